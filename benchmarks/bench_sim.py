@@ -1,0 +1,176 @@
+"""Simulator benchmark: lockstep real-time factor and control-protocol latency.
+
+Runs ``skeye sim --mode lockstep`` as its own process (as users run it) and measures:
+
+- real-time factor with 1 vehicle, every non-camera sensor streamed to a reading client;
+- real-time factor with 10 vehicles (10 connections, each with its robot and stream);
+- PING round-trip latency p50/p99 over loopback;
+- DRIVE-to-effect latency p50/p99: DRIVE immediately followed by PING; the server handles a
+  connection's lines in order and returns from DRIVE only once the engine has applied it, so the
+  PING's answer marks the moment the new set-point is in effect.
+
+Usage: python benchmarks/bench_sim.py [--sim-seconds 20] [--timestep 0.001]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+@contextmanager
+def sim_process(timestep: float) -> Iterator[int]:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "skeye.cli",
+            "sim",
+            "--mode",
+            "lockstep",
+            "--port",
+            "0",
+            "--timestep",
+            str(timestep),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        match = re.search(r"127\.0\.0\.1:(\d+)", line)
+        if not match:
+            raise RuntimeError(f"simulator did not start: {line!r}")
+        yield int(match.group(1))
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+class Conn:
+    def __init__(self, port: int) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port))
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.buf = b""
+        self.lines = 0
+        self.wait_for(b"NFO")
+
+    def send(self, text: str) -> None:
+        self.sock.sendall(text.encode() + b"\r\n")
+
+    def wait_for(self, marker: bytes) -> bytes:
+        """Read lines until one starts with ``marker``; count the others."""
+        while True:
+            *complete, self.buf = self.buf.split(b"\r\n")
+            for i, line in enumerate(complete):
+                if line.startswith(marker):
+                    self.lines += i
+                    self.buf = b"\r\n".join([*complete[i + 1 :], self.buf])
+                    return line
+            self.lines += len(complete)
+            data = self.sock.recv(1 << 20)
+            if not data:
+                raise ConnectionError("simulator closed the connection")
+            self.buf += data
+
+    def drain(self) -> None:
+        self.sock.setblocking(False)
+        try:
+            while True:
+                data = self.sock.recv(1 << 20)
+                if not data:
+                    break
+                self.lines += data.count(b"\r\n")
+        except BlockingIOError:
+            pass
+        finally:
+            self.sock.setblocking(True)
+
+
+def measure_rtf(port: int, vehicles: int, sim_seconds: float, timestep: float) -> tuple[float, int]:
+    conns = [Conn(port) for _ in range(vehicles)]
+    for i, c in enumerate(conns):
+        c.send(f"INIT {{ClassName hummingbird}} {{Name B{i}}} {{Location {i * 2.0},0,-1.5}}")
+        c.wait_for(b"RES {Command INIT}")
+    driver = conns[0]
+    steps_per_call = round(0.5 / timestep)
+    calls = int(sim_seconds / 0.5)
+    start = time.perf_counter()
+    for _ in range(calls):
+        driver.send(f"STEP {{Count {steps_per_call}}}")
+        driver.wait_for(b"RES {Command STEP}")
+        for c in conns[1:]:
+            c.drain()
+    wall = time.perf_counter() - start
+    lines = sum(c.lines for c in conns)
+    for c in conns:
+        c.sock.close()
+    time.sleep(0.3)
+    return calls * steps_per_call * timestep / wall, lines
+
+
+def measure_latency(port: int, samples: int) -> tuple[list[float], list[float]]:
+    c = Conn(port)
+    c.send("INIT {ClassName hummingbird} {Name L1} {Location 0,0,-1}")
+    c.wait_for(b"RES {Command INIT}")
+    ping, drive = [], []
+    for i in range(samples):
+        t = time.perf_counter()
+        c.send(f"PING {{Id p{i}}}")
+        c.wait_for(f"RES {{Command PING}} {{Id p{i}}}".encode())
+        ping.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        c.send(f"DRIVE {{LinearVelocity {0.1 * (i % 5):.1f}}}\r\nPING {{Id d{i}}}")
+        c.wait_for(f"RES {{Command PING}} {{Id d{i}}}".encode())
+        drive.append(time.perf_counter() - t)
+        if i % 50 == 0:
+            c.send("STEP {Count 10}")
+            c.wait_for(b"RES {Command STEP}")
+    c.sock.close()
+    return ping, drive
+
+
+def pct(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sim-seconds", type=float, default=20.0)
+    parser.add_argument("--timestep", type=float, default=0.001)
+    parser.add_argument("--samples", type=int, default=2000)
+    args = parser.parse_args()
+    print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; lockstep")
+    with sim_process(args.timestep) as port:
+        for n, target in ((1, 50.0), (10, 5.0)):
+            rtf, lines = measure_rtf(port, n, args.sim_seconds, args.timestep)
+            print(
+                f"real-time factor, {n:2d} vehicle(s), all non-camera sensors streamed: "
+                f"{rtf:6.1f}x  (target >= {target:g}x; {lines} lines received)"
+            )
+        ping, drive = measure_latency(port, args.samples)
+        print(
+            f"PING round trip:       p50 {pct(ping, 0.5):.3f} ms  p99 {pct(ping, 0.99):.3f} ms"
+            f"  (target p99 < 2 ms; {len(ping)} samples)"
+        )
+        print(
+            f"DRIVE-to-effect:       p50 {pct(drive, 0.5):.3f} ms  p99 {pct(drive, 0.99):.3f} ms"
+            f"  (target p99 < 2 ms)"
+        )
+        print(f"mean PING {statistics.mean(ping) * 1000:.3f} ms")
+
+
+if __name__ == "__main__":
+    main()

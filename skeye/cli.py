@@ -1,0 +1,140 @@
+"""The ``skeye`` command line: one sub-command per process or tool."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+from skeye import __version__
+from skeye.errors import SkeyeError
+
+
+def _wait_for_signal(stop: threading.Event) -> None:
+    def handler(signum: int, frame: Any) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+    while not stop.wait(0.5):
+        pass
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    """Run the simulator: control server (and image server when asked) until stopped."""
+    from skeye.sim.engine import Simulation, SimulationRunner
+    from skeye.sim.server import ControlServer
+    from skeye.sim.wind import make_settings, parse_params
+    from skeye.sim.world import load_world
+
+    world = load_world(args.world)
+    wind = make_settings(args.wind, parse_params(args.wind_params))
+    sim = Simulation(
+        world, seed=args.seed, timestep_s=args.timestep, wind=wind, robot_dirs=tuple(args.robot_dir)
+    )
+    stop = threading.Event()
+    with ExitStack() as stack:
+        runner = stack.enter_context(SimulationRunner(sim, mode=args.mode))
+        cameras = None
+        if args.image_port is not None:
+            from skeye.sim.cameras import CameraSystem
+            from skeye.sim.image_server import FrameBuffer, ImageServer
+
+            buffer = FrameBuffer()
+            cameras = CameraSystem(sim, buffer, synchronous=args.mode == "lockstep")
+            stack.callback(cameras.close)
+        server = stack.enter_context(ControlServer(runner, host=args.host, port=args.port))
+        where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
+        print(
+            f"skeye sim: world {world.name!r}, {args.mode} mode, step {args.timestep * 1000:g} ms, "
+            f"seed {args.seed}; control protocol on {args.host}:{server.port} ({where})",
+            flush=True,
+        )
+        if cameras is not None:
+            images = stack.enter_context(
+                ImageServer(cameras.buffer, host=args.host, port=args.image_port)
+            )
+            print(
+                f"skeye sim: image server on {args.host}:{images.port} "
+                f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')})",
+                flush=True,
+            )
+        if args.host == "127.0.0.1":
+            print(
+                "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",
+                flush=True,
+            )
+        _wait_for_signal(stop)
+        print("skeye sim: stopping", flush=True)
+    return 0
+
+
+def _add_sim(sub: Any) -> None:
+    p = sub.add_parser("sim", help="run the simulator (control protocol server)")
+    p.add_argument("--world", default="pad", help="built-in world (pad, yard, indoor) or a .toml")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=3000, help="control protocol port (0 = any free)")
+    p.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random source")
+    p.add_argument("--timestep", type=float, default=0.001, help="physics step in seconds")
+    p.add_argument(
+        "--wind", default="none", help="wind mode: none, constant, turbulence, random_force"
+    )
+    p.add_argument(
+        "--wind-params",
+        default="",
+        help="wind parameters, e.g. speed_m_s=3,from_deg=90 or f_max_n=0.3",
+    )
+    p.add_argument(
+        "--robot-dir",
+        action="append",
+        default=[],
+        type=Path,
+        help="folder of extra robot classes (<name>.toml); repeatable",
+    )
+    p.set_defaults(func=cmd_sim)
+
+
+# Each component adds its sub-commands here.
+_REGISTRARS: list[Callable[[Any], None]] = [_add_sim]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="skeye", description="A distributed development environment for small UAVs."
+    )
+    parser.add_argument("--version", action="version", version=f"skeye {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for register in _REGISTRARS:
+        register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args.func(args))
+    except SkeyeError as exc:
+        print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""skeye.control (see ARCHITECTURE.md)."""

@@ -1,0 +1,36 @@
+"""One error hierarchy for the whole project, split by whose fault it is."""
+
+from __future__ import annotations
+
+
+class SkeyeError(Exception):
+    """Base class of every error skeye raises on purpose."""
+
+
+class LocalProtocolError(SkeyeError):
+    """Our caller broke a protocol or API rule (a malformed command, a bad argument)."""
+
+
+class RemoteProtocolError(SkeyeError):
+    """The peer sent something that breaks the protocol."""
+
+
+class ConfigError(SkeyeError):
+    """A configuration file or value is wrong; the message names the file and the key."""
+
+
+class PhysicsError(SkeyeError):
+    """The simulation diverged (NaN, runaway state); the robot is stopped."""
+
+
+class CommandRejected(SkeyeError):
+    """The vehicle or simulator refused a command; ``code`` says why in the protocol's terms."""
+
+    def __init__(self, reason: str, code: int | None = None) -> None:
+        super().__init__(reason if code is None else f"{reason} (code {code})")
+        self.reason = reason
+        self.code = code
+
+
+class LinkTimeout(SkeyeError):
+    """A link or peer did not answer within its deadline."""

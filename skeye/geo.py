@@ -1,0 +1,75 @@
+"""Geodetic positions from a world's origin with a local tangent-plane model.
+
+How this works: latitude and longitude follow from north/east offsets with the WGS-84 meridian
+and prime-vertical radii of curvature at the origin (the equirectangular approximation PX4 and
+AirSim use for local frames); altitude is the origin's altitude minus the NED down coordinate.
+Good to a few millimetres over the few hundred metres a small UAV flies.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+WGS84_A_M = 6378137.0
+WGS84_E2 = 6.69437999014e-3
+
+
+@dataclass(frozen=True)
+class GeoOrigin:
+    """The geodetic position of a world's NED origin."""
+
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not -90.0 < self.latitude_deg < 90.0:
+            raise ValueError(f"latitude {self.latitude_deg} deg is outside (-90, 90)")
+        if not -180.0 <= self.longitude_deg <= 180.0:
+            raise ValueError(f"longitude {self.longitude_deg} deg is outside [-180, 180]")
+
+    def _radii_m(self) -> tuple[float, float]:
+        lat = math.radians(self.latitude_deg)
+        s2 = math.sin(lat) ** 2
+        meridian = WGS84_A_M * (1 - WGS84_E2) / (1 - WGS84_E2 * s2) ** 1.5
+        normal = WGS84_A_M / math.sqrt(1 - WGS84_E2 * s2)
+        return meridian, normal * math.cos(lat)
+
+    def to_geodetic(
+        self, north_m: float, east_m: float, down_m: float
+    ) -> tuple[float, float, float]:
+        """NED offset (m) -> (latitude deg, longitude deg, altitude m)."""
+        r_north, r_east = self._radii_m()
+        lat = self.latitude_deg + math.degrees(north_m / r_north)
+        lon = self.longitude_deg + math.degrees(east_m / r_east)
+        return lat, lon, self.altitude_m - down_m
+
+    def to_ned(
+        self, latitude_deg: float, longitude_deg: float, altitude_m: float
+    ) -> tuple[float, float, float]:
+        """(latitude deg, longitude deg, altitude m) -> NED offset (m)."""
+        r_north, r_east = self._radii_m()
+        north = math.radians(latitude_deg - self.latitude_deg) * r_north
+        east = math.radians(longitude_deg - self.longitude_deg) * r_east
+        return north, east, self.altitude_m - altitude_m
+
+
+def to_degrees_minutes(value_deg: float, positive: str, negative: str) -> str:
+    """USARSim's GPS text: ``39,8.0341,N`` (whole degrees, decimal minutes, hemisphere)."""
+    hemi = positive if value_deg >= 0 else negative
+    a = abs(value_deg)
+    deg = int(a)
+    minutes = (a - deg) * 60.0
+    return f"{deg},{minutes:.4f},{hemi}"
+
+
+def from_degrees_minutes(text: str) -> float:
+    """Inverse of :func:`to_degrees_minutes`."""
+    deg_s, min_s, hemi = text.split(",")
+    value = int(deg_s) + float(min_s) / 60.0
+    if hemi.strip().upper() in ("S", "W"):
+        value = -value
+    elif hemi.strip().upper() not in ("N", "E"):
+        raise ValueError(f"unknown hemisphere {hemi!r} in {text!r}")
+    return value

@@ -1,0 +1,1 @@
+"""skeye.ground (see ARCHITECTURE.md)."""

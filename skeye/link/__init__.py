@@ -1,0 +1,1 @@
+"""Links to a vehicle (TCP or serial) speaking the vehicle packet protocol."""

@@ -1,0 +1,1 @@
+"""skeye.pilot (see ARCHITECTURE.md)."""

@@ -1,0 +1,340 @@
+"""Robot cameras: MuJoCo offscreen rendering, each frame from the state of its own sim time.
+
+How this works: a camera is a sensor in the robot file (``type = "Camera"``) with a mount pose,
+a resolution, a horizontal field of view in radians (a float, never rounded: the vertical one
+follows from the aspect ratio) and a frame rate. It becomes a MuJoCo ``<camera>`` in the robot's
+body. An identity mount looks straight down like every downward sensor (boresight = sensor +z),
+with the image's top towards the body's front (sensor +x) and its right towards sensor +y.
+
+:class:`CameraSystem` hooks into the engine. When a camera is due (frame n at the first step
+with ``t >= n / rate``), the engine thread snapshots ``qpos`` and hands it to one render thread
+that owns the OpenGL context (EGL or OSMesa contexts belong to the thread that made them). The
+render thread recomputes kinematics on its own ``MjData``, renders, publishes the frame to the
+image server's :class:`FrameBuffer` and sends ``SEN {Type Camera} {Name n} {Frame k}`` to the
+robot's client. In lockstep mode the engine waits for the render, so frames are exact and
+reproducible; in real time it never waits: a snapshot that finds the renderer busy is skipped
+(counted in ``skipped``) and the frame numbers show clients what was rendered.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import queue
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.sim import frames
+from skeye.sim.image_server import Frame, FrameBuffer
+from skeye.sim.protocol import format_message
+from skeye.sim.robot_config import SensorMount
+
+log = logging.getLogger(__name__)
+
+_CAMERA_KEYS = {"width", "height", "fov_h_rad", "rate_hz", "near_m", "far_m"}
+
+
+@dataclass
+class CameraSpec:
+    """One mounted camera and its run-time state."""
+
+    name: str
+    mount: SensorMount
+    width: int = 800
+    height: int = 600
+    fov_h_rad: float = 1.309
+    rate_hz: float = 30.0
+    near_m: float = 0.01
+    far_m: float = 300.0
+    camera_id: int = 0
+    rendered: int = 0
+    due: int = 0
+    type_name: str = field(default="Camera", init=False)
+
+    @classmethod
+    def from_mount(cls, mount: SensorMount, owner: str) -> CameraSpec:
+        params = dict(mount.params)
+        unknown = sorted(set(params) - _CAMERA_KEYS)
+        where = f"{owner} camera {mount.name!r}"
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {unknown}; known: {sorted(_CAMERA_KEYS)}")
+        spec = cls(name=mount.name, mount=mount)
+        for key in ("width", "height"):
+            if key in params:
+                value = params[key]
+                if isinstance(value, bool) or not isinstance(value, int) or not 8 <= value <= 8192:
+                    raise ConfigError(f"{where}: {key} must be an integer 8..8192, got {value!r}")
+                setattr(spec, key, value)
+        for key in ("fov_h_rad", "rate_hz", "near_m", "far_m"):
+            if key in params:
+                value = params[key]
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise ConfigError(f"{where}: {key} must be a number, got {value!r}")
+                if not (math.isfinite(value) and value > 0):
+                    raise ConfigError(f"{where}: {key} must be positive, got {value!r}")
+                setattr(spec, key, float(value))
+        check_fov(spec.fov_h_rad, where)
+        if spec.near_m >= spec.far_m:
+            raise ConfigError(f"{where}: near_m must be < far_m")
+        return spec
+
+    @property
+    def fovy_deg(self) -> float:
+        """MuJoCo's vertical field of view (degrees, float) from the horizontal one."""
+        half_v = math.atan(math.tan(self.fov_h_rad / 2) * self.height / self.width)
+        return math.degrees(2 * half_v)
+
+    @property
+    def focal_length_px(self) -> float:
+        return (self.width / 2) / math.tan(self.fov_h_rad / 2)
+
+    def mjcf(self, robot_name: str) -> str:
+        """The ``<camera>`` element inside the robot's body (MuJoCo FLU frame)."""
+        r = frames.quat_to_matrix(frames.euler_to_quat(*self.mount.direction_rad))
+        image_right = frames.ned_to_mj(r[:, 1])  # sensor +y, FRD -> FLU
+        image_up = frames.ned_to_mj(r[:, 0])  # sensor +x
+        pos = frames.ned_to_mj(self.mount.position_m)
+        axes = " ".join(f"{v:.12g}" for v in (*image_right, *image_up))
+        return (
+            f'<camera name="{camera_model_name(robot_name, self.name)}" '
+            f'pos="{pos[0]:.9g} {pos[1]:.9g} {pos[2]:.9g}" xyaxes="{axes}" '
+            f'fovy="{self.fovy_deg:.12g}"/>'
+        )
+
+    def conf_fields(self) -> list[tuple[str, object]]:
+        return [
+            ("Width", self.width),
+            ("Height", self.height),
+            ("FOV", self.fov_h_rad),
+            ("Rate", self.rate_hz),
+            ("FocalLength", self.focal_length_px),
+            ("CameraId", self.camera_id),
+        ]
+
+    def geo_fields(self) -> list[tuple[str, object]]:
+        return [
+            ("Location", self.mount.position_m),
+            ("Orientation", tuple(frames.wrap_2pi(a) for a in self.mount.direction_rad)),
+        ]
+
+
+def check_fov(fov_h_rad: float, where: str) -> None:
+    if not (math.isfinite(fov_h_rad) and 0.01 < fov_h_rad < math.pi - 0.01):
+        raise ConfigError(f"{where}: fov_h_rad must be in (0.01, pi - 0.01), got {fov_h_rad!r}")
+
+
+def camera_model_name(robot: str, camera: str) -> str:
+    return f"robot:{robot}:cam:{camera}"
+
+
+@dataclass
+class _Job:
+    model: Any
+    qpos: np.ndarray
+    time_s: float
+    shots: list[tuple[Any, CameraSpec]]  # (robot, camera)
+    done: threading.Event | None
+
+
+class CameraSystem:
+    """Renders every robot camera into a FrameBuffer. Attach before robots are spawned."""
+
+    def __init__(self, sim: Any, buffer: FrameBuffer, *, synchronous: bool) -> None:
+        self.sim = sim
+        self.buffer = buffer
+        self.synchronous = synchronous
+        self.skipped = 0
+        self.error: str | None = None
+        self._next_id = 1
+        self._known: dict[str, int] = {}
+        self._jobs: queue.Queue[_Job | None] = queue.Queue(maxsize=1)
+        self._ready = threading.Event()
+        self._stop = threading.Event()
+        sim.xml_extras.append(self._xml)
+        sim.rebuild_hooks.append(self._on_rebuild)
+        sim.step_hooks.append(self._on_step)
+        self._thread = threading.Thread(target=self._render_loop, name="skeye-render",
+                                        daemon=True)
+        self._thread.start()
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        try:
+            self._jobs.put(None, timeout=timeout_s)
+        except queue.Full:
+            pass
+        self._thread.join(timeout_s)
+
+    def __enter__(self) -> CameraSystem:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- engine side (engine thread) -----------------------------------------------------
+    def _xml(self, robot: Any) -> str:
+        return "\n".join(cam.mjcf(robot.name) for cam in robot.cameras)
+
+    def _on_rebuild(self, sim: Any) -> None:
+        current = {}
+        for robot in sim.robots.values():
+            for cam in robot.cameras:
+                key = f"{robot.name}/{cam.name}"
+                if not cam.camera_id:
+                    cam.camera_id = self._next_id
+                    self._next_id += 1
+                current[key] = cam.camera_id
+                if key not in self._known:
+                    self.buffer.register_camera(key, cam.camera_id)
+                    # The first frame comes at the robot's first step.
+                    cam.due = math.ceil(sim.time_s * cam.rate_hz - 1e-9)
+        for key in set(self._known) - set(current):
+            self.buffer.remove_camera(key)
+        self._known = current
+        for robot in sim.robots.values():
+            for cam in robot.cameras:
+                cam_id = _camera_index(sim.model, camera_model_name(robot.name, cam.name))
+                sim.model.cam_fovy[cam_id] = cam.fovy_deg
+        # Absolute near/far clip planes: MuJoCo scales them by the model's extent.
+        cams = [c for r in sim.robots.values() for c in r.cameras]
+        if cams:
+            extent = float(sim.model.stat.extent)
+            sim.model.vis.map.znear = min(c.near_m for c in cams) / extent
+            sim.model.vis.map.zfar = max(c.far_m for c in cams) / extent
+
+    def _on_step(self, sim: Any) -> None:
+        if self.error is not None:
+            return
+        shots = []
+        t = sim.time_s
+        for robot in sim.robots.values():
+            for cam in robot.cameras:
+                if t + 1e-9 >= cam.due / cam.rate_hz:
+                    cam.due += 1
+                    while t + 1e-9 >= cam.due / cam.rate_hz:  # never fall behind the clock
+                        cam.due += 1
+                    shots.append((robot, cam))
+        if not shots:
+            return
+        job = _Job(sim.model, sim.data.qpos.copy(), t, shots,
+                   threading.Event() if self.synchronous else None)
+        if self.synchronous:
+            self._jobs.put(job)
+            assert job.done is not None
+            if not job.done.wait(60.0):
+                raise SkeyeError("camera rendering timed out (60 s)")
+            if self.error is not None:
+                self._report_error()
+        else:
+            try:
+                self._jobs.put_nowait(job)
+            except queue.Full:
+                self.skipped += len(shots)
+
+    def _report_error(self) -> None:
+        for robot in self.sim.robots.values():
+            if robot.cameras:
+                robot.outbox(format_message("ERR", ("Command", "CAMERA"), ("Name", robot.name),
+                                            ("Reason", self.error or "rendering failed")))
+
+    # -- render thread -------------------------------------------------------------------
+    def _render_loop(self) -> None:
+        import mujoco
+
+        model = None
+        data = None
+        renderers: dict[tuple[int, int], Any] = {}
+        try:
+            while not self._stop.is_set():
+                job = self._jobs.get()
+                if job is None:
+                    break
+                try:
+                    if job.model is not model:
+                        for r in renderers.values():
+                            r.close()
+                        renderers = {}
+                        model = job.model
+                        data = mujoco.MjData(model)
+                    assert data is not None
+                    data.qpos[:] = job.qpos
+                    mujoco.mj_kinematics(model, data)
+                    mujoco.mj_camlight(model, data)
+                    for robot, cam in job.shots:
+                        size = (cam.height, cam.width)
+                        if size not in renderers:
+                            renderers[size] = _make_renderer(mujoco, model, *size)
+                        renderer = renderers[size]
+                        renderer.update_scene(data, camera=camera_model_name(robot.name,
+                                                                             cam.name))
+                        rgb = renderer.render()
+                        cam.rendered += 1
+                        key = f"{robot.name}/{cam.name}"
+                        if key in self._known:
+                            self.buffer.publish(Frame(key, cam.camera_id, cam.rendered,
+                                                      job.time_s, rgb))
+                        robot.outbox(format_message(
+                            "SEN", ("Time", job.time_s), ("Type", "Camera"), ("Name", cam.name),
+                            ("Frame", cam.rendered),
+                        ))
+                except SkeyeError as exc:
+                    self.error = str(exc)
+                    log.error("%s", exc)
+                except Exception as exc:  # a GL failure must reach the clients, not kill us
+                    self.error = f"camera rendering failed: {exc}"
+                    log.exception("camera rendering failed")
+                finally:
+                    if job.done is not None:
+                        job.done.set()
+        finally:
+            for r in renderers.values():
+                r.close()
+
+
+def _camera_index(model: Any, name: str) -> int:
+    import mujoco
+
+    idx = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, name)
+    if idx < 0:
+        raise LocalProtocolError(f"no camera {name} in the model")
+    return int(idx)
+
+
+def _make_renderer(mujoco: Any, model: Any, height: int, width: int) -> Any:
+    backend = os.environ.get("MUJOCO_GL", "?")
+    try:
+        renderer = mujoco.Renderer(model, height=height, width=width)
+    except Exception as exc:
+        raise SkeyeError(
+            f"cannot render camera images with MUJOCO_GL={backend}: {exc}. Install an OpenGL "
+            "backend: Mesa's EGL (apt-get install libegl1 libgl1-mesa-dri) for MUJOCO_GL=egl, "
+            "or OSMesa (apt-get install libosmesa6) for MUJOCO_GL=osmesa, or run with a display "
+            "(MUJOCO_GL=glfw)"
+        ) from exc
+    flags = renderer.scene.flags
+    flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+    flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+    flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
+    return renderer
+
+
+def set_camera_fov(sim: Any, robot_name: str, camera: str, fov_h_rad: float) -> None:
+    """``SET {Type Camera} {Name n} {Opcode FOV} {Params rad}``: a float, never rounded."""
+    robot = sim.robots.get(robot_name)
+    if robot is None:
+        raise LocalProtocolError(f"robot {robot_name} no longer exists")
+    for cam in robot.cameras:
+        if cam.name.lower() == camera.lower():
+            check_fov(fov_h_rad, f"camera {camera!r}")
+            cam.fov_h_rad = fov_h_rad
+            index = _camera_index(sim.model, camera_model_name(robot_name, cam.name))
+            sim.model.cam_fovy[index] = cam.fovy_deg
+            return
+    raise LocalProtocolError(f"robot {robot_name} has no camera named {camera!r}")

@@ -1,0 +1,188 @@
+"""The vehicle's own low-level controller (the AscTec "LL" board's job), emulated.
+
+How this works: a cascade run every board tick on the vehicle's *own estimate* (the INS), never
+on ground truth, so an estimate that drifts makes the vehicle drift as a real one does.
+
+- Attitude mode (``DRIVE {RollAngle} {PitchAngle} {RotationalVelocity} {Thrust}``): angle
+  set-points -> P angle loop -> rate set-points -> PI rate loop -> body torques; collective
+  thrust is ``Thrust * max_thrust`` straight from the stick, as on the real board.
+- Velocity mode (USARSim's aerial ``DRIVE``): forward/lateral velocity in the yaw-following
+  frame -> PI velocity loop -> acceleration -> tilt set-points (limited to ``max_tilt_rad``);
+  vertical: PI on climb rate, and when the climb command is zero a P loop holds the height
+  estimate where the command went to zero (height hold). Yaw rate goes straight to the rate loop.
+- Mixer: total thrust and torques -> per-rotor thrust for the '+' layout -> rotor speed
+  commands (sqrt(f/kf)); roll/pitch keep priority over yaw when a rotor would saturate.
+
+Integrators are clamped (anti-windup). Every limit is a parameter (ControllerParams).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from skeye.errors import ConfigError
+from skeye.sim.vehicle import GRAVITY_M_S2, AirframeParams
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Gains and limits of the low-level controller."""
+
+    max_tilt_rad: float = 0.44  # ~25 deg
+    max_speed_m_s: float = 3.0
+    max_climb_m_s: float = 1.5
+    max_yaw_rate_rad_s: float = 1.745  # 100 deg/s
+    angle_gain: float = 7.0  # 1/s
+    rate_gain: float = 22.0  # 1/s
+    rate_integral_gain: float = 15.0  # 1/s^2
+    yaw_rate_gain: float = 8.0
+    velocity_gain: float = 2.8  # (m/s^2)/(m/s)
+    velocity_integral_gain: float = 0.8
+    climb_gain: float = 5.0
+    climb_integral_gain: float = 3.0
+    height_gain: float = 1.8  # (m/s)/m
+    max_accel_m_s2: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"controller: {name} must be a positive number, got {value!r}")
+        if self.max_tilt_rad >= math.pi / 2:
+            raise ConfigError(f"controller: max_tilt_rad must be < pi/2, got {self.max_tilt_rad}")
+
+
+@dataclass
+class Command:
+    """The current set-point; velocity mode unless ``attitude`` is set."""
+
+    attitude: bool = False
+    forward_m_s: float = 0.0
+    right_m_s: float = 0.0
+    up_m_s: float = 0.0
+    yaw_rate_rad_s: float = 0.0
+    roll_rad: float = 0.0
+    pitch_rad: float = 0.0
+    thrust: float = 0.0  # 0..1 of max thrust
+
+
+def _clamp(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+class LowLevelController:
+    """Stateful cascade; ``update`` is the hot path and works on floats."""
+
+    def __init__(self, airframe: AirframeParams, params: ControllerParams, tick_s: float) -> None:
+        self.a = airframe
+        self.p = params
+        self.dt = tick_s
+        self.reset()
+
+    def reset(self, hold_altitude_m: float | None = None) -> None:
+        self.rate_int = [0.0, 0.0, 0.0]
+        self.vel_int = [0.0, 0.0]
+        self.climb_int = 0.0
+        self.hold_altitude_m = hold_altitude_m
+
+    def update(
+        self,
+        cmd: Command,
+        rpy: tuple[float, float, float],
+        omega: tuple[float, float, float],
+        vel_ned: tuple[float, float, float],
+        altitude_m: float,
+        max_rotor_speed_rad_s: float,
+    ) -> list[float]:
+        """One tick: estimate + command -> four rotor speed commands (rad/s)."""
+        p, a, dt = self.p, self.a, self.dt
+        roll, pitch, yaw = rpy
+        if cmd.attitude:
+            roll_sp = _clamp(cmd.roll_rad, -p.max_tilt_rad * 1.6, p.max_tilt_rad * 1.6)
+            pitch_sp = _clamp(cmd.pitch_rad, -p.max_tilt_rad * 1.6, p.max_tilt_rad * 1.6)
+            thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
+            self.hold_altitude_m = None
+        else:
+            cy, sy = math.cos(yaw), math.sin(yaw)
+            v_fwd = cy * vel_ned[0] + sy * vel_ned[1]
+            v_right = -sy * vel_ned[0] + cy * vel_ned[1]
+            v_up = -vel_ned[2]
+            # Horizontal velocity loop -> accelerations in the yaw frame.
+            acc = []
+            for i, (sp_v, v) in enumerate(
+                (
+                    (_clamp(cmd.forward_m_s, -p.max_speed_m_s, p.max_speed_m_s), v_fwd),
+                    (_clamp(cmd.right_m_s, -p.max_speed_m_s, p.max_speed_m_s), v_right),
+                )
+            ):
+                err = sp_v - v
+                self.vel_int[i] = _clamp(self.vel_int[i] + err * dt, -1.0, 1.0)
+                acc.append(
+                    _clamp(
+                        p.velocity_gain * err + p.velocity_integral_gain * self.vel_int[i],
+                        -p.max_accel_m_s2,
+                        p.max_accel_m_s2,
+                    )
+                )
+            pitch_sp = _clamp(-math.atan2(acc[0], GRAVITY_M_S2), -p.max_tilt_rad, p.max_tilt_rad)
+            roll_sp = _clamp(
+                math.atan2(acc[1] * math.cos(pitch_sp), GRAVITY_M_S2),
+                -p.max_tilt_rad,
+                p.max_tilt_rad,
+            )
+            # Vertical: climb-rate PI, with height hold while the climb command is zero.
+            up_cmd = _clamp(cmd.up_m_s, -p.max_climb_m_s, p.max_climb_m_s)
+            if up_cmd == 0.0:
+                if self.hold_altitude_m is None:
+                    self.hold_altitude_m = altitude_m
+                up_cmd = _clamp(
+                    p.height_gain * (self.hold_altitude_m - altitude_m),
+                    -p.max_climb_m_s,
+                    p.max_climb_m_s,
+                )
+            else:
+                self.hold_altitude_m = None
+            err = up_cmd - v_up
+            self.climb_int = _clamp(self.climb_int + err * dt, -2.0, 2.0)
+            a_up = _clamp(
+                p.climb_gain * err + p.climb_integral_gain * self.climb_int,
+                -GRAVITY_M_S2 * 0.8,
+                p.max_accel_m_s2 * 2,
+            )
+            tilt = max(math.cos(roll) * math.cos(pitch), 0.5)
+            thrust = a.mass_kg * (GRAVITY_M_S2 + a_up) / tilt
+        yaw_rate_sp = _clamp(cmd.yaw_rate_rad_s, -p.max_yaw_rate_rad_s, p.max_yaw_rate_rad_s)
+        # Angle loop -> body rate set-points (Euler-rate approximation, fine for small tilt).
+        rate_sp = (p.angle_gain * (roll_sp - roll), p.angle_gain * (pitch_sp - pitch), yaw_rate_sp)
+        gains = (p.rate_gain, p.rate_gain, p.yaw_rate_gain)
+        torque = [0.0, 0.0, 0.0]
+        for i in range(3):
+            err = rate_sp[i] - omega[i]
+            self.rate_int[i] = _clamp(self.rate_int[i] + err * dt, -0.5, 0.5)
+            integral = p.rate_integral_gain * self.rate_int[i] if i < 2 else 0.0
+            torque[i] = a.inertia_kg_m2[i] * (gains[i] * err + integral)
+        return self.mix(thrust, torque, max_rotor_speed_rad_s)
+
+    def mix(
+        self, thrust_n: float, torque: list[float], max_rotor_speed_rad_s: float
+    ) -> list[float]:
+        """Total thrust and body torques -> rotor speed commands ('+' layout, FRD)."""
+        a = self.a
+        f_max = a.kf * max_rotor_speed_rad_s**2
+        thrust_n = _clamp(thrust_n, 0.0, 4.0 * f_max)
+        base = thrust_n / 4.0
+        tx = torque[0] / (2.0 * a.arm_m)
+        ty = torque[1] / (2.0 * a.arm_m)
+        tz = torque[2] / (4.0 * a.moment_constant_m)
+        # Roll/pitch first: limit them to what fits around the collective, then yaw.
+        head = min(base, f_max - base)
+        scale = 1.0
+        rp = max(abs(tx), abs(ty))
+        if rp > head and rp > 0:
+            scale = head / rp
+        tx, ty = tx * scale, ty * scale
+        room = max(0.0, head - max(abs(tx), abs(ty)))
+        tz = _clamp(tz, -room, room)
+        forces = (base + ty - tz, base - tx + tz, base - ty - tz, base + tx + tz)
+        kf = a.kf
+        return [math.sqrt(f / kf) if f > 0.0 else 0.0 for f in forces]

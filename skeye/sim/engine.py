@@ -1,0 +1,577 @@
+"""The simulation engine: one MuJoCo world, the robots in it, the clock.
+
+How this works: :class:`Simulation` owns the MuJoCo model and data and is used from exactly one
+thread (the :class:`SimulationRunner`'s). The world is rebuilt from its description whenever a
+robot comes or goes, carrying every surviving robot's state over, so spawning is exact and
+deterministic. Each physics step (1 kHz by default): robots whose board tick is due read their
+ground truth, run their board and set their wrench (``xfrc_applied``, converted to MuJoCo's
+frame through :mod:`skeye.sim.frames`); MuJoCo steps; sensors that are due are sampled and their
+``SEN`` lines handed to the robot's outbox. Sim time is ``steps * timestep`` exactly.
+
+The runner paces the clock: ``realtime`` follows the wall clock (slipping, and saying so, if it
+falls behind); ``lockstep`` advances only on :meth:`SimulationRunner.step`. Everything that
+changes the world (spawn, remove, drive, wind) is a task executed on the engine thread between
+steps, so the order of effects is the order of commands, and a lockstep run is reproducible.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import mujoco
+import numpy as np
+
+from skeye.errors import LocalProtocolError, PhysicsError, SkeyeError
+from skeye.sim import frames
+from skeye.sim.protocol import format_message
+from skeye.sim.robot import Outbox, Robot, check_state
+from skeye.sim.robot_config import RobotConfig, load_robot_config
+from skeye.sim.state import BodyState
+from skeye.sim.wind import WindModel, WindSettings, make_settings
+from skeye.sim.world import WorldDescription, build_mjcf
+from skeye.sim.world import start_pose_list as world_start_poses
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+
+@dataclass
+class _Slot:
+    """Where a robot lives in the compiled model."""
+
+    body_id: int
+    qpos_adr: int
+    qvel_adr: int
+
+
+class RobotWorldQuery:
+    """What a robot's sensors may ask of the world (see skeye.sim.sensors.WorldQuery)."""
+
+    def __init__(self, sim: Simulation, robot_name: str) -> None:
+        self._sim = sim
+        self._robot = robot_name
+        self.geo_origin = sim.world.geo_origin
+        self.magnetic_field_ned_ut = np.asarray(sim.world.magnetic_field_ned_ut, dtype=float)
+        self.sea_level_pressure_pa = sim.world.sea_level_pressure_pa
+
+    def ray_distance(
+        self, origin_ned_m: np.ndarray, direction_ned: np.ndarray, max_range_m: float
+    ) -> float | None:
+        return self._sim.ray_distance(self._robot, origin_ned_m, direction_ned, max_range_m)
+
+
+class Simulation:
+    """A MuJoCo world with robots. Not thread-safe: use it from the runner's thread."""
+
+    def __init__(
+        self,
+        world: WorldDescription,
+        *,
+        seed: int = 0,
+        timestep_s: float = 0.001,
+        wind: WindSettings | None = None,
+        offscreen_size: tuple[int, int] = (800, 600),
+        robot_dirs: tuple[Path, ...] = (),
+    ) -> None:
+        if not (math.isfinite(timestep_s) and 1e-5 <= timestep_s <= 0.01):
+            raise LocalProtocolError(f"physics step must be in [1e-5, 0.01] s, got {timestep_s}")
+        self.world = world
+        self.seed = seed
+        self.dt = timestep_s
+        self.steps = 0
+        self.offscreen_size = offscreen_size
+        self.robot_dirs = tuple(Path(p) for p in robot_dirs)
+        self.robots: dict[str, Robot] = {}
+        self._spawned = 0
+        self._slots: dict[str, _Slot] = {}
+        self._queries: dict[str, RobotWorldQuery] = {}
+        self.wind = WindModel(wind or make_settings("none"), np.random.default_rng([seed, 7]))
+        self.step_hooks: list[Callable[[Simulation], None]] = []
+        self.rebuild_hooks: list[Callable[[Simulation], None]] = []
+        self.xml_extras: list[Callable[[Robot], str]] = []
+        self._ray_geomid = np.zeros(1, dtype=np.int32)
+        self._ray_pnt = np.zeros(3)
+        self._ray_vec = np.zeros(3)
+        self.model: Any = None
+        self.data: Any = None
+        self._rebuild()
+
+    # -- model ---------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return self.steps * self.dt
+
+    def _robot_xml(self, robot: Robot) -> str:
+        a = robot.config.airframe
+        pos = frames.ned_to_mj(robot.spawn_pos_ned_m)
+        quat = frames.quat_ned_to_mj(frames.euler_to_quat(*robot.spawn_rpy_rad))
+        ixx, iyy, izz = a.inertia_kg_m2
+        bx, by, bz = (s / 2 for s in a.body_size_m)
+        arm, rr, gear = a.arm_m, a.rotor_radius_m, a.gear_height_m
+        n = f"robot:{robot.name}"
+        parts = [
+            f'<body name="{n}" pos="{pos[0]:.9g} {pos[1]:.9g} {pos[2]:.9g}" '
+            f'quat="{quat[0]:.9g} {quat[1]:.9g} {quat[2]:.9g} {quat[3]:.9g}">',
+            f'<freejoint name="{n}:joint"/>',
+            f'<inertial pos="0 0 0" mass="{a.mass_kg:.9g}" '
+            f'diaginertia="{ixx:.9g} {iyy:.9g} {izz:.9g}"/>',
+            f'<geom name="{n}:hull" type="box" size="{bx:.6g} {by:.6g} {bz:.6g}" '
+            f'rgba="0.15 0.15 0.18 1" mass="0" condim="3"/>',
+        ]
+        for i, (ux, uy) in enumerate(
+            ((1, 0), (0, -1), (-1, 0), (0, 1))
+        ):  # FLU: front,right,back,left
+            x, y = ux * arm, uy * arm
+            parts.append(
+                f'<geom name="{n}:arm{i}" type="capsule" fromto="0 0 0 {x:.6g} {y:.6g} 0" '
+                f'size="0.008" rgba="0.2 0.2 0.25 1" mass="0" contype="0" conaffinity="0"/>'
+            )
+            color = "0.9 0.3 0.2 0.6" if i == 0 else "0.3 0.3 0.35 0.6"
+            parts.append(
+                f'<geom name="{n}:rotor{i}" type="cylinder" pos="{x:.6g} {y:.6g} 0.02" '
+                f'size="{rr:.6g} 0.003" rgba="{color}" mass="0" contype="0" conaffinity="0"/>'
+            )
+        for gx, gy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            parts.append(
+                f'<geom name="{n}:gear{gx}{gy}" type="sphere" size="0.012" '
+                f'pos="{gx * bx:.6g} {gy * by:.6g} {-(gear - 0.012):.6g}" rgba="0.1 0.1 0.1 1" '
+                f'mass="0" friction="1.0 0.01 0.001"/>'
+            )
+        parts.extend(self.robot_xml_extras(robot))
+        parts.append("</body>")
+        return "\n".join(parts)
+
+    def robot_xml_extras(self, robot: Robot) -> list[str]:
+        """Extra MJCF inside a robot's body (cameras add themselves here)."""
+        return [extra(robot) for extra in self.xml_extras]
+
+    def _rebuild(self) -> None:
+        saved: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        if self.data is not None:
+            for name, slot in self._slots.items():
+                if name in self.robots:
+                    saved[name] = (
+                        self.data.qpos[slot.qpos_adr : slot.qpos_adr + 7].copy(),
+                        self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6].copy(),
+                    )
+        robots_xml = "\n".join(self._robot_xml(r) for r in self.robots.values())
+        xml, assets = build_mjcf(
+            self.world,
+            robots_xml=robots_xml,
+            timestep_s=self.dt,
+            offscreen_size=self.offscreen_size,
+        )
+        self.model = mujoco.MjModel.from_xml_string(xml, assets)
+        self.data = mujoco.MjData(self.model)
+        self.data.time = self.time_s
+        self._slots = {}
+        for name in self.robots:
+            body_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"robot:{name}")
+            joint_id = self.model.body_jntadr[body_id]
+            slot = _Slot(
+                body_id, int(self.model.jnt_qposadr[joint_id]), int(self.model.jnt_dofadr[joint_id])
+            )
+            self._slots[name] = slot
+            if name in saved:
+                qpos, qvel = saved[name]
+                self.data.qpos[slot.qpos_adr : slot.qpos_adr + 7] = qpos
+                self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = qvel
+        mujoco.mj_forward(self.model, self.data)
+        for hook in self.rebuild_hooks:
+            hook(self)
+
+    # -- robots --------------------------------------------------------------------------
+    def spawn(
+        self,
+        class_name: str,
+        *,
+        name: str | None = None,
+        outbox: Outbox,
+        location_ned_m: tuple[float, float, float] | None = None,
+        rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        start: str | None = None,
+        config: RobotConfig | None = None,
+    ) -> Robot:
+        """Add a robot. On a start pose (or a location at or below the ground) it stands on its
+        landing gear; a location in the air spawns it hovering, motors running."""
+        config = config or load_robot_config(class_name, self.robot_dirs, allow_paths=False)
+        self._spawned += 1
+        name = name or f"R{self._spawned}"
+        if name in self.robots:
+            raise LocalProtocolError(f"a robot named {name!r} already exists")
+        if not name.replace("_", "").replace("-", "").isalnum():
+            raise LocalProtocolError(f"robot name {name!r} may hold only letters, digits, - and _")
+        gear = config.airframe.gear_height_m
+        if start is not None:
+            poses = {p.lower(): v for p, v in self.world.start_poses.items()}
+            if start.lower() not in poses:
+                raise LocalProtocolError(
+                    f"unknown start pose {start!r}; known: {', '.join(self.world.start_poses)}"
+                )
+            pose = poses[start.lower()]
+            gn, ge, gd = (float(v) for v in pose.position_ned_m)
+            pos = (gn, ge, gd - gear)
+            rr, rp, ry = (float(v) for v in pose.rpy_rad)
+            rpy = (rr, rp, ry)
+            airborne = False
+        elif location_ned_m is not None:
+            ln, le, ld = (float(v) for v in location_ned_m)
+            pos = (ln, le, ld)
+            rpy = rotation_rpy_rad
+            below = self._ground_below(pos)
+            if below is not None and below < gear + 0.02:
+                pos = (pos[0], pos[1], pos[2] + below - gear)
+                airborne = False
+            else:
+                airborne = True
+        else:
+            raise LocalProtocolError("INIT needs {Location x,y,z} or {Start name}")
+        rng = np.random.default_rng([self.seed, 1000 + self._spawned])
+        robot = Robot(
+            name,
+            config,
+            physics_step_s=self.dt,
+            rng=rng,
+            outbox=outbox,
+            spawn_pos_ned_m=(pos[0], pos[1], pos[2]),
+            spawn_rpy_rad=(rpy[0], rpy[1], rpy[2]),
+            airborne=airborne,
+        )
+        robot.flight.landed_since_s = self.time_s
+        self.robots[name] = robot
+        self._queries[name] = RobotWorldQuery(self, name)
+        try:
+            self._rebuild()
+        except Exception:
+            del self.robots[name]
+            del self._queries[name]
+            self._rebuild()
+            raise
+        if airborne:
+            slot = self._slots[name]
+            robot.controller.reset(hold_altitude_m=-pos[2])
+            self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
+        return robot
+
+    def remove(self, name: str) -> None:
+        if self.robots.pop(name, None) is not None:
+            self._queries.pop(name, None)
+            self._rebuild()
+
+    def _ground_below(self, pos_ned: tuple[float, float, float]) -> float | None:
+        """Distance from a NED point down to the first world geom (no robot), or None."""
+        pnt = frames.ned_to_mj(pos_ned)
+        geomid = np.zeros(1, dtype=np.int32)
+        dist = mujoco.mj_ray(
+            self.model, self.data, pnt, np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid
+        )
+        return None if dist < 0 else float(dist)
+
+    def ray_distance(
+        self, robot_name: str, origin_ned_m: Any, direction_ned: Any, max_range_m: float
+    ) -> float | None:
+        """First hit along a ray from a NED point, ignoring the robot itself."""
+        slot = self._slots[robot_name]
+        d = frames.ned_to_mj(direction_ned)
+        norm = math.sqrt(float(d @ d))
+        if norm == 0.0:
+            return None
+        self._ray_pnt[:] = frames.ned_to_mj(origin_ned_m)
+        self._ray_vec[:] = d / norm
+        dist = mujoco.mj_ray(
+            self.model,
+            self.data,
+            self._ray_pnt,
+            self._ray_vec,
+            None,
+            1,
+            slot.body_id,
+            self._ray_geomid,
+        )
+        if dist < 0 or dist > max_range_m:
+            return None
+        return float(dist)
+
+    def body_state(self, name: str) -> BodyState:
+        """Ground truth of a robot in NED/FRD."""
+        slot = self._slots[name]
+        d = self.data
+        a, b = slot.qpos_adr, slot.qvel_adr
+        pos, vel, quat, omega, acc = frames.free_joint_to_ned(
+            d.qpos[a : a + 7].tolist(), d.qvel[b : b + 6].tolist(), d.qacc[b : b + 3].tolist()
+        )
+        rot = frames.quat_to_matrix(quat)
+        # Specific force (what an accelerometer feels): R^T (a - g), g = +9.81 down.
+        ax, ay, az = acc[0], acc[1], acc[2] - 9.81
+        r = rot.tolist()
+        sf = (
+            r[0][0] * ax + r[1][0] * ay + r[2][0] * az,
+            r[0][1] * ax + r[1][1] * ay + r[2][1] * az,
+            r[0][2] * ax + r[1][2] * ay + r[2][2] * az,
+        )
+        return BodyState(
+            time_s=self.time_s,
+            pos_ned_m=np.array(pos),
+            vel_ned_m_s=np.array(vel),
+            quat_ned=np.array(quat),
+            rpy_rad=np.array(frames.quat_to_euler(quat)),
+            rot_body_to_ned=rot,
+            omega_frd_rad_s=np.array(omega),
+            accel_ned_m_s2=np.array(acc),
+            specific_force_frd_m_s2=np.array(sf),
+            rotor_speed_rad_s=np.array(self.robots[name].rotors.speed_rad_s),
+        )
+
+    def _in_contact(self, body_id: int) -> bool:
+        d, m = self.data, self.model
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if m.geom_bodyid[c.geom1] == body_id or m.geom_bodyid[c.geom2] == body_id:
+                return True
+        return False
+
+    # -- stepping ------------------------------------------------------------------------
+    def step(self, count: int = 1) -> None:
+        """Advance ``count`` physics steps, emitting every message those steps produce."""
+        for _ in range(count):
+            self._step_once()
+
+    def _step_once(self) -> None:
+        d = self.data
+        step = self.steps
+        wind_advanced = False
+        failed: list[tuple[str, str]] = []
+        for name, robot in self.robots.items():
+            if step % robot.board_decimation:
+                continue
+            if not wind_advanced:
+                self.wind.advance(self.time_s, robot.tick_s)
+                wind_advanced = True
+            slot = self._slots[name]
+            try:
+                state = self.body_state(name)
+                check_state(name, state)
+                ground = None
+                if step % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
+                    ground = self.ray_distance(name, state.pos_ned_m, (0.0, 0.0, 1.0), 10.0)
+                else:
+                    ground = robot.ground_distance_m
+                contact = self._in_contact(slot.body_id)
+                force, torque = robot.board_tick(
+                    state, ground, contact, self.wind.air_velocity_ned()
+                )
+            except PhysicsError as exc:
+                failed.append((name, str(exc)))
+                continue
+            wf = self.wind.force_ned()
+            fx, fy, fz = force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]
+            d.xfrc_applied[slot.body_id] = frames.ned_wrench_to_mj((fx, fy, fz), torque)
+        mujoco.mj_step(self.model, d)
+        self.steps += 1
+        for name, reason in failed:
+            self._stop_robot(name, reason)
+        for hook in self.step_hooks:
+            hook(self)
+        self._emit_due()
+
+    def _stop_robot(self, name: str, reason: str) -> None:
+        robot = self.robots.get(name)
+        if robot is None:
+            return
+        log.error("stopping robot %s: %s", name, reason)
+        robot.flight.failed = reason
+        robot.flight.armed = False
+        robot.outbox(
+            format_message(
+                "ERR",
+                ("Command", "PHYSICS"),
+                ("Name", name),
+                ("Reason", f"robot stopped: {reason}"),
+            )
+        )
+        self.remove(name)
+
+    def _emit_due(self) -> None:
+        step = self.steps
+        t = self.time_s
+        for name, robot in self.robots.items():
+            state: BodyState | None = None
+            for sched in robot.sensors:
+                if step % sched.period_steps:
+                    continue
+                if state is None:
+                    state = self.body_state(name)
+                sensor = sched.sensor
+                if sensor.type_name == "Battery":
+                    sensor.update_battery(
+                        robot.battery.voltage_v,
+                        robot.battery.current_a,
+                        robot.battery.state_of_charge,
+                    )
+                fields = sensor.sample(state, self._queries[name])
+                robot.outbox(
+                    format_message(
+                        "SEN",
+                        ("Time", t),
+                        ("Type", sensor.type_name),
+                        ("Name", sched.mount.name),
+                        *fields,
+                    )
+                )
+            if step % robot.status_period_steps == 0:
+                robot.outbox(
+                    format_message(
+                        "STA",
+                        ("Type", "AerialVehicle"),
+                        ("Name", name),
+                        ("Time", t),
+                        *robot.status_fields(),
+                    )
+                )
+
+    def set_wind(self, settings: WindSettings) -> None:
+        self.wind = WindModel(settings, np.random.default_rng([self.seed, 7, self.steps]))
+
+    def start_poses(
+        self,
+    ) -> list[tuple[str, tuple[float, float, float], tuple[float, float, float]]]:
+        return world_start_poses(self.world)
+
+
+class SimulationRunner:
+    """Owns the engine thread; the only way other threads touch a :class:`Simulation`."""
+
+    def __init__(self, sim: Simulation, mode: str = "realtime") -> None:
+        if mode not in ("realtime", "lockstep"):
+            raise LocalProtocolError(f"mode must be 'realtime' or 'lockstep', got {mode!r}")
+        self.sim = sim
+        self.mode = mode
+        self._tasks: queue.Queue[tuple[Callable[[Simulation], Any], Future[Any]] | None] = (
+            queue.Queue()
+        )
+        self._stop = threading.Event()
+        self.behind_events = 0
+        self.wall_start = time.monotonic()
+        self.sim_start_s = sim.time_s
+        self._thread = threading.Thread(target=self._run, name="skeye-engine", daemon=True)
+        self._thread.start()
+
+    def __enter__(self) -> SimulationRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._tasks.put(None)
+        self._thread.join(timeout_s)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def submit(self, fn: Callable[[Simulation], T]) -> Future[T]:
+        """Run ``fn(sim)`` on the engine thread between steps."""
+        fut: Future[T] = Future()
+        if self._stop.is_set():
+            fut.set_exception(SkeyeError("the simulator is shutting down"))
+            return fut
+        self._tasks.put((fn, fut))
+        return fut
+
+    def call(self, fn: Callable[[Simulation], T], timeout_s: float = 30.0) -> T:
+        return self.submit(fn).result(timeout_s)
+
+    def step(self, count: int, timeout_s: float = 600.0) -> float:
+        """Lockstep: advance ``count`` steps; returns the new sim time."""
+        if self.mode != "lockstep":
+            raise LocalProtocolError("STEP works only when the simulator runs with --mode lockstep")
+
+        def do(sim: Simulation) -> float:
+            sim.step(count)
+            return sim.time_s
+
+        return self.call(do, timeout_s)
+
+    def _run_task(self, item: tuple[Callable[[Simulation], Any], Future[Any]]) -> None:
+        fn, fut = item
+        if not fut.set_running_or_notify_cancel():
+            return
+        try:
+            fut.set_result(fn(self.sim))
+        except BaseException as exc:  # delivered to the caller, never kills the engine
+            fut.set_exception(exc)
+
+    def _run(self) -> None:
+        if self.mode == "lockstep":
+            while True:
+                item = self._tasks.get()
+                if item is None:
+                    break
+                self._run_task(item)
+            self._drain()
+            return
+        sim = self.sim
+        dt = sim.dt
+        self.wall_start = time.monotonic()
+        self.sim_start_s = sim.time_s
+        while not self._stop.is_set():
+            while True:
+                try:
+                    item = self._tasks.get_nowait()
+                except queue.Empty:
+                    break
+                if item is None:
+                    self._drain()
+                    return
+                self._run_task(item)
+            target = self.sim_start_s + (time.monotonic() - self.wall_start)
+            due = int((target - sim.time_s) / dt)
+            if due <= 0:
+                # Wait for the next step's wall time, waking at once for a command.
+                wait = sim.time_s + dt - target
+                try:
+                    item = self._tasks.get(timeout=max(0.0001, min(0.002, wait)))
+                except queue.Empty:
+                    continue
+                if item is None:
+                    break
+                self._run_task(item)
+                continue
+            if due * dt > 0.5:
+                # Too far behind: slip the clock rather than run a burst.
+                self.behind_events += 1
+                if self.behind_events == 1 or self.behind_events % 100 == 0:
+                    log.warning(
+                        "simulation is running slower than real time (slipped %d times)",
+                        self.behind_events,
+                    )
+                self.wall_start += due * dt - 0.02
+                due = int(0.02 / dt)
+            sim.step(min(due, max(1, int(0.01 / dt))))
+        self._drain()
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                item = self._tasks.get_nowait()
+            except queue.Empty:
+                return
+            if item is not None:
+                item[1].set_exception(SkeyeError("the simulator is shutting down"))
+
+    def realtime_factor(self) -> float:
+        wall = time.monotonic() - self.wall_start
+        return (self.sim.time_s - self.sim_start_s) / wall if wall > 0 else 0.0

@@ -1,0 +1,128 @@
+"""Coordinate frames: the one place where MuJoCo's z-up frames meet the protocol's NED/FRD.
+
+How this works: skeye builds its MuJoCo world as NWU (x north, y west, z up) and its robot
+bodies as FLU (x forward, y left, z up). The protocol and everything above it use USARSim's NED
+world (x north, y east, z down) and FRD body frames. Both pairs differ by a rotation of pi about
+x, so a vector converts by negating y and z, and a quaternion (w, x, y, z; body to world) by
+negating its y and z parts. These functions are their own inverses. Nothing outside this module
+may flip a sign to change frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+Vec3 = Sequence[float] | np.ndarray
+
+
+def ned_to_mj(v: Vec3) -> np.ndarray:
+    """A world vector NED -> MuJoCo NWU (or body FRD -> FLU)."""
+    return np.array((v[0], -v[1], -v[2]), dtype=float)
+
+
+def mj_to_ned(v: Vec3) -> np.ndarray:
+    """A world vector MuJoCo NWU -> NED (or body FLU -> FRD)."""
+    return np.array((v[0], -v[1], -v[2]), dtype=float)
+
+
+def quat_mj_to_ned(q: Vec3) -> np.ndarray:
+    """MuJoCo body(FLU)->world(NWU) quaternion (w,x,y,z) -> body(FRD)->world(NED)."""
+    return np.array((q[0], q[1], -q[2], -q[3]), dtype=float)
+
+
+def quat_ned_to_mj(q: Vec3) -> np.ndarray:
+    """Body(FRD)->world(NED) quaternion (w,x,y,z) -> MuJoCo body(FLU)->world(NWU)."""
+    return np.array((q[0], q[1], -q[2], -q[3]), dtype=float)
+
+
+def quat_to_euler(q: Vec3) -> tuple[float, float, float]:
+    """Quaternion (w,x,y,z) -> (roll, pitch, yaw) rad, ZYX order (yaw, then pitch, then roll)."""
+    w, x, y, z = q
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    s = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
+    pitch = math.asin(s)
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def euler_to_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """(roll, pitch, yaw) rad, ZYX order -> quaternion (w,x,y,z)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return np.array(
+        (
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        )
+    )
+
+
+def quat_to_matrix(q: Vec3) -> np.ndarray:
+    """Quaternion (w,x,y,z) -> 3x3 rotation matrix (body to world)."""
+    w, x, y, z = q
+    return np.array(
+        (
+            (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+        )
+    )
+
+
+def wrap_2pi(angle_rad: float) -> float:
+    """Wrap to [0, 2 pi), as USARSim writes orientations."""
+    a = math.fmod(angle_rad, 2.0 * math.pi)
+    if a < 0.0:
+        a += 2.0 * math.pi
+    if a >= 2.0 * math.pi:  # fmod of a tiny negative number can round up to 2 pi
+        a = 0.0
+    return a
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """Wrap to [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def free_joint_to_ned(
+    qpos: Sequence[float], qvel: Sequence[float], qacc: Sequence[float]
+) -> tuple[
+    tuple[float, float, float],
+    tuple[float, float, float],
+    tuple[float, float, float, float],
+    tuple[float, float, float],
+    tuple[float, float, float],
+]:
+    """A MuJoCo free joint's (qpos[7], qvel[6], qacc[3]) -> NED position, NED velocity,
+    quaternion body(FRD)->NED, body(FRD) angular velocity and NED acceleration.
+
+    Plain floats: this runs every board tick of every robot. MuJoCo's free-joint linear
+    velocity is in the world frame and its angular velocity in the body frame.
+    """
+    return (
+        (qpos[0], -qpos[1], -qpos[2]),
+        (qvel[0], -qvel[1], -qvel[2]),
+        (qpos[3], qpos[4], -qpos[5], -qpos[6]),
+        (qvel[3], -qvel[4], -qvel[5]),
+        (qacc[0], -qacc[1], -qacc[2]),
+    )
+
+
+def ned_wrench_to_mj(
+    force_ned: Sequence[float], torque_ned: Sequence[float]
+) -> tuple[float, float, float, float, float, float]:
+    """A world-frame force and torque in NED -> MuJoCo's xfrc_applied layout (NWU)."""
+    return (
+        force_ned[0],
+        -force_ned[1],
+        -force_ned[2],
+        torque_ned[0],
+        -torque_ned[1],
+        -torque_ned[2],
+    )

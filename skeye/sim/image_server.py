@@ -1,0 +1,709 @@
+"""The image server: camera frames to many TCP clients (IMAGE_PROTOCOL.md, port 5003).
+
+How this works:
+
+* The engine's render step calls :meth:`FrameBuffer.publish` with each rendered :class:`Frame`.
+  That only stores a reference under a lock, notifies a Condition and pokes listeners that never
+  block, so the simulator never waits on a client.
+* Encoded images are cached per (camera, frame number, format, quality): the first client thread
+  that needs an encoding makes it, the others wait for that one (single flight), so four clients
+  asking for the same frame in the same format cost one encoding. The cache is a small LRU.
+* :class:`ImageServer` runs one accept thread and one thread per client. Each client thread owns
+  its socket (non-blocking) and a wake-up socket pair, and runs a select loop: requests are parsed
+  by the sans-IO :class:`~skeye.sim.image_protocol.RequestParser` and queued; the head of the
+  queue is served when nothing is being sent. At most one frame is in flight per client, and it is
+  built from the newest frame only when the previous one has gone out: a slow or stalled client
+  simply receives fewer frames, and never holds a lock or blocks anyone else. Reading stops while
+  the request queue is full, so a client that floods requests is held back by TCP.
+* ``close()`` wakes every thread through its socket pair and joins them all within a deadline.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import selectors
+import socket
+import threading
+import time
+from collections import OrderedDict, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skeye.errors import LocalProtocolError
+from skeye.sim.image_protocol import (
+    DEFAULT_PORT,
+    META_HEADER_BYTES,
+    META_OFFSET,
+    FrameType,
+    ImageFormat,
+    NewestFrame,
+    Request,
+    RequestError,
+    RequestParser,
+    SelectCamera,
+    SetFormat,
+    SetMeta,
+    Stream,
+    SubRect,
+    encode_error_frame,
+    encode_image,
+    frame_header,
+    meta_header,
+)
+
+log = logging.getLogger(__name__)
+
+NO_FRAME_WAIT_S = 1.0  # how long an OK waits for a camera's first frame before an error frame
+_RECV_BYTES = 4096  # bounds the requests one read can add to the queue
+_QUEUE_LIMIT = 64  # stop reading a client's requests while this many are waiting
+_IDLE_WAKE_S = 1.0  # safety net: a client loop looks around at least this often
+_ENCODE_WAIT_S = 5.0  # a thread waiting on another's encoding gives up and encodes itself
+_UINT32_MAX = 0xFFFF_FFFF
+
+FrameListener = Callable[[str], None]
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One rendered image of one camera.
+
+    ``number`` counts frames rendered by that camera, from 1; ``rgb`` is (H, W, 3) uint8, rows top
+    to bottom, RGB order. Publishing hands the array over: the buffer marks it read-only.
+    """
+
+    camera: str
+    camera_id: int
+    number: int
+    sim_time_s: float
+    rgb: np.ndarray
+
+    def __post_init__(self) -> None:
+        SelectCamera(self.camera)  # the same naming rule as the wire
+        for name, low in (("camera_id", 0), ("number", 1)):
+            value = getattr(self, name)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int)
+                or not (low <= value <= _UINT32_MAX)
+            ):
+                raise LocalProtocolError(
+                    f"Frame.{name} must be an integer {low}-2^32-1, got {value!r}"
+                )
+        if not math.isfinite(self.sim_time_s):
+            raise LocalProtocolError(f"Frame.sim_time_s must be finite, got {self.sim_time_s!r}")
+        rgb = self.rgb
+        if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3:
+            raise LocalProtocolError("Frame.rgb must be an (H, W, 3) uint8 array")
+        if rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
+            raise LocalProtocolError(f"Frame.rgb must have shape (H, W, 3), got {rgb.shape}")
+
+    @property
+    def width(self) -> int:
+        """Image width, px."""
+        return int(self.rgb.shape[1])
+
+    @property
+    def height(self) -> int:
+        """Image height, px."""
+        return int(self.rgb.shape[0])
+
+
+@dataclass
+class _CameraSlot:
+    camera_id: int
+    frame: Frame | None = None
+
+
+@dataclass
+class _Encoding:
+    done: threading.Event = field(default_factory=threading.Event)
+    result: tuple[FrameType, bytes] | None = None
+
+
+_CacheKey = tuple[str, int, ImageFormat, int | None]
+
+
+class _EncodeCache:
+    """Small LRU of encoded images with single-flight encoding (see module comment)."""
+
+    def __init__(self, max_entries: int) -> None:
+        if max_entries < 1:
+            raise LocalProtocolError(f"encode cache needs at least one entry, got {max_entries}")
+        self._max_entries = max_entries
+        self._lock = threading.Lock()
+        self._entries: OrderedDict[_CacheKey, _Encoding] = OrderedDict()
+        self.encodes = 0
+
+    def get(self, frame: Frame, kind: ImageFormat, quality: int | None) -> tuple[FrameType, bytes]:
+        key: _CacheKey = (frame.camera, frame.number, kind, quality)
+        with self._lock:
+            entry = self._entries.get(key)
+            owner = entry is None
+            if entry is None:
+                entry = _Encoding()
+                self._entries[key] = entry
+                while len(self._entries) > self._max_entries:
+                    self._entries.popitem(last=False)
+            else:
+                self._entries.move_to_end(key)
+        if owner:
+            try:
+                entry.result = encode_image(frame.rgb, kind, quality)
+            finally:
+                entry.done.set()
+                with self._lock:
+                    self.encodes += 1
+                    if entry.result is None and self._entries.get(key) is entry:
+                        del self._entries[key]
+            return entry.result
+        if entry.done.wait(_ENCODE_WAIT_S) and entry.result is not None:
+            return entry.result
+        return encode_image(frame.rgb, kind, quality)  # the owner failed or is stuck
+
+
+class FrameBuffer:
+    """Thread-safe store of the newest frame of each camera, shared by the engine and servers."""
+
+    def __init__(self, cache_entries: int = 16) -> None:
+        self._cond = threading.Condition()
+        self._slots: dict[str, _CameraSlot] = {}  # insertion order = registration order
+        self._listeners: tuple[FrameListener, ...] = ()
+        self._cache = _EncodeCache(cache_entries)
+
+    def register_camera(self, name: str, camera_id: int) -> None:
+        """Make a camera known before its first frame (keeps the camera order stable)."""
+        SelectCamera(name)
+        with self._cond:
+            slot = self._slots.get(name)
+            if slot is None:
+                self._slots[name] = _CameraSlot(camera_id)
+            elif slot.camera_id != camera_id:
+                raise LocalProtocolError(
+                    f"camera {name} is registered with id {slot.camera_id}, not {camera_id}"
+                )
+        self._notify(name)
+
+    def remove_camera(self, name: str) -> None:
+        """Forget a camera (its robot went); waiters for it wake up empty-handed."""
+        with self._cond:
+            removed = self._slots.pop(name, None) is not None
+            self._cond.notify_all()
+        if removed:
+            self._notify(name)
+
+    def publish(self, frame: Frame) -> None:
+        """Store ``frame`` as its camera's newest; cheap, never waits on a client.
+
+        Raises:
+            LocalProtocolError: the camera id changed or the frame number did not increase.
+        """
+        frame.rgb.flags.writeable = False
+        with self._cond:
+            slot = self._slots.get(frame.camera)
+            if slot is None:
+                slot = self._slots[frame.camera] = _CameraSlot(frame.camera_id)
+            elif slot.camera_id != frame.camera_id:
+                raise LocalProtocolError(
+                    f"camera {frame.camera} has id {slot.camera_id}, frame says {frame.camera_id}"
+                )
+            if slot.frame is not None and frame.number <= slot.frame.number:
+                raise LocalProtocolError(
+                    f"camera {frame.camera}: frame {frame.number} after {slot.frame.number}"
+                )
+            slot.frame = frame
+            self._cond.notify_all()
+        self._notify(frame.camera)
+
+    def cameras(self) -> list[str]:
+        """Camera names in order of registration or first publication."""
+        with self._cond:
+            return list(self._slots)
+
+    def camera_id(self, name: str) -> int | None:
+        """The id of a camera, or None if it is unknown."""
+        with self._cond:
+            slot = self._slots.get(name)
+            return None if slot is None else slot.camera_id
+
+    def latest(self, camera: str) -> Frame | None:
+        """The newest frame of ``camera``, or None (no frame yet, or no such camera)."""
+        with self._cond:
+            slot = self._slots.get(camera)
+            return None if slot is None else slot.frame
+
+    def wait_newer(self, camera: str, after_number: int, timeout_s: float) -> Frame | None:
+        """The newest frame of ``camera`` numbered above ``after_number``, waiting up to
+        ``timeout_s``; None on timeout or if the camera is removed meanwhile."""
+
+        def ready() -> bool:
+            slot = self._slots.get(camera)
+            return slot is None or (slot.frame is not None and slot.frame.number > after_number)
+
+        with self._cond:
+            self._cond.wait_for(ready, timeout=timeout_s)
+            slot = self._slots.get(camera)
+            if slot is None or slot.frame is None or slot.frame.number <= after_number:
+                return None
+            return slot.frame
+
+    def encoded(
+        self, frame: Frame, kind: ImageFormat, quality: int | None = None
+    ) -> tuple[FrameType, bytes]:
+        """The base frame type and payload of ``frame`` in a format, encoded at most once."""
+        return self._cache.get(frame, kind, quality)
+
+    @property
+    def encode_count(self) -> int:
+        """How many encodings were actually made (cache misses); for tests and benchmarks."""
+        return self._cache.encodes
+
+    def add_listener(self, listener: FrameListener) -> None:
+        """Call ``listener(camera)`` after each publish or camera change; it must not block."""
+        with self._cond:
+            self._listeners = (*self._listeners, listener)
+
+    def remove_listener(self, listener: FrameListener) -> None:
+        """Stop calling ``listener``; unknown listeners are ignored."""
+        with self._cond:
+            self._listeners = tuple(x for x in self._listeners if x is not listener)
+
+    def _notify(self, camera: str) -> None:
+        for listener in self._listeners:
+            try:
+                listener(camera)
+            except Exception:
+                log.exception("image frame listener failed")
+
+
+@dataclass(frozen=True)
+class ClientStats:
+    """What the server has sent one client so far."""
+
+    address: str
+    camera: str | None
+    frames_sent: int
+    errors_sent: int
+    bytes_sent: int
+
+
+class _ClientHandler:
+    """Serves one client on its own thread (see the module comment)."""
+
+    def __init__(
+        self,
+        server: ImageServer,
+        sock: socket.socket,
+        address: str,
+        default_format: ImageFormat,
+        default_quality: int | None,
+    ) -> None:
+        self._server = server
+        self._buffer = server.buffer
+        self._sock = sock
+        self.address = address
+        self._wake_r, self._wake_w = socket.socketpair()
+        for s in (self._sock, self._wake_r, self._wake_w):
+            s.setblocking(False)
+        self._parser = RequestParser()
+        self._queue: deque[Request] = deque()
+        self._out: list[memoryview] = []
+        self._out_is_error = False
+        self._stop = False
+        self._eof = False
+        self._want_wake = False
+        self.camera: str | None = None  # None: the buffer's first camera
+        self._format = default_format
+        self._quality = default_quality
+        self._meta = False
+        self._stream_period_s: float | None = None
+        self._next_stream_s = 0.0
+        self._stream_starved = False  # a stream frame is due but no newer frame exists yet
+        self._last_sent_number = 0
+        self._wait_deadline_s: float | None = None
+        self.frames_sent = 0
+        self.errors_sent = 0
+        self.bytes_sent = 0
+        self.thread = threading.Thread(
+            target=self._run, name=f"image-client {address}", daemon=True
+        )
+
+    # ---------------------------------------------------------------- thread plumbing
+
+    def stop(self) -> None:
+        """Ask the thread to end soon; safe from any thread."""
+        self._stop = True
+        self._poke()
+
+    def _poke(self) -> None:
+        try:
+            self._wake_w.send(b"\0")
+        except OSError:
+            pass  # buffer full (a wake-up is pending anyway) or already closed
+
+    def _on_publish(self, camera: str) -> None:
+        if self._want_wake:
+            self._want_wake = False
+            self._poke()
+
+    def _run(self) -> None:
+        log.info("image client %s connected", self.address)
+        self._buffer.add_listener(self._on_publish)
+        try:
+            self._loop()
+        except OSError as exc:
+            log.info("image client %s: connection lost (%s)", self.address, exc)
+        except Exception:
+            log.exception("image client %s: handler failed", self.address)
+        finally:
+            self._buffer.remove_listener(self._on_publish)
+            for s in (self._sock, self._wake_r, self._wake_w):
+                s.close()
+            self._server._forget(self)
+            log.info(
+                "image client %s disconnected (%d frames, %d errors sent)",
+                self.address,
+                self.frames_sent,
+                self.errors_sent,
+            )
+
+    def _loop(self) -> None:
+        with selectors.DefaultSelector() as sel:
+            sel.register(self._wake_r, selectors.EVENT_READ)
+            registered = 0
+            while not self._stop:
+                now = time.monotonic()
+                self._advance(now)
+                if self._eof and not self._queue and not self._out:
+                    return
+                interest = 0
+                if not self._eof and len(self._queue) < _QUEUE_LIMIT:
+                    interest |= selectors.EVENT_READ
+                if self._out:
+                    interest |= selectors.EVENT_WRITE
+                if interest != registered:
+                    if registered and interest:
+                        sel.modify(self._sock, interest)
+                    elif interest:
+                        sel.register(self._sock, interest)
+                    else:
+                        sel.unregister(self._sock)
+                    registered = interest
+                for key, mask in sel.select(self._timeout(now)):
+                    if key.fileobj is self._wake_r:
+                        self._drain_wake()
+                        continue
+                    if mask & selectors.EVENT_READ and not self._read():
+                        self._eof = True
+                    if mask & selectors.EVENT_WRITE:
+                        self._write()
+
+    def _drain_wake(self) -> None:
+        try:
+            while self._wake_r.recv(256):
+                pass
+        except BlockingIOError:
+            pass
+
+    def _read(self) -> bool:
+        """Read requests; False at end of stream."""
+        try:
+            data = self._sock.recv(_RECV_BYTES)
+        except BlockingIOError:
+            return True
+        if not data:
+            return False
+        self._queue.extend(self._parser.feed(data))
+        return True
+
+    def _write(self) -> None:
+        if not self._out:
+            return
+        try:
+            sent = self._sock.sendmsg(self._out)
+        except BlockingIOError:
+            return
+        self.bytes_sent += sent
+        while sent:
+            head = self._out[0]
+            if sent >= len(head):
+                sent -= len(head)
+                self._out.pop(0)
+            else:
+                self._out[0] = head[sent:]
+                sent = 0
+        if not self._out:
+            if self._out_is_error:
+                self.errors_sent += 1
+            else:
+                self.frames_sent += 1
+
+    def _timeout(self, now: float) -> float:
+        timeout = _IDLE_WAKE_S
+        if self._wait_deadline_s is not None:
+            timeout = min(timeout, self._wait_deadline_s - now)
+        if (
+            self._stream_period_s is not None
+            and not self._stream_starved
+            and not self._out
+            and not self._queue
+        ):
+            timeout = min(timeout, self._next_stream_s - now)
+        return max(timeout, 0.0)
+
+    # ---------------------------------------------------------------- requests
+
+    def _advance(self, now: float) -> None:
+        """Fill the (empty) output with the next thing to send, if any is ready."""
+        self._stream_starved = False
+        while not self._out and not self._stop:
+            if self._queue:
+                if not self._serve(self._queue[0], now):
+                    return  # waiting for a first frame
+                self._queue.popleft()
+                continue
+            if self._stream_period_s is not None and now >= self._next_stream_s:
+                self._want_wake = True  # before looking, so a publish in between is not missed
+                camera = self._camera_name()
+                frame = None if camera is None else self._buffer.latest(camera)
+                if frame is None or frame.number <= self._last_sent_number:
+                    self._stream_starved = True  # the publisher's listener will wake us
+                    return
+                self._want_wake = False
+                self._send_frame(frame, None)
+                period = self._stream_period_s
+                self._next_stream_s = max(self._next_stream_s + period, now - 0.5 * period)
+            return
+
+    def _serve(self, request: Request, now: float) -> bool:
+        """Act on one request; False if it must wait for a frame to exist."""
+        match request:
+            case NewestFrame() | SubRect():
+                return self._serve_image(request, now)
+            case SelectCamera(name=name):
+                if name in self._buffer.cameras():
+                    if name != self.camera:
+                        self._last_sent_number = 0
+                    self.camera = name
+                else:
+                    known = ", ".join(self._buffer.cameras()) or "none"
+                    self._send_error(f"unknown camera {name!r} (cameras: {known})")
+            case SetFormat(kind=kind, quality=quality):
+                self._format, self._quality = kind, quality
+            case SetMeta(on=on):
+                self._meta = on
+            case Stream(fps=fps):
+                self._stream_period_s = 1.0 / fps if fps > 0 else None
+                self._next_stream_s = now
+            case RequestError(reason=reason):
+                self._send_error(reason)
+        return True
+
+    def _camera_name(self) -> str | None:
+        if self.camera is not None:
+            return self.camera
+        cameras = self._buffer.cameras()
+        return cameras[0] if cameras else None
+
+    def _serve_image(self, request: NewestFrame | SubRect, now: float) -> bool:
+        camera = self._camera_name()
+        frame = None if camera is None else self._buffer.latest(camera)
+        if frame is None:
+            if self.camera is not None and self._buffer.camera_id(self.camera) is None:
+                self._wait_deadline_s = None
+                self._send_error(f"camera {self.camera!r} is gone")
+                return True
+            if self._wait_deadline_s is None:
+                self._wait_deadline_s = now + NO_FRAME_WAIT_S
+            if now < self._wait_deadline_s:
+                self._want_wake = True
+                return False
+            self._wait_deadline_s = None
+            self._send_error(f"no frame available from camera {camera or '(none yet)'}")
+            return True
+        self._wait_deadline_s = None
+        if isinstance(request, NewestFrame):
+            self._send_frame(frame, None)
+            return True
+        x, y, w, h = request.x, request.y, request.width, request.height
+        if w == 0 or h == 0 or x + w > frame.width or y + h > frame.height:
+            self._send_error(
+                f"bad rectangle x={x} y={y} width={w} height={h} "
+                f"for a {frame.width}x{frame.height} frame"
+            )
+            return True
+        self._send_frame(frame, (x, y, w, h))
+        return True
+
+    def _send_frame(self, frame: Frame, rect: tuple[int, int, int, int] | None) -> None:
+        if rect is None:
+            base, payload = self._buffer.encoded(frame, self._format, self._quality)
+            width, height = frame.width, frame.height
+            if self.camera is None or frame.camera == self.camera:
+                self._last_sent_number = max(self._last_sent_number, frame.number)
+        else:
+            x, y, width, height = rect
+            crop = frame.rgb[y : y + height, x : x + width]
+            base, payload = encode_image(crop, self._format, self._quality)
+        if self._meta:
+            head = meta_header(frame.number, frame.sim_time_s, frame.camera_id, width, height)
+            parts = [
+                frame_header(base + META_OFFSET, META_HEADER_BYTES + len(payload)) + head,
+                payload,
+            ]
+        else:
+            parts = [frame_header(base, len(payload)), payload]
+        self._out = [memoryview(p) for p in parts]
+        self._out_is_error = False
+
+    def _send_error(self, reason: str) -> None:
+        log.debug("image client %s: error frame: %s", self.address, reason)
+        self._out = [memoryview(encode_error_frame(reason))]
+        self._out_is_error = True
+
+    def stats(self) -> ClientStats:
+        return ClientStats(
+            self.address, self.camera, self.frames_sent, self.errors_sent, self.bytes_sent
+        )
+
+
+class ImageServer:
+    """Serves a :class:`FrameBuffer` over TCP; a context manager, listening once constructed.
+
+    Args:
+        buffer: where the engine publishes frames.
+        host: address to bind (127.0.0.1 unless told otherwise).
+        port: TCP port; 0 picks a free one (read it back from :attr:`port`).
+        default_format: the format a client gets until it sends ``SKEYE FORMAT``.
+        default_quality: JPEG quality when ``default_format`` is JPEG.
+        max_clients: connections beyond this get an error frame and are closed.
+        close_timeout_s: how long ``close()`` waits for all threads in total.
+    """
+
+    def __init__(
+        self,
+        buffer: FrameBuffer,
+        host: str = "127.0.0.1",
+        port: int = DEFAULT_PORT,
+        *,
+        default_format: ImageFormat = ImageFormat.RAW,
+        default_quality: int | None = None,
+        max_clients: int = 64,
+        close_timeout_s: float = 2.0,
+    ) -> None:
+        SetFormat(default_format, default_quality)  # same rules as a client's request
+        self.buffer = buffer
+        self._default_format = default_format
+        self._default_quality = default_quality
+        self._max_clients = max_clients
+        self._close_timeout_s = close_timeout_s
+        self._lock = threading.Lock()
+        self._handlers: list[_ClientHandler] = []
+        self._closed = False
+        self._listener = socket.create_server((host, port), backlog=16)
+        self._listener.setblocking(False)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self.host = host
+        self.port: int = self._listener.getsockname()[1]
+        self._accept_thread = threading.Thread(
+            target=self._accept_loop, name=f"image-server accept :{self.port}", daemon=True
+        )
+        self._accept_thread.start()
+        log.info("image server listening on %s:%d", host, self.port)
+
+    def __enter__(self) -> ImageServer:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def stats(self) -> list[ClientStats]:
+        """What each connected client has been sent, in order of connection."""
+        with self._lock:
+            return [h.stats() for h in self._handlers]
+
+    def client_count(self) -> int:
+        """Connected clients."""
+        with self._lock:
+            return len(self._handlers)
+
+    def close(self) -> None:
+        """Stop accepting, end every client thread and close every socket; idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        deadline = time.monotonic() + self._close_timeout_s
+        try:
+            self._wake_w.send(b"\0")
+        except OSError:
+            pass
+        self._accept_thread.join(max(0.0, deadline - time.monotonic()))
+        with self._lock:
+            handlers = list(self._handlers)
+        for handler in handlers:
+            handler.stop()
+        for handler in handlers:
+            handler.thread.join(max(0.0, deadline - time.monotonic()))
+        stuck = [h.address for h in handlers if h.thread.is_alive()]
+        if self._accept_thread.is_alive():
+            stuck.append("accept")
+        if stuck:
+            log.warning("image server: threads still running after close: %s", stuck)
+        else:
+            self._listener.close()
+            self._wake_r.close()
+            self._wake_w.close()
+        log.info("image server on port %d closed", self.port)
+
+    def _forget(self, handler: _ClientHandler) -> None:
+        with self._lock:
+            if handler in self._handlers:
+                self._handlers.remove(handler)
+
+    def _accept_loop(self) -> None:
+        try:
+            with selectors.DefaultSelector() as sel:
+                sel.register(self._listener, selectors.EVENT_READ)
+                sel.register(self._wake_r, selectors.EVENT_READ)
+                while not self._closed:
+                    for key, _ in sel.select(_IDLE_WAKE_S):
+                        if key.fileobj is self._listener:
+                            self._accept_one()
+        except Exception:
+            log.exception("image server accept loop failed")
+        finally:
+            if self._closed:
+                self._listener.close()
+
+    def _accept_one(self) -> None:
+        try:
+            sock, peer = self._listener.accept()
+        except (BlockingIOError, ConnectionAbortedError):
+            return
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        address = f"{peer[0]}:{peer[1]}"
+        with self._lock:
+            if self._closed or len(self._handlers) >= self._max_clients:
+                refuse = True
+            else:
+                refuse = False
+                handler = _ClientHandler(
+                    self, sock, address, self._default_format, self._default_quality
+                )
+                self._handlers.append(handler)
+                handler.thread.start()
+        if refuse:
+            log.warning(
+                "image server: refusing %s (closed or %d clients)", address, self._max_clients
+            )
+            try:
+                sock.setblocking(False)
+                sock.send(encode_error_frame("too many clients"))
+            except OSError:
+                pass
+            sock.close()

@@ -1,0 +1,283 @@
+"""One simulated vehicle at run time: its board (controller, motors, battery) and its sensors.
+
+How this works: the engine calls :meth:`Robot.board_tick` every board period with the vehicle's
+ground-truth :class:`BodyState`; the robot asks its INS for the onboard estimate, runs the
+low-level controller on that estimate, advances the motors and the battery, and returns the
+wrench (NED force and torque on the centre of mass) for the engine to apply. Sensors are
+sampled by the engine when due (:meth:`due_sensors`); the robot never touches MuJoCo.
+
+Flight state (``armed``, ``landed``) follows a small table: a robot spawned on the ground is
+disarmed; any DRIVE that asks for motion arms it; a robot that is landed and asked to go no
+higher for one second disarms (motors stop), as the AscTec board does.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skeye.errors import LocalProtocolError, PhysicsError
+from skeye.sim.cameras import CameraSpec
+from skeye.sim.controller import Command, LowLevelController
+from skeye.sim.robot_config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
+from skeye.sim.sensors import Mount, WorldQuery, build_sensor
+from skeye.sim.state import BodyState
+from skeye.sim.vehicle import Battery, RotorModel, ground_effect_factor
+
+Outbox = Callable[[bytes], None]
+
+
+@dataclass
+class ScheduledSensor:
+    """A sensor with its period in physics steps."""
+
+    sensor: Any
+    period_steps: int
+    mount: SensorMount
+
+
+class MotorsSensor:
+    """Rotor speeds as the ESCs report them (rad/s); skeye's extension, used to check lag."""
+
+    type_name = "Motors"
+
+    def __init__(self, name: str, rotors: RotorModel, rate_hz: float) -> None:
+        self.name = name
+        self.rotors = rotors
+        self.rate_hz = rate_hz
+
+    def sample(self, state: BodyState, world: WorldQuery) -> list[tuple[str, object]]:
+        return [
+            ("Speeds", tuple(self.rotors.speed_rad_s)),
+            ("Commands", tuple(self.rotors.command_rad_s)),
+            ("Thrust", self.rotors.total_thrust_n()),
+        ]
+
+    def conf_fields(self) -> list[tuple[str, object]]:
+        return [("Rate", self.rate_hz), ("MaxSpeed", self.rotors.p.max_rotor_speed_rad_s)]
+
+    def geo_fields(self) -> list[tuple[str, object]]:
+        return [("Location", (0.0, 0.0, 0.0)), ("Orientation", (0.0, 0.0, 0.0))]
+
+
+@dataclass
+class FlightState:
+    armed: bool = False
+    landed: bool = True
+    landed_since_s: float = 0.0
+    failed: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Robot:
+    """A vehicle bound to one client connection (USARSim: one robot per connection)."""
+
+    def __init__(
+        self,
+        name: str,
+        config: RobotConfig,
+        *,
+        physics_step_s: float,
+        rng: np.random.Generator,
+        outbox: Outbox,
+        spawn_pos_ned_m: tuple[float, float, float],
+        spawn_rpy_rad: tuple[float, float, float],
+        airborne: bool,
+    ) -> None:
+        self.name = name
+        self.config = config
+        self.outbox = outbox
+        self.spawn_pos_ned_m = spawn_pos_ned_m
+        self.spawn_rpy_rad = spawn_rpy_rad
+        decimation = round(1.0 / (config.board_rate_hz * physics_step_s))
+        if decimation < 1 or abs(decimation * physics_step_s * config.board_rate_hz - 1.0) > 1e-6:
+            raise LocalProtocolError(
+                f"robot class {config.class_name}: board rate {config.board_rate_hz} Hz is not an "
+                f"integer fraction of the physics rate {1.0 / physics_step_s:g} Hz"
+            )
+        self.board_decimation = decimation
+        self.tick_s = decimation * physics_step_s
+        self.rotors = RotorModel(config.airframe, self.tick_s)
+        self.controller = LowLevelController(config.airframe, config.controller, self.tick_s)
+        self.battery = Battery(config.battery)
+        self.command = Command()
+        self.flight = FlightState()
+        self.status_period_steps = max(1, round(1.0 / (config.status_rate_hz * physics_step_s)))
+        self.sensors: list[ScheduledSensor] = []
+        self.cameras: list[CameraSpec] = []
+        self.ins: Any = None
+        for mount in config.sensors:
+            type_key = mount.type_name.lower()
+            params = dict(mount.params)
+            if type_key == CAMERA_TYPE:
+                self.cameras.append(CameraSpec.from_mount(mount, config.source))
+                continue
+            if type_key == MOTORS_TYPE:
+                rate = float(params.get("rate_hz", 100.0))
+                sensor: Any = MotorsSensor(mount.name, self.rotors, rate)
+            else:
+                sensor = build_sensor(
+                    mount.type_name,
+                    mount.name,
+                    Mount(mount.position_m, mount.direction_rad),
+                    params,
+                    np.random.default_rng(rng.integers(0, 2**63)),
+                )
+            period = max(1, round(1.0 / (sensor.rate_hz * physics_step_s)))
+            self.sensors.append(ScheduledSensor(sensor, period, mount))
+            if sensor.type_name == "INS" and self.ins is None:
+                self.ins = sensor
+        if self.ins is None:
+            # The board always has an estimator, even when no INS is streamed to the client.
+            self.ins = build_sensor(
+                "INS", "INS", Mount(), {}, np.random.default_rng(rng.integers(0, 2**63))
+            )
+        self.ground_effect = 1.0
+        self.ground_distance_m: float | None = None
+        if airborne:
+            self.flight.armed = True
+            self.flight.landed = False
+            self.rotors.set_speeds(config.airframe.hover_speed_rad_s)
+
+    # -- commands ------------------------------------------------------------------------
+    def drive(self, **changes: float | bool) -> None:
+        """Update the set-point; arms the motors when the command asks for motion."""
+        if self.flight.failed:
+            raise LocalProtocolError(f"robot {self.name} is stopped: {self.flight.failed}")
+        attitude = bool(changes.pop("attitude", self.command.attitude))
+        if attitude != self.command.attitude:
+            self.command = Command(attitude=attitude)
+            self.controller.reset()
+        for key, value in changes.items():
+            setattr(self.command, key, float(value))
+        c = self.command
+        wants_motion = (
+            (c.thrust > 0.0)
+            if c.attitude
+            else (
+                c.up_m_s > 0.0
+                or c.forward_m_s != 0.0
+                or c.right_m_s != 0.0
+                or c.yaw_rate_rad_s != 0.0
+            )
+        )
+        if wants_motion and not self.flight.armed and not self.battery.empty:
+            self.flight.armed = True
+            self.controller.reset()
+
+    # -- the board -----------------------------------------------------------------------
+    def board_tick(
+        self,
+        state: BodyState,
+        ground_distance_m: float | None,
+        in_contact: bool,
+        air_vel_ned: tuple[float, float, float],
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """Advance the board one tick; returns (force NED N, torque NED N m) on the body."""
+        if self.flight.failed:
+            return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        est = self.ins.estimate(state, self.tick_s)
+        airframe = self.config.airframe
+        voltage_scale = min(1.0, self.battery.voltage_v / (self.config.battery.cells * 4.2) + 0.15)
+        w_max = airframe.max_rotor_speed_rad_s * voltage_scale
+        if self.flight.armed and not self.battery.empty:
+            commands = self.controller.update(
+                self.command,
+                _floats(est.rpy_rad),
+                _floats(est.omega_frd_rad_s),
+                _floats(est.vel_ned_m_s),
+                -float(est.pos_ned_m[2]),
+                w_max,
+            )
+        else:
+            commands = [0.0, 0.0, 0.0, 0.0]
+        self.rotors.advance(commands, w_max)
+        rot = state.rot_body_to_ned.tolist()
+        v = state.vel_ned_m_s.tolist()
+        va = (v[0] - air_vel_ned[0], v[1] - air_vel_ned[1], v[2] - air_vel_ned[2])
+        vb = (
+            rot[0][0] * va[0] + rot[1][0] * va[1] + rot[2][0] * va[2],
+            rot[0][1] * va[0] + rot[1][1] * va[1] + rot[2][1] * va[2],
+            rot[0][2] * va[0] + rot[1][2] * va[1] + rot[2][2] * va[2],
+        )
+        self.ground_distance_m = ground_distance_m
+        rotor_height = None
+        if ground_distance_m is not None:
+            rotor_height = ground_distance_m + airframe.body_size_m[2] / 2
+        self.ground_effect = ground_effect_factor(rotor_height, airframe.rotor_radius_m)
+        fx, fy, fz, tx, ty, tz, power = self.rotors.wrench(vb, self.ground_effect)
+        self.battery.draw(power, self.tick_s)
+        for value in (fx, fy, fz, tx, ty, tz):
+            if not math.isfinite(value):
+                raise PhysicsError(f"robot {self.name}: non-finite rotor wrench")
+        force = (
+            rot[0][0] * fx + rot[0][1] * fy + rot[0][2] * fz,
+            rot[1][0] * fx + rot[1][1] * fy + rot[1][2] * fz,
+            rot[2][0] * fx + rot[2][1] * fy + rot[2][2] * fz,
+        )
+        torque = (
+            rot[0][0] * tx + rot[0][1] * ty + rot[0][2] * tz,
+            rot[1][0] * tx + rot[1][1] * ty + rot[1][2] * tz,
+            rot[2][0] * tx + rot[2][1] * ty + rot[2][2] * tz,
+        )
+        self._update_flight_state(state, in_contact)
+        return force, torque
+
+    def _update_flight_state(self, state: BodyState, in_contact: bool) -> None:
+        f = self.flight
+        vx, vy, vz = state.vel_ned_m_s.tolist()
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        landed_now = in_contact and speed < 0.3
+        if landed_now and not f.landed:
+            f.landed_since_s = state.time_s
+        f.landed = landed_now
+        c = self.command
+        asks_up = (c.thrust > 0.3) if c.attitude else (c.up_m_s > 0.0)
+        if f.armed and f.landed and not asks_up and state.time_s - f.landed_since_s >= 1.0:
+            f.armed = False
+            self.command = Command(attitude=c.attitude)
+            self.controller.reset()
+        if self.battery.empty and f.armed:
+            f.armed = False
+
+    def status_fields(self) -> list[tuple[str, object]]:
+        return [
+            ("Battery", self.battery.remaining_s),
+            ("Voltage", self.battery.voltage_v),
+            ("Current", self.battery.current_a),
+            ("Armed", self.flight.armed),
+            ("Landed", self.flight.landed),
+        ]
+
+    def find_sensors(self, type_name: str, name: str | None = None) -> list[ScheduledSensor]:
+        """Mounted sensors (cameras included) of a type, optionally by name."""
+        everything = self.sensors + [ScheduledSensor(cam, 0, cam.mount) for cam in self.cameras]
+        return [
+            s
+            for s in everything
+            if s.sensor.type_name.lower() == type_name.lower()
+            and (name is None or s.mount.name.lower() == name.lower())
+        ]
+
+
+def _floats(v: Any) -> Any:
+    """A 3-vector as plain floats (numpy scalars are slow in the board's hot path)."""
+    return v.tolist() if isinstance(v, np.ndarray) else v
+
+
+def check_state(name: str, state: BodyState) -> None:
+    """Raise PhysicsError if the state is non-finite or runaway (plain floats: hot path)."""
+    px, py, pz = state.pos_ned_m.tolist()
+    vx, vy, vz = state.vel_ned_m_s.tolist()
+    wx, wy, wz = state.omega_frd_rad_s.tolist()
+    total = px + py + pz + vx + vy + vz + wx + wy + wz
+    if not math.isfinite(total):
+        raise PhysicsError(f"robot {name}: NaN in the simulated state")
+    if max(abs(px), abs(py), abs(pz)) > 1.0e5 or vx * vx + vy * vy + vz * vz > 150.0**2:
+        raise PhysicsError(f"robot {name}: the simulation diverged (runaway position or speed)")
+    if wx * wx + wy * wy + wz * wz > 200.0**2:
+        raise PhysicsError(f"robot {name}: the simulation diverged (runaway rotation rate)")

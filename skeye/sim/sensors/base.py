@@ -1,0 +1,290 @@
+"""Sensor base class, mount poses, parameter validation and the shared noise model.
+
+How this works: every simulated sensor is built from a name, a :class:`Mount` (its pose on the
+body, USARSim's Position and Direction) and a parameter mapping, plus a ``numpy`` Generator that
+the engine seeds. Parameters are declared per class as :class:`Param` rows; keys match the
+``CONF`` field names case-insensitively and ignoring underscores (``MaxRange``, ``max_range``;
+the rate is ``Rate`` or ``rate_hz``). Validation happens once, in the constructor, and every
+mistake raises ConfigError naming the sensor and the key. After that, :meth:`Sensor.sample`
+turns ground truth (:class:`~skeye.sim.state.BodyState`, NED world, FRD body, SI) and a
+:class:`WorldQuery` into the ``SEN`` fields that follow ``{Time} {Type} {Name}``.
+
+Invariants: every random draw comes from the sensor's own Generator, in an order fixed by the
+sequence of calls, so the same seed and the same calls give the same readings bit for bit. Time
+for random walks is sim time (``state.time_s``), never the wall clock; a time that does not
+move forward advances no random walk.
+
+Mount frame: the sensor frame is the body frame rotated by the mount's roll, pitch, yaw (ZYX,
+as everywhere in skeye). Vectors the sensor reports are expressed in that frame. Range sensors
+(Sonar, OpticalFlow) look along the sensor frame's +z axis, so an identity mount looks straight
+down; a forward-looking sonar has Direction (0, pi/2, 0).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar, Generic, Protocol, TypeVar
+
+import numpy as np
+
+from skeye.errors import ConfigError
+from skeye.geo import GeoOrigin
+from skeye.sim.frames import euler_to_quat, quat_to_matrix, wrap_2pi
+from skeye.sim.state import BodyState
+
+Vec3 = tuple[float, float, float]
+Fields = list[tuple[str, object]]
+
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "groundtruth": 50.0,
+    "ins": 50.0,
+    "accelerometer": 100.0,
+    "gyro": 100.0,
+    "magneticcompass": 20.0,
+    "barometer": 20.0,
+    "gps": 5.0,
+    "sonar": 15.0,
+    "opticalflow": 50.0,
+    "battery": 1.0,
+}
+"""Default sample rate of each sensor type, keyed by lower-case protocol Type."""
+
+
+class WorldQuery(Protocol):
+    """What sensors may ask of the world (the engine implements it)."""
+
+    @property
+    def geo_origin(self) -> GeoOrigin | None:
+        """Geodetic position of the NED origin; None where there is no GPS (indoors)."""
+
+    @property
+    def magnetic_field_ned_ut(self) -> np.ndarray:
+        """Earth's magnetic field in the world frame, microtesla, shape (3,)."""
+
+    @property
+    def sea_level_pressure_pa(self) -> float:
+        """ISA sea-level reference pressure of the day, Pa."""
+
+    def ray_distance(
+        self, origin_ned_m: np.ndarray, direction_ned: np.ndarray, max_range_m: float
+    ) -> float | None:
+        """Distance to the first hit along a unit ray, excluding the vehicle; None if none."""
+
+
+@dataclass(frozen=True)
+class Mount:
+    """A sensor's pose on the body: position (m, body FRD) and direction (roll, pitch, yaw rad)."""
+
+    pos_frd_m: Vec3 = (0.0, 0.0, 0.0)
+    rpy_rad: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Param:
+    """One configurable parameter: its CONF key, default, lower bound and meaning."""
+
+    key: str
+    default: float
+    doc: str
+    minimum: float = 0.0
+    exclusive: bool = False  # the value must be > minimum (else >= minimum)
+    maximum: float = math.inf
+    integer: bool = False
+
+
+@dataclass(frozen=True)
+class Reading:
+    """Base of the typed readings kept in ``Sensor.last``."""
+
+    time_s: float
+
+    def fields(self) -> Fields:
+        """The SEN fields after Time, Type and Name, in the protocol's keys and units."""
+        raise NotImplementedError
+
+
+R = TypeVar("R", bound=Reading)
+
+
+def vec3(a: np.ndarray | tuple[float, ...] | list[float]) -> Vec3:
+    """A length-3 array as a tuple of Python floats (what the SEN formatter expects)."""
+    x, y, z = (float(v) for v in a)
+    return (x, y, z)
+
+
+def rpy_matrix(rpy_rad: Vec3) -> np.ndarray:
+    """Rotation matrix (child frame -> parent frame) of a roll, pitch, yaw triple (ZYX)."""
+    return quat_to_matrix(euler_to_quat(*rpy_rad).tolist())
+
+
+def _norm_key(key: str) -> str:
+    return key.replace("_", "").lower()
+
+
+class Sensor(Generic[R]):
+    """Base of all simulated sensors.
+
+    Subclasses set ``type_name`` (the protocol Type) and ``PARAMS``, and implement ``_read``;
+    they may override ``_check`` (cross-parameter checks) and ``_setup`` (draw constant biases).
+    """
+
+    type_name: ClassVar[str] = ""
+    PARAMS: ClassVar[tuple[Param, ...]] = ()
+    _ALIASES: ClassVar[dict[str, str]] = {"ratehz": "rate"}
+
+    def __init__(
+        self, name: str, mount: Mount, params: Mapping[str, object], rng: np.random.Generator
+    ) -> None:
+        self.name = name
+        self.mount = mount
+        self.rng = rng
+        for label, vec in (("Position", mount.pos_frd_m), ("Direction", mount.rpy_rad)):
+            if not (
+                isinstance(vec, tuple | list)
+                and len(vec) == 3
+                and all(isinstance(v, int | float) and math.isfinite(v) for v in vec)
+            ):
+                raise self._error(label, f"must be 3 finite numbers, got {vec!r}")
+        self.params: dict[str, float] = self._parse(params)
+        self.rate_hz: float = float(self.params["Rate"])
+        self._rot_mount = rpy_matrix(vec3(mount.rpy_rad))  # sensor -> body
+        self._rot_mount_t = self._rot_mount.T.copy()
+        self._pos_mount = np.array(vec3(mount.pos_frd_m))
+        self._last_time_s: float | None = None
+        self.last: R | None = None
+        self._check()
+        self._setup()
+
+    # --- configuration -------------------------------------------------------------------
+
+    @classmethod
+    def all_params(cls) -> tuple[Param, ...]:
+        """The rate followed by the class's own parameters."""
+        rate = Param(
+            "Rate", DEFAULT_RATES_HZ[cls.type_name.lower()], "sample rate, Hz", exclusive=True
+        )
+        return (rate, *cls.PARAMS)
+
+    def _error(self, key: str, text: str) -> ConfigError:
+        return ConfigError(f"sensor {self.name!r} ({self.type_name}): {key} {text}")
+
+    def _parse(self, given: Mapping[str, object]) -> dict[str, float]:
+        specs = {_norm_key(p.key): p for p in self.all_params()}
+        values: dict[str, float] = {p.key: p.default for p in specs.values()}
+        seen: dict[str, str] = {}
+        for raw_key, value in given.items():
+            if not isinstance(raw_key, str):
+                raise self._error(repr(raw_key), "is not a parameter name")
+            norm = self._ALIASES.get(_norm_key(raw_key), _norm_key(raw_key))
+            spec = specs.get(norm)
+            if spec is None:
+                known = ", ".join(p.key for p in specs.values())
+                raise self._error(
+                    raw_key, f"is not a parameter of {self.type_name}; known: {known}"
+                )
+            if norm in seen:
+                raise self._error(raw_key, f"is given twice (also as {seen[norm]!r})")
+            seen[norm] = raw_key
+            values[spec.key] = self._coerce(spec, value)
+        return values
+
+    def _coerce(self, spec: Param, value: object) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise self._error(spec.key, f"must be a number, got {value!r}")
+        number = float(value)
+        if not math.isfinite(number):
+            raise self._error(spec.key, f"must be finite, got {value!r}")
+        if spec.integer:
+            if not number.is_integer():
+                raise self._error(spec.key, f"must be an integer, got {value!r}")
+            number = int(number)
+        if spec.exclusive and not number > spec.minimum:
+            raise self._error(spec.key, f"must be > {spec.minimum:g}, got {value!r}")
+        if not spec.exclusive and not number >= spec.minimum:
+            raise self._error(spec.key, f"must be >= {spec.minimum:g}, got {value!r}")
+        if not number <= spec.maximum:
+            raise self._error(spec.key, f"must be <= {spec.maximum:g}, got {value!r}")
+        return number
+
+    def _check(self) -> None:
+        """Cross-parameter checks (e.g. MinRange < MaxRange); raise ``self._error``."""
+
+    def _setup(self) -> None:
+        """Draw constant biases and set up state; runs after validation."""
+
+    def conf_fields(self) -> Fields:
+        """Fields of ``CONF {Type X} {Name n} ...``: rate, ranges and noise parameters."""
+        return [(p.key, self.params[p.key]) for p in self.all_params()]
+
+    def geo_fields(self) -> Fields:
+        """Fields of ``GEO {Type X} {Name n} ...``: the mount pose (orientation in [0, 2 pi))."""
+        rpy = vec3(self.mount.rpy_rad)
+        return [
+            ("Location", vec3(self.mount.pos_frd_m)),
+            ("Orientation", (wrap_2pi(rpy[0]), wrap_2pi(rpy[1]), wrap_2pi(rpy[2]))),
+        ]
+
+    # --- sampling --------------------------------------------------------------------------
+
+    def sample(self, state: BodyState, world: WorldQuery) -> Fields:
+        """One reading from ground truth; returns the SEN fields after Time, Type and Name."""
+        last = self._last_time_s
+        t = float(state.time_s)
+        dt_s = t - last if last is not None and t > last else 0.0
+        self._last_time_s = t
+        reading = self._read(state, world, dt_s)
+        self.last = reading
+        return reading.fields()
+
+    def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> R:
+        """Compute one reading; ``dt_s`` is sim time since the previous reading (0 at first)."""
+        raise NotImplementedError
+
+    # --- geometry helpers ------------------------------------------------------------------
+
+    def _rot_sensor_to_ned(self, state: BodyState) -> np.ndarray:
+        return np.asarray(state.rot_body_to_ned) @ self._rot_mount
+
+    def _pos_ned_m(self, state: BodyState) -> np.ndarray:
+        """Where the sensor is in the world (body position + rotated mount offset)."""
+        return np.asarray(state.pos_ned_m, dtype=float) + (
+            np.asarray(state.rot_body_to_ned) @ self._pos_mount
+        )
+
+    def _body_to_sensor(self, v_frd: np.ndarray) -> np.ndarray:
+        return self._rot_mount_t @ np.asarray(v_frd, dtype=float)
+
+
+class BiasedNoise:
+    """White noise + a constant bias (drawn once) + a bias random walk, on n channels.
+
+    ``corrupt(x, dt)`` first advances the bias by ``walk * sqrt(dt) * N(0, 1)`` per channel
+    (a Wiener process in sim time, so its statistics do not depend on the sample rate), then
+    returns ``x + bias + sigma * N(0, 1)``.
+    """
+
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        n: int,
+        noise_sigma: float,
+        bias_sigma: float,
+        bias_walk: float,
+    ) -> None:
+        self.rng = rng
+        self.n = n
+        self.noise_sigma = noise_sigma
+        self.bias_walk = bias_walk
+        self.bias: np.ndarray = rng.standard_normal(n) * bias_sigma
+
+    def corrupt(self, value: np.ndarray, dt_s: float) -> np.ndarray:
+        """The noisy measurement of ``value`` (shape (n,)) after ``dt_s`` of sim time."""
+        if self.bias_walk > 0.0 and dt_s > 0.0:
+            self.bias = self.bias + self.bias_walk * math.sqrt(dt_s) * self.rng.standard_normal(
+                self.n
+            )
+        return np.asarray(value, dtype=float) + self.bias + self.noise_sigma * (
+            self.rng.standard_normal(self.n)
+        )

@@ -1,0 +1,206 @@
+"""Sensors that look at the world: the ultrasonic rangefinder and the optical-flow sensor.
+
+How this works: both look along their mount frame's +z axis (an identity mount looks straight
+down) and ask the world for ray distances. The sonar casts a small cone of rays and keeps the
+nearest echo; the flow sensor casts one ray for the distance to the surface and turns the
+sensor's velocity and rotation into image motion, accumulated as integer counts between
+readings (fractions carried over, so nothing is lost to rounding).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from skeye.sim.sensors.base import Fields, Param, Reading, Sensor, WorldQuery
+from skeye.sim.state import BodyState
+
+SQUAL_MAX = 169  # ADNS-3080: SQUAL register maximum
+DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
+
+
+@dataclass(frozen=True)
+class SonarReading(Reading):
+    range_m: float
+    echo: bool  # False when nothing was within MaxRange (Range is then MaxRange)
+
+    def fields(self) -> Fields:
+        return [("Range", self.range_m)]
+
+
+class Sonar(Sensor[SonarReading]):
+    """An SRF10-class ultrasonic rangefinder with a cone-shaped beam, downward by default.
+
+    Model: one ray along the boresight and BeamRays rays on a cone at half the BeamAngle; the
+    nearest hit is the echo (slant distance, as time of flight measures it). Range = echo +
+    white noise, clamped to [MinRange, MaxRange]; MaxRange when no echo. Defaults: MinRange
+    0.06 m, MaxRange 6.0 m (the SRF10's rated 6 m), BeamAngle 0.6 rad full cone, BeamRays 8,
+    NoiseSigma 0.01 m (the SRF10 reports whole centimetres), rate 15 Hz (its ~65 ms ranging
+    time at full range).
+    """
+
+    type_name = "Sonar"
+    PARAMS = (
+        Param("MaxRange", 6.0, "longest range reported, m", exclusive=True),
+        Param("MinRange", 0.06, "shortest range reported, m"),
+        Param("BeamAngle", 0.6, "full cone angle of the beam, rad", maximum=math.pi,
+              exclusive=True),
+        Param("BeamRays", 8, "rays on the cone besides the centre ray", integer=True, maximum=64),
+        Param("NoiseSigma", 0.01, "white noise on the range, m"),
+    )
+
+    def _check(self) -> None:
+        lo, hi = self.params["MinRange"], self.params["MaxRange"]
+        if not hi > lo:
+            raise self._error("MaxRange", f"must be > MinRange ({lo:g}), got {hi:g}")
+        if self.params["BeamAngle"] >= math.pi:
+            raise self._error("BeamAngle", f"must be < pi, got {self.params['BeamAngle']:g}")
+
+    def _setup(self) -> None:
+        half = self.params["BeamAngle"] / 2.0
+        rays = [(0.0, 0.0, 1.0)]
+        count = int(self.params["BeamRays"])
+        for k in range(count):
+            phi = 2.0 * math.pi * k / count
+            rays.append((math.sin(half) * math.cos(phi), math.sin(half) * math.sin(phi),
+                         math.cos(half)))
+        self._rays_sensor = np.array(rays)  # unit vectors, sensor frame, one per row
+
+    def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> SonarReading:
+        p = self.params
+        lo, hi = p["MinRange"], p["MaxRange"]
+        origin = self._pos_ned_m(state)
+        dirs = self._rays_sensor @ self._rot_sensor_to_ned(state).T
+        nearest: float | None = None
+        for d in dirs:
+            hit = world.ray_distance(origin, d, hi)
+            if hit is not None and (nearest is None or hit < nearest):
+                nearest = hit
+        t = float(state.time_s)
+        if nearest is None:
+            return SonarReading(t, hi, False)
+        measured = nearest + p["NoiseSigma"] * float(self.rng.standard_normal())
+        return SonarReading(t, min(hi, max(lo, measured)), True)
+
+
+@dataclass(frozen=True)
+class FlowReading(Reading):
+    delta_counts: tuple[int, int]
+    quality: int
+    distance_m: float | None  # the surface distance along the boresight, None if none seen
+
+    def fields(self) -> Fields:
+        return [("Delta", self.delta_counts), ("Quality", self.quality)]
+
+
+class OpticalFlow(Sensor[FlowReading]):
+    """An ADNS-3080-class optical mouse sensor behind a lens, looking down (mount +z).
+
+    Delta (dx, dy) is the sensor's own motion over the surface in counts since the previous
+    reading, as a mouse reports it: positive dx when the sensor moves along its +x. The raw
+    sensor sees rotation too (no compensation): with v the sensor's velocity in its frame,
+    w its angular velocity and r the surface distance along the boresight, the rate in rad/s is
+    ``(v_x / r + w_y, v_y / r - w_x)``, so a nose-up pitch rate adds to forward motion. Counts
+    per radian = Pixels * CountsPerPixel / (2 tan(FieldOfView / 2)): the ADNS-3080's 30 px
+    array, 1.1 counts per pixel at 400 cpi and the 8 mm lens' 0.2025 rad (11.6 deg) field of
+    view as in ArduPilot's ADNS-3080 driver, about 163 counts/rad. The rate is integrated with
+    the trapezoid rule between readings (the first reading covers one nominal period), white
+    noise NoiseSigma 0.5 counts is added, fractions carry to the next reading, and each
+    reading saturates at the 8-bit registers' [-128, 127].
+
+    Quality (SQUAL, 0..169): SurfaceQuality 100 (a textured floor) while the surface distance
+    is in [MinRange 0.3 m, MaxRange 5.0 m] (the lens' focus and texture limits); below MinRange
+    it falls linearly to 0 at distance 0 (defocus), above MaxRange linearly to 0 at twice
+    MaxRange; plus QualitySigma 3 white noise, rounded and clipped. With Quality 0 the sensor
+    sees nothing: Delta is (0, 0). Default rate 50 Hz.
+    """
+
+    type_name = "OpticalFlow"
+    PARAMS = (
+        Param("Pixels", 30, "pixels across the sensor array", 1, integer=True),
+        Param("CountsPerPixel", 1.1, "counts per pixel of image motion (1.1 at 400 cpi)",
+              exclusive=True),
+        Param("FieldOfView", 0.202458, "lens field of view across the array, rad",
+              exclusive=True, maximum=math.pi),
+        Param("MinRange", 0.3, "nearest surface in focus, m"),
+        Param("MaxRange", 5.0, "farthest surface with usable texture, m", exclusive=True),
+        Param("SurfaceQuality", 100, "SQUAL over a surface in range", 0, integer=True,
+              maximum=SQUAL_MAX),
+        Param("QualitySigma", 3.0, "white noise on SQUAL"),
+        Param("NoiseSigma", 0.5, "white noise per reading on each Delta, counts"),
+    )
+
+    def _check(self) -> None:
+        p = self.params
+        if not p["MaxRange"] > p["MinRange"]:
+            raise self._error(
+                "MaxRange", f"must be > MinRange ({p['MinRange']:g}), got {p['MaxRange']:g}"
+            )
+        if p["FieldOfView"] >= math.pi:
+            raise self._error("FieldOfView", f"must be < pi, got {p['FieldOfView']:g}")
+
+    def _setup(self) -> None:
+        p = self.params
+        self.counts_per_rad = p["Pixels"] * p["CountsPerPixel"] / (
+            2.0 * math.tan(p["FieldOfView"] / 2.0)
+        )
+        self._prev_rate: tuple[float, float] | None = None
+        self._carry = [0.0, 0.0]
+
+    def _quality(self, distance_m: float | None) -> int:
+        p = self.params
+        if distance_m is None:
+            return 0
+        lo, hi = p["MinRange"], p["MaxRange"]
+        if distance_m < lo:
+            scale = distance_m / lo
+        elif distance_m > hi:
+            scale = max(0.0, 2.0 - distance_m / hi)
+        else:
+            scale = 1.0
+        if scale <= 0.0:
+            return 0
+        q = p["SurfaceQuality"] * scale + p["QualitySigma"] * float(self.rng.standard_normal())
+        return int(min(SQUAL_MAX, max(0, round(q))))
+
+    def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> FlowReading:
+        p = self.params
+        t = float(state.time_s)
+        rot_bn = np.asarray(state.rot_body_to_ned)
+        rot_sn = rot_bn @ self._rot_mount
+        origin = np.asarray(state.pos_ned_m, dtype=float) + rot_bn @ self._pos_mount
+        distance = world.ray_distance(origin, rot_sn[:, 2], 2.0 * p["MaxRange"])
+        quality = self._quality(distance)
+        if quality == 0 or distance is None or distance <= 0.0:
+            self._prev_rate = None
+            self._carry = [0.0, 0.0]
+            return FlowReading(t, (0, 0), quality, distance)
+        omega_b = np.asarray(state.omega_frd_rad_s, dtype=float)
+        vel_n = np.asarray(state.vel_ned_m_s, dtype=float) + rot_bn @ np.cross(
+            omega_b, self._pos_mount
+        )
+        v = rot_sn.T @ vel_n
+        w = self._rot_mount_t @ omega_b
+        rate = (float(v[0] / distance + w[1]), float(v[1] / distance - w[0]))
+        prev = self._prev_rate
+        if prev is None:
+            prev, dt_s = rate, 1.0 / self.rate_hz
+        self._prev_rate = rate
+        noise = self.rng.standard_normal(2)
+        delta: list[int] = []
+        for axis in range(2):
+            total = (
+                self._carry[axis]
+                + self.counts_per_rad * dt_s * 0.5 * (prev[axis] + rate[axis])
+                + p["NoiseSigma"] * float(noise[axis])
+            )
+            counts = round(total)
+            if counts > DELTA_MAX or counts < DELTA_MIN:
+                counts = min(DELTA_MAX, max(DELTA_MIN, counts))
+                self._carry[axis] = 0.0
+            else:
+                self._carry[axis] = total - counts
+            delta.append(int(counts))
+        return FlowReading(t, (delta[0], delta[1]), quality, distance)

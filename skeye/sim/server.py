@@ -1,0 +1,495 @@
+"""The control server: SIM_PROTOCOL.md over TCP, several clients, one robot per connection.
+
+How this works: an accept thread hands each connection to a :class:`ClientSession` with two
+threads: a reader that decodes lines with the sans-IO codec (:mod:`skeye.sim.protocol`) and
+handles them, and a writer that alone writes to the socket, draining a bounded queue. The engine
+thread puts the robot's STA/SEN lines into that queue without ever blocking: when a client does
+not read, its queue fills and further stream lines are dropped and counted, so a slow client
+never slows the physics or other clients. Answers (RES, ERR, GEO, CONF, NFO) always go through
+the same queue, so their order relative to the stream is kept. Every bad line gets an ``ERR``
+with a reason and the connection stays usable; only an over-long line closes it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import socket
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.sim.cameras import set_camera_fov
+from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.protocol import (
+    LineDecoder,
+    LineError,
+    Message,
+    format_error,
+    format_message,
+    format_start_poses,
+)
+from skeye.sim.robot import Robot
+from skeye.sim.wind import make_settings, parse_params
+
+log = logging.getLogger(__name__)
+
+OUTBOX_LINES = 20000
+_CLOSE = b""
+
+
+class ClientSession:
+    """One connection: its reader and writer threads and, after INIT, its robot."""
+
+    def __init__(self, server: ControlServer, sock: socket.socket, peer: str) -> None:
+        self.server = server
+        self.sock = sock
+        self.peer = peer
+        self.robot_name: str | None = None
+        self.robot_config: Any = None
+        self.outbox: queue.Queue[bytes] = queue.Queue(OUTBOX_LINES)
+        self.dropped = 0
+        self._closed = threading.Event()
+        self._reader = threading.Thread(
+            target=self._read_loop, name=f"sim-read-{peer}", daemon=True
+        )
+        self._writer = threading.Thread(
+            target=self._write_loop, name=f"sim-write-{peer}", daemon=True
+        )
+
+    def start(self) -> None:
+        self._reader.start()
+        self._writer.start()
+
+    # -- output --------------------------------------------------------------------------
+    def send(self, line: bytes) -> None:
+        """Queue a line; never blocks (called from the engine thread too)."""
+        if self._closed.is_set():
+            return
+        try:
+            self.outbox.put_nowait(line)
+        except queue.Full:
+            self.dropped += 1
+
+    def _write_loop(self) -> None:
+        try:
+            while True:
+                line = self.outbox.get()
+                if line is _CLOSE or not line:
+                    break
+                chunks = [line]
+                try:
+                    while len(chunks) < 512:
+                        more = self.outbox.get_nowait()
+                        if not more:
+                            self.sock.sendall(b"".join(chunks))
+                            return
+                        chunks.append(more)
+                except queue.Empty:
+                    pass
+                self.sock.sendall(b"".join(chunks))
+        except OSError:
+            pass
+        finally:
+            self._closed.set()
+            try:
+                self.sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    # -- input ---------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        decoder = LineDecoder()
+        try:
+            while not self._closed.is_set():
+                try:
+                    data = self.sock.recv(65536)
+                except OSError:
+                    break
+                if not data:
+                    break
+                for event in decoder.feed(data):
+                    if isinstance(event, LineError):
+                        self.send(format_error(event.command, event.reason))
+                        if event.fatal:
+                            return
+                        continue
+                    self._handle(event)
+        finally:
+            self._finish()
+
+    def _finish(self) -> None:
+        if self.robot_name is not None:
+            name = self.robot_name
+            self.robot_name = None
+            try:
+                self.server.runner.submit(lambda sim: sim.remove(name))
+            except SkeyeError:
+                pass
+        try:
+            self.outbox.put(_CLOSE, timeout=1.0)
+        except queue.Full:
+            self._closed.set()
+            try:
+                self.sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        self.server._forget(self)
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        self._closed.set()
+        try:
+            self.sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        try:
+            self.outbox.put_nowait(_CLOSE)
+        except queue.Full:
+            pass
+        for t in (self._reader, self._writer):
+            if t.is_alive() and t is not threading.current_thread():
+                t.join(timeout_s)
+        self.sock.close()
+
+    def _handle(self, msg: Message) -> None:
+        handler = _HANDLERS.get(msg.type)
+        if handler is None:
+            self.send(format_error(msg.type, f"unknown command {msg.type}"))
+            return
+        try:
+            handler(self, msg)
+        except (RemoteProtocolError, LocalProtocolError, ConfigError) as exc:
+            self.send(format_error(msg.type, str(exc)))
+        except TimeoutError:
+            self.send(format_error(msg.type, "the simulator did not answer in time"))
+        except SkeyeError as exc:
+            self.send(format_error(msg.type, str(exc)))
+
+    # -- commands ------------------------------------------------------------------------
+    def _robot(self, command: str) -> str:
+        if self.robot_name is None:
+            raise RemoteProtocolError(f"{command} needs a robot: send INIT first")
+        return self.robot_name
+
+    def cmd_init(self, msg: Message) -> None:
+        if self.robot_name is not None:
+            raise RemoteProtocolError(
+                f"this connection already drives robot {self.robot_name} (one robot per connection)"
+            )
+        class_name = msg.require("ClassName")
+        name = msg.get("Name")
+        start = msg.get("Start")
+        location = msg.get_vector("Location", 3) if msg.has("Location") else None
+        rr, rp, ry = msg.get_vector("Rotation", 3, default=(0.0, 0.0, 0.0))
+        rotation = (rr, rp, ry)
+        if start is None and location is None:
+            raise RemoteProtocolError("INIT needs {Location x,y,z} or {Start name}")
+        if location is not None and any(abs(v) > 1.0e4 for v in location):
+            raise RemoteProtocolError(f"Location {location} is outside the world (|x| > 10 km)")
+
+        def spawn(sim: Simulation) -> tuple[str, Any]:
+            robot: Robot = sim.spawn(
+                class_name,
+                name=name,
+                outbox=self.send,
+                location_ned_m=location if start is None else None,  # type: ignore[arg-type]
+                rotation_rpy_rad=rotation,
+                start=start,
+            )
+            # Answer from the engine thread, before the first STA/SEN of this robot.
+            self.send(
+                format_message("RES", ("Command", "INIT"), ("Name", robot.name), ("Status", "OK"))
+            )
+            return robot.name, robot.config
+
+        self.robot_name, self.robot_config = self.server.runner.call(spawn)
+
+    def cmd_drive(self, msg: Message) -> None:
+        name = self._robot("DRIVE")
+        attitude_keys = ("RollAngle", "PitchAngle", "Thrust")
+        velocity_keys = ("AltitudeVelocity", "LinearVelocity", "LateralVelocity")
+        has_att = any(msg.has(k) for k in attitude_keys)
+        has_vel = any(msg.has(k) for k in velocity_keys)
+        if has_att and has_vel:
+            raise RemoteProtocolError(
+                "DRIVE mixes the attitude form (RollAngle, PitchAngle, "
+                "Thrust) with the velocity form"
+            )
+        known = {
+            k.lower()
+            for k in (*attitude_keys, *velocity_keys, "RotationalVelocity", "Normalized", "Name")
+        }
+        unknown = [k for k, _ in msg.fields if k.lower() not in known]
+        if unknown:
+            raise RemoteProtocolError(f"DRIVE: unknown segment(s) {unknown}")
+        if not (has_att or has_vel or msg.has("RotationalVelocity")):
+            raise RemoteProtocolError("DRIVE needs at least one velocity or attitude segment")
+        c = self.robot_config.controller
+        robot_limits = {
+            "speed": c.max_speed_m_s,
+            "climb": c.max_climb_m_s,
+            "yaw_rate": c.max_yaw_rate_rad_s,
+        }
+        changes: dict[str, Any] = {"attitude": has_att}
+        if has_att:
+            tilt = math.pi / 2 - 1e-3
+            if msg.has("RollAngle"):
+                changes["roll_rad"] = msg.get_float("RollAngle", min_value=-tilt, max_value=tilt)
+            if msg.has("PitchAngle"):
+                changes["pitch_rad"] = msg.get_float("PitchAngle", min_value=-tilt, max_value=tilt)
+            if msg.has("Thrust"):
+                changes["thrust"] = msg.get_float("Thrust", min_value=0.0, max_value=1.0)
+        normalized = msg.get_bool("Normalized", default=False)
+        scale = 100.0 if normalized else 1.0
+        for key, attr, limit in (
+            ("LinearVelocity", "forward_m_s", robot_limits["speed"]),
+            ("LateralVelocity", "right_m_s", robot_limits["speed"]),
+            ("AltitudeVelocity", "up_m_s", robot_limits["climb"]),
+            ("RotationalVelocity", "yaw_rate_rad_s", robot_limits["yaw_rate"]),
+        ):
+            if not msg.has(key):
+                continue
+            bound = 100.0 if normalized else limit
+            value = msg.get_float(key, min_value=-bound, max_value=bound)
+            changes[attr] = value / scale * limit if normalized else value
+
+        def apply(sim: Simulation) -> None:
+            robot = sim.robots.get(name)
+            if robot is None:
+                raise RemoteProtocolError(f"robot {name} no longer exists")
+            robot.drive(**changes)
+
+        self.server.runner.call(apply)
+
+    def cmd_getstartposes(self, msg: Message) -> None:
+        self.send(format_start_poses(self.server.runner.sim.start_poses()))
+
+    def _lookup(self, msg: Message, command: str) -> tuple[str, list[Any]]:
+        type_name = msg.require("Type")
+        name = self._robot(command)
+        if type_name.lower() in ("robot", "aerialvehicle"):
+            return "robot", []
+        sensor_name = msg.get("Name")
+
+        def find(sim: Simulation) -> list[Any]:
+            robot = sim.robots[name]
+            return robot.find_sensors(type_name, sensor_name)
+
+        found = self.server.runner.call(find)
+        if not found:
+            raise RemoteProtocolError(
+                f"robot {name} has no sensor of type {type_name}"
+                + (f" named {sensor_name}" if sensor_name else "")
+            )
+        return "sensor", found
+
+    def cmd_getgeo(self, msg: Message) -> None:
+        kind, found = self._lookup(msg, "GETGEO")
+        name = self._robot("GETGEO")
+        if kind == "robot":
+            a = self.robot_config.airframe
+            self.send(
+                format_message(
+                    "GEO",
+                    ("Type", "AerialVehicle"),
+                    ("Name", name),
+                    (
+                        "Dimensions",
+                        (2 * (a.arm_m + a.rotor_radius_m),) * 2
+                        + (a.body_size_m[2] + a.gear_height_m,),
+                    ),
+                    ("COG", (0.0, 0.0, 0.0)),
+                )
+            )
+            return
+        for s in found:
+            self.send(
+                format_message(
+                    "GEO",
+                    ("Type", s.sensor.type_name),
+                    ("Name", s.mount.name),
+                    *s.sensor.geo_fields(),
+                )
+            )
+
+    def cmd_getconf(self, msg: Message) -> None:
+        kind, found = self._lookup(msg, "GETCONF")
+        name = self._robot("GETCONF")
+        if kind == "robot":
+            cfg = self.robot_config
+            a, c = cfg.airframe, cfg.controller
+            self.send(
+                format_message(
+                    "CONF",
+                    ("Type", "AerialVehicle"),
+                    ("Name", name),
+                    ("Class", cfg.class_name),
+                    ("Mass", a.mass_kg),
+                    ("MaxSpeed", c.max_speed_m_s),
+                    ("MaxClimb", c.max_climb_m_s),
+                    ("MaxYawRate", c.max_yaw_rate_rad_s),
+                    ("MaxTilt", c.max_tilt_rad),
+                    ("MaxThrust", a.max_thrust_n),
+                    ("BoardRate", cfg.board_rate_hz),
+                    ("TimeStep", self.server.runner.sim.dt),
+                )
+            )
+            return
+        for s in found:
+            self.send(
+                format_message(
+                    "CONF",
+                    ("Type", s.sensor.type_name),
+                    ("Name", s.mount.name),
+                    *s.sensor.conf_fields(),
+                )
+            )
+
+    def cmd_set(self, msg: Message) -> None:
+        type_name = msg.require("Type")
+        handler = self.server.set_handlers.get(type_name.lower())
+        if handler is None:
+            raise RemoteProtocolError(
+                f"SET: unknown Type {type_name!r}; known: "
+                + ", ".join(sorted(self.server.set_handlers))
+            )
+        handler(self, msg)
+        self.send(format_message("RES", ("Command", "SET"), ("Type", type_name), ("Status", "OK")))
+
+    def cmd_step(self, msg: Message) -> None:
+        count = msg.get_int("Count", default=1, min_value=1, max_value=10_000_000)
+        runner = self.server.runner
+
+        def do(sim: Simulation) -> None:
+            sim.step(count)
+            self.send(format_message("RES", ("Command", "STEP"), ("Time", sim.time_s)))
+
+        if runner.mode != "lockstep":
+            raise RemoteProtocolError(
+                "STEP works only when the simulator runs with --mode lockstep"
+            )
+        runner.call(do, timeout_s=3600.0)
+
+    def cmd_ping(self, msg: Message) -> None:
+        ident = msg.get("Id", "")
+        self.send(
+            format_message(
+                "RES", ("Command", "PING"), ("Id", ident), ("Time", self.server.runner.sim.time_s)
+            )
+        )
+
+
+_HANDLERS: dict[str, Callable[[ClientSession, Message], None]] = {
+    "INIT": ClientSession.cmd_init,
+    "DRIVE": ClientSession.cmd_drive,
+    "GETSTARTPOSES": ClientSession.cmd_getstartposes,
+    "GETGEO": ClientSession.cmd_getgeo,
+    "GETCONF": ClientSession.cmd_getconf,
+    "SET": ClientSession.cmd_set,
+    "STEP": ClientSession.cmd_step,
+    "PING": ClientSession.cmd_ping,
+}
+
+
+def _set_wind(session: ClientSession, msg: Message) -> None:
+    settings = make_settings(msg.require("Mode"), parse_params(msg.get("Params", "") or ""))
+    session.server.runner.call(lambda sim: sim.set_wind(settings))
+
+
+def _set_camera(session: ClientSession, msg: Message) -> None:
+    name = session._robot("SET")
+    camera = msg.require("Name")
+    opcode = msg.require("Opcode")
+    if opcode.lower() != "fov":
+        raise RemoteProtocolError(f"SET Camera: unknown Opcode {opcode!r}; known: FOV")
+    fov = msg.get_float("Params", min_value=0.01, max_value=math.pi - 0.01)
+    session.server.runner.call(lambda sim: set_camera_fov(sim, name, camera, fov))
+
+
+class ControlServer:
+    """TCP server for the control protocol; a context manager that closes every thread."""
+
+    def __init__(
+        self,
+        runner: SimulationRunner,
+        host: str = "127.0.0.1",
+        port: int = 3000,
+        max_clients: int = 128,
+    ) -> None:
+        self.runner = runner
+        self.max_clients = max_clients
+        self.set_handlers: dict[str, Callable[[ClientSession, Message], None]] = {
+            "wind": _set_wind,
+            "camera": _set_camera,
+        }
+        self._sessions: set[ClientSession] = set()
+        self._lock = threading.Lock()
+        self._closing = threading.Event()
+        self._listener = socket.create_server((host, port), reuse_port=False)
+        self._listener.settimeout(0.2)
+        self.host = host
+        self.port = self._listener.getsockname()[1]
+        self._accept_thread = threading.Thread(
+            target=self._accept_loop, name="sim-accept", daemon=True
+        )
+        self._accept_thread.start()
+
+    def __enter__(self) -> ControlServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def nfo_line(self) -> bytes:
+        sim = self.runner.sim
+        return format_message(
+            "NFO",
+            ("Gametype", "skeye"),
+            ("Level", sim.world.name),
+            ("TimeLimit", 0),
+            ("TimeStep", sim.dt),
+            ("Mode", self.runner.mode),
+        )
+
+    def _accept_loop(self) -> None:
+        while not self._closing.is_set():
+            try:
+                sock, addr = self._listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            session = ClientSession(self, sock, f"{addr[0]}:{addr[1]}")
+            with self._lock:
+                if len(self._sessions) >= self.max_clients:
+                    sock.sendall(format_error("CONNECT", "too many clients"))
+                    sock.close()
+                    continue
+                self._sessions.add(session)
+            session.send(self.nfo_line())
+            session.start()
+            log.info("client %s connected", session.peer)
+
+    def _forget(self, session: ClientSession) -> None:
+        with self._lock:
+            self._sessions.discard(session)
+        log.info("client %s disconnected", session.peer)
+
+    @property
+    def client_count(self) -> int:
+        with self._lock:
+            return len(self._sessions)
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        if self._closing.is_set():
+            return
+        self._closing.set()
+        self._listener.close()
+        self._accept_thread.join(timeout_s)
+        with self._lock:
+            sessions = list(self._sessions)
+        for s in sessions:
+            s.close(timeout_s)

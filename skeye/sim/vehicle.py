@@ -1,0 +1,277 @@
+"""Quadrotor flight physics: rotors, motors, drag, ground effect and the battery.
+
+How this works: every board tick (an integer number of physics steps) the vehicle model turns
+four rotor-speed commands into a body wrench. Each motor follows its command with a first-order
+lag whose time constant depends on direction (spin-up faster than spin-down), integrated exactly
+over the tick, and saturates at the motor's maximum speed (scaled by battery voltage). Rotor i
+gives thrust ``kf*w^2`` along body -z and a reaction torque ``s_i * c * kf*w^2`` about body z
+(c = moment constant in metres, s_i = -1 for rotors spinning clockwise seen from above). Rotor
+drag (RotorS) is ``-sum(w) * c_rd * v_perp`` with v_perp the air-relative velocity in the rotor
+plane; air drag is quadratic in the air-relative velocity. Ground effect multiplies thrust by
+Cheeseman-Bennett's ``1 / (1 - (R / 4z)^2)``, capped, with z the rotor height above what is
+below. Everything here is in the protocol's frames: NED world, FRD body, SI units.
+
+Invariants: speeds are in [0, w_max]; thrust is never negative; the battery's charge only
+decreases; all parameters are validated on construction (ConfigError naming the key).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from skeye.errors import ConfigError
+
+GRAVITY_M_S2 = 9.81
+AIR_DENSITY_KG_M3 = 1.225
+
+
+def _check_positive(owner: str, name: str, value: float) -> None:
+    if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+        raise ConfigError(f"{owner}: {name} must be a positive number, got {value!r}")
+
+
+def dataclass_from_mapping(cls: Any, data: Mapping[str, Any], owner: str) -> Any:
+    """Build a parameter dataclass from a TOML table, naming unknown keys and wrong types."""
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(data) - set(known))
+    if unknown:
+        raise ConfigError(f"{owner}: unknown key(s) {unknown}; known keys: {sorted(known)}")
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        default = getattr(cls, key, None)
+        if isinstance(default, float | int) and not isinstance(default, bool):
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ConfigError(f"{owner}: {key} must be a number, got {value!r}")
+            value = float(value) if isinstance(default, float) else value
+        elif isinstance(default, tuple):
+            if not isinstance(value, list | tuple) or len(value) != len(default):
+                raise ConfigError(
+                    f"{owner}: {key} must be a list of {len(default)} numbers, got {value!r}"
+                )
+            if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+                raise ConfigError(f"{owner}: {key} must hold numbers only, got {value!r}")
+            value = tuple(float(v) for v in value)
+        kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:
+        raise ConfigError(f"{owner}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class AirframeParams:
+    """Rigid body, rotors and drag. Defaults: RotorS' published AscTec Hummingbird set."""
+
+    mass_kg: float = 0.68
+    inertia_kg_m2: tuple[float, float, float] = (0.007, 0.007, 0.012)
+    arm_m: float = 0.17
+    rotor_radius_m: float = 0.1
+    kf: float = 8.54858e-06  # thrust constant, N / (rad/s)^2
+    moment_constant_m: float = 0.016  # reaction torque / thrust
+    tau_up_s: float = 0.0125
+    tau_down_s: float = 0.025
+    max_rotor_speed_rad_s: float = 838.0
+    rotor_drag: float = 8.06e-05  # N / (rad/s) / (m/s), per rotor
+    drag_area_m2: float = 0.01  # Cd * A for quadratic air drag
+    body_size_m: tuple[float, float, float] = (0.12, 0.12, 0.06)
+    gear_height_m: float = 0.08  # body origin above the ground when landed
+
+    def __post_init__(self) -> None:
+        owner = "airframe"
+        for name in (
+            "mass_kg",
+            "arm_m",
+            "rotor_radius_m",
+            "kf",
+            "moment_constant_m",
+            "tau_up_s",
+            "tau_down_s",
+            "max_rotor_speed_rad_s",
+            "gear_height_m",
+        ):
+            _check_positive(owner, name, getattr(self, name))
+        for name in ("rotor_drag", "drag_area_m2"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ConfigError(f"{owner}: {name} must be >= 0, got {value!r}")
+        for i, v in enumerate(self.inertia_kg_m2):
+            _check_positive(owner, f"inertia_kg_m2[{i}]", v)
+        if self.max_thrust_n <= self.mass_kg * GRAVITY_M_S2:
+            raise ConfigError(
+                f"{owner}: the rotors cannot lift the vehicle (max thrust "
+                f"{self.max_thrust_n:.2f} N <= weight {self.mass_kg * GRAVITY_M_S2:.2f} N)"
+            )
+
+    @property
+    def max_thrust_n(self) -> float:
+        return 4.0 * self.kf * self.max_rotor_speed_rad_s**2
+
+    @property
+    def hover_speed_rad_s(self) -> float:
+        return math.sqrt(self.mass_kg * GRAVITY_M_S2 / (4.0 * self.kf))
+
+
+# '+' layout in FRD: front, right, back, left. Spin sign s_i: reaction torque about body z.
+ROTOR_XY_UNIT = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))
+ROTOR_SPIN = (-1.0, 1.0, -1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class BatteryParams:
+    """3-cell LiPo. Endurance follows from the power drawn; see docs/physics.md."""
+
+    cells: int = 3
+    capacity_mah: float = 2100.0
+    internal_resistance_ohm: float = 0.03
+    efficiency: float = 0.70  # rotor shaft power / electrical power (motors, ESCs)
+    avionics_power_w: float = 3.0
+    cutoff_cell_v: float = 3.3
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cells, int) or not 1 <= self.cells <= 12:
+            raise ConfigError(f"battery: cells must be an integer 1..12, got {self.cells!r}")
+        for name in ("capacity_mah", "internal_resistance_ohm", "efficiency", "cutoff_cell_v"):
+            _check_positive("battery", name, getattr(self, name))
+        if self.efficiency > 1.0:
+            raise ConfigError(f"battery: efficiency must be <= 1, got {self.efficiency}")
+
+
+# Resting cell voltage against state of charge (typical LiPo discharge curve).
+_OCV_SOC = (0.0, 0.05, 0.10, 0.20, 0.40, 0.60, 0.80, 0.90, 1.0)
+_OCV_V = (3.30, 3.55, 3.65, 3.73, 3.80, 3.87, 3.98, 4.08, 4.20)
+
+
+def cell_open_circuit_v(soc: float) -> float:
+    """Resting voltage of one LiPo cell at a state of charge in [0, 1]."""
+    soc = min(1.0, max(0.0, soc))
+    for i in range(1, len(_OCV_SOC)):
+        if soc <= _OCV_SOC[i]:
+            s0, s1 = _OCV_SOC[i - 1], _OCV_SOC[i]
+            v0, v1 = _OCV_V[i - 1], _OCV_V[i]
+            return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
+    return _OCV_V[-1]
+
+
+class Battery:
+    """Charge bookkeeping with voltage sag: V = cells * OCV(soc) - I * R."""
+
+    def __init__(self, params: BatteryParams) -> None:
+        self.params = params
+        self.capacity_c = params.capacity_mah * 3.6  # coulombs
+        self.charge_c = self.capacity_c
+        self.current_a = 0.0
+        self.voltage_v = params.cells * cell_open_circuit_v(1.0)
+        self._avg_current_a = 0.0
+
+    @property
+    def state_of_charge(self) -> float:
+        return self.charge_c / self.capacity_c
+
+    @property
+    def empty(self) -> bool:
+        return self.charge_c <= 0.0
+
+    def draw(self, shaft_power_w: float, dt_s: float) -> None:
+        """Draw the electrical power that this shaft power needs for dt seconds."""
+        p = self.params
+        electrical_w = shaft_power_w / p.efficiency + p.avionics_power_w
+        ocv = p.cells * cell_open_circuit_v(self.state_of_charge)
+        # Solve P = I * (OCV - I R) for the smaller root; past the maximum-power point, cap.
+        disc = ocv * ocv - 4.0 * p.internal_resistance_ohm * electrical_w
+        if disc > 0.0:
+            current = (ocv - math.sqrt(disc)) / (2.0 * p.internal_resistance_ohm)
+        else:
+            current = ocv / (2.0 * p.internal_resistance_ohm)
+        if self.empty:
+            current = 0.0
+        self.current_a = current
+        self.voltage_v = max(0.0, ocv - current * p.internal_resistance_ohm)
+        self.charge_c = max(0.0, self.charge_c - current * dt_s)
+        # Smoothed current for the remaining-life estimate (time constant ~2 s).
+        k = min(1.0, dt_s / 2.0)
+        self._avg_current_a += k * (current - self._avg_current_a)
+
+    @property
+    def remaining_s(self) -> float:
+        """Remaining life at the recent average current, as USARSim's STA {Battery} reports."""
+        if self.empty:
+            return 0.0
+        current = max(self._avg_current_a, self.params.avionics_power_w / max(self.voltage_v, 1.0))
+        return self.charge_c / current
+
+
+class RotorModel:
+    """Four motors with first-order lag and the wrench they produce.
+
+    Hot path: called every board tick, so it works on plain floats.
+    """
+
+    def __init__(self, airframe: AirframeParams, tick_s: float) -> None:
+        self.p = airframe
+        self.tick_s = tick_s
+        self.alpha_up = 1.0 - math.exp(-tick_s / airframe.tau_up_s)
+        self.alpha_down = 1.0 - math.exp(-tick_s / airframe.tau_down_s)
+        self.speed_rad_s = [0.0, 0.0, 0.0, 0.0]
+        self.command_rad_s = [0.0, 0.0, 0.0, 0.0]
+
+    def set_speeds(self, speed_rad_s: float) -> None:
+        """Start with every rotor at this speed (a vehicle spawned hovering)."""
+        self.speed_rad_s = [speed_rad_s] * 4
+        self.command_rad_s = [speed_rad_s] * 4
+
+    def advance(self, commands_rad_s: list[float], max_speed_rad_s: float) -> None:
+        """Advance the motors one tick towards the (saturated) commands."""
+        speeds = self.speed_rad_s
+        up, down = self.alpha_up, self.alpha_down
+        for i in range(4):
+            c = commands_rad_s[i]
+            if c < 0.0:
+                c = 0.0
+            elif c > max_speed_rad_s:
+                c = max_speed_rad_s
+            self.command_rad_s[i] = c
+            w = speeds[i]
+            speeds[i] = w + (c - w) * (up if c > w else down)
+
+    def wrench(
+        self,
+        vel_air_body: tuple[float, float, float],
+        ground_effect: float,
+    ) -> tuple[float, float, float, float, float, float, float]:
+        """Body force (FRD, N), body torque (FRD, N m) and shaft power (W)."""
+        p = self.p
+        kf, arm, c = p.kf, p.arm_m, p.moment_constant_m
+        w0, w1, w2, w3 = self.speed_rad_s
+        f0, f1, f2, f3 = kf * w0 * w0, kf * w1 * w1, kf * w2 * w2, kf * w3 * w3
+        thrust = (f0 + f1 + f2 + f3) * ground_effect
+        tau_x = arm * (f3 - f1) * ground_effect
+        tau_y = arm * (f0 - f2) * ground_effect
+        tau_z = c * (-f0 + f1 - f2 + f3)
+        w_sum = w0 + w1 + w2 + w3
+        vx, vy, vz = vel_air_body
+        k_rd = p.rotor_drag * w_sum
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        k_air = 0.5 * AIR_DENSITY_KG_M3 * p.drag_area_m2 * speed
+        fx = -k_rd * vx - k_air * vx
+        fy = -k_rd * vy - k_air * vy
+        fz = -thrust - k_air * vz
+        power = c * (f0 * w0 + f1 * w1 + f2 * w2 + f3 * w3)
+        return fx, fy, fz, tau_x, tau_y, tau_z, power
+
+    def total_thrust_n(self) -> float:
+        kf = self.p.kf
+        return sum(kf * w * w for w in self.speed_rad_s)
+
+
+def ground_effect_factor(rotor_height_m: float | None, rotor_radius_m: float) -> float:
+    """Cheeseman-Bennett thrust ratio in ground effect, capped at 1.25 very close to the ground."""
+    if rotor_height_m is None or rotor_height_m > 4.0 * rotor_radius_m:
+        return 1.0
+    z = max(rotor_height_m, 0.01)
+    ratio = rotor_radius_m / (4.0 * z)
+    if ratio >= 0.447:  # 1 / (1 - 0.2) = 1.25
+        return 1.25
+    return 1.0 / (1.0 - ratio * ratio)

@@ -1,0 +1,1 @@
+"""Landing-pad vision: the concentric-ring pad, its detector, height and offset estimation."""

@@ -1,0 +1,168 @@
+"""Landing pads as data: the same definition makes the simulator texture and the printable pad.
+
+How this works: a pad is a black square with concentric white rings; each ring has its own
+inner/outer radius ratio so it can be identified from its two borders alone. Pads are frozen
+dataclasses; :func:`render_pad` rasterises one at a given resolution with anti-aliased edges
+(area coverage by supersampling), so the texture's ring borders sit where the data says.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass
+
+import numpy as np
+
+from skeye.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Ring:
+    """One white ring: radii in metres."""
+
+    outer_m: float
+    inner_m: float
+
+    @property
+    def ratio(self) -> float:
+        return self.inner_m / self.outer_m
+
+
+@dataclass(frozen=True)
+class PadDefinition:
+    """A square black pad with concentric white rings, outermost first."""
+
+    name: str
+    side_m: float
+    rings: tuple[Ring, ...]
+
+    def __post_init__(self) -> None:
+        if self.side_m <= 0:
+            raise ValueError(f"pad {self.name!r}: side must be positive, got {self.side_m}")
+        if not self.rings:
+            raise ValueError(f"pad {self.name!r}: needs at least one ring")
+        previous_inner = self.side_m / 2
+        for i, ring in enumerate(self.rings, start=1):
+            if not 0 < ring.inner_m < ring.outer_m <= previous_inner:
+                raise ValueError(
+                    f"pad {self.name!r}: ring {i} radii ({ring.outer_m}, {ring.inner_m}) "
+                    "must satisfy "
+                    f"0 < inner < outer <= {previous_inner} (inside the square and the ring before)"
+                )
+            previous_inner = ring.inner_m
+        ratios = [r.ratio for r in self.rings]
+        if len(set(round(r, 3) for r in ratios)) != len(ratios):
+            raise ValueError(f"pad {self.name!r}: ring ratios must be unique, got {ratios}")
+
+
+SKEYE_4 = PadDefinition(
+    name="skeye-4",
+    side_m=0.60,
+    rings=(
+        Ring(outer_m=0.280, inner_m=0.238),
+        Ring(outer_m=0.200, inner_m=0.150),
+        Ring(outer_m=0.130, inner_m=0.078),
+        Ring(outer_m=0.055, inner_m=0.022),
+    ),
+)
+
+PADS: dict[str, PadDefinition] = {SKEYE_4.name: SKEYE_4}
+
+
+def get_pad(name: str) -> PadDefinition:
+    """A built-in pad by name; raises KeyError naming the known pads."""
+    try:
+        return PADS[name]
+    except KeyError:
+        raise KeyError(f"unknown pad {name!r}; known pads: {', '.join(sorted(PADS))}") from None
+
+
+def render_pad(pad: PadDefinition, pixels: int, supersample: int = 4) -> np.ndarray:
+    """Rasterise the pad as a square greyscale image (uint8, 0 black, 255 white).
+
+    Pixel (row, col) covers the square [col, col+1) x [row, row+1) in pixel units; the pad's
+    centre is at (pixels/2, pixels/2). Edges are anti-aliased by ``supersample``^2 sub-samples.
+    """
+    if pixels < 8:
+        raise ValueError(f"pad texture needs at least 8 pixels, got {pixels}")
+    n = pixels * supersample
+    coords = (np.arange(n) + 0.5) / n * pad.side_m - pad.side_m / 2
+    xx, yy = np.meshgrid(coords, coords)
+    r = np.hypot(xx, yy)
+    white = np.zeros((n, n), dtype=bool)
+    for ring in pad.rings:
+        white |= (r >= ring.inner_m) & (r < ring.outer_m)
+    img = white.reshape(pixels, supersample, pixels, supersample).mean(axis=(1, 3))
+    return np.round(img * 255.0).astype(np.uint8)
+
+
+def pad_to_dict(pad: PadDefinition) -> dict[str, object]:
+    """The pad as plain data (the same keys a pad TOML file uses)."""
+    return {
+        "name": pad.name,
+        "side_m": pad.side_m,
+        "rings": [{"outer_m": r.outer_m, "inner_m": r.inner_m} for r in pad.rings],
+    }
+
+
+def pad_from_dict(data: dict[str, object], source: str = "<dict>") -> PadDefinition:
+    """Build a pad from plain data; raises ConfigError naming ``source`` and the bad key."""
+
+    def number(value: object, key: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{source}: {key} must be a number, got {value!r}")
+        return float(value)
+
+    unknown = set(data) - {"name", "side_m", "rings"}
+    if unknown:
+        raise ConfigError(f"{source}: unknown keys {sorted(unknown)}; expected name, side_m, rings")
+    for key in ("name", "side_m", "rings"):
+        if key not in data:
+            raise ConfigError(f"{source}: missing key {key!r}")
+    name = data["name"]
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{source}: name must be a non-empty string, got {name!r}")
+    side_m = number(data["side_m"], "side_m")
+    rings_data = data["rings"]
+    if not isinstance(rings_data, list) or not rings_data:
+        raise ConfigError(f"{source}: rings must be a non-empty list of [[rings]] tables")
+    rings = []
+    for i, entry in enumerate(rings_data, start=1):
+        if not isinstance(entry, dict) or set(entry) != {"outer_m", "inner_m"}:
+            raise ConfigError(f"{source}: rings[{i}] must have exactly outer_m and inner_m")
+        rings.append(
+            Ring(
+                outer_m=number(entry["outer_m"], f"rings[{i}].outer_m"),
+                inner_m=number(entry["inner_m"], f"rings[{i}].inner_m"),
+            )
+        )
+    try:
+        return PadDefinition(name=name, side_m=side_m, rings=tuple(rings))
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def load_pad(path: str | os.PathLike[str]) -> PadDefinition:
+    """A user-defined pad from a TOML file (keys: name, side_m, [[rings]] outer_m/inner_m).
+
+    Rings are listed outermost first; radii in metres. Raises ConfigError naming the file.
+    """
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read pad file: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return pad_from_dict(data, source=str(path))
+
+
+def resolve_pad(name_or_path: str) -> PadDefinition:
+    """A built-in pad by name, or a pad TOML file by path (anything ending in .toml)."""
+    if name_or_path.endswith(".toml"):
+        return load_pad(name_or_path)
+    try:
+        return get_pad(name_or_path)
+    except KeyError as exc:
+        raise ConfigError(str(exc.args[0])) from None

@@ -1,0 +1,190 @@
+"""Flight physics acceptance tests, against a real lockstep server on a loopback port."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from skeye.sim.robot_config import load_robot_config
+from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
+
+G = 9.81
+
+
+def spawn_airborne(client: LineClient, altitude_m: float, cls: str = "hummingbird") -> None:
+    res = client.answer(
+        f"INIT {{ClassName {cls}}} {{Name R1}} {{Location 0,0,{-altitude_m}}}", "INIT"
+    )
+    assert res.type == "RES", res
+
+
+def test_hover_thrust_equals_weight(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 3.0)
+    c.step(3000)
+    msgs = c.step(2000)
+    thrust = [float(v) for _, v in sensor_series(msgs, "Motors", "Thrust")]
+    weight = load_robot_config("hummingbird").airframe.mass_kg * G
+    assert len(thrust) >= 40
+    assert abs(np.mean(thrust) / weight - 1.0) < 0.01
+
+
+def test_free_fall_matches_g(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 40.0)
+    c.step(500)
+    c.send("DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0}")
+    c.step(400)  # motors spin down (tau_down 25 ms)
+    msgs = c.step(600)
+    series = sensor_series(msgs, "GroundTruth", "Velocity")
+    t = np.array([s[0] for s in series])
+    vd = np.array([vec(s[1])[2] for s in series])
+    # dv/dt = g - k v|v| with the documented quadratic air drag; motors are stopped.
+    airframe = load_robot_config("hummingbird").airframe
+    k = 0.5 * 1.225 * airframe.drag_area_m2 / airframe.mass_kg
+    accel = np.diff(vd) / np.diff(t)
+    v_mid = 0.5 * (vd[1:] + vd[:-1])
+    g_measured = np.mean(accel + k * v_mid * np.abs(v_mid))
+    assert abs(g_measured / G - 1.0) < 0.01, g_measured
+    assert vd[-1] > 5.0  # it really fell
+    # Nearly weightless: the accelerometer feels only the drag (upwards, body -z).
+    acc = [vec(v) for _, v in sensor_series(msgs, "Accelerometer", "ProperAcceleration")]
+    expected = -np.mean(k * v_mid**2)
+    assert abs(np.mean([a[2] for a in acc]) - expected) < 0.15
+
+
+def test_motor_step_follows_time_constant(tmp_path: Path, client_factory):
+    text = (Path(__file__).parents[2] / "skeye/sim/robots/hummingbird.toml").read_text()
+    text = text.replace('name = "hummingbird"', 'name = "fastmotors"', 1)
+    text = re.sub(r'(type = "Motors"\nname = "Motors"\nrate_hz = )\d+', r"\g<1>250", text)
+    assert "rate_hz = 250" in text
+    (tmp_path / "fastmotors.toml").write_text(text)
+    with running_sim(robot_dirs=(tmp_path,)) as server:
+        c = client_factory(server)
+        spawn_airborne(c, 5.0, cls="fastmotors")
+        before = c.step(2000)
+        c.send("DRIVE {RollAngle 0} {PitchAngle 0} {RotationalVelocity 0} {Thrust 0.5}")
+        msgs = c.step(60)
+    w_before = np.mean(vec(sensor_series(before, "Motors", "Speeds")[-1][1]))
+    series = sensor_series(msgs, "Motors", "Speeds")
+    t = np.array([s[0] for s in series])
+    w = np.array([np.mean(vec(s[1])) for s in series])
+    airframe = load_robot_config("hummingbird").airframe
+    w_target = math.sqrt(0.5 * airframe.max_thrust_n / 4 / airframe.kf)
+    remaining = (w_target - w) / (w_target - w_before)  # exp(-(t - t0) / tau)
+    mask = remaining > 0.05
+    slope = np.polyfit(t[mask], np.log(remaining[mask]), 1)[0]
+    tau = -1.0 / slope
+    assert abs(tau / airframe.tau_up_s - 1.0) < 0.05, tau
+
+
+def test_drive_forward_reaches_speed(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 2.0)
+    c.step(1000)
+    c.send("DRIVE {LinearVelocity 0.5}")
+    msgs = c.step(4000)
+    t0 = msgs[0] and float(msgs[0].require("Time"))
+    series = sensor_series(msgs, "GroundTruth", "Velocity")
+    reached = [t for t, v in series if abs(math.hypot(*vec(v)[:2]) - 0.5) < 0.025]
+    assert reached, "never within 5 % of 0.5 m/s"
+    assert reached[0] - t0 < 2.0
+    late = [math.hypot(*vec(v)[:2]) for t, v in series if t - t0 > 2.0]
+    assert all(abs(s - 0.5) < 0.025 for s in late), max(late)
+
+
+def test_hover_holds_height(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 1.5)
+    msgs = c.step(20000)
+    alts = [-vec(v)[2] for _, v in sensor_series(msgs, "GroundTruth", "Location")]
+    assert max(abs(a - 1.5) for a in alts) < 0.02
+
+
+def test_take_off_from_pad_and_land(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    assert c.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}", "INIT").type == "RES"
+    msgs = c.step(500)
+    sta = [m for m in msgs if m.type == "STA"]
+    assert sta[-1].get_bool("Landed") and not sta[-1].get_bool("Armed")
+    c.send("DRIVE {AltitudeVelocity 0.5}")
+    c.step(3000)
+    c.send("DRIVE {AltitudeVelocity 0}")
+    msgs = c.step(2000)
+    alt = -vec(sensor_series(msgs, "GroundTruth", "Location")[-1][1])[2]
+    assert 1.0 < alt < 2.0
+    assert not [m for m in msgs if m.type == "STA"][-1].get_bool("Landed")
+    c.send("DRIVE {AltitudeVelocity -0.5}")
+    msgs = c.step(8000)
+    sta = [m for m in msgs if m.type == "STA"][-1]
+    assert sta.get_bool("Landed") and not sta.get_bool("Armed")
+
+
+def test_sonar_beyond_range_reports_max(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 9.0)
+    msgs = c.step(1000)
+    ranges = [float(v) for _, v in sensor_series(msgs, "Sonar", "Range")]
+    assert ranges and all(r == 6.0 for r in ranges)
+
+
+def test_sensors_agree_with_ground_truth(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 1.2)
+    c.step(1000)
+    msgs = c.step(5000)
+    loc = np.array([vec(v) for _, v in sensor_series(msgs, "GroundTruth", "Location")])
+    truth = loc.mean(axis=0)
+    acc = np.array([vec(v) for _, v in sensor_series(msgs, "Accelerometer", "ProperAcceleration")])
+    assert np.allclose(acc.mean(axis=0), (0, 0, -G), atol=0.15)
+    gyro = np.array([vec(v) for _, v in sensor_series(msgs, "Gyro", "AngularVelocity")])
+    assert np.allclose(gyro.mean(axis=0), 0, atol=0.02)
+    sonar = np.array([float(v) for _, v in sensor_series(msgs, "Sonar", "Range")])
+    sonar_true = -truth[2] - 0.001 - 0.03  # above the pad surface, from the sonar's mount
+    assert abs(np.median(sonar) - sonar_true) < 0.05
+    ins = np.array([vec(v) for _, v in sensor_series(msgs, "INS", "Location")])
+    assert np.allclose(ins.mean(axis=0), truth, atol=0.1)
+    baro = np.array([float(v) for _, v in sensor_series(msgs, "Barometer", "Altitude")])
+    origin_alt = lockstep_server.runner.sim.world.geo_origin.altitude_m
+    assert abs(baro.mean() - (origin_alt - truth[2])) < 1.0
+    lat = np.array([float(v) for _, v in sensor_series(msgs, "GPS", "LatitudeDeg")])
+    lon = np.array([float(v) for _, v in sensor_series(msgs, "GPS", "LongitudeDeg")])
+    origin = lockstep_server.runner.sim.world.geo_origin
+    n, e, _ = origin.to_ned(lat.mean(), lon.mean(), origin.altitude_m)
+    assert math.hypot(n - truth[0], e - truth[1]) < 6.0
+    heading = np.array(
+        [float(v) for _, v in sensor_series(msgs, "MagneticCompass", "MagneticAngle")]
+    )
+    assert heading.size > 10
+    flow = np.array([vec(v) for _, v in sensor_series(msgs, "OpticalFlow", "Delta")])
+    assert np.abs(flow.mean(axis=0)).max() < 5.0  # hovering: little image motion
+
+
+def _stream(seed: int) -> bytes:
+    with running_sim(seed=seed) as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        spawn_airborne(c, 1.0)
+        c.step(500)
+        c.send("DRIVE {LinearVelocity 0.4} {LateralVelocity -0.2}")
+        c.step(1500)
+        c.close()
+        return bytes(c.raw)
+
+
+def test_lockstep_is_deterministic():
+    a, b, other = _stream(5), _stream(5), _stream(6)
+    assert a == b
+    assert a != other
+
+
+def test_hover_endurance_estimate(lockstep_server, client_factory):
+    """STA {Battery} (remaining life, s) on a full battery at hover: about 20 minutes."""
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 2.0)
+    msgs = c.step(10000)
+    remaining = float([m for m in msgs if m.type == "STA"][-1].require("Battery"))
+    assert abs(remaining / 1200.0 - 1.0) < 0.2, remaining
