@@ -99,11 +99,23 @@ def _add_sim(sub: Any) -> None:
         type=Path,
         help="folder of extra robot classes (<name>.toml); repeatable",
     )
+    p.add_argument(
+        "--image-port",
+        type=int,
+        default=None,
+        help="serve camera images on this port (5003 by convention; 0 = any free)",
+    )
     p.set_defaults(func=cmd_sim)
 
 
+def _add_vision(sub: Any) -> None:
+    from skeye.vision.cli import register
+
+    register(sub)
+
+
 # Each component adds its sub-commands here.
-_REGISTRARS: list[Callable[[Any], None]] = [_add_sim]
+_REGISTRARS: list[Callable[[Any], None]] = [_add_sim, _add_vision]
 
 
 def build_parser() -> argparse.ArgumentParser:

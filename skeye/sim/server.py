@@ -334,6 +334,7 @@ class ClientSession:
                     ("MaxThrust", a.max_thrust_n),
                     ("BoardRate", cfg.board_rate_hz),
                     ("TimeStep", self.server.runner.sim.dt),
+                ("Sensors", ",".join(f"{m.type_name}:{m.name}" for m in cfg.sensors)),
                 )
             )
             return

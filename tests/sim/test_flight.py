@@ -188,3 +188,13 @@ def test_hover_endurance_estimate(lockstep_server, client_factory):
     msgs = c.step(10000)
     remaining = float([m for m in msgs if m.type == "STA"][-1].require("Battery"))
     assert abs(remaining / 1200.0 - 1.0) < 0.2, remaining
+
+
+def test_robot_conf_lists_mounted_sensors(lockstep_server, client_factory):
+    c = client_factory(lockstep_server)
+    spawn_airborne(c, 1.0)
+    c.send("GETCONF {Type Robot}")
+    conf = c.expect("CONF")
+    sensors = conf.require("Sensors").split(",")
+    assert "Sonar:Down" in sensors and "GroundTruth:GroundTruth" in sensors
+    assert conf.get_float("Mass") == 0.68

@@ -1,0 +1,137 @@
+"""Camera benchmark: frames/s and render-to-receipt latency from the real simulator.
+
+Starts ``skeye sim --mode realtime --image-port 0`` as its own process, spawns a Hummingbird
+hovering over the pad (downward camera 800x600, 30 fps), and streams frames (``SKEYE STREAM``
+with META on) to 1 and 4 clients in RAW, JPEG quality 85 and PNG. Latency is receipt time minus
+the wall time of the frame's sim time (the sim-to-wall offset comes from PING answers; in real
+time the clock runs at 1x), so it counts rendering, encoding and transfer. Also prints the
+simulator's real-time factor seen by the clients, and the renderer (MUJOCO_GL) used.
+
+Usage: python benchmarks/bench_camera.py [--seconds 5] [--fps 30] [--clients 1 4]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from skeye.sim.image_client import ImageClient
+
+try:  # run from a checkout without installing
+    from tests.sim.conftest import LineClient
+except ImportError:  # pragma: no cover
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from tests.sim.conftest import LineClient
+
+
+@contextmanager
+def sim_process(width: int, height: int) -> Iterator[tuple[int, int, str]]:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env.setdefault("MUJOCO_GL", "egl")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "sim", "--mode", "realtime", "--port", "0",
+         "--image-port", "0"],
+        stdout=subprocess.PIPE, text=True, env=env,
+    )
+    try:
+        assert proc.stdout is not None
+        control = image = None
+        gl = "?"
+        while control is None or image is None:
+            line = proc.stdout.readline()
+            if not line:
+                raise RuntimeError("simulator exited")
+            m = re.search(r"control protocol on [\d.]+:(\d+)", line)
+            if m:
+                control = int(m.group(1))
+            m = re.search(r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)\)", line)
+            if m:
+                image, gl = int(m.group(1)), m.group(2)
+        yield control, image, gl
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def clock_offset(c: LineClient) -> float:
+    """wall - sim, from the fastest of several PINGs (real-time mode)."""
+    best = None
+    for i in range(20):
+        t0 = time.time()
+        c.send(f"PING {{Id o{i}}}")
+        res = c.read_until(lambda m, i=i: m.type == "RES" and m.get("Id") == f"o{i}")[1]
+        t1 = time.time()
+        offset = (t0 + t1) / 2 - float(res.require("Time"))
+        if best is None or (t1 - t0) < best[0]:
+            best = (t1 - t0, offset)
+    assert best is not None
+    return best[1]
+
+
+def stream(port: int, fmt: str, fps: float, seconds: float, offset: float,
+           out: list[tuple[int, float]]) -> None:
+    with ImageClient("127.0.0.1", port, timeout_s=10) as img:
+        img.select_camera("R1/Down")
+        img.set_format(fmt, quality=85)
+        img.set_meta(True)
+        start = time.time()
+        for frame in img.stream(fps):
+            now = time.time()
+            assert frame.meta is not None
+            out.append((frame.meta.frame_number, now - (frame.meta.sim_time_s + offset)))
+            if now - start > seconds:
+                break
+
+
+def pct(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--clients", type=int, nargs="+", default=[1, 4])
+    args = parser.parse_args()
+    with sim_process(800, 600) as (control_port, image_port, gl):
+        c = LineClient(control_port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1.0}", "INIT")
+        time.sleep(1.0)
+        offset = clock_offset(c)
+        print(f"renderer: MuJoCo offscreen, MUJOCO_GL={gl}; {os.cpu_count()} cores; "
+              f"camera 800x600 at {args.fps:g} fps requested; simulator in real time")
+        for fmt in ("raw", "jpeg", "png"):
+            for n in args.clients:
+                results: list[list[tuple[int, float]]] = [[] for _ in range(n)]
+                t0 = time.time()
+                c.send("PING {Id s0}")
+                s0 = float(c.read_until(lambda m: m.get("Id") == "s0")[1].require("Time"))
+                threads = [threading.Thread(target=stream, args=(image_port, fmt, args.fps,
+                                                                 args.seconds, offset, r))
+                           for r in results]
+                for t in threads:
+                    t.start()
+                for t in threads:
+                    t.join()
+                c.send("PING {Id s1}")
+                s1 = float(c.read_until(lambda m: m.get("Id") == "s1")[1].require("Time"))
+                rtf = (s1 - s0) / (time.time() - t0)
+                rates = [len(r) / args.seconds for r in results]
+                lat = [x[1] for r in results for x in r]
+                print(f"{fmt.upper():4s} q85 x{n}: {min(rates):5.1f}-{max(rates):5.1f} frames/s "
+                      f"per client, latency p50 {pct(lat, 0.5):5.1f} ms p99 {pct(lat, 0.99):6.1f}"
+                      f" ms, sim real-time factor {rtf:.2f}")
+        c.close()
+
+
+if __name__ == "__main__":
+    main()

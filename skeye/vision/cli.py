@@ -1,0 +1,86 @@
+"""Command-line subcommands for the pad: ``pad`` (write a printable pad) and ``vision detect``.
+
+How this works: :func:`register` adds the subcommands to the lead's argparse subparsers; each
+sets ``func(args) -> int``. ``vision detect`` runs the same :func:`detect` the pilot calls and
+prints one JSON object; it exits 0 whether or not a pad was found and 2 for bad input, with
+a message on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from typing import Any
+
+import cv2
+
+from skeye.errors import ConfigError, LocalProtocolError
+from skeye.vision.detector import detect
+from skeye.vision.pad import SKEYE_4, resolve_pad
+from skeye.vision.printable import DEFAULT_DPI, write_printable
+
+EXIT_BAD_INPUT = 2
+
+
+def _fail(message: str) -> int:
+    print(f"skeye: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def cmd_pad(args: argparse.Namespace) -> int:
+    """Write the printable pad."""
+    try:
+        pad = resolve_pad(args.pad)
+        out = write_printable(pad, args.out, dpi=args.dpi)
+    except (ConfigError, LocalProtocolError) as exc:
+        return _fail(str(exc))
+    except OSError as exc:
+        return _fail(f"cannot write {args.out}: {exc.strerror or exc}")
+    print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
+    return 0
+
+
+def cmd_detect(args: argparse.Namespace) -> int:
+    """Detect the pad in one image file and print the estimate as JSON."""
+    if not math.isfinite(args.fov) or not 0.0 < args.fov < math.pi:
+        return _fail(f"--fov must be in (0, pi) radians, got {args.fov}")
+    if (args.roll is None) != (args.pitch is None):
+        return _fail("give both --roll and --pitch, or neither")
+    try:
+        pad = resolve_pad(args.pad)
+    except ConfigError as exc:
+        return _fail(str(exc))
+    if not os.path.isfile(args.image):
+        return _fail(f"no such image file: {args.image}")
+    image = cv2.imread(args.image, cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        return _fail(f"cannot read image (not a supported image format?): {args.image}")
+    try:
+        est = detect(image, args.fov, pad=pad, roll_rad=args.roll, pitch_rad=args.pitch)
+    except LocalProtocolError as exc:
+        return _fail(str(exc))
+    out: dict[str, Any] = est.to_json_dict()
+    print(json.dumps(out))
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``pad`` and ``vision detect`` to an argparse subparsers object."""
+    p = subparsers.add_parser("pad", help="write the landing pad as a printable PDF or PNG")
+    p.add_argument("--out", required=True, help="output file, .pdf or .png")
+    p.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
+    p.add_argument("--dpi", type=int, default=DEFAULT_DPI, help="PNG resolution (dots per inch)")
+    p.set_defaults(func=cmd_pad)
+
+    v = subparsers.add_parser("vision", help="landing-pad vision tools")
+    vsub = v.add_subparsers(dest="vision_command", required=True)
+    d = vsub.add_parser("detect", help="detect the landing pad in an image, print JSON")
+    d.add_argument("image", help="image file (any format OpenCV reads)")
+    d.add_argument("--fov", type=float, required=True, help="horizontal field of view, rad")
+    d.add_argument("--roll", type=float, default=None, help="vehicle roll, rad (with --pitch)")
+    d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
+    d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
+    d.set_defaults(func=cmd_detect)

@@ -1,0 +1,677 @@
+"""Landing-pad detector: concentric rings -> pad centre, height and offset.
+
+How this works:
+
+1. **Level view.** With the vehicle's roll and pitch given, every image point used below is
+   moved by the pure-rotation homography ``K R K^-1`` into a virtual level camera (same
+   intrinsics, image plane parallel to the pad). There the rings are exact circles whose common
+   centre is the projection of the pad's centre. Without roll and pitch the camera is taken as
+   level (the homography is the identity).
+2. **Coarse search.** The grey image is halved (area average), thresholded (Otsu; an adaptive
+   threshold is tried when Otsu finds nothing), and its contours are taken with their two-level
+   hierarchy. A white ring is a white component whose largest hole is a roughly concentric
+   circle; components touching the image border are skipped here.
+3. **Sub-pixel borders.** For each candidate, rays are cast from its centre across each border
+   in the level view; the full-resolution grey profile is sampled along each ray (bilinear) and
+   the border is where it crosses the mid-level between its local black and white, with the
+   right polarity, nearest the expected radius. Circles are fitted to these points.
+4. **Identification.** A ring is named by its inner/outer radius ratio (nearest ratio of the
+   pad within a tolerance). Identified rings must be concentric and agree on the scale
+   (pixels per metre); the largest agreeing group wins. From its centre and scale the other
+   borders' radii are predicted and looked for along rays that stay inside the image, so rings
+   cut by the image edge still count when both their borders are found where predicted.
+5. **Joint fit.** All border points of the identified rings are fitted together (Gauss-Newton)
+   to concentric circles of radii ``s * r_m``: a common centre and one scale ``s``. Larger
+   borders carry more weight, as they should (blur and pixel effects shrink small ones most).
+   Height ``h = f / s`` (``f * r_m / r_px`` combined over all borders); the offset follows from
+   the centre.
+
+Invariants: ``found`` needs at least two identified rings that pass every check; otherwise
+the estimate says "not found" with all figures ``None`` - never a guess. Nothing is rounded.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from skeye.errors import LocalProtocolError
+from skeye.vision.camera import (
+    camera_to_level,
+    focal_length_px,
+    intrinsics,
+    level_offset_to_body,
+    principal_point_px,
+)
+from skeye.vision.pad import SKEYE_4, PadDefinition
+
+# Tunables (pixels are full-resolution pixels of the level view).
+_MIN_CONTRAST = 30.0  # grey levels between a border's black and white along a ray
+_SAMPLES_PER_RAY = 13
+_MAX_BORDER_RMS_PX = 0.5  # scatter of one border's points about the joint fit
+_STEP_FRACTION = 0.5  # of the local contrast, between the two halves of a ray's window
+_CANDIDATE_RAYS = 48
+_FINAL_RAYS = 64
+_MAX_CANDIDATES = 24
+_MIN_RING_PX = 4.0  # outer radius below which a ring is not looked at
+_MIN_BORDER_PX = 2.0  # predicted border radius below which it is not looked for
+
+
+@dataclass(frozen=True)
+class BorderEllipse:
+    """One identified ring border as it appears in the (possibly tilted) image."""
+
+    ring: int  # 1 = outermost
+    border: str  # "outer" or "inner"
+    center_px: tuple[float, float]
+    semi_axes_px: tuple[float, float]  # (major, minor)
+    angle_rad: float  # of the major axis, from image +u towards +v
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {
+            "ring": self.ring,
+            "border": self.border,
+            "center_px": list(self.center_px),
+            "semi_axes_px": list(self.semi_axes_px),
+            "angle_rad": self.angle_rad,
+        }
+
+
+@dataclass(frozen=True)
+class PadEstimate:
+    """What one frame says about the pad.
+
+    ``offset_cam_m`` is the pad centre's (x right, y down) offset from the point straight below
+    the camera, at the pad plane, in the level camera frame (the camera frame itself when no
+    roll/pitch was given); ``offset_body_m`` is the same offset as (forward, right) in the
+    level, yaw-aligned body frame. ``height_m`` is the camera's height above the pad plane.
+    """
+
+    found: bool
+    center_px: tuple[float, float] | None
+    height_m: float | None
+    offset_cam_m: tuple[float, float] | None
+    offset_body_m: tuple[float, float] | None
+    rings: tuple[int, ...]
+    ellipses: tuple[BorderEllipse, ...]
+    quality: float
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The LANDING_PAD.md command-line JSON form, plus ``offset_body_m``."""
+
+        def pair(p: tuple[float, float] | None) -> list[float] | None:
+            return None if p is None else [float(p[0]), float(p[1])]
+
+        return {
+            "found": self.found,
+            "center_px": pair(self.center_px),
+            "height_m": self.height_m,
+            "offset_cam_m": pair(self.offset_cam_m),
+            "offset_body_m": pair(self.offset_body_m),
+            "rings": list(self.rings),
+            "quality": self.quality,
+        }
+
+
+NOT_FOUND = PadEstimate(
+    found=False,
+    center_px=None,
+    height_m=None,
+    offset_cam_m=None,
+    offset_body_m=None,
+    rings=(),
+    ellipses=(),
+    quality=0.0,
+)
+
+
+@dataclass(frozen=True)
+class _Border:
+    ring: int  # 1-based
+    outer: bool
+    radius_m: float
+    polarity: float  # +1: grey rises going outwards (black inside), -1: falls
+    gap_m: float  # distance to the nearest other border (or the square's edge, or the centre)
+
+
+def _pad_borders(pad: PadDefinition) -> list[_Border]:
+    radii = sorted([x for r in pad.rings for x in (r.outer_m, r.inner_m)] + [pad.side_m / 2, 0.0])
+    out = []
+    for i, ring in enumerate(pad.rings, start=1):
+        for outer, r in ((True, ring.outer_m), (False, ring.inner_m)):
+            gap = min(abs(r - x) for x in radii if x != r)
+            out.append(_Border(i, outer, r, -1.0 if outer else 1.0, gap))
+    return out
+
+
+class _View:
+    """One frame's image and camera geometry; maps between image and level-view pixels."""
+
+    def __init__(self, grey: np.ndarray, fov_h_rad: float, roll: float, pitch: float, tilt: bool):
+        self.grey = grey
+        self.flat = grey.reshape(-1)
+        self.h, self.w = grey.shape
+        self.f = focal_length_px(self.w, fov_h_rad)
+        self.cx, self.cy = principal_point_px(self.w, self.h)
+        if tilt:
+            k = intrinsics(self.w, self.h, fov_h_rad)
+            self.hom: np.ndarray | None = k @ camera_to_level(roll, pitch) @ np.linalg.inv(k)
+            self.hom_inv: np.ndarray | None = np.linalg.inv(self.hom)
+        else:
+            self.hom = None
+            self.hom_inv = None
+
+    @staticmethod
+    def _apply(hom: np.ndarray | None, x: np.ndarray, y: np.ndarray) -> tuple[Any, Any]:
+        if hom is None:
+            return x, y
+        w = hom[2, 0] * x + hom[2, 1] * y + hom[2, 2]
+        return (
+            (hom[0, 0] * x + hom[0, 1] * y + hom[0, 2]) / w,
+            (hom[1, 0] * x + hom[1, 1] * y + hom[1, 2]) / w,
+        )
+
+    def to_level(self, x: np.ndarray, y: np.ndarray) -> tuple[Any, Any]:
+        return self._apply(self.hom, x, y)
+
+    def to_image(self, x: np.ndarray, y: np.ndarray) -> tuple[Any, Any]:
+        return self._apply(self.hom_inv, x, y)
+
+    def sample(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bilinear grey values at image points (float), and whether each point is inside."""
+        inside = (x >= 0) & (x <= self.w - 1) & (y >= 0) & (y <= self.h - 1)
+        xc = np.clip(x, 0, self.w - 1)
+        yc = np.clip(y, 0, self.h - 1)
+        x0 = np.minimum(xc.astype(np.intp), self.w - 2)
+        y0 = np.minimum(yc.astype(np.intp), self.h - 2)
+        fx = xc - x0
+        fy = yc - y0
+        i = y0 * self.w + x0
+        f = self.flat
+        top = f[i] * (1.0 - fx) + f[i + 1] * fx
+        bot = f[i + self.w] * (1.0 - fx) + f[i + self.w + 1] * fx
+        return top * (1.0 - fy) + bot * fy, inside
+
+
+_RAY_CACHE: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _ray_dirs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    if n not in _RAY_CACHE:
+        t = np.arange(n) * (2.0 * math.pi / n)
+        _RAY_CACHE[n] = (np.cos(t).astype(np.float32), np.sin(t).astype(np.float32))
+    return _RAY_CACHE[n]
+
+
+_RAY_STEPS = np.linspace(-1.0, 1.0, _SAMPLES_PER_RAY)
+_RAY_INDEX = np.arange(_SAMPLES_PER_RAY - 1, dtype=np.float32)
+
+
+def _edge_points(
+    view: _View,
+    centres: np.ndarray,
+    radii_px: np.ndarray,
+    polarity: np.ndarray,
+    halfwidth_px: np.ndarray,
+    n_rays: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sub-pixel border crossings along rays from each border's centre (level view).
+
+    ``centres`` is (B, 2), the other arrays (B,). Returns level-view points (B, n_rays, 2) and
+    a validity mask (B, n_rays).
+    """
+    cos_t, sin_t = _ray_dirs(n_rays)
+    k = _SAMPLES_PER_RAY
+    b = len(radii_px)
+    t = _RAY_STEPS
+    rad = (radii_px[:, None] + halfwidth_px[:, None] * t[None, :]).astype(np.float32)  # (B,K)
+    ccx = centres[:, 0, None, None].astype(np.float32)
+    ccy = centres[:, 1, None, None].astype(np.float32)
+    lx = ccx + rad[:, None, :] * cos_t[None, :, None]  # (B,N,K)
+    ly = ccy + rad[:, None, :] * sin_t[None, :, None]
+    ix, iy = view.to_image(lx, ly)
+    ix = np.asarray(ix, dtype=np.float32).reshape(b * n_rays, k)
+    iy = np.asarray(iy, dtype=np.float32).reshape(b * n_rays, k)
+    # Bilinear sampling (OpenCV's fixed-point weights: 1/32 px, far below our error budget).
+    prof = cv2.remap(view.grey, ix, iy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    # A homography maps segments to segments: a ray is inside when both its ends are.
+    ends_x = ix[:, :: k - 1]
+    ends_y = iy[:, :: k - 1]
+    inside = ((ends_x >= 0) & (ends_y >= 0) & (ends_x <= view.w - 1) & (ends_y <= view.h - 1)).all(
+        axis=1
+    )
+    lo = prof.min(axis=1)
+    hi = prof.max(axis=1)
+    midlevel = 0.5 * (lo.astype(np.float32) + hi)
+    pol = np.repeat(polarity.astype(np.float32), n_rays)
+    d = (prof - midlevel[:, None]) * pol[:, None]
+    d0 = d[:, :-1]
+    d1 = d[:, 1:]
+    cross = (d0 < 0) & (d1 >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pos = _RAY_INDEX + d0 / (d0 - d1)
+    mid = (k - 1) / 2.0
+    dist = np.where(cross, np.abs(pos - mid), np.float32(np.inf))
+    j = np.argmin(dist, axis=1)
+    rows = np.arange(b * n_rays)
+    best = pos[rows, j]
+    # A real border is a step: the two halves of the window differ by most of the contrast,
+    # with the right sign. Texture and noise cross the mid-level too, but are no step.
+    half = k // 2
+    rise = (
+        prof[:, half + 1 :].mean(axis=1, dtype=np.float32)
+        - prof[:, :half].mean(axis=1, dtype=np.float32)
+    ) * pol
+    contrast = hi.astype(np.float32) - lo
+    ok = inside & cross[rows, j] & (contrast >= _MIN_CONTRAST) & (rise >= _STEP_FRACTION * contrast)
+    best = np.where(ok, best, mid)
+    step = 2.0 * halfwidth_px / (k - 1)
+    r_edge = radii_px[:, None] + (best.reshape(b, n_rays) - mid) * step[:, None]
+    pts = np.empty((b, n_rays, 2))
+    pts[..., 0] = centres[:, 0, None] + r_edge * cos_t
+    pts[..., 1] = centres[:, 1, None] + r_edge * sin_t
+    return pts, ok.reshape(b, n_rays), inside.reshape(b, n_rays)
+
+
+def _fit_circles(
+    pts: np.ndarray, ok: np.ndarray, ref: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Algebraic (Kasa) circle fits of many point sets at once.
+
+    ``pts`` (B, N, 2) with mask ``ok`` (B, N); ``ref`` (B, 2) a point near each centre (for
+    conditioning). Returns centre x, centre y, radius and RMS radial residual, each (B,);
+    radius 0 and RMS inf where a set has fewer than 5 points or is degenerate.
+    """
+    w = ok.astype(np.float64)
+    x = (pts[..., 0] - ref[:, 0, None]) * w
+    y = (pts[..., 1] - ref[:, 1, None]) * w
+    z = x * x + y * y
+    n = w.sum(axis=1)
+    sx, sy, sz = x.sum(axis=1), y.sum(axis=1), z.sum(axis=1)
+    sxx, syy, sxy = (x * x).sum(axis=1), (y * y).sum(axis=1), (x * y).sum(axis=1)
+    a = np.empty((len(n), 3, 3))
+    a[:, 0, 0], a[:, 0, 1], a[:, 0, 2] = sxx, sxy, sx
+    a[:, 1, 0], a[:, 1, 1], a[:, 1, 2] = sxy, syy, sy
+    a[:, 2, 0], a[:, 2, 1], a[:, 2, 2] = sx, sy, n
+    rhs = np.stack(((x * z).sum(axis=1), (y * z).sum(axis=1), sz), axis=1)
+    good = (n >= 5) & (np.abs(np.linalg.det(a)) > 1e-9)
+    a[~good] = np.eye(3)
+    sol = np.linalg.solve(a, rhs[..., None])[..., 0]
+    cx = sol[:, 0] / 2.0
+    cy = sol[:, 1] / 2.0
+    r2 = sol[:, 2] + cx * cx + cy * cy
+    good &= r2 > 0
+    r = np.sqrt(np.where(good, r2, 0.0))
+    res = (np.hypot(x - cx[:, None], y - cy[:, None]) - r[:, None]) * w
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rms = np.sqrt((res * res).sum(axis=1) / n)
+    rms = np.where(good, rms, np.inf)
+    return cx + ref[:, 0], cy + ref[:, 1], r, rms
+
+
+def _adaptive(small: np.ndarray) -> np.ndarray:
+    block = max(15, (min(small.shape) // 6) | 1)
+    return cv2.adaptiveThreshold(
+        small, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY, block, -8
+    )
+
+
+@dataclass
+class _Candidate:
+    cx: float
+    cy: float
+    r_outer: float
+    r_inner: float
+
+
+def _disc(
+    view: _View, contour: np.ndarray, sx: float, sy: float
+) -> tuple[float, float, float, float]:
+    """A coarse contour's centre, equal-area radius and roundness, in level-view pixels.
+
+    Roundness is the equal-area radius over half the larger extent (1 for a circle).
+    """
+    p = contour.reshape(-1, 2).astype(np.float64)
+    lx, ly = view.to_level((p[:, 0] + 0.5) * sx - 0.5, (p[:, 1] + 0.5) * sy - 0.5)
+    lp = np.column_stack((lx, ly)).astype(np.float32)
+    m = cv2.moments(lp)
+    area = abs(m["m00"])
+    if area <= 0:
+        return 0.0, 0.0, 0.0, 0.0
+    r = math.sqrt(area / math.pi)
+    _, _, bw, bh = cv2.boundingRect(lp)
+    return m["m10"] / m["m00"], m["m01"] / m["m00"], r, 2.0 * r / max(bw, bh, 1e-9)
+
+
+def _coarse_candidates(
+    view: _View, binary: np.ndarray, scale_x: float, scale_y: float, tilt_known: bool
+) -> list[_Candidate]:
+    """Ring-like white components (one big, round, concentric hole) of the coarse image."""
+    contours, hierarchy = cv2.findContours(binary, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    if hierarchy is None or not contours:
+        return []
+    hier = hierarchy[0]
+    lens = np.fromiter((len(c) for c in contours), dtype=np.intp, count=len(contours))
+    min_outer = max(8, int(2.0 * _MIN_RING_PX / max(scale_x, scale_y)))
+    tops = np.nonzero((hier[:, 3] < 0) & (hier[:, 2] >= 0) & (lens >= min_outer))[0]
+    if tops.size == 0:
+        return []
+    tops = tops[np.argsort(-lens[tops])][: 4 * _MAX_CANDIDATES]
+    hs, ws = binary.shape
+    out: list[_Candidate] = []
+    min_round = 0.85 if tilt_known else 0.6
+    for i in tops.tolist():
+        bx, by, bw, bh = cv2.boundingRect(contours[i])
+        if bx <= 0 or by <= 0 or bx + bw >= ws or by + bh >= hs:
+            continue
+        j = int(hier[i, 2])
+        hole, hole_len = -1, 0
+        while j >= 0:
+            if lens[j] > hole_len:
+                hole, hole_len = j, int(lens[j])
+            j = int(hier[j, 0])
+        if hole_len < 6:
+            continue
+        ox, oy, ro, round_o = _disc(view, contours[i], scale_x, scale_y)
+        ix, iy, ri, round_i = _disc(view, contours[hole], scale_x, scale_y)
+        # Pixel contours run along the white side of a border: half a coarse pixel inside the
+        # outer border, outside the hole's.
+        ro += 0.5 * scale_x
+        ri -= 0.5 * scale_x
+        if ro < _MIN_RING_PX or ri <= 0.5:
+            continue
+        if round_o < min_round or round_i < min_round - 0.15:
+            continue
+        if math.hypot(ox - ix, oy - iy) > 0.1 * ro + 1.5 * scale_x:
+            continue
+        if not 0.05 < ri / ro < 0.98:
+            continue
+        out.append(_Candidate(ox, oy, ro, ri))
+        if len(out) >= _MAX_CANDIDATES:
+            break
+    return out
+
+
+@dataclass
+class _Ring:
+    ring: int
+    cx: float
+    cy: float
+    scale: float  # px per metre
+    r_outer: float
+
+
+def _identify(
+    view: _View, cands: list[_Candidate], pad: PadDefinition, ratio_tol: float
+) -> list[_Ring]:
+    """Refine every candidate's two borders (one batch) and name its ring by the radius ratio."""
+    if not cands:
+        return []
+    ro0 = np.array([c.r_outer for c in cands])
+    ri0 = np.array([c.r_inner for c in cands])
+    hw = np.clip(0.35 * (ro0 - ri0), 1.0, 5.0)
+    centres = np.repeat(np.array([(c.cx, c.cy) for c in cands]), 2, axis=0)
+    radii = np.column_stack((ro0, ri0)).reshape(-1)
+    halfw = np.column_stack((hw, np.minimum(hw, 0.6 * ri0))).reshape(-1)
+    pol = np.tile((-1.0, 1.0), len(cands))
+    pts, ok, _ = _edge_points(view, centres, radii, pol, halfw, _CANDIDATE_RAYS)
+    cx, cy, r, rms = _fit_circles(pts, ok, centres)
+    n_ok = ok.sum(axis=1)
+    ratios = np.array([ring.ratio for ring in pad.rings])
+    found: list[_Ring] = []
+    for i in range(len(cands)):
+        o, n = 2 * i, 2 * i + 1
+        if min(n_ok[o], n_ok[n]) < 0.6 * _CANDIDATE_RAYS or r[n] <= 0 or r[o] <= 0:
+            continue
+        if rms[o] > 0.5 + 0.02 * r[o] or rms[n] > 0.5 + 0.02 * r[n]:
+            continue
+        if math.hypot(cx[o] - cx[n], cy[o] - cy[n]) > 0.5 + 0.02 * r[o]:
+            continue
+        ratio = r[n] / r[o]
+        k = int(np.argmin(np.abs(ratios - ratio)))
+        if abs(ratios[k] - ratio) > ratio_tol:
+            continue
+        ring = pad.rings[k]
+        scale = (r[o] + r[n]) / (ring.outer_m + ring.inner_m)
+        found.append(
+            _Ring(k + 1, 0.5 * (cx[o] + cx[n]), 0.5 * (cy[o] + cy[n]), float(scale), float(r[o]))
+        )
+    return found
+
+
+def _best_group(rings: list[_Ring]) -> list[_Ring]:
+    """The largest set of distinct, concentric rings that agree on the scale."""
+    best: list[_Ring] = []
+    for seed in sorted(rings, key=lambda r: -r.r_outer):
+        group: dict[int, _Ring] = {}
+        for r in rings:
+            if math.hypot(r.cx - seed.cx, r.cy - seed.cy) > 1.0 + 0.03 * seed.r_outer:
+                continue
+            if abs(r.scale / seed.scale - 1.0) > 0.04:
+                continue
+            if r.ring not in group or r.r_outer > group[r.ring].r_outer:
+                group[r.ring] = r
+        if len(group) > len(best):
+            best = list(group.values())
+    return best
+
+
+def _joint_fit(
+    pts: np.ndarray, radius_m: np.ndarray, cx: float, cy: float, scale: float, iters: int = 4
+) -> tuple[float, float, float, np.ndarray]:
+    """Gauss-Newton fit of concentric circles of radii ``scale * radius_m``; residuals (px)."""
+    x = pts[:, 0]
+    y = pts[:, 1]
+    jac = np.empty((3, len(x)))  # rows: -d res / d (cx, cy, scale), signs folded below
+    jac[2] = radius_m
+    for _ in range(iters):
+        dx = x - cx
+        dy = y - cy
+        dist = np.hypot(dx, dy)
+        np.divide(dx, dist, out=jac[0])
+        np.divide(dy, dist, out=jac[1])
+        res = dist - scale * radius_m
+        # With J = -jac^T: (J^T J) step = -J^T res  <=>  (jac jac^T) step = jac res.
+        step = np.linalg.solve(jac @ jac.T, jac @ res)
+        cx += float(step[0])
+        cy += float(step[1])
+        scale += float(step[2])
+        if abs(step[0]) + abs(step[1]) + abs(step[2]) * float(radius_m[0]) < 1e-5:
+            break
+    res = np.hypot(x - cx, y - cy) - scale * radius_m
+    return cx, cy, scale, res
+
+
+def _conic_ellipse(
+    hom: np.ndarray | None, cx: float, cy: float, r: float
+) -> tuple[tuple[float, float], tuple[float, float], float]:
+    """The image ellipse of a level-view circle: centre, (major, minor) semi-axes, angle."""
+    if hom is None:
+        return (cx, cy), (r, r), 0.0
+    q = np.array(((1.0, 0.0, -cx), (0.0, 1.0, -cy), (-cx, -cy, cx * cx + cy * cy - r * r)))
+    q = hom.T @ q @ hom
+    a, b, c = float(q[0, 0]), float(q[0, 1]), float(q[1, 1])
+    d, e, f = float(q[0, 2]), float(q[1, 2]), float(q[2, 2])
+    det = a * c - b * b
+    ex = (b * e - c * d) / det
+    ey = (b * d - a * e) / det
+    f0 = f + d * ex + e * ey
+    # Eigenvalues of [[a, b], [b, c]]; the smaller one belongs to the major axis.
+    mean = 0.5 * (a + c)
+    half = math.hypot(0.5 * (a - c), b)
+    lam_small, lam_big = mean - half, mean + half
+    if f0 > 0:  # the conic may come out with either overall sign
+        lam_small, lam_big, f0 = -lam_big, -lam_small, -f0
+    major = math.sqrt(max(-f0 / lam_small, 0.0))
+    minor = math.sqrt(max(-f0 / lam_big, 0.0))
+    # Direction of the major axis: eigenvector of the smaller |eigenvalue|.
+    angle = 0.5 * math.atan2(2.0 * b, a - c) + math.pi / 2.0
+    angle %= math.pi
+    return (ex, ey), (major, minor), angle
+
+
+def _to_grey(image: np.ndarray) -> np.ndarray:
+    if not isinstance(image, np.ndarray):
+        raise LocalProtocolError(f"image must be a numpy array, got {type(image).__name__}")
+    if image.dtype != np.uint8:
+        raise LocalProtocolError(f"image must be uint8, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim == 3 and image.shape[2] == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    elif image.ndim == 3 and image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
+    elif image.ndim != 2:
+        raise LocalProtocolError(
+            f"image must be greyscale (H, W) or BGR (H, W, 3), got shape {image.shape}"
+        )
+    if image.shape[0] < 16 or image.shape[1] < 16:
+        raise LocalProtocolError(
+            f"image too small for detection: {image.shape[1]}x{image.shape[0]}"
+        )
+    return np.ascontiguousarray(image)
+
+
+def detect(
+    image: np.ndarray,
+    fov_h_rad: float,
+    pad: PadDefinition = SKEYE_4,
+    roll_rad: float | None = None,
+    pitch_rad: float | None = None,
+) -> PadEstimate:
+    """Find the pad in one frame from the downward camera.
+
+    Args:
+        image: greyscale (H, W) or BGR (H, W, 3) uint8 frame.
+        fov_h_rad: the camera's horizontal field of view (float, radians, never rounded).
+        pad: the pad to look for.
+        roll_rad, pitch_rad: the vehicle's attitude (body FRD, ZYX; see
+            :mod:`skeye.vision.camera`), both or neither. When given, the tilt is compensated
+            and offsets are in the level frame; when not, the camera is taken as level.
+
+    Returns:
+        A :class:`PadEstimate`; ``found`` is False (with every figure None) unless at least
+        two rings were identified and agree.
+    """
+    if (roll_rad is None) != (pitch_rad is None):
+        raise LocalProtocolError("give both roll_rad and pitch_rad, or neither")
+    for name, value in (("roll_rad", roll_rad), ("pitch_rad", pitch_rad)):
+        if value is not None and not (math.isfinite(value) and abs(value) < math.pi / 2):
+            raise LocalProtocolError(f"{name} must be finite and within (-pi/2, pi/2), got {value}")
+    grey = _to_grey(image)
+    tilt = roll_rad is not None
+    view = _View(grey, fov_h_rad, roll_rad or 0.0, pitch_rad or 0.0, tilt)
+
+    h, w = grey.shape
+    if min(h, w) >= 200:
+        small = cv2.resize(grey, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    else:
+        small = grey
+    sx = w / small.shape[1]
+    sy = h / small.shape[0]
+    ratios = sorted(r.ratio for r in pad.rings)
+    spacing = min((b - a for a, b in itertools.pairwise(ratios)), default=0.2)
+    ratio_tol = min(0.035, 0.4 * spacing)
+    borders = _pad_borders(pad)
+
+    _, otsu = cv2.threshold(small, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+    for binary in (otsu, None):
+        if binary is None:
+            binary = _adaptive(small)
+        cands = _coarse_candidates(view, binary, sx, sy, tilt)
+        group = _best_group(_identify(view, cands, pad, ratio_tol))
+        if group:
+            est = _finish(view, pad, borders, group)
+            if est.found:
+                return est
+    return NOT_FOUND
+
+
+def _finish(
+    view: _View, pad: PadDefinition, borders: list[_Border], group: list[_Ring]
+) -> PadEstimate:
+    """From a seed group of identified rings: look for the rest, fit jointly, check, report."""
+    wts = np.array([g.r_outer for g in group])
+    cx = float(np.average([g.cx for g in group], weights=wts))
+    cy = float(np.average([g.cy for g in group], weights=wts))
+    scale = float(np.average([g.scale for g in group], weights=wts))
+
+    radius_m = np.array([b.radius_m for b in borders])
+    ring_of = np.array([b.ring for b in borders])
+    r_px = radius_m * scale
+    look = np.nonzero(r_px >= _MIN_BORDER_PX)[0]
+    if look.size == 0:
+        return NOT_FOUND
+    hw = np.minimum(
+        np.clip(0.4 * np.array([b.gap_m for b in borders]) * scale, 0.75, 5.0), 0.6 * r_px
+    )
+    centres = np.tile((cx, cy), (look.size, 1))
+    pol = np.array([b.polarity for b in borders])
+    pts, ok, inside = _edge_points(view, centres, r_px[look], pol[look], hw[look], _FINAL_RAYS)
+
+    # A border is confirmed when enough rays found it where the seed predicts; a ring is
+    # identified when both of its borders are confirmed.
+    dist = np.hypot(pts[..., 0] - cx, pts[..., 1] - cy)
+    near = ok & (np.abs(dist - r_px[look, None]) <= (0.75 + 0.015 * r_px[look, None]))
+    n_near = near.sum(axis=1)
+    confirmed = (n_near >= 10) & (n_near >= 0.7 * inside.sum(axis=1))
+    per_ring = np.bincount(ring_of[look][confirmed], minlength=len(pad.rings) + 1)
+    rings = [i for i in range(1, len(pad.rings) + 1) if per_ring[i] == 2]
+    if len(rings) < 2:
+        return NOT_FOUND
+    use = confirmed & np.isin(ring_of[look], rings)
+    sel = near & use[:, None]
+    all_pts = pts[sel]
+    border_idx = np.broadcast_to(np.arange(look.size)[:, None], sel.shape)[sel]
+    all_rm = radius_m[look][border_idx]
+    cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale)
+    # One round of outlier rejection, then refit.
+    keep = np.abs(res) <= max(0.5, 4.5 * float(np.median(np.abs(res))))
+    if keep.sum() < 20:
+        return NOT_FOUND
+    all_pts, all_rm, border_idx = all_pts[keep], all_rm[keep], border_idx[keep]
+    cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale, iters=2)
+    if not (scale > 0 and math.isfinite(cx) and math.isfinite(cy)):
+        return NOT_FOUND
+    # Every border used must agree with the joint model on its own.
+    counts = np.bincount(border_idx, minlength=look.size)
+    bias = np.bincount(border_idx, weights=res, minlength=look.size) / np.maximum(counts, 1)
+    used = use & (counts > 0)
+    if (counts[use] < 5).any():
+        return NOT_FOUND
+    if (np.abs(bias[used]) > 0.5 + 0.01 * scale * radius_m[look][used]).any():
+        return NOT_FOUND
+    sq = np.bincount(border_idx, weights=res * res, minlength=look.size) / np.maximum(counts, 1)
+    if (sq[used] > _MAX_BORDER_RMS_PX**2).any():
+        return NOT_FOUND
+    rms = float(np.sqrt(np.mean(res * res)))
+    if rms > 1.0:
+        return NOT_FOUND
+
+    height_m = view.f / scale
+    x_m = (cx - view.cx) / view.f * height_m
+    y_m = (cy - view.cy) / view.f * height_m
+    ucx, ucy = view.to_image(np.array(cx), np.array(cy))
+    ellipses = []
+    for ring_no in rings:
+        ring = pad.rings[ring_no - 1]
+        for name, r_m in (("outer", ring.outer_m), ("inner", ring.inner_m)):
+            c, axes, ang = _conic_ellipse(view.hom, cx, cy, scale * r_m)
+            ellipses.append(BorderEllipse(ring_no, name, c, axes, ang))
+    rings_term = 1.0 - 0.5 ** len(rings)
+    fit_term = 1.0 / (1.0 + (rms / 0.5) ** 2)
+    return PadEstimate(
+        found=True,
+        center_px=(float(ucx), float(ucy)),
+        height_m=float(height_m),
+        offset_cam_m=(float(x_m), float(y_m)),
+        offset_body_m=level_offset_to_body((float(x_m), float(y_m))),
+        rings=tuple(rings),
+        ellipses=tuple(ellipses),
+        quality=float(rings_term * fit_term),
+    )

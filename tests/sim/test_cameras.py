@@ -1,0 +1,189 @@
+"""Cameras rendered by the simulator and served by the image server, over loopback."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skeye.sim.cameras import CameraSystem
+from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.image_client import ImageClient
+from skeye.sim.image_server import FrameBuffer, ImageServer
+from skeye.sim.server import ControlServer
+from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
+from skeye.vision.pad import SKEYE_4
+from tests.sim.conftest import LineClient
+
+ROBOTS = Path(__file__).parents[2] / "skeye/sim/robots"
+
+
+@contextmanager
+def sim_with_images(
+    mode: str = "lockstep", robot_dirs: tuple[Path, ...] = ()
+) -> Iterator[tuple[ControlServer, ImageServer, CameraSystem]]:
+    sim = Simulation(load_world("pad"), seed=3, robot_dirs=robot_dirs)
+    buffer = FrameBuffer()
+    with (
+        SimulationRunner(sim, mode=mode) as runner,
+        CameraSystem(sim, buffer, synchronous=mode == "lockstep") as cameras,
+        ControlServer(runner, port=0) as control,
+        ImageServer(buffer, port=0) as images,
+    ):
+        yield control, images, cameras
+
+
+def small_camera_robot(tmp_path: Path, width: int = 320, height: int = 240) -> Path:
+    text = (ROBOTS / "hummingbird.toml").read_text()
+    text = text.replace('name = "hummingbird"', 'name = "smallcam"', 1)
+    text = text.replace("width = 800\nheight = 600", f"width = {width}\nheight = {height}")
+    (tmp_path / "smallcam.toml").write_text(text)
+    return tmp_path
+
+
+def ring_edges_along(row: np.ndarray, start: int, step: int) -> list[float]:
+    """Sub-pixel positions (index units) where the intensity crosses mid-grey, walking out."""
+    edges = []
+    mid = 0.5 * (float(row.max()) + float(row.min()))
+    i = start
+    while 0 <= i + step < len(row):
+        a, b = float(row[i]), float(row[i + step])
+        if (a - mid) * (b - mid) < 0:
+            edges.append(i + step * (mid - a) / (b - a))
+        i += step
+    return edges
+
+
+def test_rendered_pad_matches_pinhole_model():
+    altitude = 1.2
+    north, east = 0.08, -0.05
+    with sim_with_images() as (control, _images, cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer(f"INIT {{ClassName hummingbird}} {{Name R1}} {{Location {north},{east},"
+                 f"{-altitude}}}", "INIT")
+        c.step(1)  # frame 1 is rendered from the state at the first step
+        frame = cameras.buffer.latest("R1/Down")
+        c.close()
+    assert frame is not None and frame.number == 1
+    grey = frame.rgb.mean(axis=2)
+    h, w = grey.shape
+    f = (w / 2) / math.tan(1.309 / 2)
+    cam_height = altitude - 0.035 - PAD_SURFACE_HEIGHT_M
+    # The pad is south-east... of the vehicle: behind (image down) by `north`, left by `east`.
+    cx = (w - 1) / 2 + f * (0.0 - east) / cam_height
+    cy = (h - 1) / 2 + f * (north - 0.0) / cam_height
+    row = grey[round(cy)]
+    col = grey[:, round(cx)]
+    right = ring_edges_along(row, round(cx), +1)
+    left = ring_edges_along(row, round(cx), -1)
+    down = ring_edges_along(col, round(cy), +1)
+    up = ring_edges_along(col, round(cy), -1)
+    radii_m = sorted([r for ring in SKEYE_4.rings for r in (ring.inner_m, ring.outer_m)])
+    expected_px = [f * r / cam_height for r in radii_m]
+    n = len(expected_px)
+    # Centre from symmetric edge pairs, radii from their half distances.
+    measured_cx = np.mean([(a + b) / 2 for a, b in zip(right[:n], left[:n], strict=True)])
+    measured_cy = np.mean([(a + b) / 2 for a, b in zip(down[:n], up[:n], strict=True)])
+    assert abs(measured_cx - cx) < 1.0 and abs(measured_cy - cy) < 1.0
+    for i, expected in enumerate(expected_px):
+        for measured in ((right[i] - left[i]) / 2, (down[i] - up[i]) / 2):
+            assert abs(measured - expected) < 1.0, (i, measured, expected)
+
+
+def test_image_requests_against_the_simulator():
+    with sim_with_images() as (control, images, _cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        c.step(40)
+        with ImageClient("127.0.0.1", images.port) as img:
+            img.select_camera("R1/Down")
+            img.set_meta(True)
+            numbers = []
+            for fmt in ("raw", "jpeg", "png"):
+                img.set_format(fmt, quality=85)
+                frame = img.get_frame()
+                assert frame.image().shape == (600, 800, 3)
+                assert frame.meta is not None and frame.meta.width == 800
+                numbers.append(frame.meta.frame_number)
+                c.step(34)
+            assert numbers == sorted(numbers) and len(set(numbers)) == 3
+            # A bad extension line gets an error frame; the connection stays usable.
+            img._sock.sendall(b"SKEYE FORMAT GIF\n")  # a line the client API would refuse
+            with pytest.raises(Exception, match=r"(?i)format|gif"):
+                img.get_frame()
+            img.set_format("jpeg", quality=85)
+            assert img.get_frame().image().shape == (600, 800, 3)
+        c.send("GETCONF {Type Camera}")
+        conf = c.expect("CONF")
+        assert conf.get_float("FOV") == pytest.approx(1.309, abs=1e-6)
+        assert c.answer("SET {Type Camera} {Name Down} {Opcode FOV} {Params 1.2345678}",
+                        "SET").type == "RES"
+        c.send("GETCONF {Type Camera} {Name Down}")
+        assert c.expect("CONF").get_float("FOV") == pytest.approx(1.2345678, abs=1e-6)
+        bad = c.answer("SET {Type Camera} {Name Down} {Opcode FOV} {Params 9}", "SET")
+        assert bad.type == "ERR"
+        c.close()
+
+
+def _stream_rate(port: int, seconds: float) -> float:
+    with ImageClient("127.0.0.1", port) as img:
+        img.set_format("jpeg", quality=85)
+        img.set_meta(True)
+        start = time.monotonic()
+        count = 0
+        for _ in img.stream(30):
+            count += 1
+            if time.monotonic() - start > seconds:
+                break
+        return count / (time.monotonic() - start)
+
+
+def test_stalled_image_client_does_not_slow_physics_or_others(tmp_path):
+    """Real time: a client that never reads costs the others < 10 % of their rate."""
+    with sim_with_images(mode="realtime",
+                         robot_dirs=(small_camera_robot(tmp_path),)) as (control, images, _c):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName smallcam} {Name R1} {Location 0,0,-1}", "INIT")
+        time.sleep(0.5)
+        base_rate = _stream_rate(images.port, 3.0)
+        t0, s0 = time.monotonic(), control.runner.sim.time_s
+        time.sleep(1.0)
+        base_rtf = (control.runner.sim.time_s - s0) / (time.monotonic() - t0)
+        import socket
+
+        stalled = socket.create_connection(("127.0.0.1", images.port))
+        stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        stalled.sendall(b"SKEYE FORMAT RAW\nSKEYE STREAM 30\n")
+        time.sleep(0.5)
+        t0, s0 = time.monotonic(), control.runner.sim.time_s
+        stalled_rate = _stream_rate(images.port, 3.0)
+        stalled_rtf = (control.runner.sim.time_s - s0) / (time.monotonic() - t0)
+        stalled.close()
+        c.close()
+    assert base_rate > 10
+    assert stalled_rate >= 0.9 * base_rate, (stalled_rate, base_rate)
+    assert stalled_rtf >= 0.9 * base_rtf, (stalled_rtf, base_rtf)
+
+
+def test_camera_frames_are_announced_in_lockstep():
+    with sim_with_images() as (control, _images, _cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        msgs = c.step(200)
+        c.close()
+    frames = [(float(m.require("Time")), int(m.require("Frame"))) for m in msgs
+              if m.type == "SEN" and m.get("Type") == "Camera"]
+    # 30 fps in sim time: frame n at the first step with t >= (n - 1) / 30.
+    assert [n for _, n in frames] == list(range(1, len(frames) + 1))
+    for t, n in frames:
+        assert (n - 1) / 30 - 1e-9 <= t < (n - 1) / 30 + 0.001 + 1e-9
+    assert len(frames) == 7  # t = 0, 1/30, ..., 6/30 within the first 0.2 s

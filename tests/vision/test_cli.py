@@ -1,0 +1,118 @@
+"""The ``pad`` and ``vision detect`` subcommands, through a small argparse main."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import cv2
+import pytest
+
+from skeye.vision.camera import render_pad_view
+from skeye.vision.cli import register
+from skeye.vision.pad import SKEYE_4
+
+from .helpers import FOV_H_RAD, H, W
+
+
+def run(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="skeye")
+    sub = parser.add_subparsers(dest="command", required=True)
+    register(sub)
+    args = parser.parse_args(argv)
+    return int(args.func(args))
+
+
+@pytest.fixture(scope="module")
+def pad_png(tmp_path_factory):
+    path = tmp_path_factory.mktemp("img") / "frame.png"
+    roll, pitch = 0.1, -0.12
+    img = render_pad_view(
+        SKEYE_4, W, H, FOV_H_RAD, 1.2, (0.1, -0.2), roll_rad=roll, pitch_rad=pitch
+    )
+    cv2.imwrite(str(path), img)
+    return path
+
+
+def test_detect_prints_json(pad_png, capsys):
+    rc = run(
+        ["vision", "detect", str(pad_png), "--fov", "1.309", "--roll", "0.1", "--pitch", "-0.12"]
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert out["found"] is True and out["rings"] == [1, 2, 3, 4]
+    assert out["height_m"] == pytest.approx(1.2, rel=0.01)
+    assert out["offset_cam_m"] == pytest.approx([0.1, -0.2], abs=0.01)
+    assert out["offset_body_m"] == pytest.approx([0.2, 0.1], abs=0.01)
+    assert 0 < out["quality"] <= 1 and len(out["center_px"]) == 2
+
+
+def test_detect_without_attitude_takes_camera_level(tmp_path, capsys):
+    path = tmp_path / "level.png"
+    cv2.imwrite(str(path), render_pad_view(SKEYE_4, W, H, FOV_H_RAD, 0.9, (-0.1, 0.15)))
+    assert run(["vision", "detect", str(path), "--fov", "1.309", "--pad", "skeye-4"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["found"] is True
+    assert out["height_m"] == pytest.approx(0.9, rel=0.01)
+    assert out["offset_cam_m"] == pytest.approx([-0.1, 0.15], abs=0.01)
+
+
+def test_detect_not_found_exits_zero_with_nulls(tmp_path, capsys):
+    path = tmp_path / "blank.png"
+    cv2.imwrite(str(path), render_pad_view(SKEYE_4, W, H, FOV_H_RAD, 1.0, (5.0, 5.0)))
+    assert run(["vision", "detect", str(path), "--fov", "1.309"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out == {
+        "found": False,
+        "center_px": None,
+        "height_m": None,
+        "offset_cam_m": None,
+        "offset_body_m": None,
+        "rings": [],
+        "quality": 0.0,
+    }
+
+
+@pytest.mark.parametrize(
+    "extra,match",
+    [
+        (["--fov", "0"], "--fov"),
+        (["--fov", "nan"], "--fov"),
+        (["--fov", "1.3", "--roll", "0.1"], "--roll and --pitch"),
+        (["--fov", "1.3", "--pad", "nope"], "unknown pad"),
+    ],
+)
+def test_detect_bad_values(pad_png, capsys, extra, match):
+    assert run(["vision", "detect", str(pad_png), *extra]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and match in captured.err
+
+
+def test_detect_missing_and_unreadable_image(tmp_path, capsys):
+    assert run(["vision", "detect", str(tmp_path / "none.png"), "--fov", "1.3"]) == 2
+    assert "no such image" in capsys.readouterr().err
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"this is not a png")
+    assert run(["vision", "detect", str(junk), "--fov", "1.3"]) == 2
+    assert "cannot read image" in capsys.readouterr().err
+
+
+def test_detect_requires_fov(pad_png):
+    with pytest.raises(SystemExit) as info:
+        run(["vision", "detect", str(pad_png)])
+    assert info.value.code == 2
+
+
+def test_pad_command_writes_files(tmp_path, capsys):
+    pdf = tmp_path / "pad.pdf"
+    assert run(["pad", "--out", str(pdf)]) == 0
+    assert pdf.read_bytes().startswith(b"%PDF")
+    png = tmp_path / "pad.png"
+    assert run(["pad", "--out", str(png), "--dpi", "30"]) == 0
+    assert png.read_bytes().startswith(b"\x89PNG")
+    assert run(["pad", "--out", str(tmp_path / "pad.jpg")]) == 2
+    assert ".pdf or .png" in capsys.readouterr().err
+    toml = tmp_path / "p.toml"
+    toml.write_text("name = 'x'\nside_m = 0.3\nrings = [{outer_m = 0.1, inner_m = 0.2}]\n")
+    assert run(["pad", "--out", str(pdf), "--pad", str(toml)]) == 2
+    assert "p.toml" in capsys.readouterr().err

@@ -1,0 +1,146 @@
+"""Pad definitions from TOML, plain-data round trip, and the printable pad at true scale."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from PIL import Image
+
+from skeye.errors import ConfigError, LocalProtocolError
+from skeye.vision.pad import (
+    SKEYE_4,
+    PadDefinition,
+    Ring,
+    load_pad,
+    pad_from_dict,
+    pad_to_dict,
+    render_pad,
+    resolve_pad,
+)
+from skeye.vision.printable import METRES_PER_INCH, page_size_m, write_printable
+
+GOOD_TOML = """
+name = "big-3"
+side_m = 1.2
+[[rings]]
+outer_m = 0.55
+inner_m = 0.44
+[[rings]]
+outer_m = 0.35
+inner_m = 0.21
+[[rings]]
+outer_m = 0.12
+inner_m = 0.036
+"""
+
+
+def test_existing_pad_behaviour_kept():
+    assert resolve_pad("skeye-4") is SKEYE_4
+    assert [round(r.ratio, 2) for r in SKEYE_4.rings] == [0.85, 0.75, 0.6, 0.4]
+    tex = render_pad(SKEYE_4, 64)
+    assert tex.shape == (64, 64) and tex[0, 0] == 0 and tex[32, 32] == 0
+
+
+def test_load_pad_from_toml(tmp_path):
+    path = tmp_path / "big.toml"
+    path.write_text(GOOD_TOML)
+    pad = load_pad(path)
+    assert pad.name == "big-3" and pad.side_m == 1.2
+    assert pad.rings[1] == Ring(0.35, 0.21)
+    assert resolve_pad(str(path)) == pad
+
+
+@pytest.mark.parametrize(
+    "text,match",
+    [
+        ("name = 'x'\nside_m = 0.6\n", "missing key 'rings'"),
+        ("name = 'x'\nside_m = 'big'\nrings = [{outer_m = 0.2, inner_m = 0.1}]", "side_m"),
+        ("name = 'x'\nside_m = 0.6\nrings = []", "non-empty list"),
+        ("name = 'x'\nside_m = 0.6\nrings = [{outer_m = 0.2}]", r"rings\[1\]"),
+        ("name = 'x'\nside_m = 0.6\nrings = [{outer_m = 0.2, inner_m = 0.3}]", "must satisfy"),
+        (
+            "name = 'x'\nside_m = 0.6\ncolour = 1\nrings = [{outer_m = 0.2, inner_m = 0.1}]",
+            "unknown",
+        ),
+        (
+            "name = 'x'\nside_m = 0.6\n"
+            "rings = [{outer_m = 0.2, inner_m = 0.1}, {outer_m = 0.05, inner_m = 0.025}]",
+            "unique",
+        ),
+        ("name = = 'x'", "not valid TOML"),
+    ],
+)
+def test_bad_pad_files_name_the_file_and_key(tmp_path, text, match):
+    path = tmp_path / "pad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=match) as info:
+        load_pad(path)
+    assert str(path) in str(info.value)
+
+
+def test_missing_pad_file_and_unknown_name(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_pad(tmp_path / "nope.toml")
+    with pytest.raises(ConfigError, match="known pads: skeye-4"):
+        resolve_pad("skeye-5")
+
+
+@st.composite
+def pads(draw):
+    n = draw(st.integers(1, 5))
+    side = draw(st.floats(0.1, 3.0))
+    radii = sorted(
+        draw(st.lists(st.floats(0.001, 0.5), min_size=2 * n, max_size=2 * n, unique=True)),
+        reverse=True,
+    )
+    radii = [r * side for r in radii]
+    rings = tuple(Ring(radii[2 * i], radii[2 * i + 1]) for i in range(n))
+    try:
+        return PadDefinition("p", side, rings)
+    except ValueError:
+        from hypothesis import reject
+
+        reject()
+
+
+@settings(max_examples=60, deadline=None)
+@given(pads())
+def test_dict_round_trip(pad):
+    assert pad_from_dict(pad_to_dict(pad)) == pad
+
+
+def test_printable_pdf_is_true_scale(tmp_path):
+    out = write_printable(SKEYE_4, tmp_path / "pad.pdf")
+    data = out.read_bytes()
+    assert data.startswith(b"%PDF")
+    box = re.search(rb"MediaBox\s*\[\s*0 0 ([\d.]+) ([\d.]+)\s*\]", data)
+    assert box is not None
+    side_pt = page_size_m(SKEYE_4) / METRES_PER_INCH * 72.0
+    assert float(box.group(1)) == pytest.approx(side_pt, abs=0.01)
+    assert float(box.group(2)) == pytest.approx(side_pt, abs=0.01)
+
+
+@pytest.mark.parametrize("dpi", [40, 72])
+def test_printable_png_carries_its_dpi(tmp_path, dpi):
+    out = write_printable(SKEYE_4, tmp_path / "pad.png", dpi=dpi)
+    with Image.open(out) as im:
+        side_px = page_size_m(SKEYE_4) / METRES_PER_INCH * dpi
+        assert im.size[0] == pytest.approx(side_px, abs=1.0) and im.size[0] == im.size[1]
+        assert im.info["dpi"][0] == pytest.approx(dpi, rel=1e-3)  # PNG stores px per metre
+        grey = np.asarray(im.convert("L"))
+        c = im.size[0] // 2
+        assert grey[c, c] < 30  # black centre disc
+        assert grey[2, 2] > 225  # white margin
+        # The outermost ring's outer border lies 0.28 m from the centre.
+        px_per_m = im.size[0] / page_size_m(SKEYE_4)
+        assert grey[c, c + round(0.27 * px_per_m)] > 225
+        assert grey[c, c + round(0.29 * px_per_m)] < 30
+
+
+def test_printable_rejects_other_extensions(tmp_path):
+    with pytest.raises(LocalProtocolError, match=r"\.pdf or \.png"):
+        write_printable(SKEYE_4, tmp_path / "pad.svg")
