@@ -371,6 +371,12 @@ class Simulation:
                 )
             except PhysicsError as exc:
                 failed.append((name, str(exc)))
+                # Park the failed body far above the world with finite state, so MuJoCo's own
+                # NaN guard (which resets the whole MjData) never fires for one robot's fault.
+                a, b = slot.qpos_adr, slot.qvel_adr
+                d.qpos[a : a + 7] = (0.0, 0.0, 1.0e4, 1.0, 0.0, 0.0, 0.0)
+                d.qvel[b : b + 6] = 0.0
+                d.xfrc_applied[slot.body_id] = 0.0
                 continue
             wf = self.wind.force_ned()
             fx, fy, fz = force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]

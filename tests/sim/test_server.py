@@ -1,0 +1,266 @@
+"""Control server behaviour: errors, several clients, robot lifetime, modes, wind, robots."""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skeye.errors import ConfigError
+from skeye.sim.robot_config import load_robot_config, parse_robot_config
+from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
+
+BAD_LINES = [
+    ("FLY {Speed 3}", "FLY", "unknown command"),
+    ("DRIVE {LinearVelocity 1", "DRIVE", "brace"),
+    ("DRIVE {LinearVelocity 0.5}", "DRIVE", "INIT first"),
+    ("INIT {ClassName zeppelin} {Location 0,0,-1}", "INIT", "unknown robot class"),
+    ("INIT {ClassName hummingbird}", "INIT", "Location"),
+    ("INIT {ClassName hummingbird} {Location 0,0}", "INIT", "Location"),
+    ("INIT {ClassName hummingbird} {Location nan,0,-1}", "INIT", "Location"),
+    ("INIT {ClassName hummingbird} {Start Nowhere}", "INIT", "unknown start pose"),
+    ("INIT {ClassName ../../etc/passwd} {Location 0,0,-1}", "INIT", "unknown robot class"),
+    ("STEP {Count 10}", "STEP", "lockstep"),
+    ("SET {Type Weather} {Mode sunny}", "SET", "unknown Type"),
+    ("SET {Type Wind} {Mode hurricane}", "SET", "unknown mode"),
+    ("SET {Type Wind} {Mode constant} {Params speed_m_s=-3}", "SET", "speed_m_s"),
+    ("SET {Type Wind} {Mode constant} {Params gust=3}", "SET", "unknown parameter"),
+    ("GETCONF {Type Robot}", "GETCONF", "INIT first"),
+    ("{Name x}", "UNKNOWN", "type word"),
+]
+
+
+def test_every_bad_line_gets_err_and_the_connection_stays_usable():
+    with running_sim(mode="realtime") as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        other = LineClient(server.port)
+        other.expect("NFO")
+        assert other.answer("INIT {ClassName hummingbird} {Name Other} {Location 0,0,-1}",
+                            "INIT").type == "RES"
+        for line, command, reason in BAD_LINES:
+            c.send(line)
+            err = c.read_until(lambda m: m.type == "ERR")[1]
+            assert (err.get("Command") or "").upper() == command, (line, err)
+            assert reason.lower() in (err.get("Reason") or "").lower(), (line, err)
+            pong = c.answer("PING {Id alive}", "PING")
+            assert pong.type == "RES" and pong.get("Id") == "alive"
+        # Robot-level bad values, once a robot exists.
+        assert c.answer("INIT {ClassName hummingbird} {Name R1} {Location 3,0,-1}",
+                        "INIT").type == "RES"
+        for line, reason in [
+            ("DRIVE {LinearVelocity nan}", "not a number"),
+            ("DRIVE {LinearVelocity 99}", "range"),
+            ("DRIVE {Thrust 1.5}", "range"),
+            ("DRIVE {RollAngle 0.1} {LinearVelocity 1}", "mixes"),
+            ("DRIVE {Normalized true} {LinearVelocity 150}", "range"),
+            ("DRIVE {Banana 1}", "unknown segment"),
+            ("INIT {ClassName hummingbird} {Location 0,0,-1}", "one robot per connection"),
+            ("GETCONF {Type Lidar}", "no sensor"),
+            ("SET {Type Camera} {Name Down} {Opcode ZOOM} {Params 2}", "Opcode"),
+        ]:
+            c.send(line)
+            err = c.read_until(lambda m: m.type == "ERR")[1]
+            assert reason.lower() in (err.get("Reason") or "").lower(), (line, err)
+        assert c.answer("PING {Id still}", "PING").type == "RES"
+        # The other client never noticed: its stream kept flowing, no ERR reached it.
+        seen, _ = other.read_until(lambda m: m.type == "SEN", timeout_s=5)
+        assert not [m for m in seen if m.type == "ERR"]
+        c.close()
+        other.close()
+
+
+def test_overlong_line_gets_err_then_close():
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.sock.sendall(b"PING {Id " + b"x" * 70000 + b"}\r\n")
+        err = c.expect("ERR")
+        assert "long" in (err.get("Reason") or "").lower()
+        with pytest.raises(ConnectionError):
+            c.read_until(lambda m: False, timeout_s=5)
+        # The server still serves new clients.
+        d = LineClient(server.port)
+        d.expect("NFO")
+        assert d.answer("PING {Id 1}", "PING").type == "RES"
+        d.close()
+
+
+def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connection():
+    with running_sim() as server:
+        a, b = LineClient(server.port), LineClient(server.port)
+        a.expect("NFO")
+        b.expect("NFO")
+        assert a.answer("INIT {ClassName hummingbird} {Name A} {Location 0,0,-1}",
+                        "INIT").type == "RES"
+        assert b.answer("INIT {ClassName airrobot} {Name B} {Location 5,0,-1}",
+                        "INIT").type == "RES"
+        assert b.answer("INIT {ClassName hummingbird} {Name A2} {Location 0,0,-1}",
+                        "INIT").type == "ERR"
+        a.send("DRIVE {LinearVelocity 1}")
+        msgs = b.step(2000)  # a world command: any connection may step
+        names = {m.get("Name") for m in msgs if m.type == "STA"}
+        assert names == {"B"}  # b sees only its own robot's stream
+        assert set(server.runner.sim.robots) == {"A", "B"}
+        a.close()
+        deadline = time.monotonic() + 5
+        while "A" in server.runner.sim.robots and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert set(server.runner.sim.robots) == {"B"}
+        # Same name may be used again after the robot went.
+        c = LineClient(server.port)
+        c.expect("NFO")
+        assert c.answer("INIT {ClassName hummingbird} {Name A} {Location 0,0,-1}",
+                        "INIT").type == "RES"
+        c.close()
+        b.close()
+
+
+def test_realtime_mode_follows_the_wall_clock():
+    with running_sim(mode="realtime") as server:
+        c = LineClient(server.port)
+        nfo = c.expect("NFO")
+        assert nfo.get("Mode") == "realtime"
+        t0 = float(c.answer("PING {Id a}", "PING").require("Time"))
+        time.sleep(1.0)
+        t1 = float(c.answer("PING {Id b}", "PING").require("Time"))
+        assert 0.8 < t1 - t0 < 1.3
+        c.close()
+
+
+def test_start_poses_and_geo_conf():
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.send("GETSTARTPOSES")
+        nfo = c.expect("NFO")
+        assert int(nfo.require("StartPoses")) >= 1
+        assert "Pad1" in (nfo.blocks[1] if len(nfo.blocks) > 1 else "")
+        c.answer("INIT {ClassName hummingbird} {Start Pad1}", "INIT")
+        c.send("GETGEO {Type Sonar} {Name Down}")
+        geo = c.expect("GEO")
+        assert vec(geo.require("Location"))[2] == pytest.approx(0.03)
+        c.send("GETCONF {Type Sonar}")
+        conf = c.expect("CONF")
+        assert float(conf.require("MaxRange")) == 6.0
+        assert float(conf.require("MinRange")) == 0.06
+        c.close()
+
+
+def test_wind_set_at_run_time_pushes_the_vehicle():
+    def drift(wind: str | None) -> float:
+        with running_sim() as server:
+            c = LineClient(server.port)
+            c.expect("NFO")
+            c.answer("INIT {ClassName hummingbird} {Location 0,0,-2}", "INIT")
+            c.step(200)
+            if wind:
+                assert c.answer(wind, "SET").type == "RES"
+            msgs = c.step(4000)
+            c.close()
+        loc = [vec(v) for _, v in sensor_series(msgs, "GroundTruth", "Location")]
+        return math.hypot(loc[-1][0] - loc[0][0], loc[-1][1] - loc[0][1])
+
+    still = drift(None)
+    windy = drift("SET {Type Wind} {Mode constant} {Params speed_m_s=6,from_deg=0}")
+    pushed = drift("SET {Type Wind} {Mode random_force} {Params f_max_n=1.5}")
+    assert still < 0.1
+    assert windy > 3 * still + 0.1
+    assert pushed > still
+
+
+def test_airrobot_keeps_usarsim_limits():
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName USARBot.AirRobot} {Location 0,0,-2}", "INIT")
+        c.send("GETCONF {Type Robot}")
+        conf = c.expect("CONF")
+        assert conf.get_float("MaxSpeed") == 2.0
+        assert conf.get_float("MaxYawRate") == pytest.approx(math.radians(100))
+        c.send("DRIVE {Normalized true} {LinearVelocity 100}")
+        msgs = c.step(6000)
+        c.close()
+    speeds = [math.hypot(*vec(v)[:2]) for _, v in sensor_series(msgs, "GroundTruth", "Velocity")]
+    assert 1.85 < np.mean(speeds[-20:]) < 2.15
+
+
+def test_robot_files_are_validated_with_clear_errors(tmp_path: Path):
+    base = load_robot_config("hummingbird")
+    assert base.airframe.mass_kg == 0.68
+    cases = [
+        ({"name": "x", "airframe": {"mass_kg": -1}}, "mass_kg"),
+        ({"name": "x", "airframe": {"kf": 1e-9}}, "cannot lift"),
+        ({"name": "x", "airframe": {"wings": 2}}, "unknown key"),
+        ({"name": "x", "sensors": [{"type": "Sonar", "name": "S", "MaxRange": 0.01}]}, "MaxRange"),
+        ({"name": "x", "sensors": [{"type": "Lidar", "name": "L"}]}, "Lidar"),
+        ({"name": "x", "sensors": [{"type": "Sonar", "name": "S", "position_m": [0, 0]}]},
+         "position_m"),
+        ({"name": "x", "board_rate_hz": 0}, "board_rate_hz"),
+        ({"name": "x", "battery": {"cells": 40}}, "cells"),
+        ({"name": "x", "sensors": [{"type": "Camera", "name": "C", "fov_h_rad": 4}]},
+         "fov_h_rad"),
+    ]
+    for data, needle in cases:
+        with pytest.raises(ConfigError, match=needle):
+            from skeye.sim.robot import Robot
+
+            cfg = parse_robot_config(data, "test.toml")
+            Robot("R", cfg, physics_step_s=0.001, rng=np.random.default_rng(0),
+                  outbox=lambda b: None, spawn_pos_ned_m=(0, 0, -1), spawn_rpy_rad=(0, 0, 0),
+                  airborne=True)
+    (tmp_path / "broken.toml").write_text("name = [unclosed")
+    with pytest.raises(ConfigError, match="invalid TOML"):
+        load_robot_config("broken", (tmp_path,))
+
+
+def test_divergence_stops_the_robot_with_an_error():
+    """A NaN in a robot's state (here injected into MuJoCo's velocities) stops that robot with
+    an ERR naming the cause; the simulator goes on serving everyone else."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name U} {Location 0,0,-3}", "INIT")
+        d = LineClient(server.port)
+        d.expect("NFO")
+        assert d.answer("INIT {ClassName hummingbird} {Name V} {Location 4,0,-1}",
+                        "INIT").type == "RES"
+        d.send("DRIVE {LinearVelocity 0.5}")
+        before = d.step(1500)
+        last = vec(sensor_series(before, "GroundTruth", "Location")[-1][1])
+        assert last[0] > 4.3  # V has moved away from where it was spawned
+
+        def poison(sim):
+            slot = sim._slots["U"]
+            sim.data.qvel[slot.qvel_adr + 3] = float("nan")
+
+        server.runner.call(poison)
+        c.send("STEP {Count 50}")
+        _, err = c.read_until(lambda m: m.type == "ERR", timeout_s=30)
+        assert err.get("Command") == "PHYSICS" and "NaN" in (err.get("Reason") or "")
+        assert "U" not in server.runner.sim.robots
+        msgs = d.step(100)
+        loc = [vec(v) for _, v in sensor_series(msgs, "GroundTruth", "Location")]
+        assert loc and all(math.isfinite(x) for p in loc for x in p)
+        # No world reset: V carried on from where it was (0.5 m/s), not back at its spawn.
+        assert abs(loc[0][0] - last[0]) < 0.1 and abs(loc[0][2] - last[2]) < 0.05
+        c.close()
+        d.close()
+
+
+def test_many_connects_and_disconnects_leave_no_threads():
+    with running_sim() as server:
+        before = threading.active_count()
+        for _ in range(50):
+            s = socket.create_connection(("127.0.0.1", server.port))
+            s.close()
+        deadline = time.monotonic() + 5
+        while threading.active_count() > before and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert threading.active_count() <= before
+        assert server.client_count == 0
