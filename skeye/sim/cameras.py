@@ -158,6 +158,7 @@ class CameraSystem:
         sim.xml_extras.append(self._xml)
         sim.rebuild_hooks.append(self._on_rebuild)
         sim.step_hooks.append(self._on_step)
+        sim.event_sources.append(self._next_event_step)
         self._thread = threading.Thread(target=self._render_loop, name="skeye-render",
                                         daemon=True)
         self._thread.start()
@@ -208,6 +209,15 @@ class CameraSystem:
             extent = float(sim.model.stat.extent)
             sim.model.vis.map.znear = min(c.near_m for c in cams) / extent
             sim.model.vis.map.zfar = max(c.far_m for c in cams) / extent
+
+    def _next_event_step(self, sim: Any) -> int:
+        """The step index whose end reaches the next camera's due time."""
+        best = sim.steps + 1_000_000
+        for robot in sim.robots.values():
+            for cam in robot.cameras:
+                end_step = math.ceil((cam.due / cam.rate_hz - 1e-9) / sim.dt)
+                best = min(best, end_step - 1)
+        return max(best, sim.steps)
 
     def _on_step(self, sim: Any) -> None:
         if self.error is not None:
@@ -280,10 +290,14 @@ class CameraSystem:
                         if key in self._known:
                             self.buffer.publish(Frame(key, cam.camera_id, cam.rendered,
                                                       job.time_s, rgb))
-                        robot.outbox(format_message(
+                        line = format_message(
                             "SEN", ("Time", job.time_s), ("Type", "Camera"), ("Name", cam.name),
                             ("Frame", cam.rendered),
-                        ))
+                        )
+                        if job.done is not None:  # lockstep: in order, with the step's lines
+                            self.sim.emit(robot, line)
+                        else:
+                            robot.outbox(line)
                 except SkeyeError as exc:
                     self.error = str(exc)
                     log.error("%s", exc)

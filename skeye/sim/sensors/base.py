@@ -114,6 +114,13 @@ def vec3(a: np.ndarray | tuple[float, ...] | list[float]) -> Vec3:
     return (x, y, z)
 
 
+def cross3(a: np.ndarray | Vec3, b: np.ndarray | Vec3) -> np.ndarray:
+    """The cross product of two 3-vectors (np.cross costs ~10 us on 3-vectors: hot path)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0))
+
+
 def rpy_matrix(rpy_rad: Vec3) -> np.ndarray:
     """Rotation matrix (child frame -> parent frame) of a roll, pitch, yaw triple (ZYX)."""
     return quat_to_matrix(euler_to_quat(*rpy_rad).tolist())

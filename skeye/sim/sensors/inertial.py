@@ -22,6 +22,7 @@ from skeye.sim.sensors.base import (
     Sensor,
     Vec3,
     WorldQuery,
+    cross3,
     vec3,
 )
 from skeye.sim.state import BodyState
@@ -71,8 +72,8 @@ class Accelerometer(Sensor[AccelReading]):
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> AccelReading:
         omega = np.asarray(state.omega_frd_rad_s, dtype=float)
-        f_body = np.asarray(state.specific_force_frd_m_s2, dtype=float) + np.cross(
-            omega, np.cross(omega, self._pos_mount)
+        f_body = np.asarray(state.specific_force_frd_m_s2, dtype=float) + cross3(
+            omega, cross3(omega, self._pos_mount)
         )
         f = self._noise.corrupt(self._body_to_sensor(f_body), dt_s)
         return AccelReading(float(state.time_s), vec3(f))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skeye.sim.sensors.base import Fields, Param, Reading, Sensor, WorldQuery
+from skeye.sim.sensors.base import Fields, Param, Reading, Sensor, WorldQuery, cross3
 from skeye.sim.state import BodyState
 
 SQUAL_MAX = 169  # ADNS-3080: SQUAL register maximum
@@ -178,7 +178,7 @@ class OpticalFlow(Sensor[FlowReading]):
             self._carry = [0.0, 0.0]
             return FlowReading(t, (0, 0), quality, distance)
         omega_b = np.asarray(state.omega_frd_rad_s, dtype=float)
-        vel_n = np.asarray(state.vel_ned_m_s, dtype=float) + rot_bn @ np.cross(
+        vel_n = np.asarray(state.vel_ned_m_s, dtype=float) + rot_bn @ cross3(
             omega_b, self._pos_mount
         )
         v = rot_sn.T @ vel_n
