@@ -18,7 +18,7 @@ $(VENV)/.test-installed: $(VENV)/.installed
 	touch $@
 
 run: $(VENV)/.installed
-	MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/skeye sim --world pad --port 3000
+	MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/skeye sim --world pad --port 3000 --image-port 5003
 
 test: $(VENV)/.test-installed
 	$(BIN)/ruff check .
