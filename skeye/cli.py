@@ -115,7 +115,13 @@ def _add_vision(sub: Any) -> None:
 
 
 # Each component adds its sub-commands here.
-_REGISTRARS: list[Callable[[Any], None]] = [_add_sim, _add_vision]
+def _add_snapshot(sub: Any) -> None:
+    from skeye.sim.snapshot import register
+
+    register(sub)
+
+
+_REGISTRARS: list[Callable[[Any], None]] = [_add_sim, _add_snapshot, _add_vision]
 
 
 def build_parser() -> argparse.ArgumentParser:

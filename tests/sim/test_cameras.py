@@ -187,3 +187,25 @@ def test_camera_frames_are_announced_in_lockstep():
     for t, n in frames:
         assert (n - 1) / 30 - 1e-9 <= t < (n - 1) / 30 + 0.001 + 1e-9
     assert len(frames) == 7  # t = 0, 1/30, ..., 6/30 within the first 0.2 s
+
+
+def test_snapshot_saves_png_and_jpeg(tmp_path):
+    import cv2
+
+    from skeye.errors import LocalProtocolError
+    from skeye.sim.snapshot import save_snapshot
+
+    with sim_with_images() as (control, images, _cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        c.step(40)
+        for name in ("frame.png", "frame.jpg"):
+            w, h, number = save_snapshot(f"127.0.0.1:{images.port}", tmp_path / name, "R1/Down")
+            assert (w, h) == (800, 600) and number and number >= 1
+            assert cv2.imread(str(tmp_path / name)).shape == (600, 800, 3)
+        with pytest.raises(LocalProtocolError, match="must end in"):
+            save_snapshot(f"127.0.0.1:{images.port}", tmp_path / "frame.gif")
+        with pytest.raises(LocalProtocolError, match="port"):
+            save_snapshot("127.0.0.1:notaport", tmp_path / "x.png")
+        c.close()

@@ -1,0 +1,119 @@
+"""Position hold over the landing pad and autonomous landing on it: the control law.
+
+How this works (the paper's method, section 5): every processed camera frame gives the pad
+centre's offset in the level body frame (forward, right) and the height. While the offset is
+larger than the deadband (0.05 m by default) a PI controller turns it into a horizontal
+velocity command towards the pad, limited in magnitude to ``max_speed_m_s`` (0.3 m/s by
+default); inside the deadband the command is zero (the vehicle's own board then holds zero
+velocity on its INS estimate, and the integrator keeps its value so a steady push stays
+compensated). Vertically, HOLD keeps the height; LAND descends while the vehicle is over the
+pad (offset within ``centre_tolerance_m``), more slowly near the ground, and commits to the
+touchdown below ``commit_height_m`` where the outer rings leave the image.
+
+Losing the pad (no detection for ``lost_after_s``) makes the vehicle stop, then climb slowly
+(``search_climb_m_s``, up to ``search_ceiling_m``) to widen its view, and say so through
+``searching``. The law is pure: it takes observations and the time, returns set-points; the
+pilot owns the clock, the camera and the link.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from skeye.errors import LocalProtocolError
+
+
+@dataclass(frozen=True)
+class PadHoldParams:
+    """Gains and limits; deadband and speed limit come from PAD_MODE."""
+
+    deadband_m: float = 0.05
+    max_speed_m_s: float = 0.3
+    kp: float = 1.2  # (m/s) per m of offset
+    ki: float = 0.15  # (m/s) per m s
+    integral_limit_m_s: float = 0.15
+    descent_m_s: float = 0.25
+    final_descent_m_s: float = 0.12
+    slow_below_m: float = 0.8
+    centre_tolerance_m: float = 0.08
+    commit_height_m: float = 0.35
+    lost_after_s: float = 0.5
+    search_climb_m_s: float = 0.1
+    search_ceiling_m: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (math.isfinite(value) and value >= 0):
+                raise LocalProtocolError(f"pad hold: {name} must be a finite number >= 0")
+        if self.max_speed_m_s <= 0:
+            raise LocalProtocolError("pad hold: max_speed_m_s must be > 0")
+
+
+@dataclass(frozen=True)
+class PadSetpoint:
+    """What the pilot should command now (body frame, SI), and why."""
+
+    forward_m_s: float
+    right_m_s: float
+    up_m_s: float
+    touchdown: bool = False  # LAND: hand over to the final landing
+    searching: bool = False  # the pad is lost; climbing slowly to find it
+
+
+class PadHoldLaw:
+    """Stateful PI law for HOLD (mode 1) and LAND (mode 2)."""
+
+    def __init__(self, params: PadHoldParams | None = None) -> None:
+        self.p = params or PadHoldParams()
+        self.reset()
+
+    def reset(self) -> None:
+        self._int_f = 0.0
+        self._int_r = 0.0
+        self._last_seen_s: float | None = None
+        self._last_time_s: float | None = None
+        self._height_m: float | None = None
+
+    def update(
+        self,
+        time_s: float,
+        found: bool,
+        forward_m: float = 0.0,
+        right_m: float = 0.0,
+        height_m: float = 0.0,
+        *,
+        landing: bool = False,
+    ) -> PadSetpoint:
+        """One observation (or a frame without the pad) -> a velocity set-point."""
+        p = self.p
+        dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
+        self._last_time_s = time_s
+        if not found:
+            if self._last_seen_s is None or time_s - self._last_seen_s >= p.lost_after_s:
+                climb = p.search_climb_m_s
+                if self._height_m is not None and self._height_m >= p.search_ceiling_m:
+                    climb = 0.0
+                return PadSetpoint(0.0, 0.0, climb, searching=True)
+            return PadSetpoint(0.0, 0.0, 0.0)  # a missed frame or two: keep still
+        self._last_seen_s = time_s
+        self._height_m = height_m
+        offset = math.hypot(forward_m, right_m)
+        if offset > p.deadband_m:
+            lim = p.integral_limit_m_s / max(p.ki, 1e-9)
+            self._int_f = min(lim, max(-lim, self._int_f + forward_m * dt))
+            self._int_r = min(lim, max(-lim, self._int_r + right_m * dt))
+            vf = p.kp * forward_m + p.ki * self._int_f
+            vr = p.kp * right_m + p.ki * self._int_r
+            speed = math.hypot(vf, vr)
+            if speed > p.max_speed_m_s:
+                vf, vr = vf * p.max_speed_m_s / speed, vr * p.max_speed_m_s / speed
+        else:
+            vf = vr = 0.0
+        up = 0.0
+        if landing:
+            if height_m <= p.commit_height_m and offset <= p.centre_tolerance_m:
+                return PadSetpoint(vf, vr, -p.final_descent_m_s, touchdown=True)
+            if offset <= p.centre_tolerance_m:
+                up = -(p.final_descent_m_s if height_m < p.slow_below_m else p.descent_m_s)
+        return PadSetpoint(vf, vr, up)

@@ -1,0 +1,62 @@
+"""The pad hold / landing law on scripted observations (no simulator needed)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from skeye.errors import LocalProtocolError
+from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
+
+
+def test_inside_the_deadband_commands_nothing():
+    law = PadHoldLaw()
+    sp = law.update(0.0, True, 0.03, -0.02, 1.0)
+    assert (sp.forward_m_s, sp.right_m_s, sp.up_m_s) == (0.0, 0.0, 0.0)
+
+
+def test_outside_the_deadband_flies_towards_the_pad_within_the_speed_limit():
+    law = PadHoldLaw(PadHoldParams(max_speed_m_s=0.3))
+    sp = law.update(0.0, True, 0.10, 0.0, 1.0)
+    assert sp.forward_m_s > 0 and sp.right_m_s == 0
+    far = law.update(0.033, True, -2.0, 2.0, 1.0)
+    assert math.hypot(far.forward_m_s, far.right_m_s) == pytest.approx(0.3)
+    assert far.forward_m_s < 0 < far.right_m_s
+
+
+def test_integral_compensates_a_steady_offset_and_is_bounded():
+    law = PadHoldLaw()
+    first = law.update(0.0, True, 0.0, 0.08, 1.0).right_m_s
+    for i in range(1, 300):
+        sp = law.update(i / 30, True, 0.0, 0.08, 1.0)
+    assert sp.right_m_s > first
+    assert sp.right_m_s <= 1.2 * 0.08 + 0.15 + 1e-9
+
+
+def test_landing_descends_only_when_centred_and_commits_low():
+    law = PadHoldLaw()
+    assert law.update(0.0, True, 0.2, 0.0, 1.5, landing=True).up_m_s == 0.0
+    assert law.update(0.1, True, 0.01, 0.0, 1.5, landing=True).up_m_s == -0.25
+    assert law.update(0.2, True, 0.01, 0.0, 0.6, landing=True).up_m_s == -0.12
+    final = law.update(0.3, True, 0.01, 0.0, 0.3, landing=True)
+    assert final.touchdown and final.up_m_s < 0
+
+
+def test_losing_the_pad_holds_then_searches_upwards_to_a_ceiling():
+    law = PadHoldLaw(PadHoldParams(lost_after_s=0.5, search_ceiling_m=2.0))
+    law.update(0.0, True, 0.0, 0.0, 1.0)
+    brief = law.update(0.2, False)
+    assert not brief.searching and brief.up_m_s == 0.0
+    lost = law.update(0.6, False)
+    assert lost.searching and lost.up_m_s == pytest.approx(0.1)
+    assert (lost.forward_m_s, lost.right_m_s) == (0.0, 0.0)
+    law.update(0.7, True, 0.0, 0.0, 2.1)
+    assert law.update(1.5, False).up_m_s == 0.0  # at the ceiling: stop climbing
+
+
+def test_bad_parameters_are_refused():
+    with pytest.raises(LocalProtocolError, match="max_speed"):
+        PadHoldParams(max_speed_m_s=0.0)
+    with pytest.raises(LocalProtocolError, match="kp"):
+        PadHoldParams(kp=float("nan"))
