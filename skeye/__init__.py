@@ -1,5 +1,7 @@
 """skeye: a distributed development environment for small unmanned aerial vehicles."""
 
+from typing import TYPE_CHECKING
+
 from skeye.errors import (
     CommandRejected,
     ConfigError,
@@ -10,7 +12,20 @@ from skeye.errors import (
     SkeyeError,
 )
 
+if TYPE_CHECKING:
+    from skeye.control import connect
+
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> object:
+    """``skeye.connect`` without importing the control interface (numpy, OpenCV) up front."""
+    if name == "connect":
+        from skeye.control import connect
+
+        return connect
+    raise AttributeError(f"module 'skeye' has no attribute {name!r}")
+
 
 __all__ = [
     "CommandRejected",
@@ -21,4 +36,5 @@ __all__ = [
     "RemoteProtocolError",
     "SkeyeError",
     "__version__",
+    "connect",
 ]

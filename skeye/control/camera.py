@@ -1,0 +1,103 @@
+"""The camera sensor: frame numbers from the control stream, pixels from the image server.
+
+How this works: the simulator announces every rendered frame on the control stream
+(``SEN {Type Camera} {Name Down} {Frame n}``); that line updates :class:`CameraSensor` like any
+other sensor. The pixels live on the image server (IMAGE_PROTOCOL.md); :meth:`CameraSensor.image`
+asks it for the newest frame of ``<robot>/<camera>`` over one lazily opened
+:class:`~skeye.sim.image_client.ImageClient` (RAW + META, so the frame number and sim time come
+with the pixels). The image client is not thread-safe: one lock serialises its use.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from skeye.errors import LocalProtocolError
+from skeye.sim.image_client import ImageClient
+from skeye.sim.protocol import Message
+
+from .sensors import CameraReading, Sensor
+
+
+@dataclass(frozen=True)
+class CameraImage:
+    """One camera image: BGR uint8 pixels (H, W, 3), its frame number and sim time."""
+
+    frame: int
+    time_s: float
+    bgr: np.ndarray
+
+
+class CameraSensor(Sensor[CameraReading]):
+    """A mounted camera. ``latest.frame`` counts rendered frames; :meth:`image` fetches pixels.
+
+    Args:
+        name: camera name on the robot (``Down``).
+        images: a factory for the image client (None when the connection has no image server).
+        robot_name: the robot's name, for the image server's ``robot/camera`` address.
+    """
+
+    type_name = "Camera"
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        images: Callable[[], ImageClient] | None = None,
+        robot_name: str = "",
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(name, **kwargs)
+        self._images = images
+        self._robot_name = robot_name
+        self._client: ImageClient | None = None
+        self._client_lock = threading.Lock()
+
+    def parse(self, msg: Message, time_s: float) -> CameraReading:
+        return CameraReading(time_s, msg.get_int("Frame", min_value=0))
+
+    def image(self) -> CameraImage:
+        """The newest frame of this camera from the image server.
+
+        In lockstep, call it after :meth:`wait_next` (the frame of a step exists once the step
+        has returned and its ``SEN`` line arrived).
+
+        Raises:
+            LocalProtocolError: the connection was opened without ``images=``.
+            RemoteProtocolError / LinkTimeout: the image server refused or did not answer.
+        """
+        if self._images is None:
+            raise LocalProtocolError(
+                f"camera {self.name!r}: connect with images='host:port' to fetch pixels"
+            )
+        with self._client_lock:
+            if self._client is None:
+                client = self._images()
+                try:
+                    client.select_camera(f"{self._robot_name}/{self.name}")
+                    client.set_format("raw")
+                    client.set_meta(True)
+                except BaseException:
+                    client.close()
+                    raise
+                self._client = client
+            frame = self._client.get_frame()
+        bgr = frame.image()
+        if frame.meta is None:
+            latest = self.latest
+            number, time_s = (latest.frame, latest.time_s) if latest else (0, 0.0)
+        else:
+            number, time_s = frame.meta.frame_number, frame.meta.sim_time_s
+        return CameraImage(number, time_s, bgr)
+
+    def close(self) -> None:
+        """Close the image-server connection (idempotent)."""
+        with self._client_lock:
+            if self._client is not None:
+                self._client.close()
+                self._client = None

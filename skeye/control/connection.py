@@ -1,0 +1,587 @@
+"""The connection to a simulator: the socket, its two threads, and request/answer matching.
+
+How this works (ARCHITECTURE.md, "Inside the control interface"):
+
+- A **message-handler** thread alone reads the socket. It feeds the bytes to the shared sans-IO
+  codec (:class:`skeye.sim.protocol.LineDecoder`) and dispatches each message: ``SEN`` to its
+  sensor object, ``STA`` to the robot's status, answers (``RES``, ``ERR``, ``CONF``, ``GEO``,
+  ``NFO {StartPoses}``) to the oldest pending request they answer. An ``ERR`` nobody waits for
+  (a refused ``DRIVE``, a physics stop) goes to the robot, whose motion then fails with it.
+- A **command-handler** thread alone writes the socket, draining one bounded multi-producer
+  queue of whole lines, so bytes of two commands never interleave. A full queue blocks the
+  producer up to its timeout, then raises :class:`~skeye.errors.LinkTimeout`.
+- Every wait has a deadline. When the link dies (EOF, a socket error, a protocol violation) the
+  reader records the error and wakes every waiter (pending requests, sensor waits, motion waits)
+  with it, so a caller gets a clear :class:`LinkClosed` instead of hanging.
+
+Invariants: a request is registered before its line is queued (its answer cannot be missed);
+answers to one connection come in request order (the server handles a connection's commands
+one at a time), so "the oldest pending request this message answers" is the right match.
+:meth:`Connection.close` is idempotent and joins every thread it started.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import socket
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from skeye.errors import (
+    CommandRejected,
+    LinkTimeout,
+    LocalProtocolError,
+    RemoteProtocolError,
+    SkeyeError,
+)
+from skeye.sim.image_client import ImageClient
+from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
+
+from .clock import Clock, LockstepClock, RealtimeClock, period_steps
+from .motion import MotionConfig
+
+if TYPE_CHECKING:
+    from .robots import Robot
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PORT = 3000
+DEFAULT_IMAGE_PORT = 5003
+_STOP = b""
+
+
+class LinkClosed(SkeyeError):
+    """The connection to the simulator is gone (closed by us, by the peer, or broken)."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A start pose: NED position (m) and roll, pitch, yaw (rad)."""
+
+    position_ned_m: tuple[float, float, float]
+    rpy_rad: tuple[float, float, float]
+
+
+def parse_address(address: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
+    """``host:port``, ``tcp://host:port`` or ``host`` -> (host, port).
+
+    Raises:
+        LocalProtocolError: an empty host, a port that is not a number in 1..65535, or a
+            scheme other than tcp.
+    """
+    text = address.strip()
+    if "://" in text:
+        scheme, text = text.split("://", 1)
+        if scheme.lower() != "tcp":
+            raise LocalProtocolError(f"simulator address {address!r}: only tcp:// is supported")
+    text = text.rstrip("/")
+    if text.startswith("["):  # [::1]:3000
+        host, _, rest = text[1:].partition("]")
+        port_text = rest.lstrip(":") or str(default_port)
+    elif text.count(":") == 1:
+        host, port_text = text.split(":")
+    else:
+        host, port_text = text, str(default_port)
+    if not host:
+        raise LocalProtocolError(f"simulator address {address!r} has no host")
+    if not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise LocalProtocolError(f"simulator address {address!r}: bad port {port_text!r}")
+    return host, int(port_text)
+
+
+class _Pending:
+    """One request waiting for its answer."""
+
+    def __init__(self, command: str, answer_types: frozenset[str], ident: str | None) -> None:
+        self.command = command
+        self.answer_types = answer_types
+        self.ident = ident
+        self.event = threading.Event()
+        self.answer: Message | None = None
+        self.error: SkeyeError | None = None
+
+    def matches(self, msg: Message) -> bool:
+        if msg.type in ("RES", "ERR"):
+            if (msg.get("Command") or "").upper() != self.command:
+                return False
+            if msg.type == "RES" and "RES" not in self.answer_types:
+                return False
+            return self.ident is None or msg.get("Id") == self.ident or msg.type == "ERR"
+        if msg.type not in self.answer_types:
+            return False
+        if msg.type == "NFO":
+            return msg.has("StartPoses")
+        return True
+
+
+_ANSWERS: dict[str, frozenset[str]] = {
+    "GETSTARTPOSES": frozenset({"NFO"}),
+    "GETCONF": frozenset({"CONF"}),
+    "GETGEO": frozenset({"GEO"}),
+}
+
+
+class Connection:
+    """One connection to the simulator's control port; a context manager.
+
+    Use :func:`connect` to make one. As in USARSim, a connection drives at most one robot.
+
+    Args:
+        address: ``host:port`` of the control server.
+        images: ``host:port`` of the image server, for :meth:`CameraSensor.image`.
+        timeout_s: deadline for connecting, for each answer and each wait of the link.
+        queue_size: lines the command queue holds before producers block.
+        motion: motion-control defaults for robots spawned on this connection.
+    """
+
+    def __init__(
+        self,
+        address: str = f"127.0.0.1:{DEFAULT_PORT}",
+        *,
+        images: str | None = None,
+        timeout_s: float = 10.0,
+        queue_size: int = 256,
+        motion: MotionConfig | None = None,
+    ) -> None:
+        if not timeout_s > 0:
+            raise LocalProtocolError(f"timeout_s must be > 0, got {timeout_s}")
+        if queue_size < 1:
+            raise LocalProtocolError(f"queue_size must be >= 1, got {queue_size}")
+        self.host, self.port = parse_address(address)
+        self.images_address = (
+            None if images is None else parse_address(images, DEFAULT_IMAGE_PORT)
+        )
+        self.timeout_s = timeout_s
+        self.motion_config = motion or MotionConfig()
+        self.mode = ""
+        self.time_step_s = 0.0
+        self.level = ""
+        self.time_s = 0.0
+        self.unmatched_errors: list[Message] = []
+        self.robot: Robot | None = None
+        self._error: SkeyeError | None = None
+        self._closed = False
+        self._lock = threading.Lock()
+        self._pending: list[_Pending] = []
+        self._ping_ids = 0
+        self._outbox: queue.Queue[bytes] = queue.Queue(queue_size)
+        self._nfo = threading.Event()
+        self._close_hooks: list[Callable[[SkeyeError], None]] = []
+        try:
+            self._sock = socket.create_connection((self.host, self.port), timeout=timeout_s)
+        except TimeoutError as exc:
+            raise LinkTimeout(f"simulator {self.peer}: no connection in {timeout_s:g} s") from exc
+        except OSError as exc:
+            raise LinkClosed(f"cannot connect to the simulator at {self.peer}: {exc}") from exc
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._sock.settimeout(None)
+        self._reader = threading.Thread(target=self._read_loop, name="skeye-control-read",
+                                        daemon=True)
+        self._writer = threading.Thread(target=self._write_loop, name="skeye-control-write",
+                                        daemon=True)
+        self._reader.start()
+        self._writer.start()
+        self.clock: Clock
+        try:
+            if not self._nfo.wait(timeout_s):
+                raise LinkTimeout(f"simulator {self.peer}: no NFO greeting in {timeout_s:g} s")
+            self._check()
+            steps = period_steps(self.motion_config.control_rate_hz, self.time_step_s)
+            if self.mode == "lockstep":
+                self.clock = LockstepClock(self._tick, self._get_error, self._step,
+                                           self.time_step_s, steps)
+            else:
+                self.clock = RealtimeClock(self._tick, self._get_error,
+                                           steps * self.time_step_s)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- context manager ----------------------------------------------------------------
+    def __enter__(self) -> Connection:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<Connection {self.peer} {self.mode} t={self.time_s:.3f}s>"
+
+    @property
+    def peer(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def error(self) -> SkeyeError | None:
+        """Why the link is down, or None while it is up."""
+        return self._error
+
+    def _get_error(self) -> SkeyeError | None:
+        return self._error
+
+    def _check(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    # -- writing ------------------------------------------------------------------------
+    def send(self, type_word: str, *fields: tuple[str, object], timeout_s: float | None = None
+             ) -> None:
+        """Queue one command line for the command-handler thread (no answer expected).
+
+        Raises:
+            LocalProtocolError: the command cannot be formatted.
+            LinkTimeout: the queue stayed full for ``timeout_s``.
+            LinkClosed: the link is down.
+        """
+        self._put(format_message(type_word, *fields), timeout_s)
+
+    def _put(self, line: bytes, timeout_s: float | None) -> None:
+        self._check()
+        wait_s = self.timeout_s if timeout_s is None else timeout_s
+        try:
+            self._outbox.put(line, timeout=wait_s)
+        except queue.Full:
+            raise LinkTimeout(
+                f"simulator {self.peer}: command queue full for {wait_s:g} s "
+                "(the simulator is not reading)"
+            ) from None
+        self._check()
+
+    def request(
+        self, type_word: str, *fields: tuple[str, object], timeout_s: float | None = None
+    ) -> Message:
+        """Send a command and wait for its answer (``RES``, ``CONF``, ``GEO`` or ``NFO``).
+
+        Raises:
+            CommandRejected: the simulator answered ``ERR``; ``reason`` says why.
+            LinkTimeout: no answer within ``timeout_s`` (default: the connection's).
+            LinkClosed: the link died while waiting.
+        """
+        command = type_word.upper()
+        ident = None
+        if command == "PING":
+            ident = dict((k.lower(), str(v)) for k, v in fields).get("id")
+        pending = _Pending(command, _ANSWERS.get(command, frozenset({"RES"})), ident)
+        line = format_message(type_word, *fields)
+        with self._lock:
+            self._check()
+            self._pending.append(pending)
+        wait_s = self.timeout_s if timeout_s is None else timeout_s
+        try:
+            self._put(line, wait_s)
+            if not pending.event.wait(wait_s):
+                raise LinkTimeout(f"simulator {self.peer}: no answer to {command} in {wait_s:g} s")
+        finally:
+            with self._lock:
+                if pending in self._pending:
+                    self._pending.remove(pending)
+        if pending.error is not None:
+            raise pending.error
+        assert pending.answer is not None
+        if pending.answer.type == "ERR":
+            reason = pending.answer.get("Reason") or "no reason given"
+            raise CommandRejected(f"{command}: {reason}")
+        return pending.answer
+
+    def _write_loop(self) -> None:
+        try:
+            while True:
+                line = self._outbox.get()
+                if line is _STOP or not line:
+                    return
+                chunks = [line]
+                try:  # batch what is already queued: fewer syscalls, same byte order
+                    while len(chunks) < 64:
+                        more = self._outbox.get_nowait()
+                        if not more:
+                            self._sock.sendall(b"".join(chunks))
+                            return
+                        chunks.append(more)
+                except queue.Empty:
+                    pass
+                self._sock.sendall(b"".join(chunks))
+        except OSError as exc:
+            self._fail(LinkClosed(f"simulator {self.peer}: sending failed: {exc}"))
+
+    # -- reading ------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        decoder = LineDecoder()
+        error: SkeyeError
+        try:
+            while True:
+                try:
+                    data = self._sock.recv(65536)
+                except OSError as exc:
+                    error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
+                    break
+                if not data:
+                    error = LinkClosed(
+                        f"the simulator at {self.peer} closed the connection "
+                        f"(last sim time {self.time_s:.3f} s)"
+                    )
+                    break
+                for event in decoder.feed(data):
+                    if isinstance(event, LineError):
+                        log.warning("simulator %s sent a bad line: %s: %r", self.peer,
+                                    event.reason, event.line)
+                        if event.fatal:
+                            raise RemoteProtocolError(f"simulator {self.peer}: {event.reason}")
+                        continue
+                    self._dispatch(event)
+        except SkeyeError as exc:
+            error = exc
+        except Exception as exc:  # a bug must not leave waiters hanging
+            log.exception("message handler failed")
+            error = SkeyeError(f"the message handler failed: {exc!r}")
+        if self._closed:
+            error = LinkClosed(f"the connection to {self.peer} was closed")
+        self._fail(error)
+
+    def _note_time(self, msg: Message) -> None:
+        text = msg.get("Time")
+        if text is not None:
+            try:
+                t = float(text)
+            except ValueError:
+                return
+            if t > self.time_s:
+                self.time_s = t
+
+    def _dispatch(self, msg: Message) -> None:
+        kind = msg.type
+        if kind == "SEN":
+            self._note_time(msg)
+            robot = self.robot
+            if robot is not None:
+                robot._on_sensor(msg)
+            return
+        if kind == "STA":
+            self._note_time(msg)
+            if self.robot is not None:
+                self.robot._on_status(msg)
+            return
+        if kind == "NFO" and msg.has("Mode") and not self._nfo.is_set():
+            self.mode = (msg.get("Mode") or "realtime").lower()
+            self.time_step_s = msg.get_float("TimeStep", default=0.001, min_value=1e-6)
+            self.level = msg.get("Level") or ""
+            self._nfo.set()
+            return
+        if kind == "RES":
+            self._note_time(msg)
+        with self._lock:
+            match = next((p for p in self._pending if p.matches(msg)), None)
+            if match is not None:
+                self._pending.remove(match)
+        if match is not None:
+            match.answer = msg
+            match.event.set()
+            return
+        if kind == "ERR":
+            self.unmatched_errors.append(msg)
+            del self.unmatched_errors[:-100]
+            log.warning("simulator %s: %s refused: %s", self.peer, msg.get("Command"),
+                        msg.get("Reason"))
+            if self.robot is not None:
+                self.robot._on_error(msg)
+
+    def _fail(self, error: SkeyeError) -> None:
+        """The link is down: record why and wake every waiter with it."""
+        with self._lock:
+            if self._error is None:
+                self._error = error
+            error = self._error
+            pending, self._pending = self._pending, []
+            hooks = list(self._close_hooks)
+        for p in pending:
+            p.error = error
+            p.event.set()
+        self._nfo.set()
+        robot = self.robot
+        if robot is not None:
+            robot._link_down(error)
+        for hook in hooks:
+            try:
+                hook(error)
+            except Exception:
+                log.exception("close hook failed")
+        try:  # let the writer finish; if the queue is full it exits on its send error
+            self._outbox.put_nowait(_STOP)
+        except queue.Full:
+            pass
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+
+    # -- world commands -------------------------------------------------------------------
+    def start_poses(self) -> dict[str, Pose]:
+        """The world's start poses: name -> :class:`Pose`."""
+        answer = self.request("GETSTARTPOSES")
+        return {
+            name: Pose(location, rotation)
+            for name, (location, rotation) in parse_start_poses(answer).items()
+        }
+
+    def ping(self) -> float:
+        """Round trip to the simulator; returns its sim time."""
+        with self._lock:
+            self._ping_ids += 1
+            ident = f"p{self._ping_ids}"
+        return self.request("PING", ("Id", ident)).get_float("Time")
+
+    def set_wind(self, mode: str, params: str = "") -> None:
+        """``SET {Type Wind}``: none, constant, turbulence or random_force (see the sim docs)."""
+        fields: list[tuple[str, object]] = [("Type", "Wind"), ("Mode", mode)]
+        if params:
+            fields.append(("Params", params))
+        self.request("SET", *fields)
+
+    def _step(self, count: int) -> float:
+        answer = self.request("STEP", ("Count", count),
+                              timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
+        t = answer.get_float("Time")
+        self.time_s = max(self.time_s, t)
+        return t
+
+    def step(self, count: int = 1) -> float:
+        """Lockstep: advance ``count`` physics steps (motion control keeps running); sim time."""
+        if self.mode != "lockstep":
+            raise LocalProtocolError("step() needs a simulator in lockstep mode")
+        if count < 1:
+            raise LocalProtocolError(f"step count must be >= 1, got {count}")
+        assert isinstance(self.clock, LockstepClock)
+        self.clock.advance_steps(count)
+        return self.time_s
+
+    def run_for(self, seconds: float) -> float:
+        """Let ``seconds`` of sim time pass (lockstep: step; realtime: wait); the sim time."""
+        if not seconds >= 0:
+            raise LocalProtocolError(f"run_for needs seconds >= 0, got {seconds}")
+        self.clock.advance(seconds)
+        return self.time_s
+
+    def _tick(self) -> None:
+        robot = self.robot
+        if robot is not None:
+            robot._control_tick()
+
+    # -- robots ---------------------------------------------------------------------------
+    def spawn(
+        self,
+        robot: type[Robot] | str = "hummingbird",
+        *,
+        start: str | None = None,
+        location_ned_m: tuple[float, float, float] | None = None,
+        rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        name: str = "R1",
+        feedback: str = "ins",
+        motion: MotionConfig | None = None,
+    ) -> Robot:
+        """Spawn a robot at a start pose or a NED location; returns it once it streams.
+
+        Args:
+            robot: a robot class (:class:`~skeye.control.robots.Hummingbird`) or class name.
+            start: a start pose name (see :meth:`start_poses`).
+            location_ned_m: or a NED position (m); ``rotation_rpy_rad`` its attitude.
+            name: the robot's name in the simulator.
+            feedback: default navigation feedback, ``"ins"`` or ``"ground_truth"``.
+            motion: motion-control settings (default: the connection's).
+
+        Raises:
+            LocalProtocolError: this connection already has a robot, or bad arguments.
+            CommandRejected: the simulator refused (unknown class or start pose...).
+        """
+        from .robots import robot_class
+
+        if self.robot is not None:
+            raise LocalProtocolError(
+                f"this connection already drives {self.robot.name} (one robot per connection)"
+            )
+        if (start is None) == (location_ned_m is None):
+            raise LocalProtocolError("spawn needs exactly one of start= or location_ned_m=")
+        cls: type[Robot] = robot_class(robot) if isinstance(robot, str) else robot
+        fields: list[tuple[str, object]] = [("ClassName", cls.class_name), ("Name", name)]
+        if start is not None:
+            fields.append(("Start", start))
+            home: tuple[float, float, float] | None = None
+        else:
+            assert location_ned_m is not None
+            home = tuple(float(v) for v in location_ned_m)  # type: ignore[assignment]
+            fields.append(("Location", home))
+            fields.append(("Rotation", tuple(float(v) for v in rotation_rpy_rad)))
+        if start is not None:
+            poses = self.start_poses()
+            pose = next((p for n, p in poses.items() if n.lower() == start.lower()), None)
+            if pose is None:
+                raise LocalProtocolError(
+                    f"no start pose {start!r}; the world has: {', '.join(poses) or 'none'}"
+                )
+            home = pose.position_ned_m
+        assert home is not None
+        new = cls(self, name, home, feedback=feedback, motion=motion or self.motion_config)
+        self.robot = new
+        try:
+            answer = self.request("INIT", *fields)
+            new.name = answer.get("Name") or name
+            new._configure(self.request("GETCONF", ("Type", "Robot")))
+            new._await_first_readings()
+        except BaseException:
+            self.robot = None
+            raise
+        return new
+
+    # -- images ---------------------------------------------------------------------------
+    def _image_client(self) -> ImageClient:
+        if self.images_address is None:
+            raise LocalProtocolError("connect with images='host:port' to fetch camera frames")
+        host, port = self.images_address
+        return ImageClient(host, port, timeout_s=self.timeout_s)
+
+    # -- shutdown -------------------------------------------------------------------------
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Stop every thread and close the socket; idempotent. The simulator removes the robot."""
+        if self._closed:
+            return
+        self._closed = True
+        clock = getattr(self, "clock", None)
+        if clock is not None:
+            clock.close(timeout_s)
+        self._fail(LinkClosed(f"the connection to {self.peer} was closed"))
+        current = threading.current_thread()
+        for t in (self._writer, self._reader):
+            if t.is_alive() and t is not current:
+                t.join(timeout_s)
+        self._sock.close()
+        if self.robot is not None:
+            self.robot._close()
+
+    def add_close_hook(self, fn: Callable[[SkeyeError], None]) -> None:
+        """Call ``fn(error)`` once when the link goes down."""
+        with self._lock:
+            self._close_hooks.append(fn)
+
+
+def connect(
+    address: str = f"127.0.0.1:{DEFAULT_PORT}",
+    *,
+    images: str | None = None,
+    timeout_s: float = 10.0,
+    **kwargs: Any,
+) -> Connection:
+    """Connect to a simulator's control port (``host:port``); use it as a context manager.
+
+    Example::
+
+        with skeye.connect("127.0.0.1:3000") as sim:
+            copter = sim.spawn("hummingbird", start="Pad1")
+            copter.take_off(1.0)
+            copter.land()
+    """
+    return Connection(address, images=images, timeout_s=timeout_s, **kwargs)

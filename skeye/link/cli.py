@@ -1,0 +1,191 @@
+"""``skeye link URI COMMAND [args]``: send one command to a vehicle and print what comes back.
+
+For scripts and for checking a real vehicle: every command prints the vehicle's answer (the
+RESULT or ack) and exits 0 when it was accepted, 3 when the vehicle refused it (the RESULT's
+code is printed), 2 on a bad argument or URI and 1 when the link failed or timed out.
+Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import threading
+import time
+from dataclasses import fields
+from enum import IntEnum
+from typing import Any, TextIO
+
+from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.link.packets import Ack, Message, PollMask, Result, SkeyeMask
+from skeye.link.transport import LinkClosed
+from skeye.link.vehicle import Vehicle
+
+EXIT_OK, EXIT_LINK, EXIT_USAGE, EXIT_REJECTED = 0, 1, 2, 3
+
+
+def format_message(msg: Message) -> str:
+    """One line: the message's class name and its fields in wire units."""
+    parts = []
+    for f in fields(msg):
+        value = getattr(msg, f.name)
+        if isinstance(value, IntEnum):
+            value = value.name
+        parts.append(f"{f.name}={value}")
+    return f"{type(msg).__name__} {' '.join(parts)}".rstrip()
+
+
+def _mask(text: str, names: type[PollMask] | type[SkeyeMask]) -> int:
+    """A mask from a number (``0x0205``) or names joined by ``,`` (``ll_status,gps_data``)."""
+    try:
+        return int(text, 0)
+    except ValueError:
+        pass
+    total = 0
+    for word in text.split(","):
+        word = word.strip().upper()
+        if word == "ALL":
+            total |= int(sum(names))
+            continue
+        try:
+            total |= int(names[word])
+        except KeyError:
+            valid = ", ".join(m.name.lower() for m in names if m.name)
+            raise LocalProtocolError(
+                f"unknown mask bit {word.lower()!r}; known: {valid}, all"
+            ) from None
+    return total
+
+
+def _answer(answer: Result | Ack, out: TextIO) -> None:
+    print(format_message(answer), file=out)
+
+
+def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Execute the parsed ``skeye link`` command; returns the exit code."""
+    try:
+        with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
+            return _run(vehicle, args, out)
+    except CommandRejected as exc:
+        print(f"rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
+        return EXIT_REJECTED
+    except LocalProtocolError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (LinkClosed, LinkTimeout) as exc:
+        print(f"link error: {exc}", file=sys.stderr)
+        return EXIT_LINK
+    except SkeyeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_LINK
+
+
+def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
+    cmd = args.command
+    if cmd == "poll":
+        for msg in vehicle.poll(_mask(args.mask, PollMask)).values():
+            print(format_message(msg), file=out)
+        return EXIT_OK
+    if cmd == "stream":
+        return _stream(vehicle, args, out)
+    answer: Result | Ack
+    if cmd == "take-off":
+        answer = vehicle.take_off(args.height)
+    elif cmd == "land":
+        answer = vehicle.land()
+    elif cmd == "hold":
+        answer = vehicle.hold()
+    elif cmd == "velocity":
+        answer = vehicle.set_velocity(
+            args.forward, args.right, args.up, math.radians(args.yaw_rate_deg_s), args.duration
+        )
+    elif cmd == "move-by":
+        answer = vehicle.move_by(
+            args.forward, args.right, args.up, math.radians(args.yaw_deg), args.frame, args.speed
+        )
+    elif cmd == "goto-gps":
+        answer = vehicle.goto_gps(args.latitude, args.longitude, args.height, args.speed)
+    elif cmd == "pad-mode":
+        answer = vehicle.pad_mode(args.mode, args.deadband, args.max_speed)
+    else:  # argparse only lets known commands through
+        raise LocalProtocolError(f"unknown command {cmd!r}")
+    _answer(answer, out)
+    return EXIT_OK
+
+
+def _stream(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
+    lock = threading.Lock()
+    count = [0]
+
+    def show(msg: Message) -> None:
+        if isinstance(msg, Result):
+            return
+        with lock:
+            count[0] += 1
+            print(format_message(msg), file=out, flush=True)
+
+    vehicle.add_callback(show)
+    answer = vehicle.stream(
+        _mask(args.poll_mask, PollMask), _mask(args.skeye_mask, SkeyeMask), args.period
+    )
+    _answer(answer, out)
+    deadline = time.monotonic() + args.seconds
+    while time.monotonic() < deadline and vehicle.connected:
+        time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
+    vehicle.remove_callback(show)
+    vehicle.stream(0, 0, 0.0)
+    print(f"# {count[0]} frames in {args.seconds:g} s", file=out)
+    return EXIT_OK
+
+
+def register(subparsers: Any) -> None:
+    """Add ``skeye link URI COMMAND [args]`` to the main parser's subcommands."""
+    p = subparsers.add_parser(
+        "link",
+        help="send one command to a vehicle (pilot or real) and print the answer",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("uri", help="tcp://host:port or serial:///dev/ttyUSB0?baud=57600")
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for an answer")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    c = sub.add_parser("take-off", help="start motors and climb")
+    c.add_argument("height", type=float, help="metres above the take-off point")
+    sub.add_parser("land", help="descend and stop motors")
+    sub.add_parser("hold", help="stop and hover here")
+    c = sub.add_parser("velocity", help="fly at body-frame velocities")
+    c.add_argument("forward", type=float, help="m/s")
+    c.add_argument("right", type=float, help="m/s")
+    c.add_argument("up", type=float, help="m/s")
+    c.add_argument("--yaw-rate-deg-s", type=float, default=0.0)
+    c.add_argument("--duration", type=float, default=0.0, help="seconds (0 = until replaced)")
+    c = sub.add_parser("move-by", help="move relative to the current position")
+    c.add_argument("forward", type=float, help="m (north with --frame world)")
+    c.add_argument("right", type=float, help="m (east with --frame world)")
+    c.add_argument("up", type=float, help="m")
+    c.add_argument("--yaw-deg", type=float, default=0.0)
+    c.add_argument("--frame", choices=("body", "world"), default="body")
+    c.add_argument("--speed", type=float, default=1.0, help="m/s")
+    c = sub.add_parser("goto-gps", help="fly to GPS coordinates")
+    c.add_argument("latitude", type=float, help="degrees")
+    c.add_argument("longitude", type=float, help="degrees")
+    c.add_argument("height", type=float, help="metres above home")
+    c.add_argument("--speed", type=float, default=1.0, help="m/s")
+    c = sub.add_parser("pad-mode", help="landing-pad mode")
+    c.add_argument("mode", choices=("off", "hold", "land"))
+    c.add_argument("--deadband", type=float, default=0.1, help="m")
+    c.add_argument("--max-speed", type=float, default=0.5, help="m/s")
+    c = sub.add_parser("poll", help="poll structures once and print them")
+    c.add_argument(
+        "mask",
+        nargs="?",
+        default="ll_status",
+        help="0x... or names: ll_status,imu_calcdata,... all",
+    )
+    c = sub.add_parser("stream", help="stream telemetry for N seconds and print it")
+    c.add_argument("seconds", type=float)
+    c.add_argument("--period", type=float, default=0.1, help="seconds between pushes")
+    c.add_argument("--poll-mask", default="0", help="structures (0x... or names)")
+    c.add_argument("--skeye-mask", default="nav_status", help="nav_status,pad (or 0x...)")
+    p.set_defaults(func=run)

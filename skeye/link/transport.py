@@ -1,0 +1,332 @@
+"""Byte links chosen by URI: TCP, serial, and an in-memory pair for tests.
+
+How this works: a ``Link`` moves raw bytes and knows nothing of the packet protocol (that is
+``skeye.link.packets``, sans-IO). ``open_link(uri)`` picks the adapter:
+
+- ``tcp://host:port``: a TCP client connection (the pilot wraps its accepted sockets the same
+  way with ``TcpLink(sock)``);
+- ``serial:///dev/ttyUSB0?baud=57600``: a serial port through pyserial, 8N1, no flow control,
+  as the XBee radio is wired;
+- ``memory_pair()``: two connected in-memory ends, for tests.
+
+Every link has the same three calls: ``send(data)`` writes all of ``data`` (thread-safe: one
+lock per link, so two threads never interleave frames), ``recv(timeout_s)`` returns whatever
+arrived within the timeout (``b""`` when nothing did), and ``close()`` (idempotent; a ``recv``
+blocked in another thread returns promptly with ``LinkClosed``). A peer that goes away makes
+``recv`` and ``send`` raise ``LinkClosed``. One thread should own ``recv`` (STYLE.md rule 8).
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import threading
+import time
+import tty
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import TracebackType
+from urllib.parse import parse_qs, urlsplit
+
+from skeye.errors import LinkTimeout, LocalProtocolError, SkeyeError
+
+DEFAULT_BAUD = 57600
+DEFAULT_CONNECT_TIMEOUT_S = 5.0
+DEFAULT_SEND_TIMEOUT_S = 5.0
+RECV_CHUNK = 65536
+
+
+class LinkClosed(SkeyeError):
+    """The link was closed locally or by the peer; nothing more can be sent or received."""
+
+
+class Link(ABC):
+    """A bidirectional byte stream; a context manager that closes it."""
+
+    name: str = "link"
+
+    def __init__(self) -> None:
+        self._send_lock = threading.Lock()
+        self._closed = threading.Event()
+
+    @property
+    def closed(self) -> bool:
+        """True once ``close()`` ran or the peer went away."""
+        return self._closed.is_set()
+
+    def send(self, data: bytes) -> None:
+        """Write all of ``data``; raises ``LinkClosed`` if the link is gone."""
+        if self._closed.is_set():
+            raise LinkClosed(f"{self.name}: link is closed")
+        with self._send_lock:
+            self._send(data)
+
+    def recv(self, timeout_s: float) -> bytes:
+        """Bytes that arrived within ``timeout_s`` (``b""`` if none); ``LinkClosed`` at the end."""
+        if self._closed.is_set():
+            raise LinkClosed(f"{self.name}: link is closed")
+        return self._recv(max(0.0, timeout_s))
+
+    def close(self) -> None:
+        """Close the link (idempotent)."""
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        self._close()
+
+    @abstractmethod
+    def _send(self, data: bytes) -> None: ...
+
+    @abstractmethod
+    def _recv(self, timeout_s: float) -> bytes: ...
+
+    @abstractmethod
+    def _close(self) -> None: ...
+
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name}{' closed' if self.closed else ''}>"
+
+
+class TcpLink(Link):
+    """A connected TCP socket (a client connection, or one the pilot accepted)."""
+
+    def __init__(
+        self, sock: socket.socket, name: str = "", send_timeout_s: float = DEFAULT_SEND_TIMEOUT_S
+    ) -> None:
+        super().__init__()
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        # The timeout bounds sendall() to a dead peer; recv() waits in select() instead.
+        sock.settimeout(send_timeout_s)
+        self._sock = sock
+        try:
+            peer = sock.getpeername()
+            self.peer = f"{peer[0]}:{peer[1]}"
+        except OSError:
+            self.peer = "?"
+        self.name = name or f"tcp://{self.peer}"
+
+    def _send(self, data: bytes) -> None:
+        try:
+            self._sock.sendall(data)
+        except TimeoutError:
+            raise LinkTimeout(f"{self.name}: peer did not take {len(data)} bytes") from None
+        except OSError as exc:
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: {exc}") from None
+
+    def _recv(self, timeout_s: float) -> bytes:
+        try:
+            ready, _, _ = select.select([self._sock], [], [], timeout_s)
+            if not ready:
+                return b""
+            data = self._sock.recv(RECV_CHUNK)
+        except (OSError, ValueError) as exc:  # ValueError: fd closed by another thread
+            if self._closed.is_set():
+                raise LinkClosed(f"{self.name}: link is closed") from None
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: {exc}") from None
+        if not data:
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: peer closed the connection")
+        return data
+
+    def _close(self) -> None:
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+
+
+class SerialLink(Link):
+    """A serial port through pyserial (8N1, no flow control)."""
+
+    def __init__(self, port: str, baud: int = DEFAULT_BAUD) -> None:
+        super().__init__()
+        import serial  # pyserial; imported here so TCP-only users do not need it
+
+        try:
+            # timeout=0: non-blocking reads; recv() waits in select() on the descriptor.
+            self._port = serial.Serial(port, baudrate=baud, timeout=0, write_timeout=10.0)
+        except (serial.SerialException, ValueError) as exc:
+            raise LinkClosed(f"cannot open serial port {port}: {exc}") from None
+        self._serial_error: type[Exception] = serial.SerialException
+        self.baud = baud
+        self.name = f"serial://{port}?baud={baud}"
+
+    def _send(self, data: bytes) -> None:
+        try:
+            self._port.write(data)
+            self._port.flush()
+        except (self._serial_error, OSError, TypeError) as exc:
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: {exc}") from None
+
+    def _recv(self, timeout_s: float) -> bytes:
+        try:
+            ready, _, _ = select.select([self._port.fileno()], [], [], timeout_s)
+            if not ready:
+                return b""
+            data: bytes = self._port.read(max(1, self._port.in_waiting))
+        except (self._serial_error, OSError, ValueError, TypeError) as exc:
+            if self._closed.is_set():
+                raise LinkClosed(f"{self.name}: link is closed") from None
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: {exc}") from None
+        if not data:
+            # select() said readable but nothing came: the other end of the line hung up.
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: the line hung up")
+        return data
+
+    def _close(self) -> None:
+        try:
+            self._port.close()
+        except (self._serial_error, OSError):
+            pass
+
+
+class MemoryLink(Link):
+    """One end of an in-memory pair (see ``memory_pair``)."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__()
+        self.name = name
+        self._inbox = bytearray()
+        self._cond = threading.Condition()
+        self.peer: MemoryLink | None = None
+
+    def _deliver(self, data: bytes) -> None:
+        with self._cond:
+            self._inbox += data
+            self._cond.notify_all()
+
+    def _send(self, data: bytes) -> None:
+        peer = self.peer
+        if peer is None or peer.closed:
+            self._closed.set()
+            raise LinkClosed(f"{self.name}: peer closed")
+        peer._deliver(bytes(data))
+
+    def _recv(self, timeout_s: float) -> bytes:
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while not self._inbox:
+                peer_gone = self.peer is None or self.peer.closed
+                if self._closed.is_set() or peer_gone:
+                    raise LinkClosed(f"{self.name}: link is closed")
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return b""
+                self._cond.wait(left)
+            data = bytes(self._inbox)
+            self._inbox.clear()
+            return data
+
+    def _close(self) -> None:
+        with self._cond:
+            self._cond.notify_all()
+        peer = self.peer
+        if peer is not None:
+            with peer._cond:
+                peer._cond.notify_all()
+
+
+def memory_pair(name: str = "memory") -> tuple[MemoryLink, MemoryLink]:
+    """Two connected in-memory links: what one sends, the other receives."""
+    a, b = MemoryLink(f"{name}-a"), MemoryLink(f"{name}-b")
+    a.peer, b.peer = b, a
+    return a, b
+
+
+def parse_uri(uri: str) -> tuple[str, str, int]:
+    """Split a link URI into (scheme, host-or-device, port-or-baud); raises on a bad URI."""
+    parts = urlsplit(uri)
+    scheme = parts.scheme.lower()
+    if scheme == "tcp":
+        if not parts.hostname or parts.port is None:
+            raise LocalProtocolError(f"link URI {uri!r}: expected tcp://host:port")
+        return scheme, parts.hostname, parts.port
+    if scheme == "serial":
+        device = parts.netloc + parts.path
+        if not device:
+            raise LocalProtocolError(f"link URI {uri!r}: expected serial:///dev/ttyX?baud=57600")
+        query = parse_qs(parts.query)
+        unknown = set(query) - {"baud"}
+        if unknown:
+            raise LocalProtocolError(f"link URI {uri!r}: unknown option(s) {sorted(unknown)}")
+        baud_text = query.get("baud", [str(DEFAULT_BAUD)])[-1]
+        try:
+            baud = int(baud_text)
+        except ValueError:
+            raise LocalProtocolError(
+                f"link URI {uri!r}: baud {baud_text!r} is not a number"
+            ) from None
+        if baud <= 0:
+            raise LocalProtocolError(f"link URI {uri!r}: baud must be positive")
+        return scheme, device, baud
+    raise LocalProtocolError(f"link URI {uri!r}: scheme must be tcp:// or serial://")
+
+
+def open_link(uri: str, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> Link:
+    """Open the link a URI names: ``tcp://host:port`` or ``serial:///dev/ttyX?baud=57600``."""
+    scheme, where, number = parse_uri(uri)
+    if scheme == "tcp":
+        try:
+            sock = socket.create_connection((where, number), timeout=timeout_s)
+        except TimeoutError:
+            raise LinkTimeout(f"{uri}: no connection within {timeout_s} s") from None
+        except OSError as exc:
+            raise LinkClosed(f"{uri}: cannot connect: {exc}") from None
+        return TcpLink(sock, name=f"tcp://{where}:{number}")
+    return SerialLink(where, number)
+
+
+@contextmanager
+def pty_null_modem() -> Iterator[tuple[str, str]]:
+    """Two pseudo-terminals wired back to back, like ``socat`` or a null-modem cable.
+
+    Yields two device paths; what is written to one is read from the other. Each side opens
+    its path with ``serial:///dev/pts/N`` as it would a real port, so serial links are tested
+    without hardware (POSIX only). A bridge thread copies bytes until the context exits.
+    """
+    m1, s1 = os.openpty()
+    m2, s2 = os.openpty()
+    for fd in (s1, s2):
+        tty.setraw(fd)
+    stop = threading.Event()
+
+    def bridge() -> None:
+        route = {m1: m2, m2: m1}
+        while not stop.is_set():
+            try:
+                ready, _, _ = select.select(list(route), [], [], 0.05)
+                for fd in ready:
+                    data = os.read(fd, RECV_CHUNK)
+                    if data:
+                        os.write(route[fd], data)
+            except OSError:  # a side was hung up and reopened: keep bridging
+                time.sleep(0.01)
+
+    thread = threading.Thread(target=bridge, name="pty-null-modem", daemon=True)
+    thread.start()
+    try:
+        yield os.ttyname(s1), os.ttyname(s2)
+    finally:
+        stop.set()
+        thread.join(1.0)
+        for fd in (m1, s1, m2, s2):
+            os.close(fd)

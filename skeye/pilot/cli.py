@@ -1,0 +1,106 @@
+"""``skeye pilot``: the onboard computer's stand-in, serving the vehicle packet protocol.
+
+It connects to a simulator (``--sim``), spawns a robot and serves one ground-control client over
+TCP (``--port``, default 7000, bound to 127.0.0.1 unless ``--host``) or a serial line
+(``--serial /dev/ttyUSB0 --baud 57600``). When the simulator runs in lockstep the pilot drives
+its clock: ``--lockstep-rate`` sim seconds per wall second (1 = real time, 0 = as fast as the
+CPU allows).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+from typing import Any
+
+from skeye.errors import SkeyeError
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.server import DEFAULT_PORT, PilotServer
+
+log = logging.getLogger(__name__)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the pilot until SIGINT/SIGTERM; returns the exit code."""
+    from skeye.control.connection import connect
+    from skeye.pilot.sim_airframe import SimAirframe
+
+    settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
+    try:
+        with connect(args.sim, images=args.images, timeout_s=args.timeout) as sim:
+            if args.location is not None:
+                north, east, down = (float(v) for v in args.location.split(","))
+                robot = sim.spawn(args.robot, location_ned_m=(north, east, down), name=args.name)
+            else:
+                robot = sim.spawn(args.robot, start=args.start, name=args.name)
+            airframe = SimAirframe(sim, robot)
+            settings = BoardSettings(
+                link_timeout_s=settings.link_timeout_s,
+                land_timeout_s=settings.land_timeout_s,
+                max_speed_m_s=robot.motion_config.max_speed_m_s,
+                default_speed_m_s=min(1.0, robot.motion_config.max_speed_m_s),
+            )
+            lockstep = sim.mode == "lockstep"
+            tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
+            server = PilotServer(
+                airframe,
+                host=args.host,
+                port=None if args.serial else args.port,
+                serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
+                settings=settings,
+                tick_s=tick_s,
+                lockstep=lockstep,
+                lockstep_rate=args.lockstep_rate,
+            )
+            stop = threading.Event()
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, lambda *_: stop.set())
+            with server:
+                mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
+                print(
+                    f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
+                    f"ground control on {server.address}",
+                    flush=True,
+                )
+                while not stop.wait(0.2):
+                    if server.loop_error is not None:
+                        raise server.loop_error
+            print("skeye pilot: stopping", flush=True)
+    except SkeyeError as exc:
+        print(f"skeye pilot: {exc}", flush=True)
+        return 1
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``skeye pilot`` to the main parser's subcommands."""
+    p = subparsers.add_parser(
+        "pilot",
+        help="emulate the vehicle's onboard boards on a simulated robot",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address")
+    p.add_argument("--images", default=None, help="image server address (e.g. 127.0.0.1:5003)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
+    where.add_argument("--serial", default=None, help="serve on this serial device instead")
+    p.add_argument("--baud", type=int, default=57600, help="serial baud rate")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--robot", default="hummingbird", help="robot class to spawn")
+    p.add_argument("--name", default="R1", help="robot name")
+    p.add_argument("--start", default="Pad1", help="start pose")
+    p.add_argument("--location", default=None, help="spawn at north,east,down (m) instead")
+    p.add_argument("--link-timeout", type=float, default=2.0, help="s without packets -> hold")
+    p.add_argument("--land-timeout", type=float, default=20.0, help="s more -> land")
+    p.add_argument(
+        "--lockstep-rate",
+        type=float,
+        default=1.0,
+        help="lockstep sim: sim seconds per wall second (0 = unpaced)",
+    )
+    p.add_argument("--tick", type=float, default=0.01, help="loop period in realtime (s)")
+    p.add_argument("--timeout", type=float, default=10.0, help="simulator answer deadline (s)")
+    p.set_defaults(func=run)

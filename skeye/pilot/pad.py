@@ -1,0 +1,77 @@
+"""Landing-pad mode of the onboard computer: the stored PAD_MODE and the PAD report.
+
+How this works: ``PadController`` keeps what ground control asked for (PAD_MODE: mode,
+deadband, maximum correction speed) and the latest pad estimate. The pilot calls ``report()``
+for every PAD packet. Detection is not wired in yet (a later issue adds it): until something
+calls ``on_frame`` with a real estimate, ``report()`` says ``found=0``; nothing here invents a
+detection.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+from skeye.link.packets import PadAction, PadMode, PadReport
+from skeye.link.scaling import PadModeSi, PadSi, pad_mode_to_si, pad_report_from_si
+
+
+@dataclass(frozen=True)
+class PadObservation:
+    """One camera frame's pad estimate, in SI (body FRD offsets of the pad centre)."""
+
+    frame_time_s: float
+    found: bool
+    rings: int = 0  # bit per identified ring
+    dx_m: float = 0.0
+    dy_m: float = 0.0
+    height_m: float = 0.0
+    quality: float = 0.0  # 0..1
+
+
+class PadController:
+    """Stored pad mode and latest estimate; the hook the vision pipeline feeds.
+
+    The detection issue plugs in here: for each camera frame the pilot receives, call
+    ``on_frame(observation)`` with the detector's estimate (``skeye.vision``'s result converted
+    to a ``PadObservation``: pad centre offset in metres in the body frame, height, identified
+    rings, quality). ``report()`` then carries it in PAD packets, and ``mode`` says what the
+    navigation should do with it (OFF: nothing; HOLD: keep the pad centre within ``deadband_m``
+    at up to ``max_speed_m_s``; LAND: the same, descending onto it). Until then no frame is
+    ever fed and the PAD packet reports ``found=0``.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._settings = PadModeSi(PadAction.OFF, deadband_m=0.0, max_speed_m_s=0.0)
+        self._latest: PadObservation | None = None
+
+    @property
+    def settings(self) -> PadModeSi:
+        """The last PAD_MODE accepted, in SI."""
+        return self._settings
+
+    @property
+    def mode(self) -> PadAction:
+        return self._settings.mode
+
+    def set_mode(self, msg: PadMode) -> None:
+        """Store a PAD_MODE command (the codec already checked its ranges)."""
+        with self._lock:
+            self._settings = pad_mode_to_si(msg)
+
+    def on_frame(self, observation: PadObservation) -> None:
+        """Record the estimate from one camera frame (called by the vision pipeline)."""
+        with self._lock:
+            self._latest = observation
+
+    def report(self) -> PadReport:
+        """The PAD packet: the latest estimate, or ``found=0`` when there is none."""
+        with self._lock:
+            obs = self._latest
+        if obs is None or not obs.found:
+            frame_time_s = 0.0 if obs is None else obs.frame_time_s
+            return pad_report_from_si(PadSi(False, 0, 0.0, 0.0, 0.0, 0.0, frame_time_s))
+        return pad_report_from_si(
+            PadSi(True, obs.rings, obs.dx_m, obs.dy_m, obs.height_m, obs.quality, obs.frame_time_s)
+        )

@@ -1,0 +1,252 @@
+"""The pilot's I/O: one ground-control link (TCP or serial), the boards, and the loop that ticks.
+
+How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with threads:
+
+- an accept thread (TCP) hands each connection a ``TcpLink``. Exactly one client is served: a
+  connection arriving while another is served gets ``RESULT(0x00, code 5, reason)`` and is
+  closed; the first is not touched. A serial port is the single client for the whole run.
+- one reader thread per served link alone calls ``link.recv``, feeds a fresh
+  ``CommandStreamParser`` and answers each event at once (``boards.handle``), so a poll's
+  round trip never waits for the loop. Garbage is counted by the parser and the boards; the
+  reader never stops on bad input.
+- the loop thread calls ``boards.tick`` every ``tick_s`` (stream, flight-state progress,
+  failsafe) and, when the simulator is in lockstep, drives sim time: it advances the sim by
+  ``tick_s`` per iteration, paced to ``lockstep_rate`` sim seconds per wall second (0 = as
+  fast as the CPU allows). Time given to the boards is the wall clock (``time.monotonic``):
+  the link-loss timeouts are about the radio link, which runs on wall time.
+
+One lock serialises every call into the boards; sends are thread-safe in the links. Stopping
+(``close``) is idempotent and joins every thread with a deadline.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+import time
+from collections.abc import Callable
+from types import TracebackType
+
+from skeye.errors import ConfigError
+from skeye.link.packets import CommandStreamParser, Message, Result, ResultCode, encode
+from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
+from skeye.pilot.airframe import Airframe
+from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PORT = 7000
+DEFAULT_TICK_S = 0.01
+
+
+class PilotServer:
+    """Serve one ground-control client at a time over TCP, or a serial line.
+
+    Args:
+        airframe: the vehicle (``SimAirframe`` on the simulator).
+        host, port: where to listen for TCP (port 0: any free port; see ``self.port``).
+        serial_uri: ``serial:///dev/ttyX?baud=57600`` instead of TCP.
+        settings: link-loss timeouts and other tunables of the boards.
+        tick_s: loop period (stream resolution, failsafe resolution, lockstep step).
+        lockstep: drive the simulator's clock (it is in lockstep mode).
+        lockstep_rate: sim seconds per wall second when driving the clock; 0 = unpaced.
+        clock: wall clock in seconds (injectable for tests).
+    """
+
+    def __init__(
+        self,
+        airframe: Airframe,
+        *,
+        host: str = "127.0.0.1",
+        port: int | None = DEFAULT_PORT,
+        serial_uri: str | None = None,
+        settings: BoardSettings | None = None,
+        tick_s: float = DEFAULT_TICK_S,
+        lockstep: bool = False,
+        lockstep_rate: float = 1.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if (port is None) == (serial_uri is None):
+            raise ConfigError("PilotServer needs exactly one of port= or serial_uri=")
+        if not tick_s > 0 or lockstep_rate < 0:
+            raise ValueError(
+                f"tick_s must be > 0 and lockstep_rate >= 0 ({tick_s}, {lockstep_rate})"
+            )
+        self.airframe = airframe
+        self.clock = clock
+        self.tick_s = tick_s
+        self.lockstep = lockstep
+        self.lockstep_rate = lockstep_rate
+        self.boards = OnboardBoards(airframe, settings, now_s=clock())
+        self.turned_away = 0
+        self.loop_error: BaseException | None = None
+        self._lock = threading.Lock()
+        self._client: Link | None = None
+        self._client_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._listener: socket.socket | None = None
+        self.host = host
+        self.port: int | None = None
+        self.serial_uri = serial_uri
+        if port is not None:
+            self._listener = socket.create_server((host, port))
+            self._listener.settimeout(0.2)
+            self.port = self._listener.getsockname()[1]
+
+    @property
+    def address(self) -> str:
+        """Where the pilot listens: ``tcp://host:port`` or the serial URI."""
+        return self.serial_uri or f"tcp://{self.host}:{self.port}"
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def start(self) -> PilotServer:
+        """Start the loop and the accept thread (or open the serial port); returns self."""
+        self._spawn(self._loop, "pilot-loop")
+        if self._listener is not None:
+            self._spawn(self._accept_loop, "pilot-accept")
+        else:
+            assert self.serial_uri is not None
+            self._serve(open_link(self.serial_uri))
+        return self
+
+    def _spawn(self, target: Callable[..., None], name: str, *args: object) -> None:
+        t = threading.Thread(target=target, args=args, name=name, daemon=True)
+        self._threads.append(t)
+        t.start()
+
+    def serve_forever(self) -> None:
+        """Run until ``close()`` (or Ctrl-C in the caller); re-raises a loop failure."""
+        self.start()
+        while not self._stop.wait(0.5):
+            pass
+        if self.loop_error is not None:
+            raise self.loop_error
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Stop every thread and close the links (idempotent)."""
+        self._stop.set()
+        if self._listener is not None:
+            self._listener.close()
+        with self._client_lock:
+            client = self._client
+        if client is not None:
+            client.close()
+        current = threading.current_thread()
+        for t in self._threads:
+            if t is not current:
+                t.join(timeout_s)
+
+    def __enter__(self) -> PilotServer:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    @property
+    def client(self) -> Link | None:
+        """The ground-control link being served, if any."""
+        return self._client
+
+    # -- clients -------------------------------------------------------------------------
+    def _accept_loop(self) -> None:
+        assert self._listener is not None
+        while not self._stop.is_set():
+            try:
+                sock, _ = self._listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            link = TcpLink(sock)
+            with self._client_lock:
+                busy = self._client is not None and not self._client.closed
+                current = self._client.name if busy and self._client else ""
+            if busy:
+                self._turn_away(link, current)
+            else:
+                self._serve(link)
+
+    def _turn_away(self, link: Link, current: str) -> None:
+        self.turned_away += 1
+        reason = f"busy: this vehicle serves one ground station and {current} is connected"
+        log.info("turning away %s: %s", link.name, reason)
+        try:
+            link.send(encode(Result(NO_COMMAND_PD, ResultCode.BUSY, reason)))
+        except LinkClosed:
+            pass
+        link.close()
+
+    def _serve(self, link: Link) -> None:
+        with self._client_lock:
+            self._client = link
+        with self._lock:
+            self.boards.link_changed(self.clock())
+        log.info("serving ground control on %s", link.name)
+        self._spawn(self._read_loop, f"pilot-read-{link.name}", link)
+
+    def _read_loop(self, link: Link) -> None:
+        parser = CommandStreamParser()
+        try:
+            while not self._stop.is_set():
+                data = link.recv(0.1)
+                if not data:
+                    continue
+                for event in parser.feed(data):
+                    with self._lock:
+                        replies = self.boards.handle(event, self.clock())
+                    self._send(link, replies)
+        except LinkClosed:
+            pass
+        finally:
+            link.close()
+            with self._client_lock:
+                if self._client is link:
+                    self._client = None
+            with self._lock:
+                self.boards.client_gone(self.clock())
+            log.info("ground control on %s went away", link.name)
+
+    def _send(self, link: Link, replies: list[Message]) -> None:
+        if not replies:
+            return
+        try:
+            link.send(b"".join(encode(m) for m in replies))
+        except LinkClosed:
+            pass
+
+    # -- the loop ------------------------------------------------------------------------
+    def _loop(self) -> None:
+        try:
+            next_s = self.clock()
+            while not self._stop.is_set():
+                with self._lock:
+                    out = self.boards.tick(self.clock())
+                client = self._client
+                if client is not None and out:
+                    self._send(client, out)
+                self.airframe.advance(self.tick_s)  # no-op for time unless lockstep
+                if self.lockstep:
+                    if self.lockstep_rate > 0:
+                        next_s += self.tick_s / self.lockstep_rate
+                        delay = next_s - self.clock()
+                        if delay < -1.0:  # fell behind: do not try to catch up in a burst
+                            next_s = self.clock()
+                        elif delay > 0:
+                            self._stop.wait(delay)
+                else:
+                    next_s += self.tick_s
+                    delay = next_s - self.clock()
+                    if delay < -1.0:
+                        next_s = self.clock()
+                    self._stop.wait(max(0.0, delay))
+        except BaseException as exc:
+            log.exception("pilot loop failed")
+            self.loop_error = exc
+            self._stop.set()

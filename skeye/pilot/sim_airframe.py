@@ -1,0 +1,188 @@
+"""``Airframe`` on a simulated robot, through ``skeye.control``.
+
+How this works: motion commands map onto the control interface's robot methods with
+``wait=False`` (the boards watch ``busy``); readings come from the robot's sensor objects'
+``latest``. Stick input (CTRL_INPUT) is the simulator's attitude ``DRIVE`` form, sent as a raw
+line on the connection; the robot's own motion control must be idle first, or its next tick
+would overwrite the sticks with a velocity ``DRIVE``. So the first stick command while a motion
+runs replaces it with a one-shot zero velocity (which ends after one tick) and is deferred;
+``advance`` (called every pilot tick) and later stick commands send the newest sticks once the
+robot is idle. Altitudes: the control interface's ``take_off`` is relative to the spawn point;
+everything here is above the world origin (``-down``).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+from skeye.control.connection import Connection
+from skeye.control.robots import Robot
+from skeye.pilot.airframe import GpsFix, Snapshot
+
+Attitude = tuple[float, float, float, float]
+
+
+class SimAirframe:
+    """A robot spawned (by the caller) on a ``skeye.control`` connection."""
+
+    def __init__(self, connection: Connection, robot: Robot) -> None:
+        self.connection = connection
+        self.robot = robot
+        self.lockstep = connection.mode == "lockstep"
+        self._lock = threading.Lock()
+        self._sticks: Attitude | None = None  # deferred until the robot's motion is idle
+        self._sticks_live = False
+        mass = robot.limits.get("Mass")
+        self._max_thrust_n: float | None = None
+        if mass is not None:
+            self._max_thrust_n = 2.0 * mass * 9.80665  # fallback until Motors reports
+        self._last_baro: tuple[float, float] | None = None
+        self._baro_climb_m_s = 0.0
+
+    @property
+    def busy(self) -> bool:
+        return self.robot.busy
+
+    def snapshot(self) -> Snapshot:
+        r = self.robot
+        ins = r.ins.latest
+        gt = r.ground_truth.latest
+        pose = ins or gt
+        assert pose is not None  # spawn waits for the first readings
+        vel = pose.velocity_ned_m_s or (gt.velocity_ned_m_s if gt else None) or (0.0, 0.0, 0.0)
+        gyro = r.gyro.latest
+        acc = r.accelerometer.latest
+        compass = r.compass.latest
+        baro = r.barometer.latest
+        gps = r.gps.latest
+        battery = r.battery.latest
+        status = r.status.latest
+        motors = r.motors.latest if ("motors", "motors") in r.sensors else None
+        if baro is not None:
+            if self._last_baro is not None and baro.time_s > self._last_baro[0] + 0.05:
+                t0, a0 = self._last_baro
+                self._baro_climb_m_s = (baro.altitude_m - a0) / (baro.time_s - t0)
+                self._last_baro = (baro.time_s, baro.altitude_m)
+            elif self._last_baro is None:
+                self._last_baro = (baro.time_s, baro.altitude_m)
+        fix = None
+        if gps is not None:
+            fix = GpsFix(
+                gps.fix,
+                gps.satellites,
+                gps.latitude_deg or 0.0,
+                gps.longitude_deg or 0.0,
+                gps.altitude_m or 0.0,
+                gps.velocity_ned_m_s or (0.0, 0.0, 0.0),
+            )
+        thrust_fraction = 0.0
+        if motors is not None and math.isfinite(motors.thrust_n) and self._max_thrust_n:
+            thrust_fraction = max(0.0, min(1.0, motors.thrust_n / self._max_thrust_n))
+        return Snapshot(
+            time_s=max(pose.time_s, self.connection.time_s),
+            pos_ned_m=pose.position_ned_m,
+            rpy_rad=pose.rpy_rad,
+            vel_ned_m_s=vel,
+            rates_frd_rad_s=gyro.angular_velocity_frd_rad_s if gyro else (0.0, 0.0, 0.0),
+            specific_force_frd_m_s2=(
+                acc.proper_acceleration_frd_m_s2 if acc else (0.0, 0.0, -9.80665)
+            ),
+            mag_field_frd_ut=compass.field_frd_ut if compass else (0.0, 0.0, 0.0),
+            mag_heading_rad=compass.heading_rad if compass else pose.rpy_rad[2],
+            baro_pressure_pa=baro.pressure_pa if baro else 101325.0,
+            baro_altitude_m=baro.altitude_m if baro else -pose.position_ned_m[2],
+            baro_climb_m_s=self._baro_climb_m_s,
+            gps=fix,
+            battery_v=(
+                battery.voltage_v
+                if battery
+                else (status.voltage_v if status and status.voltage_v else 0.0)
+            ),
+            armed=status.armed if status else False,
+            landed=status.landed if status else True,
+            thrust_fraction=thrust_fraction,
+        )
+
+    # -- commands ------------------------------------------------------------------------
+    def _manual_off(self) -> None:
+        with self._lock:
+            self._sticks = None
+            self._sticks_live = False
+
+    def take_off(self, altitude_m: float) -> None:
+        self._manual_off()
+        self.robot.take_off(altitude_m + self.robot.home_ned_m[2], wait=False)
+
+    def fly_to(self, north_m: float, east_m: float, altitude_m: float, speed_m_s: float) -> None:
+        self._manual_off()
+        self.robot.fly_to(north_m, east_m, altitude_m, wait=False, max_speed_m_s=speed_m_s)
+
+    def fly_to_gps(
+        self, latitude_deg: float, longitude_deg: float, altitude_m: float, speed_m_s: float
+    ) -> None:
+        self._manual_off()
+        self.robot.fly_to_gps(
+            latitude_deg, longitude_deg, altitude_m, wait=False, max_speed_m_s=speed_m_s
+        )
+
+    def turn_by(self, yaw_rad: float) -> None:
+        self._manual_off()
+        self.robot.move_by(yaw_rad=yaw_rad, wait=False)
+
+    def set_velocity(
+        self,
+        forward_m_s: float,
+        right_m_s: float,
+        up_m_s: float,
+        yaw_rate_rad_s: float,
+        duration_s: float | None,
+    ) -> None:
+        self._manual_off()
+        self.robot.set_velocity(
+            forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s, duration_s=duration_s, wait=False
+        )
+
+    def hover(self) -> None:
+        self._manual_off()
+        self.robot.hover()
+
+    def land(self) -> None:
+        self._manual_off()
+        self.robot.land(wait=False)
+
+    def attitude(
+        self, roll_rad: float, pitch_rad: float, yaw_rate_rad_s: float, thrust_fraction: float
+    ) -> None:
+        with self._lock:
+            self._sticks = (roll_rad, pitch_rad, yaw_rate_rad_s, thrust_fraction)
+            live = self._sticks_live
+        if not live and (self.robot.busy or self.robot._motion is not None):
+            # Replace the robot's motion by a one-shot velocity DRIVE that ends after a tick.
+            self.robot.set_velocity(0.0, 0.0, 0.0, 0.0, duration_s=None, wait=False)
+            return
+        self._flush_sticks()
+
+    def _flush_sticks(self) -> None:
+        with self._lock:
+            sticks = self._sticks
+        if sticks is None or self.robot._motion is not None:
+            return
+        roll, pitch, yaw_rate, thrust = sticks
+        self.connection.send(
+            "DRIVE",
+            ("RollAngle", roll),
+            ("PitchAngle", pitch),
+            ("RotationalVelocity", yaw_rate),
+            ("Thrust", thrust),
+        )
+        with self._lock:
+            self._sticks_live = True
+            if self._sticks is sticks:
+                self._sticks = None
+
+    def advance(self, seconds: float) -> None:
+        """Send deferred sticks; in lockstep, let ``seconds`` of sim time pass."""
+        self._flush_sticks()
+        if self.lockstep:
+            self.connection.run_for(seconds)

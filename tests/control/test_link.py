@@ -1,0 +1,214 @@
+"""The connection's threads: no interleaved bytes, bounded queues, clean close, clear failures."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+
+import skeye
+from skeye.control import LinkClosed
+from skeye.errors import CommandRejected, LinkTimeout, SkeyeError
+from skeye.sim.protocol import LineDecoder, LineError, Message, format_message
+from tests.control.conftest import SimHandle, sim_running
+
+
+def _control_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("skeye-control")]
+
+
+def _assert_only(before: set[threading.Thread]) -> None:
+    """Our threads are gone at once; the server's session threads within a second."""
+    assert not _control_threads(), _control_threads()
+    deadline = time.monotonic() + 2.0
+    while set(threading.enumerate()) - before and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert set(threading.enumerate()) <= before, set(threading.enumerate()) - before
+
+
+@contextmanager
+def relay(port: int) -> Iterator[tuple[int, bytearray]]:
+    """A TCP relay to the simulator that records every byte the client sends."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    captured = bytearray()
+    threads: list[threading.Thread] = []
+
+    def pump(src: socket.socket, dst: socket.socket, record: bool) -> None:
+        try:
+            while data := src.recv(65536):
+                if record:
+                    captured.extend(data)
+                dst.sendall(data)
+        except OSError:
+            pass
+        finally:
+            for s in (src, dst):
+                try:
+                    s.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+
+    def accept() -> None:
+        client, _ = listener.accept()
+        upstream = socket.create_connection(("127.0.0.1", port))
+        for args in ((client, upstream, True), (upstream, client, False)):
+            t = threading.Thread(target=pump, args=args, daemon=True)
+            t.start()
+            threads.append(t)
+
+    acceptor = threading.Thread(target=accept, daemon=True)
+    acceptor.start()
+    try:
+        yield listener.getsockname()[1], captured
+    finally:
+        acceptor.join(5)
+        listener.close()
+        for t in threads:
+            t.join(5)
+
+
+def test_eight_producers_never_interleave_bytes(lockstep_sim: SimHandle) -> None:
+    per_thread = 60
+    padding = "x" * 3000  # long lines: unserialised writers would interleave them
+    with relay(lockstep_sim.server.port) as (port, captured):
+        with skeye.connect(f"127.0.0.1:{port}", queue_size=8) as sim:
+            errors: list[BaseException] = []
+
+            def produce(i: int) -> None:
+                try:
+                    for k in range(per_thread):
+                        if k % 2:
+                            sim.send("PING", ("Id", f"t{i}-{k}"), ("Pad", padding))
+                        else:  # requests are matched to their own answers by Id
+                            answer = sim.request("PING", ("Id", f"t{i}-{k}"), ("Pad", padding))
+                            assert answer.get("Id") == f"t{i}-{k}"
+                except BaseException as exc:
+                    errors.append(exc)
+
+            workers = [threading.Thread(target=produce, args=(i,)) for i in range(8)]
+            for w in workers:
+                w.start()
+            for w in workers:
+                w.join(30)
+            assert not errors, errors
+            sim.ping()  # everything before it has been written and answered
+    events = LineDecoder().feed(bytes(captured))
+    assert not [e for e in events if isinstance(e, LineError)]
+    pings = [e for e in events if isinstance(e, Message) and e.type == "PING"]
+    assert len(pings) == 8 * per_thread + 1
+    assert all(m.get("Pad") == padding for m in pings[:-1])
+    for i in range(8):  # each producer's commands arrive whole and in its order
+        ids = [m.get("Id") for m in pings if (m.get("Id") or "").startswith(f"t{i}-")]
+        assert ids == [f"t{i}-{k}" for k in range(per_thread)]
+
+
+def test_full_queue_blocks_then_raises_link_timeout() -> None:
+    """A simulator that stops reading: the queue fills and the producer gets LinkTimeout."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    accepted: list[socket.socket] = []
+
+    def serve() -> None:
+        conn, _ = listener.accept()
+        conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        conn.sendall(format_message("NFO", ("Gametype", "skeye"), ("TimeStep", 0.001),
+                                    ("Mode", "realtime")))
+        accepted.append(conn)  # ... and never read
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    big = "y" * 60000
+    with skeye.connect(f"127.0.0.1:{listener.getsockname()[1]}", queue_size=2,
+                       timeout_s=0.5) as sim:
+        started = time.monotonic()
+        with pytest.raises(LinkTimeout, match="queue full"):
+            for _ in range(10000):
+                sim.send("PING", ("Pad", big), timeout_s=0.3)
+        assert time.monotonic() - started < 30
+    server.join(5)
+    for c in accepted:
+        c.close()
+    listener.close()
+    assert not _control_threads()
+
+
+def test_close_stops_every_thread_lockstep(lockstep_sim: SimHandle) -> None:
+    before = set(threading.enumerate())
+    sim = skeye.connect(lockstep_sim.address)
+    copter = sim.spawn("hummingbird", start="Pad1")
+    copter.take_off(0.5)
+    assert len(_control_threads()) == 2  # message handler + command handler
+    sim.close()
+    sim.close()  # idempotent
+    _assert_only(before)
+    with pytest.raises(LinkClosed):
+        copter.fly_to(1.0, 0.0, 0.5)
+    with pytest.raises(LinkClosed):
+        sim.ping()
+
+
+def test_close_stops_every_thread_realtime() -> None:
+    with sim_running(mode="realtime") as handle:
+        before = set(threading.enumerate())
+        with skeye.connect(handle.address) as sim:
+            assert sim.mode == "realtime"
+            copter = sim.spawn("hummingbird", start="Pad1")
+            copter.take_off(0.3, wait=False)  # the control thread flies it
+            first = copter.ins.wait_next(2.0)
+            time.sleep(0.3)
+            assert copter.ins.latest is not None and copter.ins.latest.time_s > first.time_s
+            assert len(_control_threads()) == 3  # + the realtime control thread
+        _assert_only(before)
+
+
+def test_simulator_dying_mid_flight_raises_quickly() -> None:
+    with sim_running() as handle, skeye.connect(handle.address, timeout_s=5.0) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        copter.take_off(1.0)
+        killer = threading.Timer(0.3, handle.server.close)
+        killer.start()
+        started = time.monotonic()
+        with pytest.raises(SkeyeError) as info:
+            copter.fly_to(20.0, 0.0, 1.0)  # far: it is still flying when the server dies
+        killer.join()
+        assert time.monotonic() - started < 3.0
+        assert isinstance(info.value, LinkClosed | CommandRejected), info.value
+        assert "closed" in str(info.value) or "shutting down" in str(info.value)
+        with pytest.raises(SkeyeError):
+            copter.ins.wait_next(1.0)
+
+
+def test_engine_stopping_mid_flight_raises_quickly() -> None:
+    with sim_running() as handle, skeye.connect(handle.address, timeout_s=5.0) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        copter.take_off(1.0)
+        killer = threading.Timer(0.3, handle.runner.close)
+        killer.start()
+        started = time.monotonic()
+        with pytest.raises(CommandRejected, match="shutting down"):
+            copter.fly_to(20.0, 0.0, 1.0)
+        killer.join()
+        assert time.monotonic() - started < 3.0
+
+
+def test_realtime_simulator_dying_mid_flight_raises() -> None:
+    with sim_running(mode="realtime") as handle, skeye.connect(handle.address) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        killer = threading.Timer(0.5, handle.server.close)
+        killer.start()
+        started = time.monotonic()
+        with pytest.raises(LinkClosed, match="closed the connection"):
+            copter.take_off(2.0)
+        killer.join()
+        assert time.monotonic() - started < 3.0
+
+
+def test_nothing_listening_is_a_clear_error() -> None:
+    probe = socket.create_server(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    with pytest.raises(LinkClosed, match="cannot connect"):
+        skeye.connect(f"127.0.0.1:{port}", timeout_s=1.0)

@@ -1,0 +1,173 @@
+"""Links by URI: in-memory pair, TCP, and serial over a pseudo-terminal null modem."""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from skeye.errors import LocalProtocolError
+from skeye.link.packets import Result, ResultCode, VehicleStreamParser, encode
+from skeye.link.transport import (
+    Link,
+    LinkClosed,
+    TcpLink,
+    memory_pair,
+    open_link,
+    parse_uri,
+    pty_null_modem,
+)
+
+
+def recv_exactly(link: Link, n: int, timeout_s: float = 3.0) -> bytes:
+    data = b""
+    while len(data) < n:
+        chunk = link.recv(timeout_s)
+        assert chunk, f"timed out after {len(data)} of {n} bytes"
+        data += chunk
+    return data
+
+
+def tcp_pair() -> tuple[Link, Link]:
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    client = open_link(f"tcp://127.0.0.1:{port}")
+    sock, _ = server.accept()
+    server.close()
+    return client, TcpLink(sock)
+
+
+@pytest.fixture(params=["memory", "tcp", "serial"])
+def pair(request):
+    a: Link
+    b: Link
+    if request.param == "memory":
+        a, b = memory_pair()
+        yield a, b
+    elif request.param == "tcp":
+        a, b = tcp_pair()
+        yield a, b
+    else:
+        with pty_null_modem() as (dev_a, dev_b):
+            a = open_link(f"serial://{dev_a}?baud=57600")
+            b = open_link(f"serial://{dev_b}?baud=57600")
+            yield a, b
+    a.close()
+    b.close()
+
+
+def test_bytes_cross_both_ways_and_recv_times_out_empty(pair):
+    a, b = pair
+    assert b.recv(0.05) == b""
+    payload = bytes(range(256)) * 8
+    a.send(payload)
+    assert recv_exactly(b, len(payload)) == payload
+    b.send(b"pong")
+    assert recv_exactly(a, 4) == b"pong"
+
+
+def test_concurrent_senders_never_interleave_frames(pair):
+    a, b = pair
+    frames = [encode(Result(0x80 + t, ResultCode.OK, f"thread {t} " * 10)) for t in range(4)]
+    per_thread = 25
+
+    def blast(frame: bytes) -> None:
+        for _ in range(per_thread):
+            a.send(frame)
+
+    threads = [threading.Thread(target=blast, args=(f,)) for f in frames]
+    for t in threads:
+        t.start()
+    data = recv_exactly(b, sum(len(f) for f in frames) * per_thread)
+    for t in threads:
+        t.join()
+    parser = VehicleStreamParser()
+    events = parser.feed(data)
+    assert len(events) == 4 * per_thread and not parser.errors
+
+
+def test_close_is_idempotent_and_ends_the_peer():
+    for a, b in (memory_pair(), tcp_pair()):
+        with a:
+            pass
+        a.close()
+        assert a.closed
+        with pytest.raises(LinkClosed):
+            a.send(b"x")
+        with pytest.raises(LinkClosed):
+            b.recv(1.0)
+        b.close()
+
+
+def test_close_from_another_thread_wakes_a_blocked_recv():
+    a, b = tcp_pair()
+    errors: list[BaseException] = []
+
+    def reader() -> None:
+        try:
+            while True:
+                b.recv(0.1)
+        except LinkClosed as exc:
+            errors.append(exc)
+
+    t = threading.Thread(target=reader)
+    t.start()
+    b.close()
+    t.join(2.0)
+    assert not t.is_alive() and errors
+    a.close()
+
+
+def test_connect_refused_and_missing_serial_port_raise_link_closed():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    with pytest.raises(LinkClosed, match="cannot connect"):
+        open_link(f"tcp://127.0.0.1:{port}", timeout_s=1.0)
+    with pytest.raises(LinkClosed, match="/dev/does-not-exist"):
+        open_link("serial:///dev/does-not-exist?baud=57600")
+
+
+@pytest.mark.parametrize(
+    ("uri", "expected"),
+    [
+        ("tcp://127.0.0.1:7000", ("tcp", "127.0.0.1", 7000)),
+        ("TCP://localhost:1", ("tcp", "localhost", 1)),
+        ("serial:///dev/ttyUSB0?baud=57600", ("serial", "/dev/ttyUSB0", 57600)),
+        ("serial:///dev/ttyS1", ("serial", "/dev/ttyS1", 57600)),
+    ],
+)
+def test_parse_uri(uri, expected):
+    assert parse_uri(uri) == expected
+
+
+@pytest.mark.parametrize(
+    ("uri", "match"),
+    [
+        ("udp://1.2.3.4:5", "scheme"),
+        ("tcp://host", "host:port"),
+        ("serial://", "serial"),
+        ("serial:///dev/x?baud=fast", "not a number"),
+        ("serial:///dev/x?baud=0", "positive"),
+        ("serial:///dev/x?parity=E", "unknown option"),
+    ],
+)
+def test_bad_uris_name_the_problem(uri, match):
+    with pytest.raises(LocalProtocolError, match=match):
+        parse_uri(uri)
+
+
+@given(st.lists(st.binary(min_size=1, max_size=64), max_size=20))
+def test_memory_pair_delivers_any_chunking_in_order(chunks):
+    a, b = memory_pair()
+    for c in chunks:
+        a.send(c)
+    total = b"".join(chunks)
+    got = b""
+    while len(got) < len(total):
+        got += b.recv(0.5)
+    assert got == total

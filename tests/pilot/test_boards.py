@@ -1,0 +1,300 @@
+"""The emulated boards, sans I/O: answers, refusals, stick gesture, failsafe, state table."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skeye.link.crc import crc16
+from skeye.link.packets import (
+    PD,
+    Ack,
+    CommandStreamParser,
+    CtrlInput,
+    Hold,
+    ImuCalcData,
+    Land,
+    LlStatus,
+    MoveBy,
+    MoveFrame,
+    NavState,
+    NavStatus,
+    PadAction,
+    PadMode,
+    PadReport,
+    Poll,
+    Result,
+    ResultCode,
+    SkeyeMask,
+    Stream,
+    TakeOff,
+    Velocity,
+    encode,
+)
+from skeye.pilot.boards import BoardSettings, OnboardBoards
+from skeye.pilot.states import TRANSITIONS, FlightEvent, FlightStateMachine, IllegalTransition
+from tests.pilot.fake_airframe import FakeAirframe
+
+
+def make(link_timeout_s: float = 2.0, land_timeout_s: float = 20.0):
+    air = FakeAirframe()
+    boards = OnboardBoards(air, BoardSettings(link_timeout_s, land_timeout_s), now_s=0.0)
+    return air, boards
+
+
+def send(boards: OnboardBoards, data: bytes, now_s: float = 0.0) -> list:
+    out = []
+    for event in CommandStreamParser().feed(data):
+        out += boards.handle(event, now_s)
+    return out
+
+
+def result(replies: list) -> Result:
+    assert len(replies) == 1 and isinstance(replies[0], Result), replies
+    return replies[0]
+
+
+def skeye_frame(pd: int, payload: bytes, crc: int | None = None) -> bytes:
+    c = crc16(payload) if crc is None else crc
+    return (
+        b">*>s"
+        + len(payload).to_bytes(2, "little")
+        + bytes([pd])
+        + payload
+        + c.to_bytes(2, "little")
+        + b"<#<"
+    )
+
+
+def airborne(boards: OnboardBoards, air: FakeAirframe, now_s: float = 0.0) -> None:
+    assert result(send(boards, encode(TakeOff(1000)), now_s)).code is ResultCode.OK
+    air.finish(landed=False, armed=True, pos_ned_m=(0.0, 0.0, -1.0))
+    boards.tick(now_s)
+    assert boards.state is NavState.HOLDING
+
+
+def test_take_off_climbs_above_the_current_height_and_holds_when_done():
+    air, boards = make()
+    assert result(send(boards, encode(TakeOff(1500)))).code is ResultCode.OK
+    assert air.calls[-1] == ("take_off", (1.5,))
+    assert boards.state is NavState.TAKING_OFF
+    boards.tick(0.1)
+    assert boards.state is NavState.TAKING_OFF  # still climbing
+    air.finish(landed=False, armed=True)
+    boards.tick(0.2)
+    assert boards.state is NavState.HOLDING
+
+
+@pytest.mark.parametrize(
+    ("msg", "code"),
+    [
+        (Land(), ResultCode.REFUSED),
+        (Hold(), ResultCode.REFUSED),
+        (MoveBy(1000, 0, 0, 0, MoveFrame.BODY_FRD, 500), ResultCode.REFUSED),
+        (Velocity(100, 0, 0, 0, 0), ResultCode.REFUSED),
+    ],
+)
+def test_commands_refused_while_landed(msg, code):
+    air, boards = make()
+    r = result(send(boards, encode(msg)))
+    assert r.code is code and "landed" in r.reason
+    assert air.calls == []  # nothing reached the vehicle
+
+
+def test_take_off_while_taking_off_is_busy():
+    _, boards = make()
+    send(boards, encode(TakeOff(1000)))
+    r = result(send(boards, encode(TakeOff(1000))))
+    assert r.code is ResultCode.BUSY and r.command_pd == PD.TAKE_OFF
+
+
+def test_move_by_body_frame_turns_with_heading():
+    air, boards = make()
+    airborne(boards, air)
+    air.finish(rpy_rad=(0.0, 0.0, 1.5707963267948966))  # facing east
+    assert result(send(boards, encode(MoveBy(1000, 0, -500, 0, MoveFrame.BODY_FRD, 0)))).code == 0
+    name, (n, e, alt, speed) = air.calls[-1]
+    assert name == "fly_to" and n == pytest.approx(0.0, abs=1e-9) and e == pytest.approx(1.0)
+    assert alt == pytest.approx(1.5) and speed == 1.0
+    assert boards.state is NavState.FLYING
+    air.finish()
+    boards.tick(0.1)
+    assert boards.state is NavState.HOLDING
+
+
+def test_timed_velocity_ends_in_hold():
+    air, boards = make()
+    airborne(boards, air)
+    send(boards, encode(Velocity(500, 0, -200, 100, 300)), now_s=1.0)
+    assert air.calls[-1] == ("set_velocity", (0.5, 0.0, 0.2, 0.1, 0.3))
+    boards.tick(1.2)
+    assert boards.state is NavState.FLYING
+    boards.tick(1.31)
+    assert boards.state is NavState.HOLDING and air.calls[-1][0] == "hover"
+
+
+def test_velocity_beyond_the_vehicle_limit_is_a_bad_value():
+    air, boards = make()
+    airborne(boards, air)
+
+    def refuse(*args: object) -> None:
+        from skeye.errors import LocalProtocolError
+
+        raise LocalProtocolError("set_velocity: forward_m_s=30.0 exceeds the limit 1.0")
+
+    air.set_velocity = refuse
+    r = result(send(boards, encode(Velocity(30000, 0, 0, 0, 0))))
+    assert r.code is ResultCode.BAD_VALUE and "exceeds" in r.reason
+    assert boards.state is NavState.HOLDING  # the state did not change
+
+
+def test_bad_checksum_length_value_and_unknown_pd_are_answered_and_serving_goes_on():
+    _, boards = make()
+    good_ctrl = encode(CtrlInput(0, 0, 0, 0, 0))
+    bad_ctrl = good_ctrl[:-2] + bytes([good_ctrl[-2] ^ 0xFF, good_ctrl[-1]])
+    r = result(send(boards, bad_ctrl))
+    assert (r.command_pd, r.code) == (PD.CTRL_INPUT, ResultCode.BAD_CHECKSUM)
+    r = result(send(boards, skeye_frame(PD.TAKE_OFF, (1000).to_bytes(4, "little"), crc=0x1234)))
+    assert (r.command_pd, r.code) == (PD.TAKE_OFF, ResultCode.BAD_CHECKSUM)
+    r = result(send(boards, skeye_frame(PD.TAKE_OFF, b"\x01\x02")))
+    assert (r.command_pd, r.code) == (PD.TAKE_OFF, ResultCode.BAD_LENGTH)
+    r = result(send(boards, skeye_frame(PD.PAD_MODE, bytes([7, 0, 0, 0, 0]))))  # mode 7
+    assert (r.command_pd, r.code) == (PD.PAD_MODE, ResultCode.BAD_VALUE)
+    r = result(send(boards, skeye_frame(PD.TAKE_OFF, (0).to_bytes(4, "little"))))  # height 0
+    assert (r.command_pd, r.code) == (PD.TAKE_OFF, ResultCode.BAD_VALUE)
+    r = result(send(boards, skeye_frame(0x8F, b"")))
+    assert (r.command_pd, r.code) == (0x8F, ResultCode.BAD_VALUE)
+    r = result(send(boards, b">*>zz"))
+    assert (r.command_pd, r.code) == (0, ResultCode.BAD_VALUE)
+    replies = send(boards, b"garbage" + encode(Poll(0x0001)))
+    assert [type(m) for m in replies] == [LlStatus]
+    assert boards.errors["bad_checksum"] == 2 and boards.errors["bad_value"] == 3
+    assert replies[0].chksum_error == 2
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.binary(max_size=300))
+def test_arbitrary_bytes_never_break_the_boards(data):
+    _, boards = make()
+    for m in send(boards, data):
+        encode(m)  # every reply is a valid packet
+    assert [type(m) for m in send(boards, encode(Poll(0x0004)))] == [ImuCalcData]
+
+
+def test_poll_answers_each_structure_in_mask_order_with_scalings():
+    _air, boards = make()
+    replies = boards.poll(0x03FF)
+    assert [type(m).__name__ for m in replies] == [
+        "LlStatus",
+        "ImuRawData",
+        "ImuCalcData",
+        "RcData",
+        "ControllerOutput",
+        "GpsData",
+        "CurrentWay",
+        "GpsDataAdvanced",
+    ]
+    ll, _, calc = replies[0], replies[1], replies[2]
+    assert ll.battery_voltage_1 == 12400 and ll.flying == 0 and ll.motors_on == 0
+    assert calc.acc_z_calib == -10000 and calc.acc_z == 0  # at rest: -1 g body, 0 earth
+    assert calc.acc_absolute_value == 10000 and calc.height == 0
+    assert replies[5].latitude == 490_000_000 and replies[5].status == 3
+
+
+def test_pad_mode_is_stored_and_pad_reports_not_found():
+    _, boards = make()
+    assert result(send(boards, encode(PadMode(PadAction.LAND, 50, 300)))).code == 0
+    assert boards.pad.settings.mode is PadAction.LAND
+    assert boards.pad.settings.deadband_m == 0.05 and boards.pad.settings.max_speed_m_s == 0.3
+    send(boards, encode(Stream(0, int(SkeyeMask.PAD | SkeyeMask.NAV_STATUS), 100)), now_s=0.0)
+    out = boards.tick(0.0)
+    nav = next(m for m in out if isinstance(m, NavStatus))
+    pad = next(m for m in out if isinstance(m, PadReport))
+    assert nav.pad_mode is PadAction.LAND and pad.found == 0
+    assert boards.tick(0.05) == []  # not due yet
+    assert len(boards.tick(0.1)) == 2
+
+
+def test_link_loss_holds_then_lands():
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    airborne(boards, air, now_s=0.0)
+    boards.tick(1.9)
+    assert boards.state is NavState.HOLDING
+    boards.tick(2.0)
+    assert boards.state is NavState.FAILSAFE and air.calls[-1][0] == "hover"
+    boards.tick(21.9)
+    assert boards.state is NavState.FAILSAFE
+    boards.tick(22.0)
+    assert boards.state is NavState.LANDING and air.calls[-1][0] == "land"
+    air.finish(landed=True, armed=False)
+    boards.tick(22.1)
+    assert boards.state is NavState.LANDED
+
+
+def test_a_packet_during_failsafe_stops_the_land_countdown():
+    air, boards = make(link_timeout_s=1.0, land_timeout_s=2.0)
+    airborne(boards, air)
+    boards.tick(1.0)
+    assert boards.state is NavState.FAILSAFE
+    send(boards, encode(Poll(1)), now_s=1.5)
+    boards.tick(10.0)  # the client polls late: link lost again, but no landing yet
+    assert boards.state is NavState.FAILSAFE
+    assert result(send(boards, encode(Hold()), now_s=10.0)).code == 0
+    assert boards.state is NavState.HOLDING
+
+
+def test_no_failsafe_on_the_ground():
+    _, boards = make(link_timeout_s=0.5)
+    boards.tick(100.0)
+    assert boards.state is NavState.LANDED
+
+
+def test_motor_gesture_starts_motors_then_sticks_fly():
+    air, boards = make()
+    gesture = encode(CtrlInput(0, 0, 2047, 0, 0x0F))
+    for i in range(10):
+        assert send(boards, gesture, now_s=i * 0.1) == [Ack(PD.CTRL_INPUT)]
+    assert not boards.motors_on  # 0.9 s: not yet
+    send(boards, gesture, now_s=1.0)
+    assert boards.motors_on and boards.state is NavState.LANDED
+    assert "attitude" not in air.names()
+    send(boards, encode(CtrlInput(400, -400, 0, 2500, 0x0F)), now_s=1.1)
+    assert boards.state is NavState.FLYING
+    name, (roll, pitch, _yaw_rate, thrust) = air.calls[-1]
+    assert name == "attitude" and thrust == pytest.approx(2500 / 4095)
+    assert pitch == pytest.approx(0.174533, rel=1e-4) and roll == pytest.approx(-0.174533, rel=1e-4)
+
+
+def test_sticks_are_ignored_while_motors_are_off():
+    air, boards = make()
+    send(boards, encode(CtrlInput(0, 0, 0, 3000, 0x0F)))
+    assert air.calls == [] and boards.state is NavState.LANDED
+
+
+def test_motor_gesture_stops_motors_on_the_ground():
+    air, boards = make()
+    for i in range(12):
+        send(boards, encode(CtrlInput(0, 0, -2047, 0, 0x0F)), now_s=i * 0.1)
+    assert boards.motors_on
+    for _ in range(12):  # release, then hold again
+        send(boards, encode(CtrlInput(0, 0, 0, 0, 0x0F)), now_s=2.0)
+    for i in range(12):
+        send(boards, encode(CtrlInput(0, 0, -2047, 0, 0x0F)), now_s=3.0 + i * 0.1)
+    assert not boards.motors_on and air.calls[-1] == ("attitude", (0.0, 0.0, 0.0, 0.0))
+
+
+def test_state_table_raises_on_illegal_transitions():
+    fsm = FlightStateMachine()
+    with pytest.raises(IllegalTransition) as info:
+        fsm.fire(FlightEvent.LAND)
+    assert info.value.code is ResultCode.REFUSED
+    assert fsm.fire(FlightEvent.TAKE_OFF) is NavState.TAKING_OFF
+    with pytest.raises(IllegalTransition) as info:
+        fsm.fire(FlightEvent.MOVE)
+    assert info.value.code is ResultCode.BUSY
+    assert fsm.state is NavState.TAKING_OFF
+    # Every state can be left towards the ground somehow.
+    for state in NavState:
+        reachable = {nxt for (s, _), nxt in TRANSITIONS.items() if s is state}
+        assert state is NavState.LANDED or reachable & {NavState.LANDING, NavState.LANDED}

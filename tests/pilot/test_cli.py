@@ -1,0 +1,66 @@
+"""``skeye link`` and ``skeye pilot`` argument handling, against a pilot on a scripted airframe."""
+
+from __future__ import annotations
+
+import argparse
+import io
+
+from skeye.link import cli as link_cli
+from skeye.pilot import cli as pilot_cli
+from skeye.pilot.server import PilotServer
+from tests.pilot.fake_airframe import FakeAirframe
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="skeye")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    link_cli.register(sub)
+    pilot_cli.register(sub)
+    return p
+
+
+def run(*argv: str) -> tuple[int, str]:
+    args = parser().parse_args(list(argv))
+    out = io.StringIO()
+    return link_cli.run(args, out), out.getvalue()
+
+
+def test_link_commands_print_answers_and_exit_codes():
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot:
+        code, text = run("link", pilot.address, "poll", "ll_status,gps_data")
+        assert code == 0 and text.startswith("LlStatus battery_voltage_1=12400")
+        assert "GpsData latitude=490000000" in text
+        code, _ = run("link", pilot.address, "land")
+        assert code == link_cli.EXIT_REJECTED
+        code, text = run("link", pilot.address, "take-off", "1.5")
+        assert code == 0 and "Result command_pd=131 code=OK" in text
+        assert air.calls[-1] == ("take_off", (1.5,))
+        code, text = run("link", pilot.address, "pad-mode", "hold", "--deadband", "0.2")
+        assert code == 0 and pilot.boards.pad.settings.deadband_m == 0.2
+        code, text = run("link", pilot.address, "stream", "0.3", "--period", "0.05")
+        assert code == 0 and text.count("NavStatus state=TAKING_OFF") >= 3
+        code, _ = run("link", pilot.address, "poll", "no_such_bit")
+        assert code == link_cli.EXIT_USAGE
+    code, _ = run("link", "udp://x:1", "land")
+    assert code == link_cli.EXIT_USAGE
+
+
+def test_pilot_arguments():
+    args = parser().parse_args(
+        [
+            "pilot",
+            "--sim",
+            "127.0.0.1:3000",
+            "--serial",
+            "/dev/ttyUSB0",
+            "--baud",
+            "57600",
+            "--link-timeout",
+            "0.5",
+            "--land-timeout",
+            "3",
+        ]
+    )
+    assert args.serial == "/dev/ttyUSB0" and args.link_timeout == 0.5 and args.land_timeout == 3
+    assert args.host == "127.0.0.1" and args.func is pilot_cli.run

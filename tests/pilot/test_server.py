@@ -1,0 +1,93 @@
+"""The pilot server over real loopback TCP, on a scripted airframe: one client, link loss."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from skeye.errors import CommandRejected
+from skeye.link.packets import (
+    PD,
+    LlStatus,
+    NavState,
+    PollMask,
+    Result,
+    ResultCode,
+    SkeyeMask,
+    VehicleStreamParser,
+)
+from skeye.link.transport import LinkClosed
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.server import PilotServer
+from tests.pilot.fake_airframe import FakeAirframe
+
+
+def test_second_client_is_turned_away_and_first_is_untouched():
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot, Vehicle.open(pilot.address) as first:
+        first.poll(int(PollMask.LL_STATUS))
+        second = socket.create_connection(("127.0.0.1", pilot.port), timeout=2.0)
+        data = b""
+        while True:  # read until the pilot closes it
+            chunk = second.recv(4096)
+            if not chunk:
+                break
+            data += chunk
+        second.close()
+        (answer,) = VehicleStreamParser().feed(data)
+        assert isinstance(answer, Result)
+        assert answer.code is ResultCode.BUSY and "one ground station" in answer.reason
+        assert pilot.turned_away == 1
+        assert PD.LL_STATUS in first.poll(int(PollMask.LL_STATUS))
+        with Vehicle.open(pilot.address) as third:  # a Vehicle raises the refusal
+            with pytest.raises((CommandRejected, LinkClosed)) as info:
+                third.poll(1, timeout_s=2.0)
+            if isinstance(info.value, CommandRejected):
+                assert info.value.code == 5
+    # The first client left: a new one is served.
+    with PilotServer(air, port=0) as pilot:
+        with Vehicle.open(pilot.address) as a:
+            a.poll(1)
+        deadline = time.monotonic() + 2
+        while pilot.client is not None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with Vehicle.open(pilot.address) as b:
+            assert PD.LL_STATUS in b.poll(1)
+
+
+def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
+    air = FakeAirframe()
+    settings = BoardSettings(link_timeout_s=0.3, land_timeout_s=0.3)
+    with PilotServer(air, port=0, settings=settings) as pilot:
+        with Vehicle.open(pilot.address) as v:
+            v.take_off(1.0)
+            air.finish(landed=False, armed=True)
+            v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)  # streaming is not a packet from us
+            v.wait_state(NavState.HOLDING, timeout_s=2)
+            t0 = time.monotonic()
+            v.wait_state(NavState.FAILSAFE, timeout_s=2)
+            assert time.monotonic() - t0 >= 0.2
+            assert air.names()[-1] == "hover"
+            v.wait_state(NavState.LANDING, timeout_s=2)
+            assert air.names()[-1] == "land"
+        air.finish(landed=True, armed=False)
+        with Vehicle.open(pilot.address) as v:
+            ll = v.poll(1)[PD.LL_STATUS]
+            assert isinstance(ll, LlStatus) and ll.flying == 0
+            deadline = time.monotonic() + 2.0
+            while pilot.boards.state is not NavState.LANDED and time.monotonic() < deadline:
+                time.sleep(0.01)  # the loop notices the touchdown on its next tick
+            assert pilot.boards.state is NavState.LANDED
+
+
+def test_garbage_over_tcp_is_counted_and_serving_goes_on():
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot, Vehicle.open(pilot.address) as v:
+        v.send_raw(b"\x00\xff>*>zz>>>*>s\x05\x00garbage" * 20)
+        r = v.wait_result(0)
+        assert r.code is ResultCode.BAD_VALUE
+        assert PD.LL_STATUS in v.poll(1)
+        assert sum(pilot.boards.errors.values()) >= 20
