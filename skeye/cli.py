@@ -50,6 +50,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
             buffer = FrameBuffer()
             cameras = CameraSystem(sim, buffer, synchronous=args.mode == "lockstep")
             stack.callback(cameras.close)
+        recorder = None
+        if args.record is not None:
+            from skeye.sim.recording import Recorder
+
+            meta = {
+                "world": world.name,
+                "mode": args.mode,
+                "timestep_s": args.timestep,
+                "seed": args.seed,
+                "wind": args.wind,
+            }
+            # Entered before the server, so it closes after it and keeps the last lines.
+            recorder = stack.enter_context(Recorder(args.record, meta))
         server = stack.enter_context(ControlServer(runner, host=args.host, port=args.port))
         where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
         print(
@@ -57,6 +70,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
             f"seed {args.seed}; control protocol on {args.host}:{server.port} ({where})",
             flush=True,
         )
+        if recorder is not None:
+            recorder.attach(server, runner)
+            print(f"skeye sim: recording to {args.record}", flush=True)
         if cameras is not None:
             images = stack.enter_context(
                 ImageServer(cameras.buffer, host=args.host, port=args.image_port)
@@ -105,6 +121,13 @@ def _add_sim(sub: Any) -> None:
         default=None,
         help="serve camera images on this port (5003 by convention; 0 = any free)",
     )
+    p.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="record every line sent and received, and ground truth, to FILE (docs/recording.md)",
+    )
     p.set_defaults(func=cmd_sim)
 
 
@@ -114,14 +137,60 @@ def _add_vision(sub: Any) -> None:
     register(sub)
 
 
-# Each component adds its sub-commands here.
 def _add_snapshot(sub: Any) -> None:
     from skeye.sim.snapshot import register
 
     register(sub)
 
 
-_REGISTRARS: list[Callable[[Any], None]] = [_add_sim, _add_snapshot, _add_vision]
+def _add_replay(sub: Any) -> None:
+    from skeye.sim.replay import register
+
+    register(sub)
+
+
+def _add_plot(sub: Any) -> None:
+    from skeye.sim.plotting import register
+
+    register(sub)
+
+
+def _add_pilot(sub: Any) -> None:
+    from skeye.pilot.cli import register
+
+    register(sub)
+
+
+def _add_link(sub: Any) -> None:
+    from skeye.link.cli import register
+
+    register(sub)
+
+
+def _add_ground(sub: Any) -> None:
+    from skeye.ground.cli import register  # adds `ground` and `up`
+
+    register(sub)
+
+
+def _add_validate(sub: Any) -> None:
+    from skeye.validate.cli import register
+
+    register(sub)
+
+
+# Each component adds its sub-commands here.
+_REGISTRARS: list[Callable[[Any], None]] = [
+    _add_sim,
+    _add_snapshot,
+    _add_pilot,
+    _add_link,
+    _add_ground,
+    _add_vision,
+    _add_validate,
+    _add_replay,
+    _add_plot,
+]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -86,12 +86,25 @@ def _pad_action(mode: PadAction | str | int) -> PadAction:
         ) from None
 
 
+DEFAULT_KEEPALIVE_S = 0.5
+
+
 class Vehicle:
     """A vehicle at the other end of a link; a context manager that closes the link."""
 
-    def __init__(self, link: Link, timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
+    def __init__(
+        self,
+        link: Link,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        keepalive_s: float | None = DEFAULT_KEEPALIVE_S,
+    ) -> None:
         self.link = link
         self.timeout_s = timeout_s
+        # A ground station that goes quiet looks like a lost radio link to the vehicle (which
+        # then holds, and lands after its timeout): poll LL_STATUS when nothing else was sent
+        # for keepalive_s, like a GCS heartbeat. None turns it off (tests of the failsafe).
+        self.keepalive_s = keepalive_s
+        self._last_sent_s = time.monotonic()
         self.parser = VehicleStreamParser()
         self.latest: dict[PD, Message] = {}
         self.frame_errors = 0
@@ -108,9 +121,18 @@ class Vehicle:
         self._reader.start()
 
     @classmethod
-    def open(cls, uri: str, timeout_s: float = DEFAULT_TIMEOUT_S) -> Vehicle:
+    def open(
+        cls,
+        uri: str,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        keepalive_s: float | None = DEFAULT_KEEPALIVE_S,
+    ) -> Vehicle:
         """Open ``tcp://host:port`` or ``serial:///dev/ttyX?baud=57600`` and wrap it."""
-        return cls(open_link(uri), timeout_s=timeout_s)
+        return cls(open_link(uri), timeout_s=timeout_s, keepalive_s=keepalive_s)
+
+    def _send(self, data: bytes) -> None:
+        self._last_sent_s = time.monotonic()
+        self.link.send(data)
 
     # -- lifecycle -----------------------------------------------------------------------
     def close(self, timeout_s: float = 2.0) -> None:
@@ -144,6 +166,9 @@ class Vehicle:
                 if data:
                     for event in self.parser.feed(data):
                         self._dispatch(event)
+                keepalive = self.keepalive_s
+                if keepalive is not None and time.monotonic() - self._last_sent_s >= keepalive:
+                    self._send(encode(Poll(int(PollMask.LL_STATUS))))
         except LinkClosed:
             pass
         except BaseException as exc:  # reaches waiting callers through _wait
@@ -234,7 +259,7 @@ class Vehicle:
     def send_raw(self, data: bytes) -> None:
         """Send bytes as they are (tests, and tools checking a vehicle's error handling)."""
         with self._command_lock:
-            self.link.send(data)
+            self._send(data)
 
     def command(self, msg: Message, timeout_s: float | None = None) -> Result | Ack:
         """Send a skeye or AscTec command and wait for its RESULT or ack.
@@ -251,7 +276,7 @@ class Vehicle:
         with self._command_lock, self._cond:
             acks0 = self._acks[pd]
             results0 = len(self._results[pd])
-            self.link.send(encode(msg))
+            self._send(encode(msg))
             self._wait(
                 lambda: self._acks[pd] > acks0 or len(self._results[pd]) > results0,
                 f"answer to {type(msg).__name__}",
@@ -276,7 +301,7 @@ class Vehicle:
         self._check_turned_away()
         with self._command_lock, self._cond:
             start = {pd: self._counts[pd] for pd in wanted}
-            self.link.send(encode(request))
+            self._send(encode(request))
             self._wait(
                 lambda: all(self._counts[pd] > start[pd] for pd in wanted),
                 f"poll answer (mask 0x{mask:04x})",

@@ -259,6 +259,10 @@ class OnboardBoards:
         self._end_motion()
         self.motors_on = True
 
+    def land(self) -> None:
+        """Start a landing where the vehicle is (LAND, >*>we, a pad landing's touchdown)."""
+        self._land()
+
     def _land(self) -> None:
         self.flight.check(FlightEvent.LAND)
         self.airframe.land()

@@ -42,6 +42,9 @@ def run(args: argparse.Namespace) -> int:
                 max_speed_m_s=robot.motion_config.max_speed_m_s,
                 default_speed_m_s=min(1.0, robot.motion_config.max_speed_m_s),
             )
+            vision = None
+            if args.images is not None:
+                vision = pad_vision_factory(sim, robot, args.camera)
             lockstep = sim.mode == "lockstep"
             tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
             server = PilotServer(
@@ -53,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
                 tick_s=tick_s,
                 lockstep=lockstep,
                 lockstep_rate=args.lockstep_rate,
+                vision=vision,
             )
             stop = threading.Event()
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -74,6 +78,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down") -> Any:
+    """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator."""
+    from skeye.pilot.vision import PadVision
+
+    conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
+    fov_h_rad = conf.get_float("FOV")
+
+    def make(boards: Any, lock: Any) -> PadVision:
+        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad)
+
+    return make
+
+
 def register(subparsers: Any) -> None:
     """Add ``skeye pilot`` to the main parser's subcommands."""
     p = subparsers.add_parser(
@@ -83,7 +100,12 @@ def register(subparsers: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address")
-    p.add_argument("--images", default=None, help="image server address (e.g. 127.0.0.1:5003)")
+    p.add_argument(
+        "--images",
+        default=None,
+        help="image server address (e.g. 127.0.0.1:5003): enables landing-pad vision",
+    )
+    p.add_argument("--camera", default="Down", help="the downward camera's name")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")

@@ -7,8 +7,9 @@ velocity command towards the pad, limited in magnitude to ``max_speed_m_s`` (0.3
 default); inside the deadband the command is zero (the vehicle's own board then holds zero
 velocity on its INS estimate, and the integrator keeps its value so a steady push stays
 compensated). Vertically, HOLD keeps the height; LAND descends while the vehicle is over the
-pad (offset within ``centre_tolerance_m``), more slowly near the ground, and commits to the
-touchdown below ``commit_height_m`` where the outer rings leave the image.
+pad (offset within ``centre_tolerance_m``), correcting down to a tighter deadband
+(``landing_deadband_m``) so it aims at the centre, more slowly near the ground, and commits to
+the touchdown below ``commit_height_m``, before the detector loses the pad (it needs two rings).
 
 Losing the pad (no detection for ``lost_after_s``) makes the vehicle stop, then climb slowly
 (``search_climb_m_s``, up to ``search_ceiling_m``) to widen its view, and say so through
@@ -37,7 +38,8 @@ class PadHoldParams:
     final_descent_m_s: float = 0.12
     slow_below_m: float = 0.8
     centre_tolerance_m: float = 0.08
-    commit_height_m: float = 0.35
+    landing_deadband_m: float = 0.02  # LAND aims at the centre, not just near it
+    commit_height_m: float = 0.5  # the detector needs two rings: lost below ~0.3 m
     lost_after_s: float = 0.5
     search_climb_m_s: float = 0.1
     search_ceiling_m: float = 4.0
@@ -99,7 +101,8 @@ class PadHoldLaw:
         self._last_seen_s = time_s
         self._height_m = height_m
         offset = math.hypot(forward_m, right_m)
-        if offset > p.deadband_m:
+        deadband = min(p.deadband_m, p.landing_deadband_m) if landing else p.deadband_m
+        if offset > deadband:
             lim = p.integral_limit_m_s / max(p.ki, 1e-9)
             self._int_f = min(lim, max(-lim, self._int_f + forward_m * dt))
             self._int_r = min(lim, max(-lim, self._int_r + right_m * dt))

@@ -27,6 +27,7 @@ import threading
 import time
 from collections.abc import Callable
 from types import TracebackType
+from typing import Any
 
 from skeye.errors import ConfigError
 from skeye.link.packets import CommandStreamParser, Message, Result, ResultCode, encode
@@ -66,6 +67,7 @@ class PilotServer:
         lockstep: bool = False,
         lockstep_rate: float = 1.0,
         clock: Callable[[], float] = time.monotonic,
+        vision: Callable[[OnboardBoards, threading.Lock], Any] | None = None,
     ) -> None:
         if (port is None) == (serial_uri is None):
             raise ConfigError("PilotServer needs exactly one of port= or serial_uri=")
@@ -82,6 +84,8 @@ class PilotServer:
         self.turned_away = 0
         self.loop_error: BaseException | None = None
         self._lock = threading.Lock()
+        # The landing-pad vision (skeye.pilot.vision.PadVision), stepped after every tick.
+        self.vision = vision(self.boards, self._lock) if vision is not None else None
         self._client: Link | None = None
         self._client_lock = threading.Lock()
         self._stop = threading.Event()
@@ -232,6 +236,8 @@ class PilotServer:
                 if client is not None and out:
                     self._send(client, out)
                 self.airframe.advance(self.tick_s)  # no-op for time unless lockstep
+                if self.vision is not None:
+                    self.vision.step()
                 if self.lockstep:
                     if self.lockstep_rate > 0:
                         next_s += self.tick_s / self.lockstep_rate

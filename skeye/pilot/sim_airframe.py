@@ -116,7 +116,15 @@ class SimAirframe:
 
     def fly_to(self, north_m: float, east_m: float, altitude_m: float, speed_m_s: float) -> None:
         self._manual_off()
-        self.robot.fly_to(north_m, east_m, altitude_m, wait=False, max_speed_m_s=speed_m_s)
+        # The packet's speed bounds the whole move: horizontal speed and climb rate alike.
+        self.robot.fly_to(
+            north_m,
+            east_m,
+            altitude_m,
+            wait=False,
+            max_speed_m_s=speed_m_s,
+            max_climb_m_s=min(speed_m_s, self.robot.motion_config.max_climb_m_s),
+        )
 
     def fly_to_gps(
         self, latitude_deg: float, longitude_deg: float, altitude_m: float, speed_m_s: float

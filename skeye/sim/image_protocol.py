@@ -536,6 +536,8 @@ class DecodedFrame:
         if self.frame_type is FrameType.RAW:
             img = decode_raw(self.data)
         else:
+            if not self.data:  # OpenCV raises its own error on an empty buffer
+                raise RemoteProtocolError(f"{self.frame_type.name} frame with no image data")
             img_or_none = cv2.imdecode(np.frombuffer(self.data, np.uint8), cv2.IMREAD_COLOR)
             if img_or_none is None:
                 raise RemoteProtocolError(

@@ -8,10 +8,17 @@ not read, its queue fills and further stream lines are dropped and counted, so a
 never slows the physics or other clients. Answers (RES, ERR, GEO, CONF, NFO) always go through
 the same queue, so their order relative to the stream is kept. Every bad line gets an ``ERR``
 with a reason and the connection stays usable; only an over-long line closes it.
+
+Observers (:attr:`ControlServer.observers`, e.g. the flight recorder) see every connection
+opened (``+``) and closed (``-``), every line received (``<``, re-encoded from the decoded
+message) and every chunk queued to a client (``>``, one or more whole lines). They are called on
+the thread that produced the data (the engine's for the stream), must not block, and a failing
+observer is logged and never breaks the session.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import queue
@@ -36,8 +43,18 @@ from skeye.sim.wind import make_settings, parse_params
 
 log = logging.getLogger(__name__)
 
-OUTBOX_LINES = 20000
+OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
 _CLOSE = b""
+
+# (connection id, direction "+" "-" "<" ">", data): see the module comment.
+LineObserver = Callable[[int, str, bytes], None]
+
+
+def _line_bytes(event: Message | LineError) -> bytes:
+    """A received line as observers see it: its type and blocks (or the bad line's text)."""
+    if isinstance(event, LineError):
+        return event.line.encode("utf-8", "replace")
+    return " ".join([event.type, *(f"{{{b}}}" for b in event.blocks)]).encode("utf-8")
 
 
 class ClientSession:
@@ -47,10 +64,13 @@ class ClientSession:
         self.server = server
         self.sock = sock
         self.peer = peer
+        self.conn_id = next(server._conn_ids)
         self.robot_name: str | None = None
         self.robot_config: Any = None
-        self.outbox: queue.Queue[bytes] = queue.Queue(OUTBOX_LINES)
-        self.dropped = 0
+        self.outbox: queue.Queue[bytes] = queue.Queue()
+        self.dropped = 0  # lines not sent because the client did not read them in time
+        self._queued_bytes = 0
+        self._queued_lock = threading.Lock()
         self._closed = threading.Event()
         self._reader = threading.Thread(
             target=self._read_loop, name=f"sim-read-{peer}", daemon=True
@@ -68,10 +88,15 @@ class ClientSession:
         """Queue a line; never blocks (called from the engine thread too)."""
         if self._closed.is_set():
             return
-        try:
-            self.outbox.put_nowait(line)
-        except queue.Full:
-            self.dropped += 1
+        if self.server.observers:
+            self.server.notify(self.conn_id, ">", line)
+        with self._queued_lock:
+            # One chunk may be larger than the bound (a long lockstep STEP); a backlog may not.
+            if self._queued_bytes and self._queued_bytes + len(line) > OUTBOX_BYTES:
+                self.dropped += max(1, line.count(b"\n"))
+                return
+            self._queued_bytes += len(line)
+        self.outbox.put_nowait(line)
 
     def _write_loop(self) -> None:
         try:
@@ -89,7 +114,10 @@ class ClientSession:
                         chunks.append(more)
                 except queue.Empty:
                     pass
-                self.sock.sendall(b"".join(chunks))
+                data = b"".join(chunks)
+                self.sock.sendall(data)
+                with self._queued_lock:
+                    self._queued_bytes -= len(data)
         except OSError:
             pass
         finally:
@@ -111,6 +139,8 @@ class ClientSession:
                 if not data:
                     break
                 for event in decoder.feed(data):
+                    if self.server.observers:
+                        self.server.notify(self.conn_id, "<", _line_bytes(event))
                     if isinstance(event, LineError):
                         self.send(format_error(event.command, event.reason))
                         if event.fatal:
@@ -128,14 +158,7 @@ class ClientSession:
                 self.server.runner.submit(lambda sim: sim.remove(name))
             except SkeyeError:
                 pass
-        try:
-            self.outbox.put(_CLOSE, timeout=1.0)
-        except queue.Full:
-            self._closed.set()
-            try:
-                self.sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
+        self.outbox.put_nowait(_CLOSE)  # the writer sends what is queued, then stops
         self.server._forget(self)
 
     def close(self, timeout_s: float = 2.0) -> None:
@@ -144,10 +167,7 @@ class ClientSession:
             self.sock.shutdown(socket.SHUT_RDWR)
         except OSError:
             pass
-        try:
-            self.outbox.put_nowait(_CLOSE)
-        except queue.Full:
-            pass
+        self.outbox.put_nowait(_CLOSE)
         for t in (self._reader, self._writer):
             if t.is_alive() and t is not threading.current_thread():
                 t.join(timeout_s)
@@ -425,6 +445,8 @@ class ControlServer:
             "wind": _set_wind,
             "camera": _set_camera,
         }
+        self.observers: list[LineObserver] = []
+        self._conn_ids = itertools.count(1)
         self._sessions: set[ClientSession] = set()
         self._lock = threading.Lock()
         self._closing = threading.Event()
@@ -470,6 +492,8 @@ class ControlServer:
                     sock.close()
                     continue
                 self._sessions.add(session)
+            if self.observers:
+                self.notify(session.conn_id, "+", session.peer.encode())
             session.send(self.nfo_line())
             session.start()
             log.info("client %s connected", session.peer)
@@ -477,7 +501,17 @@ class ControlServer:
     def _forget(self, session: ClientSession) -> None:
         with self._lock:
             self._sessions.discard(session)
+        if self.observers:
+            self.notify(session.conn_id, "-", session.peer.encode())
         log.info("client %s disconnected", session.peer)
+
+    def notify(self, conn_id: int, direction: str, data: bytes) -> None:
+        """Hand data to every observer; one that raises is logged, never propagated."""
+        for observer in list(self.observers):
+            try:
+                observer(conn_id, direction, data)
+            except Exception:
+                log.exception("observer %r failed", observer)
 
     @property
     def client_count(self) -> int:

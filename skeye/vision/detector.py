@@ -54,6 +54,7 @@ from skeye.vision.pad import SKEYE_4, PadDefinition
 _MIN_CONTRAST = 30.0  # grey levels between a border's black and white along a ray
 _SAMPLES_PER_RAY = 13
 _MAX_BORDER_RMS_PX = 0.5  # scatter of one border's points about the joint fit
+_BORDER_RMS_PER_PX = 0.006  # ... or this fraction of its radius, whichever is larger
 _STEP_FRACTION = 0.5  # of the local contrast, between the two halves of a ray's window
 _CANDIDATE_RAYS = 48
 _FINAL_RAYS = 64
@@ -644,13 +645,16 @@ def _finish(
     used = use & (counts > 0)
     if (counts[use] < 5).any():
         return NOT_FOUND
-    if (np.abs(bias[used]) > 0.5 + 0.01 * scale * radius_m[look][used]).any():
+    r_used = scale * radius_m[look][used]
+    if (np.abs(bias[used]) > 0.5 + 0.015 * r_used).any():
         return NOT_FOUND
+    # Limits grow with the border's radius: an attitude error of a few milliradians bends a
+    # 300 px border (low heights) by about a pixel; small, distant rings keep the 0.5 px floor.
     sq = np.bincount(border_idx, weights=res * res, minlength=look.size) / np.maximum(counts, 1)
-    if (sq[used] > _MAX_BORDER_RMS_PX**2).any():
+    if (sq[used] > np.maximum(_MAX_BORDER_RMS_PX, _BORDER_RMS_PER_PX * r_used) ** 2).any():
         return NOT_FOUND
     rms = float(np.sqrt(np.mean(res * res)))
-    if rms > 1.0:
+    if rms > max(1.0, _BORDER_RMS_PER_PX * float(r_used.max())):
         return NOT_FOUND
 
     height_m = view.f / scale

@@ -39,6 +39,7 @@ def test_landing_descends_only_when_centred_and_commits_low():
     assert law.update(0.0, True, 0.2, 0.0, 1.5, landing=True).up_m_s == 0.0
     assert law.update(0.1, True, 0.01, 0.0, 1.5, landing=True).up_m_s == -0.25
     assert law.update(0.2, True, 0.01, 0.0, 0.6, landing=True).up_m_s == -0.12
+    assert not law.update(0.25, True, 0.01, 0.0, 0.6, landing=True).touchdown
     final = law.update(0.3, True, 0.01, 0.0, 0.3, landing=True)
     assert final.touchdown and final.up_m_s < 0
 

@@ -62,7 +62,7 @@ def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
     air = FakeAirframe()
     settings = BoardSettings(link_timeout_s=0.3, land_timeout_s=0.3)
     with PilotServer(air, port=0, settings=settings) as pilot:
-        with Vehicle.open(pilot.address) as v:
+        with Vehicle.open(pilot.address, keepalive_s=None) as v:  # goes quiet after take-off
             v.take_off(1.0)
             air.finish(landed=False, armed=True)
             v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)  # streaming is not a packet from us
@@ -91,3 +91,16 @@ def test_garbage_over_tcp_is_counted_and_serving_goes_on():
         assert r.code is ResultCode.BAD_VALUE
         assert PD.LL_STATUS in v.poll(1)
         assert sum(pilot.boards.errors.values()) >= 20
+
+
+def test_a_quiet_ground_station_keeps_the_link_alive_with_its_heartbeat():
+    air = FakeAirframe()
+    settings = BoardSettings(link_timeout_s=0.3, land_timeout_s=0.3)
+    with PilotServer(air, port=0, settings=settings) as pilot:
+        with Vehicle.open(pilot.address, keepalive_s=0.1) as v:
+            v.take_off(1.0)
+            air.finish(landed=False, armed=True)
+            v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+            v.wait_state(NavState.HOLDING, timeout_s=2)
+            time.sleep(1.0)  # well past the link timeout, sending no command
+            assert pilot.boards.state is NavState.HOLDING

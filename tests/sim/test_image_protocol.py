@@ -454,3 +454,13 @@ def test_frame_type_and_size_survive_any_payload(frame_type: int, payload: bytes
     assert struct.unpack(">I", wire[1:5])[0] == len(payload)
     events = FrameDecoder().feed(wire)
     assert len(events) == 1
+
+
+def test_an_empty_compressed_frame_is_a_protocol_error():
+    from skeye.errors import RemoteProtocolError
+    from skeye.sim.image_protocol import FrameDecoder, FrameType, encode_frame
+
+    for kind in (FrameType.PNG, FrameType.JPEG_GOOD):
+        (frame,) = FrameDecoder().feed(encode_frame(kind, b""))
+        with pytest.raises(RemoteProtocolError, match="no image data"):
+            frame.image()

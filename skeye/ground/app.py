@@ -1,0 +1,215 @@
+"""The ground-control web application (ASGI): the page, a REST API and two WebSockets.
+
+How this works: ``create_app(bridge, video)`` builds a FastAPI app around a ``VehicleBridge``
+(the vehicle link, its own thread) and an optional ``VideoRelay`` (the camera, its own
+thread). Request handlers never touch a socket to the vehicle: they read the bridge's snapshot
+and hand validated commands to ``bridge.execute`` in a worker thread.
+
+- ``GET /``: the page (``static/index.html``; its scripts and styles under ``/static``, all
+  local, no CDN).
+- ``GET /api/state``: telemetry, link quality and video status; ``GET /api/history``: recent
+  track; ``GET /api/commands``: the command table (names, arguments, ranges).
+- ``POST /api/command/{name}`` with a JSON object of arguments: 200 and the outcome when the
+  vehicle accepted it; 409 with the RESULT code and reason when it refused; 400 for a body that
+  is not JSON, 404 for an unknown command, 422 for bad arguments (the message names the
+  argument), 503 when no vehicle is connected or it did not answer.
+- ``WS /ws``: pushes ``telemetry`` at ``telemetry_hz`` (only when something changed, and at
+  least once a second so link ages stay fresh); takes ``{"type": "command", "id", "name",
+  "args"}`` and answers ``{"type": "result", "id", ...}`` with the same outcomes and statuses.
+- ``WS /ws/video``: for every new frame, a JSON ``frame`` message (size, detection: ring
+  ellipses and centre in pixels) and then the JPEG as a binary message.
+
+Every browser tab gets its own WebSocket tasks; a slow tab only slows itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+
+from skeye.errors import LocalProtocolError
+from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
+from skeye.ground.commands import COMMANDS, describe_commands, parse_command
+from skeye.ground.video import VideoRelay
+
+log = logging.getLogger(__name__)
+
+STATIC_DIR = Path(str(resources.files("skeye.ground").joinpath("static")))
+
+
+class CommandError(Exception):
+    """A command that did not reach the vehicle: HTTP status and message."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+async def perform(bridge: VehicleBridge, name: str, body: Any) -> tuple[int, dict[str, Any]]:
+    """Validate and execute one command; returns (HTTP status, JSON answer)."""
+    if name not in COMMANDS:
+        raise CommandError(
+            404, f"unknown command {name!r}; known commands: {', '.join(COMMANDS)}"
+        )
+    try:
+        command = parse_command(name, body)
+    except LocalProtocolError as exc:
+        raise CommandError(422, str(exc)) from None
+    try:
+        outcome = await asyncio.to_thread(bridge.execute, command)
+    except VehicleUnavailable as exc:
+        raise CommandError(503, str(exc)) from None
+    return (200 if outcome.ok else 409), outcome.to_json()
+
+
+def _error(status: int, message: str) -> JSONResponse:
+    return JSONResponse({"error": message, "status": status}, status_code=status)
+
+
+def create_app(
+    bridge: VehicleBridge, video: VideoRelay | None = None, *, telemetry_hz: float = 10.0
+) -> FastAPI:
+    """The ground-control app; the caller owns (starts and closes) ``bridge`` and ``video``."""
+    app = FastAPI(title="skeye ground control", docs_url="/api/docs", redoc_url=None)
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+    period_s = 1.0 / telemetry_hz
+
+    def video_status() -> dict[str, Any] | None:
+        return None if video is None else video.status_json()
+
+    @app.get("/", include_in_schema=False)
+    async def index() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+
+    @app.get("/api/state")
+    async def state() -> dict[str, Any]:
+        return {**bridge.snapshot(), "video": video_status()}
+
+    @app.get("/api/history")
+    async def history() -> dict[str, Any]:
+        return {"points": bridge.history()}
+
+    @app.get("/api/commands")
+    async def commands() -> dict[str, Any]:
+        return {"commands": describe_commands()}
+
+    @app.post("/api/command/{name}")
+    async def command(name: str, request: Request) -> Response:
+        raw = await request.body()
+        body: Any = None
+        if raw.strip():
+            try:
+                body = json.loads(raw)
+            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                return _error(400, f"request body is not valid JSON: {exc}")
+        try:
+            status, answer = await perform(bridge, name, body)
+        except CommandError as exc:
+            return _error(exc.status, exc.message)
+        return JSONResponse(answer, status_code=status)
+
+    @app.get("/api/video/frame.jpg")
+    async def frame() -> Response:
+        latest = None if video is None else video.latest()
+        if latest is None:
+            why = "no video source configured" if video is None else "no frame yet"
+            return _error(503, why)
+        return Response(latest.jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+
+    @app.get("/api/video/detection")
+    async def detection() -> Response:
+        latest = None if video is None else video.latest()
+        if latest is None:
+            return _error(503, "no video frame yet")
+        return JSONResponse(latest.meta_json())
+
+    @app.websocket("/ws")
+    async def telemetry_ws(ws: WebSocket) -> None:
+        await ws.accept()
+        send_lock = asyncio.Lock()
+
+        async def send(msg: dict[str, Any]) -> None:
+            async with send_lock:
+                await ws.send_json(msg)
+
+        async def pusher() -> None:
+            last_seq = -1
+            last_sent = 0.0
+            loop = asyncio.get_running_loop()
+            while True:
+                now = loop.time()
+                if bridge.seq != last_seq or now - last_sent >= 1.0:
+                    snap = bridge.snapshot()
+                    last_seq, last_sent = snap["seq"], now
+                    snap["video"] = video_status()
+                    await send(snap)
+                await asyncio.sleep(period_s)
+
+        async def run_command(msg: dict[str, Any]) -> None:
+            ident = msg.get("id")
+            try:
+                status, answer = await perform(bridge, str(msg.get("name")), msg.get("args"))
+            except CommandError as exc:
+                status, answer = exc.status, {"error": exc.message}
+            await send({"type": "result", "id": ident, "status": status, **answer})
+
+        await send(
+            {
+                "type": "hello",
+                "commands": describe_commands(),
+                "history": bridge.history(),
+                "video": video_status(),
+            }
+        )
+        push = asyncio.create_task(pusher())
+        tasks: set[asyncio.Task[None]] = set()
+        try:
+            while True:
+                text = await ws.receive_text()
+                try:
+                    msg = json.loads(text)
+                    if not isinstance(msg, dict) or msg.get("type") != "command":
+                        raise ValueError('expected {"type": "command", "name": ..., "args": {}}')
+                except ValueError as exc:
+                    await send({"type": "result", "id": None, "status": 400, "error": str(exc)})
+                    continue
+                task = asyncio.create_task(run_command(msg))
+                tasks.add(task)
+                task.add_done_callback(tasks.discard)
+        except WebSocketDisconnect:
+            pass
+        finally:
+            push.cancel()
+            for task in list(tasks):
+                task.cancel()
+
+    @app.websocket("/ws/video")
+    async def video_ws(ws: WebSocket) -> None:
+        await ws.accept()
+        if video is None:
+            await ws.send_json({"type": "status", "state": "no video source configured"})
+            await ws.close()
+            return
+        last_seq = -1
+        try:
+            while True:
+                latest = video.latest()
+                if latest is not None and latest.seq != last_seq:
+                    last_seq = latest.seq
+                    await ws.send_json(latest.meta_json())
+                    await ws.send_bytes(latest.jpeg)
+                else:
+                    await asyncio.sleep(0.5 / video.fps)
+        except WebSocketDisconnect:
+            pass
+
+    return app

@@ -1,0 +1,279 @@
+"""``skeye ground`` (the web UI server) and ``skeye up`` (simulator + pilot + ground control).
+
+``skeye ground --vehicle tcp://127.0.0.1:7000 [--video tcp://127.0.0.1:5003] --port 8080``
+serves the page on http://127.0.0.1:8080/ (``--host`` to listen elsewhere); ``--vehicle`` may be
+``serial:///dev/ttyUSB0?baud=57600`` for the real vehicle.
+
+``skeye up`` starts ``skeye sim`` (with its image server), ``skeye pilot`` and ``skeye ground``
+as child processes on this machine, waits until each one listens, prints the URL, and on Ctrl-C
+or SIGTERM (or when one of them dies) stops them all: SIGTERM in reverse order, then SIGKILL
+for any that has not exited after a few seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+from urllib.parse import urlsplit
+
+from skeye.errors import ConfigError, LocalProtocolError
+
+STOP_DEADLINE_S = 5.0
+START_DEADLINE_S = 60.0
+
+
+def _default_fov_rad(robot: str) -> float:
+    """The horizontal field of view of the robot class's first camera."""
+    from skeye.sim.robot_config import load_robot_config
+
+    config = load_robot_config(robot)
+    for mount in config.sensors:
+        if mount.type_name.lower() == "camera":
+            fov = dict(mount.params).get("fov_h_rad")
+            if isinstance(fov, int | float):
+                return float(fov)
+    raise ConfigError(f"robot class {robot!r} has no camera with fov_h_rad")
+
+
+def _host_port(uri: str) -> tuple[str, int]:
+    parts = urlsplit(uri if "://" in uri else f"tcp://{uri}")
+    if parts.scheme != "tcp" or not parts.hostname or parts.port is None:
+        raise LocalProtocolError(f"video source {uri!r}: expected tcp://host:port")
+    return parts.hostname, parts.port
+
+
+def run_ground(args: argparse.Namespace) -> int:
+    """Serve the ground-control page until SIGINT/SIGTERM."""
+    import uvicorn
+
+    from skeye.ground.app import create_app
+    from skeye.ground.bridge import VehicleBridge
+    from skeye.ground.video import VideoRelay
+
+    if args.camera_fov_deg is not None:
+        fov_rad = math.radians(args.camera_fov_deg)
+    else:
+        fov_rad = _default_fov_rad(args.robot)
+    sock = socket.create_server((args.host, args.port))
+    port = sock.getsockname()[1]
+    with VehicleBridge(args.vehicle) as bridge:
+        video = None
+        if args.video:
+            host, vport = _host_port(args.video)
+            video = VideoRelay(
+                host,
+                vport,
+                fov_h_rad=fov_rad,
+                camera=args.camera,
+                fps=args.video_fps,
+                attitude=bridge.attitude_rad,
+            ).start()
+        try:
+            app = create_app(bridge, video)
+            config = uvicorn.Config(app, log_level="warning", ws_ping_interval=None)
+            server = uvicorn.Server(config)
+            shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+            print(
+                f"skeye ground: http://{shown}:{port}/ (vehicle {args.vehicle}"
+                f"{', video ' + args.video if args.video else ''})",
+                flush=True,
+            )
+            server.run(sockets=[sock])  # returns on SIGINT / SIGTERM
+        finally:
+            if video is not None:
+                video.close()
+    print("skeye ground: stopped", flush=True)
+    return 0
+
+
+def _add_ground(sub: Any) -> None:
+    p = sub.add_parser(
+        "ground",
+        help="serve the ground-control web page for a vehicle",
+        description="Serve the ground-control web page (telemetry, camera, map, commands).",
+    )
+    p.add_argument(
+        "--vehicle",
+        default="tcp://127.0.0.1:7000",
+        help="vehicle link: tcp://host:port (skeye pilot) or serial:///dev/ttyUSB0?baud=57600",
+    )
+    p.add_argument(
+        "--video", default=None, help="image server for the camera view, e.g. tcp://127.0.0.1:5003"
+    )
+    p.add_argument("--camera", default=None, help="camera robot/name (default: server's first)")
+    p.add_argument(
+        "--camera-fov-deg",
+        type=float,
+        default=None,
+        help="camera horizontal field of view (default: the --robot class's camera)",
+    )
+    p.add_argument("--robot", default="hummingbird", help="robot class the camera belongs to")
+    p.add_argument("--video-fps", type=float, default=8.0, help="camera frames per second")
+    p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.set_defaults(func=run_ground)
+
+
+# --- skeye up --------------------------------------------------------------------------------
+
+
+def _child_argv(*args: str) -> list[str]:
+    """A skeye sub-command in a child interpreter (the same venv as this one)."""
+    return [sys.executable, "-m", "skeye.ground.cli", *args]
+
+
+def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float
+                    ) -> None:
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        if child.poll() is not None:
+            raise ConfigError(f"{what} exited with status {child.returncode} while starting")
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                return
+        except OSError:
+            time.sleep(0.2)
+    raise ConfigError(f"{what} did not listen on port {port} within {deadline_s:g} s")
+
+
+def _stop_all(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> None:
+    """SIGTERM in reverse start order, then SIGKILL after the deadline."""
+    for _, child in reversed(children):
+        if child.poll() is None:
+            child.send_signal(signal.SIGTERM)
+        try:
+            child.wait(STOP_DEADLINE_S)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait(STOP_DEADLINE_S)
+
+
+def run_up(args: argparse.Namespace) -> int:
+    """Start simulator, pilot and ground control; stop them all on a signal."""
+    env = dict(os.environ)
+    env.setdefault("MUJOCO_GL", "egl")
+    stop = threading.Event()
+
+    def handler(signum: int, frame: Any) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+    children: list[tuple[str, subprocess.Popen[bytes]]] = []
+
+    def start(what: str, argv: list[str], port: int) -> None:
+        child = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL)
+        children.append((what, child))
+        _wait_listening(port, child, what, START_DEADLINE_S)
+
+    status = 0
+    try:
+        start(
+            "simulator",
+            _child_argv(
+                "sim", "--world", args.world, "--port", str(args.sim_port),
+                "--image-port", str(args.image_port), "--seed", str(args.seed),
+            ),
+            args.image_port,
+        )
+        _wait_listening(args.sim_port, children[0][1], "simulator", START_DEADLINE_S)
+        start(
+            "pilot",
+            _child_argv(
+                "pilot", "--sim", f"127.0.0.1:{args.sim_port}",
+                "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
+                "--robot", args.robot,
+            ),
+            args.pilot_port,
+        )
+        start(
+            "ground control",
+            _child_argv(
+                "ground", "--vehicle", f"tcp://127.0.0.1:{args.pilot_port}",
+                "--video", f"tcp://127.0.0.1:{args.image_port}", "--port", str(args.ground_port),
+                "--host", args.host, "--robot", args.robot,
+            ),
+            args.ground_port,
+        )
+        print(
+            f"skeye up: open http://127.0.0.1:{args.ground_port}/  (simulator {args.sim_port}, "
+            f"images {args.image_port}, pilot {args.pilot_port}); Ctrl-C stops everything",
+            flush=True,
+        )
+        while not stop.wait(0.5):
+            dead = [(w, c) for w, c in children if c.poll() is not None]
+            if dead:
+                what, child = dead[0]
+                print(f"skeye up: {what} exited ({child.returncode}); stopping", flush=True)
+                status = 1
+                break
+    except ConfigError as exc:
+        print(f"skeye up: {exc}", file=sys.stderr, flush=True)
+        status = 1
+    finally:
+        _stop_all(children)
+    print("skeye up: stopped", flush=True)
+    return status
+
+
+def _add_up(sub: Any) -> None:
+    p = sub.add_parser(
+        "up",
+        help="start simulator, pilot and ground control on this machine",
+        description="Start skeye sim, skeye pilot and skeye ground; Ctrl-C stops them all.",
+    )
+    p.add_argument("--world", default="pad", help="world for the simulator (default pad)")
+    p.add_argument("--robot", default="hummingbird", help="robot class the pilot flies")
+    p.add_argument("--seed", type=int, default=0, help="simulator seed")
+    p.add_argument("--sim-port", type=int, default=3000)
+    p.add_argument("--image-port", type=int, default=5003)
+    p.add_argument("--pilot-port", type=int, default=7000)
+    p.add_argument("--ground-port", type=int, default=8080)
+    p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
+    p.set_defaults(func=run_up)
+
+
+def register(subparsers: Any) -> None:
+    """Add ``skeye ground`` and ``skeye up`` to the main parser's sub-commands."""
+    _add_ground(subparsers)
+    _add_up(subparsers)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``skeye`` with ``pilot``, ``ground`` and ``up`` registered even where ``skeye.cli`` does
+    not list them yet; ``skeye up`` starts its children through this."""
+    import logging
+
+    from skeye.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    if "pilot" not in sub.choices:
+        from skeye.pilot.cli import register as register_pilot
+
+        register_pilot(sub)
+    if "ground" not in sub.choices:
+        register(sub)
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args.func(args))
+    except (ConfigError, LocalProtocolError, OSError) as exc:
+        print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,220 @@
+"""Commands ground control accepts from a browser: validation of JSON, then the vehicle call.
+
+How this works: ``COMMANDS`` is a table, one ``CommandSpec`` per command the page can send (the
+skeye packets of PILOT_PACKETS.md section 4, in SI with units in the argument names).
+``parse_command(name, body)`` checks a decoded JSON object against it: unknown command, unknown
+or missing argument, wrong type (a JSON ``true`` is not a number), non-finite number, value out
+of range or not one of the choices all raise ``LocalProtocolError`` naming the argument and what
+was expected. Nothing here does I/O: ``run_command(vehicle, command)`` is the one place a parsed
+command becomes a ``skeye.link.Vehicle`` call (and so one packet on the wire).
+
+Ranges are what the wire can carry (int16 mm/s, uint16 mm, ...) narrowed to what makes sense
+for a small multirotor; whether the vehicle accepts a value *now* is the vehicle's call, and
+its refusal comes back as a RESULT with a code and a reason.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from skeye.errors import LocalProtocolError
+from skeye.link.packets import Ack, Result
+from skeye.link.vehicle import Vehicle
+
+Value = float | str
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One argument: a number in ``[lo, hi]`` or a string from ``choices``."""
+
+    name: str
+    lo: float = -math.inf
+    hi: float = math.inf
+    default: Value | None = None  # None: required
+    choices: tuple[str, ...] = ()
+    help: str = ""
+
+    def check(self, command: str, value: Any) -> Value:
+        """The value if valid; raises LocalProtocolError naming what is wrong."""
+        where = f"{command}: argument {self.name!r}"
+        if self.choices:
+            if not isinstance(value, str) or value.lower() not in self.choices:
+                raise LocalProtocolError(
+                    f"{where} must be one of {', '.join(self.choices)}, got {value!r}"
+                )
+            return value.lower()
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise LocalProtocolError(f"{where} must be a number, got {value!r}")
+        number = float(value)
+        if not math.isfinite(number):
+            raise LocalProtocolError(f"{where} must be finite, got {value!r}")
+        if not self.lo <= number <= self.hi:
+            raise LocalProtocolError(
+                f"{where} must be within [{self.lo:g}, {self.hi:g}], got {number:g}"
+            )
+        return number
+
+
+@dataclass(frozen=True)
+class CommandSpec:
+    """A command the page can send: its packet, arguments and a one-line description."""
+
+    name: str
+    packet: str
+    args: tuple[Arg, ...]
+    help: str
+
+
+COMMANDS: dict[str, CommandSpec] = {
+    spec.name: spec
+    for spec in (
+        CommandSpec(
+            "velocity",
+            "VELOCITY 0x80",
+            (
+                Arg("forward_m_s", -5.0, 5.0, 0.0, help="body forward"),
+                Arg("right_m_s", -5.0, 5.0, 0.0, help="body right"),
+                Arg("up_m_s", -3.0, 3.0, 0.0, help="positive up"),
+                Arg("yaw_rate_rad_s", -3.0, 3.0, 0.0, help="clockwise seen from above"),
+                Arg("duration_s", 0.0, 65.0, 0.0, help="0 = until replaced"),
+            ),
+            "fly at absolute body-frame velocities",
+        ),
+        CommandSpec(
+            "move_by",
+            "MOVE_BY 0x81",
+            (
+                Arg("forward_m", -1000.0, 1000.0, 0.0, help="or north in the world frame"),
+                Arg("right_m", -1000.0, 1000.0, 0.0, help="or east in the world frame"),
+                Arg("up_m", -100.0, 100.0, 0.0),
+                Arg("yaw_rad", -2 * math.pi, 2 * math.pi, 0.0),
+                Arg("frame", default="body", choices=("body", "world")),
+                Arg("speed_m_s", 0.05, 10.0, 1.0),
+            ),
+            "move by distances relative to the current position",
+        ),
+        CommandSpec(
+            "goto_gps",
+            "GOTO_GPS 0x82",
+            (
+                Arg("latitude_deg", -90.0, 90.0),
+                Arg("longitude_deg", -180.0, 180.0),
+                Arg("height_m", 0.0, 1000.0, help="above home"),
+                Arg("speed_m_s", 0.05, 10.0, 1.0),
+            ),
+            "fly to GPS coordinates",
+        ),
+        CommandSpec(
+            "take_off",
+            "TAKE_OFF 0x83",
+            (Arg("height_m", 0.1, 100.0, 1.0),),
+            "start the motors and climb",
+        ),
+        CommandSpec("land", "LAND 0x84", (), "descend and stop the motors"),
+        CommandSpec("hold", "HOLD 0x85", (), "stop and hover here"),
+        CommandSpec(
+            "pad_mode",
+            "PAD_MODE 0x86",
+            (
+                Arg("mode", choices=("off", "hold", "land")),
+                Arg("deadband_m", 0.0, 2.0, 0.1),
+                Arg("max_speed_m_s", 0.05, 5.0, 0.5),
+            ),
+            "landing pad: off, hold over the pad, or land on it",
+        ),
+    )
+}
+
+
+@dataclass(frozen=True)
+class GroundCommand:
+    """A validated command: its name and every argument (defaults filled in)."""
+
+    name: str
+    args: tuple[tuple[str, Value], ...]
+
+    def kwargs(self) -> dict[str, Value]:
+        return dict(self.args)
+
+
+def parse_command(name: str, body: object) -> GroundCommand:
+    """Check ``body`` (decoded JSON: an object, or None for no arguments) against ``COMMANDS``.
+
+    Raises:
+        LocalProtocolError: unknown command or argument, missing, wrong type or out of range.
+    """
+    spec = COMMANDS.get(name)
+    if spec is None:
+        raise LocalProtocolError(
+            f"unknown command {name!r}; known commands: {', '.join(COMMANDS)}"
+        )
+    if body is None:
+        body = {}
+    if not isinstance(body, Mapping):
+        raise LocalProtocolError(
+            f"{name}: arguments must be a JSON object, got {type(body).__name__}"
+        )
+    known = {a.name for a in spec.args}
+    unknown = sorted(str(k) for k in body if k not in known)
+    if unknown:
+        expected = ", ".join(sorted(known)) or "none"
+        raise LocalProtocolError(
+            f"{name}: unknown argument(s) {', '.join(unknown)}; expected: {expected}"
+        )
+    values: list[tuple[str, Value]] = []
+    for arg in spec.args:
+        if arg.name in body:
+            values.append((arg.name, arg.check(name, body[arg.name])))
+        elif arg.default is None:
+            raise LocalProtocolError(f"{name}: missing argument {arg.name!r}")
+        else:
+            values.append((arg.name, arg.default))
+    return GroundCommand(name, tuple(values))
+
+
+_RUNNERS: dict[str, Callable[..., Result | Ack]] = {
+    "velocity": Vehicle.set_velocity,
+    "move_by": Vehicle.move_by,
+    "goto_gps": Vehicle.goto_gps,
+    "take_off": Vehicle.take_off,
+    "land": Vehicle.land,
+    "hold": Vehicle.hold,
+    "pad_mode": Vehicle.pad_mode,
+}
+
+
+def run_command(vehicle: Vehicle, command: GroundCommand) -> Result | Ack:
+    """Send ``command`` as its packet and wait for the answer.
+
+    Raises:
+        CommandRejected: the vehicle answered a RESULT with a non-zero code.
+        LinkTimeout, LinkClosed: no answer / the link went away.
+    """
+    return _RUNNERS[command.name](vehicle, **command.kwargs())
+
+
+def describe_commands() -> list[dict[str, Any]]:
+    """The command table as JSON, for ``GET /api/commands`` and the page's forms."""
+    return [
+        {
+            "name": spec.name,
+            "packet": spec.packet,
+            "help": spec.help,
+            "args": [
+                {
+                    "name": a.name,
+                    "min": None if math.isinf(a.lo) else a.lo,
+                    "max": None if math.isinf(a.hi) else a.hi,
+                    "default": a.default,
+                    "choices": list(a.choices) or None,
+                    "help": a.help,
+                }
+                for a in spec.args
+            ],
+        }
+        for spec in COMMANDS.values()
+    ]

@@ -1,0 +1,1 @@
+"""Validation: the paper's experiments, run through the real processes."""

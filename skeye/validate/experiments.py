@@ -1,0 +1,264 @@
+"""The paper's two experiments (EXPERIMENTS.md), run through the real processes.
+
+How this works: each run starts ``skeye sim`` (lockstep, seeded, camera images served, every
+line recorded with ``--record``) and ``skeye pilot`` (landing-pad vision on frames from the
+image server, driving the lockstep clock) as child processes, then flies a scripted ground
+client (:class:`skeye.link.Vehicle`) over the vehicle packet protocol, exactly as ground control
+would. The estimates come from the PAD packets the pilot streams; the truth comes afterwards
+from the simulator's recording (the GroundTruth lines it sent), matched by sim time. Nothing
+reads the simulator's state behind the pilot's back.
+
+- E1: hover 0.30 m above the pad, climb at 0.1 m/s to 1.0 m, hold 10 s, climb to 2.0 m, hold
+  10 s; for every processed frame: time, estimated height, true camera height.
+- E2: hover 0.70 m above the pad under the paper's random force (F_max 0.3 N redrawn every
+  1/30 s), position hold on the pad (PAD_MODE 1: deadband 0.05 m, 0.3 m/s) for 5 minutes;
+  the horizontal distance of the vehicle from the pad centre, and the same run without vision
+  (the drift baseline: HOLD on the onboard estimate only).
+
+``quick`` runs the same code for a fraction of the time (CI).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from skeye.errors import SkeyeError
+from skeye.link.packets import NavState, PadReport, SkeyeMask
+from skeye.link.scaling import nav_status_to_si, pad_report_to_si
+from skeye.link.vehicle import Vehicle
+from skeye.sim.protocol import parse_line
+from skeye.sim.recording import RecordingReader
+from skeye.sim.world import PAD_SURFACE_HEIGHT_M
+
+CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
+F_MAX_N = 0.3
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    seed: int
+    quick: bool = False
+    f_max_n: float = F_MAX_N
+    e2_duration_s: float = 300.0
+
+    @property
+    def e2_seconds(self) -> float:
+        return 20.0 if self.quick else self.e2_duration_s
+
+
+@dataclass
+class E1Series:
+    time_s: list[float] = field(default_factory=list)
+    estimated_m: list[float | None] = field(default_factory=list)
+    true_m: list[float] = field(default_factory=list)
+
+
+@dataclass
+class E2Series:
+    time_s: list[float] = field(default_factory=list)
+    distance_m: list[float] = field(default_factory=list)
+
+
+# -- processes --------------------------------------------------------------------------------
+def _spawn(args: list[str], pattern: str, what: str, timeout_s: float = 60.0
+           ) -> tuple[subprocess.Popen[str], list[re.Match[str]]]:
+    """Start ``python -m skeye.cli ARGS`` and wait for every line matching ``pattern``."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env.setdefault("MUJOCO_GL", "egl")
+    proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=env)
+    assert proc.stdout is not None
+    wanted = pattern.split("|")
+    found: list[re.Match[str]] = []
+    deadline = time.monotonic() + timeout_s
+    seen: list[str] = []
+    while len(found) < len(wanted):
+        line = proc.stdout.readline()
+        if not line or time.monotonic() > deadline:
+            proc.kill()
+            raise SkeyeError(f"{what} did not start: {''.join(seen[-5:]) or 'no output'}")
+        seen.append(line)
+        m = re.search(wanted[len(found)], line)
+        if m:
+            found.append(m)
+    # Keep draining its output so it never blocks on a full pipe.
+    threading.Thread(target=lambda: proc.stdout.read() if proc.stdout else None,
+                     daemon=True).start()
+    return proc, found
+
+
+def _stop(proc: subprocess.Popen[str]) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+
+@contextmanager
+def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: bool
+                 ) -> Iterator[Vehicle]:
+    """Simulator + pilot as processes, and a ground client connected to the pilot."""
+    sim_args = ["sim", "--mode", "lockstep", "--port", "0", "--seed", str(settings.seed),
+                "--record", str(record)]
+    if vision:
+        sim_args += ["--image-port", "0"]
+    if wind:
+        sim_args += ["--wind", "random_force", "--wind-params", f"f_max_n={settings.f_max_n}"]
+    pattern = r"control protocol on [\d.]+:(\d+)"
+    if vision:
+        pattern += r"|image server on [\d.]+:(\d+)"
+    with ExitStack() as stack:
+        sim, found = _spawn(sim_args, pattern, "skeye sim")
+        stack.callback(_stop, sim)
+        pilot_args = ["pilot", "--sim", f"127.0.0.1:{found[0].group(1)}", "--port", "0",
+                      "--lockstep-rate", "0", "--link-timeout", "30", "--land-timeout", "60"]
+        if vision:
+            pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}"]
+        pilot, pfound = _spawn(pilot_args, r"ground control on (tcp://[\d.]+:\d+)", "skeye pilot")
+        stack.callback(_stop, pilot)
+        vehicle = stack.enter_context(Vehicle.open(pfound[0].group(1), timeout_s=30.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD), 0.005)
+        yield vehicle
+
+
+def _sim_time(vehicle: Vehicle) -> float:
+    from skeye.link.packets import PD
+
+    msg = vehicle.wait_for(PD.NAV_STATUS, timeout_s=30)
+    return nav_status_to_si(msg).time_s  # type: ignore[arg-type]
+
+
+def _wait_sim(vehicle: Vehicle, seconds: float, timeout_s: float) -> None:
+    end = _sim_time(vehicle) + seconds
+    deadline = time.monotonic() + timeout_s
+    while _sim_time(vehicle) < end:
+        if time.monotonic() > deadline:
+            raise SkeyeError(f"the simulation did not advance {seconds} s in {timeout_s} s")
+        time.sleep(0.02)
+
+
+def _settled(vehicle: Vehicle, timeout_s: float = 600.0) -> None:
+    vehicle.wait_state(NavState.FLYING, timeout_s=30)
+    vehicle.wait_state(NavState.HOLDING, timeout_s=timeout_s)
+
+
+def _ground_truth(record: Path) -> list[tuple[float, float, float, float, float]]:
+    """(sim time, north, east, down, cos(roll)cos(pitch)) of every GroundTruth line sent."""
+    out = []
+    for rec in RecordingReader(record).records():
+        if rec.direction != ">" or not rec.line.startswith("SEN") or "GroundTruth" not in rec.line:
+            continue
+        msg = parse_line(rec.line)
+        if msg.get("Type") != "GroundTruth":
+            continue
+        n, e, d = msg.get_vector("Location")
+        roll, pitch, _ = msg.get_vector("Orientation")
+        out.append((msg.get_float("Time"), n, e, d, math.cos(roll) * math.cos(pitch)))
+    if not out:
+        raise SkeyeError(f"{record}: no ground truth recorded")
+    return out
+
+
+def _interpolate(truth: Sequence[tuple[float, ...]], t: float) -> tuple[float, ...]:
+    lo, hi = 0, len(truth) - 1
+    if t <= truth[0][0]:
+        return truth[0]
+    if t >= truth[hi][0]:
+        return truth[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if truth[mid][0] <= t:
+            lo = mid
+        else:
+            hi = mid
+    a, b = truth[lo], truth[hi]
+    w = (t - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 0.0
+    return tuple(x + w * (y - x) for x, y in zip(a, b, strict=True))
+
+
+# -- E1 ---------------------------------------------------------------------------------------
+def run_e1(settings: RunSettings, workdir: Path) -> E1Series:
+    record = workdir / f"e1_seed{settings.seed}.rec"
+    pads: dict[float, PadReport] = {}
+    lock = threading.Lock()
+    plateaus = [(1.0, 10.0), (2.0, 10.0)] if not settings.quick else [(0.6, 2.0)]
+    with flight_stack(settings, record, vision=True, wind=False) as vehicle:
+
+        def on_packet(msg: object) -> None:
+            if isinstance(msg, PadReport):
+                with lock:
+                    pads.setdefault(msg.frame_time, msg)
+
+        vehicle.take_off(0.30 - 0.045)  # camera 0.30 m above the pad (0.045: gear - camera)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=300)
+        start = _sim_time(vehicle)
+        vehicle.add_callback(on_packet)
+        height = 0.30
+        for target, hold_s in plateaus:
+            vehicle.move_by(up_m=target - height, speed_m_s=0.1)
+            _settled(vehicle)
+            height = target
+            _wait_sim(vehicle, hold_s, timeout_s=600)
+    truth = _ground_truth(record)
+    series = E1Series()
+    for frame_ms in sorted(pads):
+        t = frame_ms / 1000.0
+        if t < start:
+            continue
+        report = pad_report_to_si(pads[frame_ms])
+        _, _, _, down, tilt = _interpolate(truth, t)
+        series.time_s.append(t)
+        series.estimated_m.append(report.height_m if report.found else None)
+        series.true_m.append(-down - CAMERA_BELOW_CENTRE_M * tilt - PAD_SURFACE_HEIGHT_M)
+    return series
+
+
+# -- E2 ---------------------------------------------------------------------------------------
+def run_e2(settings: RunSettings, workdir: Path, *, vision: bool) -> E2Series:
+    name = "e2" if vision else "e2_baseline"
+    record = workdir / f"{name}_seed{settings.seed}.rec"
+    with flight_stack(settings, record, vision=vision, wind=True) as vehicle:
+        vehicle.take_off(0.70 - 0.081)  # vehicle centre 0.70 m above the pad (0.081: on gear)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=300)
+        if vision:
+            vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
+        else:
+            vehicle.hold()
+        start = _sim_time(vehicle)
+        _wait_sim(vehicle, settings.e2_seconds, timeout_s=settings.e2_seconds * 10 + 600)
+        end = _sim_time(vehicle)
+    series = E2Series()
+    for t, n, e, _d, _tilt in _ground_truth(record):
+        if start <= t <= end:
+            series.time_s.append(t - start)
+            series.distance_m.append(math.hypot(n, e))
+    return series
+
+
+def run_all(settings: RunSettings, experiments: tuple[str, ...], workdir: str | None = None
+            ) -> dict[str, object]:
+    """Run the chosen experiments for one seed (a worker process's job)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        wd = Path(workdir or tmp)
+        wd.mkdir(parents=True, exist_ok=True)
+        out: dict[str, object] = {}
+        if "E1" in experiments:
+            out["E1"] = run_e1(settings, wd)
+        if "E2" in experiments:
+            out["E2"] = run_e2(settings, wd, vision=True)
+            out["E2_baseline"] = run_e2(settings, wd, vision=False)
+        return out

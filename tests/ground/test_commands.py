@@ -1,0 +1,124 @@
+"""Command validation, link state table, packet rate and telemetry conversion (no I/O)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from skeye.errors import LocalProtocolError
+from skeye.ground.bridge import LinkEvent, LinkState, PacketRate, next_link_state
+from skeye.ground.commands import COMMANDS, GroundCommand, describe_commands, parse_command
+from skeye.ground.telemetry import telemetry_json
+from skeye.link.packets import PD, NavState, PadAction
+from skeye.link.scaling import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
+
+
+def test_defaults_are_filled_in() -> None:
+    cmd = parse_command("velocity", {"forward_m_s": 0.5})
+    assert cmd.kwargs() == {
+        "forward_m_s": 0.5, "right_m_s": 0.0, "up_m_s": 0.0, "yaw_rate_rad_s": 0.0,
+        "duration_s": 0.0,
+    }
+    assert parse_command("land", None) == GroundCommand("land", ())
+    assert parse_command("pad_mode", {"mode": "HOLD"}).kwargs()["mode"] == "hold"
+
+
+@pytest.mark.parametrize(
+    ("name", "body", "message"),
+    [
+        ("fly", {}, "unknown command 'fly'; known commands: velocity"),
+        ("take_off", [1.5], "arguments must be a JSON object, got list"),
+        ("take_off", {"height": 1.5}, "unknown argument(s) height; expected: height_m"),
+        ("goto_gps", {"latitude_deg": 50.0, "height_m": 2}, "missing argument 'longitude_deg'"),
+        ("take_off", {"height_m": True}, "'height_m' must be a number, got True"),
+        ("take_off", {"height_m": "2"}, "'height_m' must be a number, got '2'"),
+        ("take_off", {"height_m": math.nan}, "'height_m' must be finite"),
+        ("velocity", {"forward_m_s": 9}, "'forward_m_s' must be within [-5, 5], got 9"),
+        ("move_by", {"frame": "map"}, "'frame' must be one of body, world, got 'map'"),
+        ("pad_mode", {"mode": 1}, "'mode' must be one of off, hold, land, got 1"),
+        ("land", {"now": 1}, "unknown argument(s) now; expected: none"),
+    ],
+)
+def test_bad_commands_say_what_is_wrong(name: str, body: object, message: str) -> None:
+    with pytest.raises(LocalProtocolError) as info:
+        parse_command(name, body)
+    assert message in str(info.value)
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.floats(allow_nan=True) | st.integers() | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner),
+    max_leaves=6,
+)
+arg_names = st.sampled_from(sorted({a.name for s in COMMANDS.values() for a in s.args}))
+
+
+@given(
+    st.sampled_from([*COMMANDS, "nope"]),
+    st.dictionaries(arg_names | st.text(max_size=6), json_values, max_size=5) | json_values,
+)
+def test_any_json_gives_a_command_or_a_clear_error(name: str, body: object) -> None:
+    try:
+        cmd = parse_command(name, body)
+    except LocalProtocolError as exc:
+        assert str(exc)
+        return
+    spec = COMMANDS[name]
+    assert [k for k, _ in cmd.args] == [a.name for a in spec.args]
+    for arg, (_, value) in zip(spec.args, cmd.args, strict=True):
+        if arg.choices:
+            assert value in arg.choices
+        else:
+            assert isinstance(value, float) and arg.lo <= value <= arg.hi
+
+
+def test_command_table_is_described_for_the_page() -> None:
+    described = {c["name"]: c for c in describe_commands()}
+    assert set(described) == set(COMMANDS)
+    assert described["take_off"]["packet"] == "TAKE_OFF 0x83"
+    assert described["pad_mode"]["args"][0]["choices"] == ["off", "hold", "land"]
+
+
+def test_link_state_table() -> None:
+    s = next_link_state(LinkState.DISCONNECTED, LinkEvent.CONNECT)
+    assert s is LinkState.CONNECTING
+    assert next_link_state(s, LinkEvent.TURNED_AWAY) is LinkState.REFUSED
+    assert next_link_state(LinkState.REFUSED, LinkEvent.CONNECT) is LinkState.CONNECTING
+    assert next_link_state(s, LinkEvent.UP) is LinkState.CONNECTED
+    assert next_link_state(LinkState.CONNECTED, LinkEvent.LOST) is LinkState.DISCONNECTED
+    assert next_link_state(LinkState.CONNECTED, LinkEvent.CLOSE) is LinkState.CLOSED
+    with pytest.raises(LocalProtocolError, match="link state connected: event 'up'"):
+        next_link_state(LinkState.CONNECTED, LinkEvent.UP)
+    with pytest.raises(LocalProtocolError):
+        next_link_state(LinkState.CLOSED, LinkEvent.CONNECT)
+
+
+def test_packet_rate_over_a_window() -> None:
+    rate = PacketRate(window_s=2.0)
+    for i in range(40):
+        rate.add(10.0 + i * 0.05)  # 20 Hz for 2 s
+    assert rate.rate_hz(11.95) == pytest.approx(20.0)
+    assert rate.rate_hz(20.0) == 0.0
+    with pytest.raises(ValueError):
+        PacketRate(0.0)
+
+
+def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
+    assert telemetry_json({}) == {
+        "nav": None, "imu": None, "status": None, "gps": None, "pad": None, "waypoint": None,
+    }
+    nav = nav_status_from_si(
+        NavStatusSi(NavState.HOLDING, PadAction.HOLD, (1.5, -2.25, -3.0), math.radians(90),
+                    (0.5, 0.0, -0.25), 12.1, 42.0)
+    )
+    pad = pad_report_from_si(PadSi(True, 0b0101, 0.12, -0.05, 1.4, 0.9, 41.9))
+    t = telemetry_json({PD.NAV_STATUS: nav, PD.PAD: pad})
+    assert t["nav"]["state"] == "holding" and t["nav"]["pad_mode"] == "hold"
+    assert (t["nav"]["north_m"], t["nav"]["east_m"], t["nav"]["height_m"]) == (1.5, -2.25, 3.0)
+    assert t["nav"]["yaw_deg"] == pytest.approx(90.0)
+    assert t["nav"]["climb_m_s"] == 0.25 and t["nav"]["battery_v"] == 12.1
+    assert t["pad"]["rings"] == [1, 3]
+    assert (t["pad"]["dx_m"], t["pad"]["dy_m"], t["pad"]["quality"]) == (0.12, -0.05, 0.9)

@@ -1,0 +1,108 @@
+"""The app's HTTP and WebSocket API: clear errors for bad requests, several tabs at once."""
+
+from __future__ import annotations
+
+import json
+import socket
+from collections.abc import Iterator
+from contextlib import ExitStack
+
+import pytest
+from fastapi.testclient import TestClient
+
+from skeye.ground.app import create_app
+from skeye.ground.bridge import VehicleBridge
+from tests.ground.conftest import Stack, wait_until
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def offline() -> Iterator[TestClient]:
+    """The app with a vehicle URI nobody listens on."""
+    with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
+        with TestClient(create_app(bridge)) as client:
+            yield client
+
+
+def test_page_and_static_files_are_served_locally(offline: TestClient) -> None:
+    page = offline.get("/")
+    assert page.status_code == 200 and "skeye ground control" in page.text
+    assert "http" not in page.text.replace("http-equiv", "")  # no CDN, nothing remote
+    for name in ("app.js", "app.css"):
+        assert offline.get(f"/static/{name}").status_code == 200
+
+
+@pytest.mark.parametrize(
+    ("path", "body", "status", "message"),
+    [
+        ("/api/command/take_off", b"{bad", 400, "request body is not valid JSON"),
+        ("/api/command/fly", b"{}", 404, "unknown command 'fly'"),
+        ("/api/command/take_off", b'{"height": 1}', 422, "unknown argument(s) height"),
+        ("/api/command/velocity", b'{"up_m_s": 40}', 422, "'up_m_s' must be within [-3, 3]"),
+        ("/api/command/goto_gps", b"[]", 422, "arguments must be a JSON object"),
+        ("/api/command/land", b"", 503, "no vehicle connected"),
+    ],
+)
+def test_bad_requests_get_clear_errors(
+    offline: TestClient, path: str, body: bytes, status: int, message: str
+) -> None:
+    r = offline.post(path, content=body)
+    assert r.status_code == status
+    assert message in r.json()["error"] and r.json()["status"] == status
+
+
+def test_state_and_video_without_a_vehicle(offline: TestClient) -> None:
+    state = offline.get("/api/state").json()
+    assert state["link"]["state"] in ("connecting", "disconnected")
+    assert state["nav"] is None and state["video"] is None
+    r = offline.get("/api/video/frame.jpg")
+    assert r.status_code == 503 and "no video source" in r.json()["error"]
+
+
+def test_websocket_rejects_malformed_messages(offline: TestClient) -> None:
+    with offline.websocket_connect("/ws") as ws:
+        assert ws.receive_json()["type"] == "hello"
+        ws.send_text("not json")
+        while (msg := ws.receive_json())["type"] != "result":
+            pass
+        assert msg["status"] == 400
+        ws.send_text(json.dumps({"type": "command", "id": 7, "name": "take_off",
+                                 "args": {"height_m": -1}}))
+        while (msg := ws.receive_json())["type"] != "result":
+            pass
+        assert msg["id"] == 7 and msg["status"] == 422
+        assert "'height_m' must be within" in msg["error"]
+
+
+def test_several_tabs_at_once(stack: Stack) -> None:
+    from websockets.sync.client import connect
+
+    url = stack.web.url.replace("http", "ws") + "/ws"
+    wait_until(lambda: stack.bridge.state.value == "connected", 20, "the vehicle link")
+    with ExitStack() as opened:
+        tabs = [opened.enter_context(connect(url)) for _ in range(4)]
+        for ws in tabs:
+            assert json.loads(ws.recv(5))["type"] == "hello"
+        seqs = []
+        for ws in tabs:
+            frames = [json.loads(ws.recv(5)) for _ in range(3)]
+            assert all(f["type"] == "telemetry" for f in frames)
+            assert frames[-1]["link"]["state"] == "connected"
+            assert frames[-1]["nav"] is not None
+            seqs.append(frames[-1]["seq"])
+        assert min(seqs) > 0
+        # a command from one tab is answered to that tab only
+        tabs[1].send(json.dumps({"type": "command", "id": 99, "name": "hold", "args": {}}))
+        while (msg := json.loads(tabs[1].recv(5)))["type"] != "result":
+            pass
+        assert msg["id"] == 99 and msg["status"] in (200, 409)
+        if msg["status"] == 409:  # landed: the vehicle refuses HOLD, with its reason
+            assert msg["code"] == 4 and msg["reason"]
+        for other in (tabs[0], tabs[2], tabs[3]):
+            for _ in range(3):
+                assert json.loads(other.recv(5))["type"] == "telemetry"

@@ -1,0 +1,72 @@
+"""Shared helpers of the robustness tests: resource counts and a simulator process."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+def open_fds() -> int:
+    """File descriptors this process holds (Linux /proc)."""
+    return len(os.listdir("/proc/self/fd"))
+
+
+def wait_for(predicate: Callable[[], bool], timeout_s: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return predicate()
+
+
+def thread_count() -> int:
+    return threading.active_count()
+
+
+@contextmanager
+def sim_process(*extra: str) -> Iterator[tuple[subprocess.Popen[str], dict[str, int], list[str]]]:
+    """``skeye sim --port 0 ...`` as a child process; yields (process, ports, banner lines)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env.setdefault("MUJOCO_GL", "egl")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "sim", "--port", "0", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    ports: dict[str, int] = {}
+    banner: list[str] = []
+    try:
+        assert proc.stdout is not None
+        while True:
+            line = proc.stdout.readline()
+            if not line:
+                raise RuntimeError(f"simulator exited: {banner}")
+            banner.append(line.strip())
+            if m := re.search(r"control protocol on [\d.]+:(\d+)", line):
+                ports["control"] = int(m.group(1))
+            if m := re.search(r"image server on [\d.]+:(\d+)", line):
+                ports["image"] = int(m.group(1))
+            if "bound to" in line or "all interfaces" in line:
+                break
+        yield proc, ports, banner
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5)
+        if proc.stdout is not None:
+            proc.stdout.close()

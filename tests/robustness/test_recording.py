@@ -1,0 +1,228 @@
+"""Flight recording: the record codec, the recorder on a live server, crash safety, replay, plot."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import time
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from skeye.cli import main
+from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
+from skeye.sim.plotting import load_tracks, plot_recording
+from skeye.sim.recording import (
+    DIRECTIONS,
+    NOTE,
+    RECEIVED,
+    SENT,
+    TRUTH,
+    Record,
+    Recorder,
+    RecordingReader,
+    format_header,
+    format_record,
+    parse_header,
+    parse_record,
+)
+from skeye.sim.replay import ReplayServer
+from tests.robustness.helpers import sim_process, wait_for
+from tests.sim.conftest import LineClient, running_sim
+
+LINE_TEXT = st.text(
+    st.characters(exclude_categories=["Cs"], exclude_characters="\r\n"), max_size=80
+)
+RECORDS = st.builds(
+    Record,
+    st.floats(0, 4e9, allow_nan=False),
+    st.floats(0, 1e6, allow_nan=False),
+    st.integers(0, 10**6),
+    st.sampled_from(sorted(DIRECTIONS)),
+    LINE_TEXT,
+)
+
+
+@given(RECORDS)
+def test_record_round_trip(record: Record) -> None:
+    back = parse_record(format_record(record).decode())
+    assert back.conn == record.conn and back.direction == record.direction
+    assert back.line == record.line
+    assert back.wall_s == pytest.approx(record.wall_s, abs=1e-6)
+    assert back.sim_s == pytest.approx(record.sim_s, abs=1e-6)
+
+
+@given(st.text(max_size=120))
+def test_parse_record_gives_a_record_or_a_protocol_error(text: str) -> None:
+    try:
+        parse_record(text)
+    except RemoteProtocolError:
+        pass
+
+
+def test_record_rejects_line_breaks_and_unknown_directions() -> None:
+    with pytest.raises(LocalProtocolError, match="line break"):
+        Record(0.0, 0.0, 1, SENT, "SEN {Time 1}\r\nSEN")
+    with pytest.raises(LocalProtocolError, match="direction"):
+        Record(0.0, 0.0, 1, "?", "x")
+    with pytest.raises(RemoteProtocolError, match="not a skeye recording"):
+        parse_header("hello")
+    assert parse_header(format_header({"world": "pad"}).decode()) == {"world": "pad"}
+
+
+def test_reader_skips_a_cut_off_last_line_and_bad_lines(tmp_path: Path) -> None:
+    path = tmp_path / "cut.rec"
+    good = [Record(1.0, 0.1, 1, SENT, "SEN {Time 0.1}"), Record(2.0, 0.2, 1, RECEIVED, "PING")]
+    body = b"".join(format_record(r) for r in good)
+    path.write_bytes(format_header({}) + body[:20] + b"garbage\n" + body + b"3.0 0.3 1 > SEN {Ti")
+    reader = RecordingReader(path)
+    assert list(reader.records())[-2:] == good
+    assert reader.truncated and reader.bad_lines == 1
+
+
+def test_recorder_refuses_to_overwrite(tmp_path: Path) -> None:
+    path = tmp_path / "exists.rec"
+    path.write_text("precious")
+    with pytest.raises(ConfigError, match="already exists"):
+        Recorder(path)
+    assert path.read_text() == "precious"
+    with pytest.raises(ConfigError, match="cannot create"):
+        Recorder(tmp_path / "no-such-folder" / "x.rec")
+
+
+def test_recorder_flushes_within_a_second_without_closing(tmp_path: Path) -> None:
+    path = tmp_path / "flush.rec"
+    with Recorder(path, flush_interval_s=0.5) as rec:
+        rec.observe(3, RECEIVED, b"PING {Id 1}")
+        assert wait_for(lambda: b"PING {Id 1}" in path.read_bytes(), timeout_s=1.0)
+    assert [r.line for r in RecordingReader(path).records()] == ["PING {Id 1}"]
+
+
+def test_recorder_counts_what_it_drops(tmp_path: Path) -> None:
+    path = tmp_path / "drop.rec"
+    rec = Recorder(path, queue_records=1, flush_interval_s=1.0)
+    for i in range(2000):
+        rec.observe(1, RECEIVED, b"PING {Id %d}" % i)
+    rec.close()
+    records = list(RecordingReader(path).records())
+    notes = [r.line for r in records if r.direction == NOTE]
+    assert rec.dropped > 0 and notes and "dropped" in notes[0]
+    kept = sum(1 for r in records if r.direction == RECEIVED)
+    assert kept + rec.dropped == 2000
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, bytes]:
+    """A lockstep flight: INIT, climb, a bad line, PING; returns (file, bytes the client got)."""
+    path = tmp_path_factory.mktemp("rec") / "flight.rec"
+    with running_sim() as server, Recorder(path, {"world": "pad"}) as recorder:
+        recorder.attach(server, server.runner, truth_rate_hz=20.0)
+        client = LineClient(server.port)
+        client.expect("NFO")
+        assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-1}", "INIT").type == "RES"
+        client.step(300)
+        client.send("DRIVE {AltitudeVelocity 0.5} {LinearVelocity 1}")
+        client.step(1200)
+        assert client.answer("NOPE {x", "NOPE").type == "ERR"
+        client.answer("PING {Id last}", "PING")
+        raw = bytes(client.raw)
+        client.close()
+        assert wait_for(lambda: server.client_count == 0)
+    return path, raw
+
+
+def test_recording_holds_every_line_sent_and_received(recording: tuple[Path, bytes]) -> None:
+    path, client_bytes = recording
+    reader = RecordingReader(path)
+    records = list(reader.records())
+    assert reader.header["world"] == "pad" and not reader.truncated and reader.bad_lines == 0
+    sent = b"".join(r.line.encode() + b"\r\n" for r in records if r.direction == SENT)
+    assert sent == client_bytes  # byte for byte, in order
+    received = [r.line for r in records if r.direction == RECEIVED]
+    assert received[0] == "INIT {ClassName hummingbird} {Location 0,0,-1}"
+    assert [line.split()[0] for line in received] == [
+        "INIT",
+        "STEP",
+        "DRIVE",
+        "STEP",
+        "NOPE",
+        "PING",
+    ]
+    assert [r.direction for r in records if r.direction in "+-"] == ["+", "-"]
+    truth = [r for r in records if r.direction == TRUTH]
+    assert len(truth) == pytest.approx(1.5 * 20, abs=2)
+    assert all(r.line.startswith("TRUTH {Name R1}") for r in truth)
+    sims = [r.sim_s for r in records]
+    assert sims == sorted(sims)
+
+
+def test_plot_draws_and_summarises(recording: tuple[Path, bytes], tmp_path: Path) -> None:
+    path, _ = recording
+    tracks, summary = load_tracks(path)
+    track = tracks["R1"]
+    assert len(track.time_s) == summary.robots["R1"]["samples"]
+    assert len(track.time_s) >= 28
+    altitudes = [-p[2] for p in track.pos_ned_m]
+    assert altitudes[0] == pytest.approx(1.0, abs=0.05) and max(altitudes) > 1.3
+    assert track.commands["DRIVE"] == 1 and track.commands["INIT"] == 1
+    assert summary.connections == 1 and summary.bad_lines == 0
+    out = tmp_path / "plot.png"
+    assert main(["plot", str(path), "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert plot_recording(path, tmp_path / "again.png").records == summary.records
+
+
+def test_replay_plays_the_stream_paced_and_read_only(recording: tuple[Path, bytes]) -> None:
+    path, client_bytes = recording
+    expected = [line for line in client_bytes.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
+    with ReplayServer(path, port=0, speed=2.0) as replay:
+        assert replay.host == "127.0.0.1" and replay.robot == "R1"
+        client = LineClient(replay.port)
+        nfo = client.expect("NFO")
+        assert nfo.get("Replay") == "true" and nfo.get("Level") == "pad"
+        start = time.monotonic()
+        assert "read-only" in (
+            client.answer("INIT {ClassName hummingbird}", "INIT").get("Reason") or ""
+        )
+        assert client.answer("DRIVE {LinearVelocity 1}", "DRIVE").type == "ERR"
+        assert client.answer("STEP", "STEP").type == "ERR"
+        ping = client.answer("PING {Id 9}", "PING")
+        assert ping.type == "RES" and ping.get("Id") == "9"
+        last_time = (
+            expected[-1].split(b"{Time ", 1)[1].split(b"}")[0] if b"{Time " in expected[-1] else b""
+        )
+        client.read_until(
+            lambda m: m.type in ("SEN", "STA") and m.get("Time") == last_time.decode(), timeout_s=10
+        )
+        elapsed = time.monotonic() - start
+        got = [line for line in client.raw.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
+        assert got == expected
+        # 1.5 s of sim time at speed 2: not before ~0.7 s of wall time.
+        assert elapsed > 0.6
+        client.close()
+    with pytest.raises(ConfigError, match="no robot"):
+        ReplayServer(path, port=0, robot="R9")
+
+
+def test_sim_killed_loses_at_most_the_last_second(tmp_path: Path) -> None:
+    path = tmp_path / "crash.rec"
+    with sim_process("--record", str(path)) as (proc, ports, banner):
+        assert any("127.0.0.1 only" in line for line in banner)
+        sock = socket.create_connection(("127.0.0.1", ports["control"]))
+        sock.sendall(b"INIT {ClassName hummingbird} {Location 0,0,-2}\r\n")
+        deadline = time.monotonic() + 2.5
+        while time.monotonic() < deadline:
+            sock.recv(65536)
+        killed_at = time.time()
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(5)
+        sock.close()
+    reader = RecordingReader(path)
+    records = list(reader.records())
+    assert reader.bad_lines == 0
+    last_wall = max(r.wall_s for r in records)
+    assert killed_at - last_wall < 1.0, f"lost {killed_at - last_wall:.2f} s"
+    assert any(r.direction == TRUTH for r in records)
+    assert any(r.line.startswith("SEN ") for r in records)
