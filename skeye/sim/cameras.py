@@ -194,8 +194,9 @@ class CameraSystem:
                 current[key] = cam.camera_id
                 if key not in self._known:
                     self.buffer.register_camera(key, cam.camera_id)
-                    # The first frame comes at the robot's first step.
-                    cam.due = math.ceil(sim.time_s * cam.rate_hz - 1e-9)
+                    # The first frame comes at the robot's first step (from its spawn state),
+                    # then on the camera's grid of sim times k / rate.
+                    cam.due = math.floor(sim.time_s * cam.rate_hz + 1e-9)
         for key in set(self._known) - set(current):
             self.buffer.remove_camera(key)
         self._known = current
