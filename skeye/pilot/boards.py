@@ -455,6 +455,17 @@ class OnboardBoards:
                 self.airframe.land()
                 self._failsafe_since_s = None
 
+    def vehicle_lost(self, now_s: float) -> None:
+        """The vehicle below stopped answering (simulator gone): failsafe as on link loss.
+
+        In the air that is FAILSAFE (hold, then land after the land timeout: the commands go
+        to an airframe that may refuse them, which the loop tolerates); on the ground, nothing.
+        """
+        if self.state in (NavState.TAKING_OFF, NavState.FLYING, NavState.HOLDING):
+            self._fire(FlightEvent.LINK_LOST)
+            self._end_motion()
+            self._failsafe_since_s = now_s
+
     def link_changed(self, now_s: float) -> None:
         """A client connected: the link-loss timer counts from now."""
         self._last_packet_s = now_s

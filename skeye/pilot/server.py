@@ -29,7 +29,7 @@ from collections.abc import Callable
 from types import TracebackType
 from typing import Any
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, SkeyeError
 from skeye.link.packets import CommandStreamParser, Message, Result, ResultCode, encode
 from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
 from skeye.pilot.airframe import Airframe
@@ -83,6 +83,7 @@ class PilotServer:
         self.boards = OnboardBoards(airframe, settings, now_s=clock())
         self.turned_away = 0
         self.loop_error: BaseException | None = None
+        self.vehicle_lost: str | None = None  # why the simulator/vehicle stopped answering
         self._lock = threading.Lock()
         # The landing-pad vision (skeye.pilot.vision.PadVision), stepped after every tick.
         self.vision = vision(self.boards, self._lock) if vision is not None else None
@@ -226,18 +227,38 @@ class PilotServer:
             pass
 
     # -- the loop ------------------------------------------------------------------------
+    def _check_vehicle(self) -> None:
+        """Raise if the airframe reports its link (the simulator) down."""
+        error = getattr(self.airframe, "lost", None)
+        if error:
+            raise SkeyeError(error)
+
+    def _lose_vehicle(self, reason: str) -> None:
+        if self.vehicle_lost is None:
+            self.vehicle_lost = reason
+            log.error("vehicle lost: %s; ground link kept, failsafe applies", reason)
+            with self._lock:
+                self.boards.vehicle_lost(self.clock())
+
     def _loop(self) -> None:
         try:
             next_s = self.clock()
             while not self._stop.is_set():
-                with self._lock:
-                    out = self.boards.tick(self.clock())
-                client = self._client
-                if client is not None and out:
-                    self._send(client, out)
-                self.airframe.advance(self.tick_s)  # no-op for time unless lockstep
-                if self.vision is not None:
-                    self.vision.step()
+                try:
+                    with self._lock:
+                        out = self.boards.tick(self.clock())
+                    client = self._client
+                    if client is not None and out:
+                        self._send(client, out)
+                    if self.vehicle_lost is None:
+                        self._check_vehicle()
+                        self.airframe.advance(self.tick_s)  # no-op for time unless lockstep
+                        if self.vision is not None:
+                            self.vision.step()
+                except SkeyeError as exc:
+                    # The simulator (the vehicle's hardware) went away: keep the ground link,
+                    # report it, and let the failsafe run; every command now gets a refusal.
+                    self._lose_vehicle(str(exc))
                 if self.lockstep:
                     if self.lockstep_rate > 0:
                         next_s += self.tick_s / self.lockstep_rate

@@ -41,6 +41,15 @@ class SimAirframe:
         self._baro_climb_m_s = 0.0
 
     @property
+    def lost(self) -> str | None:
+        """Why the simulator link is down (it died or closed), or None while it is up."""
+        if self.connection.error is not None:
+            return f"simulator lost: {self.connection.error}"
+        if self.connection.closed:
+            return "simulator lost: the connection is closed"
+        return None
+
+    @property
     def busy(self) -> bool:
         return self.robot.busy
 

@@ -1,0 +1,45 @@
+"""The simulator dies under a flying pilot: the pilot says so, keeps its ground link, and the
+failsafe applies; commands are refused (code 4) while polls are still answered."""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+
+import pytest
+
+from skeye.control.connection import connect
+from skeye.errors import CommandRejected
+from skeye.link.packets import PD, NavState, PollMask, SkeyeMask
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.server import PilotServer
+from skeye.pilot.sim_airframe import SimAirframe
+from tests.sim.conftest import running_sim
+
+
+def test_simulator_killed_under_the_pilot():
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=4))
+        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=5.0))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        pilot = stack.enter_context(
+            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
+                        tick_s=0.05, settings=BoardSettings(land_timeout_s=60.0))
+        )
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=5.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=30)
+
+        server.close()  # the simulator goes away (its engine too)
+        server.runner.close()
+
+        vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        assert pilot.vehicle_lost is not None and "simulator" in pilot.vehicle_lost
+        assert pilot.loop_error is None
+        # The ground link is kept: polls are answered, commands refused with the reason.
+        assert PD.LL_STATUS in vehicle.poll(int(PollMask.LL_STATUS))
+        with pytest.raises(CommandRejected) as info:
+            vehicle.move_by(forward_m=1.0)
+        assert info.value.code == 4
+        assert PD.LL_STATUS in vehicle.poll(int(PollMask.LL_STATUS))
