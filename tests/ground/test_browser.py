@@ -146,7 +146,10 @@ def test_land_lands(page: Any, stack: Stack) -> None:
 
 def test_page_survives_pilot_restart(page: Any, stack: Stack) -> None:
     connects = value(page, "#lq-connects")
-    stack.restart_pilot(down_s=2.0)
+    stack.pilot.stop()  # the pilot goes away: the page must say so
+    wait_js(page, "document.querySelector('#link-state').dataset.state !== 'connected'",
+            15, "the page to show the link down")
+    stack.restart_pilot(down_s=0.5)
     wait_js(page, f"Number(document.querySelector('#lq-connects').dataset.value) > {connects}"
                   " && document.querySelector('#link-state').dataset.state === 'connected'",
             20, "the page to reconnect to the restarted pilot")
