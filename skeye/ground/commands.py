@@ -121,8 +121,8 @@ COMMANDS: dict[str, CommandSpec] = {
             "PAD_MODE 0x86",
             (
                 Arg("mode", choices=("off", "hold", "land")),
-                Arg("deadband_m", 0.0, 2.0, 0.1),
-                Arg("max_speed_m_s", 0.05, 5.0, 0.5),
+                Arg("deadband_m", 0.0, 2.0, 0.05),  # the paper's 5 cm
+                Arg("max_speed_m_s", 0.05, 5.0, 0.3),  # and 0.3 m/s
             ),
             "landing pad: off, hold over the pad, or land on it",
         ),
