@@ -62,6 +62,7 @@ _QUEUE_LIMIT = 64  # stop reading a client's requests while this many are waitin
 _IDLE_WAKE_S = 1.0  # safety net: a client loop looks around at least this often
 _ENCODE_WAIT_S = 5.0  # a thread waiting on another's encoding gives up and encodes itself
 _UINT32_MAX = 0xFFFF_FFFF
+_STREAM_EARLY = 0.2  # a stream frame may go this fraction of a period before its slot
 
 FrameListener = Callable[[str], None]
 
@@ -450,7 +451,8 @@ class _ClientHandler:
             and not self._out
             and not self._queue
         ):
-            timeout = min(timeout, self._next_stream_s - now)
+            early = _STREAM_EARLY * self._stream_period_s
+            timeout = min(timeout, self._next_stream_s - early - now)
         return max(timeout, 0.0)
 
     # ---------------------------------------------------------------- requests
@@ -464,7 +466,10 @@ class _ClientHandler:
                     return  # waiting for a first frame
                 self._queue.popleft()
                 continue
-            if self._stream_period_s is not None and now >= self._next_stream_s:
+            if (
+                self._stream_period_s is not None
+                and now >= self._next_stream_s - _STREAM_EARLY * self._stream_period_s
+            ):
                 self._want_wake = True  # before looking, so a publish in between is not missed
                 camera = self._camera_name()
                 frame = None if camera is None else self._buffer.latest(camera)
@@ -473,8 +478,10 @@ class _ClientHandler:
                     return
                 self._want_wake = False
                 self._send_frame(frame, None)
-                period = self._stream_period_s
-                self._next_stream_s = max(self._next_stream_s + period, now - 0.5 * period)
+                # A token bucket of one frame: the long-run rate never exceeds the requested
+                # one, yet a frame arriving a little before its slot (camera and stream at the
+                # same rate, with jitter) goes out at once instead of waiting up to a period.
+                self._next_stream_s = max(self._next_stream_s, now) + self._stream_period_s
             return
 
     def _serve(self, request: Request, now: float) -> bool:
