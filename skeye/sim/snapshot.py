@@ -9,24 +9,9 @@ from typing import Any
 
 import cv2
 
+from skeye.control.connection import parse_address
 from skeye.errors import LocalProtocolError
 from skeye.sim.image_client import ImageClient
-
-
-def parse_address(text: str, default_port: int) -> tuple[str, int]:
-    """``host:port`` (or ``host``) -> (host, port), with a clear error."""
-    host, sep, port_text = text.rpartition(":")
-    if not sep:
-        return text, default_port
-    try:
-        port = int(port_text)
-    except ValueError:
-        raise LocalProtocolError(
-            f"bad address {text!r}: port {port_text!r} is not a number"
-        ) from None
-    if not 0 < port < 65536:
-        raise LocalProtocolError(f"bad address {text!r}: port must be 1..65535")
-    return host or "127.0.0.1", port
 
 
 def save_snapshot(address: str, out: Path, camera: str | None = None, quality: int = 95,
