@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
-import subprocess
 import sys
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from skeye.processes import start_skeye, stop_process
 from skeye.sim.image_client import ImageClient
 
 try:  # run from a checkout without installing
@@ -32,32 +31,16 @@ except ImportError:  # pragma: no cover
 
 
 @contextmanager
-def sim_process(width: int, height: int) -> Iterator[tuple[int, int, str]]:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    env.setdefault("MUJOCO_GL", "egl")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "skeye.cli", "sim", "--mode", "realtime", "--port", "0",
-         "--image-port", "0"],
-        stdout=subprocess.PIPE, text=True, env=env,
+def sim_process() -> Iterator[tuple[int, int, str]]:
+    proc, found = start_skeye(
+        ["sim", "--mode", "realtime", "--port", "0", "--image-port", "0"],
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)\)"],
+        "skeye sim",
     )
     try:
-        assert proc.stdout is not None
-        control = image = None
-        gl = "?"
-        while control is None or image is None:
-            line = proc.stdout.readline()
-            if not line:
-                raise RuntimeError("simulator exited")
-            m = re.search(r"control protocol on [\d.]+:(\d+)", line)
-            if m:
-                control = int(m.group(1))
-            m = re.search(r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)\)", line)
-            if m:
-                image, gl = int(m.group(1)), m.group(2)
-        yield control, image, gl
+        yield int(found[0].group(1)), int(found[1].group(1)), found[1].group(2)
     finally:
-        proc.terminate()
-        proc.wait(10)
+        stop_process(proc)
 
 
 def clock_offset(c: LineClient) -> float:
@@ -101,7 +84,7 @@ def main() -> None:
     parser.add_argument("--fps", type=float, default=30.0)
     parser.add_argument("--clients", type=int, nargs="+", default=[1, 4])
     args = parser.parse_args()
-    with sim_process(800, 600) as (control_port, image_port, gl):
+    with sim_process() as (control_port, image_port, gl):
         c = LineClient(control_port)
         c.expect("NFO")
         c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1.0}", "INIT")

@@ -17,11 +17,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import socket
 import statistics
-import subprocess
 import sys
 import threading
 import time
@@ -30,6 +28,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.processes import start_skeye, stop_process
 from skeye.sim.image_client import ImageClient
 
 
@@ -129,25 +128,15 @@ class LoadResult:
 
 
 def run_load(control: int, image: int, seconds: float, fps: float = 30.0) -> LoadResult:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    env.setdefault("MUJOCO_GL", "egl")
-    cmd = [sys.executable, "-m", "skeye.cli", "sim", "--port", "0", "--image-port", "0"]
-    proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
+    proc, found = start_skeye(
+        ["sim", "--port", "0", "--image-port", "0"],
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"],
+        "skeye sim",
     )
+    ports = {"control": int(found[0].group(1)), "image": int(found[1].group(1))}
     clients: list[ControlClient] = []
     streamers: list[ImageStreamer] = []
     try:
-        assert proc.stdout is not None
-        ports: dict[str, int] = {}
-        while "image" not in ports or "control" not in ports:
-            line = proc.stdout.readline()
-            if not line:
-                raise RuntimeError("simulator exited before it listened")
-            if m := re.search(r"control protocol on [\d.]+:(\d+)", line):
-                ports["control"] = int(m.group(1))
-            if m := re.search(r"image server on [\d.]+:(\d+)", line):
-                ports["image"] = int(m.group(1))
         for i in range(control):
             c = ControlClient(ports["control"], i)
             c.send(
@@ -191,13 +180,7 @@ def run_load(control: int, image: int, seconds: float, fps: float = 30.0) -> Loa
             s.close()
         for c in clients:
             c.sock.close()
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        if proc.stdout is not None:
-            proc.stdout.close()
+        stop_process(proc, timeout_s=10)
 
 
 def main() -> None:

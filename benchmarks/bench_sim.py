@@ -16,46 +16,25 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import socket
 import statistics
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from skeye.processes import start_skeye, stop_process
+
 
 @contextmanager
 def sim_process(timestep: float) -> Iterator[int]:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "skeye.cli",
-            "sim",
-            "--mode",
-            "lockstep",
-            "--port",
-            "0",
-            "--timestep",
-            str(timestep),
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-        env=env,
+    proc, found = start_skeye(
+        ["sim", "--mode", "lockstep", "--port", "0", "--timestep", str(timestep)],
+        [r"127\.0\.0\.1:(\d+)"], "skeye sim",
     )
     try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        match = re.search(r"127\.0\.0\.1:(\d+)", line)
-        if not match:
-            raise RuntimeError(f"simulator did not start: {line!r}")
-        yield int(match.group(1))
+        yield int(found[0].group(1))
     finally:
-        proc.terminate()
-        proc.wait(10)
+        stop_process(proc)
 
 
 class Conn:

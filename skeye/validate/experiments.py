@@ -21,10 +21,6 @@ reads the simulator's state behind the pilot's back.
 from __future__ import annotations
 
 import math
-import os
-import re
-import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -37,6 +33,7 @@ from skeye.errors import SkeyeError
 from skeye.link.packets import NavState, PadReport, SkeyeMask
 from skeye.link.scaling import nav_status_to_si, pad_report_to_si
 from skeye.link.vehicle import Vehicle
+from skeye.processes import start_skeye, stop_process
 from skeye.sim.protocol import parse_line
 from skeye.sim.recording import RecordingReader
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M
@@ -71,43 +68,6 @@ class E2Series:
 
 
 # -- processes --------------------------------------------------------------------------------
-def _spawn(args: list[str], pattern: str, what: str, timeout_s: float = 60.0
-           ) -> tuple[subprocess.Popen[str], list[re.Match[str]]]:
-    """Start ``python -m skeye.cli ARGS`` and wait for every line matching ``pattern``."""
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    env.setdefault("MUJOCO_GL", "egl")
-    proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=env)
-    assert proc.stdout is not None
-    wanted = pattern.split("|")
-    found: list[re.Match[str]] = []
-    deadline = time.monotonic() + timeout_s
-    seen: list[str] = []
-    while len(found) < len(wanted):
-        line = proc.stdout.readline()
-        if not line or time.monotonic() > deadline:
-            proc.kill()
-            raise SkeyeError(f"{what} did not start: {''.join(seen[-5:]) or 'no output'}")
-        seen.append(line)
-        m = re.search(wanted[len(found)], line)
-        if m:
-            found.append(m)
-    # Keep draining its output so it never blocks on a full pipe.
-    threading.Thread(target=lambda: proc.stdout.read() if proc.stdout else None,
-                     daemon=True).start()
-    return proc, found
-
-
-def _stop(proc: subprocess.Popen[str]) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
-
-
 @contextmanager
 def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: bool
                  ) -> Iterator[Vehicle]:
@@ -118,18 +78,19 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
         sim_args += ["--image-port", "0"]
     if wind:
         sim_args += ["--wind", "random_force", "--wind-params", f"f_max_n={settings.f_max_n}"]
-    pattern = r"control protocol on [\d.]+:(\d+)"
+    patterns = [r"control protocol on [\d.]+:(\d+)"]
     if vision:
-        pattern += r"|image server on [\d.]+:(\d+)"
+        patterns.append(r"image server on [\d.]+:(\d+)")
     with ExitStack() as stack:
-        sim, found = _spawn(sim_args, pattern, "skeye sim")
-        stack.callback(_stop, sim)
+        sim, found = start_skeye(sim_args, patterns, "skeye sim")
+        stack.callback(stop_process, sim)
         pilot_args = ["pilot", "--sim", f"127.0.0.1:{found[0].group(1)}", "--port", "0",
                       "--lockstep-rate", "0", "--link-timeout", "30", "--land-timeout", "60"]
         if vision:
             pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}"]
-        pilot, pfound = _spawn(pilot_args, r"ground control on (tcp://[\d.]+:\d+)", "skeye pilot")
-        stack.callback(_stop, pilot)
+        pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
+                                    "skeye pilot")
+        stack.callback(stop_process, pilot)
         vehicle = stack.enter_context(Vehicle.open(pfound[0].group(1), timeout_s=30.0))
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD), 0.005)
         yield vehicle
