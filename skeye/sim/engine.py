@@ -271,35 +271,28 @@ class Simulation:
             self._rebuild()
 
     def _ground_below(self, pos_ned: tuple[float, float, float]) -> float | None:
-        """Distance from a NED point down to the first world geom (no robot), or None."""
-        pnt = frames.ned_to_mj(pos_ned)
-        geomid = np.zeros(1, dtype=np.int32)
-        dist = mujoco.mj_ray(
-            self.model, self.data, pnt, np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid
-        )
-        return None if dist < 0 else float(dist)
+        """Distance from a NED point straight down to the first geom, or None."""
+        return self._cast(pos_ned, (0.0, 0.0, 1.0), -1, math.inf)
 
     def ray_distance(
         self, robot_name: str, origin_ned_m: Any, direction_ned: Any, max_range_m: float
     ) -> float | None:
         """First hit along a ray from a NED point, ignoring the robot itself."""
-        slot = self._slots[robot_name]
+        return self._cast(origin_ned_m, direction_ned, self._slots[robot_name].body_id,
+                          max_range_m)
+
+    def _cast(
+        self, origin_ned_m: Any, direction_ned: Any, exclude_body: int, max_range_m: float
+    ) -> float | None:
+        """One MuJoCo ray (NED in, metres out); None when nothing is hit within range."""
         d = frames.ned_to_mj(direction_ned)
         norm = math.sqrt(float(d @ d))
         if norm == 0.0:
             return None
         self._ray_pnt[:] = frames.ned_to_mj(origin_ned_m)
         self._ray_vec[:] = d / norm
-        dist = mujoco.mj_ray(
-            self.model,
-            self.data,
-            self._ray_pnt,
-            self._ray_vec,
-            None,
-            1,
-            slot.body_id,
-            self._ray_geomid,
-        )
+        dist = mujoco.mj_ray(self.model, self.data, self._ray_pnt, self._ray_vec, None, 1,
+                             exclude_body, self._ray_geomid)
         if dist < 0 or dist > max_range_m:
             return None
         return float(dist)
@@ -546,17 +539,6 @@ class SimulationRunner:
 
     def call(self, fn: Callable[[Simulation], T], timeout_s: float = 30.0) -> T:
         return self.submit(fn).result(timeout_s)
-
-    def step(self, count: int, timeout_s: float = 600.0) -> float:
-        """Lockstep: advance ``count`` steps; returns the new sim time."""
-        if self.mode != "lockstep":
-            raise LocalProtocolError("STEP works only when the simulator runs with --mode lockstep")
-
-        def do(sim: Simulation) -> float:
-            sim.step(count)
-            return sim.time_s
-
-        return self.call(do, timeout_s)
 
     def _run_task(self, item: tuple[Callable[[Simulation], Any], Future[Any]]) -> None:
         fn, fut = item
