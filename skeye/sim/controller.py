@@ -94,74 +94,72 @@ class LowLevelController:
         altitude_m: float,
         max_rotor_speed_rad_s: float,
     ) -> list[float]:
-        """One tick: estimate + command -> four rotor speed commands (rad/s)."""
+        """One tick: estimate + command -> four rotor speed commands (rad/s).
+
+        Hot path (every board tick of every robot): written out on plain floats.
+        """
         p, a, dt = self.p, self.a, self.dt
         roll, pitch, yaw = rpy
         if cmd.attitude:
-            roll_sp = _clamp(cmd.roll_rad, -p.max_tilt_rad * 1.6, p.max_tilt_rad * 1.6)
-            pitch_sp = _clamp(cmd.pitch_rad, -p.max_tilt_rad * 1.6, p.max_tilt_rad * 1.6)
+            lim = p.max_tilt_rad * 1.6
+            roll_sp = _clamp(cmd.roll_rad, -lim, lim)
+            pitch_sp = _clamp(cmd.pitch_rad, -lim, lim)
             thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
             self.hold_altitude_m = None
         else:
             cy, sy = math.cos(yaw), math.sin(yaw)
-            v_fwd = cy * vel_ned[0] + sy * vel_ned[1]
-            v_right = -sy * vel_ned[0] + cy * vel_ned[1]
-            v_up = -vel_ned[2]
-            # Horizontal velocity loop -> accelerations in the yaw frame.
-            acc = []
-            for i, (sp_v, v) in enumerate(
-                (
-                    (_clamp(cmd.forward_m_s, -p.max_speed_m_s, p.max_speed_m_s), v_fwd),
-                    (_clamp(cmd.right_m_s, -p.max_speed_m_s, p.max_speed_m_s), v_right),
-                )
-            ):
-                err = sp_v - v
-                self.vel_int[i] = _clamp(self.vel_int[i] + err * dt, -1.0, 1.0)
-                acc.append(
-                    _clamp(
-                        p.velocity_gain * err + p.velocity_integral_gain * self.vel_int[i],
-                        -p.max_accel_m_s2,
-                        p.max_accel_m_s2,
-                    )
-                )
-            pitch_sp = _clamp(-math.atan2(acc[0], GRAVITY_M_S2), -p.max_tilt_rad, p.max_tilt_rad)
+            vn, ve, vd = vel_ned
+            vmax, amax, ki = p.max_speed_m_s, p.max_accel_m_s2, p.velocity_integral_gain
+            kv = p.velocity_gain
+            vel_int = self.vel_int
+            # Horizontal velocity loop -> accelerations in the yaw frame (forward, right).
+            err = _clamp(cmd.forward_m_s, -vmax, vmax) - (cy * vn + sy * ve)
+            i0 = vel_int[0] = _clamp(vel_int[0] + err * dt, -1.0, 1.0)
+            acc_fwd = _clamp(kv * err + ki * i0, -amax, amax)
+            err = _clamp(cmd.right_m_s, -vmax, vmax) - (-sy * vn + cy * ve)
+            i1 = vel_int[1] = _clamp(vel_int[1] + err * dt, -1.0, 1.0)
+            acc_right = _clamp(kv * err + ki * i1, -amax, amax)
+            tilt_max = p.max_tilt_rad
+            pitch_sp = _clamp(-math.atan2(acc_fwd, GRAVITY_M_S2), -tilt_max, tilt_max)
             roll_sp = _clamp(
-                math.atan2(acc[1] * math.cos(pitch_sp), GRAVITY_M_S2),
-                -p.max_tilt_rad,
-                p.max_tilt_rad,
+                math.atan2(acc_right * math.cos(pitch_sp), GRAVITY_M_S2), -tilt_max, tilt_max
             )
             # Vertical: climb-rate PI, with height hold while the climb command is zero.
-            up_cmd = _clamp(cmd.up_m_s, -p.max_climb_m_s, p.max_climb_m_s)
+            climb_max = p.max_climb_m_s
+            up_cmd = _clamp(cmd.up_m_s, -climb_max, climb_max)
             if up_cmd == 0.0:
                 if self.hold_altitude_m is None:
                     self.hold_altitude_m = altitude_m
                 up_cmd = _clamp(
-                    p.height_gain * (self.hold_altitude_m - altitude_m),
-                    -p.max_climb_m_s,
-                    p.max_climb_m_s,
+                    p.height_gain * (self.hold_altitude_m - altitude_m), -climb_max, climb_max
                 )
             else:
                 self.hold_altitude_m = None
-            err = up_cmd - v_up
+            err = up_cmd + vd
             self.climb_int = _clamp(self.climb_int + err * dt, -2.0, 2.0)
             a_up = _clamp(
                 p.climb_gain * err + p.climb_integral_gain * self.climb_int,
                 -GRAVITY_M_S2 * 0.8,
-                p.max_accel_m_s2 * 2,
+                amax * 2,
             )
-            tilt = max(math.cos(roll) * math.cos(pitch), 0.5)
-            thrust = a.mass_kg * (GRAVITY_M_S2 + a_up) / tilt
+            tilt = math.cos(roll) * math.cos(pitch)
+            thrust = a.mass_kg * (GRAVITY_M_S2 + a_up) / (tilt if tilt > 0.5 else 0.5)
         yaw_rate_sp = _clamp(cmd.yaw_rate_rad_s, -p.max_yaw_rate_rad_s, p.max_yaw_rate_rad_s)
-        # Angle loop -> body rate set-points (Euler-rate approximation, fine for small tilt).
-        rate_sp = (p.angle_gain * (roll_sp - roll), p.angle_gain * (pitch_sp - pitch), yaw_rate_sp)
-        gains = (p.rate_gain, p.rate_gain, p.yaw_rate_gain)
-        torque = [0.0, 0.0, 0.0]
-        for i in range(3):
-            err = rate_sp[i] - omega[i]
-            self.rate_int[i] = _clamp(self.rate_int[i] + err * dt, -0.5, 0.5)
-            integral = p.rate_integral_gain * self.rate_int[i] if i < 2 else 0.0
-            torque[i] = a.inertia_kg_m2[i] * (gains[i] * err + integral)
-        return self.mix(thrust, torque, max_rotor_speed_rad_s)
+        # Angle loop -> body rate set-points (Euler-rate approximation, fine for small tilt),
+        # then the PI rate loop (P only on yaw) -> body torques.
+        rate_int = self.rate_int
+        kr, kri, ka = p.rate_gain, p.rate_integral_gain, p.angle_gain
+        ixx, iyy, izz = a.inertia_kg_m2
+        err = ka * (roll_sp - roll) - omega[0]
+        r0 = rate_int[0] = _clamp(rate_int[0] + err * dt, -0.5, 0.5)
+        tau_x = ixx * (kr * err + kri * r0)
+        err = ka * (pitch_sp - pitch) - omega[1]
+        r1 = rate_int[1] = _clamp(rate_int[1] + err * dt, -0.5, 0.5)
+        tau_y = iyy * (kr * err + kri * r1)
+        err = yaw_rate_sp - omega[2]
+        rate_int[2] = _clamp(rate_int[2] + err * dt, -0.5, 0.5)
+        tau_z = izz * (p.yaw_rate_gain * err)
+        return self.mix(thrust, [tau_x, tau_y, tau_z], max_rotor_speed_rad_s)
 
     def mix(
         self, thrust_n: float, torque: list[float], max_rotor_speed_rad_s: float

@@ -33,7 +33,7 @@ import numpy as np
 from skeye.errors import LocalProtocolError, PhysicsError, SkeyeError
 from skeye.sim import frames
 from skeye.sim.protocol import format_message
-from skeye.sim.robot import Outbox, Robot, check_state
+from skeye.sim.robot import Outbox, Robot, ScheduledSensor, check_state
 from skeye.sim.robot_config import RobotConfig, load_robot_config
 from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
@@ -64,9 +64,14 @@ class RobotWorldQuery:
         self.sea_level_pressure_pa = sim.world.sea_level_pressure_pa
 
     def ray_distance(
-        self, origin_ned_m: np.ndarray, direction_ned: np.ndarray, max_range_m: float
+        self, origin_ned_m: Any, direction_ned: Any, max_range_m: float
     ) -> float | None:
         return self._sim.ray_distance(self._robot, origin_ned_m, direction_ned, max_range_m)
+
+    def ray_distances(
+        self, origin_ned_m: Any, directions_ned: Any, max_range_m: float
+    ) -> list[float | None]:
+        return self._sim.ray_distances(self._robot, origin_ned_m, directions_ned, max_range_m)
 
 
 class Simulation:
@@ -99,6 +104,7 @@ class Simulation:
         # Each step hook names, through an event source, the next step it needs to see.
         self.event_sources: list[Callable[[Simulation], int]] = []
         self._pending: dict[int, tuple[Outbox, list[bytes]]] = {}
+        self._periods: list[int] = []
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
         self.xml_extras: list[Callable[[Robot], str]] = []
         self._ray_geomid = np.zeros(1, dtype=np.int32)
@@ -158,13 +164,14 @@ class Simulation:
         return [extra(robot) for extra in self.xml_extras]
 
     def _rebuild(self) -> None:
-        saved: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        saved: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         if self.data is not None:
             for name, slot in self._slots.items():
                 if name in self.robots:
                     saved[name] = (
                         self.data.qpos[slot.qpos_adr : slot.qpos_adr + 7].copy(),
                         self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6].copy(),
+                        self.data.xfrc_applied[slot.body_id].copy(),
                     )
         robots_xml = "\n".join(self._robot_xml(r) for r in self.robots.values())
         xml, assets = build_mjcf(
@@ -185,10 +192,13 @@ class Simulation:
             )
             self._slots[name] = slot
             if name in saved:
-                qpos, qvel = saved[name]
+                # The wrench too: the board sets it only on its ticks.
+                qpos, qvel, wrench = saved[name]
                 self.data.qpos[slot.qpos_adr : slot.qpos_adr + 7] = qpos
                 self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = qvel
+                self.data.xfrc_applied[body_id] = wrench
         mujoco.mj_forward(self.model, self.data)
+        self._update_schedule()
         for hook in self.rebuild_hooks:
             hook(self)
 
@@ -263,6 +273,8 @@ class Simulation:
             slot = self._slots[name]
             robot.controller.reset(hold_altitude_m=-pos[2])
             self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
+        # The board's first tick now, so the wrench is set from the first step on.
+        self._board_tick(name, robot, self.body_state(name))
         return robot
 
     def remove(self, name: str) -> None:
@@ -285,46 +297,51 @@ class Simulation:
         self, origin_ned_m: Any, direction_ned: Any, exclude_body: int, max_range_m: float
     ) -> float | None:
         """One MuJoCo ray (NED in, metres out); None when nothing is hit within range."""
-        d = frames.ned_to_mj(direction_ned)
-        norm = math.sqrt(float(d @ d))
+        dx, dy, dz = float(direction_ned[0]), -float(direction_ned[1]), -float(direction_ned[2])
+        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
         if norm == 0.0:
             return None
-        self._ray_pnt[:] = frames.ned_to_mj(origin_ned_m)
-        self._ray_vec[:] = d / norm
-        dist = mujoco.mj_ray(self.model, self.data, self._ray_pnt, self._ray_vec, None, 1,
-                             exclude_body, self._ray_geomid)
+        pnt, vec = self._ray_pnt, self._ray_vec
+        pnt[0], pnt[1], pnt[2] = origin_ned_m[0], -origin_ned_m[1], -origin_ned_m[2]
+        vec[0], vec[1], vec[2] = dx / norm, dy / norm, dz / norm
+        dist = mujoco.mj_ray(self.model, self.data, pnt, vec, None, 1, exclude_body,
+                             self._ray_geomid)
         if dist < 0 or dist > max_range_m:
             return None
         return float(dist)
+
+    def ray_distances(
+        self, robot_name: str, origin_ned_m: Any, directions_ned: Any, max_range_m: float
+    ) -> list[float | None]:
+        """:meth:`ray_distance` for several rays from one point, in one MuJoCo call."""
+        n = len(directions_ned)
+        if n == 0:
+            return []
+        vec = np.empty((n, 3))
+        for i, (x, y, z) in enumerate(directions_ned):
+            norm = math.sqrt(x * x + y * y + z * z)
+            if norm == 0.0:
+                raise LocalProtocolError("a ray direction must not be zero")
+            vec[i, 0], vec[i, 1], vec[i, 2] = x / norm, -y / norm, -z / norm
+        pnt = self._ray_pnt
+        pnt[0], pnt[1], pnt[2] = origin_ned_m[0], -origin_ned_m[1], -origin_ned_m[2]
+        dist = np.empty(n)
+        geomid = np.empty(n, dtype=np.int32)
+        mujoco.mj_multiRay(self.model, self.data, pnt, vec.reshape(-1), None, 1,
+                           self._slots[robot_name].body_id, geomid, dist, None, n, max_range_m)
+        return [d if 0.0 <= d <= max_range_m else None for d in dist.tolist()]
 
     def body_state(self, name: str) -> BodyState:
         """Ground truth of a robot in NED/FRD."""
         slot = self._slots[name]
         d = self.data
         a, b = slot.qpos_adr, slot.qvel_adr
-        pos, vel, quat, omega, acc = frames.free_joint_to_ned(
-            d.qpos[a : a + 7].tolist(), d.qvel[b : b + 6].tolist(), d.qacc[b : b + 3].tolist()
-        )
-        rot = frames.quat_to_matrix(quat)
-        # Specific force (what an accelerometer feels): R^T (a - g), g = +9.81 down.
-        ax, ay, az = acc[0], acc[1], acc[2] - 9.81
-        r = rot.tolist()
-        sf = (
-            r[0][0] * ax + r[1][0] * ay + r[2][0] * az,
-            r[0][1] * ax + r[1][1] * ay + r[2][1] * az,
-            r[0][2] * ax + r[1][2] * ay + r[2][2] * az,
-        )
-        return BodyState(
-            time_s=self.time_s,
-            pos_ned_m=np.array(pos),
-            vel_ned_m_s=np.array(vel),
-            quat_ned=np.array(quat),
-            rpy_rad=np.array(frames.quat_to_euler(quat)),
-            rot_body_to_ned=rot,
-            omega_frd_rad_s=np.array(omega),
-            accel_ned_m_s2=np.array(acc),
-            specific_force_frd_m_s2=np.array(sf),
-            rotor_speed_rad_s=np.array(self.robots[name].rotors.speed_rad_s),
+        return frames.free_joint_state(
+            self.steps * self.dt,
+            d.qpos[a : a + 7].tolist(),
+            d.qvel[b : b + 6].tolist(),
+            d.qacc[b : b + 3].tolist(),
+            self.robots[name].rotors.speed_rad_s,
         )
 
     def _in_contact(self, body_id: int) -> bool:
@@ -339,12 +356,13 @@ class Simulation:
     def step(self, count: int = 1) -> None:
         """Advance ``count`` physics steps, emitting every message those steps produce.
 
-        Steps in which nothing happens but physics (no board tick, no sensor, status or camera
-        due) run as one ``mj_step(nstep=k)`` call: the same arithmetic, without Python in the
-        loop. The lines the steps produce go to each client in one write at the end.
+        Steps after which nothing is due but physics (no board tick, no sensor, status or
+        camera) run as one ``mj_step(nstep=k)`` call: the same arithmetic, without Python in
+        the loop. The lines the steps produce go to each client in one write at the end.
         """
         target = self.steps + count
         try:
+            self._check_states()
             while self.steps < target:
                 quiet = min(self._next_event_step(), target - 1) - self.steps
                 if quiet > 0:
@@ -354,20 +372,46 @@ class Simulation:
         finally:
             self.flush()
 
-    def _next_event_step(self) -> int:
-        """The first step index >= now at which :meth:`_step_once` has work to do."""
-        now = self.steps
-        best = now + 1_000_000
+    def _check_states(self) -> None:
+        """Stop every robot whose state went bad between steps (a task can write MuJoCo's
+        state), before MuJoCo sees it: its own NaN guard would reset the whole world."""
+        for name in list(self.robots):
+            try:
+                check_state(name, self.body_state(name))
+            except PhysicsError as exc:
+                self._park(name)
+                self._stop_robot(name, str(exc))
+
+    def _update_schedule(self) -> None:
+        """Collect the distinct periods (in steps) at which robots have work: board ticks,
+        sensors, status. Called whenever robots come or go."""
+        periods: set[int] = set()
         for robot in self.robots.values():
-            dec = robot.board_decimation
-            best = min(best, -(-now // dec) * dec)
-            for period in [s.period_steps for s in robot.sensors] + [robot.status_period_steps]:
-                best = min(best, -(-(now + 1) // period) * period - 1)
-            if best == now:
-                return now
+            periods.add(robot.board_decimation)
+            periods.add(robot.status_period_steps)
+            periods.update(s.period_steps for s in robot.sensors)
+        self._periods = sorted(periods)
+
+    def _next_event_step(self) -> int:
+        """The first step index >= now whose :meth:`_step_once` has work to do after it.
+
+        Work that falls due when the step count reaches a multiple of ``p`` is done at the end
+        of the step with index ``k`` where ``(k + 1) % p == 0``.
+        """
+        now = self.steps
+        after = now + 1
+        best = now + 1_000_000
+        for p in self._periods:
+            k = -(-after // p) * p - 1
+            if k < best:
+                best = k
+                if k == now:
+                    return now
         for source in self.event_sources:
-            best = min(best, source(self))
-        return max(best, now)
+            k = source(self)
+            if k < best:
+                best = k
+        return best if best > now else now
 
     def emit(self, robot: Robot, line: bytes) -> None:
         """Queue a line for a robot's client; sent when the current step() call ends."""
@@ -383,48 +427,73 @@ class Simulation:
             outbox(b"".join(lines))
 
     def _step_once(self) -> None:
-        d = self.data
-        step = self.steps
-        wind_advanced = False
+        """One physics step, then whatever falls due at the new step count, robot by robot:
+        sensors are sampled (and status reported) from the state now, then the board ticks on
+        that same state and sets the wrench MuJoCo applies until the board's next tick."""
+        mujoco.mj_step(self.model, self.data)
+        self.steps = step = self.steps + 1
         failed: list[tuple[str, str]] = []
+        wind_advanced = False
+        joints: tuple[list[float], list[float], list[float]] | None = None
+        t = step * self.dt
         for name, robot in self.robots.items():
-            if step % robot.board_decimation:
+            board = step % robot.board_decimation == 0
+            due = [sched for sched in robot.sensors if step % sched.period_steps == 0]
+            status = step % robot.status_period_steps == 0
+            if not (board or due or status):
                 continue
-            if not wind_advanced:
-                self.wind.advance(self.time_s, robot.tick_s)
-                wind_advanced = True
+            if joints is None:  # one read of MuJoCo's arrays for all robots this step
+                d = self.data
+                joints = (d.qpos.tolist(), d.qvel.tolist(), d.qacc.tolist())
             slot = self._slots[name]
-            try:
-                state = self.body_state(name)
-                check_state(name, state)
-                ground = None
-                if step % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
-                    ground = self.ray_distance(name, state.pos_ned_m, (0.0, 0.0, 1.0), 10.0)
-                else:
-                    ground = robot.ground_distance_m
-                contact = self._in_contact(slot.body_id)
-                force, torque = robot.board_tick(
-                    state, ground, contact, self.wind.air_velocity_ned()
-                )
-            except PhysicsError as exc:
-                failed.append((name, str(exc)))
-                # Park the failed body far above the world with finite state, so MuJoCo's own
-                # NaN guard (which resets the whole MjData) never fires for one robot's fault.
-                a, b = slot.qpos_adr, slot.qvel_adr
-                d.qpos[a : a + 7] = (0.0, 0.0, 1.0e4, 1.0, 0.0, 0.0, 0.0)
-                d.qvel[b : b + 6] = 0.0
-                d.xfrc_applied[slot.body_id] = 0.0
-                continue
-            wf = self.wind.force_ned()
-            fx, fy, fz = force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]
-            d.xfrc_applied[slot.body_id] = frames.ned_wrench_to_mj((fx, fy, fz), torque)
-        mujoco.mj_step(self.model, d)
-        self.steps += 1
+            a, b = slot.qpos_adr, slot.qvel_adr
+            state = frames.free_joint_state(
+                t, joints[0][a : a + 7], joints[1][b : b + 6], joints[2][b : b + 3],
+                robot.rotors.speed_rad_s,
+            )
+            if due or status:
+                self._emit_readings(robot, state, due, status)
+            if board:
+                if not wind_advanced:
+                    self.wind.advance(state.time_s, robot.tick_s)
+                    wind_advanced = True
+                try:
+                    self._board_tick(name, robot, state)
+                except PhysicsError as exc:
+                    failed.append((name, str(exc)))
+                    self._park(name)
         for name, reason in failed:
             self._stop_robot(name, reason)
         for hook in self.step_hooks:
             hook(self)
-        self._emit_due()
+
+    def _board_tick(self, name: str, robot: Robot, state: BodyState) -> None:
+        """Run one robot's board on ``state`` and set the wrench on its body."""
+        check_state(name, state)
+        slot = self._slots[name]
+        if self.steps % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
+            ground = self._cast(state.pos_ned_m, (0.0, 0.0, 1.0), slot.body_id, 10.0)
+        else:
+            ground = robot.ground_distance_m
+        force, torque = robot.board_tick(
+            state, ground, self._in_contact(slot.body_id), self.wind.air_velocity_ned()
+        )
+        wf = self.wind.force_ned()
+        self.data.xfrc_applied[slot.body_id] = (
+            force[0] + wf[0], -(force[1] + wf[1]), -(force[2] + wf[2]),
+            torque[0], -torque[1], -torque[2],
+        )  # NED -> MuJoCo's NWU, as frames.ned_wrench_to_mj (written out: hot path)
+
+    def _park(self, name: str) -> None:
+        """Park a failed body far above the world with finite state and no force, so MuJoCo's
+        own NaN guard (which resets the whole MjData) never fires for one robot's fault."""
+        slot = self._slots[name]
+        d = self.data
+        a, b = slot.qpos_adr, slot.qvel_adr
+        d.qpos[a : a + 7] = (0.0, 0.0, 1.0e4, 1.0, 0.0, 0.0, 0.0)
+        d.qvel[b : b + 6] = 0.0
+        d.qacc[b : b + 6] = 0.0
+        d.xfrc_applied[slot.body_id] = 0.0
 
     def _stop_robot(self, name: str, reason: str) -> None:
         robot = self.robots.get(name)
@@ -444,45 +513,24 @@ class Simulation:
         )
         self.remove(name)
 
-    def _emit_due(self) -> None:
-        step = self.steps
-        t = self.time_s
-        for name, robot in self.robots.items():
-            state: BodyState | None = None
-            for sched in robot.sensors:
-                if step % sched.period_steps:
-                    continue
-                if state is None:
-                    state = self.body_state(name)
-                sensor = sched.sensor
-                if sensor.type_name == "Battery":
-                    sensor.update_battery(
-                        robot.battery.voltage_v,
-                        robot.battery.current_a,
-                        robot.battery.state_of_charge,
-                    )
-                fields = sensor.sample(state, self._queries[name])
-                self.emit(
-                    robot,
-                    format_message(
-                        "SEN",
-                        ("Time", t),
-                        ("Type", sensor.type_name),
-                        ("Name", sched.mount.name),
-                        *fields,
-                    )
+    def _emit_readings(
+        self, robot: Robot, state: BodyState, due: list[ScheduledSensor], status: bool
+    ) -> None:
+        """SEN lines of the due sensors, then STA if due, for one robot."""
+        lines: list[bytes] = []
+        query = self._queries[robot.name]
+        for sched in due:
+            sensor = sched.sensor
+            if sensor.type_name == "Battery":
+                sensor.update_battery(
+                    robot.battery.voltage_v,
+                    robot.battery.current_a,
+                    robot.battery.state_of_charge,
                 )
-            if step % robot.status_period_steps == 0:
-                self.emit(
-                    robot,
-                    format_message(
-                        "STA",
-                        ("Type", "AerialVehicle"),
-                        ("Name", name),
-                        ("Time", t),
-                        *robot.status_fields(),
-                    )
-                )
+            lines.append(sched.sen_line(sensor.read(state, query)))
+        if status:
+            lines.append(robot.status_line(state.time_s))
+        self.emit(robot, b"".join(lines))
 
     def set_wind(self, settings: WindSettings) -> None:
         self.wind = WindModel(settings, np.random.default_rng([self.seed, 7, self.steps]))

@@ -15,6 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from skeye.sim.state import BodyState, Mat3
+
 Vec3 = Sequence[float] | np.ndarray
 
 
@@ -90,27 +92,55 @@ def wrap_pi(angle_rad: float) -> float:
     return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def free_joint_to_ned(
-    qpos: Sequence[float], qvel: Sequence[float], qacc: Sequence[float]
-) -> tuple[
-    tuple[float, float, float],
-    tuple[float, float, float],
-    tuple[float, float, float, float],
-    tuple[float, float, float],
-    tuple[float, float, float],
-]:
-    """A MuJoCo free joint's (qpos[7], qvel[6], qacc[3]) -> NED position, NED velocity,
-    quaternion body(FRD)->NED, body(FRD) angular velocity and NED acceleration.
+def free_joint_state(
+    time_s: float,
+    qpos: Sequence[float],
+    qvel: Sequence[float],
+    qacc: Sequence[float],
+    rotor_speed_rad_s: Sequence[float] = (0.0, 0.0, 0.0, 0.0),
+) -> BodyState:
+    """A MuJoCo free joint's (qpos[7], qvel[6], qacc[3]) -> the body's state in NED/FRD.
 
     Plain floats: this runs every board tick of every robot. MuJoCo's free-joint linear
-    velocity is in the world frame and its angular velocity in the body frame.
+    velocity is in the world frame and its angular velocity in the body frame. The specific
+    force is ``R^T (a - g)`` with g = +9.81 m/s^2 down (what an accelerometer feels).
     """
-    return (
+    w, x, y, z = qpos[3], qpos[4], -qpos[5], -qpos[6]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
+    r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
+    r10, r11, r12 = 2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)
+    r20, r21, r22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
+    s = -r20
+    pitch = math.asin(1.0 if s > 1.0 else -1.0 if s < -1.0 else s)
+    ax, ay, az = qacc[0], -qacc[1], -qacc[2]
+    gz = az - 9.81
+    w0, w1, w2, w3 = rotor_speed_rad_s
+    return BodyState(
+        time_s,
         (qpos[0], -qpos[1], -qpos[2]),
         (qvel[0], -qvel[1], -qvel[2]),
-        (qpos[3], qpos[4], -qpos[5], -qpos[6]),
+        (w, x, y, z),
+        (math.atan2(r21, r22), pitch, math.atan2(r10, r00)),
+        ((r00, r01, r02), (r10, r11, r12), (r20, r21, r22)),
         (qvel[3], -qvel[4], -qvel[5]),
-        (qacc[0], -qacc[1], -qacc[2]),
+        (ax, ay, az),
+        (
+            r00 * ax + r10 * ay + r20 * gz,
+            r01 * ax + r11 * ay + r21 * gz,
+            r02 * ax + r12 * ay + r22 * gz,
+        ),
+        (w0, w1, w2, w3),
+    )
+
+
+def quat_to_rows(q: Sequence[float]) -> Mat3:
+    """Quaternion (w,x,y,z) -> rotation matrix (body to world) as rows of plain floats."""
+    w, x, y, z = q
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
     )
 
 

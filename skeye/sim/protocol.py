@@ -38,14 +38,23 @@ import numpy as np
 from skeye.errors import LocalProtocolError, RemoteProtocolError
 
 __all__ = [
+    "BOOL",
+    "FLOAT",
     "FREE_TEXT_KEYS",
+    "INT",
     "MISSING",
+    "WORD",
+    "Layout",
     "LineDecoder",
     "LineError",
+    "LineFormat",
     "Message",
+    "Slot",
+    "floats",
     "format_error",
     "format_message",
     "format_start_poses",
+    "ints",
     "parse_line",
     "parse_start_poses",
 ]
@@ -403,6 +412,125 @@ def format_message(type: str, *fields: tuple[str, object]) -> bytes:
             )
         parts.append(f"{{{block}}}")
     return " ".join(parts).encode("utf-8") + LINE_END
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A value hole in a :class:`LineFormat`: ``count`` numbers of one kind.
+
+    Kinds: ``f`` (float, six decimals, as :func:`format_message` writes floats), ``d`` (int),
+    ``b`` (bool, ``true``/``false``), ``s`` (a word without braces or whitespace).
+    """
+
+    count: int = 1
+    kind: str = "f"
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("f", "d", "b", "s"):
+            raise LocalProtocolError(f"slot kind must be one of f, d, b, s; got {self.kind!r}")
+        if self.count < 1 or (self.kind in ("b", "s") and self.count != 1):
+            raise LocalProtocolError(f"bad slot size {self.count} for kind {self.kind!r}")
+
+
+FLOAT = Slot(1, "f")
+INT = Slot(1, "d")
+BOOL = Slot(1, "b")
+WORD = Slot(1, "s")
+
+
+def floats(count: int) -> Slot:
+    """A vector of ``count`` floats (``{Key x,y,z}``)."""
+    return Slot(count, "f")
+
+
+def ints(count: int) -> Slot:
+    """A vector of ``count`` ints."""
+    return Slot(count, "d")
+
+
+Layout = tuple[tuple[str, Slot], ...]
+"""The keys of a line's fields and the slots their values fill, in order."""
+
+_SLOT_TEXT = {"f": "%.6f", "d": "%d", "b": "%s", "s": "%s"}
+
+
+class LineFormat:
+    """A line whose type word, keys and fixed words are known in advance; numbers fill slots.
+
+    Streams write the same shape of line many times a second (``SEN {Time t} {Type INS}
+    {Name INS} {Location x,y,z} ...``). This builds the text around the values once, so
+    :meth:`format` is one ``%`` operation: several times cheaper than :func:`format_message`,
+    with the same text for the same fields (the tests check this).
+
+    Args:
+        type: the line's type word.
+        fields: ``(key, value)`` pairs in order; a value is a fixed ``str`` word or a
+            :class:`Slot` that :meth:`format`'s values fill, in order.
+    """
+
+    def __init__(self, type: str, fields: Sequence[tuple[str, str | Slot]]) -> None:
+        _check_word("type word", type)
+        parts = [type.replace("%", "%%")]
+        self.size = 0
+        self._bools: list[int] = []
+        self._words: list[int] = []
+        self._floats: list[tuple[int, str]] = []
+        for key, value in fields:
+            _check_word("key", key)
+            if isinstance(value, Slot):
+                if value.kind == "b":
+                    self._bools.append(self.size)
+                elif value.kind == "s":
+                    self._words.append(self.size)
+                elif value.kind == "f":
+                    self._floats.extend((self.size + i, key) for i in range(value.count))
+                text = ",".join([_SLOT_TEXT[value.kind]] * value.count)
+                self.size += value.count
+            else:
+                _check_word(f"{key} value", value)
+                text = value.replace("%", "%%")
+            parts.append("{" + key.replace("%", "%%") + " " + text + "}")
+        self._template = " ".join(parts) + "\r\n"
+        self._plain = not (self._bools or self._words)
+
+    def format(self, values: Sequence[object]) -> bytes:
+        """The line with ``values`` (flat, one per slot element) filled in.
+
+        Raises:
+            LocalProtocolError: the wrong number of values, a non-finite float, a value of the
+                wrong type, or a word holding a brace or whitespace.
+        """
+        if len(values) != self.size:
+            raise LocalProtocolError(f"line format takes {self.size} values, got {len(values)}")
+        if self._plain:
+            try:
+                total = sum(values)  # type: ignore[arg-type]
+                if total - total == 0.0:
+                    return (self._template % tuple(values)).encode()
+            except TypeError:
+                pass
+            return self._checked(values)
+        return self._checked(values)
+
+    def _checked(self, values: Sequence[object]) -> bytes:
+        """The slow path: check every value, naming the first bad one."""
+        filled = list(values)
+        for i, key in self._floats:
+            v = filled[i]
+            if isinstance(v, bool) or not isinstance(v, numbers.Real):
+                raise LocalProtocolError(f"{key}: {v!r} is not a number")
+            if not math.isfinite(v):
+                raise LocalProtocolError(f"{key}: {v} is not a finite number")
+        for i in self._bools:
+            filled[i] = "true" if filled[i] else "false"
+        for i in self._words:
+            word = filled[i]
+            if not isinstance(word, str) or not _PLAIN_WORD.fullmatch(word):
+                raise LocalProtocolError(f"value {word!r} is not a word without braces or spaces")
+        try:
+            return (self._template % tuple(filled)).encode()
+        except TypeError as exc:
+            raise LocalProtocolError(f"cannot format the values: {exc}") from None
 
 
 def _safe_text(text: str) -> str:

@@ -23,8 +23,9 @@ import numpy as np
 from skeye.errors import LocalProtocolError, PhysicsError
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
+from skeye.sim.protocol import BOOL, FLOAT, Layout, LineFormat, floats
 from skeye.sim.robot_config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
-from skeye.sim.sensors import Mount, WorldQuery, build_sensor
+from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
 from skeye.sim.state import BodyState
 from skeye.sim.vehicle import Battery, RotorModel, ground_effect_factor
 
@@ -33,11 +34,36 @@ Outbox = Callable[[bytes], None]
 
 @dataclass
 class ScheduledSensor:
-    """A sensor with its period in physics steps."""
+    """A sensor with its period in physics steps, and its SEN lines' precompiled formats."""
 
     sensor: Any
     period_steps: int
     mount: SensorMount
+    _formats: dict[int, tuple[Layout, LineFormat]] = field(default_factory=dict, repr=False)
+
+    def sen_line(self, reading: Reading) -> bytes:
+        """``SEN {Time t} {Type T} {Name n} ...`` for one reading of this sensor."""
+        layout = reading.layout()
+        entry = self._formats.get(id(layout))
+        if entry is None or entry[0] is not layout:
+            fmt = LineFormat(
+                "SEN",
+                [("Time", FLOAT), ("Type", self.sensor.type_name), ("Name", self.mount.name),
+                 *layout],
+            )
+            entry = self._formats[id(layout)] = (layout, fmt)
+        return entry[1].format((reading.time_s, *reading.values()))
+
+
+@dataclass(frozen=True)
+class MotorsReading(Reading):
+    speeds_rad_s: tuple[float, float, float, float]
+    commands_rad_s: tuple[float, float, float, float]
+    thrust_n: float
+    LAYOUT = (("Speeds", floats(4)), ("Commands", floats(4)), ("Thrust", FLOAT))
+
+    def values(self) -> tuple[object, ...]:
+        return (*self.speeds_rad_s, *self.commands_rad_s, self.thrust_n)
 
 
 class MotorsSensor:
@@ -49,13 +75,18 @@ class MotorsSensor:
         self.name = name
         self.rotors = rotors
         self.rate_hz = rate_hz
+        self.last: MotorsReading | None = None
+
+    def read(self, state: BodyState, world: WorldQuery) -> MotorsReading:
+        s0, s1, s2, s3 = self.rotors.speed_rad_s
+        c0, c1, c2, c3 = self.rotors.command_rad_s
+        self.last = MotorsReading(
+            state.time_s, (s0, s1, s2, s3), (c0, c1, c2, c3), self.rotors.total_thrust_n()
+        )
+        return self.last
 
     def sample(self, state: BodyState, world: WorldQuery) -> list[tuple[str, object]]:
-        return [
-            ("Speeds", tuple(self.rotors.speed_rad_s)),
-            ("Commands", tuple(self.rotors.command_rad_s)),
-            ("Thrust", self.rotors.total_thrust_n()),
-        ]
+        return self.read(state, world).fields()
 
     def conf_fields(self) -> list[tuple[str, object]]:
         return [("Rate", self.rate_hz), ("MaxSpeed", self.rotors.p.max_rotor_speed_rad_s)]
@@ -137,6 +168,13 @@ class Robot:
                 "INS", "INS", Mount(), {}, np.random.default_rng(rng.integers(0, 2**63))
             )
         self.ground_effect = 1.0
+        self._full_voltage_v = config.battery.cells * 4.2
+        self._half_body_height_m = config.airframe.body_size_m[2] / 2
+        self._status_format = LineFormat(
+            "STA",
+            [("Type", "AerialVehicle"), ("Name", name), ("Time", FLOAT), ("Battery", FLOAT),
+             ("Voltage", FLOAT), ("Current", FLOAT), ("Armed", BOOL), ("Landed", BOOL)],
+        )
         self.ground_distance_m: float | None = None
         if airborne:
             self.flight.armed = True
@@ -177,61 +215,63 @@ class Robot:
         in_contact: bool,
         air_vel_ned: tuple[float, float, float],
     ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-        """Advance the board one tick; returns (force NED N, torque NED N m) on the body."""
+        """Advance the board one tick; returns (force NED N, torque NED N m) on the body.
+
+        Hot path (every board tick of every robot): plain floats throughout.
+        """
         if self.flight.failed:
             return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-        est = self.ins.estimate(state, self.tick_s)
+        est = self.ins.estimate_now(state)
         airframe = self.config.airframe
-        voltage_scale = min(1.0, self.battery.voltage_v / (self.config.battery.cells * 4.2) + 0.15)
+        battery = self.battery
+        voltage_scale = min(1.0, battery.voltage_v / self._full_voltage_v + 0.15)
         w_max = airframe.max_rotor_speed_rad_s * voltage_scale
-        if self.flight.armed and not self.battery.empty:
+        if self.flight.armed and not battery.empty:
             commands = self.controller.update(
                 self.command,
-                _floats(est.rpy_rad),
-                _floats(est.omega_frd_rad_s),
-                _floats(est.vel_ned_m_s),
-                -float(est.pos_ned_m[2]),
+                est.rpy_rad,
+                est.omega_frd_rad_s,
+                est.vel_ned_m_s,
+                -est.pos_ned_m[2],
                 w_max,
             )
         else:
             commands = [0.0, 0.0, 0.0, 0.0]
         self.rotors.advance(commands, w_max)
-        rot = state.rot_body_to_ned.tolist()
-        v = state.vel_ned_m_s.tolist()
-        va = (v[0] - air_vel_ned[0], v[1] - air_vel_ned[1], v[2] - air_vel_ned[2])
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = state.rot_body_to_ned
+        vn, ve, vd = state.vel_ned_m_s
+        an, ae, ad = vn - air_vel_ned[0], ve - air_vel_ned[1], vd - air_vel_ned[2]
         vb = (
-            rot[0][0] * va[0] + rot[1][0] * va[1] + rot[2][0] * va[2],
-            rot[0][1] * va[0] + rot[1][1] * va[1] + rot[2][1] * va[2],
-            rot[0][2] * va[0] + rot[1][2] * va[1] + rot[2][2] * va[2],
+            r00 * an + r10 * ae + r20 * ad,
+            r01 * an + r11 * ae + r21 * ad,
+            r02 * an + r12 * ae + r22 * ad,
         )
         self.ground_distance_m = ground_distance_m
         rotor_height = None
         if ground_distance_m is not None:
-            rotor_height = ground_distance_m + airframe.body_size_m[2] / 2
+            rotor_height = ground_distance_m + self._half_body_height_m
         self.ground_effect = ground_effect_factor(rotor_height, airframe.rotor_radius_m)
         fx, fy, fz, tx, ty, tz, power = self.rotors.wrench(vb, self.ground_effect)
-        self.battery.draw(power, self.tick_s)
-        for value in (fx, fy, fz, tx, ty, tz):
-            if not math.isfinite(value):
-                raise PhysicsError(f"robot {self.name}: non-finite rotor wrench")
+        battery.draw(power, self.tick_s)
+        if (fx + fy + fz + tx + ty + tz) - (fx + fy + fz + tx + ty + tz) != 0.0:
+            raise PhysicsError(f"robot {self.name}: non-finite rotor wrench")
         force = (
-            rot[0][0] * fx + rot[0][1] * fy + rot[0][2] * fz,
-            rot[1][0] * fx + rot[1][1] * fy + rot[1][2] * fz,
-            rot[2][0] * fx + rot[2][1] * fy + rot[2][2] * fz,
+            r00 * fx + r01 * fy + r02 * fz,
+            r10 * fx + r11 * fy + r12 * fz,
+            r20 * fx + r21 * fy + r22 * fz,
         )
         torque = (
-            rot[0][0] * tx + rot[0][1] * ty + rot[0][2] * tz,
-            rot[1][0] * tx + rot[1][1] * ty + rot[1][2] * tz,
-            rot[2][0] * tx + rot[2][1] * ty + rot[2][2] * tz,
+            r00 * tx + r01 * ty + r02 * tz,
+            r10 * tx + r11 * ty + r12 * tz,
+            r20 * tx + r21 * ty + r22 * tz,
         )
         self._update_flight_state(state, in_contact)
         return force, torque
 
     def _update_flight_state(self, state: BodyState, in_contact: bool) -> None:
         f = self.flight
-        vx, vy, vz = state.vel_ned_m_s.tolist()
-        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-        landed_now = in_contact and speed < 0.3
+        vx, vy, vz = state.vel_ned_m_s
+        landed_now = in_contact and vx * vx + vy * vy + vz * vz < 0.09  # under 0.3 m/s
         if landed_now and not f.landed:
             f.landed_since_s = state.time_s
         f.landed = landed_now
@@ -243,6 +283,13 @@ class Robot:
             self.controller.reset()
         if self.battery.empty and f.armed:
             f.armed = False
+
+    def status_line(self, time_s: float) -> bytes:
+        """``STA {Type AerialVehicle} {Name n} {Time t} ...`` (fields: :meth:`status_fields`)."""
+        b, f = self.battery, self.flight
+        return self._status_format.format(
+            (time_s, b.remaining_s, b.voltage_v, b.current_a, f.armed, f.landed)
+        )
 
     def status_fields(self) -> list[tuple[str, object]]:
         return [
@@ -264,16 +311,11 @@ class Robot:
         ]
 
 
-def _floats(v: Any) -> Any:
-    """A 3-vector as plain floats (numpy scalars are slow in the board's hot path)."""
-    return v.tolist() if isinstance(v, np.ndarray) else v
-
-
 def check_state(name: str, state: BodyState) -> None:
     """Raise PhysicsError if the state is non-finite or runaway (plain floats: hot path)."""
-    px, py, pz = state.pos_ned_m.tolist()
-    vx, vy, vz = state.vel_ned_m_s.tolist()
-    wx, wy, wz = state.omega_frd_rad_s.tolist()
+    px, py, pz = state.pos_ned_m
+    vx, vy, vz = state.vel_ned_m_s
+    wx, wy, wz = state.omega_frd_rad_s
     total = px + py + pz + vx + vy + vz + wx + wy + wz
     if not math.isfinite(total):
         raise PhysicsError(f"robot {name}: NaN in the simulated state")

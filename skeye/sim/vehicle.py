@@ -17,6 +17,7 @@ decreases; all parameters are validated on construction (ConfigError naming the 
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -147,12 +148,10 @@ _OCV_V = (3.30, 3.55, 3.65, 3.73, 3.80, 3.87, 3.98, 4.08, 4.20)
 def cell_open_circuit_v(soc: float) -> float:
     """Resting voltage of one LiPo cell at a state of charge in [0, 1]."""
     soc = min(1.0, max(0.0, soc))
-    for i in range(1, len(_OCV_SOC)):
-        if soc <= _OCV_SOC[i]:
-            s0, s1 = _OCV_SOC[i - 1], _OCV_SOC[i]
-            v0, v1 = _OCV_V[i - 1], _OCV_V[i]
-            return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
-    return _OCV_V[-1]
+    i = max(1, bisect.bisect_left(_OCV_SOC, soc))
+    s0, s1 = _OCV_SOC[i - 1], _OCV_SOC[i]
+    v0, v1 = _OCV_V[i - 1], _OCV_V[i]
+    return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
 
 
 class Battery:

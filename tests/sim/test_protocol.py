@@ -11,13 +11,21 @@ from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError, RemoteProtocolError
 from skeye.sim.protocol import (
+    BOOL,
+    FLOAT,
     FREE_TEXT_KEYS,
+    INT,
+    WORD,
     LineDecoder,
     LineError,
+    LineFormat,
     Message,
+    Slot,
+    floats,
     format_error,
     format_message,
     format_start_poses,
+    ints,
     parse_line,
     parse_start_poses,
 )
@@ -724,3 +732,91 @@ def test_start_poses_format_errors(poses: list, reason: str) -> None:
     with pytest.raises(LocalProtocolError) as info:
         format_start_poses(poses)
     assert reason in str(info.value)
+
+
+# --- LineFormat: the precompiled stream lines ---------------------------------------------
+
+_SLOTS = st.sampled_from([FLOAT, floats(3), floats(4), INT, ints(2), BOOL, WORD])
+_KEYS = st.from_regex(r"[A-Z][A-Za-z0-9_]{0,11}", fullmatch=True)
+_WORDS = st.from_regex(r"[A-Za-z0-9_.,%-]{1,12}", fullmatch=True)
+_FINITE = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e9, max_value=1e9)
+
+
+def _values_for(slot: Slot) -> st.SearchStrategy[list[object]]:
+    element: st.SearchStrategy[object] = {
+        "f": _FINITE,
+        "d": st.integers(-(2**40), 2**40),
+        "b": st.booleans(),
+        "s": _WORDS,
+    }[slot.kind]
+    return st.lists(element, min_size=slot.count, max_size=slot.count)
+
+
+@st.composite
+def _shapes(draw: st.DrawFn) -> tuple[list[tuple[str, object]], list[object], list[tuple]]:
+    """A layout (fixed words and slots), values for it, and the same fields as pairs."""
+    layout: list[tuple[str, object]] = []
+    values: list[object] = []
+    pairs: list[tuple[str, object]] = []
+    for key in draw(st.lists(_KEYS, max_size=8)):
+        if draw(st.booleans()):
+            word = draw(_WORDS)
+            layout.append((key, word))
+            pairs.append((key, word))
+            continue
+        slot = draw(_SLOTS)
+        vals = draw(_values_for(slot))
+        layout.append((key, slot))
+        values.extend(vals)
+        pairs.append((key, vals[0] if slot.count == 1 else tuple(vals)))
+    return layout, values, pairs
+
+
+@settings(max_examples=300, deadline=None)
+@given(shape=_shapes(), type_=st.sampled_from(["SEN", "STA", "X%d"]))
+def test_line_format_writes_what_format_message_writes(shape: tuple, type_: str) -> None:
+    layout, values, pairs = shape
+    fmt = LineFormat(type_, layout)
+    line = fmt.format(values)
+    assert line == format_message(type_, *pairs)
+    parsed = parse_line(line.decode().rstrip("\r\n"))
+    assert parsed.type == type_.upper()
+
+
+def test_line_format_a_sensor_line() -> None:
+    fmt = LineFormat("SEN", [("Time", FLOAT), ("Type", "INS"), ("Location", floats(3)),
+                             ("Armed", BOOL), ("Delta", ints(2))])
+    assert fmt.size == 7
+    assert fmt.format((1.5, 1.0, -2.0, 0.25, True, 3, -4)) == (
+        b"SEN {Time 1.500000} {Type INS} {Location 1.000000,-2.000000,0.250000} {Armed true} "
+        b"{Delta 3,-4}\r\n"
+    )
+
+
+@pytest.mark.parametrize(
+    ("values", "reason"),
+    [
+        ((1.0, float("nan")), "Location: nan is not a finite number"),
+        ((1.0, float("inf")), "Location: inf is not a finite number"),
+        ((1.0,), "takes 2 values, got 1"),
+        ((1.0, "x"), "Location: 'x' is not a number"),
+        ((1.0, None), "Location: None is not a number"),
+    ],
+)
+def test_line_format_refuses_bad_values(values: tuple, reason: str) -> None:
+    fmt = LineFormat("SEN", [("Time", FLOAT), ("Location", FLOAT)])
+    with pytest.raises(LocalProtocolError, match=reason):
+        fmt.format(values)
+
+
+def test_line_format_refuses_bad_words_and_layouts() -> None:
+    with pytest.raises(LocalProtocolError, match="not a word"):
+        LineFormat("STA", [("Name", WORD)]).format(("two words",))
+    with pytest.raises(LocalProtocolError, match="brace or whitespace"):
+        LineFormat("STA", [("Name", "a b")])
+    with pytest.raises(LocalProtocolError, match="brace or whitespace"):
+        LineFormat("STA", [("Bad Key", FLOAT)])
+    with pytest.raises(LocalProtocolError, match="slot kind"):
+        Slot(1, "x")
+    with pytest.raises(LocalProtocolError, match="bad slot size"):
+        Slot(2, "b")

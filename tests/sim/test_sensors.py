@@ -34,6 +34,7 @@ from skeye.sim.sensors import (
     isa_altitude_m,
     isa_pressure_pa,
 )
+from skeye.sim.sensors.base import vec3
 from skeye.sim.state import BodyState
 
 G = 9.81
@@ -60,6 +61,11 @@ class FlatWorld:
         t = (self.ground_down_m - float(origin_ned_m[2])) / dz
         return t if t <= max_range_m else None
 
+    def ray_distances(
+        self, origin_ned_m: Any, directions_ned: Any, max_range_m: float
+    ) -> list[float | None]:
+        return [self.ray_distance(origin_ned_m, d, max_range_m) for d in directions_ned]
+
 
 def make_state(
     t: float = 0.0,
@@ -74,14 +80,14 @@ def make_state(
     a = np.array(accel, dtype=float)
     return BodyState(
         time_s=t,
-        pos_ned_m=np.array(pos, dtype=float),
-        vel_ned_m_s=np.array(vel, dtype=float),
-        quat_ned=q,
-        rpy_rad=np.array(rpy, dtype=float),
-        rot_body_to_ned=rot,
-        omega_frd_rad_s=np.array(omega, dtype=float),
-        accel_ned_m_s2=a,
-        specific_force_frd_m_s2=rot.T @ (a - np.array([0.0, 0.0, G])),
+        pos_ned_m=vec3(pos),
+        vel_ned_m_s=vec3(vel),
+        quat_ned=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        rpy_rad=vec3(rpy),
+        rot_body_to_ned=(vec3(rot[0]), vec3(rot[1]), vec3(rot[2])),
+        omega_frd_rad_s=vec3(omega),
+        accel_ned_m_s2=vec3(a),
+        specific_force_frd_m_s2=vec3(rot.T @ (a - np.array([0.0, 0.0, G]))),
     )
 
 

@@ -112,7 +112,7 @@ def test_builtin_world_compiles_and_a_robot_rests_on_its_first_start_pose(name: 
     drop_m = 0.05
     center = (pos_ned[0], -pos_ned[1], -pos_ned[2] + ROBOT_BOX_HALF_M[2] + drop_m)
     model = compile_world(world, robot_xml(center), ROBOT_ASSETS)
-    assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
     assert model.opt.timestep == pytest.approx(0.001)
     np.testing.assert_allclose(model.opt.gravity, (0.0, 0.0, -9.81))
     assert model.opt.density == 0.0 and model.opt.viscosity == 0.0

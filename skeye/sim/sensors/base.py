@@ -23,7 +23,7 @@ down; a forward-looking sonar has Direction (0, pi/2, 0).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Generic, Protocol, TypeVar
 
@@ -31,8 +31,9 @@ import numpy as np
 
 from skeye.errors import ConfigError
 from skeye.geo import GeoOrigin
-from skeye.sim.frames import euler_to_quat, quat_to_matrix, wrap_2pi
-from skeye.sim.state import BodyState
+from skeye.sim.frames import euler_to_quat, quat_to_rows, wrap_2pi
+from skeye.sim.protocol import Layout
+from skeye.sim.state import BodyState, Mat3, mat_mul, mat_t_vec, mat_vec, transpose
 
 Vec3 = tuple[float, float, float]
 Fields = list[tuple[str, object]]
@@ -68,9 +69,14 @@ class WorldQuery(Protocol):
         """ISA sea-level reference pressure of the day, Pa."""
 
     def ray_distance(
-        self, origin_ned_m: np.ndarray, direction_ned: np.ndarray, max_range_m: float
+        self, origin_ned_m: Vec3, direction_ned: Vec3, max_range_m: float
     ) -> float | None:
         """Distance to the first hit along a unit ray, excluding the vehicle; None if none."""
+
+    def ray_distances(
+        self, origin_ned_m: Vec3, directions_ned: Sequence[Vec3], max_range_m: float
+    ) -> list[float | None]:
+        """:meth:`ray_distance` for several unit rays from one point (one call, cheaper)."""
 
 
 @dataclass(frozen=True)
@@ -96,34 +102,51 @@ class Param:
 
 @dataclass(frozen=True)
 class Reading:
-    """Base of the typed readings kept in ``Sensor.last``."""
+    """Base of the typed readings kept in ``Sensor.last``.
+
+    A subclass declares its SEN fields once, as ``LAYOUT`` (keys and slots, see
+    :class:`~skeye.sim.protocol.LineFormat`), and returns their values flat from
+    :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from the two, so the
+    engine's precompiled line and the generic fields can never disagree.
+    """
 
     time_s: float
+    LAYOUT: ClassVar[Layout] = ()
+
+    def layout(self) -> Layout:
+        """The keys and slots of this reading's SEN fields (after Time, Type and Name)."""
+        return self.LAYOUT
+
+    def values(self) -> tuple[object, ...]:
+        """The field values, flat, in layout order."""
+        raise NotImplementedError
 
     def fields(self) -> Fields:
         """The SEN fields after Time, Type and Name, in the protocol's keys and units."""
-        raise NotImplementedError
+        flat = self.values()
+        out: Fields = []
+        i = 0
+        for key, slot in self.layout():
+            if slot.count == 1:
+                out.append((key, flat[i]))
+            else:
+                out.append((key, tuple(flat[i : i + slot.count])))
+            i += slot.count
+        return out
 
 
 R = TypeVar("R", bound=Reading)
 
 
 def vec3(a: np.ndarray | tuple[float, ...] | list[float]) -> Vec3:
-    """A length-3 array as a tuple of Python floats (what the SEN formatter expects)."""
+    """A length-3 sequence as a tuple of Python floats (what the SEN formatter expects)."""
     x, y, z = (float(v) for v in a)
     return (x, y, z)
 
 
-def cross3(a: np.ndarray | Vec3, b: np.ndarray | Vec3) -> np.ndarray:
-    """The cross product of two 3-vectors (np.cross costs ~10 us on 3-vectors: hot path)."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    return np.array((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0))
-
-
-def rpy_matrix(rpy_rad: Vec3) -> np.ndarray:
+def rpy_matrix(rpy_rad: Vec3) -> Mat3:
     """Rotation matrix (child frame -> parent frame) of a roll, pitch, yaw triple (ZYX)."""
-    return quat_to_matrix(euler_to_quat(*rpy_rad).tolist())
+    return quat_to_rows(euler_to_quat(*rpy_rad).tolist())
 
 
 def _norm_key(key: str) -> str:
@@ -157,8 +180,9 @@ class Sensor(Generic[R]):
         self.params: dict[str, float] = self._parse(params)
         self.rate_hz: float = float(self.params["Rate"])
         self._rot_mount = rpy_matrix(vec3(mount.rpy_rad))  # sensor -> body
-        self._rot_mount_t = self._rot_mount.T.copy()
-        self._pos_mount = np.array(vec3(mount.pos_frd_m))
+        self._rot_mount_t = transpose(self._rot_mount)
+        self._mount_is_identity = self._rot_mount == rpy_matrix((0.0, 0.0, 0.0))
+        self._pos_mount = vec3(mount.pos_frd_m)
         self._last_time_s: float | None = None
         self.last: R | None = None
         self._check()
@@ -237,31 +261,42 @@ class Sensor(Generic[R]):
 
     def sample(self, state: BodyState, world: WorldQuery) -> Fields:
         """One reading from ground truth; returns the SEN fields after Time, Type and Name."""
+        return self.read(state, world).fields()
+
+    def read(self, state: BodyState, world: WorldQuery) -> R:
+        """One reading from ground truth, kept in ``last`` (the engine's hot path)."""
         last = self._last_time_s
-        t = float(state.time_s)
+        t = state.time_s
         dt_s = t - last if last is not None and t > last else 0.0
         self._last_time_s = t
         reading = self._read(state, world, dt_s)
         self.last = reading
-        return reading.fields()
+        return reading
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> R:
         """Compute one reading; ``dt_s`` is sim time since the previous reading (0 at first)."""
         raise NotImplementedError
 
-    # --- geometry helpers ------------------------------------------------------------------
+    # --- geometry helpers (plain floats: these run for every sample) ------------------------
 
-    def _rot_sensor_to_ned(self, state: BodyState) -> np.ndarray:
-        return np.asarray(state.rot_body_to_ned) @ self._rot_mount
+    def _rot_sensor_to_ned(self, state: BodyState) -> Mat3:
+        if self._mount_is_identity:
+            return state.rot_body_to_ned
+        return mat_mul(state.rot_body_to_ned, self._rot_mount)
 
-    def _pos_ned_m(self, state: BodyState) -> np.ndarray:
+    def _pos_ned_m(self, state: BodyState) -> Vec3:
         """Where the sensor is in the world (body position + rotated mount offset)."""
-        return np.asarray(state.pos_ned_m, dtype=float) + (
-            np.asarray(state.rot_body_to_ned) @ self._pos_mount
-        )
+        px, py, pz = state.pos_ned_m
+        ox, oy, oz = mat_vec(state.rot_body_to_ned, self._pos_mount)
+        return (px + ox, py + oy, pz + oz)
 
-    def _body_to_sensor(self, v_frd: np.ndarray) -> np.ndarray:
-        return self._rot_mount_t @ np.asarray(v_frd, dtype=float)
+    def _body_to_sensor(self, v_frd: Vec3) -> Vec3:
+        if self._mount_is_identity:
+            return v_frd
+        return mat_t_vec(self._rot_mount, v_frd)
+
+
+_NOISE_BLOCK = 256  # corrupt() calls per block of pre-drawn normal deviates
 
 
 class BiasedNoise:
@@ -269,7 +304,9 @@ class BiasedNoise:
 
     ``corrupt(x, dt)`` first advances the bias by ``walk * sqrt(dt) * N(0, 1)`` per channel
     (a Wiener process in sim time, so its statistics do not depend on the sample rate), then
-    returns ``x + bias + sigma * N(0, 1)``.
+    returns ``x + bias + sigma * N(0, 1)``. Normal deviates are drawn from the Generator in
+    blocks (2n per call: walk, then noise), so the sequence depends only on the seed and the
+    number of calls.
     """
 
     def __init__(
@@ -284,14 +321,43 @@ class BiasedNoise:
         self.n = n
         self.noise_sigma = noise_sigma
         self.bias_walk = bias_walk
-        self.bias: np.ndarray = rng.standard_normal(n) * bias_sigma
+        self._bias: list[float] = (rng.standard_normal(n) * bias_sigma).tolist()
+        self._rows: list[list[float]] = []
+        self._row_i = 0
 
-    def corrupt(self, value: np.ndarray, dt_s: float) -> np.ndarray:
-        """The noisy measurement of ``value`` (shape (n,)) after ``dt_s`` of sim time."""
+    @property
+    def bias(self) -> np.ndarray:
+        """The current bias, one value per channel."""
+        return np.array(self._bias)
+
+    def _next_row(self) -> list[float]:
+        i = self._row_i
+        if i >= len(self._rows):
+            self._rows = self.rng.standard_normal((_NOISE_BLOCK, 2 * self.n)).tolist()
+            i = 0
+        self._row_i = i + 1
+        return self._rows[i]
+
+    def corrupt(self, value: Sequence[float], dt_s: float) -> list[float]:
+        """The noisy measurement of ``value`` (n floats) after ``dt_s`` of sim time."""
+        n = self.n
+        row = self._next_row()
+        bias = self._bias
         if self.bias_walk > 0.0 and dt_s > 0.0:
-            self.bias = self.bias + self.bias_walk * math.sqrt(dt_s) * self.rng.standard_normal(
-                self.n
-            )
-        return np.asarray(value, dtype=float) + self.bias + self.noise_sigma * (
-            self.rng.standard_normal(self.n)
-        )
+            k = self.bias_walk * math.sqrt(dt_s)
+            for i in range(n):
+                bias[i] += k * row[i]
+        sigma = self.noise_sigma
+        return [value[i] + bias[i] + sigma * row[n + i] for i in range(n)]
+
+    def corrupt3(self, x: float, y: float, z: float, dt_s: float) -> Vec3:
+        """:meth:`corrupt` for three channels, written out (the IMU's hot path)."""
+        row = self._next_row()
+        b = self._bias
+        if self.bias_walk > 0.0 and dt_s > 0.0:
+            k = self.bias_walk * math.sqrt(dt_s)
+            b[0] += k * row[0]
+            b[1] += k * row[1]
+            b[2] += k * row[2]
+        s = self.noise_sigma
+        return (x + b[0] + s * row[3], y + b[1] + s * row[4], z + b[2] + s * row[5])

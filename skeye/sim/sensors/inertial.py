@@ -11,21 +11,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from skeye.sim.frames import wrap_2pi
+from skeye.sim.protocol import FLOAT, floats
 from skeye.sim.sensors.base import (
     BiasedNoise,
-    Fields,
     Param,
     Reading,
     Sensor,
     Vec3,
     WorldQuery,
-    cross3,
-    vec3,
 )
-from skeye.sim.state import BodyState
+from skeye.sim.state import BodyState, cross, mat_t_vec
 
 # International Standard Atmosphere, troposphere.
 ISA_T0_K = 288.15
@@ -46,9 +42,10 @@ def _noise_params(
 @dataclass(frozen=True)
 class AccelReading(Reading):
     proper_acceleration_m_s2: Vec3
+    LAYOUT = (("ProperAcceleration", floats(3)),)
 
-    def fields(self) -> Fields:
-        return [("ProperAcceleration", self.proper_acceleration_m_s2)]
+    def values(self) -> tuple[object, ...]:
+        return self.proper_acceleration_m_s2
 
 
 class Accelerometer(Sensor[AccelReading]):
@@ -71,20 +68,20 @@ class Accelerometer(Sensor[AccelReading]):
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> AccelReading:
-        omega = np.asarray(state.omega_frd_rad_s, dtype=float)
-        f_body = np.asarray(state.specific_force_frd_m_s2, dtype=float) + cross3(
-            omega, cross3(omega, self._pos_mount)
-        )
-        f = self._noise.corrupt(self._body_to_sensor(f_body), dt_s)
-        return AccelReading(float(state.time_s), vec3(f))
+        omega = state.omega_frd_rad_s
+        cx, cy, cz = cross(omega, cross(omega, self._pos_mount))
+        fx, fy, fz = state.specific_force_frd_m_s2
+        x, y, z = self._body_to_sensor((fx + cx, fy + cy, fz + cz))
+        return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
 @dataclass(frozen=True)
 class GyroReading(Reading):
     angular_velocity_rad_s: Vec3
+    LAYOUT = (("AngularVelocity", floats(3)),)
 
-    def fields(self) -> Fields:
-        return [("AngularVelocity", self.angular_velocity_rad_s)]
+    def values(self) -> tuple[object, ...]:
+        return self.angular_velocity_rad_s
 
 
 class Gyro(Sensor[GyroReading]):
@@ -104,17 +101,18 @@ class Gyro(Sensor[GyroReading]):
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> GyroReading:
-        w = self._noise.corrupt(self._body_to_sensor(state.omega_frd_rad_s), dt_s)
-        return GyroReading(float(state.time_s), vec3(w))
+        x, y, z = self._body_to_sensor(state.omega_frd_rad_s)
+        return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
 @dataclass(frozen=True)
 class CompassReading(Reading):
     magnetic_angle_rad: float
     field_ut: Vec3
+    LAYOUT = (("MagneticAngle", FLOAT), ("Field", floats(3)))
 
-    def fields(self) -> Fields:
-        return [("MagneticAngle", self.magnetic_angle_rad), ("Field", self.field_ut)]
+    def values(self) -> tuple[object, ...]:
+        return (self.magnetic_angle_rad, *self.field_ut)
 
 
 class MagneticCompass(Sensor[CompassReading]):
@@ -139,26 +137,28 @@ class MagneticCompass(Sensor[CompassReading]):
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> CompassReading:
         rot = self._rot_sensor_to_ned(state)
-        field_true = rot.T @ np.asarray(world.magnetic_field_ned_ut, dtype=float)
-        b = self._noise.corrupt(field_true, dt_s)
-        roll = math.atan2(rot[2, 1], rot[2, 2])
-        pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))
+        fx, fy, fz = world.magnetic_field_ned_ut
+        b = self._noise.corrupt3(*mat_t_vec(rot, (float(fx), float(fy), float(fz))), dt_s)
+        r20, r21, r22 = rot[2]
+        roll = math.atan2(r21, r22)
+        pitch = math.asin(max(-1.0, min(1.0, -r20)))
         cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
         # Ry(pitch) @ Rx(roll) @ b: the field in the frame that only follows the sensor's yaw.
         by = cr * b[1] - sr * b[2]
         bz = sr * b[1] + cr * b[2]
         bx = cp * b[0] + sp * bz
         heading = wrap_2pi(math.atan2(-by, bx))
-        return CompassReading(float(state.time_s), heading, vec3(b))
+        return CompassReading(state.time_s, heading, b)
 
 
 @dataclass(frozen=True)
 class BaroReading(Reading):
     pressure_pa: float
     altitude_m: float
+    LAYOUT = (("Pressure", FLOAT), ("Altitude", FLOAT))
 
-    def fields(self) -> Fields:
-        return [("Pressure", self.pressure_pa), ("Altitude", self.altitude_m)]
+    def values(self) -> tuple[object, ...]:
+        return (self.pressure_pa, self.altitude_m)
 
 
 def isa_pressure_pa(altitude_m: float, sea_level_pa: float) -> float:
@@ -194,7 +194,7 @@ class Barometer(Sensor[BaroReading]):
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> BaroReading:
         origin = world.geo_origin
         base_alt_m = origin.altitude_m if origin is not None else 0.0
-        altitude_m = base_alt_m - float(self._pos_ned_m(state)[2])
+        altitude_m = base_alt_m - self._pos_ned_m(state)[2]
         p0 = float(world.sea_level_pressure_pa)
-        pressure = float(self._noise.corrupt(np.array([isa_pressure_pa(altitude_m, p0)]), dt_s)[0])
-        return BaroReading(float(state.time_s), pressure, isa_altitude_m(pressure, p0))
+        pressure = self._noise.corrupt((isa_pressure_pa(altitude_m, p0),), dt_s)[0]
+        return BaroReading(state.time_s, pressure, isa_altitude_m(pressure, p0))

@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from skeye.errors import LocalProtocolError
 from skeye.geo import to_degrees_minutes
 from skeye.sim.frames import wrap_2pi
-from skeye.sim.sensors.base import Fields, Param, Reading, Sensor, Vec3, WorldQuery, vec3
+from skeye.sim.protocol import FLOAT, INT, WORD, Layout, floats
+from skeye.sim.sensors.base import Param, Reading, Sensor, Vec3, WorldQuery, vec3
 from skeye.sim.state import BodyState
 
 _TWO_PI = 2.0 * math.pi
@@ -37,14 +39,20 @@ class GroundTruthReading(Reading):
     orientation_rad: Vec3  # roll, pitch, yaw, each in [0, 2 pi)
     velocity_ned_m_s: Vec3
     angular_velocity_frd_rad_s: Vec3
+    LAYOUT = (
+        ("Location", floats(3)),
+        ("Orientation", floats(3)),
+        ("Velocity", floats(3)),
+        ("AngularVelocity", floats(3)),
+    )
 
-    def fields(self) -> Fields:
-        return [
-            ("Location", self.location_ned_m),
-            ("Orientation", self.orientation_rad),
-            ("Velocity", self.velocity_ned_m_s),
-            ("AngularVelocity", self.angular_velocity_frd_rad_s),
-        ]
+    def values(self) -> tuple[object, ...]:
+        return (
+            *self.location_ned_m,
+            *self.orientation_rad,
+            *self.velocity_ned_m_s,
+            *self.angular_velocity_frd_rad_s,
+        )
 
 
 class GroundTruth(Sensor[GroundTruthReading]):
@@ -58,19 +66,18 @@ class GroundTruth(Sensor[GroundTruthReading]):
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> GroundTruthReading:
         return GroundTruthReading(
-            float(state.time_s),
-            vec3(state.pos_ned_m),
-            _wrap_rpy_2pi(vec3(state.rpy_rad)),
-            vec3(state.vel_ned_m_s),
-            vec3(state.omega_frd_rad_s),
+            state.time_s,
+            state.pos_ned_m,
+            _wrap_rpy_2pi(state.rpy_rad),
+            state.vel_ned_m_s,
+            state.omega_frd_rad_s,
         )
 
 
 # --- INS -----------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class InsEstimate:
+class InsEstimate(NamedTuple):
     """The vehicle's own state estimate. Roll, pitch, yaw in [-pi, pi); NED world, FRD body."""
 
     pos_ned_m: Vec3
@@ -84,13 +91,10 @@ class InsReading(Reading):
     location_ned_m: Vec3
     orientation_rad: Vec3  # [0, 2 pi)
     velocity_ned_m_s: Vec3
+    LAYOUT = (("Location", floats(3)), ("Orientation", floats(3)), ("Velocity", floats(3)))
 
-    def fields(self) -> Fields:
-        return [
-            ("Location", self.location_ned_m),
-            ("Orientation", self.orientation_rad),
-            ("Velocity", self.velocity_ned_m_s),
-        ]
+    def values(self) -> tuple[object, ...]:
+        return (*self.location_ned_m, *self.orientation_rad, *self.velocity_ned_m_s)
 
 
 _INS_BLOCK_ROWS = 512  # estimate() calls per block of pre-drawn normal deviates (18 each)
@@ -115,9 +119,9 @@ class INS(Sensor[InsReading]):
       0.0005 rad/s (a calibrated gyro).
 
     SEN fields: Location, Orientation (wrapped to [0, 2 pi)) and, as an extension, Velocity.
-    Default rate 50 Hz. :meth:`estimate` is what the low-level controller calls each period;
-    :meth:`sample` reports the estimate at the sample's time (the same one when the controller
-    already asked at that time).
+    Default rate 50 Hz. :meth:`estimate_now` is what the low-level controller calls each
+    period; :meth:`read` reports the estimate at the sample's time (the same one when the
+    controller already asked at that time, so the drift advances once per instant).
     """
 
     type_name = "INS"
@@ -178,7 +182,7 @@ class INS(Sensor[InsReading]):
         """Advance the error processes by ``dt_s`` of sim time and return the estimate now."""
         if not dt_s >= 0.0 or dt_s == math.inf:
             raise LocalProtocolError(f"INS {self.name!r}: dt_s must be finite and >= 0, got {dt_s}")
-        if dt_s != self._dt_s:
+        if abs(dt_s - self._dt_s) > 1e-12:  # steps * dt differences wobble in the last bit
             self._set_dt(dt_s)
         rows = self._rows
         i = self._row_i
@@ -199,10 +203,10 @@ class INS(Sensor[InsReading]):
         ab0 = ab[0] = a * ab[0] + k_rp * d3
         ab1 = ab[1] = a * ab[1] + k_rp * d4
         ab2 = ab[2] = a * ab[2] + self._k_yaw * d5
-        px, py, pz = state.pos_ned_m.tolist()
-        vx, vy, vz = state.vel_ned_m_s.tolist()
-        roll, pitch, yaw = state.rpy_rad.tolist()
-        wx, wy, wz = state.omega_frd_rad_s.tolist()
+        px, py, pz = state.pos_ned_m
+        vx, vy, vz = state.vel_ned_m_s
+        roll, pitch, yaw = state.rpy_rad
+        wx, wy, wz = state.omega_frd_rad_s
         est = InsEstimate(
             (px + pb0 + np0, py + pb1 + np1, pz + pb2 + np2),
             (vx + nv0, vy + nv1, vz + nv2),
@@ -213,20 +217,27 @@ class INS(Sensor[InsReading]):
         self._est_time_s = state.time_s
         return est
 
-    def sample(self, state: BodyState, world: WorldQuery) -> Fields:
-        """The estimate at ``state.time_s`` as SEN fields (advancing the drift if needed)."""
-        t = float(state.time_s)
+    def estimate_now(self, state: BodyState) -> InsEstimate:
+        """The estimate at ``state.time_s``: advanced by the sim time since the last one, or
+        the same one again at the same time (the board and the SEN stream share it)."""
+        t = state.time_s
         est = self._est
-        if est is None or self._est_time_s != t:
-            last = self._est_time_s
-            est = self.estimate(state, t - last if last is not None and t > last else 0.0)
+        if est is not None and self._est_time_s == t:
+            return est
+        last = self._est_time_s
+        return self.estimate(state, t - last if last is not None and t > last else 0.0)
+
+    def read(self, state: BodyState, world: WorldQuery) -> InsReading:
+        """The estimate at ``state.time_s`` as a reading (see :meth:`estimate_now`)."""
+        est = self.estimate_now(state)
+        t = state.time_s
         self._last_time_s = t
         reading = InsReading(t, est.pos_ned_m, _wrap_rpy_2pi(est.rpy_rad), est.vel_ned_m_s)
         self.last = reading
-        return reading.fields()
+        return reading
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> InsReading:
-        raise AssertionError("INS overrides sample()")  # pragma: no cover
+        raise AssertionError("INS overrides read()")  # pragma: no cover
 
 
 # --- GPS -----------------------------------------------------------------------------------
@@ -241,25 +252,46 @@ class GpsReading(Reading):
     altitude_m: float | None = None
     velocity_ned_m_s: Vec3 | None = None
 
-    def fields(self) -> Fields:
-        if (
+    def _has_fix(self) -> bool:
+        return not (
             self.fix == 0
             or self.latitude_deg is None
             or self.longitude_deg is None
             or self.altitude_m is None
             or self.velocity_ned_m_s is None
-        ):
-            return [("Fix", self.fix), ("Satellites", self.satellites)]
-        return [
-            ("Latitude", to_degrees_minutes(self.latitude_deg, "N", "S")),
-            ("Longitude", to_degrees_minutes(self.longitude_deg, "E", "W")),
-            ("Fix", self.fix),
-            ("Satellites", self.satellites),
-            ("LatitudeDeg", self.latitude_deg),
-            ("LongitudeDeg", self.longitude_deg),
-            ("Altitude", self.altitude_m),
-            ("VelocityNED", self.velocity_ned_m_s),
-        ]
+        )
+
+    def layout(self) -> Layout:
+        return _GPS_FIX_LAYOUT if self._has_fix() else _GPS_NO_FIX_LAYOUT
+
+    def values(self) -> tuple[object, ...]:
+        if not self._has_fix():
+            return (self.fix, self.satellites)
+        assert self.latitude_deg is not None and self.longitude_deg is not None
+        assert self.velocity_ned_m_s is not None
+        return (
+            to_degrees_minutes(self.latitude_deg, "N", "S"),
+            to_degrees_minutes(self.longitude_deg, "E", "W"),
+            self.fix,
+            self.satellites,
+            self.latitude_deg,
+            self.longitude_deg,
+            self.altitude_m,
+            *self.velocity_ned_m_s,
+        )
+
+
+_GPS_NO_FIX_LAYOUT: Layout = (("Fix", INT), ("Satellites", INT))
+_GPS_FIX_LAYOUT: Layout = (
+    ("Latitude", WORD),
+    ("Longitude", WORD),
+    ("Fix", INT),
+    ("Satellites", INT),
+    ("LatitudeDeg", FLOAT),
+    ("LongitudeDeg", FLOAT),
+    ("Altitude", FLOAT),
+    ("VelocityNED", floats(3)),
+)
 
 
 class GPS(Sensor[GpsReading]):
@@ -313,7 +345,7 @@ class GPS(Sensor[GpsReading]):
             lo, hi = int(self.params["MinSatellites"]), int(self.params["MaxSatellites"])
             step = 1 if self.rng.random() < 0.5 else -1
             self._satellites = min(hi, max(lo, self._satellites + step))
-        n, e, d = vec3(self._pos_ned_m(state) + self._error_ned_m)
+        n, e, d = vec3(np.add(self._pos_ned_m(state), self._error_ned_m))
         lat, lon, alt = origin.to_geodetic(n, e, d)
         vel = np.asarray(state.vel_ned_m_s, dtype=float) + self.params[
             "VelocitySigma"
@@ -329,10 +361,10 @@ class BatteryReading(Reading):
     voltage_v: float
     current_a: float
     remaining: float  # fraction of capacity, 0..1
+    LAYOUT = (("Voltage", FLOAT), ("Current", FLOAT), ("Remaining", FLOAT))
 
-    def fields(self) -> Fields:
-        return [("Voltage", self.voltage_v), ("Current", self.current_a),
-                ("Remaining", self.remaining)]
+    def values(self) -> tuple[object, ...]:
+        return (self.voltage_v, self.current_a, self.remaining)
 
 
 class Battery(Sensor[BatteryReading]):

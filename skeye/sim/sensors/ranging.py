@@ -12,10 +12,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
-from skeye.sim.sensors.base import Fields, Param, Reading, Sensor, WorldQuery, cross3
-from skeye.sim.state import BodyState
+from skeye.sim.protocol import FLOAT, INT, ints
+from skeye.sim.sensors.base import Param, Reading, Sensor, WorldQuery
+from skeye.sim.state import BodyState, Vec3, cross, mat_t_vec, mat_vec
 
 SQUAL_MAX = 169  # ADNS-3080: SQUAL register maximum
 DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
@@ -25,9 +24,10 @@ DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y re
 class SonarReading(Reading):
     range_m: float
     echo: bool  # False when nothing was within MaxRange (Range is then MaxRange)
+    LAYOUT = (("Range", FLOAT),)
 
-    def fields(self) -> Fields:
-        return [("Range", self.range_m)]
+    def values(self) -> tuple[object, ...]:
+        return (self.range_m,)
 
 
 class Sonar(Sensor[SonarReading]):
@@ -66,19 +66,17 @@ class Sonar(Sensor[SonarReading]):
             phi = 2.0 * math.pi * k / count
             rays.append((math.sin(half) * math.cos(phi), math.sin(half) * math.sin(phi),
                          math.cos(half)))
-        self._rays_sensor = np.array(rays)  # unit vectors, sensor frame, one per row
+        self._rays_sensor: list[Vec3] = rays  # unit vectors, sensor frame
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> SonarReading:
         p = self.params
         lo, hi = p["MinRange"], p["MaxRange"]
         origin = self._pos_ned_m(state)
-        dirs = self._rays_sensor @ self._rot_sensor_to_ned(state).T
-        nearest: float | None = None
-        for d in dirs:
-            hit = world.ray_distance(origin, d, hi)
-            if hit is not None and (nearest is None or hit < nearest):
-                nearest = hit
-        t = float(state.time_s)
+        rot = self._rot_sensor_to_ned(state)
+        hits = world.ray_distances(origin, [mat_vec(rot, r) for r in self._rays_sensor], hi)
+        echoes = [h for h in hits if h is not None]
+        nearest = min(echoes) if echoes else None
+        t = state.time_s
         if nearest is None:
             return SonarReading(t, hi, False)
         measured = nearest + p["NoiseSigma"] * float(self.rng.standard_normal())
@@ -90,9 +88,10 @@ class FlowReading(Reading):
     delta_counts: tuple[int, int]
     quality: int
     distance_m: float | None  # the surface distance along the boresight, None if none seen
+    LAYOUT = (("Delta", ints(2)), ("Quality", INT))
 
-    def fields(self) -> Fields:
-        return [("Delta", self.delta_counts), ("Quality", self.quality)]
+    def values(self) -> tuple[object, ...]:
+        return (*self.delta_counts, self.quality)
 
 
 class OpticalFlow(Sensor[FlowReading]):
@@ -167,34 +166,34 @@ class OpticalFlow(Sensor[FlowReading]):
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> FlowReading:
         p = self.params
-        t = float(state.time_s)
-        rot_bn = np.asarray(state.rot_body_to_ned)
-        rot_sn = rot_bn @ self._rot_mount
-        origin = np.asarray(state.pos_ned_m, dtype=float) + rot_bn @ self._pos_mount
-        distance = world.ray_distance(origin, rot_sn[:, 2], 2.0 * p["MaxRange"])
+        t = state.time_s
+        rot_bn = state.rot_body_to_ned
+        rot_sn = self._rot_sensor_to_ned(state)
+        origin = self._pos_ned_m(state)
+        boresight = (rot_sn[0][2], rot_sn[1][2], rot_sn[2][2])
+        distance = world.ray_distance(origin, boresight, 2.0 * p["MaxRange"])
         quality = self._quality(distance)
         if quality == 0 or distance is None or distance <= 0.0:
             self._prev_rate = None
             self._carry = [0.0, 0.0]
             return FlowReading(t, (0, 0), quality, distance)
-        omega_b = np.asarray(state.omega_frd_rad_s, dtype=float)
-        vel_n = np.asarray(state.vel_ned_m_s, dtype=float) + rot_bn @ cross3(
-            omega_b, self._pos_mount
-        )
-        v = rot_sn.T @ vel_n
-        w = self._rot_mount_t @ omega_b
-        rate = (float(v[0] / distance + w[1]), float(v[1] / distance - w[0]))
+        omega_b = state.omega_frd_rad_s
+        lx, ly, lz = mat_vec(rot_bn, cross(omega_b, self._pos_mount))
+        vx, vy, vz = state.vel_ned_m_s
+        v = mat_t_vec(rot_sn, (vx + lx, vy + ly, vz + lz))
+        w = self._body_to_sensor(omega_b)
+        rate = (v[0] / distance + w[1], v[1] / distance - w[0])
         prev = self._prev_rate
         if prev is None:
             prev, dt_s = rate, 1.0 / self.rate_hz
         self._prev_rate = rate
-        noise = self.rng.standard_normal(2)
+        noise = self.rng.standard_normal(2).tolist()
         delta: list[int] = []
         for axis in range(2):
             total = (
                 self._carry[axis]
                 + self.counts_per_rad * dt_s * 0.5 * (prev[axis] + rate[axis])
-                + p["NoiseSigma"] * float(noise[axis])
+                + p["NoiseSigma"] * noise[axis]
             )
             counts = round(total)
             if counts > DELTA_MAX or counts < DELTA_MIN:
