@@ -181,6 +181,12 @@ class LowLevelController:
         tx, ty = tx * scale, ty * scale
         room = max(0.0, head - max(abs(tx), abs(ty)))
         tz = _clamp(tz, -room, room)
-        forces = (base + ty - tz, base - tx + tz, base - ty - tz, base + tx + tz)
         kf = a.kf
-        return [math.sqrt(f / kf) if f > 0.0 else 0.0 for f in forces]
+        f0, f1, f2, f3 = base + ty - tz, base - tx + tz, base - ty - tz, base + tx + tz
+        sqrt = math.sqrt
+        return [
+            sqrt(f0 / kf) if f0 > 0.0 else 0.0,
+            sqrt(f1 / kf) if f1 > 0.0 else 0.0,
+            sqrt(f2 / kf) if f2 > 0.0 else 0.0,
+            sqrt(f3 / kf) if f3 > 0.0 else 0.0,
+        ]

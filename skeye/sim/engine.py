@@ -297,12 +297,12 @@ class Simulation:
         self, origin_ned_m: Any, direction_ned: Any, exclude_body: int, max_range_m: float
     ) -> float | None:
         """One MuJoCo ray (NED in, metres out); None when nothing is hit within range."""
-        dx, dy, dz = float(direction_ned[0]), -float(direction_ned[1]), -float(direction_ned[2])
+        dx, dy, dz = frames.ned_to_mj_floats(direction_ned)
         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
         if norm == 0.0:
             return None
         pnt, vec = self._ray_pnt, self._ray_vec
-        pnt[0], pnt[1], pnt[2] = origin_ned_m[0], -origin_ned_m[1], -origin_ned_m[2]
+        pnt[0], pnt[1], pnt[2] = frames.ned_to_mj_floats(origin_ned_m)
         vec[0], vec[1], vec[2] = dx / norm, dy / norm, dz / norm
         dist = mujoco.mj_ray(self.model, self.data, pnt, vec, None, 1, exclude_body,
                              self._ray_geomid)
@@ -318,13 +318,14 @@ class Simulation:
         if n == 0:
             return []
         vec = np.empty((n, 3))
-        for i, (x, y, z) in enumerate(directions_ned):
+        for i, direction in enumerate(directions_ned):
+            x, y, z = frames.ned_to_mj_floats(direction)
             norm = math.sqrt(x * x + y * y + z * z)
             if norm == 0.0:
                 raise LocalProtocolError("a ray direction must not be zero")
-            vec[i, 0], vec[i, 1], vec[i, 2] = x / norm, -y / norm, -z / norm
+            vec[i, 0], vec[i, 1], vec[i, 2] = x / norm, y / norm, z / norm
         pnt = self._ray_pnt
-        pnt[0], pnt[1], pnt[2] = origin_ned_m[0], -origin_ned_m[1], -origin_ned_m[2]
+        pnt[0], pnt[1], pnt[2] = frames.ned_to_mj_floats(origin_ned_m)
         dist = np.empty(n)
         geomid = np.empty(n, dtype=np.int32)
         mujoco.mj_multiRay(self.model, self.data, pnt, vec.reshape(-1), None, 1,
@@ -364,11 +365,8 @@ class Simulation:
         try:
             self._check_states()
             while self.steps < target:
-                quiet = min(self._next_event_step(), target - 1) - self.steps
-                if quiet > 0:
-                    mujoco.mj_step(self.model, self.data, nstep=quiet)
-                    self.steps += quiet
-                self._step_once()
+                # The quiet steps and the one after which something is due: one MuJoCo call.
+                self._step_to_event(min(self._next_event_step(), target - 1) - self.steps + 1)
         finally:
             self.flush()
 
@@ -393,7 +391,7 @@ class Simulation:
         self._periods = sorted(periods)
 
     def _next_event_step(self) -> int:
-        """The first step index >= now whose :meth:`_step_once` has work to do after it.
+        """The first step index >= now whose :meth:`_step_to_event` has work to do after it.
 
         Work that falls due when the step count reaches a multiple of ``p`` is done at the end
         of the step with index ``k`` where ``(k + 1) % p == 0``.
@@ -426,12 +424,12 @@ class Simulation:
         for outbox, lines in pending.values():
             outbox(b"".join(lines))
 
-    def _step_once(self) -> None:
-        """One physics step, then whatever falls due at the new step count, robot by robot:
-        sensors are sampled (and status reported) from the state now, then the board ticks on
-        that same state and sets the wrench MuJoCo applies until the board's next tick."""
-        mujoco.mj_step(self.model, self.data)
-        self.steps = step = self.steps + 1
+    def _step_to_event(self, count: int = 1) -> None:
+        """``count`` physics steps, then whatever falls due at the new step count, robot by
+        robot: sensors are sampled (and status reported) from the state now, then the board
+        ticks on that same state and sets the wrench MuJoCo applies until its next tick."""
+        mujoco.mj_step(self.model, self.data, nstep=count)
+        self.steps = step = self.steps + count
         failed: list[tuple[str, str]] = []
         wind_advanced = False
         joints: tuple[list[float], list[float], list[float]] | None = None
@@ -479,10 +477,9 @@ class Simulation:
             state, ground, self._in_contact(slot.body_id), self.wind.air_velocity_ned()
         )
         wf = self.wind.force_ned()
-        self.data.xfrc_applied[slot.body_id] = (
-            force[0] + wf[0], -(force[1] + wf[1]), -(force[2] + wf[2]),
-            torque[0], -torque[1], -torque[2],
-        )  # NED -> MuJoCo's NWU, as frames.ned_wrench_to_mj (written out: hot path)
+        self.data.xfrc_applied[slot.body_id] = frames.ned_wrench_to_mj(
+            (force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]), torque
+        )
 
     def _park(self, name: str) -> None:
         """Park a failed body far above the world with finite state and no force, so MuJoCo's

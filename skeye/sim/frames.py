@@ -25,29 +25,9 @@ def ned_to_mj(v: Vec3) -> np.ndarray:
     return np.array((v[0], -v[1], -v[2]), dtype=float)
 
 
-def mj_to_ned(v: Vec3) -> np.ndarray:
-    """A world vector MuJoCo NWU -> NED (or body FLU -> FRD)."""
-    return np.array((v[0], -v[1], -v[2]), dtype=float)
-
-
-def quat_mj_to_ned(q: Vec3) -> np.ndarray:
-    """MuJoCo body(FLU)->world(NWU) quaternion (w,x,y,z) -> body(FRD)->world(NED)."""
-    return np.array((q[0], q[1], -q[2], -q[3]), dtype=float)
-
-
 def quat_ned_to_mj(q: Vec3) -> np.ndarray:
     """Body(FRD)->world(NED) quaternion (w,x,y,z) -> MuJoCo body(FLU)->world(NWU)."""
     return np.array((q[0], q[1], -q[2], -q[3]), dtype=float)
-
-
-def quat_to_euler(q: Vec3) -> tuple[float, float, float]:
-    """Quaternion (w,x,y,z) -> (roll, pitch, yaw) rad, ZYX order (yaw, then pitch, then roll)."""
-    w, x, y, z = q
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    s = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
-    pitch = math.asin(s)
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 def euler_to_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -142,6 +122,11 @@ def quat_to_rows(q: Sequence[float]) -> Mat3:
         (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
         (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
     )
+
+
+def ned_to_mj_floats(v: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`ned_to_mj` as a tuple of plain floats (for hot paths that fill MuJoCo buffers)."""
+    return (v[0], -v[1], -v[2])
 
 
 def ned_wrench_to_mj(

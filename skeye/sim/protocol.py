@@ -4,8 +4,9 @@ How this works: bytes go into a :class:`LineDecoder`, which splits them at ``\\r
 ``\\r\\n``, decodes UTF-8 and hands each line to :func:`parse_line`; out come :class:`Message`
 values or :class:`LineError` values, never an exception. Going the other way,
 :func:`format_message` turns a type word and ``(key, value)`` pairs into one ``\\r\\n``-ended
-line, one field per block. No sockets, threads or clocks live here; the simulator server and the
-Python client are thin adapters around these functions.
+line, one field per block; :class:`LineFormat` writes the same text for lines whose shape is
+known in advance (the sensor streams), several times faster. No sockets, threads or clocks live
+here; the simulator server and the Python client are thin adapters around these functions.
 
 Invariants:
 - A line is ``TYPE {Key Value} {Key Value} ...``. The type word and keys are case-insensitive:

@@ -345,7 +345,7 @@ class _TruthSampler:
             sim.event_sources.remove(self.next_event)
 
     def next_event(self, sim: Any) -> int:
-        # _step_once at step k leaves sim.steps == k + 1: sample when that is a multiple.
+        # The step with index k leaves sim.steps == k + 1: sample when that is a multiple.
         return -(-(sim.steps + 1) // self.period) * self.period - 1
 
     def on_step(self, sim: Any) -> None:
