@@ -19,6 +19,7 @@ Usage: python benchmarks/bench_sim.py [--sim-seconds 20] [--timestep 0.001] [--r
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import socket
 import statistics
@@ -124,6 +125,19 @@ def measure_latency(port: int, samples: int) -> tuple[list[float], list[float]]:
     return ping, drive
 
 
+def reference_loop_ms() -> float:
+    """A fixed pure-Python workload (best of 5), printed with the figures: on a shared machine
+    it tells a slow run of the code from a run on a slow moment of the machine."""
+    best = math.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        x = 0.0
+        for i in range(300_000):
+            x += (i * 0.5) ** 0.5
+        best = min(best, time.perf_counter() - start)
+    return best * 1000.0
+
+
 def pct(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
@@ -137,6 +151,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; lockstep")
+    print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
     with sim_process(args.timestep) as port:
         for n, target in ((1, 50.0), (10, 5.0)):
             runs = [measure_rtf(port, n, args.sim_seconds, args.timestep)
@@ -158,6 +173,7 @@ def main() -> None:
             f"  (target p99 < 2 ms)"
         )
         print(f"mean PING {statistics.mean(ping) * 1000:.3f} ms")
+    print(f"CPU reference loop after: {reference_loop_ms():.1f} ms")
 
 
 if __name__ == "__main__":
