@@ -39,6 +39,9 @@ log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 7000
 DEFAULT_TICK_S = 0.01
+HANDOVER_GRACE_S = 0.5
+"""How long a new ground station waits for the current one's connection to finish closing (it
+may have hung up a moment ago, its reader not yet noticed) before being turned away as busy."""
 
 
 class PilotServer:
@@ -89,6 +92,7 @@ class PilotServer:
         self.vision = vision(self.boards, self._lock) if vision is not None else None
         self._client: Link | None = None
         self._client_lock = threading.Lock()
+        self._client_changed = threading.Condition(self._client_lock)
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._listener: socket.socket | None = None
@@ -170,7 +174,10 @@ class PilotServer:
             except OSError:
                 break
             link = TcpLink(sock)
-            with self._client_lock:
+            with self._client_changed:
+                self._client_changed.wait_for(
+                    lambda: self._client is None or self._client.closed, HANDOVER_GRACE_S
+                )
                 busy = self._client is not None and not self._client.closed
                 current = self._client.name if busy and self._client else ""
             if busy:
@@ -211,9 +218,10 @@ class PilotServer:
             pass
         finally:
             link.close()
-            with self._client_lock:
+            with self._client_changed:
                 if self._client is link:
                     self._client = None
+                self._client_changed.notify_all()
             with self._lock:
                 self.boards.client_gone(self.clock())
             log.info("ground control on %s went away", link.name)

@@ -58,6 +58,17 @@ def test_second_client_is_turned_away_and_first_is_untouched():
             assert PD.LL_STATUS in b.poll(1)
 
 
+def test_a_station_that_reconnects_at_once_is_served_not_turned_away():
+    """Closing and reconnecting at once races the pilot's reader noticing the hang-up; the new
+    connection waits for that (HANDOVER_GRACE_S) instead of being refused as busy."""
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot:
+        for _ in range(20):
+            with Vehicle.open(pilot.address) as v:
+                assert PD.LL_STATUS in v.poll(int(PollMask.LL_STATUS))
+        assert pilot.turned_away == 0
+
+
 def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
     air = FakeAirframe()
     settings = BoardSettings(link_timeout_s=0.3, land_timeout_s=0.3)
