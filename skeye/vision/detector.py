@@ -636,6 +636,19 @@ def _finish(
     if keep.sum() < 20:
         return NOT_FOUND
     all_pts, all_rm, border_idx = all_pts[keep], all_rm[keep], border_idx[keep]
+    # A border left with too few points after that cut (say one seen only in the image's
+    # corners, at low height) drops its ring from the fit, not the whole detection.
+    counts = np.bincount(border_idx, minlength=look.size)
+    thin = np.unique(ring_of[look][use & (counts < 5)])
+    if thin.size:
+        rings = [r for r in rings if r not in thin]
+        if len(rings) < 2:
+            return NOT_FOUND
+        use = use & ~np.isin(ring_of[look], thin)
+        mask = use[border_idx]
+        all_pts, all_rm, border_idx = all_pts[mask], all_rm[mask], border_idx[mask]
+        if mask.sum() < 20:
+            return NOT_FOUND
     cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale, iters=2)
     if not (scale > 0 and math.isfinite(cx) and math.isfinite(cy)):
         return NOT_FOUND
