@@ -24,7 +24,9 @@ How this works:
    to concentric circles of radii ``s * r_m``: a common centre and one scale ``s``. Larger
    borders carry more weight, as they should (blur and pixel effects shrink small ones most).
    Height ``h = f / s`` (``f * r_m / r_px`` combined over all borders); the offset follows from
-   the centre.
+   the centre. One round of outlier rejection follows; a ring one of whose borders keeps fewer
+   than five points after it (the outermost ring, seen only in the image's corners when the
+   camera is low) leaves the fit instead of failing the detection.
 
 Invariants: ``found`` needs at least two identified rings that pass every check; otherwise
 the estimate says "not found" with all figures ``None`` - never a guess. Nothing is rounded.
