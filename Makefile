@@ -9,12 +9,19 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 
-$(VENV)/.installed: $(BIN)/python pyproject.toml
+# The simulator's hot path is compiled at install time (setup.py, skeye/native.py): reinstall
+# whenever one of those sources changes, so the compiled modules never lag behind the code.
+NATIVE_SOURCES := $(shell $(PYTHON) skeye/native.py --sources)
+
+$(VENV)/.installed: $(BIN)/python pyproject.toml setup.py skeye/native.py $(NATIVE_SOURCES)
 	$(BIN)/pip install -q -e .
 	touch $@
 
+# The test extras only (the package itself is already built and installed above).
 $(VENV)/.test-installed: $(VENV)/.installed
-	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/pip install -q $$($(BIN)/python -c "import tomllib; \
+		print(' '.join(d for d in tomllib.load(open('pyproject.toml', 'rb')) \
+		['project']['optional-dependencies']['test']))")
 	touch $@
 
 run: $(VENV)/.installed
@@ -23,7 +30,7 @@ run: $(VENV)/.installed
 test: $(VENV)/.test-installed chromium
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/python -m pytest -q
+	SKEYE_REQUIRE_COMPILED=1 MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/python -m pytest -q
 
 # Browser tests drive the distribution's Chromium (never a browser downloaded by Playwright).
 chromium:
@@ -40,3 +47,4 @@ bench: $(VENV)/.installed
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	find . -name '*.so' -not -path './.venv/*' -delete

@@ -27,6 +27,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from skeye import native
 from skeye.processes import start_skeye, stop_process
 
 
@@ -151,6 +152,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; lockstep")
+    print(native.decide().describe())  # what the simulator process will run
     print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
     with sim_process(args.timestep) as port:
         for n, target in ((1, 50.0), (10, 5.0)):

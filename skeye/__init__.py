@@ -2,7 +2,11 @@
 
 from typing import TYPE_CHECKING
 
-from skeye.errors import (
+from skeye import native as _native
+
+_native.install()  # before any simulator module: compiled or source (see skeye.native)
+
+from skeye.errors import (  # noqa: E402
     CommandRejected,
     ConfigError,
     LinkTimeout,

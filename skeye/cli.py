@@ -29,6 +29,7 @@ def _wait_for_signal(stop: threading.Event) -> None:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
+    from skeye import native
     from skeye.sim.engine import Simulation, SimulationRunner
     from skeye.sim.server import ControlServer
     from skeye.sim.wind import make_settings, parse_params
@@ -70,6 +71,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             f"seed {args.seed}; control protocol on {args.host}:{server.port} ({where})",
             flush=True,
         )
+        print(f"skeye sim: {native.status().describe()}", flush=True)
         if recorder is not None:
             recorder.attach(server, runner)
             print(f"skeye sim: recording to {args.record}", flush=True)

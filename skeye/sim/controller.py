@@ -19,7 +19,7 @@ Integrators are clamped (anti-windup). Every limit is a parameter (ControllerPar
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from skeye.errors import ConfigError
 from skeye.sim.vehicle import GRAVITY_M_S2, AirframeParams
@@ -45,7 +45,7 @@ class ControllerParams:
     max_accel_m_s2: float = 4.0
 
     def __post_init__(self) -> None:
-        for name, value in self.__dict__.items():
+        for name, value in ((f.name, getattr(self, f.name)) for f in fields(self)):
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"controller: {name} must be a positive number, got {value!r}")
         if self.max_tilt_rad >= math.pi / 2:

@@ -207,8 +207,8 @@ class Simulation:
         self,
         class_name: str,
         *,
-        name: str | None = None,
         outbox: Outbox,
+        name: str | None = None,
         location_ned_m: tuple[float, float, float] | None = None,
         rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
         start: str | None = None,
@@ -553,8 +553,8 @@ class SimulationRunner:
         self.behind_events = 0
         self.wall_start = time.monotonic()
         self.sim_start_s = sim.time_s
-        self._thread = threading.Thread(target=self._run, name="skeye-engine", daemon=True)
-        self._thread.start()
+        self._engine_thread = threading.Thread(target=self._run, name="skeye-engine", daemon=True)
+        self._engine_thread.start()
 
     def __enter__(self) -> SimulationRunner:
         return self
@@ -567,11 +567,11 @@ class SimulationRunner:
             return
         self._stop.set()
         self._tasks.put(None)
-        self._thread.join(timeout_s)
+        self._engine_thread.join(timeout_s)
 
     @property
     def alive(self) -> bool:
-        return self._thread.is_alive()
+        return self._engine_thread.is_alive()
 
     def submit(self, fn: Callable[[Simulation], T]) -> Future[T]:
         """Run ``fn(sim)`` on the engine thread between steps."""

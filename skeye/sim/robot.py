@@ -55,12 +55,17 @@ class ScheduledSensor:
         return entry[1].format((reading.time_s, *reading.values()))
 
 
+_MOTORS_LAYOUT: Layout = (("Speeds", floats(4)), ("Commands", floats(4)), ("Thrust", FLOAT))
+
+
 @dataclass(frozen=True)
 class MotorsReading(Reading):
     speeds_rad_s: tuple[float, float, float, float]
     commands_rad_s: tuple[float, float, float, float]
     thrust_n: float
-    LAYOUT = (("Speeds", floats(4)), ("Commands", floats(4)), ("Thrust", FLOAT))
+
+    def layout(self) -> Layout:
+        return _MOTORS_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (*self.speeds_rad_s, *self.commands_rad_s, self.thrust_n)

@@ -41,8 +41,9 @@ def dataclass_from_mapping(cls: Any, data: Mapping[str, Any], owner: str) -> Any
     if unknown:
         raise ConfigError(f"{owner}: unknown key(s) {unknown}; known keys: {sorted(known)}")
     kwargs: dict[str, Any] = {}
+    defaults = {f.name: f.default for f in fields(cls)}
     for key, value in data.items():
-        default = getattr(cls, key, None)
+        default = defaults.get(key)
         if isinstance(default, float | int) and not isinstance(default, bool):
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise ConfigError(f"{owner}: {key} must be a number, got {value!r}")

@@ -104,18 +104,18 @@ class Param:
 class Reading:
     """Base of the typed readings kept in ``Sensor.last``.
 
-    A subclass declares its SEN fields once, as ``LAYOUT`` (keys and slots, see
-    :class:`~skeye.sim.protocol.LineFormat`), and returns their values flat from
-    :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from the two, so the
-    engine's precompiled line and the generic fields can never disagree.
+    A subclass declares its SEN fields once, as a module-level ``Layout`` constant (keys and
+    slots, see :class:`~skeye.sim.protocol.LineFormat`) that :meth:`layout` returns (the same
+    object each time: the engine caches its compiled line format by it), and returns their
+    values flat from :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from
+    the two, so the engine's precompiled line and the generic fields can never disagree.
     """
 
     time_s: float
-    LAYOUT: ClassVar[Layout] = ()
 
     def layout(self) -> Layout:
         """The keys and slots of this reading's SEN fields (after Time, Type and Name)."""
-        return self.LAYOUT
+        raise NotImplementedError
 
     def values(self) -> tuple[object, ...]:
         """The field values, flat, in layout order."""
@@ -230,7 +230,7 @@ class Sensor(Generic[R]):
         if spec.integer:
             if not number.is_integer():
                 raise self._error(spec.key, f"must be an integer, got {value!r}")
-            number = int(number)
+            number = float(int(number))
         if spec.exclusive and not number > spec.minimum:
             raise self._error(spec.key, f"must be > {spec.minimum:g}, got {value!r}")
         if not spec.exclusive and not number >= spec.minimum:

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from skeye.sim.frames import wrap_2pi
-from skeye.sim.protocol import FLOAT, floats
+from skeye.sim.protocol import FLOAT, Layout, floats
 from skeye.sim.sensors.base import (
     BiasedNoise,
     Param,
@@ -39,10 +39,15 @@ def _noise_params(
     )
 
 
+_ACCEL_LAYOUT: Layout = (("ProperAcceleration", floats(3)),)
+
+
 @dataclass(frozen=True)
 class AccelReading(Reading):
     proper_acceleration_m_s2: Vec3
-    LAYOUT = (("ProperAcceleration", floats(3)),)
+
+    def layout(self) -> Layout:
+        return _ACCEL_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return self.proper_acceleration_m_s2
@@ -75,10 +80,15 @@ class Accelerometer(Sensor[AccelReading]):
         return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
+_GYRO_LAYOUT: Layout = (("AngularVelocity", floats(3)),)
+
+
 @dataclass(frozen=True)
 class GyroReading(Reading):
     angular_velocity_rad_s: Vec3
-    LAYOUT = (("AngularVelocity", floats(3)),)
+
+    def layout(self) -> Layout:
+        return _GYRO_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return self.angular_velocity_rad_s
@@ -105,11 +115,16 @@ class Gyro(Sensor[GyroReading]):
         return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
+_COMPASS_LAYOUT: Layout = (("MagneticAngle", FLOAT), ("Field", floats(3)))
+
+
 @dataclass(frozen=True)
 class CompassReading(Reading):
     magnetic_angle_rad: float
     field_ut: Vec3
-    LAYOUT = (("MagneticAngle", FLOAT), ("Field", floats(3)))
+
+    def layout(self) -> Layout:
+        return _COMPASS_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (self.magnetic_angle_rad, *self.field_ut)
@@ -151,11 +166,16 @@ class MagneticCompass(Sensor[CompassReading]):
         return CompassReading(state.time_s, heading, b)
 
 
+_BARO_LAYOUT: Layout = (("Pressure", FLOAT), ("Altitude", FLOAT))
+
+
 @dataclass(frozen=True)
 class BaroReading(Reading):
     pressure_pa: float
     altitude_m: float
-    LAYOUT = (("Pressure", FLOAT), ("Altitude", FLOAT))
+
+    def layout(self) -> Layout:
+        return _BARO_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (self.pressure_pa, self.altitude_m)

@@ -33,18 +33,23 @@ def _wrap_rpy_2pi(rpy: Vec3) -> Vec3:
 # --- GroundTruth ---------------------------------------------------------------------------
 
 
+_GROUND_TRUTH_LAYOUT: Layout = (
+    ("Location", floats(3)),
+    ("Orientation", floats(3)),
+    ("Velocity", floats(3)),
+    ("AngularVelocity", floats(3)),
+)
+
+
 @dataclass(frozen=True)
 class GroundTruthReading(Reading):
     location_ned_m: Vec3
     orientation_rad: Vec3  # roll, pitch, yaw, each in [0, 2 pi)
     velocity_ned_m_s: Vec3
     angular_velocity_frd_rad_s: Vec3
-    LAYOUT = (
-        ("Location", floats(3)),
-        ("Orientation", floats(3)),
-        ("Velocity", floats(3)),
-        ("AngularVelocity", floats(3)),
-    )
+
+    def layout(self) -> Layout:
+        return _GROUND_TRUTH_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (
@@ -86,12 +91,17 @@ class InsEstimate(NamedTuple):
     omega_frd_rad_s: Vec3
 
 
+_INS_LAYOUT: Layout = (("Location", floats(3)), ("Orientation", floats(3)), ("Velocity", floats(3)))
+
+
 @dataclass(frozen=True)
 class InsReading(Reading):
     location_ned_m: Vec3
     orientation_rad: Vec3  # [0, 2 pi)
     velocity_ned_m_s: Vec3
-    LAYOUT = (("Location", floats(3)), ("Orientation", floats(3)), ("Velocity", floats(3)))
+
+    def layout(self) -> Layout:
+        return _INS_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (*self.location_ned_m, *self.orientation_rad, *self.velocity_ned_m_s)
@@ -356,12 +366,17 @@ class GPS(Sensor[GpsReading]):
 # --- Battery -------------------------------------------------------------------------------
 
 
+_BATTERY_LAYOUT: Layout = (("Voltage", FLOAT), ("Current", FLOAT), ("Remaining", FLOAT))
+
+
 @dataclass(frozen=True)
 class BatteryReading(Reading):
     voltage_v: float
     current_a: float
     remaining: float  # fraction of capacity, 0..1
-    LAYOUT = (("Voltage", FLOAT), ("Current", FLOAT), ("Remaining", FLOAT))
+
+    def layout(self) -> Layout:
+        return _BATTERY_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (self.voltage_v, self.current_a, self.remaining)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from skeye.sim.protocol import FLOAT, INT, ints
+from skeye.sim.protocol import FLOAT, INT, Layout, ints
 from skeye.sim.sensors.base import Param, Reading, Sensor, WorldQuery
 from skeye.sim.state import BodyState, Vec3, cross, mat_t_vec, mat_vec
 
@@ -20,11 +20,16 @@ SQUAL_MAX = 169  # ADNS-3080: SQUAL register maximum
 DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
 
 
+_SONAR_LAYOUT: Layout = (("Range", FLOAT),)
+
+
 @dataclass(frozen=True)
 class SonarReading(Reading):
     range_m: float
     echo: bool  # False when nothing was within MaxRange (Range is then MaxRange)
-    LAYOUT = (("Range", FLOAT),)
+
+    def layout(self) -> Layout:
+        return _SONAR_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (self.range_m,)
@@ -83,12 +88,17 @@ class Sonar(Sensor[SonarReading]):
         return SonarReading(t, min(hi, max(lo, measured)), True)
 
 
+_FLOW_LAYOUT: Layout = (("Delta", ints(2)), ("Quality", INT))
+
+
 @dataclass(frozen=True)
 class FlowReading(Reading):
     delta_counts: tuple[int, int]
     quality: int
     distance_m: float | None  # the surface distance along the boresight, None if none seen
-    LAYOUT = (("Delta", ints(2)), ("Quality", INT))
+
+    def layout(self) -> Layout:
+        return _FLOW_LAYOUT
 
     def values(self) -> tuple[object, ...]:
         return (*self.delta_counts, self.quality)
