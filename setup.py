@@ -39,6 +39,9 @@ class OptionalBuildExt(build_ext):
     failed = False
 
     def run(self) -> None:
+        if self.inplace:  # an editable install: drop extensions of modules taken off the list
+            for ext in _native().stray_extensions(HERE).values():
+                ext.unlink()
         try:
             super().run()
         except Exception as exc:  # no compiler, missing headers: the .py sources still work

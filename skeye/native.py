@@ -112,13 +112,29 @@ def decide(root: Path = _ROOT, environ: Mapping[str, str] = os.environ) -> Nativ
     return NativeStatus(True, "compiled extensions up to date")
 
 
+def stray_extensions(root: Path = _ROOT) -> dict[str, Path]:
+    """Compiled extensions left beside a source that is not in :data:`COMPILED_MODULES` (a
+    module taken off the list after a build), by module name: never loaded."""
+    found = {}
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        for ext in (root / "skeye").rglob("*" + suffix):
+            source = ext.with_name(ext.name[: -len(suffix)] + ".py")
+            module = ".".join(source.relative_to(root).with_suffix("").parts)
+            if source.exists() and module not in COMPILED_MODULES:
+                found[module] = ext
+    return found
+
+
 class _SourceFinder(importlib.abc.MetaPathFinder):
-    """Loads the listed modules from their ``.py`` sources, never from an extension."""
+    """Loads the given modules from their ``.py`` sources, never from an extension."""
+
+    def __init__(self, modules: set[str]) -> None:
+        self.modules = modules
 
     def find_spec(
         self, fullname: str, path: object = None, target: ModuleType | None = None
     ) -> importlib.machinery.ModuleSpec | None:
-        if fullname not in COMPILED_MODULES:
+        if fullname not in self.modules:
             return None
         return importlib.util.spec_from_file_location(fullname, source_path(fullname))
 
@@ -132,10 +148,18 @@ def install() -> NativeStatus:
     if _status is not None:
         return _status
     _status = decide()
+    from_source = set(stray_extensions())
+    if from_source:
+        warnings.warn(
+            f"skeye: ignoring compiled modules no longer compiled: {', '.join(sorted(from_source))}"
+            " (`make` removes them)", RuntimeWarning, stacklevel=2,
+        )
     if not _status.compiled and any(extension_path(m) for m in COMPILED_MODULES):
-        sys.meta_path.insert(0, _SourceFinder())
+        from_source.update(COMPILED_MODULES)
         if not _status.reason.startswith(PURE_PYTHON_ENV):
             warnings.warn(f"skeye: {_status.describe()}", RuntimeWarning, stacklevel=2)
+    if from_source:
+        sys.meta_path.insert(0, _SourceFinder(from_source))
     return _status
 
 

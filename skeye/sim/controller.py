@@ -183,10 +183,9 @@ class LowLevelController:
         tz = _clamp(tz, -room, room)
         kf = a.kf
         f0, f1, f2, f3 = base + ty - tz, base - tx + tz, base - ty - tz, base + tx + tz
-        sqrt = math.sqrt
         return [
-            sqrt(f0 / kf) if f0 > 0.0 else 0.0,
-            sqrt(f1 / kf) if f1 > 0.0 else 0.0,
-            sqrt(f2 / kf) if f2 > 0.0 else 0.0,
-            sqrt(f3 / kf) if f3 > 0.0 else 0.0,
+            math.sqrt(f0 / kf) if f0 > 0.0 else 0.0,
+            math.sqrt(f1 / kf) if f1 > 0.0 else 0.0,
+            math.sqrt(f2 / kf) if f2 > 0.0 else 0.0,
+            math.sqrt(f3 / kf) if f3 > 0.0 else 0.0,
         ]

@@ -112,6 +112,11 @@ class Simulation:
         self._ray_vec = np.zeros(3)
         self.model: Any = None
         self.data: Any = None
+        # Views of MjData's arrays (each attribute access on MjData makes a new view).
+        self._qpos: Any = None
+        self._qvel: Any = None
+        self._qacc: Any = None
+        self._xfrc: Any = None
         self._rebuild()
 
     # -- model ---------------------------------------------------------------------------
@@ -183,6 +188,8 @@ class Simulation:
         self.model = mujoco.MjModel.from_xml_string(xml, assets)
         self.data = mujoco.MjData(self.model)
         self.data.time = self.time_s
+        d = self.data
+        self._qpos, self._qvel, self._qacc, self._xfrc = d.qpos, d.qvel, d.qacc, d.xfrc_applied
         self._slots = {}
         for name in self.robots:
             body_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"robot:{name}")
@@ -441,8 +448,7 @@ class Simulation:
             if not (board or due or status):
                 continue
             if joints is None:  # one read of MuJoCo's arrays for all robots this step
-                d = self.data
-                joints = (d.qpos.tolist(), d.qvel.tolist(), d.qacc.tolist())
+                joints = (self._qpos.tolist(), self._qvel.tolist(), self._qacc.tolist())
             slot = self._slots[name]
             a, b = slot.qpos_adr, slot.qvel_adr
             state = frames.free_joint_state(
@@ -477,7 +483,7 @@ class Simulation:
             state, ground, self._in_contact(slot.body_id), self.wind.air_velocity_ned()
         )
         wf = self.wind.force_ned()
-        self.data.xfrc_applied[slot.body_id] = frames.ned_wrench_to_mj(
+        self._xfrc[slot.body_id] = frames.ned_wrench_to_mj(
             (force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]), torque
         )
 

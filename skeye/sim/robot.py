@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
@@ -55,14 +55,26 @@ class ScheduledSensor:
         return entry[1].format((reading.time_s, *reading.values()))
 
 
-_MOTORS_LAYOUT: Layout = (("Speeds", floats(4)), ("Commands", floats(4)), ("Thrust", FLOAT))
+_MOTORS_LAYOUT: Final[Layout] = (("Speeds", floats(4)), ("Commands", floats(4)), ("Thrust", FLOAT))
 
 
-@dataclass(frozen=True)
+@dataclass
 class MotorsReading(Reading):
     speeds_rad_s: tuple[float, float, float, float]
     commands_rad_s: tuple[float, float, float, float]
     thrust_n: float
+
+    def __init__(
+        self,
+        time_s: float,
+        speeds_rad_s: tuple[float, float, float, float],
+        commands_rad_s: tuple[float, float, float, float],
+        thrust_n: float,
+    ) -> None:
+        self.time_s = time_s
+        self.speeds_rad_s = speeds_rad_s
+        self.commands_rad_s = commands_rad_s
+        self.thrust_n = thrust_n
 
     def layout(self) -> Layout:
         return _MOTORS_LAYOUT

@@ -36,6 +36,32 @@ class BodyState:
     # Rotor speeds (rad/s), for telemetry.
     rotor_speed_rad_s: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
+    # Written out, not generated: one state is made per event, and mypyc compiles a written
+    # __init__ while a dataclass's generated one stays interpreted.
+    def __init__(
+        self,
+        time_s: float = 0.0,
+        pos_ned_m: Vec3 = (0.0, 0.0, 0.0),
+        vel_ned_m_s: Vec3 = (0.0, 0.0, 0.0),
+        quat_ned: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
+        rpy_rad: Vec3 = (0.0, 0.0, 0.0),
+        rot_body_to_ned: Mat3 = IDENTITY3,
+        omega_frd_rad_s: Vec3 = (0.0, 0.0, 0.0),
+        accel_ned_m_s2: Vec3 = (0.0, 0.0, 0.0),
+        specific_force_frd_m_s2: Vec3 = (0.0, 0.0, -9.81),
+        rotor_speed_rad_s: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
+    ) -> None:
+        self.time_s = time_s
+        self.pos_ned_m = pos_ned_m
+        self.vel_ned_m_s = vel_ned_m_s
+        self.quat_ned = quat_ned
+        self.rpy_rad = rpy_rad
+        self.rot_body_to_ned = rot_body_to_ned
+        self.omega_frd_rad_s = omega_frd_rad_s
+        self.accel_ned_m_s2 = accel_ned_m_s2
+        self.specific_force_frd_m_s2 = specific_force_frd_m_s2
+        self.rotor_speed_rad_s = rotor_speed_rad_s
+
 
 def mat_vec(m: Mat3, v: Vec3) -> Vec3:
     """``m @ v`` on plain floats."""

@@ -17,16 +17,15 @@ decreases; all parameters are validated on construction (ConfigError naming the 
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, Final
 
 from skeye.errors import ConfigError
 
-GRAVITY_M_S2 = 9.81
-AIR_DENSITY_KG_M3 = 1.225
+GRAVITY_M_S2: Final = 9.81
+AIR_DENSITY_KG_M3: Final = 1.225
 
 
 def _check_positive(owner: str, name: str, value: float) -> None:
@@ -142,16 +141,19 @@ class BatteryParams:
 
 
 # Resting cell voltage against state of charge (typical LiPo discharge curve).
-_OCV_SOC = (0.0, 0.05, 0.10, 0.20, 0.40, 0.60, 0.80, 0.90, 1.0)
-_OCV_V = (3.30, 3.55, 3.65, 3.73, 3.80, 3.87, 3.98, 4.08, 4.20)
+_OCV_SOC: tuple[float, ...] = (0.0, 0.05, 0.10, 0.20, 0.40, 0.60, 0.80, 0.90, 1.0)
+_OCV_V: tuple[float, ...] = (3.30, 3.55, 3.65, 3.73, 3.80, 3.87, 3.98, 4.08, 4.20)
 
 
 def cell_open_circuit_v(soc: float) -> float:
     """Resting voltage of one LiPo cell at a state of charge in [0, 1]."""
     soc = min(1.0, max(0.0, soc))
-    i = max(1, bisect.bisect_left(_OCV_SOC, soc))
-    s0, s1 = _OCV_SOC[i - 1], _OCV_SOC[i]
-    v0, v1 = _OCV_V[i - 1], _OCV_V[i]
+    knots, volts = _OCV_SOC, _OCV_V  # one global lookup each (a board tick calls this)
+    i = 1  # the first knot at or above soc (bisect_left), at least 1
+    while i < len(knots) - 1 and knots[i] < soc:
+        i += 1
+    s0, s1 = knots[i - 1], knots[i]
+    v0, v1 = volts[i - 1], volts[i]
     return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
 
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from skeye.errors import ConfigError
 
 WIND_MODES = ("none", "constant", "turbulence", "random_force")
 
-_DEFAULTS: dict[str, dict[str, float]] = {
+_DEFAULTS: Final[dict[str, dict[str, float]]] = {
     "none": {},
     "constant": {"speed_m_s": 2.0, "from_deg": 270.0},
     "turbulence": {"speed_m_s": 2.0, "from_deg": 270.0, "sigma_m_s": 1.0},

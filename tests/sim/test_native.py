@@ -140,3 +140,14 @@ def test_setup_compiles_exactly_the_listed_modules() -> None:
         str(native.source_path(m).relative_to(Path(native.__file__).parent.parent))
         for m in native.COMPILED_MODULES
     ]
+
+
+def test_an_extension_left_from_an_older_list_is_found(tmp_path: Path) -> None:
+    _fake_build(tmp_path)
+    suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
+    source = tmp_path / "skeye" / "sim" / "protocol.py"
+    source.write_text("# source\n")
+    stray = source.with_name("protocol" + suffix)
+    stray.write_bytes(b"")
+    assert native.stray_extensions(tmp_path) == {"skeye.sim.protocol": stray}
+    assert native.decide(tmp_path, environ={}).compiled  # the listed ones are still fine

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Generic, Protocol, TypeVar
+from typing import ClassVar, Final, Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -38,7 +38,7 @@ from skeye.sim.state import BodyState, Mat3, mat_mul, mat_t_vec, mat_vec, transp
 Vec3 = tuple[float, float, float]
 Fields = list[tuple[str, object]]
 
-DEFAULT_RATES_HZ: dict[str, float] = {
+DEFAULT_RATES_HZ: Final[dict[str, float]] = {
     "groundtruth": 50.0,
     "ins": 50.0,
     "accelerometer": 100.0,
@@ -100,7 +100,7 @@ class Param:
     integer: bool = False
 
 
-@dataclass(frozen=True)
+@dataclass
 class Reading:
     """Base of the typed readings kept in ``Sensor.last``.
 
@@ -109,6 +109,8 @@ class Reading:
     object each time: the engine caches its compiled line format by it), and returns their
     values flat from :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from
     the two, so the engine's precompiled line and the generic fields can never disagree.
+    Subclasses write their ``__init__`` out (one is made per sample: mypyc compiles a written
+    one, while a dataclass's generated one stays interpreted). Nothing changes a reading.
     """
 
     time_s: float
@@ -296,7 +298,7 @@ class Sensor(Generic[R]):
         return mat_t_vec(self._rot_mount, v_frd)
 
 
-_NOISE_BLOCK = 256  # corrupt() calls per block of pre-drawn normal deviates
+_NOISE_BLOCK: Final = 256  # corrupt() calls per block of pre-drawn normal deviates
 
 
 class BiasedNoise:

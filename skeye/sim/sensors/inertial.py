@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 from skeye.sim.frames import wrap_2pi
 from skeye.sim.protocol import FLOAT, Layout, floats
@@ -24,9 +25,9 @@ from skeye.sim.sensors.base import (
 from skeye.sim.state import BodyState, cross, mat_t_vec
 
 # International Standard Atmosphere, troposphere.
-ISA_T0_K = 288.15
-ISA_LAPSE_K_M = 0.0065
-ISA_EXPONENT = 5.25588  # g0 * M / (R * L)
+ISA_T0_K: Final = 288.15
+ISA_LAPSE_K_M: Final = 0.0065
+ISA_EXPONENT: Final = 5.25588  # g0 * M / (R * L)
 
 
 def _noise_params(
@@ -39,12 +40,16 @@ def _noise_params(
     )
 
 
-_ACCEL_LAYOUT: Layout = (("ProperAcceleration", floats(3)),)
+_ACCEL_LAYOUT: Final[Layout] = (("ProperAcceleration", floats(3)),)
 
 
-@dataclass(frozen=True)
+@dataclass
 class AccelReading(Reading):
     proper_acceleration_m_s2: Vec3
+
+    def __init__(self, time_s: float, proper_acceleration_m_s2: Vec3) -> None:
+        self.time_s = time_s
+        self.proper_acceleration_m_s2 = proper_acceleration_m_s2
 
     def layout(self) -> Layout:
         return _ACCEL_LAYOUT
@@ -80,12 +85,16 @@ class Accelerometer(Sensor[AccelReading]):
         return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
-_GYRO_LAYOUT: Layout = (("AngularVelocity", floats(3)),)
+_GYRO_LAYOUT: Final[Layout] = (("AngularVelocity", floats(3)),)
 
 
-@dataclass(frozen=True)
+@dataclass
 class GyroReading(Reading):
     angular_velocity_rad_s: Vec3
+
+    def __init__(self, time_s: float, angular_velocity_rad_s: Vec3) -> None:
+        self.time_s = time_s
+        self.angular_velocity_rad_s = angular_velocity_rad_s
 
     def layout(self) -> Layout:
         return _GYRO_LAYOUT
@@ -115,13 +124,18 @@ class Gyro(Sensor[GyroReading]):
         return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
-_COMPASS_LAYOUT: Layout = (("MagneticAngle", FLOAT), ("Field", floats(3)))
+_COMPASS_LAYOUT: Final[Layout] = (("MagneticAngle", FLOAT), ("Field", floats(3)))
 
 
-@dataclass(frozen=True)
+@dataclass
 class CompassReading(Reading):
     magnetic_angle_rad: float
     field_ut: Vec3
+
+    def __init__(self, time_s: float, magnetic_angle_rad: float, field_ut: Vec3) -> None:
+        self.time_s = time_s
+        self.magnetic_angle_rad = magnetic_angle_rad
+        self.field_ut = field_ut
 
     def layout(self) -> Layout:
         return _COMPASS_LAYOUT
@@ -166,13 +180,18 @@ class MagneticCompass(Sensor[CompassReading]):
         return CompassReading(state.time_s, heading, b)
 
 
-_BARO_LAYOUT: Layout = (("Pressure", FLOAT), ("Altitude", FLOAT))
+_BARO_LAYOUT: Final[Layout] = (("Pressure", FLOAT), ("Altitude", FLOAT))
 
 
-@dataclass(frozen=True)
+@dataclass
 class BaroReading(Reading):
     pressure_pa: float
     altitude_m: float
+
+    def __init__(self, time_s: float, pressure_pa: float, altitude_m: float) -> None:
+        self.time_s = time_s
+        self.pressure_pa = pressure_pa
+        self.altitude_m = altitude_m
 
     def layout(self) -> Layout:
         return _BARO_LAYOUT

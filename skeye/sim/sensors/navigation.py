@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Final
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from skeye.sim.protocol import FLOAT, INT, WORD, Layout, floats
 from skeye.sim.sensors.base import Param, Reading, Sensor, Vec3, WorldQuery, vec3
 from skeye.sim.state import BodyState
 
-_TWO_PI = 2.0 * math.pi
+_TWO_PI: Final = 2.0 * math.pi
 
 
 def _wrap_rpy_2pi(rpy: Vec3) -> Vec3:
@@ -33,7 +33,7 @@ def _wrap_rpy_2pi(rpy: Vec3) -> Vec3:
 # --- GroundTruth ---------------------------------------------------------------------------
 
 
-_GROUND_TRUTH_LAYOUT: Layout = (
+_GROUND_TRUTH_LAYOUT: Final[Layout] = (
     ("Location", floats(3)),
     ("Orientation", floats(3)),
     ("Velocity", floats(3)),
@@ -41,12 +41,26 @@ _GROUND_TRUTH_LAYOUT: Layout = (
 )
 
 
-@dataclass(frozen=True)
+@dataclass
 class GroundTruthReading(Reading):
     location_ned_m: Vec3
     orientation_rad: Vec3  # roll, pitch, yaw, each in [0, 2 pi)
     velocity_ned_m_s: Vec3
     angular_velocity_frd_rad_s: Vec3
+
+    def __init__(
+        self,
+        time_s: float,
+        location_ned_m: Vec3,
+        orientation_rad: Vec3,
+        velocity_ned_m_s: Vec3,
+        angular_velocity_frd_rad_s: Vec3,
+    ) -> None:
+        self.time_s = time_s
+        self.location_ned_m = location_ned_m
+        self.orientation_rad = orientation_rad
+        self.velocity_ned_m_s = velocity_ned_m_s
+        self.angular_velocity_frd_rad_s = angular_velocity_frd_rad_s
 
     def layout(self) -> Layout:
         return _GROUND_TRUTH_LAYOUT
@@ -82,7 +96,7 @@ class GroundTruth(Sensor[GroundTruthReading]):
 # --- INS -----------------------------------------------------------------------------------
 
 
-class InsEstimate(NamedTuple):
+class InsEstimate:
     """The vehicle's own state estimate. Roll, pitch, yaw in [-pi, pi); NED world, FRD body."""
 
     pos_ned_m: Vec3
@@ -90,15 +104,41 @@ class InsEstimate(NamedTuple):
     rpy_rad: Vec3
     omega_frd_rad_s: Vec3
 
+    def __init__(
+        self,
+        pos_ned_m: Vec3,
+        vel_ned_m_s: Vec3,
+        rpy_rad: Vec3,
+        omega_frd_rad_s: Vec3,
+    ) -> None:
+        self.pos_ned_m = pos_ned_m
+        self.vel_ned_m_s = vel_ned_m_s
+        self.rpy_rad = rpy_rad
+        self.omega_frd_rad_s = omega_frd_rad_s
 
-_INS_LAYOUT: Layout = (("Location", floats(3)), ("Orientation", floats(3)), ("Velocity", floats(3)))
+
+_INS_LAYOUT: Final[Layout] = (
+    ("Location", floats(3)), ("Orientation", floats(3)), ("Velocity", floats(3))
+)
 
 
-@dataclass(frozen=True)
+@dataclass
 class InsReading(Reading):
     location_ned_m: Vec3
     orientation_rad: Vec3  # [0, 2 pi)
     velocity_ned_m_s: Vec3
+
+    def __init__(
+        self,
+        time_s: float,
+        location_ned_m: Vec3,
+        orientation_rad: Vec3,
+        velocity_ned_m_s: Vec3,
+    ) -> None:
+        self.time_s = time_s
+        self.location_ned_m = location_ned_m
+        self.orientation_rad = orientation_rad
+        self.velocity_ned_m_s = velocity_ned_m_s
 
     def layout(self) -> Layout:
         return _INS_LAYOUT
@@ -107,7 +147,7 @@ class InsReading(Reading):
         return (*self.location_ned_m, *self.orientation_rad, *self.velocity_ned_m_s)
 
 
-_INS_BLOCK_ROWS = 512  # estimate() calls per block of pre-drawn normal deviates (18 each)
+_INS_BLOCK_ROWS: Final = 512  # estimate() calls per block of pre-drawn normal deviates (18 each)
 
 
 class INS(Sensor[InsReading]):
@@ -253,7 +293,7 @@ class INS(Sensor[InsReading]):
 # --- GPS -----------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass
 class GpsReading(Reading):
     fix: int
     satellites: int
@@ -261,6 +301,24 @@ class GpsReading(Reading):
     longitude_deg: float | None = None
     altitude_m: float | None = None
     velocity_ned_m_s: Vec3 | None = None
+
+    def __init__(
+        self,
+        time_s: float,
+        fix: int,
+        satellites: int,
+        latitude_deg: float | None = None,
+        longitude_deg: float | None = None,
+        altitude_m: float | None = None,
+        velocity_ned_m_s: Vec3 | None = None,
+    ) -> None:
+        self.time_s = time_s
+        self.fix = fix
+        self.satellites = satellites
+        self.latitude_deg = latitude_deg
+        self.longitude_deg = longitude_deg
+        self.altitude_m = altitude_m
+        self.velocity_ned_m_s = velocity_ned_m_s
 
     def _has_fix(self) -> bool:
         return not (
@@ -291,8 +349,8 @@ class GpsReading(Reading):
         )
 
 
-_GPS_NO_FIX_LAYOUT: Layout = (("Fix", INT), ("Satellites", INT))
-_GPS_FIX_LAYOUT: Layout = (
+_GPS_NO_FIX_LAYOUT: Final[Layout] = (("Fix", INT), ("Satellites", INT))
+_GPS_FIX_LAYOUT: Final[Layout] = (
     ("Latitude", WORD),
     ("Longitude", WORD),
     ("Fix", INT),
@@ -366,14 +424,20 @@ class GPS(Sensor[GpsReading]):
 # --- Battery -------------------------------------------------------------------------------
 
 
-_BATTERY_LAYOUT: Layout = (("Voltage", FLOAT), ("Current", FLOAT), ("Remaining", FLOAT))
+_BATTERY_LAYOUT: Final[Layout] = (("Voltage", FLOAT), ("Current", FLOAT), ("Remaining", FLOAT))
 
 
-@dataclass(frozen=True)
+@dataclass
 class BatteryReading(Reading):
     voltage_v: float
     current_a: float
     remaining: float  # fraction of capacity, 0..1
+
+    def __init__(self, time_s: float, voltage_v: float, current_a: float, remaining: float) -> None:
+        self.time_s = time_s
+        self.voltage_v = voltage_v
+        self.current_a = current_a
+        self.remaining = remaining
 
     def layout(self) -> Layout:
         return _BATTERY_LAYOUT

@@ -11,22 +11,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 from skeye.sim.protocol import FLOAT, INT, Layout, ints
 from skeye.sim.sensors.base import Param, Reading, Sensor, WorldQuery
 from skeye.sim.state import BodyState, Vec3, cross, mat_t_vec, mat_vec
 
-SQUAL_MAX = 169  # ADNS-3080: SQUAL register maximum
+SQUAL_MAX: Final = 169  # ADNS-3080: SQUAL register maximum
 DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
 
 
-_SONAR_LAYOUT: Layout = (("Range", FLOAT),)
+_SONAR_LAYOUT: Final[Layout] = (("Range", FLOAT),)
 
 
-@dataclass(frozen=True)
+@dataclass
 class SonarReading(Reading):
     range_m: float
     echo: bool  # False when nothing was within MaxRange (Range is then MaxRange)
+
+    def __init__(self, time_s: float, range_m: float, echo: bool) -> None:
+        self.time_s = time_s
+        self.range_m = range_m
+        self.echo = echo
 
     def layout(self) -> Layout:
         return _SONAR_LAYOUT
@@ -88,14 +94,26 @@ class Sonar(Sensor[SonarReading]):
         return SonarReading(t, min(hi, max(lo, measured)), True)
 
 
-_FLOW_LAYOUT: Layout = (("Delta", ints(2)), ("Quality", INT))
+_FLOW_LAYOUT: Final[Layout] = (("Delta", ints(2)), ("Quality", INT))
 
 
-@dataclass(frozen=True)
+@dataclass
 class FlowReading(Reading):
     delta_counts: tuple[int, int]
     quality: int
     distance_m: float | None  # the surface distance along the boresight, None if none seen
+
+    def __init__(
+        self,
+        time_s: float,
+        delta_counts: tuple[int, int],
+        quality: int,
+        distance_m: float | None,
+    ) -> None:
+        self.time_s = time_s
+        self.delta_counts = delta_counts
+        self.quality = quality
+        self.distance_m = distance_m
 
     def layout(self) -> Layout:
         return _FLOW_LAYOUT
