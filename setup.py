@@ -63,6 +63,11 @@ def _ext_modules() -> list[Any]:
     native = _native()
     if os.environ.get(native.PURE_PYTHON_ENV, "") not in ("", "0"):
         _warn(f"{native.PURE_PYTHON_ENV} is set")
+        # Extensions an earlier editable build left beside the sources would still be used.
+        for module in native.COMPILED_MODULES:
+            ext = native.extension_path(module, HERE)
+            if ext is not None:
+                ext.unlink()
         return []
     try:
         from mypyc.build import mypycify

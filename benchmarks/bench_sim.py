@@ -13,6 +13,10 @@ Each real-time factor is measured ``--repeats`` times (fresh robots each time) a
 the best and the median: on a shared machine the slowest runs measure the neighbours, and the
 best run is the one closest to what the code costs (as ``timeit`` reports its minimum).
 
+The simulator's hot path is compiled with mypyc (skeye.native); a second simulator process runs
+the same code from its Python sources (``SKEYE_PURE_PYTHON=1``), and the two are measured
+alternately, so the printed speed-up is a ratio taken within one run (``--no-pure`` skips it).
+
 Usage: python benchmarks/bench_sim.py [--sim-seconds 20] [--timestep 0.001] [--repeats 3]
 """
 
@@ -25,17 +29,18 @@ import socket
 import statistics
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 
 from skeye import native
 from skeye.processes import start_skeye, stop_process
 
 
 @contextmanager
-def sim_process(timestep: float) -> Iterator[int]:
+def sim_process(timestep: float, pure: bool = False) -> Iterator[int]:
     proc, found = start_skeye(
         ["sim", "--mode", "lockstep", "--port", "0", "--timestep", str(timestep)],
         [r"127\.0\.0\.1:(\d+)"], "skeye sim",
+        env={native.PURE_PYTHON_ENV: "1" if pure else "0"},
     )
     try:
         yield int(found[0].group(1))
@@ -150,14 +155,24 @@ def main() -> None:
     parser.add_argument("--timestep", type=float, default=0.001)
     parser.add_argument("--samples", type=int, default=2000)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-pure", action="store_true",
+                        help="skip the pure-Python simulator (no speed-up ratio)")
     args = parser.parse_args()
     print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; lockstep")
-    print(native.decide().describe())  # what the simulator process will run
+    status = native.decide(environ={})
+    print(status.describe())  # what the (compiled) simulator process will run
     print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
-    with sim_process(args.timestep) as port:
+    with ExitStack() as stack:
+        port = stack.enter_context(sim_process(args.timestep))
+        pure_port = None
+        if not args.no_pure and status.compiled:
+            pure_port = stack.enter_context(sim_process(args.timestep, pure=True))
         for n, target in ((1, 50.0), (10, 5.0)):
-            runs = [measure_rtf(port, n, args.sim_seconds, args.timestep)
-                    for _ in range(max(1, args.repeats))]
+            runs, pure_runs = [], []
+            for _ in range(max(1, args.repeats)):  # alternate, so both see the same host
+                runs.append(measure_rtf(port, n, args.sim_seconds, args.timestep))
+                if pure_port is not None:
+                    pure_runs.append(measure_rtf(pure_port, n, args.sim_seconds, args.timestep))
             rtfs = [rtf for rtf, _ in runs]
             print(
                 f"real-time factor, {n:2d} vehicle(s), all non-camera sensors streamed: "
@@ -165,6 +180,13 @@ def main() -> None:
                 f"(target >= {target:g}x; runs {', '.join(f'{r:.1f}' for r in rtfs)}; "
                 f"{runs[0][1]} lines received per run)"
             )
+            if pure_runs:
+                pure = [rtf for rtf, _ in pure_runs]
+                print(
+                    f"  same code from its Python sources: best {max(pure):6.1f}x  median "
+                    f"{statistics.median(pure):6.1f}x; compiled / pure "
+                    f"{statistics.median(rtfs) / statistics.median(pure):.2f} (medians)"
+                )
         ping, drive = measure_latency(port, args.samples)
         print(
             f"PING round trip:       p50 {pct(ping, 0.5):.3f} ms  p99 {pct(ping, 0.99):.3f} ms"

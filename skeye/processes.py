@@ -14,24 +14,30 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from skeye.errors import SkeyeError
 
 
 def start_skeye(
-    args: Sequence[str], patterns: Sequence[str], what: str, timeout_s: float = 60.0
+    args: Sequence[str],
+    patterns: Sequence[str],
+    what: str,
+    timeout_s: float = 60.0,
+    env: Mapping[str, str] | None = None,
 ) -> tuple[subprocess.Popen[str], list[re.Match[str]]]:
     """Start ``python -m skeye.cli ARGS``; wait for a stdout line matching each pattern, in order.
+    ``env`` adds to (or overrides) this process's environment.
 
     Raises:
         SkeyeError: the child exited or took longer than ``timeout_s``; the message quotes its
             last output lines.
     """
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    env.setdefault("MUJOCO_GL", "egl")
+    child_env = dict(os.environ, PYTHONUNBUFFERED="1")
+    child_env.setdefault("MUJOCO_GL", "egl")
+    child_env.update(env or {})
     proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=env)
+                            stderr=subprocess.STDOUT, text=True, env=child_env)
     assert proc.stdout is not None
     found: list[re.Match[str]] = []
     deadline = time.monotonic() + timeout_s
