@@ -2,7 +2,10 @@
 
 The same flight runs on both links: take off, move by 1 m, GPS goto, land, with the telemetry
 checked against the simulator's ground truth. The simulator runs in lockstep and the pilot
-drives its clock unpaced (``lockstep_rate=0``), so a flight takes a few seconds of wall time.
+drives its clock at 5x real time (``lockstep_rate=5``), so a flight takes a few seconds of wall
+time. Not unpaced: NAV_STATUS streams on the wall clock (the radio link's time), and an unpaced
+compiled simulator finishes a 1 m move between two 50 ms stream frames, so the FLYING state
+would never be seen.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ def flight(request) -> Iterator[tuple[Vehicle, object]]:
         sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=10.0))
         robot = sim.spawn("hummingbird", start="Pad1")
         airframe = SimAirframe(sim, robot)
-        kwargs: dict[str, Any] = {"lockstep": True, "lockstep_rate": 0.0, "tick_s": 0.05}
+        kwargs: dict[str, Any] = {"lockstep": True, "lockstep_rate": 5.0, "tick_s": 0.05}
         if request.param == "tcp":
             pilot = stack.enter_context(PilotServer(airframe, port=0, **kwargs))
             uri = pilot.address

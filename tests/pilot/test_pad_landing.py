@@ -27,8 +27,10 @@ def pad_flight() -> Iterator[tuple[Vehicle, object, object, PilotServer]]:
             connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}")
         )
         robot = sim.spawn("hummingbird", start="Pad1")
+        # Paced at 5x: NAV_STATUS streams on the wall clock, and an unpaced sim could finish
+        # the 0.3 m move between two stream frames (FLYING never seen).
         pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
+            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=5.0,
                         tick_s=0.05, vision=pad_vision_factory(sim, robot))
         )
         vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
