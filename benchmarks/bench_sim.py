@@ -17,7 +17,11 @@ The simulator's hot path is compiled with mypyc (skeye.native); a second simulat
 the same code from its Python sources (``SKEYE_PURE_PYTHON=1``), and the two are measured
 alternately, so the printed speed-up is a ratio taken within one run (``--no-pure`` skips it).
 
+The built-in robots' boards (controller, motor model) run at 250 Hz on the 1 kHz physics step;
+``--board-rate 1000`` measures a copy of the Hummingbird whose board runs at every physics step.
+
 Usage: python benchmarks/bench_sim.py [--sim-seconds 20] [--timestep 0.001] [--repeats 3]
+       [--board-rate HZ] [--no-pure]
 """
 
 from __future__ import annotations
@@ -27,18 +31,40 @@ import math
 import os
 import socket
 import statistics
+import tempfile
 import time
+import tomllib
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from importlib import resources
+from pathlib import Path
 
 from skeye import native
 from skeye.processes import start_skeye, stop_process
 
 
+def robot_dir_with_board_rate(folder: Path, board_rate_hz: float) -> str:
+    """Write a copy of the Hummingbird whose board runs at ``board_rate_hz``; return its class."""
+    text = (resources.files("skeye.sim") / "robots" / "hummingbird.toml").read_text()
+    name = f"hummingbird_board{board_rate_hz:g}"
+    lines = []
+    for line in text.splitlines():
+        if line.startswith("name ="):
+            line = f'name = "{name}"'
+        elif line.startswith("board_rate_hz"):
+            line = f"board_rate_hz = {board_rate_hz:g}"
+        lines.append(line)
+    text = "\n".join(lines) + "\n"
+    assert tomllib.loads(text)["board_rate_hz"] == board_rate_hz
+    (folder / f"{name}.toml").write_text(text)
+    return name
+
+
 @contextmanager
-def sim_process(timestep: float, pure: bool = False) -> Iterator[int]:
+def sim_process(timestep: float, pure: bool = False, robot_dir: str | None = None) -> Iterator[int]:
+    extra = ["--robot-dir", robot_dir] if robot_dir else []
     proc, found = start_skeye(
-        ["sim", "--mode", "lockstep", "--port", "0", "--timestep", str(timestep)],
+        ["sim", "--mode", "lockstep", "--port", "0", "--timestep", str(timestep), *extra],
         [r"127\.0\.0\.1:(\d+)"], "skeye sim",
         env={native.PURE_PYTHON_ENV: "1" if pure else "0"},
     )
@@ -88,10 +114,12 @@ class Conn:
             self.sock.setblocking(True)
 
 
-def measure_rtf(port: int, vehicles: int, sim_seconds: float, timestep: float) -> tuple[float, int]:
+def measure_rtf(
+    port: int, vehicles: int, sim_seconds: float, timestep: float, robot_class: str
+) -> tuple[float, int]:
     conns = [Conn(port) for _ in range(vehicles)]
     for i, c in enumerate(conns):
-        c.send(f"INIT {{ClassName hummingbird}} {{Name B{i}}} {{Location {i * 2.0},0,-1.5}}")
+        c.send(f"INIT {{ClassName {robot_class}}} {{Name B{i}}} {{Location {i * 2.0},0,-1.5}}")
         c.wait_for(b"RES {Command INIT}")
     driver = conns[0]
     steps_per_call = round(0.5 / timestep)
@@ -110,9 +138,9 @@ def measure_rtf(port: int, vehicles: int, sim_seconds: float, timestep: float) -
     return calls * steps_per_call * timestep / wall, lines
 
 
-def measure_latency(port: int, samples: int) -> tuple[list[float], list[float]]:
+def measure_latency(port: int, samples: int, robot_class: str) -> tuple[list[float], list[float]]:
     c = Conn(port)
-    c.send("INIT {ClassName hummingbird} {Name L1} {Location 0,0,-1}")
+    c.send(f"INIT {{ClassName {robot_class}}} {{Name L1}} {{Location 0,0,-1}}")
     c.wait_for(b"RES {Command INIT}")
     ping, drive = [], []
     for i in range(samples):
@@ -157,22 +185,34 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-pure", action="store_true",
                         help="skip the pure-Python simulator (no speed-up ratio)")
+    parser.add_argument("--board-rate", type=float, default=None, metavar="HZ",
+                        help="fly a Hummingbird whose board runs at HZ (default: its own 250 Hz)")
     args = parser.parse_args()
-    print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; lockstep")
+    robot_class, robot_dir = "hummingbird", None
+    if args.board_rate is not None:
+        robot_dir = tempfile.mkdtemp(prefix="skeye-bench-")
+        robot_class = robot_dir_with_board_rate(Path(robot_dir), args.board_rate)
+    board = f"{args.board_rate:g} Hz" if args.board_rate else "250 Hz (the robot's own)"
+    print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; "
+          f"board {board}; lockstep")
     status = native.decide(environ={})
     print(status.describe())  # what the (compiled) simulator process will run
     print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
     with ExitStack() as stack:
-        port = stack.enter_context(sim_process(args.timestep))
+        port = stack.enter_context(sim_process(args.timestep, robot_dir=robot_dir))
         pure_port = None
         if not args.no_pure and status.compiled:
-            pure_port = stack.enter_context(sim_process(args.timestep, pure=True))
+            pure_port = stack.enter_context(
+                sim_process(args.timestep, pure=True, robot_dir=robot_dir)
+            )
         for n, target in ((1, 50.0), (10, 5.0)):
             runs, pure_runs = [], []
             for _ in range(max(1, args.repeats)):  # alternate, so both see the same host
-                runs.append(measure_rtf(port, n, args.sim_seconds, args.timestep))
+                runs.append(measure_rtf(port, n, args.sim_seconds, args.timestep, robot_class))
                 if pure_port is not None:
-                    pure_runs.append(measure_rtf(pure_port, n, args.sim_seconds, args.timestep))
+                    pure_runs.append(
+                        measure_rtf(pure_port, n, args.sim_seconds, args.timestep, robot_class)
+                    )
             rtfs = [rtf for rtf, _ in runs]
             print(
                 f"real-time factor, {n:2d} vehicle(s), all non-camera sensors streamed: "
@@ -187,7 +227,7 @@ def main() -> None:
                     f"{statistics.median(pure):6.1f}x; compiled / pure "
                     f"{statistics.median(rtfs) / statistics.median(pure):.2f} (medians)"
                 )
-        ping, drive = measure_latency(port, args.samples)
+        ping, drive = measure_latency(port, args.samples, robot_class)
         print(
             f"PING round trip:       p50 {pct(ping, 0.5):.3f} ms  p99 {pct(ping, 0.99):.3f} ms"
             f"  (target p99 < 2 ms; {len(ping)} samples)"
