@@ -172,7 +172,9 @@ def test_simulator_dying_mid_flight_raises_quickly() -> None:
         killer.start()
         started = time.monotonic()
         with pytest.raises(SkeyeError) as info:
-            copter.fly_to(20.0, 0.0, 1.0)  # far: it is still flying when the server dies
+            # Far and slow (400 s of sim time): in lockstep the client steps the sim as fast as
+            # it can, and the compiled sim flies 20 m at full speed in under the 0.3 s.
+            copter.fly_to(20.0, 0.0, 1.0, max_speed_m_s=0.05)
         killer.join()
         assert time.monotonic() - started < 3.0
         assert isinstance(info.value, LinkClosed | CommandRejected), info.value
@@ -189,7 +191,7 @@ def test_engine_stopping_mid_flight_raises_quickly() -> None:
         killer.start()
         started = time.monotonic()
         with pytest.raises(CommandRejected, match="shutting down"):
-            copter.fly_to(20.0, 0.0, 1.0)
+            copter.fly_to(20.0, 0.0, 1.0, max_speed_m_s=0.05)  # 400 s of sim time
         killer.join()
         assert time.monotonic() - started < 3.0
 
