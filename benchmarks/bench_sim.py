@@ -100,6 +100,17 @@ class Conn:
                 raise ConnectionError("simulator closed the connection")
             self.buf += data
 
+    def spawn(self, robot_class: str, name: str, location: str) -> None:
+        """INIT a robot; a refusal (ERR) is raised with the simulator's reason, not waited out."""
+        self.send(f"INIT {{ClassName {robot_class}}} {{Name {name}}} {{Location {location}}}")
+        while True:
+            line = self.wait_for(b"")
+            if line.startswith(b"RES {Command INIT}"):
+                return
+            if line.startswith(b"ERR {Command INIT}"):
+                raise RuntimeError(f"simulator refused INIT {robot_class}: {line.decode()}")
+            self.lines += 1  # a stream line, counted as wait_for counts those it skips
+
     def drain(self) -> None:
         self.sock.setblocking(False)
         try:
@@ -119,8 +130,7 @@ def measure_rtf(
 ) -> tuple[float, int]:
     conns = [Conn(port) for _ in range(vehicles)]
     for i, c in enumerate(conns):
-        c.send(f"INIT {{ClassName {robot_class}}} {{Name B{i}}} {{Location {i * 2.0},0,-1.5}}")
-        c.wait_for(b"RES {Command INIT}")
+        c.spawn(robot_class, f"B{i}", f"{i * 2.0},0,-1.5")
     driver = conns[0]
     steps_per_call = round(0.5 / timestep)
     calls = int(sim_seconds / 0.5)
@@ -140,8 +150,7 @@ def measure_rtf(
 
 def measure_latency(port: int, samples: int, robot_class: str) -> tuple[list[float], list[float]]:
     c = Conn(port)
-    c.send(f"INIT {{ClassName {robot_class}}} {{Name L1}} {{Location 0,0,-1}}")
-    c.wait_for(b"RES {Command INIT}")
+    c.spawn(robot_class, "L1", "0,0,-1")
     ping, drive = [], []
     for i in range(samples):
         t = time.perf_counter()
@@ -188,17 +197,17 @@ def main() -> None:
     parser.add_argument("--board-rate", type=float, default=None, metavar="HZ",
                         help="fly a Hummingbird whose board runs at HZ (default: its own 250 Hz)")
     args = parser.parse_args()
-    robot_class, robot_dir = "hummingbird", None
-    if args.board_rate is not None:
-        robot_dir = tempfile.mkdtemp(prefix="skeye-bench-")
-        robot_class = robot_dir_with_board_rate(Path(robot_dir), args.board_rate)
-    board = f"{args.board_rate:g} Hz" if args.board_rate else "250 Hz (the robot's own)"
-    print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; "
-          f"board {board}; lockstep")
-    status = native.decide(environ={})
-    print(status.describe())  # what the (compiled) simulator process will run
-    print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
     with ExitStack() as stack:
+        robot_class, robot_dir, board = "hummingbird", None, "250 Hz (the robot's own)"
+        if args.board_rate is not None:
+            robot_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="skeye-bench-"))
+            robot_class = robot_dir_with_board_rate(Path(robot_dir), args.board_rate)
+            board = f"{args.board_rate:g} Hz"
+        print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; "
+              f"board {board}; lockstep")
+        status = native.decide(environ={})
+        print(status.describe())  # what the (compiled) simulator process will run
+        print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
         port = stack.enter_context(sim_process(args.timestep, robot_dir=robot_dir))
         pure_port = None
         if not args.no_pure and status.compiled:

@@ -1,0 +1,43 @@
+"""benchmarks/bench_sim.py's own pieces, against a real server on a loopback port.
+
+The benchmark's figures are not asserted (speed is the benchmark's job); what is tested is that
+its ``--board-rate`` robot copy loads and flies, and that a robot the simulator refuses stops the
+benchmark with the simulator's reason instead of waiting forever for an INIT answer.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.sim.conftest import running_sim
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+
+from bench_sim import Conn, measure_rtf, robot_dir_with_board_rate
+
+
+def test_board_rate_copy_flies_at_every_physics_step(tmp_path: Path) -> None:
+    name = robot_dir_with_board_rate(tmp_path, 1000.0)
+    assert name == "hummingbird_board1000"
+    with running_sim(robot_dirs=(tmp_path,)) as server:
+        conn = Conn(server.port)
+        conn.spawn(name, "X", "0,0,-1")
+        conn.send("GETCONF {Type Robot}")
+        conf = conn.wait_for(b"CONF")
+        assert b"{BoardRate 1000" in conf, conf
+        conn.sock.close()
+        rtf, lines = measure_rtf(server.port, 1, 0.5, 0.001, name)
+        assert rtf > 0 and lines > 0
+
+
+def test_refused_robot_raises_with_the_simulators_reason(tmp_path: Path) -> None:
+    name = robot_dir_with_board_rate(tmp_path, 300.0)  # not a whole number of 1 ms steps
+    with running_sim(robot_dirs=(tmp_path,)) as server:
+        conn = Conn(server.port)
+        with pytest.raises(RuntimeError, match="not an integer fraction of the physics rate"):
+            conn.spawn(name, "X", "0,0,-1")
+        conn.spawn("hummingbird", "Y", "0,0,-1")  # the connection stays usable
+        conn.sock.close()
