@@ -757,7 +757,8 @@ class ImageServer:
             if self._closed or len(self._handlers) >= self._max_clients:
                 reason = "too many clients"
             elif same_peer >= self.max_clients_per_peer:
-                reason = f"too many clients from {peer[0]} ({self.max_clients_per_peer} per address)"
+                reason = (f"too many clients from {peer[0]} "
+                          f"({self.max_clients_per_peer} per address)")
             refuse = bool(reason)
             if not refuse:
                 refuse = False

@@ -15,6 +15,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import pytest
 
@@ -28,7 +29,7 @@ from tests.sim.conftest import LineClient, running_sim
 ENGINE_ERR_WAIT_S = 10.0  # "at once": far below the 30 s call timeout a client used to wait
 
 
-def _is_err(command: str):  # noqa: ANN202
+def _is_err(command: str) -> Callable[[Message], bool]:
     return lambda m: m.type == "ERR" and (m.get("Command") or "").upper() == command
 
 
@@ -168,9 +169,8 @@ def test_skeye_sim_process_exits_nonzero_when_its_engine_dies() -> None:
             client = None  # it may already be gone: the exit status below still tells
         if client is not None:
             try:
-                msgs: list[Message] = []
                 try:
-                    msgs, err = client.read_until(_is_err("ENGINE"), timeout_s=120)
+                    _, err = client.read_until(_is_err("ENGINE"), timeout_s=120)
                     assert "injected engine fault" in (err.get("Reason") or "")
                 except ConnectionError:
                     pass  # connected after the failure was announced and the server closed
