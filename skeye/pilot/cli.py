@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
                 robot = sim.spawn(args.robot, location_ned_m=(north, east, down), name=args.name)
             else:
                 robot = sim.spawn(args.robot, start=args.start, name=args.name)
-            airframe = SimAirframe(sim, robot)
+            airframe = SimAirframe(sim, robot, frozen_timeout_s=args.sim_frozen_timeout)
             settings = BoardSettings(
                 link_timeout_s=settings.link_timeout_s,
                 land_timeout_s=settings.land_timeout_s,
@@ -125,4 +125,12 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--tick", type=float, default=0.01, help="loop period in realtime (s)")
     p.add_argument("--timeout", type=float, default=10.0, help="simulator answer deadline (s)")
+    p.add_argument(
+        "--sim-frozen-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="realtime: sim time standing still for S wall seconds means the simulator froze "
+        "(failsafe, as if it were gone); default 5",
+    )
     p.set_defaults(func=run)
