@@ -10,6 +10,7 @@ import os
 import signal
 import urllib.request
 from contextlib import ExitStack
+from typing import ClassVar
 
 import pytest
 
@@ -85,7 +86,7 @@ def test_frozen_detection_needs_sim_time_to_stand_still() -> None:
         closed = False
 
     class _Robot:
-        limits: dict[str, float] = {}
+        limits: ClassVar[dict[str, float]] = {}
 
     now = [100.0]
     conn = _Conn()
