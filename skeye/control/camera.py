@@ -5,7 +5,10 @@ How this works: the simulator announces every rendered frame on the control stre
 other sensor. The pixels live on the image server (IMAGE_PROTOCOL.md); :meth:`CameraSensor.image`
 asks it for the newest frame of ``<robot>/<camera>`` over one lazily opened
 :class:`~skeye.sim.image_client.ImageClient` (RAW + META, so the frame number and sim time come
-with the pixels). The image client is not thread-safe: one lock serialises its use.
+with the pixels). The image client is not thread-safe: one lock serialises its use. A request
+that fails in any way (timeout, reset, refused, a server that restarted) drops the connection,
+so the next call reconnects and a late frame can never answer a later request; socket errors
+are raised as :class:`~skeye.errors.SkeyeError`.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import LocalProtocolError
+from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.sim.image_client import ImageClient
 from skeye.sim.protocol import Message
 
@@ -76,17 +79,26 @@ class CameraSensor(Sensor[CameraReading]):
                 f"camera {self.name!r}: connect with images='host:port' to fetch pixels"
             )
         with self._client_lock:
-            if self._client is None:
-                client = self._images()
-                try:
-                    client.select_camera(f"{self._robot_name}/{self.name}")
-                    client.set_format("raw")
-                    client.set_meta(True)
-                except BaseException:
-                    client.close()
+            try:
+                if self._client is None:
+                    client = self._images()
+                    try:
+                        client.select_camera(f"{self._robot_name}/{self.name}")
+                        client.set_format("raw")
+                        client.set_meta(True)
+                    except BaseException:
+                        client.close()
+                        raise
+                    self._client = client
+                frame = self._client.get_frame()
+            except (SkeyeError, OSError) as exc:
+                # The connection's state is unknown (a frame may still be on its way): drop it.
+                if self._client is not None:
+                    self._client.close()
+                    self._client = None
+                if isinstance(exc, SkeyeError):
                     raise
-                self._client = client
-            frame = self._client.get_frame()
+                raise SkeyeError(f"camera {self.name!r}: image server: {exc}") from exc
         bgr = frame.image()
         if frame.meta is None:
             latest = self.latest
@@ -96,7 +108,11 @@ class CameraSensor(Sensor[CameraReading]):
         return CameraImage(number, time_s, bgr)
 
     def close(self) -> None:
-        """Close the image-server connection (idempotent)."""
+        """Close the image-server connection (idempotent). A request blocked on it (on another
+        thread) is woken at once: it fails, instead of holding the lock until its timeout."""
+        client = self._client
+        if client is not None:
+            client.close()
         with self._client_lock:
             if self._client is not None:
                 self._client.close()

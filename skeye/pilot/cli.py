@@ -84,9 +84,10 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down") -> Any:
 
     conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
     fov_h_rad = conf.get_float("FOV")
+    lockstep = sim.mode == "lockstep"
 
     def make(boards: Any, lock: Any) -> PadVision:
-        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad)
+        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep)
 
     return make
 
