@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import pytest
 
+from skeye.processes import die_with_parent
 from skeye.sim.image_protocol import FrameDecoder, RemoteError
 from skeye.sim.image_server import FrameBuffer, ImageServer
 from skeye.sim.protocol import Message
@@ -150,7 +151,8 @@ def test_skeye_sim_process_exits_nonzero_when_its_engine_dies() -> None:
     env = dict(os.environ, SKEYE_SIM_FAULT_AT_S="0.5", PYTHONUNBUFFERED="1")
     env.setdefault("MUJOCO_GL", "egl")
     proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", "sim", "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                            preexec_fn=die_with_parent())
     try:
         assert proc.stdout is not None
         port = None
