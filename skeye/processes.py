@@ -81,7 +81,7 @@ def start_skeye(
     args: Sequence[str],
     patterns: Sequence[str],
     what: str,
-    timeout_s: float = 60.0,
+    timeout_s: float = 180.0,
     env: Mapping[str, str] | None = None,
 ) -> tuple[subprocess.Popen[str], list[re.Match[str]]]:
     """Start ``python -m skeye.cli ARGS``; wait for a stdout line matching each pattern, in order.
