@@ -7,7 +7,9 @@ thread puts the robot's STA/SEN lines into that queue without ever blocking: whe
 not read, its queue fills and further stream lines are dropped and counted, so a slow client
 never slows the physics or other clients. Answers (RES, ERR, GEO, CONF, NFO) always go through
 the same queue, so their order relative to the stream is kept. Every bad line gets an ``ERR``
-with a reason and the connection stays usable; only an over-long line closes it.
+with a reason and the connection stays usable; only an over-long line closes it, and so does an
+HTTP request line or header (a web page's cross-protocol POST, whose body would otherwise be
+read as commands).
 
 Slots are bounded: at most ``max_clients`` connections, at most ``max_clients_per_peer`` from
 one peer address, and a connection that sends no line within ``handshake_timeout_s`` of
@@ -32,6 +34,7 @@ import itertools
 import logging
 import math
 import queue
+import re
 import selectors
 import socket
 import threading
@@ -57,6 +60,11 @@ from skeye.workers import Worker, WorkerFailed
 log = logging.getLogger(__name__)
 
 OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
+# An HTTP request line or header: a web page POSTing to this port (a cross-protocol request, whose
+# text/plain body would otherwise be read as protocol lines). The connection is closed at once.
+_HTTP_LINE = re.compile(
+    r"^(?:(?:GET|POST|PUT|DELETE|HEAD|OPTIONS|PATCH|CONNECT|TRACE) \S+ HTTP/\d|"
+    r"(?:Host|Origin|Content-Type|User-Agent|Content-Length):)", re.IGNORECASE)
 HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send its first line within this
 IDLE_TIMEOUT_S = 120.0  # a connection without a robot must send a line at least this often
 MAX_CLIENTS_PER_PEER = 64  # connections from one peer address (half the default 128 slots)
@@ -195,6 +203,13 @@ class ClientSession:
         for event in decoder.feed(data):
             if self.server.observers:
                 self.server.notify(self.conn_id, "<", _line_bytes(event))
+            if isinstance(event, LineError) and _HTTP_LINE.match(event.line):
+                log.warning("client %s sent HTTP (a web page?); closing: %r", self.peer,
+                            event.line[:80])
+                self.send(format_error(
+                    "CONNECT", "this is the simulator control port, not HTTP; a web page may "
+                    "not talk to it: closed"))
+                return False
             if isinstance(event, LineError):
                 self.send(format_error(event.command, event.reason))
                 if event.fatal:

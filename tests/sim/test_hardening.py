@@ -138,7 +138,10 @@ def test_lockstep_step_that_breaks_the_engine_is_fatal_for_everyone() -> None:
         assert other.answer("PING {Id 1}", "PING").type == "RES"
         _kill_engine(server)
         stepper.send("STEP {Count 10}")
-        stepper.read_until(_is_err("STEP"), timeout_s=ENGINE_ERR_WAIT_S)
+        # Its STEP's own ERR, or the ENGINE one that closes the session (whichever goes first).
+        err = stepper.read_until(lambda m: m.type == "ERR" and m.get("Command") in
+                                 ("STEP", "ENGINE"), timeout_s=ENGINE_ERR_WAIT_S)[1]
+        assert "OverflowError" in (err.get("Reason") or ""), err
         err = other.read_until(_is_err("ENGINE"), timeout_s=ENGINE_ERR_WAIT_S)[1]
         assert "OverflowError" in (err.get("Reason") or "")
         _closed(other)
@@ -270,3 +273,20 @@ def test_image_server_closes_idle_connections_and_limits_slots_per_peer() -> Non
         assert "idle for 2 s" in once.error_then_eof()
         for c in (silent, half, refused, once):
             c.close()
+
+
+def test_a_web_page_post_to_the_control_port_is_refused_before_its_body() -> None:
+    """A browser can POST text/plain to any port (no preflight); its body would be protocol
+    lines. The server closes the connection at the request line: the body is never run."""
+    with running_sim(mode="realtime") as server:
+        request = (b"POST / HTTP/1.1\r\nHost: 127.0.0.1:3000\r\nOrigin: http://evil.example\r\n"
+                   b"Content-Type: text/plain\r\nContent-Length: 56\r\n\r\n"
+                   b"SET {Type Wind} {Mode constant} {Params speed_m_s=30}\r\n")
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.sock.sendall(request)
+        err = c.read_until(_is_err("CONNECT"), timeout_s=30)[1]
+        assert "not HTTP" in (err.get("Reason") or "")
+        _closed(c)
+        assert server.runner.call(lambda sim: sim.wind.settings.mode) == "none"
+        c.close()
