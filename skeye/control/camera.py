@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.image_client import ImageClient
 from skeye.sim.protocol import Message
 
@@ -79,26 +79,24 @@ class CameraSensor(Sensor[CameraReading]):
                 f"camera {self.name!r}: connect with images='host:port' to fetch pixels"
             )
         with self._client_lock:
+            reused = self._client is not None
             try:
-                if self._client is None:
-                    client = self._images()
-                    try:
-                        client.select_camera(f"{self._robot_name}/{self.name}")
-                        client.set_format("raw")
-                        client.set_meta(True)
-                    except BaseException:
-                        client.close()
-                        raise
-                    self._client = client
-                frame = self._client.get_frame()
-            except (SkeyeError, OSError) as exc:
-                # The connection's state is unknown (a frame may still be on its way): drop it.
-                if self._client is not None:
-                    self._client.close()
-                    self._client = None
-                if isinstance(exc, SkeyeError):
-                    raise
-                raise SkeyeError(f"camera {self.name!r}: image server: {exc}") from exc
+                frame = self._fetch()
+            except (RemoteProtocolError, OSError) as exc:
+                self._drop()
+                closed = isinstance(exc, OSError) or "closed" in str(exc)
+                if not (reused and closed):
+                    raise _as_skeye(self.name, exc) from exc
+                # The server closed a connection that sat idle (its --idle-timeout): once more,
+                # on a fresh one.
+                try:
+                    frame = self._fetch()
+                except (SkeyeError, OSError) as exc2:
+                    self._drop()
+                    raise _as_skeye(self.name, exc2) from exc2
+            except SkeyeError:
+                self._drop()  # e.g. a timeout: a late frame must not answer the next request
+                raise
         bgr = frame.image()
         if frame.meta is None:
             latest = self.latest
@@ -106,6 +104,27 @@ class CameraSensor(Sensor[CameraReading]):
         else:
             number, time_s = frame.meta.frame_number, frame.meta.sim_time_s
         return CameraImage(number, time_s, bgr)
+
+    def _fetch(self) -> Any:
+        """The newest frame over the current connection, opening one if needed (lock held)."""
+        assert self._images is not None
+        if self._client is None:
+            client = self._images()
+            try:
+                client.select_camera(f"{self._robot_name}/{self.name}")
+                client.set_format("raw")
+                client.set_meta(True)
+            except BaseException:
+                client.close()
+                raise
+            self._client = client
+        return self._client.get_frame()
+
+    def _drop(self) -> None:
+        """Close the connection: its state is unknown (a frame may still be on its way)."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
 
     def close(self) -> None:
         """Close the image-server connection (idempotent). A request blocked on it (on another
@@ -117,3 +136,9 @@ class CameraSensor(Sensor[CameraReading]):
             if self._client is not None:
                 self._client.close()
                 self._client = None
+
+
+def _as_skeye(camera: str, exc: BaseException) -> SkeyeError:
+    if isinstance(exc, SkeyeError):
+        return exc
+    return SkeyeError(f"camera {camera!r}: image server: {exc}")

@@ -123,3 +123,20 @@ def test_a_late_frame_never_answers_the_next_request() -> None:
             assert image.frame == 6  # not the late frame 5
         finally:
             camera.close()
+
+
+def test_the_camera_reconnects_after_the_server_idled_it_out() -> None:
+    buffer = FrameBuffer()
+    rgb = np.zeros((48, 64, 3), np.uint8)
+    buffer.publish(Frame("R1/Down", 1, 1, 0.1, rgb.copy()))
+    with ImageServer(buffer, port=0, idle_timeout_s=1.0) as server:
+        camera = CameraSensor(
+            "Down", robot_name="R1",
+            images=lambda: ImageClient("127.0.0.1", server.port, timeout_s=30))
+        try:
+            assert camera.image().frame == 1
+            wait_until(lambda: server.client_count() == 0, 60, "the idle connection closed")
+            buffer.publish(Frame("R1/Down", 1, 2, 0.2, rgb.copy()))
+            assert camera.image().frame == 2  # a fresh connection, no error to the caller
+        finally:
+            camera.close()
