@@ -83,6 +83,10 @@ class Worker:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    def is_alive(self) -> bool:
+        """As :meth:`threading.Thread.is_alive`."""
+        return self._thread.is_alive()
+
     @property
     def thread(self) -> threading.Thread:
         return self._thread

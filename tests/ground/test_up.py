@@ -50,8 +50,12 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
         assert len(children) == 3
 
         def connected() -> bool:
-            with urllib.request.urlopen(f"http://127.0.0.1:{ground}/api/state", timeout=2) as r:
-                state = json.load(r)
+            try:  # a busy host may take longer than a moment to answer: ask again
+                with urllib.request.urlopen(f"http://127.0.0.1:{ground}/api/state",
+                                            timeout=30) as r:
+                    state = json.load(r)
+            except OSError:
+                return False
             return state["link"]["state"] == "connected" and state["nav"] is not None
 
         wait_until(connected, 120, "ground control connected to the pilot")
