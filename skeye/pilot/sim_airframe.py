@@ -25,6 +25,7 @@ from collections.abc import Callable
 
 from skeye.control.connection import Connection
 from skeye.control.robots import Robot
+from skeye.errors import ConfigError
 from skeye.pilot.airframe import GpsFix, Snapshot
 
 Attitude = tuple[float, float, float, float]
@@ -44,7 +45,7 @@ class SimAirframe:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not (math.isfinite(frozen_timeout_s) and frozen_timeout_s > 0):
-            raise ValueError(f"frozen_timeout_s must be > 0, got {frozen_timeout_s!r}")
+            raise ConfigError(f"--sim-frozen-timeout must be > 0 s, got {frozen_timeout_s!r}")
         self.connection = connection
         self.robot = robot
         self.lockstep = connection.mode == "lockstep"
