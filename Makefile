@@ -13,8 +13,10 @@ $(BIN)/python:
 # whenever one of those sources changes, so the compiled modules never lag behind the code.
 NATIVE_SOURCES := $(shell $(PYTHON) skeye/native.py --sources)
 
+# skeye/buildprogress.py runs `pip install -v` and shows only its progress lines (which step,
+# which file is compiling), so a slow build never looks hung.
 $(VENV)/.installed: $(BIN)/python pyproject.toml setup.py skeye/native.py $(NATIVE_SOURCES)
-	$(BIN)/pip install -q -e .
+	$(BIN)/python skeye/buildprogress.py -e .
 	touch $@
 
 # The test extras only (the package itself is already built and installed above).
