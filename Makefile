@@ -2,6 +2,7 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
+UP_ARGS ?=   # more `skeye up` options for `make run`, e.g. UP_ARGS="--ground-port 8081"
 
 .PHONY: run test lint bench clean chromium
 
@@ -26,8 +27,10 @@ $(VENV)/.test-installed: $(VENV)/.installed
 		['project']['optional-dependencies']['test']))")
 	touch $@
 
+# exec: skeye up is make's own child, so make's SIGTERM reaches it; on SIGINT make passes
+# nothing on and waits, which skeye up notices (skeye/processes.py, ParentWatch) and stops.
 run: $(VENV)/.installed
-	MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/skeye up --world pad
+	MUJOCO_GL=$${MUJOCO_GL:-egl} exec $(BIN)/skeye up --world pad $(UP_ARGS)
 
 test: $(VENV)/.test-installed chromium
 	$(BIN)/ruff check .

@@ -117,7 +117,15 @@ class OptionalBuildExt(build_ext):
             _warn(f"could not compile {ext.name} ({exc})")
 
 
+# The PEP 517 hooks run this file once per hook (requirements, metadata, then the build): only
+# the commands that build need the extensions, so only they run mypyc (it took ~10 s a time).
+_BUILD_COMMANDS = ("build", "build_ext", "bdist_wheel", "editable_wheel", "install", "develop",
+                   "bdist_egg")
+
+
 def _ext_modules() -> list[Any]:
+    if not any(arg in _BUILD_COMMANDS for arg in sys.argv[1:]):
+        return []
     native = _native()
     if os.environ.get(native.PURE_PYTHON_ENV, "") not in ("", "0"):
         _warn(f"{native.PURE_PYTHON_ENV} is set")

@@ -6,8 +6,10 @@ serves the page on http://127.0.0.1:8080/ (``--host`` to listen elsewhere); ``--
 
 ``skeye up`` starts ``skeye sim`` (with its image server), ``skeye pilot`` and ``skeye ground``
 as child processes on this machine, waits until each one listens, prints the URL, and on Ctrl-C
-or SIGTERM (or when one of them dies) stops them all: SIGTERM in reverse order, then SIGKILL
-for any that has not exited after a few seconds.
+or SIGTERM (or when one of them dies, or when the ``make`` that started it is signalled) stops
+them all: SIGTERM in reverse order, then SIGKILL for any that has not exited after a few
+seconds. Before starting anything it checks that each of its four ports is free and names the
+option that moves a taken one.
 """
 
 from __future__ import annotations
@@ -175,8 +177,17 @@ def run_up(args: argparse.Namespace) -> int:
         children.append((what, child))
         _wait_listening(port, child, what, START_DEADLINE_S)
 
+    from skeye.processes import ParentWatch, check_ports_free
+
+    parent = ParentWatch()
     status = 0
     try:
+        check_ports_free([
+            ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
+            ("the image server", "127.0.0.1", args.image_port, "--image-port"),
+            ("the pilot", "127.0.0.1", args.pilot_port, "--pilot-port"),
+            ("ground control", args.host, args.ground_port, "--ground-port"),
+        ])
         start(
             "simulator",
             _child_argv(
@@ -210,6 +221,10 @@ def run_up(args: argparse.Namespace) -> int:
             flush=True,
         )
         while not stop.wait(0.5):
+            going = parent.stopping()  # `make run` got Ctrl-C or a signal (see ParentWatch)
+            if going is not None:
+                print(f"skeye up: {going}; stopping", flush=True)
+                break
             dead = [(w, c) for w, c in children if c.poll() is not None]
             if dead:
                 what, child = dead[0]
