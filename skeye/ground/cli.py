@@ -58,6 +58,7 @@ def run_ground(args: argparse.Namespace) -> int:
     import uvicorn
 
     from skeye.ground.app import create_app
+    from skeye.ground.commands import VehicleLimits
     from skeye.ground.bridge import VehicleBridge
     from skeye.ground.video import VideoRelay
 
@@ -80,7 +81,7 @@ def run_ground(args: argparse.Namespace) -> int:
                 attitude=bridge.attitude_rad,
             ).start()
         try:
-            app = create_app(bridge, video)
+            app = create_app(bridge, video, limits=VehicleLimits.for_robot(args.robot))
             config = uvicorn.Config(app, log_level="warning", ws_ping_interval=None)
             server = uvicorn.Server(config)
             shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
@@ -118,7 +119,12 @@ def _add_ground(sub: Any) -> None:
         default=None,
         help="camera horizontal field of view (default: the --robot class's camera)",
     )
-    p.add_argument("--robot", default="hummingbird", help="robot class the camera belongs to")
+    p.add_argument(
+        "--robot",
+        default="hummingbird",
+        help="the vehicle's robot class: its camera, and the speed limits commands are checked "
+        "against",
+    )
     p.add_argument("--video-fps", type=float, default=8.0, help="camera frames per second")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")

@@ -111,7 +111,9 @@ class BoardSettings:
     land_timeout_s: float = 20.0
     launch_height_m: float = 1.0  # >*>wl climbs this high
     default_speed_m_s: float = 1.0  # a command's speed field of 0 means this
-    max_speed_m_s: float = 3.0  # full stick in GPS mode; WAYPOINT max_speed 100 %
+    # The robot file's [controller] max_speed_m_s (skeye pilot sets it): a faster MOVE_BY or
+    # GOTO_GPS is refused; full stick in GPS mode; WAYPOINT max_speed 100 %.
+    max_speed_m_s: float = 3.0
 
 
 def _sat16(v: int) -> int:
@@ -278,8 +280,16 @@ class OnboardBoards:
         self._motion_pending = True
 
     def _speed(self, speed_mm_s: int) -> float:
+        """A command's speed (0: the default); over the vehicle's limit it is refused, never
+        silently capped."""
         speed = speed_mm_s / 1000.0 if speed_mm_s > 0 else self.settings.default_speed_m_s
-        return min(speed, self.settings.max_speed_m_s)
+        limit = self.settings.max_speed_m_s
+        if speed > limit + 1e-9:
+            raise _Refused(
+                ResultCode.BAD_VALUE,
+                f"speed {speed:g} m/s is over this vehicle's limit of {limit:g} m/s",
+            )
+        return speed
 
     def _velocity(self, msg: Velocity, now_s: float) -> None:
         self.flight.check(FlightEvent.MOVE)
@@ -434,11 +444,13 @@ class OnboardBoards:
         elif state is NavState.LANDING and not self.airframe.busy and snap.landed:
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
+            self.pad.landing_finished()
         on_ground = snap.landed and not snap.armed
         if on_ground and self.state in (NavState.FLYING, NavState.HOLDING, NavState.FAILSAFE):
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
             self._end_motion()
+            self.pad.landing_finished()
 
     def _failsafe(self, now_s: float) -> None:
         state = self.state
@@ -641,13 +653,17 @@ class OnboardBoards:
         )
 
     def nav_status(self) -> Message:
-        """NAV_STATUS from the onboard estimate."""
+        """NAV_STATUS from the onboard estimate. North and east are from the world origin; down
+        is from the ground at home (where the vehicle rested before its last take-off), so
+        ``-down`` is the height above ground that TAKE_OFF and GOTO_GPS heights mean: 0 when
+        landed there, 1.5 after "take off to 1.5 m"."""
         snap = self.airframe.snapshot()
+        north, east, down = snap.pos_ned_m
         return nav_status_from_si(
             NavStatusSi(
                 state=self.state,
                 pad_mode=self.pad.mode,
-                pos_ned_m=snap.pos_ned_m,
+                pos_ned_m=(north, east, down - self.home_ned_m[2]),
                 yaw_rad=snap.rpy_rad[2],
                 vel_ned_m_s=snap.vel_ned_m_s,
                 battery_v=snap.battery_v,

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
                         "name with --name"
                     ) from None
                 raise
-            airframe = SimAirframe(sim, robot)
+            airframe = SimAirframe(sim, robot)  # flies by the robot file's speed limits
             settings = BoardSettings(
                 link_timeout_s=settings.link_timeout_s,
                 land_timeout_s=settings.land_timeout_s,

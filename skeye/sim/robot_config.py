@@ -179,3 +179,21 @@ def load_robot_config(
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from None
     return parse_robot_config(data, source)
+
+
+def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
+    """Load every ``*.toml`` in each ``--robot-dir`` folder, so a typo stops ``skeye sim`` at
+    start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
+
+    Raises:
+        ConfigError: a folder that is missing or not a folder, or a robot file that does not
+            load (the message names the file and the problem).
+    """
+    configs = []
+    for folder in search_dirs:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise ConfigError(f"--robot-dir {folder}: not a folder")
+        for path in sorted(folder.glob("*.toml")):
+            configs.append(load_robot_config(folder / path.name))
+    return configs

@@ -118,7 +118,7 @@ def _make_run(tmp_path, ports: list[int]) -> subprocess.Popen[str]:
 
     root = Path(__file__).resolve().parents[2]
     venv = tmp_path / "venv"
-    venv.mkdir()
+    venv.mkdir(parents=True)
     (venv / ".installed").touch()
     sim, img, pilot, ground = ports
     up_args = (f"--sim-port {sim} --image-port {img} --pilot-port {pilot} "
