@@ -197,3 +197,23 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
         for path in sorted(folder.glob("*.toml")):
             configs.append(load_robot_config(folder / path.name))
     return configs
+
+
+def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[float, str]:
+    """The horizontal field of view of a robot class's camera (its first, or the one named),
+    and a phrase saying where it came from, for messages.
+
+    Raises:
+        ConfigError: unknown robot class, or no such camera with ``fov_h_rad``.
+    """
+    config = load_robot_config(robot)
+    for mount in config.sensors:
+        if mount.type_name.lower() != "camera":
+            continue
+        if camera is not None and mount.name.lower() != camera.lower():
+            continue
+        fov = dict(mount.params).get("fov_h_rad")
+        if isinstance(fov, int | float) and not isinstance(fov, bool):
+            return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
+    which = f"camera named {camera!r}" if camera else "camera"
+    raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")

@@ -2,8 +2,9 @@
 
 How this works: :func:`register` adds the subcommands to the lead's argparse subparsers; each
 sets ``func(args) -> int``. ``vision detect`` runs the same :func:`detect` the pilot calls and
-prints one JSON object; it exits 0 whether or not a pad was found and 2 for bad input, with
-a message on stderr.
+prints one JSON object; without ``--fov`` it takes the field of view of the ``--robot`` file's
+camera and says so on stderr. It exits 0 whether or not a pad was found and 2 for bad
+input, with a message on stderr.
 """
 
 from __future__ import annotations
@@ -45,6 +46,15 @@ def cmd_pad(args: argparse.Namespace) -> int:
 
 def cmd_detect(args: argparse.Namespace) -> int:
     """Detect the pad in one image file and print the estimate as JSON."""
+    if args.fov is None:  # the camera the frame most likely came from: the robot file's
+        from skeye.sim.robot_config import camera_fov_h_rad
+
+        try:
+            args.fov, source = camera_fov_h_rad(args.robot, args.camera)
+        except ConfigError as exc:
+            return _fail(f"{exc}; give --fov")
+        print(f"skeye vision detect: --fov not given: using {args.fov:g} rad, the horizontal "
+              f"field of view of the {source}", file=sys.stderr)
     if not math.isfinite(args.fov) or not 0.0 < args.fov < math.pi:
         return _fail(f"--fov must be in (0, pi) radians, got {args.fov}")
     if (args.roll is None) != (args.pitch is None):
@@ -79,7 +89,15 @@ def register(subparsers: Any) -> None:
     vsub = v.add_subparsers(dest="vision_command", required=True)
     d = vsub.add_parser("detect", help="detect the landing pad in an image, print JSON")
     d.add_argument("image", help="image file (any format OpenCV reads)")
-    d.add_argument("--fov", type=float, required=True, help="horizontal field of view, rad")
+    d.add_argument(
+        "--fov",
+        type=float,
+        default=None,
+        help="horizontal field of view, rad (default: the --robot file's camera, e.g. 1.309)",
+    )
+    d.add_argument("--robot", default="hummingbird",
+                   help="robot class (or .toml) whose camera took the image, for the default FOV")
+    d.add_argument("--camera", default=None, help="that robot's camera name (default: its first)")
     d.add_argument("--roll", type=float, default=None, help="vehicle roll, rad (with --pitch)")
     d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
     d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
