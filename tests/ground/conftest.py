@@ -102,7 +102,12 @@ class Pilot:
         settings = BoardSettings(
             max_speed_m_s=mc.max_speed_m_s, default_speed_m_s=min(1.0, mc.max_speed_m_s)
         )
-        self.server = PilotServer(airframe, port=self.port, settings=settings).start()
+        from skeye.pilot.cli import pad_vision_factory
+
+        self.server = PilotServer(  # with the pad vision, as `skeye pilot --images` runs
+            airframe, port=self.port, settings=settings,
+            vision=pad_vision_factory(self.conn, self.robot),
+        ).start()
         self.port = self.server.port
         return self
 
