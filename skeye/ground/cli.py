@@ -58,8 +58,8 @@ def run_ground(args: argparse.Namespace) -> int:
     import uvicorn
 
     from skeye.ground.app import create_app
-    from skeye.ground.commands import VehicleLimits
     from skeye.ground.bridge import VehicleBridge
+    from skeye.ground.commands import VehicleLimits
     from skeye.ground.video import VideoRelay
 
     if args.camera_fov_deg is not None:

@@ -26,7 +26,6 @@ def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code."""
     from skeye.control.connection import connect
     from skeye.pilot.sim_airframe import SimAirframe
-
     from skeye.processes import check_ports_free
 
     settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)

@@ -35,12 +35,21 @@ def cmd_pad(args: argparse.Namespace) -> int:
     """Write the printable pad."""
     try:
         pad = resolve_pad(args.pad)
-        out = write_printable(pad, args.out, dpi=args.dpi)
+        out = write_printable(pad, args.out, dpi=args.dpi, paper=args.paper)
     except (ConfigError, LocalProtocolError) as exc:
         return _fail(str(exc))
     except OSError as exc:
         return _fail(f"cannot write {args.out}: {exc.strerror or exc}")
-    print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
+    if args.paper is None:
+        print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
+    else:
+        from skeye.vision.printable import page_size_m, plan_tiles
+
+        plan = plan_tiles(page_size_m(pad), args.paper)
+        print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale): {len(plan.tiles)} "
+              f"{args.paper} sheets ({plan.rows} rows x {plan.cols} columns, "
+              f"{'landscape' if plan.landscape else 'portrait'}); print at 100 %, check the "
+              "100 mm bar, overlap the sheets on their + marks")
     return 0
 
 
@@ -83,6 +92,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--out", required=True, help="output file, .pdf or .png")
     p.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
     p.add_argument("--dpi", type=int, default=DEFAULT_DPI, help="PNG resolution (dots per inch)")
+    p.add_argument(
+        "--paper",
+        choices=("a4", "letter"),
+        default=None,
+        help="tile the pad over sheets of this paper (PDF), with overlap marks and a scale bar",
+    )
     p.set_defaults(func=cmd_pad)
 
     v = subparsers.add_parser("vision", help="landing-pad vision tools")

@@ -130,3 +130,12 @@ def test_detect_takes_the_fov_from_the_robot_file_and_says_so(pad_png, capsys):
     assert "--fov not given" not in capsys.readouterr().err
     assert run(["vision", "detect", str(pad_png), "--camera", "Front"]) == 2
     assert "no camera named 'Front' with fov_h_rad; give --fov" in capsys.readouterr().err
+
+
+def test_pad_command_tiles_over_paper(tmp_path, capsys):
+    out = tmp_path / "pad.pdf"
+    assert run(["pad", "--out", str(out), "--paper", "letter"]) == 0
+    assert "12 letter sheets (3 rows x 4 columns" in capsys.readouterr().out
+    assert out.read_bytes().startswith(b"%PDF")
+    assert run(["pad", "--out", str(tmp_path / "pad.png"), "--paper", "a4"]) == 2
+    assert "--paper writes a PDF of sheets" in capsys.readouterr().err
