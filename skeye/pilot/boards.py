@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.geo import GeoOrigin
 from skeye.link.packet_defs import GPS_FIX_VALID, NavState
 from skeye.link.packets import (
     PD,
@@ -89,7 +90,7 @@ from skeye.link.scaling import (
     stick_to_yaw_rate_rad_s,
     v_to_mv,
 )
-from skeye.pilot.airframe import Airframe, Snapshot
+from skeye.pilot.airframe import Airframe, GpsFix, Snapshot
 from skeye.pilot.pad import PadController
 from skeye.pilot.states import FlightEvent, FlightStateMachine, IllegalTransition
 
@@ -114,6 +115,42 @@ class BoardSettings:
     # The robot file's [controller] max_speed_m_s (skeye pilot sets it): a faster MOVE_BY or
     # GOTO_GPS is refused; full stick in GPS mode; WAYPOINT max_speed 100 %.
     max_speed_m_s: float = 3.0
+
+
+class GeoAnchor:
+    """The vehicle's position estimate in latitude/longitude: its INS position (NED, smooth,
+    drifting millimetres a minute) anchored to the GPS by the mean offset between every fix and
+    the INS position at that time. A single fix wanders metres (multipath, 30 s correlation);
+    the mean of many is steadier, and the estimate moves only as the INS says the vehicle moved.
+    This is what GPS_DATA_ADVANCED reports as its "best estimate"."""
+
+    def __init__(self) -> None:
+        self.origin: GeoOrigin | None = None  # the first fix: where offsets are measured from
+        self.fixes = 0
+        self._sum_n = 0.0
+        self._sum_e = 0.0
+        self._last: tuple[float, float] | None = None
+
+    def add(self, fix: GpsFix | None, pos_ned_m: tuple[float, float, float]) -> None:
+        """Take the snapshot's fix if it is a new one."""
+        if fix is None or not fix.fix or (fix.latitude_deg, fix.longitude_deg) == self._last:
+            return
+        self._last = (fix.latitude_deg, fix.longitude_deg)
+        if self.origin is None:
+            self.origin = GeoOrigin(fix.latitude_deg, fix.longitude_deg, 0.0)
+        n, e, _ = self.origin.to_ned(fix.latitude_deg, fix.longitude_deg, 0.0)
+        self._sum_n += n - pos_ned_m[0]
+        self._sum_e += e - pos_ned_m[1]
+        self.fixes += 1
+
+    def estimate(self, pos_ned_m: tuple[float, float, float]) -> tuple[float, float] | None:
+        """(latitude, longitude) of the INS position, or None before the first fix."""
+        if self.origin is None or self.fixes == 0:
+            return None
+        n = pos_ned_m[0] + self._sum_n / self.fixes
+        e = pos_ned_m[1] + self._sum_e / self.fixes
+        lat, lon, _ = self.origin.to_geodetic(n, e, 0.0)
+        return lat, lon
 
 
 def _sat16(v: int) -> int:
@@ -158,6 +195,8 @@ class OnboardBoards:
         self._waypoint_status = 0
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
+        self.geo = GeoAnchor()
+        self.geo.add(snap.gps, snap.pos_ned_m)
 
     # -- state ---------------------------------------------------------------------------
     @property
@@ -430,6 +469,7 @@ class OnboardBoards:
     def _progress(self, now_s: float) -> None:
         state = self.state
         snap = self.airframe.snapshot()
+        self.geo.add(snap.gps, snap.pos_ned_m)
         if state is NavState.TAKING_OFF and not self.airframe.busy:
             self._fire(FlightEvent.CLIMBED)
         elif state is NavState.FLYING:
@@ -627,7 +667,11 @@ class OnboardBoards:
 
     def _gps_advanced(self, snap: Snapshot) -> Message:
         gps = self._gps_si(snap)
-        best = GpsBestSi(gps.latitude_deg, gps.longitude_deg, gps.vel_east_m_s, gps.vel_north_m_s)
+        self.geo.add(snap.gps, snap.pos_ned_m)
+        here = self.geo.estimate(snap.pos_ned_m)
+        lat, lon = here if here is not None else (gps.latitude_deg, gps.longitude_deg)
+        vn, ve, _ = snap.vel_ned_m_s  # the INS velocity, as the position
+        best = GpsBestSi(lat, lon, ve, vn)
         return gps_data_advanced_from_si(gps, best)
 
     def _current_way(self, snap: Snapshot) -> CurrentWay:

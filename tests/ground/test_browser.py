@@ -147,6 +147,26 @@ def test_velocity_command_moves_the_vehicle(page: Any, stack: Stack) -> None:
     assert math.hypot(shown[0] - truth[0], shown[1] - truth[1]) < 0.5  # INS vs truth
 
 
+def test_here_fills_the_position_estimate_and_says_so(page: Any, stack: Stack) -> None:
+    # Item 9: "here" fills the vehicle's position estimate (GPS_DATA_ADVANCED), not the fix.
+    from skeye.geo import GeoOrigin
+    from skeye.sim.world import load_world
+
+    wait_js(page, "S.telemetry.gps && S.telemetry.gps.estimate_latitude_deg !== null", 10,
+            "the vehicle's position estimate")
+    page.click("#g-here")
+    assert page.get_attribute("#g-source", "data-source") == "estimate"
+    assert "position estimate" in page.text_content("#g-source")
+    lat, lon = float(page.input_value("#g-lat")), float(page.input_value("#g-lon"))
+    geo = load_world("pad").geo_origin
+    assert geo is not None
+    origin = GeoOrigin(geo.latitude_deg, geo.longitude_deg, 0.0)
+    n, e, _ = origin.to_ned(lat, lon, 0.0)
+    truth = stack.pilot.ground_truth()
+    # the estimate is the INS position plus the mean GPS offset: within the fixes' spread
+    assert math.hypot(n - truth[0], e - truth[1]) < 6.0, (n, e, truth)
+
+
 def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
     # Item 4: 2.5 m/s is under the robot file's 3 m/s and is flown, not capped at 1 m/s.
     page.fill("#m-fwd", "5")
@@ -157,6 +177,7 @@ def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'move_by' && "
                   "document.querySelector('#last-result').dataset.ok === 'true'", 5,
             "the 2.5 m/s move to be accepted")
+    wait_js(page, "S.telemetry.nav.state === 'flying'", 10, "the move to start")
     fastest = [0.0]
 
     def arrived() -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -342,3 +344,27 @@ def test_nav_status_height_is_above_the_ground_at_home():
     air.finish(landed=False, armed=True, pos_ned_m=(2.0, 3.0, -1.59))
     nav = next(m for m in boards.tick(1.0) if isinstance(m, NavStatus))
     assert nav.z == -1500  # "take off to 1.5 m" shows 1.5 m
+
+
+def test_gps_best_estimate_is_the_ins_position_anchored_to_the_mean_fix():
+    from skeye.geo import GeoOrigin
+    from skeye.link.packets import GpsDataAdvanced, PollMask
+    from skeye.link.scaling import gps_data_advanced_to_si
+    from skeye.pilot.airframe import GpsFix
+
+    air, boards = make()
+    origin = GeoOrigin(49.0, 8.0, 0.0)
+    truth = (10.0, -4.0, -1.0)  # where the INS (and the vehicle) is
+    errors = [(2.0, -1.5), (-1.0, 2.5), (0.5, -0.5), (-1.5, -0.5)]  # fix errors, mean 0
+    for i, (dn, de) in enumerate(errors):
+        lat, lon, _ = origin.to_geodetic(truth[0] + dn, truth[1] + de, 0.0)
+        air.finish(pos_ned_m=truth, gps=GpsFix(True, 9, lat, lon, 100.0, (0.0, 0.0, 0.0)))
+        boards.tick(0.01 * i)
+    assert boards.geo.fixes == 5  # and the fake's first, exact fix at the origin
+    msg = boards.poll(int(PollMask.GPS_DATA_ADVANCED))[0]
+    assert isinstance(msg, GpsDataAdvanced)
+    raw, best = gps_data_advanced_to_si(msg)
+    n, e, _ = origin.to_ned(best.latitude_deg, best.longitude_deg, 0.0)
+    assert math.hypot(n - truth[0], e - truth[1]) < 0.05  # the mean fix: errors cancel
+    n, e, _ = origin.to_ned(raw.latitude_deg, raw.longitude_deg, 0.0)
+    assert math.hypot(n - truth[0], e - truth[1]) > 1.0  # the last raw fix is 1.6 m off

@@ -298,9 +298,17 @@ function wireControls() {
     forward_m: num("m-fwd"), right_m: num("m-right"), up_m: num("m-up"),
     yaw_rad: rad(num("m-yaw")), frame: $("m-frame").value, speed_m_s: num("m-speed"),
   }));
+  // "here": the vehicle's position estimate (INS anchored to its GPS fixes, GPS_DATA_ADVANCED),
+  // not the raw fix, which wanders metres; the note beside the button says which was used.
   $("g-here").onclick = () => {
     const g = S.telemetry && S.telemetry.gps;
-    if (g) { $("g-lat").value = g.latitude_deg.toFixed(7); $("g-lon").value = g.longitude_deg.toFixed(7); }
+    if (!g || !g.fix) { $("g-source").textContent = "no GPS fix: nothing to fill in"; return; }
+    const est = g.estimate_latitude_deg !== null && g.estimate_latitude_deg !== undefined;
+    $("g-lat").value = (est ? g.estimate_latitude_deg : g.latitude_deg).toFixed(7);
+    $("g-lon").value = (est ? g.estimate_longitude_deg : g.longitude_deg).toFixed(7);
+    $("g-source").textContent = est ? "filled: the vehicle's position estimate"
+      : `filled: the raw GPS fix (±${g.horizontal_accuracy_m} m; no estimate from this vehicle)`;
+    $("g-source").dataset.source = est ? "estimate" : "fix";
   };
   $("btn-goto").onclick = guarded("goto_gps", () => send("goto_gps", {
     latitude_deg: num("g-lat"), longitude_deg: num("g-lon"), height_m: num("g-height"),
