@@ -141,7 +141,7 @@ def _ext_modules() -> list[Any]:
         paths = [str(native.source_path(m).relative_to(HERE)) for m in native.COMPILED_MODULES]
         started = time.monotonic()
         _say(f"[step 1/2] mypyc: type-checking {len(paths)} simulator modules and translating "
-             "them to C (one step, no per-module output; about a minute on a quiet 2-core "
+             "them to C (one step with no per-module output: 10-30 s on a busy 2-core "
              "machine)")
         ext = list(mypycify(paths, opt_level="3", group_name="skeye_native", multi_file=True))
         _say(f"[step 1/2] mypyc done in {time.monotonic() - started:.0f} s")
