@@ -7,7 +7,9 @@ line on the connection; the robot's own motion control must be idle first, or it
 would overwrite the sticks with a velocity ``DRIVE``. So the first stick command while a motion
 runs replaces it with a one-shot zero velocity (which ends after one tick) and is deferred;
 ``advance`` (called every pilot tick) and later stick commands send the newest sticks once the
-robot is idle. Altitudes: the control interface's ``take_off`` is relative to the spawn point;
+robot is idle. The robot's motion limits are raised to its robot file's (``MaxSpeed`` ...), the
+limits the boards and ground control check commands against. Altitudes: the control
+interface's ``take_off`` is relative to the spawn point;
 everything here is above the world origin (``-down``).
 
 A frozen simulator is as lost as a dead one (:attr:`SimAirframe.lost`): in realtime, sim time
@@ -22,6 +24,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 from skeye.control.connection import Connection
 from skeye.control.robots import Robot
@@ -48,6 +51,16 @@ class SimAirframe:
             raise ConfigError(f"--sim-frozen-timeout must be > 0 s, got {frozen_timeout_s!r}")
         self.connection = connection
         self.robot = robot
+        # One set of speed limits: the robot file's [controller] table as the simulator reports
+        # it (MaxSpeed, MaxClimb, MaxYawRate), not the control interface's gentler defaults;
+        # the boards refuse faster commands and ground control checks against the same file.
+        cfg = robot.motion_config
+        robot.motion_config = replace(
+            cfg,
+            max_speed_m_s=robot.limits.get("MaxSpeed", cfg.max_speed_m_s),
+            max_climb_m_s=robot.limits.get("MaxClimb", cfg.max_climb_m_s),
+            max_yaw_rate_rad_s=robot.limits.get("MaxYawRate", cfg.max_yaw_rate_rad_s),
+        )
         self.lockstep = connection.mode == "lockstep"
         self.frozen_timeout_s = frozen_timeout_s
         self._clock = clock

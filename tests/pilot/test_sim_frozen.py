@@ -15,6 +15,7 @@ from typing import ClassVar
 import pytest
 
 from skeye.control.connection import connect
+from skeye.control.motion import MotionConfig
 from skeye.errors import CommandRejected
 from skeye.link.packets import NavState, SkeyeMask
 from skeye.link.vehicle import Vehicle
@@ -87,6 +88,7 @@ def test_frozen_detection_needs_sim_time_to_stand_still() -> None:
 
     class _Robot:
         limits: ClassVar[dict[str, float]] = {}
+        motion_config = MotionConfig()
 
     now = [100.0]
     conn = _Conn()
