@@ -530,13 +530,10 @@ class OnboardBoards:
             self._end_motion()
             self._failsafe_since_s = now_s
 
-    def link_changed(self, now_s: float) -> None:
-        """A client connected: the link-loss timer counts from now."""
-        self._last_packet_s = now_s
-
     def client_gone(self, now_s: float) -> None:
-        """The client went away: stop its stream. The link-loss timer keeps counting from its
-        last packet (a vanished client is a lost link)."""
+        """The client went away (or a new one arrives): stop the stream. The link-loss timer
+        keeps counting from the last packet: a vanished client is a lost link, and a connection
+        alone is not a packet."""
         self._stream = None
 
     # -- telemetry -----------------------------------------------------------------------

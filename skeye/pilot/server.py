@@ -18,6 +18,9 @@ How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with thread
   than the link timeout is replaced by the next one that connects. Accepted sockets use TCP
   keepalive, so a peer that vanished without a FIN is noticed. The link-loss failsafe counts
   from the last packet: a connection alone (without packets) does not reset it.
+- a TCP connection whose first bytes are an HTTP request line (``POST /...``) is closed before
+  anything it sends is parsed: a web page cannot make the browser send packets in a request
+  body (a cross-protocol request) to fly the vehicle.
 - the loop thread calls ``boards.tick`` every ``tick_s`` (stream, flight-state progress,
   failsafe) and, when the simulator is in lockstep, drives sim time: it advances the sim by
   ``tick_s`` per iteration, paced to ``lockstep_rate`` sim seconds per wall second (0 = as
@@ -65,6 +68,8 @@ SEND_TIMEOUT_S = 5.0
 SEND_BUFFER_BYTES = 64 * 1024
 """Kernel send buffer of a ground client's socket: telemetry a client has not read waits in the
 pilot's outbox (where it can be dropped), not in megabytes of kernel buffer going stale."""
+HTTP_METHODS = (b"GET ", b"POST ", b"PUT ", b"HEAD ", b"OPTIONS ", b"DELETE ", b"PATCH ",
+                b"CONNECT ", b"TRACE ")
 KEEPALIVE_IDLE_S = 10
 KEEPALIVE_INTERVAL_S = 5
 KEEPALIVE_COUNT = 3
@@ -146,6 +151,7 @@ class PilotServer:
         self._session: ClientSession | None = None
         self.closed_idle = 0  # TCP clients closed for sending nothing after connecting
         self.replaced_silent = 0  # silent clients replaced by a new one
+        self.refused_http = 0  # connections closed for sending an HTTP request
         self._client_lock = threading.Lock()
         self._client_changed = threading.Condition(self._client_lock)
         self._stop = threading.Event()
@@ -295,6 +301,7 @@ class PilotServer:
         link = session.link
         parser = CommandStreamParser()
         timeout_s = self.boards.settings.link_timeout_s
+        head: bytes | None = b""  # first bytes, until they cannot start an HTTP request
         try:
             while not self._stop.is_set():
                 if session.tcp and session.packets == 0:
@@ -309,6 +316,17 @@ class PilotServer:
                 data = link.recv(0.1)
                 if not data:
                     continue
+                if session.tcp and head is not None:
+                    head += data
+                    if any(head.startswith(m) for m in HTTP_METHODS):
+                        log.warning("%s sent an HTTP request, not packets: closed", link.name)
+                        self.refused_http += 1
+                        break
+                    if len(head) < max(map(len, HTTP_METHODS)) and any(
+                        m.startswith(head) for m in HTTP_METHODS
+                    ):
+                        continue  # too short to tell yet: wait for more
+                    data, head = head, None
                 for event in parser.feed(data):
                     now = self.clock()
                     if not isinstance(event, FrameError):

@@ -9,7 +9,7 @@ from contextlib import ExitStack
 
 from skeye.control.connection import connect
 from skeye.errors import CommandRejected
-from skeye.link.packets import PD, NavState, PollMask, SkeyeMask, Stream, encode
+from skeye.link.packets import PD, NavState, PollMask, SkeyeMask, Stream, TakeOff, encode
 from skeye.link.transport import LinkClosed, TcpLink
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
@@ -103,6 +103,27 @@ def test_a_connection_that_sends_nothing_is_freed_and_the_failsafe_applies() -> 
             station.hold()
             wait_until(lambda: pilot.boards.state is NavState.HOLDING, 30, "holding again")
         assert pilot.turned_away == 0
+
+
+def test_an_http_request_from_a_web_page_is_closed_unread() -> None:
+    """A web page can make the browser POST any bytes to port 7000 (text/plain, no preflight):
+    valid packets in the body must not fly the vehicle."""
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot:
+        assert pilot.port is not None
+        body = encode(TakeOff(height=2000)) + encode(Stream(poll_mask=1, skeye_mask=0, period=50))
+        request = (
+            b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nOrigin: http://evil.example\r\n"
+            b"Content-Type: text/plain\r\nContent-Length: " + str(len(body)).encode()
+            + b"\r\n\r\n" + body
+        )
+        with _raw_client(pilot.port) as page:
+            for i in range(0, len(request), 3):  # however the bytes arrive
+                page.sendall(request[i : i + 3])
+            assert page.recv(4096) == b""  # closed, nothing answered
+        assert pilot.refused_http == 1 and air.calls == []
+        with Vehicle.open(pilot.address) as station:  # a real station is served
+            assert PD.LL_STATUS in station.poll(int(PollMask.LL_STATUS))
 
 
 def test_a_silent_station_is_replaced_by_the_next_one() -> None:
