@@ -44,7 +44,7 @@ from fastapi.staticfiles import StaticFiles
 
 from skeye.errors import LocalProtocolError
 from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
-from skeye.ground.commands import COMMANDS, describe_commands, parse_command
+from skeye.ground.commands import COMMANDS, VehicleLimits, describe_commands, parse_command
 from skeye.ground.guard import (
     MAX_JSON_DEPTH,
     MAX_WS_MESSAGE_BYTES,
@@ -75,14 +75,16 @@ class CommandError(Exception):
         self.message = message
 
 
-async def perform(bridge: VehicleBridge, name: str, body: Any) -> tuple[int, dict[str, Any]]:
+async def perform(
+    bridge: VehicleBridge, name: str, body: Any, limits: VehicleLimits | None = None
+) -> tuple[int, dict[str, Any]]:
     """Validate and execute one command; returns (HTTP status, JSON answer)."""
     if name not in COMMANDS:
         raise CommandError(
             404, f"unknown command {name!r}; known commands: {', '.join(COMMANDS)}"
         )
     try:
-        command = parse_command(name, body)
+        command = parse_command(name, body, limits)
     except LocalProtocolError as exc:
         raise CommandError(422, str(exc)) from None
     try:
@@ -117,12 +119,16 @@ def create_app(
     *,
     telemetry_hz: float = 10.0,
     security: GroundSecurity | None = None,
+    limits: VehicleLimits | None = None,
 ) -> FastAPI:
     """The ground-control app; the caller owns (starts and closes) ``bridge`` and ``video``.
 
     ``security`` holds the token and the extra host names (a fresh random token when None:
-    then nobody can use the API, which only suits tests of the refusals).
+    then nobody can use the API, which only suits tests of the refusals). ``limits``: the
+    vehicle's speed limits (default: the hummingbird robot file's).
     """
+    if limits is None:
+        limits = VehicleLimits.for_robot("hummingbird")
     app = FastAPI(
         title="skeye ground control", docs_url=None, redoc_url=None, openapi_url=None
     )
@@ -147,7 +153,7 @@ def create_app(
 
     @app.get("/api/commands")
     async def commands() -> dict[str, Any]:
-        return {"commands": describe_commands()}
+        return {"commands": describe_commands(limits)}
 
     @app.post("/api/command/{name}")
     async def command(name: str, request: Request) -> Response:
@@ -159,7 +165,7 @@ def create_app(
             except ValueError as exc:
                 return _error(400, f"request body {exc}")
         try:
-            status, answer = await perform(bridge, name, body)
+            status, answer = await perform(bridge, name, body, limits)
         except CommandError as exc:
             return _error(exc.status, exc.message)
         return JSONResponse(answer, status_code=status)
@@ -204,7 +210,9 @@ def create_app(
         async def run_command(msg: dict[str, Any]) -> None:
             ident = msg.get("id")
             try:
-                status, answer = await perform(bridge, str(msg.get("name")), msg.get("args"))
+                status, answer = await perform(
+                    bridge, str(msg.get("name")), msg.get("args"), limits
+                )
             except CommandError as exc:
                 status, answer = exc.status, {"error": exc.message}
             await send({"type": "result", "id": ident, "status": status, **answer})
@@ -212,7 +220,7 @@ def create_app(
         await send(
             {
                 "type": "hello",
-                "commands": describe_commands(),
+                "commands": describe_commands(limits),
                 "history": bridge.history(),
                 "video": video_status(),
             }
