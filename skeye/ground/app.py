@@ -19,13 +19,20 @@ and hand validated commands to ``bridge.execute`` in a worker thread.
 - ``WS /ws/video``: for every new frame, a JSON ``frame`` message (size, detection: ring
   ellipses and centre in pixels) and then the JPEG as a binary message.
 
-Every browser tab gets its own WebSocket tasks; a slow tab only slows itself.
+Every browser tab gets its own WebSocket tasks; a slow tab only slows itself. A tab's commands
+are limited (``MAX_IN_FLIGHT`` waiting for the vehicle, ``COMMAND_RATE_HZ`` on average): the
+excess is answered at once with status 429, so one tab cannot queue work in front of another's.
+A binary frame closes ``/ws`` with code 1003, a message over ``MAX_WS_MESSAGE_BYTES`` with 1009,
+JSON nested deeper than ``MAX_JSON_DEPTH`` with 1008, each with a reason.
+
+Access (Host, Origin, token, content type, body size) is checked before any of this by
+``skeye.ground.guard.Guard``; nothing here is reachable without the server's token. There is no
+``/api/docs`` page (it would load a script from a CDN): the API is described in docs/ground.md.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 from importlib import resources
 from pathlib import Path
@@ -38,11 +45,25 @@ from fastapi.staticfiles import StaticFiles
 from skeye.errors import LocalProtocolError
 from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
 from skeye.ground.commands import COMMANDS, VehicleLimits, describe_commands, parse_command
+from skeye.ground.guard import (
+    MAX_JSON_DEPTH,
+    MAX_WS_MESSAGE_BYTES,
+    CommandRate,
+    GroundSecurity,
+    Guard,
+    parse_json_limited,
+)
 from skeye.ground.video import VideoRelay
 
 log = logging.getLogger(__name__)
 
 STATIC_DIR = Path(str(resources.files("skeye.ground").joinpath("static")))
+MAX_IN_FLIGHT = 2  # commands of one WebSocket waiting for the vehicle at once
+COMMAND_RATE_HZ = 10.0  # average commands per second per WebSocket (the page sends ~3)
+COMMAND_BURST = 20
+WS_UNSUPPORTED_DATA = 1003
+WS_POLICY_VIOLATION = 1008
+WS_MESSAGE_TOO_BIG = 1009
 
 
 class CommandError(Exception):
@@ -73,6 +94,21 @@ async def perform(
     return (200 if outcome.ok else 409), outcome.to_json()
 
 
+def uvicorn_config(app: Any, log_level: str = "warning") -> Any:
+    """The uvicorn settings every ground server runs with: WebSocket messages at most
+    ``MAX_WS_MESSAGE_BYTES`` (larger: closed with 1009), a short receive queue per socket (a
+    flooding client is held back by TCP, not buffered), no pings (the page reconnects)."""
+    import uvicorn
+
+    return uvicorn.Config(
+        app,
+        log_level=log_level,
+        ws_ping_interval=None,
+        ws_max_size=MAX_WS_MESSAGE_BYTES,
+        ws_max_queue=4,
+    )
+
+
 def _error(status: int, message: str) -> JSONResponse:
     return JSONResponse({"error": message, "status": status}, status_code=status)
 
@@ -82,13 +118,21 @@ def create_app(
     video: VideoRelay | None = None,
     *,
     telemetry_hz: float = 10.0,
+    security: GroundSecurity | None = None,
     limits: VehicleLimits | None = None,
 ) -> FastAPI:
     """The ground-control app; the caller owns (starts and closes) ``bridge`` and ``video``.
-    ``limits``: the vehicle's speed limits (default: the hummingbird robot file's)."""
+
+    ``security`` holds the token and the extra host names (a fresh random token when None:
+    then nobody can use the API, which only suits tests of the refusals). ``limits``: the
+    vehicle's speed limits (default: the hummingbird robot file's).
+    """
     if limits is None:
         limits = VehicleLimits.for_robot("hummingbird")
-    app = FastAPI(title="skeye ground control", docs_url="/api/docs", redoc_url=None)
+    app = FastAPI(
+        title="skeye ground control", docs_url=None, redoc_url=None, openapi_url=None
+    )
+    app.add_middleware(Guard, security=security or GroundSecurity())
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     period_s = 1.0 / telemetry_hz
 
@@ -113,13 +157,13 @@ def create_app(
 
     @app.post("/api/command/{name}")
     async def command(name: str, request: Request) -> Response:
-        raw = await request.body()
+        raw = await request.body()  # the Guard has bounded it
         body: Any = None
         if raw.strip():
             try:
-                body = json.loads(raw)
-            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-                return _error(400, f"request body is not valid JSON: {exc}")
+                body = parse_json_limited(raw)
+            except ValueError as exc:
+                return _error(400, f"request body {exc}")
         try:
             status, answer = await perform(bridge, name, body, limits)
         except CommandError as exc:
@@ -183,15 +227,44 @@ def create_app(
         )
         push = asyncio.create_task(pusher())
         tasks: set[asyncio.Task[None]] = set()
+        loop = asyncio.get_running_loop()
+        rate = CommandRate(COMMAND_RATE_HZ, COMMAND_BURST, loop.time())
         try:
             while True:
-                text = await ws.receive_text()
+                message = await ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                text = message.get("text")
+                if text is None:
+                    await ws.close(WS_UNSUPPORTED_DATA, "binary frames are not accepted on /ws")
+                    break
+                if len(text) > MAX_WS_MESSAGE_BYTES:
+                    reason = f"message over {MAX_WS_MESSAGE_BYTES} bytes"
+                    await ws.close(WS_MESSAGE_TOO_BIG, reason)
+                    break
                 try:
-                    msg = json.loads(text)
-                    if not isinstance(msg, dict) or msg.get("type") != "command":
-                        raise ValueError('expected {"type": "command", "name": ..., "args": {}}')
+                    msg = parse_json_limited(text)
                 except ValueError as exc:
-                    await send({"type": "result", "id": None, "status": 400, "error": str(exc)})
+                    if "nested" in str(exc):
+                        reason = f"JSON nested deeper than {MAX_JSON_DEPTH} levels"
+                        await ws.close(WS_POLICY_VIOLATION, reason)
+                        break
+                    await send({"type": "result", "id": None, "status": 400,
+                                "error": f"message {exc}"})
+                    continue
+                if not isinstance(msg, dict) or msg.get("type") != "command":
+                    await send({"type": "result", "id": None, "status": 400,
+                                "error": 'expected {"type": "command", "name": ..., "args": {}}'})
+                    continue
+                ident = msg.get("id")
+                if len(tasks) >= MAX_IN_FLIGHT or not rate.allow(loop.time()):
+                    why = (
+                        f"{MAX_IN_FLIGHT} commands of this page are still waiting for the vehicle"
+                        if len(tasks) >= MAX_IN_FLIGHT
+                        else f"more than {COMMAND_RATE_HZ:g} commands/s from this page"
+                    )
+                    await send({"type": "result", "id": ident, "status": 429,
+                                "error": f"too many commands: {why}"})
                     continue
                 task = asyncio.create_task(run_command(msg))
                 tasks.add(task)

@@ -59,10 +59,19 @@ def run_ground(args: argparse.Namespace) -> int:
     """Serve the ground-control page until SIGINT/SIGTERM."""
     import uvicorn
 
-    from skeye.ground.app import create_app
+    from skeye.ground.app import create_app, uvicorn_config
     from skeye.ground.bridge import VehicleBridge
     from skeye.ground.commands import VehicleLimits
+    from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
     from skeye.ground.video import VideoRelay
+
+    try:
+        security = GroundSecurity(
+            token=os.environ.get(TOKEN_ENV) or new_token(),
+            allowed_hosts=tuple(args.allow_host or ()),
+        )
+    except ValueError as exc:
+        raise ConfigError(f"{exc} (from ${TOKEN_ENV} or --allow-host)") from None
 
     if args.camera_fov_deg is not None:
         fov_rad = math.radians(args.camera_fov_deg)
@@ -83,13 +92,15 @@ def run_ground(args: argparse.Namespace) -> int:
                 attitude=bridge.attitude_rad,
             ).start()
         try:
-            app = create_app(bridge, video, limits=VehicleLimits.for_robot(args.robot))
-            config = uvicorn.Config(app, log_level="warning", ws_ping_interval=None)
-            server = uvicorn.Server(config)
+            app = create_app(
+                bridge, video, security=security, limits=VehicleLimits.for_robot(args.robot)
+            )
+            server = uvicorn.Server(uvicorn_config(app))
             shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+            shown = f"[{shown}]" if ":" in shown else shown
             print(
-                f"skeye ground: http://{shown}:{port}/ (vehicle {args.vehicle}"
-                f"{', video ' + args.video if args.video else ''})",
+                f"skeye ground: http://{shown}:{port}/?token={security.token} (vehicle "
+                f"{args.vehicle}{', video ' + args.video if args.video else ''})",
                 flush=True,
             )
             server.run(sockets=[sock])  # returns on SIGINT / SIGTERM
@@ -130,7 +141,18 @@ def _add_ground(sub: Any) -> None:
     p.add_argument("--video-fps", type=float, default=8.0, help="camera frames per second")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    _add_allow_host(p)
     p.set_defaults(func=run_ground)
+
+
+def _add_allow_host(p: Any) -> None:
+    p.add_argument(
+        "--allow-host",
+        action="append",
+        metavar="NAME",
+        help="also answer to this host name in the Host header (IP addresses and localhost "
+        "always are); repeat for several, e.g. for remote use under a DNS name",
+    )
 
 
 # --- skeye up --------------------------------------------------------------------------------
@@ -182,8 +204,12 @@ def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> boo
 
 def run_up(args: argparse.Namespace) -> int:
     """Start simulator, pilot and ground control; stop them all on a signal."""
+    from skeye.ground.guard import TOKEN_ENV, new_token
+
     env = dict(os.environ)
     env.setdefault("MUJOCO_GL", "egl")
+    token = env.get(TOKEN_ENV) or new_token()
+    env[TOKEN_ENV] = token  # to the ground child by environment: argv is visible to all users
     stop = threading.Event()
 
     def handler(signum: int, frame: Any) -> None:
@@ -238,11 +264,13 @@ def run_up(args: argparse.Namespace) -> int:
                 "ground", "--vehicle", f"tcp://127.0.0.1:{args.pilot_port}",
                 "--video", f"tcp://127.0.0.1:{args.image_port}", "--port", str(args.ground_port),
                 "--host", args.host, "--robot", args.robot,
+                *[f"--allow-host={h}" for h in args.allow_host or ()],
             ),
             args.ground_port,
         )
         print(
-            f"skeye up: open http://127.0.0.1:{args.ground_port}/  (simulator {args.sim_port}, "
+            f"skeye up: open http://127.0.0.1:{args.ground_port}/?token={token}  "
+            f"(simulator {args.sim_port}, "
             f"images {args.image_port}, pilot {args.pilot_port}); Ctrl-C stops everything",
             flush=True,
         )
@@ -284,6 +312,7 @@ def _add_up(sub: Any) -> None:
     p.add_argument("--pilot-port", type=int, default=7000)
     p.add_argument("--ground-port", type=int, default=8080)
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
+    _add_allow_host(p)
     p.set_defaults(func=run_up)
 
 

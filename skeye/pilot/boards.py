@@ -18,6 +18,12 @@ Link loss: while airborne, no packet for ``link_timeout_s`` -> FAILSAFE (hover),
 ``land_timeout_s`` more -> LANDING. A packet arriving in FAILSAFE stops the land countdown; the
 vehicle keeps holding until ground control commands it.
 
+Flight envelope (``skeye.pilot.envelope``, like PX4's geofence): every command with a target
+is checked against a ceiling above home and a radius around it and refused with RESULT code 3
+and a reason when outside; stick and open-ended velocity input is limited at the envelope's
+edge, not refused (a full-thrust stick in height mode means the maximum climb rate, and holds
+height at the ceiling); a vehicle beyond a limit that still moves outward is stopped (HOLDING).
+
 Units: the wire's AscTec scalings are converted in ``skeye.link.scaling``; IMU_RAWDATA, which
 AscTec leaves in uncalibrated ADC counts, carries the calibrated scalings of IMU_CALCDATA
 (gyro 0.015 deg/s, acc 10000 = 1 g) and the field in 0.01 uT, pressure in Pa; the simulator
@@ -29,7 +35,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.geo import GeoOrigin
@@ -91,6 +97,7 @@ from skeye.link.scaling import (
     v_to_mv,
 )
 from skeye.pilot.airframe import Airframe, GpsFix, Snapshot
+from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.pad import PadController
 from skeye.pilot.states import FlightEvent, FlightStateMachine, IllegalTransition
 
@@ -115,6 +122,8 @@ class BoardSettings:
     # The robot file's [controller] max_speed_m_s (skeye pilot sets it): a faster MOVE_BY or
     # GOTO_GPS is refused; full stick in GPS mode; WAYPOINT max_speed 100 %.
     max_speed_m_s: float = 3.0
+    max_climb_m_s: float = 1.5  # full thrust stick in height / GPS mode
+    envelope: FlightEnvelope = field(default_factory=FlightEnvelope)  # ceiling, radius
 
 
 class GeoAnchor:
@@ -195,6 +204,8 @@ class OnboardBoards:
         self._waypoint_status = 0
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
+        self.envelope_stops = 0  # times the envelope stopped a vehicle moving out
+        self.envelope_reason = ""  # why, the last time
         self.geo = GeoAnchor()
         self.geo.add(snap.gps, snap.pos_ned_m)
 
@@ -291,9 +302,27 @@ class OnboardBoards:
         self._velocity_until_s = None
         self._waypoint_target = None
 
+    def _check_envelope(self, home_ned_m: tuple[float, float, float],
+                        target_ned_m: tuple[float, float, float]) -> None:
+        reason = self.settings.envelope.check_target(home_ned_m, target_ned_m)
+        if reason is not None:
+            raise _Refused(ResultCode.BAD_VALUE, reason)
+
+    def _gps_target_ned(self, snap: Snapshot, lat_deg: float, lon_deg: float,
+                        altitude_m: float) -> tuple[float, float, float] | None:
+        """A GPS target in NED through the latest fix (None without a fix: the airframe
+        refuses the move itself then)."""
+        g = snap.gps
+        if g is None or not g.fix or not -90.0 < g.latitude_deg < 90.0:
+            return None
+        dn, de, _ = GeoOrigin(g.latitude_deg, g.longitude_deg).to_ned(lat_deg, lon_deg, 0.0)
+        return (snap.pos_ned_m[0] + dn, snap.pos_ned_m[1] + de, -altitude_m)
+
     def _take_off(self, height_m: float) -> None:
         self.flight.check(FlightEvent.TAKE_OFF)
         snap = self.airframe.snapshot()
+        n, e, d = snap.pos_ned_m
+        self._check_envelope(snap.pos_ned_m, (n, e, d - height_m))  # home is here
         self.airframe.take_off(snap.altitude_m + height_m)
         self.home_ned_m = snap.pos_ned_m
         self._fire(FlightEvent.TAKE_OFF)
@@ -333,6 +362,12 @@ class OnboardBoards:
     def _velocity(self, msg: Velocity, now_s: float) -> None:
         self.flight.check(FlightEvent.MOVE)
         duration_s = msg.duration / 1000.0 if msg.duration else None
+        if duration_s is not None:  # where it ends; open-ended ones are stopped at the edge
+            snap = self.airframe.snapshot()
+            vn, ve = _frd_to_ned((msg.vx / 1000.0, msg.vy / 1000.0, 0.0), snap.rpy_rad[2])
+            n, e, d = snap.pos_ned_m
+            end = (n + vn * duration_s, e + ve * duration_s, d + msg.vz / 1000.0 * duration_s)
+            self._check_envelope(self.home_ned_m, end)
         self.airframe.set_velocity(
             msg.vx / 1000.0, msg.vy / 1000.0, -msg.vz / 1000.0, msg.yaw_rate / 1000.0, duration_s
         )
@@ -356,12 +391,15 @@ class OnboardBoards:
             return
         n, e, d = snap.pos_ned_m
         speed = self._speed(msg.speed)
+        self._check_envelope(self.home_ned_m, (n + dn, e + de, d + delta[2]))
         self._start_motion(lambda: self.airframe.fly_to(n + dn, e + de, -(d + delta[2]), speed))
 
     def _goto_gps(self, msg: GotoGps) -> None:
         self.flight.check(FlightEvent.MOVE)
         altitude_m = -self.home_ned_m[2] + msg.height / 1000.0
         lat, lon, speed = msg.latitude / 1e7, msg.longitude / 1e7, self._speed(msg.speed)
+        target = self._gps_target_ned(self.airframe.snapshot(), lat, lon, altitude_m)
+        self._check_envelope(self.home_ned_m, target or (*self.home_ned_m[:2], -altitude_m))
         self._start_motion(lambda: self.airframe.fly_to_gps(lat, lon, altitude_m, speed))
 
     def _goto_waypoint(self) -> None:
@@ -378,10 +416,13 @@ class OnboardBoards:
         )
         if wp.properties & WaypointProps.ABSOLUTE:
             lat, lon = wp.Y / 1e7, wp.X / 1e7
+            target = self._gps_target_ned(snap, lat, lon, altitude_m)
+            self._check_envelope(self.home_ned_m, target or (*self.home_ned_m[:2], -altitude_m))
             self._start_motion(lambda: self.airframe.fly_to_gps(lat, lon, altitude_m, speed))
         else:  # X east, Y north, mm from home
             n = self.home_ned_m[0] + wp.Y / 1000.0
             e = self.home_ned_m[1] + wp.X / 1000.0
+            self._check_envelope(self.home_ned_m, (n, e, -altitude_m))
             self._start_motion(lambda: self.airframe.fly_to(n, e, altitude_m, speed))
             self._waypoint_target = (n, e, -altitude_m)
         self._waypoint_status = 0
@@ -417,15 +458,22 @@ class OnboardBoards:
     def _fly_sticks(self, msg: CtrlInput, bits: CtrlBits) -> None:
         if bits & (CtrlBits.HEIGHT_CONTROL | CtrlBits.GPS_POSITION_CONTROL):
             # Height / GPS modes: sticks command velocities (thrust centred = hold height).
+            # Full stick = the vehicle's maximum speed / climb rate, limited (not refused) at
+            # the flight envelope's edge.
             full = self.settings.max_speed_m_s
             fwd = -msg.pitch / STICK_MAX * full if bits & CtrlBits.PITCH else 0.0
             right = msg.roll / STICK_MAX * full if bits & CtrlBits.ROLL else 0.0
             up = (
-                (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2) * full
+                max(-1.0, min(1.0, (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2)))
+                * self.settings.max_climb_m_s
                 if bits & CtrlBits.THRUST
                 else 0.0
             )
             yaw = stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0
+            snap = self.airframe.snapshot()
+            fwd, right, up = self.settings.envelope.limit_body_velocity(
+                self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], fwd, right, up
+            )
             self.airframe.set_velocity(fwd, right, up, yaw, None)
             return
         self.airframe.attitude(
@@ -434,6 +482,20 @@ class OnboardBoards:
             stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0,
             msg.thrust / THRUST_MAX if bits & CtrlBits.THRUST else 0.0,
         )
+
+    def _envelope_guard(self) -> None:
+        """Stop a flying vehicle that is beyond the envelope and still moving out."""
+        if self.state is not NavState.FLYING:
+            return
+        snap = self.airframe.snapshot()
+        reason = self.settings.envelope.breach(self.home_ned_m, snap.pos_ned_m, snap.vel_ned_m_s)
+        if reason is None:
+            return
+        self.envelope_stops += 1
+        self.envelope_reason = reason
+        self._end_motion()
+        self.airframe.hover()
+        self._fire(FlightEvent.ARRIVED)
 
     def _check_gesture(self, now_s: float) -> None:
         since = self._gesture_since_s
@@ -454,6 +516,7 @@ class OnboardBoards:
         """Advance time-dependent behaviour; returns packets to push (streamed telemetry)."""
         self._check_gesture(now_s)
         self._progress(now_s)
+        self._envelope_guard()
         self._failsafe(now_s)
         if self._stream is None or now_s < self._stream_next_s:
             return []
@@ -518,13 +581,10 @@ class OnboardBoards:
             self._end_motion()
             self._failsafe_since_s = now_s
 
-    def link_changed(self, now_s: float) -> None:
-        """A client connected: the link-loss timer counts from now."""
-        self._last_packet_s = now_s
-
     def client_gone(self, now_s: float) -> None:
-        """The client went away: stop its stream. The link-loss timer keeps counting from its
-        last packet (a vanished client is a lost link)."""
+        """The client went away (or a new one arrives): stop the stream. The link-loss timer
+        keeps counting from the last packet: a vanished client is a lost link, and a connection
+        alone is not a packet."""
         self._stream = None
 
     # -- telemetry -----------------------------------------------------------------------

@@ -5,6 +5,11 @@ TCP (``--port``, default 7000, bound to 127.0.0.1 unless ``--host``) or a serial
 (``--serial /dev/ttyUSB0 --baud 57600``). When the simulator runs in lockstep the pilot drives
 its clock: ``--lockstep-rate`` sim seconds per wall second (1 = real time, 0 = as fast as the
 CPU allows).
+
+The flight envelope (``skeye.pilot.envelope``: ceiling above home, radius around home) comes
+from the robot class's file (``[envelope]``; a class outside the built-ins is looked up in
+``--robot-dir``), else the pilot's defaults (120 m, 500 m); ``--ceiling-m`` and
+``--max-radius-m`` override either. The start-up line says which envelope is in force.
 """
 
 from __future__ import annotations
@@ -13,13 +18,42 @@ import argparse
 import logging
 import signal
 import threading
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
-from skeye.errors import SkeyeError
+from skeye.errors import ConfigError, SkeyeError
 from skeye.pilot.boards import BoardSettings
+from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
 
 log = logging.getLogger(__name__)
+
+
+def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
+    """The envelope in force and where it came from (robot file, defaults, options).
+
+    Raises:
+        ConfigError: a bad robot file or value, or a class missing from ``--robot-dir``.
+    """
+    from skeye.sim.robot_config import BUILTIN_ROBOTS, load_robot_config
+
+    dirs = (Path(args.robot_dir),) if args.robot_dir else ()
+    short = args.robot.split(".", 1)[1] if args.robot.lower().startswith("usarbot.") else args.robot
+    if dirs or short.lower() in BUILTIN_ROBOTS:
+        config = load_robot_config(args.robot, dirs, allow_paths=False)
+        envelope, source = config.envelope, f"robot file {config.source}"
+    else:
+        envelope = FlightEnvelope()
+        source = "pilot defaults (the robot file is not here: give --robot-dir to use its own)"
+    changes = {
+        k: v for k, v in (("ceiling_m", args.ceiling_m), ("max_radius_m", args.max_radius_m))
+        if v is not None
+    }
+    if changes:
+        envelope = replace(envelope, **changes)  # validated again by __post_init__
+        source += " with " + ", ".join(f"--{k.replace('_', '-')} {v:g}" for k, v in changes.items())
+    return envelope, source
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,6 +62,11 @@ def run(args: argparse.Namespace) -> int:
     from skeye.pilot.sim_airframe import SimAirframe
     from skeye.processes import check_ports_free
 
+    try:
+        envelope, envelope_source = flight_envelope(args)
+    except ConfigError as exc:
+        print(f"skeye pilot: {exc}", flush=True)
+        return 2
     settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
     try:
         if not args.serial:  # before the robot is spawned: a taken port leaves nothing behind
@@ -55,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
                 land_timeout_s=settings.land_timeout_s,
                 max_speed_m_s=robot.motion_config.max_speed_m_s,
                 default_speed_m_s=min(1.0, robot.motion_config.max_speed_m_s),
+                max_climb_m_s=robot.motion_config.max_climb_m_s,
+                envelope=envelope,
             )
             vision = None
             if args.images is not None:
@@ -79,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
                 mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
                 print(
                     f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
-                    f"ground control on {server.address}",
+                    f"ground control on {server.address}; flight envelope: "
+                    f"{envelope.describe()} ({envelope_source})",
                     flush=True,
                 )
                 while not stop.wait(0.2):
@@ -127,6 +169,24 @@ def register(subparsers: Any) -> None:
     p.add_argument("--baud", type=int, default=57600, help="serial baud rate")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--robot", default="hummingbird", help="robot class to spawn")
+    p.add_argument(
+        "--robot-dir",
+        default=None,
+        help="folder of robot files (as skeye sim's): the class's [envelope] is read there",
+    )
+    p.add_argument(
+        "--ceiling-m",
+        type=float,
+        default=None,
+        help="flight envelope: highest height above home in m (default: robot file, or 120)",
+    )
+    p.add_argument(
+        "--max-radius-m",
+        type=float,
+        default=None,
+        help="flight envelope: farthest horizontal distance from home in m (default: robot "
+        "file, or 500)",
+    )
     p.add_argument("--name", default="R1", help="robot name")
     p.add_argument("--start", default="Pad1", help="start pose")
     p.add_argument("--location", default=None, help="spawn at north,east,down (m) instead")

@@ -9,6 +9,18 @@ How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with thread
   ``CommandStreamParser`` and answers each event at once (``boards.handle``), so a poll's
   round trip never waits for the loop. Garbage is counted by the parser and the boards; the
   reader never stops on bad input.
+- one sender thread per served link (``skeye.pilot.outbox.Outbox``) alone writes to it: the
+  reader's answers and the loop's telemetry are queued, never sent inline, so a ground client
+  that stops reading loses telemetry (dropped, counted) and is closed after the link's send
+  timeout; the loop keeps ticking and the vehicle is never declared lost for it.
+- a TCP client that sends no valid packet within the link timeout of connecting is closed (a
+  silent connection must not hold the one client slot); a client whose last packet is older
+  than the link timeout is replaced by the next one that connects. Accepted sockets use TCP
+  keepalive, so a peer that vanished without a FIN is noticed. The link-loss failsafe counts
+  from the last packet: a connection alone (without packets) does not reset it.
+- a TCP connection whose first bytes are an HTTP request line (``POST /...``) is closed before
+  anything it sends is parsed: a web page cannot make the browser send packets in a request
+  body (a cross-protocol request) to fly the vehicle.
 - the loop thread calls ``boards.tick`` every ``tick_s`` (stream, flight-state progress,
   failsafe) and, when the simulator is in lockstep, drives sim time: it advances the sim by
   ``tick_s`` per iteration, paced to ``lockstep_rate`` sim seconds per wall second (0 = as
@@ -26,14 +38,23 @@ import socket
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
 from skeye.errors import ConfigError, SkeyeError
-from skeye.link.packets import CommandStreamParser, Message, Result, ResultCode, encode
+from skeye.link.packets import (
+    CommandStreamParser,
+    FrameError,
+    Message,
+    Result,
+    ResultCode,
+    encode,
+)
 from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
 from skeye.pilot.airframe import Airframe
 from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
+from skeye.pilot.outbox import Outbox
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +63,42 @@ DEFAULT_TICK_S = 0.01
 HANDOVER_GRACE_S = 0.5
 """How long a new ground station waits for the current one's connection to finish closing (it
 may have hung up a moment ago, its reader not yet noticed) before being turned away as busy."""
+SEND_TIMEOUT_S = 5.0
+"""A ground client that takes no byte of what the pilot sends for this long is closed."""
+SEND_BUFFER_BYTES = 64 * 1024
+"""Kernel send buffer of a ground client's socket: telemetry a client has not read waits in the
+pilot's outbox (where it can be dropped), not in megabytes of kernel buffer going stale."""
+HTTP_METHODS = (b"GET ", b"POST ", b"PUT ", b"HEAD ", b"OPTIONS ", b"DELETE ", b"PATCH ",
+                b"CONNECT ", b"TRACE ")
+KEEPALIVE_IDLE_S = 10
+KEEPALIVE_INTERVAL_S = 5
+KEEPALIVE_COUNT = 3
+
+
+@dataclass
+class ClientSession:
+    """One served ground client: its link, its outbox, and when it last sent a packet."""
+
+    link: Link
+    outbox: Outbox
+    connected_s: float
+    tcp: bool
+    last_packet_s: float | None = None
+    packets: int = 0  # valid packets (not garbage) received
+
+
+def _tune(sock: socket.socket) -> None:
+    """A bounded send buffer, and TCP keepalive: a peer gone without a FIN is noticed in
+    about 25 s."""
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    for name, value in (
+        ("TCP_KEEPIDLE", KEEPALIVE_IDLE_S),
+        ("TCP_KEEPINTVL", KEEPALIVE_INTERVAL_S),
+        ("TCP_KEEPCNT", KEEPALIVE_COUNT),
+    ):
+        if hasattr(socket, name):
+            sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, name), value)
 
 
 class PilotServer:
@@ -91,6 +148,10 @@ class PilotServer:
         # The landing-pad vision (skeye.pilot.vision.PadVision), stepped after every tick.
         self.vision = vision(self.boards, self._lock) if vision is not None else None
         self._client: Link | None = None
+        self._session: ClientSession | None = None
+        self.closed_idle = 0  # TCP clients closed for sending nothing after connecting
+        self.replaced_silent = 0  # silent clients replaced by a new one
+        self.refused_http = 0  # connections closed for sending an HTTP request
         self._client_lock = threading.Lock()
         self._client_changed = threading.Condition(self._client_lock)
         self._stop = threading.Event()
@@ -140,8 +201,11 @@ class PilotServer:
             self._listener.close()
         with self._client_lock:
             client = self._client
+            session = self._session
         if client is not None:
             client.close()
+        if session is not None:
+            session.outbox.close()
         current = threading.current_thread()
         for t in self._threads:
             if t is not current:
@@ -167,6 +231,18 @@ class PilotServer:
         return self._client
 
     # -- clients -------------------------------------------------------------------------
+    @property
+    def session(self) -> ClientSession | None:
+        """The served client's session (link, outbox, packet times), if any."""
+        return self._session
+
+    def _silent(self, session: ClientSession | None) -> bool:
+        """Has this client been silent for the link timeout (since its last packet)?"""
+        if session is None:
+            return False
+        last = session.last_packet_s if session.last_packet_s is not None else session.connected_s
+        return self.clock() - last >= self.boards.settings.link_timeout_s
+
     def _accept_loop(self) -> None:
         assert self._listener is not None
         while not self._stop.is_set():
@@ -176,13 +252,27 @@ class PilotServer:
                 continue
             except OSError:
                 break
-            link = TcpLink(sock)
+            try:
+                _tune(sock)
+            except OSError:
+                pass
+            link = TcpLink(sock, send_timeout_s=SEND_TIMEOUT_S)
             with self._client_changed:
                 self._client_changed.wait_for(
                     lambda: self._client is None or self._client.closed, HANDOVER_GRACE_S
                 )
                 busy = self._client is not None and not self._client.closed
                 current = self._client.name if busy and self._client else ""
+                session = self._session
+            if busy and session is not None and self._silent(session):
+                self.replaced_silent += 1
+                log.info(
+                    "ground control on %s silent for the link timeout: replaced by %s",
+                    session.link.name,
+                    link.name,
+                )
+                session.link.close()
+                busy = False
             if busy:
                 self._turn_away(link, current)
             else:
@@ -199,43 +289,74 @@ class PilotServer:
         link.close()
 
     def _serve(self, link: Link) -> None:
+        session = ClientSession(
+            link, Outbox(link).start(), self.clock(), tcp=isinstance(link, TcpLink)
+        )
         with self._client_lock:
             self._client = link
+            self._session = session
         with self._lock:
-            self.boards.link_changed(self.clock())
+            self.boards.client_gone(self.clock())  # a new client starts with no stream
         log.info("serving ground control on %s", link.name)
-        self._spawn(self._read_loop, f"pilot-read-{link.name}", link)
+        self._spawn(self._read_loop, f"pilot-read-{link.name}", session)
 
-    def _read_loop(self, link: Link) -> None:
+    def _read_loop(self, session: ClientSession) -> None:
+        link = session.link
         parser = CommandStreamParser()
+        timeout_s = self.boards.settings.link_timeout_s
+        head: bytes | None = b""  # first bytes, until they cannot start an HTTP request
         try:
             while not self._stop.is_set():
+                if session.tcp and session.packets == 0:
+                    if self.clock() - session.connected_s >= timeout_s:
+                        self.closed_idle += 1
+                        log.info(
+                            "ground control on %s sent no packet within %g s: closed",
+                            link.name,
+                            timeout_s,
+                        )
+                        break
                 data = link.recv(0.1)
                 if not data:
                     continue
+                if session.tcp and head is not None:
+                    head += data
+                    if any(head.startswith(m) for m in HTTP_METHODS):
+                        log.warning("%s sent an HTTP request, not packets: closed", link.name)
+                        self.refused_http += 1
+                        break
+                    if len(head) < max(map(len, HTTP_METHODS)) and any(
+                        m.startswith(head) for m in HTTP_METHODS
+                    ):
+                        continue  # too short to tell yet: wait for more
+                    data, head = head, None
                 for event in parser.feed(data):
+                    now = self.clock()
+                    if not isinstance(event, FrameError):
+                        session.packets += 1
+                        session.last_packet_s = now
                     with self._lock:
-                        replies = self.boards.handle(event, self.clock())
-                    self._send(link, replies)
+                        replies = self.boards.handle(event, now)
+                    self._send(session, replies, droppable=False)
         except LinkClosed:
             pass
         finally:
+            session.outbox.close()
             link.close()
             with self._client_changed:
-                if self._client is link:
+                current = self._client is link
+                if current:
                     self._client = None
+                    self._session = None
                 self._client_changed.notify_all()
-            with self._lock:
-                self.boards.client_gone(self.clock())
+            if current:
+                with self._lock:
+                    self.boards.client_gone(self.clock())
             log.info("ground control on %s went away", link.name)
 
-    def _send(self, link: Link, replies: list[Message]) -> None:
-        if not replies:
-            return
-        try:
-            link.send(b"".join(encode(m) for m in replies))
-        except LinkClosed:
-            pass
+    def _send(self, session: ClientSession, replies: list[Message], *, droppable: bool) -> None:
+        if replies:
+            session.outbox.put(b"".join(encode(m) for m in replies), droppable=droppable)
 
     # -- the loop ------------------------------------------------------------------------
     def _check_vehicle(self) -> None:
@@ -258,9 +379,9 @@ class PilotServer:
                 try:
                     with self._lock:
                         out = self.boards.tick(self.clock())
-                    client = self._client
-                    if client is not None and out:
-                        self._send(client, out)
+                    session = self._session
+                    if session is not None and out:
+                        self._send(session, out, droppable=True)  # never blocks the loop
                     if self.vehicle_lost is None:
                         self._check_vehicle()
                         self.airframe.advance(self.tick_s)  # no-op for time unless lockstep

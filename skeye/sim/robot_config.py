@@ -4,7 +4,9 @@ How this works: a robot class is a TOML file (built-ins in ``skeye/sim/robots/``
 ``[airframe]``, ``[battery]`` and ``[controller]`` fill the parameter dataclasses of
 :mod:`skeye.sim.vehicle` and :mod:`skeye.sim.controller`; each ``[[sensors]]`` entry mounts a
 sensor USARSim-style: ``type``, ``name``, ``position_m`` (body FRD), ``direction_rad`` (roll,
-pitch, yaw of the sensor frame in the body frame) and the sensor class's own parameters. Every
+pitch, yaw of the sensor frame in the body frame) and the sensor class's own parameters. An
+optional ``[envelope]`` table (``ceiling_m``, ``max_radius_m``) is the flight envelope the pilot
+enforces for this class (``skeye.pilot.envelope``; the simulator itself does not use it). Every
 mistake raises ConfigError naming the file and the key; nothing is half-loaded.
 """
 
@@ -12,12 +14,13 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from skeye.errors import ConfigError
+from skeye.pilot.envelope import FlightEnvelope
 from skeye.sim.controller import ControllerParams
 from skeye.sim.vehicle import AirframeParams, BatteryParams, dataclass_from_mapping
 
@@ -50,6 +53,7 @@ class RobotConfig:
     controller: ControllerParams
     sensors: tuple[SensorMount, ...]
     source: str
+    envelope: FlightEnvelope = field(default_factory=FlightEnvelope)
 
 
 _TOP_KEYS = {
@@ -61,6 +65,7 @@ _TOP_KEYS = {
     "battery",
     "controller",
     "sensors",
+    "envelope",
 }
 
 
@@ -90,7 +95,7 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
             raise ConfigError(f"{source}: {key} must be a positive number, got {value!r}")
         rates[key] = float(value)
     tables = {}
-    for key in ("airframe", "battery", "controller"):
+    for key in ("airframe", "battery", "controller", "envelope"):
         table = data.get(key, {})
         if not isinstance(table, dict):
             raise ConfigError(f"{source}: [{key}] must be a table")
@@ -100,6 +105,7 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
     controller = dataclass_from_mapping(
         ControllerParams, tables["controller"], f"{source} [controller]"
     )
+    envelope = dataclass_from_mapping(FlightEnvelope, tables["envelope"], f"{source} [envelope]")
     sensors_data = data.get("sensors", [])
     if not isinstance(sensors_data, list):
         raise ConfigError(f"{source}: 'sensors' must be an array of tables ([[sensors]])")
@@ -137,6 +143,7 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
         controller=controller,
         sensors=tuple(mounts),
         source=source,
+        envelope=envelope,
     )
 
 

@@ -51,16 +51,18 @@ def _robot_dir(tmp: Path) -> Path:
 
 
 class UvicornThread:
-    """The ground app served by uvicorn in a thread, on a free port."""
+    """The ground app served by uvicorn in a thread, on a free port, with ``skeye ground``'s
+    settings (``uvicorn_config``); ``token`` is the app's secret."""
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, token: str = "") -> None:
         import uvicorn
 
+        from skeye.ground.app import uvicorn_config
+
+        self.token = token
         self.sock = socket.create_server(("127.0.0.1", 0))
         self.port = self.sock.getsockname()[1]
-        self.server = uvicorn.Server(
-            uvicorn.Config(app, log_level="warning", ws_ping_interval=None)
-        )
+        self.server = uvicorn.Server(uvicorn_config(app))
         self.thread = threading.Thread(
             target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True
         )
@@ -73,6 +75,16 @@ class UvicornThread:
     @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
+
+    @property
+    def page_url(self) -> str:
+        """The URL ``skeye ground`` prints: the page, with the token."""
+        return f"{self.url}/?token={self.token}"
+
+    @property
+    def auth(self) -> dict[str, str]:
+        """Headers that carry the token (for scripts)."""
+        return {"X-Skeye-Token": self.token}
 
     def close(self) -> None:
         self.server.should_exit = True
@@ -171,6 +183,7 @@ def _start_sim(robot_dir: Path) -> tuple[subprocess.Popen[str], int, int]:
 def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
     from skeye.ground.app import create_app
     from skeye.ground.bridge import VehicleBridge
+    from skeye.ground.guard import GroundSecurity
     from skeye.ground.video import VideoRelay
 
     sim, control_port, image_port = _start_sim(_robot_dir(tmp_path_factory.mktemp("robots")))
@@ -180,7 +193,8 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
     video = VideoRelay(
         "127.0.0.1", image_port, fov_h_rad=1.309, fps=6.0, attitude=bridge.attitude_rad
     ).start()
-    web = UvicornThread(create_app(bridge, video))
+    security = GroundSecurity()
+    web = UvicornThread(create_app(bridge, video, security=security), security.token)
     s = Stack(sim, sim_address, image_port, pilot, bridge, video, web)
     try:
         yield s

@@ -30,7 +30,7 @@ def page(stack: Stack) -> Iterator[Any]:
         pg = browser.new_page(viewport={"width": 1500, "height": 1000})
         errors: list[str] = []
         pg.on("pageerror", lambda e: errors.append(str(e)))
-        pg.goto(stack.web.url + "/")
+        pg.goto(stack.web.page_url)  # the URL skeye ground prints
         yield pg
         browser.close()
         assert not errors, f"JavaScript errors on the page: {errors}"

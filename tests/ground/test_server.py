@@ -12,6 +12,7 @@ from fastapi.testclient import TestClient
 
 from skeye.ground.app import create_app
 from skeye.ground.bridge import VehicleBridge
+from skeye.ground.guard import GroundSecurity
 from tests.ground.conftest import Stack, wait_until
 
 
@@ -23,9 +24,11 @@ def _free_port() -> int:
 
 @pytest.fixture
 def offline() -> Iterator[TestClient]:
-    """The app with a vehicle URI nobody listens on."""
+    """The app with a vehicle URI nobody listens on; the client sends the token and JSON."""
+    security = GroundSecurity(allowed_hosts=("testserver",))
+    headers = {"X-Skeye-Token": security.token, "Content-Type": "application/json"}
     with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
-        with TestClient(create_app(bridge)) as client:
+        with TestClient(create_app(bridge, security=security), headers=headers) as client:
             yield client
 
 
@@ -82,7 +85,7 @@ def test_websocket_rejects_malformed_messages(offline: TestClient) -> None:
 def test_several_tabs_at_once(stack: Stack) -> None:
     from websockets.sync.client import connect
 
-    url = stack.web.url.replace("http", "ws") + "/ws"
+    url = stack.web.url.replace("http", "ws") + "/ws?token=" + stack.web.token
     wait_until(lambda: stack.bridge.state.value == "connected", 20, "the vehicle link")
     with ExitStack() as opened:
         tabs = [opened.enter_context(connect(url)) for _ in range(4)]

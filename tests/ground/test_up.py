@@ -46,13 +46,16 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
             assert line and time.monotonic() < deadline, f"skeye up did not start: {lines}"
             lines.append(line)
         assert f"http://127.0.0.1:{ground}/" in lines[-1]
+        token = lines[-1].split("?token=", 1)[1].split()[0]  # the page's secret, as printed
         children = _children(proc.pid)
         assert len(children) == 3
 
         def connected() -> bool:
+            request = urllib.request.Request(
+                f"http://127.0.0.1:{ground}/api/state", headers={"X-Skeye-Token": token}
+            )
             try:  # a busy host may take longer than a moment to answer: ask again
-                with urllib.request.urlopen(f"http://127.0.0.1:{ground}/api/state",
-                                            timeout=30) as r:
+                with urllib.request.urlopen(request, timeout=30) as r:
                     state = json.load(r)
             except OSError:
                 return False

@@ -26,8 +26,10 @@ from skeye.processes import start_skeye, stop_process
 from tests.ground.conftest import wait_until
 
 
-def _ground_state(port: int) -> dict:
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/state", timeout=10) as r:
+def _ground_state(port: int, token: str) -> dict:
+    request = urllib.request.Request(f"http://127.0.0.1:{port}/api/state",
+                                     headers={"X-Skeye-Token": token})
+    with urllib.request.urlopen(request, timeout=10) as r:
         return json.load(r)
 
 
@@ -50,10 +52,11 @@ def test_frozen_realtime_simulator_puts_the_pilot_in_failsafe() -> None:
             vehicle.wait_state(NavState.HOLDING, timeout_s=120)
         ground_proc, gfound = start_skeye(
             ["ground", "--vehicle", pilot.address, "--port", "0"],
-            [r"skeye ground: http://127.0.0.1:(\d+)/"], "ground control", timeout_s=120)
+            [r"skeye ground: http://127.0.0.1:(\d+)/\?token=([\w-]+)"], "ground control",
+            timeout_s=120)
         stack.callback(stop_process, ground_proc)
-        gport = int(gfound[0].group(1))
-        wait_until(lambda: (_ground_state(gport)["nav"] or {}).get("state") == "holding", 60,
+        gport, token = int(gfound[0].group(1)), gfound[0].group(2)
+        wait_until(lambda: (_ground_state(gport, token)["nav"] or {}).get("state") == "holding", 60,
                    "ground control shows the vehicle holding")
         assert pilot.vehicle_lost is None
 
@@ -61,8 +64,8 @@ def test_frozen_realtime_simulator_puts_the_pilot_in_failsafe() -> None:
         wait_until(lambda: pilot.vehicle_lost is not None, 120, "the pilot notices")
         assert "simulator frozen" in str(pilot.vehicle_lost)
         assert pilot.boards.state is NavState.FAILSAFE
-        wait_until(lambda: (_ground_state(gport)["nav"] or {}).get("state") == "failsafe", 60,
-                   "ground control shows the failsafe")
+        wait_until(lambda: (_ground_state(gport, token)["nav"] or {}).get("state") == "failsafe",
+                   60, "ground control shows the failsafe")
         assert pilot.loop_error is None
         stop_process(ground_proc)
 

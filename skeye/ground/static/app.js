@@ -55,6 +55,13 @@ function connectTelemetry() {
     pill("link-state", "vehicle: unknown", "bad", { state: "unknown" });
     for (const [, p] of S.pending) p.resolve({ status: 503, error: "page lost its server" });
     S.pending.clear();
+    // A restarted server has a new token: say so instead of retrying silently.
+    fetch("/api/state").then((r) => {
+      if (r.status === 401) {
+        banner("This page's access token is no longer valid: open the URL (with ?token=...) " +
+          "that skeye ground or skeye up printed when it started.");
+      }
+    }).catch(() => {});
     setTimeout(connectTelemetry, 1000);
   };
   ws.onmessage = (ev) => {

@@ -1,0 +1,303 @@
+"""Attacks on ``skeye ground``, each against a real uvicorn server on a loopback port, each
+shown refused: cross-site commands, foreign WebSockets, DNS rebinding, a missing token, CDN
+scripts, oversized and deeply nested input, binary frames, and one tab flooding the others.
+
+Servers here run with a vehicle URI nobody listens on unless a test needs a vehicle: a refused
+request must be refused before it reaches the vehicle bridge (``bridge.quality().commands``
+stays 0), and one that gets through answers 503 (no vehicle).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import threading
+import time
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.sync.client import connect as ws_connect
+
+from skeye.ground.app import create_app
+from skeye.ground.bridge import VehicleBridge
+from skeye.ground.guard import MAX_BODY_BYTES, GroundSecurity, cookie_name
+from skeye.link.packets import NavState
+from skeye.pilot.server import PilotServer
+from tests.ground.conftest import UvicornThread, wait_until
+from tests.pilot.fake_airframe import FakeAirframe
+
+EVIL = "http://evil.example"
+STATIC = Path(__file__).resolve().parents[2] / "skeye" / "ground" / "static"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Ground:
+    web: UvicornThread
+    bridge: VehicleBridge
+
+    @property
+    def ws_url(self) -> str:
+        return f"ws://127.0.0.1:{self.web.port}/ws"
+
+    def commands_reached(self) -> int:
+        return self.bridge.quality().commands
+
+
+@pytest.fixture
+def ground(request: pytest.FixtureRequest) -> Iterator[Ground]:
+    hosts = getattr(request, "param", ())
+    security = GroundSecurity(allowed_hosts=hosts)
+    with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
+        web = UvicornThread(create_app(bridge, security=security), security.token)
+        try:
+            yield Ground(web, bridge)
+        finally:
+            web.close()
+
+
+def _post(g: Ground, name: str, body: bytes, headers: dict[str, str]) -> httpx.Response:
+    return httpx.post(f"{g.web.url}/api/command/{name}", content=body, headers=headers,
+                      timeout=30)
+
+
+# -- 1. commands only from the page's own origin, with the token -----------------------------
+def test_cross_site_text_plain_post_is_refused(ground: Ground) -> None:
+    """The issue's curl: a no-preflight text/plain POST from another origin."""
+    body = b'{"height_m": 2}'
+    r = _post(ground, "take_off", body, {"Origin": EVIL, "Content-Type": "text/plain"})
+    assert r.status_code == 403 and "cross-origin" in r.json()["error"]
+    # Even carrying the token (a leaked one), a foreign origin or a non-JSON type is refused.
+    tok = ground.web.auth
+    r = _post(ground, "take_off", body,
+              {**tok, "Origin": EVIL, "Content-Type": "application/json"})
+    assert r.status_code == 403
+    r = _post(ground, "take_off", body, {**tok, "Content-Type": "text/plain"})
+    assert r.status_code == 415 and "application/json" in r.json()["error"]
+    form = "application/x-www-form-urlencoded"
+    r = _post(ground, "take_off", body, {**tok, "Content-Type": form})
+    assert r.status_code == 415
+    r = _post(ground, "take_off", body, {"Content-Type": "application/json"})
+    assert r.status_code == 401 and "token" in r.json()["error"]
+    r = _post(ground, "take_off", body,
+              {"X-Skeye-Token": "x" * 32, "Content-Type": "application/json"})
+    assert r.status_code == 401
+    assert ground.commands_reached() == 0
+    # The page's own request gets through (and finds no vehicle).
+    own = f"http://127.0.0.1:{ground.web.port}"
+    r = _post(ground, "take_off", body, {**tok, "Origin": own, "Content-Type": "application/json"})
+    assert r.status_code == 503 and ground.commands_reached() == 1
+    r = _post(ground, "take_off", body,
+              {"Authorization": f"token {ground.web.token}", "Content-Type": "application/json"})
+    assert r.status_code == 503 and ground.commands_reached() == 2
+
+
+def test_foreign_origin_websocket_is_refused(ground: Ground) -> None:
+    url = f"{ground.ws_url}?token={ground.web.token}"
+    with pytest.raises(InvalidStatus) as info:
+        ws_connect(url, origin=EVIL, open_timeout=10)  # type: ignore[arg-type]
+    assert info.value.response.status_code == 403
+    with pytest.raises(InvalidStatus) as info:  # the right origin, but no token
+        ws_connect(ground.ws_url, origin=f"http://127.0.0.1:{ground.web.port}", open_timeout=10)  # type: ignore[arg-type]
+    assert info.value.response.status_code == 401
+    with ws_connect(url, origin=f"http://127.0.0.1:{ground.web.port}", open_timeout=10) as ws:  # type: ignore[arg-type]
+        assert json.loads(ws.recv(10))["type"] == "hello"
+    with pytest.raises(InvalidStatus) as info:
+        ws_connect(f"ws://127.0.0.1:{ground.web.port}/ws/video?token={ground.web.token}",
+                   origin=EVIL, open_timeout=10)  # type: ignore[arg-type]
+    assert info.value.response.status_code == 403
+
+
+def test_dns_rebinding_host_is_refused(ground: Ground) -> None:
+    """A rebinding page reaches the server under its own name: Host says so."""
+    port = ground.web.port
+    for path in ("/api/state", "/", f"/?token={ground.web.token}"):
+        r = httpx.get(f"{ground.web.url}{path}", headers={**ground.web.auth,
+                      "Host": f"evil.example:{port}"}, timeout=30)
+        assert r.status_code == 400 and "--allow-host" in r.json()["error"], path
+    with pytest.raises(InvalidStatus) as info:
+        ws_connect(f"{ground.ws_url}?token={ground.web.token}", open_timeout=10,
+                   additional_headers={"Host": f"evil.example:{port}"})
+    assert info.value.response.status_code == 400
+    for host in (f"localhost:{port}", f"127.0.0.1:{port}", f"[::1]:{port}"):
+        r = httpx.get(f"{ground.web.url}/api/state", headers={**ground.web.auth, "Host": host},
+                      timeout=30)
+        assert r.status_code == 200, host
+
+
+@pytest.mark.parametrize("ground", [("groundstation.lan",)], indirect=True)
+def test_allow_host_admits_a_named_host(ground: Ground) -> None:
+    port = ground.web.port
+    ok = httpx.get(f"{ground.web.url}/api/state",
+                   headers={**ground.web.auth, "Host": f"groundstation.lan:{port}"}, timeout=30)
+    assert ok.status_code == 200
+    bad = httpx.get(f"{ground.web.url}/api/state",
+                    headers={**ground.web.auth, "Host": f"other.lan:{port}"}, timeout=30)
+    assert bad.status_code == 400
+
+
+def test_token_from_the_printed_url_opens_a_working_page(ground: Ground) -> None:
+    web = ground.web
+    r = httpx.get(f"{web.url}/", timeout=30)
+    assert r.status_code == 401 and "?token=" in r.text
+    assert httpx.get(f"{web.url}/?token={'y' * 32}", timeout=30).status_code == 401
+    for path in ("/api/state", "/api/history", "/api/commands", "/api/video/frame.jpg"):
+        assert httpx.get(f"{web.url}{path}", timeout=30).status_code == 401, path
+    with httpx.Client(base_url=web.url, timeout=30) as browser:
+        r = browser.get(f"/?token={web.token}")  # what the printed URL does
+        assert r.status_code == 303 and r.headers["location"] == "/"
+        cookie = r.headers["set-cookie"]
+        assert "HttpOnly" in cookie and "SameSite=Strict" in cookie
+        assert cookie.startswith(cookie_name(web.port) + "=")
+        page = browser.get("/")
+        assert page.status_code == 200 and "skeye ground control" in page.text
+        assert browser.get("/api/state").status_code == 200
+        assert browser.get("/static/app.js").status_code == 200
+    # Another server's cookie (another port) is not this one's.
+    other = httpx.get(f"{web.url}/api/state", timeout=30,
+                      cookies={cookie_name(web.port + 1): web.token})
+    assert other.status_code == 401
+
+
+# -- 2. nothing external -----------------------------------------------------------------------
+def test_no_docs_page_and_nothing_loaded_from_elsewhere(ground: Ground) -> None:
+    for path in ("/api/docs", "/docs", "/redoc", "/openapi.json"):
+        r = httpx.get(f"{ground.web.url}{path}", headers=ground.web.auth, timeout=30)
+        assert r.status_code == 404, path
+        assert "cdn" not in r.text.lower()
+    page = httpx.get(f"{ground.web.page_url}", follow_redirects=True, timeout=30).text
+    for text in [page] + [p.read_text("utf-8") for p in STATIC.iterdir() if p.is_file()]:
+        for marker in ("http://", "https://", "//cdn", "src=\"//", "@import"):
+            assert marker not in text, marker
+
+
+# -- 3. limits ---------------------------------------------------------------------------------
+def test_request_body_is_limited(ground: Ground) -> None:
+    headers = {**ground.web.auth, "Content-Type": "application/json"}
+    big = b'{"height_m": 1, "pad": "' + b"x" * MAX_BODY_BYTES + b'"}'
+    r = _post(ground, "take_off", big, headers)
+    assert r.status_code == 413 and str(MAX_BODY_BYTES) in r.json()["error"]
+
+    def chunks() -> Iterator[bytes]:  # no Content-Length: chunked transfer
+        yield b'{"pad": "'
+        for _ in range(100):
+            yield b"x" * 4096
+        yield b'"}'
+
+    r = httpx.post(f"{ground.web.url}/api/command/take_off", content=chunks(), headers=headers,
+                   timeout=30)
+    assert r.status_code == 413
+    deep = b"[" * 100_000 + b"]" * 100_000
+    r = _post(ground, "take_off", deep[: MAX_BODY_BYTES - 10], headers)
+    assert r.status_code == 400 and "nested deeper" in r.json()["error"]
+    assert ground.commands_reached() == 0
+
+
+def _closed(ws: Any) -> tuple[int | None, str]:
+    """Read until the server closes; its close code and reason."""
+    try:
+        while True:
+            ws.recv(10)
+    except ConnectionClosed as exc:
+        rcvd = exc.rcvd
+        return (rcvd.code, rcvd.reason) if rcvd is not None else (None, "")
+
+
+def test_websocket_binary_oversized_and_deep_messages_close_cleanly(
+    ground: Ground, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING)
+    url = f"{ground.ws_url}?token={ground.web.token}"
+    cases: list[tuple[Any, int, str]] = [
+        (b"\x00\x01binary", 1003, "binary frames"),
+        (json.dumps({"type": "command", "x": "y" * 70_000}), 1009, ""),
+        ("[" * 5000 + "]" * 5000, 1008, "nested deeper"),
+        ('{"type": "command", "args": ' + '{"a": ' * 20 + "1" + "}" * 21, 1008, "nested deeper"),
+    ]
+    for message, code, reason in cases:
+        with ws_connect(url, open_timeout=10, max_size=None) as ws:
+            assert json.loads(ws.recv(10))["type"] == "hello"
+            ws.send(message)
+            got_code, got_reason = _closed(ws)
+            assert got_code == code and reason in got_reason, (got_code, got_reason)
+    with ws_connect(url, open_timeout=10) as ws:  # the server serves on
+        assert json.loads(ws.recv(10))["type"] == "hello"
+    errors = [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info]
+    assert not errors, [r.getMessage() for r in errors]
+
+
+class SlowAirframe(FakeAirframe):
+    """Each move takes the pilot 20 ms to start, as a busy vehicle might."""
+
+    def fly_to(self, north_m: float, east_m: float, altitude_m: float, speed_m_s: float) -> None:
+        time.sleep(0.02)
+        super().fly_to(north_m, east_m, altitude_m, speed_m_s)
+
+
+def test_one_flooding_tab_does_not_starve_another_client() -> None:
+    """3000 commands on one WebSocket; another client's POST must still be answered (the
+    timeout is a generous bound for a busy machine, not a speed target)."""
+    air = SlowAirframe()
+    security = GroundSecurity()
+    with PilotServer(air, port=0) as pilot, VehicleBridge(
+        f"tcp://127.0.0.1:{pilot.port}", retry_s=0.2
+    ) as bridge:
+        web = UvicornThread(create_app(bridge, security=security), security.token)
+        try:
+            wait_until(lambda: bridge.state.value == "connected", 30, "the vehicle link")
+            headers = {**web.auth, "Content-Type": "application/json"}
+            r = httpx.post(f"{web.url}/api/command/take_off", json={"height_m": 1.0},
+                           headers=headers, timeout=30)
+            assert r.status_code == 200, r.text
+            air.finish(landed=False, armed=True)
+            wait_until(lambda: pilot.boards.state is NavState.HOLDING, 30, "holding")
+
+            statuses: Counter[int] = Counter()
+            sent = 0
+            url = f"ws://127.0.0.1:{web.port}/ws?token={web.token}"
+            with ws_connect(url, open_timeout=10) as flood:
+
+                def read() -> None:
+                    try:
+                        while True:
+                            msg = json.loads(flood.recv(30))
+                            if msg["type"] == "result":
+                                statuses[msg["status"]] += 1
+                    except (ConnectionClosed, TimeoutError):
+                        pass
+
+                def write() -> None:
+                    nonlocal sent
+                    for i in range(3000):
+                        flood.send(json.dumps({"type": "command", "id": i, "name": "move_by",
+                                               "args": {"forward_m": 0.1}}))
+                        sent += 1
+
+                reader = threading.Thread(target=read, daemon=True)
+                writer = threading.Thread(target=write, daemon=True)
+                reader.start()
+                writer.start()
+                wait_until(lambda: sent >= 2000, 120, "2000 commands sent on the flooding socket")
+                r = httpx.post(f"{web.url}/api/command/hold", json={}, headers=headers,
+                               timeout=30)
+                assert r.status_code == 200, r.text  # served, not queued behind the flood
+                writer.join(120)
+                wait_until(lambda: sum(statuses.values()) >= 3000, 120,
+                           "every flood command answered")
+                assert statuses[429] > 0  # the excess was refused at once, with a status
+                assert set(statuses) <= {200, 409, 429}
+            reader.join(10)
+        finally:
+            web.close()
