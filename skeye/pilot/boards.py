@@ -36,6 +36,7 @@ from skeye.link.packet_defs import GPS_FIX_VALID, NavState
 from skeye.link.packets import (
     PD,
     Ack,
+    Clock,
     ComeHome,
     CommandError,
     CommandEvent,
@@ -156,6 +157,7 @@ class OnboardBoards:
         self._waypoint_status = 0
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
+        self.clock_until_s = 0.0  # sim time granted by CLOCK (used with --ground-clock)
 
     # -- state ---------------------------------------------------------------------------
     @property
@@ -240,6 +242,8 @@ class OnboardBoards:
         elif isinstance(msg, Stream):
             self._stream = msg if msg.period > 0 else None
             self._stream_next_s = now_s
+        elif isinstance(msg, Clock):
+            self.clock_until_s = msg.until / 1000.0
         else:
             raise _Refused(ResultCode.BAD_VALUE, f"{type(msg).__name__} is not a command")
         return ok
