@@ -56,7 +56,8 @@ class RunSettings:
 
     @property
     def e2_seconds(self) -> float:
-        return 20.0 if self.quick else self.e2_duration_s
+        """E2's hold: ``e2_duration_s``, at most 20 s in a quick run."""
+        return min(20.0, self.e2_duration_s) if self.quick else self.e2_duration_s
 
     def wind_args(self) -> list[str]:
         if self.wind == "none":
