@@ -253,3 +253,9 @@ def run_all(settings: RunSettings, experiments: tuple[str, ...], workdir: str | 
             out["E2"] = run_e2(settings, wd, vision=True)
             out["E2_baseline"] = run_e2(settings, wd, vision=False)
         return out
+
+
+# The pieces a flight script for ``skeye sweep`` builds on (docs/sweeps.md).
+until_state = _until_state
+wait_sim = _wait_sim
+ground_truth = _ground_truth
