@@ -1,5 +1,5 @@
-"""skeye.control: the Python interface to the simulator (ARCHITECTURE.md, "Inside the control
-interface"): a connection with a message thread and a command thread, one class per sensor,
+"""skeye.control: the Python interface to the simulator (docs/control.md): a connection with a
+message thread and a command thread, one class per sensor,
 PI motion control and robot classes, so a flight is a few lines::
 
     with skeye.connect("127.0.0.1:3000") as sim:

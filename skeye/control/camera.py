@@ -2,10 +2,10 @@
 
 How this works: the simulator announces every rendered frame on the control stream
 (``SEN {Type Camera} {Name Down} {Frame n}``); that line updates :class:`CameraSensor` like any
-other sensor. The pixels live on the image server (IMAGE_PROTOCOL.md); :meth:`CameraSensor.image`
-asks it for the newest frame of ``<robot>/<camera>`` over one lazily opened
-:class:`~skeye.sim.image_client.ImageClient` (RAW + META, so the frame number and sim time come
-with the pixels). The image client is not thread-safe: one lock serialises its use.
+other sensor. The pixels live on the image server (docs/protocols/images.md);
+:meth:`CameraSensor.image` asks it for the newest frame of ``<robot>/<camera>`` over one lazily
+opened :class:`~skeye.sim.image_client.ImageClient` (RAW + META, so the frame number and sim
+time come with the pixels). The image client is not thread-safe: one lock serialises its use.
 """
 
 from __future__ import annotations

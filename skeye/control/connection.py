@@ -1,6 +1,6 @@
 """The connection to a simulator: the socket, its two threads, and request/answer matching.
 
-How this works (ARCHITECTURE.md, "Inside the control interface"):
+How this works (user's view: docs/control.md):
 
 - A **message-handler** thread alone reads the socket. It feeds the bytes to the shared sans-IO
   codec (:class:`skeye.sim.protocol.LineDecoder`) and dispatches each message: ``SEN`` to its

@@ -127,7 +127,7 @@ class DriveCommand:
     yaw_rate_rad_s: float = 0.0
 
     def fields(self) -> tuple[tuple[str, float], ...]:
-        """The ``DRIVE`` segments (SIM_PROTOCOL.md names; up positive)."""
+        """The ``DRIVE`` segments (docs/protocols/simulator.md names; up positive)."""
         return (
             ("LinearVelocity", self.forward_m_s),
             ("LateralVelocity", self.right_m_s),

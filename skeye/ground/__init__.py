@@ -1,1 +1,1 @@
-"""skeye.ground (see ARCHITECTURE.md)."""
+"""skeye.ground (see docs/ground.md)."""

@@ -1,7 +1,7 @@
 """Commands ground control accepts from a browser: validation of JSON, then the vehicle call.
 
 How this works: ``COMMANDS`` is a table, one ``CommandSpec`` per command the page can send (the
-skeye packets of PILOT_PACKETS.md section 4, in SI with units in the argument names).
+skeye packets of docs/protocols/packets.md, in SI with units in the argument names).
 ``parse_command(name, body)`` checks a decoded JSON object against it: unknown command, unknown
 or missing argument, wrong type (a JSON ``true`` is not a number), non-finite number, value out
 of range or not one of the choices all raise ``LocalProtocolError`` naming the argument and what

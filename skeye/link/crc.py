@@ -1,4 +1,4 @@
-"""Checksums of the vehicle packet protocol (PILOT_PACKETS.md).
+"""Checksums of the vehicle packet protocol (docs/protocols/packets.md).
 
 How this works: frames carry ``crc16`` of their payload, the AscTec reflected CCITT variant
 (polynomial 0x1021 processed LSB first, register starting at 0x00FF, no final xor), computed

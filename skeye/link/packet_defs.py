@@ -1,4 +1,4 @@
-"""Messages of the vehicle packet protocol (PILOT_PACKETS.md) and the one table that lays them out.
+"""Vehicle packet messages (docs/protocols/packets.md) and the one table that lays them out.
 
 How this works: every structure and command is a frozen dataclass whose integer fields carry the
 AscTec (or skeye) names and raw wire units; SI conversions live in ``skeye.link.scaling``.

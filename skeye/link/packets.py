@@ -1,4 +1,4 @@
-"""Sans-IO codec of the vehicle packet protocol (PILOT_PACKETS.md): bytes <-> messages.
+"""Sans-IO codec of the vehicle packet protocol (docs/protocols/packets.md): bytes <-> messages.
 
 How this works: ``encode(msg)`` looks the message's class up in ``LAYOUTS`` (packet_defs) and
 packs its fields in the table's order, little-endian, then frames the payload the way that

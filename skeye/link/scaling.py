@@ -3,7 +3,7 @@
 How this works: each scaled wire quantity has a pair of named converters (``rad_to_mdeg`` /
 ``mdeg_to_rad`` ...). "To wire" converters round to the nearest count and refuse NaN or
 infinity with ``LocalProtocolError``; only the stick and thrust converters clamp, because the
-spec defines a stick range and full stick is a legitimate request. Structure helpers
+protocol defines a stick range and full stick is a legitimate request. Structure helpers
 (``imu_calcdata_from_si`` / ``imu_calcdata_to_si`` ...) build and read whole messages from small
 frozen SI dataclasses; when building they saturate int16 sensor fields (accelerations, NAV_STATUS
 velocities) at their wire limits, as a real sensor saturates, so a hard landing cannot crash the
@@ -12,7 +12,7 @@ telemetry.
 Frames: AscTec's IMU body frame is x forward, y right, z down (FRD), the same as the simulator
 protocol's; "nick" is pitch. Earth-frame vectors (IMU_CALCDATA acc_x/y/z and speed_x/y/z,
 NAV_STATUS x/y/z and vx/vy/vz) are world NED: x north, y east, z down. GPS_DATA is the
-exception the spec names: speed_x is east, speed_y north. ``height`` fields are positive up.
+exception the protocol names: speed_x is east, speed_y north. ``height`` fields are positive up.
 Yaw on the wire is 0..360000 (1/1000 deg, clockwise from north); yaw in SI is wrapped to
 [-pi, pi).
 """

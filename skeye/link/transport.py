@@ -13,7 +13,7 @@ Every link has the same three calls: ``send(data)`` writes all of ``data`` (thre
 lock per link, so two threads never interleave frames), ``recv(timeout_s)`` returns whatever
 arrived within the timeout (``b""`` when nothing did), and ``close()`` (idempotent; a ``recv``
 blocked in another thread returns promptly with ``LinkClosed``). A peer that goes away makes
-``recv`` and ``send`` raise ``LinkClosed``. One thread should own ``recv`` (STYLE.md rule 8).
+``recv`` and ``send`` raise ``LinkClosed``. One thread should own ``recv``.
 """
 
 from __future__ import annotations

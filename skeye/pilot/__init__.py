@@ -1,1 +1,1 @@
-"""skeye.pilot (see ARCHITECTURE.md)."""
+"""skeye.pilot (see docs/pilot.md)."""

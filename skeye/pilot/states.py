@@ -1,4 +1,4 @@
-"""The pilot's flight states as one transition table (STYLE.md rule 4).
+"""The pilot's flight states as one transition table.
 
 How this works: ``TRANSITIONS`` maps ``(state, event) -> next state``; ``BUSY`` lists the pairs
 that are refused because the vehicle is in the middle of something it finishes by itself
@@ -6,7 +6,7 @@ that are refused because the vehicle is in the middle of something it finishes b
 ``FlightStateMachine.fire(event)`` applies the table and raises ``IllegalTransition`` with the
 RESULT code the pilot answers (4 refused in this state, 5 busy), so a command that does not fit
 the state is rejected before anything is sent to the simulator. States are the NAV_STATUS
-states of PILOT_PACKETS.md section 4.
+states of docs/protocols/packets.md.
 """
 
 from __future__ import annotations

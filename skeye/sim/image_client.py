@@ -1,4 +1,4 @@
-"""A small blocking client of the image server (IMAGE_PROTOCOL.md).
+"""A small blocking client of the image server (docs/protocols/images.md).
 
 Extension requests (camera, format, META, stream) get no reply when they succeed, so a refused
 one (an unknown camera, say) surfaces as an error frame in place of the next frame: the next

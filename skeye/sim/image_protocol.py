@@ -1,4 +1,4 @@
-"""The image protocol (IMAGE_PROTOCOL.md): USARSim's UPIS kept byte for byte, plus skeye extensions.
+"""The image protocol (docs/protocols/images.md): USARSim's UPIS byte for byte, plus extensions.
 
 How this works (sans-IO: no sockets, no threads, no clock):
 

@@ -1,4 +1,4 @@
-"""The image server: camera frames to many TCP clients (IMAGE_PROTOCOL.md, port 5003).
+"""The image server: camera frames to many TCP clients (docs/protocols/images.md, port 5003).
 
 How this works:
 

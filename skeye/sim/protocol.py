@@ -1,4 +1,4 @@
-"""Sans-IO codec for the simulator control protocol (SIM_PROTOCOL.md, USARSim Gamebots-style).
+"""Sans-IO codec for the simulator control protocol (docs/protocols/simulator.md, Gamebots-style).
 
 How this works: bytes go into a :class:`LineDecoder`, which splits them at ``\\r``, ``\\n`` or
 ``\\r\\n``, decodes UTF-8 and hands each line to :func:`parse_line`; out come :class:`Message`

@@ -1,4 +1,4 @@
-"""The control server: SIM_PROTOCOL.md over TCP, several clients, one robot per connection.
+"""The control server: docs/protocols/simulator.md over TCP, many clients, one robot per connection.
 
 How this works: an accept thread hands each connection to a :class:`ClientSession` with two
 threads: a reader that decodes lines with the sans-IO codec (:mod:`skeye.sim.protocol`) and

@@ -10,7 +10,7 @@ acts against and an extra force on the centre of mass (NED, N). Modes:
   a first-order filter with time constant L/V (length scales L_u = L_v = 30 m, L_w = 10 m, the
   low-altitude values of MIL-F-8785C at ~10 m, V = max(mean speed, 1 m/s)), with standard
   deviations ``sigma_m_s`` horizontally and half that vertically. Seeded.
-- ``random_force``: the paper's disturbance (EXPERIMENTS.md): a horizontal force on the centre
+- ``random_force``: the paper's disturbance (docs/experiments.md): a horizontal force on the centre
   of mass whose direction is uniform in the plane and magnitude uniform in [0, f_max_n],
   redrawn every ``tick_s`` (default 1/30 s). Seeded.
 

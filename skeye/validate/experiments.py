@@ -1,4 +1,4 @@
-"""The paper's two experiments (EXPERIMENTS.md), run through the real processes.
+"""The paper's two experiments (docs/experiments.md), run through the real processes.
 
 How this works: each run starts ``skeye sim`` (lockstep, seeded, camera images served, every
 line recorded with ``--record``) and ``skeye pilot`` (landing-pad vision on frames from the

@@ -2,7 +2,7 @@
 
 Every figure in the summary is computed here from the recorded series (``e1_figures``,
 ``e2_figures``); nothing is typed in. With several seeds each figure is the median over the
-seeds and ``runs`` lists every seed's figures (EXPERIMENTS.md, "Sweeps").
+seeds and ``runs`` lists every seed's figures (docs/experiments.md).
 """
 
 from __future__ import annotations

@@ -105,7 +105,7 @@ class PadEstimate:
     quality: float
 
     def to_json_dict(self) -> dict[str, Any]:
-        """The LANDING_PAD.md command-line JSON form, plus ``offset_body_m``."""
+        """The docs/landing-pad.md command-line JSON form, plus ``offset_body_m``."""
 
         def pair(p: tuple[float, float] | None) -> list[float] | None:
             return None if p is None else [float(p[0]), float(p[1])]

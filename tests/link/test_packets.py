@@ -1,4 +1,4 @@
-"""Tests of the vehicle packet codec (PILOT_PACKETS.md): one table both ways, parsers, fuzz."""
+"""Tests of the vehicle packet codec (docs/protocols/packets.md): one table both ways, fuzz."""
 
 from __future__ import annotations
 

@@ -47,7 +47,7 @@ def test_quick_validation_reports_every_figure_from_its_series(tmp_path: Path):
     assert e2["duration_s"] > 15 and e2["f_max_n"] == 0.3
     assert summary["paper"] == {"E1_max_rel_error": 0.02, "E2_std_m": 0.0249, "E2_max_m": 0.1327}
 
-    # Every figure EXPERIMENTS.md names appears in the report, beside the paper's.
+    # Every figure docs/experiments.md names appears in the report, beside the paper's.
     for needle in ("max absolute error", "max relative error", "RMS error",
                    "frames with no detection", "mean distance", "standard deviation",
                    "maximum", "baseline", "2.49 cm", "13.27 cm"):

@@ -15,7 +15,7 @@ from skeye.vision.pad import SKEYE_4, PadDefinition, Ring
 
 from .helpers import FOV_H_RAD, H, W, grass, rings_fully_in_view
 
-HEIGHT_TOL_REL = 0.01  # LANDING_PAD.md: at most 1 %
+HEIGHT_TOL_REL = 0.01  # docs/landing-pad.md: at most 1 %
 OFFSET_TOL_M = 0.01  # and 1 cm
 
 

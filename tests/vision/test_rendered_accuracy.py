@@ -1,4 +1,4 @@
-"""Detector accuracy on frames rendered by the simulator at known poses (LANDING_PAD.md).
+"""Detector accuracy on frames rendered by the simulator at known poses (docs/landing-pad.md).
 
 Each pose is a robot spawned in the air with that position and attitude; its first frame is
 rendered from exactly that state (before the controller moves it). Truth: the camera's height

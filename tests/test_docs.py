@@ -1,0 +1,262 @@
+"""The documentation stays inside the repository and its links resolve.
+
+How this works: every file the repository holds (``git ls-files``, untracked files included, or
+a walk of the folders when there is no git checkout) under README.md, docs/, skeye/, tests/,
+examples/ and benchmarks/ is searched for references to documents that live outside the
+repository (the old specification folder and its file names). Every markdown link in README.md
+and docs/**/*.md is resolved: a relative target must be a file or folder inside the repository,
+and a ``#anchor`` into a markdown file must name one of its headings (GitHub's slug rules).
+The checkers are plain functions, tested here on small files too, so the test can fail.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CHECKED = ("README.md", "docs", "skeye", "tests", "examples", "benchmarks")
+
+# Documents a user of the project does not have. Spelled in pieces so this file does not match.
+OUTSIDE_REFERENCES = (
+    "../" + "shared",
+    "shared" + "/spec",
+    "/work" + "/",
+    *(
+        name + ".md"
+        for name in (
+            "SIM_" + "PROTOCOL",
+            "IMAGE_" + "PROTOCOL",
+            "PILOT_" + "PACKETS",
+            "LANDING_" + "PAD",
+            "EXPERI" + "MENTS",
+            "ARCHI" + "TECTURE",
+            "STY" + "LE",
+        )
+    ),
+)
+
+_FENCE = re.compile(r"^\s*(```|~~~)")
+_INLINE_CODE = re.compile(r"`+[^`]*`+")
+_LINK = re.compile(r"!?\[(?:[^\]\[]|\[[^\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
+_REF_DEF = re.compile(r"^\s{0,3}\[[^\]]+\]:\s*<?(\S+?)>?(?:\s+\"[^\"]*\")?\s*$")
+_HEADING = re.compile(r"^\s{0,3}(#{1,6})\s+(.*?)\s*#*\s*$")
+_HTML_ANCHOR = re.compile(r"<a\s+(?:id|name)=\"([^\"]+)\"", re.IGNORECASE)
+_SCHEME = re.compile(r"^[a-zA-Z][a-zA-Z0-9+.-]*:")
+
+
+def repo_files(root: Path = ROOT) -> list[Path]:
+    """The files of the repository under the checked paths (tracked and untracked, not ignored)."""
+    try:
+        out = subprocess.run(
+            ["git", "ls-files", "-co", "--exclude-standard", "--", *CHECKED],
+            cwd=root, capture_output=True, text=True, check=True, timeout=60,
+        ).stdout
+        files = [root / line for line in out.splitlines() if line]
+    except (OSError, subprocess.SubprocessError):
+        files = []
+        for top in CHECKED:
+            base = root / top
+            if base.is_file():
+                files.append(base)
+            elif base.is_dir():
+                files.extend(p for p in base.rglob("*") if p.is_file()
+                             and "__pycache__" not in p.parts)
+    return [f for f in files if f.is_file()]
+
+
+def text_of(path: Path) -> str | None:
+    """The file as UTF-8 text, or None for a binary file."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        return None
+
+
+def outside_references(text: str) -> list[tuple[int, str]]:
+    """(line number, reference) for every mention of a document outside the repository."""
+    found: list[tuple[int, str]] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        for ref in OUTSIDE_REFERENCES:
+            if ref in line:
+                found.append((number, ref))
+    return found
+
+
+def slug(heading: str, seen: dict[str, int]) -> str:
+    """GitHub's anchor for a heading's text; ``seen`` numbers repeats (-1, -2, ...)."""
+    text = re.sub(r"!?\[([^\]]*)\]\([^)]*\)", r"\1", heading)  # a link reads as its text
+    text = re.sub(r"[^\w\- ]", "", text.strip().lower())
+    base = text.replace(" ", "-")
+    count = seen.get(base, 0)
+    seen[base] = count + 1
+    return base if count == 0 else f"{base}-{count}"
+
+
+def anchors(text: str) -> set[str]:
+    """Every anchor a markdown text defines: heading slugs and HTML ``<a id=...>``."""
+    out: set[str] = set()
+    seen: dict[str, int] = {}
+    in_code = False
+    for line in text.splitlines():
+        if _FENCE.match(line):
+            in_code = not in_code
+            continue
+        if in_code:
+            continue
+        match = _HEADING.match(line)
+        if match:
+            out.add(slug(match.group(2), seen))
+        out.update(_HTML_ANCHOR.findall(line))
+    return out
+
+
+def links(text: str) -> list[tuple[int, str]]:
+    """(line number, target) of every markdown link and image outside code."""
+    found: list[tuple[int, str]] = []
+    in_code = False
+    for number, line in enumerate(text.splitlines(), start=1):
+        if _FENCE.match(line):
+            in_code = not in_code
+            continue
+        if in_code:
+            continue
+        plain = _INLINE_CODE.sub("", line)
+        found.extend((number, target) for target in _LINK.findall(plain))
+        ref = _REF_DEF.match(plain)
+        if ref:
+            found.append((number, ref.group(1)))
+    return found
+
+
+def broken_links(path: Path, root: Path = ROOT) -> list[str]:
+    """What is wrong with the links of one markdown file (empty when all resolve)."""
+    text = path.read_text(encoding="utf-8")
+    problems: list[str] = []
+    for number, target in links(text):
+        where = f"{path.relative_to(root)}:{number}: {target}"
+        if _SCHEME.match(target):
+            if target.lower().startswith(("http://", "https://", "mailto:")):
+                continue
+            problems.append(f"{where}: links outside the repository")
+            continue
+        file_part, _, anchor = target.partition("#")
+        if file_part.startswith("/"):
+            problems.append(f"{where}: absolute path (links outside the repository)")
+            continue
+        resolved = (path.parent / file_part).resolve() if file_part else path.resolve()
+        if not resolved.is_relative_to(root.resolve()):
+            problems.append(f"{where}: points outside the repository")
+            continue
+        if not resolved.exists():
+            problems.append(f"{where}: no such file")
+            continue
+        if anchor and resolved.suffix == ".md" and resolved.is_file():
+            if anchor not in anchors(resolved.read_text(encoding="utf-8")):
+                problems.append(f"{where}: no heading with anchor #{anchor}")
+    return problems
+
+
+def markdown_docs(root: Path = ROOT) -> list[Path]:
+    return [p for p in repo_files(root)
+            if p.suffix == ".md" and (p == root / "README.md" or p.is_relative_to(root / "docs"))]
+
+
+# --- the repository -----------------------------------------------------------------------
+
+
+def test_nothing_refers_outside_the_repository():
+    this_file = Path(__file__).resolve()
+    problems: list[str] = []
+    files = repo_files()
+    assert any(p.name == "protocol.py" for p in files), "the file list is empty or wrong"
+    for path in files:
+        if path.resolve() == this_file:
+            continue
+        text = text_of(path)
+        if text is None:
+            continue
+        problems.extend(
+            f"{path.relative_to(ROOT)}:{n}: refers to {ref!r}"
+            for n, ref in outside_references(text)
+        )
+    assert not problems, "references to documents outside the repository:\n" + "\n".join(problems)
+
+
+def test_markdown_links_resolve():
+    docs = markdown_docs()
+    assert ROOT / "README.md" in docs and ROOT / "docs" / "README.md" in docs
+    problems = [problem for path in docs for problem in broken_links(path)]
+    assert not problems, "broken links:\n" + "\n".join(problems)
+
+
+@pytest.mark.parametrize(
+    "page",
+    [
+        "protocols/simulator.md",
+        "protocols/images.md",
+        "protocols/packets.md",
+        "landing-pad.md",
+        "experiments.md",
+    ],
+)
+def test_protocol_pages_exist_and_are_indexed(page):
+    assert (ROOT / "docs" / page).is_file()
+    index = (ROOT / "docs" / "README.md").read_text(encoding="utf-8")
+    assert f"]({page})" in index, f"docs/README.md does not link {page}"
+
+
+def test_every_docs_page_is_indexed():
+    index = (ROOT / "docs" / "README.md").read_text(encoding="utf-8")
+    linked = {target.partition("#")[0] for _, target in links(index)}
+    pages = {
+        p.relative_to(ROOT / "docs").as_posix()
+        for p in markdown_docs()
+        if p.is_relative_to(ROOT / "docs") and p.name != "README.md"
+    }
+    assert pages - linked == set()
+
+
+# --- the checkers themselves ----------------------------------------------------------------
+
+
+def test_checker_reports_outside_references():
+    text = "see ../" + "shared/spec/SIM_" + "PROTOCOL.md\nfine line\n"
+    found = outside_references(text)
+    assert (1, "../" + "shared") in found and (1, "SIM_" + "PROTOCOL.md") in found
+    assert all(number == 1 for number, _ in found)
+    assert outside_references("docs/protocols/simulator.md and docs/architecture.md") == []
+
+
+def test_checker_reports_broken_and_outside_links(tmp_path):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "b.md").write_text("# Title\n\n## The `SET` command (wind)\n")
+    page = tmp_path / "docs" / "a.md"
+    page.write_text(
+        "# A\n"
+        "[ok](b.md) [anchor](b.md#the-set-command-wind) [self](#a) [web](https://example.org)\n"
+        "[gone](c.md) [bad anchor](b.md#nope) [out](../../elsewhere.md) [abs](/etc/passwd)\n"
+        "`[in code](c.md)`\n"
+        "```\n[in a fence](c.md)\n```\n"
+        "[file](file:///etc/passwd)\n"
+    )
+    problems = broken_links(page, root=tmp_path)
+    assert len(problems) == 5, problems
+    assert any("c.md: no such file" in p for p in problems)
+    assert any("#nope" in p for p in problems)
+    assert any("elsewhere.md: points outside" in p for p in problems)
+    assert any("/etc/passwd: absolute path" in p for p in problems)
+    assert any("file:///etc/passwd: links outside" in p for p in problems)
+
+
+def test_slugs_follow_github():
+    seen: dict[str, int] = {}
+    assert slug("GETGEO and GETCONF", seen) == "getgeo-and-getconf"
+    assert slug("Messages (simulator to client)", seen) == "messages-simulator-to-client"
+    e1 = "E1: height from the pad (paper Fig. 6)"
+    assert slug(e1, seen) == "e1-height-from-the-pad-paper-fig-6"
+    assert slug("RESULT codes", seen) == "result-codes"
+    assert slug("RESULT codes", seen) == "result-codes-1"
