@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from types import TracebackType
 from typing import Any, Protocol
 
 from skeye.errors import LocalProtocolError
@@ -35,7 +36,21 @@ class Backend(Protocol):
     def close(self) -> None: ...
 
 
-class LocalBackend:
+class _Closing:
+    """``with backend:`` closes it on any exit."""
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> _Closing:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+class LocalBackend(_Closing):
     """A pool of ``workers`` trial processes on this machine."""
 
     def __init__(self, workers: int | None = None, keep: Callable[[dict[str, Any]], dict[str, str]]
@@ -61,15 +76,12 @@ class LocalBackend:
                 for fut in done:
                     yield fut.result()
 
-    def close(self) -> None:
-        pass
-
 
 def _ray_trial(trial: dict[str, Any]) -> Row:
     return run_trial_process(trial)
 
 
-class RayBackend:
+class RayBackend(_Closing):
     """One Ray task per trial on a cluster (joined, or started here on loopback)."""
 
     def __init__(self, address: str | None = None, workers: int | None = None, cpus: float = 1.0,
@@ -112,7 +124,9 @@ class RayBackend:
                 yield row
 
     def close(self) -> None:
-        self.ray.shutdown()
+        """Disconnect (and stop the cluster if this started it); idempotent."""
+        if self.ray.is_initialized():
+            self.ray.shutdown()
 
 
 def make_backend(name: str, address: str | None, workers: int | None, cpus: float = 1.0,

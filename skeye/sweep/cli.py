@@ -73,8 +73,8 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
     """Run a sweep spec and write results.csv/.parquet and report.md into ``out``."""
     spec = load_spec(spec_path, quick)
     out.mkdir(parents=True, exist_ok=True)
-    backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
     start = time.monotonic()
+    backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
     try:
         result = run_trials(spec, out, backend, spec.name, show_progress)
     finally:
