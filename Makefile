@@ -2,6 +2,7 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
+UP_ARGS ?=   # more `skeye up` options for `make run`, e.g. UP_ARGS="--ground-port 8081"
 
 .PHONY: run test lint bench clean chromium
 
@@ -13,8 +14,10 @@ $(BIN)/python:
 # whenever one of those sources changes, so the compiled modules never lag behind the code.
 NATIVE_SOURCES := $(shell $(PYTHON) skeye/native.py --sources)
 
+# skeye/buildprogress.py runs `pip install -v` and shows only its progress lines (which step,
+# which file is compiling), so a slow build never looks hung.
 $(VENV)/.installed: $(BIN)/python pyproject.toml setup.py skeye/native.py $(NATIVE_SOURCES)
-	$(BIN)/pip install -q -e .
+	$(BIN)/python skeye/buildprogress.py -e .
 	touch $@
 
 # The test extras only (the package itself is already built and installed above).
@@ -24,8 +27,10 @@ $(VENV)/.test-installed: $(VENV)/.installed
 		['project']['optional-dependencies']['test']))")
 	touch $@
 
+# exec: skeye up is make's own child, so make's SIGTERM reaches it; on SIGINT make passes
+# nothing on and waits, which skeye up notices (skeye/processes.py, ParentWatch) and stops.
 run: $(VENV)/.installed
-	MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/skeye up --world pad
+	MUJOCO_GL=$${MUJOCO_GL:-egl} exec $(BIN)/skeye up --world pad $(UP_ARGS)
 
 test: $(VENV)/.test-installed chromium
 	$(BIN)/ruff check .

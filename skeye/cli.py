@@ -31,11 +31,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
     from skeye.sim.engine import Simulation, SimulationRunner
+    from skeye.sim.robot_config import validate_robot_dirs
     from skeye.sim.server import ControlServer
     from skeye.sim.wind import make_settings, parse_params
     from skeye.sim.world import load_world
 
     world = load_world(args.world)
+    validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
     wind = make_settings(args.wind, parse_params(args.wind_params))
     sim = Simulation(
         world, seed=args.seed, timestep_s=args.timestep, wind=wind, robot_dirs=tuple(args.robot_dir)

@@ -4,19 +4,24 @@ Every server prints its address on stdout once it listens (``control protocol on
 ``image server on ...``, ``ground control on tcp://...``); :func:`start_skeye` waits for those
 lines, returns their regex matches, and then keeps draining the child's output so it never
 blocks on a full pipe. Used by ``skeye validate`` and the benchmarks.
+
+Also here: :func:`check_ports_free` (``skeye up`` and ``skeye pilot`` check their ports before
+starting anything) and :class:`ParentWatch` (``skeye up`` stops when ``make run`` is signalled).
 """
 
 from __future__ import annotations
 
 import os
 import re
+import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
 from collections.abc import Mapping, Sequence
 
-from skeye.errors import SkeyeError
+from skeye.errors import ConfigError, SkeyeError
 
 
 def start_skeye(
@@ -66,3 +71,85 @@ def stop_process(proc: subprocess.Popen[str], timeout_s: float = 15.0) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(5)
+
+
+def port_in_use(host: str, port: int) -> bool:
+    """Whether something already listens on ``host:port`` (a test bind; TIME_WAIT is free)."""
+    if port == 0:
+        return False
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError:
+            return True
+    return False
+
+
+def check_ports_free(ports: Sequence[tuple[str, str, int, str]]) -> None:
+    """Check every ``(what, host, port, option)`` before anything starts.
+
+    Raises:
+        ConfigError: two of them share a port, or one is taken; the message names the port,
+            what wanted it and the option that moves it.
+    """
+    seen: dict[int, str] = {}
+    for what, _, port, option in ports:
+        if port and port in seen:
+            raise ConfigError(
+                f"port {port} is given to both {seen[port]} and {what}; move one with {option}"
+            )
+        seen[port] = f"{what} ({option})"
+    for what, host, port, option in ports:
+        if port_in_use(host, port):
+            raise ConfigError(
+                f"port {port} on {host} (for {what}) is already in use - another skeye up or "
+                f"server running? Stop it, or move {what} with {option} PORT"
+            )
+
+
+_FATAL_SIGNALS = (signal.SIGHUP, signal.SIGINT, signal.SIGQUIT, signal.SIGTERM)
+
+
+def _signal_mask(pid: int, field: str) -> int | None:
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1], 16)
+    except (OSError, ValueError):
+        return None
+    return None
+
+
+class ParentWatch:
+    """Notices when the process that started this one is going away.
+
+    ``make`` catches SIGINT (and SIGTERM, SIGHUP, SIGQUIT) itself and then waits for its
+    children without passing SIGINT on, so ``kill -INT <make's pid>`` would leave ``skeye up``
+    and its servers running. GNU make's handler first resets the signal to its default
+    disposition; this class reads the parent's caught-signal mask (Linux ``/proc``) and reports
+    once a fatal signal that the parent used to catch is no longer caught, or once the parent
+    has exited (this process was re-parented). Where ``/proc`` is missing it reports only the
+    latter.
+    """
+
+    def __init__(self) -> None:
+        self.pid = os.getppid()
+        self._caught = _signal_mask(self.pid, "SigCgt")
+
+    def stopping(self) -> str | None:
+        """Why the parent is going away, or None while it is not."""
+        if os.getppid() != self.pid:
+            return f"parent process {self.pid} exited"
+        if self._caught is None:
+            return None
+        now = _signal_mask(self.pid, "SigCgt")
+        if now is None:
+            return f"parent process {self.pid} exited"
+        for sig in _FATAL_SIGNALS:
+            bit = 1 << (sig - 1)
+            if self._caught & bit and not now & bit:
+                return f"parent process {self.pid} is handling {sig.name}"
+        return None

@@ -37,7 +37,7 @@ from fastapi.staticfiles import StaticFiles
 
 from skeye.errors import LocalProtocolError
 from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
-from skeye.ground.commands import COMMANDS, describe_commands, parse_command
+from skeye.ground.commands import COMMANDS, VehicleLimits, describe_commands, parse_command
 from skeye.ground.video import VideoRelay
 
 log = logging.getLogger(__name__)
@@ -54,14 +54,16 @@ class CommandError(Exception):
         self.message = message
 
 
-async def perform(bridge: VehicleBridge, name: str, body: Any) -> tuple[int, dict[str, Any]]:
+async def perform(
+    bridge: VehicleBridge, name: str, body: Any, limits: VehicleLimits | None = None
+) -> tuple[int, dict[str, Any]]:
     """Validate and execute one command; returns (HTTP status, JSON answer)."""
     if name not in COMMANDS:
         raise CommandError(
             404, f"unknown command {name!r}; known commands: {', '.join(COMMANDS)}"
         )
     try:
-        command = parse_command(name, body)
+        command = parse_command(name, body, limits)
     except LocalProtocolError as exc:
         raise CommandError(422, str(exc)) from None
     try:
@@ -76,9 +78,16 @@ def _error(status: int, message: str) -> JSONResponse:
 
 
 def create_app(
-    bridge: VehicleBridge, video: VideoRelay | None = None, *, telemetry_hz: float = 10.0
+    bridge: VehicleBridge,
+    video: VideoRelay | None = None,
+    *,
+    telemetry_hz: float = 10.0,
+    limits: VehicleLimits | None = None,
 ) -> FastAPI:
-    """The ground-control app; the caller owns (starts and closes) ``bridge`` and ``video``."""
+    """The ground-control app; the caller owns (starts and closes) ``bridge`` and ``video``.
+    ``limits``: the vehicle's speed limits (default: the hummingbird robot file's)."""
+    if limits is None:
+        limits = VehicleLimits.for_robot("hummingbird")
     app = FastAPI(title="skeye ground control", docs_url="/api/docs", redoc_url=None)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     period_s = 1.0 / telemetry_hz
@@ -100,7 +109,7 @@ def create_app(
 
     @app.get("/api/commands")
     async def commands() -> dict[str, Any]:
-        return {"commands": describe_commands()}
+        return {"commands": describe_commands(limits)}
 
     @app.post("/api/command/{name}")
     async def command(name: str, request: Request) -> Response:
@@ -112,7 +121,7 @@ def create_app(
             except (json.JSONDecodeError, UnicodeDecodeError) as exc:
                 return _error(400, f"request body is not valid JSON: {exc}")
         try:
-            status, answer = await perform(bridge, name, body)
+            status, answer = await perform(bridge, name, body, limits)
         except CommandError as exc:
             return _error(exc.status, exc.message)
         return JSONResponse(answer, status_code=status)
@@ -157,7 +166,9 @@ def create_app(
         async def run_command(msg: dict[str, Any]) -> None:
             ident = msg.get("id")
             try:
-                status, answer = await perform(bridge, str(msg.get("name")), msg.get("args"))
+                status, answer = await perform(
+                    bridge, str(msg.get("name")), msg.get("args"), limits
+                )
             except CommandError as exc:
                 status, answer = exc.status, {"error": exc.message}
             await send({"type": "result", "id": ident, "status": status, **answer})
@@ -165,7 +176,7 @@ def create_app(
         await send(
             {
                 "type": "hello",
-                "commands": describe_commands(),
+                "commands": describe_commands(limits),
                 "history": bridge.history(),
                 "video": video_status(),
             }

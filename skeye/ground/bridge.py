@@ -56,7 +56,8 @@ from skeye.link.vehicle import Vehicle
 log = logging.getLogger(__name__)
 
 RATE_WINDOW_S = 2.0
-STREAM_POLL_MASK = int(PollMask.LL_STATUS | PollMask.IMU_CALCDATA | PollMask.GPS_DATA)
+# GPS_DATA_ADVANCED: the receiver's fix and the vehicle's fused position estimate ("here").
+STREAM_POLL_MASK = int(PollMask.LL_STATUS | PollMask.IMU_CALCDATA | PollMask.GPS_DATA_ADVANCED)
 STREAM_SKEYE_MASK = int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD)
 KEEPALIVE_MASK = int(PollMask.CURRENT_WAY)  # not streamed, so its answer times the round trip
 HISTORY_POINTS = 3000  # NAV_STATUS samples kept for a page that opens late (5 min at 10 Hz)

@@ -6,8 +6,10 @@ serves the page on http://127.0.0.1:8080/ (``--host`` to listen elsewhere); ``--
 
 ``skeye up`` starts ``skeye sim`` (with its image server), ``skeye pilot`` and ``skeye ground``
 as child processes on this machine, waits until each one listens, prints the URL, and on Ctrl-C
-or SIGTERM (or when one of them dies) stops them all: SIGTERM in reverse order, then SIGKILL
-for any that has not exited after a few seconds.
+or SIGTERM (or when one of them dies, or when the ``make`` that started it is signalled) stops
+them all: SIGTERM in reverse order, then SIGKILL for any that has not exited after a few
+seconds. Before starting anything it checks that each of its four ports is free and names the
+option that moves a taken one.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ def run_ground(args: argparse.Namespace) -> int:
 
     from skeye.ground.app import create_app
     from skeye.ground.bridge import VehicleBridge
+    from skeye.ground.commands import VehicleLimits
     from skeye.ground.video import VideoRelay
 
     if args.camera_fov_deg is not None:
@@ -78,7 +81,7 @@ def run_ground(args: argparse.Namespace) -> int:
                 attitude=bridge.attitude_rad,
             ).start()
         try:
-            app = create_app(bridge, video)
+            app = create_app(bridge, video, limits=VehicleLimits.for_robot(args.robot))
             config = uvicorn.Config(app, log_level="warning", ws_ping_interval=None)
             server = uvicorn.Server(config)
             shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
@@ -116,7 +119,12 @@ def _add_ground(sub: Any) -> None:
         default=None,
         help="camera horizontal field of view (default: the --robot class's camera)",
     )
-    p.add_argument("--robot", default="hummingbird", help="robot class the camera belongs to")
+    p.add_argument(
+        "--robot",
+        default="hummingbird",
+        help="the vehicle's robot class: its camera, and the speed limits commands are checked "
+        "against",
+    )
     p.add_argument("--video-fps", type=float, default=8.0, help="camera frames per second")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
@@ -175,8 +183,17 @@ def run_up(args: argparse.Namespace) -> int:
         children.append((what, child))
         _wait_listening(port, child, what, START_DEADLINE_S)
 
+    from skeye.processes import ParentWatch, check_ports_free
+
+    parent = ParentWatch()
     status = 0
     try:
+        check_ports_free([
+            ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
+            ("the image server", "127.0.0.1", args.image_port, "--image-port"),
+            ("the pilot", "127.0.0.1", args.pilot_port, "--pilot-port"),
+            ("ground control", args.host, args.ground_port, "--ground-port"),
+        ])
         start(
             "simulator",
             _child_argv(
@@ -210,6 +227,10 @@ def run_up(args: argparse.Namespace) -> int:
             flush=True,
         )
         while not stop.wait(0.5):
+            going = parent.stopping()  # `make run` got Ctrl-C or a signal (see ParentWatch)
+            if going is not None:
+                print(f"skeye up: {going}; stopping", flush=True)
+                break
             dead = [(w, c) for w, c in children if c.poll() is not None]
             if dead:
                 what, child = dead[0]

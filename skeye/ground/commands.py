@@ -9,8 +9,12 @@ was expected. Nothing here does I/O: ``run_command(vehicle, command)`` is the on
 command becomes a ``skeye.link.Vehicle`` call (and so one packet on the wire).
 
 Ranges are what the wire can carry (int16 mm/s, uint16 mm, ...) narrowed to what makes sense
-for a small multirotor; whether the vehicle accepts a value *now* is the vehicle's call, and
-its refusal comes back as a RESULT with a code and a reason.
+for a small multirotor. Speeds have one more bound, the vehicle's own: :class:`VehicleLimits`
+holds the ``[controller]`` limits of the robot file (``max_speed_m_s``, ``max_climb_m_s``,
+``max_yaw_rate_rad_s``), the same numbers the pilot flies by; a speed over them is refused with
+the limit and where it comes from, and ``describe_commands`` advertises it (``max`` and
+``limit``) to the page. Whether the vehicle accepts a value *now* is the vehicle's call, and its
+refusal comes back as a RESULT with a code and a reason.
 """
 
 from __future__ import annotations
@@ -28,6 +32,32 @@ Value = float | str
 
 
 @dataclass(frozen=True)
+class VehicleLimits:
+    """The vehicle's speed limits: its robot file's ``[controller]`` table."""
+
+    max_speed_m_s: float
+    max_climb_m_s: float
+    max_yaw_rate_rad_s: float
+    source: str  # where they come from, for messages: "robot file hummingbird"
+
+    @classmethod
+    def for_robot(cls, robot: str) -> VehicleLimits:
+        """The limits of a robot class (name or TOML path), as ``skeye sim`` loads it."""
+        from skeye.sim.robot_config import load_robot_config
+
+        config = load_robot_config(robot)
+        c = config.controller
+        return cls(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s,
+                   f"robot file {config.class_name}")
+
+    def bound(self, kind: str) -> tuple[float, str]:
+        """The limit for ``kind`` ('speed', 'climb', 'yaw_rate') and its key in the file."""
+        key = {"speed": "max_speed_m_s", "climb": "max_climb_m_s",
+               "yaw_rate": "max_yaw_rate_rad_s"}[kind]
+        return float(getattr(self, key)), key
+
+
+@dataclass(frozen=True)
 class Arg:
     """One argument: a number in ``[lo, hi]`` or a string from ``choices``."""
 
@@ -37,9 +67,11 @@ class Arg:
     default: Value | None = None  # None: required
     choices: tuple[str, ...] = ()
     help: str = ""
+    limit: str = ""  # a VehicleLimits bound on |value|: "speed", "climb" or "yaw_rate"
 
-    def check(self, command: str, value: Any) -> Value:
-        """The value if valid; raises LocalProtocolError naming what is wrong."""
+    def check(self, command: str, value: Any, limits: VehicleLimits | None = None) -> Value:
+        """The value if valid; raises LocalProtocolError naming what is wrong (for a speed
+        over the vehicle's limit: the limit, its key and the robot file)."""
         where = f"{command}: argument {self.name!r}"
         if self.choices:
             if not isinstance(value, str) or value.lower() not in self.choices:
@@ -56,7 +88,21 @@ class Arg:
             raise LocalProtocolError(
                 f"{where} must be within [{self.lo:g}, {self.hi:g}], got {number:g}"
             )
+        if self.limit and limits is not None:
+            bound, key = limits.bound(self.limit)
+            if abs(number) > bound + 1e-9:
+                raise LocalProtocolError(
+                    f"{where} is {number:g}, over the vehicle's limit of {bound:g} "
+                    f"({key} in its {limits.source}); not sent"
+                )
         return number
+
+    def effective_range(self, limits: VehicleLimits | None) -> tuple[float, float]:
+        """``[lo, hi]`` narrowed by the vehicle's limit."""
+        if not self.limit or limits is None:
+            return self.lo, self.hi
+        bound, _ = limits.bound(self.limit)
+        return max(self.lo, -bound), min(self.hi, bound)
 
 
 @dataclass(frozen=True)
@@ -76,10 +122,11 @@ COMMANDS: dict[str, CommandSpec] = {
             "velocity",
             "VELOCITY 0x80",
             (
-                Arg("forward_m_s", -5.0, 5.0, 0.0, help="body forward"),
-                Arg("right_m_s", -5.0, 5.0, 0.0, help="body right"),
-                Arg("up_m_s", -3.0, 3.0, 0.0, help="positive up"),
-                Arg("yaw_rate_rad_s", -3.0, 3.0, 0.0, help="clockwise seen from above"),
+                Arg("forward_m_s", -5.0, 5.0, 0.0, help="body forward", limit="speed"),
+                Arg("right_m_s", -5.0, 5.0, 0.0, help="body right", limit="speed"),
+                Arg("up_m_s", -3.0, 3.0, 0.0, help="positive up", limit="climb"),
+                Arg("yaw_rate_rad_s", -3.0, 3.0, 0.0, help="clockwise seen from above",
+                    limit="yaw_rate"),
                 Arg("duration_s", 0.0, 65.0, 0.0, help="0 = until replaced"),
             ),
             "fly at absolute body-frame velocities",
@@ -93,7 +140,7 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg("up_m", -100.0, 100.0, 0.0),
                 Arg("yaw_rad", -2 * math.pi, 2 * math.pi, 0.0),
                 Arg("frame", default="body", choices=("body", "world")),
-                Arg("speed_m_s", 0.05, 10.0, 1.0),
+                Arg("speed_m_s", 0.05, 10.0, 1.0, limit="speed"),
             ),
             "move by distances relative to the current position",
         ),
@@ -104,7 +151,7 @@ COMMANDS: dict[str, CommandSpec] = {
                 Arg("latitude_deg", -90.0, 90.0),
                 Arg("longitude_deg", -180.0, 180.0),
                 Arg("height_m", 0.0, 1000.0, help="above home"),
-                Arg("speed_m_s", 0.05, 10.0, 1.0),
+                Arg("speed_m_s", 0.05, 10.0, 1.0, limit="speed"),
             ),
             "fly to GPS coordinates",
         ),
@@ -122,7 +169,7 @@ COMMANDS: dict[str, CommandSpec] = {
             (
                 Arg("mode", choices=("off", "hold", "land")),
                 Arg("deadband_m", 0.0, 2.0, 0.05),  # the paper's 5 cm
-                Arg("max_speed_m_s", 0.05, 5.0, 0.3),  # and 0.3 m/s
+                Arg("max_speed_m_s", 0.05, 5.0, 0.3, limit="speed"),  # and 0.3 m/s
             ),
             "landing pad: off, hold over the pad, or land on it",
         ),
@@ -141,8 +188,11 @@ class GroundCommand:
         return dict(self.args)
 
 
-def parse_command(name: str, body: object) -> GroundCommand:
-    """Check ``body`` (decoded JSON: an object, or None for no arguments) against ``COMMANDS``.
+def parse_command(
+    name: str, body: object, limits: VehicleLimits | None = None
+) -> GroundCommand:
+    """Check ``body`` (decoded JSON: an object, or None for no arguments) against ``COMMANDS``
+    and, for speeds, against the vehicle's ``limits``.
 
     Raises:
         LocalProtocolError: unknown command or argument, missing, wrong type or out of range.
@@ -168,7 +218,7 @@ def parse_command(name: str, body: object) -> GroundCommand:
     values: list[tuple[str, Value]] = []
     for arg in spec.args:
         if arg.name in body:
-            values.append((arg.name, arg.check(name, body[arg.name])))
+            values.append((arg.name, arg.check(name, body[arg.name], limits)))
         elif arg.default is None:
             raise LocalProtocolError(f"{name}: missing argument {arg.name!r}")
         else:
@@ -197,8 +247,19 @@ def run_command(vehicle: Vehicle, command: GroundCommand) -> Result | Ack:
     return _RUNNERS[command.name](vehicle, **command.kwargs())
 
 
-def describe_commands() -> list[dict[str, Any]]:
-    """The command table as JSON, for ``GET /api/commands`` and the page's forms."""
+def describe_commands(limits: VehicleLimits | None = None) -> list[dict[str, Any]]:
+    """The command table as JSON, for ``GET /api/commands`` and the page's forms; ``min`` and
+    ``max`` include the vehicle's limits, and ``limit`` says where a speed bound comes from."""
+
+    def limit_json(a: Arg) -> dict[str, Any] | None:
+        if not a.limit or limits is None:
+            return None
+        bound, key = limits.bound(a.limit)
+        return {"value": bound, "key": key, "source": limits.source}
+
+    def bounds(a: Arg) -> tuple[float, float]:
+        return a.effective_range(limits)
+
     return [
         {
             "name": spec.name,
@@ -207,8 +268,9 @@ def describe_commands() -> list[dict[str, Any]]:
             "args": [
                 {
                     "name": a.name,
-                    "min": None if math.isinf(a.lo) else a.lo,
-                    "max": None if math.isinf(a.hi) else a.hi,
+                    "min": None if math.isinf(bounds(a)[0]) else bounds(a)[0],
+                    "max": None if math.isinf(bounds(a)[1]) else bounds(a)[1],
+                    "limit": limit_json(a),
                     "default": a.default,
                     "choices": list(a.choices) or None,
                     "help": a.help,

@@ -29,6 +29,7 @@ from skeye.link.packets import (
 )
 from skeye.link.scaling import (
     dm_to_m,
+    gps_data_advanced_to_si,
     gps_data_to_si,
     imu_calcdata_to_si,
     mv_to_v,
@@ -107,9 +108,14 @@ def status_json(msg: LlStatus) -> dict[str, Any]:
 
 
 def gps_json(msg: GpsData | GpsDataAdvanced) -> dict[str, Any]:
-    """GPS_DATA: position, height, velocity, accuracy, satellites, fix."""
+    """GPS_DATA: position, height, velocity, accuracy, satellites, fix; from GPS_DATA_ADVANCED
+    also the vehicle's position estimate (``estimate_latitude_deg``/``_longitude_deg``, None
+    from plain GPS_DATA)."""
     si = gps_data_to_si(msg)
+    best = gps_data_advanced_to_si(msg)[1] if isinstance(msg, GpsDataAdvanced) else None
     return {
+        "estimate_latitude_deg": None if best is None else round(best.latitude_deg, 7),
+        "estimate_longitude_deg": None if best is None else round(best.longitude_deg, 7),
         "latitude_deg": round(si.latitude_deg, 7),
         "longitude_deg": round(si.longitude_deg, 7),
         "height_m": _r(si.height_m, 3),

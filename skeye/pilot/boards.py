@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.geo import GeoOrigin
 from skeye.link.packet_defs import GPS_FIX_VALID, NavState
 from skeye.link.packets import (
     PD,
@@ -90,7 +91,7 @@ from skeye.link.scaling import (
     stick_to_yaw_rate_rad_s,
     v_to_mv,
 )
-from skeye.pilot.airframe import Airframe, Snapshot
+from skeye.pilot.airframe import Airframe, GpsFix, Snapshot
 from skeye.pilot.pad import PadController
 from skeye.pilot.states import FlightEvent, FlightStateMachine, IllegalTransition
 
@@ -112,7 +113,45 @@ class BoardSettings:
     land_timeout_s: float = 20.0
     launch_height_m: float = 1.0  # >*>wl climbs this high
     default_speed_m_s: float = 1.0  # a command's speed field of 0 means this
-    max_speed_m_s: float = 3.0  # full stick in GPS mode; WAYPOINT max_speed 100 %
+    # The robot file's [controller] max_speed_m_s (skeye pilot sets it): a faster MOVE_BY or
+    # GOTO_GPS is refused; full stick in GPS mode; WAYPOINT max_speed 100 %.
+    max_speed_m_s: float = 3.0
+
+
+class GeoAnchor:
+    """The vehicle's position estimate in latitude/longitude: its INS position (NED, smooth,
+    drifting millimetres a minute) anchored to the GPS by the mean offset between every fix and
+    the INS position at that time. A single fix wanders metres (multipath, 30 s correlation);
+    the mean of many is steadier, and the estimate moves only as the INS says the vehicle moved.
+    This is what GPS_DATA_ADVANCED reports as its "best estimate"."""
+
+    def __init__(self) -> None:
+        self.origin: GeoOrigin | None = None  # the first fix: where offsets are measured from
+        self.fixes = 0
+        self._sum_n = 0.0
+        self._sum_e = 0.0
+        self._last: tuple[float, float] | None = None
+
+    def add(self, fix: GpsFix | None, pos_ned_m: tuple[float, float, float]) -> None:
+        """Take the snapshot's fix if it is a new one."""
+        if fix is None or not fix.fix or (fix.latitude_deg, fix.longitude_deg) == self._last:
+            return
+        self._last = (fix.latitude_deg, fix.longitude_deg)
+        if self.origin is None:
+            self.origin = GeoOrigin(fix.latitude_deg, fix.longitude_deg, 0.0)
+        n, e, _ = self.origin.to_ned(fix.latitude_deg, fix.longitude_deg, 0.0)
+        self._sum_n += n - pos_ned_m[0]
+        self._sum_e += e - pos_ned_m[1]
+        self.fixes += 1
+
+    def estimate(self, pos_ned_m: tuple[float, float, float]) -> tuple[float, float] | None:
+        """(latitude, longitude) of the INS position, or None before the first fix."""
+        if self.origin is None or self.fixes == 0:
+            return None
+        n = pos_ned_m[0] + self._sum_n / self.fixes
+        e = pos_ned_m[1] + self._sum_e / self.fixes
+        lat, lon, _ = self.origin.to_geodetic(n, e, 0.0)
+        return lat, lon
 
 
 def _sat16(v: int) -> int:
@@ -158,6 +197,8 @@ class OnboardBoards:
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
         self.clock_until_s = 0.0  # sim time granted by CLOCK (used with --ground-clock)
+        self.geo = GeoAnchor()
+        self.geo.add(snap.gps, snap.pos_ned_m)
 
     # -- state ---------------------------------------------------------------------------
     @property
@@ -282,8 +323,16 @@ class OnboardBoards:
         self._motion_pending = True
 
     def _speed(self, speed_mm_s: int) -> float:
+        """A command's speed (0: the default); over the vehicle's limit it is refused, never
+        silently capped."""
         speed = speed_mm_s / 1000.0 if speed_mm_s > 0 else self.settings.default_speed_m_s
-        return min(speed, self.settings.max_speed_m_s)
+        limit = self.settings.max_speed_m_s
+        if speed > limit + 1e-9:
+            raise _Refused(
+                ResultCode.BAD_VALUE,
+                f"speed {speed:g} m/s is over this vehicle's limit of {limit:g} m/s",
+            )
+        return speed
 
     def _velocity(self, msg: Velocity, now_s: float) -> None:
         self.flight.check(FlightEvent.MOVE)
@@ -424,6 +473,7 @@ class OnboardBoards:
     def _progress(self, now_s: float) -> None:
         state = self.state
         snap = self.airframe.snapshot()
+        self.geo.add(snap.gps, snap.pos_ned_m)
         if state is NavState.TAKING_OFF and not self.airframe.busy:
             self._fire(FlightEvent.CLIMBED)
         elif state is NavState.FLYING:
@@ -438,11 +488,13 @@ class OnboardBoards:
         elif state is NavState.LANDING and not self.airframe.busy and snap.landed:
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
+            self.pad.landing_finished()
         on_ground = snap.landed and not snap.armed
         if on_ground and self.state in (NavState.FLYING, NavState.HOLDING, NavState.FAILSAFE):
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
             self._end_motion()
+            self.pad.landing_finished()
 
     def _failsafe(self, now_s: float) -> None:
         state = self.state
@@ -619,7 +671,11 @@ class OnboardBoards:
 
     def _gps_advanced(self, snap: Snapshot) -> Message:
         gps = self._gps_si(snap)
-        best = GpsBestSi(gps.latitude_deg, gps.longitude_deg, gps.vel_east_m_s, gps.vel_north_m_s)
+        self.geo.add(snap.gps, snap.pos_ned_m)
+        here = self.geo.estimate(snap.pos_ned_m)
+        lat, lon = here if here is not None else (gps.latitude_deg, gps.longitude_deg)
+        vn, ve, _ = snap.vel_ned_m_s  # the INS velocity, as the position
+        best = GpsBestSi(lat, lon, ve, vn)
         return gps_data_advanced_from_si(gps, best)
 
     def _current_way(self, snap: Snapshot) -> CurrentWay:
@@ -645,13 +701,17 @@ class OnboardBoards:
         )
 
     def nav_status(self) -> Message:
-        """NAV_STATUS from the onboard estimate."""
+        """NAV_STATUS from the onboard estimate. North and east are from the world origin; down
+        is from the ground at home (where the vehicle rested before its last take-off), so
+        ``-down`` is the height above ground that TAKE_OFF and GOTO_GPS heights mean: 0 when
+        landed there, 1.5 after "take off to 1.5 m"."""
         snap = self.airframe.snapshot()
+        north, east, down = snap.pos_ned_m
         return nav_status_from_si(
             NavStatusSi(
                 state=self.state,
                 pad_mode=self.pad.mode,
-                pos_ned_m=snap.pos_ned_m,
+                pos_ned_m=(north, east, down - self.home_ned_m[2]),
                 yaw_rad=snap.rpy_rad[2],
                 vel_ned_m_s=snap.vel_ned_m_s,
                 battery_v=snap.battery_v,

@@ -26,16 +26,29 @@ def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code."""
     from skeye.control.connection import connect
     from skeye.pilot.sim_airframe import SimAirframe
+    from skeye.processes import check_ports_free
 
     settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
     try:
+        if not args.serial:  # before the robot is spawned: a taken port leaves nothing behind
+            check_ports_free([("the pilot", args.host, args.port, "--port")])
         with connect(args.sim, images=args.images, timeout_s=args.timeout) as sim:
-            if args.location is not None:
-                north, east, down = (float(v) for v in args.location.split(","))
-                robot = sim.spawn(args.robot, location_ned_m=(north, east, down), name=args.name)
-            else:
-                robot = sim.spawn(args.robot, start=args.start, name=args.name)
-            airframe = SimAirframe(sim, robot)
+            try:
+                if args.location is not None:
+                    north, east, down = (float(v) for v in args.location.split(","))
+                    robot = sim.spawn(
+                        args.robot, location_ned_m=(north, east, down), name=args.name
+                    )
+                else:
+                    robot = sim.spawn(args.robot, start=args.start, name=args.name)
+            except SkeyeError as exc:
+                if "already exists" in str(exc):
+                    raise SkeyeError(
+                        f"{exc}; another pilot or client flies it - give this one another "
+                        "name with --name"
+                    ) from None
+                raise
+            airframe = SimAirframe(sim, robot)  # flies by the robot file's speed limits
             settings = BoardSettings(
                 link_timeout_s=settings.link_timeout_s,
                 land_timeout_s=settings.land_timeout_s,

@@ -2,15 +2,16 @@
 
 How this works: ``PadController`` keeps what ground control asked for (PAD_MODE: mode,
 deadband, maximum correction speed) and the latest pad estimate. The pilot calls ``report()``
-for every PAD packet. Detection is not wired in yet (a later issue adds it): until something
-calls ``on_frame`` with a real estimate, ``report()`` says ``found=0``; nothing here invents a
-detection.
+for every PAD packet. ``skeye pilot --images`` feeds it: ``skeye.pilot.vision.PadVision`` runs
+the detector on every camera frame and calls ``on_frame``; without camera images nothing is
+fed and ``report()`` says ``found=0`` (nothing here invents a detection). A pad landing (LAND)
+ends with the touchdown: the mode goes back to OFF (``landing_finished``).
 """
 
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from skeye.link.packets import PadAction, PadMode, PadReport
 from skeye.link.scaling import PadModeSi, PadSi, pad_mode_to_si, pad_report_from_si
@@ -32,13 +33,13 @@ class PadObservation:
 class PadController:
     """Stored pad mode and latest estimate; the hook the vision pipeline feeds.
 
-    The detection issue plugs in here: for each camera frame the pilot receives, call
-    ``on_frame(observation)`` with the detector's estimate (``skeye.vision``'s result converted
-    to a ``PadObservation``: pad centre offset in metres in the body frame, height, identified
-    rings, quality). ``report()`` then carries it in PAD packets, and ``mode`` says what the
-    navigation should do with it (OFF: nothing; HOLD: keep the pad centre within ``deadband_m``
-    at up to ``max_speed_m_s``; LAND: the same, descending onto it). Until then no frame is
-    ever fed and the PAD packet reports ``found=0``.
+    For each camera frame, ``PadVision`` calls ``on_frame(observation)`` with the detector's
+    estimate (``skeye.vision``'s result converted to a ``PadObservation``: pad centre offset in
+    metres in the body frame, height, identified rings, quality). ``report()`` carries it in
+    PAD packets, and ``mode`` says what the navigation does with it (OFF: nothing; HOLD: keep
+    the pad centre within ``deadband_m`` at up to ``max_speed_m_s``; LAND: the same, descending
+    onto it, until the touchdown ends the mode). Without images no frame is fed and the PAD
+    packet reports ``found=0``.
     """
 
     def __init__(self) -> None:
@@ -59,6 +60,13 @@ class PadController:
         """Store a PAD_MODE command (the codec already checked its ranges)."""
         with self._lock:
             self._settings = pad_mode_to_si(msg)
+
+    def landing_finished(self) -> None:
+        """The vehicle touched down: a pad landing (LAND) is over, so the mode ends (OFF,
+        as PX4's precision landing ends with the landing). HOLD and OFF stay as they are."""
+        with self._lock:
+            if self._settings.mode is PadAction.LAND:
+                self._settings = replace(self._settings, mode=PadAction.OFF)
 
     def on_frame(self, observation: PadObservation) -> None:
         """Record the estimate from one camera frame (called by the vision pipeline)."""

@@ -7,7 +7,9 @@ line on the connection; the robot's own motion control must be idle first, or it
 would overwrite the sticks with a velocity ``DRIVE``. So the first stick command while a motion
 runs replaces it with a one-shot zero velocity (which ends after one tick) and is deferred;
 ``advance`` (called every pilot tick) and later stick commands send the newest sticks once the
-robot is idle. Altitudes: the control interface's ``take_off`` is relative to the spawn point;
+robot is idle. The robot's motion limits are raised to its robot file's (``MaxSpeed`` ...), the
+limits the boards and ground control check commands against. Altitudes: the control
+interface's ``take_off`` is relative to the spawn point;
 everything here is above the world origin (``-down``).
 """
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import math
 import threading
+from dataclasses import replace
 
 from skeye.control.connection import Connection
 from skeye.control.robots import Robot
@@ -29,6 +32,16 @@ class SimAirframe:
     def __init__(self, connection: Connection, robot: Robot) -> None:
         self.connection = connection
         self.robot = robot
+        # One set of speed limits: the robot file's [controller] table as the simulator reports
+        # it (MaxSpeed, MaxClimb, MaxYawRate), not the control interface's gentler defaults;
+        # the boards refuse faster commands and ground control checks against the same file.
+        cfg = robot.motion_config
+        robot.motion_config = replace(
+            cfg,
+            max_speed_m_s=robot.limits.get("MaxSpeed", cfg.max_speed_m_s),
+            max_climb_m_s=robot.limits.get("MaxClimb", cfg.max_climb_m_s),
+            max_yaw_rate_rad_s=robot.limits.get("MaxYawRate", cfg.max_yaw_rate_rad_s),
+        )
         self.lockstep = connection.mode == "lockstep"
         self._lock = threading.Lock()
         self._sticks: Attitude | None = None  # deferred until the robot's motion is idle

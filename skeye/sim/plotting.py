@@ -5,7 +5,8 @@ of its ground truth: the recorder's ``TRUTH`` samples when there are any, otherw
 ``SEN {Type GroundTruth}`` and ``STA`` lines its connection was sent. :func:`summarize` turns
 the tracks into figures; :func:`plot_recording` draws three panels with matplotlib's Agg backend
 (no display needed): the trajectory seen from above (north up, east right), altitude above the
-world origin over sim time, and battery time left over sim time.
+world origin over sim time, and battery time left over sim time while flying (on the ground the
+estimate, charge over the idle current, reaches hours: those samples are left out).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class RobotTrack:
     pos_ned_m: list[tuple[float, float, float]] = field(default_factory=list)
     battery_time_s: list[float] = field(default_factory=list)
     battery_s: list[float] = field(default_factory=list)
+    battery_landed: list[bool] = field(default_factory=list)  # on the ground at that sample
     commands: Counter[str] = field(default_factory=Counter)
 
     def distance_m(self) -> float:
@@ -136,6 +138,7 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
             if msg.has("Battery"):
                 track.battery_time_s.append(rec.sim_s)
                 track.battery_s.append(msg.get_float("Battery"))
+                track.battery_landed.append(_landed(msg))
             continue
         if msg.type == "RES":
             if msg.get("Name"):
@@ -148,6 +151,7 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
         if msg.type == "STA" and msg.has("Battery"):
             track.battery_time_s.append(rec.sim_s)
             track.battery_s.append(msg.get_float("Battery"))
+            track.battery_landed.append(_landed(msg))
         elif msg.type == "SEN":
             pos = _vector(msg, "Location")
             if pos is not None:
@@ -173,6 +177,19 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
         truncated=reader.truncated,
     )
     return tracks, summary
+
+
+def _landed(msg: Any) -> bool:
+    return msg.has("Landed") and str(msg.get("Landed")).lower() in ("true", "1")
+
+
+def flight_time_left_min(track: RobotTrack) -> np.ndarray:
+    """The battery's flight time left (minutes) while flying; NaN (a gap in the plot) where the
+    robot is on the ground, where the estimate (charge over the idle current) reaches hours and
+    would flatten the flight."""
+    left = np.asarray(track.battery_s, dtype=float) / 60.0
+    landed = np.asarray(track.battery_landed + [False] * (len(left) - len(track.battery_landed)))
+    return np.where(landed, np.nan, left)
 
 
 def summarize(tracks: dict[str, RobotTrack], **totals: Any) -> RecordingSummary:
@@ -207,11 +224,12 @@ def plot_recording(path: str | Path, out: str | Path) -> RecordingSummary:
             top.plot(p[0, 1], p[0, 0], "o", color=top.lines[-1].get_color())
             alt.plot(t.time_s, -p[:, 2], label=name)
         if t.battery_s:
-            bat.plot(t.battery_time_s, np.asarray(t.battery_s) / 60.0, label=name)
+            bat.plot(t.battery_time_s, flight_time_left_min(t), label=name)
     top.set(title="trajectory (top view)", xlabel="east (m)", ylabel="north (m)")
     top.set_aspect("equal", adjustable="datalim")
     alt.set(title="altitude", xlabel="sim time (s)", ylabel="altitude above origin (m)")
-    bat.set(title="battery", xlabel="sim time (s)", ylabel="flight time left (min)")
+    bat.set(title="battery (shown while flying only)", xlabel="sim time (s)",
+            ylabel="flight time left (min)")
     for ax in (top, alt, bat):
         ax.grid(True, alpha=0.3)
         if ax.lines:

@@ -179,3 +179,41 @@ def load_robot_config(
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from None
     return parse_robot_config(data, source)
+
+
+def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
+    """Load every ``*.toml`` in each ``--robot-dir`` folder, so a typo stops ``skeye sim`` at
+    start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
+
+    Raises:
+        ConfigError: a folder that is missing or not a folder, or a robot file that does not
+            load (the message names the file and the problem).
+    """
+    configs = []
+    for folder in search_dirs:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise ConfigError(f"--robot-dir {folder}: not a folder")
+        for path in sorted(folder.glob("*.toml")):
+            configs.append(load_robot_config(folder / path.name))
+    return configs
+
+
+def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[float, str]:
+    """The horizontal field of view of a robot class's camera (its first, or the one named),
+    and a phrase saying where it came from, for messages.
+
+    Raises:
+        ConfigError: unknown robot class, or no such camera with ``fov_h_rad``.
+    """
+    config = load_robot_config(robot)
+    for mount in config.sensors:
+        if mount.type_name.lower() != "camera":
+            continue
+        if camera is not None and mount.name.lower() != camera.lower():
+            continue
+        fov = dict(mount.params).get("fov_h_rad")
+        if isinstance(fov, int | float) and not isinstance(fov, bool):
+            return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
+    which = f"camera named {camera!r}" if camera else "camera"
+    raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")

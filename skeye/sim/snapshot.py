@@ -10,7 +10,7 @@ from typing import Any
 import cv2
 
 from skeye.control.connection import parse_address
-from skeye.errors import LocalProtocolError
+from skeye.errors import ConfigError, LocalProtocolError
 from skeye.sim.image_client import ImageClient
 
 
@@ -23,7 +23,15 @@ def save_snapshot(address: str, out: Path, camera: str | None = None, quality: i
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
     host, port = parse_address(address, 5003)
-    with ImageClient(host, port, timeout_s=timeout_s) as client:
+    try:
+        client = ImageClient(host, port, timeout_s=timeout_s)
+    except ConnectionRefusedError as exc:
+        raise ConfigError(
+            f"no image server at {host}:{port} ({exc.strerror or exc}): start the simulator "
+            f"with one (`skeye sim --image-port {port}`; `skeye up` and `make run` serve "
+            "images on 5003), or point --images at the one that runs"
+        ) from None
+    with client:
         if camera:
             client.select_camera(camera)
         client.set_format("png" if suffix == ".png" else "jpeg", quality=quality)

@@ -2,8 +2,9 @@
 
 How this works: :func:`register` adds the subcommands to the lead's argparse subparsers; each
 sets ``func(args) -> int``. ``vision detect`` runs the same :func:`detect` the pilot calls and
-prints one JSON object; it exits 0 whether or not a pad was found and 2 for bad input, with
-a message on stderr.
+prints one JSON object; without ``--fov`` it takes the field of view of the ``--robot`` file's
+camera and says so on stderr. It exits 0 whether or not a pad was found and 2 for bad
+input, with a message on stderr.
 """
 
 from __future__ import annotations
@@ -34,17 +35,35 @@ def cmd_pad(args: argparse.Namespace) -> int:
     """Write the printable pad."""
     try:
         pad = resolve_pad(args.pad)
-        out = write_printable(pad, args.out, dpi=args.dpi)
+        out = write_printable(pad, args.out, dpi=args.dpi, paper=args.paper)
     except (ConfigError, LocalProtocolError) as exc:
         return _fail(str(exc))
     except OSError as exc:
         return _fail(f"cannot write {args.out}: {exc.strerror or exc}")
-    print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
+    if args.paper is None:
+        print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
+    else:
+        from skeye.vision.printable import page_size_m, plan_tiles
+
+        plan = plan_tiles(page_size_m(pad), args.paper)
+        print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale): {len(plan.tiles)} "
+              f"{args.paper} sheets ({plan.rows} rows x {plan.cols} columns, "
+              f"{'landscape' if plan.landscape else 'portrait'}); print at 100 %, check the "
+              "100 mm bar, overlap the sheets on their + marks")
     return 0
 
 
 def cmd_detect(args: argparse.Namespace) -> int:
     """Detect the pad in one image file and print the estimate as JSON."""
+    if args.fov is None:  # the camera the frame most likely came from: the robot file's
+        from skeye.sim.robot_config import camera_fov_h_rad
+
+        try:
+            args.fov, source = camera_fov_h_rad(args.robot, args.camera)
+        except ConfigError as exc:
+            return _fail(f"{exc}; give --fov")
+        print(f"skeye vision detect: --fov not given: using {args.fov:g} rad, the horizontal "
+              f"field of view of the {source}", file=sys.stderr)
     if not math.isfinite(args.fov) or not 0.0 < args.fov < math.pi:
         return _fail(f"--fov must be in (0, pi) radians, got {args.fov}")
     if (args.roll is None) != (args.pitch is None):
@@ -73,13 +92,27 @@ def register(subparsers: Any) -> None:
     p.add_argument("--out", required=True, help="output file, .pdf or .png")
     p.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
     p.add_argument("--dpi", type=int, default=DEFAULT_DPI, help="PNG resolution (dots per inch)")
+    p.add_argument(
+        "--paper",
+        choices=("a4", "letter"),
+        default=None,
+        help="tile the pad over sheets of this paper (PDF), with overlap marks and a scale bar",
+    )
     p.set_defaults(func=cmd_pad)
 
     v = subparsers.add_parser("vision", help="landing-pad vision tools")
     vsub = v.add_subparsers(dest="vision_command", required=True)
     d = vsub.add_parser("detect", help="detect the landing pad in an image, print JSON")
     d.add_argument("image", help="image file (any format OpenCV reads)")
-    d.add_argument("--fov", type=float, required=True, help="horizontal field of view, rad")
+    d.add_argument(
+        "--fov",
+        type=float,
+        default=None,
+        help="horizontal field of view, rad (default: the --robot file's camera, e.g. 1.309)",
+    )
+    d.add_argument("--robot", default="hummingbird",
+                   help="robot class (or .toml) whose camera took the image, for the default FOV")
+    d.add_argument("--camera", default=None, help="that robot's camera name (default: its first)")
     d.add_argument("--roll", type=float, default=None, help="vehicle roll, rad (with --pitch)")
     d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
     d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")

@@ -5,12 +5,23 @@ margin, converted from metres (``/ 0.0254``), with one axes filling it whose dat
 metres; the square and rings are drawn as vector shapes from the :class:`PadDefinition`. PDF
 keeps them as vectors (page size in points = metres / 0.0254 * 72); PNG is rasterised at the
 requested DPI and carries that DPI in its metadata, so printing at 100 % gives the true size.
+
+A pad larger than a home printer's paper is tiled (``paper="a4"`` or ``"letter"``, PDF only):
+:func:`plan_tiles` cuts the true-scale page into paper-sized tiles that overlap by
+``TILE_OVERLAP_M``, in whichever orientation needs fewer sheets; each sheet shows its part of
+the pad, dashed lines where its neighbours' parts begin, red ``+`` registration marks inside the
+overlaps (each appears on both sheets it joins: lay one over the other), its row and column,
+and a 100 mm scale bar to check the printer did not scale it (as AprilTag and ArUco print
+tools do).
 """
 
 from __future__ import annotations
 
+import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 # A bare Figure renders through its own canvas: no pyplot, no global backend switch.
 from matplotlib.figure import Figure
@@ -22,6 +33,13 @@ from skeye.vision.pad import PadDefinition
 METRES_PER_INCH = 0.0254
 DEFAULT_MARGIN_M = 0.02
 DEFAULT_DPI = 300
+PAPERS_M: dict[str, tuple[float, float]] = {  # portrait width, height
+    "a4": (0.210, 0.297),
+    "letter": (0.2159, 0.2794),
+}
+PAPER_MARGIN_M = 0.010  # what most home printers cannot print, on every side
+TILE_OVERLAP_M = 0.010
+SCALE_BAR_M = 0.100
 
 
 def page_size_m(pad: PadDefinition, margin_m: float = DEFAULT_MARGIN_M) -> float:
@@ -37,6 +55,12 @@ def _figure(pad: PadDefinition, margin_m: float) -> Figure:
     ax.set_ylim(-side / 2, side / 2)
     ax.set_aspect("equal")
     ax.axis("off")
+    _draw_pad(ax, pad, margin_m)
+    return fig
+
+
+def _draw_pad(ax: Any, pad: PadDefinition, margin_m: float) -> None:
+    """The pad centred on (0, 0), in metres, with its print note in the margin below."""
     half = pad.side_m / 2
     ax.add_patch(Rectangle((-half, -half), pad.side_m, pad.side_m, color="black", lw=0))
     for ring in pad.rings:  # outermost first: each white disc, then its black hole
@@ -52,7 +76,120 @@ def _figure(pad: PadDefinition, margin_m: float) -> Figure:
             fontsize=min(8.0, margin_m / METRES_PER_INCH * 72 * 0.4),
             color="0.5",
         )
-    return fig
+
+
+@dataclass(frozen=True)
+class Tile:
+    """One sheet: the part ``[x0, x0 + width] x [y0, y0 + height]`` of the true-scale page
+    (metres, origin at the page's lower-left corner), row 1 at the top."""
+
+    row: int
+    col: int
+    x0_m: float
+    y0_m: float
+    width_m: float
+    height_m: float
+
+
+@dataclass(frozen=True)
+class TilePlan:
+    paper: str
+    landscape: bool
+    page_side_m: float
+    rows: int
+    cols: int
+    tiles: tuple[Tile, ...]
+
+    @property
+    def sheet_m(self) -> tuple[float, float]:
+        w, h = PAPERS_M[self.paper]
+        return (h, w) if self.landscape else (w, h)
+
+
+def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
+    """Cut a square page of ``page_side_m`` into overlapping tiles of ``paper``'s printable
+    area, in the orientation that needs fewer sheets (portrait when equal)."""
+    if paper not in PAPERS_M:
+        raise LocalProtocolError(f"paper must be one of {', '.join(PAPERS_M)}, got {paper!r}")
+    best: TilePlan | None = None
+    for landscape in (False, True):
+        w, h = PAPERS_M[paper]
+        sheet_w, sheet_h = (h, w) if landscape else (w, h)
+        usable_w, usable_h = sheet_w - 2 * PAPER_MARGIN_M, sheet_h - 2 * PAPER_MARGIN_M
+        cols = _count(page_side_m, usable_w)
+        rows = _count(page_side_m, usable_h)
+        tiles = tuple(
+            Tile(r + 1, c + 1, c * (usable_w - TILE_OVERLAP_M),
+                 page_side_m - usable_h - r * (usable_h - TILE_OVERLAP_M), usable_w, usable_h)
+            for r in range(rows) for c in range(cols)
+        )
+        plan = TilePlan(paper, landscape, page_side_m, rows, cols, tiles)
+        if best is None or len(plan.tiles) < len(best.tiles):
+            best = plan
+    assert best is not None
+    return best
+
+
+def _count(length_m: float, usable_m: float) -> int:
+    if length_m <= usable_m:
+        return 1
+    return math.ceil((length_m - TILE_OVERLAP_M) / (usable_m - TILE_OVERLAP_M) - 1e-9)
+
+
+def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> TilePlan:
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.lines import Line2D
+
+    side = page_size_m(pad, margin_m)
+    plan = plan_tiles(side, paper)
+    sheet_w, sheet_h = plan.sheet_m
+    step_x = plan.tiles[0].width_m - TILE_OVERLAP_M
+    step_y = plan.tiles[0].height_m - TILE_OVERLAP_M
+    # registration marks: centred in every overlap strip, at every crossing of the strips
+    xs = [c * step_x + TILE_OVERLAP_M / 2 for c in range(1, plan.cols)]
+    ys = [side - r * step_y - TILE_OVERLAP_M / 2 for r in range(1, plan.rows)]
+    mark_xs = xs or [side / 2]
+    mark_ys = ys or [side / 2]
+    with PdfPages(out) as pdf:
+        for tile in plan.tiles:
+            fig = Figure(figsize=(sheet_w / METRES_PER_INCH, sheet_h / METRES_PER_INCH))
+            ax = fig.add_axes((PAPER_MARGIN_M / sheet_w, PAPER_MARGIN_M / sheet_h,
+                               tile.width_m / sheet_w, tile.height_m / sheet_h))
+            # axes in page metres, shifted so the pad (drawn about 0) sits mid-page
+            ax.set_xlim(tile.x0_m - side / 2, tile.x0_m + tile.width_m - side / 2)
+            ax.set_ylim(tile.y0_m - side / 2, tile.y0_m + tile.height_m - side / 2)
+            ax.axis("off")
+            _draw_pad(ax, pad, margin_m)
+            for x in xs:  # where the right/left neighbour's part begins / ends
+                for edge in (x - TILE_OVERLAP_M / 2, x + TILE_OVERLAP_M / 2):
+                    ax.axvline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
+            for y in ys:
+                for edge in (y - TILE_OVERLAP_M / 2, y + TILE_OVERLAP_M / 2):
+                    ax.axhline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
+            arm = 0.004
+            for mx in mark_xs:
+                for my in mark_ys:
+                    if (mx in xs or my in ys):
+                        ax.plot([mx - arm - side / 2, mx + arm - side / 2],
+                                [my - side / 2] * 2, color="red", lw=0.8)
+                        ax.plot([mx - side / 2] * 2,
+                                [my - arm - side / 2, my + arm - side / 2], color="red", lw=0.8)
+            # the scale bar and the sheet's place, in the bottom margin
+            y_bar = PAPER_MARGIN_M * 0.45 / sheet_h
+            x0 = PAPER_MARGIN_M / sheet_w
+            x1 = (PAPER_MARGIN_M + SCALE_BAR_M) / sheet_w
+            fig.add_artist(Line2D([x0, x1], [y_bar, y_bar], color="black", lw=1.2))
+            for x in (x0, x1):
+                fig.add_artist(Line2D([x, x], [y_bar - 0.004, y_bar + 0.004], color="black",
+                                      lw=1.2))
+            fig.text(x1 + 0.01, y_bar,
+                     f"<- this bar must measure {SCALE_BAR_M * 1000:.0f} mm (print at 100 %)  |  "
+                     f"{pad.name} sheet row {tile.row}/{plan.rows}, column {tile.col}/"
+                     f"{plan.cols}; overlap {TILE_OVERLAP_M * 1000:.0f} mm between the dashed "
+                     "lines: lay the + marks on each other",
+                     fontsize=5.5, va="center", color="0.2")
+            pdf.savefig(fig)
+    return plan
 
 
 def write_printable(
@@ -60,8 +197,10 @@ def write_printable(
     path: str | os.PathLike[str],
     dpi: int = DEFAULT_DPI,
     margin_m: float = DEFAULT_MARGIN_M,
+    paper: str | None = None,
 ) -> Path:
-    """Write the pad at true scale to ``path`` (.pdf, or .png at ``dpi`` with DPI metadata).
+    """Write the pad at true scale to ``path`` (.pdf, or .png at ``dpi`` with DPI metadata);
+    with ``paper`` ("a4", "letter") a PDF of overlapping sheets of that paper.
 
     Raises LocalProtocolError for another extension or bad sizes; OSError if it can't write.
     """
@@ -73,6 +212,11 @@ def write_printable(
         raise LocalProtocolError(f"margin must be within 0..1 m, got {margin_m}")
     if ext == ".png" and not 10 <= dpi <= 1200:
         raise LocalProtocolError(f"dpi must be within 10..1200, got {dpi}")
+    if paper is not None:
+        if ext != ".pdf":
+            raise LocalProtocolError(f"--paper writes a PDF of sheets; name it .pdf, not {ext}")
+        _write_tiled(pad, out, margin_m, paper)
+        return out
     fig = _figure(pad, margin_m)
     if ext == ".pdf":
         fig.savefig(out, format="pdf")

@@ -97,12 +97,16 @@ class Pilot:
 
         self.conn = connect(self.sim_address, images=self.images, timeout_s=10.0)
         self.robot = self.conn.spawn(SMALL_CAMERA_ROBOT, start="Pad1", name=self.name)
+        airframe = SimAirframe(self.conn, self.robot)  # sets the robot file's limits
         mc = self.robot.motion_config
         settings = BoardSettings(
             max_speed_m_s=mc.max_speed_m_s, default_speed_m_s=min(1.0, mc.max_speed_m_s)
         )
-        self.server = PilotServer(
-            SimAirframe(self.conn, self.robot), port=self.port, settings=settings
+        from skeye.pilot.cli import pad_vision_factory
+
+        self.server = PilotServer(  # with the pad vision, as `skeye pilot --images` runs
+            airframe, port=self.port, settings=settings,
+            vision=pad_vision_factory(self.conn, self.robot),
         ).start()
         self.port = self.server.port
         return self

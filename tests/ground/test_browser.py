@@ -64,6 +64,44 @@ def test_page_loads_and_telemetry_updates(page: Any, stack: Stack) -> None:
             "camera frames to show")
 
 
+def last_result(pg: Any) -> dict[str, str]:
+    return pg.evaluate("(() => { const el = document.querySelector('#last-result'); "
+                       "return {text: el.textContent, ok: el.dataset.ok, "
+                       "command: el.dataset.command}; })()")
+
+
+def test_limits_are_shown_and_bad_fields_are_not_sent(page: Any, stack: Stack) -> None:
+    # Issue 21 item 4: one speed limit, the robot file's, advertised on the page and enforced.
+    wait_js(page, "document.querySelector('#limits').dataset.value === '3'", 10,
+            "the vehicle's speed limit to be shown")
+    assert "speed 3 m/s" in page.text_content("#limits")
+    assert "robot file hummingbird" in page.text_content("#limits")
+    assert page.get_attribute("#m-speed", "max") == "3"
+    assert page.get_attribute("#g-speed", "max") == "3"
+    page.fill("#m-speed", "3.5")
+    page.click("#btn-move")
+    wait_js(page, "document.querySelector('#last-result').dataset.command === 'move_by'", 5,
+            "the over-limit move to be answered")
+    r = last_result(page)
+    assert r["ok"] == "false" and "over the vehicle's limit of 3" in r["text"], r
+    assert "max_speed_m_s" in r["text"]
+    page.fill("#m-speed", "0.5")
+    # Item 5: a blank field is "not given": nothing is sent, the page says which field.
+    sent = page.evaluate("S.cmdId")
+    page.fill("#v-fwd", "")
+    page.click("#btn-velocity")
+    wait_js(page, "document.querySelector('#last-result').dataset.command === 'velocity'", 5,
+            "the blank field to be reported")
+    r = last_result(page)
+    assert r["ok"] == "false" and '"fwd" field is blank' in r["text"], r
+    assert page.evaluate("S.cmdId") == sent  # no command went to the server
+    page.fill("#g-lat", "")
+    page.click("#btn-goto")
+    assert '"lat" field is blank' in last_result(page)["text"]
+    assert page.evaluate("S.cmdId") == sent
+    page.fill("#v-fwd", "0")
+
+
 def test_take_off_raises_the_shown_height(page: Any, stack: Stack) -> None:
     assert value(page, "#ro-height") < 0.5
     page.fill("#to-height", "1.5")
@@ -75,6 +113,15 @@ def test_take_off_raises_the_shown_height(page: Any, stack: Stack) -> None:
     wait_js(page, "document.querySelector('#flight-state').dataset.state === 'holding'", 20,
             "the climb to finish")
     assert -stack.pilot.ground_truth()[2] > 1.2
+
+
+def test_height_is_above_ground_and_labelled(page: Any, stack: Stack) -> None:
+    # Item 7: "take off to 1.5 m" shows 1.5 m: height above the ground (0 when landed), the
+    # same reference as the command; the label says so.
+    shown = value(page, "#ro-height")
+    assert abs(shown - 1.5) < 0.1, shown
+    assert "above ground" in page.text_content(".readouts .big")
+    assert "above ground" in page.text_content(".controls")
 
 
 def test_velocity_command_moves_the_vehicle(page: Any, stack: Stack) -> None:
@@ -98,6 +145,71 @@ def test_velocity_command_moves_the_vehicle(page: Any, stack: Stack) -> None:
     shown = (value(page, "#ro-north"), value(page, "#ro-east"))
     truth = stack.pilot.ground_truth()
     assert math.hypot(shown[0] - truth[0], shown[1] - truth[1]) < 0.5  # INS vs truth
+
+
+def test_here_fills_the_position_estimate_and_says_so(page: Any, stack: Stack) -> None:
+    # Item 9: "here" fills the vehicle's position estimate (GPS_DATA_ADVANCED), not the fix.
+    from skeye.geo import GeoOrigin
+    from skeye.sim.world import load_world
+
+    wait_js(page, "S.telemetry.gps && S.telemetry.gps.estimate_latitude_deg !== null", 10,
+            "the vehicle's position estimate")
+    page.click("#g-here")
+    assert page.get_attribute("#g-source", "data-source") == "estimate"
+    assert "position estimate" in page.text_content("#g-source")
+    lat, lon = float(page.input_value("#g-lat")), float(page.input_value("#g-lon"))
+    geo = load_world("pad").geo_origin
+    assert geo is not None
+    origin = GeoOrigin(geo.latitude_deg, geo.longitude_deg, 0.0)
+    n, e, _ = origin.to_ned(lat, lon, 0.0)
+    truth = stack.pilot.ground_truth()
+    # the estimate is the INS position plus the mean GPS offset: within the fixes' spread
+    assert math.hypot(n - truth[0], e - truth[1]) < 6.0, (n, e, truth)
+
+
+def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
+    # Item 4: 2.5 m/s is under the robot file's 3 m/s and is flown, not capped at 1 m/s.
+    page.fill("#m-fwd", "5")
+    page.fill("#m-right", "0")
+    page.select_option("#m-frame", "body")
+    page.fill("#m-speed", "2.5")
+    page.click("#btn-move")
+    wait_js(page, "document.querySelector('#last-result').dataset.command === 'move_by' && "
+                  "document.querySelector('#last-result').dataset.ok === 'true'", 5,
+            "the 2.5 m/s move to be accepted")
+    wait_js(page, "S.telemetry.nav.state === 'flying'", 10, "the move to start")
+    fastest = [0.0]
+
+    def arrived() -> bool:
+        reading = stack.pilot.robot.ground_truth.latest
+        fastest[0] = max(fastest[0], math.hypot(*reading.velocity_ned_m_s[:2]))
+        return page.evaluate("S.telemetry.nav.state") == "holding"
+
+    wait_until(arrived, 30, "the move to end", poll_s=0.02)
+    assert fastest[0] > 1.6, f"flew at most {fastest[0]:.2f} m/s (ground truth)"
+    page.fill("#m-speed", "0.5")
+
+
+def test_held_keys_log_one_line_per_change(page: Any, stack: Stack) -> None:
+    # Item 8: a held key renews its velocity every 300 ms; the log shows one line (x n).
+    page.check("#kbd-enable")
+    page.fill("#kbd-speed", "0.3")
+    page.click("#horizon")  # focus off the inputs: the keys fly
+    lines = page.locator("#cmd-log li").count()
+    sent = page.evaluate("S.cmdId")
+    page.keyboard.down("KeyD")
+    wait_js(page, f"S.cmdId >= {sent} + 4 && S.pending.size === 0", 15,
+            "four renewals of the held key's velocity to be answered")
+    page.keyboard.up("KeyD")
+    wait_js(page, f"S.cmdId >= {sent} + 5 && S.pending.size === 0", 5, "the stop on release")
+    new = page.evaluate(f"[...document.querySelectorAll('#cmd-log li')].slice(0, "
+                        f"document.querySelectorAll('#cmd-log li').length - {lines})"
+                        ".map(li => [li.dataset.text, Number(li.dataset.repeats)])")
+    assert len(new) == 2, new  # the held velocity (repeated), then the stop
+    held, stop = new[1], new[0]
+    assert "right_m_s=0.3" in held[0] and held[1] >= 4, new
+    assert "right_m_s=0 " in stop[0] and stop[1] == 1, new
+    page.uncheck("#kbd-enable")
 
 
 def test_move_back_over_the_pad_and_hold_shows_detections(page: Any, stack: Stack) -> None:
@@ -158,3 +270,22 @@ def test_page_survives_pilot_restart(page: Any, stack: Stack) -> None:
     page.click("#btn-hold")  # landed: refused, but answered
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'hold'", 5,
             "an answer from the new pilot")
+
+
+def test_a_pad_landing_ends_pad_mode_and_the_page_says_so(page: Any, stack: Stack) -> None:
+    # Item 6: PAD_MODE land ends with the landing (as PX4's precision landing does).
+    wait_js(page, "document.querySelector('#flight-state').dataset.state === 'landed'", 20,
+            "the new vehicle on the ground")
+    page.fill("#to-height", "1.0")
+    page.click("#btn-takeoff")
+    wait_js(page, "document.querySelector('#flight-state').dataset.state === 'holding'", 40,
+            "the climb to 1 m")
+    page.click("#btn-pad-land")
+    wait_js(page, "document.querySelector('#pad-mode').dataset.mode === 'land'", 10,
+            "pad mode land")
+    wait_js(page, "document.querySelector('#flight-state').dataset.state === 'landed'", 120,
+            "the pad landing to touch down")
+    wait_js(page, "document.querySelector('#pad-mode').dataset.mode === 'off'", 10,
+            "pad mode to end with the landing")
+    assert "pad landing finished" in page.inner_text("#cmd-log")
+    assert math.hypot(*stack.pilot.ground_truth()[:2]) < 0.3  # on the pad

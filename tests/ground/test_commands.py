@@ -122,3 +122,32 @@ def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     assert t["nav"]["climb_m_s"] == 0.25 and t["nav"]["battery_v"] == 12.1
     assert t["pad"]["rings"] == [1, 3]
     assert (t["pad"]["dx_m"], t["pad"]["dy_m"], t["pad"]["quality"]) == (0.12, -0.05, 0.9)
+
+
+def test_speeds_are_checked_against_the_robot_files_limits() -> None:
+    from skeye.ground.commands import VehicleLimits
+
+    limits = VehicleLimits.for_robot("hummingbird")
+    assert (limits.max_speed_m_s, limits.max_climb_m_s) == (3.0, 1.5)  # hummingbird.toml
+    assert parse_command("move_by", {"speed_m_s": 2.5}, limits).kwargs()["speed_m_s"] == 2.5
+    for name, body, key, bound in (
+        ("move_by", {"speed_m_s": 3.5}, "max_speed_m_s", "3"),
+        ("goto_gps", {"latitude_deg": 50.0, "longitude_deg": 12.0, "height_m": 2.0,
+                      "speed_m_s": 10.0}, "max_speed_m_s", "3"),
+        ("velocity", {"forward_m_s": -4.0}, "max_speed_m_s", "3"),
+        ("velocity", {"up_m_s": 2.0}, "max_climb_m_s", "1.5"),
+        ("pad_mode", {"mode": "hold", "max_speed_m_s": 4.0}, "max_speed_m_s", "3"),
+    ):
+        with pytest.raises(LocalProtocolError) as info:
+            parse_command(name, body, limits)
+        assert (f"over the vehicle's limit of {bound} ({key} in its robot file hummingbird)"
+                in str(info.value)), info.value
+    described = {c["name"]: {a["name"]: a for a in c["args"]}
+                 for c in describe_commands(limits)}
+    speed = described["goto_gps"]["speed_m_s"]
+    assert speed["max"] == 3.0 and speed["limit"] == {
+        "value": 3.0, "key": "max_speed_m_s", "source": "robot file hummingbird"}
+    assert described["velocity"]["forward_m_s"]["min"] == -3.0
+    assert described["take_off"]["height_m"]["limit"] is None
+    airrobot = VehicleLimits.for_robot("airrobot")
+    assert {c["name"]: c for c in describe_commands(airrobot)}["move_by"]["args"][5]["max"] == 2.0

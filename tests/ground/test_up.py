@@ -62,3 +62,109 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait(10)
+
+
+def _run_up(*extra: str, timeout_s: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "skeye.ground.cli", "up", *extra],
+                          capture_output=True, text=True, timeout=timeout_s)
+
+
+def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None:
+    sim, img, pilot, ground = _free_ports(4)
+    ports = ["--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
+             "--ground-port", str(ground)]
+    for taken, option in ((pilot, "--pilot-port"), (ground, "--ground-port"),
+                          (sim, "--sim-port")):
+        with socket.create_server(("127.0.0.1", taken)):
+            done = _run_up(*ports)
+        assert done.returncode == 1, done
+        assert f"port {taken}" in done.stderr and option in done.stderr, done.stderr
+        assert "already in use" in done.stderr
+        assert "open http" not in done.stdout and "control protocol" not in done.stdout
+        for port in (sim, img, pilot, ground):  # nothing was started, nothing listens
+            with socket.socket() as probe:
+                assert probe.connect_ex(("127.0.0.1", port)) != 0
+    done = _run_up("--sim-port", str(sim), "--image-port", str(sim))
+    assert done.returncode == 1 and "--image-port" in done.stderr and f"port {sim}" in done.stderr
+
+
+def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
+    from tests.sim.conftest import running_sim
+
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [sys.executable, "-m", "skeye.ground.cli", "pilot", "--sim", "127.0.0.1:1",
+             "--port", str(port)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    assert f"port {port}" in done.stdout and "--port" in done.stdout, done.stdout
+    with running_sim(mode="realtime") as server:
+        from skeye.control.connection import connect
+
+        with connect(f"127.0.0.1:{server.port}") as conn:
+            conn.spawn("hummingbird", start="Pad1", name="R1")
+            done = subprocess.run(
+                [sys.executable, "-m", "skeye.ground.cli", "pilot", "--sim",
+                 f"127.0.0.1:{server.port}", "--port", "0", "--name", "R1"],
+                capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    assert "already exists" in done.stdout and "--name" in done.stdout, done.stdout
+
+
+def _make_run(tmp_path, ports: list[int]) -> subprocess.Popen[str]:
+    """The repository's own ``make run`` recipe, with this test's interpreter and free ports
+    (VENV points at a folder whose install stamp is fresh, so make only runs ``skeye up``)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    venv = tmp_path / "venv"
+    venv.mkdir(parents=True)
+    (venv / ".installed").touch()
+    sim, img, pilot, ground = ports
+    up_args = (f"--sim-port {sim} --image-port {img} --pilot-port {pilot} "
+               f"--ground-port {ground}")
+    return subprocess.Popen(
+        ["make", "-s", "-C", str(root), "run", f"VENV={venv}",
+         f"BIN={Path(sys.executable).parent}", f"UP_ARGS={up_args}"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+        # a shell that started this test in the background may have left SIGINT ignored
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+
+
+def _descendants(pid: int) -> list[int]:
+    found, todo = [], [pid]
+    while todo:
+        for child in _children(todo.pop()):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def test_signals_to_make_run_stop_every_server(tmp_path) -> None:
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        ports = _free_ports(4)
+        make = _make_run(tmp_path / sig.name, ports)
+        try:
+            assert make.stdout is not None
+            lines: list[str] = []
+            while not any("skeye up: open" in line for line in lines):
+                line = make.stdout.readline()
+                assert line, f"make run did not start: {lines}"
+                lines.append(line)
+            servers = _descendants(make.pid)
+            assert len(servers) == 4  # skeye up and its three children
+            os.kill(make.pid, sig)
+            make.wait(60)
+            rest = make.stdout.read()
+            assert "skeye up: stopped" in rest, rest
+            for pid in servers:
+                gone = not os.path.exists(f"/proc/{pid}")
+                assert gone or open(f"/proc/{pid}/stat").read().split()[2] == "Z", (sig, pid)
+            for port in ports:
+                with socket.socket() as probe:
+                    assert probe.connect_ex(("127.0.0.1", port)) != 0, (sig, port)
+        finally:
+            if make.poll() is None:
+                os.killpg(make.pid, signal.SIGKILL)
+                make.wait(10)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -298,3 +300,71 @@ def test_state_table_raises_on_illegal_transitions():
     for state in NavState:
         reachable = {nxt for (s, _), nxt in TRANSITIONS.items() if s is state}
         assert state is NavState.LANDED or reachable & {NavState.LANDING, NavState.LANDED}
+
+
+def test_speeds_are_flown_as_asked_up_to_the_limit_and_refused_above_it():
+    air, boards = make()  # BoardSettings' max_speed_m_s 3.0: skeye pilot sets the robot file's
+    airborne(boards, air)
+    assert result(send(boards, encode(MoveBy(4000, 0, 0, 0, MoveFrame.BODY_FRD, 2500)))).code == 0
+    assert air.calls[-1][0] == "fly_to" and air.calls[-1][1][3] == 2.5  # not capped to 1.0
+    calls = len(air.calls)
+    r = result(send(boards, encode(MoveBy(4000, 0, 0, 0, MoveFrame.BODY_FRD, 3500))))
+    assert r.code is ResultCode.BAD_VALUE
+    assert "speed 3.5 m/s is over this vehicle's limit of 3 m/s" in r.reason
+    assert len(air.calls) == calls  # refused: nothing flown
+
+
+def test_a_pad_landing_ends_pad_mode_at_touchdown_and_hold_stays():
+    air, boards = make()
+    airborne(boards, air)
+    assert result(send(boards, encode(PadMode(PadAction.LAND, 50, 300)))).code == 0
+    boards.land()  # the pad controller's touchdown hand-over
+    air.finish(landed=True, armed=False)
+    boards.tick(0.1)
+    assert boards.state is NavState.LANDED
+    assert boards.pad.mode is PadAction.OFF
+    assert boards.pad.settings.deadband_m == 0.05  # only the mode ends
+    airborne(boards, air, now_s=1.0)
+    assert result(send(boards, encode(PadMode(PadAction.HOLD, 50, 300)))).code == 0
+    assert result(send(boards, encode(Land()))).code == 0
+    air.finish(landed=True, armed=False)
+    boards.tick(1.1)
+    assert boards.pad.mode is PadAction.HOLD  # only a pad *landing* ends with the landing
+
+
+def test_nav_status_height_is_above_the_ground_at_home():
+    air, boards = make()
+    air.finish(pos_ned_m=(2.0, 3.0, -0.09))  # resting on its gear, body origin 9 cm up
+    boards = OnboardBoards(air, BoardSettings(), now_s=0.0)
+    send(boards, encode(Stream(0, int(SkeyeMask.NAV_STATUS), 100)))
+    nav = next(m for m in boards.tick(0.0) if isinstance(m, NavStatus))
+    assert (nav.x, nav.y, nav.z) == (2000, 3000, 0)  # landed: height 0
+    assert result(send(boards, encode(TakeOff(1500)))).code == 0
+    assert air.calls[-1][0] == "take_off" and air.calls[-1][1][0] == pytest.approx(1.59)
+    air.finish(landed=False, armed=True, pos_ned_m=(2.0, 3.0, -1.59))
+    nav = next(m for m in boards.tick(1.0) if isinstance(m, NavStatus))
+    assert nav.z == -1500  # "take off to 1.5 m" shows 1.5 m
+
+
+def test_gps_best_estimate_is_the_ins_position_anchored_to_the_mean_fix():
+    from skeye.geo import GeoOrigin
+    from skeye.link.packets import GpsDataAdvanced, PollMask
+    from skeye.link.scaling import gps_data_advanced_to_si
+    from skeye.pilot.airframe import GpsFix
+
+    air, boards = make()
+    origin = GeoOrigin(49.0, 8.0, 0.0)
+    truth = (10.0, -4.0, -1.0)  # where the INS (and the vehicle) is
+    errors = [(2.0, -1.5), (-1.0, 2.5), (0.5, -0.5), (-1.5, -0.5)]  # fix errors, mean 0
+    for i, (dn, de) in enumerate(errors):
+        lat, lon, _ = origin.to_geodetic(truth[0] + dn, truth[1] + de, 0.0)
+        air.finish(pos_ned_m=truth, gps=GpsFix(True, 9, lat, lon, 100.0, (0.0, 0.0, 0.0)))
+        boards.tick(0.01 * i)
+    assert boards.geo.fixes == 5  # and the fake's first, exact fix at the origin
+    msg = boards.poll(int(PollMask.GPS_DATA_ADVANCED))[0]
+    assert isinstance(msg, GpsDataAdvanced)
+    raw, best = gps_data_advanced_to_si(msg)
+    n, e, _ = origin.to_ned(best.latitude_deg, best.longitude_deg, 0.0)
+    assert math.hypot(n - truth[0], e - truth[1]) < 0.05  # the mean fix: errors cancel
+    n, e, _ = origin.to_ned(raw.latitude_deg, raw.longitude_deg, 0.0)
+    assert math.hypot(n - truth[0], e - truth[1]) > 1.0  # the last raw fix is 1.6 m off

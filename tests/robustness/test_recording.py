@@ -7,6 +7,7 @@ import socket
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -226,3 +227,19 @@ def test_sim_killed_loses_at_most_the_last_second(tmp_path: Path) -> None:
     assert killed_at - last_wall < 1.0, f"lost {killed_at - last_wall:.2f} s"
     assert any(r.direction == TRUTH for r in records)
     assert any(r.line.startswith("SEN ") for r in records)
+
+
+def test_battery_panel_shows_flight_time_left_only_while_flying(
+    recording: tuple[Path, bytes],
+) -> None:
+    from skeye.sim.plotting import RobotTrack, flight_time_left_min
+
+    path, _ = recording
+    track = load_tracks(path)[0]["R1"]
+    assert len(track.battery_landed) == len(track.battery_s) > 0
+    # On the ground the estimate (charge over the idle current) is hours: left out, not drawn.
+    t = RobotTrack("A", battery_time_s=[0.0, 1.0, 2.0, 3.0],
+                   battery_s=[31800.0, 31700.0, 600.0, 590.0],
+                   battery_landed=[True, True, False, False])
+    left = flight_time_left_min(t)
+    assert np.isnan(left[:2]).all() and left[2:] == pytest.approx([10.0, 590 / 60])

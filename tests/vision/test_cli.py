@@ -97,10 +97,11 @@ def test_detect_missing_and_unreadable_image(tmp_path, capsys):
     assert "cannot read image" in capsys.readouterr().err
 
 
-def test_detect_requires_fov(pad_png):
-    with pytest.raises(SystemExit) as info:
-        run(["vision", "detect", str(pad_png)])
-    assert info.value.code == 2
+def test_detect_without_fov_needs_a_robot_with_a_camera(pad_png, capsys):
+    # --fov used to be required (issue 21 made it default to the robot file's camera); with no
+    # usable robot file the command still refuses, naming the problem.
+    assert run(["vision", "detect", str(pad_png), "--robot", "no_such_robot"]) == 2
+    assert "unknown robot class 'no_such_robot'" in capsys.readouterr().err
 
 
 def test_pad_command_writes_files(tmp_path, capsys):
@@ -116,3 +117,25 @@ def test_pad_command_writes_files(tmp_path, capsys):
     toml.write_text("name = 'x'\nside_m = 0.3\nrings = [{outer_m = 0.1, inner_m = 0.2}]\n")
     assert run(["pad", "--out", str(pdf), "--pad", str(toml)]) == 2
     assert "p.toml" in capsys.readouterr().err
+
+
+def test_detect_takes_the_fov_from_the_robot_file_and_says_so(pad_png, capsys):
+    assert run(["vision", "detect", str(pad_png), "--roll", "0.1", "--pitch", "-0.12"]) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert out["found"] is True and out["height_m"] == pytest.approx(1.2, rel=0.01)
+    assert ("--fov not given: using 1.309 rad, the horizontal field of view of the camera "
+            "'Down' of robot file hummingbird") in captured.err
+    assert run(["vision", "detect", str(pad_png), "--fov", "1.2"]) == 0
+    assert "--fov not given" not in capsys.readouterr().err
+    assert run(["vision", "detect", str(pad_png), "--camera", "Front"]) == 2
+    assert "no camera named 'Front' with fov_h_rad; give --fov" in capsys.readouterr().err
+
+
+def test_pad_command_tiles_over_paper(tmp_path, capsys):
+    out = tmp_path / "pad.pdf"
+    assert run(["pad", "--out", str(out), "--paper", "letter"]) == 0
+    assert "12 letter sheets (3 rows x 4 columns" in capsys.readouterr().out
+    assert out.read_bytes().startswith(b"%PDF")
+    assert run(["pad", "--out", str(tmp_path / "pad.png"), "--paper", "a4"]) == 2
+    assert "--paper writes a PDF of sheets" in capsys.readouterr().err

@@ -144,3 +144,44 @@ def test_printable_png_carries_its_dpi(tmp_path, dpi):
 def test_printable_rejects_other_extensions(tmp_path):
     with pytest.raises(LocalProtocolError, match=r"\.pdf or \.png"):
         write_printable(SKEYE_4, tmp_path / "pad.svg")
+
+
+@pytest.mark.parametrize(("paper", "sheet_pt"), [("a4", (595.3, 841.9)), ("letter", (612, 792))])
+def test_pad_tiles_over_home_printer_paper(tmp_path, paper, sheet_pt):
+    import re
+
+    from skeye.vision.printable import (
+        PAPER_MARGIN_M,
+        PAPERS_M,
+        TILE_OVERLAP_M,
+        page_size_m,
+        plan_tiles,
+        write_printable,
+    )
+
+    side = page_size_m(SKEYE_4)
+    plan = plan_tiles(side, paper)
+    # every sheet fits the paper's printable area; together they cover the whole page, and
+    # neighbours overlap by exactly TILE_OVERLAP_M
+    w, h = PAPERS_M[paper]
+    for t in plan.tiles:
+        assert t.width_m == pytest.approx((h if plan.landscape else w) - 2 * PAPER_MARGIN_M)
+        assert t.height_m == pytest.approx((w if plan.landscape else h) - 2 * PAPER_MARGIN_M)
+    assert min(t.x0_m for t in plan.tiles) == 0 and max(t.y0_m + t.height_m for t in plan.tiles
+                                                        ) == pytest.approx(side)
+    assert max(t.x0_m + t.width_m for t in plan.tiles) >= side
+    assert min(t.y0_m for t in plan.tiles) <= 0
+    by_place = {(t.row, t.col): t for t in plan.tiles}
+    a, b = by_place[(1, 1)], by_place[(1, 2)]
+    assert a.x0_m + a.width_m - b.x0_m == pytest.approx(TILE_OVERLAP_M)
+    below = by_place[(2, 1)]
+    assert below.y0_m + below.height_m - a.y0_m == pytest.approx(TILE_OVERLAP_M)
+    out = write_printable(SKEYE_4, tmp_path / "pad.pdf", paper=paper)
+    data = out.read_bytes()
+    assert len(re.findall(rb"/Type /Page[^s]", data)) == len(plan.tiles) == plan.rows * plan.cols
+    boxes = {tuple(round(float(v), 1) for v in m.split()[2:])
+             for m in re.findall(rb"/MediaBox \[([^\]]*)\]", data)}
+    want = sheet_pt[::-1] if plan.landscape else sheet_pt
+    assert boxes == {tuple(round(v, 1) for v in want)}
+    with pytest.raises(LocalProtocolError, match=r"name it \.pdf"):
+        write_printable(SKEYE_4, tmp_path / "pad.png", paper=paper)

@@ -65,7 +65,40 @@ function connectTelemetry() {
   };
 }
 
+// Inputs that carry a command argument with a vehicle limit (GET /api/commands "limit").
+const LIMITED_INPUTS = {
+  "velocity.forward_m_s": ["v-fwd"], "velocity.right_m_s": ["v-right"],
+  "velocity.up_m_s": ["v-up"], "move_by.speed_m_s": ["m-speed"],
+  "goto_gps.speed_m_s": ["g-speed"], "pad_mode.max_speed_m_s": ["p-speed"],
+};
+
+function applyLimits(commands) {
+  const found = {};
+  for (const c of commands) for (const a of c.args) {
+    if (!a.limit) continue;
+    found[a.limit.key] = a.limit;
+    for (const id of LIMITED_INPUTS[`${c.name}.${a.name}`] || []) {
+      if (a.max !== null) $(id).max = a.max;
+      if (a.min !== null) $(id).min = a.min;
+      $(id).title = `at most ${a.limit.value} (${a.limit.key}, ${a.limit.source})`;
+    }
+  }
+  const speed = found.max_speed_m_s;
+  if (speed) $("kbd-speed").max = speed.value;
+  const parts = [];
+  if (speed) parts.push(`speed ${speed.value} m/s`);
+  if (found.max_climb_m_s) parts.push(`climb ${found.max_climb_m_s.value} m/s`);
+  if (found.max_yaw_rate_rad_s) {
+    parts.push(`yaw ${(found.max_yaw_rate_rad_s.value * 180 / Math.PI).toFixed(0)} °/s`);
+  }
+  const source = (speed || found.max_climb_m_s || {}).source;
+  setText("limits", parts.length ? `vehicle limits: ${parts.join(" · ")} (${source})` : "",
+    speed ? speed.value : null);
+  S.limits = found;
+}
+
 function onHello(msg) {
+  applyLimits(msg.commands);
   S.track = [];
   S.series = [];
   const now = performance.now() / 1000;
@@ -105,6 +138,10 @@ function onTelemetry(t) {
     pill("flight-state", `state: ${n.state.replace("_", " ")}`, fsCls, { state: n.state });
     pill("pad-mode", `pad: ${n.pad_mode}`, n.pad_mode === "off" ? "neutral" : "warn",
       { mode: n.pad_mode });
+    if (S.padMode === "land" && n.pad_mode === "off" && n.state === "landed") {
+      logLine("pad landing finished: landed, pad mode back to off", "ok", "pad-landed");
+    }
+    S.padMode = n.pad_mode;
     setText("ro-height", fmt(n.height_m, 2, " m"), n.height_m);
     setText("ro-north", fmt(n.north_m, 2), n.north_m);
     setText("ro-east", fmt(n.east_m, 2), n.east_m);
@@ -200,46 +237,86 @@ function showResult(name, args, r) {
   el.dataset.ok = r.ok ? "true" : "false";
   el.dataset.code = r.code ?? "";
   el.dataset.command = name;
-  const li = document.createElement("li");
-  const t = new Date().toLocaleTimeString();
-  li.innerHTML = `<span class="t"></span><span class="${cls}"></span>`;
-  li.children[0].textContent = t;
-  li.children[1].textContent = `${text}${argText && !r.ok ? "" : ""}${argText ? `  [${argText}]` : ""}`;
-  $("cmd-log").prepend(li);
-  while ($("cmd-log").children.length > 100) $("cmd-log").lastChild.remove();
+  logLine(`${text}${argText ? `  [${argText}]` : ""}`, cls, name);
 }
 
+// One line per change: an answer identical to the newest line (a held key renews the same
+// velocity every few hundred ms) counts up "×n" on that line instead of adding another.
+function logLine(text, cls, kind) {
+  const log = $("cmd-log"), top = log.firstElementChild;
+  const t = new Date().toLocaleTimeString();
+  if (top && top.dataset.text === text) {
+    const n = Number(top.dataset.repeats) + 1;
+    top.dataset.repeats = String(n);
+    top.children[0].textContent = t;
+    top.children[2].textContent = ` ×${n}`;
+    return;
+  }
+  const li = document.createElement("li");
+  li.innerHTML = `<span class="t"></span><span class="${cls}"></span><span class="dim"></span>`;
+  li.children[0].textContent = t;
+  li.children[1].textContent = text;
+  li.dataset.text = text;
+  li.dataset.kind = kind;
+  li.dataset.repeats = "1";
+  log.prepend(li);
+  while (log.children.length > 100) log.lastChild.remove();
+}
+
+// A blank (or unparsable) field is "not given", never a zero: the command is not sent and
+// the log says which field to fill in.
+class BlankField extends Error {}
 const num = (id) => {
   const v = $(id).valueAsNumber;
-  return Number.isFinite(v) ? v : 0;
+  if (Number.isFinite(v)) return v;
+  const label = $(id).closest("label");
+  const what = label ? label.firstChild.textContent.trim() : id;
+  throw new BlankField(`the "${what}" field is ${$(id).value === "" ? "blank" : "not a number"}`
+    + "; fill it in (0 where you mean none)");
 };
 const rad = (deg) => deg * Math.PI / 180;
 
+// Run a control's handler; a blank field refuses the command on the page, visibly.
+function guarded(name, fn) {
+  return () => {
+    try { fn(); } catch (e) {
+      if (!(e instanceof BlankField)) throw e;
+      showResult(name, {}, { ok: false, status: "blank field", error: e.message });
+    }
+  };
+}
+
 function wireControls() {
-  $("btn-takeoff").onclick = () => send("take_off", { height_m: num("to-height") });
+  $("btn-takeoff").onclick = guarded("take_off", () => send("take_off", { height_m: num("to-height") }));
   $("btn-hold").onclick = () => send("hold");
   $("btn-land").onclick = () => send("land");
-  $("btn-velocity").onclick = () => send("velocity", {
+  $("btn-velocity").onclick = guarded("velocity", () => send("velocity", {
     forward_m_s: num("v-fwd"), right_m_s: num("v-right"), up_m_s: num("v-up"),
     yaw_rate_rad_s: rad(num("v-yaw")), duration_s: num("v-dur"),
-  });
-  $("btn-move").onclick = () => send("move_by", {
+  }));
+  $("btn-move").onclick = guarded("move_by", () => send("move_by", {
     forward_m: num("m-fwd"), right_m: num("m-right"), up_m: num("m-up"),
     yaw_rad: rad(num("m-yaw")), frame: $("m-frame").value, speed_m_s: num("m-speed"),
-  });
+  }));
+  // "here": the vehicle's position estimate (INS anchored to its GPS fixes, GPS_DATA_ADVANCED),
+  // not the raw fix, which wanders metres; the note beside the button says which was used.
   $("g-here").onclick = () => {
     const g = S.telemetry && S.telemetry.gps;
-    if (g) { $("g-lat").value = g.latitude_deg.toFixed(7); $("g-lon").value = g.longitude_deg.toFixed(7); }
+    if (!g || !g.fix) { $("g-source").textContent = "no GPS fix: nothing to fill in"; return; }
+    const est = g.estimate_latitude_deg !== null && g.estimate_latitude_deg !== undefined;
+    $("g-lat").value = (est ? g.estimate_latitude_deg : g.latitude_deg).toFixed(7);
+    $("g-lon").value = (est ? g.estimate_longitude_deg : g.longitude_deg).toFixed(7);
+    $("g-source").textContent = est ? "filled: the vehicle's position estimate"
+      : `filled: the raw GPS fix (±${g.horizontal_accuracy_m} m; no estimate from this vehicle)`;
+    $("g-source").dataset.source = est ? "estimate" : "fix";
   };
-  $("btn-goto").onclick = () => {
-    const args = { height_m: num("g-height"), speed_m_s: num("g-speed") };
-    if ($("g-lat").value !== "") args.latitude_deg = num("g-lat");
-    if ($("g-lon").value !== "") args.longitude_deg = num("g-lon");
-    send("goto_gps", args);
-  };
-  const pad = (mode) => send("pad_mode", {
+  $("btn-goto").onclick = guarded("goto_gps", () => send("goto_gps", {
+    latitude_deg: num("g-lat"), longitude_deg: num("g-lon"), height_m: num("g-height"),
+    speed_m_s: num("g-speed"),
+  }));
+  const pad = (mode) => guarded("pad_mode", () => send("pad_mode", {
     mode, deadband_m: num("p-deadband"), max_speed_m_s: num("p-speed"),
-  });
+  }))();
   $("btn-pad-hold").onclick = () => pad("hold");
   $("btn-pad-land").onclick = () => pad("land");
   $("btn-pad-off").onclick = () => pad("off");
@@ -270,7 +347,15 @@ function kbdVelocity() {
 
 function kbdSend(final = false) {
   const v = kbdVelocity();
-  const speed = num("kbd-speed");
+  let speed;
+  try { speed = num("kbd-speed"); } catch (e) {
+    if (!(e instanceof BlankField)) throw e;
+    speed = 0;  // a release still stops the vehicle; a key press sends nothing
+    if (!final) {
+      showResult("velocity", {}, { ok: false, status: "blank field", error: e.message });
+      return;
+    }
+  }
   const moving = v.fwd || v.right || v.up || v.yaw;
   $("kbd-state").textContent = moving
     ? `fwd ${v.fwd * speed} · right ${v.right * speed} · up ${v.up * speed} · yaw ${v.yaw}` : "";
