@@ -125,9 +125,16 @@ class LoadResult:
     frames_per_client_s: list[float]
     image_errors: int
     sim_alive: bool
+    sim_seconds: float = 0.0  # sim time that passed during the measurement
+    lines_per_client_sim_s: float = 0.0  # per second of sim time: independent of host load
+    frames_per_client_sim_s: tuple[float, ...] = ()
 
 
-def run_load(control: int, image: int, seconds: float, fps: float = 30.0) -> LoadResult:
+def run_load(control: int, image: int, seconds: float, fps: float = 30.0,
+             sim_seconds: float | None = None) -> LoadResult:
+    """Measure for ``seconds`` of wall time or, with ``sim_seconds``, until that much sim time
+    has passed (at most ``max(120, 60 * sim_seconds)`` wall seconds: a host too busy to reach
+    it gives a result whose ``sim_seconds`` says how far it got)."""
     proc, found = start_skeye(
         ["sim", "--port", "0", "--image-port", "0"],
         [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"],
@@ -155,14 +162,19 @@ def run_load(control: int, image: int, seconds: float, fps: float = 30.0) -> Loa
         lines0 = sum(c.lines for c in clients)
         t_start = time.monotonic()
         n = 0
-        while time.monotonic() - t_start < seconds:
+        wall_limit = seconds if sim_seconds is None else max(120.0, 60.0 * sim_seconds)
+        sim_now = sim0
+        while time.monotonic() - t_start < wall_limit:
+            if sim_seconds is not None and sim_now - sim0 >= sim_seconds:
+                break
             time.sleep(0.25)
             n += 1
-            pinger.ping(f"p{n}")
+            sim_now = pinger.ping(f"p{n}", timeout_s=60.0)[1]
         wall1, sim1 = pinger.ping("end")
         t_end = time.monotonic()
         lines = sum(c.lines for c in clients) - lines0
         rtts = [r * 1000 for r in pinger.rtt_s]
+        sim_s = max(sim1 - sim0, 1e-9)
         return LoadResult(
             control_clients=control,
             image_clients=image,
@@ -174,6 +186,11 @@ def run_load(control: int, image: int, seconds: float, fps: float = 30.0) -> Loa
             frames_per_client_s=[round(s.rate(t_start, t_end), 2) for s in streamers],
             image_errors=sum(s.errors for s in streamers),
             sim_alive=proc.poll() is None and not any(c.closed for c in clients),
+            sim_seconds=sim1 - sim0,
+            lines_per_client_sim_s=lines / max(control, 1) / sim_s,
+            frames_per_client_sim_s=tuple(
+                round(s.rate(t_start, t_end) * (t_end - t_start) / sim_s, 2) for s in streamers
+            ),
         )
     finally:
         for s in streamers:

@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from pathlib import Path
@@ -17,14 +18,39 @@ from skeye import __version__
 from skeye.errors import SkeyeError
 
 
-def _wait_for_signal(stop: threading.Event) -> None:
+def _wait_for_signal(stop: threading.Event, failed: threading.Event | None = None) -> None:
+    """Wait for SIGTERM/SIGINT (or ``failed`` to be set)."""
     def handler(signum: int, frame: Any) -> None:
         stop.set()
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
-    while not stop.wait(0.5):
-        pass
+    while not stop.wait(0.2):
+        if failed is not None and failed.is_set():
+            return
+
+
+ENGINE_FAILED_STATUS = 3
+FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
+"""Fault injection for tests (docs/reliability.md): the engine raises once sim time passes this."""
+
+
+def _inject_fault(sim: Any) -> None:
+    """Install the engine fault named by ``SKEYE_SIM_FAULT_AT_S``, if set."""
+    text = os.environ.get(FAULT_ENV)
+    if not text:
+        return
+    try:
+        at_s = float(text)
+    except ValueError:
+        raise SkeyeError(f"{FAULT_ENV} must be a number of seconds, got {text!r}") from None
+
+    def fault(s: Any) -> None:
+        if s.time_s >= at_s:
+            raise RuntimeError(f"injected engine fault at sim time {s.time_s:.3f} s ({FAULT_ENV})")
+
+    sim.step_hooks.append(fault)
+    print(f"skeye sim: {FAULT_ENV}={at_s:g}: the engine will fail on purpose", flush=True)
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -42,6 +68,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     sim = Simulation(
         world, seed=args.seed, timestep_s=args.timestep, wind=wind, robot_dirs=tuple(args.robot_dir)
     )
+    _inject_fault(sim)
     stop = threading.Event()
     with ExitStack() as stack:
         runner = stack.enter_context(SimulationRunner(sim, mode=args.mode))
@@ -66,7 +93,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
             }
             # Entered before the server, so it closes after it and keeps the last lines.
             recorder = stack.enter_context(Recorder(args.record, meta))
-        server = stack.enter_context(ControlServer(runner, host=args.host, port=args.port))
+        limits: dict[str, Any] = {
+            "handshake_timeout_s": args.handshake_timeout,
+            "idle_timeout_s": args.idle_timeout,
+        }
+        if args.max_clients_per_peer is not None:
+            limits["max_clients_per_peer"] = args.max_clients_per_peer
+        server = stack.enter_context(
+            ControlServer(runner, host=args.host, port=args.port, **limits)
+        )
         where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
         print(
             f"skeye sim: world {world.name!r}, {args.mode} mode, step {args.timestep * 1000:g} ms, "
@@ -79,7 +114,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             print(f"skeye sim: recording to {args.record}", flush=True)
         if cameras is not None:
             images = stack.enter_context(
-                ImageServer(cameras.buffer, host=args.host, port=args.image_port)
+                ImageServer(cameras.buffer, host=args.host, port=args.image_port, **limits)
             )
             print(
                 f"skeye sim: image server on {args.host}:{images.port} "
@@ -91,9 +126,16 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",
                 flush=True,
             )
-        _wait_for_signal(stop)
-        print("skeye sim: stopping", flush=True)
-    return 0
+        _wait_for_signal(stop, runner.failed)
+        if runner.error is not None:
+            print(f"skeye sim: error: {runner.error}; stopping", file=sys.stderr, flush=True)
+            # The clients were told (ERR {Command ENGINE}); let their writers flush it.
+            deadline = time.monotonic() + 2.0
+            while server.client_count and time.monotonic() < deadline:
+                time.sleep(0.05)
+        else:
+            print("skeye sim: stopping", flush=True)
+    return ENGINE_FAILED_STATUS if runner.error is not None else 0
 
 
 def _add_sim(sub: Any) -> None:
@@ -124,6 +166,29 @@ def _add_sim(sub: Any) -> None:
         type=int,
         default=None,
         help="serve camera images on this port (5003 by convention; 0 = any free)",
+    )
+    p.add_argument(
+        "--max-clients-per-peer",
+        type=int,
+        default=None,
+        metavar="N",
+        help="connections one peer address may hold on each server "
+        "(default: half the slots: 64 control, 32 image)",
+    )
+    p.add_argument(
+        "--handshake-timeout",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="close a connection that sends no command within S seconds (default 10)",
+    )
+    p.add_argument(
+        "--idle-timeout",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="close a connection without a robot (control) or without a stream (images) that "
+        "sends nothing for S seconds (default 120)",
     )
     p.add_argument(
         "--record",

@@ -5,12 +5,20 @@ Every server prints its address on stdout once it listens (``control protocol on
 lines, returns their regex matches, and then keeps draining the child's output so it never
 blocks on a full pipe. Used by ``skeye validate`` and the benchmarks.
 
+No child outlives its parent: every child started here (and by ``skeye up``) asks the kernel
+for SIGTERM when its parent dies (Linux ``PR_SET_PDEATHSIG``, set between fork and exec, so it
+holds even when the parent is SIGKILLed), every child is stopped by an ``atexit`` hook if the
+parent exits without stopping it, and :func:`stop_processes` stops a group of children with one
+shared deadline: SIGTERM to all, then SIGKILL to whoever is left.
+
 Also here: :func:`check_ports_free` (``skeye up`` and ``skeye pilot`` check their ports before
 starting anything) and :class:`ParentWatch` (``skeye up`` stops when ``make run`` is signalled).
 """
 
 from __future__ import annotations
 
+import atexit
+import ctypes
 import os
 import re
 import signal
@@ -19,16 +27,65 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 from skeye.errors import ConfigError, SkeyeError
+
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent() -> Callable[[], None] | None:
+    """A ``preexec_fn`` that makes the child get SIGTERM when this process dies (Linux; None
+    elsewhere). If this process is already gone when the child runs it, the child stops."""
+    if not sys.platform.startswith("linux"):
+        return None
+    parent = os.getpid()
+
+    def preexec() -> None:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        if os.getppid() != parent:  # the parent died before the request took effect
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    return preexec
+
+
+def stop_processes(procs: Sequence[subprocess.Popen[Any]], timeout_s: float = 15.0) -> None:
+    """SIGTERM every running process, wait for all with one deadline, SIGKILL the rest."""
+    for proc in procs:
+        if proc.poll() is None:
+            try:
+                proc.terminate()
+            except OSError:
+                pass
+    deadline = time.monotonic() + timeout_s
+    for proc in procs:
+        try:
+            proc.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
+
+
+_children: list[subprocess.Popen[Any]] = []
+_children_lock = threading.Lock()
+
+
+def _stop_remaining_children() -> None:
+    with _children_lock:
+        left = [p for p in _children if p.poll() is None]
+    stop_processes(left, timeout_s=10.0)
+
+
+atexit.register(_stop_remaining_children)
 
 
 def start_skeye(
     args: Sequence[str],
     patterns: Sequence[str],
     what: str,
-    timeout_s: float = 60.0,
+    timeout_s: float = 180.0,
     env: Mapping[str, str] | None = None,
 ) -> tuple[subprocess.Popen[str], list[re.Match[str]]]:
     """Start ``python -m skeye.cli ARGS``; wait for a stdout line matching each pattern, in order.
@@ -42,7 +99,11 @@ def start_skeye(
     child_env.setdefault("MUJOCO_GL", "egl")
     child_env.update(env or {})
     proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=child_env)
+                            stderr=subprocess.STDOUT, text=True, env=child_env,
+                            preexec_fn=die_with_parent())
+    with _children_lock:
+        _children[:] = [p for p in _children if p.poll() is None]
+        _children.append(proc)
     assert proc.stdout is not None
     found: list[re.Match[str]] = []
     deadline = time.monotonic() + timeout_s
@@ -64,13 +125,7 @@ def start_skeye(
 
 def stop_process(proc: subprocess.Popen[str], timeout_s: float = 15.0) -> None:
     """SIGTERM, then SIGKILL if it has not exited within ``timeout_s``."""
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
+    stop_processes([proc], timeout_s)
 
 
 def port_in_use(host: str, port: int) -> bool:

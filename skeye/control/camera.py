@@ -5,7 +5,11 @@ How this works: the simulator announces every rendered frame on the control stre
 other sensor. The pixels live on the image server (docs/protocols/images.md);
 :meth:`CameraSensor.image` asks it for the newest frame of ``<robot>/<camera>`` over one lazily
 opened :class:`~skeye.sim.image_client.ImageClient` (RAW + META, so the frame number and sim
-time come with the pixels). The image client is not thread-safe: one lock serialises its use.
+time come with the pixels). The image client is not thread-safe: one lock serialises its use. A
+request that fails in any way (timeout, reset, refused, a server that restarted) drops the
+connection, so the next call reconnects and a late frame can never answer a later request;
+socket errors are raised as :class:`~skeye.errors.SkeyeError`. A connection the server closed
+for idling is replaced once, transparently.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import LocalProtocolError
+from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.image_client import ImageClient
 from skeye.sim.protocol import Message
 
@@ -76,17 +80,24 @@ class CameraSensor(Sensor[CameraReading]):
                 f"camera {self.name!r}: connect with images='host:port' to fetch pixels"
             )
         with self._client_lock:
-            if self._client is None:
-                client = self._images()
+            reused = self._client is not None
+            try:
+                frame = self._fetch()
+            except (RemoteProtocolError, OSError) as exc:
+                self._drop()
+                closed = isinstance(exc, OSError) or "closed" in str(exc)
+                if not (reused and closed):
+                    raise _as_skeye(self.name, exc) from exc
+                # The server closed a connection that sat idle (its --idle-timeout): once more,
+                # on a fresh one.
                 try:
-                    client.select_camera(f"{self._robot_name}/{self.name}")
-                    client.set_format("raw")
-                    client.set_meta(True)
-                except BaseException:
-                    client.close()
-                    raise
-                self._client = client
-            frame = self._client.get_frame()
+                    frame = self._fetch()
+                except (SkeyeError, OSError) as exc2:
+                    self._drop()
+                    raise _as_skeye(self.name, exc2) from exc2
+            except SkeyeError:
+                self._drop()  # e.g. a timeout: a late frame must not answer the next request
+                raise
         bgr = frame.image()
         if frame.meta is None:
             latest = self.latest
@@ -95,9 +106,40 @@ class CameraSensor(Sensor[CameraReading]):
             number, time_s = frame.meta.frame_number, frame.meta.sim_time_s
         return CameraImage(number, time_s, bgr)
 
+    def _fetch(self) -> Any:
+        """The newest frame over the current connection, opening one if needed (lock held)."""
+        assert self._images is not None
+        if self._client is None:
+            client = self._images()
+            try:
+                client.select_camera(f"{self._robot_name}/{self.name}")
+                client.set_format("raw")
+                client.set_meta(True)
+            except BaseException:
+                client.close()
+                raise
+            self._client = client
+        return self._client.get_frame()
+
+    def _drop(self) -> None:
+        """Close the connection: its state is unknown (a frame may still be on its way)."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
     def close(self) -> None:
-        """Close the image-server connection (idempotent)."""
+        """Close the image-server connection (idempotent). A request blocked on it (on another
+        thread) is woken at once: it fails, instead of holding the lock until its timeout."""
+        client = self._client
+        if client is not None:
+            client.close()
         with self._client_lock:
             if self._client is not None:
                 self._client.close()
                 self._client = None
+
+
+def _as_skeye(camera: str, exc: BaseException) -> SkeyeError:
+    if isinstance(exc, SkeyeError):
+        return exc
+    return SkeyeError(f"camera {camera!r}: image server: {exc}")

@@ -15,6 +15,7 @@ option that moves a taken one.
 from __future__ import annotations
 
 import argparse
+import atexit
 import math
 import os
 import signal
@@ -28,9 +29,10 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from skeye.errors import ConfigError, LocalProtocolError
+from skeye.processes import die_with_parent
 
-STOP_DEADLINE_S = 5.0
-START_DEADLINE_S = 60.0
+STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
+START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to import MuJoCo
 
 
 def _default_fov_rad(robot: str) -> float:
@@ -139,12 +141,16 @@ def _child_argv(*args: str) -> list[str]:
     return [sys.executable, "-m", "skeye.ground.cli", *args]
 
 
-def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float
-                    ) -> None:
+def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float,
+                    stop: threading.Event | None = None) -> None:
     end = time.monotonic() + deadline_s
     while time.monotonic() < end:
         if child.poll() is not None:
-            raise ConfigError(f"{what} exited with status {child.returncode} while starting")
+            meaning = _EXIT_MEANING.get(child.returncode, "") if what == "simulator" else ""
+            raise ConfigError(f"{what} exited with status {child.returncode}"
+                              f"{' (' + meaning + ')' if meaning else ''} while starting")
+        if stop is not None and stop.is_set():
+            raise ConfigError(f"stopped while {what} was starting")
         try:
             with socket.create_connection(("127.0.0.1", port), timeout=0.5):
                 return
@@ -154,15 +160,24 @@ def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadli
 
 
 def _stop_all(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> None:
-    """SIGTERM in reverse start order, then SIGKILL after the deadline."""
-    for _, child in reversed(children):
-        if child.poll() is None:
-            child.send_signal(signal.SIGTERM)
-        try:
-            child.wait(STOP_DEADLINE_S)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait(STOP_DEADLINE_S)
+    """SIGTERM to every child at once, one shared deadline, then SIGKILL (see
+    :func:`skeye.processes.stop_processes`)."""
+    from skeye.processes import stop_processes
+
+    stop_processes([child for _, child in reversed(children)], STOP_DEADLINE_S)
+
+
+_EXIT_MEANING = {3: "its simulation engine failed"}
+
+
+def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> bool:
+    """Say which children have exited, and how; True if any has."""
+    dead = [(w, c) for w, c in children if c.poll() is not None]
+    for what, child in dead:
+        meaning = _EXIT_MEANING.get(child.returncode, "") if what == "simulator" else ""
+        print(f"skeye up: {what} exited ({child.returncode}"
+              f"{': ' + meaning if meaning else ''}); stopping", flush=True)
+    return bool(dead)
 
 
 def run_up(args: argparse.Namespace) -> int:
@@ -178,10 +193,15 @@ def run_up(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, handler)
     children: list[tuple[str, subprocess.Popen[bytes]]] = []
 
+    # Every exit path stops the children: the finally below, atexit if something escapes it,
+    # and the kernel (PR_SET_PDEATHSIG) if this process is killed outright.
+    atexit.register(_stop_all, children)
+
     def start(what: str, argv: list[str], port: int) -> None:
-        child = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL)
+        child = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL,
+                                 preexec_fn=die_with_parent())
         children.append((what, child))
-        _wait_listening(port, child, what, START_DEADLINE_S)
+        _wait_listening(port, child, what, START_DEADLINE_S, stop)
 
     from skeye.processes import ParentWatch, check_ports_free
 
@@ -202,7 +222,7 @@ def run_up(args: argparse.Namespace) -> int:
             ),
             args.image_port,
         )
-        _wait_listening(args.sim_port, children[0][1], "simulator", START_DEADLINE_S)
+        _wait_listening(args.sim_port, children[0][1], "simulator", START_DEADLINE_S, stop)
         start(
             "pilot",
             _child_argv(
@@ -231,17 +251,21 @@ def run_up(args: argparse.Namespace) -> int:
             if going is not None:
                 print(f"skeye up: {going}; stopping", flush=True)
                 break
-            dead = [(w, c) for w, c in children if c.poll() is not None]
-            if dead:
-                what, child = dead[0]
-                print(f"skeye up: {what} exited ({child.returncode}); stopping", flush=True)
+            if _report_dead(children):
                 status = 1
                 break
     except ConfigError as exc:
         print(f"skeye up: {exc}", file=sys.stderr, flush=True)
+        # The root cause may be another child: a pilot that cannot reach its simulator is
+        # usually looking at one that is exiting. Give it a few seconds to say so.
+        end = time.monotonic() + 5.0
+        while children and children[0][1].poll() is None and time.monotonic() < end:
+            time.sleep(0.1)
+        _report_dead(children)
         status = 1
     finally:
         _stop_all(children)
+        atexit.unregister(_stop_all)
     print("skeye up: stopped", flush=True)
     return status
 

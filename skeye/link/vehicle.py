@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 from types import TracebackType
 
@@ -112,6 +112,9 @@ class Vehicle:
         self.turned_away: Result | None = None  # the RESULT code 5 that refused this client
         self._cond = threading.Condition()
         self._counts: dict[PD, int] = defaultdict(int)
+        # Every NAV_STATUS with its count, so wait_state sees a state that lasted a single frame
+        # even when several frames arrived while the waiting thread was not scheduled.
+        self._nav_history: deque[tuple[int, NavStatus]] = deque(maxlen=4096)
         self._acks: dict[PD, int] = defaultdict(int)
         self._results: dict[int, list[Result]] = defaultdict(list)
         self._callbacks: list[TelemetryCallback] = []
@@ -196,6 +199,8 @@ class Vehicle:
                 assert pd is not None  # every vehicle frame has a descriptor
                 self.latest[pd] = event
                 self._counts[pd] += 1
+                if isinstance(event, NavStatus):
+                    self._nav_history.append((self._counts[pd], event))
             self._cond.notify_all()
         if not isinstance(event, Ack):
             for cb in list(self._callbacks):
@@ -237,15 +242,35 @@ class Vehicle:
             return self.latest[pd]
 
     def wait_state(self, *states: NavState, timeout_s: float = 30.0) -> NavStatus:
-        """Wait until a NAV_STATUS reports one of ``states`` (needs NAV_STATUS streaming)."""
+        """Wait until a NAV_STATUS received after this call reports one of ``states`` (needs
+        NAV_STATUS streaming). Every frame counts, not only the newest: a state seen in one
+        frame is found even if later frames arrived before this thread ran."""
         deadline = time.monotonic() + timeout_s
+        with self._cond:
+            seen = self._counts[PD.NAV_STATUS]
+        last: NavStatus | None = None
+        names = ", ".join(s.name for s in states)
         while True:
-            msg = self.wait_for(PD.NAV_STATUS, max(0.01, deadline - time.monotonic()))
-            if isinstance(msg, NavStatus) and msg.state in states:
-                return msg
+            after = seen
+
+            def arrived(after: int = after) -> bool:
+                return self._counts[PD.NAV_STATUS] > after
+
+            with self._cond:
+                try:
+                    self._wait(arrived, "NAV_STATUS", max(0.01, deadline - time.monotonic()))
+                except LinkTimeout:
+                    raise LinkTimeout(
+                        f"vehicle not {names} within {timeout_s} s (last: {last})"
+                    ) from None
+                fresh = [m for n, m in self._nav_history if n > after]
+                seen = self._counts[PD.NAV_STATUS]
+            for msg in fresh:
+                last = msg
+                if msg.state in states:
+                    return msg
             if time.monotonic() >= deadline:
-                names = ", ".join(s.name for s in states)
-                raise LinkTimeout(f"vehicle not {names} within {timeout_s} s (last: {msg})")
+                raise LinkTimeout(f"vehicle not {names} within {timeout_s} s (last: {last})")
 
     def nav_status(self) -> NavStatus | None:
         """The latest NAV_STATUS received (streamed), or None."""

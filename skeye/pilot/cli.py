@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
                         "name with --name"
                     ) from None
                 raise
-            airframe = SimAirframe(sim, robot)  # flies by the robot file's speed limits
+            # Flies by the robot file's speed limits.
+            airframe = SimAirframe(sim, robot, frozen_timeout_s=args.sim_frozen_timeout)
             settings = BoardSettings(
                 link_timeout_s=settings.link_timeout_s,
                 land_timeout_s=settings.land_timeout_s,
@@ -98,9 +99,10 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down") -> Any:
 
     conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
     fov_h_rad = conf.get_float("FOV")
+    lockstep = sim.mode == "lockstep"
 
     def make(boards: Any, lock: Any) -> PadVision:
-        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad)
+        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep)
 
     return make
 
@@ -144,4 +146,12 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--tick", type=float, default=0.01, help="loop period in realtime (s)")
     p.add_argument("--timeout", type=float, default=10.0, help="simulator answer deadline (s)")
+    p.add_argument(
+        "--sim-frozen-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="realtime: sim time standing still for S wall seconds means the simulator froze "
+        "(failsafe, as if it were gone); default 5",
+    )
     p.set_defaults(func=run)

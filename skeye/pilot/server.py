@@ -150,6 +150,9 @@ class PilotServer:
         for t in self._threads:
             if t is not current:
                 t.join(timeout_s)
+        close_vision = getattr(self.vision, "close", None)
+        if close_vision is not None:
+            close_vision(timeout_s)
 
     def __enter__(self) -> PilotServer:
         return self.start()

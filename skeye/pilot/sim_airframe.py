@@ -11,25 +11,44 @@ robot is idle. The robot's motion limits are raised to its robot file's (``MaxSp
 limits the boards and ground control check commands against. Altitudes: the control
 interface's ``take_off`` is relative to the spawn point;
 everything here is above the world origin (``-down``).
+
+A frozen simulator is as lost as a dead one (:attr:`SimAirframe.lost`): in realtime, sim time
+(the newest time any line carried) must move within ``frozen_timeout_s`` of wall time; in
+lockstep, a ``STEP`` that was answered must have moved it. Otherwise the pilot's failsafe
+applies, exactly as when the simulator's connection drops.
 """
 
 from __future__ import annotations
 
 import math
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import replace
 
 from skeye.control.connection import Connection
 from skeye.control.robots import Robot
+from skeye.errors import ConfigError
 from skeye.pilot.airframe import GpsFix, Snapshot
 
 Attitude = tuple[float, float, float, float]
+FROZEN_TIMEOUT_S = 5.0
+"""Realtime: sim time standing still this long (wall seconds) means the simulator is frozen."""
 
 
 class SimAirframe:
     """A robot spawned (by the caller) on a ``skeye.control`` connection."""
 
-    def __init__(self, connection: Connection, robot: Robot) -> None:
+    def __init__(
+        self,
+        connection: Connection,
+        robot: Robot,
+        *,
+        frozen_timeout_s: float = FROZEN_TIMEOUT_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if not (math.isfinite(frozen_timeout_s) and frozen_timeout_s > 0):
+            raise ConfigError(f"--sim-frozen-timeout must be > 0 s, got {frozen_timeout_s!r}")
         self.connection = connection
         self.robot = robot
         # One set of speed limits: the robot file's [controller] table as the simulator reports
@@ -43,6 +62,11 @@ class SimAirframe:
             max_yaw_rate_rad_s=robot.limits.get("MaxYawRate", cfg.max_yaw_rate_rad_s),
         )
         self.lockstep = connection.mode == "lockstep"
+        self.frozen_timeout_s = frozen_timeout_s
+        self._clock = clock
+        self._seen_time_s = connection.time_s
+        self._seen_at_s = clock()
+        self._frozen: str | None = None
         self._lock = threading.Lock()
         self._sticks: Attitude | None = None  # deferred until the robot's motion is idle
         self._sticks_live = False
@@ -60,7 +84,16 @@ class SimAirframe:
             return f"simulator lost: {self.connection.error}"
         if self.connection.closed:
             return "simulator lost: the connection is closed"
-        return None
+        if self._frozen is None and not self.lockstep:
+            now, t = self._clock(), self.connection.time_s
+            if t != self._seen_time_s:
+                self._seen_time_s, self._seen_at_s = t, now
+            elif now - self._seen_at_s >= self.frozen_timeout_s:
+                self._frozen = (
+                    f"simulator frozen: sim time stuck at {t:.3f} s for "
+                    f"{now - self._seen_at_s:.1f} s of wall time"
+                )
+        return self._frozen
 
     @property
     def busy(self) -> bool:
@@ -214,5 +247,10 @@ class SimAirframe:
     def advance(self, seconds: float) -> None:
         """Send deferred sticks; in lockstep, let ``seconds`` of sim time pass."""
         self._flush_sticks()
-        if self.lockstep:
-            self.connection.run_for(seconds)
+        if self.lockstep and seconds > 0:
+            before = self.connection.time_s
+            after = self.connection.run_for(seconds)
+            if after <= before and self._frozen is None:
+                self._frozen = (
+                    f"simulator frozen: STEP answered but sim time stayed at {after:.3f} s"
+                )

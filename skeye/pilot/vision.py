@@ -1,11 +1,18 @@
 """The pilot's vision: landing-pad detection on every new camera frame, and what PAD_MODE does.
 
-How this works: after each loop tick the pilot calls :meth:`PadVision.step`. When the robot's
-camera has announced a frame newer than the last one processed (``SEN {Type Camera}``), the
-newest frame is fetched from the image server (RAW, with its META header: frame number and sim
-time), turned grey, and given to :func:`skeye.vision.detector.detect` with the camera's float
-field of view and the INS roll and pitch, exactly as ``skeye vision detect`` does on a real
-camera image. The estimate goes to the boards' :class:`PadController` (the PAD packet).
+How this works: the vision runs on its own worker thread (:class:`skeye.workers.Worker`), never
+in the pilot's control loop. When the robot's camera has announced a frame newer than the last
+one processed (``SEN {Type Camera}``), the worker fetches the newest frame from the image server
+(RAW, with its META header: frame number and sim time), turns it grey and gives it to
+:func:`skeye.vision.detector.detect` with the camera's float field of view and the INS roll and
+pitch, exactly as ``skeye vision detect`` does on a real camera image. The estimate goes into a
+bounded queue (the oldest is dropped when it is full); the control loop's :meth:`PadVision.step`
+drains it into the boards' :class:`PadController` (the PAD packet) without ever waiting on the
+camera. A camera error (timeout, reset, refused, image server restarted) counts as "pad not
+seen" for that frame; the camera reconnects on the next frame, and since a failed request drops
+its connection, a late frame never answers a later request. In lockstep the loop waits (at most
+``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible; the
+simulator is paused meanwhile, so nothing flies unwatched.
 
 In pad modes the estimate also flies the vehicle through :class:`PadHoldLaw`: HOLD (1) keeps
 the pad centre within the deadband at up to the speed limit; LAND (2) descends onto it and
@@ -18,6 +25,7 @@ vehicle back with a hover. Nothing here reads the simulator's ground truth.
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 from dataclasses import dataclass, replace
 from typing import Any
@@ -31,6 +39,7 @@ from skeye.pilot.pad import PadObservation
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
 from skeye.vision.detector import detect
 from skeye.vision.pad import SKEYE_4, PadDefinition
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +55,7 @@ class VisionStats:
 
 
 class PadVision:
-    """Detector + pad navigation, driven by the pilot loop."""
+    """Detector + pad navigation: a worker thread detects, the pilot loop navigates."""
 
     def __init__(
         self,
@@ -57,7 +66,13 @@ class PadVision:
         fov_h_rad: float,
         pad: PadDefinition = SKEYE_4,
         params: PadHoldParams | None = None,
+        lockstep: bool = False,
+        lockstep_wait_s: float = 5.0,
+        queue_size: int = 4,
     ) -> None:
+        if queue_size < 1 or not lockstep_wait_s > 0:
+            raise ValueError(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
+                             f"({queue_size}, {lockstep_wait_s})")
         self.boards = boards
         self.robot = robot
         self.lock = lock
@@ -66,24 +81,108 @@ class PadVision:
         self.base_params = params or PadHoldParams()
         self.law = PadHoldLaw(self.base_params)
         self.stats = VisionStats()
+        self.lockstep = lockstep
+        self.lockstep_wait_s = lockstep_wait_s
         self._last_frame = 0
         self._mode = PadAction.OFF
+        self._observations: queue.Queue[PadObservation] = queue.Queue(queue_size)
+        self._kick = threading.Event()
+        self._stop = threading.Event()
+        self._done = threading.Condition()
+        self._attempted = 0  # newest announced frame the worker has dealt with
+        self._worker: Worker | None = None
 
+    # -- lifecycle -------------------------------------------------------------------------
+    def start(self) -> PadVision:
+        if self._worker is None:
+            self._worker = Worker(self._run, "pilot-vision", on_error=self._on_error).start()
+        return self
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop the worker (idempotent)."""
+        self._stop.set()
+        self._kick.set()
+        if self._worker is not None:
+            self._worker.join(timeout_s)
+
+    def __enter__(self) -> PadVision:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _on_error(self, exc: BaseException) -> None:
+        with self._done:
+            self._done.notify_all()
+
+    # -- the control loop's side -------------------------------------------------------------
     def step(self) -> None:
-        """Process the newest frame if there is a new one; never raises on a bad frame."""
+        """Called by the pilot loop after each tick: hand new observations to the boards.
+
+        Raises:
+            WorkerFailed: the vision thread died (a bug); the pilot treats it as a failure.
+        """
+        worker = self.start()._worker
+        assert worker is not None
+        worker.check()
+        self._kick.set()
+        latest = self.robot.camera.latest
+        if self.lockstep and latest is not None:
+            with self._done:
+                self._done.wait_for(
+                    lambda: self._attempted >= latest.frame or not worker.alive,
+                    self.lockstep_wait_s,
+                )
+            worker.check()
+        while True:
+            try:
+                obs = self._observations.get_nowait()
+            except queue.Empty:
+                return
+            with self.lock:
+                self.boards.pad.on_frame(obs)
+                self._navigate(obs)
+
+    # -- the worker's side -------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._kick.wait(0.05)
+            self._kick.clear()
+            latest = self.robot.camera.latest
+            if latest is None or latest.frame <= self._last_frame or self._stop.is_set():
+                continue
+            obs = self._process(latest.frame, latest.time_s)
+            if obs is not None:
+                self._put(obs)
+            with self._done:
+                self._attempted = max(self._attempted, latest.frame)
+                self._done.notify_all()
+
+    def _put(self, obs: PadObservation) -> None:
+        while True:
+            try:
+                self._observations.put_nowait(obs)
+                return
+            except queue.Full:
+                try:
+                    self._observations.get_nowait()  # the loop is behind: drop the oldest
+                except queue.Empty:
+                    pass
+
+    def _process(self, announced: int, announced_time_s: float) -> PadObservation | None:
+        """Fetch and detect the newest frame; a failure is "pad not seen", never an exception."""
         camera = self.robot.camera
-        latest = camera.latest
-        if latest is None or latest.frame <= self._last_frame:
-            return
         try:
             image = camera.image()
         except SkeyeError as exc:
             self.stats.errors += 1
             self.stats.last_error = str(exc)
-            log.warning("camera frame not available: %s", exc)
-            return
+            log.warning("camera frame not available (pad not seen): %s", exc)
+            self._last_frame = announced
+            self._stop.wait(0.1)  # do not hammer a server that is down
+            return PadObservation(announced_time_s, False)
         if image.frame <= self._last_frame:
-            return
+            return None
         self._last_frame = image.frame
         ins = self.robot.ins.latest
         roll, pitch = (ins.rpy_rad[0], ins.rpy_rad[1]) if ins is not None else (0.0, 0.0)
@@ -95,13 +194,9 @@ class PadVision:
             bits = 0
             for ring in est.rings:
                 bits |= 1 << (ring - 1)
-            obs = PadObservation(image.time_s, True, bits, est.offset_body_m[0],
-                                 est.offset_body_m[1], est.height_m, est.quality)
-        else:
-            obs = PadObservation(image.time_s, False)
-        with self.lock:
-            self.boards.pad.on_frame(obs)
-            self._navigate(obs)
+            return PadObservation(image.time_s, True, bits, est.offset_body_m[0],
+                                  est.offset_body_m[1], est.height_m, est.quality)
+        return PadObservation(image.time_s, False)
 
     def _navigate(self, obs: PadObservation) -> None:
         boards = self.boards

@@ -33,6 +33,7 @@ from skeye.sim import frames
 from skeye.sim.image_server import Frame, FrameBuffer
 from skeye.sim.protocol import format_message
 from skeye.sim.robot_config import SensorMount
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -159,9 +160,20 @@ class CameraSystem:
         sim.rebuild_hooks.append(self._on_rebuild)
         sim.step_hooks.append(self._on_step)
         sim.event_sources.append(self._next_event_step)
-        self._thread = threading.Thread(target=self._render_loop, name="skeye-render",
-                                        daemon=True)
-        self._thread.start()
+        self._reported = False
+        self._worker = Worker(self._render_loop, "skeye-render", on_error=self._render_died)
+        self._worker.start()
+
+    def _render_died(self, exc: BaseException) -> None:
+        """The render thread itself failed: record why and release a waiting engine."""
+        self.error = f"camera rendering stopped: {type(exc).__name__}: {exc}"
+        while True:
+            try:
+                job = self._jobs.get_nowait()
+            except queue.Empty:
+                return
+            if job is not None and job.done is not None:
+                job.done.set()
 
     def close(self, timeout_s: float = 5.0) -> None:
         if self._stop.is_set():
@@ -171,7 +183,7 @@ class CameraSystem:
             self._jobs.put(None, timeout=timeout_s)
         except queue.Full:
             pass
-        self._thread.join(timeout_s)
+        self._worker.join(timeout_s)
 
     def __enter__(self) -> CameraSystem:
         return self
@@ -222,6 +234,9 @@ class CameraSystem:
 
     def _on_step(self, sim: Any) -> None:
         if self.error is not None:
+            if not self._reported:  # realtime: the render thread failed since the last step
+                self._reported = True
+                self._report_error()
             return
         shots = []
         t = sim.time_s
@@ -242,6 +257,7 @@ class CameraSystem:
             if not job.done.wait(60.0):
                 raise SkeyeError("camera rendering timed out (60 s)")
             if self.error is not None:
+                self._reported = True
                 self._report_error()
         else:
             try:
@@ -250,10 +266,14 @@ class CameraSystem:
                 self.skipped += len(shots)
 
     def _report_error(self) -> None:
+        log.error("telling the camera robots' clients: %s", self.error)
+        # One line, no braces: the reason must never make the ERR line itself unformattable.
+        reason = " ".join((self.error or "rendering failed").replace("{", "(")
+                          .replace("}", ")").split())[:400]
         for robot in self.sim.robots.values():
             if robot.cameras:
                 robot.outbox(format_message("ERR", ("Command", "CAMERA"), ("Name", robot.name),
-                                            ("Reason", self.error or "rendering failed")))
+                                            ("Reason", reason)))
 
     # -- render thread -------------------------------------------------------------------
     def _render_loop(self) -> None:
@@ -303,7 +323,7 @@ class CameraSystem:
                     self.error = str(exc)
                     log.error("%s", exc)
                 except Exception as exc:  # a GL failure must reach the clients, not kill us
-                    self.error = f"camera rendering failed: {exc}"
+                    self.error = f"camera rendering failed: {type(exc).__name__}: {exc}"
                     log.exception("camera rendering failed")
                 finally:
                     if job.done is not None:

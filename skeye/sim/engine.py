@@ -12,6 +12,11 @@ The runner paces the clock: ``realtime`` follows the wall clock (slipping, and s
 falls behind); ``lockstep`` advances only on :meth:`SimulationRunner.step`. Everything that
 changes the world (spawn, remove, drive, wind) is a task executed on the engine thread between
 steps, so the order of effects is the order of commands, and a lockstep run is reproducible.
+
+The engine never stops silently: an exception escaping a step (or a task submitted as
+``fatal``, like a lockstep ``STEP``) ends the engine thread, is kept in
+:attr:`SimulationRunner.error`, fails every queued and later task at once, and is handed to each
+of :attr:`SimulationRunner.failure_listeners` (the control server tells every client).
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
+from skeye.workers import Worker, WorkerFailed
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -552,15 +558,21 @@ class SimulationRunner:
             raise LocalProtocolError(f"mode must be 'realtime' or 'lockstep', got {mode!r}")
         self.sim = sim
         self.mode = mode
-        self._tasks: queue.Queue[tuple[Callable[[Simulation], Any], Future[Any]] | None] = (
+        self._tasks: queue.Queue[tuple[Callable[[Simulation], Any], Future[Any], bool] | None] = (
             queue.Queue()
         )
         self._stop = threading.Event()
         self.behind_events = 0
         self.wall_start = time.monotonic()
         self.sim_start_s = sim.time_s
-        self._engine_thread = threading.Thread(target=self._run, name="skeye-engine", daemon=True)
-        self._engine_thread.start()
+        # Why the engine thread died (None while it runs or after a clean stop).
+        self.error: WorkerFailed | None = None
+        self.failed = threading.Event()
+        # Called once, on the dying engine thread, with the failure; must not block.
+        self.failure_listeners: list[Callable[[WorkerFailed], None]] = []
+        self._fatal: BaseException | None = None
+        self._engine = Worker(self._run, "skeye-engine", on_error=self._on_engine_error)
+        self._engine.start()
 
     def __enter__(self) -> SimulationRunner:
         return self
@@ -573,32 +585,54 @@ class SimulationRunner:
             return
         self._stop.set()
         self._tasks.put(None)
-        self._engine_thread.join(timeout_s)
+        self._engine.join(timeout_s)
 
     @property
     def alive(self) -> bool:
-        return self._engine_thread.is_alive()
+        """The engine thread runs and has not failed."""
+        return self._engine.alive and not self.failed.is_set()
 
-    def submit(self, fn: Callable[[Simulation], T]) -> Future[T]:
-        """Run ``fn(sim)`` on the engine thread between steps."""
+    def _on_engine_error(self, exc: BaseException) -> None:
+        self.error = WorkerFailed("the simulation engine", exc)
+        self.failed.set()
+        self._drain()
+        for listener in list(self.failure_listeners):
+            try:
+                listener(self.error)
+            except Exception:
+                log.exception("engine failure listener %r failed", listener)
+
+    def _refusal(self) -> SkeyeError:
+        if self.error is not None:
+            return self.error
+        return SkeyeError("the simulator is shutting down")
+
+    def submit(self, fn: Callable[[Simulation], T], *, fatal: bool = False) -> Future[T]:
+        """Run ``fn(sim)`` on the engine thread between steps. With ``fatal``, an exception
+        from ``fn`` also ends the engine (for tasks that step the physics)."""
         fut: Future[T] = Future()
-        if self._stop.is_set():
-            fut.set_exception(SkeyeError("the simulator is shutting down"))
+        if self._stop.is_set() or self.failed.is_set():
+            fut.set_exception(self._refusal())
             return fut
-        self._tasks.put((fn, fut))
+        self._tasks.put((fn, fut, fatal))
+        if self.failed.is_set():  # it died between the check and the put
+            self._drain()
         return fut
 
-    def call(self, fn: Callable[[Simulation], T], timeout_s: float = 30.0) -> T:
-        return self.submit(fn).result(timeout_s)
+    def call(self, fn: Callable[[Simulation], T], timeout_s: float = 30.0, *,
+             fatal: bool = False) -> T:
+        return self.submit(fn, fatal=fatal).result(timeout_s)
 
-    def _run_task(self, item: tuple[Callable[[Simulation], Any], Future[Any]]) -> None:
-        fn, fut = item
+    def _run_task(self, item: tuple[Callable[[Simulation], Any], Future[Any], bool]) -> None:
+        fn, fut, fatal = item
         if not fut.set_running_or_notify_cancel():
             return
         try:
             fut.set_result(fn(self.sim))
-        except BaseException as exc:  # delivered to the caller, never kills the engine
+        except BaseException as exc:  # delivered to the caller; ends the engine only if fatal
             fut.set_exception(exc)
+            if fatal and not isinstance(exc, SkeyeError):
+                raise
 
     def _run(self) -> None:
         if self.mode == "lockstep":
@@ -655,8 +689,8 @@ class SimulationRunner:
                 item = self._tasks.get_nowait()
             except queue.Empty:
                 return
-            if item is not None:
-                item[1].set_exception(SkeyeError("the simulator is shutting down"))
+            if item is not None and not item[1].done():
+                item[1].set_exception(self._refusal())
 
     def realtime_factor(self) -> float:
         wall = time.monotonic() - self.wall_start

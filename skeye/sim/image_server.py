@@ -15,6 +15,10 @@ How this works:
   built from the newest frame only when the previous one has gone out: a slow or stalled client
   simply receives fewer frames, and never holds a lock or blocks anyone else. Reading stops while
   the request queue is full, so a client that floods requests is held back by TCP.
+* Slots are bounded: ``max_clients`` connections, ``max_clients_per_peer`` from one address. A
+  connection that sends no complete request within ``handshake_timeout_s`` of connecting, or
+  that makes no progress (no request received, no byte sent to it) for ``idle_timeout_s``, gets
+  an error frame naming the reason and is closed: idle or stalled clients cannot hold the slots.
 * ``close()`` wakes every thread through its socket pair and joins them all within a deadline.
 """
 
@@ -63,6 +67,9 @@ _IDLE_WAKE_S = 1.0  # safety net: a client loop looks around at least this often
 _ENCODE_WAIT_S = 5.0  # a thread waiting on another's encoding gives up and encodes itself
 _UINT32_MAX = 0xFFFF_FFFF
 _STREAM_EARLY = 0.2  # a stream frame may go this fraction of a period before its slot
+HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send a complete request within this
+IDLE_TIMEOUT_S = 120.0  # no request and no byte sent for this long: the connection is closed
+MAX_CLIENTS_PER_PEER = 32  # connections from one peer address (half the default 64 slots)
 
 FrameListener = Callable[[str], None]
 
@@ -324,6 +331,10 @@ class _ClientHandler:
         self._stream_starved = False  # a stream frame is due but no newer frame exists yet
         self._last_sent_number = 0
         self._wait_deadline_s: float | None = None
+        self._got_request = False
+        self._active_s = time.monotonic()  # last request received or byte sent
+        self.closed_reason: str | None = None
+        self.peer_host = address.rpartition(":")[0]
         self.frames_sent = 0
         self.errors_sent = 0
         self.bytes_sent = 0
@@ -376,6 +387,7 @@ class _ClientHandler:
             registered = 0
             while not self._stop:
                 now = time.monotonic()
+                self._check_idle(now)
                 self._advance(now)
                 if self._eof and not self._queue and not self._out:
                     return
@@ -401,6 +413,29 @@ class _ClientHandler:
                     if mask & selectors.EVENT_WRITE:
                         self._write()
 
+    def _idle_deadline_s(self) -> float:
+        if not self._got_request:
+            return self._active_s + self._server.handshake_timeout_s
+        return self._active_s + self._server.idle_timeout_s
+
+    def _check_idle(self, now: float) -> None:
+        """Close a connection that sent no request in time, or made no progress for long."""
+        if self.closed_reason is not None or now < self._idle_deadline_s():
+            return
+        server = self._server
+        if not self._got_request:
+            reason = f"no request within {server.handshake_timeout_s:g} s of connecting; closed"
+        else:
+            reason = f"idle for {server.idle_timeout_s:g} s (no request, nothing read); closed"
+        log.info("image client %s: %s", self.address, reason)
+        self.closed_reason = reason
+        self._eof = True
+        self._queue.clear()
+        self._stream_period_s = None
+        self._send_error(reason)
+        self._active_s = now  # the error frame gets one more idle period to go out
+        self._got_request = True
+
     def _drain_wake(self) -> None:
         try:
             while self._wake_r.recv(256):
@@ -416,7 +451,11 @@ class _ClientHandler:
             return True
         if not data:
             return False
-        self._queue.extend(self._parser.feed(data))
+        requests = self._parser.feed(data)
+        if requests:
+            self._got_request = True
+            self._active_s = time.monotonic()
+        self._queue.extend(requests)
         return True
 
     def _write(self) -> None:
@@ -427,6 +466,8 @@ class _ClientHandler:
         except BlockingIOError:
             return
         self.bytes_sent += sent
+        if sent:
+            self._active_s = time.monotonic()
         while sent:
             head = self._out[0]
             if sent >= len(head):
@@ -442,7 +483,7 @@ class _ClientHandler:
                 self.frames_sent += 1
 
     def _timeout(self, now: float) -> float:
-        timeout = _IDLE_WAKE_S
+        timeout = min(_IDLE_WAKE_S, self._idle_deadline_s() - now)
         if self._wait_deadline_s is not None:
             timeout = min(timeout, self._wait_deadline_s - now)
         if (
@@ -586,6 +627,10 @@ class ImageServer:
         default_format: the format a client gets until it sends ``SKEYE FORMAT``.
         default_quality: JPEG quality when ``default_format`` is JPEG.
         max_clients: connections beyond this get an error frame and are closed.
+        max_clients_per_peer: the same, for connections from one peer address.
+        handshake_timeout_s: a connection with no complete request this long after connecting
+            gets an error frame and is closed.
+        idle_timeout_s: the same for a connection with no request and no byte sent this long.
         close_timeout_s: how long ``close()`` waits for all threads in total.
     """
 
@@ -598,9 +643,21 @@ class ImageServer:
         default_format: ImageFormat = ImageFormat.RAW,
         default_quality: int | None = None,
         max_clients: int = 64,
+        max_clients_per_peer: int = MAX_CLIENTS_PER_PEER,
+        handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
         close_timeout_s: float = 2.0,
     ) -> None:
         SetFormat(default_format, default_quality)  # same rules as a client's request
+        for what, value in (("max_clients", max_clients),
+                            ("max_clients_per_peer", max_clients_per_peer),
+                            ("handshake_timeout_s", handshake_timeout_s),
+                            ("idle_timeout_s", idle_timeout_s)):
+            if not (math.isfinite(value) and value > 0):
+                raise LocalProtocolError(f"image server: {what} must be > 0, got {value!r}")
+        self.max_clients_per_peer = max_clients_per_peer
+        self.handshake_timeout_s = handshake_timeout_s
+        self.idle_timeout_s = idle_timeout_s
         self.buffer = buffer
         self._default_format = default_format
         self._default_quality = default_quality
@@ -695,9 +752,15 @@ class ImageServer:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         address = f"{peer[0]}:{peer[1]}"
         with self._lock:
+            same_peer = sum(1 for h in self._handlers if h.peer_host == peer[0])
+            reason = ""
             if self._closed or len(self._handlers) >= self._max_clients:
-                refuse = True
-            else:
+                reason = "too many clients"
+            elif same_peer >= self.max_clients_per_peer:
+                reason = (f"too many clients from {peer[0]} "
+                          f"({self.max_clients_per_peer} per address)")
+            refuse = bool(reason)
+            if not refuse:
                 refuse = False
                 handler = _ClientHandler(
                     self, sock, address, self._default_format, self._default_quality
@@ -710,7 +773,7 @@ class ImageServer:
             )
             try:
                 sock.setblocking(False)
-                sock.send(encode_error_frame("too many clients"))
+                sock.send(encode_error_frame(reason))
             except OSError:
                 pass
             sock.close()

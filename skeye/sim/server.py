@@ -7,7 +7,19 @@ thread puts the robot's STA/SEN lines into that queue without ever blocking: whe
 not read, its queue fills and further stream lines are dropped and counted, so a slow client
 never slows the physics or other clients. Answers (RES, ERR, GEO, CONF, NFO) always go through
 the same queue, so their order relative to the stream is kept. Every bad line gets an ``ERR``
-with a reason and the connection stays usable; only an over-long line closes it.
+with a reason and the connection stays usable; only an over-long line closes it, and so does an
+HTTP request line or header (a web page's cross-protocol POST, whose body would otherwise be
+read as commands).
+
+Slots are bounded: at most ``max_clients`` connections, at most ``max_clients_per_peer`` from
+one peer address, and a connection that sends no line within ``handshake_timeout_s`` of
+connecting, or (while it drives no robot) none for ``idle_timeout_s``, gets
+``ERR {Command CONNECT}`` with the reason and is closed. A connection driving a robot is never
+closed for being quiet (a hovering robot needs no commands); TCP keepalive finds its dead peers.
+
+If the engine thread dies (:attr:`SimulationRunner.error`), every client gets
+``ERR {Command ENGINE} {Reason ...}`` naming the failure at once and is closed, and so is every
+later connection; ``skeye sim`` then exits with status 3.
 
 Observers (:attr:`ControlServer.observers`, e.g. the flight recorder) see every connection
 opened (``+``) and closed (``-``), every line received (``<``, re-encoded from the decoded
@@ -22,8 +34,11 @@ import itertools
 import logging
 import math
 import queue
+import re
+import selectors
 import socket
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -40,10 +55,19 @@ from skeye.sim.protocol import (
 )
 from skeye.sim.robot import Robot
 from skeye.sim.wind import make_settings, parse_params
+from skeye.workers import Worker, WorkerFailed
 
 log = logging.getLogger(__name__)
 
 OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
+# An HTTP request line or header: a web page POSTing to this port (a cross-protocol request, whose
+# text/plain body would otherwise be read as protocol lines). The connection is closed at once.
+_HTTP_LINE = re.compile(
+    r"^(?:(?:GET|POST|PUT|DELETE|HEAD|OPTIONS|PATCH|CONNECT|TRACE) \S+ HTTP/\d|"
+    r"(?:Host|Origin|Content-Type|User-Agent|Content-Length):)", re.IGNORECASE)
+HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send its first line within this
+IDLE_TIMEOUT_S = 120.0  # a connection without a robot must send a line at least this often
+MAX_CLIENTS_PER_PEER = 64  # connections from one peer address (half the default 128 slots)
 _CLOSE = b""
 
 # (connection id, direction "+" "-" "<" ">", data): see the module comment.
@@ -64,6 +88,7 @@ class ClientSession:
         self.server = server
         self.sock = sock
         self.peer = peer
+        self.peer_host = peer.rpartition(":")[0]
         self.conn_id = next(server._conn_ids)
         self.robot_name: str | None = None
         self.robot_config: Any = None
@@ -72,16 +97,22 @@ class ClientSession:
         self._queued_bytes = 0
         self._queued_lock = threading.Lock()
         self._closed = threading.Event()
-        self._reader = threading.Thread(
-            target=self._read_loop, name=f"sim-read-{peer}", daemon=True
-        )
-        self._writer = threading.Thread(
-            target=self._write_loop, name=f"sim-write-{peer}", daemon=True
-        )
+        self._reader = Worker(self._read_loop, f"sim-read-{peer}", on_error=self._on_error)
+        self._writer = Worker(self._write_loop, f"sim-write-{peer}", on_error=self._on_error)
 
     def start(self) -> None:
         self._reader.start()
         self._writer.start()
+
+    def _on_error(self, exc: BaseException) -> None:
+        """A session thread failed (a bug): the client hears why, the session ends."""
+        self.send(format_error("CONNECT", f"server error, closing: {exc!r}"))
+        self._closed.set()
+        self.outbox.put_nowait(_CLOSE)
+        try:
+            self.sock.shutdown(socket.SHUT_RD)
+        except OSError:
+            pass
 
     # -- output --------------------------------------------------------------------------
     def send(self, line: bytes) -> None:
@@ -128,27 +159,64 @@ class ClientSession:
                 pass
 
     # -- input ---------------------------------------------------------------------------
+    def _idle_reason(self, quiet_s: float, got_line: bool) -> str | None:
+        """Why this connection must go for having been quiet ``quiet_s``, or None."""
+        server = self.server
+        if not got_line and quiet_s >= server.handshake_timeout_s:
+            return f"no command within {server.handshake_timeout_s:g} s of connecting; closed"
+        if got_line and self.robot_name is None and quiet_s >= server.idle_timeout_s:
+            return f"idle for {server.idle_timeout_s:g} s without a robot; closed"
+        return None
+
     def _read_loop(self) -> None:
         decoder = LineDecoder()
+        got_line = False
+        last_s = time.monotonic()
         try:
-            while not self._closed.is_set():
-                try:
-                    data = self.sock.recv(65536)
-                except OSError:
-                    break
-                if not data:
-                    break
-                for event in decoder.feed(data):
-                    if self.server.observers:
-                        self.server.notify(self.conn_id, "<", _line_bytes(event))
-                    if isinstance(event, LineError):
-                        self.send(format_error(event.command, event.reason))
-                        if event.fatal:
-                            return
+            with selectors.DefaultSelector() as sel:
+                sel.register(self.sock, selectors.EVENT_READ)
+                while not self._closed.is_set():
+                    ready = sel.select(0.5)
+                    reason = self._idle_reason(time.monotonic() - last_s, got_line)
+                    if reason is not None:
+                        log.info("closing client %s: %s", self.peer, reason)
+                        self.send(format_error("CONNECT", reason))
+                        return
+                    if not ready:
                         continue
-                    self._handle(event)
+                    try:
+                        data = self.sock.recv(65536)
+                    except OSError:
+                        break
+                    if not data:
+                        break
+                    if b"\n" in data:
+                        got_line = True
+                        last_s = time.monotonic()
+                    if not self._feed(decoder, data):
+                        return
         finally:
             self._finish()
+
+    def _feed(self, decoder: LineDecoder, data: bytes) -> bool:
+        """Handle the lines in ``data``; False when the connection must close."""
+        for event in decoder.feed(data):
+            if self.server.observers:
+                self.server.notify(self.conn_id, "<", _line_bytes(event))
+            if isinstance(event, LineError) and _HTTP_LINE.match(event.line):
+                log.warning("client %s sent HTTP (a web page?); closing: %r", self.peer,
+                            event.line[:80])
+                self.send(format_error(
+                    "CONNECT", "this is the simulator control port, not HTTP; a web page may "
+                    "not talk to it: closed"))
+                return False
+            if isinstance(event, LineError):
+                self.send(format_error(event.command, event.reason))
+                if event.fatal:
+                    return False
+                continue
+            self._handle(event)
+        return True
 
     def _finish(self) -> None:
         if self.robot_name is not None:
@@ -161,6 +229,14 @@ class ClientSession:
         self.outbox.put_nowait(_CLOSE)  # the writer sends what is queued, then stops
         self.server._forget(self)
 
+    def end(self) -> None:
+        """Close after what is queued has gone out (safe from any thread, never blocks)."""
+        self.outbox.put_nowait(_CLOSE)
+        try:
+            self.sock.shutdown(socket.SHUT_RD)  # the reader sees the end and finishes
+        except OSError:
+            pass
+
     def close(self, timeout_s: float = 2.0) -> None:
         self._closed.set()
         try:
@@ -169,8 +245,7 @@ class ClientSession:
             pass
         self.outbox.put_nowait(_CLOSE)
         for t in (self._reader, self._writer):
-            if t.is_alive() and t is not threading.current_thread():
-                t.join(timeout_s)
+            t.join(timeout_s)
         self.sock.close()
 
     def _handle(self, msg: Message) -> None:
@@ -186,6 +261,9 @@ class ClientSession:
             self.send(format_error(msg.type, "the simulator did not answer in time"))
         except SkeyeError as exc:
             self.send(format_error(msg.type, str(exc)))
+        except Exception as exc:  # a bug (or a failure that killed the engine): say so, go on
+            log.exception("%s from %s failed", msg.type, self.peer)
+            self.send(format_error(msg.type, f"failed: {type(exc).__name__}: {exc}"))
 
     # -- commands ------------------------------------------------------------------------
     def _robot(self, command: str) -> str:
@@ -204,6 +282,10 @@ class ClientSession:
         location = msg.get_vector("Location", 3) if msg.has("Location") else None
         rr, rp, ry = msg.get_vector("Rotation", 3, default=(0.0, 0.0, 0.0))
         rotation = (rr, rp, ry)
+        if any(abs(v) > 2 * math.pi for v in rotation):
+            raise RemoteProtocolError(
+                f"Rotation {rotation} must be in [-2pi, 2pi] rad per axis (radians, not degrees)"
+            )
         if start is None and location is None:
             raise RemoteProtocolError("INIT needs {Location x,y,z} or {Start name}")
         if location is not None and any(abs(v) > 1.0e4 for v in location):
@@ -391,10 +473,12 @@ class ClientSession:
             raise RemoteProtocolError(
                 "STEP works only when the simulator runs with --mode lockstep"
             )
-        runner.call(do, timeout_s=3600.0)
+        runner.call(do, timeout_s=3600.0, fatal=True)
 
     def cmd_ping(self, msg: Message) -> None:
         ident = msg.get("Id", "")
+        if self.server.runner.error is not None:
+            raise self.server.runner.error  # no pretending: a dead engine's clock is not time
         self.send(
             format_message(
                 "RES", ("Command", "PING"), ("Id", ident), ("Time", self.server.runner.sim.time_s)
@@ -429,6 +513,15 @@ def _set_camera(session: ClientSession, msg: Message) -> None:
     session.server.runner.call(lambda sim: set_camera_fov(sim, name, camera, fov))
 
 
+def _keepalive(sock: socket.socket) -> None:
+    """TCP keepalive: a peer that vanished without a FIN is found within about two minutes."""
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    for name, value in (("TCP_KEEPIDLE", 60), ("TCP_KEEPINTVL", 10), ("TCP_KEEPCNT", 6)):
+        option = getattr(socket, name, None)
+        if option is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, option, value)
+
+
 class ControlServer:
     """TCP server for the control protocol; a context manager that closes every thread."""
 
@@ -438,9 +531,22 @@ class ControlServer:
         host: str = "127.0.0.1",
         port: int = 3000,
         max_clients: int = 128,
+        *,
+        max_clients_per_peer: int = MAX_CLIENTS_PER_PEER,
+        handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
     ) -> None:
+        for what, value in (("max_clients", max_clients),
+                            ("max_clients_per_peer", max_clients_per_peer),
+                            ("handshake_timeout_s", handshake_timeout_s),
+                            ("idle_timeout_s", idle_timeout_s)):
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"control server: {what} must be > 0, got {value!r}")
         self.runner = runner
         self.max_clients = max_clients
+        self.max_clients_per_peer = max_clients_per_peer
+        self.handshake_timeout_s = handshake_timeout_s
+        self.idle_timeout_s = idle_timeout_s
         self.set_handlers: dict[str, Callable[[ClientSession, Message], None]] = {
             "wind": _set_wind,
             "camera": _set_camera,
@@ -454,10 +560,23 @@ class ControlServer:
         self._listener.settimeout(0.2)
         self.host = host
         self.port = self._listener.getsockname()[1]
-        self._accept_thread = threading.Thread(
-            target=self._accept_loop, name="sim-accept", daemon=True
-        )
-        self._accept_thread.start()
+        self._accept_thread = Worker(self._accept_loop, "sim-accept").start()
+        runner.failure_listeners.append(self._engine_failed)
+        if runner.error is not None:
+            self._engine_failed(runner.error)
+
+    def _engine_error_line(self, error: WorkerFailed) -> bytes:
+        return format_error("ENGINE", f"{error}; the simulator is stopping")
+
+    def _engine_failed(self, error: WorkerFailed) -> None:
+        """On the dying engine thread: tell every client why, then close them all."""
+        log.error("%s; telling %d clients", error, self.client_count)
+        line = self._engine_error_line(error)
+        with self._lock:
+            sessions = list(self._sessions)
+        for session in sessions:
+            session.send(line)
+            session.end()
 
     def __enter__(self) -> ControlServer:
         return self
@@ -485,13 +604,30 @@ class ControlServer:
             except OSError:
                 break
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            _keepalive(sock)
             session = ClientSession(self, sock, f"{addr[0]}:{addr[1]}")
+            refusal: bytes | None = None
             with self._lock:
-                if len(self._sessions) >= self.max_clients:
-                    sock.sendall(format_error("CONNECT", "too many clients"))
-                    sock.close()
-                    continue
-                self._sessions.add(session)
+                same_peer = sum(1 for s in self._sessions if s.peer_host == addr[0])
+                if self.runner.error is not None:
+                    refusal = self._engine_error_line(self.runner.error)
+                elif len(self._sessions) >= self.max_clients:
+                    refusal = format_error("CONNECT", "too many clients")
+                elif same_peer >= self.max_clients_per_peer:
+                    refusal = format_error(
+                        "CONNECT", f"too many clients from {addr[0]} "
+                        f"({self.max_clients_per_peer} per address)")
+                else:
+                    self._sessions.add(session)
+            if refusal is not None:
+                log.warning("refusing client %s: %s", session.peer, refusal.decode().strip())
+                try:
+                    sock.settimeout(1.0)
+                    sock.sendall(refusal)
+                except OSError:
+                    pass
+                sock.close()
+                continue
             if self.observers:
                 self.notify(session.conn_id, "+", session.peer.encode())
             session.send(self.nfo_line())
@@ -521,6 +657,8 @@ class ControlServer:
     def close(self, timeout_s: float = 5.0) -> None:
         if self._closing.is_set():
             return
+        if self._engine_failed in self.runner.failure_listeners:
+            self.runner.failure_listeners.remove(self._engine_failed)
         self._closing.set()
         self._listener.close()
         self._accept_thread.join(timeout_s)

@@ -18,6 +18,8 @@ from typing import Any
 
 import pytest
 
+from skeye.processes import die_with_parent
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 CHROMIUM = "/usr/bin/chromium"
@@ -146,9 +148,10 @@ class Stack:
 def _start_sim(robot_dir: Path) -> tuple[subprocess.Popen[str], int, int]:
     argv = [sys.executable, "-c", "import sys; from skeye.cli import main; sys.exit(main())",
             "sim", "--port", "0", "--image-port", "0", "--robot-dir", str(robot_dir)]
-    sim = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    sim = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                           preexec_fn=die_with_parent())
     ports: dict[str, int] = {}
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 300  # a busy 2-core host can take minutes to import MuJoCo
     assert sim.stdout is not None
     while len(ports) < 2:
         line = sim.stdout.readline()

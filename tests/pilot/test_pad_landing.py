@@ -38,7 +38,7 @@ def pad_flight() -> Iterator[tuple[Vehicle, object, object, PilotServer]]:
 
 
 def pad_at(vehicle: Vehicle) -> PadReport:
-    msg = vehicle.wait_for(PD.PAD, timeout_s=10)
+    msg = vehicle.wait_for(PD.PAD, timeout_s=60)
     assert isinstance(msg, PadReport)
     return msg
 
@@ -49,7 +49,7 @@ def test_pad_mode_land_from_1_5_m_and_0_3_m_off_centre(pad_flight):
     vehicle.take_off(1.5)
     vehicle.wait_state(NavState.HOLDING, timeout_s=60)
     vehicle.move_by(forward_m=0.3)  # facing north: 0.3 m north of the pad centre
-    vehicle.wait_state(NavState.FLYING, timeout_s=10)
+    vehicle.wait_state(NavState.FLYING, timeout_s=60)
     vehicle.wait_state(NavState.HOLDING, timeout_s=60)
     north, east, alt = robot.position()
     assert math.hypot(north - 0.3, east) < 0.1 and alt == pytest.approx(1.5, abs=0.15)

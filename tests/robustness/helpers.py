@@ -12,6 +12,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from skeye.processes import die_with_parent
+
 
 def open_fds() -> int:
     """File descriptors this process holds (Linux /proc)."""
@@ -43,6 +45,7 @@ def sim_process(*extra: str) -> Iterator[tuple[subprocess.Popen[str], dict[str, 
         text=True,
         env=env,
         cwd=Path(__file__).resolve().parents[2],
+        preexec_fn=die_with_parent(),
     )
     ports: dict[str, int] = {}
     banner: list[str] = []

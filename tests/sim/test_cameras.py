@@ -158,9 +158,10 @@ def test_stalled_image_client_does_not_slow_physics_or_others(tmp_path):
     """Real time: a client that never reads costs the others < 10 % of their frames and the
     physics < 10 % of its real-time factor.
 
-    Timing on a shared 2-core machine is noisy, so the comparison (a window without the stalled
-    client, then one with it) is tried up to three times; a stalled client that really slowed
-    the others would fail every try."""
+    Timing on a shared 2-core machine is noisy, so this property is statistical: the comparison
+    (the window with the stalled client against the mean of a window before and one after it,
+    so a drift in the host's load does not read as a slowdown) is tried up to five times and
+    must hold once; a stalled client that really slowed the others would fail every try."""
     import socket
 
     with sim_with_images(mode="realtime",
@@ -177,16 +178,19 @@ def test_stalled_image_client_does_not_slow_physics_or_others(tmp_path):
             return share, rtf, count
 
         tries = []
-        for _ in range(3):
-            base_share, base_rtf, base_count = window()
+        for _ in range(5):
+            before = window()
             stalled = socket.create_connection(("127.0.0.1", images.port))
             stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
             stalled.sendall(b"SKEYE FORMAT RAW\nSKEYE STREAM 30\n")
             time.sleep(0.3)
             share, rtf, count = window()
             stalled.close()
+            after = window()
+            base_share = (before[0] + after[0]) / 2
+            base_rtf = (before[1] + after[1]) / 2
             tries.append((base_share, share, base_rtf, rtf))
-            assert base_count > 5 and count > 5  # the streams work
+            assert before[2] > 5 and count > 5  # the streams work
             if share >= 0.9 * base_share and rtf >= 0.9 * base_rtf:
                 break
             time.sleep(0.3)

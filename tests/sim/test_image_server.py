@@ -412,8 +412,12 @@ def _rate_of(client: ImageClient, fps: float, window_s: float) -> float:
 
 
 def test_stalled_client_slows_neither_publisher_nor_others(buffer: FrameBuffer) -> None:
-    """Ratios inside one run; tried up to three times, since timing on a shared 2-core machine
-    is noisy (a stalled client that really slowed the others would fail every try)."""
+    """Ratios inside one run. The property is statistical on a shared 2-core machine (rates and
+    the worst publish() duration depend on scheduling), so the comparison is tried up to five
+    times and must hold in one try; a stalled client that really slowed the others, or made
+    publish() wait on it, would fail every try. Each try compares the window with the stalled
+    client against the mean of a window before and one after it, so a drift in the host's load
+    does not read as a slowdown."""
     window_s = 1.5
     tries = []
     with (
@@ -422,12 +426,19 @@ def test_stalled_client_slows_neither_publisher_nor_others(buffer: FrameBuffer) 
         ImageClient("127.0.0.1", srv.port) as good,
     ):
         time.sleep(0.1)
-        for _ in range(3):
-            t0 = time.monotonic()
-            rate_alone = _rate_of(good, 30.0, window_s)
-            t1 = time.monotonic()
-            pub_alone, worst_alone = pub.rate_between(t0, t1)
 
+        def alone() -> tuple[float, float, float]:
+            t0 = time.monotonic()
+            rate = _rate_of(good, 30.0, window_s)
+            return (rate, *pub.rate_between(t0, time.monotonic()))
+
+        def holds(t: tuple[float, ...]) -> bool:
+            rate_alone, rate_with, pub_alone, pub_with, worst_alone, worst_with = t
+            return (rate_with >= 0.9 * rate_alone and pub_with >= 0.9 * pub_alone
+                    and worst_with < 0.1 and worst_alone < 0.1)
+
+        for _ in range(5):
+            before = alone()
             stalled = RawConn(srv.port, rcvbuf=4096)
             try:
                 stalled.send(b"SKEYE STREAM 30\n")  # RAW, 1.4 MB a frame, never read
@@ -441,17 +452,21 @@ def test_stalled_client_slows_neither_publisher_nor_others(buffer: FrameBuffer) 
                 stalled_frames = stats[stalled_addr].frames_sent
             finally:
                 stalled.close()
-            tries.append((rate_alone, rate_with, pub_alone, pub_with))
+            after = alone()
+            rate_alone = (before[0] + after[0]) / 2
+            pub_alone = (before[1] + after[1]) / 2
+            worst_alone = max(before[2], after[2])
+            tries.append((rate_alone, rate_with, pub_alone, pub_with, worst_alone, worst_with))
             # It really was stalled: its socket buffers hold a frame or two.
             assert stalled_frames <= 3
             # The stream works at all (its speed on a busy machine is the benchmark's business).
             assert rate_alone > 5.0
-            # publish() never waits on a client (a blocked 1.4 MB send would take far longer).
-            assert worst_with < 0.1 and worst_alone < 0.1, (worst_alone, worst_with)
-            if rate_with >= 0.9 * rate_alone and pub_with >= 0.9 * pub_alone:
+            if holds(tries[-1]):
                 break
             time.sleep(0.2)
-    rate_alone, rate_with, pub_alone, pub_with = tries[-1]
+    rate_alone, rate_with, pub_alone, pub_with, worst_alone, worst_with = tries[-1]
+    # publish() never waits on a client (a blocked 1.4 MB send would take far longer).
+    assert worst_with < 0.1 and worst_alone < 0.1, tries
     assert rate_with >= 0.9 * rate_alone and pub_with >= 0.9 * pub_alone, tries
 
 

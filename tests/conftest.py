@@ -1,0 +1,58 @@
+"""Suite-wide safety net: no process a test started survives the test session.
+
+Tests stop their own children (context managers, fixture finalizers); children started through
+:mod:`skeye.processes` also die with this process (PR_SET_PDEATHSIG) and are stopped at exit.
+This finalizer catches whatever is left anyway, stops it (SIGTERM, a deadline, SIGKILL) and
+says so, so a leak shows up as a warning instead of a process running for hours."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+import warnings
+from collections.abc import Iterator
+
+import pytest
+
+
+def child_pids(pid: int) -> list[int]:
+    """The direct children of ``pid`` (Linux /proc; empty elsewhere)."""
+    out: list[int] = []
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except FileNotFoundError:
+        return out
+    for task in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{task}/children") as f:
+                out += [int(p) for p in f.read().split()]
+        except FileNotFoundError:
+            pass
+    return out
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, IndexError):
+        return False
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_orphans() -> Iterator[None]:
+    yield
+    left = [pid for pid in child_pids(os.getpid()) if _running(pid)]
+    if not left:
+        return
+    warnings.warn(f"processes left running by the tests, stopped now: {left}", stacklevel=1)
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for pid in left:
+            try:
+                os.kill(pid, sig)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(_running(p) for p in left):
+            time.sleep(0.1)

@@ -1,0 +1,104 @@
+"""A frozen simulator (issue 15, point 6): the ``skeye sim`` process is stopped (SIGSTOP) under a
+hovering pilot. Its sockets stay open, so only the clock tells: sim time stands still while the
+wall clock runs. The pilot declares FAILSAFE, NAV_STATUS says so, commands are refused with the
+reason, and a real ``skeye ground`` process shows ``failsafe``."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import urllib.request
+from contextlib import ExitStack
+from typing import ClassVar
+
+import pytest
+
+from skeye.control.connection import connect
+from skeye.control.motion import MotionConfig
+from skeye.errors import CommandRejected
+from skeye.link.packets import NavState, SkeyeMask
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.server import PilotServer
+from skeye.pilot.sim_airframe import SimAirframe
+from skeye.processes import start_skeye, stop_process
+from tests.ground.conftest import wait_until
+
+
+def _ground_state(port: int) -> dict:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/state", timeout=10) as r:
+        return json.load(r)
+
+
+def test_frozen_realtime_simulator_puts_the_pilot_in_failsafe() -> None:
+    with ExitStack() as stack:
+        sim_proc, found = start_skeye(["sim", "--port", "0"], [r"control protocol on [\d.]+:(\d+)"],
+                                      "simulator", timeout_s=120)
+        stack.callback(stop_process, sim_proc)
+        stack.callback(lambda: sim_proc.poll() is None and os.kill(sim_proc.pid, signal.SIGCONT))
+        sim = stack.enter_context(connect(f"127.0.0.1:{found[0].group(1)}", timeout_s=30.0))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        # Long link timeout: only the frozen simulator may cause the failsafe in this test.
+        pilot = stack.enter_context(
+            PilotServer(SimAirframe(sim, robot, frozen_timeout_s=5.0), port=0,
+                        settings=BoardSettings(link_timeout_s=600.0, land_timeout_s=600.0))
+        )
+        with Vehicle.open(pilot.address, timeout_s=30.0) as vehicle:
+            vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+            vehicle.take_off(1.0)
+            vehicle.wait_state(NavState.HOLDING, timeout_s=120)
+        ground_proc, gfound = start_skeye(
+            ["ground", "--vehicle", pilot.address, "--port", "0"],
+            [r"skeye ground: http://127.0.0.1:(\d+)/"], "ground control", timeout_s=120)
+        stack.callback(stop_process, ground_proc)
+        gport = int(gfound[0].group(1))
+        wait_until(lambda: (_ground_state(gport)["nav"] or {}).get("state") == "holding", 60,
+                   "ground control shows the vehicle holding")
+        assert pilot.vehicle_lost is None
+
+        os.kill(sim_proc.pid, signal.SIGSTOP)  # frozen: connected, silent
+        wait_until(lambda: pilot.vehicle_lost is not None, 120, "the pilot notices")
+        assert "simulator frozen" in str(pilot.vehicle_lost)
+        assert pilot.boards.state is NavState.FAILSAFE
+        wait_until(lambda: (_ground_state(gport)["nav"] or {}).get("state") == "failsafe", 60,
+                   "ground control shows the failsafe")
+        assert pilot.loop_error is None
+        stop_process(ground_proc)
+
+        # NAV_STATUS says so to any ground station, and commands are refused with the reason.
+        with Vehicle.open(pilot.address, timeout_s=30.0) as vehicle:
+            vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+            vehicle.wait_state(NavState.FAILSAFE, timeout_s=30)
+            with pytest.raises(CommandRejected) as info:
+                vehicle.move_by(forward_m=1.0)
+            assert info.value.code == 4
+        os.kill(sim_proc.pid, signal.SIGCONT)
+
+
+def test_frozen_detection_needs_sim_time_to_stand_still() -> None:
+    """The watchdog's rule on an injected clock: moving sim time resets it; standing sim time
+    trips it only after the timeout."""
+
+    class _Conn:
+        mode = "realtime"
+        time_s = 1.0
+        error = None
+        closed = False
+
+    class _Robot:
+        limits: ClassVar[dict[str, float]] = {}
+        motion_config = MotionConfig()
+
+    now = [100.0]
+    conn = _Conn()
+    airframe = SimAirframe(conn, _Robot(), frozen_timeout_s=5.0,  # type: ignore[arg-type]
+                           clock=lambda: now[0])
+    for _ in range(20):  # 20 s of wall time, sim time moving: never frozen
+        now[0] += 1.0
+        conn.time_s += 0.5
+        assert airframe.lost is None
+    now[0] += 4.9
+    assert airframe.lost is None
+    now[0] += 0.2
+    assert airframe.lost is not None and "frozen" in airframe.lost
