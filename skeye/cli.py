@@ -248,6 +248,12 @@ def _add_validate(sub: Any) -> None:
     register(sub)
 
 
+def _add_sweep(sub: Any) -> None:
+    from skeye.sweep.cli import register
+
+    register(sub)
+
+
 # Each component adds its sub-commands here.
 _REGISTRARS: list[Callable[[Any], None]] = [
     _add_sim,
@@ -257,6 +263,7 @@ _REGISTRARS: list[Callable[[Any], None]] = [
     _add_ground,
     _add_vision,
     _add_validate,
+    _add_sweep,
     _add_replay,
     _add_plot,
 ]

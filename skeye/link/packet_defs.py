@@ -49,6 +49,7 @@ class PD(IntEnum):
     HOLD = 0x85
     PAD_MODE = 0x86
     STREAM = 0x87
+    CLOCK = 0x8E
     NAV_STATUS = 0x90
     PAD = 0x91
     RESULT = 0x92
@@ -560,6 +561,17 @@ class Stream(Message):
     period: int  # ms
 
 
+@dataclass(frozen=True)
+class Clock(Message):
+    """CLOCK: with ``skeye pilot --ground-clock``, let lockstep sim time run up to ``until`` ms.
+
+    The pilot advances the simulator only up to the latest granted time and then waits (telemetry
+    and commands still served), so a scripted ground station acts at exact sim times.
+    """
+
+    until: int  # ms of sim time
+
+
 # --- skeye replies (vehicle -> ground) ------------------------------------------------------
 
 
@@ -789,6 +801,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("skeye_mask", _H, bits=int(sum(SkeyeMask))),
         Field("period", _H),
     ),
+    Clock: _s(PD.CLOCK, Field("until", "I")),
     NavStatus: _v(
         PD.NAV_STATUS,
         Field("state", _B, 0, max(NavState), enum=NavState),

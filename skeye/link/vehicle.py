@@ -28,6 +28,7 @@ from skeye.link.packet_defs import LAYOUTS
 from skeye.link.packets import (
     PD,
     Ack,
+    Clock,
     ComeHome,
     EndFlight,
     FrameError,
@@ -392,6 +393,24 @@ class Vehicle:
         return self.command(
             pad_mode_from_si(PadModeSi(_pad_action(mode), deadband_m, max_speed_m_s))
         )
+
+    def run_until(self, time_s: float, timeout_s: float | None = None) -> NavStatus:
+        """Grant the vehicle sim time up to ``time_s`` (CLOCK; a pilot run with
+        ``--ground-clock``) and wait for a NAV_STATUS at that time (needs NAV_STATUS streaming).
+
+        Returns the NAV_STATUS taken at ``time_s`` (the pilot holds the clock there), so a
+        script that decides on it acts at an exact sim time.
+        """
+        until_ms = s_to_ms(time_s)
+        self.command(Clock(until_ms))
+        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        while True:
+            msg = self.wait_for(PD.NAV_STATUS, max(0.01, deadline - time.monotonic()))
+            if isinstance(msg, NavStatus) and msg.time >= until_ms:
+                return msg
+            if time.monotonic() >= deadline:
+                raise LinkTimeout(f"sim time did not reach {time_s} s within "
+                                  f"{timeout_s or self.timeout_s} s (last: {msg})")
 
     def stream(
         self, poll_mask: int = 0, skeye_mask: int = int(SkeyeMask.NAV_STATUS), period_s: float = 0.1

@@ -43,6 +43,7 @@ from skeye.link.packet_defs import GPS_FIX_VALID, NavState
 from skeye.link.packets import (
     PD,
     Ack,
+    Clock,
     ComeHome,
     CommandError,
     CommandEvent,
@@ -206,6 +207,7 @@ class OnboardBoards:
         self._stream_next_s = 0.0
         self.envelope_stops = 0  # times the envelope stopped a vehicle moving out
         self.envelope_reason = ""  # why, the last time
+        self.clock_until_s = 0.0  # sim time granted by CLOCK (used with --ground-clock)
         self.geo = GeoAnchor()
         self.geo.add(snap.gps, snap.pos_ned_m)
 
@@ -292,6 +294,8 @@ class OnboardBoards:
         elif isinstance(msg, Stream):
             self._stream = msg if msg.period > 0 else None
             self._stream_next_s = now_s
+        elif isinstance(msg, Clock):
+            self.clock_until_s = msg.until / 1000.0
         else:
             raise _Refused(ResultCode.BAD_VALUE, f"{type(msg).__name__} is not a command")
         return ok

@@ -111,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
                 tick_s=tick_s,
                 lockstep=lockstep,
                 lockstep_rate=args.lockstep_rate,
+                ground_clock=args.ground_clock,
                 vision=vision,
             )
             stop = threading.Event()
@@ -197,6 +198,11 @@ def register(subparsers: Any) -> None:
         type=float,
         default=1.0,
         help="lockstep sim: sim seconds per wall second (0 = unpaced)",
+    )
+    p.add_argument(
+        "--ground-clock",
+        action="store_true",
+        help="lockstep sim: advance only up to the sim time the ground grants (CLOCK packets)",
     )
     p.add_argument("--tick", type=float, default=0.01, help="loop period in realtime (s)")
     p.add_argument("--timeout", type=float, default=10.0, help="simulator answer deadline (s)")

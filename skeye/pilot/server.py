@@ -112,6 +112,8 @@ class PilotServer:
         tick_s: loop period (stream resolution, failsafe resolution, lockstep step).
         lockstep: drive the simulator's clock (it is in lockstep mode).
         lockstep_rate: sim seconds per wall second when driving the clock; 0 = unpaced.
+        ground_clock: in lockstep, advance sim time only up to what the ground station granted
+            with CLOCK packets (a scripted ground client then acts at exact sim times).
         clock: wall clock in seconds (injectable for tests).
     """
 
@@ -126,6 +128,7 @@ class PilotServer:
         tick_s: float = DEFAULT_TICK_S,
         lockstep: bool = False,
         lockstep_rate: float = 1.0,
+        ground_clock: bool = False,
         clock: Callable[[], float] = time.monotonic,
         vision: Callable[[OnboardBoards, threading.Lock], Any] | None = None,
     ) -> None:
@@ -140,6 +143,7 @@ class PilotServer:
         self.tick_s = tick_s
         self.lockstep = lockstep
         self.lockstep_rate = lockstep_rate
+        self.ground_clock = ground_clock and lockstep
         self.boards = OnboardBoards(airframe, settings, now_s=clock())
         self.turned_away = 0
         self.loop_error: BaseException | None = None
@@ -365,6 +369,15 @@ class PilotServer:
         if error:
             raise SkeyeError(error)
 
+    def _clock_held(self) -> bool:
+        """With ``ground_clock``: True once sim time has reached the granted time (the last tick
+        may pass it by less than one tick)."""
+        if not self.ground_clock:
+            return False
+        with self._lock:
+            until_s = self.boards.clock_until_s
+        return self.airframe.snapshot().time_s >= until_s - 1e-6
+
     def _lose_vehicle(self, reason: str) -> None:
         if self.vehicle_lost is None:
             self.vehicle_lost = reason
@@ -382,11 +395,14 @@ class PilotServer:
                     session = self._session
                     if session is not None and out:
                         self._send(session, out, droppable=True)  # never blocks the loop
-                    if self.vehicle_lost is None:
+                    if self.vehicle_lost is None and not self._clock_held():
                         self._check_vehicle()
                         self.airframe.advance(self.tick_s)  # no-op for time unless lockstep
                         if self.vision is not None:
                             self.vision.step()
+                    elif self.ground_clock:
+                        self._stop.wait(0.001)  # wait for a CLOCK grant
+                        continue
                 except SkeyeError as exc:
                     # The simulator (the vehicle's hardware) went away: keep the ground link,
                     # report it, and let the failsafe run; every command now gets a refusal.

@@ -3,19 +3,27 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import tempfile
 from pathlib import Path
 from typing import Any
 
-from skeye.errors import LocalProtocolError
-from skeye.validate.experiments import E1Series, E2Series, RunSettings, run_all
+from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.sweep.backends import LocalBackend
+from skeye.sweep.cli import run_trials
+from skeye.sweep.spec import SweepSpec, Trial
+from skeye.validate.experiments import E1Series, E2Series, RunSettings
 from skeye.validate.report import PAPER, median_summary, write_e1, write_e2, write_report
 
 
 def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1,
              workers: int | None = None, keep_recordings: bool = False) -> dict[str, Any]:
-    """Run the experiments for ``seeds`` seeds in parallel worker processes; write the report."""
+    """Run the experiments for ``seeds`` seeds on the sweep's local pool; write the report.
+
+    Each (experiment, seed) is one trial of :mod:`skeye.sweep` (its own processes, in parallel
+    up to ``workers``); the series come back from the trials and the report is built here.
+    """
     which = which.upper()
     if which not in ("E1", "E2", "ALL"):
         raise LocalProtocolError(f"unknown experiment {which!r}: E1, E2 or all")
@@ -23,32 +31,39 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         raise LocalProtocolError(f"--seeds must be >= 1, got {seeds}")
     experiments = ("E1", "E2") if which == "ALL" else (which,)
     out.mkdir(parents=True, exist_ok=True)
-    settings = {s: RunSettings(seed=s, quick=quick) for s in range(first_seed, first_seed + seeds)}
-    results: dict[int, dict[str, Any]] = {}
-    from rich.progress import Progress
+    seed_list = list(range(first_seed, first_seed + seeds))
+    settings = {s: RunSettings(seed=s, quick=quick) for s in seed_list}
+    trials = [Trial(e, {}, s, quick, timeout_s=900.0 if quick else 7200.0)
+              for s in seed_list for e in experiments]
+    spec = SweepSpec(which, trials, [])
+    with tempfile.TemporaryDirectory(prefix="skeye-validate-") as tmp:
 
-    workers = workers or max(1, min(seeds, (os.cpu_count() or 2) // 2 or 1))
-    with Progress() as progress, ProcessPoolExecutor(max_workers=workers) as pool:
-        task = progress.add_task(f"validate {'/'.join(experiments)} x {seeds} seed(s)",
-                                 total=seeds)
-        futures = {
-            pool.submit(run_all, st, experiments,
-                        str(out / f"recordings_seed{s}") if keep_recordings else None): s
-            for s, st in settings.items()
-        }
-        for fut in as_completed(futures):
-            results[futures[fut]] = fut.result()
-            progress.advance(task)
+        def keep(trial: dict[str, Any]) -> dict[str, str]:
+            t = Trial.from_json(trial)
+            extra = {"series_file": str(Path(tmp) / f"{t.key}.series.json")}
+            if keep_recordings:
+                extra["workdir"] = str(out / f"recordings_seed{t.seed}")
+            return extra
+
+        backend = LocalBackend(workers or max(1, min(len(trials), (os.cpu_count() or 2) // 2)),
+                               keep)
+        result = run_trials(spec, Path(tmp), backend,
+                            f"validate {'/'.join(experiments)} x {seeds} seed(s)")
+        failed = [r for r in result.rows if r.get("error")]
+        if failed:
+            raise SkeyeError("; ".join(f"{r['experiment']} seed {r['seed']}: {r['error']}"
+                                       for r in failed))
+        series = {(t.experiment, t.seed): json.loads(
+            (Path(tmp) / f"{t.key}.series.json").read_text()) for t in trials}
     summary: dict[str, Any] = {"paper": PAPER}
     if "E1" in experiments:
-        e1: dict[int, E1Series] = {s: r["E1"] for s, r in results.items()}
+        e1 = {s: E1Series(**series["E1", s]["E1"]) for s in seed_list}
         summary["E1"] = median_summary(write_e1(out, e1))
     if "E2" in experiments:
-        e2: dict[int, tuple[E2Series, E2Series]] = {
-            s: (r["E2"], r["E2_baseline"]) for s, r in results.items()
-        }
+        e2 = {s: (E2Series(**series["E2", s]["E2"]), E2Series(**series["E2", s]["E2_baseline"]))
+              for s in seed_list}
         summary["E2"] = median_summary(write_e2(out, e2, settings))
-    write_report(out, summary, quick, sorted(settings))
+    write_report(out, summary, quick, seed_list)
     return summary
 
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 import tempfile
 import threading
-import time
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
@@ -44,14 +43,29 @@ F_MAX_N = 0.3
 
 @dataclass(frozen=True)
 class RunSettings:
+    """One trial's settings; every field may be swept (``skeye sweep``)."""
+
     seed: int
     quick: bool = False
     f_max_n: float = F_MAX_N
     e2_duration_s: float = 300.0
+    wind: str = "random_force"  # E2's disturbance: a ``skeye sim --wind`` mode
+    wind_params: str = ""  # extra ``--wind-params`` (k=v,...); f_max_n is added for random_force
+    deadband_m: float = 0.05  # E2's PAD_MODE 1 deadband
+    max_speed_m_s: float = 0.3  # E2's PAD_MODE 1 speed limit
 
     @property
     def e2_seconds(self) -> float:
-        return 20.0 if self.quick else self.e2_duration_s
+        """E2's hold: ``e2_duration_s``, at most 20 s in a quick run."""
+        return min(20.0, self.e2_duration_s) if self.quick else self.e2_duration_s
+
+    def wind_args(self) -> list[str]:
+        if self.wind == "none":
+            return []
+        params = [p for p in self.wind_params.split(",") if p]
+        if self.wind == "random_force" and not any(p.startswith("f_max_n=") for p in params):
+            params.append(f"f_max_n={self.f_max_n}")
+        return ["--wind", self.wind] + (["--wind-params", ",".join(params)] if params else [])
 
 
 @dataclass
@@ -77,7 +91,7 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
     if vision:
         sim_args += ["--image-port", "0"]
     if wind:
-        sim_args += ["--wind", "random_force", "--wind-params", f"f_max_n={settings.f_max_n}"]
+        sim_args += settings.wind_args()
     patterns = [r"control protocol on [\d.]+:(\d+)"]
     if vision:
         patterns.append(r"image server on [\d.]+:(\d+)")
@@ -85,7 +99,8 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
         sim, found = start_skeye(sim_args, patterns, "skeye sim")
         stack.callback(stop_process, sim)
         pilot_args = ["pilot", "--sim", f"127.0.0.1:{found[0].group(1)}", "--port", "0",
-                      "--lockstep-rate", "0", "--link-timeout", "30", "--land-timeout", "60"]
+                      "--lockstep-rate", "0", "--ground-clock", "--link-timeout", "30",
+                      "--land-timeout", "60"]
         if vision:
             pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}"]
         pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
@@ -103,18 +118,34 @@ def _sim_time(vehicle: Vehicle) -> float:
     return nav_status_to_si(msg).time_s  # type: ignore[arg-type]
 
 
-def _wait_sim(vehicle: Vehicle, seconds: float, timeout_s: float) -> None:
-    end = _sim_time(vehicle) + seconds
-    deadline = time.monotonic() + timeout_s
-    while _sim_time(vehicle) < end:
-        if time.monotonic() > deadline:
-            raise SkeyeError(f"the simulation did not advance {seconds} s in {timeout_s} s")
-        time.sleep(0.02)
+# The pilot runs with --ground-clock: sim time passes only as far as this script grants it, so
+# every command is given at an exact sim time and a seeded run repeats bit for bit.
+STEP_S = 0.05  # one pilot tick (the Hummingbird's 20 Hz control period)
 
 
-def _settled(vehicle: Vehicle, timeout_s: float = 600.0) -> None:
-    vehicle.wait_state(NavState.FLYING, timeout_s=30)
-    vehicle.wait_state(NavState.HOLDING, timeout_s=timeout_s)
+def _wait_sim(vehicle: Vehicle, seconds: float, timeout_s: float, *, step_s: float | None = None
+              ) -> float:
+    """Let ``seconds`` of sim time pass (in steps of ``step_s``, or at once); the sim time."""
+    now = _sim_time(vehicle)
+    end = now + seconds
+    while now < end - 1e-6:
+        until = end if step_s is None else min(end, now + step_s)
+        now = nav_status_to_si(vehicle.run_until(until, timeout_s=timeout_s)).time_s
+    return now
+
+
+def _until_state(vehicle: Vehicle, state: NavState, limit_s: float = 600.0) -> float:
+    """Step sim time one tick at a time until the pilot reports ``state``; the sim time."""
+    now = _sim_time(vehicle)
+    end = now + limit_s
+    while True:
+        nav = vehicle.run_until(now + STEP_S, timeout_s=60)
+        now = nav_status_to_si(nav).time_s
+        if nav.state is state:
+            return now
+        if now > end:
+            raise SkeyeError(f"the vehicle was not {state.name} within {limit_s} s of sim time "
+                             f"(state {nav.state.name})")
 
 
 def _ground_truth(record: Path) -> list[tuple[float, float, float, float, float]]:
@@ -165,15 +196,15 @@ def run_e1(settings: RunSettings, workdir: Path) -> E1Series:
                     pads.setdefault(msg.frame_time, msg)
 
         vehicle.take_off(0.30 - 0.045)  # camera 0.30 m above the pad (0.045: gear - camera)
-        vehicle.wait_state(NavState.HOLDING, timeout_s=300)
-        start = _sim_time(vehicle)
+        start = _until_state(vehicle, NavState.HOLDING)
         vehicle.add_callback(on_packet)
         height = 0.30
         for target, hold_s in plateaus:
             vehicle.move_by(up_m=target - height, speed_m_s=0.1)
-            _settled(vehicle)
+            _until_state(vehicle, NavState.HOLDING)
             height = target
-            _wait_sim(vehicle, hold_s, timeout_s=600)
+            # one tick at a time: the PAD report of every processed frame reaches us
+            _wait_sim(vehicle, hold_s, timeout_s=60, step_s=STEP_S)
     truth = _ground_truth(record)
     series = E1Series()
     for frame_ms in sorted(pads):
@@ -194,14 +225,13 @@ def run_e2(settings: RunSettings, workdir: Path, *, vision: bool) -> E2Series:
     record = workdir / f"{name}_seed{settings.seed}.rec"
     with flight_stack(settings, record, vision=vision, wind=True) as vehicle:
         vehicle.take_off(0.70 - 0.081)  # vehicle centre 0.70 m above the pad (0.081: on gear)
-        vehicle.wait_state(NavState.HOLDING, timeout_s=300)
+        start = _until_state(vehicle, NavState.HOLDING)
         if vision:
-            vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
+            vehicle.pad_mode(1, deadband_m=settings.deadband_m,
+                             max_speed_m_s=settings.max_speed_m_s)
         else:
             vehicle.hold()
-        start = _sim_time(vehicle)
-        _wait_sim(vehicle, settings.e2_seconds, timeout_s=settings.e2_seconds * 10 + 600)
-        end = _sim_time(vehicle)
+        end = _wait_sim(vehicle, settings.e2_seconds, timeout_s=settings.e2_seconds * 10 + 600)
     series = E2Series()
     for t, n, e, _d, _tilt in _ground_truth(record):
         if start <= t <= end:
@@ -223,3 +253,9 @@ def run_all(settings: RunSettings, experiments: tuple[str, ...], workdir: str | 
             out["E2"] = run_e2(settings, wd, vision=True)
             out["E2_baseline"] = run_e2(settings, wd, vision=False)
         return out
+
+
+# The pieces a flight script for ``skeye sweep`` builds on (docs/sweeps.md).
+until_state = _until_state
+wait_sim = _wait_sim
+ground_truth = _ground_truth

@@ -21,6 +21,7 @@ from skeye.link.packets import (
     ACK_PDS,
     PD,
     Ack,
+    Clock,
     ComeHome,
     CommandError,
     CommandStreamParser,
@@ -192,6 +193,7 @@ CASES: list[tuple[Message, bytes]] = [
     ),
     (TakeOff(1500), sframe(0x83, "i", 1500)),
     (PadMode(PadAction.LAND, 100, 300), sframe(0x86, "BHH", 2, 100, 300)),
+    (Clock(123456), sframe(0x8E, "I", 123456)),
     (
         Stream(PollMask.IMU_CALCDATA | PollMask.GPS_DATA, SkeyeMask.NAV_STATUS | SkeyeMask.PAD, 50),
         sframe(0x87, "HHH", 0x84, 3, 50),
@@ -267,6 +269,7 @@ SPEC_SIZES = {
     Hold: 0,
     PadMode: 5,
     Stream: 6,
+    Clock: 4,
     NavStatus: 30,
     PadReport: 20,
 }

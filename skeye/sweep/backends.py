@@ -1,0 +1,142 @@
+"""Where trials run: a local pool (default) or a Ray cluster (``pip install skeye[ray]``).
+
+How this works: both backends take trials as JSON-able dicts and yield result rows as each trial
+finishes, in completion order; each trial runs through
+:func:`skeye.sweep.worker.run_trial_process` (its own process group, free loopback ports of the
+machine it runs on), so the two give the same figures for the same trial.
+
+- ``LocalBackend``: at most ``workers`` trials at a time on this machine (threads that each wait
+  on one trial process).
+- ``RayBackend``: one Ray task per trial, asking for ``cpus`` (and ``gpus``) per trial, retried
+  up to ``max_retries`` times when its worker or node dies; ``address`` joins a running cluster
+  (``auto``, or ``HOST:PORT``), none starts a private local one (loopback only, no dashboard).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from types import TracebackType
+from typing import Any, Protocol
+
+from skeye.errors import LocalProtocolError
+from skeye.sweep.worker import base_row, run_trial_process
+
+Row = dict[str, Any]
+OnStart = Callable[[int], None]  # called with the number of trials running now
+
+
+class Backend(Protocol):
+    workers: int
+
+    def run(self, trials: list[dict[str, Any]], on_running: OnStart | None = None
+            ) -> Iterator[Row]: ...
+
+    def close(self) -> None: ...
+
+
+class _Closing:
+    """``with backend:`` closes it on any exit."""
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> _Closing:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+class LocalBackend(_Closing):
+    """A pool of ``workers`` trial processes on this machine."""
+
+    def __init__(self, workers: int | None = None, keep: Callable[[dict[str, Any]], dict[str, str]]
+                 | None = None) -> None:
+        self.workers = workers or max(1, (os.cpu_count() or 2) // 2)
+        if self.workers < 1:
+            raise LocalProtocolError(f"--workers must be >= 1, got {self.workers}")
+        self.keep = keep  # trial -> extra run_trial_process arguments (validate's series)
+
+    def run(self, trials: list[dict[str, Any]], on_running: OnStart | None = None
+            ) -> Iterator[Row]:
+        with ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="trial") as pool:
+            pending: set[Future[Row]] = set()
+            queue = list(trials)
+            while queue or pending:
+                while queue and len(pending) < self.workers:
+                    t = queue.pop(0)
+                    extra = self.keep(t) if self.keep else {}
+                    pending.add(pool.submit(run_trial_process, t, **extra))
+                if on_running:
+                    on_running(len(pending))
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    yield fut.result()
+
+
+def _ray_trial(trial: dict[str, Any]) -> Row:
+    return run_trial_process(trial)
+
+
+class RayBackend(_Closing):
+    """One Ray task per trial on a cluster (joined, or started here on loopback)."""
+
+    def __init__(self, address: str | None = None, workers: int | None = None, cpus: float = 1.0,
+                 gpus: float = 0.0, max_retries: int = 3) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise LocalProtocolError(
+                "the Ray backend needs Ray: pip install 'skeye[ray]'") from None
+        self.ray = ray
+        self.cpus, self.gpus, self.max_retries = cpus, gpus, max_retries
+        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # nothing leaves this machine
+        # Trials see their node's environment (MUJOCO_GL, SKEYE_PURE_PYTHON, ...).
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(num_cpus=workers or max(1, (os.cpu_count() or 2) // 2), num_gpus=0,
+                     include_dashboard=False, _node_ip_address="127.0.0.1",
+                     object_store_memory=100 * 1024 * 1024, log_to_driver=False)
+        self.workers = int(ray.cluster_resources().get("CPU", 1) // max(cpus, 1e-9))
+        self._remote = ray.remote(_ray_trial).options(
+            num_cpus=cpus, num_gpus=gpus, max_retries=max_retries, retry_exceptions=False)
+
+    def run(self, trials: list[dict[str, Any]], on_running: OnStart | None = None
+            ) -> Iterator[Row]:
+        ray = self.ray
+        refs = {self._remote.remote(t): t for t in trials}
+        while refs:
+            if on_running:
+                on_running(min(len(refs), self.workers))
+            done, _ = ray.wait(list(refs), num_returns=1)
+            trial = refs.pop(done[0])
+            try:
+                yield ray.get(done[0])
+            except ray.exceptions.RayError as exc:  # retries used up, node lost for good
+                from skeye.sweep.spec import Trial
+
+                row = base_row(Trial.from_json(trial))
+                row["error"] = f"ray: {type(exc).__name__}: {str(exc).splitlines()[0]}"
+                yield row
+
+    def close(self) -> None:
+        """Disconnect (and stop the cluster if this started it); idempotent."""
+        if self.ray.is_initialized():
+            self.ray.shutdown()
+
+
+def make_backend(name: str, address: str | None, workers: int | None, cpus: float = 1.0,
+                 gpus: float = 0.0) -> Backend:
+    if workers is not None and workers < 1:
+        raise LocalProtocolError(f"--workers must be >= 1, got {workers}")
+    if name == "local":
+        if address:
+            raise LocalProtocolError("--address is for --backend ray")
+        return LocalBackend(workers)
+    if name == "ray":
+        return RayBackend(address, workers, cpus, gpus)
+    raise LocalProtocolError(f"unknown backend {name!r}: local or ray")

@@ -1,0 +1,108 @@
+"""``skeye sweep SPEC.toml --out DIR [--backend local|ray] [--address ADDR] [--workers N]``.
+
+How this works: the spec expands to trials (:mod:`skeye.sweep.spec`); those whose rows already
+exist in ``DIR/trials`` without an error are skipped; the rest go to the backend, and each row
+is stored the moment it comes back. A rich progress bar shows trials done, failed and running and
+the time left. At the end the tables and the report are written from every row of the spec.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from skeye.sweep.backends import Backend, make_backend
+from skeye.sweep.results import ResultStore, write_report, write_tables
+from skeye.sweep.spec import SweepSpec, load_spec
+
+
+@dataclass
+class SweepResult:
+    rows: list[dict[str, Any]] = field(default_factory=list)  # one per trial of the spec
+    ran: int = 0  # trials run by this invocation
+    skipped: int = 0  # trials whose rows existed already
+    failed: int = 0
+
+
+def run_trials(spec: SweepSpec, out: Path, backend: Backend, label: str = "sweep",
+               show_progress: bool = True) -> SweepResult:
+    """Run the spec's missing trials on ``backend``; rows stored as they arrive."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    store = ResultStore(out)
+    todo = [t for t in spec.trials if not store.done(t.key)]
+    result = SweepResult(skipped=len(spec.trials) - len(todo))
+    counts = {"failed": 0, "running": 0}
+    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                        TextColumn("failed {task.fields[failed]}, running {task.fields[running]}"),
+                        TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn(),
+                        disable=not show_progress, transient=False)
+    with progress:
+        task = progress.add_task(f"{label}: {len(todo)} to run, {result.skipped} done before",
+                                 total=len(todo), failed=0, running=0)
+
+        def on_running(n: int) -> None:
+            counts["running"] = n
+            progress.update(task, running=n)
+
+        for row in backend.run([t.to_json() for t in todo], on_running):
+            store.put(row)
+            result.ran += 1
+            if row.get("error"):
+                counts["failed"] += 1
+            progress.update(task, advance=1, failed=counts["failed"])
+    result.failed = counts["failed"]
+    result.rows = [r for t in spec.trials if (r := store.get(t.key)) is not None]
+    return result
+
+
+def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str | None = None,
+          workers: int | None = None, quick: bool | None = None, show_progress: bool = True
+          ) -> SweepResult:
+    """Run a sweep spec and write results.csv/.parquet and report.md into ``out``."""
+    spec = load_spec(spec_path, quick)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.monotonic()
+    backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
+    try:
+        result = run_trials(spec, out, backend, spec.name, show_progress)
+    finally:
+        backend.close()
+    write_tables(out, result.rows, spec.param_names)
+    write_report(out, spec, result.rows, backend_name, time.monotonic() - start)
+    return result
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    result = sweep(Path(args.spec), Path(args.out), args.backend, args.address, args.workers,
+                   True if args.quick else None)
+    print(f"{len(result.rows)} trials: {result.ran} run now, {result.skipped} from earlier runs, "
+          f"{result.failed} failed; results in {args.out}/results.csv, report in "
+          f"{args.out}/report.md", file=sys.stderr)
+    return 1 if result.failed else 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("sweep", help="run an experiment over a grid of parameters and seeds",
+                       description="Run the trials of SPEC.toml (docs/sweeps.md) on a local "
+                                   "process pool or a Ray cluster; rerun to resume.")
+    p.add_argument("spec", help="sweep specification (TOML)")
+    p.add_argument("--out", required=True, help="output folder (rerun with it to resume)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local")
+    p.add_argument("--address", default=None,
+                   help="Ray cluster to join (auto, or HOST:PORT); none starts a local one")
+    p.add_argument("--workers", type=int, default=None,
+                   help="trials at a time (local), CPUs of the local Ray cluster")
+    p.add_argument("--quick", action="store_true", help="shortened runs, whatever the spec says")
+    p.set_defaults(func=cmd_sweep)

@@ -1,0 +1,188 @@
+"""Sweep specifications (``SPEC.toml``) and the trials they expand to.
+
+How this works: a spec names an experiment (``E1``, ``E2`` or a flight script) and parameters:
+``[grid]`` values are crossed (every combination), ``[[trials]]`` tables are listed as they are,
+and every parameter set runs once per seed. A :class:`Trial` is plain data (JSON-able, so it
+travels to a worker process or a Ray node); its ``key`` hashes the experiment, parameters, seed,
+quick flag and the code version, so a rerun recognises the results it already has and a code
+change runs everything again. Bad specs raise :class:`LocalProtocolError` naming the problem.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import tomllib
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import skeye
+from skeye.errors import LocalProtocolError
+from skeye.validate.experiments import RunSettings
+
+EXPERIMENTS = ("E1", "E2")
+SETTINGS_FIELDS = {f.name: str(f.type) for f in dataclasses.fields(RunSettings)
+                   if f.name not in ("seed", "quick")}
+"""Parameters E1 and E2 take (fields of :class:`RunSettings`)."""
+_SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
+              "resources", "name"}
+
+
+@cache
+def code_version() -> str:
+    """skeye's version plus a hash of its Python sources (what a trial's result depends on)."""
+    root = Path(skeye.__file__).parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    return f"{skeye.__version__}+{h.hexdigest()[:12]}"
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One run: an experiment with one parameter set and one seed."""
+
+    experiment: str  # E1, E2 or script
+    params: dict[str, Any]
+    seed: int
+    quick: bool = False
+    script: str | None = None  # absolute path of the flight script (experiment "script")
+    timeout_s: float = 1800.0
+    code: str = field(default_factory=code_version)
+
+    @property
+    def key(self) -> str:
+        ident = {"experiment": self.experiment, "params": self.params, "seed": self.seed,
+                 "quick": self.quick, "script": self.script, "code": self.code}
+        if self.script:
+            ident["script_sha"] = hashlib.sha256(Path(self.script).read_bytes()).hexdigest()
+        blob = json.dumps(ident, sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def settings(self) -> RunSettings:
+        known = {k: v for k, v in self.params.items() if k in SETTINGS_FIELDS}
+        return RunSettings(seed=self.seed, quick=self.quick, **known)
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Trial:
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    experiment: str
+    trials: list[Trial]
+    param_names: list[str]
+    cpus: float = 1.0
+    gpus: float = 0.0
+    name: str = "sweep"
+
+
+def _seeds(value: Any) -> list[int]:
+    if isinstance(value, bool):
+        raise LocalProtocolError(f"seeds must be a count or a list of integers, got {value!r}")
+    if isinstance(value, int):
+        if value < 1:
+            raise LocalProtocolError(f"seeds must be >= 1, got {value}")
+        return list(range(1, value + 1))
+    if isinstance(value, list) and value and all(
+            isinstance(s, int) and not isinstance(s, bool) for s in value):
+        if len(set(value)) != len(value):
+            raise LocalProtocolError(f"seeds repeat: {value}")
+        return list(value)
+    raise LocalProtocolError(f"seeds must be a count or a list of integers, got {value!r}")
+
+
+def _check_value(name: str, value: Any, where: str) -> None:
+    if not isinstance(value, str | int | float | bool):
+        raise LocalProtocolError(f"{where}: parameter {name!r} must be a number, string or "
+                                 f"boolean, got {value!r}")
+
+
+def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) -> SweepSpec:
+    """Expand a spec (already parsed TOML) into trials; ``quick`` overrides the spec's."""
+    unknown = set(data) - _SPEC_KEYS
+    if unknown:
+        raise LocalProtocolError(f"unknown spec keys {sorted(unknown)}; known: "
+                                 f"{sorted(_SPEC_KEYS)}")
+    experiment = str(data.get("experiment", "")).upper()
+    script: str | None = None
+    if experiment == "SCRIPT":
+        experiment = "script"
+        if "script" not in data:
+            raise LocalProtocolError("experiment = \"script\" needs script = \"path/to/file.py\"")
+        path = (base_dir / str(data["script"])).resolve()
+        if not path.is_file():
+            raise LocalProtocolError(f"flight script {path} does not exist")
+        script = str(path)
+    elif experiment not in EXPERIMENTS:
+        raise LocalProtocolError(f"experiment must be E1, E2 or script, got "
+                                 f"{data.get('experiment')!r}")
+    seeds = _seeds(data.get("seeds", 1))
+    grid = data.get("grid", {})
+    listed = data.get("trials", [])
+    if not isinstance(grid, dict) or not isinstance(listed, list):
+        raise LocalProtocolError("[grid] must be a table and [[trials]] a list of tables")
+    for name, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise LocalProtocolError(f"[grid] {name} must be a non-empty list of values")
+        for v in values:
+            _check_value(name, v, "[grid]")
+    for i, entry in enumerate(listed):
+        if not isinstance(entry, dict):
+            raise LocalProtocolError(f"[[trials]] entry {i + 1} must be a table")
+        for name, v in entry.items():
+            _check_value(name, v, f"[[trials]] entry {i + 1}")
+    names = sorted(set(grid) | {k for entry in listed for k in entry})
+    if "seed" in names:
+        raise LocalProtocolError("seeds are set with seeds = N or [..], not as a parameter")
+    if experiment != "script":
+        bad = [n for n in names if n not in SETTINGS_FIELDS]
+        if bad:
+            raise LocalProtocolError(f"{experiment} has no parameter {bad}; it takes "
+                                     f"{sorted(SETTINGS_FIELDS)} (a flight script takes any)")
+    sets: list[dict[str, Any]] = []
+    if grid:
+        keys = sorted(grid)
+        sets += [dict(zip(keys, combo, strict=True))
+                 for combo in itertools.product(*(grid[k] for k in keys))]
+    sets += [dict(entry) for entry in listed]
+    if not sets:
+        sets = [{}]
+    is_quick = bool(data.get("quick", False)) if quick is None else quick
+    timeout_s = float(data.get("timeout_s", 900.0 if is_quick else 3600.0))
+    if not timeout_s > 0:
+        raise LocalProtocolError(f"timeout_s must be > 0, got {timeout_s}")
+    resources = data.get("resources", {})
+    if not isinstance(resources, dict) or set(resources) - {"cpus", "gpus"}:
+        raise LocalProtocolError("[resources] takes cpus and gpus")
+    for params in sets:
+        for name, v in params.items():
+            kind = SETTINGS_FIELDS.get(name)
+            if kind == "float" and (isinstance(v, bool) or not isinstance(v, int | float)):
+                raise LocalProtocolError(f"parameter {name} must be a number, got {v!r}")
+            if kind == "str" and not isinstance(v, str):
+                raise LocalProtocolError(f"parameter {name} must be a string, got {v!r}")
+    trials = [Trial(experiment, params, seed, is_quick, script, timeout_s)
+              for params in sets for seed in seeds]
+    return SweepSpec(experiment, trials, names, float(resources.get("cpus", 1.0)),
+                     float(resources.get("gpus", 0.0)), str(data.get("name", "sweep")))
+
+
+def load_spec(path: Path, quick: bool | None = None) -> SweepSpec:
+    """Read and expand ``SPEC.toml``."""
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise LocalProtocolError(f"sweep spec {path} does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise LocalProtocolError(f"{path}: not valid TOML: {exc}") from None
+    return parse_spec(data, path.parent, quick)

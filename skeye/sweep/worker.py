@@ -1,0 +1,151 @@
+"""One trial in its own process group: ``python -m skeye.sweep.worker TRIAL.json RESULT.json``.
+
+How this works: :func:`run_trial_process` (called by a local pool thread or inside a Ray task)
+starts this module as a child in a new session, so the trial and everything it starts (``skeye
+sim``, ``skeye pilot``) form one process group that is killed as a whole on a timeout. The child
+runs the experiment (:func:`run_experiment`) with the ground client in its own main thread, writes
+its figures to RESULT.json (atomically) and exits. It watches its stdin, a pipe from the parent:
+if the parent dies (a Ray worker killed mid-trial) the pipe closes and the child kills its whole
+group, so a retried trial never races a leftover simulator. Whatever goes wrong (a crash, a
+timeout, an exception in the flight) becomes a row with ``error`` set, never an exception here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import skeye
+from skeye.errors import SkeyeError
+from skeye.sweep.spec import Trial
+
+LOG_TAIL_LINES = 8
+
+
+def _figures_only(figures: dict[str, Any]) -> dict[str, float]:
+    return {k: v for k, v in figures.items() if k != "seed"}
+
+
+def run_experiment(trial: Trial, workdir: Path) -> tuple[dict[str, float], dict[str, Any]]:
+    """Run the trial's experiment here; its figures and its series (for ``skeye validate``)."""
+    from skeye.validate.experiments import run_e1, run_e2
+    from skeye.validate.report import e1_figures, e2_figures
+
+    settings = trial.settings()
+    if trial.experiment == "E1":
+        s1 = run_e1(settings, workdir)
+        return _figures_only(e1_figures(s1, trial.seed)), {"E1": dataclasses.asdict(s1)}
+    if trial.experiment == "E2":
+        s2 = run_e2(settings, workdir, vision=True)
+        base = run_e2(settings, workdir, vision=False)
+        return (_figures_only(e2_figures(s2, base, settings)),
+                {"E2": dataclasses.asdict(s2), "E2_baseline": dataclasses.asdict(base)})
+    assert trial.script is not None
+    spec = importlib.util.spec_from_file_location("skeye_sweep_script", trial.script)
+    if spec is None or spec.loader is None:
+        raise SkeyeError(f"cannot load flight script {trial.script}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    entry = getattr(module, "trial", None)
+    if not callable(entry):
+        raise SkeyeError(f"{trial.script} has no function trial(settings, params, workdir)")
+    figures = entry(settings, dict(trial.params), workdir)
+    if not isinstance(figures, dict) or not all(
+            isinstance(k, str) and isinstance(v, int | float) and not isinstance(v, bool)
+            for k, v in figures.items()):
+        raise SkeyeError(f"{trial.script}: trial() must return a dict of figure name -> number, "
+                         f"got {figures!r}")
+    return _figures_only(figures), {}
+
+
+def base_row(trial: Trial) -> dict[str, Any]:
+    return {"key": trial.key, "experiment": trial.experiment, **trial.params,
+            "seed": trial.seed, "quick": trial.quick}
+
+
+def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
+                      series_file: str | None = None) -> dict[str, Any]:
+    """Run one trial in a child process group; its result row (``error`` set on failure)."""
+    trial = Trial.from_json(trial_json)
+    row = base_row(trial)
+    start = time.monotonic()
+    error = ""
+    figures: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="skeye-trial-") as tmp:
+        trial_file, result_file, log_file = (Path(tmp) / n for n in
+                                             ("trial.json", "result.json", "log.txt"))
+        trial_file.write_text(json.dumps(trial_json))
+        args = [sys.executable, "-m", "skeye.sweep.worker", str(trial_file), str(result_file),
+                workdir or str(Path(tmp) / "work"), series_file or ""]
+        with open(log_file, "w") as log:
+            proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=log,
+                                    stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            proc.wait(trial.timeout_s)
+        except subprocess.TimeoutExpired:
+            error = f"timeout: the trial ran longer than {trial.timeout_s:g} s"
+        finally:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)  # the trial and its sim and pilot
+            except ProcessLookupError:
+                pass
+            proc.wait()
+            if proc.stdin is not None:
+                proc.stdin.close()
+        if result_file.exists():
+            result = json.loads(result_file.read_text())
+            figures, error = result["figures"], result["error"] or error
+        elif not error:
+            tail = log_file.read_text().splitlines()[-LOG_TAIL_LINES:]
+            error = f"trial process exited with code {proc.returncode}: " + " | ".join(tail)
+    row.update(figures)
+    row.update(wall_s=round(time.monotonic() - start, 3), host=socket.gethostname(),
+               skeye_version=skeye.__version__, code_version=trial.code, error=error)
+    return row
+
+
+def _die_with_parent() -> None:
+    """Block until the parent's pipe closes, then kill this whole process group."""
+    try:
+        sys.stdin.buffer.read()
+    finally:
+        os.killpg(os.getpgid(0), signal.SIGKILL)
+
+
+def main(argv: list[str]) -> int:
+    trial_file, result_file, workdir, series_file = argv
+    threading.Thread(target=_die_with_parent, name="parent-watch", daemon=True).start()
+    trial = Trial.from_json(json.loads(Path(trial_file).read_text()))
+    Path(workdir).mkdir(parents=True, exist_ok=True)
+    figures: dict[str, float] = {}
+    error = ""
+    series: dict[str, Any] = {}
+    try:
+        figures, series = run_experiment(trial, Path(workdir))
+    except Exception as exc:  # a failed flight is a row with its error, not a crash
+        error = f"{type(exc).__name__}: {exc}"
+    clean: dict[str, float | None] = {
+        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+        for k, v in figures.items()}
+    if series_file and series:
+        Path(series_file).write_text(json.dumps(series))
+    tmp = Path(result_file + ".tmp")
+    tmp.write_text(json.dumps({"figures": clean, "error": error}))
+    tmp.replace(result_file)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,239 @@
+"""``skeye sweep``: a small E2 sweep (2 F_max values x 2 seeds, quick, 1 s holds) on the local
+pool and on a real Ray cluster on loopback (a worker killed mid-trial), identical figures per
+trial; resuming runs only what is missing; failed trials are rows."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from skeye.sweep.cli import sweep
+
+# Real flights (two process stacks per trial): generous on a busy 2-core machine.
+pytestmark = pytest.mark.timeout(1200)
+
+SPEC = """
+name = "test sweep"
+experiment = "E2"
+quick = true
+seeds = {seeds}
+[grid]
+f_max_n = [0.1, 0.4]
+e2_duration_s = [1.0]
+"""
+FIGURES = ("mean_m", "std_m", "max_m", "duration_s", "samples", "baseline_mean_m",
+           "baseline_std_m", "baseline_max_m", "baseline_final_m")
+
+
+def _spec(tmp: Path, seeds: str = "[1, 2]", name: str = "spec.toml") -> Path:
+    path = tmp / name
+    path.write_text(SPEC.format(seeds=seeds))
+    return path
+
+
+@pytest.fixture(scope="module")
+def local_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[tuple, dict]]:
+    tmp = tmp_path_factory.mktemp("sweep")
+    out = tmp / "local"
+    result = sweep(_spec(tmp), out, "local", workers=2, show_progress=False)
+    assert (result.ran, result.skipped, result.failed) == (4, 0, 0)
+    rows = {(r["f_max_n"], r["seed"]): r for r in result.rows}
+    return out, rows
+
+
+def test_local_sweep_writes_one_row_per_trial_and_a_report(local_run):
+    out, rows = local_run
+    assert sorted(rows) == [(0.1, 1), (0.1, 2), (0.4, 1), (0.4, 2)]
+    for row in rows.values():
+        assert row["error"] == "" and row["quick"] is True and row["e2_duration_s"] == 1.0
+        assert row["wall_s"] > 0 and row["host"] and row["skeye_version"]
+        for name in FIGURES:
+            assert isinstance(row[name], int | float), name
+        assert 0 < row["mean_m"] <= row["max_m"] < 0.5
+    # Different seeds (and forces) fly differently.
+    assert rows[0.1, 1]["mean_m"] != rows[0.1, 2]["mean_m"] != rows[0.4, 2]["mean_m"]
+    table = list(csv.DictReader(open(out / "results.csv")))
+    assert len(table) == 4 and {"f_max_n", "seed", "mean_m", "wall_s", "host", "error"} <= set(
+        table[0])
+    for t in table:
+        assert float(t["mean_m"]) == rows[float(t["f_max_n"]), int(t["seed"])]["mean_m"]
+    pq = pytest.importorskip("pyarrow.parquet")
+    assert pq.read_table(out / "results.parquet").num_rows == 4
+    report = (out / "report.md").read_text()
+    assert "## by f_max_n" in report and "plot_f_max_n.png" in report
+    assert (out / "plot_f_max_n.png").stat().st_size > 0
+    assert "## by seed" not in report and "e2_duration_s" not in report.split("## by")[1]
+
+
+def test_resumed_sweep_runs_only_what_is_missing(local_run, tmp_path: Path):
+    out, rows = local_run
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "trials").glob("*.json")}
+    again = sweep(_spec(tmp_path), out, "local", workers=2, show_progress=False)
+    assert (again.ran, again.skipped) == (0, 4)
+    # An interrupted sweep: the row of the trial that was running is missing.
+    lost = rows[0.4, 2]["key"]
+    (out / "trials" / f"{lost}.json").unlink()
+    more = sweep(_spec(tmp_path), out, "local", workers=2, show_progress=False)
+    assert (more.ran, more.skipped, more.failed) == (1, 3, 0)
+    new = {(r["f_max_n"], r["seed"]): r for r in more.rows}
+    assert sorted(new) == sorted(rows)
+    for name, mtime in before.items():
+        if name != f"{lost}.json":
+            assert (out / "trials" / name).stat().st_mtime_ns == mtime  # not run again
+    for name in FIGURES:  # the rerun trial gives the same figures
+        assert new[0.4, 2][name] == rows[0.4, 2][name]
+
+
+def _parent(pid: int) -> int:
+    return int((Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
+def _descends_from(pid: int, ancestor: int) -> bool:
+    while pid > 1:
+        if pid == ancestor:
+            return True
+        try:
+            pid = _parent(pid)
+        except (OSError, ValueError, IndexError):
+            return False
+    return False
+
+
+def _worker_procs(ancestor: int) -> dict[int, tuple[int, str]]:
+    """pid -> (parent pid, trial) of every trial process (skeye.sweep.worker) under
+    ``ancestor``."""
+    found = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().split(b"\0")
+            if b"skeye.sweep.worker" not in cmd:
+                continue
+            if not _descends_from(int(d.name), ancestor):
+                continue
+            ppid = _parent(int(d.name))
+            found[int(d.name)] = (ppid, Path(cmd[cmd.index(b"skeye.sweep.worker") + 1].decode())
+                                  .read_text())
+        except (OSError, ValueError, IndexError):
+            continue
+    return found
+
+
+def test_ray_cluster_gives_the_same_figures_and_retries_a_killed_worker(local_run,
+                                                                       tmp_path: Path):
+    pytest.importorskip("ray")
+    _, rows = local_run
+    out = tmp_path / "ray"
+    env = dict(os.environ, RAY_USAGE_STATS_ENABLED="0")
+    proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", "sweep", str(_spec(tmp_path)),
+                             "--out", str(out), "--backend", "ray", "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    killed: tuple[int, str] | None = None
+    restarted = False
+    deadline = time.monotonic() + 600
+    try:
+        while proc.poll() is None and time.monotonic() < deadline:
+            procs = _worker_procs(proc.pid)
+            if killed is None and procs:
+                pid, (ray_worker, trial) = next(iter(procs.items()))
+                os.kill(ray_worker, signal.SIGKILL)  # the Ray worker running this trial
+                killed = (pid, trial)
+            elif killed is not None and not restarted:
+                restarted = any(pid != killed[0] and trial == killed[1]
+                                for pid, (_, trial) in procs.items())
+            time.sleep(0.2)
+        output = proc.communicate(timeout=60)[0]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, output
+    assert killed is not None and restarted, "the killed trial was not run again"
+    table = list(csv.DictReader(open(out / "results.csv")))
+    assert len(table) == 4
+    for t in table:
+        assert t["error"] == ""
+        local = rows[float(t["f_max_n"]), int(t["seed"])]
+        assert t["key"] == local["key"]
+        for name in FIGURES:
+            assert float(t[name]) == local[name], (name, t, local)
+    killed_trial = json.loads(killed[1])
+    assert (killed_trial["params"]["f_max_n"], killed_trial["seed"]) in rows
+    assert _worker_procs(os.getpid()) == {}  # no trial (nor its sim and pilot) left behind
+
+
+FAILING = """
+import time
+
+def trial(settings, params, workdir):
+    if params["mode"] == "raise":
+        raise RuntimeError("the flight went wrong")
+    if params["mode"] == "hang":
+        time.sleep(600)
+    if params["mode"] == "crash":
+        import os
+        os._exit(3)
+    return {"height_m": 1.5 + settings.seed, "mode_len": len(params["mode"])}
+"""
+
+
+def test_failed_trials_are_rows_with_their_error(tmp_path: Path):
+    (tmp_path / "flight.py").write_text(FAILING)
+    spec = tmp_path / "s.toml"
+    spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [4]\ntimeout_s = 10\n'
+                    '[grid]\nmode = ["ok", "raise", "hang", "crash"]\n')
+    result = sweep(spec, tmp_path / "out", "local", workers=2, show_progress=False)
+    rows = {r["mode"]: r for r in result.rows}
+    assert (result.ran, result.failed) == (4, 3)
+    assert rows["ok"]["error"] == "" and rows["ok"]["height_m"] == 5.5
+    assert rows["raise"]["error"] == "RuntimeError: the flight went wrong"
+    assert rows["hang"]["error"].startswith("timeout") and rows["hang"]["wall_s"] >= 10
+    assert "exited with code 3" in rows["crash"]["error"]
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "## failed trials" in report and "the flight went wrong" in report
+    # A rerun retries only the failed trials.
+    again = sweep(spec, tmp_path / "out", "local", workers=2, show_progress=False)
+    assert (again.ran, again.skipped) == (3, 1)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ('experiment = "E3"', "experiment must be E1, E2 or script"),
+        ('experiment = "E2"\nseeds = 0', "seeds must be >= 1"),
+        ('experiment = "E2"\nseeds = [1, 1]', "seeds repeat"),
+        ('experiment = "E2"\n[grid]\ngain = [1, 2]', "E2 has no parameter"),
+        ('experiment = "E2"\n[grid]\nf_max_n = ["x"]', "f_max_n must be a number"),
+        ('experiment = "E2"\n[grid]\nf_max_n = []', "non-empty list"),
+        ('experiment = "E2"\ncolour = 1', "unknown spec keys"),
+        ('experiment = "script"\nscript = "nope.py"', "does not exist"),
+        ('experiment = "E2"\n[grid\n', "not valid TOML"),
+        ('experiment = "E2"\ntimeout_s = -1', "timeout_s must be > 0"),
+    ],
+)
+def test_bad_specs_are_refused_with_the_reason(tmp_path: Path, text: str, match: str):
+    from skeye.errors import LocalProtocolError
+
+    spec = tmp_path / "bad.toml"
+    spec.write_text(text)
+    with pytest.raises(LocalProtocolError, match=match):
+        sweep(spec, tmp_path / "out", "local", show_progress=False)
+
+
+def test_bad_command_lines_are_refused(tmp_path: Path):
+    spec = _spec(tmp_path)
+    for args, match in ((["--workers", "0"], "--workers must be >= 1"),
+                        (["--address", "auto"], "--address is for --backend ray")):
+        run = subprocess.run([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
+                              str(tmp_path / "o"), *args], capture_output=True, text=True,
+                             timeout=120)
+        assert run.returncode != 0 and match in run.stderr + run.stdout
