@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from importlib.util import module_from_spec, spec_from_file_location
@@ -42,8 +43,15 @@ def _warn(text: str) -> None:
           flush=True)
 
 
+_SAY_LOCK = threading.Lock()
+
+
 def _say(text: str) -> None:
-    print(f"skeye setup: {text}", file=sys.stderr, flush=True)
+    # One write per line under a lock: compiler threads report at the same moment, and print()
+    # writes the text and its newline separately, so their lines would run together.
+    with _SAY_LOCK:
+        sys.stderr.write(f"skeye setup: {text}\n")
+        sys.stderr.flush()
 
 
 def _jobs() -> int:
@@ -66,8 +74,10 @@ def _parallel_compile(compiler: Any, counter: list[int], total: int) -> None:
 
         def one(obj: str) -> None:
             src, ext = build[obj]
-            counter[0] += 1
-            _say(f"[step 2/2] compiling C ({counter[0]}/{total}): {Path(src).name}")
+            with _SAY_LOCK:
+                counter[0] += 1
+                number = counter[0]
+            _say(f"[step 2/2] compiling C ({number}/{total}): {Path(src).name}")
             compiler._compile(obj, src, ext, cc_args, extra_postargs, pp_opts)
 
         todo = [obj for obj in objects if obj in build]
