@@ -57,6 +57,7 @@ from skeye.sim.image_protocol import (
     frame_header,
     meta_header,
 )
+from skeye.sim.limits import check_server_limits
 
 log = logging.getLogger(__name__)
 
@@ -649,12 +650,9 @@ class ImageServer:
         close_timeout_s: float = 2.0,
     ) -> None:
         SetFormat(default_format, default_quality)  # same rules as a client's request
-        for what, value in (("max_clients", max_clients),
-                            ("max_clients_per_peer", max_clients_per_peer),
-                            ("handshake_timeout_s", handshake_timeout_s),
-                            ("idle_timeout_s", idle_timeout_s)):
-            if not (math.isfinite(value) and value > 0):
-                raise LocalProtocolError(f"image server: {what} must be > 0, got {value!r}")
+        check_server_limits("image server", max_clients=max_clients,
+                            max_clients_per_peer=max_clients_per_peer,
+                            handshake_timeout_s=handshake_timeout_s, idle_timeout_s=idle_timeout_s)
         self.max_clients_per_peer = max_clients_per_peer
         self.handshake_timeout_s = handshake_timeout_s
         self.idle_timeout_s = idle_timeout_s

@@ -45,6 +45,7 @@ from typing import Any
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.cameras import set_camera_fov
 from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.limits import check_server_limits
 from skeye.sim.protocol import (
     LineDecoder,
     LineError,
@@ -536,12 +537,9 @@ class ControlServer:
         handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
         idle_timeout_s: float = IDLE_TIMEOUT_S,
     ) -> None:
-        for what, value in (("max_clients", max_clients),
-                            ("max_clients_per_peer", max_clients_per_peer),
-                            ("handshake_timeout_s", handshake_timeout_s),
-                            ("idle_timeout_s", idle_timeout_s)):
-            if not (math.isfinite(value) and value > 0):
-                raise ConfigError(f"control server: {what} must be > 0, got {value!r}")
+        check_server_limits("control server", max_clients=max_clients,
+                            max_clients_per_peer=max_clients_per_peer,
+                            handshake_timeout_s=handshake_timeout_s, idle_timeout_s=idle_timeout_s)
         self.runner = runner
         self.max_clients = max_clients
         self.max_clients_per_peer = max_clients_per_peer

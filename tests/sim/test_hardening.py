@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import pytest
 
+from skeye.errors import ConfigError
 from skeye.processes import die_with_parent
 from skeye.sim.image_protocol import FrameDecoder, RemoteError
 from skeye.sim.image_server import FrameBuffer, ImageServer
@@ -290,3 +291,15 @@ def test_a_web_page_post_to_the_control_port_is_refused_before_its_body() -> Non
         _closed(c)
         assert server.runner.call(lambda sim: sim.wind.settings.mode) == "none"
         c.close()
+
+
+@pytest.mark.parametrize("limit, value", [("max_clients", 0), ("max_clients_per_peer", -1),
+                                          ("handshake_timeout_s", float("nan")),
+                                          ("idle_timeout_s", float("inf"))])
+def test_both_servers_refuse_a_bad_connection_limit_the_same_way(limit: str, value: float) -> None:
+    """A limit that is not a finite number above zero is a ConfigError naming the server, the
+    limit and the value, from the control server and the image server alike; nothing binds."""
+    with pytest.raises(ConfigError, match=rf"control server: {limit} must be > 0, got {value!r}"):
+        ControlServer(None, port=0, **{limit: value})  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=rf"image server: {limit} must be > 0, got {value!r}"):
+        ImageServer(FrameBuffer(), port=0, **{limit: value})  # type: ignore[arg-type]
