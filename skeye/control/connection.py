@@ -383,6 +383,10 @@ class Connection:
             match.answer = msg
             match.event.set()
             return
+        if kind == "ERR" and msg.get("Command") == "ENGINE":  # the simulator is stopping
+            self._fail(LinkClosed(f"simulator {self.peer}: its engine failed: "
+                                  f"{msg.get('Reason') or 'no reason given'}"))
+            return
         if kind == "ERR":
             self.unmatched_errors.append(msg)
             del self.unmatched_errors[:-100]

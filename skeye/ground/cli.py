@@ -168,7 +168,7 @@ def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadli
     end = time.monotonic() + deadline_s
     while time.monotonic() < end:
         if child.poll() is not None:
-            meaning = _EXIT_MEANING.get(child.returncode, "") if what == "simulator" else ""
+            meaning = _exit_meaning(what, child.returncode)
             raise ConfigError(f"{what} exited with status {child.returncode}"
                               f"{' (' + meaning + ')' if meaning else ''} while starting")
         if stop is not None and stop.is_set():
@@ -189,14 +189,45 @@ def _stop_all(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> None:
     stop_processes([child for _, child in reversed(children)], STOP_DEADLINE_S)
 
 
-_EXIT_MEANING = {3: "its simulation engine failed"}
+_EXIT_MEANING = {
+    ("simulator", 3): "its simulation engine failed",
+    ("pilot", 4): "it lost the simulator",  # skeye.pilot.cli.EXIT_LOST_SIMULATOR
+}
+SIM_SETTLE_S = 30.0
+"""How long to wait for the simulator's own exit status once the pilot says it lost the
+simulator: the simulator is then usually exiting, and its status names the root cause."""
+
+
+def _exit_meaning(what: str, status: int | None) -> str:
+    return _EXIT_MEANING.get((what, status if status is not None else 0), "")
+
+
+def _wait_for_simulator(children: Sequence[tuple[str, subprocess.Popen[bytes]]],
+                        settle_s: float) -> None:
+    """If the simulator still runs, wait up to ``settle_s`` for it to exit: a pilot that lost
+    its simulator, or failed while starting, is usually looking at a simulator on its way out."""
+    if not children or children[0][0] != "simulator":
+        return
+    try:
+        children[0][1].wait(settle_s)
+    except subprocess.TimeoutExpired:
+        pass
+
+
+def _settle_s(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> float:
+    lost = any(what == "pilot" and child.poll() == 4 for what, child in children)
+    return SIM_SETTLE_S if lost else 5.0
 
 
 def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> bool:
-    """Say which children have exited, and how; True if any has."""
+    """Say which children have exited, and how; True if any has. A pilot that lost its
+    simulator first waits for the simulator, so the root cause is named too."""
+    if any(c.poll() is not None for _, c in children):
+        _wait_for_simulator(children, _settle_s(children) if any(
+            what != "simulator" and c.poll() is not None for what, c in children) else 0.0)
     dead = [(w, c) for w, c in children if c.poll() is not None]
     for what, child in dead:
-        meaning = _EXIT_MEANING.get(child.returncode, "") if what == "simulator" else ""
+        meaning = _exit_meaning(what, child.returncode)
         print(f"skeye up: {what} exited ({child.returncode}"
               f"{': ' + meaning if meaning else ''}); stopping", flush=True)
     return bool(dead)
@@ -285,10 +316,7 @@ def run_up(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye up: {exc}", file=sys.stderr, flush=True)
         # The root cause may be another child: a pilot that cannot reach its simulator is
-        # usually looking at one that is exiting. Give it a few seconds to say so.
-        end = time.monotonic() + 5.0
-        while children and children[0][1].poll() is None and time.monotonic() < end:
-            time.sleep(0.1)
+        # usually looking at one that is exiting. _report_dead gives it time to say so.
         _report_dead(children)
         status = 1
     finally:

@@ -56,9 +56,16 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     return envelope, source
 
 
+EXIT_LOST_SIMULATOR = 4
+"""The exit status when the pilot stopped because it could not reach its simulator or the link
+failed before it served (once serving, a lost simulator is a failsafe, not an exit): ``skeye up``
+then waits for the simulator's own exit status, the root cause."""
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run the pilot until SIGINT/SIGTERM; returns the exit code."""
-    from skeye.control.connection import connect
+    """Run the pilot until SIGINT/SIGTERM; returns the exit code (0; 1 for an error; 2 for a
+    bad option; :data:`EXIT_LOST_SIMULATOR` when the simulator link failed)."""
+    from skeye.control.connection import LinkClosed, connect
     from skeye.pilot.sim_airframe import SimAirframe
     from skeye.processes import check_ports_free
 
@@ -68,10 +75,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
     settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
+    lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
         if not args.serial:  # before the robot is spawned: a taken port leaves nothing behind
             check_ports_free([("the pilot", args.host, args.port, "--port")])
         with connect(args.sim, images=args.images, timeout_s=args.timeout) as sim:
+            sim.add_close_hook(lambda error: None if sim.closed else lost.append(error))
             try:
                 if args.location is not None:
                     north, east, down = (float(v) for v in args.location.split(","))
@@ -131,6 +140,8 @@ def run(args: argparse.Namespace) -> int:
             print("skeye pilot: stopping", flush=True)
     except SkeyeError as exc:
         print(f"skeye pilot: {exc}", flush=True)
+        if lost or isinstance(exc, LinkClosed):
+            return EXIT_LOST_SIMULATOR
         return 1
     return 0
 

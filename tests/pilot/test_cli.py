@@ -64,3 +64,16 @@ def test_pilot_arguments():
     )
     assert args.serial == "/dev/ttyUSB0" and args.link_timeout == 0.5 and args.land_timeout == 3
     assert args.host == "127.0.0.1" and args.func is pilot_cli.run
+
+
+def test_a_pilot_that_cannot_reach_its_simulator_exits_with_status_4(capsys):
+    # skeye up reads status 4 as "look at the simulator": it waits for the simulator's own exit
+    # status (the root cause) before naming what failed.
+    import socket
+
+    with socket.socket() as s:  # a port nothing listens on: bound, never listening
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        args = parser().parse_args(["pilot", "--sim", f"127.0.0.1:{port}", "--port", "0"])
+        assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR == 4
+    assert "cannot connect to the simulator" in capsys.readouterr().out

@@ -130,6 +130,20 @@ def test_realtime_engine_death_reaches_every_client_at_once() -> None:
             c.close()
 
 
+def test_python_client_gets_link_closed_naming_the_engine_failure() -> None:
+    from skeye.control.connection import LinkClosed, connect
+
+    with running_sim(mode="realtime") as server, connect(f"127.0.0.1:{server.port}") as sim:
+        closed: list[BaseException] = []
+        sim.add_close_hook(closed.append)
+        _kill_engine(server)
+        deadline = time.monotonic() + ENGINE_ERR_WAIT_S
+        while not closed and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert closed and isinstance(sim.error, LinkClosed), sim.error
+        assert "its engine failed" in str(sim.error) and "OverflowError" in str(sim.error)
+
+
 def test_lockstep_step_that_breaks_the_engine_is_fatal_for_everyone() -> None:
     with running_sim(mode="lockstep") as server:
         stepper = LineClient(server.port)
