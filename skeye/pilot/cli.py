@@ -88,10 +88,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
     settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
-    if args.video_port is not None and args.images is None:
-        print("skeye pilot: --video-port serves the camera: it needs --images (the image "
-              "server of the simulator)", flush=True)
-        return 2
+    if args.video_port is not None:
+        problem = video_options_problem(args)
+        if problem:
+            print(f"skeye pilot: {problem}", flush=True)
+            return 2
     lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
@@ -193,6 +194,22 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down") -> Any:
         return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep)
 
     return make
+
+
+def video_options_problem(args: argparse.Namespace) -> str:
+    """What is wrong with the ``--video-*`` options ('' when nothing), checked before the
+    simulator is reached."""
+    if args.images is None:
+        return "--video-port serves the camera: it needs --images (the image server)"
+    if not 1 <= args.video_quality <= 100:
+        return f"--video-quality must be 1..100, got {args.video_quality}"
+    if not 0.01 <= args.video_fps <= 1000:
+        return f"--video-fps must be in [0.01, 1000] frames/s, got {args.video_fps:g}"
+    if args.video_clients < 1:
+        return f"--video-clients must be at least 1, got {args.video_clients}"
+    if not 0 <= args.video_port <= 65535:
+        return f"--video-port must be a TCP port 0..65535, got {args.video_port}"
+    return ""
 
 
 def camera_fov_rad(sim: Any, camera: str = "Down") -> float:
