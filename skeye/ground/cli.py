@@ -102,7 +102,8 @@ def _add_ground(sub: Any) -> None:
         default="hummingbird",
         help="the vehicle's robot class: the speed limits commands are checked against",
     )
-    p.add_argument("--video-fps", type=float, default=8.0, help="camera frames per second")
+    p.add_argument("--video-fps", type=float, default=8.0,
+                   help="the most camera frames per second asked of the vehicle (default 8)")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     _add_allow_host(p)

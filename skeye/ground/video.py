@@ -125,6 +125,7 @@ class VideoRelay:
         self.state = "connecting"
         self.last_error = ""
         self.frames = 0
+        self.failures = 0  # connections that ended in an error
         self.hello: Hello | None = None
         self._latest: VideoFrame | None = None
         self._lock = threading.Lock()
@@ -196,8 +197,9 @@ class VideoRelay:
             except (SkeyeError, OSError) as exc:
                 if self._stop.is_set():
                     break
-                self.state = "reconnecting"
                 self.last_error = str(exc) or type(exc).__name__
+                self.state = "reconnecting"
+                self.failures += 1
                 log.info("video relay %s: %s", self.address, self.last_error)
             finally:
                 with self._lock:

@@ -89,3 +89,34 @@ def test_ground_control_imports_no_detector_and_no_image_client() -> None:
                           timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "", done.stdout
+
+
+def test_a_bad_video_address_is_named(capsys) -> None:
+    from skeye.ground.cli import main
+
+    for uri in ("udp://127.0.0.1:7001", "tcp://127.0.0.1", "tcp://127.0.0.1:99999"):
+        assert main(["ground", "--vehicle", "tcp://127.0.0.1:1", "--video", uri,
+                     "--port", "0"]) == 2
+        err = capsys.readouterr().err
+        assert f"video source {uri!r}: expected tcp://host:port" in err, err
+
+
+def test_the_relay_names_a_bad_video_source_and_keeps_trying() -> None:
+    """Something that is not a vehicle's video port: the relay says why and reconnects."""
+    import socket
+
+    from skeye.ground.video import VideoRelay
+
+    with socket.create_server(("127.0.0.1", 0)) as fake:
+        port = fake.getsockname()[1]
+        with VideoRelay("127.0.0.1", port, retry_s=0.1, timeout_s=30) as relay:
+            for n in (1, 2):  # two connections: it came back after the first failure
+                conn, _ = fake.accept()
+                conn.settimeout(30)
+                assert conn.recv(64).startswith(b"SV")  # its SUBSCRIBE
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+                conn.close()
+                wait_until(lambda n=n: relay.failures == n, 30, "the relay to give up")
+                assert "not a skeye video stream" in relay.last_error
+            assert relay.latest() is None and relay.frames == 0
+            relay.check()  # its worker is alive and well
