@@ -151,6 +151,7 @@ class VideoServer:
         self.host = host
         self.published = 0  # frames handed over by the vision thread
         self.encoded = 0  # frames JPEG-encoded (only while some client takes them)
+        self.bad_frames = 0  # frames that could not be encoded (logged, skipped)
         self.frames_sent = 0
         self.turned_away = 0  # refused: all slots taken
         self.bad_clients = 0  # closed for bytes that are not the protocol
@@ -387,20 +388,28 @@ class VideoServer:
                 if client.streaming and client.out:
                     client.dropped += 1  # its buffer still holds an earlier frame: it misses this
 
-    def _encoded(self) -> bytes:
+    def _encoded(self) -> bytes | None:
+        """The current frame as a FRAME message, encoded once; None if it cannot be (logged:
+        one bad frame is skipped, the server goes on)."""
         assert self._current is not None
         seq, frame = self._current
         if self._jpeg is None or self._jpeg[0] != seq:
-            ok, buf = cv2.imencode(".jpg", frame.bgr,
-                                   [cv2.IMWRITE_JPEG_QUALITY, self.hello.jpeg_quality])
-            if not ok:
-                raise LocalProtocolError("OpenCV could not encode the camera frame as JPEG")
-            height, width = frame.bgr.shape[:2]
-            message = Frame(frame.frame_number, frame.time_s, int(width), int(height),
-                            frame.detection, frame.detect_ms, buf.tobytes())
-            self._jpeg = (seq, encode(message))
-            self.encoded += 1
-        return self._jpeg[1]
+            try:
+                ok, buf = cv2.imencode(".jpg", frame.bgr,
+                                       [cv2.IMWRITE_JPEG_QUALITY, self.hello.jpeg_quality])
+                if not ok:
+                    raise LocalProtocolError("OpenCV could not encode the frame as JPEG")
+                height, width = frame.bgr.shape[:2]
+                message = Frame(frame.frame_number, frame.time_s, int(width), int(height),
+                                frame.detection, frame.detect_ms, buf.tobytes())
+                self._jpeg = (seq, encode(message))
+            except (LocalProtocolError, cv2.error, ValueError) as exc:
+                self.bad_frames += 1
+                log.warning("video: frame %d not served: %s", frame.frame_number, exc)
+                self._jpeg = (seq, b"")
+            else:
+                self.encoded += 1
+        return self._jpeg[1] or None
 
     def _distribute(self, sel: selectors.BaseSelector) -> None:
         if self._current is None:
@@ -415,6 +424,8 @@ class VideoServer:
             if now - client.last_frame_s < 1.0 / client.max_fps:
                 continue  # its rate: it gets the newest frame when its slot comes
             data = self._encoded()
+            if data is None:
+                return  # this frame cannot be served: wait for the next
             client.out += data
             client.last_seq = seq
             client.last_frame_s = now

@@ -87,6 +87,7 @@ class VisionStats:
     detections: int = 0
     errors: int = 0
     last_error: str = ""
+    video_errors: int = 0  # frames the video port could not carry (logged)
 
 
 class PadVision:
@@ -234,8 +235,12 @@ class PadVision:
         video = self._video
         if video is not None:
             attitude = (float(roll), float(pitch)) if ins is not None else (None, None)
-            video(CameraFrame(image.frame, image.time_s, image.bgr,
-                              wire_detection(est, *attitude), detect_ms))
+            try:
+                video(CameraFrame(image.frame, image.time_s, image.bgr,
+                                  wire_detection(est, *attitude), detect_ms))
+            except SkeyeError as exc:  # a value the video protocol cannot carry: not served
+                self.stats.video_errors += 1
+                log.warning("frame %d not served on the video port: %s", image.frame, exc)
         if est.found and est.offset_body_m is not None and est.height_m is not None:
             self.stats.detections += 1
             bits = 0

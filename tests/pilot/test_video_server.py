@@ -214,3 +214,20 @@ def test_close_is_idempotent_and_frees_the_port() -> None:
     server.close()
     with socket.create_server(("127.0.0.1", port)):
         pass
+
+
+def test_a_frame_that_cannot_be_served_is_skipped(server: VideoServer) -> None:
+    rng = np.random.default_rng(4)
+    viewer = Viewer(server.port)
+    assert isinstance(viewer.next(), Hello)
+    bad = CameraFrame(1, -1.0, np.zeros((8, 8, 3), np.uint8), Detection(False), 0.0)  # time < 0
+    server.publish(bad)
+    wait_until(lambda: server.bad_frames == 1, 30, "the bad frame refused")
+    got = threading.Event()
+    frames: list[Frame] = []
+    threading.Thread(target=lambda: (frames.append(viewer.next()), got.set()),  # type: ignore[func-returns-value]
+                     daemon=True).start()
+    _publish_until(server, got.is_set, "a good frame after the bad one", rng, start=2)
+    assert isinstance(frames[0], Frame) and frames[0].frame_number >= 2
+    server.check()  # the server's thread lives on
+    viewer.close()
