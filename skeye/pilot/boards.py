@@ -24,7 +24,7 @@ and a reason when outside; stick and open-ended velocity input is limited at the
 edge, not refused (a full-thrust stick in height mode means the maximum climb rate, and holds
 height at the ceiling); a vehicle beyond a limit that still moves outward is stopped (HOLDING).
 
-Units: the wire's AscTec scalings are converted in ``skeye.link.scaling``; IMU_RAWDATA, which
+Units: the wire's AscTec scalings are converted in ``skeye.wire.packet_units``; IMU_RAWDATA, which
 AscTec leaves in uncalibrated ADC counts, carries the calibrated scalings of IMU_CALCDATA
 (gyro 0.015 deg/s, acc 10000 = 1 g) and the field in 0.01 uT, pressure in Pa; the simulator
 has no temperature model, so both temperature fields report 25.00 degC (2500).
@@ -39,8 +39,31 @@ from dataclasses import dataclass, field
 
 from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.geo import GeoOrigin
-from skeye.link.packet_defs import GPS_FIX_VALID, NavState
-from skeye.link.packets import (
+from skeye.pilot.airframe import Airframe, GpsFix, Snapshot
+from skeye.pilot.envelope import FlightEnvelope
+from skeye.pilot.pad import PadController
+from skeye.pilot.states import FlightEvent, FlightStateMachine, IllegalTransition
+from skeye.wire.packet_defs import GPS_FIX_VALID, NavState
+from skeye.wire.packet_units import (
+    STICK_MAX,
+    THRUST_MAX,
+    GpsBestSi,
+    GpsSi,
+    ImuCalcSi,
+    NavStatusSi,
+    fraction_to_controller_thrust,
+    gps_data_advanced_from_si,
+    gps_data_from_si,
+    imu_calcdata_from_si,
+    m_s2_to_acc_counts,
+    m_to_dm,
+    nav_status_from_si,
+    rad_s_to_angvel_counts,
+    stick_to_angle_rad,
+    stick_to_yaw_rate_rad_s,
+    v_to_mv,
+)
+from skeye.wire.packets import (
     PD,
     Ack,
     Clock,
@@ -78,29 +101,6 @@ from skeye.link.packets import (
     WaypointGoto,
     WaypointProps,
 )
-from skeye.link.scaling import (
-    STICK_MAX,
-    THRUST_MAX,
-    GpsBestSi,
-    GpsSi,
-    ImuCalcSi,
-    NavStatusSi,
-    fraction_to_controller_thrust,
-    gps_data_advanced_from_si,
-    gps_data_from_si,
-    imu_calcdata_from_si,
-    m_s2_to_acc_counts,
-    m_to_dm,
-    nav_status_from_si,
-    rad_s_to_angvel_counts,
-    stick_to_angle_rad,
-    stick_to_yaw_rate_rad_s,
-    v_to_mv,
-)
-from skeye.pilot.airframe import Airframe, GpsFix, Snapshot
-from skeye.pilot.envelope import FlightEnvelope
-from skeye.pilot.pad import PadController
-from skeye.pilot.states import FlightEvent, FlightStateMachine, IllegalTransition
 
 NO_COMMAND_PD = 0x00  # RESULT.command_pd when the answer names no command
 GESTURE_HOLD_S = 1.0  # thrust 0 + full yaw held this long starts or stops the motors
@@ -791,7 +791,7 @@ class _Refused(Exception):
 
 def event_pd(msg: Message) -> int:
     """The descriptor a command's answer names."""
-    from skeye.link.packet_defs import LAYOUTS
+    from skeye.wire.packet_defs import LAYOUTS
 
     pd = LAYOUTS[type(msg)].pd
     return NO_COMMAND_PD if pd is None else int(pd)

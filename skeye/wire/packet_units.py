@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from skeye.errors import LocalProtocolError
-from skeye.link.packet_defs import (
+from skeye.wire.packet_defs import (
     CtrlBits,
     CtrlInput,
     GotoGps,

@@ -1,10 +1,10 @@
 """Vehicle packet messages (docs/protocols/packets.md) and the one table that lays them out.
 
 How this works: every structure and command is a frozen dataclass whose integer fields carry the
-AscTec (or skeye) names and raw wire units; SI conversions live in ``skeye.link.scaling``.
+AscTec (or skeye) names and raw wire units; SI conversions live in ``skeye.wire.packet_units``.
 ``LAYOUTS`` maps each message class to its ``Layout``: descriptor, how it is framed
 (``FrameKind``), and its wire fields in order, each with a struct code and an allowed range.
-That table is the single source for both the codec in ``skeye.link.packets`` and the range
+That table is the single source for both the codec in ``skeye.wire.packets`` and the range
 checks here: ``__post_init__`` walks the message's layout and raises ``LocalProtocolError``
 naming the field for anything out of range, so an invalid message cannot exist and the encoder
 never meets a value it cannot pack. Integer-like values (numpy ints too) are normalised to

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError
-from skeye.link import scaling as sc
-from skeye.link.packets import (
+from skeye.wire import packet_units as sc
+from skeye.wire.packets import (
     CommandStreamParser,
     CtrlBits,
     CtrlInput,

@@ -38,8 +38,8 @@ from enum import Enum
 from typing import Any
 
 from skeye.errors import LocalProtocolError
-from skeye.link.crc import command_checksum, crc16
-from skeye.link.packet_defs import (
+from skeye.wire.crc import command_checksum, crc16
+from skeye.wire.packet_defs import (
     ACK_PDS,
     ASCTEC_BY_PREFIX,
     GPS_FIX_VALID,

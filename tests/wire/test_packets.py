@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError
-from skeye.link.crc import command_checksum, crc16
-from skeye.link.packet_defs import LAYOUTS, FrameKind
-from skeye.link.packets import (
+from skeye.wire.crc import command_checksum, crc16
+from skeye.wire.packet_defs import LAYOUTS, FrameKind
+from skeye.wire.packets import (
     ACK_PDS,
     PD,
     Ack,
