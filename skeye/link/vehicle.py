@@ -214,8 +214,15 @@ class Vehicle:
         self._callbacks.append(fn)
 
     def remove_callback(self, fn: TelemetryCallback) -> None:
-        """Stop calling ``fn``."""
-        self._callbacks.remove(fn)
+        """Stop calling ``fn``.
+
+        Raises:
+            LocalProtocolError: ``fn`` was not added.
+        """
+        try:
+            self._callbacks.remove(fn)
+        except ValueError:
+            raise LocalProtocolError(f"{fn!r} is not a telemetry callback here") from None
 
     def _wait(self, ready: Callable[[], bool], what: str, timeout_s: float | None) -> None:
         """Wait under ``self._cond`` until ``ready()``; raise on timeout or a dead link."""

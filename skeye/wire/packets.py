@@ -353,7 +353,13 @@ class _StreamParser:
         return len(self._buf)
 
     def feed(self, data: bytes) -> list[Any]:
-        """Add received bytes; return every message or error event now complete, in order."""
+        """Add received bytes; return every message or error event now complete, in order.
+
+        Raises:
+            LocalProtocolError: ``data`` is not bytes (the only error ``feed`` raises).
+        """
+        if not isinstance(data, bytes | bytearray | memoryview):
+            raise LocalProtocolError(f"feed takes bytes, got {type(data).__name__}")
         self._buf += data
         events: list[Any] = []
         while self._buf:

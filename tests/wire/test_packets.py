@@ -700,3 +700,10 @@ def test_messages_are_frozen() -> None:
     msg = TakeOff(100)
     with pytest.raises(AttributeError):
         msg.height = 5  # type: ignore[misc]
+
+
+def test_feeding_something_other_than_bytes_is_a_protocol_error() -> None:
+    for parser in (VehicleStreamParser(), CommandStreamParser()):
+        with pytest.raises(LocalProtocolError, match="feed takes bytes, got str"):
+            parser.feed(">*>p")  # type: ignore[arg-type]
+        assert parser.feed(bytearray(b"xx")) == [] and parser.garbage_bytes == 2
