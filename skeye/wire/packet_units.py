@@ -26,6 +26,7 @@ for code that converts one value.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Annotated, Any, TypeVar, get_args, get_origin, get_type_hints
@@ -176,11 +177,15 @@ def from_si(cls: type[M], *views: object, scales: Mapping[str, Scale] | None = N
             parts = _vector(value, len(mark.names), what) if len(mark.names) > 1 else (value,)
             for k, (n, part) in enumerate(zip(mark.names, parts, strict=True)):
                 label = what if len(parts) == 1 else f"{what}[{k}]"
+                if len(parts) > 1 and isinstance(part, numbers.Real):
+                    part = float(part) if (over.get(n) or _field(cls, n).scale) else part
                 kwargs[n] = wire_value(cls, n, part, over.get(n), label)
     return cls(**kwargs)
 
 
 def _vector(v: Any, n: int, what: str) -> tuple[Any, ...]:
+    """The ``n`` components of a vector (scaled ones are then converted in double precision,
+    numpy float32 too, as a vector always was)."""
     try:
         items = tuple(v)
     except TypeError:
