@@ -47,8 +47,14 @@ from skeye.wire.packet_defs import LAYOUTS, NavState
 from skeye.wire.packet_units import (
     STICK_MAX,
     THRUST_MAX,
+    goto_gps_to_si,
+    move_by_to_si,
+    si_value,
     stick_to_angle_rad,
     stick_to_yaw_rate_rad_s,
+    take_off_to_si,
+    velocity_to_si,
+    waypoint_to_si,
 )
 from skeye.wire.packets import (
     PD,
@@ -210,7 +216,7 @@ class OnboardBoards:
             self._come_home()
             return Ack(PD.COME_HOME)
         if isinstance(msg, TakeOff):
-            self._take_off(msg.height / 1000.0)
+            self._take_off(take_off_to_si(msg))
         elif isinstance(msg, Land):
             self._land()
         elif isinstance(msg, Hold):
@@ -230,7 +236,7 @@ class OnboardBoards:
             self._stream = msg if msg.period > 0 else None
             self._stream_next_s = now_s
         elif isinstance(msg, Clock):
-            self.clock_until_s = msg.until / 1000.0
+            self.clock_until_s = si_value(msg, "until")
         else:
             raise _Refused(ResultCode.BAD_VALUE, f"{type(msg).__name__} is not a command")
         return ok
@@ -286,10 +292,10 @@ class OnboardBoards:
         self._end_motion()
         self._motion_pending = True
 
-    def _speed(self, speed_mm_s: int) -> float:
+    def _speed(self, speed_m_s: float) -> float:
         """A command's speed (0: the default); over the vehicle's limit it is refused, never
         silently capped."""
-        speed = speed_mm_s / 1000.0 if speed_mm_s > 0 else self.settings.default_speed_m_s
+        speed = speed_m_s if speed_m_s > 0 else self.settings.default_speed_m_s
         limit = self.settings.max_speed_m_s
         if speed > limit + 1e-9:
             raise _Refused(
@@ -300,16 +306,16 @@ class OnboardBoards:
 
     def _velocity(self, msg: Velocity, now_s: float) -> None:
         self.flight.check(FlightEvent.MOVE)
-        duration_s = msg.duration / 1000.0 if msg.duration else None
+        si = velocity_to_si(msg)
+        fwd, right, down = si.vel_frd_m_s
+        duration_s = si.duration_s if msg.duration else None
         if duration_s is not None:  # where it ends; open-ended ones are stopped at the edge
             snap = self.airframe.snapshot()
-            vn, ve = _frd_to_ned((msg.vx / 1000.0, msg.vy / 1000.0, 0.0), snap.rpy_rad[2])
+            vn, ve = _frd_to_ned((fwd, right, 0.0), snap.rpy_rad[2])
             n, e, d = snap.pos_ned_m
-            end = (n + vn * duration_s, e + ve * duration_s, d + msg.vz / 1000.0 * duration_s)
+            end = (n + vn * duration_s, e + ve * duration_s, d + down * duration_s)
             self._check_envelope(self.home_ned_m, end)
-        self.airframe.set_velocity(
-            msg.vx / 1000.0, msg.vy / 1000.0, -msg.vz / 1000.0, msg.yaw_rate / 1000.0, duration_s
-        )
+        self.airframe.set_velocity(fwd, right, -down, si.yaw_rate_rad_s, duration_s)
         self._fire(FlightEvent.MOVE)
         self._end_motion()
         self._velocity_until_s = None if duration_s is None else now_s + duration_s
@@ -317,26 +323,27 @@ class OnboardBoards:
     def _move_by(self, msg: MoveBy) -> None:
         self.flight.check(FlightEvent.MOVE)
         snap = self.airframe.snapshot()
-        delta = (msg.dx / 1000.0, msg.dy / 1000.0, msg.dz / 1000.0)
+        si = move_by_to_si(msg)
+        delta, dyaw_rad = si.delta_m, si.dyaw_rad
         if msg.frame is MoveFrame.BODY_FRD:
             dn, de = _frd_to_ned(delta, snap.rpy_rad[2])
         else:
             dn, de = delta[0], delta[1]
-        dyaw_rad = math.radians(msg.dyaw / 1000.0)
         if delta == (0.0, 0.0, 0.0):
             if dyaw_rad == 0.0:
                 raise _Refused(ResultCode.BAD_VALUE, "MOVE_BY of zero distance and zero yaw")
             self._start_motion(lambda: self.airframe.turn_by(dyaw_rad))
             return
         n, e, d = snap.pos_ned_m
-        speed = self._speed(msg.speed)
+        speed = self._speed(si.speed_m_s)
         self._check_envelope(self.home_ned_m, (n + dn, e + de, d + delta[2]))
         self._start_motion(lambda: self.airframe.fly_to(n + dn, e + de, -(d + delta[2]), speed))
 
     def _goto_gps(self, msg: GotoGps) -> None:
         self.flight.check(FlightEvent.MOVE)
-        altitude_m = -self.home_ned_m[2] + msg.height / 1000.0
-        lat, lon, speed = msg.latitude / 1e7, msg.longitude / 1e7, self._speed(msg.speed)
+        si = goto_gps_to_si(msg)
+        altitude_m = -self.home_ned_m[2] + si.height_m
+        lat, lon, speed = si.latitude_deg, si.longitude_deg, self._speed(si.speed_m_s)
         target = self._gps_target_ned(self.airframe.snapshot(), lat, lon, altitude_m)
         self._check_envelope(self.home_ned_m, target or (*self.home_ned_m[:2], -altitude_m))
         self._start_motion(lambda: self.airframe.fly_to_gps(lat, lon, altitude_m, speed))
@@ -347,20 +354,21 @@ class OnboardBoards:
             raise _Refused(ResultCode.REFUSED, "no waypoint uploaded (send >*>ws first)")
         self.flight.check(FlightEvent.MOVE)
         snap = self.airframe.snapshot()
+        si = waypoint_to_si(wp)  # x east, y north: metres from home, or degrees when ABSOLUTE
         speed = self.settings.max_speed_m_s * max(wp.max_speed, 1) / 100.0
         altitude_m = (
-            -self.home_ned_m[2] + wp.height / 1000.0
+            -self.home_ned_m[2] + si.height_m
             if wp.properties & WaypointProps.HEIGHT_ENABLED
             else snap.altitude_m
         )
         if wp.properties & WaypointProps.ABSOLUTE:
-            lat, lon = wp.Y / 1e7, wp.X / 1e7
+            lat, lon = si.y, si.x
             target = self._gps_target_ned(snap, lat, lon, altitude_m)
             self._check_envelope(self.home_ned_m, target or (*self.home_ned_m[:2], -altitude_m))
             self._start_motion(lambda: self.airframe.fly_to_gps(lat, lon, altitude_m, speed))
-        else:  # X east, Y north, mm from home
-            n = self.home_ned_m[0] + wp.Y / 1000.0
-            e = self.home_ned_m[1] + wp.X / 1000.0
+        else:
+            n = self.home_ned_m[0] + si.y
+            e = self.home_ned_m[1] + si.x
             self._check_envelope(self.home_ned_m, (n, e, -altitude_m))
             self._start_motion(lambda: self.airframe.fly_to(n, e, altitude_m, speed))
             self._waypoint_target = (n, e, -altitude_m)
@@ -459,7 +467,7 @@ class OnboardBoards:
         self._failsafe(now_s)
         if self._stream is None or now_s < self._stream_next_s:
             return []
-        period_s = self._stream.period / 1000.0
+        period_s = si_value(self._stream, "period")
         self._stream_next_s = max(self._stream_next_s + period_s, now_s - period_s)
         out = self.poll(self._stream.poll_mask)
         if self._stream.skeye_mask & SkeyeMask.NAV_STATUS:
