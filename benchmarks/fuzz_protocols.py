@@ -24,10 +24,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from skeye.errors import RemoteProtocolError
-from skeye.link import packets
 from skeye.sim import image_protocol as ip
 from skeye.sim.protocol import LineDecoder, LineError
 from skeye.sim.recording import parse_record
+from skeye.wire import packets
 
 SEEDS: dict[str, list[bytes]] = {
     "sim-lines": [

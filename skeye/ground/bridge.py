@@ -36,8 +36,11 @@ from typing import Any
 from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.ground.commands import GroundCommand, run_command
 from skeye.ground.telemetry import nav_json, pad_json, telemetry_json
-from skeye.link.packet_defs import LAYOUTS
-from skeye.link.packets import (
+from skeye.link.transport import LinkClosed
+from skeye.link.vehicle import Vehicle
+from skeye.wire.packet_defs import LAYOUTS
+from skeye.wire.packet_units import imu_calcdata_to_si
+from skeye.wire.packets import (
     PD,
     Ack,
     ImuCalcData,
@@ -49,9 +52,6 @@ from skeye.link.packets import (
     ResultCode,
     SkeyeMask,
 )
-from skeye.link.scaling import imu_calcdata_to_si
-from skeye.link.transport import LinkClosed
-from skeye.link.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
 

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from skeye.errors import LocalProtocolError
-from skeye.link.packets import Ack, Result
 from skeye.link.vehicle import Vehicle
+from skeye.wire.packets import Ack, Result
 
 Value = float | str
 

@@ -1,7 +1,7 @@
 """Byte links chosen by URI: TCP, serial, and an in-memory pair for tests.
 
 How this works: a ``Link`` moves raw bytes and knows nothing of the packet protocol (that is
-``skeye.link.packets``, sans-IO). ``open_link(uri)`` picks the adapter:
+``skeye.wire.packets``, sans-IO). ``open_link(uri)`` picks the adapter:
 
 - ``tcp://host:port``: a TCP client connection (the pilot wraps its accepted sockets the same
   way with ``TcpLink(sock)``);

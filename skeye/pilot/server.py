@@ -43,7 +43,11 @@ from types import TracebackType
 from typing import Any
 
 from skeye.errors import ConfigError, SkeyeError
-from skeye.link.packets import (
+from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
+from skeye.pilot.airframe import Airframe
+from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
+from skeye.pilot.outbox import Outbox
+from skeye.wire.packets import (
     CommandStreamParser,
     FrameError,
     Message,
@@ -51,10 +55,6 @@ from skeye.link.packets import (
     ResultCode,
     encode,
 )
-from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
-from skeye.pilot.airframe import Airframe
-from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
-from skeye.pilot.outbox import Outbox
 
 log = logging.getLogger(__name__)
 

@@ -33,12 +33,12 @@ from typing import Any
 import cv2
 
 from skeye.errors import SkeyeError
-from skeye.link.packets import NavState, PadAction
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadObservation
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
 from skeye.vision.detector import detect
 from skeye.vision.pad import SKEYE_4, PadDefinition
+from skeye.wire.packets import NavState, PadAction
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)

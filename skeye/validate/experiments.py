@@ -29,13 +29,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from skeye.errors import SkeyeError
-from skeye.link.packets import NavState, PadReport, SkeyeMask
-from skeye.link.scaling import nav_status_to_si, pad_report_to_si
 from skeye.link.vehicle import Vehicle
 from skeye.processes import start_skeye, stop_process
 from skeye.sim.protocol import parse_line
 from skeye.sim.recording import RecordingReader
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M
+from skeye.wire.packet_units import nav_status_to_si, pad_report_to_si
+from skeye.wire.packets import NavState, PadReport, SkeyeMask
 
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3
@@ -112,7 +112,7 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
 
 
 def _sim_time(vehicle: Vehicle) -> float:
-    from skeye.link.packets import PD
+    from skeye.wire.packets import PD
 
     msg = vehicle.wait_for(PD.NAV_STATUS, timeout_s=30)
     return nav_status_to_si(msg).time_s  # type: ignore[arg-type]

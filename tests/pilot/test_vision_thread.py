@@ -19,7 +19,6 @@ import pytest
 from skeye.control.camera import CameraSensor
 from skeye.control.connection import connect
 from skeye.errors import LinkTimeout
-from skeye.link.packets import PD, PollMask, SkeyeMask
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.cli import pad_vision_factory
@@ -32,6 +31,7 @@ from skeye.sim.image_client import ImageClient
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
+from skeye.wire.packets import PD, PollMask, SkeyeMask
 from tests.ground.conftest import wait_until
 
 

@@ -9,7 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeye.link.packets import (
+from skeye.sim.image_protocol import FrameDecoder, RemoteError
+from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.sim.recording import Recorder
+from skeye.sim.robot_config import BUILTIN_ROBOTS
+from skeye.wire.packets import (
     SKEYE_START,
     START,
     CommandStreamParser,
@@ -17,10 +21,6 @@ from skeye.link.packets import (
     FrameError,
     VehicleStreamParser,
 )
-from skeye.sim.image_protocol import FrameDecoder, RemoteError
-from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
-from skeye.sim.recording import Recorder
-from skeye.sim.robot_config import BUILTIN_ROBOTS
 from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient, running_sim
 
