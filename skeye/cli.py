@@ -56,8 +56,8 @@ def _inject_fault(sim: Any) -> None:
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
+    from skeye.robots.config import validate_robot_dirs
     from skeye.sim.engine import Simulation, SimulationRunner
-    from skeye.sim.robot_config import validate_robot_dirs
     from skeye.sim.server import ControlServer
     from skeye.sim.wind import make_settings, parse_params
     from skeye.sim.world import load_world
@@ -82,7 +82,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             stack.callback(cameras.close)
         recorder = None
         if args.record is not None:
-            from skeye.sim.recording import Recorder
+            from skeye.recording.records import Recorder
 
             meta = {
                 "world": world.name,
@@ -207,19 +207,19 @@ def _add_vision(sub: Any) -> None:
 
 
 def _add_snapshot(sub: Any) -> None:
-    from skeye.sim.snapshot import register
+    from skeye.recording.snapshot import register
 
     register(sub)
 
 
 def _add_replay(sub: Any) -> None:
-    from skeye.sim.replay import register
+    from skeye.recording.replay import register
 
     register(sub)
 
 
 def _add_plot(sub: Any) -> None:
-    from skeye.sim.plotting import register
+    from skeye.recording.plotting import register
 
     register(sub)
 

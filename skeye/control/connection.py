@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from skeye.control.image_client import ImageClient
 from skeye.errors import (
     CommandRejected,
     LinkTimeout,
@@ -37,7 +38,6 @@ from skeye.errors import (
     RemoteProtocolError,
     SkeyeError,
 )
-from skeye.sim.image_client import ImageClient
 from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps

@@ -37,7 +37,7 @@ START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to imp
 
 def _default_fov_rad(robot: str) -> float:
     """The horizontal field of view of the robot class's first camera."""
-    from skeye.sim.robot_config import load_robot_config
+    from skeye.robots.config import load_robot_config
 
     config = load_robot_config(robot)
     for mount in config.sensors:

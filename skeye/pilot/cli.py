@@ -36,7 +36,7 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     Raises:
         ConfigError: a bad robot file or value, or a class missing from ``--robot-dir``.
     """
-    from skeye.sim.robot_config import BUILTIN_ROBOTS, load_robot_config
+    from skeye.robots.config import BUILTIN_ROBOTS, load_robot_config
 
     dirs = (Path(args.robot_dir),) if args.robot_dir else ()
     short = args.robot.split(".", 1)[1] if args.robot.lower().startswith("usarbot.") else args.robot

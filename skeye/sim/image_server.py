@@ -10,7 +10,7 @@ How this works:
   asking for the same frame in the same format cost one encoding. The cache is a small LRU.
 * :class:`ImageServer` runs one accept thread and one thread per client. Each client thread owns
   its socket (non-blocking) and a wake-up socket pair, and runs a select loop: requests are parsed
-  by the sans-IO :class:`~skeye.sim.image_protocol.RequestParser` and queued; the head of the
+  by the sans-IO :class:`~skeye.wire.images.RequestParser` and queued; the head of the
   queue is served when nothing is being sent. At most one frame is in flight per client, and it is
   built from the newest frame only when the previous one has gone out: a slow or stalled client
   simply receives fewer frames, and never holds a lock or blocks anyone else. Reading stops while
@@ -37,12 +37,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from skeye.errors import LocalProtocolError
-from skeye.sim.image_protocol import (
-    DEFAULT_PORT,
-    META_HEADER_BYTES,
-    META_OFFSET,
-    FrameType,
-    ImageFormat,
+from skeye.pixels import encode_image
+from skeye.sim.limits import check_server_limits
+from skeye.wire.image_requests import (
     NewestFrame,
     Request,
     RequestError,
@@ -52,12 +49,17 @@ from skeye.sim.image_protocol import (
     SetMeta,
     Stream,
     SubRect,
+)
+from skeye.wire.images import (
+    DEFAULT_PORT,
+    META_HEADER_BYTES,
+    META_OFFSET,
+    FrameType,
+    ImageFormat,
     encode_error_frame,
-    encode_image,
     frame_header,
     meta_header,
 )
-from skeye.sim.limits import check_server_limits
 
 log = logging.getLogger(__name__)
 

@@ -10,8 +10,9 @@ from typing import Any
 import cv2
 
 from skeye.control.connection import parse_address
+from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.sim.image_client import ImageClient
+from skeye.pixels import frame_image
 
 
 def save_snapshot(address: str, out: Path, camera: str | None = None, quality: int = 95,
@@ -37,7 +38,7 @@ def save_snapshot(address: str, out: Path, camera: str | None = None, quality: i
         client.set_format("png" if suffix == ".png" else "jpeg", quality=quality)
         client.set_meta(True)
         frame = client.get_frame()
-    image = frame.image()
+    image = frame_image(frame)
     if suffix == ".png":
         ok = cv2.imwrite(str(out), image)
     else:

@@ -14,16 +14,8 @@ from collections import deque
 from collections.abc import Iterator
 
 from skeye.errors import LinkTimeout, LocalProtocolError, RemoteProtocolError
-from skeye.sim.image_protocol import (
-    DEFAULT_MAX_FRAME_BYTES,
-    DEFAULT_PORT,
-    DecodedFrame,
-    FrameDecoder,
-    FrameEvent,
-    ImageFormat,
+from skeye.wire.image_requests import (
     NewestFrame,
-    ProtocolViolation,
-    RemoteError,
     Request,
     SelectCamera,
     SetFormat,
@@ -31,6 +23,16 @@ from skeye.sim.image_protocol import (
     Stream,
     SubRect,
     encode_request,
+)
+from skeye.wire.images import (
+    DEFAULT_MAX_FRAME_BYTES,
+    DEFAULT_PORT,
+    DecodedFrame,
+    FrameDecoder,
+    FrameEvent,
+    ImageFormat,
+    ProtocolViolation,
+    RemoteError,
 )
 
 log = logging.getLogger(__name__)
