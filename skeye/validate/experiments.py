@@ -35,7 +35,7 @@ from skeye.link.vehicle import Vehicle
 from skeye.processes import start_skeye, stop_process
 from skeye.recording.records import RecordingReader
 from skeye.sim.protocol import parse_line
-from skeye.sim.world import PAD_SURFACE_HEIGHT_M
+from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
 
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3

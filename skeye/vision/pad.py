@@ -16,6 +16,10 @@ import numpy as np
 
 from skeye.errors import ConfigError
 
+PAD_SURFACE_HEIGHT_M = 0.001
+"""A pad's visible surface lies this far above the point a world file gives (so it never
+z-fights the ground); the simulator draws it there and measures height above it."""
+
 
 @dataclass(frozen=True)
 class Ring:
