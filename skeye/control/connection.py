@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 from skeye.control.image_client import ImageClient
 from skeye.errors import (
     CommandRejected,
+    LinkClosed,
     LinkTimeout,
     LocalProtocolError,
     RemoteProtocolError,
@@ -51,10 +52,6 @@ log = logging.getLogger(__name__)
 DEFAULT_PORT = 3000
 DEFAULT_IMAGE_PORT = 5003
 _STOP = b""
-
-
-class LinkClosed(SkeyeError):
-    """The connection to the simulator is gone (closed by us, by the peer, or broken)."""
 
 
 @dataclass(frozen=True)

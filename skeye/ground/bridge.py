@@ -33,7 +33,14 @@ from enum import Enum
 from types import TracebackType
 from typing import Any
 
-from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.errors import (
+    CommandRejected,
+    InvalidArgument,
+    LinkClosed,
+    LinkTimeout,
+    LocalProtocolError,
+    SkeyeError,
+)
 from skeye.ground.commands import GroundCommand, run_command
 from skeye.ground.telemetry import nav_json, pad_json, telemetry_json
 from skeye.link.packet_defs import LAYOUTS
@@ -50,7 +57,6 @@ from skeye.link.packets import (
     SkeyeMask,
 )
 from skeye.link.scaling import imu_calcdata_to_si
-from skeye.link.transport import LinkClosed
 from skeye.link.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
@@ -108,7 +114,7 @@ class PacketRate:
 
     def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
         if not window_s > 0:
-            raise ValueError(f"window_s must be > 0, got {window_s}")
+            raise InvalidArgument(f"window_s must be > 0, got {window_s}")
         self.window_s = window_s
         self._times: deque[float] = deque()
 
@@ -188,7 +194,7 @@ class VehicleBridge:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not 0 < keepalive_s < stale_s:
-            raise ValueError(f"need 0 < keepalive_s < stale_s, got {keepalive_s}, {stale_s}")
+            raise InvalidArgument(f"need 0 < keepalive_s < stale_s, got {keepalive_s}, {stale_s}")
         self.uri = uri
         self.stream_period_s = stream_period_s
         self.keepalive_s = keepalive_s

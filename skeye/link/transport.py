@@ -30,16 +30,12 @@ from contextlib import contextmanager
 from types import TracebackType
 from urllib.parse import parse_qs, urlsplit
 
-from skeye.errors import LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError
 
 DEFAULT_BAUD = 57600
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 DEFAULT_SEND_TIMEOUT_S = 5.0
 RECV_CHUNK = 65536
-
-
-class LinkClosed(SkeyeError):
-    """The link was closed locally or by the peer; nothing more can be sent or received."""
 
 
 class Link(ABC):

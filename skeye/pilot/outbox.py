@@ -23,7 +23,7 @@ import logging
 import threading
 from collections import deque
 
-from skeye.errors import LinkTimeout
+from skeye.errors import InvalidArgument, LinkTimeout
 from skeye.link.transport import Link, LinkClosed
 
 log = logging.getLogger(__name__)
@@ -49,7 +49,7 @@ class Outbox:
         hard_max_bytes: int = DEFAULT_HARD_MAX_BYTES,
     ) -> None:
         if not 0 < max_bytes <= hard_max_bytes:
-            raise ValueError(
+            raise InvalidArgument(
                 f"need 0 < max_bytes <= hard_max_bytes, got {max_bytes}, {hard_max_bytes}"
             )
         self.link = link

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
-from skeye.errors import ConfigError, SkeyeError
+from skeye.errors import ConfigError, InvalidArgument, SkeyeError
 from skeye.link.packets import (
     CommandStreamParser,
     FrameError,
@@ -135,7 +135,7 @@ class PilotServer:
         if (port is None) == (serial_uri is None):
             raise ConfigError("PilotServer needs exactly one of port= or serial_uri=")
         if not tick_s > 0 or lockstep_rate < 0:
-            raise ValueError(
+            raise InvalidArgument(
                 f"tick_s must be > 0 and lockstep_rate >= 0 ({tick_s}, {lockstep_rate})"
             )
         self.airframe = airframe
