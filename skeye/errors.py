@@ -42,6 +42,10 @@ class LinkClosed(SkeyeError):
     link (:mod:`skeye.link.transport`)."""
 
 
+class PeerClosed(LinkClosed):
+    """The peer ended the connection in order (end of stream, a serial line hung up)."""
+
+
 class InvalidArgument(LocalProtocolError, ValueError):
     """A caller passed a value out of range or of the wrong kind; also a ``ValueError``, so code
     that catches that keeps working."""

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from skeye.control.image_client import ImageClient
-from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.errors import LinkClosed, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.pixels import frame_image
 from skeye.sim.protocol import Message
 
@@ -84,16 +84,16 @@ class CameraSensor(Sensor[CameraReading]):
             reused = self._client is not None
             try:
                 frame = self._fetch()
-            except (RemoteProtocolError, OSError) as exc:
+            except (RemoteProtocolError, LinkClosed) as exc:
                 self._drop()
-                closed = isinstance(exc, OSError) or "closed" in str(exc)
+                closed = isinstance(exc, LinkClosed) or "closed" in str(exc)
                 if not (reused and closed):
                     raise _as_skeye(self.name, exc) from exc
                 # The server closed a connection that sat idle (its --idle-timeout): once more,
                 # on a fresh one.
                 try:
                     frame = self._fetch()
-                except (SkeyeError, OSError) as exc2:
+                except SkeyeError as exc2:
                     self._drop()
                     raise _as_skeye(self.name, exc2) from exc2
             except SkeyeError:

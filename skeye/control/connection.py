@@ -1,13 +1,14 @@
-"""The connection to a simulator: the socket, its two threads, and request/answer matching.
+"""The connection to a simulator: its link, its two threads, and request/answer matching.
 
 How this works (user's view: docs/control.md):
 
-- A **message-handler** thread alone reads the socket. It feeds the bytes to the shared sans-IO
+- The byte link comes from :func:`skeye.link.transport.open_link` (``tcp://host:port``).
+- A **message-handler** thread alone reads the link. It feeds the bytes to the shared sans-IO
   codec (:class:`skeye.sim.protocol.LineDecoder`) and dispatches each message: ``SEN`` to its
   sensor object, ``STA`` to the robot's status, answers (``RES``, ``ERR``, ``CONF``, ``GEO``,
   ``NFO {StartPoses}``) to the oldest pending request they answer. An ``ERR`` nobody waits for
   (a refused ``DRIVE``, a physics stop) goes to the robot, whose motion then fails with it.
-- A **command-handler** thread alone writes the socket, draining one bounded multi-producer
+- A **command-handler** thread alone writes the link, draining one bounded multi-producer
   queue of whole lines, so bytes of two commands never interleave. A full queue blocks the
   producer up to its timeout, then raises :class:`~skeye.errors.LinkTimeout`.
 - Every wait has a deadline. When the link dies (EOF, a socket error, a protocol violation) the
@@ -24,7 +25,6 @@ from __future__ import annotations
 
 import logging
 import queue
-import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -36,9 +36,11 @@ from skeye.errors import (
     LinkClosed,
     LinkTimeout,
     LocalProtocolError,
+    PeerClosed,
     RemoteProtocolError,
     SkeyeError,
 )
+from skeye.link.transport import Link, open_link, tcp_uri
 from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
@@ -52,6 +54,7 @@ log = logging.getLogger(__name__)
 DEFAULT_PORT = 3000
 DEFAULT_IMAGE_PORT = 5003
 _STOP = b""
+_RECV_WAIT_S = 1.0  # the reader's longest wait in one recv (a closed link wakes it at once)
 
 
 @dataclass(frozen=True)
@@ -167,14 +170,13 @@ class Connection:
         self._outbox: queue.Queue[bytes] = queue.Queue(queue_size)
         self._nfo = threading.Event()
         self._close_hooks: list[Callable[[SkeyeError], None]] = []
-        try:
-            self._sock = socket.create_connection((self.host, self.port), timeout=timeout_s)
-        except TimeoutError as exc:
+        try:  # no send deadline: a full command queue is what times out (see ``send``)
+            self._link: Link = open_link(tcp_uri(self.host, self.port), timeout_s,
+                                         send_timeout_s=None)
+        except LinkTimeout as exc:
             raise LinkTimeout(f"simulator {self.peer}: no connection in {timeout_s:g} s") from exc
-        except OSError as exc:
+        except LinkClosed as exc:
             raise LinkClosed(f"cannot connect to the simulator at {self.peer}: {exc}") from exc
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._sock.settimeout(None)
         self._reader = threading.Thread(target=self._read_loop, name="skeye-control-read",
                                         daemon=True)
         self._writer = threading.Thread(target=self._write_loop, name="skeye-control-write",
@@ -298,13 +300,13 @@ class Connection:
                     while len(chunks) < 64:
                         more = self._outbox.get_nowait()
                         if not more:
-                            self._sock.sendall(b"".join(chunks))
+                            self._link.send(b"".join(chunks))
                             return
                         chunks.append(more)
                 except queue.Empty:
                     pass
-                self._sock.sendall(b"".join(chunks))
-        except OSError as exc:
+                self._link.send(b"".join(chunks))
+        except SkeyeError as exc:  # LinkClosed, LinkTimeout
             self._fail(LinkClosed(f"simulator {self.peer}: sending failed: {exc}"))
 
     # -- reading ------------------------------------------------------------------------
@@ -314,16 +316,18 @@ class Connection:
         try:
             while True:
                 try:
-                    data = self._sock.recv(65536)
-                except OSError as exc:
-                    error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
-                    break
-                if not data:
+                    data = self._link.recv(_RECV_WAIT_S)
+                except PeerClosed:
                     error = LinkClosed(
                         f"the simulator at {self.peer} closed the connection "
                         f"(last sim time {self.time_s:.3f} s)"
                     )
                     break
+                except LinkClosed as exc:
+                    error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
+                    break
+                if not data:
+                    continue
                 for event in decoder.feed(data):
                     if isinstance(event, LineError):
                         log.warning("simulator %s sent a bad line: %s: %r", self.peer,
@@ -416,10 +420,7 @@ class Connection:
             self._outbox.put_nowait(_STOP)
         except queue.Full:
             pass
-        try:
-            self._sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
+        self._link.close()  # wakes the reader; the writer's next send fails
 
     # -- world commands -------------------------------------------------------------------
     def start_poses(self) -> dict[str, Pose]:
@@ -559,7 +560,7 @@ class Connection:
         for t in (self._writer, self._reader):
             if t.is_alive() and t is not current:
                 t.join(timeout_s)
-        self._sock.close()
+        self._link.close()
         if self.robot is not None:
             self.robot._close()
 

@@ -21,7 +21,7 @@ from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.pad import SKEYE_4
 from tests.sim.conftest import LineClient
 
-ROBOTS = Path(__file__).parents[2] / "skeye/sim/robots"
+ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
 
 @contextmanager
@@ -116,7 +116,7 @@ def test_image_requests_against_the_simulator():
                 c.step(34)
             assert numbers == sorted(numbers) and len(set(numbers)) == 3
             # A bad extension line gets an error frame; the connection stays usable.
-            img._sock.sendall(b"SKEYE FORMAT GIF\n")  # a line the client API would refuse
+            img.link.send(b"SKEYE FORMAT GIF\n")  # a line the client API would refuse
             with pytest.raises(Exception, match=r"(?i)format|gif"):
                 img.get_frame()
             img.set_format("jpeg", quality=85)
