@@ -28,7 +28,7 @@ import queue
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from skeye.control.image_client import ImageClient
 from skeye.errors import (
@@ -45,9 +45,7 @@ from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, 
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
 from .motion import MotionConfig
-
-if TYPE_CHECKING:
-    from .robots import Robot
+from .robots import Robot, robot_class
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +185,7 @@ class Connection:
         try:
             if not self._nfo.wait(timeout_s):
                 raise LinkTimeout(f"simulator {self.peer}: no NFO greeting in {timeout_s:g} s")
-            self._check()
+            self.check()
             steps = period_steps(self.motion_config.control_rate_hz, self.time_step_s)
             if self.mode == "lockstep":
                 self.clock = LockstepClock(self._tick, self._get_error, self._step,
@@ -225,7 +223,8 @@ class Connection:
     def _get_error(self) -> SkeyeError | None:
         return self._error
 
-    def _check(self) -> None:
+    def check(self) -> None:
+        """Raise the link's error if it is down (LinkClosed, RemoteProtocolError...)."""
         if self._error is not None:
             raise self._error
 
@@ -242,7 +241,7 @@ class Connection:
         self._put(format_message(type_word, *fields), timeout_s)
 
     def _put(self, line: bytes, timeout_s: float | None) -> None:
-        self._check()
+        self.check()
         wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
             self._outbox.put(line, timeout=wait_s)
@@ -251,7 +250,7 @@ class Connection:
                 f"simulator {self.peer}: command queue full for {wait_s:g} s "
                 "(the simulator is not reading)"
             ) from None
-        self._check()
+        self.check()
 
     def request(
         self, type_word: str, *fields: tuple[str, object], timeout_s: float | None = None
@@ -270,7 +269,7 @@ class Connection:
         pending = _Pending(command, _ANSWERS.get(command, frozenset({"RES"})), ident)
         line = format_message(type_word, *fields)
         with self._lock:
-            self._check()
+            self.check()
             self._pending.append(pending)
         wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
@@ -361,12 +360,12 @@ class Connection:
             self._note_time(msg)
             robot = self.robot
             if robot is not None:
-                robot._on_sensor(msg)
+                robot.on_sensor(msg)
             return
         if kind == "STA":
             self._note_time(msg)
             if self.robot is not None:
-                self.robot._on_status(msg)
+                self.robot.on_status(msg)
             return
         if kind == "NFO" and msg.has("Mode") and not self._nfo.is_set():
             self.mode = (msg.get("Mode") or "realtime").lower()
@@ -394,7 +393,7 @@ class Connection:
             log.warning("simulator %s: %s refused: %s", self.peer, msg.get("Command"),
                         msg.get("Reason"))
             if self.robot is not None:
-                self.robot._on_error(msg)
+                self.robot.on_error(msg)
 
     def _fail(self, error: SkeyeError) -> None:
         """The link is down: record why and wake every waiter with it."""
@@ -410,7 +409,7 @@ class Connection:
         self._nfo.set()
         robot = self.robot
         if robot is not None:
-            robot._link_down(error)
+            robot.link_down(error)
         for hook in hooks:
             try:
                 hook(error)
@@ -472,7 +471,7 @@ class Connection:
     def _tick(self) -> None:
         robot = self.robot
         if robot is not None:
-            robot._control_tick()
+            robot.control_tick()
 
     # -- robots ---------------------------------------------------------------------------
     def spawn(
@@ -500,8 +499,6 @@ class Connection:
             LocalProtocolError: this connection already has a robot, or bad arguments.
             CommandRejected: the simulator refused (unknown class or start pose...).
         """
-        from .robots import robot_class
-
         if self.robot is not None:
             raise LocalProtocolError(
                 f"this connection already drives {self.robot.name} (one robot per connection)"
@@ -532,15 +529,16 @@ class Connection:
         try:
             answer = self.request("INIT", *fields)
             new.name = answer.get("Name") or name
-            new._configure(self.request("GETCONF", ("Type", "Robot")))
-            new._await_first_readings()
+            new.configure(self.request("GETCONF", ("Type", "Robot")))
+            new.await_first_readings()
         except BaseException:
             self.robot = None
             raise
         return new
 
     # -- images ---------------------------------------------------------------------------
-    def _image_client(self) -> ImageClient:
+    def image_client(self) -> ImageClient:
+        """A new client of the simulator's image server (``images=`` given to connect)."""
         if self.images_address is None:
             raise LocalProtocolError("connect with images='host:port' to fetch camera frames")
         host, port = self.images_address
@@ -562,7 +560,7 @@ class Connection:
                 t.join(timeout_s)
         self._link.close()
         if self.robot is not None:
-            self.robot._close()
+            self.robot.close()
 
     def add_close_hook(self, fn: Callable[[SkeyeError], None]) -> None:
         """Call ``fn(error)`` once when the link goes down."""
