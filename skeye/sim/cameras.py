@@ -31,6 +31,7 @@ import numpy as np
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.robots.config import SensorMount
 from skeye.sim import frames
+from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
 from skeye.sim.image_server import Frame, FrameBuffer
 from skeye.sim.protocol import format_message
 from skeye.workers import Worker
