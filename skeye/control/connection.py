@@ -42,6 +42,7 @@ from skeye.errors import (
 )
 from skeye.link.transport import Link, open_link, tcp_uri
 from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
+from skeye.workers import Worker
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
 from .motion import MotionConfig
@@ -175,10 +176,9 @@ class Connection:
             raise LinkTimeout(f"simulator {self.peer}: no connection in {timeout_s:g} s") from exc
         except LinkClosed as exc:
             raise LinkClosed(f"cannot connect to the simulator at {self.peer}: {exc}") from exc
-        self._reader = threading.Thread(target=self._read_loop, name="skeye-control-read",
-                                        daemon=True)
-        self._writer = threading.Thread(target=self._write_loop, name="skeye-control-write",
-                                        daemon=True)
+        self._reader = Worker(self._read_loop, "skeye-control-read", on_error=self._worker_failed)
+        self._writer = Worker(self._write_loop, "skeye-control-write",
+                              on_error=self._worker_failed)
         self._reader.start()
         self._writer.start()
         self.clock: Clock
@@ -307,6 +307,10 @@ class Connection:
                 self._link.send(b"".join(chunks))
         except SkeyeError as exc:  # LinkClosed, LinkTimeout
             self._fail(LinkClosed(f"simulator {self.peer}: sending failed: {exc}"))
+
+    def _worker_failed(self, exc: BaseException) -> None:
+        """A link thread died of a bug: every waiter hears of it (the worker logged it)."""
+        self._fail(SkeyeError(f"a connection thread failed: {exc!r}"))
 
     # -- reading ------------------------------------------------------------------------
     def _read_loop(self) -> None:
@@ -554,10 +558,8 @@ class Connection:
         if clock is not None:
             clock.close(timeout_s)
         self._fail(LinkClosed(f"the connection to {self.peer} was closed"))
-        current = threading.current_thread()
         for t in (self._writer, self._reader):
-            if t.is_alive() and t is not current:
-                t.join(timeout_s)
+            t.join(timeout_s)  # returns at once for the calling thread's own worker
         self._link.close()
         if self.robot is not None:
             self.robot.close()

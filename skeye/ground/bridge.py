@@ -58,6 +58,7 @@ from skeye.link.packets import (
 )
 from skeye.link.scaling import imu_calcdata_to_si
 from skeye.link.vehicle import Vehicle
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -222,14 +223,13 @@ class VehicleBridge:
         self._pad_offset: tuple[float, float] | None = None
         self._t0_s = clock()
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._thread: Worker | None = None
 
     # -- lifecycle -------------------------------------------------------------------------
     def start(self) -> VehicleBridge:
         """Start the worker thread; returns self."""
         if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="ground-bridge", daemon=True)
-            self._thread.start()
+            self._thread = Worker(self._run, "ground-bridge").start()
         return self
 
     def close(self, timeout_s: float = 3.0) -> None:
@@ -239,7 +239,7 @@ class VehicleBridge:
             vehicle = self._vehicle
         if vehicle is not None:
             vehicle.close()
-        if self._thread is not None and self._thread is not threading.current_thread():
+        if self._thread is not None:
             self._thread.join(timeout_s)
         with self._lock:
             self._state = next_link_state(self._state, LinkEvent.CLOSE)

@@ -25,6 +25,7 @@ from collections import deque
 
 from skeye.errors import InvalidArgument, LinkTimeout
 from skeye.link.transport import Link, LinkClosed
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -63,9 +64,7 @@ class Outbox:
         self._queued_bytes = 0
         self._cond = threading.Condition()
         self._closed = False
-        self._thread = threading.Thread(
-            target=self._run, name=f"pilot-send-{link.name}", daemon=True
-        )
+        self._thread = Worker(self._run, f"pilot-send-{link.name}")
 
     def start(self) -> Outbox:
         self._thread.start()
@@ -103,8 +102,7 @@ class Outbox:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
+        self._thread.join(timeout_s)
 
     def __enter__(self) -> Outbox:
         return self.start()
