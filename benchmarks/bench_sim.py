@@ -45,7 +45,7 @@ from skeye.processes import start_skeye, stop_process
 
 def robot_dir_with_board_rate(folder: Path, board_rate_hz: float) -> str:
     """Write a copy of the Hummingbird whose board runs at ``board_rate_hz``; return its class."""
-    text = (resources.files("skeye.sim") / "robots" / "hummingbird.toml").read_text()
+    text = (resources.files("skeye.robots") / "hummingbird.toml").read_text()
     name = f"hummingbird_board{board_rate_hz:g}"
     lines = []
     for line in text.splitlines():

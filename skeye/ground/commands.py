@@ -43,7 +43,7 @@ class VehicleLimits:
     @classmethod
     def for_robot(cls, robot: str) -> VehicleLimits:
         """The limits of a robot class (name or TOML path), as ``skeye sim`` loads it."""
-        from skeye.sim.robot_config import load_robot_config
+        from skeye.robots.config import load_robot_config
 
         config = load_robot_config(robot)
         c = config.controller

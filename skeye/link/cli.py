@@ -17,8 +17,7 @@ from dataclasses import fields
 from enum import IntEnum
 from typing import Any, TextIO
 
-from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
-from skeye.link.transport import LinkClosed
+from skeye.errors import CommandRejected, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.link.vehicle import Vehicle
 from skeye.wire.packets import Ack, Message, PollMask, Result, SkeyeMask
 

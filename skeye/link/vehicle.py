@@ -64,6 +64,7 @@ from skeye.wire.packets import (
     WaypointGoto,
     encode,
 )
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -121,8 +122,7 @@ class Vehicle:
         self._command_lock = threading.Lock()
         self._reader_error: BaseException | None = None
         self._stop = threading.Event()
-        self._reader = threading.Thread(target=self._read_loop, name="vehicle-reader", daemon=True)
-        self._reader.start()
+        self._reader = Worker(self._read_loop, "vehicle-reader").start()
 
     @classmethod
     def open(
@@ -143,8 +143,7 @@ class Vehicle:
         """Stop the reader and close the link (idempotent)."""
         self._stop.set()
         self.link.close()
-        if self._reader is not threading.current_thread():
-            self._reader.join(timeout_s)
+        self._reader.join(timeout_s)
 
     def __enter__(self) -> Vehicle:
         return self

@@ -32,7 +32,7 @@ from typing import Any
 
 import cv2
 
-from skeye.errors import SkeyeError
+from skeye.errors import InvalidArgument, SkeyeError
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadObservation
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
@@ -71,7 +71,7 @@ class PadVision:
         queue_size: int = 4,
     ) -> None:
         if queue_size < 1 or not lockstep_wait_s > 0:
-            raise ValueError(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
+            raise InvalidArgument(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
                              f"({queue_size}, {lockstep_wait_s})")
         self.boards = boards
         self.robot = robot

@@ -29,10 +29,11 @@ from typing import Any
 import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.robots.config import SensorMount
 from skeye.sim import frames
+from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
 from skeye.sim.image_server import Frame, FrameBuffer
 from skeye.sim.protocol import format_message
-from skeye.sim.robot_config import SensorMount
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)

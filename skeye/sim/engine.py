@@ -32,14 +32,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
+
+# isort: split
 import mujoco
 import numpy as np
 
 from skeye.errors import LocalProtocolError, PhysicsError, SkeyeError
+from skeye.robots.config import RobotConfig, load_robot_config
 from skeye.sim import frames
 from skeye.sim.protocol import format_message
 from skeye.sim.robot import Outbox, Robot, ScheduledSensor, check_state
-from skeye.sim.robot_config import RobotConfig, load_robot_config
 from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
 from skeye.sim.world import WorldDescription, build_mjcf

@@ -31,9 +31,9 @@ from pathlib import Path
 from skeye.errors import SkeyeError
 from skeye.link.vehicle import Vehicle
 from skeye.processes import start_skeye, stop_process
+from skeye.recording.records import RecordingReader
 from skeye.sim.protocol import parse_line
-from skeye.sim.recording import RecordingReader
-from skeye.sim.world import PAD_SURFACE_HEIGHT_M
+from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
 from skeye.wire.packet_units import nav_status_to_si, pad_report_to_si
 from skeye.wire.packets import NavState, PadReport, SkeyeMask
 

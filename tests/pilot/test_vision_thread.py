@@ -18,6 +18,7 @@ import pytest
 
 from skeye.control.camera import CameraSensor
 from skeye.control.connection import connect
+from skeye.control.image_client import ImageClient
 from skeye.errors import LinkTimeout
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
@@ -27,7 +28,6 @@ from skeye.pilot.sim_airframe import SimAirframe
 from skeye.pilot.vision import PadVision
 from skeye.sim.cameras import CameraSystem
 from skeye.sim.engine import Simulation, SimulationRunner
-from skeye.sim.image_client import ImageClient
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world

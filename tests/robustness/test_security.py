@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeye.sim.image_protocol import FrameDecoder, RemoteError
+from skeye.recording.records import Recorder
+from skeye.robots.config import BUILTIN_ROBOTS
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
-from skeye.sim.recording import Recorder
-from skeye.sim.robot_config import BUILTIN_ROBOTS
+from skeye.wire.images import FrameDecoder, RemoteError
 from skeye.wire.packets import (
     SKEYE_START,
     START,
@@ -24,7 +24,7 @@ from skeye.wire.packets import (
 from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient, running_sim
 
-ROBOT_TOML = (Path(__file__).resolve().parents[2] / "skeye/sim/robots/hummingbird.toml").read_text()
+ROBOT_TOML = (Path(__file__).resolve().parents[2] / "skeye/robots/hummingbird.toml").read_text()
 
 
 def test_servers_bind_loopback_by_default() -> None:

@@ -22,7 +22,7 @@ def _skeye(*argv: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_sim_refuses_to_start_with_a_robot_file_that_has_a_typo(tmp_path: Path) -> None:
-    text = resources.files("skeye.sim").joinpath("robots/hummingbird.toml").read_text("utf-8")
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
     (tmp_path / "good.toml").write_text(text.replace('name = "hummingbird"', 'name = "good"'))
     (tmp_path / "typo.toml").write_text(
         text.replace('name = "hummingbird"', 'name = "typo"').replace("mass_kg", "mas_kg"))

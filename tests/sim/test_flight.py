@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeye.sim.robot_config import load_robot_config
+from skeye.robots.config import load_robot_config
 from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
 
 G = 9.81
@@ -57,7 +57,7 @@ def test_free_fall_matches_g(lockstep_server, client_factory):
 
 
 def test_motor_step_follows_time_constant(tmp_path: Path, client_factory):
-    text = (Path(__file__).parents[2] / "skeye/sim/robots/hummingbird.toml").read_text()
+    text = (Path(__file__).parents[2] / "skeye/robots/hummingbird.toml").read_text()
     text = text.replace('name = "hummingbird"', 'name = "fastmotors"', 1)
     text = re.sub(r'(type = "Motors"\nname = "Motors"\nrate_hz = )\d+', r"\g<1>250", text)
     assert "rate_hz = 250" in text

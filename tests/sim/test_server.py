@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from skeye.errors import ConfigError
-from skeye.sim.robot_config import load_robot_config, parse_robot_config
+from skeye.robots.config import load_robot_config, parse_robot_config
 from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
 
 BAD_LINES = [
