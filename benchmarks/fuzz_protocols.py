@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from skeye.errors import RemoteProtocolError
 from skeye.link import packets
 from skeye.sim import image_protocol as ip
-from skeye.sim.protocol import LineDecoder, LineError
 from skeye.sim.recording import parse_record
+from skeye.wire.sim_lines import LineDecoder, LineError
 
 SEEDS: dict[str, list[bytes]] = {
     "sim-lines": [

@@ -23,7 +23,7 @@ import numpy as np
 
 from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.image_client import ImageClient
-from skeye.sim.protocol import Message
+from skeye.wire.sim_lines import Message
 
 from .sensors import CameraReading, Sensor
 

@@ -3,7 +3,7 @@
 How this works (user's view: docs/control.md):
 
 - A **message-handler** thread alone reads the socket. It feeds the bytes to the shared sans-IO
-  codec (:class:`skeye.sim.protocol.LineDecoder`) and dispatches each message: ``SEN`` to its
+  codec (:class:`skeye.wire.sim_lines.LineDecoder`) and dispatches each message: ``SEN`` to its
   sensor object, ``STA`` to the robot's status, answers (``RES``, ``ERR``, ``CONF``, ``GEO``,
   ``NFO {StartPoses}``) to the oldest pending request they answer. An ``ERR`` nobody waits for
   (a refused ``DRIVE``, a physics stop) goes to the robot, whose motion then fails with it.
@@ -38,7 +38,8 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.sim.image_client import ImageClient
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
+from skeye.wire.sim_format import parse_start_poses
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
 from .motion import MotionConfig

@@ -33,7 +33,7 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.geo import GeoOrigin
-from skeye.sim.protocol import Message
+from skeye.wire.sim_lines import Message
 
 from .camera import CameraSensor
 from .motion import (

@@ -25,7 +25,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 from skeye.errors import LinkTimeout, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.geo import from_degrees_minutes
-from skeye.sim.protocol import Message
+from skeye.wire.sim_lines import Message
 
 log = logging.getLogger(__name__)
 

@@ -31,8 +31,8 @@ import numpy as np
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.sim import frames
 from skeye.sim.image_server import Frame, FrameBuffer
-from skeye.sim.protocol import format_message
 from skeye.sim.robot_config import SensorMount
+from skeye.wire.sim_lines import format_message
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)

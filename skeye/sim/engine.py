@@ -37,13 +37,13 @@ import numpy as np
 
 from skeye.errors import LocalProtocolError, PhysicsError, SkeyeError
 from skeye.sim import frames
-from skeye.sim.protocol import format_message
 from skeye.sim.robot import Outbox, Robot, ScheduledSensor, check_state
 from skeye.sim.robot_config import RobotConfig, load_robot_config
 from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
+from skeye.wire.sim_lines import format_message
 from skeye.workers import Worker, WorkerFailed
 
 log = logging.getLogger(__name__)

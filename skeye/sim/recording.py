@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
-from skeye.sim.protocol import format_message
+from skeye.wire.sim_lines import format_message
 
 log = logging.getLogger(__name__)
 

@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_error, format_message
 from skeye.sim.recording import SENT, RecordingReader, robot_connections
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 
 log = logging.getLogger(__name__)
 

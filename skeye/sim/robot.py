@@ -23,11 +23,11 @@ import numpy as np
 from skeye.errors import LocalProtocolError, PhysicsError
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
-from skeye.sim.protocol import BOOL, FLOAT, Layout, LineFormat, floats
 from skeye.sim.robot_config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
 from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
 from skeye.sim.state import BodyState
 from skeye.sim.vehicle import Battery, RotorModel, ground_effect_factor
+from skeye.wire.sim_format import BOOL, FLOAT, Layout, LineFormat, floats
 
 Outbox = Callable[[bytes], None]
 

@@ -1,7 +1,7 @@
 """The control server: docs/protocols/simulator.md over TCP, many clients, one robot per connection.
 
 How this works: an accept thread hands each connection to a :class:`ClientSession` with two
-threads: a reader that decodes lines with the sans-IO codec (:mod:`skeye.sim.protocol`) and
+threads: a reader that decodes lines with the sans-IO codec (:mod:`skeye.wire.sim_lines`) and
 handles them, and a writer that alone writes to the socket, draining a bounded queue. The engine
 thread puts the robot's STA/SEN lines into that queue without ever blocking: when a client does
 not read, its queue fills and further stream lines are dropped and counted, so a slow client
@@ -46,16 +46,10 @@ from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, S
 from skeye.sim.cameras import set_camera_fov
 from skeye.sim.engine import Simulation, SimulationRunner
 from skeye.sim.limits import check_server_limits
-from skeye.sim.protocol import (
-    LineDecoder,
-    LineError,
-    Message,
-    format_error,
-    format_message,
-    format_start_poses,
-)
 from skeye.sim.robot import Robot
 from skeye.sim.wind import make_settings, parse_params
+from skeye.wire.sim_format import format_start_poses
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 from skeye.workers import Worker, WorkerFailed
 
 log = logging.getLogger(__name__)

@@ -33,9 +33,9 @@ from skeye.link.packets import NavState, PadReport, SkeyeMask
 from skeye.link.scaling import nav_status_to_si, pad_report_to_si
 from skeye.link.vehicle import Vehicle
 from skeye.processes import start_skeye, stop_process
-from skeye.sim.protocol import parse_line
 from skeye.sim.recording import RecordingReader
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M
+from skeye.wire.sim_lines import parse_line
 
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3

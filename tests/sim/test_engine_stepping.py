@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from skeye.sim.engine import Simulation
-from skeye.sim.protocol import format_message, parse_line
 from skeye.sim.world import load_world
+from skeye.wire.sim_lines import format_message, parse_line
 
 
 @pytest.mark.parametrize("world", ["pad", "indoor"])  # indoor: GPS without a fix

@@ -32,8 +32,8 @@ import numpy as np
 from skeye.errors import ConfigError
 from skeye.geo import GeoOrigin
 from skeye.sim.frames import euler_to_quat, quat_to_rows, wrap_2pi
-from skeye.sim.protocol import Layout
 from skeye.sim.state import BodyState, Mat3, mat_mul, mat_t_vec, mat_vec, transpose
+from skeye.wire.sim_format import Layout
 
 Vec3 = tuple[float, float, float]
 Fields = list[tuple[str, object]]
@@ -105,7 +105,7 @@ class Reading:
     """Base of the typed readings kept in ``Sensor.last``.
 
     A subclass declares its SEN fields once, as a module-level ``Layout`` constant (keys and
-    slots, see :class:`~skeye.sim.protocol.LineFormat`) that :meth:`layout` returns (the same
+    slots, see :class:`~skeye.wire.sim_lines.LineFormat`) that :meth:`layout` returns (the same
     object each time: the engine caches its compiled line format by it), and returns their
     values flat from :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from
     the two, so the engine's precompiled line and the generic fields can never disagree.

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Final
 
 from skeye.sim.frames import wrap_2pi
-from skeye.sim.protocol import FLOAT, Layout, floats
 from skeye.sim.sensors.base import (
     BiasedNoise,
     Param,
@@ -23,6 +22,7 @@ from skeye.sim.sensors.base import (
     WorldQuery,
 )
 from skeye.sim.state import BodyState, cross, mat_t_vec
+from skeye.wire.sim_format import FLOAT, Layout, floats
 
 # International Standard Atmosphere, troposphere.
 ISA_T0_K: Final = 288.15

@@ -19,9 +19,9 @@ import numpy as np
 from skeye.errors import LocalProtocolError
 from skeye.geo import to_degrees_minutes
 from skeye.sim.frames import wrap_2pi
-from skeye.sim.protocol import FLOAT, INT, WORD, Layout, floats
 from skeye.sim.sensors.base import Param, Reading, Sensor, Vec3, WorldQuery, vec3
 from skeye.sim.state import BodyState
+from skeye.wire.sim_format import FLOAT, INT, WORD, Layout, floats
 
 _TWO_PI: Final = 2.0 * math.pi
 

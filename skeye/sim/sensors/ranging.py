@@ -13,9 +13,9 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from skeye.sim.protocol import FLOAT, INT, Layout, ints
 from skeye.sim.sensors.base import Param, Reading, Sensor, WorldQuery
 from skeye.sim.state import BodyState, Vec3, cross, mat_t_vec, mat_vec
+from skeye.wire.sim_format import FLOAT, INT, Layout, ints
 
 SQUAL_MAX: Final = 169  # ADNS-3080: SQUAL register maximum
 DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
