@@ -5,8 +5,10 @@ thread (the :class:`SimulationRunner`'s). The world is rebuilt from its descript
 robot comes or goes, carrying every surviving robot's state over, so spawning is exact and
 deterministic. Each physics step (1 kHz by default): robots whose board tick is due read their
 ground truth, run their board and set their wrench (``xfrc_applied``, converted to MuJoCo's
-frame through :mod:`skeye.sim.frames`); MuJoCo steps; sensors that are due are sampled and their
-``SEN`` lines handed to the robot's outbox. Sim time is ``steps * timestep`` exactly.
+frame through :mod:`skeye.sim.frames`); MuJoCo steps; sensors that are due are sampled. The
+engine writes no wire text: the typed readings (:mod:`skeye.sim.readings`) of one ``step()``
+call go to each robot's sink in one call when it ends (the control server's sink turns them into
+protocol lines; an in-process user keeps them). Sim time is ``steps * timestep`` exactly.
 
 The runner paces the clock: ``realtime`` follows the wall clock (slipping, and saying so, if it
 falls behind); ``lockstep`` advances only on :meth:`SimulationRunner.step`. Everything that
@@ -37,13 +39,13 @@ import numpy as np
 
 from skeye.errors import LocalProtocolError, PhysicsError, SkeyeError
 from skeye.sim import frames
-from skeye.sim.robot import Outbox, Robot, ScheduledSensor, check_state
+from skeye.sim.readings import Event, ReadingSink, RobotStopped
+from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.robot_config import RobotConfig, load_robot_config
 from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
-from skeye.wire.sim_lines import format_message
 from skeye.workers import Worker, WorkerFailed
 
 log = logging.getLogger(__name__)
@@ -109,7 +111,7 @@ class Simulation:
         self.step_hooks: list[Callable[[Simulation], None]] = []
         # Each step hook names, through an event source, the next step it needs to see.
         self.event_sources: list[Callable[[Simulation], int]] = []
-        self._pending: dict[int, tuple[Outbox, list[bytes]]] = {}
+        self._pending: dict[int, tuple[ReadingSink, list[Event]]] = {}
         self._periods: list[int] = []
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
         self.xml_extras: list[Callable[[Robot], str]] = []
@@ -220,7 +222,7 @@ class Simulation:
         self,
         class_name: str,
         *,
-        outbox: Outbox,
+        sink: ReadingSink,
         name: str | None = None,
         location_ned_m: tuple[float, float, float] | None = None,
         rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -228,7 +230,8 @@ class Simulation:
         config: RobotConfig | None = None,
     ) -> Robot:
         """Add a robot. On a start pose (or a location at or below the ground) it stands on its
-        landing gear; a location in the air spawns it hovering, motors running."""
+        landing gear; a location in the air spawns it hovering, motors running. ``sink`` takes
+        the robot's readings (:mod:`skeye.sim.readings`) after each :meth:`step` call."""
         config = config or load_robot_config(class_name, self.robot_dirs, allow_paths=False)
         self._spawned += 1
         name = name or f"R{self._spawned}"
@@ -267,7 +270,7 @@ class Simulation:
             config,
             physics_step_s=self.dt,
             rng=rng,
-            outbox=outbox,
+            sink=sink,
             spawn_pos_ned_m=(pos[0], pos[1], pos[2]),
             spawn_rpy_rad=(rpy[0], rpy[1], rpy[2]),
             airborne=airborne,
@@ -424,18 +427,20 @@ class Simulation:
                 best = k
         return best if best > now else now
 
-    def emit(self, robot: Robot, line: bytes) -> None:
-        """Queue a line for a robot's client; sent when the current step() call ends."""
+    def emit(self, robot: Robot, events: list[Event]) -> None:
+        """Queue events for a robot's sink; handed over when the current step() call ends."""
         entry = self._pending.get(id(robot))
         if entry is None:
-            self._pending[id(robot)] = (robot.outbox, [line])
+            self._pending[id(robot)] = (robot.sink, list(events))
         else:
-            entry[1].append(line)
+            entry[1].extend(events)
 
     def flush(self) -> None:
+        """Hand every robot's queued events to its sink (one call per robot)."""
         pending, self._pending = self._pending, {}
-        for outbox, lines in pending.values():
-            outbox(b"".join(lines))
+        for sink, events in pending.values():
+            if events:
+                sink(events)
 
     def _step_to_event(self, count: int = 1) -> None:
         """``count`` physics steps, then whatever falls due at the new step count, robot by
@@ -511,22 +516,14 @@ class Simulation:
         log.error("stopping robot %s: %s", name, reason)
         robot.flight.failed = reason
         robot.flight.armed = False
-        self.emit(
-            robot,
-            format_message(
-                "ERR",
-                ("Command", "PHYSICS"),
-                ("Name", name),
-                ("Reason", f"robot stopped: {reason}"),
-            )
-        )
+        self.emit(robot, [RobotStopped(name, "PHYSICS", f"robot stopped: {reason}")])
         self.remove(name)
 
     def _emit_readings(
         self, robot: Robot, state: BodyState, due: list[ScheduledSensor], status: bool
     ) -> None:
-        """SEN lines of the due sensors, then STA if due, for one robot."""
-        lines: list[bytes] = []
+        """Readings of the due sensors, then the status if due, for one robot."""
+        events: list[Event] = []
         query = self._queries[robot.name]
         for sched in due:
             sensor = sched.sensor
@@ -536,10 +533,10 @@ class Simulation:
                     robot.battery.current_a,
                     robot.battery.state_of_charge,
                 )
-            lines.append(sched.sen_line(sensor.read(state, query)))
+            events.append(sched.sample(state, query))
         if status:
-            lines.append(robot.status_line(state.time_s))
-        self.emit(robot, b"".join(lines))
+            events.append(robot.status(state.time_s))
+        self.emit(robot, events)
 
     def set_wind(self, settings: WindSettings) -> None:
         self.wind = WindModel(settings, np.random.default_rng([self.seed, 7, self.steps]))

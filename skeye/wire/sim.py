@@ -81,6 +81,7 @@ __all__ = [
     "line_format",
     "parse_value",
     "sen_layout",
+    "sen_line_format",
 ]
 
 _SEN_HEADER = ("Time", "Name")
@@ -325,7 +326,7 @@ def _check_value(spec: FieldSpec, value: Any) -> object:
             raise LocalProtocolError(
                 f"{key}: {value!r} is out of range [{spec.min_value}, {spec.max_value}]"
             )
-        return number if kind == "int" else float(number)
+        return value  # as given: an int stays an int (``1``, not ``1.000000``), as always
     if kind == "bool":
         if not isinstance(value, bool):
             raise LocalProtocolError(f"{key}: {value!r} is not a bool")
@@ -336,15 +337,23 @@ def _check_value(spec: FieldSpec, value: Any) -> object:
         if kind == "word" and (not value or any(c.isspace() for c in value)):
             raise LocalProtocolError(f"{key}: {value!r} is not one word")
         return value
-    items = tuple(value)
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise LocalProtocolError(f"{key}: {value!r} is not a vector") from None
     size = {"vec3": 3, "vec2": 2, "ivec2": 2}.get(kind)
     if size is not None and len(items) != size:
         raise LocalProtocolError(f"{key}: {value!r} must have {size} components")
+    if not items or not all(
+        isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+        for v in items
+    ):
+        raise LocalProtocolError(f"{key}: {value!r} is not a vector of finite numbers")
     if kind == "ivec2":
-        if not all(isinstance(v, numbers.Real) and float(v).is_integer() for v in items):
+        if not all(float(v).is_integer() for v in items):
             raise LocalProtocolError(f"{key}: {value!r} must be whole numbers")
         return tuple(int(v) for v in items)
-    return tuple(float(v) if not isinstance(v, bool) else v for v in items)
+    return items  # as given: ints stay ints
 
 
 def fields_of(message: Any) -> list[tuple[str, object]]:
@@ -446,6 +455,11 @@ def sen_layout(
     return tuple(layout)
 
 
+def sen_line_format(type_name: str, name: str, layout: Layout) -> LineFormat:
+    """``SEN {Time %} {Type type_name} {Name name}`` followed by ``layout``'s slots."""
+    return LineFormat("SEN", [("Time", FLOAT), ("Type", type_name), ("Name", name), *layout])
+
+
 def line_format(cls: type, fixed: Mapping[str, str], layout: Layout | None = None) -> LineFormat:
     """A precompiled line of ``cls`` whose ``fixed`` keys hold fixed words.
 
@@ -456,9 +470,7 @@ def line_format(cls: type, fixed: Mapping[str, str], layout: Layout | None = Non
     if issubclass(cls, Sen):
         if layout is None:
             layout = sen_layout(cls)
-        return LineFormat(
-            "SEN", [("Time", FLOAT), ("Type", cls.TYPE), ("Name", fixed["Name"]), *layout]
-        )
+        return sen_line_format(cls.TYPE, fixed["Name"], layout)
     codec = CODECS[cls.WORD]  # type: ignore[attr-defined]
     parts: list[tuple[str, str | Slot]] = []
     for spec in codec.fields:

@@ -334,7 +334,7 @@ class Nfo:
 
     WORD: ClassVar[str] = "NFO"
     gametype: str | None = field(default=None, metadata=wire("Gametype", "word"))
-    level: str | None = field(default=None, metadata=wire("Level", "word"))
+    level: str | None = field(default=None, metadata=wire("Level", "text"))
     time_limit: int | None = field(default=None, metadata=wire("TimeLimit", "int"))
     time_step_s: float | None = field(
         default=None, metadata=wire("TimeStep", "float", min_value=1e-6)
@@ -366,7 +366,7 @@ class RobotConf:
     max_thrust_n: float | None = field(default=None, metadata=wire("MaxThrust", "float"))
     board_rate_hz: float | None = field(default=None, metadata=wire("BoardRate", "float"))
     time_step_s: float | None = field(default=None, metadata=wire("TimeStep", "float"))
-    sensors: str | None = field(default=None, metadata=wire("Sensors", "word"))
+    sensors: str | None = field(default=None, metadata=wire("Sensors", "text"))
     """``Type:Name`` pairs, comma-separated."""
 
     def mounted(self) -> list[tuple[str, str]]:

@@ -104,9 +104,10 @@ class Param:
 class Reading:
     """Base of the typed readings kept in ``Sensor.last``.
 
-    A subclass declares its SEN fields once, as a module-level ``Layout`` constant (keys and
-    slots, see :class:`~skeye.wire.sim_lines.LineFormat`) that :meth:`layout` returns (the same
-    object each time: the engine caches its compiled line format by it), and returns their
+    A subclass takes its SEN fields from the protocol's codec table, as a module-level
+    ``Layout`` constant (keys and slots, :func:`skeye.wire.sim.sen_layout`) that :meth:`layout`
+    returns (the same object each time: the server caches its compiled line format by it), and
+    returns their
     values flat from :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from
     the two, so the engine's precompiled line and the generic fields can never disagree.
     Subclasses write their ``__init__`` out (one is made per sample: mypyc compiles a written
