@@ -11,7 +11,7 @@ the ``step()`` call ends the engine hands each robot's events, in order, to the 
 keep them as they are::
 
     events = []
-    sim = Simulation(load_world("default"), seed=7)
+    sim = Simulation(load_world("pad"), seed=7)
     sim.spawn("hummingbird", name="R1", sink=events.extend, start="Pad1")
     sim.step(1000)  # one second of sim time; events now holds every reading
 

@@ -245,7 +245,7 @@ class Recorder:
 
         Args:
             server: a :class:`~skeye.sim.server.ControlServer`.
-            runner: its :class:`~skeye.sim.engine.SimulationRunner`.
+            runner: its :class:`~skeye.sim.runner.SimulationRunner`.
             truth_rate_hz: how often each robot's ground truth is sampled (0 = never).
         """
         sim = runner.sim

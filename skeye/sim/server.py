@@ -30,8 +30,8 @@ import socket
 import threading
 from collections.abc import Callable
 
-from skeye.sim.engine import SimulationRunner
 from skeye.sim.limits import check_server_limits
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.session import (
     OUTBOX_BYTES,
     ClientSession,

@@ -33,8 +33,9 @@ from typing import Any, Protocol
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.cameras import set_camera_fov
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
 from skeye.sim.robot import Robot
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.stream import text_sink
 from skeye.sim.wind import make_settings, parse_params
 from skeye.wire.sim import DriveLimits, decode, drive_in_si, encode, parse_value

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
 from skeye.sim.image_client import ImageClient
 from skeye.sim.image_server import FrameBuffer, ImageServer
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.pad import SKEYE_4
