@@ -377,7 +377,7 @@ class ClientSession:
                 name=init.name,
                 sink=sink,
                 location_ned_m=init.location_ned_m if init.start is None else None,
-                rotation_rpy_rad=init.rotation_rpy_rad,
+                rotation_rpy_rad=init.rotation_rpy_rad or (0.0, 0.0, 0.0),
                 start=init.start,
             )
             # Answer from the engine thread, before the first STA/SEN of this robot.

@@ -21,7 +21,7 @@ import math
 import numbers
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from skeye.errors import LocalProtocolError, RemoteProtocolError
 from skeye.wire.sim_format import (
@@ -74,6 +74,7 @@ __all__ = [
     "DriveLimits",
     "FieldSpec",
     "decode",
+    "decode_as",
     "decode_line",
     "drive_in_si",
     "encode",
@@ -85,6 +86,7 @@ __all__ = [
 ]
 
 _SEN_HEADER = ("Time", "Name")
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -194,7 +196,8 @@ def _decode_fields(codec: Codec, msg: Message, skip: Iterable[str] = ()) -> dict
 
 
 def _check_init(init: Init) -> None:
-    if any(abs(v) > 2 * math.pi for v in init.rotation_rpy_rad):
+    if init.rotation_rpy_rad is not None and any(abs(v) > 2 * math.pi
+                                                 for v in init.rotation_rpy_rad):
         raise RemoteProtocolError(
             f"Rotation {init.rotation_rpy_rad} must be in [-2pi, 2pi] rad per axis "
             "(radians, not degrees)"
@@ -267,6 +270,31 @@ def decode(msg: Message) -> Any:
     if isinstance(result, Init):
         _check_init(result)
     return result
+
+
+def decode_as(msg: Message, cls: type[T]) -> T:
+    """The fields of ``msg`` read as a ``cls``, whatever its type word and ``Type`` say.
+
+    For a reader that already knows what a line is (a client's sensor object, handed the lines
+    of its own sensor): a SEN class's ``Name`` may then be left out (it reads as ``""``), and
+    :class:`~skeye.wire.sim_messages.SenOther` keeps the fields as text.
+
+    Raises:
+        RemoteProtocolError: as :func:`decode`.
+    """
+    if cls is SenOther:
+        time_s = msg.get_float("Time", min_value=0.0)
+        other = SenOther(time_s, msg.get("Type") or "", msg.get("Name") or "", msg.fields)
+        return other  # type: ignore[return-value]
+    if issubclass(cls, Sen):
+        codec = SEN_CODECS[cls.TYPE.lower()]
+        named = msg.has("Name")
+        values = _decode_fields(codec, msg, skip=() if named else ("Name",))
+        if not named:
+            values["name"] = ""
+        return cls(**values)
+    codec = _ROBOT_CONF if cls is RobotConf else CODECS[cls.WORD]  # type: ignore[attr-defined]
+    return cls(**_decode_fields(codec, msg))
 
 
 def decode_line(line: str) -> Any:

@@ -52,7 +52,8 @@ class Init:
     name: str | None = field(default=None, metadata=wire("Name", "word"))
     start: str | None = field(default=None, metadata=wire("Start", "word"))
     location_ned_m: Vec3 | None = field(default=None, metadata=wire("Location", "vec3"))
-    rotation_rpy_rad: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=wire("Rotation", "vec3"))
+    rotation_rpy_rad: Vec3 | None = field(default=None, metadata=wire("Rotation", "vec3"))
+    """None: level, heading north (0, 0, 0)."""
 
 
 @dataclass(frozen=True)
@@ -151,14 +152,14 @@ class GetStartPoses:
 # --- messages --------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Sta:
     """``STA``: a robot's status: battery life left (s), voltage, current, flight state."""
 
     WORD: ClassVar[str] = "STA"
     type: str = field(default="AerialVehicle", metadata=wire("Type", "word"))
     name: str | None = field(default=None, metadata=wire("Name", "word"))
-    time_s: float = field(default=0.0, metadata=wire("Time", "float", min_value=0.0))
+    time_s: float = field(metadata=wire("Time", "float", min_value=0.0))
     battery_s: float = field(default=math.inf, metadata=wire("Battery", "float"))
     voltage_v: float | None = field(default=None, metadata=wire("Voltage", "float"))
     current_a: float | None = field(default=None, metadata=wire("Current", "float"))
@@ -273,7 +274,7 @@ class SenCamera(Sen):
     """A camera's frame ``frame`` now exists on the image server."""
 
     TYPE: ClassVar[str] = "Camera"
-    frame: int = field(metadata=wire("Frame", "int"))
+    frame: int = field(metadata=wire("Frame", "int", min_value=0))
 
 
 SEN_CLASSES: tuple[type[Sen], ...] = (

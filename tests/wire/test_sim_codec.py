@@ -202,7 +202,7 @@ def test_decoding_errors_name_the_problem(line: str, reason: str) -> None:
         Init("two words", start="Pad1"),
         SenOpticalFlow(0.0, "F", (0.5, 1.0), 3),
         SenIns(0.0, "INS", (0.0, 0.0), (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-        Sta(),  # an infinite battery life cannot be written
+        Sta(time_s=1.0),  # an infinite battery life cannot be written
     ],
 )
 def test_encoding_refuses_bad_values(message: Any) -> None:
@@ -220,6 +220,8 @@ def test_lenient_optional_fields() -> None:
     assert sim.decode_line("SEN {Time 1} {Type GPS} {Name G} {Fix 0} {Satellites 3}") == SenGps(
         1.0, "G", fix=0, satellites=3)
     assert sim.decode_line("STA {Time 1}") == Sta(name=None, time_s=1.0)
+    with pytest.raises(RemoteProtocolError, match=r"missing \{Time"):
+        sim.decode_line("STA {Name R1} {Armed true}")
     conf = sim.decode_line("CONF {Type AerialVehicle} {Name R1} {MaxSpeed 5} "
                            "{Sensors INS:INS,Sonar:Down}")
     assert isinstance(conf, RobotConf) and conf.max_speed_m_s == 5.0
