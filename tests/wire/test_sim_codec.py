@@ -30,6 +30,7 @@ from skeye.wire.sim_messages import (
     SenMotors,
     SenOpticalFlow,
     SenOther,
+    SenSonar,
     Sta,
     StartPoses,
     Step,
@@ -292,3 +293,15 @@ def test_fuzz_protocol_shaped_lines_never_raise_anything_else(
                 sim.decode(item)
             except RemoteProtocolError:
                 pass
+
+
+def test_decode_as_reads_a_known_sensors_lines_without_type_or_name() -> None:
+    """A client's sensor object is handed its own lines: Type and Name may be left out."""
+    msg = parse_line("SEN {Time 1.5} {Range 2.25}")
+    assert sim.decode_as(msg, SenSonar) == SenSonar(1.5, "", 2.25)
+    msg = parse_line("SEN {Time 1} {Type Lidar} {Name L} {Ranges 1,2}")
+    assert sim.decode_as(msg, SenOther) == SenOther(1.0, "Lidar", "L", msg.fields)
+    assert sim.decode_as(parse_line("STA {Time 2} {Armed true}"), Sta) == Sta(
+        time_s=2.0, armed=True)
+    with pytest.raises(RemoteProtocolError, match=r"missing \{Range"):
+        sim.decode_as(parse_line("SEN {Time 1}"), SenSonar)
