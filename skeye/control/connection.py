@@ -38,9 +38,9 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.sim.image_client import ImageClient
-from skeye.wire.sim import decode, encode, fields_of
+from skeye.wire.sim import decode, encode, fields_of, res_time_s
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
-from skeye.wire.sim_messages import GetConf, GetStartPoses, Init, Ping, Res, Set, Step
+from skeye.wire.sim_messages import GetConf, GetStartPoses, Init, Ping, Set, Step
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
 from .motion import MotionConfig
@@ -125,13 +125,6 @@ _ANSWERS: dict[str, frozenset[str]] = {
     "GETGEO": frozenset({"GEO"}),
 }
 
-
-
-def _time_of(answer: Any) -> float:
-    """The sim time a ``RES`` (of STEP, PING) carries; RemoteProtocolError if it has none."""
-    if not isinstance(answer, Res) or answer.time_s is None:
-        raise RemoteProtocolError(f"expected RES {{Time ...}}, got {answer!r}")
-    return answer.time_s
 
 class Connection:
     """One connection to the simulator's control port; a context manager.
@@ -457,7 +450,7 @@ class Connection:
         with self._lock:
             self._ping_ids += 1
             ident = f"p{self._ping_ids}"
-        return _time_of(self.request_message(Ping(ident)))
+        return res_time_s(self.request_message(Ping(ident)))
 
     def set_wind(self, mode: str, params: str = "") -> None:
         """``SET {Type Wind}``: none, constant, turbulence or random_force (see the sim docs)."""
@@ -466,7 +459,7 @@ class Connection:
     def _step(self, count: int) -> float:
         answer = self.request_message(
             Step(count), timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
-        t = _time_of(answer)
+        t = res_time_s(answer)
         self.time_s = max(self.time_s, t)
         return t
 

@@ -81,6 +81,7 @@ __all__ = [
     "fields_of",
     "line_format",
     "parse_value",
+    "res_time_s",
     "sen_layout",
     "sen_line_format",
 ]
@@ -300,6 +301,13 @@ def decode_as(msg: Message, cls: type[T]) -> T:
 def decode_line(line: str) -> Any:
     """:func:`decode` of one line of text."""
     return decode(parse_line(line))
+
+
+def res_time_s(answer: object) -> float:
+    """The sim time a ``RES`` (of STEP or PING) carries; RemoteProtocolError if it has none."""
+    if not isinstance(answer, Res) or answer.time_s is None:
+        raise RemoteProtocolError(f"expected RES {{Time ...}}, got {answer!r}")
+    return answer.time_s
 
 
 @dataclass(frozen=True)
