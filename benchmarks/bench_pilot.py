@@ -20,7 +20,8 @@ from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
 from skeye.wire.packets import PD, POLL_MASK_ALL, PollMask, SkeyeMask

@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from skeye.errors import RemoteProtocolError
 from skeye.pixels import frame_image
 from skeye.recording.records import parse_record
-from skeye.sim.protocol import LineDecoder, LineError
 from skeye.wire import images as ip
 from skeye.wire import packets
 from skeye.wire.image_requests import RequestParser
+from skeye.wire.sim_lines import LineDecoder, LineError
 
 SEEDS: dict[str, list[bytes]] = {
     "sim-lines": [

@@ -44,7 +44,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
     from skeye.robots.config import validate_robot_dirs
-    from skeye.sim.engine import Simulation, SimulationRunner
+    from skeye.sim.engine import Simulation
+    from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
     from skeye.sim.wind import make_settings, parse_params
     from skeye.sim.world import load_world

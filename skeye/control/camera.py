@@ -24,7 +24,7 @@ import numpy as np
 from skeye.control.image_client import ImageClient
 from skeye.errors import LinkClosed, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.pixels import frame_image
-from skeye.sim.protocol import Message
+from skeye.wire.sim_messages import SenCamera
 
 from .sensors import CameraReading, Sensor
 
@@ -48,6 +48,7 @@ class CameraSensor(Sensor[CameraReading]):
     """
 
     type_name = "Camera"
+    message_class = SenCamera
 
     def __init__(
         self,
@@ -63,8 +64,9 @@ class CameraSensor(Sensor[CameraReading]):
         self._client: ImageClient | None = None
         self._client_lock = threading.Lock()
 
-    def parse(self, msg: Message, time_s: float) -> CameraReading:
-        return CameraReading(time_s, msg.get_int("Frame", min_value=0))
+    def convert(self, message: Any) -> CameraReading:
+        s: SenCamera = message
+        return CameraReading(s.time_s, s.frame)
 
     def image(self) -> CameraImage:
         """The newest frame of this camera from the image server.

@@ -4,7 +4,7 @@ How this works (user's view: docs/control.md):
 
 - The byte link comes from :func:`skeye.link.transport.open_link` (``tcp://host:port``).
 - A **message-handler** thread alone reads the link. It feeds the bytes to the shared sans-IO
-  codec (:class:`skeye.sim.protocol.LineDecoder`) and dispatches each message: ``SEN`` to its
+  codec (:class:`skeye.wire.sim_lines.LineDecoder`) and dispatches each message: ``SEN`` to its
   sensor object, ``STA`` to the robot's status, answers (``RES``, ``ERR``, ``CONF``, ``GEO``,
   ``NFO {StartPoses}``) to the oldest pending request they answer. An ``ERR`` nobody waits for
   (a refused ``DRIVE``, a physics stop) goes to the robot, whose motion then fails with it.
@@ -41,7 +41,9 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.link.transport import Link, open_link, tcp_uri
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
+from skeye.wire.sim import decode, encode, fields_of, res_time_s
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
+from skeye.wire.sim_messages import GetConf, GetStartPoses, Init, Ping, Set, Step
 from skeye.workers import Worker
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
@@ -240,6 +242,18 @@ class Connection:
         """
         self._put(format_message(type_word, *fields), timeout_s)
 
+    def send_message(self, message: Any, timeout_s: float | None = None) -> None:
+        """:meth:`send` of a typed message (:mod:`skeye.wire.sim_messages`, e.g. ``Drive``)."""
+        self._put(encode(message), timeout_s)
+
+    def request_message(self, message: Any, timeout_s: float | None = None) -> Any:
+        """:meth:`request` of a typed message; returns the typed answer (:mod:`skeye.wire.sim`).
+
+        Raises:
+            RemoteProtocolError: the answer breaks the protocol; else as :meth:`request`.
+        """
+        return decode(self.request(type(message).WORD, *fields_of(message), timeout_s=timeout_s))
+
     def _put(self, line: bytes, timeout_s: float | None) -> None:
         self.check()
         wait_s = self.timeout_s if timeout_s is None else timeout_s
@@ -372,9 +386,10 @@ class Connection:
                 self.robot.on_status(msg)
             return
         if kind == "NFO" and msg.has("Mode") and not self._nfo.is_set():
-            self.mode = (msg.get("Mode") or "realtime").lower()
-            self.time_step_s = msg.get_float("TimeStep", default=0.001, min_value=1e-6)
-            self.level = msg.get("Level") or ""
+            nfo = decode(msg)
+            self.mode = (nfo.mode or "realtime").lower()
+            self.time_step_s = 0.001 if nfo.time_step_s is None else nfo.time_step_s
+            self.level = nfo.level or ""
             self._nfo.set()
             return
         if kind == "RES":
@@ -428,30 +443,24 @@ class Connection:
     # -- world commands -------------------------------------------------------------------
     def start_poses(self) -> dict[str, Pose]:
         """The world's start poses: name -> :class:`Pose`."""
-        answer = self.request("GETSTARTPOSES")
-        return {
-            name: Pose(location, rotation)
-            for name, (location, rotation) in parse_start_poses(answer).items()
-        }
+        answer = self.request_message(GetStartPoses())
+        return {name: Pose(location, rotation) for name, location, rotation in answer.poses}
 
     def ping(self) -> float:
         """Round trip to the simulator; returns its sim time."""
         with self._lock:
             self._ping_ids += 1
             ident = f"p{self._ping_ids}"
-        return self.request("PING", ("Id", ident)).get_float("Time")
+        return res_time_s(self.request_message(Ping(ident)))
 
     def set_wind(self, mode: str, params: str = "") -> None:
         """``SET {Type Wind}``: none, constant, turbulence or random_force (see the sim docs)."""
-        fields: list[tuple[str, object]] = [("Type", "Wind"), ("Mode", mode)]
-        if params:
-            fields.append(("Params", params))
-        self.request("SET", *fields)
+        self.request_message(Set("Wind", mode=mode, params=params or None))
 
     def _step(self, count: int) -> float:
-        answer = self.request("STEP", ("Count", count),
-                              timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
-        t = answer.get_float("Time")
+        answer = self.request_message(
+            Step(count), timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
+        t = res_time_s(answer)
         self.time_s = max(self.time_s, t)
         return t
 
@@ -510,15 +519,14 @@ class Connection:
         if (start is None) == (location_ned_m is None):
             raise LocalProtocolError("spawn needs exactly one of start= or location_ned_m=")
         cls: type[Robot] = robot_class(robot) if isinstance(robot, str) else robot
-        fields: list[tuple[str, object]] = [("ClassName", cls.class_name), ("Name", name)]
         if start is not None:
-            fields.append(("Start", start))
+            init = Init(cls.class_name, name, start=start)
             home: tuple[float, float, float] | None = None
         else:
             assert location_ned_m is not None
             home = tuple(float(v) for v in location_ned_m)  # type: ignore[assignment]
-            fields.append(("Location", home))
-            fields.append(("Rotation", tuple(float(v) for v in rotation_rpy_rad)))
+            rr, rp, ry = (float(v) for v in rotation_rpy_rad)
+            init = Init(cls.class_name, name, location_ned_m=home, rotation_rpy_rad=(rr, rp, ry))
         if start is not None:
             poses = self.start_poses()
             pose = next((p for n, p in poses.items() if n.lower() == start.lower()), None)
@@ -531,9 +539,9 @@ class Connection:
         new = cls(self, name, home, feedback=feedback, motion=motion or self.motion_config)
         self.robot = new
         try:
-            answer = self.request("INIT", *fields)
-            new.name = answer.get("Name") or name
-            new.configure(self.request("GETCONF", ("Type", "Robot")))
+            answer = self.request_message(init)
+            new.name = answer.name or name
+            new.configure(self.request_message(GetConf("Robot")))
             new.await_first_readings()
         except BaseException:
             self.robot = None

@@ -10,7 +10,7 @@ modules never import the connection module and the two do not form an import cir
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 from skeye.errors import SkeyeError
 
@@ -41,6 +41,10 @@ class RobotHost(Protocol):
     def send(self, type_word: str, *fields: tuple[str, object],
              timeout_s: float | None = None) -> None:
         """Queue one command line."""
+        ...
+
+    def send_message(self, message: Any, timeout_s: float | None = None) -> None:
+        """Queue one typed command (a :mod:`skeye.wire.sim_messages` dataclass)."""
         ...
 
     def image_client(self) -> ImageClient:

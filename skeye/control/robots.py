@@ -34,7 +34,8 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.geo import GeoOrigin
-from skeye.sim.protocol import Message
+from skeye.wire.sim_lines import Message
+from skeye.wire.sim_messages import RobotConf
 
 from .camera import CameraSensor
 from .flight import TRANSITIONS, FlightState, transition
@@ -110,10 +111,12 @@ class Robot(RobotSensors):
         return feedback
 
     # -- setup (called by Connection.spawn) -----------------------------------------------
-    def configure(self, conf: Message) -> None:
-        for key in ("MaxSpeed", "MaxClimb", "MaxYawRate", "Mass", "TimeStep", "MaxTilt"):
-            if conf.has(key):
-                self.limits[key] = conf.get_float(key)
+    def configure(self, conf: RobotConf) -> None:
+        for key, value in (("MaxSpeed", conf.max_speed_m_s), ("MaxClimb", conf.max_climb_m_s),
+                           ("MaxYawRate", conf.max_yaw_rate_rad_s), ("Mass", conf.mass_kg),
+                           ("TimeStep", conf.time_step_s), ("MaxTilt", conf.max_tilt_rad)):
+            if value is not None:
+                self.limits[key] = value
         cfg = self.motion_config
         self.motion_config = replace(
             cfg,
@@ -122,10 +125,7 @@ class Robot(RobotSensors):
             max_yaw_rate_rad_s=min(cfg.max_yaw_rate_rad_s,
                                    self.limits.get("MaxYawRate", math.inf)),
         )
-        for item in (conf.get("Sensors") or "").split(","):
-            if ":" not in item:
-                continue
-            type_name, sensor_name = (part.strip() for part in item.split(":", 1))
+        for type_name, sensor_name in conf.mounted():
             self.mounted.append((type_name, sensor_name))
             self._sensor(type_name, sensor_name)
 
@@ -232,7 +232,7 @@ class Robot(RobotSensors):
             armed = status.armed if status is not None else True
             was_done = motion.done
             command = motion.update(state, landed, armed)
-            self.connection.send("DRIVE", *command.fields())
+            self.connection.send_message(command.to_message())
             self._last_command = command
         except SkeyeError as exc:
             self._motion_failed(motion, exc)
@@ -250,7 +250,7 @@ class Robot(RobotSensors):
                     self.state = FlightState.FAILED
         if self.connection.error is None and not isinstance(exc, PhysicsError):
             try:  # stop where we are rather than keep the last velocity
-                self.connection.send("DRIVE", *STOP.fields(), timeout_s=0.5)
+                self.connection.send_message(STOP.to_message(), timeout_s=0.5)
             except SkeyeError:
                 pass
 

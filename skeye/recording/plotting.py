@@ -29,7 +29,7 @@ from skeye.recording.records import (
     TRUTH,
     RecordingReader,
 )
-from skeye.sim.protocol import parse_line
+from skeye.wire.sim_lines import parse_line
 
 
 @dataclass

@@ -29,7 +29,7 @@ from typing import Any
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.processes import wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_error, format_message
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 
 log = logging.getLogger(__name__)
 

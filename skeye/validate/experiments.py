@@ -32,10 +32,11 @@ from skeye.errors import SkeyeError
 from skeye.link.vehicle import Vehicle
 from skeye.processes import start_skeye, stop_process
 from skeye.recording.records import RecordingReader
-from skeye.sim.protocol import parse_line
 from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
 from skeye.wire.packet_units import nav_status_to_si, pad_report_to_si
 from skeye.wire.packets import NavState, PadReport, SkeyeMask
+from skeye.wire.sim import decode_line
+from skeye.wire.sim_messages import SenGroundTruth
 
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3
@@ -154,12 +155,12 @@ def _ground_truth(record: Path) -> list[tuple[float, float, float, float, float]
     for rec in RecordingReader(record).records():
         if rec.direction != ">" or not rec.line.startswith("SEN") or "GroundTruth" not in rec.line:
             continue
-        msg = parse_line(rec.line)
-        if msg.get("Type") != "GroundTruth":
+        msg = decode_line(rec.line)
+        if not isinstance(msg, SenGroundTruth):
             continue
-        n, e, d = msg.get_vector("Location")
-        roll, pitch, _ = msg.get_vector("Orientation")
-        out.append((msg.get_float("Time"), n, e, d, math.cos(roll) * math.cos(pitch)))
+        n, e, d = msg.location_ned_m
+        roll, pitch, _ = msg.orientation_rpy_rad
+        out.append((msg.time_s, n, e, d, math.cos(roll) * math.cos(pitch)))
     if not out:
         raise SkeyeError(f"{record}: no ground truth recorded")
     return out

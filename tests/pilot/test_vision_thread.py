@@ -27,8 +27,9 @@ from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from skeye.pilot.vision import PadVision
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
 from skeye.wire.packets import PD, PollMask, SkeyeMask

@@ -13,7 +13,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-import skeye.sim.server as server_module
+import skeye.sim.session as session_module
 from skeye.control.image_client import ImageClient
 from skeye.pixels import frame_image_rgb
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
@@ -75,7 +75,7 @@ def test_control_client_that_never_reads(
     control: ControlServer, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     bound = 300_000  # small, so the test fills it quickly
-    monkeypatch.setattr(server_module, "OUTBOX_BYTES", bound)
+    monkeypatch.setattr(session_module, "OUTBOX_BYTES", bound)
     sleeper = socket.socket()
     sleeper.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     sleeper.connect(("127.0.0.1", control.port))

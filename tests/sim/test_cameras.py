@@ -14,8 +14,9 @@ import pytest
 from skeye.control.image_client import ImageClient
 from skeye.pixels import frame_image
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
 from skeye.sim.image_server import FrameBuffer, ImageServer
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.pad import SKEYE_4

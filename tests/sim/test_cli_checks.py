@@ -29,7 +29,7 @@ def test_sim_refuses_to_start_with_a_robot_file_that_has_a_typo(tmp_path: Path) 
     # The message INIT {ClassName typo} would get...
     sim = Simulation(load_world("pad"), seed=1, robot_dirs=(tmp_path,))
     with pytest.raises(ConfigError) as info:
-        sim.spawn("typo", outbox=lambda _: None, name="T")
+        sim.spawn("typo", sink=lambda events: None, name="T")
     assert "mas_kg" in str(info.value)
     # ... is what skeye sim says at start-up, before it listens.
     done = _skeye("sim", "--port", "0", "--robot-dir", str(tmp_path))

@@ -207,7 +207,7 @@ def test_hover_until_the_battery_is_empty():
     from skeye.sim.world import load_world
 
     sim = Simulation(load_world("pad"), seed=1)
-    robot = sim.spawn("hummingbird", name="R1", outbox=lambda b: None,
+    robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                       location_ned_m=(0.0, 0.0, -2.0))
     robot.sensors = []  # the battery is the question; no stream to format
     while robot.flight.armed and sim.time_s < 1800:
