@@ -15,10 +15,6 @@ The rules (docs/architecture.md; every import counts: module level, inside funct
    ``a_module._x`` are allowed only inside the package that defines ``_x`` (a top-level module
    such as ``skeye.cli`` counts as its own package).
 4. **No import circle** between modules of ``skeye``.
-
-``PENDING_SIM_PROTOCOL`` lists the imports of ``skeye.sim.protocol`` that wait for the typed
-simulator codec to move into ``skeye.wire`` (issue 16, a parallel change); the test fails as
-soon as one of them is gone, so the list can only shrink.
 """
 
 from __future__ import annotations
@@ -40,18 +36,6 @@ SIM = "skeye.sim"
 SIM_IMPORTERS = {"skeye.cli"}
 WIRE = "skeye.wire"
 WIRE_MAY_IMPORT = {"numpy", "skeye.errors"}
-
-PENDING_SIM_PROTOCOL = {
-    ("skeye.control.camera", "skeye.sim.protocol"),
-    ("skeye.control.connection", "skeye.sim.protocol"),
-    ("skeye.control.robots", "skeye.sim.protocol"),
-    ("skeye.control.sensors", "skeye.sim.protocol"),
-    ("skeye.recording.plotting", "skeye.sim.protocol"),
-    ("skeye.recording.records", "skeye.sim.protocol"),
-    ("skeye.recording.replay", "skeye.sim.protocol"),
-    ("skeye.validate.experiments", "skeye.sim.protocol"),
-}
-
 
 @dataclass(frozen=True)
 class Import:
@@ -118,13 +102,13 @@ def _within(module: str, prefix: str) -> bool:
 
 
 def sim_violations(imports: list[Import], package: str = PACKAGE,
-                   pending: frozenset[tuple[str, str]] = frozenset()) -> list[str]:
+                   ) -> list[str]:
     sim, importers = f"{package}.sim", {f"{package}.cli"}
     bad = []
     for imp in imports:
         if not _within(imp.target, sim) or _within(imp.importer, sim):
             continue
-        if imp.importer in importers or (imp.importer, imp.target) in pending:
+        if imp.importer in importers:
             continue
         bad.append(f"{imp.importer}:{imp.line} imports {imp.target}")
     return bad
@@ -235,13 +219,7 @@ def imports() -> list[Import]:
 
 
 def test_only_the_simulator_and_its_command_import_skeye_sim(imports: list[Import]) -> None:
-    assert sim_violations(imports, pending=frozenset(PENDING_SIM_PROTOCOL)) == []
-
-
-def test_pending_imports_of_the_sim_protocol_still_exist(imports: list[Import]) -> None:
-    present = {(i.importer, i.target) for i in imports}
-    gone = sorted(PENDING_SIM_PROTOCOL - present)
-    assert gone == [], f"no longer imported: take them off PENDING_SIM_PROTOCOL: {gone}"
+    assert sim_violations(imports) == []
 
 
 def test_wire_imports_only_stdlib_numpy_and_errors(imports: list[Import]) -> None:

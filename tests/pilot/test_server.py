@@ -64,7 +64,7 @@ def test_a_station_that_reconnects_at_once_is_served_not_turned_away():
     air = FakeAirframe()
     with PilotServer(air, port=0) as pilot:
         for _ in range(20):
-            with Vehicle.open(pilot.address) as v:
+            with Vehicle.open(pilot.address, timeout_s=30.0) as v:  # an event wait
                 assert PD.LL_STATUS in v.poll(int(PollMask.LL_STATUS))
         assert pilot.turned_away == 0
 
