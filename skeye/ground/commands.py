@@ -97,6 +97,15 @@ class Arg:
     step: float | None = None  # the page's input step, in ``unit``
     initial: Value | None = None  # the page's starting value (default: ``default``)
 
+    def __post_init__(self) -> None:
+        if not self.choices and (self.si_unit, self.display_unit) not in DISPLAY_FACTORS and (
+            self.display_unit != self.si_unit
+        ):
+            raise ValueError(
+                f"argument {self.name!r}: the page cannot show {self.si_unit or 'no unit'} "
+                f"as {self.display_unit!r} (known: {sorted(DISPLAY_FACTORS)})"
+            )
+
     @property
     def si_unit(self) -> str:
         return si_unit(self.name)
@@ -225,9 +234,10 @@ COMMANDS: dict[str, CommandSpec] = {
             "PAD_MODE 0x86",
             (
                 Arg("mode", choices=("off", "hold", "land"), label="mode"),
-                Arg("deadband_m", 0.0, 2.0, 0.05, label="deadband", step=0.01),  # the paper's 5 cm
+                # the paper's 5 cm and 0.3 m/s
+                Arg("deadband_m", 0.0, 2.0, 0.05, label="deadband", step=0.01),
                 Arg("max_speed_m_s", 0.05, 5.0, 0.3, limit="speed", label="max",
-                    step=0.05),  # and 0.3 m/s
+                    step=0.05),
             ),
             "landing pad: off, hold over the pad, or land on it",
         ),

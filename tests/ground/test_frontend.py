@@ -179,6 +179,10 @@ def test_a_field_typed_out_of_range_is_marked(page: Any) -> None:
 
 # -- helpers, unit by unit ---------------------------------------------------------------------
 def test_unit_conversions(page: Any) -> None:
+    from skeye.ground.commands import DISPLAY_FACTORS
+
+    factors = js(page, "return units.DISPLAY_FACTORS;")
+    assert factors == {f"{si}→{shown}": k for (si, shown), k in DISPLAY_FACTORS.items()}
     r = js(page, "return {deg: units.toDisplay(1, 'rad/s', '°/s'),"
                  " back: units.fromDisplay(100, 'rad/s', '°/s'), same: units.factor('m', 'm'),"
                  " tidy: units.toDisplay(100 * Math.PI / 180, 'rad', '°'),"
@@ -207,10 +211,12 @@ def test_form_generation_and_reading(page: Any) -> None:
           out.blank = e.message; out.isBlank = e instanceof forms.BlankField; }
         const sel = forms.buildField(document, {name: 'frame', choices: ['body', 'world'],
           label: 'frame', unit: '', initial: 'world', help: 'h', limit: null}, 'test-frame');
-        out.select = [sel.querySelector('select').value, sel.querySelector('select').options.length];
+        const chosen = sel.querySelector('select');
+        out.select = [chosen.value, chosen.options.length];
         out.range = [forms.rangeProblem(speed, 3.5), forms.rangeProblem(speed, 0.01),
                      forms.rangeProblem(speed, 2)];
-        out.clamp = [forms.clampToArg(speed, 7), forms.clampToArg(speed, 0), forms.clampToArg(speed, 1)];
+        out.clamp = [forms.clampToArg(speed, 7), forms.clampToArg(speed, 0),
+                     forms.clampToArg(speed, 1)];
         return out;""")
     assert r["text"] == "yaw  °/s" and r["id"] == "test-yaw"
     assert close(float(r["max"]), 57.29577951) and float(r["min"]) == -float(r["max"])
