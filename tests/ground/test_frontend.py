@@ -25,12 +25,6 @@ from skeye.ground.commands import (
 )
 from tests.ground.conftest import CHROMIUM, CHROMIUM_ARGS, UvicornThread
 
-pytestmark = pytest.mark.skipif(
-    not os.path.exists(CHROMIUM),
-    reason=f"no system Chromium at {CHROMIUM} (apt-get install chromium)",
-)
-playwright_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright")
-
 STATIC = Path(__file__).resolve().parents[2] / "skeye" / "ground" / "static"
 LIMITS = VehicleLimits.for_robot("hummingbird")  # what create_app uses by default
 FIXED = {("pad_mode", "mode")}  # set by the page's buttons, not a field
@@ -59,6 +53,9 @@ def web() -> Iterator[UvicornThread]:
 
 @pytest.fixture(scope="module")
 def page(web: UvicornThread) -> Iterator[Any]:
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"no system Chromium at {CHROMIUM} (apt-get install chromium)")
+    playwright_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright")
     with playwright_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         pg = browser.new_page(viewport={"width": 1500, "height": 1000})
@@ -106,6 +103,19 @@ def test_modules_and_vendored_files_are_served_as_they_must_be(web: UvicornThrea
     page = httpx.get(web.page_url, follow_redirects=True, timeout=30).text
     assert '<script type="module" src="/static/app.js">' in page
     assert "1.6.32" in (STATIC / "vendor" / "uplot" / "README.md").read_text("utf-8")
+
+
+def test_the_package_data_ships_every_static_file() -> None:
+    import fnmatch
+    import tomllib
+
+    pyproject = tomllib.loads((STATIC.parents[2] / "pyproject.toml").read_text("utf-8"))
+    patterns = pyproject["tool"]["setuptools"]["package-data"]["skeye"]
+    for path in STATIC.rglob("*"):
+        if path.is_file():
+            name = path.relative_to(STATIC.parents[1]).as_posix()  # ground/static/...
+            assert any(fnmatch.fnmatchcase(name, p) and name.count("/") == p.count("/")
+                       for p in patterns), f"{name} is not in the wheel's package data"
 
 
 # -- forms from the table ----------------------------------------------------------------------
