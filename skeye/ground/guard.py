@@ -19,10 +19,13 @@ the problem:
 4. **POST bodies**: ``Content-Type: application/json`` (415; this is what a browser cannot send
    cross-origin without a CORS preflight, which this server never grants), at most
    ``MAX_BODY_BYTES`` (413), read here in full before the app runs.
+5. **POST rate** (429, ``Retry-After: 1``): ``POST_RATE_HZ`` per client address on average,
+   bursts of ``POST_BURST``, so a loop of POSTs cannot monopolise the vehicle bridge.
 
 Tokens are compared in constant time. ``parse_json_limited`` (bodies and WebSocket messages)
 refuses JSON nested deeper than ``MAX_JSON_DEPTH`` before parsing it. ``CommandRate`` is a
-token bucket, pure (time is an argument), that the app keeps per WebSocket connection.
+token bucket, pure (time is an argument), that the app keeps per WebSocket connection and this
+gate per client address for POSTs.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import ipaddress
 import json
 import logging
 import secrets
+import time
 from collections.abc import Awaitable, Callable, Iterable, MutableMapping
 from dataclasses import dataclass, field
 from http.cookies import CookieError, SimpleCookie
@@ -197,13 +201,40 @@ LOGIN_PAGE = """<!doctype html><html lang="en"><head><meta charset="utf-8">
 """
 
 
-class Guard:
-    """ASGI middleware: Host, Origin, token, content type and body size (see the module doc)."""
+POST_RATE_HZ = 10.0
+"""Average POSTs per second per client address: the page's own command rate (it uses the
+WebSocket; a script with ``curl`` needs a few per second), so a loop of POSTs from one machine
+cannot monopolise the vehicle bridge or the event loop."""
+POST_BURST = 20
+MAX_TRACKED_CLIENTS = 1024  # client addresses with a POST bucket; the oldest is forgotten
 
-    def __init__(self, app: ASGIApp, security: GroundSecurity) -> None:
+
+class Guard:
+    """ASGI middleware: Host, Origin, token, content type, body size and POST rate (see the
+    module doc)."""
+
+    def __init__(self, app: ASGIApp, security: GroundSecurity, *,
+                 post_rate_hz: float = POST_RATE_HZ, post_burst: int = POST_BURST) -> None:
+        CommandRate(post_rate_hz, post_burst, 0.0)  # refuses a bad rate or burst here
         self.app = app
         self.security = security
         self.refused = 0
+        self.post_rate_hz = post_rate_hz
+        self.post_burst = post_burst
+        self._post_rates: dict[str, CommandRate] = {}
+
+    def _post_allowed(self, scope: Scope) -> bool:
+        """One token from this client address's bucket (insertion order = age)."""
+        client = scope.get("client")
+        peer = str(client[0]) if client else "?"
+        now = time.monotonic()
+        rate = self._post_rates.pop(peer, None)
+        if rate is None:
+            rate = CommandRate(self.post_rate_hz, self.post_burst, now)
+            if len(self._post_rates) >= MAX_TRACKED_CLIENTS:
+                del self._post_rates[next(iter(self._post_rates))]
+        self._post_rates[peer] = rate
+        return rate.allow(now)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         kind = scope.get("type")
@@ -219,6 +250,15 @@ class Guard:
             await self._refuse(scope, receive, send, status, message)
             return
         if kind == "http" and scope.get("method") == "POST":
+            if not self._post_allowed(scope):
+                self.refused += 1
+                await _respond(
+                    send, 429,
+                    _json_body(429, f"too many requests: at most {self.post_rate_hz:g} POST/s "
+                               f"on average (bursts of {self.post_burst}) per client"),
+                    b"application/json", [(b"retry-after", b"1")],
+                )
+                return
             await self._post(scope, receive, send, headers)
             return
         if kind == "http" and scope.get("path") == "/" and self._query_token(scope):

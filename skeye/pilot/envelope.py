@@ -16,8 +16,9 @@ NED metres, no clock):
   always allowed; COME_HOME (``>*>wh``) is never refused.
 
 Defaults: a 120 m ceiling (the maximum height of the EU "open" category, Regulation (EU)
-2019/947, UAS.OPEN.010, and of the FAA's Part 107, 14 CFR 107.51) and a 500 m radius (the
-horizontal visual-line-of-sight distance the UK CAA's CAP 722 uses for small unmanned aircraft).
+2019/947, UAS.OPEN.010, and of the FAA's Part 107, 14 CFR 107.51(b): 400 ft) and a 500 m radius
+(UK CAA CAP 722, 6th edition 2015, paragraph 3.11: visual-line-of-sight operations "normally
+accepted out to a maximum distance of 500 m horizontally and 400 ft vertically").
 A robot file's ``[envelope]`` table and ``skeye pilot --ceiling-m/--max-radius-m`` change them.
 """
 

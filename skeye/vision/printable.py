@@ -21,14 +21,13 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-
-# A bare Figure renders through its own canvas: no pyplot, no global backend switch.
-from matplotlib.figure import Figure
-from matplotlib.patches import Circle, Rectangle
+from typing import TYPE_CHECKING, Any
 
 from skeye.errors import LocalProtocolError
 from skeye.vision.pad import PadDefinition
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 METRES_PER_INCH = 0.0254
 DEFAULT_MARGIN_M = 0.02
@@ -48,6 +47,11 @@ def page_size_m(pad: PadDefinition, margin_m: float = DEFAULT_MARGIN_M) -> float
 
 
 def _figure(pad: PadDefinition, margin_m: float) -> Figure:
+    # A bare Figure renders through its own canvas: no pyplot, no global backend switch.
+    # matplotlib is imported here, not at the top: every `skeye` command builds its parser
+    # from this package, and importing matplotlib costs a second or more.
+    from matplotlib.figure import Figure
+
     side = page_size_m(pad, margin_m)
     fig = Figure(figsize=(side / METRES_PER_INCH, side / METRES_PER_INCH))
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
@@ -61,6 +65,8 @@ def _figure(pad: PadDefinition, margin_m: float) -> Figure:
 
 def _draw_pad(ax: Any, pad: PadDefinition, margin_m: float) -> None:
     """The pad centred on (0, 0), in metres, with its print note in the margin below."""
+    from matplotlib.patches import Circle, Rectangle
+
     half = pad.side_m / 2
     ax.add_patch(Rectangle((-half, -half), pad.side_m, pad.side_m, color="black", lw=0))
     for ring in pad.rings:  # outermost first: each white disc, then its black hole
@@ -138,6 +144,7 @@ def _count(length_m: float, usable_m: float) -> int:
 
 def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> TilePlan:
     from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
     side = page_size_m(pad, margin_m)

@@ -16,6 +16,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -301,3 +302,30 @@ def test_one_flooding_tab_does_not_starve_another_client() -> None:
             reader.join(10)
         finally:
             web.close()
+
+
+def test_a_loop_of_posts_is_rate_limited_per_client(ground: Ground) -> None:
+    # Issue 15's leftover: the WebSocket had a per-tab rate, POSTs had none. A burst passes
+    # (here to an unknown command: 404 without touching the bridge), then 429 with Retry-After.
+    # The POSTs go out all at once, so the count does not depend on how fast the host is: at
+    # most the burst plus what the bucket refills while they are answered gets through.
+    from skeye.ground.guard import POST_BURST, POST_RATE_HZ
+
+    headers = {**ground.web.auth, "Content-Type": "application/json"}
+    url = f"{ground.web.url}/api/command/no_such_command"
+    n = POST_BURST * 4
+    start = time.monotonic()
+    with httpx.Client(timeout=60, limits=httpx.Limits(max_connections=n)) as client:
+        with ThreadPoolExecutor(n) as pool:
+            answers = list(pool.map(lambda _: client.post(url, content=b"{}", headers=headers),
+                                    range(n)))
+        took_s = time.monotonic() - start
+        codes = Counter(r.status_code for r in answers)
+        assert set(codes) <= {404, 429} and codes[404] >= POST_BURST, codes
+        assert codes[404] <= POST_BURST + POST_RATE_HZ * took_s + 1, (codes, took_s)
+        # Refusals, unless the host took so long that the bucket refilled for all of them.
+        assert codes[429] or took_s > (n - POST_BURST - 1) / POST_RATE_HZ, (codes, took_s)
+        for refused in (r for r in answers if r.status_code == 429):
+            assert refused.headers["retry-after"] == "1" and "POST/s" in refused.json()["error"]
+        assert client.get(f"{ground.web.url}/api/commands", headers=ground.web.auth
+                          ).status_code == 200

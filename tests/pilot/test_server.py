@@ -71,24 +71,24 @@ def test_a_station_that_reconnects_at_once_is_served_not_turned_away():
 
 def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
     air = FakeAirframe()
-    settings = BoardSettings(link_timeout_s=0.3, land_timeout_s=0.3)
+    settings = BoardSettings(link_timeout_s=1.0, land_timeout_s=1.0)  # >> a busy host's stalls
     with PilotServer(air, port=0, settings=settings) as pilot:
         with Vehicle.open(pilot.address, keepalive_s=None) as v:  # goes quiet after take-off
             v.take_off(1.0)
             air.finish(landed=False, armed=True)
             v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)  # streaming is not a packet from us
-            v.wait_state(NavState.HOLDING, timeout_s=2)
+            v.wait_state(NavState.HOLDING, timeout_s=30)
             t0 = time.monotonic()
-            v.wait_state(NavState.FAILSAFE, timeout_s=2)
+            v.wait_state(NavState.FAILSAFE, timeout_s=30)
             assert time.monotonic() - t0 >= 0.2
             assert air.names()[-1] == "hover"
-            v.wait_state(NavState.LANDING, timeout_s=2)
+            v.wait_state(NavState.LANDING, timeout_s=30)
             assert air.names()[-1] == "land"
         air.finish(landed=True, armed=False)
         with Vehicle.open(pilot.address) as v:
             ll = v.poll(1)[PD.LL_STATUS]
             assert isinstance(ll, LlStatus) and ll.flying == 0
-            deadline = time.monotonic() + 2.0
+            deadline = time.monotonic() + 30.0
             while pilot.boards.state is not NavState.LANDED and time.monotonic() < deadline:
                 time.sleep(0.01)  # the loop notices the touchdown on its next tick
             assert pilot.boards.state is NavState.LANDED
@@ -106,12 +106,12 @@ def test_garbage_over_tcp_is_counted_and_serving_goes_on():
 
 def test_a_quiet_ground_station_keeps_the_link_alive_with_its_heartbeat():
     air = FakeAirframe()
-    settings = BoardSettings(link_timeout_s=0.3, land_timeout_s=0.3)
+    settings = BoardSettings(link_timeout_s=1.0, land_timeout_s=1.0)  # 10 heartbeats
     with PilotServer(air, port=0, settings=settings) as pilot:
         with Vehicle.open(pilot.address, keepalive_s=0.1) as v:
             v.take_off(1.0)
             air.finish(landed=False, armed=True)
             v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
-            v.wait_state(NavState.HOLDING, timeout_s=2)
-            time.sleep(1.0)  # well past the link timeout, sending no command
+            v.wait_state(NavState.HOLDING, timeout_s=30)
+            time.sleep(3.0)  # well past the link timeout, sending no command
             assert pilot.boards.state is NavState.HOLDING

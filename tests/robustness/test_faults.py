@@ -62,7 +62,7 @@ def test_client_dies_mid_command(control: ControlServer, hard: bool) -> None:
     victim.send("DRIVE {LinearVelocity 1}")
     _abort(victim.sock) if hard else victim.close()
     assert wait_for(lambda: control.client_count == 0, timeout_s=20)
-    assert wait_for(lambda: _robots(control) == [], timeout_s=5)
+    assert wait_for(lambda: _robots(control) == [], timeout_s=30)
     witness = LineClient(control.port)
     witness.expect("NFO")
     assert witness.answer("INIT {ClassName hummingbird} {Location 0,0,-1}", "INIT").type == "RES"

@@ -185,3 +185,28 @@ def test_pad_tiles_over_home_printer_paper(tmp_path, paper, sheet_pt):
     assert boxes == {tuple(round(v, 1) for v in want)}
     with pytest.raises(LocalProtocolError, match=r"name it \.pdf"):
         write_printable(SKEYE_4, tmp_path / "pad.png", paper=paper)
+
+
+def _render_pad_reference(pad, pixels: int, supersample: int):
+    """The definition: every sub-sample of every pixel, then the share inside a ring."""
+    n = pixels * supersample
+    coords = (np.arange(n) + 0.5) / n * pad.side_m - pad.side_m / 2
+    xx, yy = np.meshgrid(coords, coords)
+    r = np.hypot(xx, yy)
+    white = np.zeros((n, n), dtype=bool)
+    for ring in pad.rings:
+        white |= (r >= ring.inner_m) & (r < ring.outer_m)
+    share = white.reshape(pixels, supersample, pixels, supersample).mean(axis=(1, 3))
+    return np.round(share * 255.0).astype(np.uint8)
+
+
+@pytest.mark.parametrize(("pixels", "supersample"), [(8, 4), (64, 4), (257, 3), (600, 2)])
+def test_render_pad_equals_sub_sampling_every_pixel(pixels: int, supersample: int):
+    # render_pad sub-samples only the pixels an edge may cross; the result must be the same
+    # image, bit for bit, as sub-sampling all of them (the simulator's texture depends on it).
+    from skeye.vision.pad import PadDefinition, Ring
+
+    odd = PadDefinition(name="odd", side_m=0.37, rings=(Ring(0.18, 0.1234567), Ring(0.1, 0.0031)))
+    for pad in (SKEYE_4, odd):
+        assert np.array_equal(render_pad(pad, pixels, supersample),
+                              _render_pad_reference(pad, pixels, supersample))
