@@ -187,6 +187,18 @@ def test_a_field_typed_out_of_range_is_marked(page: Any) -> None:
     assert page.get_attribute("#arg-move_by-speed_m_s", "class") in ("", None)
 
 
+def test_a_new_hello_updates_the_fields_and_keeps_what_was_typed(page: Any) -> None:
+    count = page.evaluate("document.querySelectorAll('[data-arg]').length")
+    page.fill("#arg-velocity-forward_m_s", "0.7")
+    hellos = page.evaluate("S.hellos")
+    page.evaluate("S.ws.close()")  # the page reconnects and gets a new hello
+    page.wait_for_function(f"S.hellos > {hellos} && S.ws.readyState === WebSocket.OPEN",
+                           timeout=30_000)
+    assert page.evaluate("document.querySelectorAll('[data-arg]').length") == count
+    assert page.input_value("#arg-velocity-forward_m_s") == "0.7"
+    assert page.get_attribute("#arg-velocity-forward_m_s", "max") == "3"
+
+
 # -- helpers, unit by unit ---------------------------------------------------------------------
 def test_unit_conversions(page: Any) -> None:
     from skeye.ground.commands import DISPLAY_FACTORS

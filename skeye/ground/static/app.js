@@ -21,6 +21,7 @@ const PLOT_PERIOD_MS = 200;
 const nowS = () => Date.now() / 1000;
 
 function onHello(msg) {
+  S.hellos += 1;
   S.commands = indexCommands(msg.commands);
   S.keyboard = msg.keyboard;
   renderForms(document, S.commands);

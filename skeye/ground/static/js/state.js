@@ -14,6 +14,7 @@ export const S = {
   commands: null,     // Map name -> command, from the server's table (hello)
   keyboard: null,     // the keyboard's speed field and timing (hello)
   padMode: null,
+  hellos: 0,          // hello messages so far: one per (re)connection to the server
 };
 
 window.S = S;
