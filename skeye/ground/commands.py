@@ -15,6 +15,11 @@ holds the ``[controller]`` limits of the robot file (``max_speed_m_s``, ``max_cl
 the limit and where it comes from, and ``describe_commands`` advertises it (``max`` and
 ``limit``) to the page. Whether the vehicle accepts a value *now* is the vehicle's call, and its
 refusal comes back as a RESULT with a code and a reason.
+
+The table is also the page's one source for its forms (static/js/forms.js builds every field
+from ``describe_commands``): each ``Arg`` carries its label, the unit the page shows (rad/s as
+°/s: ``DISPLAY_FACTORS``), the input step and the field's starting value; ``KEYBOARD`` holds the
+keyboard flying's speed field, yaw rate, duration and renewal period (``describe_keyboard``).
 """
 
 from __future__ import annotations
