@@ -321,12 +321,14 @@ def test_plot_data_helpers(page: Any) -> None:
         const rows = [{t: 1, a: 1, b: null}, {t: 2, a: 2}, {t: 3, a: null, b: 5}];
         return {cols: plots.columns(rows, ['a', 'b'], 2), all: plots.columns(rows, ['a']),
                 ranges: [plots.paddedRange(null, null), plots.paddedRange(1, 1),
-                         plots.paddedRange(0, 10)]};""")
+                         plots.paddedRange(0, 10)],
+                clock: plots.clockTime(new Date(2026, 0, 1, 13, 4, 5).getTime() / 1000)};""")
     assert r["cols"] == [[2, 3], [2, None], [None, 5]]
     assert r["all"] == [[1, 2, 3], [1, 2, None]]
     assert r["ranges"][0] == [-0.5, 0.5]
     assert [round(x, 9) for x in r["ranges"][1]] == [0.7, 1.3]
     assert r["ranges"][2] == [-1, 11]
+    assert r["clock"] == "13:04:05"  # local clock, 24 h
 
 
 # -- plots: legend, zoom, back to live ---------------------------------------------------------

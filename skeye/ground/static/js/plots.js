@@ -22,6 +22,10 @@ export function paddedRange(lo, hi, minSpan = 0.5) {
   return [lo - margin, hi + margin];
 }
 
+// A time axis label: the local clock, 24 h (uPlot's default adds a date line).
+export const clockTime = (tS) => new Date(tS * 1000).toLocaleTimeString([],
+  { hour: "2-digit", minute: "2-digit", second: "2-digit", hour12: false });
+
 const AXIS = { stroke: "#8193a5", grid: { stroke: "#1b242e", width: 1 },
   ticks: { stroke: "#1b242e", width: 1 } };
 
@@ -42,7 +46,8 @@ export class TimePlot {
       width: Math.max(200, el.clientWidth),
       height,
       scales: { x: { time: true }, y: { range: (u, lo, hi) => paddedRange(lo, hi) } },
-      axes: [{ ...AXIS }, { ...AXIS, size: 48, values: (u, vals) => vals.map((v) => v.toFixed(2)) }],
+      axes: [{ ...AXIS, values: (u, vals) => vals.map(clockTime) },
+        { ...AXIS, size: 48, values: (u, vals) => vals.map((v) => v.toFixed(2)) }],
       series: [{ label: "time" },
         ...series.map((s) => ({ label: s.label, stroke: s.stroke, width: 2, value }))],
       cursor: { drag: { x: true, y: false } },
