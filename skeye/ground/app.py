@@ -45,7 +45,7 @@ from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
-from skeye.errors import LocalProtocolError
+from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
 from skeye.ground.commands import (
     COMMANDS,
@@ -79,7 +79,7 @@ WS_POLICY_VIOLATION = 1008
 WS_MESSAGE_TOO_BIG = 1009
 
 
-class CommandError(Exception):
+class CommandError(SkeyeError):
     """A command that did not reach the vehicle: HTTP status and message."""
 
     def __init__(self, status: int, message: str) -> None:

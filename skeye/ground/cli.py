@@ -37,7 +37,7 @@ START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to imp
 
 def _default_fov_rad(robot: str) -> float:
     """The horizontal field of view of the robot class's first camera."""
-    from skeye.sim.robot_config import load_robot_config
+    from skeye.robots.config import load_robot_config
 
     config = load_robot_config(robot)
     for mount in config.sensors:
@@ -160,7 +160,7 @@ def _add_allow_host(p: Any) -> None:
 
 def _child_argv(*args: str) -> list[str]:
     """A skeye sub-command in a child interpreter (the same venv as this one)."""
-    return [sys.executable, "-m", "skeye.ground.cli", *args]
+    return [sys.executable, "-m", "skeye.cli", *args]
 
 
 def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float,
@@ -348,34 +348,3 @@ def register(subparsers: Any) -> None:
     """Add ``skeye ground`` and ``skeye up`` to the main parser's sub-commands."""
     _add_ground(subparsers)
     _add_up(subparsers)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``skeye`` with ``pilot``, ``ground`` and ``up`` registered even where ``skeye.cli`` does
-    not list them yet; ``skeye up`` starts its children through this."""
-    import logging
-
-    from skeye.cli import build_parser
-
-    parser = build_parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    if "pilot" not in sub.choices:
-        from skeye.pilot.cli import register as register_pilot
-
-        register_pilot(sub)
-    if "ground" not in sub.choices:
-        register(sub)
-    args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
-    try:
-        return int(args.func(args))
-    except (ConfigError, LocalProtocolError, OSError) as exc:
-        print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from skeye.errors import LocalProtocolError
-from skeye.link.packets import Ack, Result
 from skeye.link.vehicle import Vehicle
+from skeye.wire.packets import Ack, Result
 
 Value = float | str
 
@@ -48,7 +48,7 @@ class VehicleLimits:
     @classmethod
     def for_robot(cls, robot: str) -> VehicleLimits:
         """The limits of a robot class (name or TOML path), as ``skeye sim`` loads it."""
-        from skeye.sim.robot_config import load_robot_config
+        from skeye.robots.config import load_robot_config
 
         config = load_robot_config(robot)
         c = config.controller

@@ -24,8 +24,9 @@ from typing import Any
 import cv2
 import numpy as np
 
+from skeye.control.image_client import ImageClient
 from skeye.errors import LocalProtocolError, SkeyeError
-from skeye.sim.image_client import ImageClient
+from skeye.pixels import frame_image
 from skeye.vision.detector import detect
 
 log = logging.getLogger(__name__)
@@ -197,7 +198,7 @@ class VideoRelay:
         for frame in client.stream(self.fps):
             if self._stop.is_set():
                 return
-            image = frame.image()
+            image = frame_image(frame)
             t0 = time.perf_counter()
             detection = detection_json(
                 image, self.fov_h_rad, self.attitude() if self.attitude else None

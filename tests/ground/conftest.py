@@ -41,7 +41,7 @@ SMALL_CAMERA_ROBOT = "groundtest"
 def _robot_dir(tmp: Path) -> Path:
     from importlib import resources
 
-    text = resources.files("skeye.sim").joinpath("robots/hummingbird.toml").read_text("utf-8")
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
     text = re.sub(r'(?m)^name = "hummingbird"', f'name = "{SMALL_CAMERA_ROBOT}"', text, count=1)
     text = re.sub(r"(?m)^width = 800$", "width = 320", text)
     text = re.sub(r"(?m)^height = 600$", "height = 240", text)

@@ -12,8 +12,8 @@ from skeye.errors import LocalProtocolError
 from skeye.ground.bridge import LinkEvent, LinkState, PacketRate, next_link_state
 from skeye.ground.commands import COMMANDS, GroundCommand, describe_commands, parse_command
 from skeye.ground.telemetry import telemetry_json
-from skeye.link.packets import PD, NavState, PadAction
-from skeye.link.scaling import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
+from skeye.wire.packet_units import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
+from skeye.wire.packets import PD, NavState, PadAction
 
 
 def test_defaults_are_filled_in() -> None:

@@ -29,8 +29,8 @@ from websockets.sync.client import connect as ws_connect
 from skeye.ground.app import create_app
 from skeye.ground.bridge import VehicleBridge
 from skeye.ground.guard import MAX_BODY_BYTES, GroundSecurity, cookie_name
-from skeye.link.packets import NavState
 from skeye.pilot.server import PilotServer
+from skeye.wire.packets import NavState
 from tests.ground.conftest import UvicornThread, wait_until
 from tests.pilot.fake_airframe import FakeAirframe
 

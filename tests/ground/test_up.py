@@ -29,7 +29,7 @@ def _children(pid: int) -> list[int]:
 
 def test_up_starts_everything_and_sigterm_stops_everything() -> None:
     sim, img, pilot, ground = _free_ports(4)
-    argv = [sys.executable, "-m", "skeye.ground.cli", "up", "--sim-port", str(sim),
+    argv = [sys.executable, "-m", "skeye.cli", "up", "--sim-port", str(sim),
             "--image-port", str(img), "--pilot-port", str(pilot), "--ground-port", str(ground)]
     # Its own process group, killed whole in the finally: a failure leaves no orphans.
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -78,7 +78,7 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
 
 
 def _run_up(*extra: str, timeout_s: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "skeye.ground.cli", "up", *extra],
+    return subprocess.run([sys.executable, "-m", "skeye.cli", "up", *extra],
                           capture_output=True, text=True, timeout=timeout_s)
 
 
@@ -107,7 +107,7 @@ def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
     with socket.create_server(("127.0.0.1", 0)) as taken:
         port = taken.getsockname()[1]
         done = subprocess.run(
-            [sys.executable, "-m", "skeye.ground.cli", "pilot", "--sim", "127.0.0.1:1",
+            [sys.executable, "-m", "skeye.cli", "pilot", "--sim", "127.0.0.1:1",
              "--port", str(port)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1
     assert f"port {port}" in done.stdout and "--port" in done.stdout, done.stdout
@@ -117,7 +117,7 @@ def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
         with connect(f"127.0.0.1:{server.port}") as conn:
             conn.spawn("hummingbird", start="Pad1", name="R1")
             done = subprocess.run(
-                [sys.executable, "-m", "skeye.ground.cli", "pilot", "--sim",
+                [sys.executable, "-m", "skeye.cli", "pilot", "--sim",
                  f"127.0.0.1:{server.port}", "--port", "0", "--name", "R1"],
                 capture_output=True, text=True, timeout=60)
     assert done.returncode == 1

@@ -8,7 +8,11 @@ import time
 import pytest
 
 from skeye.errors import CommandRejected
-from skeye.link.packets import (
+from skeye.link.transport import LinkClosed
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.server import PilotServer
+from skeye.wire.packets import (
     PD,
     LlStatus,
     NavState,
@@ -18,10 +22,6 @@ from skeye.link.packets import (
     SkeyeMask,
     VehicleStreamParser,
 )
-from skeye.link.transport import LinkClosed
-from skeye.link.vehicle import Vehicle
-from skeye.pilot.boards import BoardSettings
-from skeye.pilot.server import PilotServer
 from tests.pilot.fake_airframe import FakeAirframe
 
 

@@ -21,8 +21,7 @@ from typing import Any
 import numpy as np
 
 from skeye.errors import RemoteProtocolError
-from skeye.sim.protocol import parse_line
-from skeye.sim.recording import (
+from skeye.recording.records import (
     CONNECTED,
     NOTE,
     RECEIVED,
@@ -30,6 +29,7 @@ from skeye.sim.recording import (
     TRUTH,
     RecordingReader,
 )
+from skeye.wire.sim_lines import parse_line
 
 
 @dataclass

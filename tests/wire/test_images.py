@@ -10,16 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError, RemoteProtocolError
-from skeye.sim.image_protocol import (
-    META_OFFSET,
-    DecodedFrame,
-    FrameDecoder,
-    FrameType,
-    ImageFormat,
-    MetaHeader,
+from skeye.pixels import (
+    encode_image,
+    frame_image,
+    frame_image_rgb,
+    jpeg_payload,
+    png_payload,
+    raw_payload,
+)
+from skeye.wire.image_requests import (
     NewestFrame,
-    ProtocolViolation,
-    RemoteError,
     Request,
     RequestError,
     RequestParser,
@@ -28,15 +28,21 @@ from skeye.sim.image_protocol import (
     SetMeta,
     Stream,
     SubRect,
+    encode_request,
+)
+from skeye.wire.images import (
+    META_OFFSET,
+    DecodedFrame,
+    FrameDecoder,
+    FrameType,
+    ImageFormat,
+    MetaHeader,
+    ProtocolViolation,
+    RemoteError,
     encode_error_frame,
     encode_frame,
-    encode_image,
-    encode_request,
-    jpeg_payload,
     jpeg_type_for_quality,
     meta_header,
-    png_payload,
-    raw_payload,
 )
 
 # ------------------------------------------------------------------ requests, one table both ways
@@ -320,8 +326,8 @@ def test_lossless_frames_round_trip(
     assert event.frame_type == base and event.wire_type == wire_type
     assert event.meta == meta
     assert event.data == payload
-    assert np.array_equal(event.image_rgb(), rgb)
-    assert np.array_equal(event.image(), rgb[:, :, ::-1])
+    assert np.array_equal(frame_image_rgb(event), rgb)
+    assert np.array_equal(frame_image(event), rgb[:, :, ::-1])
 
 
 @given(
@@ -344,7 +350,7 @@ def test_jpeg_frames_round_trip_close(
     (event,) = FrameDecoder().feed(encode_frame(wire_type, body))
     assert isinstance(event, DecodedFrame)
     assert event.frame_type == base
-    decoded = event.image_rgb().astype(int)
+    decoded = frame_image_rgb(event).astype(int)
     assert decoded.shape == rgb.shape
     # Flat colours survive JPEG closely at usable qualities (chroma subsampling, quantisation).
     tolerance = 12 if quality >= 50 else 48
@@ -409,14 +415,14 @@ def test_undecodable_image_data_raises_remote_protocol_error() -> None:
     (event,) = FrameDecoder().feed(encode_frame(FrameType.JPEG_GOOD, b"not a jpeg"))
     assert isinstance(event, DecodedFrame)
     with pytest.raises(RemoteProtocolError, match="does not decode"):
-        event.image()
+        frame_image(event)
     wrong_size = encode_frame(
         FrameType.PNG + META_OFFSET, meta_header(1, 0.0, 0, 9, 9) + png_payload(_image(2, 2, 0))
     )
     (event,) = FrameDecoder().feed(wrong_size)
     assert isinstance(event, DecodedFrame)
     with pytest.raises(RemoteProtocolError, match="META says 9x9"):
-        event.image()
+        frame_image(event)
 
 
 def test_jpeg_payload_is_a_jpeg_file() -> None:
@@ -442,7 +448,7 @@ def test_decoder_fuzz_gives_events_only_and_ignores_splits(
     for event in whole:  # decoding the image may refuse, but only with our error
         if isinstance(event, DecodedFrame):
             try:
-                event.image()
+                frame_image(event)
             except RemoteProtocolError:
                 pass
 
@@ -458,9 +464,9 @@ def test_frame_type_and_size_survive_any_payload(frame_type: int, payload: bytes
 
 def test_an_empty_compressed_frame_is_a_protocol_error():
     from skeye.errors import RemoteProtocolError
-    from skeye.sim.image_protocol import FrameDecoder, FrameType, encode_frame
+    from skeye.wire.images import FrameDecoder, FrameType, encode_frame
 
     for kind in (FrameType.PNG, FrameType.JPEG_GOOD):
         (frame,) = FrameDecoder().feed(encode_frame(kind, b""))
         with pytest.raises(RemoteProtocolError, match="no image data"):
-            frame.image()
+            frame_image(frame)

@@ -10,8 +10,9 @@ from typing import Any
 import cv2
 
 from skeye.control.connection import parse_address
-from skeye.errors import ConfigError, LocalProtocolError
-from skeye.sim.image_client import ImageClient
+from skeye.control.image_client import ImageClient
+from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
+from skeye.pixels import frame_image
 
 
 def save_snapshot(address: str, out: Path, camera: str | None = None, quality: int = 95,
@@ -25,9 +26,9 @@ def save_snapshot(address: str, out: Path, camera: str | None = None, quality: i
     host, port = parse_address(address, 5003)
     try:
         client = ImageClient(host, port, timeout_s=timeout_s)
-    except ConnectionRefusedError as exc:
+    except LinkClosed as exc:
         raise ConfigError(
-            f"no image server at {host}:{port} ({exc.strerror or exc}): start the simulator "
+            f"no image server at {host}:{port} ({exc}): start the simulator "
             f"with one (`skeye sim --image-port {port}`; `skeye up` and `make run` serve "
             "images on 5003), or point --images at the one that runs"
         ) from None
@@ -37,7 +38,7 @@ def save_snapshot(address: str, out: Path, camera: str | None = None, quality: i
         client.set_format("png" if suffix == ".png" else "jpeg", quality=quality)
         client.set_meta(True)
         frame = client.get_frame()
-    image = frame.image()
+    image = frame_image(frame)
     if suffix == ".png":
         ok = cv2.imwrite(str(out), image)
     else:

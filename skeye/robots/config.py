@@ -1,8 +1,8 @@
 """Robot configuration files: which vehicle model, its parameters, and which sensors sit where.
 
-How this works: a robot class is a TOML file (built-ins in ``skeye/sim/robots/``). Its tables
+How this works: a robot class is a TOML file (built-ins in ``skeye/robots/``). Its tables
 ``[airframe]``, ``[battery]`` and ``[controller]`` fill the parameter dataclasses of
-:mod:`skeye.sim.vehicle` and :mod:`skeye.sim.controller`; each ``[[sensors]]`` entry mounts a
+:mod:`skeye.robots.params`; each ``[[sensors]]`` entry mounts a
 sensor USARSim-style: ``type``, ``name``, ``position_m`` (body FRD), ``direction_rad`` (roll,
 pitch, yaw of the sensor frame in the body frame) and the sensor class's own parameters. An
 optional ``[envelope]`` table (``ceiling_m``, ``max_radius_m``) is the flight envelope the pilot
@@ -21,8 +21,12 @@ from typing import Any
 
 from skeye.errors import ConfigError
 from skeye.pilot.envelope import FlightEnvelope
-from skeye.sim.controller import ControllerParams
-from skeye.sim.vehicle import AirframeParams, BatteryParams, dataclass_from_mapping
+from skeye.robots.params import (
+    AirframeParams,
+    BatteryParams,
+    ControllerParams,
+    dataclass_from_mapping,
+)
 
 BUILTIN_ROBOTS = ("hummingbird", "airrobot")
 CAMERA_TYPE = "camera"
@@ -161,7 +165,8 @@ def load_robot_config(
     path: Path | None = None
     if short.lower() in BUILTIN_ROBOTS:
         source = f"robots/{short.lower()}.toml"
-        text = resources.files("skeye.sim").joinpath(source).read_text(encoding="utf-8")
+        builtin = resources.files("skeye.robots").joinpath(f"{short.lower()}.toml")
+        text = builtin.read_text(encoding="utf-8")
     else:
         if short.replace("_", "").replace("-", "").isalnum():
             for folder in search_dirs:

@@ -1,10 +1,11 @@
 """Vehicle packet messages (docs/protocols/packets.md) and the one table that lays them out.
 
 How this works: every structure and command is a frozen dataclass whose integer fields carry the
-AscTec (or skeye) names and raw wire units; SI conversions live in ``skeye.link.scaling``.
-``LAYOUTS`` maps each message class to its ``Layout``: descriptor, how it is framed
-(``FrameKind``), and its wire fields in order, each with a struct code and an allowed range.
-That table is the single source for both the codec in ``skeye.link.packets`` and the range
+AscTec (or skeye) names and raw wire units. ``LAYOUTS`` maps each message class to its
+``Layout``: descriptor, how it is framed (``FrameKind``), and its wire fields in order, each with
+a struct code, an allowed range and, for a physical quantity, its ``Scale`` (wire unit and SI
+unit, ``skeye.wire.scales``). That table is the single source for the codec in
+``skeye.wire.packets``, for the SI views in ``skeye.wire.packet_units`` and for the range
 checks here: ``__post_init__`` walks the message's layout and raises ``LocalProtocolError``
 naming the field for anything out of range, so an invalid message cannot exist and the encoder
 never meets a value it cannot pack. Integer-like values (numpy ints too) are normalised to
@@ -20,6 +21,26 @@ from enum import Enum, IntEnum, IntFlag
 from typing import Any, ClassVar
 
 from skeye.errors import LocalProtocolError
+from skeye.wire.scales import (
+    ACC,
+    ANGVEL,
+    CONTROLLER_THRUST,
+    CS,
+    DEG_E7,
+    DM,
+    HEADING_MDEG,
+    MDEG,
+    MM,
+    MM_S,
+    MRAD_S,
+    MS,
+    MV,
+    QUALITY,
+    STICK_ANGLE,
+    STICK_YAW_RATE,
+    THRUST,
+    Scale,
+)
 
 MAX_PAYLOAD = 1024  # longest payload a receiver accepts; a longer length field is a bad frame
 
@@ -180,7 +201,12 @@ _CODE_RANGES = {
 
 @dataclass(frozen=True)
 class Field:
-    """One wire field: struct code, element count, inclusive range, allowed bits, enum."""
+    """One wire field: struct code, element count, inclusive range, allowed bits, enum, scale.
+
+    ``scale`` is the field's wire unit (None: a count, code or raw value without SI view);
+    ``saturate``: built from SI, the value saturates at ``limits`` as a real sensor's reading
+    does (int16 accelerations and velocities), instead of being refused.
+    """
 
     name: str
     code: str
@@ -190,6 +216,8 @@ class Field:
     bits: int | None = None
     enum: type[IntEnum] | None = None
     computed: bool = False  # the command checksum: not a message attribute, made on encode
+    scale: Scale | None = None
+    saturate: bool = False
 
     @property
     def limits(self) -> tuple[int, int]:
@@ -315,7 +343,7 @@ class ImuRawData(Message):
 
 @dataclass(frozen=True)
 class ImuCalcData(Message):
-    """IMU_CALCDATA: fused attitude, rates, accelerations, velocity, height (see scaling)."""
+    """IMU_CALCDATA: fused attitude, rates, accelerations, velocity, height (see packet_units)."""
 
     angle_nick: int  # 1/1000 deg; nick is pitch
     angle_roll: int
@@ -647,22 +675,24 @@ _I, _H, _h, _B = "i", "H", "h", "B"
 _LAT = (-900_000_000, 900_000_000)
 _LON = (-1_800_000_000, 1_800_000_000)
 _GPS_FIELDS = (
-    Field("latitude", _I, *_LAT),
-    Field("longitude", _I, *_LON),
-    Field("height", _I),
-    Field("speed_x", _I),
-    Field("speed_y", _I),
-    Field("heading", _I),
-    Field("horizontal_accuracy", "I"),
-    Field("vertical_accuracy", "I"),
-    Field("speed_accuracy", "I"),
+    Field("latitude", _I, *_LAT, scale=DEG_E7),
+    Field("longitude", _I, *_LON, scale=DEG_E7),
+    Field("height", _I, scale=MM),
+    Field("speed_x", _I, scale=MM_S),
+    Field("speed_y", _I, scale=MM_S),
+    Field("heading", _I, scale=HEADING_MDEG),
+    Field("horizontal_accuracy", "I", scale=MM),
+    Field("vertical_accuracy", "I", scale=MM),
+    Field("speed_accuracy", "I", scale=MM_S),
     Field("numSV", "I"),
     Field("status", _I),
 )
 
 
-def _plain(code: str, *names: str) -> tuple[Field, ...]:
-    return tuple(Field(n, code) for n in names)
+def _plain(
+    code: str, *names: str, scale: Scale | None = None, saturate: bool = False
+) -> tuple[Field, ...]:
+    return tuple(Field(n, code, scale=scale, saturate=saturate) for n in names)
 
 
 def _v(pd: PD, *f: Field) -> Layout:
@@ -680,27 +710,35 @@ def _cmd(pd: PD, prefix: bytes) -> Layout:
 LAYOUTS: dict[type[Message], Layout] = {
     LlStatus: _v(
         PD.LL_STATUS,
-        *_plain(_h, "battery_voltage_1", "battery_voltage_2", "status", "cpu_load"),
+        *_plain(_h, "battery_voltage_1", "battery_voltage_2", scale=MV, saturate=True),
+        *_plain(_h, "status", "cpu_load"),
         *_plain(_B, "compass_enabled", "chksum_error", "flying", "motors_on"),
         *_plain(_h, "flightMode", "up_time"),
     ),
     ImuRawData: _v(
         PD.IMU_RAWDATA,
         Field("pressure", _I),
-        *_plain(_h, "gyro_x", "gyro_y", "gyro_z", "mag_x", "mag_y", "mag_z"),
-        *_plain(_h, "acc_x", "acc_y", "acc_z"),
+        *_plain(_h, "gyro_x", "gyro_y", "gyro_z", scale=ANGVEL, saturate=True),
+        *_plain(_h, "mag_x", "mag_y", "mag_z"),
+        *_plain(_h, "acc_x", "acc_y", "acc_z", scale=ACC, saturate=True),
         Field("temp_gyro", _H),
         Field("temp_ADC", "I"),
     ),
     ImuCalcData: _v(
         PD.IMU_CALCDATA,
-        *_plain(_I, "angle_nick", "angle_roll"),
-        Field("angle_yaw", _I, 0, 360_000),
-        *_plain(_I, "angvel_nick", "angvel_roll", "angvel_yaw"),
-        *_plain(_h, "acc_x_calib", "acc_y_calib", "acc_z_calib", "acc_x", "acc_y", "acc_z"),
-        *_plain(_I, "acc_angle_nick", "acc_angle_roll", "acc_absolute_value"),
-        *_plain(_I, "Hx", "Hy", "Hz", "mag_heading", "speed_x", "speed_y", "speed_z"),
-        *_plain(_I, "height", "dheight", "dheight_reference", "height_reference"),
+        *_plain(_I, "angle_nick", "angle_roll", scale=MDEG),
+        Field("angle_yaw", _I, 0, 360_000, scale=HEADING_MDEG),
+        *_plain(_I, "angvel_nick", "angvel_roll", "angvel_yaw", scale=ANGVEL),
+        *_plain(_h, "acc_x_calib", "acc_y_calib", "acc_z_calib", scale=ACC, saturate=True),
+        *_plain(_h, "acc_x", "acc_y", "acc_z", scale=ACC, saturate=True),
+        *_plain(_I, "acc_angle_nick", "acc_angle_roll", scale=MDEG),
+        Field("acc_absolute_value", _I, scale=ACC),
+        *_plain(_I, "Hx", "Hy", "Hz"),
+        Field("mag_heading", _I, scale=HEADING_MDEG),
+        *_plain(_I, "speed_x", "speed_y", "speed_z", scale=MM_S),
+        Field("height", _I, scale=MM),
+        *_plain(_I, "dheight", "dheight_reference", scale=MM_S),
+        Field("height_reference", _I, scale=MM),
     ),
     RcData: _v(
         PD.RC_DATA,
@@ -709,15 +747,17 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("lock", _B),
     ),
     ControllerOutput: _v(
-        PD.CONTROLLER_OUTPUT, *_plain(_I, "nick", "roll", "yaw"), Field("thrust", _I, 0, 200)
+        PD.CONTROLLER_OUTPUT,
+        *_plain(_I, "nick", "roll", "yaw"),
+        Field("thrust", _I, 0, 200, scale=CONTROLLER_THRUST),
     ),
     GpsData: _v(PD.GPS_DATA, *_GPS_FIELDS),
     GpsDataAdvanced: _v(
         PD.GPS_DATA_ADVANCED,
         *_GPS_FIELDS,
-        Field("latitude_best_estimate", _I, *_LAT),
-        Field("longitude_best_estimate", _I, *_LON),
-        *_plain(_I, "speed_x_best_estimate", "speed_y_best_estimate"),
+        Field("latitude_best_estimate", _I, *_LAT, scale=DEG_E7),
+        Field("longitude_best_estimate", _I, *_LON, scale=DEG_E7),
+        *_plain(_I, "speed_x_best_estimate", "speed_y_best_estimate", scale=MM_S),
     ),
     CurrentWay: _v(
         PD.CURRENT_WAY,
@@ -725,17 +765,17 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("nr_of_wp", _H),
         *_plain(_B, "current_wp", "current_wp_memlocation", "status", "dummy2"),
         Field("navigation_status", _H),
-        Field("distance_to_wp", _H),
+        Field("distance_to_wp", _H, scale=DM),
     ),
     Poll: Layout(None, FrameKind.ASCTEC, (Field("mask", _H),), prefix=b">*>p"),
     CtrlInput: Layout(
         PD.CTRL_INPUT,
         FrameKind.ASCTEC,
         (
-            Field("pitch", _h, -2047, 2047),
-            Field("roll", _h, -2047, 2047),
-            Field("yaw", _h, -2047, 2047),
-            Field("thrust", _h, 0, 4095),
+            Field("pitch", _h, -2047, 2047, scale=STICK_ANGLE),
+            Field("roll", _h, -2047, 2047, scale=STICK_ANGLE),
+            Field("yaw", _h, -2047, 2047, scale=STICK_YAW_RATE),
+            Field("thrust", _h, 0, 4095, scale=THRUST),
             Field("ctrl", _h, 0, 0x3F, bits=0x3F),
             Field("chksum", _H, computed=True),
         ),
@@ -751,10 +791,12 @@ LAYOUTS: dict[type[Message], Layout] = {
             Field("dummy_2", _H),
             Field("properties", _B, bits=int(sum(WaypointProps))),
             Field("max_speed", _B, 0, 100),
-            Field("time", _H),
-            Field("pos_acc", _H),
+            Field("time", _H, scale=CS),
+            Field("pos_acc", _H, scale=MM),
             Field("chksum", _H, computed=True),
-            *_plain(_I, "X", "Y", "yaw", "height"),
+            *_plain(_I, "X", "Y", scale=MM),  # degrees x 1e7 when ABSOLUTE (packet_units)
+            Field("yaw", _I, scale=HEADING_MDEG),
+            Field("height", _I, scale=MM),
         ),
         prefix=b">*>ws",
         checksum=(
@@ -773,51 +815,59 @@ LAYOUTS: dict[type[Message], Layout] = {
     Launch: _cmd(PD.LAUNCH, b">*>wl"),
     EndFlight: _cmd(PD.END_FLIGHT, b">*>we"),
     ComeHome: _cmd(PD.COME_HOME, b">*>wh"),
-    Velocity: _s(PD.VELOCITY, *_plain(_h, "vx", "vy", "vz", "yaw_rate"), Field("duration", _H)),
+    Velocity: _s(
+        PD.VELOCITY,
+        *_plain(_h, "vx", "vy", "vz", scale=MM_S),
+        Field("yaw_rate", _h, scale=MRAD_S),
+        Field("duration", _H, scale=MS),
+    ),
     MoveBy: _s(
         PD.MOVE_BY,
-        *_plain(_I, "dx", "dy", "dz", "dyaw"),
+        *_plain(_I, "dx", "dy", "dz", scale=MM),
+        Field("dyaw", _I, scale=MDEG),
         Field("frame", _B, 0, max(MoveFrame), enum=MoveFrame),
-        Field("speed", _H),
+        Field("speed", _H, scale=MM_S),
     ),
     GotoGps: _s(
         PD.GOTO_GPS,
-        Field("latitude", _I, *_LAT),
-        Field("longitude", _I, *_LON),
-        Field("height", _I),
-        Field("speed", _H),
+        Field("latitude", _I, *_LAT, scale=DEG_E7),
+        Field("longitude", _I, *_LON, scale=DEG_E7),
+        Field("height", _I, scale=MM),
+        Field("speed", _H, scale=MM_S),
     ),
-    TakeOff: _s(PD.TAKE_OFF, Field("height", _I, 1, None)),
+    TakeOff: _s(PD.TAKE_OFF, Field("height", _I, 1, None, scale=MM)),
     Land: _s(PD.LAND),
     Hold: _s(PD.HOLD),
     PadMode: _s(
         PD.PAD_MODE,
         Field("mode", _B, 0, max(PadAction), enum=PadAction),
-        *_plain(_H, "deadband", "max_speed"),
+        Field("deadband", _H, scale=MM),
+        Field("max_speed", _H, scale=MM_S),
     ),
     Stream: _s(
         PD.STREAM,
         Field("poll_mask", _H, bits=POLL_MASK_ALL),
         Field("skeye_mask", _H, bits=int(sum(SkeyeMask))),
-        Field("period", _H),
+        Field("period", _H, scale=MS),
     ),
-    Clock: _s(PD.CLOCK, Field("until", "I")),
+    Clock: _s(PD.CLOCK, Field("until", "I", scale=MS)),
     NavStatus: _v(
         PD.NAV_STATUS,
         Field("state", _B, 0, max(NavState), enum=NavState),
         Field("pad_mode", _B, 0, max(PadAction), enum=PadAction),
-        *_plain(_I, "x", "y", "z", "yaw"),
-        *_plain(_h, "vx", "vy", "vz"),
-        Field("battery", _H),
-        Field("time", "I"),
+        *_plain(_I, "x", "y", "z", scale=MM),
+        Field("yaw", _I, scale=HEADING_MDEG),
+        *_plain(_h, "vx", "vy", "vz", scale=MM_S, saturate=True),
+        Field("battery", _H, scale=MV),
+        Field("time", "I", scale=MS),
     ),
     PadReport: _v(
         PD.PAD,
         Field("found", _B, 0, 1),
         Field("rings", _B),
-        *_plain(_I, "dx", "dy", "height"),
-        Field("quality", _H, 0, 1000),
-        Field("frame_time", "I"),
+        *_plain(_I, "dx", "dy", "height", scale=MM),
+        Field("quality", _H, 0, 1000, scale=QUALITY),
+        Field("frame_time", "I", scale=MS),
     ),
     Result: Layout(
         PD.RESULT,
@@ -856,6 +906,8 @@ def _check_layouts() -> None:
             type_lo, type_hi = _CODE_RANGES[f.code]
             if not type_lo <= lo <= hi <= type_hi:
                 raise AssertionError(f"{cls.__name__}.{f.name}: range {lo}..{hi} vs '{f.code}'")
+            if f.saturate and f.scale is None:
+                raise AssertionError(f"{cls.__name__}.{f.name}: saturates but has no scale")
 
 
 _check_layouts()

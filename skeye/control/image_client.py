@@ -8,22 +8,20 @@ one (an unknown camera, say) surfaces as an error frame in place of the next fra
 from __future__ import annotations
 
 import logging
-import socket
 import time
 from collections import deque
 from collections.abc import Iterator
 
-from skeye.errors import LinkTimeout, LocalProtocolError, RemoteProtocolError
-from skeye.sim.image_protocol import (
-    DEFAULT_MAX_FRAME_BYTES,
-    DEFAULT_PORT,
-    DecodedFrame,
-    FrameDecoder,
-    FrameEvent,
-    ImageFormat,
+from skeye.errors import (
+    LinkClosed,
+    LinkTimeout,
+    LocalProtocolError,
+    PeerClosed,
+    RemoteProtocolError,
+)
+from skeye.link.transport import Link, open_link, tcp_uri
+from skeye.wire.image_requests import (
     NewestFrame,
-    ProtocolViolation,
-    RemoteError,
     Request,
     SelectCamera,
     SetFormat,
@@ -31,6 +29,16 @@ from skeye.sim.image_protocol import (
     Stream,
     SubRect,
     encode_request,
+)
+from skeye.wire.images import (
+    DEFAULT_MAX_FRAME_BYTES,
+    DEFAULT_PORT,
+    DecodedFrame,
+    FrameDecoder,
+    FrameEvent,
+    ImageFormat,
+    ProtocolViolation,
+    RemoteError,
 )
 
 log = logging.getLogger(__name__)
@@ -50,7 +58,7 @@ class ImageClient:
 
     Raises:
         LinkTimeout: connecting took longer than ``timeout_s``.
-        OSError: the connection was refused.
+        LinkClosed: the connection was refused (and later: the link broke).
     """
 
     def __init__(
@@ -63,12 +71,12 @@ class ImageClient:
     ) -> None:
         self.timeout_s = timeout_s
         try:
-            self._sock = socket.create_connection((host, port), timeout=timeout_s)
-        except TimeoutError as exc:
+            self._link: Link = open_link(tcp_uri(host, port), timeout_s,
+                                         send_timeout_s=timeout_s, recv_bytes=_RECV_BYTES)
+        except LinkTimeout as exc:
             raise LinkTimeout(
                 f"image server {host}:{port}: no connection in {timeout_s} s"
             ) from exc
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._decoder = FrameDecoder(max_frame_bytes)
         self._events: deque[FrameEvent] = deque()
         self._stream_fps: float | None = None
@@ -81,16 +89,18 @@ class ImageClient:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
+    @property
+    def link(self) -> Link:
+        """The byte link to the server (for tests that send raw bytes; requests go through the
+        methods below)."""
+        return self._link
+
     def close(self) -> None:
         """Close the connection; idempotent."""
         if self._closed:
             return
         self._closed = True
-        try:
-            self._sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
-        self._sock.close()
+        self._link.close()
 
     # ---------------------------------------------------------------- settings
 
@@ -150,15 +160,12 @@ class ImageClient:
         self._events.clear()
         deadline = time.monotonic() + max(self.timeout_s, quiet_s)
         while time.monotonic() < deadline:
-            self._sock.settimeout(quiet_s)
             try:
-                data = self._sock.recv(_RECV_BYTES)
-            except TimeoutError:
-                break  # quiet: nothing more was in flight
-            finally:
-                self._sock.settimeout(self.timeout_s)
-            if not data:
+                data = self._link.recv(quiet_s)
+            except PeerClosed:
                 break
+            if not data:
+                break  # quiet: nothing more was in flight
             for event in self._decoder.feed(data):
                 if not isinstance(event, DecodedFrame):
                     log.debug("image client: discarded while stopping a stream: %s", event)
@@ -171,7 +178,7 @@ class ImageClient:
             if self._stream_fps is not None and not self._closed:
                 try:
                     self.stop_stream()
-                except (OSError, LinkTimeout) as exc:
+                except (LinkClosed, LinkTimeout) as exc:
                     log.info("image client: could not stop the stream cleanly: %s", exc)
 
     # ---------------------------------------------------------------- plumbing
@@ -186,8 +193,8 @@ class ImageClient:
         if self._closed:
             raise LocalProtocolError("the image client is closed")
         try:
-            self._sock.sendall(encode_request(request))
-        except TimeoutError as exc:
+            self._link.send(encode_request(request))
+        except LinkTimeout as exc:
             raise LinkTimeout(f"image server {self._peer}: send timed out") from exc
 
     def _next_frame(self) -> DecodedFrame:
@@ -208,17 +215,11 @@ class ImageClient:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise LinkTimeout(f"image server {self._peer}: no frame in {self.timeout_s} s")
-            self._sock.settimeout(remaining)
             try:
-                data = self._sock.recv(_RECV_BYTES)
-            except TimeoutError as exc:
-                raise LinkTimeout(
-                    f"image server {self._peer}: no frame in {self.timeout_s} s"
-                ) from exc
-            finally:
-                if not self._closed:
-                    self._sock.settimeout(self.timeout_s)
-            if not data:
-                raise RemoteProtocolError(f"image server {self._peer} closed the connection")
-            self._events.extend(self._decoder.feed(data))
+                data = self._link.recv(remaining)
+            except PeerClosed:
+                raise RemoteProtocolError(
+                    f"image server {self._peer} closed the connection"
+                ) from None
+            self._events.extend(self._decoder.feed(data))  # b"": nothing yet, loop
         return self._events.popleft()

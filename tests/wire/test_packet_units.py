@@ -10,20 +10,31 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError
-from skeye.link import scaling as sc
-from skeye.link.packets import (
+from skeye.wire import packet_units as sc
+from skeye.wire.packet_defs import LAYOUTS, Field
+from skeye.wire.packets import (
     CommandStreamParser,
     CtrlBits,
     CtrlInput,
+    GotoGps,
     GpsData,
+    GpsDataAdvanced,
     ImuCalcData,
+    Message,
+    MoveBy,
     MoveFrame,
     NavState,
+    NavStatus,
     PadAction,
+    PadMode,
+    PadReport,
     VehicleStreamParser,
+    Velocity,
+    Waypoint,
     WaypointProps,
     encode,
 )
+from skeye.wire.scales import YAW_FULL_MDEG
 
 DEG = math.pi / 180.0
 
@@ -350,3 +361,69 @@ def test_waypoint_builders_relative_and_absolute() -> None:
     assert (wpa.X, wpa.Y) == (85455938, 473977419)
     (back,) = CommandStreamParser().feed(encode(wpa))
     assert_fields_close(sc.waypoint_to_si(back), absolute)  # type: ignore[arg-type]
+
+
+# --- the table: every scaled field and every SI view ------------------------------------------
+
+SI_VIEWS: dict[type, type[Message]] = {
+    sc.ImuCalcSi: ImuCalcData,
+    sc.StickSi: CtrlInput,
+    sc.GpsSi: GpsData,
+    sc.GpsBestSi: GpsDataAdvanced,
+    sc.NavStatusSi: NavStatus,
+    sc.PadSi: PadReport,
+    sc.VelocitySi: Velocity,
+    sc.MoveBySi: MoveBy,
+    sc.GotoGpsSi: GotoGps,
+    sc.PadModeSi: PadMode,
+    sc.WaypointSi: Waypoint,
+}
+SCALED = [(cls, f) for cls, lay in LAYOUTS.items() for f in lay.fields if f.scale is not None]
+
+
+@pytest.mark.parametrize("view", SI_VIEWS, ids=lambda v: v.__name__)
+def test_si_view_names_carry_the_unit_of_the_wire_field_they_read(view: type) -> None:
+    """A view field reading a scaled wire field ends in that scale's unit suffix (``_m_s``...)."""
+    table = {f.name: f for f in LAYOUTS[SI_VIEWS[view]].fields}
+    checked = 0
+    for name, mark in sc.view_fields(view):
+        assert set(mark.names) <= set(table), (view.__name__, name)
+        for scale in {table[n].scale for n in mark.names} - {None}:
+            assert scale is not None
+            if view is sc.WaypointSi and name in ("x", "y"):
+                continue  # metres or degrees, by the ABSOLUTE flag
+            assert name.endswith(scale.suffix), (view.__name__, name, scale.unit)
+            checked += 1
+    assert checked > 0
+
+
+@pytest.mark.parametrize(
+    ("cls", "field"), SCALED, ids=lambda x: getattr(x, "__name__", None) or x.name
+)
+@settings(max_examples=30, deadline=None)
+@given(data=st.data())
+def test_every_scaled_field_round_trips_its_counts(
+    cls: type, field: Field, data: st.DataObject
+) -> None:
+    lo, hi = field.limits
+    scale = field.scale
+    assert scale is not None
+    if scale.clamp is not None:
+        lo, hi = max(lo, scale.clamp[0]), min(hi, scale.clamp[1])
+    if scale.wrap:
+        lo, hi = 0, YAW_FULL_MDEG - 1
+    counts = data.draw(st.integers(lo, hi))
+    assert scale.to_wire(scale.to_si(counts)) == counts
+    assert sc.wire_value(cls, field.name, scale.to_si(counts)) == counts
+
+
+def test_bad_si_values_are_refused_naming_the_field() -> None:
+    si = _imu_si(0.0, 0.0, 0.0, (0.0, 0.0, 0.0), 0.0)
+    with pytest.raises(LocalProtocolError, match=r"ImuCalcSi.vel_ned_m_s\[1\]"):
+        sc.imu_calcdata_from_si(sc.ImuCalcSi(**{**si.__dict__, "vel_ned_m_s": (0.0, math.nan, 0)}))
+    with pytest.raises(LocalProtocolError, match="needs 3 components"):
+        sc.imu_calcdata_from_si(sc.ImuCalcSi(**{**si.__dict__, "vel_ned_m_s": (0.0, 1.0)}))
+    with pytest.raises(LocalProtocolError, match=r"PadSi\.dx_m"):
+        sc.pad_report_from_si(sc.PadSi(True, 0, "1.0", 0.0, 0.0, 0.0, 0.0))  # type: ignore[arg-type]
+    with pytest.raises(LocalProtocolError, match="no wire field"):
+        sc.wire_value(ImuCalcData, "nope", 1.0)

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
-from skeye.sim.protocol import format_message
+from skeye.wire.sim_lines import format_message
 
 log = logging.getLogger(__name__)
 
@@ -245,7 +245,7 @@ class Recorder:
 
         Args:
             server: a :class:`~skeye.sim.server.ControlServer`.
-            runner: its :class:`~skeye.sim.engine.SimulationRunner`.
+            runner: its :class:`~skeye.sim.runner.SimulationRunner`.
             truth_rate_hz: how often each robot's ground truth is sampled (0 = never).
         """
         sim = runner.sim

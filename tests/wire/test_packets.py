@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError
-from skeye.link.crc import command_checksum, crc16
-from skeye.link.packet_defs import LAYOUTS, FrameKind
-from skeye.link.packets import (
+from skeye.wire.crc import command_checksum, crc16
+from skeye.wire.packet_defs import LAYOUTS, FrameKind
+from skeye.wire.packets import (
     ACK_PDS,
     PD,
     Ack,
@@ -700,3 +700,10 @@ def test_messages_are_frozen() -> None:
     msg = TakeOff(100)
     with pytest.raises(AttributeError):
         msg.height = 5  # type: ignore[misc]
+
+
+def test_feeding_something_other_than_bytes_is_a_protocol_error() -> None:
+    for parser in (VehicleStreamParser(), CommandStreamParser()):
+        with pytest.raises(LocalProtocolError, match="feed takes bytes, got str"):
+            parser.feed(">*>p")  # type: ignore[arg-type]
+        assert parser.feed(bytearray(b"xx")) == [] and parser.garbage_bytes == 2

@@ -38,8 +38,8 @@ from enum import Enum
 from typing import Any
 
 from skeye.errors import LocalProtocolError
-from skeye.link.crc import command_checksum, crc16
-from skeye.link.packet_defs import (
+from skeye.wire.crc import command_checksum, crc16
+from skeye.wire.packet_defs import (
     ACK_PDS,
     ASCTEC_BY_PREFIX,
     GPS_FIX_VALID,
@@ -353,7 +353,13 @@ class _StreamParser:
         return len(self._buf)
 
     def feed(self, data: bytes) -> list[Any]:
-        """Add received bytes; return every message or error event now complete, in order."""
+        """Add received bytes; return every message or error event now complete, in order.
+
+        Raises:
+            LocalProtocolError: ``data`` is not bytes (the only error ``feed`` raises).
+        """
+        if not isinstance(data, bytes | bytearray | memoryview):
+            raise LocalProtocolError(f"feed takes bytes, got {type(data).__name__}")
         self._buf += data
         events: list[Any] = []
         while self._buf:

@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_error, format_message
-from skeye.sim.recording import SENT, RecordingReader, robot_connections
+from skeye.processes import wait_for_signal
+from skeye.recording.records import SENT, RecordingReader, robot_connections
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 
 log = logging.getLogger(__name__)
 
@@ -237,8 +238,6 @@ class _Playback:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Serve a recording until stopped."""
-    from skeye.cli import _wait_for_signal
-
     with ReplayServer(
         args.file, host=args.host, port=args.port, speed=args.speed, robot=args.robot
     ) as server:
@@ -255,7 +254,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 "machines",
                 flush=True,
             )
-        _wait_for_signal(threading.Event())
+        wait_for_signal(threading.Event())
         print("skeye replay: stopping", flush=True)
     return 0
 
