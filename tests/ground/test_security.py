@@ -179,7 +179,7 @@ def test_no_docs_page_and_nothing_loaded_from_elsewhere(ground: Ground) -> None:
         assert r.status_code == 404, path
         assert "cdn" not in r.text.lower()
     page = httpx.get(f"{ground.web.page_url}", follow_redirects=True, timeout=30).text
-    for text in [page] + [p.read_text("utf-8") for p in STATIC.iterdir() if p.is_file()]:
+    for text in [page] + [p.read_text("utf-8") for p in STATIC.rglob("*") if p.is_file()]:
         for marker in ("http://", "https://", "//cdn", "src=\"//", "@import"):
             assert marker not in text, marker
 
