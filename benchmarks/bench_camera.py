@@ -20,8 +20,8 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from skeye.control.image_client import ImageClient
 from skeye.processes import start_skeye, stop_process
-from skeye.sim.image_client import ImageClient
 
 try:  # run from a checkout without installing
     from tests.sim.conftest import LineClient

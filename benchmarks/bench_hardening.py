@@ -23,7 +23,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
 

@@ -22,9 +22,9 @@ from multiprocessing.synchronize import Event as EventType
 import cv2
 import numpy as np
 
-from skeye.sim.image_client import ImageClient
-from skeye.sim.image_protocol import ImageFormat
+from skeye.control.image_client import ImageClient
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.wire.images import ImageFormat
 
 FrameSource = Callable[[int], np.ndarray]
 

@@ -28,8 +28,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.control.image_client import ImageClient
 from skeye.processes import start_skeye, stop_process
-from skeye.sim.image_client import ImageClient
 
 
 class ControlClient:

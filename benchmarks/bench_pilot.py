@@ -17,13 +17,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from skeye.control.connection import connect
-from skeye.link.packets import PD, POLL_MASK_ALL, PollMask, SkeyeMask
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
+from skeye.wire.packets import PD, POLL_MASK_ALL, PollMask, SkeyeMask
 
 
 def percentile(values: list[float], q: float) -> float:

@@ -7,7 +7,10 @@ Runs ``skeye sim --mode lockstep`` as its own process (as users run it) and meas
 - PING round-trip latency p50/p99 over loopback;
 - DRIVE-to-effect latency p50/p99: DRIVE immediately followed by PING; the server handles a
   connection's lines in order and returns from DRIVE only once the engine has applied it, so the
-  PING's answer marks the moment the new set-point is in effect.
+  PING's answer marks the moment the new set-point is in effect;
+- the real-time factor of the same 1-vehicle flight stepped in this process, without server or
+  sockets (``skeye.sim.engine.Simulation`` with a sink that keeps the typed readings), and with
+  those readings encoded as protocol lines: what TCP and the client cost, by difference.
 
 Each real-time factor is measured ``--repeats`` times (fresh robots each time) and printed as
 the best and the median: on a shared machine the slowest runs measure the neighbours, and the
@@ -45,7 +48,7 @@ from skeye.processes import start_skeye, stop_process
 
 def robot_dir_with_board_rate(folder: Path, board_rate_hz: float) -> str:
     """Write a copy of the Hummingbird whose board runs at ``board_rate_hz``; return its class."""
-    text = (resources.files("skeye.sim") / "robots" / "hummingbird.toml").read_text()
+    text = (resources.files("skeye.robots") / "hummingbird.toml").read_text()
     name = f"hummingbird_board{board_rate_hz:g}"
     lines = []
     for line in text.splitlines():
@@ -181,6 +184,35 @@ def reference_loop_ms() -> float:
     return best * 1000.0
 
 
+def measure_in_process_rtf(
+    n: int, sim_seconds: float, timestep: float, robot_class: str,
+    robot_dir: str | None = None, *, encode: bool = False,
+) -> tuple[float, int]:
+    """Step ``n`` vehicles in this process for ``sim_seconds``: (real-time factor, readings).
+
+    No server, runner or socket: each robot's sink keeps its readings (``encode``: as protocol
+    lines, through the server's encoder)."""
+    from skeye.sim.engine import Simulation
+    from skeye.sim.readings import Event
+    from skeye.sim.stream import text_sink
+    from skeye.sim.world import load_world
+
+    events: list[Event] = []
+    chunks: list[bytes] = []
+    dirs = (Path(robot_dir),) if robot_dir else ()
+    sim = Simulation(load_world("pad"), seed=1, timestep_s=timestep, robot_dirs=dirs)
+    for i in range(n):
+        sink = text_sink(chunks.append) if encode else events.extend
+        sim.spawn(robot_class, name=f"B{i}", sink=sink, location_ned_m=(i * 2.0, 0.0, -1.5))
+    steps = round(sim_seconds / timestep)
+    started = time.perf_counter()
+    for _ in range(0, steps, 100):  # as a client's STEP {Count 100} would
+        sim.step(100)
+    wall_s = time.perf_counter() - started
+    count = sum(chunk.count(b"\n") for chunk in chunks) if encode else len(events)
+    return sim.time_s / wall_s, count
+
+
 def pct(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
@@ -246,6 +278,15 @@ def main() -> None:
             f"  (target p99 < 2 ms)"
         )
         print(f"mean PING {statistics.mean(ping) * 1000:.3f} ms")
+        for encode in (False, True):
+            runs_in = [measure_in_process_rtf(1, args.sim_seconds, args.timestep, robot_class,
+                                              robot_dir, encode=encode)
+                       for _ in range(max(1, args.repeats))]
+            rtfs = [rtf for rtf, _ in runs_in]
+            what = "readings encoded as lines" if encode else "typed readings kept"
+            print(f"in-process, 1 vehicle, no TCP, {what}: best {max(rtfs):6.1f}x  median "
+                  f"{statistics.median(rtfs):6.1f}x  ({runs_in[0][1]} per run; "
+                  f"{native.status().describe()} in this process)")
     print(f"CPU reference loop after: {reference_loop_ms():.1f} ms")
 
 

@@ -23,11 +23,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+
 from skeye.errors import RemoteProtocolError
-from skeye.link import packets
-from skeye.sim import image_protocol as ip
-from skeye.sim.protocol import LineDecoder, LineError
-from skeye.sim.recording import parse_record
+from skeye.pixels import frame_image
+from skeye.recording.records import parse_record
+from skeye.wire import images as ip
+from skeye.wire import packets
+from skeye.wire.image_requests import RequestParser
+from skeye.wire.sim_lines import LineDecoder, LineError
 
 SEEDS: dict[str, list[bytes]] = {
     "sim-lines": [
@@ -112,7 +115,7 @@ def _sim_lines(rng: random.Random, data: bytes) -> None:
 
 
 def _image_requests(rng: random.Random, data: bytes) -> None:
-    parser = ip.RequestParser()
+    parser = RequestParser()
     for chunk in _chunks(rng, data):
         parser.feed(chunk)
     assert parser.buffered_bytes <= ip.DEFAULT_MAX_LINE_BYTES + 17
@@ -124,7 +127,7 @@ def _image_frames(rng: random.Random, data: bytes) -> None:
         for event in decoder.feed(chunk):
             if isinstance(event, ip.DecodedFrame):
                 try:
-                    event.image()
+                    frame_image(event)
                 except RemoteProtocolError:
                     pass
 

@@ -9,11 +9,14 @@ _native.install()  # before any simulator module: compiled or source (see skeye.
 from skeye.errors import (  # noqa: E402
     CommandRejected,
     ConfigError,
+    InvalidArgument,
+    LinkClosed,
     LinkTimeout,
     LocalProtocolError,
     PhysicsError,
     RemoteProtocolError,
     SkeyeError,
+    UnknownName,
 )
 
 if TYPE_CHECKING:
@@ -34,11 +37,14 @@ def __getattr__(name: str) -> object:
 __all__ = [
     "CommandRejected",
     "ConfigError",
+    "InvalidArgument",
+    "LinkClosed",
     "LinkTimeout",
     "LocalProtocolError",
     "PhysicsError",
     "RemoteProtocolError",
     "SkeyeError",
+    "UnknownName",
     "__version__",
     "connect",
 ]

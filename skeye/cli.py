@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import sys
 import threading
 import time
@@ -16,19 +15,7 @@ from typing import Any
 
 from skeye import __version__
 from skeye.errors import SkeyeError
-
-
-def _wait_for_signal(stop: threading.Event, failed: threading.Event | None = None) -> None:
-    """Wait for SIGTERM/SIGINT (or ``failed`` to be set)."""
-    def handler(signum: int, frame: Any) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGINT, handler)
-    while not stop.wait(0.2):
-        if failed is not None and failed.is_set():
-            return
-
+from skeye.processes import wait_for_signal
 
 ENGINE_FAILED_STATUS = 3
 FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
@@ -56,8 +43,9 @@ def _inject_fault(sim: Any) -> None:
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
-    from skeye.sim.engine import Simulation, SimulationRunner
-    from skeye.sim.robot_config import validate_robot_dirs
+    from skeye.robots.config import validate_robot_dirs
+    from skeye.sim.engine import Simulation
+    from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
     from skeye.sim.wind import make_settings, parse_params
     from skeye.sim.world import load_world
@@ -82,7 +70,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             stack.callback(cameras.close)
         recorder = None
         if args.record is not None:
-            from skeye.sim.recording import Recorder
+            from skeye.recording.records import Recorder
 
             meta = {
                 "world": world.name,
@@ -126,7 +114,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",
                 flush=True,
             )
-        _wait_for_signal(stop, runner.failed)
+        wait_for_signal(stop, runner.failed)
         if runner.error is not None:
             print(f"skeye sim: error: {runner.error}; stopping", file=sys.stderr, flush=True)
             # The clients were told (ERR {Command ENGINE}); let their writers flush it.
@@ -207,19 +195,19 @@ def _add_vision(sub: Any) -> None:
 
 
 def _add_snapshot(sub: Any) -> None:
-    from skeye.sim.snapshot import register
+    from skeye.recording.snapshot import register
 
     register(sub)
 
 
 def _add_replay(sub: Any) -> None:
-    from skeye.sim.replay import register
+    from skeye.recording.replay import register
 
     register(sub)
 
 
 def _add_plot(sub: Any) -> None:
-    from skeye.sim.plotting import register
+    from skeye.recording.plotting import register
 
     register(sub)
 

@@ -34,3 +34,25 @@ class CommandRejected(SkeyeError):
 
 class LinkTimeout(SkeyeError):
     """A link or peer did not answer within its deadline."""
+
+
+class LinkClosed(SkeyeError):
+    """A link is gone (closed locally, by the peer, or broken); nothing more can be sent or
+    received. Raised by every client: the simulator connection, the image client, the vehicle
+    link (:mod:`skeye.link.transport`)."""
+
+
+class PeerClosed(LinkClosed):
+    """The peer ended the connection in order (end of stream, a serial line hung up)."""
+
+
+class InvalidArgument(LocalProtocolError, ValueError):
+    """A caller passed a value out of range or of the wrong kind; also a ``ValueError``, so code
+    that catches that keeps working."""
+
+
+class UnknownName(ConfigError, KeyError):
+    """A name that is not in its table (a pad, a robot class); also a ``KeyError``."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""

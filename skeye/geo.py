@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from skeye.errors import InvalidArgument
+
 WGS84_A_M = 6378137.0
 WGS84_E2 = 6.69437999014e-3
 
@@ -25,9 +27,9 @@ class GeoOrigin:
 
     def __post_init__(self) -> None:
         if not -90.0 < self.latitude_deg < 90.0:
-            raise ValueError(f"latitude {self.latitude_deg} deg is outside (-90, 90)")
+            raise InvalidArgument(f"latitude {self.latitude_deg} deg is outside (-90, 90)")
         if not -180.0 <= self.longitude_deg <= 180.0:
-            raise ValueError(f"longitude {self.longitude_deg} deg is outside [-180, 180]")
+            raise InvalidArgument(f"longitude {self.longitude_deg} deg is outside [-180, 180]")
 
     def _radii_m(self) -> tuple[float, float]:
         lat = math.radians(self.latitude_deg)
@@ -71,5 +73,5 @@ def from_degrees_minutes(text: str) -> float:
     if hemi.strip().upper() in ("S", "W"):
         value = -value
     elif hemi.strip().upper() not in ("N", "E"):
-        raise ValueError(f"unknown hemisphere {hemi!r} in {text!r}")
+        raise InvalidArgument(f"unknown hemisphere {hemi!r} in {text!r}")
     return value

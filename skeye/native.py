@@ -36,6 +36,7 @@ from pathlib import Path
 from types import ModuleType
 
 COMPILED_MODULES: tuple[str, ...] = (
+    "skeye.robots.params",
     "skeye.sim.state",
     "skeye.sim.frames",
     "skeye.sim.controller",

@@ -208,3 +208,15 @@ class ParentWatch:
             if self._caught & bit and not now & bit:
                 return f"parent process {self.pid} is handling {sig.name}"
         return None
+
+
+def wait_for_signal(stop: threading.Event, failed: threading.Event | None = None) -> None:
+    """Wait for SIGTERM/SIGINT (or ``failed`` to be set)."""
+    def handler(signum: int, frame: Any) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+    while not stop.wait(0.2):
+        if failed is not None and failed.is_set():
+            return

@@ -7,6 +7,11 @@ parent through an error queue), and handed to the ``on_error`` callback, which r
 dying worker's thread and must not block. A failing callback is logged, never re-raised. So no
 thread of skeye dies silently: the owner learns of it at once (callback) or when it next looks
 (:meth:`Worker.check`, the queue).
+
+Stopping: :meth:`Worker.stop` sets :attr:`Worker.stopping` (a target that loops watches it) and
+calls the ``on_stop`` callback, which wakes a target blocked elsewhere (closes its socket,
+notifies its condition); :meth:`Worker.join` waits with a deadline and says whether the thread
+ended. Joining from the worker's own thread returns at once.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ class Worker:
         on_error: called once with the exception if ``target`` raises.
         errors: a queue that receives ``(name, exception)`` if ``target`` raises.
         args: positional arguments for ``target``.
+        on_stop: called by :meth:`stop` to wake the target (it must not block).
     """
 
     def __init__(
@@ -52,9 +58,13 @@ class Worker:
         on_error: Callable[[BaseException], None] | None = None,
         errors: ErrorQueue | None = None,
         args: tuple[Any, ...] = (),
+        on_stop: Callable[[], None] | None = None,
     ) -> None:
         self.name = name
         self.error: BaseException | None = None
+        self.stopping = threading.Event()
+        """Set by :meth:`stop`: the target should return soon."""
+        self._on_stop = on_stop
         self._target = target
         self._args = args
         self._on_error = on_error
@@ -91,9 +101,25 @@ class Worker:
     def thread(self) -> threading.Thread:
         return self._thread
 
-    def join(self, timeout_s: float | None = None) -> None:
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
+    def stop(self) -> None:
+        """Ask the target to end (idempotent): set :attr:`stopping`, call ``on_stop``."""
+        self.stopping.set()
+        if self._on_stop is not None:
+            try:
+                self._on_stop()
+            except Exception:
+                log.exception("stop callback of worker %s failed", self.name)
+
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait up to ``timeout_s`` for the thread to end; True when it has (or never started).
+
+        From the worker's own thread it returns at once (False: the thread is still running).
+        """
+        if self._thread is threading.current_thread():
+            return False
+        if self._thread.is_alive():
             self._thread.join(timeout_s)
+        return not self._thread.is_alive()
 
     def check(self) -> None:
         """Raise :class:`WorkerFailed` if the target raised."""

@@ -14,6 +14,15 @@ import warnings
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import HealthCheck, settings
+
+# Hypothesis times each example against a wall-clock deadline (200 ms) and flags slow data
+# generation: both fail on a busy host for reasons that are not the code's. Property tests here
+# check correctness, never speed (speed lives in benchmarks/).
+settings.register_profile(
+    "skeye", deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.load_profile("skeye")
 
 
 def child_pids(pid: int) -> list[int]:

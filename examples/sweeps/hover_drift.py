@@ -12,7 +12,6 @@ import math
 from pathlib import Path
 from typing import Any
 
-from skeye.link.packets import NavState
 from skeye.validate.experiments import (
     RunSettings,
     flight_stack,
@@ -20,6 +19,7 @@ from skeye.validate.experiments import (
     until_state,
     wait_sim,
 )
+from skeye.wire.packets import NavState
 
 
 def trial(settings: RunSettings, params: dict[str, Any], workdir: Path) -> dict[str, float]:

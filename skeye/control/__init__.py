@@ -11,7 +11,7 @@ PI motion control and robot classes, so a flight is a few lines::
 
 from skeye.control.camera import CameraImage, CameraSensor
 from skeye.control.clock import Clock, LockstepClock, RealtimeClock
-from skeye.control.connection import Connection, LinkClosed, Pose, connect, parse_address
+from skeye.control.connection import Connection, Pose, connect, parse_address
 from skeye.control.motion import (
     DriveCommand,
     MotionCancelled,
@@ -22,6 +22,7 @@ from skeye.control.motion import (
 )
 from skeye.control.robots import AirRobot, FlightState, Hummingbird, Robot
 from skeye.control.sensors import Reading, Sensor
+from skeye.errors import LinkClosed
 
 __all__ = [
     "AirRobot",

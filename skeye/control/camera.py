@@ -4,7 +4,7 @@ How this works: the simulator announces every rendered frame on the control stre
 (``SEN {Type Camera} {Name Down} {Frame n}``); that line updates :class:`CameraSensor` like any
 other sensor. The pixels live on the image server (docs/protocols/images.md);
 :meth:`CameraSensor.image` asks it for the newest frame of ``<robot>/<camera>`` over one lazily
-opened :class:`~skeye.sim.image_client.ImageClient` (RAW + META, so the frame number and sim
+opened :class:`~skeye.control.image_client.ImageClient` (RAW + META, so the frame number and sim
 time come with the pixels). The image client is not thread-safe: one lock serialises its use. A
 request that fails in any way (timeout, reset, refused, a server that restarted) drops the
 connection, so the next call reconnects and a late frame can never answer a later request;
@@ -21,9 +21,10 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
-from skeye.sim.image_client import ImageClient
-from skeye.sim.protocol import Message
+from skeye.control.image_client import ImageClient
+from skeye.errors import LinkClosed, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.pixels import frame_image
+from skeye.wire.sim_messages import SenCamera
 
 from .sensors import CameraReading, Sensor
 
@@ -47,6 +48,7 @@ class CameraSensor(Sensor[CameraReading]):
     """
 
     type_name = "Camera"
+    message_class = SenCamera
 
     def __init__(
         self,
@@ -62,8 +64,9 @@ class CameraSensor(Sensor[CameraReading]):
         self._client: ImageClient | None = None
         self._client_lock = threading.Lock()
 
-    def parse(self, msg: Message, time_s: float) -> CameraReading:
-        return CameraReading(time_s, msg.get_int("Frame", min_value=0))
+    def convert(self, message: Any) -> CameraReading:
+        s: SenCamera = message
+        return CameraReading(s.time_s, s.frame)
 
     def image(self) -> CameraImage:
         """The newest frame of this camera from the image server.
@@ -83,22 +86,22 @@ class CameraSensor(Sensor[CameraReading]):
             reused = self._client is not None
             try:
                 frame = self._fetch()
-            except (RemoteProtocolError, OSError) as exc:
+            except (RemoteProtocolError, LinkClosed) as exc:
                 self._drop()
-                closed = isinstance(exc, OSError) or "closed" in str(exc)
+                closed = isinstance(exc, LinkClosed) or "closed" in str(exc)
                 if not (reused and closed):
                     raise _as_skeye(self.name, exc) from exc
                 # The server closed a connection that sat idle (its --idle-timeout): once more,
                 # on a fresh one.
                 try:
                     frame = self._fetch()
-                except (SkeyeError, OSError) as exc2:
+                except SkeyeError as exc2:
                     self._drop()
                     raise _as_skeye(self.name, exc2) from exc2
             except SkeyeError:
                 self._drop()  # e.g. a timeout: a late frame must not answer the next request
                 raise
-        bgr = frame.image()
+        bgr = frame_image(frame)
         if frame.meta is None:
             latest = self.latest
             number, time_s = (latest.frame, latest.time_s) if latest else (0, 0.0)

@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable
 
 from skeye.errors import ConfigError, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -85,8 +86,7 @@ class RealtimeClock(Clock):
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self.ticks = 0
-        self._thread = threading.Thread(target=self._run, name="skeye-control-motion", daemon=True)
-        self._thread.start()
+        self._thread = Worker(self._run, "skeye-control-motion").start()
 
     def _run(self) -> None:
         next_t = time.monotonic()
@@ -138,8 +138,7 @@ class RealtimeClock(Clock):
     def close(self, timeout_s: float = 2.0) -> None:
         self._stop.set()
         self.poke()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
+        self._thread.join(timeout_s)
 
 
 class LockstepClock(Clock):

@@ -1,13 +1,14 @@
-"""The connection to a simulator: the socket, its two threads, and request/answer matching.
+"""The connection to a simulator: its link, its two threads, and request/answer matching.
 
 How this works (user's view: docs/control.md):
 
-- A **message-handler** thread alone reads the socket. It feeds the bytes to the shared sans-IO
-  codec (:class:`skeye.sim.protocol.LineDecoder`) and dispatches each message: ``SEN`` to its
+- The byte link comes from :func:`skeye.link.transport.open_link` (``tcp://host:port``).
+- A **message-handler** thread alone reads the link. It feeds the bytes to the shared sans-IO
+  codec (:class:`skeye.wire.sim_lines.LineDecoder`) and dispatches each message: ``SEN`` to its
   sensor object, ``STA`` to the robot's status, answers (``RES``, ``ERR``, ``CONF``, ``GEO``,
   ``NFO {StartPoses}``) to the oldest pending request they answer. An ``ERR`` nobody waits for
   (a refused ``DRIVE``, a physics stop) goes to the robot, whose motion then fails with it.
-- A **command-handler** thread alone writes the socket, draining one bounded multi-producer
+- A **command-handler** thread alone writes the link, draining one bounded multi-producer
   queue of whole lines, so bytes of two commands never interleave. A full queue blocks the
   producer up to its timeout, then raises :class:`~skeye.errors.LinkTimeout`.
 - Every wait has a deadline. When the link dies (EOF, a socket error, a protocol violation) the
@@ -24,37 +25,37 @@ from __future__ import annotations
 
 import logging
 import queue
-import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from skeye.control.image_client import ImageClient
 from skeye.errors import (
     CommandRejected,
+    LinkClosed,
     LinkTimeout,
     LocalProtocolError,
+    PeerClosed,
     RemoteProtocolError,
     SkeyeError,
 )
-from skeye.sim.image_client import ImageClient
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_message, parse_start_poses
+from skeye.link.transport import Link, open_link, tcp_uri
+from skeye.wire.sim import decode, encode, fields_of, res_time_s
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
+from skeye.wire.sim_messages import GetConf, GetStartPoses, Init, Ping, Set, Step
+from skeye.workers import Worker
 
 from .clock import Clock, LockstepClock, RealtimeClock, period_steps
 from .motion import MotionConfig
-
-if TYPE_CHECKING:
-    from .robots import Robot
+from .robots import Robot, robot_class
 
 log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 3000
 DEFAULT_IMAGE_PORT = 5003
 _STOP = b""
-
-
-class LinkClosed(SkeyeError):
-    """The connection to the simulator is gone (closed by us, by the peer, or broken)."""
+_RECV_WAIT_S = 1.0  # the reader's longest wait in one recv (a closed link wakes it at once)
 
 
 @dataclass(frozen=True)
@@ -170,25 +171,23 @@ class Connection:
         self._outbox: queue.Queue[bytes] = queue.Queue(queue_size)
         self._nfo = threading.Event()
         self._close_hooks: list[Callable[[SkeyeError], None]] = []
-        try:
-            self._sock = socket.create_connection((self.host, self.port), timeout=timeout_s)
-        except TimeoutError as exc:
+        try:  # no send deadline: a full command queue is what times out (see ``send``)
+            self._link: Link = open_link(tcp_uri(self.host, self.port), timeout_s,
+                                         send_timeout_s=None)
+        except LinkTimeout as exc:
             raise LinkTimeout(f"simulator {self.peer}: no connection in {timeout_s:g} s") from exc
-        except OSError as exc:
+        except LinkClosed as exc:
             raise LinkClosed(f"cannot connect to the simulator at {self.peer}: {exc}") from exc
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._sock.settimeout(None)
-        self._reader = threading.Thread(target=self._read_loop, name="skeye-control-read",
-                                        daemon=True)
-        self._writer = threading.Thread(target=self._write_loop, name="skeye-control-write",
-                                        daemon=True)
+        self._reader = Worker(self._read_loop, "skeye-control-read", on_error=self._worker_failed)
+        self._writer = Worker(self._write_loop, "skeye-control-write",
+                              on_error=self._worker_failed)
         self._reader.start()
         self._writer.start()
         self.clock: Clock
         try:
             if not self._nfo.wait(timeout_s):
                 raise LinkTimeout(f"simulator {self.peer}: no NFO greeting in {timeout_s:g} s")
-            self._check()
+            self.check()
             steps = period_steps(self.motion_config.control_rate_hz, self.time_step_s)
             if self.mode == "lockstep":
                 self.clock = LockstepClock(self._tick, self._get_error, self._step,
@@ -226,7 +225,8 @@ class Connection:
     def _get_error(self) -> SkeyeError | None:
         return self._error
 
-    def _check(self) -> None:
+    def check(self) -> None:
+        """Raise the link's error if it is down (LinkClosed, RemoteProtocolError...)."""
         if self._error is not None:
             raise self._error
 
@@ -242,8 +242,20 @@ class Connection:
         """
         self._put(format_message(type_word, *fields), timeout_s)
 
+    def send_message(self, message: Any, timeout_s: float | None = None) -> None:
+        """:meth:`send` of a typed message (:mod:`skeye.wire.sim_messages`, e.g. ``Drive``)."""
+        self._put(encode(message), timeout_s)
+
+    def request_message(self, message: Any, timeout_s: float | None = None) -> Any:
+        """:meth:`request` of a typed message; returns the typed answer (:mod:`skeye.wire.sim`).
+
+        Raises:
+            RemoteProtocolError: the answer breaks the protocol; else as :meth:`request`.
+        """
+        return decode(self.request(type(message).WORD, *fields_of(message), timeout_s=timeout_s))
+
     def _put(self, line: bytes, timeout_s: float | None) -> None:
-        self._check()
+        self.check()
         wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
             self._outbox.put(line, timeout=wait_s)
@@ -252,7 +264,7 @@ class Connection:
                 f"simulator {self.peer}: command queue full for {wait_s:g} s "
                 "(the simulator is not reading)"
             ) from None
-        self._check()
+        self.check()
 
     def request(
         self, type_word: str, *fields: tuple[str, object], timeout_s: float | None = None
@@ -271,7 +283,7 @@ class Connection:
         pending = _Pending(command, _ANSWERS.get(command, frozenset({"RES"})), ident)
         line = format_message(type_word, *fields)
         with self._lock:
-            self._check()
+            self.check()
             self._pending.append(pending)
         wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
@@ -301,14 +313,18 @@ class Connection:
                     while len(chunks) < 64:
                         more = self._outbox.get_nowait()
                         if not more:
-                            self._sock.sendall(b"".join(chunks))
+                            self._link.send(b"".join(chunks))
                             return
                         chunks.append(more)
                 except queue.Empty:
                     pass
-                self._sock.sendall(b"".join(chunks))
-        except OSError as exc:
+                self._link.send(b"".join(chunks))
+        except SkeyeError as exc:  # LinkClosed, LinkTimeout
             self._fail(LinkClosed(f"simulator {self.peer}: sending failed: {exc}"))
+
+    def _worker_failed(self, exc: BaseException) -> None:
+        """A link thread died of a bug: every waiter hears of it (the worker logged it)."""
+        self._fail(SkeyeError(f"a connection thread failed: {exc!r}"))
 
     # -- reading ------------------------------------------------------------------------
     def _read_loop(self) -> None:
@@ -317,16 +333,18 @@ class Connection:
         try:
             while True:
                 try:
-                    data = self._sock.recv(65536)
-                except OSError as exc:
-                    error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
-                    break
-                if not data:
+                    data = self._link.recv(_RECV_WAIT_S)
+                except PeerClosed:
                     error = LinkClosed(
                         f"the simulator at {self.peer} closed the connection "
                         f"(last sim time {self.time_s:.3f} s)"
                     )
                     break
+                except LinkClosed as exc:
+                    error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
+                    break
+                if not data:
+                    continue
                 for event in decoder.feed(data):
                     if isinstance(event, LineError):
                         log.warning("simulator %s sent a bad line: %s: %r", self.peer,
@@ -360,17 +378,18 @@ class Connection:
             self._note_time(msg)
             robot = self.robot
             if robot is not None:
-                robot._on_sensor(msg)
+                robot.on_sensor(msg)
             return
         if kind == "STA":
             self._note_time(msg)
             if self.robot is not None:
-                self.robot._on_status(msg)
+                self.robot.on_status(msg)
             return
         if kind == "NFO" and msg.has("Mode") and not self._nfo.is_set():
-            self.mode = (msg.get("Mode") or "realtime").lower()
-            self.time_step_s = msg.get_float("TimeStep", default=0.001, min_value=1e-6)
-            self.level = msg.get("Level") or ""
+            nfo = decode(msg)
+            self.mode = (nfo.mode or "realtime").lower()
+            self.time_step_s = 0.001 if nfo.time_step_s is None else nfo.time_step_s
+            self.level = nfo.level or ""
             self._nfo.set()
             return
         if kind == "RES":
@@ -393,7 +412,7 @@ class Connection:
             log.warning("simulator %s: %s refused: %s", self.peer, msg.get("Command"),
                         msg.get("Reason"))
             if self.robot is not None:
-                self.robot._on_error(msg)
+                self.robot.on_error(msg)
 
     def _fail(self, error: SkeyeError) -> None:
         """The link is down: record why and wake every waiter with it."""
@@ -409,7 +428,7 @@ class Connection:
         self._nfo.set()
         robot = self.robot
         if robot is not None:
-            robot._link_down(error)
+            robot.link_down(error)
         for hook in hooks:
             try:
                 hook(error)
@@ -419,38 +438,29 @@ class Connection:
             self._outbox.put_nowait(_STOP)
         except queue.Full:
             pass
-        try:
-            self._sock.shutdown(socket.SHUT_RDWR)
-        except OSError:
-            pass
+        self._link.close()  # wakes the reader; the writer's next send fails
 
     # -- world commands -------------------------------------------------------------------
     def start_poses(self) -> dict[str, Pose]:
         """The world's start poses: name -> :class:`Pose`."""
-        answer = self.request("GETSTARTPOSES")
-        return {
-            name: Pose(location, rotation)
-            for name, (location, rotation) in parse_start_poses(answer).items()
-        }
+        answer = self.request_message(GetStartPoses())
+        return {name: Pose(location, rotation) for name, location, rotation in answer.poses}
 
     def ping(self) -> float:
         """Round trip to the simulator; returns its sim time."""
         with self._lock:
             self._ping_ids += 1
             ident = f"p{self._ping_ids}"
-        return self.request("PING", ("Id", ident)).get_float("Time")
+        return res_time_s(self.request_message(Ping(ident)))
 
     def set_wind(self, mode: str, params: str = "") -> None:
         """``SET {Type Wind}``: none, constant, turbulence or random_force (see the sim docs)."""
-        fields: list[tuple[str, object]] = [("Type", "Wind"), ("Mode", mode)]
-        if params:
-            fields.append(("Params", params))
-        self.request("SET", *fields)
+        self.request_message(Set("Wind", mode=mode, params=params or None))
 
     def _step(self, count: int) -> float:
-        answer = self.request("STEP", ("Count", count),
-                              timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
-        t = answer.get_float("Time")
+        answer = self.request_message(
+            Step(count), timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
+        t = res_time_s(answer)
         self.time_s = max(self.time_s, t)
         return t
 
@@ -474,7 +484,7 @@ class Connection:
     def _tick(self) -> None:
         robot = self.robot
         if robot is not None:
-            robot._control_tick()
+            robot.control_tick()
 
     # -- robots ---------------------------------------------------------------------------
     def spawn(
@@ -502,8 +512,6 @@ class Connection:
             LocalProtocolError: this connection already has a robot, or bad arguments.
             CommandRejected: the simulator refused (unknown class or start pose...).
         """
-        from .robots import robot_class
-
         if self.robot is not None:
             raise LocalProtocolError(
                 f"this connection already drives {self.robot.name} (one robot per connection)"
@@ -511,15 +519,14 @@ class Connection:
         if (start is None) == (location_ned_m is None):
             raise LocalProtocolError("spawn needs exactly one of start= or location_ned_m=")
         cls: type[Robot] = robot_class(robot) if isinstance(robot, str) else robot
-        fields: list[tuple[str, object]] = [("ClassName", cls.class_name), ("Name", name)]
         if start is not None:
-            fields.append(("Start", start))
+            init = Init(cls.class_name, name, start=start)
             home: tuple[float, float, float] | None = None
         else:
             assert location_ned_m is not None
             home = tuple(float(v) for v in location_ned_m)  # type: ignore[assignment]
-            fields.append(("Location", home))
-            fields.append(("Rotation", tuple(float(v) for v in rotation_rpy_rad)))
+            rr, rp, ry = (float(v) for v in rotation_rpy_rad)
+            init = Init(cls.class_name, name, location_ned_m=home, rotation_rpy_rad=(rr, rp, ry))
         if start is not None:
             poses = self.start_poses()
             pose = next((p for n, p in poses.items() if n.lower() == start.lower()), None)
@@ -532,17 +539,18 @@ class Connection:
         new = cls(self, name, home, feedback=feedback, motion=motion or self.motion_config)
         self.robot = new
         try:
-            answer = self.request("INIT", *fields)
-            new.name = answer.get("Name") or name
-            new._configure(self.request("GETCONF", ("Type", "Robot")))
-            new._await_first_readings()
+            answer = self.request_message(init)
+            new.name = answer.name or name
+            new.configure(self.request_message(GetConf("Robot")))
+            new.await_first_readings()
         except BaseException:
             self.robot = None
             raise
         return new
 
     # -- images ---------------------------------------------------------------------------
-    def _image_client(self) -> ImageClient:
+    def image_client(self) -> ImageClient:
+        """A new client of the simulator's image server (``images=`` given to connect)."""
         if self.images_address is None:
             raise LocalProtocolError("connect with images='host:port' to fetch camera frames")
         host, port = self.images_address
@@ -558,13 +566,11 @@ class Connection:
         if clock is not None:
             clock.close(timeout_s)
         self._fail(LinkClosed(f"the connection to {self.peer} was closed"))
-        current = threading.current_thread()
         for t in (self._writer, self._reader):
-            if t.is_alive() and t is not current:
-                t.join(timeout_s)
-        self._sock.close()
+            t.join(timeout_s)  # returns at once for the calling thread's own worker
+        self._link.close()
         if self.robot is not None:
-            self.robot._close()
+            self.robot.close()
 
     def add_close_hook(self, fn: Callable[[SkeyeError], None]) -> None:
         """Call ``fn(error)`` once when the link goes down."""

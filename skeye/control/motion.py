@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.wire.sim_messages import Drive
 
 from .sensors import Vec3, wrap_pi
 
@@ -126,13 +127,13 @@ class DriveCommand:
     up_m_s: float = 0.0
     yaw_rate_rad_s: float = 0.0
 
-    def fields(self) -> tuple[tuple[str, float], ...]:
-        """The ``DRIVE`` segments (docs/protocols/simulator.md names; up positive)."""
-        return (
-            ("LinearVelocity", self.forward_m_s),
-            ("LateralVelocity", self.right_m_s),
-            ("AltitudeVelocity", self.up_m_s),
-            ("RotationalVelocity", self.yaw_rate_rad_s),
+    def to_message(self) -> Drive:
+        """The velocity-form ``DRIVE`` of these set-points (the wire table spells it)."""
+        return Drive(
+            forward_m_s=self.forward_m_s,
+            right_m_s=self.right_m_s,
+            up_m_s=self.up_m_s,
+            yaw_rate_rad_s=self.yaw_rate_rad_s,
         )
 
 

@@ -8,14 +8,15 @@ motion and, by default, wait for it; the clock's control tick (a thread in realt
 loop in lockstep) feeds it the feedback sensor's latest reading and sends its ``DRIVE``. A
 position motion that arrives turns into a position hold, so the vehicle stays where it was sent.
 
-The flight state follows a transition table (:data:`TRANSITIONS`); an illegal request (flying
-somewhere while landed) raises LocalProtocolError before anything is sent. A motion's error (a
+The flight state follows a transition table (:mod:`skeye.control.flight`); an illegal request
+(flying somewhere while landed) raises LocalProtocolError before anything is sent. The sensor
+registry is the base class :class:`~skeye.control.robot_sensors.RobotSensors`; the robot sees
+its connection only through :class:`~skeye.control.host.RobotHost`. A motion's error (a
 refused ``DRIVE``, the link dying, a sim-time budget exceeded) is raised in whoever waits for it.
 """
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
 import threading
@@ -23,7 +24,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 from skeye.errors import (
     CommandRejected,
@@ -33,9 +34,12 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.geo import GeoOrigin
-from skeye.sim.protocol import Message
+from skeye.wire.sim_lines import Message
+from skeye.wire.sim_messages import RobotConf
 
 from .camera import CameraSensor
+from .flight import TRANSITIONS, FlightState, transition
+from .host import RobotHost
 from .motion import (
     STOP,
     DriveCommand,
@@ -50,74 +54,13 @@ from .motion import (
     Velocity,
     body_to_world,
 )
-from .sensors import (
-    SENSOR_CLASSES,
-    AccelerometerSensor,
-    BarometerSensor,
-    BatterySensor,
-    CompassSensor,
-    GpsSensor,
-    GroundTruthSensor,
-    GyroSensor,
-    InsSensor,
-    MotorsSensor,
-    OpticalFlowSensor,
-    PoseReading,
-    RawSensor,
-    Sensor,
-    SonarSensor,
-    StatusSensor,
-)
-
-if TYPE_CHECKING:
-    from .connection import Connection
+from .robot_sensors import FEEDBACK_TYPES, RobotSensors
+from .sensors import PoseReading, Sensor, StatusSensor
 
 log = logging.getLogger(__name__)
 
-FEEDBACK_TYPES = {"ins": "ins", "ground_truth": "groundtruth"}
 
-
-class FlightState(enum.Enum):
-    LANDED = "landed"
-    TAKING_OFF = "taking_off"
-    FLYING = "flying"
-    HOLDING = "holding"
-    LANDING = "landing"
-    FAILED = "failed"
-
-
-_S = FlightState
-_AIRBORNE = (_S.TAKING_OFF, _S.FLYING, _S.HOLDING, _S.LANDING)
-TRANSITIONS: dict[tuple[FlightState, str], FlightState] = {
-    (_S.LANDED, "take_off"): _S.TAKING_OFF,
-    (_S.HOLDING, "take_off"): _S.TAKING_OFF,
-    (_S.FLYING, "take_off"): _S.TAKING_OFF,
-    (_S.LANDING, "take_off"): _S.TAKING_OFF,
-    (_S.LANDED, "velocity"): _S.FLYING,
-    (_S.LANDED, "hold"): _S.LANDED,
-    (_S.LANDED, "land"): _S.LANDED,
-    (_S.LANDED, "landed"): _S.LANDED,
-    **{(s, "move"): _S.FLYING for s in _AIRBORNE},
-    **{(s, "velocity"): _S.FLYING for s in _AIRBORNE},
-    **{(s, "hold"): _S.HOLDING for s in _AIRBORNE},
-    **{(s, "arrived"): _S.HOLDING for s in _AIRBORNE},
-    **{(s, "land"): _S.LANDING for s in _AIRBORNE},
-    **{(s, "landed"): _S.LANDED for s in _AIRBORNE},
-    **{(s, "failed"): _S.FAILED for s in FlightState},
-}
-"""``(state, event) -> state``; a pair not in the table is an illegal request."""
-
-
-def transition(state: FlightState, event: str, who: str = "robot") -> FlightState:
-    """The state after ``event``; LocalProtocolError naming both when it is not allowed."""
-    new = TRANSITIONS.get((state, event))
-    if new is None:
-        hint = " (call take_off() first)" if state is _S.LANDED else ""
-        raise LocalProtocolError(f"{who}: cannot {event} while {state.value}{hint}")
-    return new
-
-
-class Robot:
+class Robot(RobotSensors):
     """One spawned robot: its sensors, its flight state and its motion commands.
 
     Made by :meth:`Connection.spawn`. Sensors mounted on the robot are attributes
@@ -130,7 +73,7 @@ class Robot:
 
     def __init__(
         self,
-        connection: Connection,
+        connection: RobotHost,
         name: str,
         home_ned_m: tuple[float, float, float],
         *,
@@ -168,10 +111,12 @@ class Robot:
         return feedback
 
     # -- setup (called by Connection.spawn) -----------------------------------------------
-    def _configure(self, conf: Message) -> None:
-        for key in ("MaxSpeed", "MaxClimb", "MaxYawRate", "Mass", "TimeStep", "MaxTilt"):
-            if conf.has(key):
-                self.limits[key] = conf.get_float(key)
+    def configure(self, conf: RobotConf) -> None:
+        for key, value in (("MaxSpeed", conf.max_speed_m_s), ("MaxClimb", conf.max_climb_m_s),
+                           ("MaxYawRate", conf.max_yaw_rate_rad_s), ("Mass", conf.mass_kg),
+                           ("TimeStep", conf.time_step_s), ("MaxTilt", conf.max_tilt_rad)):
+            if value is not None:
+                self.limits[key] = value
         cfg = self.motion_config
         self.motion_config = replace(
             cfg,
@@ -180,35 +125,11 @@ class Robot:
             max_yaw_rate_rad_s=min(cfg.max_yaw_rate_rad_s,
                                    self.limits.get("MaxYawRate", math.inf)),
         )
-        for item in (conf.get("Sensors") or "").split(","):
-            if ":" not in item:
-                continue
-            type_name, sensor_name = (part.strip() for part in item.split(":", 1))
+        for type_name, sensor_name in conf.mounted():
             self.mounted.append((type_name, sensor_name))
             self._sensor(type_name, sensor_name)
 
-    def _sensor(self, type_name: str, sensor_name: str) -> Sensor[Any]:
-        key = (type_name.lower(), sensor_name.lower())
-        sensor = self.sensors.get(key)
-        if sensor is not None:
-            return sensor
-        with self._lock:
-            sensor = self.sensors.get(key)
-            if sensor is None:
-                kwargs: dict[str, Any] = {"advance": self._advance}
-                if key[0] == "camera":
-                    conn = self.connection
-                    images = conn._image_client if conn.images_address is not None else None
-                    sensor = CameraSensor(sensor_name, images=images, robot_name=self.name,
-                                          **kwargs)
-                elif key[0] in SENSOR_CLASSES:
-                    sensor = SENSOR_CLASSES[key[0]](sensor_name, **kwargs)
-                else:
-                    sensor = RawSensor(sensor_name, type_name, **kwargs)
-                self.sensors = {**self.sensors, key: sensor}  # copy-on-write for lock-free reads
-        return sensor
-
-    def _await_first_readings(self) -> None:
+    def await_first_readings(self) -> None:
         need: list[Sensor[Any]] = [self.status]
         for type_key in ("groundtruth", "ins"):
             found = self._find(type_key)
@@ -228,7 +149,7 @@ class Robot:
                                     self.motion_config)
 
     # -- message thread --------------------------------------------------------------------
-    def _on_sensor(self, msg: Message) -> None:
+    def on_sensor(self, msg: Message) -> None:
         type_name = msg.get("Type")
         sensor_name = msg.get("Name")
         if not type_name or not sensor_name:
@@ -236,10 +157,10 @@ class Robot:
             return
         self._sensor(type_name, sensor_name).update(msg)
 
-    def _on_status(self, msg: Message) -> None:
+    def on_status(self, msg: Message) -> None:
         self.status.update(msg)
 
-    def _on_error(self, msg: Message) -> None:
+    def on_error(self, msg: Message) -> None:
         command = (msg.get("Command") or "").upper()
         reason = msg.get("Reason") or "no reason given"
         error: SkeyeError
@@ -254,7 +175,7 @@ class Robot:
         with self._lock:
             self._rejection = error
 
-    def _link_down(self, error: SkeyeError) -> None:
+    def link_down(self, error: SkeyeError) -> None:
         for sensor in (*self.sensors.values(), self.status):
             sensor.fail(error)
         with self._lock:
@@ -262,92 +183,10 @@ class Robot:
             if motion is not None and not motion.error:
                 motion.error = error
 
-    def _close(self) -> None:
+    def close(self) -> None:
         for sensor in self.sensors.values():
             if isinstance(sensor, CameraSensor):
                 sensor.close()
-
-    # -- sensors ---------------------------------------------------------------------------
-    def _find(self, type_key: str, name: str | None = None) -> Sensor[Any] | None:
-        for (t, n), sensor in self.sensors.items():
-            if t == type_key and (name is None or n == name.lower()):
-                return sensor
-        return None
-
-    def sensor(self, type_name: str, name: str | None = None) -> Sensor[Any]:
-        """The mounted sensor of a type (the first one, unless ``name`` says which)."""
-        found = self._find(type_name.lower(), name)
-        if found is None:
-            mounted = ", ".join(f"{t}:{n}" for t, n in self.mounted) or "none"
-            raise LocalProtocolError(
-                f"{self.name} ({self.class_name}) has no {type_name} sensor"
-                + (f" named {name!r}" if name else "") + f"; mounted: {mounted}"
-            )
-        return found
-
-    @property
-    def ground_truth(self) -> GroundTruthSensor:
-        return self.sensor("GroundTruth")  # type: ignore[return-value]
-
-    @property
-    def ins(self) -> InsSensor:
-        return self.sensor("INS")  # type: ignore[return-value]
-
-    @property
-    def accelerometer(self) -> AccelerometerSensor:
-        return self.sensor("Accelerometer")  # type: ignore[return-value]
-
-    imu = accelerometer
-
-    @property
-    def gyro(self) -> GyroSensor:
-        return self.sensor("Gyro")  # type: ignore[return-value]
-
-    @property
-    def compass(self) -> CompassSensor:
-        return self.sensor("MagneticCompass")  # type: ignore[return-value]
-
-    @property
-    def barometer(self) -> BarometerSensor:
-        return self.sensor("Barometer")  # type: ignore[return-value]
-
-    @property
-    def gps(self) -> GpsSensor:
-        return self.sensor("GPS")  # type: ignore[return-value]
-
-    @property
-    def sonar(self) -> SonarSensor:
-        return self.sensor("Sonar")  # type: ignore[return-value]
-
-    @property
-    def optical_flow(self) -> OpticalFlowSensor:
-        return self.sensor("OpticalFlow")  # type: ignore[return-value]
-
-    @property
-    def battery(self) -> BatterySensor:
-        return self.sensor("Battery")  # type: ignore[return-value]
-
-    @property
-    def motors(self) -> MotorsSensor:
-        return self.sensor("Motors")  # type: ignore[return-value]
-
-    @property
-    def camera(self) -> CameraSensor:
-        return self.sensor("Camera")  # type: ignore[return-value]
-
-    def position(self) -> tuple[float, float, float]:
-        """``(north_m, east_m, altitude_m)`` from ground truth (altitude up positive)."""
-        reading = self.ground_truth.latest
-        if reading is None:
-            raise LinkTimeout(f"{self.name}: no ground-truth reading yet")
-        n, e, d = reading.position_ned_m
-        return (n, e, -d)
-
-    @property
-    def landed(self) -> bool:
-        """What the vehicle's last status line said."""
-        status = self.status.latest
-        return True if status is None else status.landed
 
     @property
     def busy(self) -> bool:
@@ -378,7 +217,7 @@ class Robot:
                 raise LinkTimeout(f"{self.name}: no {what} reading for 2 s")
 
     # -- the control tick (clock thread or stepping loop) ----------------------------------
-    def _control_tick(self) -> None:
+    def control_tick(self) -> None:
         with self._lock:
             motion = self._motion
             rejection, self._rejection = self._rejection, None
@@ -393,7 +232,7 @@ class Robot:
             armed = status.armed if status is not None else True
             was_done = motion.done
             command = motion.update(state, landed, armed)
-            self.connection.send("DRIVE", *command.fields())
+            self.connection.send_message(command.to_message())
             self._last_command = command
         except SkeyeError as exc:
             self._motion_failed(motion, exc)
@@ -411,7 +250,7 @@ class Robot:
                     self.state = FlightState.FAILED
         if self.connection.error is None and not isinstance(exc, PhysicsError):
             try:  # stop where we are rather than keep the last velocity
-                self.connection.send("DRIVE", *STOP.fields(), timeout_s=0.5)
+                self.connection.send_message(STOP.to_message(), timeout_s=0.5)
             except SkeyeError:
                 pass
 
@@ -446,7 +285,7 @@ class Robot:
         timeout_s: float | None,
         feedback: str | None,
     ) -> None:
-        self.connection._check()
+        self.connection.check()
         fb = self._check_feedback(feedback or self.feedback)
         with self._lock:
             new_state = transition(self.state, event, self.name)
@@ -473,7 +312,7 @@ class Robot:
         """
         target = motion if motion is not None else self._motion
         if target is None:
-            self.connection._check()
+            self.connection.check()
             return
         if timeout_s is None:
             timeout_s = self.connection.timeout_s + 3.0 * (target.sim_timeout_s or 30.0)

@@ -1,7 +1,9 @@
 """Client-side sensor objects: one class per simulated sensor, all sharing :class:`Sensor`.
 
 How this works: the connection's message-handler thread hands every ``SEN`` line of a sensor to
-its object (:meth:`Sensor.update`), which parses the line into a frozen, typed reading (SI units,
+its object (:meth:`Sensor.update`), which decodes it through the protocol's codec table
+(:mod:`skeye.wire.sim`: one layout per sensor Type, shared with the simulator) and converts it
+into a frozen, typed reading (SI units,
 NED world / FRD body frames, angles in (-pi, pi]), stores it as ``latest`` and in a bounded
 ``history``, wakes :meth:`Sensor.wait_next` callers and then runs the registered callbacks. A
 callback that raises is logged and counted; it never stops the message thread. A line the parser
@@ -25,7 +27,23 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 from skeye.errors import LinkTimeout, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.geo import from_degrees_minutes
-from skeye.sim.protocol import Message
+from skeye.wire.sim import decode_as
+from skeye.wire.sim_lines import Message
+from skeye.wire.sim_messages import (
+    SenAccelerometer,
+    SenBarometer,
+    SenBattery,
+    SenGps,
+    SenGroundTruth,
+    SenGyro,
+    SenIns,
+    SenMagneticCompass,
+    SenMotors,
+    SenOpticalFlow,
+    SenOther,
+    SenSonar,
+    Sta,
+)
 
 log = logging.getLogger(__name__)
 
@@ -39,13 +57,8 @@ def wrap_pi(angle_rad: float) -> float:
     return math.pi if wrapped == -math.pi else wrapped
 
 
-def _vec3(msg: Message, key: str) -> Vec3:
-    x, y, z = msg.get_vector(key, 3)
-    return (x, y, z)
-
-
-def _rpy(msg: Message, key: str) -> Vec3:
-    r, p, y = msg.get_vector(key, 3)
+def _rpy(rpy: Vec3) -> Vec3:
+    r, p, y = rpy
     return (wrap_pi(r), wrap_pi(p), wrap_pi(y))
 
 
@@ -188,6 +201,8 @@ class Sensor(Generic[R]):
     """
 
     type_name: ClassVar[str] = ""
+    message_class: ClassVar[type] = SenOther
+    """What this sensor's lines decode as (:mod:`skeye.wire.sim_messages`)."""
 
     def __init__(
         self,
@@ -268,14 +283,15 @@ class Sensor(Generic[R]):
             self._advance()
 
     # -- called by the message thread ---------------------------------------------------
-    def parse(self, msg: Message, time_s: float) -> R:
-        """Turn one ``SEN`` line into this sensor's reading (RemoteProtocolError if bad)."""
+    def convert(self, message: Any) -> R:
+        """Turn one decoded line (a ``message_class``) into this sensor's reading."""
         raise NotImplementedError
 
     def update(self, msg: Message) -> None:
-        """Take one ``SEN`` line: parse, store, wake waiters, run callbacks."""
+        """Take one ``SEN`` line: decode it through the codec table, convert, store, wake
+        waiters, run callbacks."""
         try:
-            reading = self.parse(msg, msg.get_float("Time", min_value=0.0))
+            reading = self.convert(decode_as(msg, self.message_class))
         except RemoteProtocolError as exc:
             self.parse_errors += 1
             log.warning("bad %s %r reading: %s", self.type_name, self.name, exc)
@@ -313,14 +329,16 @@ class GroundTruthSensor(Sensor[GroundTruthReading]):
     """The vehicle's true pose (body origin), NED, 50 Hz by default."""
 
     type_name = "GroundTruth"
+    message_class = SenGroundTruth
 
-    def parse(self, msg: Message, time_s: float) -> GroundTruthReading:
+    def convert(self, message: Any) -> GroundTruthReading:
+        s: SenGroundTruth = message
         return GroundTruthReading(
-            time_s,
-            _vec3(msg, "Location"),
-            _rpy(msg, "Orientation"),
-            _vec3(msg, "Velocity"),
-            _vec3(msg, "AngularVelocity"),
+            s.time_s,
+            s.location_ned_m,
+            _rpy(s.orientation_rpy_rad),
+            s.velocity_ned_m_s,
+            s.angular_velocity_frd_rad_s,
         )
 
 
@@ -328,72 +346,80 @@ class InsSensor(Sensor[InsReading]):
     """The vehicle's own (drifting) estimate of its pose, as the onboard board sees it."""
 
     type_name = "INS"
+    message_class = SenIns
 
-    def parse(self, msg: Message, time_s: float) -> InsReading:
-        velocity = _vec3(msg, "Velocity") if msg.has("Velocity") else None
-        return InsReading(time_s, _vec3(msg, "Location"), _rpy(msg, "Orientation"), velocity)
+    def convert(self, message: Any) -> InsReading:
+        s: SenIns = message
+        return InsReading(s.time_s, s.location_ned_m, _rpy(s.orientation_rpy_rad),
+                          s.velocity_ned_m_s)
 
 
 class AccelerometerSensor(Sensor[AccelerometerReading]):
     """Specific force in the body frame (FRD), m/s^2: about (0, 0, -9.81) at rest."""
 
     type_name = "Accelerometer"
+    message_class = SenAccelerometer
 
-    def parse(self, msg: Message, time_s: float) -> AccelerometerReading:
-        return AccelerometerReading(time_s, _vec3(msg, "ProperAcceleration"))
+    def convert(self, message: Any) -> AccelerometerReading:
+        s: SenAccelerometer = message
+        return AccelerometerReading(s.time_s, s.proper_acceleration_frd_m_s2)
 
 
 class GyroSensor(Sensor[GyroReading]):
     """Body rates p, q, r (FRD), rad/s."""
 
     type_name = "Gyro"
+    message_class = SenGyro
 
-    def parse(self, msg: Message, time_s: float) -> GyroReading:
-        return GyroReading(time_s, _vec3(msg, "AngularVelocity"))
+    def convert(self, message: Any) -> GyroReading:
+        s: SenGyro = message
+        return GyroReading(s.time_s, s.angular_velocity_frd_rad_s)
 
 
 class CompassSensor(Sensor[CompassReading]):
     """Magnetometer: heading (rad, wrapped to (-pi, pi]) and field in the body frame (uT)."""
 
     type_name = "MagneticCompass"
+    message_class = SenMagneticCompass
 
-    def parse(self, msg: Message, time_s: float) -> CompassReading:
-        field = _vec3(msg, "Field") if msg.has("Field") else (0.0, 0.0, 0.0)
-        return CompassReading(time_s, wrap_pi(msg.get_float("MagneticAngle")), field)
+    def convert(self, message: Any) -> CompassReading:
+        s: SenMagneticCompass = message
+        field = s.field_frd_ut if s.field_frd_ut is not None else (0.0, 0.0, 0.0)
+        return CompassReading(s.time_s, wrap_pi(s.magnetic_angle_rad), field)
 
 
 class BarometerSensor(Sensor[BarometerReading]):
     """Static pressure (Pa) and the pressure altitude it implies (m)."""
 
     type_name = "Barometer"
+    message_class = SenBarometer
 
-    def parse(self, msg: Message, time_s: float) -> BarometerReading:
-        return BarometerReading(
-            time_s, msg.get_float("Pressure", min_value=0.0), msg.get_float("Altitude")
-        )
+    def convert(self, message: Any) -> BarometerReading:
+        s: SenBarometer = message
+        return BarometerReading(s.time_s, s.pressure_pa, s.altitude_m)
 
 
 class GpsSensor(Sensor[GpsReading]):
     """GPS fix: decimal degrees (``LatitudeDeg``) or USARSim's ``39,8.0341,N`` text."""
 
     type_name = "GPS"
+    message_class = SenGps
 
-    def parse(self, msg: Message, time_s: float) -> GpsReading:
-        fix = msg.get_int("Fix", default=0) > 0
-        satellites = msg.get_int("Satellites", default=0, min_value=0)
-        if not fix:
-            return GpsReading(time_s, False, satellites, None, None, None, None)
-        lat = self._degrees(msg, "LatitudeDeg", "Latitude", 90.0)
-        lon = self._degrees(msg, "LongitudeDeg", "Longitude", 180.0)
-        alt = msg.get_float("Altitude") if msg.has("Altitude") else None
-        vel = _vec3(msg, "VelocityNED") if msg.has("VelocityNED") else None
-        return GpsReading(time_s, True, satellites, lat, lon, alt, vel)
+    def convert(self, message: Any) -> GpsReading:
+        s: SenGps = message
+        if s.fix <= 0:
+            return GpsReading(s.time_s, False, s.satellites, None, None, None, None)
+        lat = self._degrees(s.latitude_deg, s.latitude, "Latitude")
+        lon = self._degrees(s.longitude_deg, s.longitude, "Longitude")
+        return GpsReading(s.time_s, True, s.satellites, lat, lon, s.altitude_m,
+                          s.velocity_ned_m_s)
 
     @staticmethod
-    def _degrees(msg: Message, decimal_key: str, text_key: str, limit: float) -> float:
-        if msg.has(decimal_key):
-            return msg.get_float(decimal_key, min_value=-limit, max_value=limit)
-        text = msg.require(text_key)
+    def _degrees(degrees: float | None, text: str | None, text_key: str) -> float:
+        if degrees is not None:
+            return degrees
+        if text is None:
+            raise RemoteProtocolError(f"missing {{{text_key} ...}}")
         try:
             return from_degrees_minutes(text)
         except (ValueError, SkeyeError) as exc:
@@ -404,76 +430,71 @@ class SonarSensor(Sensor[SonarReading]):
     """Ultrasonic range along the beam (m), clamped to the sensor's [MinRange, MaxRange]."""
 
     type_name = "Sonar"
+    message_class = SenSonar
 
-    def parse(self, msg: Message, time_s: float) -> SonarReading:
-        return SonarReading(time_s, msg.get_float("Range", min_value=0.0))
+    def convert(self, message: Any) -> SonarReading:
+        s: SenSonar = message
+        return SonarReading(s.time_s, s.range_m)
 
 
 class OpticalFlowSensor(Sensor[OpticalFlowReading]):
     """Optical-flow counts since the last reading and the surface quality (0..169)."""
 
     type_name = "OpticalFlow"
+    message_class = SenOpticalFlow
 
-    def parse(self, msg: Message, time_s: float) -> OpticalFlowReading:
-        dx, dy = msg.get_vector("Delta", 2)
-        return OpticalFlowReading(time_s, (dx, dy), msg.get_int("Quality", default=0))
+    def convert(self, message: Any) -> OpticalFlowReading:
+        s: SenOpticalFlow = message
+        return OpticalFlowReading(s.time_s, s.delta_counts, s.quality)
 
 
 class BatterySensor(Sensor[BatteryReading]):
     """Battery monitor: voltage (V), current (A), remaining charge (fraction 0..1)."""
 
     type_name = "Battery"
+    message_class = SenBattery
 
-    def parse(self, msg: Message, time_s: float) -> BatteryReading:
-        return BatteryReading(
-            time_s,
-            msg.get_float("Voltage", min_value=0.0),
-            msg.get_float("Current"),
-            msg.get_float("Remaining", min_value=0.0, max_value=1.0),
-        )
+    def convert(self, message: Any) -> BatteryReading:
+        s: SenBattery = message
+        return BatteryReading(s.time_s, s.voltage_v, s.current_a, s.remaining)
 
 
 class MotorsSensor(Sensor[MotorsReading]):
     """Rotor speeds and speed commands (rad/s) and the total thrust (N)."""
 
     type_name = "Motors"
+    message_class = SenMotors
 
-    def parse(self, msg: Message, time_s: float) -> MotorsReading:
-        return MotorsReading(
-            time_s,
-            msg.get_vector("Speeds", None),
-            msg.get_vector("Commands", None) if msg.has("Commands") else (),
-            msg.get_float("Thrust", default=math.nan),
-        )
+    def convert(self, message: Any) -> MotorsReading:
+        s: SenMotors = message
+        thrust_n = math.nan if s.thrust_n is None else s.thrust_n
+        return MotorsReading(s.time_s, s.speeds_rad_s, s.commands_rad_s or (), thrust_n)
 
 
 class StatusSensor(Sensor[StatusReading]):
     """The robot's status line (``STA``): armed, landed, remaining battery life (s)."""
 
     type_name = "Status"
+    message_class = Sta
 
-    def parse(self, msg: Message, time_s: float) -> StatusReading:
-        voltage = msg.get_float("Voltage") if msg.has("Voltage") else None
-        return StatusReading(
-            time_s,
-            msg.get_bool("Armed", default=False),
-            msg.get_bool("Landed", default=False),
-            msg.get_float("Battery", default=math.inf),
-            voltage,
-        )
+    def convert(self, message: Any) -> StatusReading:
+        s: Sta = message
+        return StatusReading(s.time_s, s.armed, s.landed, s.battery_s, s.voltage_v)
 
 
 class RawSensor(Sensor[RawReading]):
     """A sensor of a type this client has no class for: readings keep the raw fields."""
 
     type_name = "Raw"
+    message_class = SenOther
 
     def __init__(self, name: str, type_name: str, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
         self.type_name = type_name  # type: ignore[misc]
 
-    def parse(self, msg: Message, time_s: float) -> RawReading:
-        return RawReading(time_s, msg.fields)
+    def convert(self, message: Any) -> RawReading:
+        s: SenOther = message
+        return RawReading(s.time_s, s.fields)
 
 
 SENSOR_CLASSES: dict[str, type[Sensor[Any]]] = {

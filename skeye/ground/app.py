@@ -5,10 +5,12 @@ How this works: ``create_app(bridge, video)`` builds a FastAPI app around a ``Ve
 thread). Request handlers never touch a socket to the vehicle: they read the bridge's snapshot
 and hand validated commands to ``bridge.execute`` in a worker thread.
 
-- ``GET /``: the page (``static/index.html``; its scripts and styles under ``/static``, all
-  local, no CDN).
+- ``GET /``: the page (``static/index.html``; its ES modules, styles and the vendored uPlot
+  under ``/static``, all local, no CDN; ``.js`` files are served as ``text/javascript``, which
+  module scripts require).
 - ``GET /api/state``: telemetry, link quality and video status; ``GET /api/history``: recent
-  track; ``GET /api/commands``: the command table (names, arguments, ranges).
+  track; ``GET /api/commands``: the command table (names, arguments, ranges, the page's
+  field labels, units and steps) and the keyboard's speed, from which the page builds its forms.
 - ``POST /api/command/{name}`` with a JSON object of arguments: 200 and the outcome when the
   vehicle accepted it; 409 with the RESULT code and reason when it refused; 400 for a body that
   is not JSON, 404 for an unknown command, 422 for bad arguments (the message names the
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import mimetypes
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -42,9 +45,15 @@ from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
-from skeye.errors import LocalProtocolError
+from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
-from skeye.ground.commands import COMMANDS, VehicleLimits, describe_commands, parse_command
+from skeye.ground.commands import (
+    COMMANDS,
+    VehicleLimits,
+    describe_commands,
+    describe_keyboard,
+    parse_command,
+)
 from skeye.ground.guard import (
     MAX_JSON_DEPTH,
     MAX_WS_MESSAGE_BYTES,
@@ -58,6 +67,10 @@ from skeye.ground.video import VideoRelay
 log = logging.getLogger(__name__)
 
 STATIC_DIR = Path(str(resources.files("skeye.ground").joinpath("static")))
+# Browsers run a module script only when it comes as JavaScript; a host without
+# /etc/mime.types (or an old one) must not turn the page's modules into text/plain.
+mimetypes.add_type("text/javascript", ".js")
+mimetypes.add_type("text/css", ".css")
 MAX_IN_FLIGHT = 2  # commands of one WebSocket waiting for the vehicle at once
 COMMAND_RATE_HZ = 10.0  # average commands per second per WebSocket (the page sends ~3)
 COMMAND_BURST = 20
@@ -66,7 +79,7 @@ WS_POLICY_VIOLATION = 1008
 WS_MESSAGE_TOO_BIG = 1009
 
 
-class CommandError(Exception):
+class CommandError(SkeyeError):
     """A command that did not reach the vehicle: HTTP status and message."""
 
     def __init__(self, status: int, message: str) -> None:
@@ -153,7 +166,7 @@ def create_app(
 
     @app.get("/api/commands")
     async def commands() -> dict[str, Any]:
-        return {"commands": describe_commands(limits)}
+        return {"commands": describe_commands(limits), "keyboard": describe_keyboard(limits)}
 
     @app.post("/api/command/{name}")
     async def command(name: str, request: Request) -> Response:
@@ -221,6 +234,7 @@ def create_app(
             {
                 "type": "hello",
                 "commands": describe_commands(limits),
+                "keyboard": describe_keyboard(limits),
                 "history": bridge.history(),
                 "video": video_status(),
             }

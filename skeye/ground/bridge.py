@@ -33,11 +33,20 @@ from enum import Enum
 from types import TracebackType
 from typing import Any
 
-from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.errors import (
+    CommandRejected,
+    InvalidArgument,
+    LinkClosed,
+    LinkTimeout,
+    LocalProtocolError,
+    SkeyeError,
+)
 from skeye.ground.commands import GroundCommand, run_command
 from skeye.ground.telemetry import nav_json, pad_json, telemetry_json
-from skeye.link.packet_defs import LAYOUTS
-from skeye.link.packets import (
+from skeye.link.vehicle import Vehicle
+from skeye.wire.packet_defs import LAYOUTS
+from skeye.wire.packet_units import imu_calcdata_to_si
+from skeye.wire.packets import (
     PD,
     Ack,
     ImuCalcData,
@@ -49,9 +58,7 @@ from skeye.link.packets import (
     ResultCode,
     SkeyeMask,
 )
-from skeye.link.scaling import imu_calcdata_to_si
-from skeye.link.transport import LinkClosed
-from skeye.link.vehicle import Vehicle
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -108,7 +115,7 @@ class PacketRate:
 
     def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
         if not window_s > 0:
-            raise ValueError(f"window_s must be > 0, got {window_s}")
+            raise InvalidArgument(f"window_s must be > 0, got {window_s}")
         self.window_s = window_s
         self._times: deque[float] = deque()
 
@@ -188,7 +195,7 @@ class VehicleBridge:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not 0 < keepalive_s < stale_s:
-            raise ValueError(f"need 0 < keepalive_s < stale_s, got {keepalive_s}, {stale_s}")
+            raise InvalidArgument(f"need 0 < keepalive_s < stale_s, got {keepalive_s}, {stale_s}")
         self.uri = uri
         self.stream_period_s = stream_period_s
         self.keepalive_s = keepalive_s
@@ -216,14 +223,13 @@ class VehicleBridge:
         self._pad_offset: tuple[float, float] | None = None
         self._t0_s = clock()
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._thread: Worker | None = None
 
     # -- lifecycle -------------------------------------------------------------------------
     def start(self) -> VehicleBridge:
         """Start the worker thread; returns self."""
         if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="ground-bridge", daemon=True)
-            self._thread.start()
+            self._thread = Worker(self._run, "ground-bridge").start()
         return self
 
     def close(self, timeout_s: float = 3.0) -> None:
@@ -233,7 +239,7 @@ class VehicleBridge:
             vehicle = self._vehicle
         if vehicle is not None:
             vehicle.close()
-        if self._thread is not None and self._thread is not threading.current_thread():
+        if self._thread is not None:
             self._thread.join(timeout_s)
         with self._lock:
             self._state = next_link_state(self._state, LinkEvent.CLOSE)

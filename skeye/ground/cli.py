@@ -28,7 +28,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from skeye.errors import ConfigError, LocalProtocolError
+from skeye.errors import ConfigError
 from skeye.processes import die_with_parent
 
 STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
@@ -125,7 +125,7 @@ def _add_allow_host(p: Any) -> None:
 
 def _child_argv(*args: str) -> list[str]:
     """A skeye sub-command in a child interpreter (the same venv as this one)."""
-    return [sys.executable, "-m", "skeye.ground.cli", *args]
+    return [sys.executable, "-m", "skeye.cli", *args]
 
 
 def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float,
@@ -317,34 +317,3 @@ def register(subparsers: Any) -> None:
     """Add ``skeye ground`` and ``skeye up`` to the main parser's sub-commands."""
     _add_ground(subparsers)
     _add_up(subparsers)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``skeye`` with ``pilot``, ``ground`` and ``up`` registered even where ``skeye.cli`` does
-    not list them yet; ``skeye up`` starts its children through this."""
-    import logging
-
-    from skeye.cli import build_parser
-
-    parser = build_parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    if "pilot" not in sub.choices:
-        from skeye.pilot.cli import register as register_pilot
-
-        register_pilot(sub)
-    if "ground" not in sub.choices:
-        register(sub)
-    args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
-    try:
-        return int(args.func(args))
-    except (ConfigError, LocalProtocolError, OSError) as exc:
-        print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -41,6 +41,8 @@ from http.cookies import CookieError, SimpleCookie
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from skeye.errors import InvalidArgument
+
 log = logging.getLogger(__name__)
 
 MAX_BODY_BYTES = 64 * 1024
@@ -77,10 +79,10 @@ class GroundSecurity:
 
     def __post_init__(self) -> None:
         if len(self.token) < 16 or not self.token.isascii() or not self.token.isprintable():
-            raise ValueError("the ground token must be at least 16 printable ASCII characters")
+            raise InvalidArgument("the ground token must be at least 16 printable ASCII characters")
         for name in self.allowed_hosts:
             if not name or any(c in name for c in "/:@ \t") or not name.isascii():
-                raise ValueError(
+                raise InvalidArgument(
                     f"--allow-host {name!r}: expected a bare host name (no scheme, port or path)"
                 )
 
@@ -150,11 +152,11 @@ def parse_json_limited(text: str | bytes) -> Any:
         ValueError: not JSON, or nested too deeply (the message says which).
     """
     if json_depth_exceeds(text):
-        raise ValueError(f"is JSON nested deeper than {MAX_JSON_DEPTH} levels")
+        raise InvalidArgument(f"is JSON nested deeper than {MAX_JSON_DEPTH} levels")
     try:
         return json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"is not valid JSON: {exc}") from None
+        raise InvalidArgument(f"is not valid JSON: {exc}") from None
 
 
 class CommandRate:
@@ -162,7 +164,7 @@ class CommandRate:
 
     def __init__(self, rate_hz: float, burst: int, now_s: float) -> None:
         if not rate_hz > 0 or burst < 1:
-            raise ValueError(f"need rate_hz > 0 and burst >= 1, got {rate_hz}, {burst}")
+            raise InvalidArgument(f"need rate_hz > 0 and burst >= 1, got {rate_hz}, {burst}")
         self.rate_hz = rate_hz
         self.burst = burst
         self._tokens = float(burst)

@@ -1,7 +1,7 @@
 """Vehicle telemetry as the page shows it: packet messages -> one JSON-ready dict, in SI.
 
 How this works: ``telemetry_json(latest)`` takes the newest message of each descriptor (what
-``skeye.link.Vehicle.latest`` holds) and converts each through ``skeye.link.scaling`` (the one
+``skeye.link.Vehicle.latest`` holds) and converts each through ``skeye.wire.packet_units`` (the one
 module where the wire's integer scalings become SI); the page never sees a wire unit. A
 structure that has not arrived is ``None`` in the result, never a made-up zero. Heights are
 positive up; positions and velocities world NED (north, east, down) as NAV_STATUS carries them;
@@ -14,7 +14,16 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from skeye.link.packets import (
+from skeye.wire.packet_units import (
+    dm_to_m,
+    gps_data_advanced_to_si,
+    gps_data_to_si,
+    imu_calcdata_to_si,
+    mv_to_v,
+    nav_status_to_si,
+    pad_report_to_si,
+)
+from skeye.wire.packets import (
     GPS_FIX_VALID,
     PD,
     CurrentWay,
@@ -26,15 +35,6 @@ from skeye.link.packets import (
     NavigationStatus,
     NavStatus,
     PadReport,
-)
-from skeye.link.scaling import (
-    dm_to_m,
-    gps_data_advanced_to_si,
-    gps_data_to_si,
-    imu_calcdata_to_si,
-    mv_to_v,
-    nav_status_to_si,
-    pad_report_to_si,
 )
 
 

@@ -17,10 +17,9 @@ from dataclasses import fields
 from enum import IntEnum
 from typing import Any, TextIO
 
-from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
-from skeye.link.packets import Ack, Message, PollMask, Result, SkeyeMask
-from skeye.link.transport import LinkClosed
+from skeye.errors import CommandRejected, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.link.vehicle import Vehicle
+from skeye.wire.packets import Ack, Message, PollMask, Result, SkeyeMask
 
 EXIT_OK, EXIT_LINK, EXIT_USAGE, EXIT_REJECTED = 0, 1, 2, 3
 

@@ -1,7 +1,12 @@
 """Byte links chosen by URI: TCP, serial, and an in-memory pair for tests.
 
+Every client of skeye takes its byte stream from here: the vehicle link and the pilot
+(:mod:`skeye.link.vehicle`, :mod:`skeye.pilot.server`), the simulator connection
+(:class:`skeye.control.connection.Connection`) and the image client
+(:class:`skeye.control.image_client.ImageClient`).
+
 How this works: a ``Link`` moves raw bytes and knows nothing of the packet protocol (that is
-``skeye.link.packets``, sans-IO). ``open_link(uri)`` picks the adapter:
+``skeye.wire.packets``, sans-IO). ``open_link(uri)`` picks the adapter:
 
 - ``tcp://host:port``: a TCP client connection (the pilot wraps its accepted sockets the same
   way with ``TcpLink(sock)``);
@@ -13,7 +18,8 @@ Every link has the same three calls: ``send(data)`` writes all of ``data`` (thre
 lock per link, so two threads never interleave frames), ``recv(timeout_s)`` returns whatever
 arrived within the timeout (``b""`` when nothing did), and ``close()`` (idempotent; a ``recv``
 blocked in another thread returns promptly with ``LinkClosed``). A peer that goes away makes
-``recv`` and ``send`` raise ``LinkClosed``. One thread should own ``recv``.
+``recv`` and ``send`` raise ``LinkClosed`` (``PeerClosed``, a subclass, when it ended the stream
+in order). One thread should own ``recv``. Errors are :mod:`skeye.errors` classes only.
 """
 
 from __future__ import annotations
@@ -30,16 +36,12 @@ from contextlib import contextmanager
 from types import TracebackType
 from urllib.parse import parse_qs, urlsplit
 
-from skeye.errors import LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError, PeerClosed
 
 DEFAULT_BAUD = 57600
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 DEFAULT_SEND_TIMEOUT_S = 5.0
 RECV_CHUNK = 65536
-
-
-class LinkClosed(SkeyeError):
-    """The link was closed locally or by the peer; nothing more can be sent or received."""
 
 
 class Link(ABC):
@@ -104,13 +106,19 @@ class TcpLink(Link):
     """A connected TCP socket (a client connection, or one the pilot accepted)."""
 
     def __init__(
-        self, sock: socket.socket, name: str = "", send_timeout_s: float = DEFAULT_SEND_TIMEOUT_S
+        self,
+        sock: socket.socket,
+        name: str = "",
+        send_timeout_s: float | None = DEFAULT_SEND_TIMEOUT_S,
+        recv_bytes: int = RECV_CHUNK,
     ) -> None:
         super().__init__()
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        # The timeout bounds sendall() to a dead peer; recv() waits in select() instead.
+        # The timeout bounds sendall() to a dead peer (None: no bound; close() still ends it);
+        # recv() waits in select() instead.
         sock.settimeout(send_timeout_s)
         self._sock = sock
+        self._recv_bytes = recv_bytes
         try:
             peer = sock.getpeername()
             self.peer = f"{peer[0]}:{peer[1]}"
@@ -132,7 +140,7 @@ class TcpLink(Link):
             ready, _, _ = select.select([self._sock], [], [], timeout_s)
             if not ready:
                 return b""
-            data = self._sock.recv(RECV_CHUNK)
+            data = self._sock.recv(self._recv_bytes)
         except (OSError, ValueError) as exc:  # ValueError: fd closed by another thread
             if self._closed.is_set():
                 raise LinkClosed(f"{self.name}: link is closed") from None
@@ -140,7 +148,7 @@ class TcpLink(Link):
             raise LinkClosed(f"{self.name}: {exc}") from None
         if not data:
             self._closed.set()
-            raise LinkClosed(f"{self.name}: peer closed the connection")
+            raise PeerClosed(f"{self.name}: peer closed the connection")
         return data
 
     def _close(self) -> None:
@@ -189,7 +197,7 @@ class SerialLink(Link):
         if not data:
             # select() said readable but nothing came: the other end of the line hung up.
             self._closed.set()
-            raise LinkClosed(f"{self.name}: the line hung up")
+            raise PeerClosed(f"{self.name}: the line hung up")
         return data
 
     def _close(self) -> None:
@@ -225,9 +233,10 @@ class MemoryLink(Link):
         deadline = time.monotonic() + timeout_s
         with self._cond:
             while not self._inbox:
-                peer_gone = self.peer is None or self.peer.closed
-                if self._closed.is_set() or peer_gone:
+                if self._closed.is_set():
                     raise LinkClosed(f"{self.name}: link is closed")
+                if self.peer is None or self.peer.closed:
+                    raise PeerClosed(f"{self.name}: peer closed")
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return b""
@@ -281,8 +290,32 @@ def parse_uri(uri: str) -> tuple[str, str, int]:
     raise LocalProtocolError(f"link URI {uri!r}: scheme must be tcp:// or serial://")
 
 
-def open_link(uri: str, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> Link:
-    """Open the link a URI names: ``tcp://host:port`` or ``serial:///dev/ttyX?baud=57600``."""
+def tcp_uri(host: str, port: int) -> str:
+    """The ``tcp://`` URI of a host and port (an IPv6 address in brackets)."""
+    return f"tcp://[{host}]:{port}" if ":" in host else f"tcp://{host}:{port}"
+
+
+def open_link(
+    uri: str,
+    timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S,
+    *,
+    send_timeout_s: float | None = DEFAULT_SEND_TIMEOUT_S,
+    recv_bytes: int = RECV_CHUNK,
+) -> Link:
+    """Open the link a URI names: ``tcp://host:port`` or ``serial:///dev/ttyX?baud=57600``.
+
+    Args:
+        uri: where to connect.
+        timeout_s: the deadline for connecting.
+        send_timeout_s: TCP: how long a send may wait for a peer that reads nothing before it
+            raises LinkTimeout (None: as long as it takes; ``close()`` still ends it).
+        recv_bytes: TCP: the most bytes one ``recv`` returns.
+
+    Raises:
+        LocalProtocolError: a malformed URI.
+        LinkTimeout: no connection within ``timeout_s``.
+        LinkClosed: the connection was refused, or the port cannot be opened.
+    """
     scheme, where, number = parse_uri(uri)
     if scheme == "tcp":
         try:
@@ -291,7 +324,8 @@ def open_link(uri: str, timeout_s: float = DEFAULT_CONNECT_TIMEOUT_S) -> Link:
             raise LinkTimeout(f"{uri}: no connection within {timeout_s} s") from None
         except OSError as exc:
             raise LinkClosed(f"{uri}: cannot connect: {exc}") from None
-        return TcpLink(sock, name=f"tcp://{where}:{number}")
+        return TcpLink(sock, name=tcp_uri(where, number), send_timeout_s=send_timeout_s,
+                       recv_bytes=recv_bytes)
     return SerialLink(where, number)
 
 

@@ -11,7 +11,7 @@ connect (RESULT code 5: another ground station is connected), every later comman
 
 Units: the typed methods take SI in named arguments (``up_m_s`` positive up, like
 ``skeye.control``); the conversion to the wire's FRD/NED integer scalings is in
-``skeye.link.scaling``.
+``skeye.wire.packet_units``.
 """
 
 from __future__ import annotations
@@ -24,8 +24,21 @@ from collections.abc import Callable, Iterable
 from types import TracebackType
 
 from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError
-from skeye.link.packet_defs import LAYOUTS
-from skeye.link.packets import (
+from skeye.link.transport import Link, LinkClosed, open_link
+from skeye.wire.packet_defs import LAYOUTS
+from skeye.wire.packet_units import (
+    GotoGpsSi,
+    MoveBySi,
+    PadModeSi,
+    ctrl_input_from_si,
+    goto_gps_from_si,
+    move_by_from_si,
+    pad_mode_from_si,
+    s_to_ms,
+    take_off_from_si,
+    velocity_from_si,
+)
+from skeye.wire.packets import (
     PD,
     Ack,
     Clock,
@@ -51,19 +64,7 @@ from skeye.link.packets import (
     WaypointGoto,
     encode,
 )
-from skeye.link.scaling import (
-    GotoGpsSi,
-    MoveBySi,
-    PadModeSi,
-    ctrl_input_from_si,
-    goto_gps_from_si,
-    move_by_from_si,
-    pad_mode_from_si,
-    s_to_ms,
-    take_off_from_si,
-    velocity_from_si,
-)
-from skeye.link.transport import Link, LinkClosed, open_link
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -121,8 +122,7 @@ class Vehicle:
         self._command_lock = threading.Lock()
         self._reader_error: BaseException | None = None
         self._stop = threading.Event()
-        self._reader = threading.Thread(target=self._read_loop, name="vehicle-reader", daemon=True)
-        self._reader.start()
+        self._reader = Worker(self._read_loop, "vehicle-reader").start()
 
     @classmethod
     def open(
@@ -143,8 +143,7 @@ class Vehicle:
         """Stop the reader and close the link (idempotent)."""
         self._stop.set()
         self.link.close()
-        if self._reader is not threading.current_thread():
-            self._reader.join(timeout_s)
+        self._reader.join(timeout_s)
 
     def __enter__(self) -> Vehicle:
         return self
@@ -214,8 +213,15 @@ class Vehicle:
         self._callbacks.append(fn)
 
     def remove_callback(self, fn: TelemetryCallback) -> None:
-        """Stop calling ``fn``."""
-        self._callbacks.remove(fn)
+        """Stop calling ``fn``.
+
+        Raises:
+            LocalProtocolError: ``fn`` was not added.
+        """
+        try:
+            self._callbacks.remove(fn)
+        except ValueError:
+            raise LocalProtocolError(f"{fn!r} is not a telemetry callback here") from None
 
     def _wait(self, ready: Callable[[], bool], what: str, timeout_s: float | None) -> None:
         """Wait under ``self._cond`` until ``ready()``; raise on timeout or a dead link."""

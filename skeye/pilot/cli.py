@@ -49,7 +49,7 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     Raises:
         ConfigError: a bad robot file or value, or a class missing from ``--robot-dir``.
     """
-    from skeye.sim.robot_config import BUILTIN_ROBOTS, load_robot_config
+    from skeye.robots.config import BUILTIN_ROBOTS, load_robot_config
 
     dirs = (Path(args.robot_dir),) if args.robot_dir else ()
     short = args.robot.split(".", 1)[1] if args.robot.lower().startswith("usarbot.") else args.robot
@@ -78,7 +78,8 @@ then waits for the simulator's own exit status, the root cause."""
 def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code (0; 1 for an error; 2 for a
     bad option; :data:`EXIT_LOST_SIMULATOR` when the simulator link failed)."""
-    from skeye.control.connection import LinkClosed, connect
+    from skeye.control.connection import connect
+    from skeye.errors import LinkClosed
     from skeye.pilot.sim_airframe import SimAirframe
     from skeye.processes import check_ports_free
 

@@ -23,8 +23,9 @@ import logging
 import threading
 from collections import deque
 
-from skeye.errors import LinkTimeout
+from skeye.errors import InvalidArgument, LinkTimeout
 from skeye.link.transport import Link, LinkClosed
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +50,7 @@ class Outbox:
         hard_max_bytes: int = DEFAULT_HARD_MAX_BYTES,
     ) -> None:
         if not 0 < max_bytes <= hard_max_bytes:
-            raise ValueError(
+            raise InvalidArgument(
                 f"need 0 < max_bytes <= hard_max_bytes, got {max_bytes}, {hard_max_bytes}"
             )
         self.link = link
@@ -63,9 +64,7 @@ class Outbox:
         self._queued_bytes = 0
         self._cond = threading.Condition()
         self._closed = False
-        self._thread = threading.Thread(
-            target=self._run, name=f"pilot-send-{link.name}", daemon=True
-        )
+        self._thread = Worker(self._run, f"pilot-send-{link.name}")
 
     def start(self) -> Outbox:
         self._thread.start()
@@ -103,8 +102,7 @@ class Outbox:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
+        self._thread.join(timeout_s)
 
     def __enter__(self) -> Outbox:
         return self.start()

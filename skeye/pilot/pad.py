@@ -13,8 +13,8 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, replace
 
-from skeye.link.packets import PadAction, PadMode, PadReport
-from skeye.link.scaling import PadModeSi, PadSi, pad_mode_to_si, pad_report_from_si
+from skeye.wire.packet_units import PadModeSi, PadSi, pad_mode_to_si, pad_report_from_si
+from skeye.wire.packets import PadAction, PadMode, PadReport
 
 
 @dataclass(frozen=True)

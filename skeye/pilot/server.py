@@ -45,8 +45,13 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
-from skeye.errors import ConfigError, SkeyeError
-from skeye.link.packets import (
+from skeye.errors import ConfigError, InvalidArgument, SkeyeError
+from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
+from skeye.pilot.airframe import Airframe
+from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
+from skeye.pilot.outbox import Outbox
+from skeye.pilot.video_server import VideoServer
+from skeye.wire.packets import (
     CommandStreamParser,
     FrameError,
     Message,
@@ -54,11 +59,7 @@ from skeye.link.packets import (
     ResultCode,
     encode,
 )
-from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
-from skeye.pilot.airframe import Airframe
-from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
-from skeye.pilot.outbox import Outbox
-from skeye.pilot.video_server import VideoServer
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +141,7 @@ class PilotServer:
         if (port is None) == (serial_uri is None):
             raise ConfigError("PilotServer needs exactly one of port= or serial_uri=")
         if not tick_s > 0 or lockstep_rate < 0:
-            raise ValueError(
+            raise InvalidArgument(
                 f"tick_s must be > 0 and lockstep_rate >= 0 ({tick_s}, {lockstep_rate})"
             )
         self.airframe = airframe
@@ -168,7 +169,7 @@ class PilotServer:
         self._client_lock = threading.Lock()
         self._client_changed = threading.Condition(self._client_lock)
         self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._threads: list[Worker] = []
         self._listener: socket.socket | None = None
         self.host = host
         self.port: int | None = None
@@ -197,9 +198,7 @@ class PilotServer:
         return self
 
     def _spawn(self, target: Callable[..., None], name: str, *args: object) -> None:
-        t = threading.Thread(target=target, args=args, name=name, daemon=True)
-        self._threads.append(t)
-        t.start()
+        self._threads.append(Worker(target, name, args=args).start())
 
     def serve_forever(self) -> None:
         """Run until ``close()`` (or Ctrl-C in the caller); re-raises a loop failure."""
@@ -221,10 +220,8 @@ class PilotServer:
             client.close()
         if session is not None:
             session.outbox.close()
-        current = threading.current_thread()
         for t in self._threads:
-            if t is not current:
-                t.join(timeout_s)
+            t.join(timeout_s)  # returns at once for the calling thread's own worker
         close_vision = getattr(self.vision, "close", None)
         if close_vision is not None:
             close_vision(timeout_s)

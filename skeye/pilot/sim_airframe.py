@@ -30,6 +30,7 @@ from skeye.control.connection import Connection
 from skeye.control.robots import Robot
 from skeye.errors import ConfigError
 from skeye.pilot.airframe import GpsFix, Snapshot
+from skeye.wire.sim_messages import Drive
 
 Attitude = tuple[float, float, float, float]
 FROZEN_TIMEOUT_S = 5.0
@@ -232,12 +233,8 @@ class SimAirframe:
         if sticks is None or self.robot._motion is not None:
             return
         roll, pitch, yaw_rate, thrust = sticks
-        self.connection.send(
-            "DRIVE",
-            ("RollAngle", roll),
-            ("PitchAngle", pitch),
-            ("RotationalVelocity", yaw_rate),
-            ("Thrust", thrust),
+        self.connection.send_message(
+            Drive(roll_rad=roll, pitch_rad=pitch, yaw_rate_rad_s=yaw_rate, thrust_fraction=thrust)
         )
         with self._lock:
             self._sticks_live = True

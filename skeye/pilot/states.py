@@ -15,7 +15,7 @@ import threading
 from enum import Enum
 
 from skeye.errors import LocalProtocolError
-from skeye.link.packets import NavState, ResultCode
+from skeye.wire.packets import NavState, ResultCode
 
 
 class FlightEvent(Enum):

@@ -39,14 +39,14 @@ from typing import Any
 
 import cv2
 
-from skeye.errors import SkeyeError
-from skeye.link.packets import NavState, PadAction
+from skeye.errors import InvalidArgument, SkeyeError
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadObservation
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
 from skeye.pilot.video_server import CameraFrame
 from skeye.vision.detector import PadEstimate, detect
 from skeye.vision.pad import SKEYE_4, PadDefinition
+from skeye.wire.packets import NavState, PadAction
 from skeye.wire.video import Detection, RingEllipse
 from skeye.workers import Worker
 
@@ -107,7 +107,7 @@ class PadVision:
         queue_size: int = 4,
     ) -> None:
         if queue_size < 1 or not lockstep_wait_s > 0:
-            raise ValueError(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
+            raise InvalidArgument(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
                              f"({queue_size}, {lockstep_wait_s})")
         self.boards = boards
         self.robot = robot

@@ -1,37 +1,7 @@
-"""The simulator: MuJoCo world, quadrotor physics, sensors, control and image servers.
+"""The simulator process: MuJoCo world, quadrotor physics, sensors, control and image servers.
 
-Importing this package picks MuJoCo's OpenGL backend before MuJoCo is imported (it reads
-``MUJOCO_GL`` once): an explicit ``MUJOCO_GL`` wins; otherwise GLFW when a display is set, EGL
-when there is none (Mesa's software EGL on a headless machine, the NVIDIA driver on a GPU one),
-and OSMesa when only that is installed. :mod:`skeye.sim.cameras` reports a failure to render
-with the backend's name and what to install.
+Only the simulator lives here (and ``skeye.cli``, which starts it, imports it): clients are in
+:mod:`skeye.control`, codecs in :mod:`skeye.wire`, recordings in :mod:`skeye.recording`, robot
+class files in :mod:`skeye.robots`. Importing this package has no side effect; the modules that
+load MuJoCo import :mod:`skeye.sim.gl` first, which picks the OpenGL backend.
 """
-
-from __future__ import annotations
-
-import ctypes.util
-import os
-
-
-def choose_gl_backend() -> str:
-    """Set ``MUJOCO_GL`` if unset and return the backend in use."""
-    chosen = os.environ.get("MUJOCO_GL")
-    if chosen:
-        return chosen
-    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
-        chosen = "glfw"
-    elif ctypes.util.find_library("EGL"):
-        chosen = "egl"
-    elif ctypes.util.find_library("OSMesa"):
-        chosen = "osmesa"
-    else:
-        chosen = "egl"
-    os.environ["MUJOCO_GL"] = chosen
-    if chosen == "osmesa":
-        os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
-    elif chosen == "egl":
-        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    return chosen
-
-
-GL_BACKEND = choose_gl_backend()

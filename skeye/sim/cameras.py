@@ -10,8 +10,9 @@ with the image's top towards the body's front (sensor +x) and its right towards 
 with ``t >= n / rate``), the engine thread snapshots ``qpos`` and hands it to one render thread
 that owns the OpenGL context (EGL or OSMesa contexts belong to the thread that made them). The
 render thread recomputes kinematics on its own ``MjData``, renders, publishes the frame to the
-image server's :class:`FrameBuffer` and sends ``SEN {Type Camera} {Name n} {Frame k}`` to the
-robot's client. In lockstep mode the engine waits for the render, so frames are exact and
+image server's :class:`FrameBuffer` and hands a :class:`~skeye.sim.readings.CameraFrame` to the
+robot's sink (which the control server sends as ``SEN {Type Camera} {Name n} {Frame k}``). In
+lockstep mode the engine waits for the render, so frames are exact and
 reproducible; in real time it never waits: a snapshot that finds the renderer busy is skipped
 (counted in ``skipped``) and the frame numbers show clients what was rendered.
 """
@@ -29,10 +30,11 @@ from typing import Any
 import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.robots.config import SensorMount
 from skeye.sim import frames
+from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
 from skeye.sim.image_server import Frame, FrameBuffer
-from skeye.sim.protocol import format_message
-from skeye.sim.robot_config import SensorMount
+from skeye.sim.readings import CameraFrame, RobotStopped
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -272,8 +274,7 @@ class CameraSystem:
                           .replace("}", ")").split())[:400]
         for robot in self.sim.robots.values():
             if robot.cameras:
-                robot.outbox(format_message("ERR", ("Command", "CAMERA"), ("Name", robot.name),
-                                            ("Reason", reason)))
+                robot.sink([RobotStopped(robot.name, "CAMERA", reason)])
 
     # -- render thread -------------------------------------------------------------------
     def _render_loop(self) -> None:
@@ -311,14 +312,11 @@ class CameraSystem:
                         if key in self._known:
                             self.buffer.publish(Frame(key, cam.camera_id, cam.rendered,
                                                       job.time_s, rgb))
-                        line = format_message(
-                            "SEN", ("Time", job.time_s), ("Type", "Camera"), ("Name", cam.name),
-                            ("Frame", cam.rendered),
-                        )
+                        shot = CameraFrame(job.time_s, cam.name, cam.rendered)
                         if job.done is not None:  # lockstep: in order, with the step's lines
-                            self.sim.emit(robot, line)
+                            self.sim.emit(robot, [shot])
                         else:
-                            robot.outbox(line)
+                            robot.sink([shot])
                 except SkeyeError as exc:
                     self.error = str(exc)
                     log.error("%s", exc)

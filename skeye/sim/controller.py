@@ -19,37 +19,9 @@ Integrators are clamped (anti-windup). Every limit is a parameter (ControllerPar
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from skeye.errors import ConfigError
-from skeye.sim.vehicle import GRAVITY_M_S2, AirframeParams
-
-
-@dataclass(frozen=True)
-class ControllerParams:
-    """Gains and limits of the low-level controller."""
-
-    max_tilt_rad: float = 0.44  # ~25 deg
-    max_speed_m_s: float = 3.0
-    max_climb_m_s: float = 1.5
-    max_yaw_rate_rad_s: float = 1.745  # 100 deg/s
-    angle_gain: float = 7.0  # 1/s
-    rate_gain: float = 22.0  # 1/s
-    rate_integral_gain: float = 15.0  # 1/s^2
-    yaw_rate_gain: float = 8.0
-    velocity_gain: float = 2.8  # (m/s^2)/(m/s)
-    velocity_integral_gain: float = 0.8
-    climb_gain: float = 5.0
-    climb_integral_gain: float = 3.0
-    height_gain: float = 1.8  # (m/s)/m
-    max_accel_m_s2: float = 4.0
-
-    def __post_init__(self) -> None:
-        for name, value in ((f.name, getattr(self, f.name)) for f in fields(self)):
-            if not (math.isfinite(value) and value > 0):
-                raise ConfigError(f"controller: {name} must be a positive number, got {value!r}")
-        if self.max_tilt_rad >= math.pi / 2:
-            raise ConfigError(f"controller: max_tilt_rad must be < pi/2, got {self.max_tilt_rad}")
+from skeye.robots.params import GRAVITY_M_S2, AirframeParams, ControllerParams
 
 
 @dataclass

@@ -1,53 +1,49 @@
 """The simulation engine: one MuJoCo world, the robots in it, the clock.
 
 How this works: :class:`Simulation` owns the MuJoCo model and data and is used from exactly one
-thread (the :class:`SimulationRunner`'s). The world is rebuilt from its description whenever a
-robot comes or goes, carrying every surviving robot's state over, so spawning is exact and
-deterministic. Each physics step (1 kHz by default): robots whose board tick is due read their
-ground truth, run their board and set their wrench (``xfrc_applied``, converted to MuJoCo's
-frame through :mod:`skeye.sim.frames`); MuJoCo steps; sensors that are due are sampled and their
-``SEN`` lines handed to the robot's outbox. Sim time is ``steps * timestep`` exactly.
+thread (under the server, the :class:`~skeye.sim.runner.SimulationRunner`'s). The world is
+rebuilt from its description whenever a robot comes or goes, carrying every surviving robot's
+state over, so spawning is exact and deterministic. Each physics step (1 kHz by default):
+robots whose board tick is due read their ground truth, run their board and set their wrench
+(``xfrc_applied``, converted to MuJoCo's frame through :mod:`skeye.sim.frames`); MuJoCo steps;
+sensors that are due are sampled. The engine writes no wire text: the typed readings
+(:mod:`skeye.sim.readings`) of one ``step()`` call go to each robot's sink in one call when it
+ends (the control server's sink turns them into protocol lines; an in-process user keeps
+them). Sim time is ``steps * timestep`` exactly.
 
-The runner paces the clock: ``realtime`` follows the wall clock (slipping, and saying so, if it
-falls behind); ``lockstep`` advances only on :meth:`SimulationRunner.step`. Everything that
-changes the world (spawn, remove, drive, wind) is a task executed on the engine thread between
-steps, so the order of effects is the order of commands, and a lockstep run is reproducible.
-
-The engine never stops silently: an exception escaping a step (or a task submitted as
-``fatal``, like a lockstep ``STEP``) ends the engine thread, is kept in
-:attr:`SimulationRunner.error`, fails every queued and later task at once, and is handed to each
-of :attr:`SimulationRunner.failure_listeners` (the control server tells every client).
+In-process use: :class:`Simulation` can be stepped directly, without the server, the runner or
+any socket (benchmarks, tests, learning environments). Spawn a robot with a sink that keeps the
+readings (``sink=events.extend``) and call :meth:`Simulation.step`; see :mod:`skeye.sim.readings`.
+Under the simulator process, :class:`skeye.sim.runner.SimulationRunner` owns the one thread that
+steps it and paces the clock.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import queue
-import threading
-import time
 from collections.abc import Callable
-from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
+from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
+
+# isort: split
 import mujoco
 import numpy as np
 
-from skeye.errors import LocalProtocolError, PhysicsError, SkeyeError
+from skeye.errors import LocalProtocolError, PhysicsError
+from skeye.robots.config import RobotConfig, load_robot_config
 from skeye.sim import frames
-from skeye.sim.protocol import format_message
-from skeye.sim.robot import Outbox, Robot, ScheduledSensor, check_state
-from skeye.sim.robot_config import RobotConfig, load_robot_config
+from skeye.sim.readings import Event, ReadingSink, RobotStopped
+from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
-from skeye.workers import Worker, WorkerFailed
 
 log = logging.getLogger(__name__)
-T = TypeVar("T")
 
 
 @dataclass
@@ -109,7 +105,7 @@ class Simulation:
         self.step_hooks: list[Callable[[Simulation], None]] = []
         # Each step hook names, through an event source, the next step it needs to see.
         self.event_sources: list[Callable[[Simulation], int]] = []
-        self._pending: dict[int, tuple[Outbox, list[bytes]]] = {}
+        self._pending: dict[int, tuple[ReadingSink, list[Event]]] = {}
         self._periods: list[int] = []
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
         self.xml_extras: list[Callable[[Robot], str]] = []
@@ -220,7 +216,7 @@ class Simulation:
         self,
         class_name: str,
         *,
-        outbox: Outbox,
+        sink: ReadingSink,
         name: str | None = None,
         location_ned_m: tuple[float, float, float] | None = None,
         rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -228,7 +224,8 @@ class Simulation:
         config: RobotConfig | None = None,
     ) -> Robot:
         """Add a robot. On a start pose (or a location at or below the ground) it stands on its
-        landing gear; a location in the air spawns it hovering, motors running."""
+        landing gear; a location in the air spawns it hovering, motors running. ``sink`` takes
+        the robot's readings (:mod:`skeye.sim.readings`) after each :meth:`step` call."""
         config = config or load_robot_config(class_name, self.robot_dirs, allow_paths=False)
         self._spawned += 1
         name = name or f"R{self._spawned}"
@@ -267,7 +264,7 @@ class Simulation:
             config,
             physics_step_s=self.dt,
             rng=rng,
-            outbox=outbox,
+            sink=sink,
             spawn_pos_ned_m=(pos[0], pos[1], pos[2]),
             spawn_rpy_rad=(rpy[0], rpy[1], rpy[2]),
             airborne=airborne,
@@ -424,18 +421,20 @@ class Simulation:
                 best = k
         return best if best > now else now
 
-    def emit(self, robot: Robot, line: bytes) -> None:
-        """Queue a line for a robot's client; sent when the current step() call ends."""
+    def emit(self, robot: Robot, events: list[Event]) -> None:
+        """Queue events for a robot's sink; handed over when the current step() call ends."""
         entry = self._pending.get(id(robot))
         if entry is None:
-            self._pending[id(robot)] = (robot.outbox, [line])
+            self._pending[id(robot)] = (robot.sink, list(events))
         else:
-            entry[1].append(line)
+            entry[1].extend(events)
 
     def flush(self) -> None:
+        """Hand every robot's queued events to its sink (one call per robot)."""
         pending, self._pending = self._pending, {}
-        for outbox, lines in pending.values():
-            outbox(b"".join(lines))
+        for sink, events in pending.values():
+            if events:
+                sink(events)
 
     def _step_to_event(self, count: int = 1) -> None:
         """``count`` physics steps, then whatever falls due at the new step count, robot by
@@ -511,22 +510,14 @@ class Simulation:
         log.error("stopping robot %s: %s", name, reason)
         robot.flight.failed = reason
         robot.flight.armed = False
-        self.emit(
-            robot,
-            format_message(
-                "ERR",
-                ("Command", "PHYSICS"),
-                ("Name", name),
-                ("Reason", f"robot stopped: {reason}"),
-            )
-        )
+        self.emit(robot, [RobotStopped(name, "PHYSICS", f"robot stopped: {reason}")])
         self.remove(name)
 
     def _emit_readings(
         self, robot: Robot, state: BodyState, due: list[ScheduledSensor], status: bool
     ) -> None:
-        """SEN lines of the due sensors, then STA if due, for one robot."""
-        lines: list[bytes] = []
+        """Readings of the due sensors, then the status if due, for one robot."""
+        events: list[Event] = []
         query = self._queries[robot.name]
         for sched in due:
             sensor = sched.sensor
@@ -536,10 +527,10 @@ class Simulation:
                     robot.battery.current_a,
                     robot.battery.state_of_charge,
                 )
-            lines.append(sched.sen_line(sensor.read(state, query)))
+            events.append(sched.sample(state, query))
         if status:
-            lines.append(robot.status_line(state.time_s))
-        self.emit(robot, b"".join(lines))
+            events.append(robot.status(state.time_s))
+        self.emit(robot, events)
 
     def set_wind(self, settings: WindSettings) -> None:
         self.wind = WindModel(settings, np.random.default_rng([self.seed, 7, self.steps]))
@@ -548,150 +539,3 @@ class Simulation:
         self,
     ) -> list[tuple[str, tuple[float, float, float], tuple[float, float, float]]]:
         return world_start_poses(self.world)
-
-
-class SimulationRunner:
-    """Owns the engine thread; the only way other threads touch a :class:`Simulation`."""
-
-    def __init__(self, sim: Simulation, mode: str = "realtime") -> None:
-        if mode not in ("realtime", "lockstep"):
-            raise LocalProtocolError(f"mode must be 'realtime' or 'lockstep', got {mode!r}")
-        self.sim = sim
-        self.mode = mode
-        self._tasks: queue.Queue[tuple[Callable[[Simulation], Any], Future[Any], bool] | None] = (
-            queue.Queue()
-        )
-        self._stop = threading.Event()
-        self.behind_events = 0
-        self.wall_start = time.monotonic()
-        self.sim_start_s = sim.time_s
-        # Why the engine thread died (None while it runs or after a clean stop).
-        self.error: WorkerFailed | None = None
-        self.failed = threading.Event()
-        # Called once, on the dying engine thread, with the failure; must not block.
-        self.failure_listeners: list[Callable[[WorkerFailed], None]] = []
-        self._fatal: BaseException | None = None
-        self._engine = Worker(self._run, "skeye-engine", on_error=self._on_engine_error)
-        self._engine.start()
-
-    def __enter__(self) -> SimulationRunner:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self, timeout_s: float = 5.0) -> None:
-        if self._stop.is_set():
-            return
-        self._stop.set()
-        self._tasks.put(None)
-        self._engine.join(timeout_s)
-
-    @property
-    def alive(self) -> bool:
-        """The engine thread runs and has not failed."""
-        return self._engine.alive and not self.failed.is_set()
-
-    def _on_engine_error(self, exc: BaseException) -> None:
-        self.error = WorkerFailed("the simulation engine", exc)
-        self.failed.set()
-        self._drain()
-        for listener in list(self.failure_listeners):
-            try:
-                listener(self.error)
-            except Exception:
-                log.exception("engine failure listener %r failed", listener)
-
-    def _refusal(self) -> SkeyeError:
-        if self.error is not None:
-            return self.error
-        return SkeyeError("the simulator is shutting down")
-
-    def submit(self, fn: Callable[[Simulation], T], *, fatal: bool = False) -> Future[T]:
-        """Run ``fn(sim)`` on the engine thread between steps. With ``fatal``, an exception
-        from ``fn`` also ends the engine (for tasks that step the physics)."""
-        fut: Future[T] = Future()
-        if self._stop.is_set() or self.failed.is_set():
-            fut.set_exception(self._refusal())
-            return fut
-        self._tasks.put((fn, fut, fatal))
-        if self.failed.is_set():  # it died between the check and the put
-            self._drain()
-        return fut
-
-    def call(self, fn: Callable[[Simulation], T], timeout_s: float = 30.0, *,
-             fatal: bool = False) -> T:
-        return self.submit(fn, fatal=fatal).result(timeout_s)
-
-    def _run_task(self, item: tuple[Callable[[Simulation], Any], Future[Any], bool]) -> None:
-        fn, fut, fatal = item
-        if not fut.set_running_or_notify_cancel():
-            return
-        try:
-            fut.set_result(fn(self.sim))
-        except BaseException as exc:  # delivered to the caller; ends the engine only if fatal
-            fut.set_exception(exc)
-            if fatal and not isinstance(exc, SkeyeError):
-                raise
-
-    def _run(self) -> None:
-        if self.mode == "lockstep":
-            while True:
-                item = self._tasks.get()
-                if item is None:
-                    break
-                self._run_task(item)
-            self._drain()
-            return
-        sim = self.sim
-        dt = sim.dt
-        self.wall_start = time.monotonic()
-        self.sim_start_s = sim.time_s
-        while not self._stop.is_set():
-            while True:
-                try:
-                    item = self._tasks.get_nowait()
-                except queue.Empty:
-                    break
-                if item is None:
-                    self._drain()
-                    return
-                self._run_task(item)
-            target = self.sim_start_s + (time.monotonic() - self.wall_start)
-            due = int((target - sim.time_s) / dt)
-            if due <= 0:
-                # Wait for the next step's wall time, waking at once for a command.
-                wait = sim.time_s + dt - target
-                try:
-                    item = self._tasks.get(timeout=max(0.0001, min(0.002, wait)))
-                except queue.Empty:
-                    continue
-                if item is None:
-                    break
-                self._run_task(item)
-                continue
-            if due * dt > 0.5:
-                # Too far behind: slip the clock rather than run a burst.
-                self.behind_events += 1
-                if self.behind_events == 1 or self.behind_events % 100 == 0:
-                    log.warning(
-                        "simulation is running slower than real time (slipped %d times)",
-                        self.behind_events,
-                    )
-                self.wall_start += due * dt - 0.02
-                due = int(0.02 / dt)
-            sim.step(min(due, max(1, int(0.01 / dt))))
-        self._drain()
-
-    def _drain(self) -> None:
-        while True:
-            try:
-                item = self._tasks.get_nowait()
-            except queue.Empty:
-                return
-            if item is not None and not item[1].done():
-                item[1].set_exception(self._refusal())
-
-    def realtime_factor(self) -> float:
-        wall = time.monotonic() - self.wall_start
-        return (self.sim.time_s - self.sim_start_s) / wall if wall > 0 else 0.0

@@ -2,15 +2,11 @@
 
 How this works:
 
-* The engine's render step calls :meth:`FrameBuffer.publish` with each rendered :class:`Frame`.
-  That only stores a reference under a lock, notifies a Condition and pokes listeners that never
-  block, so the simulator never waits on a client.
-* Encoded images are cached per (camera, frame number, format, quality): the first client thread
-  that needs an encoding makes it, the others wait for that one (single flight), so four clients
-  asking for the same frame in the same format cost one encoding. The cache is a small LRU.
+* The engine's render step publishes each rendered :class:`Frame` to a :class:`FrameBuffer`
+  (:mod:`skeye.sim.frame_store`: it never blocks the simulator, and caches encodings).
 * :class:`ImageServer` runs one accept thread and one thread per client. Each client thread owns
   its socket (non-blocking) and a wake-up socket pair, and runs a select loop: requests are parsed
-  by the sans-IO :class:`~skeye.sim.image_protocol.RequestParser` and queued; the head of the
+  by the sans-IO :class:`~skeye.wire.images.RequestParser` and queued; the head of the
   queue is served when nothing is being sent. At most one frame is in flight per client, and it is
   built from the newest frame only when the previous one has gone out: a slow or stalled client
   simply receives fewer frames, and never holds a lock or blocks anyone else. Reading stops while
@@ -25,24 +21,17 @@ How this works:
 from __future__ import annotations
 
 import logging
-import math
 import selectors
 import socket
 import threading
 import time
-from collections import OrderedDict, deque
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass
 
-import numpy as np
-
-from skeye.errors import LocalProtocolError
-from skeye.sim.image_protocol import (
-    DEFAULT_PORT,
-    META_HEADER_BYTES,
-    META_OFFSET,
-    FrameType,
-    ImageFormat,
+from skeye.pixels import encode_image
+from skeye.sim.frame_store import Frame, FrameBuffer
+from skeye.sim.limits import check_server_limits
+from skeye.wire.image_requests import (
     NewestFrame,
     Request,
     RequestError,
@@ -52,239 +41,30 @@ from skeye.sim.image_protocol import (
     SetMeta,
     Stream,
     SubRect,
+)
+from skeye.wire.images import (
+    DEFAULT_PORT,
+    META_HEADER_BYTES,
+    META_OFFSET,
+    ImageFormat,
     encode_error_frame,
-    encode_image,
     frame_header,
     meta_header,
 )
-from skeye.sim.limits import check_server_limits
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
+
+__all__ = ["ClientStats", "Frame", "FrameBuffer", "ImageServer"]  # the store, re-exported
 
 NO_FRAME_WAIT_S = 1.0  # how long an OK waits for a camera's first frame before an error frame
 _RECV_BYTES = 4096  # bounds the requests one read can add to the queue
 _QUEUE_LIMIT = 64  # stop reading a client's requests while this many are waiting
 _IDLE_WAKE_S = 1.0  # safety net: a client loop looks around at least this often
-_ENCODE_WAIT_S = 5.0  # a thread waiting on another's encoding gives up and encodes itself
-_UINT32_MAX = 0xFFFF_FFFF
 _STREAM_EARLY = 0.2  # a stream frame may go this fraction of a period before its slot
 HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send a complete request within this
 IDLE_TIMEOUT_S = 120.0  # no request and no byte sent for this long: the connection is closed
 MAX_CLIENTS_PER_PEER = 32  # connections from one peer address (half the default 64 slots)
-
-FrameListener = Callable[[str], None]
-
-
-@dataclass(frozen=True, eq=False)
-class Frame:
-    """One rendered image of one camera.
-
-    ``number`` counts frames rendered by that camera, from 1; ``rgb`` is (H, W, 3) uint8, rows top
-    to bottom, RGB order. Publishing hands the array over: the buffer marks it read-only.
-    """
-
-    camera: str
-    camera_id: int
-    number: int
-    sim_time_s: float
-    rgb: np.ndarray
-
-    def __post_init__(self) -> None:
-        SelectCamera(self.camera)  # the same naming rule as the wire
-        for name, low in (("camera_id", 0), ("number", 1)):
-            value = getattr(self, name)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int)
-                or not (low <= value <= _UINT32_MAX)
-            ):
-                raise LocalProtocolError(
-                    f"Frame.{name} must be an integer {low}-2^32-1, got {value!r}"
-                )
-        if not math.isfinite(self.sim_time_s):
-            raise LocalProtocolError(f"Frame.sim_time_s must be finite, got {self.sim_time_s!r}")
-        rgb = self.rgb
-        if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3:
-            raise LocalProtocolError("Frame.rgb must be an (H, W, 3) uint8 array")
-        if rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
-            raise LocalProtocolError(f"Frame.rgb must have shape (H, W, 3), got {rgb.shape}")
-
-    @property
-    def width(self) -> int:
-        """Image width, px."""
-        return int(self.rgb.shape[1])
-
-    @property
-    def height(self) -> int:
-        """Image height, px."""
-        return int(self.rgb.shape[0])
-
-
-@dataclass
-class _CameraSlot:
-    camera_id: int
-    frame: Frame | None = None
-
-
-@dataclass
-class _Encoding:
-    done: threading.Event = field(default_factory=threading.Event)
-    result: tuple[FrameType, bytes] | None = None
-
-
-_CacheKey = tuple[str, int, ImageFormat, int | None]
-
-
-class _EncodeCache:
-    """Small LRU of encoded images with single-flight encoding (see module comment)."""
-
-    def __init__(self, max_entries: int) -> None:
-        if max_entries < 1:
-            raise LocalProtocolError(f"encode cache needs at least one entry, got {max_entries}")
-        self._max_entries = max_entries
-        self._lock = threading.Lock()
-        self._entries: OrderedDict[_CacheKey, _Encoding] = OrderedDict()
-        self.encodes = 0
-
-    def get(self, frame: Frame, kind: ImageFormat, quality: int | None) -> tuple[FrameType, bytes]:
-        key: _CacheKey = (frame.camera, frame.number, kind, quality)
-        with self._lock:
-            entry = self._entries.get(key)
-            owner = entry is None
-            if entry is None:
-                entry = _Encoding()
-                self._entries[key] = entry
-                while len(self._entries) > self._max_entries:
-                    self._entries.popitem(last=False)
-            else:
-                self._entries.move_to_end(key)
-        if owner:
-            try:
-                entry.result = encode_image(frame.rgb, kind, quality)
-            finally:
-                entry.done.set()
-                with self._lock:
-                    self.encodes += 1
-                    if entry.result is None and self._entries.get(key) is entry:
-                        del self._entries[key]
-            return entry.result
-        if entry.done.wait(_ENCODE_WAIT_S) and entry.result is not None:
-            return entry.result
-        return encode_image(frame.rgb, kind, quality)  # the owner failed or is stuck
-
-
-class FrameBuffer:
-    """Thread-safe store of the newest frame of each camera, shared by the engine and servers."""
-
-    def __init__(self, cache_entries: int = 16) -> None:
-        self._cond = threading.Condition()
-        self._slots: dict[str, _CameraSlot] = {}  # insertion order = registration order
-        self._listeners: tuple[FrameListener, ...] = ()
-        self._cache = _EncodeCache(cache_entries)
-
-    def register_camera(self, name: str, camera_id: int) -> None:
-        """Make a camera known before its first frame (keeps the camera order stable)."""
-        SelectCamera(name)
-        with self._cond:
-            slot = self._slots.get(name)
-            if slot is None:
-                self._slots[name] = _CameraSlot(camera_id)
-            elif slot.camera_id != camera_id:
-                raise LocalProtocolError(
-                    f"camera {name} is registered with id {slot.camera_id}, not {camera_id}"
-                )
-        self._notify(name)
-
-    def remove_camera(self, name: str) -> None:
-        """Forget a camera (its robot went); waiters for it wake up empty-handed."""
-        with self._cond:
-            removed = self._slots.pop(name, None) is not None
-            self._cond.notify_all()
-        if removed:
-            self._notify(name)
-
-    def publish(self, frame: Frame) -> None:
-        """Store ``frame`` as its camera's newest; cheap, never waits on a client.
-
-        Raises:
-            LocalProtocolError: the camera id changed or the frame number did not increase.
-        """
-        frame.rgb.flags.writeable = False
-        with self._cond:
-            slot = self._slots.get(frame.camera)
-            if slot is None:
-                slot = self._slots[frame.camera] = _CameraSlot(frame.camera_id)
-            elif slot.camera_id != frame.camera_id:
-                raise LocalProtocolError(
-                    f"camera {frame.camera} has id {slot.camera_id}, frame says {frame.camera_id}"
-                )
-            if slot.frame is not None and frame.number <= slot.frame.number:
-                raise LocalProtocolError(
-                    f"camera {frame.camera}: frame {frame.number} after {slot.frame.number}"
-                )
-            slot.frame = frame
-            self._cond.notify_all()
-        self._notify(frame.camera)
-
-    def cameras(self) -> list[str]:
-        """Camera names in order of registration or first publication."""
-        with self._cond:
-            return list(self._slots)
-
-    def camera_id(self, name: str) -> int | None:
-        """The id of a camera, or None if it is unknown."""
-        with self._cond:
-            slot = self._slots.get(name)
-            return None if slot is None else slot.camera_id
-
-    def latest(self, camera: str) -> Frame | None:
-        """The newest frame of ``camera``, or None (no frame yet, or no such camera)."""
-        with self._cond:
-            slot = self._slots.get(camera)
-            return None if slot is None else slot.frame
-
-    def wait_newer(self, camera: str, after_number: int, timeout_s: float) -> Frame | None:
-        """The newest frame of ``camera`` numbered above ``after_number``, waiting up to
-        ``timeout_s``; None on timeout or if the camera is removed meanwhile."""
-
-        def ready() -> bool:
-            slot = self._slots.get(camera)
-            return slot is None or (slot.frame is not None and slot.frame.number > after_number)
-
-        with self._cond:
-            self._cond.wait_for(ready, timeout=timeout_s)
-            slot = self._slots.get(camera)
-            if slot is None or slot.frame is None or slot.frame.number <= after_number:
-                return None
-            return slot.frame
-
-    def encoded(
-        self, frame: Frame, kind: ImageFormat, quality: int | None = None
-    ) -> tuple[FrameType, bytes]:
-        """The base frame type and payload of ``frame`` in a format, encoded at most once."""
-        return self._cache.get(frame, kind, quality)
-
-    @property
-    def encode_count(self) -> int:
-        """How many encodings were actually made (cache misses); for tests and benchmarks."""
-        return self._cache.encodes
-
-    def add_listener(self, listener: FrameListener) -> None:
-        """Call ``listener(camera)`` after each publish or camera change; it must not block."""
-        with self._cond:
-            self._listeners = (*self._listeners, listener)
-
-    def remove_listener(self, listener: FrameListener) -> None:
-        """Stop calling ``listener``; unknown listeners are ignored."""
-        with self._cond:
-            self._listeners = tuple(x for x in self._listeners if x is not listener)
-
-    def _notify(self, camera: str) -> None:
-        for listener in self._listeners:
-            try:
-                listener(camera)
-            except Exception:
-                log.exception("image frame listener failed")
 
 
 @dataclass(frozen=True)
@@ -339,9 +119,7 @@ class _ClientHandler:
         self.frames_sent = 0
         self.errors_sent = 0
         self.bytes_sent = 0
-        self.thread = threading.Thread(
-            target=self._run, name=f"image-client {address}", daemon=True
-        )
+        self.thread = Worker(self._run, f"image-client {address}")
 
     # ---------------------------------------------------------------- thread plumbing
 
@@ -671,9 +449,7 @@ class ImageServer:
         self._wake_w.setblocking(False)
         self.host = host
         self.port: int = self._listener.getsockname()[1]
-        self._accept_thread = threading.Thread(
-            target=self._accept_loop, name=f"image-server accept :{self.port}", daemon=True
-        )
+        self._accept_thread = Worker(self._accept_loop, f"image-server accept :{self.port}")
         self._accept_thread.start()
         log.info("image server listening on %s:%d", host, self.port)
 
@@ -728,7 +504,7 @@ class ImageServer:
                 self._handlers.remove(handler)
 
     def _accept_loop(self) -> None:
-        try:
+        try:  # a failure is logged with its traceback by the Worker and kept as its error
             with selectors.DefaultSelector() as sel:
                 sel.register(self._listener, selectors.EVENT_READ)
                 sel.register(self._wake_r, selectors.EVENT_READ)
@@ -736,8 +512,6 @@ class ImageServer:
                     for key, _ in sel.select(_IDLE_WAKE_S):
                         if key.fileobj is self._listener:
                             self._accept_one()
-        except Exception:
-            log.exception("image server accept loop failed")
         finally:
             if self._closed:
                 self._listener.close()

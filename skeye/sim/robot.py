@@ -14,48 +14,38 @@ higher for one second disarms (motors stop), as the AscTec board does.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final
 
 import numpy as np
 
 from skeye.errors import LocalProtocolError, PhysicsError
+from skeye.robots.config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
-from skeye.sim.protocol import BOOL, FLOAT, Layout, LineFormat, floats
-from skeye.sim.robot_config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
+from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
 from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
 from skeye.sim.state import BodyState
 from skeye.sim.vehicle import Battery, RotorModel, ground_effect_factor
-
-Outbox = Callable[[bytes], None]
+from skeye.wire.sim import sen_layout
+from skeye.wire.sim_format import Layout
+from skeye.wire.sim_messages import SenMotors
 
 
 @dataclass
 class ScheduledSensor:
-    """A sensor with its period in physics steps, and its SEN lines' precompiled formats."""
+    """A mounted sensor with its period in physics steps."""
 
     sensor: Any
     period_steps: int
     mount: SensorMount
-    _formats: dict[int, tuple[Layout, LineFormat]] = field(default_factory=dict, repr=False)
 
-    def sen_line(self, reading: Reading) -> bytes:
-        """``SEN {Time t} {Type T} {Name n} ...`` for one reading of this sensor."""
-        layout = reading.layout()
-        entry = self._formats.get(id(layout))
-        if entry is None or entry[0] is not layout:
-            fmt = LineFormat(
-                "SEN",
-                [("Time", FLOAT), ("Type", self.sensor.type_name), ("Name", self.mount.name),
-                 *layout],
-            )
-            entry = self._formats[id(layout)] = (layout, fmt)
-        return entry[1].format((reading.time_s, *reading.values()))
+    def sample(self, state: BodyState, world: WorldQuery) -> SensorSample:
+        """One typed reading of this sensor, named for the robot's sink."""
+        return SensorSample(self.sensor.type_name, self.mount.name, self.sensor.read(state, world))
 
 
-_MOTORS_LAYOUT: Final[Layout] = (("Speeds", floats(4)), ("Commands", floats(4)), ("Thrust", FLOAT))
+_MOTORS_LAYOUT: Final[Layout] = sen_layout(SenMotors, counts={"Speeds": 4, "Commands": 4})
 
 
 @dataclass
@@ -131,14 +121,14 @@ class Robot:
         *,
         physics_step_s: float,
         rng: np.random.Generator,
-        outbox: Outbox,
+        sink: ReadingSink,
         spawn_pos_ned_m: tuple[float, float, float],
         spawn_rpy_rad: tuple[float, float, float],
         airborne: bool,
     ) -> None:
         self.name = name
         self.config = config
-        self.outbox = outbox
+        self.sink = sink
         self.spawn_pos_ned_m = spawn_pos_ned_m
         self.spawn_rpy_rad = spawn_rpy_rad
         decimation = round(1.0 / (config.board_rate_hz * physics_step_s))
@@ -187,11 +177,6 @@ class Robot:
         self.ground_effect = 1.0
         self._full_voltage_v = config.battery.cells * 4.2
         self._half_body_height_m = config.airframe.body_size_m[2] / 2
-        self._status_format = LineFormat(
-            "STA",
-            [("Type", "AerialVehicle"), ("Name", name), ("Time", FLOAT), ("Battery", FLOAT),
-             ("Voltage", FLOAT), ("Current", FLOAT), ("Armed", BOOL), ("Landed", BOOL)],
-        )
         self.ground_distance_m: float | None = None
         if airborne:
             self.flight.armed = True
@@ -301,12 +286,11 @@ class Robot:
         if self.battery.empty and f.armed:
             f.armed = False
 
-    def status_line(self, time_s: float) -> bytes:
-        """``STA {Type AerialVehicle} {Name n} {Time t} ...`` (fields: :meth:`status_fields`)."""
+    def status(self, time_s: float) -> StatusReading:
+        """The robot's status now (the protocol's ``STA``; fields: :meth:`status_fields`)."""
         b, f = self.battery, self.flight
-        return self._status_format.format(
-            (time_s, b.remaining_s, b.voltage_v, b.current_a, f.armed, f.landed)
-        )
+        return StatusReading(self.name, time_s, b.remaining_s, b.voltage_v, b.current_a,
+                             f.armed, f.landed)
 
     def status_fields(self) -> list[tuple[str, object]]:
         return [

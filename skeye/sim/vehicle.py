@@ -18,126 +18,15 @@ decreases; all parameters are validated on construction (ConfigError naming the 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, fields
-from typing import Any, Final
+from typing import Final
 
-from skeye.errors import ConfigError
+from skeye.robots.params import AirframeParams, BatteryParams
 
-GRAVITY_M_S2: Final = 9.81
 AIR_DENSITY_KG_M3: Final = 1.225
-
-
-def _check_positive(owner: str, name: str, value: float) -> None:
-    if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-        raise ConfigError(f"{owner}: {name} must be a positive number, got {value!r}")
-
-
-def dataclass_from_mapping(cls: Any, data: Mapping[str, Any], owner: str) -> Any:
-    """Build a parameter dataclass from a TOML table, naming unknown keys and wrong types."""
-    known = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(data) - set(known))
-    if unknown:
-        raise ConfigError(f"{owner}: unknown key(s) {unknown}; known keys: {sorted(known)}")
-    kwargs: dict[str, Any] = {}
-    defaults = {f.name: f.default for f in fields(cls)}
-    for key, value in data.items():
-        default = defaults.get(key)
-        if isinstance(default, float | int) and not isinstance(default, bool):
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ConfigError(f"{owner}: {key} must be a number, got {value!r}")
-            value = float(value) if isinstance(default, float) else value
-        elif isinstance(default, tuple):
-            if not isinstance(value, list | tuple) or len(value) != len(default):
-                raise ConfigError(
-                    f"{owner}: {key} must be a list of {len(default)} numbers, got {value!r}"
-                )
-            if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-                raise ConfigError(f"{owner}: {key} must hold numbers only, got {value!r}")
-            value = tuple(float(v) for v in value)
-        kwargs[key] = value
-    try:
-        return cls(**kwargs)
-    except ConfigError as exc:
-        raise ConfigError(f"{owner}: {exc}") from None
-
-
-@dataclass(frozen=True)
-class AirframeParams:
-    """Rigid body, rotors and drag. Defaults: RotorS' published AscTec Hummingbird set."""
-
-    mass_kg: float = 0.68
-    inertia_kg_m2: tuple[float, float, float] = (0.007, 0.007, 0.012)
-    arm_m: float = 0.17
-    rotor_radius_m: float = 0.1
-    kf: float = 8.54858e-06  # thrust constant, N / (rad/s)^2
-    moment_constant_m: float = 0.016  # reaction torque / thrust
-    tau_up_s: float = 0.0125
-    tau_down_s: float = 0.025
-    max_rotor_speed_rad_s: float = 838.0
-    rotor_drag: float = 8.06e-05  # N / (rad/s) / (m/s), per rotor
-    drag_area_m2: float = 0.01  # Cd * A for quadratic air drag
-    body_size_m: tuple[float, float, float] = (0.12, 0.12, 0.06)
-    gear_height_m: float = 0.08  # body origin above the ground when landed
-
-    def __post_init__(self) -> None:
-        owner = "airframe"
-        for name in (
-            "mass_kg",
-            "arm_m",
-            "rotor_radius_m",
-            "kf",
-            "moment_constant_m",
-            "tau_up_s",
-            "tau_down_s",
-            "max_rotor_speed_rad_s",
-            "gear_height_m",
-        ):
-            _check_positive(owner, name, getattr(self, name))
-        for name in ("rotor_drag", "drag_area_m2"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ConfigError(f"{owner}: {name} must be >= 0, got {value!r}")
-        for i, v in enumerate(self.inertia_kg_m2):
-            _check_positive(owner, f"inertia_kg_m2[{i}]", v)
-        if self.max_thrust_n <= self.mass_kg * GRAVITY_M_S2:
-            raise ConfigError(
-                f"{owner}: the rotors cannot lift the vehicle (max thrust "
-                f"{self.max_thrust_n:.2f} N <= weight {self.mass_kg * GRAVITY_M_S2:.2f} N)"
-            )
-
-    @property
-    def max_thrust_n(self) -> float:
-        return 4.0 * self.kf * self.max_rotor_speed_rad_s**2
-
-    @property
-    def hover_speed_rad_s(self) -> float:
-        return math.sqrt(self.mass_kg * GRAVITY_M_S2 / (4.0 * self.kf))
-
 
 # '+' layout in FRD: front, right, back, left. Spin sign s_i: reaction torque about body z.
 ROTOR_XY_UNIT = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))
 ROTOR_SPIN = (-1.0, 1.0, -1.0, 1.0)
-
-
-@dataclass(frozen=True)
-class BatteryParams:
-    """3-cell LiPo. Endurance follows from the power drawn; see docs/physics.md."""
-
-    cells: int = 3
-    capacity_mah: float = 2100.0
-    internal_resistance_ohm: float = 0.03
-    efficiency: float = 0.70  # rotor shaft power / electrical power (motors, ESCs)
-    avionics_power_w: float = 3.0
-    cutoff_cell_v: float = 3.3
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.cells, int) or not 1 <= self.cells <= 12:
-            raise ConfigError(f"battery: cells must be an integer 1..12, got {self.cells!r}")
-        for name in ("capacity_mah", "internal_resistance_ohm", "efficiency", "cutoff_cell_v"):
-            _check_positive("battery", name, getattr(self, name))
-        if self.efficiency > 1.0:
-            raise ConfigError(f"battery: efficiency must be <= 1, got {self.efficiency}")
 
 
 # Resting cell voltage against state of charge (typical LiPo discharge curve).

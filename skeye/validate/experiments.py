@@ -29,13 +29,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from skeye.errors import SkeyeError
-from skeye.link.packets import NavState, PadReport, SkeyeMask
-from skeye.link.scaling import nav_status_to_si, pad_report_to_si
 from skeye.link.vehicle import Vehicle
 from skeye.processes import start_skeye, stop_process
-from skeye.sim.protocol import parse_line
-from skeye.sim.recording import RecordingReader
-from skeye.sim.world import PAD_SURFACE_HEIGHT_M
+from skeye.recording.records import RecordingReader
+from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
+from skeye.wire.packet_units import nav_status_to_si, pad_report_to_si
+from skeye.wire.packets import NavState, PadReport, SkeyeMask
+from skeye.wire.sim import decode_line
+from skeye.wire.sim_messages import SenGroundTruth
 
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3
@@ -112,7 +113,7 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
 
 
 def _sim_time(vehicle: Vehicle) -> float:
-    from skeye.link.packets import PD
+    from skeye.wire.packets import PD
 
     msg = vehicle.wait_for(PD.NAV_STATUS, timeout_s=30)
     return nav_status_to_si(msg).time_s  # type: ignore[arg-type]
@@ -154,12 +155,12 @@ def _ground_truth(record: Path) -> list[tuple[float, float, float, float, float]
     for rec in RecordingReader(record).records():
         if rec.direction != ">" or not rec.line.startswith("SEN") or "GroundTruth" not in rec.line:
             continue
-        msg = parse_line(rec.line)
-        if msg.get("Type") != "GroundTruth":
+        msg = decode_line(rec.line)
+        if not isinstance(msg, SenGroundTruth):
             continue
-        n, e, d = msg.get_vector("Location")
-        roll, pitch, _ = msg.get_vector("Orientation")
-        out.append((msg.get_float("Time"), n, e, d, math.cos(roll) * math.cos(pitch)))
+        n, e, d = msg.location_ned_m
+        roll, pitch, _ = msg.orientation_rpy_rad
+        out.append((msg.time_s, n, e, d, math.cos(roll) * math.cos(pitch)))
     if not out:
         raise SkeyeError(f"{record}: no ground truth recorded")
     return out

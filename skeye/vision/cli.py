@@ -56,7 +56,7 @@ def cmd_pad(args: argparse.Namespace) -> int:
 def cmd_detect(args: argparse.Namespace) -> int:
     """Detect the pad in one image file and print the estimate as JSON."""
     if args.fov is None:  # the camera the frame most likely came from: the robot file's
-        from skeye.sim.robot_config import camera_fov_h_rad
+        from skeye.robots.config import camera_fov_h_rad
 
         try:
             args.fov, source = camera_fov_h_rad(args.robot, args.camera)

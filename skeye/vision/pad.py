@@ -15,7 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, InvalidArgument, UnknownName
+
+PAD_SURFACE_HEIGHT_M = 0.001
+"""A pad's visible surface lies this far above the point a world file gives (so it never
+z-fights the ground); the simulator draws it there and measures height above it."""
 
 
 @dataclass(frozen=True)
@@ -40,13 +44,13 @@ class PadDefinition:
 
     def __post_init__(self) -> None:
         if self.side_m <= 0:
-            raise ValueError(f"pad {self.name!r}: side must be positive, got {self.side_m}")
+            raise InvalidArgument(f"pad {self.name!r}: side must be positive, got {self.side_m}")
         if not self.rings:
-            raise ValueError(f"pad {self.name!r}: needs at least one ring")
+            raise InvalidArgument(f"pad {self.name!r}: needs at least one ring")
         previous_inner = self.side_m / 2
         for i, ring in enumerate(self.rings, start=1):
             if not 0 < ring.inner_m < ring.outer_m <= previous_inner:
-                raise ValueError(
+                raise InvalidArgument(
                     f"pad {self.name!r}: ring {i} radii ({ring.outer_m}, {ring.inner_m}) "
                     "must satisfy "
                     f"0 < inner < outer <= {previous_inner} (inside the square and the ring before)"
@@ -54,7 +58,7 @@ class PadDefinition:
             previous_inner = ring.inner_m
         ratios = [r.ratio for r in self.rings]
         if len(set(round(r, 3) for r in ratios)) != len(ratios):
-            raise ValueError(f"pad {self.name!r}: ring ratios must be unique, got {ratios}")
+            raise InvalidArgument(f"pad {self.name!r}: ring ratios must be unique, got {ratios}")
 
 
 SKEYE_4 = PadDefinition(
@@ -76,7 +80,7 @@ def get_pad(name: str) -> PadDefinition:
     try:
         return PADS[name]
     except KeyError:
-        raise KeyError(f"unknown pad {name!r}; known pads: {', '.join(sorted(PADS))}") from None
+        raise UnknownName(f"unknown pad {name!r}; known pads: {', '.join(sorted(PADS))}") from None
 
 
 def render_pad(pad: PadDefinition, pixels: int, supersample: int = 4) -> np.ndarray:
@@ -89,7 +93,7 @@ def render_pad(pad: PadDefinition, pixels: int, supersample: int = 4) -> np.ndar
     a few percent of the work: the simulator builds a 2048 px texture at every start).
     """
     if pixels < 8:
-        raise ValueError(f"pad texture needs at least 8 pixels, got {pixels}")
+        raise InvalidArgument(f"pad texture needs at least 8 pixels, got {pixels}")
     n = pixels * supersample
     coords = (np.arange(n) + 0.5) / n * pad.side_m - pad.side_m / 2  # sub-sample centres
     # A pixel's sub-samples lie within half a pixel diagonal of its centre (plus a margin far

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
 

@@ -15,7 +15,7 @@ from skeye.errors import CommandRejected, LocalProtocolError
 from skeye.sim.world import load_world
 from tests.control.conftest import SimHandle, sim_running
 
-ROBOTS = Path(__file__).resolve().parents[2] / "skeye/sim/robots"
+ROBOTS = Path(__file__).resolve().parents[2] / "skeye/robots"
 
 
 def test_square_returns_within_5_cm_of_start(lockstep_sim: SimHandle) -> None:

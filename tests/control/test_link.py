@@ -13,7 +13,7 @@ import pytest
 import skeye
 from skeye.control import LinkClosed
 from skeye.errors import CommandRejected, LinkTimeout, SkeyeError
-from skeye.sim.protocol import LineDecoder, LineError, Message, format_message
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
 from tests.control.conftest import SimHandle, sim_running
 
 

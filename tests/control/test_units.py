@@ -23,7 +23,7 @@ from skeye.control.sensors import (
 )
 from skeye.errors import LocalProtocolError
 from skeye.geo import to_degrees_minutes
-from skeye.sim.protocol import LineDecoder, Message, format_message
+from skeye.wire.sim_lines import LineDecoder, Message, format_message
 from tests.control.conftest import sim_running
 
 

@@ -42,7 +42,7 @@ SMALL_CAMERA_ROBOT = "groundtest"
 def _robot_dir(tmp: Path) -> Path:
     from importlib import resources
 
-    text = resources.files("skeye.sim").joinpath("robots/hummingbird.toml").read_text("utf-8")
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
     text = re.sub(r'(?m)^name = "hummingbird"', f'name = "{SMALL_CAMERA_ROBOT}"', text, count=1)
     text = re.sub(r"(?m)^width = 800$", "width = 320", text)
     text = re.sub(r"(?m)^height = 600$", "height = 240", text)
@@ -68,7 +68,7 @@ class UvicornThread:
             target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True
         )
         self.thread.start()
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 120  # an event wait: only a stuck server reaches it
         while not self.server.started:
             assert time.monotonic() < deadline, "uvicorn did not start"
             time.sleep(0.05)

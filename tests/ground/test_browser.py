@@ -2,7 +2,8 @@
 
 The tests run in order on one page, as a researcher would: load, watch telemetry, take off,
 fly with a velocity command, hold over the pad, get a command refused, land, and survive the
-pilot restarting.
+pilot restarting. The command fields are built from the server's table: ``#arg-{command}-{arg}``
+(see static/js/forms.js; the helpers' own tests are in test_frontend.py).
 """
 
 from __future__ import annotations
@@ -76,35 +77,36 @@ def test_limits_are_shown_and_bad_fields_are_not_sent(page: Any, stack: Stack) -
             "the vehicle's speed limit to be shown")
     assert "speed 3 m/s" in page.text_content("#limits")
     assert "robot file hummingbird" in page.text_content("#limits")
-    assert page.get_attribute("#m-speed", "max") == "3"
-    assert page.get_attribute("#g-speed", "max") == "3"
-    page.fill("#m-speed", "3.5")
+    assert page.get_attribute("#arg-move_by-speed_m_s", "max") == "3"
+    assert page.get_attribute("#arg-goto_gps-speed_m_s", "max") == "3"
+    assert page.get_attribute("#kbd-speed", "max") == "3"  # from the table, with the limit
+    page.fill("#arg-move_by-speed_m_s", "3.5")
     page.click("#btn-move")
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'move_by'", 5,
             "the over-limit move to be answered")
     r = last_result(page)
     assert r["ok"] == "false" and "over the vehicle's limit of 3" in r["text"], r
     assert "max_speed_m_s" in r["text"]
-    page.fill("#m-speed", "0.5")
+    page.fill("#arg-move_by-speed_m_s", "0.5")
     # Item 5: a blank field is "not given": nothing is sent, the page says which field.
     sent = page.evaluate("S.cmdId")
-    page.fill("#v-fwd", "")
+    page.fill("#arg-velocity-forward_m_s", "")
     page.click("#btn-velocity")
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'velocity'", 5,
             "the blank field to be reported")
     r = last_result(page)
     assert r["ok"] == "false" and '"fwd" field is blank' in r["text"], r
     assert page.evaluate("S.cmdId") == sent  # no command went to the server
-    page.fill("#g-lat", "")
+    page.fill("#arg-goto_gps-latitude_deg", "")
     page.click("#btn-goto")
     assert '"lat" field is blank' in last_result(page)["text"]
     assert page.evaluate("S.cmdId") == sent
-    page.fill("#v-fwd", "0")
+    page.fill("#arg-velocity-forward_m_s", "0")
 
 
 def test_take_off_raises_the_shown_height(page: Any, stack: Stack) -> None:
     assert value(page, "#ro-height") < 0.5
-    page.fill("#to-height", "1.5")
+    page.fill("#arg-take_off-height_m", "1.5")
     page.click("#btn-takeoff")
     wait_js(page, "document.querySelector('#last-result').dataset.ok === 'true'", 5,
             "take-off to be accepted")
@@ -127,8 +129,8 @@ def test_height_is_above_ground_and_labelled(page: Any, stack: Stack) -> None:
 def test_velocity_command_moves_the_vehicle(page: Any, stack: Stack) -> None:
     n0, e0, _ = stack.pilot.ground_truth()
     yaw = math.radians(page.evaluate("S.telemetry.nav.yaw_deg"))
-    page.fill("#v-fwd", "0.6")
-    page.fill("#v-dur", "2.5")
+    page.fill("#arg-velocity-forward_m_s", "0.6")
+    page.fill("#arg-velocity-duration_s", "2.5")
     page.click("#btn-velocity")
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'velocity' && "
                   "document.querySelector('#last-result').dataset.ok === 'true'", 5,
@@ -157,7 +159,8 @@ def test_here_fills_the_position_estimate_and_says_so(page: Any, stack: Stack) -
     page.click("#g-here")
     assert page.get_attribute("#g-source", "data-source") == "estimate"
     assert "position estimate" in page.text_content("#g-source")
-    lat, lon = float(page.input_value("#g-lat")), float(page.input_value("#g-lon"))
+    lat = float(page.input_value("#arg-goto_gps-latitude_deg"))
+    lon = float(page.input_value("#arg-goto_gps-longitude_deg"))
     geo = load_world("pad").geo_origin
     assert geo is not None
     origin = GeoOrigin(geo.latitude_deg, geo.longitude_deg, 0.0)
@@ -169,10 +172,10 @@ def test_here_fills_the_position_estimate_and_says_so(page: Any, stack: Stack) -
 
 def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
     # Item 4: 2.5 m/s is under the robot file's 3 m/s and is flown, not capped at 1 m/s.
-    page.fill("#m-fwd", "5")
-    page.fill("#m-right", "0")
-    page.select_option("#m-frame", "body")
-    page.fill("#m-speed", "2.5")
+    page.fill("#arg-move_by-forward_m", "5")
+    page.fill("#arg-move_by-right_m", "0")
+    page.select_option("#arg-move_by-frame", "body")
+    page.fill("#arg-move_by-speed_m_s", "2.5")
     page.click("#btn-move")
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'move_by' && "
                   "document.querySelector('#last-result').dataset.ok === 'true'", 5,
@@ -187,7 +190,7 @@ def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
 
     wait_until(arrived, 30, "the move to end", poll_s=0.02)
     assert fastest[0] > 1.6, f"flew at most {fastest[0]:.2f} m/s (ground truth)"
-    page.fill("#m-speed", "0.5")
+    page.fill("#arg-move_by-speed_m_s", "0.5")
 
 
 def test_held_keys_log_one_line_per_change(page: Any, stack: Stack) -> None:
@@ -214,10 +217,10 @@ def test_held_keys_log_one_line_per_change(page: Any, stack: Stack) -> None:
 
 def test_move_back_over_the_pad_and_hold_shows_detections(page: Any, stack: Stack) -> None:
     north, east, _ = stack.pilot.ground_truth()
-    page.fill("#m-fwd", f"{-north:.2f}")
-    page.fill("#m-right", f"{-east:.2f}")
-    page.select_option("#m-frame", "world")
-    page.fill("#m-speed", "0.8")
+    page.fill("#arg-move_by-forward_m", f"{-north:.2f}")
+    page.fill("#arg-move_by-right_m", f"{-east:.2f}")
+    page.select_option("#arg-move_by-frame", "world")
+    page.fill("#arg-move_by-speed_m_s", "0.8")
     page.click("#btn-move")
     wait_js(page, "document.querySelector('#last-result').dataset.command === 'move_by' && "
                   "document.querySelector('#last-result').dataset.ok === 'true'", 5,
@@ -276,7 +279,7 @@ def test_a_pad_landing_ends_pad_mode_and_the_page_says_so(page: Any, stack: Stac
     # Item 6: PAD_MODE land ends with the landing (as PX4's precision landing does).
     wait_js(page, "document.querySelector('#flight-state').dataset.state === 'landed'", 20,
             "the new vehicle on the ground")
-    page.fill("#to-height", "1.0")
+    page.fill("#arg-take_off-height_m", "1.0")
     page.click("#btn-takeoff")
     wait_js(page, "document.querySelector('#flight-state').dataset.state === 'holding'", 40,
             "the climb to 1 m")

@@ -12,8 +12,8 @@ from skeye.errors import LocalProtocolError
 from skeye.ground.bridge import LinkEvent, LinkState, PacketRate, next_link_state
 from skeye.ground.commands import COMMANDS, GroundCommand, describe_commands, parse_command
 from skeye.ground.telemetry import telemetry_json
-from skeye.link.packets import PD, NavState, PadAction
-from skeye.link.scaling import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
+from skeye.wire.packet_units import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
+from skeye.wire.packets import PD, NavState, PadAction
 
 
 def test_defaults_are_filled_in() -> None:
@@ -151,3 +151,39 @@ def test_speeds_are_checked_against_the_robot_files_limits() -> None:
     assert described["take_off"]["height_m"]["limit"] is None
     airrobot = VehicleLimits.for_robot("airrobot")
     assert {c["name"]: c for c in describe_commands(airrobot)}["move_by"]["args"][5]["max"] == 2.0
+
+
+def test_the_table_describes_every_field_of_the_page() -> None:
+    from skeye.ground.commands import DISPLAY_FACTORS, KEYBOARD, Arg, describe_keyboard, si_unit
+
+    assert [si_unit(n) for n in ("yaw_rate_rad_s", "speed_m_s", "yaw_rad", "latitude_deg",
+                                 "height_m", "duration_s", "mode")] == [
+        "rad/s", "m/s", "rad", "°", "m", "s", ""]
+    for spec in COMMANDS.values():
+        for arg in spec.args:
+            where = f"{spec.name}.{arg.name}"
+            assert arg.label, where
+            start = arg.start_value
+            if arg.choices:
+                assert start is None or start in arg.choices, where
+                continue
+            assert arg.si_unit and arg.step is not None and arg.step > 0, where
+            assert arg.display_unit == arg.si_unit or (
+                (arg.si_unit, arg.display_unit) in DISPLAY_FACTORS), where
+            assert start is None or (isinstance(start, float) and arg.lo <= start <= arg.hi), where
+    described = {c["name"]: {a["name"]: a for a in c["args"]} for c in describe_commands()}
+    yaw = described["velocity"]["yaw_rate_rad_s"]
+    assert (yaw["label"], yaw["si_unit"], yaw["unit"], yaw["step"]) == ("yaw", "rad/s", "°/s", 5.0)
+    assert described["take_off"]["height_m"]["initial"] == 1.5  # the page starts at 1.5 m
+    assert described["take_off"]["height_m"]["default"] == 1.0  # an omitted argument: 1 m
+    assert described["goto_gps"]["latitude_deg"]["initial"] is None  # blank until filled
+    # The keyboard flies the velocity command: its speed and yaw rate lie inside its ranges.
+    velocity = {a.name: a for a in COMMANDS["velocity"].args}
+    assert KEYBOARD.speed.limit == velocity["forward_m_s"].limit == "speed"
+    assert 0 < KEYBOARD.speed.lo and KEYBOARD.speed.hi <= velocity["forward_m_s"].hi
+    assert abs(KEYBOARD.yaw_rate_rad_s) <= velocity["yaw_rate_rad_s"].hi
+    assert KEYBOARD.duration_s <= velocity["duration_s"].hi and KEYBOARD.repeat_s < 1.0
+    kbd = describe_keyboard()
+    assert kbd["speed"]["max"] == KEYBOARD.speed.hi and kbd["repeat_s"] == KEYBOARD.repeat_s
+    with pytest.raises(ValueError, match="cannot show m/s as 'km/h'"):
+        Arg("speed_m_s", 0.0, 1.0, unit="km/h")

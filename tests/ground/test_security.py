@@ -29,8 +29,8 @@ from websockets.sync.client import connect as ws_connect
 from skeye.ground.app import create_app
 from skeye.ground.bridge import VehicleBridge
 from skeye.ground.guard import MAX_BODY_BYTES, GroundSecurity, cookie_name
-from skeye.link.packets import NavState
 from skeye.pilot.server import PilotServer
+from skeye.wire.packets import NavState
 from tests.ground.conftest import UvicornThread, wait_until
 from tests.pilot.fake_airframe import FakeAirframe
 
@@ -179,7 +179,7 @@ def test_no_docs_page_and_nothing_loaded_from_elsewhere(ground: Ground) -> None:
         assert r.status_code == 404, path
         assert "cdn" not in r.text.lower()
     page = httpx.get(f"{ground.web.page_url}", follow_redirects=True, timeout=30).text
-    for text in [page] + [p.read_text("utf-8") for p in STATIC.iterdir() if p.is_file()]:
+    for text in [page] + [p.read_text("utf-8") for p in STATIC.rglob("*") if p.is_file()]:
         for marker in ("http://", "https://", "//cdn", "src=\"//", "@import"):
             assert marker not in text, marker
 

@@ -29,7 +29,7 @@ def _children(pid: int) -> list[int]:
 
 def test_up_starts_everything_and_sigterm_stops_everything() -> None:
     sim, img, pilot, ground, video_port = _free_ports(5)
-    argv = [sys.executable, "-m", "skeye.ground.cli", "up", "--sim-port", str(sim),
+    argv = [sys.executable, "-m", "skeye.cli", "up", "--sim-port", str(sim),
             "--image-port", str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
             "--video-port", str(video_port)]
     # Its own process group, killed whole in the finally: a failure leaves no orphans.
@@ -93,7 +93,7 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
 
 
 def _run_up(*extra: str, timeout_s: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "skeye.ground.cli", "up", *extra],
+    return subprocess.run([sys.executable, "-m", "skeye.cli", "up", *extra],
                           capture_output=True, text=True, timeout=timeout_s)
 
 
@@ -123,7 +123,7 @@ def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
     with socket.create_server(("127.0.0.1", 0)) as taken:
         port = taken.getsockname()[1]
         done = subprocess.run(
-            [sys.executable, "-m", "skeye.ground.cli", "pilot", "--sim", "127.0.0.1:1",
+            [sys.executable, "-m", "skeye.cli", "pilot", "--sim", "127.0.0.1:1",
              "--port", str(port)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1
     assert f"port {port}" in done.stdout and "--port" in done.stdout, done.stdout
@@ -133,7 +133,7 @@ def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
         with connect(f"127.0.0.1:{server.port}") as conn:
             conn.spawn("hummingbird", start="Pad1", name="R1")
             done = subprocess.run(
-                [sys.executable, "-m", "skeye.ground.cli", "pilot", "--sim",
+                [sys.executable, "-m", "skeye.cli", "pilot", "--sim",
                  f"127.0.0.1:{server.port}", "--port", "0", "--name", "R1"],
                 capture_output=True, text=True, timeout=60)
     assert done.returncode == 1

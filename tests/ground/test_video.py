@@ -92,7 +92,7 @@ def test_ground_control_imports_no_detector_and_no_image_client() -> None:
 
 
 def test_a_bad_video_address_is_named(capsys) -> None:
-    from skeye.ground.cli import main
+    from skeye.cli import main
 
     for uri in ("udp://127.0.0.1:7001", "tcp://127.0.0.1", "tcp://127.0.0.1:99999"):
         assert main(["ground", "--vehicle", "tcp://127.0.0.1:1", "--video", uri,

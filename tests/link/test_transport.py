@@ -10,7 +10,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from skeye.errors import LocalProtocolError
-from skeye.link.packets import Result, ResultCode, VehicleStreamParser, encode
 from skeye.link.transport import (
     Link,
     LinkClosed,
@@ -20,6 +19,7 @@ from skeye.link.transport import (
     parse_uri,
     pty_null_modem,
 )
+from skeye.wire.packets import Result, ResultCode, VehicleStreamParser, encode
 
 
 def recv_exactly(link: Link, n: int, timeout_s: float = 3.0) -> bytes:

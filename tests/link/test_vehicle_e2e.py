@@ -20,12 +20,12 @@ import pytest
 from skeye.control.connection import connect
 from skeye.errors import CommandRejected
 from skeye.geo import GeoOrigin
-from skeye.link.packets import PD, ImuCalcData, NavState, PollMask, SkeyeMask
-from skeye.link.scaling import gps_data_to_si, imu_calcdata_to_si, nav_status_to_si
 from skeye.link.transport import pty_null_modem
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
+from skeye.wire.packet_units import gps_data_to_si, imu_calcdata_to_si, nav_status_to_si
+from skeye.wire.packets import PD, ImuCalcData, NavState, PollMask, SkeyeMask
 from tests.sim.conftest import running_sim
 
 POS_TOL_M = 0.25  # INS estimate vs ground truth over a short flight

@@ -8,8 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from skeye.link.crc import crc16
-from skeye.link.packets import (
+from skeye.pilot.boards import BoardSettings, OnboardBoards
+from skeye.pilot.states import TRANSITIONS, FlightEvent, FlightStateMachine, IllegalTransition
+from skeye.wire.crc import crc16
+from skeye.wire.packets import (
     PD,
     Ack,
     CommandStreamParser,
@@ -34,8 +36,6 @@ from skeye.link.packets import (
     Velocity,
     encode,
 )
-from skeye.pilot.boards import BoardSettings, OnboardBoards
-from skeye.pilot.states import TRANSITIONS, FlightEvent, FlightStateMachine, IllegalTransition
 from tests.pilot.fake_airframe import FakeAirframe
 
 
@@ -348,9 +348,9 @@ def test_nav_status_height_is_above_the_ground_at_home():
 
 def test_gps_best_estimate_is_the_ins_position_anchored_to_the_mean_fix():
     from skeye.geo import GeoOrigin
-    from skeye.link.packets import GpsDataAdvanced, PollMask
-    from skeye.link.scaling import gps_data_advanced_to_si
     from skeye.pilot.airframe import GpsFix
+    from skeye.wire.packet_units import gps_data_advanced_to_si
+    from skeye.wire.packets import GpsDataAdvanced, PollMask
 
     air, boards = make()
     origin = GeoOrigin(49.0, 8.0, 0.0)

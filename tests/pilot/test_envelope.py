@@ -16,14 +16,14 @@ from pathlib import Path
 import pytest
 
 from skeye.errors import CommandRejected, ConfigError
-from skeye.link.packets import PD, CtrlBits, NavState, NavStatus, SkeyeMask
-from skeye.link.scaling import nav_status_to_si
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import PilotServer
 from skeye.processes import start_skeye, stop_process
-from skeye.sim.robot_config import load_robot_config
+from skeye.robots.config import load_robot_config
+from skeye.wire.packet_units import nav_status_to_si
+from skeye.wire.packets import PD, CtrlBits, NavState, NavStatus, SkeyeMask
 from tests.pilot.fake_airframe import FakeAirframe
 
 HEIGHT_MODE = int(CtrlBits(0x0F) | CtrlBits.HEIGHT_CONTROL)
@@ -135,7 +135,7 @@ def test_envelope_values_are_checked() -> None:
 def test_robot_file_envelope_and_bad_values(tmp_path: Path) -> None:
     from importlib import resources
 
-    text = resources.files("skeye.sim").joinpath("robots/hummingbird.toml").read_text("utf-8")
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
     good = text.replace('name = "hummingbird"', 'name = "lowcap"').replace(
         "ceiling_m = 120.0", "ceiling_m = 30.0")
     (tmp_path / "lowcap.toml").write_text(good, encoding="utf-8")

@@ -9,13 +9,13 @@ from contextlib import ExitStack
 
 from skeye.control.connection import connect
 from skeye.errors import CommandRejected
-from skeye.link.packets import PD, NavState, PollMask, SkeyeMask, Stream, TakeOff, encode
 from skeye.link.transport import LinkClosed, TcpLink
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.outbox import Outbox
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
+from skeye.wire.packets import PD, NavState, PollMask, SkeyeMask, Stream, TakeOff, encode
 from tests.ground.conftest import wait_until
 from tests.pilot.fake_airframe import FakeAirframe
 from tests.sim.conftest import running_sim

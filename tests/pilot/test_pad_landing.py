@@ -10,12 +10,12 @@ from contextlib import ExitStack
 import pytest
 
 from skeye.control.connection import connect
-from skeye.link.packets import PD, NavState, PadReport, SkeyeMask
-from skeye.link.scaling import pad_report_to_si
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.cli import pad_vision_factory
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
+from skeye.wire.packet_units import pad_report_to_si
+from skeye.wire.packets import PD, NavState, PadReport, SkeyeMask
 from tests.sim.test_cameras import sim_with_images
 
 

@@ -8,7 +8,11 @@ import time
 import pytest
 
 from skeye.errors import CommandRejected
-from skeye.link.packets import (
+from skeye.link.transport import LinkClosed
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.server import PilotServer
+from skeye.wire.packets import (
     PD,
     LlStatus,
     NavState,
@@ -18,10 +22,6 @@ from skeye.link.packets import (
     SkeyeMask,
     VehicleStreamParser,
 )
-from skeye.link.transport import LinkClosed
-from skeye.link.vehicle import Vehicle
-from skeye.pilot.boards import BoardSettings
-from skeye.pilot.server import PilotServer
 from tests.pilot.fake_airframe import FakeAirframe
 
 
@@ -64,7 +64,7 @@ def test_a_station_that_reconnects_at_once_is_served_not_turned_away():
     air = FakeAirframe()
     with PilotServer(air, port=0) as pilot:
         for _ in range(20):
-            with Vehicle.open(pilot.address) as v:
+            with Vehicle.open(pilot.address, timeout_s=30.0) as v:  # an event wait
                 assert PD.LL_STATUS in v.poll(int(PollMask.LL_STATUS))
         assert pilot.turned_away == 0
 

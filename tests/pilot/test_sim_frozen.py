@@ -17,12 +17,12 @@ import pytest
 from skeye.control.connection import connect
 from skeye.control.motion import MotionConfig
 from skeye.errors import CommandRejected
-from skeye.link.packets import NavState, SkeyeMask
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from skeye.processes import start_skeye, stop_process
+from skeye.wire.packets import NavState, SkeyeMask
 from tests.ground.conftest import wait_until
 
 

@@ -9,11 +9,11 @@ import pytest
 
 from skeye.control.connection import connect
 from skeye.errors import CommandRejected
-from skeye.link.packets import PD, NavState, PollMask, SkeyeMask
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
+from skeye.wire.packets import PD, NavState, PollMask, SkeyeMask
 from tests.sim.conftest import running_sim
 
 

@@ -18,8 +18,8 @@ import pytest
 
 from skeye.control.camera import CameraSensor
 from skeye.control.connection import connect
+from skeye.control.image_client import ImageClient
 from skeye.errors import LinkTimeout
-from skeye.link.packets import PD, PollMask, SkeyeMask
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.cli import pad_vision_factory
@@ -27,11 +27,12 @@ from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from skeye.pilot.vision import PadVision
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation, SimulationRunner
-from skeye.sim.image_client import ImageClient
+from skeye.sim.engine import Simulation
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
+from skeye.wire.packets import PD, PollMask, SkeyeMask
 from tests.ground.conftest import wait_until
 
 

@@ -13,8 +13,9 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-import skeye.sim.server as server_module
-from skeye.sim.image_client import ImageClient
+import skeye.sim.session as session_module
+from skeye.control.image_client import ImageClient
+from skeye.pixels import frame_image_rgb
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
 from skeye.sim.server import ControlServer
 from tests.robustness.helpers import open_fds, thread_count, wait_for
@@ -74,7 +75,7 @@ def test_control_client_that_never_reads(
     control: ControlServer, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     bound = 300_000  # small, so the test fills it quickly
-    monkeypatch.setattr(server_module, "OUTBOX_BYTES", bound)
+    monkeypatch.setattr(session_module, "OUTBOX_BYTES", bound)
     sleeper = socket.socket()
     sleeper.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     sleeper.connect(("127.0.0.1", control.port))
@@ -151,7 +152,7 @@ def test_image_client_dies_mid_frame(images: ImageServer) -> None:
         _abort(sock) if hard else sock.close()
         assert wait_for(lambda: images.client_count() == 0)
     with ImageClient("127.0.0.1", images.port) as client:
-        assert client.get_frame().image_rgb().shape == (600, 800, 3)
+        assert frame_image_rgb(client.get_frame()).shape == (600, 800, 3)
 
 
 def test_image_client_that_never_reads(images: ImageServer) -> None:

@@ -15,10 +15,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from skeye.sim.image_protocol import DecodedFrame, FrameDecoder, ProtocolViolation, RemoteError
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
-from skeye.sim.protocol import LineDecoder, LineError
 from skeye.sim.server import ControlServer
+from skeye.wire.images import DecodedFrame, FrameDecoder, ProtocolViolation, RemoteError
+from skeye.wire.sim_lines import LineDecoder, LineError
 from tests.sim.conftest import LineClient, running_sim
 
 FUZZ = settings(

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from skeye.cli import main
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
-from skeye.sim.plotting import load_tracks, plot_recording
-from skeye.sim.recording import (
+from skeye.recording.plotting import load_tracks, plot_recording
+from skeye.recording.records import (
     DIRECTIONS,
     NOTE,
     RECEIVED,
@@ -29,7 +29,7 @@ from skeye.sim.recording import (
     parse_header,
     parse_record,
 )
-from skeye.sim.replay import ReplayServer
+from skeye.recording.replay import ReplayServer
 from tests.robustness.helpers import sim_process, wait_for
 from tests.sim.conftest import LineClient, running_sim
 
@@ -233,7 +233,7 @@ def test_sim_killed_loses_at_most_the_last_second(tmp_path: Path) -> None:
 def test_battery_panel_shows_flight_time_left_only_while_flying(
     recording: tuple[Path, bytes],
 ) -> None:
-    from skeye.sim.plotting import RobotTrack, flight_time_left_min
+    from skeye.recording.plotting import RobotTrack, flight_time_left_min
 
     path, _ = recording
     track = load_tracks(path)[0]["R1"]

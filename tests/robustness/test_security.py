@@ -9,7 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeye.link.packets import (
+from skeye.recording.records import Recorder
+from skeye.robots.config import BUILTIN_ROBOTS
+from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.wire.images import FrameDecoder, RemoteError
+from skeye.wire.packets import (
     SKEYE_START,
     START,
     CommandStreamParser,
@@ -17,14 +21,10 @@ from skeye.link.packets import (
     FrameError,
     VehicleStreamParser,
 )
-from skeye.sim.image_protocol import FrameDecoder, RemoteError
-from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
-from skeye.sim.recording import Recorder
-from skeye.sim.robot_config import BUILTIN_ROBOTS
 from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient, running_sim
 
-ROBOT_TOML = (Path(__file__).resolve().parents[2] / "skeye/sim/robots/hummingbird.toml").read_text()
+ROBOT_TOML = (Path(__file__).resolve().parents[2] / "skeye/robots/hummingbird.toml").read_text()
 
 
 def test_servers_bind_loopback_by_default() -> None:

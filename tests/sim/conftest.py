@@ -10,10 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from skeye.sim.engine import Simulation, SimulationRunner
-from skeye.sim.protocol import LineDecoder, LineError, Message
+from skeye.sim.engine import Simulation
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
+from skeye.wire.sim_lines import LineDecoder, LineError, Message
 
 
 class LineClient:

@@ -16,7 +16,7 @@ from tests.sim.conftest import running_sim
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
-from bench_sim import Conn, measure_rtf, robot_dir_with_board_rate
+from bench_sim import Conn, measure_in_process_rtf, measure_rtf, robot_dir_with_board_rate
 
 
 def test_board_rate_copy_flies_at_every_physics_step(tmp_path: Path) -> None:
@@ -41,3 +41,10 @@ def test_refused_robot_raises_with_the_simulators_reason(tmp_path: Path) -> None
             conn.spawn(name, "X", "0,0,-1")
         conn.spawn("hummingbird", "Y", "0,0,-1")  # the connection stays usable
         conn.sock.close()
+
+
+def test_in_process_measurement_steps_without_a_server() -> None:
+    rtf, readings = measure_in_process_rtf(1, 0.2, 0.001, "hummingbird")
+    assert rtf > 0 and readings > 0
+    rtf, lines = measure_in_process_rtf(1, 0.2, 0.001, "hummingbird", encode=True)
+    assert rtf > 0 and lines == readings  # one line per reading

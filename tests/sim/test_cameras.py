@@ -11,16 +11,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from skeye.control.image_client import ImageClient
+from skeye.pixels import frame_image
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation, SimulationRunner
-from skeye.sim.image_client import ImageClient
+from skeye.sim.engine import Simulation
 from skeye.sim.image_server import FrameBuffer, ImageServer
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.pad import SKEYE_4
 from tests.sim.conftest import LineClient
 
-ROBOTS = Path(__file__).parents[2] / "skeye/sim/robots"
+ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
 
 @contextmanager
@@ -109,17 +111,17 @@ def test_image_requests_against_the_simulator():
             for fmt in ("raw", "jpeg", "png"):
                 img.set_format(fmt, quality=85)
                 frame = img.get_frame()
-                assert frame.image().shape == (600, 800, 3)
+                assert frame_image(frame).shape == (600, 800, 3)
                 assert frame.meta is not None and frame.meta.width == 800
                 numbers.append(frame.meta.frame_number)
                 c.step(34)
             assert numbers == sorted(numbers) and len(set(numbers)) == 3
             # A bad extension line gets an error frame; the connection stays usable.
-            img._sock.sendall(b"SKEYE FORMAT GIF\n")  # a line the client API would refuse
+            img.link.send(b"SKEYE FORMAT GIF\n")  # a line the client API would refuse
             with pytest.raises(Exception, match=r"(?i)format|gif"):
                 img.get_frame()
             img.set_format("jpeg", quality=85)
-            assert img.get_frame().image().shape == (600, 800, 3)
+            assert frame_image(img.get_frame()).shape == (600, 800, 3)
         c.send("GETCONF {Type Camera}")
         conf = c.expect("CONF")
         assert conf.get_float("FOV") == pytest.approx(1.309, abs=1e-6)
@@ -219,7 +221,7 @@ def test_snapshot_saves_png_and_jpeg(tmp_path):
     import cv2
 
     from skeye.errors import LocalProtocolError
-    from skeye.sim.snapshot import save_snapshot
+    from skeye.recording.snapshot import save_snapshot
 
     with sim_with_images() as (control, images, _cameras):
         c = LineClient(control.port)

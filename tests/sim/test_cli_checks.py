@@ -22,14 +22,14 @@ def _skeye(*argv: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_sim_refuses_to_start_with_a_robot_file_that_has_a_typo(tmp_path: Path) -> None:
-    text = resources.files("skeye.sim").joinpath("robots/hummingbird.toml").read_text("utf-8")
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
     (tmp_path / "good.toml").write_text(text.replace('name = "hummingbird"', 'name = "good"'))
     (tmp_path / "typo.toml").write_text(
         text.replace('name = "hummingbird"', 'name = "typo"').replace("mass_kg", "mas_kg"))
     # The message INIT {ClassName typo} would get...
     sim = Simulation(load_world("pad"), seed=1, robot_dirs=(tmp_path,))
     with pytest.raises(ConfigError) as info:
-        sim.spawn("typo", outbox=lambda _: None, name="T")
+        sim.spawn("typo", sink=lambda events: None, name="T")
     assert "mas_kg" in str(info.value)
     # ... is what skeye sim says at start-up, before it listens.
     done = _skeye("sim", "--port", "0", "--robot-dir", str(tmp_path))

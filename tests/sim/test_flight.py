@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skeye.sim.robot_config import load_robot_config
+from skeye.robots.config import load_robot_config
 from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
 
 G = 9.81
@@ -57,7 +57,7 @@ def test_free_fall_matches_g(lockstep_server, client_factory):
 
 
 def test_motor_step_follows_time_constant(tmp_path: Path, client_factory):
-    text = (Path(__file__).parents[2] / "skeye/sim/robots/hummingbird.toml").read_text()
+    text = (Path(__file__).parents[2] / "skeye/robots/hummingbird.toml").read_text()
     text = text.replace('name = "hummingbird"', 'name = "fastmotors"', 1)
     text = re.sub(r'(type = "Motors"\nname = "Motors"\nrate_hz = )\d+', r"\g<1>250", text)
     assert "rate_hz = 250" in text
@@ -207,7 +207,7 @@ def test_hover_until_the_battery_is_empty():
     from skeye.sim.world import load_world
 
     sim = Simulation(load_world("pad"), seed=1)
-    robot = sim.spawn("hummingbird", name="R1", outbox=lambda b: None,
+    robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                       location_ned_m=(0.0, 0.0, -2.0))
     robot.sensors = []  # the battery is the question; no stream to format
     while robot.flight.armed and sim.time_s < 1800:

@@ -21,11 +21,11 @@ import pytest
 
 from skeye.errors import ConfigError
 from skeye.processes import die_with_parent
-from skeye.sim.image_protocol import FrameDecoder, RemoteError
 from skeye.sim.image_server import FrameBuffer, ImageServer
-from skeye.sim.protocol import Message
 from skeye.sim.server import ControlServer
 from skeye.sim.wind import PARAM_RANGES
+from skeye.wire.images import FrameDecoder, RemoteError
+from skeye.wire.sim_lines import Message
 from tests.sim.conftest import LineClient, running_sim
 
 ENGINE_ERR_WAIT_S = 10.0  # "at once": far below the 30 s call timeout a client used to wait

@@ -14,9 +14,11 @@ import cv2
 import numpy as np
 import pytest
 
+from skeye.control.image_client import ImageClient
 from skeye.errors import LocalProtocolError, RemoteProtocolError
-from skeye.sim.image_client import ImageClient
-from skeye.sim.image_protocol import (
+from skeye.pixels import frame_image, frame_image_rgb
+from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.wire.images import (
     DecodedFrame,
     FrameDecoder,
     FrameEvent,
@@ -24,7 +26,6 @@ from skeye.sim.image_protocol import (
     ImageFormat,
     RemoteError,
 )
-from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
 
 WIDTH, HEIGHT = 800, 600
 _Y, _X = np.mgrid[0:HEIGHT, 0:WIDTH]
@@ -157,7 +158,7 @@ def test_raw_frames_are_exact(server: ImageServer, publisher: Publisher, meta: b
         frame = client.get_frame()
         assert frame.frame_type is FrameType.RAW
         assert frame.wire_type == (16 if meta else 0)
-        image = frame.image_rgb()
+        image = frame_image_rgb(frame)
         assert image.shape == (HEIGHT, WIDTH, 3)
         if meta:
             assert frame.meta is not None
@@ -178,7 +179,7 @@ def test_png_frames_are_exact(server: ImageServer, publisher: Publisher) -> None
         frame = client.get_frame()
         assert frame.frame_type is FrameType.PNG and frame.wire_type == 16 + 6
         assert frame.meta is not None
-        assert np.array_equal(frame.image_rgb(), expected_rgb(frame.meta.frame_number))
+        assert np.array_equal(frame_image_rgb(frame), expected_rgb(frame.meta.frame_number))
 
 
 @pytest.mark.parametrize(("quality", "frame_type"), [(95, 1), (85, 2), (60, 3), (30, 4), (10, 5)])
@@ -191,7 +192,7 @@ def test_jpeg_frames_are_close(
         frame = client.get_frame()
         assert frame.frame_type == frame_type
         assert frame.meta is not None
-        error = np.abs(frame.image_rgb().astype(int) - expected_rgb(frame.meta.frame_number))
+        error = np.abs(frame_image_rgb(frame).astype(int) - expected_rgb(frame.meta.frame_number))
         assert error.mean() < (3.0 if quality >= 60 else 8.0)
 
 
@@ -202,9 +203,9 @@ def test_sub_rectangle(server: ImageServer, publisher: Publisher) -> None:
         assert frame.meta is not None
         assert (frame.meta.width, frame.meta.height) == (321, 57)
         want = expected_rgb(frame.meta.frame_number)[200:257, 100:421]
-        assert np.array_equal(frame.image_rgb(), want)
+        assert np.array_equal(frame_image_rgb(frame), want)
         corner = client.get_subrect(WIDTH - 1, HEIGHT - 1, 1, 1)
-        assert corner.image().shape == (1, 1, 3)
+        assert frame_image(corner).shape == (1, 1, 3)
 
 
 @pytest.mark.parametrize(
@@ -216,7 +217,7 @@ def test_bad_rectangle_gives_error_frame_and_connection_stays(
     with ImageClient("127.0.0.1", server.port) as client:
         with pytest.raises(RemoteProtocolError, match="bad rectangle"):
             client.get_subrect(*rect)
-        assert client.get_frame().image().shape == (HEIGHT, WIDTH, 3)
+        assert frame_image(client.get_frame()).shape == (HEIGHT, WIDTH, 3)
 
 
 def test_bad_extension_line_gives_error_frame_and_connection_stays(
@@ -266,7 +267,7 @@ def test_camera_selection(server: ImageServer, publisher: Publisher) -> None:
         client.select_camera("R1/Front")
         front = client.get_frame()
         assert front.meta is not None and front.meta.camera_id == 2
-        assert np.array_equal(front.image_rgb(), expected_rgb(front.meta.frame_number, 1))
+        assert np.array_equal(frame_image_rgb(front), expected_rgb(front.meta.frame_number, 1))
         client.select_camera("R9/Nowhere")
         with pytest.raises(RemoteProtocolError, match=r"unknown camera 'R9/Nowhere'.*R1/Front"):
             client.get_frame()
@@ -281,7 +282,7 @@ def test_removed_camera_gives_error_frame(
     buffer.publish(Frame("R2/Down", 7, 1, 0.0, make_frame_rgb(1)))
     with ImageClient("127.0.0.1", server.port) as client:
         client.select_camera("R2/Down")
-        assert client.get_frame().image().shape == (HEIGHT, WIDTH, 3)
+        assert frame_image(client.get_frame()).shape == (HEIGHT, WIDTH, 3)
         buffer.remove_camera("R2/Down")
         with pytest.raises(RemoteProtocolError, match="gone"):
             client.get_frame()
@@ -342,7 +343,7 @@ def test_no_frame_yet_waits_then_errors(buffer: FrameBuffer, server: ImageServer
         timer.start()
         frame = client.get_frame()  # arrives while the request waits
         timer.join()
-        assert np.array_equal(frame.image_rgb(), make_frame_rgb(1))
+        assert np.array_equal(frame_image_rgb(frame), make_frame_rgb(1))
 
 
 def test_eof_after_request_still_gets_the_answer(server: ImageServer, publisher: Publisher) -> None:
@@ -487,7 +488,7 @@ def test_client_disconnecting_mid_frame_costs_nothing(
     assert server.client_count() == 0
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
     with ImageClient("127.0.0.1", server.port) as client:
-        assert client.get_frame().image().shape == (HEIGHT, WIDTH, 3)
+        assert frame_image(client.get_frame()).shape == (HEIGHT, WIDTH, 3)
 
 
 def test_close_leaves_no_threads_and_is_idempotent(buffer: FrameBuffer) -> None:

@@ -24,6 +24,7 @@ SCENARIO = r"""
 import hashlib, sys
 from skeye import native
 from skeye.sim.engine import Simulation
+from skeye.sim.stream import text_sink
 from skeye.sim.wind import make_settings
 from skeye.sim.world import load_world
 
@@ -31,8 +32,9 @@ print(native.status().describe())
 out = []
 sim = Simulation(load_world("yard"), seed=11,
                  wind=make_settings("turbulence", {"speed_m_s": 3.0}))
-a = sim.spawn("hummingbird", outbox=out.append, name="A", location_ned_m=(0.0, 0.0, -1.5))
-b = sim.spawn("hummingbird", outbox=out.append, name="B", start="Street1")
+sink = text_sink(out.append)
+a = sim.spawn("hummingbird", sink=sink, name="A", location_ned_m=(0.0, 0.0, -1.5))
+b = sim.spawn("hummingbird", sink=sink, name="B", start="Street1")
 sim.step(700)
 a.drive(forward_m_s=0.8, right_m_s=-0.3, yaw_rate_rad_s=0.4)
 b.drive(up_m_s=1.0)

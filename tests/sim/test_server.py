@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from skeye.errors import ConfigError
-from skeye.sim.robot_config import load_robot_config, parse_robot_config
+from skeye.robots.config import load_robot_config, parse_robot_config
 from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
 
 BAD_LINES = [
@@ -212,7 +212,7 @@ def test_robot_files_are_validated_with_clear_errors(tmp_path: Path):
 
             cfg = parse_robot_config(data, "test.toml")
             Robot("R", cfg, physics_step_s=0.001, rng=np.random.default_rng(0),
-                  outbox=lambda b: None, spawn_pos_ned_m=(0, 0, -1), spawn_rpy_rad=(0, 0, 0),
+                  sink=lambda events: None, spawn_pos_ned_m=(0, 0, -1), spawn_rpy_rad=(0, 0, 0),
                   airborne=True)
     (tmp_path / "broken.toml").write_text("name = [unclosed")
     with pytest.raises(ConfigError, match="invalid TOML"):

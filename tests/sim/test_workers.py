@@ -12,8 +12,9 @@ import pytest
 
 from skeye.errors import SkeyeError
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation, SimulationRunner
+from skeye.sim.engine import Simulation
 from skeye.sim.image_server import FrameBuffer
+from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
 from skeye.workers import Worker, WorkerFailed

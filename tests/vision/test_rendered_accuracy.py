@@ -58,7 +58,7 @@ def render() -> Iterator:
         # Place the body so the camera is at (north, east) at `height` above the pad plane.
         body = (north - cam_offset[0], east - cam_offset[1],
                 -PAD_SURFACE_HEIGHT_M - height - cam_offset[2])
-        sim.spawn("hummingbird", name=name, outbox=lambda b: None,
+        sim.spawn("hummingbird", name=name, sink=lambda events: None,
                   location_ned_m=body, rotation_rpy_rad=(roll, pitch, 0.0))
         sim.step(1)
         frame = buffer.latest(f"{name}/Down")
@@ -103,7 +103,7 @@ def test_a_border_seen_only_in_the_corners_does_not_veto_the_rest(render):
     try:
         body = (-0.00105, 0.01486, -0.35803)
         rpy = (0.00084, 0.00118, 0.0013)
-        sim.spawn("hummingbird", name="E1", outbox=lambda b: None, location_ned_m=body,
+        sim.spawn("hummingbird", name="E1", sink=lambda events: None, location_ned_m=body,
                   rotation_rpy_rad=rpy)
         sim.step(1)
         grey = cv2.cvtColor(buffer.latest("E1/Down").rgb, cv2.COLOR_RGB2GRAY)

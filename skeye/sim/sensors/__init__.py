@@ -1,8 +1,9 @@
 """Simulated sensors: one class per protocol sensor Type, and a factory keyed by Type.
 
 How this works: the engine builds each mounted sensor with :func:`build_sensor` (type name, name,
-:class:`Mount`, parameters, a seeded Generator), calls ``sample(state, world)`` at the sensor's
-``rate_hz`` and formats the returned fields into ``SEN {Time t} {Type T} {Name n} ...``. The
+:class:`Mount`, parameters, a seeded Generator) and calls ``read(state, world)`` at the
+sensor's ``rate_hz``: a typed reading, never wire text (the control server writes it as
+``SEN {Time t} {Type T} {Name n} ...`` with the layout of :mod:`skeye.wire.sim`'s table). The
 classes live in :mod:`.base` (shared machinery), :mod:`.inertial`, :mod:`.navigation` and
 :mod:`.ranging`; this module only gathers them.
 """

@@ -32,8 +32,8 @@ import numpy as np
 from skeye.errors import ConfigError
 from skeye.geo import GeoOrigin
 from skeye.sim.frames import euler_to_quat, quat_to_rows, wrap_2pi
-from skeye.sim.protocol import Layout
 from skeye.sim.state import BodyState, Mat3, mat_mul, mat_t_vec, mat_vec, transpose
+from skeye.wire.sim_format import Layout
 
 Vec3 = tuple[float, float, float]
 Fields = list[tuple[str, object]]
@@ -104,9 +104,10 @@ class Param:
 class Reading:
     """Base of the typed readings kept in ``Sensor.last``.
 
-    A subclass declares its SEN fields once, as a module-level ``Layout`` constant (keys and
-    slots, see :class:`~skeye.sim.protocol.LineFormat`) that :meth:`layout` returns (the same
-    object each time: the engine caches its compiled line format by it), and returns their
+    A subclass takes its SEN fields from the protocol's codec table, as a module-level
+    ``Layout`` constant (keys and slots, :func:`skeye.wire.sim.sen_layout`) that :meth:`layout`
+    returns (the same object each time: the server caches its compiled line format by it), and
+    returns their
     values flat from :meth:`values`; :meth:`fields` derives the ``(key, value)`` pairs from
     the two, so the engine's precompiled line and the generic fields can never disagree.
     Subclasses write their ``__init__`` out (one is made per sample: mypyc compiles a written

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Final
 
 from skeye.sim.frames import wrap_2pi
-from skeye.sim.protocol import FLOAT, Layout, floats
 from skeye.sim.sensors.base import (
     BiasedNoise,
     Param,
@@ -23,6 +22,9 @@ from skeye.sim.sensors.base import (
     WorldQuery,
 )
 from skeye.sim.state import BodyState, cross, mat_t_vec
+from skeye.wire.sim import sen_layout
+from skeye.wire.sim_format import Layout
+from skeye.wire.sim_messages import SenAccelerometer, SenBarometer, SenGyro, SenMagneticCompass
 
 # International Standard Atmosphere, troposphere.
 ISA_T0_K: Final = 288.15
@@ -40,7 +42,7 @@ def _noise_params(
     )
 
 
-_ACCEL_LAYOUT: Final[Layout] = (("ProperAcceleration", floats(3)),)
+_ACCEL_LAYOUT: Final[Layout] = sen_layout(SenAccelerometer)
 
 
 @dataclass
@@ -85,7 +87,7 @@ class Accelerometer(Sensor[AccelReading]):
         return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
-_GYRO_LAYOUT: Final[Layout] = (("AngularVelocity", floats(3)),)
+_GYRO_LAYOUT: Final[Layout] = sen_layout(SenGyro)
 
 
 @dataclass
@@ -124,7 +126,7 @@ class Gyro(Sensor[GyroReading]):
         return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
-_COMPASS_LAYOUT: Final[Layout] = (("MagneticAngle", FLOAT), ("Field", floats(3)))
+_COMPASS_LAYOUT: Final[Layout] = sen_layout(SenMagneticCompass)
 
 
 @dataclass
@@ -180,7 +182,7 @@ class MagneticCompass(Sensor[CompassReading]):
         return CompassReading(state.time_s, heading, b)
 
 
-_BARO_LAYOUT: Final[Layout] = (("Pressure", FLOAT), ("Altitude", FLOAT))
+_BARO_LAYOUT: Final[Layout] = sen_layout(SenBarometer)
 
 
 @dataclass

@@ -19,9 +19,11 @@ import numpy as np
 from skeye.errors import LocalProtocolError
 from skeye.geo import to_degrees_minutes
 from skeye.sim.frames import wrap_2pi
-from skeye.sim.protocol import FLOAT, INT, WORD, Layout, floats
 from skeye.sim.sensors.base import Param, Reading, Sensor, Vec3, WorldQuery, vec3
 from skeye.sim.state import BodyState
+from skeye.wire.sim import sen_layout
+from skeye.wire.sim_format import Layout
+from skeye.wire.sim_messages import SenBattery, SenGps, SenGroundTruth, SenIns
 
 _TWO_PI: Final = 2.0 * math.pi
 
@@ -33,12 +35,7 @@ def _wrap_rpy_2pi(rpy: Vec3) -> Vec3:
 # --- GroundTruth ---------------------------------------------------------------------------
 
 
-_GROUND_TRUTH_LAYOUT: Final[Layout] = (
-    ("Location", floats(3)),
-    ("Orientation", floats(3)),
-    ("Velocity", floats(3)),
-    ("AngularVelocity", floats(3)),
-)
+_GROUND_TRUTH_LAYOUT: Final[Layout] = sen_layout(SenGroundTruth)
 
 
 @dataclass
@@ -117,9 +114,7 @@ class InsEstimate:
         self.omega_frd_rad_s = omega_frd_rad_s
 
 
-_INS_LAYOUT: Final[Layout] = (
-    ("Location", floats(3)), ("Orientation", floats(3)), ("Velocity", floats(3))
-)
+_INS_LAYOUT: Final[Layout] = sen_layout(SenIns)
 
 
 @dataclass
@@ -349,17 +344,8 @@ class GpsReading(Reading):
         )
 
 
-_GPS_NO_FIX_LAYOUT: Final[Layout] = (("Fix", INT), ("Satellites", INT))
-_GPS_FIX_LAYOUT: Final[Layout] = (
-    ("Latitude", WORD),
-    ("Longitude", WORD),
-    ("Fix", INT),
-    ("Satellites", INT),
-    ("LatitudeDeg", FLOAT),
-    ("LongitudeDeg", FLOAT),
-    ("Altitude", FLOAT),
-    ("VelocityNED", floats(3)),
-)
+_GPS_NO_FIX_LAYOUT: Final[Layout] = sen_layout(SenGps, ("Fix", "Satellites"))
+_GPS_FIX_LAYOUT: Final[Layout] = sen_layout(SenGps)
 
 
 class GPS(Sensor[GpsReading]):
@@ -424,7 +410,7 @@ class GPS(Sensor[GpsReading]):
 # --- Battery -------------------------------------------------------------------------------
 
 
-_BATTERY_LAYOUT: Final[Layout] = (("Voltage", FLOAT), ("Current", FLOAT), ("Remaining", FLOAT))
+_BATTERY_LAYOUT: Final[Layout] = sen_layout(SenBattery)
 
 
 @dataclass

@@ -13,15 +13,17 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from skeye.sim.protocol import FLOAT, INT, Layout, ints
 from skeye.sim.sensors.base import Param, Reading, Sensor, WorldQuery
 from skeye.sim.state import BodyState, Vec3, cross, mat_t_vec, mat_vec
+from skeye.wire.sim import sen_layout
+from skeye.wire.sim_format import Layout
+from skeye.wire.sim_messages import SenOpticalFlow, SenSonar
 
 SQUAL_MAX: Final = 169  # ADNS-3080: SQUAL register maximum
 DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
 
 
-_SONAR_LAYOUT: Final[Layout] = (("Range", FLOAT),)
+_SONAR_LAYOUT: Final[Layout] = sen_layout(SenSonar)
 
 
 @dataclass
@@ -94,7 +96,7 @@ class Sonar(Sensor[SonarReading]):
         return SonarReading(t, min(hi, max(lo, measured)), True)
 
 
-_FLOW_LAYOUT: Final[Layout] = (("Delta", ints(2)), ("Quality", INT))
+_FLOW_LAYOUT: Final[Layout] = sen_layout(SenOpticalFlow)
 
 
 @dataclass

@@ -1,0 +1,371 @@
+"""Flight recording: every line the control server sends or receives, plus sampled ground truth.
+
+How this works: the file format (docs/recording.md) is line-oriented text. The first line is a
+header, ``#skeye-recording 1 {json}``; every other line is one record::
+
+    <wall_s> <sim_s> <conn> <dir> <protocol line>
+
+``dir`` is ``>`` (sent to client ``conn``), ``<`` (received from it), ``+``/``-`` (connection
+opened/closed; the line is the peer address), ``=`` (a ``TRUTH`` sample of one robot, ``conn``
+0) or ``!`` (a note from the recorder, e.g. records it had to drop). A record never holds a line
+break, so a crash that cuts the last line off loses that line only: the reader skips an
+unterminated last line and counts it. :func:`format_record` and :func:`parse_record` are the
+pure codec; they round-trip.
+
+:class:`Recorder` is the I/O side. Its :meth:`Recorder.observe` is a
+:data:`~skeye.sim.server.LineObserver`: it only timestamps the data and puts it in a bounded
+queue (never blocks the engine or a client thread; when the queue is full the record is counted
+and dropped, and a ``!`` note says how many). One writer thread formats records, writes them and
+flushes and fsyncs the file at least every ``flush_interval_s`` (0.5 s) and on close, so a
+killed simulator loses at most the last second. The recorder writes exactly one file, the one
+it was given, and refuses to overwrite an existing one.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.wire.sim_lines import format_message
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+HEADER_PREFIX = "#skeye-recording"
+SENT, RECEIVED, CONNECTED, DISCONNECTED, TRUTH, NOTE = ">", "<", "+", "-", "=", "!"
+DIRECTIONS = frozenset((SENT, RECEIVED, CONNECTED, DISCONNECTED, TRUTH, NOTE))
+DEFAULT_FLUSH_INTERVAL_S = 0.5
+DEFAULT_TRUTH_RATE_HZ = 20.0
+DEFAULT_QUEUE_RECORDS = 200_000
+
+
+@dataclass(frozen=True)
+class Record:
+    """One recorded event: times in seconds, ``line`` without its terminator."""
+
+    wall_s: float
+    sim_s: float
+    conn: int
+    direction: str
+    line: str
+
+    def __post_init__(self) -> None:
+        if self.direction not in DIRECTIONS:
+            raise LocalProtocolError(f"unknown record direction {self.direction!r}")
+        if not (math.isfinite(self.wall_s) and math.isfinite(self.sim_s)):
+            raise LocalProtocolError("record times must be finite")
+        if self.conn < 0:
+            raise LocalProtocolError(f"connection id must be >= 0, got {self.conn}")
+        if "\n" in self.line or "\r" in self.line:
+            raise LocalProtocolError("a recorded line may not hold a line break")
+
+
+def format_record(record: Record) -> bytes:
+    """The file line of one record, newline included."""
+    return (
+        f"{record.wall_s:.6f} {record.sim_s:.6f} {record.conn} {record.direction} {record.line}\n"
+    ).encode()
+
+
+def parse_record(text: str) -> Record:
+    """One file line (terminator optional) back to a :class:`Record`.
+
+    Raises:
+        RemoteProtocolError: the line is not a record (names what is wrong).
+    """
+    parts = text.rstrip("\r\n").split(" ", 4)
+    if len(parts) < 4:
+        raise RemoteProtocolError(f"record has {len(parts)} fields, needs at least 4")
+    wall, sim, conn, direction = parts[:4]
+    try:
+        line = parts[4] if len(parts) > 4 else ""
+        record = Record(float(wall), float(sim), int(conn), direction, line)
+    except ValueError as exc:
+        raise RemoteProtocolError(f"bad record field: {exc}") from None
+    except LocalProtocolError as exc:
+        raise RemoteProtocolError(str(exc)) from None
+    return record
+
+
+def format_header(meta: dict[str, Any]) -> bytes:
+    """The first line of a recording: format name, version and a JSON object of run settings."""
+    return f"{HEADER_PREFIX} {FORMAT_VERSION} {json.dumps(meta, sort_keys=True)}\n".encode()
+
+
+def parse_header(text: str) -> dict[str, Any]:
+    """The settings object of a header line; raises RemoteProtocolError if it is not one."""
+    parts = text.rstrip("\r\n").split(" ", 2)
+    if len(parts) != 3 or parts[0] != HEADER_PREFIX:
+        raise RemoteProtocolError(f"not a skeye recording (header {text[:60]!r})")
+    if parts[1] != str(FORMAT_VERSION):
+        raise RemoteProtocolError(
+            f"recording format version {parts[1]!r}; this program reads {FORMAT_VERSION}"
+        )
+    try:
+        meta = json.loads(parts[2])
+    except json.JSONDecodeError as exc:
+        raise RemoteProtocolError(f"recording header is not JSON: {exc}") from None
+    if not isinstance(meta, dict):
+        raise RemoteProtocolError("recording header must hold a JSON object")
+    return meta
+
+
+def split_lines(data: bytes) -> list[bytes]:
+    """The protocol lines in a chunk the server queued (terminators and stray breaks removed)."""
+    return [line.rstrip(b"\r").replace(b"\r", b" ") for line in data.split(b"\n") if line.strip()]
+
+
+class RecordingReader:
+    """Reads a recording file; tolerates an unterminated last line (a crash) and bad lines.
+
+    Attributes:
+        header: the run settings from the header line.
+        bad_lines: records that did not parse (counted, skipped).
+        truncated: the file ended inside a line (that line was skipped).
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ConfigError(f"recording not found: {self.path}")
+        with self.path.open("rb") as f:
+            first = f.readline()
+        if not first.endswith(b"\n"):
+            raise RemoteProtocolError(f"{self.path}: no complete header line")
+        self.header = parse_header(first.decode("utf-8", "replace"))
+        self.bad_lines = 0
+        self.truncated = False
+
+    def records(self) -> Iterator[Record]:
+        """Every record in file order (reads lazily; safe to call again)."""
+        self.bad_lines = 0
+        self.truncated = False
+        with self.path.open("rb") as f:
+            f.readline()
+            for raw in f:
+                if not raw.endswith(b"\n"):
+                    self.truncated = True
+                    return
+                try:
+                    yield parse_record(raw.decode("utf-8", "replace"))
+                except RemoteProtocolError:
+                    self.bad_lines += 1
+
+
+def robot_connections(records: Iterator[Record]) -> dict[int, str]:
+    """Connection id -> robot name, from the ``RES {Command INIT} {Name ...}`` each was sent."""
+    found: dict[int, str] = {}
+    for rec in records:
+        if rec.direction == SENT and rec.line.startswith("RES {Command INIT}"):
+            for block in rec.line.split("{")[1:]:
+                key, _, value = block.rstrip("} ").partition(" ")
+                if key == "Name" and value:
+                    found[rec.conn] = value
+    return found
+
+
+class Recorder:
+    """Writes a recording; a context manager. Attach it to a server with :meth:`attach`.
+
+    Args:
+        path: the file to create (an existing file is never overwritten).
+        meta: run settings stored in the header (world, mode, step, seed...).
+        flush_interval_s: longest time a record waits in memory before it is on disk.
+        queue_records: records buffered between the observers and the writer thread.
+        sim_time: where sim time comes from (set by :meth:`attach`).
+        wall_clock: Unix time source.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        meta: dict[str, Any] | None = None,
+        *,
+        flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S,
+        queue_records: int = DEFAULT_QUEUE_RECORDS,
+        wall_clock: Callable[[], float] = time.time,
+    ) -> None:
+        if not (0.0 < flush_interval_s <= 1.0):
+            raise LocalProtocolError(f"flush interval must be in (0, 1] s, got {flush_interval_s}")
+        self.path = Path(path)
+        try:
+            self._file: IO[bytes] = self.path.open("xb")
+        except FileExistsError:
+            raise ConfigError(
+                f"recording {self.path} already exists; choose another name or delete it"
+            ) from None
+        except OSError as exc:
+            raise ConfigError(f"cannot create recording {self.path}: {exc.strerror}") from None
+        self._clock = wall_clock
+        self._sim_time: Callable[[], float] = lambda: 0.0
+        self._flush_interval_s = flush_interval_s
+        self._queue: queue.Queue[tuple[float, float, int, str, bytes] | None] = queue.Queue(
+            queue_records
+        )
+        self.dropped = 0
+        self.written = 0
+        self._closed = False
+        self._lock = threading.Lock()
+        self._detach: list[Callable[[], None]] = []
+        self._file.write(format_header({"started_unix_s": wall_clock(), **(meta or {})}))
+        self._file.flush()
+        self._thread = threading.Thread(target=self._write_loop, name="skeye-recorder", daemon=True)
+        self._thread.start()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- inputs --------------------------------------------------------------------------
+    def observe(self, conn_id: int, direction: str, data: bytes) -> None:
+        """A :data:`~skeye.sim.server.LineObserver`: timestamp and queue; never blocks."""
+        if self._closed:
+            return
+        try:
+            self._queue.put_nowait((self._clock(), self._sim_time(), conn_id, direction, data))
+        except queue.Full:
+            self.dropped += 1
+
+    def attach(
+        self, server: Any, runner: Any, truth_rate_hz: float = DEFAULT_TRUTH_RATE_HZ
+    ) -> None:
+        """Record ``server``'s traffic and sample every robot of ``runner``'s simulation.
+
+        Args:
+            server: a :class:`~skeye.sim.server.ControlServer`.
+            runner: its :class:`~skeye.sim.runner.SimulationRunner`.
+            truth_rate_hz: how often each robot's ground truth is sampled (0 = never).
+        """
+        sim = runner.sim
+        self._sim_time = lambda: sim.time_s
+        server.observers.append(self.observe)
+        self._detach.append(lambda: server.observers.remove(self.observe))
+        if truth_rate_hz > 0:
+            period = max(1, round(1.0 / (truth_rate_hz * sim.dt)))
+            sampler = _TruthSampler(self, period)
+            runner.call(sampler.install)
+            self._detach.append(lambda: runner.call(sampler.uninstall))
+
+    # -- output --------------------------------------------------------------------------
+    def _write_loop(self) -> None:
+        f = self._file
+        last_flush = time.monotonic()
+        reported_drops = 0
+        done = False
+        while not done:
+            wait = max(0.0, self._flush_interval_s - (time.monotonic() - last_flush))
+            batch: list[tuple[float, float, int, str, bytes] | None] = []
+            try:
+                batch.append(self._queue.get(timeout=wait))
+                while len(batch) < 4096:
+                    batch.append(self._queue.get_nowait())
+            except queue.Empty:
+                pass
+            out: list[bytes] = []
+            for entry in batch:
+                if entry is None:
+                    done = True
+                    break
+                self._format(entry, out)
+            if self.dropped != reported_drops:
+                note = f"dropped {self.dropped - reported_drops} records (queue full)"
+                reported_drops = self.dropped
+                out.append(format_record(Record(self._clock(), self._sim_time(), 0, NOTE, note)))
+            try:
+                if out:
+                    f.write(b"".join(out))
+                    self.written += len(out)
+                if done or time.monotonic() - last_flush >= self._flush_interval_s:
+                    f.flush()
+                    os.fsync(f.fileno())
+                    last_flush = time.monotonic()
+            except OSError as exc:
+                log.error("recording %s: write failed, recording stops: %s", self.path, exc)
+                self._closed = True
+                return
+
+    def _format(self, entry: tuple[float, float, int, str, bytes], out: list[bytes]) -> None:
+        wall, sim_s, conn, direction, data = entry
+        prefix = b"%.6f %.6f %d %s " % (wall, sim_s, conn, direction.encode())
+        if direction in (SENT, TRUTH):
+            out.extend(prefix + line + b"\n" for line in split_lines(data))
+        else:
+            out.append(prefix + data.replace(b"\r", b" ").replace(b"\n", b" ") + b"\n")
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Detach, write everything queued, flush and close the file; idempotent."""
+        with self._lock:
+            if self._closed and not self._thread.is_alive():
+                if not self._file.closed:
+                    self._file.close()
+                return
+            self._closed = True
+        for detach in reversed(self._detach):
+            try:
+                detach()
+            except (SkeyeError, ValueError, TimeoutError):
+                pass
+        self._detach.clear()
+        try:
+            self._queue.put(None, timeout=timeout_s)
+        except queue.Full:
+            log.error("recording %s: writer did not drain its queue", self.path)
+        self._thread.join(timeout_s)
+        if not self._file.closed:
+            self._file.close()
+
+
+class _TruthSampler:
+    """A step hook that records ``TRUTH`` lines of every robot every ``period`` steps."""
+
+    def __init__(self, recorder: Recorder, period_steps: int) -> None:
+        self.recorder = recorder
+        self.period = period_steps
+
+    def install(self, sim: Any) -> None:
+        sim.step_hooks.append(self.on_step)
+        sim.event_sources.append(self.next_event)
+
+    def uninstall(self, sim: Any) -> None:
+        if self.on_step in sim.step_hooks:
+            sim.step_hooks.remove(self.on_step)
+        if self.next_event in sim.event_sources:
+            sim.event_sources.remove(self.next_event)
+
+    def next_event(self, sim: Any) -> int:
+        # The step with index k leaves sim.steps == k + 1: sample when that is a multiple.
+        return -(-(sim.steps + 1) // self.period) * self.period - 1
+
+    def on_step(self, sim: Any) -> None:
+        if sim.steps % self.period or not sim.robots:
+            return
+        lines = []
+        for name, robot in sim.robots.items():
+            s = sim.body_state(name)
+            lines.append(
+                format_message(
+                    "TRUTH",
+                    ("Name", name),
+                    ("Time", sim.time_s),
+                    ("Location", s.pos_ned_m),
+                    ("Orientation", s.rpy_rad),
+                    ("Velocity", s.vel_ned_m_s),
+                    ("Battery", float(robot.battery.remaining_s)),
+                    ("Voltage", float(robot.battery.voltage_v)),
+                    ("Armed", bool(robot.flight.armed)),
+                    ("Landed", bool(robot.flight.landed)),
+                )
+            )
+        self.recorder.observe(0, TRUTH, b"".join(lines))

@@ -1,0 +1,270 @@
+"""``skeye replay``: serve a flight recording to clients over the control protocol.
+
+How this works: :class:`ReplayServer` listens like the simulator (127.0.0.1 unless told
+otherwise). Each client gets its own playback from the start of the recording, on its own
+thread: ``NFO {Gametype skeye} ... {Mode realtime} {Replay true}`` on accept, then the recorded
+stream of one robot (the ``STA``, ``SEN`` and ``ERR {Command PHYSICS}`` lines its connection was
+sent), each line released when ``(sim_s - first_sim_s) / speed`` wall seconds have passed. The
+file is read lazily, so a long recording costs no memory per client. The client's own lines go
+through the same sans-IO decoder as the simulator's: ``PING`` is answered with the playback's
+current sim time; commands that would change the world (``INIT``, ``DRIVE``, ``SET``, ``STEP``)
+get ``ERR ... {Reason replay is read-only}``; the queries (``GETSTARTPOSES``, ``GETGEO``,
+``GETCONF``) get ``ERR`` too, as the recording holds no world to ask. At the end of the
+recording the connection stays open (PING still answered) and nothing more is sent.
+A client that does not read blocks only its own thread; ``close()`` shuts every socket.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import select
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from skeye.errors import ConfigError, LocalProtocolError
+from skeye.processes import wait_for_signal
+from skeye.recording.records import SENT, RecordingReader, robot_connections
+from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
+
+log = logging.getLogger(__name__)
+
+READ_ONLY = frozenset(("INIT", "DRIVE", "SET", "STEP"))
+_STREAM_PREFIXES = ("STA ", "SEN ", "ERR {Command PHYSICS}")
+_MAX_BATCH_LINES = 512
+
+
+class ReplayServer:
+    """Plays one robot of a recording to every client that connects; a context manager.
+
+    Args:
+        path: the recording.
+        host, port: where to listen (port 0 picks a free one; read :attr:`port`).
+        speed: playback rate (2.0 = twice as fast as recorded).
+        robot: which recorded robot to play (default: the first one recorded).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        host: str = "127.0.0.1",
+        port: int = 3000,
+        *,
+        speed: float = 1.0,
+        robot: str | None = None,
+        max_clients: int = 64,
+    ) -> None:
+        if not (0.01 <= speed <= 1000.0):
+            raise LocalProtocolError(f"replay speed must be in [0.01, 1000], got {speed}")
+        self.reader = RecordingReader(path)
+        self.speed = speed
+        self.robots = robot_connections(self.reader.records())
+        if not self.robots:
+            raise ConfigError(f"{path}: the recording holds no robot (no INIT was answered)")
+        names = list(self.robots.values())
+        chosen = robot or names[0]
+        conns = [c for c, n in self.robots.items() if n == chosen]
+        if not conns:
+            raise ConfigError(f"no robot {chosen!r} in the recording; it holds {', '.join(names)}")
+        self.robot = chosen
+        self.conn = conns[0]
+        self.max_clients = max_clients
+        self._threads: set[threading.Thread] = set()
+        self._socks: set[socket.socket] = set()
+        self._lock = threading.Lock()
+        self._closing = threading.Event()
+        self._listener = socket.create_server((host, port))
+        self._listener.settimeout(0.2)
+        self.host = host
+        self.port: int = self._listener.getsockname()[1]
+        self._accept = threading.Thread(target=self._accept_loop, name="replay-accept", daemon=True)
+        self._accept.start()
+
+    def __enter__(self) -> ReplayServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def client_count(self) -> int:
+        with self._lock:
+            return len(self._socks)
+
+    def nfo_line(self) -> bytes:
+        h = self.reader.header
+        return format_message(
+            "NFO",
+            ("Gametype", "skeye"),
+            ("Level", str(h.get("world", "unknown"))),
+            ("TimeLimit", 0),
+            ("TimeStep", float(h.get("timestep_s", 0.001))),
+            ("Mode", "realtime"),
+            ("Replay", True),
+        )
+
+    def stream(self) -> Iterator[tuple[float, bytes]]:
+        """(sim time, line) of the chosen robot's stream, in recorded order."""
+        for rec in self.reader.records():
+            if rec.conn == self.conn and rec.direction == SENT:
+                if rec.line.startswith(_STREAM_PREFIXES):
+                    yield rec.sim_s, rec.line.encode() + b"\r\n"
+
+    def _accept_loop(self) -> None:
+        while not self._closing.is_set():
+            try:
+                sock, addr = self._listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            with self._lock:
+                if len(self._socks) >= self.max_clients:
+                    sock.sendall(format_error("CONNECT", "too many clients"))
+                    sock.close()
+                    continue
+                self._socks.add(sock)
+                t = threading.Thread(
+                    target=self._serve, args=(sock,), name=f"replay {addr[1]}", daemon=True
+                )
+                self._threads.add(t)
+            t.start()
+
+    def _serve(self, sock: socket.socket) -> None:
+        try:
+            _Playback(self, sock).run()
+        except OSError:
+            pass
+        except Exception:
+            log.exception("replay client failed")
+        finally:
+            with self._lock:
+                self._socks.discard(sock)
+                self._threads.discard(threading.current_thread())
+            sock.close()
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop accepting, shut every client socket and join the threads; idempotent."""
+        if self._closing.is_set():
+            return
+        self._closing.set()
+        self._listener.close()
+        self._accept.join(timeout_s)
+        with self._lock:
+            socks, threads = list(self._socks), list(self._threads)
+        for s in socks:
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        deadline = time.monotonic() + timeout_s
+        for t in threads:
+            t.join(max(0.0, deadline - time.monotonic()))
+
+
+class _Playback:
+    """One client's playback: a paced stream out, commands in, on one thread."""
+
+    def __init__(self, server: ReplayServer, sock: socket.socket) -> None:
+        self.server = server
+        self.sock = sock
+        self.decoder = LineDecoder()
+        self.lines = server.stream()
+        self.next_line: tuple[float, bytes] | None = next(self.lines, None)
+        self.first_sim_s = self.next_line[0] if self.next_line else 0.0
+        self.sim_now_s = self.first_sim_s
+        self.start = time.monotonic()
+
+    def _due_sim_s(self) -> float:
+        return self.first_sim_s + (time.monotonic() - self.start) * self.server.speed
+
+    def run(self) -> None:
+        self.sock.sendall(self.server.nfo_line())
+        while not self.server._closing.is_set():
+            self._send_due()
+            timeout = 0.5
+            if self.next_line is not None:
+                wait = (self.next_line[0] - self._due_sim_s()) / self.server.speed
+                timeout = min(timeout, max(0.0, wait))
+            readable, _, _ = select.select([self.sock], [], [], timeout)
+            if readable:
+                data = self.sock.recv(65536)
+                if not data:
+                    return
+                if not self._handle(data):
+                    return
+
+    def _send_due(self) -> None:
+        now = self._due_sim_s()
+        batch: list[bytes] = []
+        while self.next_line is not None and self.next_line[0] <= now:
+            self.sim_now_s = self.next_line[0]
+            batch.append(self.next_line[1])
+            self.next_line = next(self.lines, None)
+            if len(batch) >= _MAX_BATCH_LINES:
+                self.sock.sendall(b"".join(batch))
+                batch = []
+        if batch:
+            self.sock.sendall(b"".join(batch))
+
+    def _handle(self, data: bytes) -> bool:
+        """Answer what the client sent; False when the connection must close."""
+        out: list[bytes] = []
+        keep = True
+        for event in self.decoder.feed(data):
+            if isinstance(event, LineError):
+                out.append(format_error(event.command, event.reason))
+                keep = keep and not event.fatal
+                continue
+            out.append(self._answer(event))
+        if out:
+            self.sock.sendall(b"".join(out))
+        return keep
+
+    def _answer(self, msg: Message) -> bytes:
+        if msg.type == "PING":
+            sim_s = self.sim_now_s if self.next_line is None else self._due_sim_s()
+            return format_message(
+                "RES", ("Command", "PING"), ("Id", msg.get("Id", "") or ""), ("Time", sim_s)
+            )
+        if msg.type in READ_ONLY:
+            return format_error(msg.type, "replay is read-only: the recording cannot be changed")
+        return format_error(msg.type, f"{msg.type} is not available in a replay")
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Serve a recording until stopped."""
+    with ReplayServer(
+        args.file, host=args.host, port=args.port, speed=args.speed, robot=args.robot
+    ) as server:
+        where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
+        print(
+            f"skeye replay: {args.file}, robot {server.robot} (of "
+            f"{', '.join(server.robots.values())}), speed x{args.speed:g}; "
+            f"control protocol on {args.host}:{server.port} ({where})",
+            flush=True,
+        )
+        if args.host == "127.0.0.1":
+            print(
+                "skeye replay: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other "
+                "machines",
+                flush=True,
+            )
+        wait_for_signal(threading.Event())
+        print("skeye replay: stopping", flush=True)
+    return 0
+
+
+def register(sub: Any) -> None:
+    """Add ``skeye replay`` to the command line."""
+    p = sub.add_parser("replay", help="play a flight recording to clients (control protocol)")
+    p.add_argument("file", type=Path, help="a recording made with skeye sim --record")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=3000, help="port (0 = any free)")
+    p.add_argument("--speed", type=float, default=1.0, help="playback rate (1.0 = as recorded)")
+    p.add_argument("--robot", default=None, help="recorded robot to play (default: the first)")
+    p.set_defaults(func=cmd_replay)

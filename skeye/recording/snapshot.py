@@ -1,0 +1,66 @@
+"""``skeye snapshot``: save one camera frame from an image server as PNG or JPEG."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import cv2
+
+from skeye.control.connection import parse_address
+from skeye.control.image_client import ImageClient
+from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
+from skeye.pixels import frame_image
+
+
+def save_snapshot(address: str, out: Path, camera: str | None = None, quality: int = 95,
+                  timeout_s: float = 10.0) -> tuple[int, int, int | None]:
+    """Fetch the newest frame and write it; returns (width, height, frame number)."""
+    suffix = out.suffix.lower()
+    if suffix not in (".png", ".jpg", ".jpeg"):
+        raise LocalProtocolError(f"{out}: the file name must end in .png, .jpg or .jpeg")
+    if not 1 <= quality <= 100:
+        raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
+    host, port = parse_address(address, 5003)
+    try:
+        client = ImageClient(host, port, timeout_s=timeout_s)
+    except LinkClosed as exc:
+        raise ConfigError(
+            f"no image server at {host}:{port} ({exc}): start the simulator "
+            f"with one (`skeye sim --image-port {port}`; `skeye up` and `make run` serve "
+            "images on 5003), or point --images at the one that runs"
+        ) from None
+    with client:
+        if camera:
+            client.select_camera(camera)
+        client.set_format("png" if suffix == ".png" else "jpeg", quality=quality)
+        client.set_meta(True)
+        frame = client.get_frame()
+    image = frame_image(frame)
+    if suffix == ".png":
+        ok = cv2.imwrite(str(out), image)
+    else:
+        ok = cv2.imwrite(str(out), image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise LocalProtocolError(f"could not write {out}")
+    number = frame.meta.frame_number if frame.meta is not None else None
+    return image.shape[1], image.shape[0], number
+
+
+def cmd_snapshot(args: argparse.Namespace) -> int:
+    width, height, number = save_snapshot(args.images, Path(args.out), args.camera, args.quality,
+                                          args.timeout)
+    print(f"saved {args.out}: {width}x{height}, frame {number}", file=sys.stdout)
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("snapshot", help="save one camera frame from the image server")
+    p.add_argument("--images", default="127.0.0.1:5003", help="image server host:port")
+    p.add_argument("--camera", default=None, help="robot/camera, e.g. R1/Down (default: first)")
+    p.add_argument("--out", required=True, help="output file (.png, .jpg or .jpeg)")
+    p.add_argument("--quality", type=int, default=95, help="JPEG quality 1-100")
+    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for a frame")
+    p.set_defaults(func=cmd_snapshot)

@@ -1,0 +1,231 @@
+"""Robot configuration files: which vehicle model, its parameters, and which sensors sit where.
+
+How this works: a robot class is a TOML file (built-ins in ``skeye/robots/``). Its tables
+``[airframe]``, ``[battery]`` and ``[controller]`` fill the parameter dataclasses of
+:mod:`skeye.robots.params`; each ``[[sensors]]`` entry mounts a
+sensor USARSim-style: ``type``, ``name``, ``position_m`` (body FRD), ``direction_rad`` (roll,
+pitch, yaw of the sensor frame in the body frame) and the sensor class's own parameters. An
+optional ``[envelope]`` table (``ceiling_m``, ``max_radius_m``) is the flight envelope the pilot
+enforces for this class (``skeye.pilot.envelope``; the simulator itself does not use it). Every
+mistake raises ConfigError naming the file and the key; nothing is half-loaded.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from skeye.errors import ConfigError
+from skeye.pilot.envelope import FlightEnvelope
+from skeye.robots.params import (
+    AirframeParams,
+    BatteryParams,
+    ControllerParams,
+    dataclass_from_mapping,
+)
+
+BUILTIN_ROBOTS = ("hummingbird", "airrobot")
+CAMERA_TYPE = "camera"
+MOTORS_TYPE = "motors"
+
+
+@dataclass(frozen=True)
+class SensorMount:
+    """One mounted sensor as the configuration file gives it."""
+
+    type_name: str
+    name: str
+    position_m: tuple[float, float, float]
+    direction_rad: tuple[float, float, float]
+    params: tuple[tuple[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """A validated robot class."""
+
+    class_name: str
+    description: str
+    board_rate_hz: float
+    status_rate_hz: float
+    airframe: AirframeParams
+    battery: BatteryParams
+    controller: ControllerParams
+    sensors: tuple[SensorMount, ...]
+    source: str
+    envelope: FlightEnvelope = field(default_factory=FlightEnvelope)
+
+
+_TOP_KEYS = {
+    "name",
+    "description",
+    "board_rate_hz",
+    "status_rate_hz",
+    "airframe",
+    "battery",
+    "controller",
+    "sensors",
+    "envelope",
+}
+
+
+def _vector(owner: str, key: str, value: Any) -> tuple[float, float, float]:
+    if (
+        not isinstance(value, list)
+        or len(value) != 3
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        or not all(math.isfinite(v) for v in value)
+    ):
+        raise ConfigError(f"{owner}: {key} must be a list of 3 finite numbers, got {value!r}")
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
+    """Validate a parsed TOML document; ``source`` names the file in error messages."""
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        raise ConfigError(f"{source}: unknown key(s) {unknown}; known: {sorted(_TOP_KEYS)}")
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{source}: 'name' must be a non-empty string")
+    rates = {}
+    for key, default in (("board_rate_hz", 1000.0), ("status_rate_hz", 10.0)):
+        value = data.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise ConfigError(f"{source}: {key} must be a positive number, got {value!r}")
+        rates[key] = float(value)
+    tables = {}
+    for key in ("airframe", "battery", "controller", "envelope"):
+        table = data.get(key, {})
+        if not isinstance(table, dict):
+            raise ConfigError(f"{source}: [{key}] must be a table")
+        tables[key] = table
+    airframe = dataclass_from_mapping(AirframeParams, tables["airframe"], f"{source} [airframe]")
+    battery = dataclass_from_mapping(BatteryParams, tables["battery"], f"{source} [battery]")
+    controller = dataclass_from_mapping(
+        ControllerParams, tables["controller"], f"{source} [controller]"
+    )
+    envelope = dataclass_from_mapping(FlightEnvelope, tables["envelope"], f"{source} [envelope]")
+    sensors_data = data.get("sensors", [])
+    if not isinstance(sensors_data, list):
+        raise ConfigError(f"{source}: 'sensors' must be an array of tables ([[sensors]])")
+    mounts: list[SensorMount] = []
+    seen: set[tuple[str, str]] = set()
+    for i, entry in enumerate(sensors_data):
+        owner = f"{source} sensors[{i}]"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{owner}: must be a table")
+        type_name = entry.get("type")
+        sensor_name = entry.get("name")
+        if not isinstance(type_name, str) or not type_name:
+            raise ConfigError(f"{owner}: 'type' must be a non-empty string")
+        if not isinstance(sensor_name, str) or not sensor_name or "/" in sensor_name:
+            raise ConfigError(f"{owner}: 'name' must be a non-empty string without '/'")
+        ident = (type_name.lower(), sensor_name.lower())
+        if ident in seen:
+            raise ConfigError(f"{owner}: duplicate sensor {type_name} {sensor_name!r}")
+        seen.add(ident)
+        position = _vector(owner, "position_m", entry.get("position_m", [0, 0, 0]))
+        direction = _vector(owner, "direction_rad", entry.get("direction_rad", [0, 0, 0]))
+        params = tuple(
+            (k, v)
+            for k, v in entry.items()
+            if k not in ("type", "name", "position_m", "direction_rad")
+        )
+        mounts.append(SensorMount(type_name, sensor_name, position, direction, params))
+    return RobotConfig(
+        class_name=name.lower(),
+        description=str(data.get("description", "")),
+        board_rate_hz=rates["board_rate_hz"],
+        status_rate_hz=rates["status_rate_hz"],
+        airframe=airframe,
+        battery=battery,
+        controller=controller,
+        sensors=tuple(mounts),
+        source=source,
+        envelope=envelope,
+    )
+
+
+def load_robot_config(
+    name_or_path: str | Path, search_dirs: tuple[Path, ...] = (), *, allow_paths: bool = True
+) -> RobotConfig:
+    """A robot class by name or a TOML path.
+
+    Names resolve to the built-ins (``USARBot.`` prefix and case ignored), then to
+    ``<dir>/<name>.toml`` in ``search_dirs`` (``skeye sim --robot-dir``). A path is accepted only
+    with ``allow_paths`` (the command line, not the network: a client may not read files).
+    """
+    candidate = str(name_or_path)
+    short = candidate.split(".", 1)[1] if candidate.lower().startswith("usarbot.") else candidate
+    path: Path | None = None
+    if short.lower() in BUILTIN_ROBOTS:
+        source = f"robots/{short.lower()}.toml"
+        builtin = resources.files("skeye.robots").joinpath(f"{short.lower()}.toml")
+        text = builtin.read_text(encoding="utf-8")
+    else:
+        if short.replace("_", "").replace("-", "").isalnum():
+            for folder in search_dirs:
+                if (Path(folder) / f"{short}.toml").is_file():
+                    path = Path(folder) / f"{short}.toml"
+                    break
+        if path is None and allow_paths and candidate.endswith(".toml"):
+            path = Path(candidate)
+            if not path.is_file():
+                raise ConfigError(f"robot configuration file not found: {path}")
+        if path is None:
+            known = list(BUILTIN_ROBOTS) + sorted(
+                p.stem for folder in search_dirs for p in Path(folder).glob("*.toml")
+            )
+            raise ConfigError(
+                f"unknown robot class {candidate!r}; known classes: {', '.join(known)}"
+            )
+        source = str(path)
+        text = path.read_text(encoding="utf-8")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: invalid TOML: {exc}") from None
+    return parse_robot_config(data, source)
+
+
+def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
+    """Load every ``*.toml`` in each ``--robot-dir`` folder, so a typo stops ``skeye sim`` at
+    start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
+
+    Raises:
+        ConfigError: a folder that is missing or not a folder, or a robot file that does not
+            load (the message names the file and the problem).
+    """
+    configs = []
+    for folder in search_dirs:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise ConfigError(f"--robot-dir {folder}: not a folder")
+        for path in sorted(folder.glob("*.toml")):
+            configs.append(load_robot_config(folder / path.name))
+    return configs
+
+
+def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[float, str]:
+    """The horizontal field of view of a robot class's camera (its first, or the one named),
+    and a phrase saying where it came from, for messages.
+
+    Raises:
+        ConfigError: unknown robot class, or no such camera with ``fov_h_rad``.
+    """
+    config = load_robot_config(robot)
+    for mount in config.sensors:
+        if mount.type_name.lower() != "camera":
+            continue
+        if camera is not None and mount.name.lower() != camera.lower():
+            continue
+        fov = dict(mount.params).get("fov_h_rad")
+        if isinstance(fov, int | float) and not isinstance(fov, bool):
+            return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
+    which = f"camera named {camera!r}" if camera else "camera"
+    raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")

@@ -1,0 +1,244 @@
+"""The frame store between the render thread and the image server's clients.
+
+How this works: the engine's render step calls :meth:`FrameBuffer.publish` with each rendered
+:class:`Frame`. That only stores a reference under a lock, notifies a Condition and pokes
+listeners that never block, so the simulator never waits on a client. Encoded images are cached
+per (camera, frame number, format, quality): the first client thread that needs an encoding
+makes it, the others wait for that one (single flight), so four clients asking for the same
+frame in the same format cost one encoding. The cache is a small LRU. The TCP side is
+:mod:`skeye.sim.image_server`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skeye.errors import LocalProtocolError
+from skeye.pixels import encode_image
+from skeye.wire.image_requests import SelectCamera
+from skeye.wire.images import UINT32_MAX, FrameType, ImageFormat
+
+log = logging.getLogger(__name__)
+
+_ENCODE_WAIT_S = 5.0  # a thread waiting on another's encoding gives up and encodes itself
+
+FrameListener = Callable[[str], None]
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One rendered image of one camera.
+
+    ``number`` counts frames rendered by that camera, from 1; ``rgb`` is (H, W, 3) uint8, rows top
+    to bottom, RGB order. Publishing hands the array over: the buffer marks it read-only.
+    """
+
+    camera: str
+    camera_id: int
+    number: int
+    sim_time_s: float
+    rgb: np.ndarray
+
+    def __post_init__(self) -> None:
+        SelectCamera(self.camera)  # the same naming rule as the wire
+        for name, low in (("camera_id", 0), ("number", 1)):
+            value = getattr(self, name)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int)
+                or not (low <= value <= UINT32_MAX)
+            ):
+                raise LocalProtocolError(
+                    f"Frame.{name} must be an integer {low}-2^32-1, got {value!r}"
+                )
+        if not math.isfinite(self.sim_time_s):
+            raise LocalProtocolError(f"Frame.sim_time_s must be finite, got {self.sim_time_s!r}")
+        rgb = self.rgb
+        if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3:
+            raise LocalProtocolError("Frame.rgb must be an (H, W, 3) uint8 array")
+        if rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
+            raise LocalProtocolError(f"Frame.rgb must have shape (H, W, 3), got {rgb.shape}")
+
+    @property
+    def width(self) -> int:
+        """Image width, px."""
+        return int(self.rgb.shape[1])
+
+    @property
+    def height(self) -> int:
+        """Image height, px."""
+        return int(self.rgb.shape[0])
+
+
+@dataclass
+class _CameraSlot:
+    camera_id: int
+    frame: Frame | None = None
+
+
+@dataclass
+class _Encoding:
+    done: threading.Event = field(default_factory=threading.Event)
+    result: tuple[FrameType, bytes] | None = None
+
+
+_CacheKey = tuple[str, int, ImageFormat, int | None]
+
+
+class _EncodeCache:
+    """Small LRU of encoded images with single-flight encoding (see module comment)."""
+
+    def __init__(self, max_entries: int) -> None:
+        if max_entries < 1:
+            raise LocalProtocolError(f"encode cache needs at least one entry, got {max_entries}")
+        self._max_entries = max_entries
+        self._lock = threading.Lock()
+        self._entries: OrderedDict[_CacheKey, _Encoding] = OrderedDict()
+        self.encodes = 0
+
+    def get(self, frame: Frame, kind: ImageFormat, quality: int | None) -> tuple[FrameType, bytes]:
+        key: _CacheKey = (frame.camera, frame.number, kind, quality)
+        with self._lock:
+            entry = self._entries.get(key)
+            owner = entry is None
+            if entry is None:
+                entry = _Encoding()
+                self._entries[key] = entry
+                while len(self._entries) > self._max_entries:
+                    self._entries.popitem(last=False)
+            else:
+                self._entries.move_to_end(key)
+        if owner:
+            try:
+                entry.result = encode_image(frame.rgb, kind, quality)
+            finally:
+                entry.done.set()
+                with self._lock:
+                    self.encodes += 1
+                    if entry.result is None and self._entries.get(key) is entry:
+                        del self._entries[key]
+            return entry.result
+        if entry.done.wait(_ENCODE_WAIT_S) and entry.result is not None:
+            return entry.result
+        return encode_image(frame.rgb, kind, quality)  # the owner failed or is stuck
+
+
+class FrameBuffer:
+    """Thread-safe store of the newest frame of each camera, shared by the engine and servers."""
+
+    def __init__(self, cache_entries: int = 16) -> None:
+        self._cond = threading.Condition()
+        self._slots: dict[str, _CameraSlot] = {}  # insertion order = registration order
+        self._listeners: tuple[FrameListener, ...] = ()
+        self._cache = _EncodeCache(cache_entries)
+
+    def register_camera(self, name: str, camera_id: int) -> None:
+        """Make a camera known before its first frame (keeps the camera order stable)."""
+        SelectCamera(name)
+        with self._cond:
+            slot = self._slots.get(name)
+            if slot is None:
+                self._slots[name] = _CameraSlot(camera_id)
+            elif slot.camera_id != camera_id:
+                raise LocalProtocolError(
+                    f"camera {name} is registered with id {slot.camera_id}, not {camera_id}"
+                )
+        self._notify(name)
+
+    def remove_camera(self, name: str) -> None:
+        """Forget a camera (its robot went); waiters for it wake up empty-handed."""
+        with self._cond:
+            removed = self._slots.pop(name, None) is not None
+            self._cond.notify_all()
+        if removed:
+            self._notify(name)
+
+    def publish(self, frame: Frame) -> None:
+        """Store ``frame`` as its camera's newest; cheap, never waits on a client.
+
+        Raises:
+            LocalProtocolError: the camera id changed or the frame number did not increase.
+        """
+        frame.rgb.flags.writeable = False
+        with self._cond:
+            slot = self._slots.get(frame.camera)
+            if slot is None:
+                slot = self._slots[frame.camera] = _CameraSlot(frame.camera_id)
+            elif slot.camera_id != frame.camera_id:
+                raise LocalProtocolError(
+                    f"camera {frame.camera} has id {slot.camera_id}, frame says {frame.camera_id}"
+                )
+            if slot.frame is not None and frame.number <= slot.frame.number:
+                raise LocalProtocolError(
+                    f"camera {frame.camera}: frame {frame.number} after {slot.frame.number}"
+                )
+            slot.frame = frame
+            self._cond.notify_all()
+        self._notify(frame.camera)
+
+    def cameras(self) -> list[str]:
+        """Camera names in order of registration or first publication."""
+        with self._cond:
+            return list(self._slots)
+
+    def camera_id(self, name: str) -> int | None:
+        """The id of a camera, or None if it is unknown."""
+        with self._cond:
+            slot = self._slots.get(name)
+            return None if slot is None else slot.camera_id
+
+    def latest(self, camera: str) -> Frame | None:
+        """The newest frame of ``camera``, or None (no frame yet, or no such camera)."""
+        with self._cond:
+            slot = self._slots.get(camera)
+            return None if slot is None else slot.frame
+
+    def wait_newer(self, camera: str, after_number: int, timeout_s: float) -> Frame | None:
+        """The newest frame of ``camera`` numbered above ``after_number``, waiting up to
+        ``timeout_s``; None on timeout or if the camera is removed meanwhile."""
+
+        def ready() -> bool:
+            slot = self._slots.get(camera)
+            return slot is None or (slot.frame is not None and slot.frame.number > after_number)
+
+        with self._cond:
+            self._cond.wait_for(ready, timeout=timeout_s)
+            slot = self._slots.get(camera)
+            if slot is None or slot.frame is None or slot.frame.number <= after_number:
+                return None
+            return slot.frame
+
+    def encoded(
+        self, frame: Frame, kind: ImageFormat, quality: int | None = None
+    ) -> tuple[FrameType, bytes]:
+        """The base frame type and payload of ``frame`` in a format, encoded at most once."""
+        return self._cache.get(frame, kind, quality)
+
+    @property
+    def encode_count(self) -> int:
+        """How many encodings were actually made (cache misses); for tests and benchmarks."""
+        return self._cache.encodes
+
+    def add_listener(self, listener: FrameListener) -> None:
+        """Call ``listener(camera)`` after each publish or camera change; it must not block."""
+        with self._cond:
+            self._listeners = (*self._listeners, listener)
+
+    def remove_listener(self, listener: FrameListener) -> None:
+        """Stop calling ``listener``; unknown listeners are ignored."""
+        with self._cond:
+            self._listeners = tuple(x for x in self._listeners if x is not listener)
+
+    def _notify(self, camera: str) -> None:
+        for listener in self._listeners:
+            try:
+                listener(camera)
+            except Exception:
+                log.exception("image frame listener failed")

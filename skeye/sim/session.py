@@ -1,0 +1,538 @@
+"""One control connection of the simulator: its threads, its states and its commands.
+
+How this works: the control server (:mod:`skeye.sim.server`) hands each accepted socket to a
+:class:`ClientSession` with two threads: a reader that decodes lines with the sans-IO codec
+(:mod:`skeye.wire.sim_lines`, then the typed table of :mod:`skeye.wire.sim`) and handles them,
+and a writer that alone writes to the socket, draining a bounded queue. The engine thread hands
+the robot's readings to the session's sink (:func:`skeye.sim.stream.text_sink`), which queues
+their lines without ever blocking: when a client does not read, its queue fills and further
+stream lines are dropped and counted, so a slow client never slows the physics or other
+clients. Answers (RES, ERR, GEO, CONF, NFO) go through the same queue, so their order relative
+to the stream is kept. Every bad line gets an ``ERR`` with a reason and the connection stays
+usable; only an over-long line closes it, and so does an HTTP request line or header.
+
+The connection's states are a transition table (:data:`TRANSITIONS`, :class:`ConnectionStates`,
+sans-IO): a new connection awaits its first line (``AWAITING``), then has no robot
+(``OPEN``) until an INIT succeeds (``BOUND``: one robot per connection), and ends ``CLOSED``.
+Which commands each state refuses, and how long each may stay quiet, are tables too.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import queue
+import re
+import selectors
+import socket
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.sim.cameras import set_camera_fov
+from skeye.sim.engine import Simulation
+from skeye.sim.robot import Robot
+from skeye.sim.runner import SimulationRunner
+from skeye.sim.stream import text_sink
+from skeye.sim.wind import make_settings, parse_params
+from skeye.wire.sim import DriveLimits, decode, drive_in_si, encode, parse_value
+from skeye.wire.sim_lines import LineDecoder, LineError, Message
+from skeye.wire.sim_messages import (
+    Conf,
+    Drive,
+    Err,
+    Geo,
+    GetConf,
+    GetGeo,
+    GetStartPoses,
+    Init,
+    Ping,
+    Res,
+    RobotConf,
+    Set,
+    StartPoses,
+    Step,
+)
+from skeye.workers import Worker
+
+log = logging.getLogger(__name__)
+
+OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
+# An HTTP request line or header: a web page POSTing to this port (a cross-protocol request, whose
+# text/plain body would otherwise be read as protocol lines). The connection is closed at once.
+_HTTP_LINE = re.compile(
+    r"^(?:(?:GET|POST|PUT|DELETE|HEAD|OPTIONS|PATCH|CONNECT|TRACE) \S+ HTTP/\d|"
+    r"(?:Host|Origin|Content-Type|User-Agent|Content-Length):)", re.IGNORECASE)
+_CLOSE = b""
+
+# (connection id, direction "+" "-" "<" ">", data): see skeye.sim.server's module comment.
+LineObserver = Callable[[int, str, bytes], None]
+
+
+# --- the connection's states (sans-IO) -------------------------------------------------------
+
+
+class Conn(enum.Enum):
+    AWAITING = "awaiting its first line"
+    OPEN = "open, no robot"
+    BOUND = "driving a robot"
+    CLOSED = "closed"
+
+
+class ConnEvent(enum.Enum):
+    LINE = "a line arrived"
+    BIND = "INIT spawned the robot"
+    QUIET = "quiet too long"
+    CLOSE = "the connection ended"
+
+
+TRANSITIONS: dict[tuple[Conn, ConnEvent], Conn] = {
+    (Conn.AWAITING, ConnEvent.LINE): Conn.OPEN,
+    (Conn.OPEN, ConnEvent.LINE): Conn.OPEN,
+    (Conn.BOUND, ConnEvent.LINE): Conn.BOUND,
+    (Conn.OPEN, ConnEvent.BIND): Conn.BOUND,
+    (Conn.AWAITING, ConnEvent.BIND): Conn.BOUND,  # its line ended in a bare CR
+    (Conn.AWAITING, ConnEvent.QUIET): Conn.CLOSED,
+    (Conn.OPEN, ConnEvent.QUIET): Conn.CLOSED,
+    (Conn.AWAITING, ConnEvent.CLOSE): Conn.CLOSED,
+    (Conn.OPEN, ConnEvent.CLOSE): Conn.CLOSED,
+    (Conn.BOUND, ConnEvent.CLOSE): Conn.CLOSED,
+    (Conn.CLOSED, ConnEvent.CLOSE): Conn.CLOSED,
+}
+"""(state, event) -> state. A robot-driving connection is never closed for being quiet (a
+hovering robot needs no commands; TCP keepalive finds dead peers): BOUND has no QUIET row."""
+
+NEEDS_ROBOT = frozenset({"DRIVE", "GETCONF", "GETGEO"})
+"""Commands refused until INIT has bound a robot (SET checks per Type: Camera needs one)."""
+
+ONCE = frozenset({"INIT"})
+"""Commands refused once a robot is bound (one robot per connection)."""
+
+
+class ConnectionStates:
+    """The state of one connection, moved only through :data:`TRANSITIONS`."""
+
+    def __init__(self) -> None:
+        self.state = Conn.AWAITING
+
+    def _go(self, event: ConnEvent) -> Conn:
+        new = TRANSITIONS.get((self.state, event))
+        if new is None:
+            raise LocalProtocolError(f"connection {self.state.value}: no transition on "
+                                     f"{event.value}")
+        self.state = new
+        return new
+
+    def line(self) -> None:
+        """A complete line arrived."""
+        self._go(ConnEvent.LINE)
+
+    def bind(self) -> None:
+        """INIT spawned this connection's robot."""
+        self._go(ConnEvent.BIND)
+
+    def close(self) -> None:
+        self._go(ConnEvent.CLOSE)
+
+    def refusal(self, command: str, robot_name: str | None) -> str | None:
+        """Why ``command`` may not run in this state, or None."""
+        if self.state is Conn.BOUND and command in ONCE:
+            return (f"this connection already drives robot {robot_name} "
+                    "(one robot per connection)")
+        if self.state is not Conn.BOUND and command in NEEDS_ROBOT:
+            return f"{command} needs a robot: send INIT first"
+        return None
+
+    def quiet(self, quiet_s: float, handshake_timeout_s: float,
+              idle_timeout_s: float) -> str | None:
+        """After ``quiet_s`` without a line: why the connection must close (it is then CLOSED),
+        or None."""
+        if self.state is Conn.AWAITING and quiet_s >= handshake_timeout_s:
+            reason = f"no command within {handshake_timeout_s:g} s of connecting; closed"
+        elif self.state is Conn.OPEN and quiet_s >= idle_timeout_s:
+            reason = f"idle for {idle_timeout_s:g} s without a robot; closed"
+        else:
+            return None
+        self._go(ConnEvent.QUIET)
+        return reason
+
+
+class SessionHost(Protocol):
+    """What a session needs of its server."""
+
+    runner: SimulationRunner
+    observers: list[LineObserver]
+    handshake_timeout_s: float
+    idle_timeout_s: float
+    set_handlers: dict[str, Callable[[ClientSession, Set], None]]
+
+    def notify(self, conn_id: int, direction: str, data: bytes) -> None: ...
+
+    def forget(self, session: ClientSession) -> None: ...
+
+
+def _line_bytes(event: Message | LineError) -> bytes:
+    """A received line as observers see it: its type and blocks (or the bad line's text)."""
+    if isinstance(event, LineError):
+        return event.line.encode("utf-8", "replace")
+    return " ".join([event.type, *(f"{{{b}}}" for b in event.blocks)]).encode("utf-8")
+
+
+class ClientSession:
+    """One connection: its reader and writer threads and, after INIT, its robot."""
+
+    def __init__(self, server: SessionHost, sock: socket.socket, peer: str, conn_id: int) -> None:
+        self.server = server
+        self.sock = sock
+        self.peer = peer
+        self.peer_host = peer.rpartition(":")[0]
+        self.conn_id = conn_id
+        self.states = ConnectionStates()
+        self.robot_name: str | None = None
+        self.robot_config: Any = None
+        self.outbox: queue.Queue[bytes] = queue.Queue()
+        self.dropped = 0  # lines not sent because the client did not read them in time
+        self._queued_bytes = 0
+        self._queued_lock = threading.Lock()
+        self._closed = threading.Event()
+        self._reader = Worker(self._read_loop, f"sim-read-{peer}", on_error=self._on_error)
+        self._writer = Worker(self._write_loop, f"sim-write-{peer}", on_error=self._on_error)
+
+    def start(self) -> None:
+        self._reader.start()
+        self._writer.start()
+
+    def _on_error(self, exc: BaseException) -> None:
+        """A session thread failed (a bug): the client hears why, the session ends."""
+        self.send(encode(Err("CONNECT", reason=f"server error, closing: {exc!r}")))
+        self._closed.set()
+        self.outbox.put_nowait(_CLOSE)
+        try:
+            self.sock.shutdown(socket.SHUT_RD)
+        except OSError:
+            pass
+
+    # -- output --------------------------------------------------------------------------
+    def send(self, line: bytes) -> None:
+        """Queue a line; never blocks (called from the engine thread too)."""
+        if self._closed.is_set():
+            return
+        if self.server.observers:
+            self.server.notify(self.conn_id, ">", line)
+        with self._queued_lock:
+            # One chunk may be larger than the bound (a long lockstep STEP); a backlog may not.
+            if self._queued_bytes and self._queued_bytes + len(line) > OUTBOX_BYTES:
+                self.dropped += max(1, line.count(b"\n"))
+                return
+            self._queued_bytes += len(line)
+        self.outbox.put_nowait(line)
+
+    def _write_loop(self) -> None:
+        try:
+            while True:
+                line = self.outbox.get()
+                if line is _CLOSE or not line:
+                    break
+                chunks = [line]
+                try:
+                    while len(chunks) < 512:
+                        more = self.outbox.get_nowait()
+                        if not more:
+                            self.sock.sendall(b"".join(chunks))
+                            return
+                        chunks.append(more)
+                except queue.Empty:
+                    pass
+                data = b"".join(chunks)
+                self.sock.sendall(data)
+                with self._queued_lock:
+                    self._queued_bytes -= len(data)
+        except OSError:
+            pass
+        finally:
+            self._closed.set()
+            try:
+                self.sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    # -- input ---------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        decoder = LineDecoder()
+        last_s = time.monotonic()
+        server = self.server
+        try:
+            with selectors.DefaultSelector() as sel:
+                sel.register(self.sock, selectors.EVENT_READ)
+                while not self._closed.is_set():
+                    ready = sel.select(0.5)
+                    reason = self.states.quiet(time.monotonic() - last_s,
+                                               server.handshake_timeout_s, server.idle_timeout_s)
+                    if reason is not None:
+                        log.info("closing client %s: %s", self.peer, reason)
+                        self.send(encode(Err("CONNECT", reason=reason)))
+                        return
+                    if not ready:
+                        continue
+                    try:
+                        data = self.sock.recv(65536)
+                    except OSError:
+                        break
+                    if not data:
+                        break
+                    if b"\n" in data:
+                        self.states.line()
+                        last_s = time.monotonic()
+                    if not self._feed(decoder, data):
+                        return
+        finally:
+            self.states.close()
+            self._finish()
+
+    def _feed(self, decoder: LineDecoder, data: bytes) -> bool:
+        """Handle the lines in ``data``; False when the connection must close."""
+        for event in decoder.feed(data):
+            if self.server.observers:
+                self.server.notify(self.conn_id, "<", _line_bytes(event))
+            if isinstance(event, LineError) and _HTTP_LINE.match(event.line):
+                log.warning("client %s sent HTTP (a web page?); closing: %r", self.peer,
+                            event.line[:80])
+                self.send(encode(Err(
+                    "CONNECT", reason="this is the simulator control port, not HTTP; a web page "
+                    "may not talk to it: closed")))
+                return False
+            if isinstance(event, LineError):
+                self.send(encode(Err(event.command, reason=event.reason)))
+                if event.fatal:
+                    return False
+                continue
+            self._handle(event)
+        return True
+
+    def _finish(self) -> None:
+        if self.robot_name is not None:
+            name = self.robot_name
+            self.robot_name = None
+            try:
+                self.server.runner.submit(lambda sim: sim.remove(name))
+            except SkeyeError:
+                pass
+        self.outbox.put_nowait(_CLOSE)  # the writer sends what is queued, then stops
+        self.server.forget(self)
+
+    def end(self) -> None:
+        """Close after what is queued has gone out (safe from any thread, never blocks)."""
+        self.outbox.put_nowait(_CLOSE)
+        try:
+            self.sock.shutdown(socket.SHUT_RD)  # the reader sees the end and finishes
+        except OSError:
+            pass
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        self._closed.set()
+        try:
+            self.sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self.outbox.put_nowait(_CLOSE)
+        for t in (self._reader, self._writer):
+            t.join(timeout_s)
+        self.sock.close()
+
+    def _handle(self, msg: Message) -> None:
+        handler = _HANDLERS.get(msg.type)
+        if handler is None:
+            self.send(encode(Err(msg.type, reason=f"unknown command {msg.type}")))
+            return
+        try:
+            refusal = self.states.refusal(msg.type, self.robot_name)
+            if refusal is not None:
+                raise RemoteProtocolError(refusal)
+            handler(self, msg, decode(msg))
+        except (RemoteProtocolError, LocalProtocolError, ConfigError) as exc:
+            self.send(encode(Err(msg.type, reason=str(exc))))
+        except TimeoutError:
+            self.send(encode(Err(msg.type, reason="the simulator did not answer in time")))
+        except SkeyeError as exc:
+            self.send(encode(Err(msg.type, reason=str(exc))))
+        except Exception as exc:  # a bug (or a failure that killed the engine): say so, go on
+            log.exception("%s from %s failed", msg.type, self.peer)
+            self.send(encode(Err(msg.type, reason=f"failed: {type(exc).__name__}: {exc}")))
+
+    # -- commands ------------------------------------------------------------------------
+    def _robot(self, command: str) -> str:
+        if self.robot_name is None:
+            raise RemoteProtocolError(f"{command} needs a robot: send INIT first")
+        return self.robot_name
+
+    def cmd_init(self, msg: Message, init: Init) -> None:
+        sink = text_sink(self.send)
+
+        def spawn(sim: Simulation) -> tuple[str, Any]:
+            robot: Robot = sim.spawn(
+                init.class_name,
+                name=init.name,
+                sink=sink,
+                location_ned_m=init.location_ned_m if init.start is None else None,
+                rotation_rpy_rad=init.rotation_rpy_rad or (0.0, 0.0, 0.0),
+                start=init.start,
+            )
+            # Answer from the engine thread, before the first STA/SEN of this robot.
+            self.send(encode(Res("INIT", name=robot.name, status="OK")))
+            return robot.name, robot.config
+
+        self.robot_name, self.robot_config = self.server.runner.call(spawn)
+        self.states.bind()
+
+    def cmd_drive(self, msg: Message, drive: Drive) -> None:
+        name = self._robot("DRIVE")
+        c = self.robot_config.controller
+        limits = DriveLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s)
+        drive = drive_in_si(msg, drive, limits)
+        changes: dict[str, Any] = {"attitude": drive.attitude}
+        for attr, value in (
+            ("roll_rad", drive.roll_rad),
+            ("pitch_rad", drive.pitch_rad),
+            ("thrust", drive.thrust_fraction),
+            ("forward_m_s", drive.forward_m_s),
+            ("right_m_s", drive.right_m_s),
+            ("up_m_s", drive.up_m_s),
+            ("yaw_rate_rad_s", drive.yaw_rate_rad_s),
+        ):
+            if value is not None:
+                changes[attr] = value
+
+        def apply(sim: Simulation) -> None:
+            robot = sim.robots.get(name)
+            if robot is None:
+                raise RemoteProtocolError(f"robot {name} no longer exists")
+            robot.drive(**changes)
+
+        self.server.runner.call(apply)
+
+    def cmd_getstartposes(self, msg: Message, command: GetStartPoses) -> None:
+        self.send(encode(StartPoses(tuple(self.server.runner.sim.start_poses()))))
+
+    def _lookup(self, query: GetConf | GetGeo, command: str) -> tuple[str, list[Any]]:
+        type_name = query.type
+        name = self._robot(command)
+        if type_name.lower() in ("robot", "aerialvehicle"):
+            return "robot", []
+        sensor_name = query.name
+
+        def find(sim: Simulation) -> list[Any]:
+            robot = sim.robots[name]
+            return robot.find_sensors(type_name, sensor_name)
+
+        found = self.server.runner.call(find)
+        if not found:
+            raise RemoteProtocolError(
+                f"robot {name} has no sensor of type {type_name}"
+                + (f" named {sensor_name}" if sensor_name else "")
+            )
+        return "sensor", found
+
+    def cmd_getgeo(self, msg: Message, query: GetGeo) -> None:
+        kind, found = self._lookup(query, "GETGEO")
+        name = self._robot("GETGEO")
+        if kind == "robot":
+            a = self.robot_config.airframe
+            width_m = 2 * (a.arm_m + a.rotor_radius_m)
+            dimensions_m = (width_m, width_m, a.body_size_m[2] + a.gear_height_m)
+            fields = (("Dimensions", dimensions_m), ("COG", (0.0, 0.0, 0.0)))
+            self.send(encode(Geo("AerialVehicle", name, fields)))
+            return
+        for s in found:
+            self.send(encode(Geo(s.sensor.type_name, s.mount.name, tuple(s.sensor.geo_fields()))))
+
+    def cmd_getconf(self, msg: Message, query: GetConf) -> None:
+        kind, found = self._lookup(query, "GETCONF")
+        name = self._robot("GETCONF")
+        if kind == "robot":
+            cfg = self.robot_config
+            a, c = cfg.airframe, cfg.controller
+            conf = RobotConf(
+                name=name,
+                class_name=cfg.class_name,
+                mass_kg=a.mass_kg,
+                max_speed_m_s=c.max_speed_m_s,
+                max_climb_m_s=c.max_climb_m_s,
+                max_yaw_rate_rad_s=c.max_yaw_rate_rad_s,
+                max_tilt_rad=c.max_tilt_rad,
+                max_thrust_n=a.max_thrust_n,
+                board_rate_hz=cfg.board_rate_hz,
+                time_step_s=self.server.runner.sim.dt,
+                sensors=",".join(f"{m.type_name}:{m.name}" for m in cfg.sensors),
+            )
+            self.send(encode(conf))
+            return
+        for s in found:
+            self.send(encode(Conf(s.sensor.type_name, s.mount.name, tuple(s.sensor.conf_fields()))))
+
+    def cmd_set(self, msg: Message, command: Set) -> None:
+        handler = self.server.set_handlers.get(command.type.lower())
+        if handler is None:
+            raise RemoteProtocolError(
+                f"SET: unknown Type {command.type!r}; known: "
+                + ", ".join(sorted(self.server.set_handlers))
+            )
+        handler(self, command)
+        self.send(encode(Res("SET", type=command.type, status="OK")))
+
+    def cmd_step(self, msg: Message, command: Step) -> None:
+        count = command.count
+        runner = self.server.runner
+
+        def do(sim: Simulation) -> None:
+            sim.step(count)
+            self.send(encode(Res("STEP", time_s=sim.time_s)))
+
+        if runner.mode != "lockstep":
+            raise RemoteProtocolError(
+                "STEP works only when the simulator runs with --mode lockstep"
+            )
+        runner.call(do, timeout_s=3600.0, fatal=True)
+
+    def cmd_ping(self, msg: Message, ping: Ping) -> None:
+        if self.server.runner.error is not None:
+            raise self.server.runner.error  # no pretending: a dead engine's clock is not time
+        self.send(encode(Res("PING", id=ping.id, time_s=self.server.runner.sim.time_s)))
+
+
+_HANDLERS: dict[str, Callable[[ClientSession, Message, Any], None]] = {
+    "INIT": ClientSession.cmd_init,
+    "DRIVE": ClientSession.cmd_drive,
+    "GETSTARTPOSES": ClientSession.cmd_getstartposes,
+    "GETGEO": ClientSession.cmd_getgeo,
+    "GETCONF": ClientSession.cmd_getconf,
+    "SET": ClientSession.cmd_set,
+    "STEP": ClientSession.cmd_step,
+    "PING": ClientSession.cmd_ping,
+}
+
+
+def _require(value: str | None, key: str) -> str:
+    if value is None:
+        raise RemoteProtocolError(f"missing {{{key} ...}}")
+    return value
+
+
+def set_wind(session: ClientSession, command: Set) -> None:
+    """``SET {Type Wind} {Mode m} {Params k=v,...}``."""
+    settings = make_settings(_require(command.mode, "Mode"), parse_params(command.params or ""))
+    session.server.runner.call(lambda sim: sim.set_wind(settings))
+
+
+def set_camera(session: ClientSession, command: Set) -> None:
+    """``SET {Type Camera} {Name n} {Opcode FOV} {Params rad}``."""
+    name = session._robot("SET")
+    camera = _require(command.name, "Name")
+    opcode = _require(command.opcode, "Opcode")
+    if opcode.lower() != "fov":
+        raise RemoteProtocolError(f"SET Camera: unknown Opcode {opcode!r}; known: FOV")
+    fov = parse_value("Params", _require(command.params, "Params"), "float",
+                      min_value=0.01, max_value=math.pi - 0.01)
+    session.server.runner.call(lambda sim: set_camera_fov(sim, name, camera, fov))

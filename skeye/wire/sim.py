@@ -1,0 +1,517 @@
+"""The simulator protocol's codec table: typed messages <-> lines (docs/protocols/simulator.md).
+
+How this works: :data:`CODECS` maps each type word (and :data:`SEN_CODECS` each SEN Type) to the
+dataclass of :mod:`skeye.wire.sim_messages` it stands for, with that class's fields: wire key,
+value kind and range, read once from the dataclass field metadata. :func:`decode` turns a parsed
+:class:`~skeye.wire.sim_lines.Message` into its dataclass (every value typed and range-checked,
+RemoteProtocolError naming the key and the text otherwise); :func:`encode` turns a dataclass into
+one line (LocalProtocolError for a value of the wrong kind or out of range). The simulator's
+streams, which write the same shape of line many times a second, use :func:`line_format`: a
+precompiled :class:`~skeye.wire.sim_format.LineFormat` built from the same table, writing the
+same bytes as :func:`encode`. Sans-IO: no sockets, threads or clocks.
+
+Invariants: ``decode(parse_line(encode(m)))`` equals ``m`` for every message whose floats have
+at most six decimals (the wire writes six); type words and keys are case-insensitive on input.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from skeye.errors import LocalProtocolError, RemoteProtocolError
+from skeye.wire.sim_format import (
+    BOOL,
+    FLOAT,
+    INT,
+    WORD,
+    Layout,
+    LineFormat,
+    Slot,
+    floats,
+    format_start_poses,
+    ints,
+    parse_start_poses,
+)
+from skeye.wire.sim_lines import (
+    Message,
+    clean_reason,
+    format_error,
+    format_message,
+    parse_line,
+)
+from skeye.wire.sim_messages import (
+    SEN_CLASSES,
+    Conf,
+    Drive,
+    Err,
+    Geo,
+    GetConf,
+    GetGeo,
+    GetStartPoses,
+    Init,
+    Nfo,
+    Ping,
+    Res,
+    RobotConf,
+    Sen,
+    SenOther,
+    Set,
+    Sta,
+    StartPoses,
+    Step,
+)
+
+__all__ = [
+    "CODECS",
+    "COMMANDS",
+    "SEN_CODECS",
+    "Codec",
+    "DriveLimits",
+    "FieldSpec",
+    "decode",
+    "decode_as",
+    "decode_line",
+    "drive_in_si",
+    "encode",
+    "fields_of",
+    "line_format",
+    "parse_value",
+    "res_time_s",
+    "sen_layout",
+    "sen_line_format",
+]
+
+_SEN_HEADER = ("Time", "Name")
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """One block of a message: the dataclass attribute, its wire key, kind and range."""
+
+    attr: str
+    key: str
+    kind: str
+    required: bool
+    min_value: float | None
+    max_value: float | None
+
+
+@dataclass(frozen=True)
+class Codec:
+    """How one message class goes on the wire: its type word and its fields in order."""
+
+    word: str
+    cls: type
+    fields: tuple[FieldSpec, ...]
+
+    def spec(self, key: str) -> FieldSpec:
+        """The field with wire key ``key`` (case-insensitive); KeyError if none."""
+        wanted = key.casefold()
+        for f in self.fields:
+            if f.key.casefold() == wanted:
+                return f
+        raise KeyError(key)
+
+
+def _codec(cls: type) -> Codec:
+    specs = []
+    for f in dataclasses.fields(cls):
+        if "key" not in f.metadata:
+            continue
+        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        specs.append(
+            FieldSpec(
+                f.name,
+                f.metadata["key"],
+                f.metadata["kind"],
+                required,
+                f.metadata["min"],
+                f.metadata["max"],
+            )
+        )
+    return Codec(cls.WORD, cls, tuple(specs))  # type: ignore[attr-defined]
+
+
+COMMANDS: tuple[type, ...] = (Init, Drive, Step, Set, Ping, GetConf, GetGeo, GetStartPoses)
+"""The commands a client sends."""
+
+CODECS: dict[str, Codec] = {
+    c.word: c for c in (_codec(cls) for cls in (*COMMANDS, Sta, Res, Err, Nfo))
+}
+"""Codec by type word: commands, STA, RES, ERR and NFO (SEN, CONF, GEO have their own)."""
+
+SEN_CODECS: dict[str, Codec] = {cls.TYPE.lower(): _codec(cls) for cls in SEN_CLASSES}
+"""Codec of each SEN class by its lower-case Type."""
+
+_ROBOT_CONF = _codec(RobotConf)
+_ROBOT_TYPES = ("aerialvehicle",)
+
+
+# --- decoding --------------------------------------------------------------------------------
+
+
+def parse_value(
+    key: str, text: str, kind: str, min_value: float | None = None, max_value: float | None = None
+) -> Any:
+    """One value's text as ``kind`` within the range; RemoteProtocolError naming key and text."""
+    msg = Message("", ((key, text),))
+    return _read(msg, FieldSpec(key, key, kind, True, min_value, max_value))
+
+
+def _read(msg: Message, spec: FieldSpec) -> Any:
+    key, kind = spec.key, spec.kind
+    if kind == "float":
+        return msg.get_float(key, min_value=spec.min_value, max_value=spec.max_value)
+    if kind == "int":
+        lo = None if spec.min_value is None else int(spec.min_value)
+        hi = None if spec.max_value is None else int(spec.max_value)
+        return msg.get_int(key, min_value=lo, max_value=hi)
+    if kind == "bool":
+        return msg.get_bool(key)
+    if kind in ("word", "text"):
+        return msg.require(key)
+    if kind == "vec3":
+        return msg.get_vector(key, 3)
+    if kind in ("vec2", "ivec2"):
+        return msg.get_vector(key, 2)
+    return msg.get_vector(key, None)
+
+
+def _decode_fields(codec: Codec, msg: Message, skip: Iterable[str] = ()) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    skipped = set(skip)
+    for spec in codec.fields:
+        if spec.key in skipped:
+            continue
+        if msg.has(spec.key):
+            out[spec.attr] = _read(msg, spec)
+        elif spec.required:
+            msg.require(spec.key)  # raises "missing {Key ...}"
+    return out
+
+
+def _check_init(init: Init) -> None:
+    if init.rotation_rpy_rad is not None and any(abs(v) > 2 * math.pi
+                                                 for v in init.rotation_rpy_rad):
+        raise RemoteProtocolError(
+            f"Rotation {init.rotation_rpy_rad} must be in [-2pi, 2pi] rad per axis "
+            "(radians, not degrees)"
+        )
+    if init.start is None and init.location_ned_m is None:
+        raise RemoteProtocolError("INIT needs {Location x,y,z} or {Start name}")
+    if init.location_ned_m is not None and any(abs(v) > 1.0e4 for v in init.location_ned_m):
+        raise RemoteProtocolError(
+            f"Location {init.location_ned_m} is outside the world (|x| > 10 km)"
+        )
+
+
+def _check_drive_form(msg: Message) -> None:
+    has_att = any(msg.has(k) for k in Drive.ATTITUDE_KEYS)
+    has_vel = any(msg.has(k) for k in Drive.VELOCITY_KEYS)
+    if has_att and has_vel:
+        raise RemoteProtocolError(
+            "DRIVE mixes the attitude form (RollAngle, PitchAngle, Thrust) with the velocity form"
+        )
+    known = {f.key.lower() for f in CODECS["DRIVE"].fields}
+    unknown = [k for k, _ in msg.fields if k.lower() not in known]
+    if unknown:
+        raise RemoteProtocolError(f"DRIVE: unknown segment(s) {unknown}")
+    if not (has_att or has_vel or msg.has("RotationalVelocity")):
+        raise RemoteProtocolError("DRIVE needs at least one velocity or attitude segment")
+
+
+def _decode_sen(msg: Message) -> Sen | SenOther:
+    type_name = msg.require("Type")
+    codec = SEN_CODECS.get(type_name.lower())
+    if codec is None:
+        time_s = msg.get_float("Time", min_value=0.0)
+        return SenOther(time_s, type_name, msg.require("Name"), msg.fields)
+    values = _decode_fields(codec, msg)
+    result: Sen = codec.cls(**values)
+    return result
+
+
+def _generic_fields(msg: Message) -> tuple[str, str, tuple[tuple[str, object], ...]]:
+    rest = tuple((k, v) for k, v in msg.fields if k.casefold() not in ("type", "name"))
+    return msg.require("Type"), msg.get("Name") or "", rest
+
+
+def decode(msg: Message) -> Any:
+    """The typed message a parsed line holds.
+
+    Raises:
+        RemoteProtocolError: an unknown type word, a missing key, a value of the wrong kind or
+            out of range, or a combination the protocol forbids (DRIVE's two forms, INIT
+            without a place); the message says which.
+    """
+    word = msg.type
+    if word == "SEN":
+        return _decode_sen(msg)
+    if word == "NFO" and msg.has("StartPoses"):
+        poses = parse_start_poses(msg)
+        return StartPoses(tuple((name, loc, rot) for name, (loc, rot) in poses.items()))
+    if word == "CONF":
+        if (msg.get("Type") or "").lower() in _ROBOT_TYPES:
+            return RobotConf(**_decode_fields(_ROBOT_CONF, msg))
+        return Conf(*_generic_fields(msg))
+    if word == "GEO":
+        return Geo(*_generic_fields(msg))
+    codec = CODECS.get(word)
+    if codec is None:
+        raise RemoteProtocolError(f"unknown command {word}")
+    if codec.cls is Drive:
+        _check_drive_form(msg)
+    result = codec.cls(**_decode_fields(codec, msg))
+    if isinstance(result, Init):
+        _check_init(result)
+    return result
+
+
+def decode_as(msg: Message, cls: type[T]) -> T:
+    """The fields of ``msg`` read as a ``cls``, whatever its type word and ``Type`` say.
+
+    For a reader that already knows what a line is (a client's sensor object, handed the lines
+    of its own sensor): a SEN class's ``Name`` may then be left out (it reads as ``""``), and
+    :class:`~skeye.wire.sim_messages.SenOther` keeps the fields as text.
+
+    Raises:
+        RemoteProtocolError: as :func:`decode`.
+    """
+    if cls is SenOther:
+        time_s = msg.get_float("Time", min_value=0.0)
+        other = SenOther(time_s, msg.get("Type") or "", msg.get("Name") or "", msg.fields)
+        return other  # type: ignore[return-value]
+    if issubclass(cls, Sen):
+        codec = SEN_CODECS[cls.TYPE.lower()]
+        named = msg.has("Name")
+        values = _decode_fields(codec, msg, skip=() if named else ("Name",))
+        if not named:
+            values["name"] = ""
+        return cls(**values)
+    codec = _ROBOT_CONF if cls is RobotConf else CODECS[cls.WORD]  # type: ignore[attr-defined]
+    return cls(**_decode_fields(codec, msg))
+
+
+def decode_line(line: str) -> Any:
+    """:func:`decode` of one line of text."""
+    return decode(parse_line(line))
+
+
+def res_time_s(answer: object) -> float:
+    """The sim time a ``RES`` (of STEP or PING) carries; RemoteProtocolError if it has none."""
+    if not isinstance(answer, Res) or answer.time_s is None:
+        raise RemoteProtocolError(f"expected RES {{Time ...}}, got {answer!r}")
+    return answer.time_s
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """A robot's velocity limits, which bound DRIVE (its CONF's MaxSpeed, MaxClimb, MaxYawRate)."""
+
+    speed_m_s: float
+    climb_m_s: float
+    yaw_rate_rad_s: float
+
+
+def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
+    """``drive`` (decoded from ``msg``) checked against a robot's limits, in m/s and rad/s.
+
+    With ``Normalized true`` the velocities are percent of the limits (bound +-100).
+
+    Raises:
+        RemoteProtocolError: a velocity beyond its bound (naming the key and the text).
+    """
+    normalized = bool(drive.normalized)
+    changes: dict[str, Any] = {}
+    for key, attr, limit in (
+        ("LinearVelocity", "forward_m_s", limits.speed_m_s),
+        ("LateralVelocity", "right_m_s", limits.speed_m_s),
+        ("AltitudeVelocity", "up_m_s", limits.climb_m_s),
+        ("RotationalVelocity", "yaw_rate_rad_s", limits.yaw_rate_rad_s),
+    ):
+        if getattr(drive, attr) is None:
+            continue
+        bound = 100.0 if normalized else limit
+        value = msg.get_float(key, min_value=-bound, max_value=bound)
+        changes[attr] = value / 100.0 * limit if normalized else value
+    return dataclasses.replace(drive, normalized=None, **changes)
+
+
+# --- encoding --------------------------------------------------------------------------------
+
+
+def _check_value(spec: FieldSpec, value: Any) -> object:
+    kind, key = spec.kind, spec.key
+    if kind in ("float", "int"):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise LocalProtocolError(f"{key}: {value!r} is not a number")
+        if kind == "int" and not isinstance(value, numbers.Integral):
+            raise LocalProtocolError(f"{key}: {value!r} is not an integer")
+        number: float = int(value) if isinstance(value, numbers.Integral) else float(value)
+        if not math.isfinite(number):
+            raise LocalProtocolError(f"{key}: {value!r} is not a finite number")
+        if (spec.min_value is not None and number < spec.min_value) or (
+            spec.max_value is not None and number > spec.max_value
+        ):
+            raise LocalProtocolError(
+                f"{key}: {value!r} is out of range [{spec.min_value}, {spec.max_value}]"
+            )
+        return value  # as given: an int stays an int (``1``, not ``1.000000``), as always
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise LocalProtocolError(f"{key}: {value!r} is not a bool")
+        return value
+    if kind in ("word", "text"):
+        if not isinstance(value, str):
+            raise LocalProtocolError(f"{key}: {value!r} is not a str")
+        if kind == "word" and (not value or any(c.isspace() for c in value)):
+            raise LocalProtocolError(f"{key}: {value!r} is not one word")
+        return value
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise LocalProtocolError(f"{key}: {value!r} is not a vector") from None
+    size = {"vec3": 3, "vec2": 2, "ivec2": 2}.get(kind)
+    if size is not None and len(items) != size:
+        raise LocalProtocolError(f"{key}: {value!r} must have {size} components")
+    if not items or not all(
+        isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+        for v in items
+    ):
+        raise LocalProtocolError(f"{key}: {value!r} is not a vector of finite numbers")
+    if kind == "ivec2":
+        if not all(float(v).is_integer() for v in items):
+            raise LocalProtocolError(f"{key}: {value!r} must be whole numbers")
+        return tuple(int(v) for v in items)
+    return items  # as given: ints stay ints
+
+
+def fields_of(message: Any) -> list[tuple[str, object]]:
+    """The ``(key, value)`` blocks of a typed message, in wire order (None fields left out)."""
+    if isinstance(message, Sen):
+        codec = SEN_CODECS[message.TYPE.lower()]
+        out: list[tuple[str, object]] = [
+            ("Time", _check_value(codec.spec("Time"), message.time_s)),
+            ("Type", message.TYPE),
+            ("Name", _check_value(codec.spec("Name"), message.name)),
+        ]
+        skip: tuple[str, ...] = _SEN_HEADER
+    elif isinstance(message, (Conf, Geo)):
+        return [("Type", message.type), ("Name", message.name), *message.fields]
+    elif isinstance(message, RobotConf):
+        codec, out, skip = _ROBOT_CONF, [], ()
+    else:
+        codec = CODECS.get(getattr(type(message), "WORD", ""))  # type: ignore[assignment]
+        if codec is None or codec.cls is not type(message):
+            raise LocalProtocolError(f"{type(message).__name__} is not a simulator message")
+        out, skip = [], ()
+    for spec in codec.fields:
+        if spec.key in skip:
+            continue
+        value = getattr(message, spec.attr)
+        if value is not None:
+            out.append((spec.key, _check_value(spec, value)))
+    return out
+
+
+def encode(message: Any) -> bytes:
+    """One ``\\r\\n``-ended line of a typed message.
+
+    Raises:
+        LocalProtocolError: a value of the wrong kind or out of range, or text the line syntax
+            cannot carry (see :func:`~skeye.wire.sim_lines.format_message`).
+    """
+    if isinstance(message, StartPoses):
+        return format_start_poses(message.poses)
+    if isinstance(message, Err) and message.name is None:
+        return format_error(message.command, message.reason)
+    if isinstance(message, Err):
+        return format_message(
+            "ERR",
+            ("Command", message.command),
+            ("Name", message.name),
+            ("Reason", clean_reason(message.reason)),
+        )
+    if isinstance(message, SenOther):
+        return format_message(
+            "SEN",
+            ("Time", message.time_s),
+            ("Type", message.type),
+            ("Name", message.name),
+            *message.fields,
+        )
+    word = "CONF" if isinstance(message, RobotConf) else getattr(type(message), "WORD", "")
+    return format_message(word, *fields_of(message))
+
+
+# --- precompiled stream lines ----------------------------------------------------------------
+
+_SLOTS: dict[str, Slot] = {
+    "float": FLOAT,
+    "int": INT,
+    "bool": BOOL,
+    "word": WORD,
+    "vec3": floats(3),
+    "vec2": floats(2),
+    "ivec2": ints(2),
+}
+
+
+def sen_layout(
+    cls: type[Sen], keys: Iterable[str] | None = None, counts: Mapping[str, int] | None = None
+) -> Layout:
+    """The keys and slots of a SEN class's fields after Time, Type and Name.
+
+    Args:
+        cls: the SEN class.
+        keys: the keys present (the optional ones a sensor writes), in any order; all if None.
+        counts: the length of each variable-length vector (``vec``) field.
+    """
+    codec = SEN_CODECS[cls.TYPE.lower()]
+    wanted = None if keys is None else {k.casefold() for k in keys}
+    layout = []
+    for spec in codec.fields:
+        if spec.key in _SEN_HEADER:
+            continue
+        if wanted is not None and spec.key.casefold() not in wanted:
+            continue
+        if spec.kind == "vec":
+            slot = floats((counts or {})[spec.key])
+        elif spec.kind == "text":
+            raise LocalProtocolError(f"{spec.key}: free text has no slot")
+        else:
+            slot = _SLOTS[spec.kind]
+        layout.append((spec.key, slot))
+    return tuple(layout)
+
+
+def sen_line_format(type_name: str, name: str, layout: Layout) -> LineFormat:
+    """``SEN {Time %} {Type type_name} {Name name}`` followed by ``layout``'s slots."""
+    return LineFormat("SEN", [("Time", FLOAT), ("Type", type_name), ("Name", name), *layout])
+
+
+def line_format(cls: type, fixed: Mapping[str, str], layout: Layout | None = None) -> LineFormat:
+    """A precompiled line of ``cls`` whose ``fixed`` keys hold fixed words.
+
+    For a SEN class the line is ``SEN {Time %} {Type T} {Name n}`` followed by ``layout``
+    (:func:`sen_layout`); ``fixed`` must give the Name. For another class every field of its
+    codec is a slot or, when named in ``fixed``, that word; values fill the slots in order.
+    """
+    if issubclass(cls, Sen):
+        if layout is None:
+            layout = sen_layout(cls)
+        return sen_line_format(cls.TYPE, fixed["Name"], layout)
+    codec = CODECS[cls.WORD]  # type: ignore[attr-defined]
+    parts: list[tuple[str, str | Slot]] = []
+    for spec in codec.fields:
+        if spec.key in fixed:
+            parts.append((spec.key, fixed[spec.key]))
+        else:
+            parts.append((spec.key, _SLOTS[spec.kind]))
+    return LineFormat(codec.word, parts)

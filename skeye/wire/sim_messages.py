@@ -1,0 +1,400 @@
+"""The simulator protocol's messages as frozen dataclasses (docs/protocols/simulator.md).
+
+How this works: one class per message; each field's wire key, value kind and allowed range are
+declared once, in the field's metadata (:func:`wire`), and :mod:`skeye.wire.sim` builds its codec
+table from them. Units are SI and named in the field (``time_s``, ``location_ned_m``,
+``roll_rad``); angles are radians. A field whose default is None is optional on the wire: it is
+left out when None and None when absent. Commands (client to simulator) are :class:`Init`,
+:class:`Drive`, :class:`Step`, :class:`Set`, :class:`Ping`, :class:`GetConf`, :class:`GetGeo`,
+:class:`GetStartPoses`; messages (simulator to client) are :class:`Sta`, one ``Sen*`` class per
+sensor Type, :class:`Res`, :class:`Err`, :class:`Nfo`, :class:`StartPoses`, :class:`Conf` and
+:class:`Geo`.
+
+Invariants: messages never change after they are built; the field order of a class is the order
+of its blocks on the wire (the simulator's stream bytes depend on it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+Vec3 = tuple[float, float, float]
+Pose = tuple[str, Vec3, Vec3]
+"""A start pose: name, location (NED, m) and rotation (roll, pitch, yaw, rad)."""
+
+KINDS = ("float", "int", "bool", "word", "text", "vec3", "vec2", "ivec2", "vec")
+"""Value kinds: a finite float, a decimal int, true/false, a word without blanks, free text, a
+vector of 3 or 2 floats, 2 ints (written as ints, read as floats), any number of floats."""
+
+_TILT_RAD = math.pi / 2 - 1e-3
+
+
+def wire(
+    key: str, kind: str, *, min_value: float | None = None, max_value: float | None = None
+) -> dict[str, Any]:
+    """A field's metadata: it is the block ``{key value}`` of ``kind`` within the range."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown wire kind {kind!r}")  # a bug in this module
+    return {"key": key, "kind": kind, "min": min_value, "max": max_value}
+
+
+# --- commands --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Init:
+    """``INIT``: spawn a robot of a class at a start pose or a NED location."""
+
+    WORD: ClassVar[str] = "INIT"
+    class_name: str = field(metadata=wire("ClassName", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    start: str | None = field(default=None, metadata=wire("Start", "word"))
+    location_ned_m: Vec3 | None = field(default=None, metadata=wire("Location", "vec3"))
+    rotation_rpy_rad: Vec3 | None = field(default=None, metadata=wire("Rotation", "vec3"))
+    """None: level, heading north (0, 0, 0)."""
+
+
+@dataclass(frozen=True)
+class Drive:
+    """``DRIVE``: the attitude form (roll, pitch, thrust) or the velocity form, yaw rate in both.
+
+    Velocities are m/s and rad/s, or percent of the robot's limits with ``normalized``.
+    """
+
+    WORD: ClassVar[str] = "DRIVE"
+    roll_rad: float | None = field(
+        default=None, metadata=wire("RollAngle", "float", min_value=-_TILT_RAD, max_value=_TILT_RAD)
+    )
+    pitch_rad: float | None = field(
+        default=None,
+        metadata=wire("PitchAngle", "float", min_value=-_TILT_RAD, max_value=_TILT_RAD),
+    )
+    forward_m_s: float | None = field(default=None, metadata=wire("LinearVelocity", "float"))
+    right_m_s: float | None = field(default=None, metadata=wire("LateralVelocity", "float"))
+    up_m_s: float | None = field(default=None, metadata=wire("AltitudeVelocity", "float"))
+    yaw_rate_rad_s: float | None = field(default=None, metadata=wire("RotationalVelocity", "float"))
+    thrust_fraction: float | None = field(
+        default=None, metadata=wire("Thrust", "float", min_value=0.0, max_value=1.0)
+    )
+    normalized: bool | None = field(default=None, metadata=wire("Normalized", "bool"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+
+    ATTITUDE_KEYS: ClassVar[tuple[str, ...]] = ("RollAngle", "PitchAngle", "Thrust")
+    VELOCITY_KEYS: ClassVar[tuple[str, ...]] = (
+        "AltitudeVelocity",
+        "LinearVelocity",
+        "LateralVelocity",
+    )
+
+    @property
+    def attitude(self) -> bool:
+        """Whether this is the attitude form."""
+        return not (
+            self.roll_rad is None and self.pitch_rad is None and self.thrust_fraction is None
+        )
+
+
+@dataclass(frozen=True)
+class Step:
+    """``STEP``: advance a lockstep simulator ``count`` physics steps."""
+
+    WORD: ClassVar[str] = "STEP"
+    count: int = field(default=1, metadata=wire("Count", "int", min_value=1, max_value=10_000_000))
+
+
+@dataclass(frozen=True)
+class Set:
+    """``SET``: change the world (``Type Wind``: mode, params) or a camera (name, opcode)."""
+
+    WORD: ClassVar[str] = "SET"
+    type: str = field(metadata=wire("Type", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    mode: str | None = field(default=None, metadata=wire("Mode", "word"))
+    opcode: str | None = field(default=None, metadata=wire("Opcode", "word"))
+    params: str | None = field(default=None, metadata=wire("Params", "text"))
+
+
+@dataclass(frozen=True)
+class Ping:
+    """``PING``: the simulator answers ``RES {Command PING} {Id id} {Time t}``."""
+
+    WORD: ClassVar[str] = "PING"
+    id: str = field(default="", metadata=wire("Id", "text"))
+
+
+@dataclass(frozen=True)
+class GetConf:
+    """``GETCONF``: the robot's (``Type Robot``) or a sensor's configuration."""
+
+    WORD: ClassVar[str] = "GETCONF"
+    type: str = field(metadata=wire("Type", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+
+
+@dataclass(frozen=True)
+class GetGeo:
+    """``GETGEO``: the robot's (``Type Robot``) or a sensor's geometry."""
+
+    WORD: ClassVar[str] = "GETGEO"
+    type: str = field(metadata=wire("Type", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+
+
+@dataclass(frozen=True)
+class GetStartPoses:
+    """``GETSTARTPOSES``: the world's start poses, answered by :class:`StartPoses`."""
+
+    WORD: ClassVar[str] = "GETSTARTPOSES"
+
+
+# --- messages --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sta:
+    """``STA``: a robot's status: battery life left (s), voltage, current, flight state."""
+
+    WORD: ClassVar[str] = "STA"
+    type: str = field(default="AerialVehicle", metadata=wire("Type", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    time_s: float = field(metadata=wire("Time", "float", min_value=0.0))
+    battery_s: float = field(default=math.inf, metadata=wire("Battery", "float"))
+    voltage_v: float | None = field(default=None, metadata=wire("Voltage", "float"))
+    current_a: float | None = field(default=None, metadata=wire("Current", "float"))
+    armed: bool = field(default=False, metadata=wire("Armed", "bool"))
+    landed: bool = field(default=False, metadata=wire("Landed", "bool"))
+
+
+@dataclass(frozen=True)
+class Sen:
+    """``SEN {Time t} {Type T} {Name n} ...``: one sensor reading; one subclass per Type."""
+
+    WORD: ClassVar[str] = "SEN"
+    TYPE: ClassVar[str] = ""
+    time_s: float = field(metadata=wire("Time", "float", min_value=0.0))
+    name: str = field(metadata=wire("Name", "word"))
+
+
+@dataclass(frozen=True)
+class SenGroundTruth(Sen):
+    TYPE: ClassVar[str] = "GroundTruth"
+    location_ned_m: Vec3 = field(metadata=wire("Location", "vec3"))
+    orientation_rpy_rad: Vec3 = field(metadata=wire("Orientation", "vec3"))
+    velocity_ned_m_s: Vec3 = field(metadata=wire("Velocity", "vec3"))
+    angular_velocity_frd_rad_s: Vec3 = field(metadata=wire("AngularVelocity", "vec3"))
+
+
+@dataclass(frozen=True)
+class SenIns(Sen):
+    TYPE: ClassVar[str] = "INS"
+    location_ned_m: Vec3 = field(metadata=wire("Location", "vec3"))
+    orientation_rpy_rad: Vec3 = field(metadata=wire("Orientation", "vec3"))
+    velocity_ned_m_s: Vec3 | None = field(default=None, metadata=wire("Velocity", "vec3"))
+
+
+@dataclass(frozen=True)
+class SenAccelerometer(Sen):
+    TYPE: ClassVar[str] = "Accelerometer"
+    proper_acceleration_frd_m_s2: Vec3 = field(metadata=wire("ProperAcceleration", "vec3"))
+
+
+@dataclass(frozen=True)
+class SenGyro(Sen):
+    TYPE: ClassVar[str] = "Gyro"
+    angular_velocity_frd_rad_s: Vec3 = field(metadata=wire("AngularVelocity", "vec3"))
+
+
+@dataclass(frozen=True)
+class SenMagneticCompass(Sen):
+    TYPE: ClassVar[str] = "MagneticCompass"
+    magnetic_angle_rad: float = field(metadata=wire("MagneticAngle", "float"))
+    field_frd_ut: Vec3 | None = field(default=None, metadata=wire("Field", "vec3"))
+
+
+@dataclass(frozen=True)
+class SenBarometer(Sen):
+    TYPE: ClassVar[str] = "Barometer"
+    pressure_pa: float = field(metadata=wire("Pressure", "float", min_value=0.0))
+    altitude_m: float = field(metadata=wire("Altitude", "float"))
+
+
+@dataclass(frozen=True)
+class SenGps(Sen):
+    """A GPS fix (``Fix`` > 0) or none; positions both as USARSim's ``39,8.0341,N`` text and
+    as decimal degrees."""
+
+    TYPE: ClassVar[str] = "GPS"
+    latitude: str | None = field(default=None, metadata=wire("Latitude", "word"))
+    longitude: str | None = field(default=None, metadata=wire("Longitude", "word"))
+    fix: int = field(default=0, metadata=wire("Fix", "int"))
+    satellites: int = field(default=0, metadata=wire("Satellites", "int", min_value=0))
+    latitude_deg: float | None = field(
+        default=None, metadata=wire("LatitudeDeg", "float", min_value=-90.0, max_value=90.0)
+    )
+    longitude_deg: float | None = field(
+        default=None, metadata=wire("LongitudeDeg", "float", min_value=-180.0, max_value=180.0)
+    )
+    altitude_m: float | None = field(default=None, metadata=wire("Altitude", "float"))
+    velocity_ned_m_s: Vec3 | None = field(default=None, metadata=wire("VelocityNED", "vec3"))
+
+
+@dataclass(frozen=True)
+class SenSonar(Sen):
+    TYPE: ClassVar[str] = "Sonar"
+    range_m: float = field(metadata=wire("Range", "float", min_value=0.0))
+
+
+@dataclass(frozen=True)
+class SenOpticalFlow(Sen):
+    TYPE: ClassVar[str] = "OpticalFlow"
+    delta_counts: tuple[float, float] = field(metadata=wire("Delta", "ivec2"))
+    quality: int = field(default=0, metadata=wire("Quality", "int"))
+
+
+@dataclass(frozen=True)
+class SenBattery(Sen):
+    TYPE: ClassVar[str] = "Battery"
+    voltage_v: float = field(metadata=wire("Voltage", "float", min_value=0.0))
+    current_a: float = field(metadata=wire("Current", "float"))
+    remaining: float = field(metadata=wire("Remaining", "float", min_value=0.0, max_value=1.0))
+
+
+@dataclass(frozen=True)
+class SenMotors(Sen):
+    TYPE: ClassVar[str] = "Motors"
+    speeds_rad_s: tuple[float, ...] = field(metadata=wire("Speeds", "vec"))
+    commands_rad_s: tuple[float, ...] | None = field(default=None, metadata=wire("Commands", "vec"))
+    thrust_n: float | None = field(default=None, metadata=wire("Thrust", "float"))
+
+
+@dataclass(frozen=True)
+class SenCamera(Sen):
+    """A camera's frame ``frame`` now exists on the image server."""
+
+    TYPE: ClassVar[str] = "Camera"
+    frame: int = field(metadata=wire("Frame", "int", min_value=0))
+
+
+SEN_CLASSES: tuple[type[Sen], ...] = (
+    SenGroundTruth,
+    SenIns,
+    SenAccelerometer,
+    SenGyro,
+    SenMagneticCompass,
+    SenBarometer,
+    SenGps,
+    SenSonar,
+    SenOpticalFlow,
+    SenBattery,
+    SenMotors,
+    SenCamera,
+)
+"""Every SEN class; a reading of another Type decodes as :class:`SenOther`."""
+
+
+@dataclass(frozen=True)
+class SenOther:
+    """A reading of a sensor Type this codec has no class for: its fields as text."""
+
+    time_s: float
+    type: str
+    name: str
+    fields: tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
+class Res:
+    """``RES``: a command succeeded (INIT names the robot, STEP and PING give the sim time)."""
+
+    WORD: ClassVar[str] = "RES"
+    command: str = field(metadata=wire("Command", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    type: str | None = field(default=None, metadata=wire("Type", "word"))
+    id: str | None = field(default=None, metadata=wire("Id", "text"))
+    status: str | None = field(default=None, metadata=wire("Status", "word"))
+    time_s: float | None = field(default=None, metadata=wire("Time", "float"))
+
+
+@dataclass(frozen=True)
+class Err:
+    """``ERR``: a command failed, or (``PHYSICS``, ``CAMERA``, ``ENGINE``, ``CONNECT``) the
+    simulator reports a failure of its own. Encoding replaces braces and line breaks in the
+    reason, so an error can always be sent."""
+
+    WORD: ClassVar[str] = "ERR"
+    command: str = field(metadata=wire("Command", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    reason: str = field(default="", metadata=wire("Reason", "text"))
+
+
+@dataclass(frozen=True)
+class Nfo:
+    """``NFO``: the greeting, with the world and the physics step (s)."""
+
+    WORD: ClassVar[str] = "NFO"
+    gametype: str | None = field(default=None, metadata=wire("Gametype", "word"))
+    level: str | None = field(default=None, metadata=wire("Level", "text"))
+    time_limit: int | None = field(default=None, metadata=wire("TimeLimit", "int"))
+    time_step_s: float | None = field(
+        default=None, metadata=wire("TimeStep", "float", min_value=1e-6)
+    )
+    mode: str | None = field(default=None, metadata=wire("Mode", "word"))
+
+
+@dataclass(frozen=True)
+class StartPoses:
+    """``NFO {StartPoses n} {Pad1 x,y,z r,p,y ...}``: the answer to ``GETSTARTPOSES``."""
+
+    WORD: ClassVar[str] = "NFO"
+    poses: tuple[Pose, ...] = ()
+
+
+@dataclass(frozen=True)
+class RobotConf:
+    """``CONF {Type AerialVehicle}``: a robot's limits, rates and mounted sensors."""
+
+    WORD: ClassVar[str] = "CONF"
+    type: str = field(default="AerialVehicle", metadata=wire("Type", "word"))
+    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    class_name: str | None = field(default=None, metadata=wire("Class", "word"))
+    mass_kg: float | None = field(default=None, metadata=wire("Mass", "float"))
+    max_speed_m_s: float | None = field(default=None, metadata=wire("MaxSpeed", "float"))
+    max_climb_m_s: float | None = field(default=None, metadata=wire("MaxClimb", "float"))
+    max_yaw_rate_rad_s: float | None = field(default=None, metadata=wire("MaxYawRate", "float"))
+    max_tilt_rad: float | None = field(default=None, metadata=wire("MaxTilt", "float"))
+    max_thrust_n: float | None = field(default=None, metadata=wire("MaxThrust", "float"))
+    board_rate_hz: float | None = field(default=None, metadata=wire("BoardRate", "float"))
+    time_step_s: float | None = field(default=None, metadata=wire("TimeStep", "float"))
+    sensors: str | None = field(default=None, metadata=wire("Sensors", "text"))
+    """``Type:Name`` pairs, comma-separated."""
+
+    def mounted(self) -> list[tuple[str, str]]:
+        """The mounted sensors as (Type, Name) pairs."""
+        out = []
+        for item in (self.sensors or "").split(","):
+            if ":" in item:
+                type_name, sensor_name = (part.strip() for part in item.split(":", 1))
+                out.append((type_name, sensor_name))
+        return out
+
+
+@dataclass(frozen=True)
+class Conf:
+    """``CONF {Type T} {Name n} ...`` of a sensor: its parameters, keys as the sensor names them."""
+
+    WORD: ClassVar[str] = "CONF"
+    type: str
+    name: str
+    fields: tuple[tuple[str, object], ...] = ()
+
+
+@dataclass(frozen=True)
+class Geo:
+    """``GEO {Type T} {Name n} ...``: a robot's dimensions or a sensor's mount pose."""
+
+    WORD: ClassVar[str] = "GEO"
+    type: str
+    name: str
+    fields: tuple[tuple[str, object], ...] = ()

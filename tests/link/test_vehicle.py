@@ -1,0 +1,38 @@
+"""The ground-side ``Vehicle`` over an in-memory link: bad input gives skeye errors."""
+
+from __future__ import annotations
+
+import pytest
+
+from skeye.errors import LocalProtocolError
+from skeye.link.transport import memory_pair
+from skeye.link.vehicle import Vehicle
+
+
+def test_removing_a_callback_that_was_never_added_names_the_problem() -> None:
+    ground, _vehicle_side = memory_pair()
+    with Vehicle(ground, keepalive_s=None) as vehicle:
+        vehicle.add_callback(print)
+        vehicle.remove_callback(print)
+        with pytest.raises(LocalProtocolError, match="not a telemetry callback"):
+            vehicle.remove_callback(print)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda v: v.pad_mode("hover"), "expected off, hold or land"),
+        (lambda v: v.pad_mode(7), "expected 0"),
+        (lambda v: v.move_by(1.0, frame="up"), "expected 'body' or 'world'"),
+        (lambda v: v.poll(0x0400), "requests no known structure"),
+        (lambda v: v.take_off(float("nan")), "must be a finite number"),
+        (lambda v: v.set_velocity(40.0), "outside"),
+        (lambda v: v.stream(period_s=-1.0), "outside"),
+    ],
+)
+def test_bad_arguments_are_local_protocol_errors_sent_nowhere(call, match: str) -> None:
+    ground, vehicle_side = memory_pair()
+    with Vehicle(ground, keepalive_s=None) as vehicle:
+        with pytest.raises(LocalProtocolError, match=match):
+            call(vehicle)
+        assert vehicle_side.recv(0.05) == b""  # nothing reached the vehicle

@@ -1,0 +1,74 @@
+"""Telemetry synthesis on its own: structures from a snapshot and the boards' status, no boards."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from skeye.pilot.telemetry import BoardStatus, Telemetry
+from skeye.wire.packets import (
+    POLL_MASK_ALL,
+    CtrlBits,
+    CtrlInput,
+    CurrentWay,
+    ImuRawData,
+    LlStatus,
+    NavState,
+    NavStatus,
+    PadAction,
+    RcData,
+    encode,
+)
+from tests.pilot.fake_airframe import FakeAirframe
+
+IDLE = BoardStatus(
+    state=NavState.LANDED,
+    pad_mode=PadAction.OFF,
+    sticks=CtrlInput(0, 0, 0, 0, 0),
+    motors_on=False,
+    motion_pending=False,
+    checksum_errors=0,
+    home_ned_m=(0.0, 0.0, 0.0),
+    waypoint=None,
+    waypoint_target=None,
+    waypoint_status=0,
+)
+
+
+def test_a_poll_depends_only_on_the_snapshot_and_the_status() -> None:
+    snap = FakeAirframe().snapshot()
+    telemetry = Telemetry(snap)
+    first = [encode(m) for m in telemetry.poll(POLL_MASK_ALL, snap, IDLE)]
+    assert len(first) == 8
+    assert [encode(m) for m in telemetry.poll(POLL_MASK_ALL, snap, IDLE)] == first
+
+
+def test_status_shows_in_the_structures() -> None:
+    snap = replace(FakeAirframe().snapshot(), time_s=12.5, landed=False, armed=True)
+    telemetry = Telemetry(replace(snap, time_s=2.0))
+    status = replace(
+        IDLE,
+        state=NavState.HOLDING,
+        sticks=CtrlInput(100, -200, 0, 2048, int(CtrlBits.PITCH | CtrlBits.HEIGHT_CONTROL)),
+        checksum_errors=300,
+        waypoint_target=(3.0, 4.0, 0.0),
+        home_ned_m=(0.0, 0.0, 1.0),
+    )
+    ll, rc, way = telemetry.poll(0x0001 | 0x0008 | 0x0100, snap, status)
+    assert isinstance(ll, LlStatus) and isinstance(rc, RcData) and isinstance(way, CurrentWay)
+    assert (ll.flightMode, ll.chksum_error, ll.up_time, ll.flying) == (0x07, 255, 10, 1)
+    assert ll.battery_voltage_1 == 12400
+    assert rc.channels_in[:5] == (2148, 1848, 2048, 2048, 0x11)
+    assert way.distance_to_wp == 50 and way.navigation_status & 0x04  # 5 m, within 20 m
+    nav = telemetry.nav_status(snap, status)
+    assert isinstance(nav, NavStatus) and nav.z == -1000 and nav.state is NavState.HOLDING
+
+
+def test_imu_rawdata_saturates_like_a_sensor() -> None:
+    snap = replace(
+        FakeAirframe().snapshot(),
+        rates_frd_rad_s=(100.0, -100.0, 0.0),
+        specific_force_frd_m_s2=(0.0, 0.0, -50.0),
+    )
+    (raw,) = Telemetry(snap).poll(0x0002, snap, IDLE)
+    assert isinstance(raw, ImuRawData)
+    assert (raw.gyro_x, raw.gyro_y, raw.acc_z) == (32767, -32768, -32768)
