@@ -1,14 +1,16 @@
 """``skeye ground`` (the web UI server) and ``skeye up`` (simulator + pilot + ground control).
 
-``skeye ground --vehicle tcp://127.0.0.1:7000 [--video tcp://127.0.0.1:5003] --port 8080``
+``skeye ground --vehicle tcp://127.0.0.1:7000 [--video tcp://127.0.0.1:7001] --port 8080``
 serves the page on http://127.0.0.1:8080/ (``--host`` to listen elsewhere); ``--vehicle`` may be
-``serial:///dev/ttyUSB0?baud=57600`` for the real vehicle.
+``serial:///dev/ttyUSB0?baud=57600`` for the real vehicle. ``--video`` is the vehicle's video
+port (``skeye pilot --video-port``): the page shows the frames and detections the vehicle sent.
 
 ``skeye up`` starts ``skeye sim`` (with its image server), ``skeye pilot`` and ``skeye ground``
 as child processes on this machine, waits until each one listens, prints the URL, and on Ctrl-C
 or SIGTERM (or when one of them dies, or when the ``make`` that started it is signalled) stops
 them all: SIGTERM in reverse order, then SIGKILL for any that has not exited after a few
-seconds. Before starting anything it checks that each of its four ports is free and names the
+seconds. The pilot serves its camera on ``--video-port`` (default 7001) and ground control shows
+that. Before starting anything it checks that each of its five ports is free and names the
 option that moves a taken one.
 """
 
@@ -16,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import atexit
-import math
 import os
 import signal
 import socket
@@ -26,33 +27,12 @@ import threading
 import time
 from collections.abc import Sequence
 from typing import Any
-from urllib.parse import urlsplit
 
-from skeye.errors import ConfigError, LocalProtocolError
+from skeye.errors import ConfigError
 from skeye.processes import die_with_parent
 
 STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
 START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to import MuJoCo
-
-
-def _default_fov_rad(robot: str) -> float:
-    """The horizontal field of view of the robot class's first camera."""
-    from skeye.robots.config import load_robot_config
-
-    config = load_robot_config(robot)
-    for mount in config.sensors:
-        if mount.type_name.lower() == "camera":
-            fov = dict(mount.params).get("fov_h_rad")
-            if isinstance(fov, int | float):
-                return float(fov)
-    raise ConfigError(f"robot class {robot!r} has no camera with fov_h_rad")
-
-
-def _host_port(uri: str) -> tuple[str, int]:
-    parts = urlsplit(uri if "://" in uri else f"tcp://{uri}")
-    if parts.scheme != "tcp" or not parts.hostname or parts.port is None:
-        raise LocalProtocolError(f"video source {uri!r}: expected tcp://host:port")
-    return parts.hostname, parts.port
 
 
 def run_ground(args: argparse.Namespace) -> int:
@@ -63,7 +43,7 @@ def run_ground(args: argparse.Namespace) -> int:
     from skeye.ground.bridge import VehicleBridge
     from skeye.ground.commands import VehicleLimits
     from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
-    from skeye.ground.video import VideoRelay
+    from skeye.ground.video import VideoRelay, parse_video_uri
 
     try:
         security = GroundSecurity(
@@ -73,24 +53,13 @@ def run_ground(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(f"{exc} (from ${TOKEN_ENV} or --allow-host)") from None
 
-    if args.camera_fov_deg is not None:
-        fov_rad = math.radians(args.camera_fov_deg)
-    else:
-        fov_rad = _default_fov_rad(args.robot)
+    video_at = parse_video_uri(args.video) if args.video else None
     sock = socket.create_server((args.host, args.port))
     port = sock.getsockname()[1]
     with VehicleBridge(args.vehicle) as bridge:
         video = None
-        if args.video:
-            host, vport = _host_port(args.video)
-            video = VideoRelay(
-                host,
-                vport,
-                fov_h_rad=fov_rad,
-                camera=args.camera,
-                fps=args.video_fps,
-                attitude=bridge.attitude_rad,
-            ).start()
+        if video_at is not None:
+            video = VideoRelay(*video_at, fps=args.video_fps).start()
         try:
             app = create_app(
                 bridge, video, security=security, limits=VehicleLimits.for_robot(args.robot)
@@ -123,22 +92,18 @@ def _add_ground(sub: Any) -> None:
         help="vehicle link: tcp://host:port (skeye pilot) or serial:///dev/ttyUSB0?baud=57600",
     )
     p.add_argument(
-        "--video", default=None, help="image server for the camera view, e.g. tcp://127.0.0.1:5003"
-    )
-    p.add_argument("--camera", default=None, help="camera robot/name (default: server's first)")
-    p.add_argument(
-        "--camera-fov-deg",
-        type=float,
+        "--video",
         default=None,
-        help="camera horizontal field of view (default: the --robot class's camera)",
+        help="the vehicle's video port (skeye pilot --video-port), e.g. tcp://127.0.0.1:7001: "
+        "the camera view shows its frames and its own pad detection",
     )
     p.add_argument(
         "--robot",
         default="hummingbird",
-        help="the vehicle's robot class: its camera, and the speed limits commands are checked "
-        "against",
+        help="the vehicle's robot class: the speed limits commands are checked against",
     )
-    p.add_argument("--video-fps", type=float, default=8.0, help="camera frames per second")
+    p.add_argument("--video-fps", type=float, default=8.0,
+                   help="the most camera frames per second asked of the vehicle (default 8)")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     _add_allow_host(p)
@@ -269,6 +234,7 @@ def run_up(args: argparse.Namespace) -> int:
             ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
             ("the image server", "127.0.0.1", args.image_port, "--image-port"),
             ("the pilot", "127.0.0.1", args.pilot_port, "--pilot-port"),
+            ("the pilot's video", "127.0.0.1", args.video_port, "--video-port"),
             ("ground control", args.host, args.ground_port, "--ground-port"),
         ])
         start(
@@ -285,7 +251,7 @@ def run_up(args: argparse.Namespace) -> int:
             _child_argv(
                 "pilot", "--sim", f"127.0.0.1:{args.sim_port}",
                 "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
-                "--robot", args.robot,
+                "--video-port", str(args.video_port), "--robot", args.robot,
             ),
             args.pilot_port,
         )
@@ -293,7 +259,7 @@ def run_up(args: argparse.Namespace) -> int:
             "ground control",
             _child_argv(
                 "ground", "--vehicle", f"tcp://127.0.0.1:{args.pilot_port}",
-                "--video", f"tcp://127.0.0.1:{args.image_port}", "--port", str(args.ground_port),
+                "--video", f"tcp://127.0.0.1:{args.video_port}", "--port", str(args.ground_port),
                 "--host", args.host, "--robot", args.robot,
                 *[f"--allow-host={h}" for h in args.allow_host or ()],
             ),
@@ -302,7 +268,8 @@ def run_up(args: argparse.Namespace) -> int:
         print(
             f"skeye up: open http://127.0.0.1:{args.ground_port}/?token={token}  "
             f"(simulator {args.sim_port}, "
-            f"images {args.image_port}, pilot {args.pilot_port}); Ctrl-C stops everything",
+            f"images {args.image_port}, pilot {args.pilot_port}, video {args.video_port}); "
+            "Ctrl-C stops everything",
             flush=True,
         )
         while not stop.wait(0.5):
@@ -338,6 +305,8 @@ def _add_up(sub: Any) -> None:
     p.add_argument("--sim-port", type=int, default=3000)
     p.add_argument("--image-port", type=int, default=5003)
     p.add_argument("--pilot-port", type=int, default=7000)
+    p.add_argument("--video-port", type=int, default=7001,
+                   help="the pilot's video port (camera frames with its pad detection)")
     p.add_argument("--ground-port", type=int, default=8080)
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
     _add_allow_host(p)

@@ -1,42 +1,46 @@
-"""Camera relay: JPEG frames from the simulator's image server, with the pad detection.
+"""Camera relay: the vehicle's frames and its own pad detection, from the pilot's video port.
 
-How this works: ``VideoRelay`` runs one worker thread that alone owns an ``ImageClient``: it
-selects the camera (or takes the server's default: the first camera of the first robot), asks
-for JPEG frames with META headers at up to ``fps``, and for every frame decodes it, runs
-``skeye.vision.detect`` (tilt-compensated with the vehicle's attitude when an ``attitude``
-source is given) and publishes a ``VideoFrame``: the JPEG bytes as received plus the detection
-(ring ellipses and centre in pixels, height, offset, quality) as JSON. The page draws the frame
-and overlays the ellipses itself, so the JPEG is relayed without re-encoding. Browsers read
-``latest()``; nothing waits on a browser. Any failure (server gone, a bad frame) closes the
-client and the worker reconnects after ``retry_s``; ``state`` and ``last_error`` say why.
+How this works: ``VideoRelay`` runs one worker thread (:class:`skeye.workers.Worker`) that
+alone owns a TCP connection to the vehicle's video port (``skeye pilot --video-port``, the same
+on the simulator and on a real vehicle; docs/protocols/video.md). It subscribes at ``fps``,
+reads HELLO and then FRAME messages through a sans-IO
+:class:`~skeye.wire.video.VideoConnection`, and publishes each as a ``VideoFrame``: the JPEG as
+the vehicle encoded it plus the vehicle's detection (ring ellipses and centre in pixels,
+height, offsets, quality) as JSON. Nothing is detected here: the page shows what the vehicle saw
+and detected. The page draws the frame and overlays the ellipses itself, so the JPEG is relayed
+without re-encoding. Browsers read ``latest()``; nothing waits on a browser. Any failure (the
+vehicle gone, an ERROR, bytes that are not the protocol, no frame for ``timeout_s``) closes the
+connection and the worker reconnects after ``retry_s``; ``state`` and ``last_error`` say why.
 """
 
 from __future__ import annotations
 
 import logging
+import socket
 import threading
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
+from urllib.parse import urlsplit
 
-import cv2
-import numpy as np
-
-from skeye.control.image_client import ImageClient
-from skeye.errors import LocalProtocolError, SkeyeError
-from skeye.pixels import frame_image
-from skeye.vision.detector import detect
+from skeye.errors import LinkTimeout, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.wire.video import (
+    Error,
+    Frame,
+    Hello,
+    Role,
+    Subscribe,
+    VideoConnection,
+    detection_to_json,
+)
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
-
-Attitude = Callable[[], tuple[float, float] | None]  # (roll_rad, pitch_rad) or None
 
 
 @dataclass(frozen=True)
 class VideoFrame:
-    """One relayed frame and what the detector saw in it."""
+    """One relayed frame and what the vehicle's detector saw in it."""
 
     seq: int
     jpeg: bytes
@@ -62,28 +66,40 @@ class VideoFrame:
         }
 
 
-def detection_json(image: np.ndarray, fov_h_rad: float, attitude: tuple[float, float] | None
-                   ) -> dict[str, Any]:
-    """Run the detector on one BGR frame; its estimate plus every identified ring ellipse."""
-    roll, pitch = attitude if attitude is not None else (None, None)
-    est = detect(image, fov_h_rad, roll_rad=roll, pitch_rad=pitch)
-    out = est.to_json_dict()
-    out["ellipses"] = [e.to_json_dict() for e in est.ellipses]
-    out["tilt_compensated"] = attitude is not None
+def frame_detection_json(frame: Frame) -> dict[str, Any]:
+    """The page's detection object: the vehicle's estimate, its ring ellipses, and whether
+    its detector compensated roll and pitch."""
+    out = detection_to_json(frame.detection)
+    out["tilt_compensated"] = frame.detection.roll_rad is not None
     return out
 
 
+def parse_video_uri(uri: str) -> tuple[str, int]:
+    """``tcp://host:port`` (or ``host:port``) of a vehicle's video port.
+
+    Raises:
+        LocalProtocolError: anything else, naming what is expected.
+    """
+    parts = urlsplit(uri if "://" in uri else f"tcp://{uri}")
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme != "tcp" or not parts.hostname or port is None:
+        raise LocalProtocolError(
+            f"video source {uri!r}: expected tcp://host:port (the pilot's --video-port)"
+        )
+    return parts.hostname, port
+
+
 class VideoRelay:
-    """Relay one camera from an image server (a context manager).
+    """Relay the camera of a vehicle's video port (a context manager).
 
     Args:
-        host, port: the image server.
-        fov_h_rad: the camera's horizontal field of view (for the detector's geometry).
-        camera: ``robot/camera`` to select, or None for the server's default camera.
-        fps: frames per second asked of the server.
-        quality: JPEG quality 1..100.
-        attitude: returns the vehicle's (roll_rad, pitch_rad) for tilt compensation, or None.
+        host, port: the vehicle's video port (``skeye pilot --video-port``).
+        fps: the most frames per second asked of the vehicle.
         retry_s: wait before reconnecting after a failure.
+        timeout_s: connecting, and the longest wait for the next message.
     """
 
     def __init__(
@@ -91,53 +107,53 @@ class VideoRelay:
         host: str,
         port: int,
         *,
-        fov_h_rad: float,
-        camera: str | None = None,
         fps: float = 8.0,
-        quality: int = 80,
-        attitude: Attitude | None = None,
         retry_s: float = 1.0,
+        timeout_s: float = 10.0,
     ) -> None:
-        if not 0 < fov_h_rad < np.pi:
-            raise LocalProtocolError(f"camera field of view must be in (0, pi) rad: {fov_h_rad}")
         if not fps > 0:
             raise LocalProtocolError(f"video rate must be above 0 frames/s, got {fps}")
+        if not timeout_s > 0 or retry_s < 0:
+            raise LocalProtocolError(f"video timeout_s > 0 and retry_s >= 0 needed "
+                                     f"({timeout_s}, {retry_s})")
+        self.subscribe = Subscribe(fps)  # checks the range
         self.host = host
         self.port = port
-        self.fov_h_rad = fov_h_rad
-        self.camera = camera
         self.fps = fps
-        self.quality = quality
-        self.attitude = attitude
         self.retry_s = retry_s
+        self.timeout_s = timeout_s
         self.state = "connecting"
         self.last_error = ""
         self.frames = 0
+        self.failures = 0  # connections that ended in an error
+        self.hello: Hello | None = None
         self._latest: VideoFrame | None = None
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        self._client: ImageClient | None = None
-        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+        self._worker: Worker | None = None
 
     @property
     def address(self) -> str:
         return f"tcp://{self.host}:{self.port}"
 
     def start(self) -> VideoRelay:
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="ground-video", daemon=True)
-            self._thread.start()
+        if self._worker is None:
+            self._worker = Worker(self._run, "ground-video").start()
         return self
 
     def close(self, timeout_s: float = 3.0) -> None:
-        """Stop the worker and close the image connection (idempotent)."""
+        """Stop the worker and close the connection (idempotent)."""
         self._stop.set()
         with self._lock:
-            client = self._client
-        if client is not None:
-            client.close()  # unblocks a worker waiting for a frame
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
+            sock = self._sock
+        if sock is not None:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)  # unblocks a worker waiting for a frame
+            except OSError:
+                pass
+        if self._worker is not None:
+            self._worker.join(timeout_s)
         self.state = "closed"
 
     def __enter__(self) -> VideoRelay:
@@ -151,15 +167,21 @@ class VideoRelay:
     ) -> None:
         self.close()
 
+    def check(self) -> None:
+        """Raise :class:`~skeye.workers.WorkerFailed` if the worker died (a bug)."""
+        if self._worker is not None:
+            self._worker.check()
+
     def latest(self) -> VideoFrame | None:
         """The newest frame, or None before the first."""
         return self._latest
 
     def status_json(self) -> dict[str, Any]:
         frame = self._latest
+        hello = self.hello
         return {
             "source": self.address,
-            "camera": self.camera or "(server default)",
+            "camera": hello.camera if hello is not None else "(not connected yet)",
             "state": self.state,
             "frames": self.frames,
             "last_error": self.last_error,
@@ -172,49 +194,58 @@ class VideoRelay:
         while not self._stop.is_set():
             try:
                 self._relay()
-            except (SkeyeError, OSError, cv2.error) as exc:
+            except (SkeyeError, OSError) as exc:
                 if self._stop.is_set():
                     break
+                self.last_error = str(exc) or type(exc).__name__
                 self.state = "reconnecting"
-                self.last_error = str(exc)
-                log.info("video relay %s: %s", self.address, exc)
+                self.failures += 1
+                log.info("video relay %s: %s", self.address, self.last_error)
             finally:
                 with self._lock:
-                    client, self._client = self._client, None
-                if client is not None:
-                    client.close()
+                    sock, self._sock = self._sock, None
+                if sock is not None:
+                    sock.close()
             self._stop.wait(self.retry_s)
 
     def _relay(self) -> None:
-        client = ImageClient(self.host, self.port, timeout_s=5.0)
+        sock = socket.create_connection((self.host, self.port), timeout=self.timeout_s)
         with self._lock:
-            self._client = client
+            self._sock = sock
         if self._stop.is_set():
             return
-        if self.camera:
-            client.select_camera(self.camera)
-        client.set_format("jpeg", self.quality)
-        client.set_meta(True)
-        for frame in client.stream(self.fps):
-            if self._stop.is_set():
-                return
-            image = frame_image(frame)
-            t0 = time.perf_counter()
-            detection = detection_json(
-                image, self.fov_h_rad, self.attitude() if self.attitude else None
-            )
-            detect_ms = (time.perf_counter() - t0) * 1e3
-            meta = frame.meta
-            self.frames += 1
-            self._latest = VideoFrame(
-                seq=self.frames,
-                jpeg=frame.data,
-                width=int(image.shape[1]),
-                height=int(image.shape[0]),
-                frame_number=None if meta is None else int(meta.frame_number),
-                sim_time_s=None if meta is None else float(meta.sim_time_s),
-                detection=detection,
-                detect_ms=detect_ms,
-            )
-            self.state = "streaming"
-            self.last_error = ""
+        conn = VideoConnection(Role.CLIENT)
+        sock.sendall(conn.send(self.subscribe))
+        self.state = "subscribed"
+        while not self._stop.is_set():
+            try:
+                data = sock.recv(256 * 1024)
+            except TimeoutError:
+                raise LinkTimeout(
+                    f"no video from {self.address} for {self.timeout_s:g} s"
+                ) from None
+            if not data:
+                raise RemoteProtocolError(f"the vehicle closed the video connection {self.address}")
+            for msg in conn.receive_data(data):
+                if isinstance(msg, Hello):
+                    self.hello = msg
+                    self.state = "waiting for frames"
+                elif isinstance(msg, Error):
+                    raise RemoteProtocolError(f"the vehicle refused the video: {msg.reason}")
+                elif isinstance(msg, Frame):
+                    self._publish(msg)
+
+    def _publish(self, frame: Frame) -> None:
+        self.frames += 1
+        self._latest = VideoFrame(
+            seq=self.frames,
+            jpeg=frame.jpeg,
+            width=frame.width,
+            height=frame.height,
+            frame_number=frame.frame_number,
+            sim_time_s=frame.time_s,
+            detection=frame_detection_json(frame),
+            detect_ms=frame.detect_ms,
+        )
+        self.state = "streaming"
+        self.last_error = ""

@@ -10,6 +10,12 @@ The flight envelope (``skeye.pilot.envelope``: ceiling above home, radius around
 from the robot class's file (``[envelope]``; a class outside the built-ins is looked up in
 ``--robot-dir``), else the pilot's defaults (120 m, 500 m); ``--ceiling-m`` and
 ``--max-radius-m`` override either. The start-up line says which envelope is in force.
+
+With ``--images`` the pilot runs the landing-pad detector on its camera; ``--video-port PORT``
+(``skeye up`` gives 7001) also serves those camera frames, each with the pilot's own detection,
+to ground control (docs/protocols/video.md; ``skeye ground --video tcp://HOST:PORT``), bound to
+``--host`` like the packet port. An onboard ``skeye pilot`` with a real camera serves the same
+port the same way.
 """
 
 from __future__ import annotations
@@ -26,6 +32,13 @@ from skeye.errors import ConfigError, SkeyeError
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
+from skeye.pilot.video_server import (
+    DEFAULT_MAX_CLIENTS,
+    DEFAULT_MAX_FPS,
+    DEFAULT_VIDEO_PORT,
+    VideoServer,
+)
+from skeye.wire.video import DEFAULT_JPEG_QUALITY
 
 log = logging.getLogger(__name__)
 
@@ -76,10 +89,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
     settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
+    if args.video_port is not None:
+        problem = video_options_problem(args)
+        if problem:
+            print(f"skeye pilot: {problem}", flush=True)
+            return 2
     lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
-        if not args.serial:  # before the robot is spawned: a taken port leaves nothing behind
-            check_ports_free([("the pilot", args.host, args.port, "--port")])
+        ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
+        if args.video_port is not None:
+            ports.append(("the pilot's video", args.host, args.video_port, "--video-port"))
+        if ports:  # before the robot is spawned: a taken port leaves nothing behind
+            check_ports_free(ports)
         with connect(args.sim, images=args.images, timeout_s=args.timeout) as sim:
             sim.add_close_hook(lambda error: None if sim.closed else lost.append(error))
             try:
@@ -112,18 +133,31 @@ def run(args: argparse.Namespace) -> int:
                 vision = pad_vision_factory(sim, robot, args.camera)
             lockstep = sim.mode == "lockstep"
             tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
-            server = PilotServer(
-                airframe,
-                host=args.host,
-                port=None if args.serial else args.port,
-                serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
-                settings=settings,
-                tick_s=tick_s,
-                lockstep=lockstep,
-                lockstep_rate=args.lockstep_rate,
-                ground_clock=args.ground_clock,
-                vision=vision,
-            )
+            video = None
+            if args.video_port is not None:
+                video = VideoServer(
+                    host=args.host, port=args.video_port, camera=f"{robot.name}/{args.camera}",
+                    fov_h_rad=camera_fov_rad(sim, args.camera), jpeg_quality=args.video_quality,
+                    max_fps=args.video_fps, max_clients=args.video_clients,
+                )
+            try:
+                server = PilotServer(
+                    airframe,
+                    host=args.host,
+                    port=None if args.serial else args.port,
+                    serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
+                    settings=settings,
+                    tick_s=tick_s,
+                    lockstep=lockstep,
+                    lockstep_rate=args.lockstep_rate,
+                    ground_clock=args.ground_clock,
+                    vision=vision,
+                    video=video,
+                )
+            except BaseException:
+                if video is not None:
+                    video.close()
+                raise
             stop = threading.Event()
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, lambda *_: stop.set())
@@ -132,12 +166,15 @@ def run(args: argparse.Namespace) -> int:
                 print(
                     f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
                     f"ground control on {server.address}; flight envelope: "
-                    f"{envelope.describe()} ({envelope_source})",
+                    f"{envelope.describe()} ({envelope_source})"
+                    f"{'; video on ' + video.address if video is not None else ''}",
                     flush=True,
                 )
                 while not stop.wait(0.2):
                     if server.loop_error is not None:
                         raise server.loop_error
+                    if video is not None:
+                        video.check()  # its thread died: WorkerFailed names the cause
             print("skeye pilot: stopping", flush=True)
     except SkeyeError as exc:
         print(f"skeye pilot: {exc}", flush=True)
@@ -151,14 +188,35 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down") -> Any:
     """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator."""
     from skeye.pilot.vision import PadVision
 
-    conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
-    fov_h_rad = conf.get_float("FOV")
+    fov_h_rad = camera_fov_rad(sim, camera)
     lockstep = sim.mode == "lockstep"
 
     def make(boards: Any, lock: Any) -> PadVision:
         return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep)
 
     return make
+
+
+def video_options_problem(args: argparse.Namespace) -> str:
+    """What is wrong with the ``--video-*`` options ('' when nothing), checked before the
+    simulator is reached."""
+    if args.images is None:
+        return "--video-port serves the camera: it needs --images (the image server)"
+    if not 1 <= args.video_quality <= 100:
+        return f"--video-quality must be 1..100, got {args.video_quality}"
+    if not 0.01 <= args.video_fps <= 1000:
+        return f"--video-fps must be in [0.01, 1000] frames/s, got {args.video_fps:g}"
+    if args.video_clients < 1:
+        return f"--video-clients must be at least 1, got {args.video_clients}"
+    if not 0 <= args.video_port <= 65535:
+        return f"--video-port must be a TCP port 0..65535, got {args.video_port}"
+    return ""
+
+
+def camera_fov_rad(sim: Any, camera: str = "Down") -> float:
+    """The camera's horizontal field of view (float, rad), asked of the simulator."""
+    conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
+    return float(conf.get_float("FOV"))
 
 
 def register(subparsers: Any) -> None:
@@ -176,6 +234,31 @@ def register(subparsers: Any) -> None:
         help="image server address (e.g. 127.0.0.1:5003): enables landing-pad vision",
     )
     p.add_argument("--camera", default="Down", help="the downward camera's name")
+    p.add_argument(
+        "--video-port",
+        type=int,
+        default=None,
+        help=f"serve the camera frames with the pilot's pad detection on this TCP port "
+        f"(skeye up: {DEFAULT_VIDEO_PORT}; 0 = any free; needs --images)",
+    )
+    p.add_argument(
+        "--video-fps",
+        type=float,
+        default=DEFAULT_MAX_FPS,
+        help=f"most frames per second sent to a video client (default {DEFAULT_MAX_FPS:g})",
+    )
+    p.add_argument(
+        "--video-quality",
+        type=int,
+        default=DEFAULT_JPEG_QUALITY,
+        help=f"JPEG quality of the video, 1..100 (default {DEFAULT_JPEG_QUALITY})",
+    )
+    p.add_argument(
+        "--video-clients",
+        type=int,
+        default=DEFAULT_MAX_CLIENTS,
+        help=f"video clients served at once (default {DEFAULT_MAX_CLIENTS})",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")

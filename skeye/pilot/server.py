@@ -27,6 +27,9 @@ How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with thread
   fast as the CPU allows). Time given to the boards is the wall clock (``time.monotonic``):
   the link-loss timeouts are about the radio link, which runs on wall time.
 
+With a video server (``video=``, :mod:`skeye.pilot.video_server`), the vision's frames and
+detections are served on the vehicle's video port; it starts and stops with this server.
+
 One lock serialises every call into the boards; sends are thread-safe in the links. Stopping
 (``close``) is idempotent and joins every thread with a deadline.
 """
@@ -47,6 +50,7 @@ from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
 from skeye.pilot.airframe import Airframe
 from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
 from skeye.pilot.outbox import Outbox
+from skeye.pilot.video_server import VideoServer
 from skeye.wire.packets import (
     CommandStreamParser,
     FrameError,
@@ -132,6 +136,7 @@ class PilotServer:
         ground_clock: bool = False,
         clock: Callable[[], float] = time.monotonic,
         vision: Callable[[OnboardBoards, threading.Lock], Any] | None = None,
+        video: VideoServer | None = None,
     ) -> None:
         if (port is None) == (serial_uri is None):
             raise ConfigError("PilotServer needs exactly one of port= or serial_uri=")
@@ -152,6 +157,10 @@ class PilotServer:
         self._lock = threading.Lock()
         # The landing-pad vision (skeye.pilot.vision.PadVision), stepped after every tick.
         self.vision = vision(self.boards, self._lock) if vision is not None else None
+        # The vehicle's video port: what the vision saw and detected, for ground control.
+        self.video = video
+        if video is not None and self.vision is not None:
+            self.vision.attach_video(video.publish)
         self._client: Link | None = None
         self._session: ClientSession | None = None
         self.closed_idle = 0  # TCP clients closed for sending nothing after connecting
@@ -178,6 +187,8 @@ class PilotServer:
     # -- lifecycle -----------------------------------------------------------------------
     def start(self) -> PilotServer:
         """Start the loop and the accept thread (or open the serial port); returns self."""
+        if self.video is not None:
+            self.video.start()
         self._spawn(self._loop, "pilot-loop")
         if self._listener is not None:
             self._spawn(self._accept_loop, "pilot-accept")
@@ -214,6 +225,8 @@ class PilotServer:
         close_vision = getattr(self.vision, "close", None)
         if close_vision is not None:
             close_vision(timeout_s)
+        if self.video is not None:
+            self.video.close(timeout_s)
 
     def __enter__(self) -> PilotServer:
         return self.start()

@@ -20,6 +20,11 @@ hands over to the vehicle's own landing straight down. Pad navigation acts only 
 vehicle is HOLDING (after take-off, HOLD, or when a commanded motion has finished): a ground
 command (velocity, move, goto) suspends it until that motion ends, and PAD_MODE 0 gives the
 vehicle back with a hover. Nothing here reads the simulator's ground truth.
+
+With a video sink attached (:meth:`PadVision.attach_video`: the pilot's video port,
+:mod:`skeye.pilot.video_server`), every frame the worker looked at goes there too, with the
+detector's full result (:func:`wire_detection`), so ground control shows exactly what the
+vehicle saw and detected. Handing it over never waits.
 """
 
 from __future__ import annotations
@@ -27,6 +32,8 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -36,12 +43,40 @@ from skeye.errors import InvalidArgument, SkeyeError
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadObservation
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
-from skeye.vision.detector import detect
+from skeye.pilot.video_server import CameraFrame
+from skeye.vision.detector import PadEstimate, detect
 from skeye.vision.pad import SKEYE_4, PadDefinition
 from skeye.wire.packets import NavState, PadAction
+from skeye.wire.video import Detection, RingEllipse
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
+
+
+def wire_detection(est: PadEstimate, roll_rad: float | None,
+                   pitch_rad: float | None) -> Detection:
+    """The detector's estimate as the video protocol carries it (docs/protocols/video.md)."""
+
+    def pair(p: tuple[float, float] | None) -> tuple[float, float] | None:
+        return None if p is None else (float(p[0]), float(p[1]))
+
+    return Detection(
+        found=bool(est.found),
+        center_px=pair(est.center_px),
+        height_m=None if est.height_m is None else float(est.height_m),
+        offset_cam_m=pair(est.offset_cam_m),
+        offset_body_m=pair(est.offset_body_m),
+        rings=tuple(int(r) for r in est.rings),
+        ellipses=tuple(
+            RingEllipse(int(e.ring), e.border, (float(e.center_px[0]), float(e.center_px[1])),
+                        (float(e.semi_axes_px[0]), float(e.semi_axes_px[1])),
+                        float(e.angle_rad))
+            for e in est.ellipses
+        ),
+        quality=float(est.quality),
+        roll_rad=roll_rad,
+        pitch_rad=pitch_rad,
+    )
 
 
 @dataclass
@@ -52,6 +87,7 @@ class VisionStats:
     detections: int = 0
     errors: int = 0
     last_error: str = ""
+    video_errors: int = 0  # frames the video port could not carry (logged)
 
 
 class PadVision:
@@ -91,6 +127,11 @@ class PadVision:
         self._done = threading.Condition()
         self._attempted = 0  # newest announced frame the worker has dealt with
         self._worker: Worker | None = None
+        self._video: Callable[[CameraFrame], None] | None = None
+
+    def attach_video(self, sink: Callable[[CameraFrame], None] | None) -> None:
+        """Hand every frame looked at, with its detection, to ``sink`` (it must not block)."""
+        self._video = sink
 
     # -- lifecycle -------------------------------------------------------------------------
     def start(self) -> PadVision:
@@ -186,9 +227,20 @@ class PadVision:
         self._last_frame = image.frame
         ins = self.robot.ins.latest
         roll, pitch = (ins.rpy_rad[0], ins.rpy_rad[1]) if ins is not None else (0.0, 0.0)
+        t0 = time.perf_counter()
         grey = cv2.cvtColor(image.bgr, cv2.COLOR_BGR2GRAY)
         est = detect(grey, self.fov_h_rad, self.pad, roll_rad=roll, pitch_rad=pitch)
+        detect_ms = (time.perf_counter() - t0) * 1e3
         self.stats.frames += 1
+        video = self._video
+        if video is not None:
+            attitude = (float(roll), float(pitch)) if ins is not None else (None, None)
+            try:
+                video(CameraFrame(image.frame, image.time_s, image.bgr,
+                                  wire_detection(est, *attitude), detect_ms))
+            except SkeyeError as exc:  # a value the video protocol cannot carry: not served
+                self.stats.video_errors += 1
+                log.warning("frame %d not served on the video port: %s", image.frame, exc)
         if est.found and est.offset_body_m is not None and est.height_m is not None:
             self.stats.detections += 1
             bits = 0

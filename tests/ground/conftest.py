@@ -1,6 +1,7 @@
 """The full stack for ground-control tests: ``skeye sim`` (a child process, realtime, images on
 a free port), the pilot in this process (so the tests read the simulator's ground truth from
-its robot) and the ground app in this process (uvicorn in a thread on a free port)."""
+its robot; it serves its camera and detections on its video port) and the ground app in this
+process (uvicorn in a thread on a free port), whose video comes from the pilot's video port."""
 
 from __future__ import annotations
 
@@ -99,6 +100,7 @@ class Pilot:
     images: str
     port: int = 0
     name: str = "R1"
+    video_port: int = 0
     conn: Any = None
     robot: Any = None
     server: Any = None
@@ -116,13 +118,19 @@ class Pilot:
         settings = BoardSettings(
             max_speed_m_s=mc.max_speed_m_s, default_speed_m_s=min(1.0, mc.max_speed_m_s)
         )
-        from skeye.pilot.cli import pad_vision_factory
+        from skeye.pilot.cli import camera_fov_rad, pad_vision_factory
+        from skeye.pilot.video_server import VideoServer
 
-        self.server = PilotServer(  # with the pad vision, as `skeye pilot --images` runs
+        # As `skeye pilot --images ... --video-port N` runs: the pad vision, and its frames
+        # with its detections served on the vehicle's video port.
+        video = VideoServer(port=self.video_port, camera=f"{self.name}/Down",
+                            fov_h_rad=camera_fov_rad(self.conn, "Down"))
+        self.server = PilotServer(
             airframe, port=self.port, settings=settings,
-            vision=pad_vision_factory(self.conn, self.robot),
+            vision=pad_vision_factory(self.conn, self.robot), video=video,
         ).start()
         self.port = self.server.port
+        self.video_port = video.port
         return self
 
     def ground_truth(self) -> tuple[float, float, float]:
@@ -150,11 +158,12 @@ class Stack:
     lines: list[str] = field(default_factory=list)
 
     def restart_pilot(self, down_s: float = 1.5) -> None:
-        port = self.pilot.port
+        port, video_port = self.pilot.port, self.pilot.video_port
         self.pilot.stop()
         time.sleep(down_s)
         n = int(self.pilot.name[1:]) + 1
-        self.pilot = Pilot(self.sim_address, f"127.0.0.1:{self.image_port}", port, f"R{n}").start()
+        self.pilot = Pilot(self.sim_address, f"127.0.0.1:{self.image_port}", port, f"R{n}",
+                           video_port).start()
 
 
 def _start_sim(robot_dir: Path) -> tuple[subprocess.Popen[str], int, int]:
@@ -190,9 +199,7 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
     sim_address = f"127.0.0.1:{control_port}"
     pilot = Pilot(sim_address, f"127.0.0.1:{image_port}").start()
     bridge = VehicleBridge(f"tcp://127.0.0.1:{pilot.port}", retry_s=0.5).start()
-    video = VideoRelay(
-        "127.0.0.1", image_port, fov_h_rad=1.309, fps=6.0, attitude=bridge.attitude_rad
-    ).start()
+    video = VideoRelay("127.0.0.1", pilot.video_port, fps=6.0, retry_s=0.5).start()
     security = GroundSecurity()
     web = UvicornThread(create_app(bridge, video, security=security), security.token)
     s = Stack(sim, sim_address, image_port, pilot, bridge, video, web)

@@ -28,9 +28,10 @@ def _children(pid: int) -> list[int]:
 
 
 def test_up_starts_everything_and_sigterm_stops_everything() -> None:
-    sim, img, pilot, ground = _free_ports(4)
+    sim, img, pilot, ground, video_port = _free_ports(5)
     argv = [sys.executable, "-m", "skeye.cli", "up", "--sim-port", str(sim),
-            "--image-port", str(img), "--pilot-port", str(pilot), "--ground-port", str(ground)]
+            "--image-port", str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
+            "--video-port", str(video_port)]
     # Its own process group, killed whole in the finally: a failure leaves no orphans.
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
@@ -62,6 +63,20 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
             return state["link"]["state"] == "connected" and state["nav"] is not None
 
         wait_until(connected, 120, "ground control connected to the pilot")
+
+        def video_streaming() -> bool:  # the camera view comes from the pilot's video port
+            request = urllib.request.Request(
+                f"http://127.0.0.1:{ground}/api/state", headers={"X-Skeye-Token": token}
+            )
+            try:
+                with urllib.request.urlopen(request, timeout=30) as r:
+                    video = json.load(r)["video"]
+            except OSError:
+                return False
+            assert video["source"] == f"tcp://127.0.0.1:{video_port}"
+            return bool(video["state"] == "streaming" and video["frames"] > 0)
+
+        wait_until(video_streaming, 120, "ground control showing the pilot's video")
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(120) == 0
         rest = proc.stdout.read()
@@ -83,10 +98,11 @@ def _run_up(*extra: str, timeout_s: float = 60) -> subprocess.CompletedProcess[s
 
 
 def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None:
-    sim, img, pilot, ground = _free_ports(4)
+    sim, img, pilot, ground, video = _free_ports(5)
     ports = ["--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
-             "--ground-port", str(ground)]
+             "--ground-port", str(ground), "--video-port", str(video)]
     for taken, option in ((pilot, "--pilot-port"), (ground, "--ground-port"),
+                          (video, "--video-port"),
                           (sim, "--sim-port")):
         with socket.create_server(("127.0.0.1", taken)):
             done = _run_up(*ports)
@@ -94,7 +110,7 @@ def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None
         assert f"port {taken}" in done.stderr and option in done.stderr, done.stderr
         assert "already in use" in done.stderr
         assert "open http" not in done.stdout and "control protocol" not in done.stdout
-        for port in (sim, img, pilot, ground):  # nothing was started, nothing listens
+        for port in (sim, img, pilot, ground, video):  # nothing was started, nothing listens
             with socket.socket() as probe:
                 assert probe.connect_ex(("127.0.0.1", port)) != 0
     done = _run_up("--sim-port", str(sim), "--image-port", str(sim))
@@ -133,9 +149,9 @@ def _make_run(tmp_path, ports: list[int]) -> subprocess.Popen[str]:
     venv = tmp_path / "venv"
     venv.mkdir(parents=True)
     (venv / ".installed").touch()
-    sim, img, pilot, ground = ports
+    sim, img, pilot, ground, video = ports
     up_args = (f"--sim-port {sim} --image-port {img} --pilot-port {pilot} "
-               f"--ground-port {ground}")
+               f"--ground-port {ground} --video-port {video}")
     return subprocess.Popen(
         ["make", "-s", "-C", str(root), "run", f"VENV={venv}",
          f"BIN={Path(sys.executable).parent}", f"UP_ARGS={up_args}"],
@@ -156,7 +172,7 @@ def _descendants(pid: int) -> list[int]:
 
 def test_signals_to_make_run_stop_every_server(tmp_path) -> None:
     for sig in (signal.SIGINT, signal.SIGTERM):
-        ports = _free_ports(4)
+        ports = _free_ports(5)
         make = _make_run(tmp_path / sig.name, ports)
         try:
             assert make.stdout is not None

@@ -34,10 +34,10 @@ def start_up() -> Iterator[Start]:
 
     def start(env: dict[str, str] | None = None, until: str = "skeye up: open"
               ) -> tuple[subprocess.Popen[str], list[str]]:
-        sim, img, pilot, ground = _free_ports(4)
+        sim, img, pilot, ground, video = _free_ports(5)
         argv = [sys.executable, "-m", "skeye.cli", "up", "--sim-port", str(sim),
                 "--image-port", str(img), "--pilot-port", str(pilot), "--ground-port",
-                str(ground)]
+                str(ground), "--video-port", str(video)]
         full_env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
                     "PYTHONUNBUFFERED": "1", **(env or {})}
         proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

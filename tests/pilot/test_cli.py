@@ -77,3 +77,31 @@ def test_a_pilot_that_cannot_reach_its_simulator_exits_with_status_4(capsys):
         args = parser().parse_args(["pilot", "--sim", f"127.0.0.1:{port}", "--port", "0"])
         assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR == 4
     assert "cannot connect to the simulator" in capsys.readouterr().out
+
+
+def test_pilot_video_options_are_checked_before_anything_starts(capsys):
+    base = ["pilot", "--sim", "127.0.0.1:1"]
+    for extra, words in (
+        (["--video-port", "0"], "needs --images"),
+        (["--images", "127.0.0.1:1", "--video-port", "0", "--video-quality", "0"],
+         "--video-quality must be 1..100"),
+        (["--images", "127.0.0.1:1", "--video-port", "0", "--video-fps", "0"],
+         "--video-fps must be in"),
+        (["--images", "127.0.0.1:1", "--video-port", "0", "--video-clients", "0"],
+         "--video-clients must be at least 1"),
+    ):
+        args = parser().parse_args(base + extra)
+        assert pilot_cli.run(args) == 2
+        assert words in capsys.readouterr().out
+
+
+def test_pilot_names_a_taken_video_port(capsys):
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        args = parser().parse_args(["pilot", "--sim", "127.0.0.1:1", "--images", "127.0.0.1:1",
+                                    "--port", "0", "--video-port", str(port)])
+        assert pilot_cli.run(args) == 1
+    out = capsys.readouterr().out
+    assert f"port {port}" in out and "--video-port" in out and "video" in out
