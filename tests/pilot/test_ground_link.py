@@ -118,11 +118,17 @@ def test_an_http_request_from_a_web_page_is_closed_unread() -> None:
             + b"\r\n\r\n" + body
         )
         with _raw_client(pilot.port) as page:
-            for i in range(0, len(request), 3):  # however the bytes arrive
-                page.sendall(request[i : i + 3])
-            assert page.recv(4096) == b""  # closed, nothing answered
+            try:
+                for i in range(0, len(request), 3):  # however the bytes arrive
+                    page.sendall(request[i : i + 3])
+            except (BrokenPipeError, ConnectionResetError):
+                pass  # closed on the request line, while the rest was still being sent
+            try:
+                assert page.recv(4096) == b""  # closed, nothing answered
+            except ConnectionResetError:
+                pass  # closed with unread bytes pending: a reset, still nothing answered
         assert pilot.refused_http == 1 and air.calls == []
-        with Vehicle.open(pilot.address) as station:  # a real station is served
+        with Vehicle.open(pilot.address, timeout_s=30.0) as station:  # a real station is served
             assert PD.LL_STATUS in station.poll(int(PollMask.LL_STATUS))
 
 
