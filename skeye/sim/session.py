@@ -34,6 +34,7 @@ from typing import Any, Protocol
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.cameras import set_camera_fov
 from skeye.sim.engine import Simulation
+from skeye.sim.readings import Event, RobotStopped
 from skeye.sim.robot import Robot
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.stream import text_sink
@@ -85,6 +86,7 @@ class Conn(enum.Enum):
 class ConnEvent(enum.Enum):
     LINE = "a line arrived"
     BIND = "INIT spawned the robot"
+    UNBIND = "the engine stopped the robot"
     QUIET = "quiet too long"
     CLOSE = "the connection ended"
 
@@ -95,6 +97,7 @@ TRANSITIONS: dict[tuple[Conn, ConnEvent], Conn] = {
     (Conn.BOUND, ConnEvent.LINE): Conn.BOUND,
     (Conn.OPEN, ConnEvent.BIND): Conn.BOUND,
     (Conn.AWAITING, ConnEvent.BIND): Conn.BOUND,  # its line ended in a bare CR
+    (Conn.BOUND, ConnEvent.UNBIND): Conn.OPEN,  # ERR PHYSICS/CAMERA removed it: INIT again
     (Conn.AWAITING, ConnEvent.QUIET): Conn.CLOSED,
     (Conn.OPEN, ConnEvent.QUIET): Conn.CLOSED,
     (Conn.AWAITING, ConnEvent.CLOSE): Conn.CLOSED,
@@ -134,15 +137,23 @@ class ConnectionStates:
         """INIT spawned this connection's robot."""
         self._go(ConnEvent.BIND)
 
+    def unbind(self) -> None:
+        """The engine stopped and removed this connection's robot."""
+        self._go(ConnEvent.UNBIND)
+
     def close(self) -> None:
         self._go(ConnEvent.CLOSE)
 
-    def refusal(self, command: str, robot_name: str | None) -> str | None:
-        """Why ``command`` may not run in this state, or None."""
+    def refusal(self, command: str, robot_name: str | None,
+                stopped: str | None = None) -> str | None:
+        """Why ``command`` may not run in this state, or None (``stopped``: why the engine
+        removed this connection's last robot, if it did)."""
         if self.state is Conn.BOUND and command in ONCE:
             return (f"this connection already drives robot {robot_name} "
                     "(one robot per connection)")
         if self.state is not Conn.BOUND and command in NEEDS_ROBOT:
+            if stopped is not None:
+                return f"{command} needs a robot: {stopped}; send INIT for a new one"
             return f"{command} needs a robot: send INIT first"
         return None
 
@@ -192,6 +203,10 @@ class ClientSession:
         self.conn_id = conn_id
         self.states = ConnectionStates()
         self.robot_name: str | None = None
+        # Set on the engine thread when it stops this connection's robot (RobotStopped); the
+        # reader unbinds before its next command (_take_stop), so a new INIT is accepted.
+        self._robot_stopped: tuple[str, str] | None = None
+        self.stopped_reason: str | None = None
         self.robot_config: Any = None
         self.outbox: queue.Queue[bytes] = queue.Queue()
         self.dropped = 0  # lines not sent because the client did not read them in time
@@ -347,8 +362,9 @@ class ClientSession:
         if handler is None:
             self.send(encode(Err(msg.type, reason=f"unknown command {msg.type}")))
             return
+        self._take_stop()
         try:
-            refusal = self.states.refusal(msg.type, self.robot_name)
+            refusal = self.states.refusal(msg.type, self.robot_name, self.stopped_reason)
             if refusal is not None:
                 raise RemoteProtocolError(refusal)
             handler(self, msg, decode(msg))
@@ -362,14 +378,32 @@ class ClientSession:
             log.exception("%s from %s failed", msg.type, self.peer)
             self.send(encode(Err(msg.type, reason=f"failed: {type(exc).__name__}: {exc}")))
 
+    def _take_stop(self) -> None:
+        """Unbind the robot the engine stopped (it removed it already); reader thread only."""
+        stopped, self._robot_stopped = self._robot_stopped, None
+        if stopped is not None and stopped[0] == self.robot_name:
+            self.robot_name = None
+            self.stopped_reason = f"robot {stopped[0]} was stopped ({stopped[1]})"
+            self.states.unbind()
+
     # -- commands ------------------------------------------------------------------------
     def _robot(self, command: str) -> str:
+        self._take_stop()
         if self.robot_name is None:
+            if self.stopped_reason is not None:
+                raise RemoteProtocolError(f"{command} needs a robot: {self.stopped_reason}; "
+                                          "send INIT for a new one")
             raise RemoteProtocolError(f"{command} needs a robot: send INIT first")
         return self.robot_name
 
     def cmd_init(self, msg: Message, init: Init) -> None:
-        sink = text_sink(self.send)
+        text = text_sink(self.send)
+
+        def sink(events: list[Event]) -> None:  # engine thread
+            for event in events:  # noted before the ERR goes out: a client's next line sees it
+                if isinstance(event, RobotStopped):
+                    self._robot_stopped = (event.robot, event.reason)
+            text(events)
 
         def spawn(sim: Simulation) -> tuple[str, Any]:
             robot: Robot = sim.spawn(
@@ -385,6 +419,7 @@ class ClientSession:
             return robot.name, robot.config
 
         self.robot_name, self.robot_config = self.server.runner.call(spawn)
+        self.stopped_reason = None
         self.states.bind()
 
     def cmd_drive(self, msg: Message, drive: Drive) -> None:

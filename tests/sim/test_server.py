@@ -249,6 +249,18 @@ def test_divergence_stops_the_robot_with_an_error():
         assert loc and all(math.isfinite(x) for p in loc for x in p)
         # No world reset: V carried on from where it was (0.5 m/s), not back at its spawn.
         assert abs(loc[0][0] - last[0]) < 0.1 and abs(loc[0][2] - last[2]) < 0.05
+        # U's connection no longer drives a robot: its commands say why, and INIT gives it a
+        # new one (it used to keep the removed robot's name: INIT refused, GETCONF failed).
+        err = c.answer("GETCONF {Type Robot}", "GETCONF")
+        assert err.type == "ERR" and "robot U was stopped" in (err.get("Reason") or ""), err
+        assert "send INIT" in (err.get("Reason") or "")
+        err = c.answer("SET {Type Camera} {Name Down} {Opcode FOV} {Params 1.0}", "SET")
+        assert err.type == "ERR" and "robot U was stopped" in (err.get("Reason") or ""), err
+        assert c.answer("INIT {ClassName hummingbird} {Name U2} {Location 0,0,-3}",
+                        "INIT").type == "RES"
+        c.send("GETCONF {Type Robot}")
+        _, conf = c.read_until(lambda m: m.type in ("CONF", "ERR"), timeout_s=30)
+        assert conf.type == "CONF" and conf.get("Name") == "U2", conf
         c.close()
         d.close()
 
