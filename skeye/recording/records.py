@@ -37,6 +37,7 @@ from typing import IO, Any
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.wire.sim_lines import format_message
+from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
@@ -219,7 +220,9 @@ class Recorder:
         self._detach: list[Callable[[], None]] = []
         self._file.write(format_header({"started_unix_s": wall_clock(), **(meta or {})}))
         self._file.flush()
-        self._thread = threading.Thread(target=self._write_loop, name="skeye-recorder", daemon=True)
+        self.failure: BaseException | None = None
+        """Why the writer thread stopped early (a bug; a failed write is logged and noted)."""
+        self._thread = Worker(self._write_loop, "skeye-recorder", on_error=self._writer_failed)
         self._thread.start()
 
     def __enter__(self) -> Recorder:
@@ -296,6 +299,11 @@ class Recorder:
                 self._closed = True
                 return
 
+    def _writer_failed(self, exc: BaseException) -> None:
+        """The writer thread raised (Worker logged it): record nothing more, keep the reason."""
+        self.failure = exc
+        self._closed = True
+
     def _format(self, entry: tuple[float, float, int, str, bytes], out: list[bytes]) -> None:
         wall, sim_s, conn, direction, data = entry
         prefix = b"%.6f %.6f %d %s " % (wall, sim_s, conn, direction.encode())
@@ -322,7 +330,8 @@ class Recorder:
             self._queue.put(None, timeout=timeout_s)
         except queue.Full:
             log.error("recording %s: writer did not drain its queue", self.path)
-        self._thread.join(timeout_s)
+        if not self._thread.join(timeout_s):
+            log.error("recording %s: writer did not finish within %g s", self.path, timeout_s)
         if not self._file.closed:
             self._file.close()
 
