@@ -40,6 +40,32 @@ def _inject_fault(sim: Any) -> None:
     print(f"skeye sim: {FAULT_ENV}={at_s:g}: the engine will fail on purpose", flush=True)
 
 
+DEFAULT_IMAGE_QUALITY = 85  # skeye sim --image-format jpeg without --image-quality
+
+
+def image_defaults(args: argparse.Namespace) -> tuple[Any, int | None]:
+    """``--image-format``/``--image-quality`` as the image server's defaults (checked)."""
+    from skeye.errors import ConfigError
+    from skeye.wire.image_requests import SetFormat
+    from skeye.wire.images import ImageFormat
+
+    kind = ImageFormat(args.image_format.upper())
+    quality = args.image_quality
+    if quality is not None and kind is not ImageFormat.JPEG:
+        raise ConfigError(f"--image-quality applies to --image-format jpeg only, not "
+                          f"{args.image_format}")
+    if kind is ImageFormat.JPEG and quality is None:
+        quality = DEFAULT_IMAGE_QUALITY
+    if args.image_port is None and (kind is not ImageFormat.RAW or quality is not None):
+        raise ConfigError("--image-format and --image-quality need --image-port (the image "
+                          "server is off without it)")
+    try:
+        SetFormat(kind, quality)  # the same rules as a client's SKEYE FORMAT
+    except SkeyeError as exc:
+        raise ConfigError(f"--image-quality: {exc}") from None
+    return kind, quality
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
@@ -50,6 +76,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from skeye.sim.wind import make_settings, parse_params
     from skeye.sim.world import load_world
 
+    image_format, image_quality = image_defaults(args)  # before anything starts
     world = load_world(args.world)
     validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
     wind = make_settings(args.wind, parse_params(args.wind_params))
@@ -102,11 +129,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
             print(f"skeye sim: recording to {args.record}", flush=True)
         if cameras is not None:
             images = stack.enter_context(
-                ImageServer(cameras.buffer, host=args.host, port=args.image_port, **limits)
+                ImageServer(cameras.buffer, host=args.host, port=args.image_port,
+                            default_format=image_format, default_quality=image_quality,
+                            **limits)
             )
             print(
                 f"skeye sim: image server on {args.host}:{images.port} "
-                f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')})",
+                f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')}; frames {image_format.value}"
+                f"{f' {image_quality}' if image_quality is not None else ''} by default)",
                 flush=True,
             )
         if args.host == "127.0.0.1":
@@ -154,6 +184,20 @@ def _add_sim(sub: Any) -> None:
         type=int,
         default=None,
         help="serve camera images on this port (5003 by convention; 0 = any free)",
+    )
+    p.add_argument(
+        "--image-format",
+        choices=("raw", "jpeg", "png"),
+        default="raw",
+        help="the frame format an image client gets until it asks for another with SKEYE "
+        "FORMAT (USARSim's image server lets its operator choose it too; default raw)",
+    )
+    p.add_argument(
+        "--image-quality",
+        type=int,
+        default=None,
+        metavar="Q",
+        help=f"JPEG quality 1-100 of --image-format jpeg (default {DEFAULT_IMAGE_QUALITY})",
     )
     p.add_argument(
         "--max-clients-per-peer",

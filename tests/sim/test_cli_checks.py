@@ -47,3 +47,63 @@ def test_snapshot_without_an_image_server_names_the_address_and_the_option() -> 
     assert done.returncode == 2
     assert f"no image server at 127.0.0.1:{port}" in done.stderr
     assert f"--image-port {port}" in done.stderr and "--images" in done.stderr
+
+
+def test_image_format_option_sets_what_a_new_image_client_gets() -> None:
+    """``skeye sim --image-format jpeg --image-quality 60``: a client that asks for a frame
+    without SKEYE FORMAT gets JPEG of that quality's UPIS type (as USARSim's operator-chosen
+    default); a later SKEYE FORMAT still changes it."""
+    import time
+
+    from skeye.processes import start_skeye, stop_process
+    from skeye.wire.images import DecodedFrame, FrameDecoder, FrameType, jpeg_type_for_quality
+
+    sim, found = start_skeye(
+        ["sim", "--port", "0", "--image-port", "0", "--image-format", "jpeg",
+         "--image-quality", "60"],
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) .*frames JPEG 60"],
+        "skeye sim")
+    try:
+        control = socket.create_connection(("127.0.0.1", int(found[0].group(1))), timeout=60)
+        control.sendall(b"INIT {ClassName hummingbird} {Name R1} {Start Pad1}\r\n")
+        images = socket.create_connection(("127.0.0.1", int(found[1].group(1))), timeout=60)
+
+        def frame(request: bytes) -> DecodedFrame:
+            decoder = FrameDecoder()
+            deadline = time.monotonic() + 120  # the first render on a busy host
+            while True:
+                images.sendall(request)
+                events: list[object] = []
+                while not events:
+                    data = images.recv(65536)
+                    assert data, "the image server closed the connection"
+                    events = decoder.feed(data)
+                if isinstance(events[0], DecodedFrame):
+                    return events[0]
+                assert time.monotonic() < deadline, events  # "no frame available" so far
+                request = b"OK"
+
+        first = frame(b"OK")
+        assert first.frame_type == jpeg_type_for_quality(60) == FrameType.JPEG_NORMAL
+        assert first.data[:2] == b"\xff\xd8"
+        raw = frame(b"SKEYE FORMAT RAW\nOK")
+        assert raw.frame_type == FrameType.RAW
+        control.close()
+        images.close()
+    finally:
+        stop_process(sim)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--image-port", "0", "--image-quality", "50"], "--image-format jpeg only"),
+        (["--image-port", "0", "--image-format", "jpeg", "--image-quality", "0"], "1-100"),
+        (["--image-format", "png"], "need --image-port"),
+    ],
+)
+def test_bad_image_format_options_are_refused_before_anything_starts(argv: list[str],
+                                                                     message: str) -> None:
+    done = _skeye("sim", "--port", "0", *argv)
+    assert done.returncode == 2 and message in done.stderr, done
+    assert "control protocol on" not in done.stdout
