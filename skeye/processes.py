@@ -32,6 +32,11 @@ from typing import Any
 
 from skeye.errors import ConfigError, SkeyeError
 
+EXIT_LOST_SIMULATOR = 4
+"""``skeye pilot``'s exit status when it could not reach its simulator or the link failed before
+it served (once serving, a lost simulator is a failsafe, not an exit): ``skeye up`` then waits
+for the simulator's own exit status, the root cause."""
+
 _PR_SET_PDEATHSIG = 1
 
 

@@ -32,6 +32,9 @@ SCRIPT: list[tuple[str, int]] = [  # (command, steps to run after it)
     ("PING {Id 1}", 0),
 ]
 
+ANSWERS = {"INIT": b"RES {Command INIT}", "SET": b"RES {Command SET}", "GETCONF": b"CONF",
+           "GETGEO": b"GEO", "PING": b"RES {Command PING}"}  # what each command waits for
+
 
 def _free_port() -> int:
     with socket.socket() as s:
@@ -81,10 +84,8 @@ def stream(seed: int, timeout_s: float = 60.0) -> bytes:
             for command, steps in SCRIPT:
                 word = command.split()[0]
                 sock.sendall(command.encode() + b"\r\n")
-                if word in ("INIT", "SET", "GETCONF", "GETGEO", "PING"):
-                    answer = {"INIT": b"RES {Command INIT}", "SET": b"RES {Command SET}",
-                              "GETCONF": b"CONF", "GETGEO": b"GEO", "PING": b"RES {Command PING}"}
-                    _read_until(sock, buf, answer[word], timeout_s)
+                if word in ANSWERS:
+                    _read_until(sock, buf, ANSWERS[word], timeout_s)
                 if steps:
                     sock.sendall(f"STEP {{Count {steps}}}\r\n".encode())
                     _read_until(sock, buf, b"RES {Command STEP}", timeout_s)

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from skeye.errors import ConfigError
-from skeye.processes import die_with_parent
+from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent
 
 STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
 START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to import MuJoCo
@@ -156,40 +156,32 @@ def _stop_all(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> None:
 
 _EXIT_MEANING = {
     ("simulator", 3): "its simulation engine failed",
-    ("pilot", 4): "it lost the simulator",  # skeye.pilot.cli.EXIT_LOST_SIMULATOR
+    ("pilot", EXIT_LOST_SIMULATOR): "it lost the simulator",
 }
 SIM_SETTLE_S = 30.0
 """How long to wait for the simulator's own exit status once the pilot says it lost the
 simulator: the simulator is then usually exiting, and its status names the root cause."""
+OTHER_DEATH_SETTLE_S = 5.0  # the same wait after any other child's death
 
 
 def _exit_meaning(what: str, status: int | None) -> str:
     return _EXIT_MEANING.get((what, status if status is not None else 0), "")
 
 
-def _wait_for_simulator(children: Sequence[tuple[str, subprocess.Popen[bytes]]],
-                        settle_s: float) -> None:
-    """If the simulator still runs, wait up to ``settle_s`` for it to exit: a pilot that lost
-    its simulator, or failed while starting, is usually looking at a simulator on its way out."""
-    if not children or children[0][0] != "simulator":
-        return
-    try:
-        children[0][1].wait(settle_s)
-    except subprocess.TimeoutExpired:
-        pass
-
-
-def _settle_s(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> float:
-    lost = any(what == "pilot" and child.poll() == 4 for what, child in children)
-    return SIM_SETTLE_S if lost else 5.0
-
-
 def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> bool:
-    """Say which children have exited, and how; True if any has. A pilot that lost its
-    simulator first waits for the simulator, so the root cause is named too."""
-    if any(c.poll() is not None for _, c in children):
-        _wait_for_simulator(children, _settle_s(children) if any(
-            what != "simulator" and c.poll() is not None for what, c in children) else 0.0)
+    """Say which children have exited, and how; True if any has.
+
+    When another child died first, the simulator gets a moment to exit too: a pilot that lost
+    its simulator (or failed while starting) is usually looking at one on its way out, and the
+    simulator's own status names the root cause."""
+    simulator = children[0][1] if children and children[0][0] == "simulator" else None
+    others = [(w, c) for w, c in children if w != "simulator" and c.poll() is not None]
+    if simulator is not None and others:
+        lost = any(w == "pilot" and c.returncode == EXIT_LOST_SIMULATOR for w, c in others)
+        try:
+            simulator.wait(SIM_SETTLE_S if lost else OTHER_DEATH_SETTLE_S)
+        except subprocess.TimeoutExpired:
+            pass
     dead = [(w, c) for w, c in children if c.poll() is not None]
     for what, child in dead:
         meaning = _exit_meaning(what, child.returncode)

@@ -28,7 +28,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from skeye.errors import ConfigError, SkeyeError
+from skeye.errors import ConfigError, LinkClosed, SkeyeError
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
@@ -38,6 +38,7 @@ from skeye.pilot.video_server import (
     DEFAULT_VIDEO_PORT,
     VideoServer,
 )
+from skeye.processes import EXIT_LOST_SIMULATOR
 from skeye.wire.video import DEFAULT_JPEG_QUALITY
 
 log = logging.getLogger(__name__)
@@ -69,17 +70,10 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     return envelope, source
 
 
-EXIT_LOST_SIMULATOR = 4
-"""The exit status when the pilot stopped because it could not reach its simulator or the link
-failed before it served (once serving, a lost simulator is a failsafe, not an exit): ``skeye up``
-then waits for the simulator's own exit status, the root cause."""
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code (0; 1 for an error; 2 for a
     bad option; :data:`EXIT_LOST_SIMULATOR` when the simulator link failed)."""
     from skeye.control.connection import connect
-    from skeye.errors import LinkClosed
     from skeye.pilot.sim_airframe import SimAirframe
     from skeye.processes import check_ports_free
 

@@ -115,6 +115,14 @@ ONCE = frozenset({"INIT"})
 """Commands refused once a robot is bound (one robot per connection)."""
 
 
+def needs_robot(command: str, stopped: str | None = None) -> str:
+    """The refusal of a command that needs a robot on a connection without one (``stopped``:
+    why the engine removed the connection's last robot, if it did)."""
+    if stopped is not None:
+        return f"{command} needs a robot: {stopped}; send INIT for a new one"
+    return f"{command} needs a robot: send INIT first"
+
+
 class ConnectionStates:
     """The state of one connection, moved only through :data:`TRANSITIONS`."""
 
@@ -152,9 +160,7 @@ class ConnectionStates:
             return (f"this connection already drives robot {robot_name} "
                     "(one robot per connection)")
         if self.state is not Conn.BOUND and command in NEEDS_ROBOT:
-            if stopped is not None:
-                return f"{command} needs a robot: {stopped}; send INIT for a new one"
-            return f"{command} needs a robot: send INIT first"
+            return needs_robot(command, stopped)
         return None
 
     def quiet(self, quiet_s: float, handshake_timeout_s: float,
@@ -388,12 +394,8 @@ class ClientSession:
 
     # -- commands ------------------------------------------------------------------------
     def _robot(self, command: str) -> str:
-        self._take_stop()
-        if self.robot_name is None:
-            if self.stopped_reason is not None:
-                raise RemoteProtocolError(f"{command} needs a robot: {self.stopped_reason}; "
-                                          "send INIT for a new one")
-            raise RemoteProtocolError(f"{command} needs a robot: send INIT first")
+        if self.robot_name is None:  # _handle has taken any stop the engine reported
+            raise RemoteProtocolError(needs_robot(command, self.stopped_reason))
         return self.robot_name
 
     def cmd_init(self, msg: Message, init: Init) -> None:
