@@ -238,6 +238,12 @@ def _add_vision(sub: Any) -> None:
     register(sub)
 
 
+def _add_calibrate(sub: Any) -> None:
+    from skeye.vision.calibrate_cli import register
+
+    register(sub)
+
+
 def _add_snapshot(sub: Any) -> None:
     from skeye.recording.snapshot import register
 
@@ -294,6 +300,7 @@ _REGISTRARS: list[Callable[[Any], None]] = [
     _add_link,
     _add_ground,
     _add_vision,
+    _add_calibrate,
     _add_validate,
     _add_sweep,
     _add_replay,

@@ -39,6 +39,7 @@ from skeye.sim.world_model import (
     PAD_SURFACE_HEIGHT_M,
     PAD_TEXTURE_PX,
     Box,
+    CheckerboardPlacement,
     Ground,
     Light,
     PadPlacement,
@@ -47,7 +48,11 @@ from skeye.sim.world_model import (
     Visual,
     WorldDescription,
 )
-from skeye.sim.world_textures import ground_texture_png, pad_texture_png
+from skeye.sim.world_textures import (
+    checkerboard_texture_png,
+    ground_texture_png,
+    pad_texture_png,
+)
 
 __all__ = [
     "BUILTIN_WORLDS",
@@ -59,6 +64,7 @@ __all__ = [
     "PAD_SURFACE_HEIGHT_M",
     "PAD_TEXTURE_PX",
     "Box",
+    "CheckerboardPlacement",
     "Ground",
     "Light",
     "PadPlacement",
@@ -186,6 +192,28 @@ def build_mjcf(
             "geom", name=f"pad:{pad.name}:collider", type="box",
             size=_f(half, half, collider_half_m), group="3", rgba="0.1 0.1 0.1 1",
             **_pose_attrs((n, e, surface[2] + collider_half_m), pad.yaw_rad),
+        ))
+
+    # Calibration boards: a textured plane (visual only) PAD_SURFACE_HEIGHT_M above the ground;
+    # texrepeat 1 1 stretches the texture over the sheet once, in both directions.
+    for layout in sorted({b.inner_corners for b in world.checkerboards}):
+        tex = f"checkerboard:{layout[0]}x{layout[1]}"
+        file_name = f"skeye_checkerboard_{layout[0]}x{layout[1]}.png"
+        assets[file_name] = checkerboard_texture_png(*layout)
+        asset_xml.append(_el("texture", name=tex, type="2d", file=file_name))
+        asset_xml.append(_el(
+            "material", name=tex, texture=tex, texrepeat="1 1", texuniform="false",
+            specular="0", shininess="0", reflectance="0", emission="0",
+        ))
+    for board in world.checkerboards:
+        along, across = board.sheet_m
+        n, e, d = board.position_ned_m
+        body_xml.append(_el(
+            "geom", name=f"checkerboard:{board.name}", type="plane",
+            size=_f(along / 2.0, across / 2.0, 0.01),
+            material=f"checkerboard:{board.inner_corners[0]}x{board.inner_corners[1]}",
+            contype="0", conaffinity="0", group="1",
+            **_pose_attrs((n, e, d - PAD_SURFACE_HEIGHT_M), board.yaw_rad),
         ))
 
     for box in world.boxes:

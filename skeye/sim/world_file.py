@@ -24,6 +24,7 @@ from skeye.sim.world_model import (
     GROUND_TEXTURES,
     NAME_RE,
     Box,
+    CheckerboardPlacement,
     Ground,
     Light,
     PadPlacement,
@@ -148,7 +149,7 @@ def _positive(v: float) -> bool:
 
 _TOP_KEYS = {
     "name", "geo_origin", "magnetic_field", "sea_level_pressure_pa", "ground", "pads", "boxes",
-    "lights", "visual", "start_poses",
+    "lights", "visual", "start_poses", "checkerboards",
 }
 _GROUND_DEFAULTS: dict[str, tuple[Vec3, Vec3, float]] = {
     "grass": ((0.22, 0.42, 0.13), (0.36, 0.50, 0.20), 4.0),
@@ -184,6 +185,11 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
         pads.append(_parse_pad(table, i))
         _check_on_ground(table, "position_ned_m", pads[-1].position_ned_m, ground)
     boxes = tuple(_parse_box(t) for t in top.array_of_tables("boxes"))
+    boards = []
+    for i, table in enumerate(top.array_of_tables("checkerboards"), 1):
+        boards.append(_parse_checkerboard(table, i))
+        _check_on_ground(table, "position_ned_m", boards[-1].position_ned_m, ground)
+    _check_unique(top, "checkerboards", [b.name for b in boards])
     lights = tuple(_parse_light(t, i) for i, t in enumerate(top.array_of_tables("lights"), 1))
     _check_unique(top, "pads", [p.name for p in pads])
     _check_unique(top, "boxes", [b.name for b in boxes])
@@ -208,6 +214,7 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
         visual=visual,
         start_poses=start_poses,
         source=source,
+        checkerboards=tuple(boards),
     )
 
 
@@ -277,6 +284,26 @@ def _parse_pad(table: _Table, index: int) -> PadPlacement:
     return PadPlacement(
         name=table.name("name", f"pad{index}"),
         pad=pad,
+        position_ned_m=table.vector("position_ned_m"),
+        yaw_rad=table.number("yaw_rad", 0.0),
+    )
+
+
+def _parse_checkerboard(table: _Table, index: int) -> CheckerboardPlacement:
+    table.check_keys({"name", "inner_corners", "square_m", "position_ned_m", "yaw_rad"})
+    corners = table._get("inner_corners", _REQUIRED)
+    if (
+        not isinstance(corners, list)
+        or len(corners) != 2
+        or not all(isinstance(c, int) and not isinstance(c, bool) and 2 <= c <= 40
+                   for c in corners)
+    ):
+        table.fail(f"must be [cols, rows], two integers 2..40, got {corners!r}", "inner_corners")
+    return CheckerboardPlacement(
+        name=table.name("name", f"board{index}"),
+        inner_corners=(int(corners[0]), int(corners[1])),
+        square_m=table.number("square_m", check=lambda v: 0.001 <= v <= 1.0,
+                              rule="in [0.001, 1] m"),
         position_ned_m=table.vector("position_ned_m"),
         yaw_rad=table.number("yaw_rad", 0.0),
     )

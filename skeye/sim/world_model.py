@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from skeye.geo import GeoOrigin
 from skeye.vision.pad import PAD_SURFACE_HEIGHT_M, PadDefinition
 
-BUILTIN_WORLDS = ("pad", "yard", "indoor")
+BUILTIN_WORLDS = ("pad", "yard", "indoor", "checkerboard")
 GROUND_TEXTURES = ("grass", "checker", "concrete", "none")
 
 PAD_TEXTURE_PX = 2048
@@ -53,6 +53,30 @@ class PadPlacement:
     def surface_down_m(self) -> float:
         """NED down of the visible pad plane; a camera's height above the pad is this - its down."""
         return self.position_ned_m[2] - PAD_SURFACE_HEIGHT_M
+
+
+@dataclass(frozen=True)
+class CheckerboardPlacement:
+    """A printed calibration checkerboard lying flat on the ground (visual only).
+
+    ``inner_corners`` is (cols, rows) as ``skeye calibrate --board COLSxROWS`` counts them:
+    the board has (cols + 1) x (rows + 1) squares of ``square_m``, first square black, on a
+    white sheet with a margin of one square. Its columns run along the board's north axis at
+    yaw 0. ``position_ned_m`` is the board's centre on the ground; the printed surface lies
+    ``PAD_SURFACE_HEIGHT_M`` above it, like a pad's.
+    """
+
+    name: str
+    inner_corners: tuple[int, int]
+    square_m: float
+    position_ned_m: Vec3
+    yaw_rad: float
+
+    @property
+    def sheet_m(self) -> tuple[float, float]:
+        """The white sheet's extent (along the columns, along the rows), margins included."""
+        cols, rows = self.inner_corners
+        return ((cols + 3) * self.square_m, (rows + 3) * self.square_m)
 
 
 @dataclass(frozen=True)
@@ -115,3 +139,4 @@ class WorldDescription:
     visual: Visual
     start_poses: dict[str, StartPose]
     source: str
+    checkerboards: tuple[CheckerboardPlacement, ...] = ()

@@ -27,6 +27,25 @@ def pad_texture_png(pad: PadDefinition, pixels: int = PAD_TEXTURE_PX) -> bytes:
     return _png(np.dstack([grey, grey, grey]))
 
 
+CHECKER_SQUARE_PX = 64  # texture pixels per checkerboard square
+
+
+@functools.lru_cache(maxsize=8)
+def checkerboard_texture_png(cols: int, rows: int) -> bytes:
+    """A printed calibration board: (cols + 1) x (rows + 1) squares, the first black, on white
+    paper with a one-square margin (OpenCV's corner finder needs a white border). Rows of the
+    image run along the board's columns (texture u = the board's north axis at yaw 0)."""
+    n = CHECKER_SQUARE_PX
+    across, down = cols + 3, rows + 3  # squares along the sheet, margins included
+    u = np.arange(across * n) // n  # square index along the sheet
+    v = np.arange(down * n) // n
+    ui, vi = np.meshgrid(u, v)
+    board = (ui >= 1) & (ui <= cols + 1) & (vi >= 1) & (vi <= rows + 1)
+    black = board & ((ui + vi) % 2 == 0)
+    grey = np.where(black, 0, 255).astype(np.uint8)
+    return _png(np.dstack([grey, grey, grey]))
+
+
 def _png(rgb: np.ndarray) -> bytes:
     ok, encoded = cv2.imencode(".png", np.ascontiguousarray(rgb[:, :, ::-1]))  # cv2 wants BGR
     if not ok:

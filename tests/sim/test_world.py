@@ -127,7 +127,7 @@ def test_builtin_world_compiles_and_a_robot_rests_on_its_first_start_pose(name: 
 
 
 def test_builtin_names_and_unknown_world_lists_them() -> None:
-    assert set(BUILTIN_WORLDS) == {"pad", "yard", "indoor"}
+    assert set(BUILTIN_WORLDS) == {"pad", "yard", "indoor", "checkerboard"}
     with pytest.raises(ConfigError) as err:
         load_world("moon")
     for name in BUILTIN_WORLDS:
@@ -274,6 +274,33 @@ def test_validation_errors_name_file_and_key(
         load_world(path)
     message = str(err.value)
     assert str(path) in message and key in message and problem in message, message
+
+
+def test_checkerboard_world_holds_the_calibration_board() -> None:
+    world = load_world("checkerboard")
+    (board,) = world.checkerboards
+    assert board.inner_corners == (9, 6) and board.square_m == pytest.approx(0.025)
+    assert board.sheet_m == pytest.approx((0.3, 0.225))  # 12 x 9 squares with the margins
+    xml, assets = build_mjcf(world)
+    assert 'name="checkerboard:board1"' in xml and "skeye_checkerboard_9x6.png" in assets
+
+
+@pytest.mark.parametrize(
+    ("board", "problem"),
+    [
+        ("inner_corners = [9]\nsquare_m = 0.025", "[cols, rows]"),
+        ("inner_corners = [9, 1]\nsquare_m = 0.025", "[cols, rows]"),
+        ("inner_corners = [9, 6]\nsquare_m = 0", "square_m"),
+        ("inner_corners = [9, 6]", "missing required key"),
+        ("inner_corners = [9, 6]\nsquare_m = 0.025\nsquares = 3", "unknown key"),
+    ],
+)
+def test_checkerboard_errors_name_the_key(tmp_path: Path, board: str, problem: str) -> None:
+    text = BASE_TOML + f"\n[[checkerboards]]\n{board}\nposition_ned_m = [0.0, 0.0, 0.0]\n"
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        load_world(path)
+    assert "[[checkerboards]] #1" in str(err.value) and problem in str(err.value), err.value
 
 
 def test_missing_file_names_the_path(tmp_path: Path) -> None:

@@ -1,0 +1,341 @@
+"""Camera calibration: the camera.toml file, the lens model, and the checkerboard solver.
+
+How this works: a :class:`CameraCalibration` is what OpenCV's ``calibrateCamera`` finds for
+one camera at one resolution - the camera matrix (fx, fy, cx, cy in pixels, OpenCV index
+coordinates: pixel (u, v) has its centre at (u, v)) and the Brown-Conrady distortion
+coefficients in OpenCV's order (k1, k2, p1, p2, k3) - plus how it was found (RMS reprojection
+error, board, number of images). :func:`calibrate` runs the standard recipe (Zhang 2000, as
+OpenCV implements it): find the board's inner corners in every image
+(``findChessboardCorners``, refined with ``cornerSubPix``; the sector-based detector
+``findChessboardCornersSB`` when the classic one finds nothing), then ``calibrateCamera`` on
+all of them. :func:`load_calibration` / :meth:`CameraCalibration.to_toml` read and write
+camera.toml (format: docs/calibration.md).
+
+:meth:`CameraCalibration.distort_normalized` is OpenCV's forward model (normalized camera
+coordinates -> pixels), vectorized; the detector uses it to sample the image at undistorted
+positions, and ``cv2.undistortPoints`` for the way back.
+
+Invariants: a calibration belongs to one image size; using it on frames of another size is an
+error, never a silent rescale. Nothing is rounded when written.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
+
+DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Board:
+    """A checkerboard target: inner corners per row (cols) and per column (rows), square side."""
+
+    cols: int
+    rows: int
+    square_m: float
+
+    def __post_init__(self) -> None:
+        if self.cols < 2 or self.rows < 2:
+            raise InvalidArgument(f"a board needs at least 2x2 inner corners, got "
+                                  f"{self.cols}x{self.rows}")
+        if not (math.isfinite(self.square_m) and self.square_m > 0):
+            raise InvalidArgument(f"square size must be positive, got {self.square_m} m")
+
+    @property
+    def label(self) -> str:
+        return f"{self.cols}x{self.rows}"
+
+    def object_points(self) -> np.ndarray:
+        """The inner corners on the board plane (z = 0), metres, in OpenCV's row-major order."""
+        grid = np.zeros((self.rows * self.cols, 3), np.float32)
+        grid[:, :2] = np.mgrid[0 : self.cols, 0 : self.rows].T.reshape(-1, 2) * self.square_m
+        return grid
+
+
+def parse_board(text: str) -> tuple[int, int]:
+    """``"9x6"`` -> (9, 6): inner corners per row and per column."""
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise InvalidArgument(f"board must be COLSxROWS inner corners, e.g. 9x6, got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """One camera's intrinsics and lens distortion at one image size (pixels)."""
+
+    width_px: int
+    height_px: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, float, float, float, float]  # k1, k2, p1, p2, k3 (OpenCV order)
+    rms_px: float | None = None  # RMS reprojection error of the calibration
+    board: Board | None = None
+    images: int | None = None  # images the board was found in (and used)
+
+    def __post_init__(self) -> None:
+        if self.width_px < 16 or self.height_px < 16:
+            raise InvalidArgument(f"image size must be at least 16x16, got "
+                                  f"{self.width_px}x{self.height_px}")
+        values = (self.fx, self.fy, self.cx, self.cy, *self.dist)
+        if len(self.dist) != 5 or not all(math.isfinite(v) for v in values):
+            raise InvalidArgument("fx, fy, cx, cy and the 5 distortion coefficients must be "
+                                  "finite numbers")
+        if self.fx <= 0 or self.fy <= 0:
+            raise InvalidArgument(f"fx and fy must be positive, got {self.fx}, {self.fy}")
+
+    @classmethod
+    def pinhole(cls, width_px: int, height_px: int, fov_h_rad: float) -> CameraCalibration:
+        """The ideal camera the simulator renders (no distortion, centred principal point)."""
+        from skeye.vision.camera import focal_length_px, principal_point_px
+
+        f = focal_length_px(width_px, fov_h_rad)
+        cx, cy = principal_point_px(width_px, height_px)
+        return cls(width_px, height_px, f, f, cx, cy, (0.0, 0.0, 0.0, 0.0, 0.0))
+
+    def camera_matrix(self) -> np.ndarray:
+        return np.array(((self.fx, 0.0, self.cx), (0.0, self.fy, self.cy), (0.0, 0.0, 1.0)))
+
+    def dist_coeffs(self) -> np.ndarray:
+        return np.array(self.dist, dtype=np.float64)
+
+    @property
+    def fov_h_rad(self) -> float:
+        """The horizontal field of view of the undistorted (pinhole) camera."""
+        return 2.0 * math.atan(self.width_px / 2.0 / self.fx)
+
+    def check_size(self, width_px: int, height_px: int) -> None:
+        if (width_px, height_px) != (self.width_px, self.height_px):
+            raise LocalProtocolError(
+                f"the calibration is for {self.width_px}x{self.height_px} images, the frame is "
+                f"{width_px}x{height_px}: calibrate the camera at the resolution it flies with"
+            )
+
+    def max_radius(self) -> float:
+        """Largest normalized radius up to which the radial model keeps growing (invertible).
+
+        Past it (strong barrel distortion, far outside the image) the polynomial folds back;
+        points there are not in the image.
+        """
+        k1, k2, _, _, k3 = self.dist
+        r = np.linspace(0.0, 4.0, 4001)
+        r2 = r * r
+        d = 1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2 + 7.0 * k3 * r2 * r2 * r2  # d(r*L(r))/dr
+        bad = np.nonzero(d <= 0.05)[0]
+        return float(r[bad[0]]) if bad.size else 4.0
+
+    def distort_normalized(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """OpenCV's forward model: normalized undistorted coordinates -> image pixels."""
+        k1, k2, p1, p2, k3 = self.dist
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xy = x * y
+        xd = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy
+        return self.fx * xd + self.cx, self.fy * yd + self.cy
+
+    def to_toml(self) -> str:
+        """camera.toml text (docs/calibration.md); floats written with ``repr`` (exact)."""
+        lines = [
+            "# skeye camera calibration (docs/calibration.md). Pixels are OpenCV index",
+            "# coordinates; distortion is OpenCV's (k1, k2, p1, p2, k3) Brown-Conrady model.",
+            f"format = {FORMAT_VERSION}",
+            "",
+            "[camera]",
+            f"width_px = {self.width_px}",
+            f"height_px = {self.height_px}",
+            f"fx_px = {self.fx!r}",
+            f"fy_px = {self.fy!r}",
+            f"cx_px = {self.cx!r}",
+            f"cy_px = {self.cy!r}",
+            *(f"{n} = {float(v)!r}" for n, v in zip(DIST_NAMES, self.dist, strict=True)),
+        ]
+        if self.rms_px is not None or self.board is not None or self.images is not None:
+            lines += ["", "[calibration]"]
+            if self.rms_px is not None:
+                lines.append(f"rms_reprojection_px = {self.rms_px!r}")
+            if self.board is not None:
+                lines.append(f'board = "{self.board.label}"')
+                lines.append(f"square_mm = {self.board.square_m * 1000.0!r}")
+            if self.images is not None:
+                lines.append(f"images = {self.images}")
+        return "\n".join(lines) + "\n"
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_toml(), encoding="utf-8")
+
+
+def _number(table: dict[str, Any], key: str, where: str) -> float:
+    value = table.get(key)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConfigError(f"{where}.{key}: must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _integer(table: dict[str, Any], key: str, where: str) -> int:
+    value = table.get(key)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{where}.{key}: must be an integer, got {value!r}")
+    return value
+
+
+def load_calibration(path: str | Path) -> CameraCalibration:
+    """Read camera.toml; ConfigError names the file and the key at fault."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read calibration file: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: not a TOML file: {exc}") from None
+    unknown = sorted(set(data) - {"format", "camera", "calibration"})
+    if unknown:
+        raise ConfigError(f"{p}: unknown key(s) {unknown}; known: format, [camera], "
+                          "[calibration]")
+    if data.get("format", FORMAT_VERSION) != FORMAT_VERSION:
+        raise ConfigError(f"{p}: format must be {FORMAT_VERSION}, got {data.get('format')!r}")
+    cam = data.get("camera")
+    if not isinstance(cam, dict):
+        raise ConfigError(f"{p}: missing [camera] table (see docs/calibration.md)")
+    where = f"{p}: [camera]"
+    known = {"width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", *DIST_NAMES}
+    unknown = sorted(set(cam) - known)
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+    for key in ("width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px"):
+        if key not in cam:
+            raise ConfigError(f"{where}: missing required key {key}")
+    dist = tuple(_number(cam, n, where) if n in cam else 0.0 for n in DIST_NAMES)
+    rms = board = images = None
+    cal = data.get("calibration", {})
+    if not isinstance(cal, dict):
+        raise ConfigError(f"{p}: [calibration] must be a table")
+    cwhere = f"{p}: [calibration]"
+    unknown = sorted(set(cal) - {"rms_reprojection_px", "board", "square_mm", "images"})
+    if unknown:
+        raise ConfigError(f"{cwhere}: unknown key(s) {unknown}")
+    try:
+        if "rms_reprojection_px" in cal:
+            rms = _number(cal, "rms_reprojection_px", cwhere)
+        if "board" in cal:
+            if not isinstance(cal["board"], str):
+                raise ConfigError(f"{cwhere}.board: must be a string like \"9x6\"")
+            cols, rows = parse_board(cal["board"])
+            board = Board(cols, rows, _number(cal, "square_mm", cwhere) / 1000.0)
+        if "images" in cal:
+            images = _integer(cal, "images", cwhere)
+        return CameraCalibration(
+            _integer(cam, "width_px", where), _integer(cam, "height_px", where),
+            _number(cam, "fx_px", where), _number(cam, "fy_px", where),
+            _number(cam, "cx_px", where), _number(cam, "cy_px", where),
+            (dist[0], dist[1], dist[2], dist[3], dist[4]), rms, board, images,
+        )
+    except InvalidArgument as exc:
+        raise ConfigError(f"{p}: {exc}") from None
+
+
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+
+
+def undistort_points(
+    pts: np.ndarray, k: np.ndarray, dist: np.ndarray, r: np.ndarray | None, p: np.ndarray | None
+) -> np.ndarray:
+    """``cv2.undistortPoints`` iterated to convergence (its default 5 iterations leave pixels
+    of error in the corners of a strongly distorted image). ``pts`` (N, 1, 2) float64."""
+    iterate = getattr(cv2, "undistortPointsIter", None)  # OpenCV 4.x
+    if iterate is not None:
+        return np.asarray(iterate(pts, k, dist, r, p, _UNDISTORT_CRITERIA))
+    return np.asarray(cv2.undistortPoints(pts, k, dist, R=r, P=p, criteria=_UNDISTORT_CRITERIA))
+
+
+# ----------------------------------------------------------------------------------------------
+# Solving
+
+
+_SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-4)
+
+
+def find_corners(grey: np.ndarray, board: Board) -> np.ndarray | None:
+    """The board's inner corners in one greyscale image (N, 1, 2) float32, or None."""
+    size = (board.cols, board.rows)
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    ok, corners = cv2.findChessboardCorners(grey, size, flags=flags)
+    if ok:
+        # The refinement window: under half the smallest corner spacing, at most 11x11.
+        pts = corners.reshape(board.rows, board.cols, 2)
+        spacing = min(
+            float(np.linalg.norm(np.diff(pts, axis=1), axis=2).min()),
+            float(np.linalg.norm(np.diff(pts, axis=0), axis=2).min()),
+        )
+        half = int(max(2, min(11, math.floor(0.4 * spacing))))
+        return cv2.cornerSubPix(grey, corners, (half, half), (-1, -1), _SUBPIX)
+    ok, corners = cv2.findChessboardCornersSB(grey, size, flags=cv2.CALIB_CB_ACCURACY)
+    return corners.astype(np.float32) if ok else None
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    calibration: CameraCalibration
+    used: tuple[str, ...]  # image names the board was found in
+    skipped: tuple[str, ...]  # ... and not found in
+    per_image_rms_px: tuple[float, ...]  # reprojection RMS of each used image
+
+
+def calibrate(
+    images: Sequence[tuple[str, np.ndarray]], board: Board, min_images: int = 3
+) -> CalibrationResult:
+    """Calibrate from (name, greyscale uint8 image) pairs, all of one size.
+
+    Raises:
+        LocalProtocolError: mixed image sizes, or fewer than ``min_images`` images with the
+            whole board found.
+    """
+    if not images:
+        raise LocalProtocolError("no images given")
+    size = images[0][1].shape[:2]
+    obj = board.object_points()
+    object_points, image_points, used, skipped = [], [], [], []
+    for name, grey in images:
+        if grey.shape[:2] != size:
+            raise LocalProtocolError(
+                f"{name} is {grey.shape[1]}x{grey.shape[0]}, the first image "
+                f"{size[1]}x{size[0]}: all images must come from one camera at one resolution")
+        corners = find_corners(grey, board)
+        if corners is None:
+            skipped.append(name)
+            continue
+        object_points.append(obj)
+        image_points.append(corners)
+        used.append(name)
+    if len(used) < min_images:
+        raise LocalProtocolError(
+            f"the {board.label} board was found in {len(used)} of {len(images)} images; at least "
+            f"{min_images} are needed (is --board the count of INNER corners, COLSxROWS?)")
+    height, width = size
+    rms, k, dist, rvecs, tvecs = cv2.calibrateCamera(
+        object_points, image_points, (width, height), None, None
+    )
+    per_image = []
+    for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True):
+        proj, _ = cv2.projectPoints(o, r, t, k, dist)
+        err = proj.reshape(-1, 2) - np.asarray(i).reshape(-1, 2)
+        per_image.append(float(np.sqrt(np.mean(np.sum(err * err, axis=1)))))
+    d = [float(v) for v in np.asarray(dist).reshape(-1)[:5]]
+    cal = CameraCalibration(
+        width, height, float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]),
+        (d[0], d[1], d[2], d[3], d[4]), float(rms), board, len(used),
+    )
+    return CalibrationResult(cal, tuple(used), tuple(skipped), tuple(per_image))

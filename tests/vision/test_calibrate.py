@@ -1,0 +1,171 @@
+"""``skeye calibrate`` end to end: the checkerboard world in the real simulator, frames fetched
+from its image server at several poses, a known lens distortion, and the command's answer.
+
+The simulator renders ideal pinhole frames; the known distortion is applied here
+(:func:`tests.vision.helpers.distort_image`) from a wider camera of the same focal length, so
+the distorted 800x600 frame has content out to its corners. Once the simulator has its own
+lens model, the wide robot gets the coefficients in its [camera] section instead.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from skeye.cli import main
+from skeye.control.image_client import ImageClient
+from skeye.pixels import frame_image
+from skeye.sim import frames
+from skeye.sim.cameras import CameraSystem
+from skeye.sim.engine import Simulation
+from skeye.sim.image_server import FrameBuffer, ImageServer
+from skeye.sim.runner import SimulationRunner
+from skeye.sim.server import ControlServer
+from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
+from skeye.vision.calibration import load_calibration
+from skeye.vision.camera import intrinsics
+from tests.sim.conftest import LineClient
+from tests.vision.helpers import FOV_H_RAD, H, W, distort_image, wide_camera
+
+ROBOTS = Path(__file__).parents[2] / "skeye/robots"
+CAMERA_FRD = np.array([0.0, 0.0, 0.035])
+K = intrinsics(W, H, FOV_H_RAD)
+K_WIDE, W_WIDE, H_WIDE, FOV_WIDE = wide_camera(K, W, H, 1.5)
+
+
+def _poses() -> list[tuple[float, float, float, float, float, float]]:
+    """(camera height, north, east, roll, pitch, yaw): the board in the centre, the corners and
+    the edges of the image, and tilted views (OpenCV's advice for pinning down distortion)."""
+    f = float(K[0, 0])
+    h = 0.42
+    out = []
+    for u, v, yaw in ((400, 300, 0.0), (250, 180, 0.3), (550, 180, -0.3), (250, 420, -0.3),
+                      (550, 420, 0.3), (400, 170, 1.57), (400, 430, 1.57), (230, 300, 0.0),
+                      (570, 300, 0.0)):
+        # A level camera at (north, east) sees the board's centre at (u, v).
+        out.append((h, (v - (H - 1) / 2) * h / f, -(u - (W - 1) / 2) * h / f, 0.0, 0.0, yaw))
+    for roll, pitch in ((0.3, 0.0), (-0.3, 0.0), (0.25, 0.25), (-0.25, -0.25), (0.2, -0.2)):
+        out.append((0.45, 0.0, 0.0, roll, pitch, 0.5))
+    return out
+
+
+def wide_robot(tmp_path: Path) -> Path:
+    """A hummingbird whose Down camera has the reference focal length over 1.5x the image."""
+    text = (ROBOTS / "hummingbird.toml").read_text()
+    text = text.replace('name = "hummingbird"', 'name = "widecam"', 1)
+    old = f"width = {W}\nheight = {H}\nfov_h_rad = {FOV_H_RAD}"
+    assert old in text
+    text = text.replace(old, f"width = {W_WIDE}\nheight = {H_WIDE}\nfov_h_rad = {FOV_WIDE!r}")
+    (tmp_path / "widecam.toml").write_text(text)
+    return tmp_path
+
+
+@contextmanager
+def checkerboard_sim(robot_dir: Path) -> Iterator[tuple[int, int]]:
+    """The checkerboard world in lockstep, with its image server: (control port, image port)."""
+    sim = Simulation(load_world("checkerboard"), seed=1, robot_dirs=(robot_dir,),
+                     offscreen_size=(W_WIDE, H_WIDE))
+    buffer = FrameBuffer()
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        CameraSystem(sim, buffer, synchronous=True),
+        ControlServer(runner, port=0) as control,
+        ImageServer(buffer, port=0) as images,
+    ):
+        yield control.port, images.port
+
+
+def fetch_frame(control_port: int, image_port: int, name: str,
+                pose: tuple[float, float, float, float, float, float]) -> np.ndarray:
+    """Spawn a wide-camera robot with its camera at the pose, step once, fetch its frame."""
+    height, north, east, roll, pitch, yaw = pose
+    rot = frames.quat_to_matrix(frames.euler_to_quat(roll, pitch, yaw))
+    off = rot @ CAMERA_FRD
+    body = [float(v) for v in
+            (north - off[0], east - off[1], -PAD_SURFACE_HEIGHT_M - height - off[2])]
+    c = LineClient(control_port)
+    try:
+        c.expect("NFO")
+        answer = c.answer(
+            f"INIT {{ClassName widecam}} {{Name {name}}} "
+            f"{{Location {body[0]!r},{body[1]!r},{body[2]!r}}} {{Rotation {roll},{pitch},{yaw}}}",
+            "INIT")
+        assert answer.type == "RES", answer
+        c.step(1)  # frame 1 is rendered from the state at the first step
+        with ImageClient("127.0.0.1", image_port) as img:
+            img.select_camera(f"{name}/Down")
+            img.set_format("png")
+            bgr = frame_image(img.get_frame())
+    finally:
+        c.close()  # the robot leaves the world with its connection
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+
+
+@pytest.fixture(scope="module")
+def ideal_frames(tmp_path_factory: pytest.TempPathFactory) -> list[np.ndarray]:
+    robot_dir = wide_robot(tmp_path_factory.mktemp("robots"))
+    with checkerboard_sim(robot_dir) as (control_port, image_port):
+        return [fetch_frame(control_port, image_port, f"C{i}", pose)
+                for i, pose in enumerate(_poses())]
+
+
+def _write(tmp_path: Path, grey_frames: list[np.ndarray]) -> list[str]:
+    names = []
+    for i, grey in enumerate(grey_frames):
+        name = str(tmp_path / f"board{i:02d}.png")
+        assert cv2.imwrite(name, grey)
+        names.append(name)
+    return names
+
+
+@pytest.mark.parametrize("k1", [-0.2, 0.1])
+def test_calibrate_recovers_the_lens(ideal_frames: list[np.ndarray], tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str], k1: float) -> None:
+    dist = (k1, 0.0, 0.0, 0.0, 0.0)
+    shots = [distort_image(g, K_WIDE, K, dist, (W, H)) for g in ideal_frames]
+    out = tmp_path / "camera.toml"
+    status = main(["calibrate", *_write(tmp_path, shots), "--board", "9x6", "--square-mm", "25",
+                   "--out", str(out)])
+    assert status == 0, capsys.readouterr().err
+    cal = load_calibration(out)
+    f = float(K[0, 0])
+    assert abs(cal.fx - f) / f <= 0.01, (cal.fx, f)
+    assert abs(cal.fy - f) / f <= 0.01, (cal.fy, f)
+    assert abs(cal.dist[0] - k1) <= 0.02, cal.dist
+    assert (cal.width_px, cal.height_px) == (W, H)
+    assert cal.rms_px is not None and cal.rms_px < 0.5
+    assert cal.images is not None and cal.images >= 10
+    assert cal.board is not None and cal.board.label == "9x6"
+    assert math.isclose(cal.board.square_m, 0.025)
+    # The file is plain TOML with the documented keys.
+    data = tomllib.loads(out.read_text())
+    assert set(data["camera"]) == {"width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px",
+                                   "k1", "k2", "p1", "p2", "k3"}
+    assert "rms_reprojection_px" in data["calibration"]
+
+
+def test_calibrate_refuses_bad_input(ideal_frames: list[np.ndarray], tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    names = _write(tmp_path, ideal_frames[:4])
+    out = str(tmp_path / "camera.toml")
+    run: Callable[..., int] = lambda *a: main(["calibrate", *a, "--out", out])  # noqa: E731
+    assert run(*names, "--board", "9by6") == 2
+    assert "COLSxROWS" in capsys.readouterr().err
+    assert run(*names, "--board", "9x6", "--square-mm", "-3") == 2
+    assert "--square-mm" in capsys.readouterr().err
+    assert run(str(tmp_path / "missing.png"), "--board", "9x6") == 2
+    assert "no such image" in capsys.readouterr().err
+    # The wrong corner count finds no board anywhere.
+    assert run(*names, "--board", "8x6") == 2
+    assert "found in 0 of 4" in capsys.readouterr().err
+    (tmp_path / "notes.txt").write_text("not an image")
+    assert run(str(tmp_path / "notes.txt"), "--board", "9x6") == 2
+    assert "cannot read image" in capsys.readouterr().err
+    assert not Path(out).exists()
