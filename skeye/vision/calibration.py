@@ -155,21 +155,21 @@ class CameraCalibration:
             f"format = {FORMAT_VERSION}",
             "",
             "[camera]",
-            f"width_px = {self.width_px}",
-            f"height_px = {self.height_px}",
-            f"fx_px = {self.fx!r}",
-            f"fy_px = {self.fy!r}",
-            f"cx_px = {self.cx!r}",
-            f"cy_px = {self.cy!r}",
+            f"width_px = {int(self.width_px)}",
+            f"height_px = {int(self.height_px)}",
+            f"fx_px = {float(self.fx)!r}",
+            f"fy_px = {float(self.fy)!r}",
+            f"cx_px = {float(self.cx)!r}",
+            f"cy_px = {float(self.cy)!r}",
             *(f"{n} = {float(v)!r}" for n, v in zip(DIST_NAMES, self.dist, strict=True)),
         ]
         if self.rms_px is not None or self.board is not None or self.images is not None:
             lines += ["", "[calibration]"]
             if self.rms_px is not None:
-                lines.append(f"rms_reprojection_px = {self.rms_px!r}")
+                lines.append(f"rms_reprojection_px = {float(self.rms_px)!r}")
             if self.board is not None:
                 lines.append(f'board = "{self.board.label}"')
-                lines.append(f"square_mm = {self.board.square_m * 1000.0!r}")
+                lines.append(f"square_mm = {float(self.board.square_m) * 1000.0!r}")
             if self.images is not None:
                 lines.append(f"images = {self.images}")
         return "\n".join(lines) + "\n"

@@ -3,7 +3,8 @@
 How this works: :func:`register` adds the subcommands to the lead's argparse subparsers; each
 sets ``func(args) -> int``. ``vision detect`` runs the same :func:`detect` the pilot calls and
 prints one JSON object; without ``--fov`` it takes the field of view of the ``--robot`` file's
-camera and says so on stderr. It exits 0 whether or not a pad was found and 2 for bad
+camera and says so on stderr; ``--calibration camera.toml`` (``skeye calibrate``) gives the
+camera matrix and lens distortion instead. It exits 0 whether or not a pad was found and 2 for bad
 input, with a message on stderr.
 """
 
@@ -55,6 +56,16 @@ def cmd_pad(args: argparse.Namespace) -> int:
 
 def cmd_detect(args: argparse.Namespace) -> int:
     """Detect the pad in one image file and print the estimate as JSON."""
+    calibration = None
+    if args.calibration is not None:
+        from skeye.vision.calibration import load_calibration
+
+        try:
+            calibration = load_calibration(args.calibration)
+        except ConfigError as exc:
+            return _fail(str(exc))
+        if args.fov is None:  # not used for the geometry: the calibration's matrix is
+            args.fov = calibration.fov_h_rad
     if args.fov is None:  # the camera the frame most likely came from: the robot file's
         from skeye.robots.config import camera_fov_h_rad
 
@@ -78,7 +89,8 @@ def cmd_detect(args: argparse.Namespace) -> int:
     if image is None:
         return _fail(f"cannot read image (not a supported image format?): {args.image}")
     try:
-        est = detect(image, args.fov, pad=pad, roll_rad=args.roll, pitch_rad=args.pitch)
+        est = detect(image, args.fov, pad=pad, roll_rad=args.roll, pitch_rad=args.pitch,
+                     calibration=calibration)
     except LocalProtocolError as exc:
         return _fail(str(exc))
     out: dict[str, Any] = est.to_json_dict()
@@ -116,4 +128,7 @@ def register(subparsers: Any) -> None:
     d.add_argument("--roll", type=float, default=None, help="vehicle roll, rad (with --pitch)")
     d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
     d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
+    d.add_argument("--calibration", default=None, metavar="CAMERA_TOML",
+                   help="the camera's calibration from `skeye calibrate` (replaces --fov; the "
+                   "lens distortion is corrected)")
     d.set_defaults(func=cmd_detect)

@@ -6,7 +6,10 @@ How this works:
    moved by the pure-rotation homography ``K R K^-1`` into a virtual level camera (same
    intrinsics, image plane parallel to the pad). There the rings are exact circles whose common
    centre is the projection of the pad's centre. Without roll and pitch the camera is taken as
-   level (the homography is the identity).
+   level (the homography is the identity). With a camera calibration (``skeye calibrate``) the
+   level camera is the undistorted one: image points reach it through ``cv2.undistortPoints``
+   and level points go back through the lens model, so only the points looked at are
+   undistorted, never the whole image (:class:`skeye.vision.level_view.LevelView`).
 2. **Coarse search.** The grey image is halved (area average), thresholded (Otsu; an adaptive
    threshold is tried when Otsu finds nothing), and its contours are taken with their two-level
    hierarchy. A white ring is a white component whose largest hole is a roughly concentric
@@ -46,12 +49,12 @@ import cv2
 import numpy as np
 
 from skeye.errors import LocalProtocolError
+from skeye.vision.calibration import CameraCalibration
 from skeye.vision.camera import (
     level_offset_to_body,
 )
 from skeye.vision.level_view import (
     LevelView,
-    conic_ellipse,
     edge_points,
     fit_circles,
     to_grey,
@@ -334,6 +337,7 @@ def detect(
     pad: PadDefinition = SKEYE_4,
     roll_rad: float | None = None,
     pitch_rad: float | None = None,
+    calibration: CameraCalibration | None = None,
 ) -> PadEstimate:
     """Find the pad in one frame from the downward camera.
 
@@ -344,6 +348,9 @@ def detect(
         roll_rad, pitch_rad: the vehicle's attitude (body FRD, ZYX; see
             :mod:`skeye.vision.camera`), both or neither. When given, the tilt is compensated
             and offsets are in the level frame; when not, the camera is taken as level.
+        calibration: the camera's calibration (``skeye calibrate``). When given, its camera
+            matrix and lens distortion replace the ideal pinhole of ``fov_h_rad``: the points
+            the detector uses are undistorted, the image itself is not.
 
     Returns:
         A :class:`PadEstimate`; ``found`` is False (with every figure None) unless at least
@@ -356,7 +363,7 @@ def detect(
             raise LocalProtocolError(f"{name} must be finite and within (-pi/2, pi/2), got {value}")
     grey = to_grey(image)
     tilt = roll_rad is not None
-    view = LevelView(grey, fov_h_rad, roll_rad or 0.0, pitch_rad or 0.0, tilt)
+    view = LevelView(grey, fov_h_rad, roll_rad or 0.0, pitch_rad or 0.0, tilt, calibration)
 
     h, w = grey.shape
     if min(h, w) >= 200:
@@ -468,7 +475,7 @@ def _finish(
     for ring_no in rings:
         ring = pad.rings[ring_no - 1]
         for name, r_m in (("outer", ring.outer_m), ("inner", ring.inner_m)):
-            c, axes, ang = conic_ellipse(view.hom, cx, cy, scale * r_m)
+            c, axes, ang = view.image_ellipse(cx, cy, scale * r_m)
             ellipses.append(BorderEllipse(ring_no, name, c, axes, ang))
     rings_term = 1.0 - 0.5 ** len(rings)
     fit_term = 1.0 / (1.0 + (rms / 0.5) ** 2)

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import LocalProtocolError
+from skeye.vision.calibration import CameraCalibration, undistort_points
 from skeye.vision.camera import (
     camera_to_level,
     focal_length_px,
@@ -30,22 +31,48 @@ SAMPLES_PER_RAY = 13
 STEP_FRACTION = 0.5  # of the local contrast, between the two halves of a ray's window
 
 
-class LevelView:
-    """One frame's image and camera geometry; maps between image and level-view pixels."""
+_OUTSIDE = -1.0e4  # an image coordinate far outside any frame
 
-    def __init__(self, grey: np.ndarray, fov_h_rad: float, roll: float, pitch: float, tilt: bool):
+
+class LevelView:
+    """One frame's image and camera geometry; maps between image and level-view pixels.
+
+    Without a calibration the camera is the ideal pinhole of ``fov_h_rad`` (the simulator's)
+    and the level view is the homography ``K R K^-1`` of the image. With one, the level view is
+    an undistorted pinhole camera with the calibration's principal point and square pixels of
+    focal length ``fx``: image points go there by ``cv2.undistortPoints`` (with the level
+    rotation), level points come back through OpenCV's forward distortion model - only the
+    points the detector looks at, never the whole image.
+    """
+
+    def __init__(self, grey: np.ndarray, fov_h_rad: float, roll: float, pitch: float, tilt: bool,
+                 calibration: CameraCalibration | None = None):
         self.grey = grey
         self.flat = grey.reshape(-1)
         self.h, self.w = grey.shape
+        self.cal = calibration
+        self.hom: np.ndarray | None = None  # image -> level (pinhole camera with tilt only)
+        self.hom_inv: np.ndarray | None = None
+        if calibration is not None:
+            calibration.check_size(self.w, self.h)
+            self.f = calibration.fx
+            self.cx, self.cy = calibration.cx, calibration.cy
+            rot = camera_to_level(roll, pitch) if tilt else np.eye(3)
+            k_level = np.array(((self.f, 0.0, self.cx), (0.0, self.f, self.cy), (0.0, 0.0, 1.0)))
+            self._rot = rot
+            self._k_level = k_level
+            self._k = calibration.camera_matrix()
+            self._dist = calibration.dist_coeffs()
+            self._level_to_ray = rot.T @ np.linalg.inv(k_level)
+            self._r_max = calibration.max_radius()
+            return
         self.f = focal_length_px(self.w, fov_h_rad)
         self.cx, self.cy = principal_point_px(self.w, self.h)
         if tilt:
             k = intrinsics(self.w, self.h, fov_h_rad)
-            self.hom: np.ndarray | None = k @ camera_to_level(roll, pitch) @ np.linalg.inv(k)
-            self.hom_inv: np.ndarray | None = np.linalg.inv(self.hom)
-        else:
-            self.hom = None
-            self.hom_inv = None
+            hom = k @ camera_to_level(roll, pitch) @ np.linalg.inv(k)
+            self.hom = hom
+            self.hom_inv = np.linalg.inv(hom)
 
     @staticmethod
     def _apply(hom: np.ndarray | None, x: np.ndarray, y: np.ndarray) -> tuple[Any, Any]:
@@ -58,10 +85,44 @@ class LevelView:
         )
 
     def to_level(self, x: np.ndarray, y: np.ndarray) -> tuple[Any, Any]:
-        return self._apply(self.hom, x, y)
+        if self.cal is None:
+            return self._apply(self.hom, x, y)
+        xa, ya = np.asarray(x, np.float64), np.asarray(y, np.float64)
+        pts = np.stack((xa.ravel(), ya.ravel()), axis=1).reshape(-1, 1, 2)
+        out = undistort_points(pts, self._k, self._dist, self._rot, self._k_level).reshape(-1, 2)
+        return out[:, 0].reshape(xa.shape), out[:, 1].reshape(ya.shape)
 
     def to_image(self, x: np.ndarray, y: np.ndarray) -> tuple[Any, Any]:
-        return self._apply(self.hom_inv, x, y)
+        if self.cal is None:
+            return self._apply(self.hom_inv, x, y)
+        m = self._level_to_ray
+        xa, ya = np.asarray(x, np.float64), np.asarray(y, np.float64)
+        z = m[2, 0] * xa + m[2, 1] * ya + m[2, 2]
+        front = z > 1e-9
+        z = np.where(front, z, 1.0)
+        xn = (m[0, 0] * xa + m[0, 1] * ya + m[0, 2]) / z
+        yn = (m[1, 0] * xa + m[1, 1] * ya + m[1, 2]) / z
+        # Past the radius where the distortion polynomial folds back, a ray is not in the image.
+        valid = front & (xn * xn + yn * yn < self._r_max * self._r_max)
+        u, v = self.cal.distort_normalized(np.where(valid, xn, 0.0), np.where(valid, yn, 0.0))
+        return np.where(valid, u, _OUTSIDE), np.where(valid, v, _OUTSIDE)
+
+    def image_ellipse(
+        self, cx: float, cy: float, r: float
+    ) -> tuple[tuple[float, float], tuple[float, float], float]:
+        """The image ellipse of a level-view circle: centre, (major, minor) semi-axes, angle.
+
+        Exact (a conic) for the pinhole camera; with lens distortion the image curve is no
+        ellipse, and this is the least-squares ellipse through 72 of its points.
+        """
+        if self.cal is None:
+            return conic_ellipse(self.hom, cx, cy, r)
+        t = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
+        u, v = self.to_image(cx + r * np.cos(t), cy + r * np.sin(t))
+        pts = np.column_stack((u, v)).astype(np.float32)
+        (ex, ey), (a, b), deg = cv2.fitEllipse(pts)
+        angle = math.radians(deg) if a >= b else math.radians(deg) + math.pi / 2.0
+        return (float(ex), float(ey)), (max(a, b) / 2.0, min(a, b) / 2.0), angle % math.pi
 
     def sample(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bilinear grey values at image points (float), and whether each point is inside."""

@@ -139,3 +139,27 @@ def test_pad_command_tiles_over_paper(tmp_path, capsys):
     assert out.read_bytes().startswith(b"%PDF")
     assert run(["pad", "--out", str(tmp_path / "pad.png"), "--paper", "a4"]) == 2
     assert "--paper writes a PDF of sheets" in capsys.readouterr().err
+
+
+def test_detect_takes_a_calibration_file(tmp_path, capsys):
+    """A rendered pad seen through k1 = -0.2: --calibration gives the true height back."""
+    from skeye.vision.calibration import CameraCalibration
+    from skeye.vision.camera import intrinsics
+    from tests.vision.helpers import distort_image, wide_camera
+
+    k = intrinsics(W, H, FOV_H_RAD)
+    k_wide, w2, h2, fov_wide = wide_camera(k, W, H, 1.5)
+    ideal = render_pad_view(SKEYE_4, w2, h2, fov_wide, 1.0, (0.05, -0.1))
+    dist = (-0.2, 0.0, 0.0, 0.0, 0.0)
+    path = tmp_path / "lens.png"
+    cv2.imwrite(str(path), distort_image(ideal, k_wide, k, dist, (W, H)))
+    cal = tmp_path / "camera.toml"
+    CameraCalibration(W, H, k[0, 0], k[1, 1], k[0, 2], k[1, 2], dist).save(cal)
+    assert run(["vision", "detect", str(path), "--calibration", str(cal)]) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert out["found"] and out["height_m"] == pytest.approx(1.0, rel=0.002)
+    assert "--fov not given" not in captured.err
+    (tmp_path / "bad.toml").write_text("[camera]\nfx_px = 3\n")
+    assert run(["vision", "detect", str(path), "--calibration", str(tmp_path / "bad.toml")]) == 2
+    assert "missing required key" in capsys.readouterr().err

@@ -1,0 +1,87 @@
+"""camera.toml and the lens model: round trips, errors naming the key, OpenCV agreement."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from skeye.errors import ConfigError, InvalidArgument
+from skeye.vision.calibration import Board, CameraCalibration, load_calibration, parse_board
+from skeye.vision.level_view import LevelView
+
+CAL = CameraCalibration(800, 600, 521.3, 520.9, 401.2, 298.7,
+                        (-0.21, 0.035, 0.0007, -0.0004, -0.002), 0.083, Board(9, 6, 0.025), 14)
+
+
+def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
+    path = tmp_path / "camera.toml"
+    CAL.save(path)
+    assert load_calibration(path) == CAL
+    bare = CameraCalibration(640, 480, 500.0, 500.0, 319.5, 239.5, (0.0,) * 5)
+    bare.save(path)
+    assert load_calibration(path) == bare
+    assert "[calibration]" not in path.read_text()
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "problem"),
+    [
+        ("fx_px = 521.3", "fx_px = -5.0", "fx and fy must be positive"),
+        ("fx_px = 521.3", 'fx_px = "wide"', "[camera].fx_px: must be a finite number"),
+        ("width_px = 800", "width_px = 800.5", "[camera].width_px: must be an integer"),
+        ("width_px = 800\n", "", "missing required key width_px"),
+        ("k1 = -0.21", "kappa = -0.21", "unknown key(s) ['kappa']"),
+        ('board = "9x6"', 'board = "nine"', "COLSxROWS"),
+        ("format = 1", "format = 7", "format must be 1"),
+        ("[camera]", "[lens]", "unknown key(s) ['lens']"),
+    ],
+)
+def test_bad_files_name_the_key(tmp_path: Path, old: str, new: str, problem: str) -> None:
+    text = CAL.to_toml()
+    assert old in text
+    path = tmp_path / "camera.toml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(ConfigError) as err:
+        load_calibration(path)
+    assert str(path) in str(err.value) and problem in str(err.value), err.value
+
+
+def test_unreadable_and_non_toml_files(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read calibration file"):
+        load_calibration(tmp_path / "none.toml")
+    (tmp_path / "x.toml").write_text("fx = = 3")
+    with pytest.raises(ConfigError, match="not a TOML file"):
+        load_calibration(tmp_path / "x.toml")
+
+
+def test_board_parsing() -> None:
+    assert parse_board("9x6") == (9, 6) and parse_board("7X5") == (7, 5)
+    for bad in ("9", "9x", "ax6", "9x6x2", "-9x6"):
+        with pytest.raises(InvalidArgument):
+            parse_board(bad)
+    with pytest.raises(InvalidArgument):
+        Board(1, 6, 0.025)
+
+
+def test_forward_model_is_opencvs() -> None:
+    rng = np.random.default_rng(4)
+    pts = np.column_stack((rng.uniform(-0.7, 0.7, 200), rng.uniform(-0.5, 0.5, 200), np.ones(200)))
+    ref, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), CAL.camera_matrix(),
+                               CAL.dist_coeffs())
+    u, v = CAL.distort_normalized(pts[:, 0], pts[:, 1])
+    assert np.column_stack((u, v)) == pytest.approx(ref.reshape(-1, 2), abs=1e-6)
+
+
+def test_level_view_maps_there_and_back() -> None:
+    grey = np.zeros((600, 800), np.uint8)
+    view = LevelView(grey, 1.309, 0.12, -0.08, True, CAL)
+    u, v = np.meshgrid(np.linspace(0, 799, 9), np.linspace(0, 599, 7))
+    lx, ly = view.to_level(u, v)
+    bu, bv = view.to_image(lx, ly)
+    assert np.abs(bu - u).max() < 1e-4 and np.abs(bv - v).max() < 1e-4
+    # Far outside the lens's valid radius a level point is not in the image.
+    fx, fy = view.to_image(np.array([1e5]), np.array([0.0]))
+    assert fx[0] < 0 and fy[0] < 0
