@@ -88,6 +88,18 @@ def run(args: argparse.Namespace) -> int:
         if problem:
             print(f"skeye pilot: {problem}", flush=True)
             return 2
+    calibration = None
+    if args.calibration is not None:
+        from skeye.vision.calibration import load_calibration
+
+        if args.images is None:
+            print("skeye pilot: --calibration is for the pad vision: it needs --images", flush=True)
+            return 2
+        try:
+            calibration = load_calibration(args.calibration)
+        except ConfigError as exc:
+            print(f"skeye pilot: --calibration: {exc}", flush=True)
+            return 2
     lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
@@ -124,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
             )
             vision = None
             if args.images is not None:
-                vision = pad_vision_factory(sim, robot, args.camera)
+                vision = pad_vision_factory(sim, robot, args.camera, calibration)
             lockstep = sim.mode == "lockstep"
             tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
             video = None
@@ -178,15 +190,26 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down") -> Any:
-    """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator."""
+def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
+                       calibration: Any = None) -> Any:
+    """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator
+    and the camera calibration (``skeye calibrate``) when one is given; a calibration for
+    another image size than the camera's is refused here, before the vision starts."""
     from skeye.pilot.vision import PadVision
 
     fov_h_rad = camera_fov_rad(sim, camera)
     lockstep = sim.mode == "lockstep"
+    if calibration is not None:
+        conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
+        width, height = conf.get_float("Width"), conf.get_float("Height")
+        if (width, height) != (calibration.width_px, calibration.height_px):
+            raise ConfigError(
+                f"--calibration is for {calibration.width_px}x{calibration.height_px} images, "
+                f"camera {camera} gives {width:g}x{height:g}: calibrate it at that resolution")
 
     def make(boards: Any, lock: Any) -> PadVision:
-        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep)
+        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
+                         calibration=calibration)
 
     return make
 
@@ -228,6 +251,13 @@ def register(subparsers: Any) -> None:
         help="image server address (e.g. 127.0.0.1:5003): enables landing-pad vision",
     )
     p.add_argument("--camera", default="Down", help="the downward camera's name")
+    p.add_argument(
+        "--calibration",
+        default=None,
+        metavar="CAMERA_TOML",
+        help="the downward camera's calibration from `skeye calibrate` (camera matrix and lens "
+        "distortion for the pad detector; default: the ideal pinhole of the camera's FOV)",
+    )
     p.add_argument(
         "--video-port",
         type=int,

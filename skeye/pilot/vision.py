@@ -44,6 +44,7 @@ from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadObservation
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
 from skeye.pilot.video_server import CameraFrame
+from skeye.vision.calibration import CameraCalibration
 from skeye.vision.detector import PadEstimate, detect
 from skeye.vision.pad import SKEYE_4, PadDefinition
 from skeye.wire.packets import NavState, PadAction
@@ -105,6 +106,7 @@ class PadVision:
         lockstep: bool = False,
         lockstep_wait_s: float = 5.0,
         queue_size: int = 4,
+        calibration: CameraCalibration | None = None,
     ) -> None:
         if queue_size < 1 or not lockstep_wait_s > 0:
             raise InvalidArgument(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
@@ -113,6 +115,7 @@ class PadVision:
         self.robot = robot
         self.lock = lock
         self.fov_h_rad = fov_h_rad
+        self.calibration = calibration  # skeye calibrate's camera.toml; None: ideal pinhole
         self.pad = pad
         self.base_params = params or PadHoldParams()
         self.law = PadHoldLaw(self.base_params)
@@ -229,7 +232,8 @@ class PadVision:
         roll, pitch = (ins.rpy_rad[0], ins.rpy_rad[1]) if ins is not None else (0.0, 0.0)
         t0 = time.perf_counter()
         grey = cv2.cvtColor(image.bgr, cv2.COLOR_BGR2GRAY)
-        est = detect(grey, self.fov_h_rad, self.pad, roll_rad=roll, pitch_rad=pitch)
+        est = detect(grey, self.fov_h_rad, self.pad, roll_rad=roll, pitch_rad=pitch,
+                     calibration=self.calibration)
         detect_ms = (time.perf_counter() - t0) * 1e3
         self.stats.frames += 1
         video = self._video

@@ -4,11 +4,19 @@ from __future__ import annotations
 
 import argparse
 import io
+import threading
 
+import pytest
+
+from skeye.control.connection import connect
+from skeye.errors import ConfigError
 from skeye.link import cli as link_cli
 from skeye.pilot import cli as pilot_cli
 from skeye.pilot.server import PilotServer
+from skeye.pilot.vision import PadVision
+from skeye.vision.calibration import CameraCalibration
 from tests.pilot.fake_airframe import FakeAirframe
+from tests.sim.conftest import running_sim
 
 
 def parser() -> argparse.ArgumentParser:
@@ -105,3 +113,28 @@ def test_pilot_names_a_taken_video_port(capsys):
         assert pilot_cli.run(args) == 1
     out = capsys.readouterr().out
     assert f"port {port}" in out and "--video-port" in out and "video" in out
+
+
+def test_pilot_calibration_is_checked_before_anything_starts(capsys, tmp_path):
+    base = ["pilot", "--sim", "127.0.0.1:1", "--port", "0"]
+    args = parser().parse_args([*base, "--calibration", str(tmp_path / "camera.toml")])
+    assert pilot_cli.run(args) == 2
+    assert "--calibration is for the pad vision: it needs --images" in capsys.readouterr().out
+    (tmp_path / "camera.toml").write_text("[camera]\nwidth_px = 800\n")
+    args = parser().parse_args([*base, "--images", "127.0.0.1:1", "--calibration", str(tmp_path / "camera.toml")])
+    assert pilot_cli.run(args) == 2
+    out = capsys.readouterr().out
+    assert "--calibration" in out and "missing required key" in out
+
+
+def test_pilot_hands_the_calibration_to_the_detector():
+    """Against a real simulator: the camera's size is checked, and the vision keeps it."""
+    good = CameraCalibration(800, 600, 521.0, 521.0, 399.5, 299.5, (-0.2, 0.0, 0.0, 0.0, 0.0))
+    small = CameraCalibration(640, 480, 420.0, 420.0, 319.5, 239.5, (0.0,) * 5)
+    with running_sim() as server, connect(f"127.0.0.1:{server.port}") as sim:
+        robot = sim.spawn("hummingbird", start="Pad1")
+        with pytest.raises(ConfigError, match="640x480 images, camera Down gives 800x600"):
+            pilot_cli.pad_vision_factory(sim, robot, "Down", small)
+        make = pilot_cli.pad_vision_factory(sim, robot, "Down", good)
+        vision = make(None, threading.Lock())
+        assert isinstance(vision, PadVision) and vision.calibration is good
