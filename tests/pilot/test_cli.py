@@ -121,7 +121,8 @@ def test_pilot_calibration_is_checked_before_anything_starts(capsys, tmp_path):
     assert pilot_cli.run(args) == 2
     assert "--calibration is for the pad vision: it needs --images" in capsys.readouterr().out
     (tmp_path / "camera.toml").write_text("[camera]\nwidth_px = 800\n")
-    args = parser().parse_args([*base, "--images", "127.0.0.1:1", "--calibration", str(tmp_path / "camera.toml")])
+    args = parser().parse_args([*base, "--images", "127.0.0.1:1",
+                                "--calibration", str(tmp_path / "camera.toml")])
     assert pilot_cli.run(args) == 2
     out = capsys.readouterr().out
     assert "--calibration" in out and "missing required key" in out
