@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -13,7 +14,8 @@ from tests.control.conftest import sim_running
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
-NEEDS_IMAGES = {"camera.py"}
+NEEDS_IMAGES = {"camera.py", "capture_checkerboard.py"}
+WORLDS = {"capture_checkerboard.py": "checkerboard"}
 
 
 def test_there_are_examples() -> None:
@@ -29,9 +31,10 @@ def test_takeoff_and_landing_is_under_ten_lines() -> None:
 
 @pytest.mark.parametrize("script", EXAMPLES, ids=lambda p: p.name)
 def test_example_runs(script: Path, tmp_path: Path) -> None:
-    with sim_running(images=script.name in NEEDS_IMAGES) as handle:
+    with sim_running(images=script.name in NEEDS_IMAGES,
+                     world=WORLDS.get(script.name, "pad")) as handle:
         env = dict(os.environ, SKEYE_SIM=handle.address, PYTHONPATH=str(ROOT),
-                   SKEYE_CAMERA_OUT=str(tmp_path / "camera.png"))
+                   SKEYE_CAMERA_OUT=str(tmp_path / "camera.png"), SKEYE_BOARD_DIR=str(tmp_path))
         if handle.images is not None:
             env["SKEYE_IMAGES"] = handle.images
         done = subprocess.run(
@@ -42,3 +45,13 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
     if script.name == "camera.py":
         assert (tmp_path / "camera.png").stat().st_size > 1000
         assert "(600, 800, 3)" in done.stdout
+    if script.name == "capture_checkerboard.py":  # the frames calibrate the ideal camera
+        from skeye.cli import main
+        from skeye.vision.calibration import load_calibration
+
+        boards = sorted(str(p) for p in tmp_path.glob("board*.png"))
+        assert len(boards) == 14, done.stdout
+        assert main(["calibrate", *boards, "--out", str(tmp_path / "camera.toml")]) == 0
+        cal = load_calibration(tmp_path / "camera.toml")
+        f = 400 / math.tan(1.309 / 2)
+        assert abs(cal.fx / f - 1) < 0.01 and abs(cal.dist[0]) < 0.02, cal
