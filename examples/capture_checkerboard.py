@@ -42,7 +42,8 @@ for i, (north, east, roll, pitch, yaw) in enumerate(poses):
         cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
         cy, sy = math.cos(yaw), math.sin(yaw)
         axis = (cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr)
-        body = tuple(c - CAMERA_DOWN_M * a for c, a in zip((north, east, -0.001 - H_M), axis))
+        camera = (north, east, -0.001 - H_M)
+        body = tuple(c - CAMERA_DOWN_M * a for c, a in zip(camera, axis, strict=True))
         copter = sim.spawn("hummingbird", name=f"Cal{i}", location_ned_m=body,
                            rotation_rpy_rad=(roll, pitch, yaw))
         copter.camera.wait_next()
