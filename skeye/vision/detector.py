@@ -22,14 +22,17 @@ How this works:
    pad within a tolerance). Identified rings must be concentric and agree on the scale
    (pixels per metre); the largest agreeing group wins. From its centre and scale the other
    borders' radii are predicted and looked for along rays that stay inside the image, so rings
-   cut by the image edge still count when both their borders are found where predicted.
+   cut by the image edge still count when both their borders are found where predicted (by at
+   least half of those rays: motion blur wipes out the rays along the motion).
 5. **Joint fit.** All border points of the identified rings are fitted together (Gauss-Newton)
    to concentric circles of radii ``s * r_m``: a common centre and one scale ``s``. Larger
    borders carry more weight, as they should (blur and pixel effects shrink small ones most).
    Height ``h = f / s`` (``f * r_m / r_px`` combined over all borders); the offset follows from
    the centre. One round of outlier rejection follows; a ring one of whose borders keeps fewer
    than five points after it (the outermost ring, seen only in the image's corners when the
-   camera is low) leaves the fit instead of failing the detection.
+   camera is low) leaves the fit instead of failing the detection. So does a ring one of whose
+   borders disagrees with the joint fit (bias or scatter over its limit: blur shifts a thin
+   ring's borders, a rolling shutter shears a large ring), the worst first, while two remain.
 
 The geometry of steps 1 and 3 (level view, border points, circle fits) is
 :mod:`skeye.vision.level_view`.
@@ -69,6 +72,7 @@ _FINAL_RAYS = 64
 _MAX_CANDIDATES = 24
 _MIN_RING_PX = 4.0  # outer radius below which a ring is not looked at
 _MIN_BORDER_PX = 2.0  # predicted border radius below which it is not looked for
+_CONFIRM_SHARE = 0.5  # of a border's in-image rays that must find it where predicted
 
 
 @dataclass(frozen=True)
@@ -417,7 +421,7 @@ def _finish(
     dist = np.hypot(pts[..., 0] - cx, pts[..., 1] - cy)
     near = ok & (np.abs(dist - r_px[look, None]) <= (0.75 + 0.015 * r_px[look, None]))
     n_near = near.sum(axis=1)
-    confirmed = (n_near >= 10) & (n_near >= 0.7 * inside.sum(axis=1))
+    confirmed = (n_near >= 10) & (n_near >= _CONFIRM_SHARE * inside.sum(axis=1))
     per_ring = np.bincount(ring_of[look][confirmed], minlength=len(pad.rings) + 1)
     rings = [i for i in range(1, len(pad.rings) + 1) if per_ring[i] == 2]
     if len(rings) < 2:
@@ -446,23 +450,42 @@ def _finish(
         all_pts, all_rm, border_idx = all_pts[mask], all_rm[mask], border_idx[mask]
         if mask.sum() < 20:
             return NOT_FOUND
-    cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale, iters=2)
-    if not (scale > 0 and math.isfinite(cx) and math.isfinite(cy)):
-        return NOT_FOUND
-    # Every border used must agree with the joint model on its own.
-    counts = np.bincount(border_idx, minlength=look.size)
-    bias = np.bincount(border_idx, weights=res, minlength=look.size) / np.maximum(counts, 1)
-    used = use & (counts > 0)
-    if (counts[use] < 5).any():
-        return NOT_FOUND
+    # Every border used must agree with the joint model on its own. A ring one of whose
+    # borders does not (blur or lens shift a thin ring's borders; a rolling shutter shears
+    # a large ring) leaves the fit, the worst first, while two rings remain; a clean frame
+    # never gets here with a disagreeing border, so its fit is unchanged.
+    while True:
+        cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale, iters=2)
+        if not (scale > 0 and math.isfinite(cx) and math.isfinite(cy)):
+            return NOT_FOUND
+        counts = np.bincount(border_idx, minlength=look.size)
+        used = use & (counts > 0)
+        if (counts[use] < 5).any():
+            return NOT_FOUND
+        n = np.maximum(counts, 1)
+        bias = np.bincount(border_idx, weights=res, minlength=look.size) / n
+        sq = np.bincount(border_idx, weights=res * res, minlength=look.size) / n
+        r_b = scale * radius_m[look]
+        # Limits grow with the border's radius: an attitude error of a few milliradians bends
+        # a 300 px border (low heights) by about a pixel; small, distant rings keep the
+        # 0.5 px floor.
+        excess = np.maximum(
+            np.abs(bias) / (0.5 + 0.015 * r_b),
+            np.sqrt(sq) / np.maximum(_MAX_BORDER_RMS_PX, _BORDER_RMS_PER_PX * r_b),
+        )
+        excess = np.where(used, excess, 0.0)
+        if excess.max() <= 1.0:
+            break
+        worst = int(ring_of[look][int(np.argmax(excess))])
+        rings = [r for r in rings if r != worst]
+        if len(rings) < 2:
+            return NOT_FOUND
+        use = use & (ring_of[look] != worst)
+        mask = use[border_idx]
+        all_pts, all_rm, border_idx = all_pts[mask], all_rm[mask], border_idx[mask]
+        if mask.sum() < 20:
+            return NOT_FOUND
     r_used = scale * radius_m[look][used]
-    if (np.abs(bias[used]) > 0.5 + 0.015 * r_used).any():
-        return NOT_FOUND
-    # Limits grow with the border's radius: an attitude error of a few milliradians bends a
-    # 300 px border (low heights) by about a pixel; small, distant rings keep the 0.5 px floor.
-    sq = np.bincount(border_idx, weights=res * res, minlength=look.size) / np.maximum(counts, 1)
-    if (sq[used] > np.maximum(_MAX_BORDER_RMS_PX, _BORDER_RMS_PER_PX * r_used) ** 2).any():
-        return NOT_FOUND
     rms = float(np.sqrt(np.mean(res * res)))
     if rms > max(1.0, _BORDER_RMS_PER_PX * float(r_used.max())):
         return NOT_FOUND

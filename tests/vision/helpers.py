@@ -104,3 +104,59 @@ def distort_image(
     """The scene of the ideal frame as the distorting camera shows it (bilinear resampling)."""
     mx, my = distortion_maps(k_ideal, k, dist, size)
     return cv2.remap(ideal, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+# ----------------------------------------------------------------------------------------------
+# What a webcam does to a frame (greyscale uint8 in, uint8 out; noise takes a seeded rng).
+
+
+def add_noise(g: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """Gaussian sensor noise of ``sigma`` grey levels."""
+    noisy = g.astype(np.float64) + rng.normal(0.0, sigma, g.shape)
+    return np.clip(np.round(noisy), 0, 255).astype(np.uint8)
+
+
+def defocus(g: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Gaussian blur (defocus, a soft lens) of standard deviation ``sigma_px``."""
+    return cv2.GaussianBlur(g, (0, 0), sigma_px)
+
+
+def vignette(g: np.ndarray, corner_gain: float) -> np.ndarray:
+    """Brightness falling with the squared radius to ``corner_gain`` in the corners."""
+    h, w = g.shape
+    y, x = np.mgrid[0:h, 0:w]
+    r2 = ((x - (w - 1) / 2) ** 2 + (y - (h - 1) / 2) ** 2) / (((w - 1) / 2) ** 2
+                                                              + ((h - 1) / 2) ** 2)
+    return np.clip(np.round(g * (1.0 - (1.0 - corner_gain) * r2)), 0, 255).astype(np.uint8)
+
+
+def jpeg(g: np.ndarray, quality: int) -> np.ndarray:
+    """A JPEG round trip at ``quality``."""
+    ok, data = cv2.imencode(".jpg", g, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    assert ok
+    return cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+
+
+def dim(g: np.ndarray, gain: float, offset: float = 20.0) -> np.ndarray:
+    """Under-exposure: the grey range squeezed to ``offset + gain * g``."""
+    return np.clip(np.round(offset + gain * g.astype(np.float64)), 0, 255).astype(np.uint8)
+
+
+def motion_blur(g: np.ndarray, length_px: float) -> np.ndarray:
+    """Horizontal motion blur: a box of ``length_px`` along the image rows."""
+    n = math.ceil(length_px) | 1
+    length = round(length_px)
+    kernel = np.zeros((n, n), np.float32)
+    start = (n - length) // 2
+    kernel[n // 2, start : start + length] = 1.0
+    kernel /= kernel.sum()
+    return cv2.filter2D(g, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+
+
+def rolling_shutter(g: np.ndarray, skew_px: float) -> np.ndarray:
+    """A rolling shutter during a sideways motion: the last row shifted ``skew_px`` right of
+    the first, linearly in between (the middle row stays)."""
+    h, w = g.shape
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    mx = x - np.float32(skew_px) * (y / (h - 1) - 0.5)
+    return cv2.remap(g, mx, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
