@@ -14,7 +14,8 @@ import time
 import cv2
 import numpy as np
 
-from skeye.vision.camera import render_pad_view
+from skeye.vision.calibration import CameraCalibration
+from skeye.vision.camera import intrinsics, render_pad_view
 from skeye.vision.detector import detect
 from skeye.vision.pad import SKEYE_4
 
@@ -41,6 +42,19 @@ def bench_speed(frames: list[tuple[np.ndarray, dict[str, float]]], repeats: int)
     imgs = [f for f, _ in frames]
     for img, t in frames[:3]:  # warm-up
         detect(img, FOV_H_RAD, roll_rad=t["roll"], pitch_rad=t["pitch"])
+    # The same frames with a camera calibration (the ideal camera's numbers plus a mild lens):
+    # the cost of undistorting contour points and placing rays through the lens model.
+    k = intrinsics(W, H, FOV_H_RAD)
+    lens = CameraCalibration(W, H, k[0, 0], k[1, 1], k[0, 2], k[1, 2], (-0.02, 0.0, 0.0, 0.0, 0.0))
+    n = 0
+    cpu0 = time.thread_time()
+    for _ in range(repeats):
+        for img, t in frames:
+            detect(img, FOV_H_RAD, roll_rad=t["roll"], pitch_rad=t["pitch"], calibration=lens)
+            n += 1
+    cpu = time.thread_time() - cpu0
+    print(f"speed (with roll/pitch and a calibration): {n / cpu:7.1f} frames/s CPU "
+          f"({1e3 * cpu / n:.2f} ms/frame CPU)")
     for label, attitude in (("with roll/pitch", True), ("level assumed, level frames", False)):
         if not attitude:
             imgs = [render_pad_view(SKEYE_4, W, H, FOV_H_RAD, t["h"], (t["x"], t["y"]))
