@@ -33,6 +33,10 @@ How this works:
    camera is low) leaves the fit instead of failing the detection. So does a ring one of whose
    borders disagrees with the joint fit (bias or scatter over its limit: blur shifts a thin
    ring's borders, a rolling shutter shears a large ring), the worst first, while two remain.
+   With a camera calibration, a seed group that fails all this is fitted once more with a
+   shear along the image rows (a rolling shutter during a sideways motion; at most
+   ``_MAX_SHEAR``); without one that model is not tried, as an uncorrected lens makes
+   off-centre rings look sheared.
 
 The geometry of steps 1 and 3 (level view, border points, circle fits) is
 :mod:`skeye.vision.level_view`.
@@ -73,6 +77,7 @@ _MAX_CANDIDATES = 24
 _MIN_RING_PX = 4.0  # outer radius below which a ring is not looked at
 _MIN_BORDER_PX = 2.0  # predicted border radius below which it is not looked for
 _CONFIRM_SHARE = 0.5  # of a border's in-image rays that must find it where predicted
+_MAX_SHEAR = 0.05  # rolling-shutter shear accepted, px of row shift per row (30 px over 600)
 
 
 @dataclass(frozen=True)
@@ -335,6 +340,38 @@ def _joint_fit(
     return cx, cy, scale, res
 
 
+def _joint_fit_sheared(
+    pts: np.ndarray, radius_m: np.ndarray, cx: float, cy: float, scale: float, shear: float,
+    iters: int = 6,
+) -> tuple[float, float, float, float, np.ndarray]:
+    """As :func:`_joint_fit`, with the points sheared along x by ``shear`` px per px of y about
+    the centre (a rolling shutter during a sideways motion shifts each row by an amount
+    growing linearly down the frame): residuals of ``hypot(x - cx - shear (y - cy), y - cy)``.
+    """
+    x = pts[:, 0]
+    y = pts[:, 1]
+    jac = np.empty((4, len(x)))  # rows: -d res / d (cx, cy, scale, shear)
+    jac[2] = radius_m
+    for _ in range(iters):
+        dy = y - cy
+        dx = x - cx - shear * dy
+        dist = np.hypot(dx, dy)
+        jac[0] = dx / dist
+        jac[1] = (dy - shear * dx) / dist
+        jac[3] = dx * dy / dist
+        res = dist - scale * radius_m
+        step = np.linalg.solve(jac @ jac.T, jac @ res)
+        cx += float(step[0])
+        cy += float(step[1])
+        scale += float(step[2])
+        shear += float(step[3])
+        if abs(step[0]) + abs(step[1]) + abs(step[2]) * float(radius_m[0]) < 1e-5:
+            break
+    dy = y - cy
+    res = np.hypot(x - cx - shear * dy, dy) - scale * radius_m
+    return cx, cy, scale, shear, res
+
+
 def detect(
     image: np.ndarray,
     fov_h_rad: float,
@@ -389,13 +426,19 @@ def detect(
         group = _best_group(_identify(view, cands, pad, ratio_tol))
         if group:
             est = _finish(view, pad, borders, group)
+            if not est.found and calibration is not None:
+                # A rolling shutter's shear, the last thing to try; only with the lens known:
+                # off the image centre an uncorrected lens distorts the rings much like a shear
+                # and would pass with a biased height.
+                est = _finish(view, pad, borders, group, sheared=True)
             if est.found:
                 return est
     return NOT_FOUND
 
 
 def _finish(
-    view: LevelView, pad: PadDefinition, borders: list[_Border], group: list[_Ring]
+    view: LevelView, pad: PadDefinition, borders: list[_Border], group: list[_Ring],
+    sheared: bool = False,
 ) -> PadEstimate:
     """From a seed group of identified rings: look for the rest, fit jointly, check, report."""
     wts = np.array([g.r_outer for g in group])
@@ -431,7 +474,11 @@ def _finish(
     all_pts = pts[sel]
     border_idx = np.broadcast_to(np.arange(look.size)[:, None], sel.shape)[sel]
     all_rm = radius_m[look][border_idx]
-    cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale)
+    shear = 0.0
+    if sheared:
+        cx, cy, scale, shear, res = _joint_fit_sheared(all_pts, all_rm, cx, cy, scale, shear)
+    else:
+        cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale)
     # One round of outlier rejection, then refit.
     keep = np.abs(res) <= max(0.5, 4.5 * float(np.median(np.abs(res))))
     if keep.sum() < 20:
@@ -455,7 +502,11 @@ def _finish(
     # a large ring) leaves the fit, the worst first, while two rings remain; a clean frame
     # never gets here with a disagreeing border, so its fit is unchanged.
     while True:
-        cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale, iters=2)
+        if sheared:
+            cx, cy, scale, shear, res = _joint_fit_sheared(
+                all_pts, all_rm, cx, cy, scale, shear, iters=3)
+        else:
+            cx, cy, scale, res = _joint_fit(all_pts, all_rm, cx, cy, scale, iters=2)
         if not (scale > 0 and math.isfinite(cx) and math.isfinite(cy)):
             return NOT_FOUND
         counts = np.bincount(border_idx, minlength=look.size)
@@ -485,6 +536,8 @@ def _finish(
         all_pts, all_rm, border_idx = all_pts[mask], all_rm[mask], border_idx[mask]
         if mask.sum() < 20:
             return NOT_FOUND
+    if abs(shear) > _MAX_SHEAR:
+        return NOT_FOUND
     r_used = scale * radius_m[look][used]
     rms = float(np.sqrt(np.mean(res * res)))
     if rms > max(1.0, _BORDER_RMS_PER_PX * float(r_used.max())):
