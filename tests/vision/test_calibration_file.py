@@ -85,3 +85,17 @@ def test_level_view_maps_there_and_back() -> None:
     # Far outside the lens's valid radius a level point is not in the image.
     fx, fy = view.to_image(np.array([1e5]), np.array([0.0]))
     assert fx[0] < 0 and fy[0] < 0
+
+
+def test_calibrate_refuses_mixed_sizes_and_too_few_boards() -> None:
+    from skeye.errors import LocalProtocolError
+    from skeye.vision.calibration import calibrate
+
+    board = Board(9, 6, 0.025)
+    blank = np.full((480, 640), 128, np.uint8)
+    with pytest.raises(LocalProtocolError, match="all images must come from one camera"):
+        calibrate([("a.png", blank), ("b.png", np.full((600, 800), 128, np.uint8))], board)
+    with pytest.raises(LocalProtocolError, match="found in 0 of 2 images"):
+        calibrate([("a.png", blank), ("b.png", blank)], board)
+    with pytest.raises(LocalProtocolError, match="no images"):
+        calibrate([], board)
