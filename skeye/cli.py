@@ -158,7 +158,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def _add_sim(sub: Any) -> None:
     p = sub.add_parser("sim", help="run the simulator (control protocol server)")
-    p.add_argument("--world", default="pad", help="built-in world (pad, yard, indoor, checkerboard) or a .toml")
+    p.add_argument("--world", default="pad",
+                   help="built-in world (pad, yard, indoor, checkerboard) or a .toml")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=3000, help="control protocol port (0 = any free)")
     p.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
