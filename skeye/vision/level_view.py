@@ -119,7 +119,11 @@ class LevelView:
             return conic_ellipse(self.hom, cx, cy, r)
         t = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
         u, v = self.to_image(cx + r * np.cos(t), cy + r * np.sin(t))
-        pts = np.column_stack((u, v)).astype(np.float32)
+        seen = u > _OUTSIDE / 2  # points past the lens's valid radius do not count
+        if seen.sum() < 6:
+            cu, cv_ = self.to_image(np.array(cx), np.array(cy))
+            return (float(cu), float(cv_)), (r, r), 0.0
+        pts = np.column_stack((u[seen], v[seen])).astype(np.float32)
         (ex, ey), (a, b), deg = cv2.fitEllipse(pts)
         angle = math.radians(deg) if a >= b else math.radians(deg) + math.pi / 2.0
         return (float(ex), float(ey)), (max(a, b) / 2.0, min(a, b) / 2.0), angle % math.pi
