@@ -294,7 +294,7 @@ class Robot:
 
     def status_fields(self) -> list[tuple[str, object]]:
         return [
-            ("Battery", self.battery.remaining_s),
+            ("Battery", int(self.battery.remaining_s)),  # whole seconds, as USARSim
             ("Voltage", self.battery.voltage_v),
             ("Current", self.battery.current_a),
             ("Armed", self.flight.armed),
