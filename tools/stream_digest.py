@@ -27,8 +27,8 @@ SCRIPT: list[tuple[str, int]] = [  # (command, steps to run after it)
     ("GETGEO {Type Robot}", 0),
     ("DRIVE {AltitudeVelocity 0.5}", 3000),
     ("DRIVE {LinearVelocity 0.8} {LateralVelocity 0.3} {AltitudeVelocity 0}", 2000),
-    ("DRIVE {LinearVelocity 0} {LateralVelocity 0} {RotationalVelocity 0.5}", 1500),
-    ("DRIVE {RotationalVelocity 0} {AltitudeVelocity -0.4}", 4000),
+    ("DRIVE {LinearVelocity 0} {LateralVelocity 0} {RotationalVelocity 28.6479}", 1500),
+    ("DRIVE {RotationalVelocity 0} {AltitudeVelocity -0.4}", 4000),  # deg/s, as USARSim
     ("PING {Id 1}", 0),
 ]
 

@@ -479,7 +479,8 @@ class StatusSensor(Sensor[StatusReading]):
 
     def convert(self, message: Any) -> StatusReading:
         s: Sta = message
-        return StatusReading(s.time_s, s.armed, s.landed, s.battery_s, s.voltage_v)
+        battery_s = math.inf if s.battery_s is None else float(s.battery_s)
+        return StatusReading(s.time_s, s.armed, s.landed, battery_s, s.voltage_v)
 
 
 class RawSensor(Sensor[RawReading]):

@@ -185,8 +185,8 @@ def _landed(msg: Any) -> bool:
 
 def flight_time_left_min(track: RobotTrack) -> np.ndarray:
     """The battery's flight time left (minutes) while flying; NaN (a gap in the plot) where the
-    robot is on the ground, where the estimate (charge over the idle current) reaches hours and
-    would flatten the flight."""
+    robot is on the ground (recordings made before STA's Battery had a hover-current floor
+    read hours there, which would flatten the flight)."""
     left = np.asarray(track.battery_s, dtype=float) / 60.0
     landed = np.asarray(track.battery_landed + [False] * (len(left) - len(track.battery_landed)))
     return np.where(landed, np.nan, left)

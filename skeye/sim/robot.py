@@ -141,7 +141,7 @@ class Robot:
         self.tick_s = decimation * physics_step_s
         self.rotors = RotorModel(config.airframe, self.tick_s)
         self.controller = LowLevelController(config.airframe, config.controller, self.tick_s)
-        self.battery = Battery(config.battery)
+        self.battery = Battery(config.battery, RotorModel.hover_power_w(config.airframe))
         self.command = Command()
         self.flight = FlightState()
         self.status_period_steps = max(1, round(1.0 / (config.status_rate_hz * physics_step_s)))
@@ -294,7 +294,7 @@ class Robot:
 
     def status_fields(self) -> list[tuple[str, object]]:
         return [
-            ("Battery", self.battery.remaining_s),
+            ("Battery", int(self.battery.remaining_s)),  # whole seconds, as USARSim
             ("Voltage", self.battery.voltage_v),
             ("Current", self.battery.current_a),
             ("Armed", self.flight.armed),

@@ -39,7 +39,14 @@ from skeye.sim.robot import Robot
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.stream import text_sink
 from skeye.sim.wind import make_settings, parse_params
-from skeye.wire.sim import DriveLimits, decode, drive_in_si, encode, parse_value
+from skeye.wire.sim import (
+    DriveLimits,
+    decode,
+    drive_in_si,
+    encode,
+    parse_value,
+    usarsim_notes,
+)
 from skeye.wire.sim_lines import LineDecoder, LineError, Message
 from skeye.wire.sim_messages import (
     Conf,
@@ -400,6 +407,10 @@ class ClientSession:
 
     def cmd_init(self, msg: Message, init: Init) -> None:
         text = text_sink(self.send)
+        # A vector that was not three plain numbers was read as USARSim reads it: say how.
+        note = "; ".join(usarsim_notes(msg)) or None
+        if note is not None:
+            log.info("client %s: INIT %s", self.peer, note)
 
         def sink(events: list[Event]) -> None:  # engine thread
             for event in events:  # noted before the ERR goes out: a client's next line sees it
@@ -417,7 +428,7 @@ class ClientSession:
                 start=init.start,
             )
             # Answer from the engine thread, before the first STA/SEN of this robot.
-            self.send(encode(Res("INIT", name=robot.name, status="OK")))
+            self.send(encode(Res("INIT", name=robot.name, status="OK", note=note)))
             return robot.name, robot.config
 
         self.robot_name, self.robot_config = self.server.runner.call(spawn)
@@ -427,7 +438,8 @@ class ClientSession:
     def cmd_drive(self, msg: Message, drive: Drive) -> None:
         name = self._robot("DRIVE")
         c = self.robot_config.controller
-        limits = DriveLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s)
+        limits = DriveLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s,
+                             c.max_tilt_rad)
         drive = drive_in_si(msg, drive, limits)
         changes: dict[str, Any] = {"attitude": drive.attitude}
         for attr, value in (

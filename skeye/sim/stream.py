@@ -53,8 +53,9 @@ class StreamEncoder:
             fmt = self._sta[status.robot] = wire.line_format(
                 Sta, {"Type": "AerialVehicle", "Name": status.robot}
             )
-        return fmt.format((status.time_s, status.battery_s, status.voltage_v, status.current_a,
-                           status.armed, status.landed))
+        # Whole seconds, as USARSim's Battery.ExpectedLifeTime (int(energy / discharge rate)).
+        return fmt.format((status.time_s, int(status.battery_s), status.voltage_v,
+                           status.current_a, status.armed, status.landed))
 
     def encode(self, events: list[Event]) -> bytes:
         """The lines of ``events``, in order, as one chunk."""

@@ -47,15 +47,40 @@ def cell_open_circuit_v(soc: float) -> float:
 
 
 class Battery:
-    """Charge bookkeeping with voltage sag: V = cells * OCV(soc) - I * R."""
+    """Charge bookkeeping with voltage sag: V = cells * OCV(soc) - I * R.
 
-    def __init__(self, params: BatteryParams) -> None:
+    Remaining life (the protocol's ``STA {Battery}``) is the charge left divided by a current
+    that is never below the hover current: the recent average current (a 2 s filter) while the
+    vehicle draws more than hover (a climb), else the hover current. The filter starts at the
+    hover current, so the figure is sensible from the first status line: the time the vehicle
+    could still hover, as USARSim's ``Battery.ExpectedLifeTime`` starts from the rated life
+    (its ``averageDischarge`` starts at ``maxEnergy / batteryLife``) rather than from nothing.
+
+    Args:
+        params: the battery's parameters.
+        hover_shaft_power_w: the rotors' shaft power in hover (``RotorModel.hover_power_w``);
+            0 leaves only the avionics as the floor.
+    """
+
+    def __init__(self, params: BatteryParams, hover_shaft_power_w: float = 0.0) -> None:
         self.params = params
         self.capacity_c = params.capacity_mah * 3.6  # coulombs
         self.charge_c = self.capacity_c
         self.current_a = 0.0
         self.voltage_v = params.cells * cell_open_circuit_v(1.0)
-        self._avg_current_a = 0.0
+        self.hover_current_a = self._current_for(
+            hover_shaft_power_w / params.efficiency + params.avionics_power_w, self.voltage_v
+        )
+        self._avg_current_a = self.hover_current_a
+
+    def _current_for(self, electrical_w: float, ocv: float) -> float:
+        """The current that delivers this electrical power: P = I * (OCV - I R), smaller root;
+        past the maximum-power point, the current at that point."""
+        r = self.params.internal_resistance_ohm
+        disc = ocv * ocv - 4.0 * r * electrical_w
+        if disc > 0.0:
+            return (ocv - math.sqrt(disc)) / (2.0 * r)
+        return ocv / (2.0 * r)
 
     @property
     def state_of_charge(self) -> float:
@@ -70,27 +95,23 @@ class Battery:
         p = self.params
         electrical_w = shaft_power_w / p.efficiency + p.avionics_power_w
         ocv = p.cells * cell_open_circuit_v(self.state_of_charge)
-        # Solve P = I * (OCV - I R) for the smaller root; past the maximum-power point, cap.
-        disc = ocv * ocv - 4.0 * p.internal_resistance_ohm * electrical_w
-        if disc > 0.0:
-            current = (ocv - math.sqrt(disc)) / (2.0 * p.internal_resistance_ohm)
-        else:
-            current = ocv / (2.0 * p.internal_resistance_ohm)
+        current = self._current_for(electrical_w, ocv)
         if self.empty:
             current = 0.0
         self.current_a = current
         self.voltage_v = max(0.0, ocv - current * p.internal_resistance_ohm)
         self.charge_c = max(0.0, self.charge_c - current * dt_s)
-        # Smoothed current for the remaining-life estimate (time constant ~2 s).
+        # Smoothed current for the remaining-life estimate (time constant 2 s).
         k = min(1.0, dt_s / 2.0)
         self._avg_current_a += k * (current - self._avg_current_a)
 
     @property
     def remaining_s(self) -> float:
-        """Remaining life at the recent average current, as USARSim's STA {Battery} reports."""
+        """Remaining life (s) at the recent average current, never above the hover time."""
         if self.empty:
             return 0.0
-        current = max(self._avg_current_a, self.params.avionics_power_w / max(self.voltage_v, 1.0))
+        current = max(self._avg_current_a, self.hover_current_a,
+                      self.params.avionics_power_w / max(self.voltage_v, 1.0))
         return self.charge_c / current
 
 
@@ -151,6 +172,13 @@ class RotorModel:
         fz = -thrust - k_air * vz
         power = c * (f0 * w0 + f1 * w1 + f2 * w2 + f3 * w3)
         return fx, fy, fz, tau_x, tau_y, tau_z, power
+
+    @staticmethod
+    def hover_power_w(airframe: AirframeParams) -> float:
+        """Shaft power (W) of four equal rotors holding the airframe's weight out of ground
+        effect: the sum of c * kf * w^3 that :meth:`wrench` reports, at the hover speed."""
+        w = airframe.hover_speed_rad_s
+        return 4.0 * airframe.moment_constant_m * airframe.kf * w * w * w
 
     def total_thrust_n(self) -> float:
         kf = self.p.kf

@@ -11,7 +11,8 @@ precompiled :class:`~skeye.wire.sim_format.LineFormat` built from the same table
 same bytes as :func:`encode`. Sans-IO: no sockets, threads or clocks.
 
 Invariants: ``decode(parse_line(encode(m)))`` equals ``m`` for every message whose floats have
-at most six decimals (the wire writes six); type words and keys are case-insensitive on input.
+at most six decimals on the wire (the wire writes six; a field in degrees on the wire, such as
+DRIVE's angles, holds ``wire * DEG``); type words and keys are case-insensitive on input.
 """
 
 from __future__ import annotations
@@ -43,9 +44,11 @@ from skeye.wire.sim_lines import (
     format_error,
     format_message,
     parse_line,
+    parse_usarsim_vector,
 )
 from skeye.wire.sim_messages import (
     SEN_CLASSES,
+    TILT_LIMIT_RAD,
     Conf,
     Drive,
     Err,
@@ -84,6 +87,7 @@ __all__ = [
     "res_time_s",
     "sen_layout",
     "sen_line_format",
+    "usarsim_notes",
 ]
 
 _SEN_HEADER = ("Time", "Name")
@@ -100,6 +104,8 @@ class FieldSpec:
     required: bool
     min_value: float | None
     max_value: float | None
+    scale: float = 1.0
+    """field value (SI) = wire value * scale; the range is in wire units."""
 
 
 @dataclass(frozen=True)
@@ -133,6 +139,7 @@ def _codec(cls: type) -> Codec:
                 required,
                 f.metadata["min"],
                 f.metadata["max"],
+                f.metadata.get("scale", 1.0),
             )
         )
     return Codec(cls.WORD, cls, tuple(specs))  # type: ignore[attr-defined]
@@ -167,7 +174,8 @@ def parse_value(
 def _read(msg: Message, spec: FieldSpec) -> Any:
     key, kind = spec.key, spec.kind
     if kind == "float":
-        return msg.get_float(key, min_value=spec.min_value, max_value=spec.max_value)
+        value = msg.get_float(key, min_value=spec.min_value, max_value=spec.max_value)
+        return value * spec.scale if spec.scale != 1.0 else value
     if kind == "int":
         lo = None if spec.min_value is None else int(spec.min_value)
         hi = None if spec.max_value is None else int(spec.max_value)
@@ -178,6 +186,8 @@ def _read(msg: Message, spec: FieldSpec) -> Any:
         return msg.require(key)
     if kind == "vec3":
         return msg.get_vector(key, 3)
+    if kind == "uvec3":
+        return parse_usarsim_vector(key, msg.require(key))[0]
     if kind in ("vec2", "ivec2"):
         return msg.get_vector(key, 2)
     return msg.get_vector(key, None)
@@ -224,6 +234,23 @@ def _check_drive_form(msg: Message) -> None:
         raise RemoteProtocolError(f"DRIVE: unknown segment(s) {unknown}")
     if not (has_att or has_vel or msg.has("RotationalVelocity")):
         raise RemoteProtocolError("DRIVE needs at least one velocity or attitude segment")
+
+
+def usarsim_notes(msg: Message) -> list[str]:
+    """How the ``uvec3`` vectors of a command (INIT's Location and Rotation) were read, for
+    each one that was not three plain numbers (see
+    :func:`~skeye.wire.sim_lines.parse_usarsim_vector`); empty when all were plain."""
+    codec = CODECS.get(msg.type)
+    if codec is None:
+        return []
+    notes = []
+    for spec in codec.fields:
+        text = msg.get(spec.key) if spec.kind == "uvec3" else None
+        if text is not None:
+            note = parse_usarsim_vector(spec.key, text)[1]
+            if note is not None:
+                notes.append(note)
+    return notes
 
 
 def _decode_sen(msg: Message) -> Sen | SenOther:
@@ -312,20 +339,25 @@ def res_time_s(answer: object) -> float:
 
 @dataclass(frozen=True)
 class DriveLimits:
-    """A robot's velocity limits, which bound DRIVE (its CONF's MaxSpeed, MaxClimb, MaxYawRate)."""
+    """A robot's limits, which bound DRIVE (its CONF's MaxSpeed, MaxClimb, MaxYawRate, MaxTilt)."""
 
     speed_m_s: float
     climb_m_s: float
     yaw_rate_rad_s: float
+    tilt_rad: float = TILT_LIMIT_RAD
 
 
 def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
-    """``drive`` (decoded from ``msg``) checked against a robot's limits, in m/s and rad/s.
+    """``drive`` (decoded from ``msg``) checked against a robot's limits, in m/s, rad and rad/s.
 
-    With ``Normalized true`` the velocities are percent of the limits (bound +-100).
+    The wire units are USARSim's (``AerialVehicle.uc``): m/s, deg/s for ``RotationalVelocity``,
+    degrees for ``RollAngle`` and ``PitchAngle``. With ``Normalized true`` every one of them is
+    percent of the robot's limit (bound +-100; the angles' limit is MaxTilt), as USARSim's
+    ``setPitchAngle`` ... ``setRotationVelocity`` scale them. Without it the velocities are
+    bound by the limits and the angles by +-(90 deg - 1 mrad).
 
     Raises:
-        RemoteProtocolError: a velocity beyond its bound (naming the key and the text).
+        RemoteProtocolError: a value beyond its bound (naming the key and the text).
     """
     normalized = bool(drive.normalized)
     changes: dict[str, Any] = {}
@@ -334,12 +366,19 @@ def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
         ("LateralVelocity", "right_m_s", limits.speed_m_s),
         ("AltitudeVelocity", "up_m_s", limits.climb_m_s),
         ("RotationalVelocity", "yaw_rate_rad_s", limits.yaw_rate_rad_s),
+        ("RollAngle", "roll_rad", limits.tilt_rad),
+        ("PitchAngle", "pitch_rad", limits.tilt_rad),
     ):
         if getattr(drive, attr) is None:
             continue
-        bound = 100.0 if normalized else limit
-        value = msg.get_float(key, min_value=-bound, max_value=bound)
-        changes[attr] = value / 100.0 * limit if normalized else value
+        scale = CODECS["DRIVE"].spec(key).scale
+        if normalized:
+            value = msg.get_float(key, min_value=-100.0, max_value=100.0)
+            changes[attr] = value / 100.0 * limit
+            continue
+        bound = (TILT_LIMIT_RAD if attr in ("roll_rad", "pitch_rad") else limit) / scale
+        value = msg.get_float(key, min_value=-round(bound, 6), max_value=round(bound, 6))
+        changes[attr] = value * scale
     return dataclasses.replace(drive, normalized=None, **changes)
 
 
@@ -348,6 +387,8 @@ def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
 
 def _check_value(spec: FieldSpec, value: Any) -> object:
     kind, key = spec.kind, spec.key
+    if spec.scale != 1.0 and isinstance(value, numbers.Real) and not isinstance(value, bool):
+        value = float(value) / spec.scale  # SI -> the wire unit (degrees)
     if kind in ("float", "int"):
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise LocalProtocolError(f"{key}: {value!r} is not a number")
@@ -377,7 +418,7 @@ def _check_value(spec: FieldSpec, value: Any) -> object:
         items = tuple(value)
     except TypeError:
         raise LocalProtocolError(f"{key}: {value!r} is not a vector") from None
-    size = {"vec3": 3, "vec2": 2, "ivec2": 2}.get(kind)
+    size = {"vec3": 3, "uvec3": 3, "vec2": 2, "ivec2": 2}.get(kind)
     if size is not None and len(items) != size:
         raise LocalProtocolError(f"{key}: {value!r} must have {size} components")
     if not items or not all(
@@ -458,6 +499,7 @@ _SLOTS: dict[str, Slot] = {
     "bool": BOOL,
     "word": WORD,
     "vec3": floats(3),
+    "uvec3": floats(3),
     "vec2": floats(2),
     "ivec2": ints(2),
 }

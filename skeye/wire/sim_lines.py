@@ -50,9 +50,10 @@ __all__ = [
     "format_error",
     "format_message",
     "parse_line",
+    "parse_usarsim_vector",
 ]
 
-FREE_TEXT_KEYS = frozenset({"reason", "text", "message", "params"})
+FREE_TEXT_KEYS = frozenset({"reason", "text", "message", "params", "note"})
 """Keys (lower-case) whose block is never split into several fields: their value is free text."""
 
 LINE_END = b"\r\n"
@@ -64,6 +65,7 @@ _KEY_TOKEN = re.compile(r"[A-Za-z][A-Za-z0-9_.]*\Z")
 _TYPE_WORD = re.compile(r"[^\s{}]*")
 _FLOAT_TEXT = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
 _INT_TEXT = re.compile(r"[+-]?\d+\Z", re.ASCII)
+_LEADING_FLOAT = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)", re.ASCII)
 _EOL = re.compile(rb"[\r\n]")
 _FIRST_WORD = re.compile(r"\s*([^\s{}]+)")
 
@@ -101,6 +103,51 @@ def _parse_float(key: str, text: str) -> float:
     if not math.isfinite(value):
         raise RemoteProtocolError(f"{key}: {text!r} is not a finite number")
     return value
+
+
+def _unreal_float(key: str, text: str, whole: str) -> float:
+    """UnrealScript's ``float(string)`` (C ``atof``): the leading decimal number after blanks,
+    ignoring the rest; 0 when there is none."""
+    match = _LEADING_FLOAT.match(text)
+    if match is None:
+        return 0.0
+    value = float(match.group(1))
+    if not math.isfinite(value):
+        raise RemoteProtocolError(f"{key}: {whole!r} holds a number too large ({match.group(1)})")
+    return value
+
+
+def parse_usarsim_vector(key: str, text: str) -> tuple[tuple[float, float, float], str | None]:
+    """A client's ``x,y,z`` read as USARSim's ``Utilities.ParseVector`` reads it.
+
+    USARSim splits the text at its first two commas and takes ``float()`` of each part, which
+    reads a leading number and ignores the rest (no number: 0; no comma: x and y are 0 and z is
+    the whole text's leading number; empty text: 0,0,0). So ``0,0000, 0,0000, 0,0000`` (decimal
+    commas) reads 0,0,0 and ``1.0 2.0 -0.5`` (blanks) reads 0,0,1, as in USARSim.
+
+    Returns:
+        The vector and, when the text is not three plain comma-separated numbers, a note saying
+        how it was read (for the answer and the log); None for plain text.
+
+    Raises:
+        RemoteProtocolError: a number too large to be finite.
+    """
+    parts = text.split(",")
+    if len(parts) == 3 and all(_FLOAT_TEXT.match(p.strip()) for p in parts):
+        x, y, z = (_parse_float(key, p.strip()) for p in parts)
+        return (x, y, z), None
+    first = text.find(",")
+    x = _unreal_float(key, text[:first] if first >= 0 else "", text)
+    rest = text[first + 1 :]  # the whole text when there is no comma, as USARSim's Mid(s, 0)
+    second = rest.find(",")
+    y = _unreal_float(key, rest[:second] if second >= 0 else "", text)
+    z = _unreal_float(key, rest[second + 1 :], text)
+    note = (
+        f"{key} {text!r} read as {x:g},{y:g},{z:g} as USARSim's ParseVector reads it "
+        "(split at the first two commas, the leading number of each part); "
+        "send x,y,z with '.' decimals"
+    )
+    return (x, y, z), note
 
 
 @dataclass(frozen=True)

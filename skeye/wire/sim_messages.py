@@ -24,20 +24,37 @@ Vec3 = tuple[float, float, float]
 Pose = tuple[str, Vec3, Vec3]
 """A start pose: name, location (NED, m) and rotation (roll, pitch, yaw, rad)."""
 
-KINDS = ("float", "int", "bool", "word", "text", "vec3", "vec2", "ivec2", "vec")
+KINDS = ("float", "int", "bool", "word", "text", "vec3", "uvec3", "vec2", "ivec2", "vec")
 """Value kinds: a finite float, a decimal int, true/false, a word without blanks, free text, a
-vector of 3 or 2 floats, 2 ints (written as ints, read as floats), any number of floats."""
+vector of 3 or 2 floats, 2 ints (written as ints, read as floats), any number of floats.
+``uvec3`` is a vector of 3 floats a client sends, read as USARSim's ``ParseVector`` reads it
+(:func:`skeye.wire.sim_lines.parse_usarsim_vector`) and written like ``vec3``."""
 
-_TILT_RAD = math.pi / 2 - 1e-3
+TILT_LIMIT_RAD = math.pi / 2 - 1e-3
+"""The largest DRIVE roll or pitch angle accepted (the wire carries it in degrees)."""
+
+DEG = math.pi / 180.0
+"""The scale of a field whose wire unit is the degree (or deg/s): SI value = wire value * DEG."""
 
 
 def wire(
-    key: str, kind: str, *, min_value: float | None = None, max_value: float | None = None
+    key: str,
+    kind: str,
+    *,
+    min_value: float | None = None,
+    max_value: float | None = None,
+    scale: float = 1.0,
 ) -> dict[str, Any]:
-    """A field's metadata: it is the block ``{key value}`` of ``kind`` within the range."""
+    """A field's metadata: it is the block ``{key value}`` of ``kind`` within the range.
+
+    ``scale`` converts the wire unit to the field's SI unit (field = wire * scale; ``DEG`` for
+    USARSim's degrees); the range is in wire units.
+    """
     if kind not in KINDS:
         raise ValueError(f"unknown wire kind {kind!r}")  # a bug in this module
-    return {"key": key, "kind": kind, "min": min_value, "max": max_value}
+    if scale != 1.0 and kind != "float":
+        raise ValueError(f"{key}: only a float field may have a scale")  # a bug in this module
+    return {"key": key, "kind": kind, "min": min_value, "max": max_value, "scale": scale}
 
 
 # --- commands --------------------------------------------------------------------------------
@@ -51,30 +68,31 @@ class Init:
     class_name: str = field(metadata=wire("ClassName", "word"))
     name: str | None = field(default=None, metadata=wire("Name", "word"))
     start: str | None = field(default=None, metadata=wire("Start", "word"))
-    location_ned_m: Vec3 | None = field(default=None, metadata=wire("Location", "vec3"))
-    rotation_rpy_rad: Vec3 | None = field(default=None, metadata=wire("Rotation", "vec3"))
-    """None: level, heading north (0, 0, 0)."""
+    location_ned_m: Vec3 | None = field(default=None, metadata=wire("Location", "uvec3"))
+    rotation_rpy_rad: Vec3 | None = field(default=None, metadata=wire("Rotation", "uvec3"))
+    """None: level, heading north (0, 0, 0). Both vectors read as USARSim's ``ParseVector``."""
 
 
 @dataclass(frozen=True)
 class Drive:
     """``DRIVE``: the attitude form (roll, pitch, thrust) or the velocity form, yaw rate in both.
 
-    Velocities are m/s and rad/s, or percent of the robot's limits with ``normalized``.
+    The fields are SI (m/s, rad, rad/s); on the wire ``RollAngle`` and ``PitchAngle`` are degrees
+    and ``RotationalVelocity`` deg/s, as in USARSim's ``AerialVehicle.uc`` (``AngleFromDeg``).
+    With ``normalized`` the wire values are percent of the robot's limits. The angle bounds
+    (``TILT_LIMIT_RAD``, or the limits when normalized) are checked by
+    :func:`skeye.wire.sim.drive_in_si`.
     """
 
     WORD: ClassVar[str] = "DRIVE"
-    roll_rad: float | None = field(
-        default=None, metadata=wire("RollAngle", "float", min_value=-_TILT_RAD, max_value=_TILT_RAD)
-    )
-    pitch_rad: float | None = field(
-        default=None,
-        metadata=wire("PitchAngle", "float", min_value=-_TILT_RAD, max_value=_TILT_RAD),
-    )
+    roll_rad: float | None = field(default=None, metadata=wire("RollAngle", "float", scale=DEG))
+    pitch_rad: float | None = field(default=None, metadata=wire("PitchAngle", "float", scale=DEG))
     forward_m_s: float | None = field(default=None, metadata=wire("LinearVelocity", "float"))
     right_m_s: float | None = field(default=None, metadata=wire("LateralVelocity", "float"))
     up_m_s: float | None = field(default=None, metadata=wire("AltitudeVelocity", "float"))
-    yaw_rate_rad_s: float | None = field(default=None, metadata=wire("RotationalVelocity", "float"))
+    yaw_rate_rad_s: float | None = field(
+        default=None, metadata=wire("RotationalVelocity", "float", scale=DEG)
+    )
     thrust_fraction: float | None = field(
         default=None, metadata=wire("Thrust", "float", min_value=0.0, max_value=1.0)
     )
@@ -154,13 +172,18 @@ class GetStartPoses:
 
 @dataclass(frozen=True, kw_only=True)
 class Sta:
-    """``STA``: a robot's status: battery life left (s), voltage, current, flight state."""
+    """``STA``: a robot's status: battery life left (whole s), voltage, current, flight state.
+
+    ``{Time t} {Battery n}`` come first, as USARSim's ``USARVehicle.GetStatus`` writes them (an
+    integer ``Battery``, as its ``Battery.ExpectedLifeTime``); skeye's keys follow.
+    """
 
     WORD: ClassVar[str] = "STA"
+    time_s: float = field(metadata=wire("Time", "float", min_value=0.0))
+    battery_s: int | None = field(default=None, metadata=wire("Battery", "int", min_value=0))
+    """None: not given (a simulator that writes no Battery)."""
     type: str = field(default="AerialVehicle", metadata=wire("Type", "word"))
     name: str | None = field(default=None, metadata=wire("Name", "word"))
-    time_s: float = field(metadata=wire("Time", "float", min_value=0.0))
-    battery_s: float = field(default=math.inf, metadata=wire("Battery", "float"))
     voltage_v: float | None = field(default=None, metadata=wire("Voltage", "float"))
     current_a: float | None = field(default=None, metadata=wire("Current", "float"))
     armed: bool = field(default=False, metadata=wire("Armed", "bool"))
@@ -223,13 +246,16 @@ class SenBarometer(Sen):
 @dataclass(frozen=True)
 class SenGps(Sen):
     """A GPS fix (``Fix`` > 0) or none; positions both as USARSim's ``39,8.0341,N`` text and
-    as decimal degrees."""
+    as decimal degrees.
+
+    Wire order: USARSim's ``GPSSensor.GetData`` writes ``{Latitude} {Longitude} {Fix 1}
+    {Satellites n}`` with a fix and ``{Fix 0} {Satellites n}`` without, so its keys stay first
+    (Latitude, Longitude) and last (Fix, Satellites); skeye's extensions sit between them.
+    """
 
     TYPE: ClassVar[str] = "GPS"
     latitude: str | None = field(default=None, metadata=wire("Latitude", "word"))
     longitude: str | None = field(default=None, metadata=wire("Longitude", "word"))
-    fix: int = field(default=0, metadata=wire("Fix", "int"))
-    satellites: int = field(default=0, metadata=wire("Satellites", "int", min_value=0))
     latitude_deg: float | None = field(
         default=None, metadata=wire("LatitudeDeg", "float", min_value=-90.0, max_value=90.0)
     )
@@ -238,6 +264,8 @@ class SenGps(Sen):
     )
     altitude_m: float | None = field(default=None, metadata=wire("Altitude", "float"))
     velocity_ned_m_s: Vec3 | None = field(default=None, metadata=wire("VelocityNED", "vec3"))
+    fix: int = field(default=0, metadata=wire("Fix", "int"))
+    satellites: int = field(default=0, metadata=wire("Satellites", "int", min_value=0))
 
 
 @dataclass(frozen=True)
@@ -315,6 +343,8 @@ class Res:
     id: str | None = field(default=None, metadata=wire("Id", "text"))
     status: str | None = field(default=None, metadata=wire("Status", "word"))
     time_s: float | None = field(default=None, metadata=wire("Time", "float"))
+    note: str | None = field(default=None, metadata=wire("Note", "text"))
+    """How the simulator read an ambiguous value (a USARSim-style vector), for the client's log."""
 
 
 @dataclass(frozen=True)

@@ -39,9 +39,9 @@ def test_every_sensor_line_matches_format_message(world: str) -> None:
         assert expected in lines
     assert {"GroundTruth", "INS", "GPS", "Sonar", "OpticalFlow", "Motors"} <= seen
     status = encoder.status_line(robot.status(sim.time_s))
+    battery, *rest = robot.status_fields()  # USARSim's STA starts {Time} {Battery}
     assert status == format_message(
-        "STA", ("Type", "AerialVehicle"), ("Name", "R1"), ("Time", sim.time_s),
-        *robot.status_fields(),
+        "STA", ("Time", sim.time_s), battery, ("Type", "AerialVehicle"), ("Name", "R1"), *rest,
     )
     assert parse_line(status.decode().strip()).get_bool("Armed") is True
 

@@ -267,8 +267,9 @@ def test_gps_fields_formats_and_error_statistics() -> None:
     n = 15000  # 3000 s at 5 Hz: about 50 correlation times
     readings = series(gps, n, pos=(3.0, -4.0, -1.0), vel=(0.5, 0.0, 0.0))
     first = readings[0]
-    assert list(first) == ["Latitude", "Longitude", "Fix", "Satellites", "LatitudeDeg",
-                           "LongitudeDeg", "Altitude", "VelocityNED"]
+    # USARSim's GPSSensor order: Latitude, Longitude first, Fix, Satellites last
+    assert list(first) == ["Latitude", "Longitude", "LatitudeDeg", "LongitudeDeg", "Altitude",
+                           "VelocityNED", "Fix", "Satellites"]
     assert first["Latitude"].endswith(",N") and first["Longitude"].endswith(",W")
     assert from_degrees_minutes(first["Latitude"]) == pytest.approx(first["LatitudeDeg"],
                                                                     abs=2e-6)

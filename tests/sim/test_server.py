@@ -21,8 +21,9 @@ BAD_LINES = [
     ("DRIVE {LinearVelocity 0.5}", "DRIVE", "INIT first"),
     ("INIT {ClassName zeppelin} {Location 0,0,-1}", "INIT", "unknown robot class"),
     ("INIT {ClassName hummingbird}", "INIT", "Location"),
-    ("INIT {ClassName hummingbird} {Location 0,0}", "INIT", "Location"),
-    ("INIT {ClassName hummingbird} {Location nan,0,-1}", "INIT", "Location"),
+    # "0,0" and "nan,0,-1" read as USARSim's ParseVector reads them (tests/compat): accepted.
+    ("INIT {ClassName hummingbird} {Location 1e999,0,-1}", "INIT", "Location"),
+    ("INIT {ClassName hummingbird} {Location 0,0,-2e4}", "INIT", "outside the world"),
     ("INIT {ClassName hummingbird} {Start Nowhere}", "INIT", "unknown start pose"),
     ("INIT {ClassName ../../etc/passwd} {Location 0,0,-1}", "INIT", "unknown robot class"),
     ("STEP {Count 10}", "STEP", "lockstep"),

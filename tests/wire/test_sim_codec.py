@@ -51,6 +51,8 @@ def _value(spec: sim.FieldSpec) -> st.SearchStrategy[Any]:
     number = st.floats(lo, hi).map(_six).filter(lambda x: lo <= x <= hi)
     finite = st.floats(-1e6, 1e6).map(_six)
     kind = spec.kind
+    if kind == "float" and spec.scale != 1.0:  # an SI value whose wire text has six decimals
+        return number.map(lambda x: x * spec.scale)
     if kind == "float":
         return number
     if kind == "int":
@@ -61,7 +63,7 @@ def _value(spec: sim.FieldSpec) -> st.SearchStrategy[Any]:
         return WORDS
     if kind == "text":
         return FREE_TEXT if spec.key.lower() in FREE_TEXT_KEYS else WORDS
-    if kind == "vec3":
+    if kind in ("vec3", "uvec3"):
         return st.tuples(finite, finite, finite)
     if kind == "vec2":
         return st.tuples(finite, finite)
@@ -145,18 +147,21 @@ def test_the_table_covers_every_message_class() -> None:
         (Drive(forward_m_s=0.8, right_m_s=0.3, up_m_s=0.0, yaw_rate_rad_s=0.0),
          b"DRIVE {LinearVelocity 0.800000} {LateralVelocity 0.300000} "
          b"{AltitudeVelocity 0.000000} {RotationalVelocity 0.000000}\r\n"),
-        (Drive(roll_rad=0.1, pitch_rad=-0.2, yaw_rate_rad_s=0.5, thrust_fraction=0.6),
-         b"DRIVE {RollAngle 0.100000} {PitchAngle -0.200000} {RotationalVelocity 0.500000} "
+        (Drive(roll_rad=math.radians(5.0), pitch_rad=math.radians(-10.0),
+               yaw_rate_rad_s=math.radians(30.0), thrust_fraction=0.6),
+         b"DRIVE {RollAngle 5.000000} {PitchAngle -10.000000} {RotationalVelocity 30.000000} "
          b"{Thrust 0.600000}\r\n"),
+        (Res("INIT", name="R1", status="OK", note="Location '1 2 3' read as 0,0,1"),
+         b"RES {Command INIT} {Name R1} {Status OK} {Note Location '1 2 3' read as 0,0,1}\r\n"),
         (Res("INIT", name="R1", status="OK"), b"RES {Command INIT} {Name R1} {Status OK}\r\n"),
         (Res("PING", id="7", time_s=1.5), b"RES {Command PING} {Id 7} {Time 1.500000}\r\n"),
         (Err("DRIVE", reason="no {robot}\r\n here"),
          b"ERR {Command DRIVE} {Reason no (robot) here}\r\n"),
         (Err("PHYSICS", name="R1", reason="robot stopped: NaN"),
          b"ERR {Command PHYSICS} {Name R1} {Reason robot stopped: NaN}\r\n"),
-        (Sta(name="R1", time_s=0.5, battery_s=600.0, voltage_v=12.6, current_a=3.0,
+        (Sta(name="R1", time_s=0.5, battery_s=600, voltage_v=12.6, current_a=3.0,
              armed=True, landed=False),
-         b"STA {Type AerialVehicle} {Name R1} {Time 0.500000} {Battery 600.000000} "
+         b"STA {Time 0.500000} {Battery 600} {Type AerialVehicle} {Name R1} "
          b"{Voltage 12.600000} {Current 3.000000} {Armed true} {Landed false}\r\n"),
         (SenOpticalFlow(1.0, "Flow", (3.0, -4.0), 120),
          b"SEN {Time 1.000000} {Type OpticalFlow} {Name Flow} {Delta 3,-4} {Quality 120}\r\n"),
@@ -203,7 +208,8 @@ def test_decoding_errors_name_the_problem(line: str, reason: str) -> None:
         Init("two words", start="Pad1"),
         SenOpticalFlow(0.0, "F", (0.5, 1.0), 3),
         SenIns(0.0, "INS", (0.0, 0.0), (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-        Sta(time_s=1.0),  # an infinite battery life cannot be written
+        Sta(time_s=1.0, battery_s=-1),  # a negative battery life cannot be written
+        Sta(time_s=1.0, battery_s=1.5),  # nor a fraction of a second: USARSim's is an int
     ],
 )
 def test_encoding_refuses_bad_values(message: Any) -> None:
@@ -241,6 +247,40 @@ def test_drive_in_si_applies_the_robot_limits() -> None:
         sim.drive_in_si(msg, sim.decode(msg), limits)
 
 
+def test_drive_angles_are_degrees_on_the_wire() -> None:
+    """USARSim's AerialVehicle.uc: RotationalVelocity deg/s, PitchAngle and RollAngle deg."""
+    limits = sim.DriveLimits(speed_m_s=5.0, climb_m_s=2.0, yaw_rate_rad_s=math.radians(100.0),
+                             tilt_rad=math.radians(20.0))
+    msg = parse_line("DRIVE {RotationalVelocity 10}")
+    drive = sim.drive_in_si(msg, sim.decode(msg), limits)
+    assert drive.yaw_rate_rad_s == pytest.approx(math.radians(10.0))
+    msg = parse_line("DRIVE {RollAngle -15} {PitchAngle 7.5} {Thrust 0.5}")
+    drive = sim.drive_in_si(msg, sim.decode(msg), limits)
+    assert (drive.roll_rad, drive.pitch_rad) == pytest.approx(
+        (math.radians(-15.0), math.radians(7.5)))
+    msg = parse_line("DRIVE {PitchAngle 50} {Normalized true}")  # percent of MaxTilt
+    assert sim.drive_in_si(msg, sim.decode(msg), limits).pitch_rad == pytest.approx(
+        math.radians(10.0))
+    for line, key in (("DRIVE {RotationalVelocity 101}", "RotationalVelocity"),
+                      ("DRIVE {RollAngle 90}", "RollAngle")):
+        msg = parse_line(line)
+        with pytest.raises(RemoteProtocolError, match=key + r": '.*' is out of range"):
+            sim.drive_in_si(msg, sim.decode(msg), limits)
+    assert sim.decode(parse_line("DRIVE {RotationalVelocity 90}")).yaw_rate_rad_s == (
+        pytest.approx(math.pi / 2))
+
+
+def test_init_vectors_read_as_usarsim_parse_vector() -> None:
+    msg = parse_line("INIT {ClassName x} {Location 0,0000, 0,0000, 0,0000} {Rotation 0,0,1.5}")
+    init = sim.decode(msg)
+    assert init.location_ned_m == (0.0, 0.0, 0.0) and init.rotation_rpy_rad == (0.0, 0.0, 1.5)
+    notes = sim.usarsim_notes(msg)
+    assert len(notes) == 1 and "Location '0,0000, 0,0000, 0,0000' read as 0,0,0" in notes[0]
+    msg = parse_line("INIT {ClassName x} {Location 1.0 2.0 -0.5}")
+    assert sim.decode(msg).location_ned_m == (0.0, 0.0, 1.0)
+    assert sim.usarsim_notes(parse_line("INIT {ClassName x} {Location 1,2,-3}")) == []
+
+
 def test_line_format_writes_what_encode_writes() -> None:
     ins = SenIns(1.25, "INS", (1.0, 2.0, -3.0), (0.1, 0.2, 0.3), (0.0, 0.5, 0.0))
     fmt = sim.line_format(SenIns, {"Name": "INS"})
@@ -250,9 +290,9 @@ def test_line_format_writes_what_encode_writes() -> None:
     layout = sim.sen_layout(SenMotors, counts={"Speeds": 4, "Commands": 4})
     fmt = sim.line_format(SenMotors, {"Name": "M"}, layout)
     assert fmt.format((0.5, *(1.0,) * 4, *(2.0,) * 4, 9.5)) == sim.encode(motors)
-    sta = Sta(name="R1", time_s=1.0, battery_s=5.0, voltage_v=12.0, current_a=1.0, armed=True)
+    sta = Sta(name="R1", time_s=1.0, battery_s=5, voltage_v=12.0, current_a=1.0, armed=True)
     fmt = sim.line_format(Sta, {"Type": "AerialVehicle", "Name": "R1"})
-    assert fmt.format((1.0, 5.0, 12.0, 1.0, True, False)) == sim.encode(sta)
+    assert fmt.format((1.0, 5, 12.0, 1.0, True, False)) == sim.encode(sta)
 
 
 @settings(max_examples=400, deadline=None)

@@ -335,12 +335,12 @@ class GpsReading(Reading):
         return (
             to_degrees_minutes(self.latitude_deg, "N", "S"),
             to_degrees_minutes(self.longitude_deg, "E", "W"),
-            self.fix,
-            self.satellites,
             self.latitude_deg,
             self.longitude_deg,
             self.altitude_m,
             *self.velocity_ned_m_s,
+            self.fix,  # USARSim's GPSSensor ends every line with {Fix} {Satellites}
+            self.satellites,
         )
 
 
