@@ -93,6 +93,12 @@ NO_COMMAND_PD = 0x00  # RESULT.command_pd when the answer names no command
 GESTURE_HOLD_S = 1.0  # thrust 0 + full yaw held this long starts or stops the motors
 GESTURE_YAW_MIN = 2000  # "full yaw": |yaw stick| at least this (of 2047)
 GESTURE_THRUST_MAX = 50  # "thrust 0": thrust stick at most this (of 4095)
+# Sim time after a stick command during which "on the ground and disarmed" is not read as a
+# touchdown: the snapshot may predate the simulator's answer to the stick DRIVE that armed
+# it (a board tick can run between sending the DRIVE and the next STA). Without it, sticks
+# that lift the vehicle off were followed by a TOUCHDOWN, motors "off" and every later stick
+# ignored while the vehicle flew on the first one.
+STICK_ARM_SETTLE_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -140,6 +146,7 @@ class OnboardBoards:
         self._velocity_until_s: float | None = None  # wall time a timed VELOCITY ends
         self._motion_pending = False  # an autonomous motion whose end is airframe.busy
         self._sticks = CtrlInput(0, 0, 0, 0, 0)
+        self._sticks_sim_s = -math.inf  # sim time of the last stick command flown
         self._gesture_since_s: float | None = None
         self._gesture_done = False
         self._waypoint: Waypoint | None = None
@@ -399,6 +406,7 @@ class OnboardBoards:
             return  # motors idling on the ground
         self.flight.check(FlightEvent.STICKS)
         self._end_motion()
+        self._sticks_sim_s = self.airframe.snapshot().time_s
         self._fly_sticks(msg, bits)
         self._fire(FlightEvent.STICKS)
 
@@ -495,7 +503,8 @@ class OnboardBoards:
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
             self.pad.landing_finished()
-        on_ground = snap.landed and not snap.armed
+        on_ground = (snap.landed and not snap.armed
+                     and snap.time_s > self._sticks_sim_s + STICK_ARM_SETTLE_S)
         if on_ground and self.state in (NavState.FLYING, NavState.HOLDING, NavState.FAILSAFE):
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False

@@ -1,0 +1,88 @@
+"""Attitude-mode sticks over the packet protocol tilt and move the vehicle (issue 17).
+
+A ground client starts the motors with the stick gesture, then flies CTRL_INPUT with ctrl 0x0F
+(pitch, roll, yaw and thrust from the serial input: attitude mode, no horizontal hold): a roll
+stick, then a pitch stick. Both must show in the simulator's ground truth and in IMU_CALCDATA,
+and the vehicle must move the way it leans. Regression: the first stick command from the
+ground used to be followed by a TOUCHDOWN (the board read a snapshot older than the DRIVE that
+armed the vehicle), after which every stick was acknowledged and ignored while the vehicle flew
+on the first one. Waits are on sim time (lockstep, paced by the pilot).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import ExitStack
+
+import pytest
+
+from skeye.control.connection import connect
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.server import PilotServer
+from skeye.pilot.sim_airframe import SimAirframe
+from skeye.wire.packet_units import imu_calcdata_to_si
+from skeye.wire.packets import PD, ImuCalcData, PollMask
+from tests.sim.conftest import running_sim
+
+TILT_RAD = 0.2
+THRUST = 0.45  # a little above the Hummingbird's hover thrust: it climbs slowly
+
+
+@pytest.fixture
+def stick_flight() -> Iterator[tuple[Vehicle, object]]:
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=5))
+        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=10.0))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        airframe = SimAirframe(sim, robot)
+        pilot = stack.enter_context(
+            PilotServer(airframe, port=0, lockstep=True, lockstep_rate=2.0, tick_s=0.05)
+        )
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        yield vehicle, robot
+
+
+def _fly(vehicle: Vehicle, robot, seconds: float, roll: float, pitch: float, yaw: float,
+         thrust: float) -> None:
+    """Send the sticks as a ground station does (every few ticks) for ``seconds`` of sim time."""
+    start = robot.ground_truth.latest.time_s
+    for _ in range(100_000):
+        vehicle.ctrl_input(roll, pitch, yaw, thrust, 0x0F)
+        if robot.ground_truth.latest.time_s - start >= seconds:
+            return
+    raise AssertionError("sim time did not advance")
+
+
+def _imu(vehicle: Vehicle):
+    msg = vehicle.poll(int(PollMask.IMU_CALCDATA))[PD.IMU_CALCDATA]
+    assert isinstance(msg, ImuCalcData)
+    return imu_calcdata_to_si(msg)
+
+
+def test_attitude_sticks_tilt_and_move_the_vehicle(stick_flight) -> None:
+    vehicle, robot = stick_flight
+    # Thrust 0 + full yaw held for the gesture's time (the board's clock: the link's wall
+    # time) starts the motors; wait for LL_STATUS to say so.
+    for _ in range(10_000):
+        vehicle.ctrl_input(0.0, 0.0, -4.28, 0.0, 0x0F)  # full left yaw
+        if vehicle.poll(int(PollMask.LL_STATUS))[PD.LL_STATUS].motors_on:
+            break
+    else:
+        raise AssertionError("the stick gesture never started the motors")
+    _fly(vehicle, robot, 1.5, TILT_RAD, 0.0, 0.0, THRUST)  # roll right
+    gt = robot.ground_truth.latest
+    assert gt.rpy_rad[0] == pytest.approx(TILT_RAD, abs=0.03), gt
+    assert _imu(vehicle).roll_rad == pytest.approx(TILT_RAD, abs=0.03)
+    east_after_roll = gt.position_ned_m[1]
+    assert east_after_roll > 0.1, gt  # leaning right moves it east (yaw ~ north)
+
+    _fly(vehicle, robot, 1.5, 0.0, -TILT_RAD, 0.0, THRUST)  # pitch forward (nose down)
+    gt = robot.ground_truth.latest
+    assert gt.rpy_rad[0] == pytest.approx(0.0, abs=0.03), gt
+    assert gt.rpy_rad[1] == pytest.approx(-TILT_RAD, abs=0.03), gt
+    imu = _imu(vehicle)
+    assert imu.roll_rad == pytest.approx(0.0, abs=0.03)
+    assert imu.pitch_rad == pytest.approx(-TILT_RAD, abs=0.03)
+    n0 = gt.position_ned_m[0]
+    _fly(vehicle, robot, 1.0, 0.0, -TILT_RAD, 0.0, THRUST)
+    assert robot.ground_truth.latest.position_ned_m[0] > n0 + 0.1  # and it flies forward
