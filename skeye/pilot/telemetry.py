@@ -9,7 +9,7 @@ that anchor. SI becomes wire units through ``skeye.wire.packet_units`` and the s
 ``packet_defs.LAYOUTS``.
 
 Units: IMU_RAWDATA, which AscTec leaves in uncalibrated ADC counts, carries the calibrated
-scalings of IMU_CALCDATA (gyro 0.015 deg/s, acc 10000 = 1 g) and the field in 0.01 uT, pressure
+scalings of IMU_CALCDATA (gyro 64.8 counts per deg/s, acc 10000 = 1 g) and the field in 0.01 uT, pressure
 in Pa; the simulator has no temperature model, so both temperature fields report 25.00 degC
 (2500).
 """
@@ -107,6 +107,12 @@ class GeoAnchor:
         e = pos_ned_m[1] + self._sum_e / self.fixes
         lat, lon, _ = self.origin.to_geodetic(n, e, 0.0)
         return lat, lon
+
+
+# RC_DATA channel[4] and [5] (sdk.h): the serial interface is what commands the simulated
+# vehicle, so it is always enabled; the mode switch follows the board's flight mode.
+RC_SERIAL_ENABLED = 4095
+RC_MODE_MANUAL, RC_MODE_HEIGHT, RC_MODE_GPS = 0, 2048, 4095
 
 
 class Telemetry:
@@ -214,10 +220,15 @@ class Telemetry:
         )
 
     def _rc_data(self, snap: Snapshot, status: BoardStatus) -> RcData:
-        # No RC transmitter in the simulation: the channels show the serial stick input.
+        # No RC transmitter in the simulation: the channels show the serial stick input, in
+        # AscTec's order (sdk.h, RO_RC_DATA / RO_ALL_DATA: channel[0] pitch, [1] roll,
+        # [2] thrust, [3] yaw, [4] serial interface enable (> 2048 enabled), [5] mode switch
+        # (0 manual, 2048 height control, 4095 GPS + height control); range 0..4095).
         s = status.sticks
-        sticks = (s.pitch + 2048, s.roll + 2048, s.yaw + 2048, s.thrust)
-        channels = (*sticks, s.ctrl, 0, 0, 0)
+        mode = self._ll_status(snap, status).flightMode
+        switch = RC_MODE_GPS if mode & 0x04 else RC_MODE_HEIGHT if mode & 0x02 else RC_MODE_MANUAL
+        channels = (s.pitch + 2048, s.roll + 2048, s.thrust, s.yaw + 2048,
+                    RC_SERIAL_ENABLED, switch, 0, 0)
         return RcData(channels_in=channels, channels_out=channels, lock=0)
 
     def _controller_output(self, snap: Snapshot, status: BoardStatus) -> ControllerOutput:

@@ -348,7 +348,7 @@ class ImuCalcData(Message):
     angle_nick: int  # 1/1000 deg; nick is pitch
     angle_roll: int
     angle_yaw: int  # 0..360000
-    angvel_nick: int  # 0.015 deg/s per count
+    angvel_nick: int  # 64.8 counts = 1 deg/s (0.0154 deg/s per count)
     angvel_roll: int
     angvel_yaw: int
     acc_x_calib: int  # 10000 = 1 g, body FRD

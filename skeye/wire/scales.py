@@ -24,7 +24,9 @@ from skeye.errors import LocalProtocolError
 
 G_M_S2 = 9.80665  # standard gravity; AscTec's 10000 counts
 ACC_COUNTS_PER_G = 10_000
-ANGVEL_DEG_S_PER_COUNT = 0.015
+# AscTec SDK sdk.h (RO_ALL_DATA, IMU_CALCDATA): angular velocities "in 0.0154 deg/s
+# (=> 64.8 = 1 deg/s)".
+ANGVEL_COUNTS_PER_DEG_S = 64.8
 STICK_DEG_PER_COUNT = 0.025
 STICK_YAW_DEG_S_PER_COUNT = 0.120
 STICK_MAX = 2047
@@ -86,7 +88,7 @@ class Scale:
 # The protocol's units (docs/protocols/packets.md, "Units").
 MDEG = Scale("rad", "_rad", 1, 1000, degrees=True)  # 1/1000 degree
 HEADING_MDEG = Scale("rad", "_rad", 1, 1000, degrees=True, wrap=True)  # 0..360000, clockwise
-ANGVEL = Scale("rad/s", "_rad_s", ANGVEL_DEG_S_PER_COUNT, degrees=True)  # 0.015 deg/s
+ANGVEL = Scale("rad/s", "_rad_s", 1, ANGVEL_COUNTS_PER_DEG_S, degrees=True)  # 64.8 = 1 deg/s
 MRAD_S = Scale("rad/s", "_rad_s", 1, 1000)
 ACC = Scale("m/s^2", "_m_s2", G_M_S2, ACC_COUNTS_PER_G)  # 10000 = 1 g
 MM = Scale("m", "_m", 1, 1000)

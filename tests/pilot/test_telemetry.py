@@ -48,7 +48,7 @@ def test_status_shows_in_the_structures() -> None:
     status = replace(
         IDLE,
         state=NavState.HOLDING,
-        sticks=CtrlInput(100, -200, 0, 2048, int(CtrlBits.PITCH | CtrlBits.HEIGHT_CONTROL)),
+        sticks=CtrlInput(100, -200, 300, 1000, int(CtrlBits.PITCH | CtrlBits.HEIGHT_CONTROL)),
         checksum_errors=300,
         waypoint_target=(3.0, 4.0, 0.0),
         home_ned_m=(0.0, 0.0, 1.0),
@@ -57,7 +57,8 @@ def test_status_shows_in_the_structures() -> None:
     assert isinstance(ll, LlStatus) and isinstance(rc, RcData) and isinstance(way, CurrentWay)
     assert (ll.flightMode, ll.chksum_error, ll.up_time, ll.flying) == (0x07, 255, 10, 1)
     assert ll.battery_voltage_1 == 12400
-    assert rc.channels_in[:5] == (2148, 1848, 2048, 2048, 0x11)
+    # AscTec's order: pitch, roll, thrust, yaw, serial enable, mode switch (GPS: holding)
+    assert rc.channels_in == (2148, 1848, 1000, 2348, 4095, 4095, 0, 0)
     assert way.distance_to_wp == 50 and way.navigation_status & 0x04  # 5 m, within 20 m
     nav = telemetry.nav_status(snap, status)
     assert isinstance(nav, NavStatus) and nav.z == -1000 and nav.state is NavState.HOLDING

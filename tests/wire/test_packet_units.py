@@ -54,7 +54,7 @@ KNOWN: list[tuple[Callable[[float], int], Callable[[int], float], float, int]] =
     (sc.rad_to_mdeg, sc.mdeg_to_rad, math.pi / 2, 90_000),
     (sc.rad_to_mdeg, sc.mdeg_to_rad, -10 * DEG, -10_000),
     (sc.yaw_rad_to_mdeg, sc.yaw_mdeg_to_rad, -math.pi / 2, 270_000),
-    (sc.rad_s_to_angvel_counts, sc.angvel_counts_to_rad_s, 1.5 * DEG, 100),
+    (sc.rad_s_to_angvel_counts, sc.angvel_counts_to_rad_s, 10 * DEG, 648),  # 64.8 = 1 deg/s
     (sc.m_s2_to_acc_counts, sc.acc_counts_to_m_s2, 9.80665, 10_000),
     (sc.m_s2_to_acc_counts, sc.acc_counts_to_m_s2, -9.80665 / 2, -5_000),
     (sc.m_to_mm, sc.mm_to_m, 1.234, 1234),
@@ -113,7 +113,7 @@ def test_non_finite_values_are_refused(bad: float) -> None:
 PAIRS: list[tuple[Callable[[float], int], Callable[[int], float], float, int, int]] = [
     (sc.rad_to_mdeg, sc.mdeg_to_rad, 0.001 * DEG, -(2**31), 2**31 - 1),
     (sc.yaw_rad_to_mdeg, sc.yaw_mdeg_to_rad, 0.001 * DEG, 0, 359_999),
-    (sc.rad_s_to_angvel_counts, sc.angvel_counts_to_rad_s, 0.015 * DEG, -(2**31), 2**31 - 1),
+    (sc.rad_s_to_angvel_counts, sc.angvel_counts_to_rad_s, DEG / 64.8, -(2**31), 2**31 - 1),
     (sc.m_s2_to_acc_counts, sc.acc_counts_to_m_s2, 9.80665e-4, -(2**15), 2**15 - 1),
     (sc.m_to_mm, sc.mm_to_m, 1e-3, -(2**31), 2**31 - 1),
     (sc.m_s_to_mm_s, sc.mm_s_to_m_s, 1e-3, -(2**31), 2**31 - 1),
@@ -177,7 +177,7 @@ def _imu_si(
 
 def _assert_imu_close(a: sc.ImuCalcSi, b: sc.ImuCalcSi) -> None:
     """Every field within one count of its scaling."""
-    mdeg, angvel, acc, mm = 0.001 * DEG, 0.015 * DEG, 9.80665e-4, 1e-3
+    mdeg, angvel, acc, mm = 0.001 * DEG, DEG / 64.8, 9.80665e-4, 1e-3
     for name, tol in [
         ("roll_rad", mdeg),
         ("pitch_rad", mdeg),
