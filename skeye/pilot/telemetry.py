@@ -9,7 +9,8 @@ that anchor. SI becomes wire units through ``skeye.wire.packet_units`` and the s
 ``packet_defs.LAYOUTS``.
 
 Units: IMU_RAWDATA, which AscTec leaves in uncalibrated ADC counts, carries the calibrated
-scalings of IMU_CALCDATA (gyro 64.8 counts per deg/s, acc 10000 = 1 g) and the field in 0.01 uT, pressure
+scalings of IMU_CALCDATA (gyro 64.8 counts per deg/s, acc 10000 = 1 g) and the field in
+0.01 uT, pressure
 in Pa; the simulator has no temperature model, so both temperature fields report 25.00 degC
 (2500).
 """
