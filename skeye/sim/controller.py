@@ -6,10 +6,15 @@ on ground truth, so an estimate that drifts makes the vehicle drift as a real on
 - Attitude mode (``DRIVE {RollAngle} {PitchAngle} {RotationalVelocity} {Thrust}``): angle
   set-points -> P angle loop -> rate set-points -> PI rate loop -> body torques; collective
   thrust is ``Thrust * max_thrust`` straight from the stick, as on the real board.
-- Velocity mode (USARSim's aerial ``DRIVE``): forward/lateral velocity in the yaw-following
-  frame -> PI velocity loop -> acceleration -> tilt set-points (limited to ``max_tilt_rad``);
-  vertical: PI on climb rate, and when the climb command is zero a P loop holds the height
-  estimate where the command went to zero (height hold). Yaw rate goes straight to the rate loop.
+- Velocity mode (USARSim's aerial ``DRIVE``; the skeye extension board's flow-based velocity
+  hold): forward/lateral velocity in the yaw-following frame -> PI velocity loop on the
+  *estimated* velocity (optical flow indoors, so it drifts as flow drifts) -> acceleration ->
+  tilt set-points (limited to ``max_tilt_rad``); vertical: PI on climb rate, and when the climb
+  command is zero a P loop holds the height estimate where the command went to zero (height
+  hold). Yaw rate goes straight to the rate loop.
+- GPS mode (the AscTec LL board's GPS position hold): velocity mode while the estimator has a
+  GPS fix; with the horizontal sticks centred (zero forward and lateral velocity) a P loop
+  (``position_gain``) holds the position estimate where they were centred.
 - Mixer: total thrust and torques -> per-rotor thrust for the '+' layout -> rotor speed
   commands (sqrt(f/kf)); roll/pitch keep priority over yaw when a rotor would saturate.
 
@@ -56,6 +61,8 @@ class LowLevelController:
         self.vel_int = [0.0, 0.0]
         self.climb_int = 0.0
         self.hold_altitude_m = hold_altitude_m
+        self.hold_north_m: float | None = None
+        self.hold_east_m: float | None = None
 
     def update(
         self,
@@ -63,15 +70,19 @@ class LowLevelController:
         rpy: tuple[float, float, float],
         omega: tuple[float, float, float],
         vel_ned: tuple[float, float, float],
-        altitude_m: float,
+        pos_ned: tuple[float, float, float],
         max_rotor_speed_rad_s: float,
+        gps_hold: bool = False,
     ) -> list[float]:
         """One tick: estimate + command -> four rotor speed commands (rad/s).
+
+        ``gps_hold``: the estimator has a GPS fix, so centred sticks hold the position.
 
         Hot path (every board tick of every robot): written out on plain floats.
         """
         p, a, dt = self.p, self.a, self.dt
         roll, pitch, yaw = rpy
+        altitude_m = -pos_ned[2]
         if cmd.attitude:
             lim = p.max_tilt_rad * 1.6
             roll_sp = _clamp(cmd.roll_rad, -lim, lim)
@@ -84,11 +95,26 @@ class LowLevelController:
             vmax, amax, ki = p.max_speed_m_s, p.max_accel_m_s2, p.velocity_integral_gain
             kv = p.velocity_gain
             vel_int = self.vel_int
+            fwd_sp = _clamp(cmd.forward_m_s, -vmax, vmax)
+            right_sp = _clamp(cmd.right_m_s, -vmax, vmax)
+            hold_n, hold_e = self.hold_north_m, self.hold_east_m
+            if gps_hold and fwd_sp == 0.0 and right_sp == 0.0:
+                # GPS mode, sticks centred: position hold -> velocity set-point (NED -> yaw frame).
+                if hold_n is None or hold_e is None:
+                    hold_n = self.hold_north_m = pos_ned[0]
+                    hold_e = self.hold_east_m = pos_ned[1]
+                kp = p.position_gain
+                sp_n = _clamp(kp * (hold_n - pos_ned[0]), -vmax, vmax)
+                sp_e = _clamp(kp * (hold_e - pos_ned[1]), -vmax, vmax)
+                fwd_sp = cy * sp_n + sy * sp_e
+                right_sp = -sy * sp_n + cy * sp_e
+            else:
+                self.hold_north_m = self.hold_east_m = None
             # Horizontal velocity loop -> accelerations in the yaw frame (forward, right).
-            err = _clamp(cmd.forward_m_s, -vmax, vmax) - (cy * vn + sy * ve)
+            err = fwd_sp - (cy * vn + sy * ve)
             i0 = vel_int[0] = _clamp(vel_int[0] + err * dt, -1.0, 1.0)
             acc_fwd = _clamp(kv * err + ki * i0, -amax, amax)
-            err = _clamp(cmd.right_m_s, -vmax, vmax) - (-sy * vn + cy * ve)
+            err = right_sp - (-sy * vn + cy * ve)
             i1 = vel_int[1] = _clamp(vel_int[1] + err * dt, -1.0, 1.0)
             acc_right = _clamp(kv * err + ki * i1, -amax, amax)
             tilt_max = p.max_tilt_rad
