@@ -563,9 +563,9 @@ class Simulation:
                 if board_first:
                     robot.observe(sample.reading)
                 samples[i] = sample
-        for sample in samples:
-            if sample is not None:
-                events.append(sample)
+        for done in samples:
+            if done is not None:
+                events.append(done)
         if status:
             events.append(robot.status(state.time_s))
         self.emit(robot, events)
