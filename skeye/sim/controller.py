@@ -12,9 +12,10 @@ on ground truth, so an estimate that drifts makes the vehicle drift as a real on
   tilt set-points (limited to ``max_tilt_rad``); vertical: PI on climb rate, and when the climb
   command is zero a P loop holds the height estimate where the command went to zero (height
   hold). Yaw rate goes straight to the rate loop.
-- GPS mode (the AscTec LL board's GPS position hold): velocity mode while the estimator has a
-  GPS fix; with the horizontal sticks centred (zero forward and lateral velocity) a P loop
-  (``position_gain``) holds the position estimate where they were centred.
+- GPS mode (the AscTec LL board's GPS position hold; ``Command.gps_mode``): velocity mode
+  while the estimator has a GPS fix; with the horizontal sticks centred (zero forward and
+  lateral velocity) a P loop (``position_gain``) holds the position estimate where they were
+  centred.
 - Mixer: total thrust and torques -> per-rotor thrust for the '+' layout -> rotor speed
   commands (sqrt(f/kf)); roll/pitch keep priority over yaw when a rotor would saturate.
 
@@ -41,6 +42,7 @@ class Command:
     roll_rad: float = 0.0
     pitch_rad: float = 0.0
     thrust: float = 0.0  # 0..1 of max thrust
+    gps_mode: bool = False  # GPS mode: centred sticks hold the position while there is a fix
 
 
 def _clamp(x: float, lo: float, hi: float) -> float:
@@ -98,7 +100,7 @@ class LowLevelController:
             fwd_sp = _clamp(cmd.forward_m_s, -vmax, vmax)
             right_sp = _clamp(cmd.right_m_s, -vmax, vmax)
             hold_n, hold_e = self.hold_north_m, self.hold_east_m
-            if gps_hold and fwd_sp == 0.0 and right_sp == 0.0:
+            if cmd.gps_mode and gps_hold and fwd_sp == 0.0 and right_sp == 0.0:
                 # GPS mode, sticks centred: position hold -> velocity set-point (NED -> yaw frame).
                 if hold_n is None or hold_e is None:
                     hold_n = self.hold_north_m = pos_ned[0]

@@ -259,6 +259,8 @@ class Robot:
         if attitude != self.command.attitude:
             self.command = Command(attitude=attitude)
             self.controller.reset()
+        if "gps_mode" in changes:
+            self.command.gps_mode = bool(changes.pop("gps_mode"))
         for key, value in changes.items():
             setattr(self.command, key, float(value))
         c = self.command
