@@ -19,9 +19,9 @@ spawn pose, as USARSim's INS is: the operator places the vehicle at a known star
   sonar height (tilt-corrected, over the ground level seen at the first echo) or else the
   barometer (relative to its first reading); horizontally by optical-flow velocity (rates
   de-rotated with the gyro, scaled by the height above ground) and by GPS position and
-  velocity when there is a fix (relative to the first fix: the board's home). Without flow
-  or GPS the horizontal velocity is the integrated accelerometer, and it drifts as on a real
-  vehicle.
+  velocity when there is a fix (relative to the first fix: the board's home); zero velocity
+  while the board is disarmed. Without flow or GPS the horizontal velocity is
+  the integrated accelerometer, and it drifts as on a real vehicle.
 
 Readings are fused when they arrive (no delayed-state buffer): a sensor's latency shows up as
 estimate lag, as on boards of the AscTec era. Every noise parameter is in
@@ -135,6 +135,7 @@ class BoardEstimator:
         self.home: GeoOrigin | None = None
         self.home_ned: tuple[float, float] = (0.0, 0.0)
         self.gps_t = -math.inf
+        self.rest_t = -math.inf
         self.flow_used = 0
         self.mag_yaw_err = 0.0  # compass heading minus estimated yaw, times compass_gain
         self._est: InsEstimate | None = None
@@ -307,6 +308,16 @@ class BoardEstimator:
         ax[0].fuse_vel(vel[0], vv)
         ax[1].fuse_vel(vel[1], vv)
         self.gps_t = r.time_s
+
+    def at_rest(self, time_s: float) -> None:
+        """The board is disarmed (motors off), so at rest: fuse zero velocity every 0.2 s with
+        0.2 m/s noise (PX4 EKF2's zero-velocity update, zero_velocity_update.cpp)."""
+        if time_s - self.rest_t < 0.2:
+            return
+        self.rest_t = time_s
+        self._est = None
+        for axis in self.axes:
+            axis.fuse_vel(0.0, 0.04)
 
     def has_gps_fix(self, time_s: float) -> bool:
         """Whether a GPS fix was fused within the last second."""

@@ -311,6 +311,8 @@ class Robot:
             )
         else:
             commands = [0.0, 0.0, 0.0, 0.0]
+            if estimator is not None:  # motors off: the board takes itself to be at rest
+                estimator.at_rest(state.time_s)
         self.rotors.advance(commands, w_max)
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = state.rot_body_to_ned
         vn, ve, vd = state.vel_ned_m_s

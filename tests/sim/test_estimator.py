@@ -150,3 +150,21 @@ def test_estimator_kind_is_checked() -> None:
         EstimatorParams(kind="kalman")
     with pytest.raises(ConfigError, match="sonar_noise_m"):
         EstimatorParams(sonar_noise_m=-1.0)
+
+
+def test_a_disarmed_board_holds_its_velocity_estimate_at_zero() -> None:
+    """On the ground with the motors off an accelerometer bias would integrate into velocity;
+    the board's zero-velocity update (every 0.2 s while disarmed) keeps it near zero."""
+    def velocity_after(rest: bool) -> float:
+        est = BoardEstimator(EstimatorParams(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 163.0)
+        for k in range(3000):  # 30 s at 100 Hz, 0.1 m/s^2 of bias along x
+            t = k * 0.01
+            est.observe(AccelReading(t, (0.1, 0.0, -G)))
+            est.observe(GyroReading(t, (0.0, 0.0, 0.0)))
+            if rest:
+                est.at_rest(t)
+        vn, ve, _ = est.estimate().vel_ned_m_s
+        return math.hypot(vn, ve)
+
+    assert velocity_after(rest=True) < 0.02
+    assert velocity_after(rest=False) > 0.1  # the attitude filter takes up most of the bias
