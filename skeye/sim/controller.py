@@ -6,6 +6,9 @@ on ground truth, so an estimate that drifts makes the vehicle drift as a real on
 - Attitude mode (``DRIVE {RollAngle} {PitchAngle} {RotationalVelocity} {Thrust}``): angle
   set-points -> P angle loop -> rate set-points -> PI rate loop -> body torques; collective
   thrust is ``Thrust * max_thrust`` straight from the stick, as on the real board.
+- Height mode (the AscTec LL board's height control; ``Command.height_mode`` with attitude):
+  angles as in attitude mode; the thrust stick is a climb rate around its centre,
+  ``(Thrust - 0.5) * 2 * max_climb``, and at the centre the height estimate is held.
 - Velocity mode (USARSim's aerial ``DRIVE``; the skeye extension board's flow-based velocity
   hold): forward/lateral velocity in the yaw-following frame -> PI velocity loop on the
   *estimated* velocity (optical flow indoors, so it drifts as flow drifts) -> acceleration ->
@@ -43,6 +46,7 @@ class Command:
     pitch_rad: float = 0.0
     thrust: float = 0.0  # 0..1 of max thrust
     gps_mode: bool = False  # GPS mode: centred sticks hold the position while there is a fix
+    height_mode: bool = False  # with attitude: thrust stick = climb rate, height held at 0.5
 
 
 def _clamp(x: float, lo: float, hi: float) -> float:
@@ -89,8 +93,13 @@ class LowLevelController:
             lim = p.max_tilt_rad * 1.6
             roll_sp = _clamp(cmd.roll_rad, -lim, lim)
             pitch_sp = _clamp(cmd.pitch_rad, -lim, lim)
-            thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
-            self.hold_altitude_m = None
+            if cmd.height_mode:
+                # Height mode: the thrust stick is a climb rate around its centre (0.5).
+                up = (_clamp(cmd.thrust, 0.0, 1.0) - 0.5) * 2.0 * p.max_climb_m_s
+                thrust = self._vertical(up, altitude_m, vel_ned[2], roll, pitch)
+            else:
+                thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
+                self.hold_altitude_m = None
         else:
             cy, sy = math.cos(yaw), math.sin(yaw)
             vn, ve, vd = vel_ned
@@ -124,26 +133,7 @@ class LowLevelController:
             roll_sp = _clamp(
                 math.atan2(acc_right * math.cos(pitch_sp), GRAVITY_M_S2), -tilt_max, tilt_max
             )
-            # Vertical: climb-rate PI, with height hold while the climb command is zero.
-            climb_max = p.max_climb_m_s
-            up_cmd = _clamp(cmd.up_m_s, -climb_max, climb_max)
-            if up_cmd == 0.0:
-                if self.hold_altitude_m is None:
-                    self.hold_altitude_m = altitude_m
-                up_cmd = _clamp(
-                    p.height_gain * (self.hold_altitude_m - altitude_m), -climb_max, climb_max
-                )
-            else:
-                self.hold_altitude_m = None
-            err = up_cmd + vd
-            self.climb_int = _clamp(self.climb_int + err * dt, -2.0, 2.0)
-            a_up = _clamp(
-                p.climb_gain * err + p.climb_integral_gain * self.climb_int,
-                -GRAVITY_M_S2 * 0.8,
-                amax * 2,
-            )
-            tilt = math.cos(roll) * math.cos(pitch)
-            thrust = a.mass_kg * (GRAVITY_M_S2 + a_up) / (tilt if tilt > 0.5 else 0.5)
+            thrust = self._vertical(cmd.up_m_s, altitude_m, vd, roll, pitch)
         yaw_rate_sp = _clamp(cmd.yaw_rate_rad_s, -p.max_yaw_rate_rad_s, p.max_yaw_rate_rad_s)
         # Angle loop -> body rate set-points (Euler-rate approximation, fine for small tilt),
         # then the PI rate loop (P only on yaw) -> body torques.
@@ -160,6 +150,31 @@ class LowLevelController:
         rate_int[2] = _clamp(rate_int[2] + err * dt, -0.5, 0.5)
         tau_z = izz * (p.yaw_rate_gain * err)
         return self.mix(thrust, [tau_x, tau_y, tau_z], max_rotor_speed_rad_s)
+
+    def _vertical(
+        self, up_m_s: float, altitude_m: float, vd: float, roll: float, pitch: float
+    ) -> float:
+        """Climb-rate PI, with height hold while the climb command is zero -> thrust (N)."""
+        p, a, dt = self.p, self.a, self.dt
+        climb_max = p.max_climb_m_s
+        up_cmd = _clamp(up_m_s, -climb_max, climb_max)
+        if up_cmd == 0.0:
+            if self.hold_altitude_m is None:
+                self.hold_altitude_m = altitude_m
+            up_cmd = _clamp(
+                p.height_gain * (self.hold_altitude_m - altitude_m), -climb_max, climb_max
+            )
+        else:
+            self.hold_altitude_m = None
+        err = up_cmd + vd
+        self.climb_int = _clamp(self.climb_int + err * dt, -2.0, 2.0)
+        a_up = _clamp(
+            p.climb_gain * err + p.climb_integral_gain * self.climb_int,
+            -GRAVITY_M_S2 * 0.8,
+            p.max_accel_m_s2 * 2,
+        )
+        tilt = math.cos(roll) * math.cos(pitch)
+        return a.mass_kg * (GRAVITY_M_S2 + a_up) / (tilt if tilt > 0.5 else 0.5)
 
     def mix(
         self, thrust_n: float, torque: list[float], max_rotor_speed_rad_s: float

@@ -54,10 +54,9 @@ class ScheduledSensor:
 BOARD_SENSOR_TYPES: Final = (
     "Gyro", "Accelerometer", "MagneticCompass", "Barometer", "Sonar", "OpticalFlow", "GPS"
 )
-"""The sensors the board's estimator reads: the first mounted one of each type (for Sonar and
-OpticalFlow, the first looking straight down), else one the board has but does not stream."""
-
-_DOWN_LOOKING: Final = ("Sonar", "OpticalFlow")
+"""The sensors the board's estimator reads: the first mounted one of each type aligned with the
+body (so Sonar and OpticalFlow look straight down), else one the board has but does not
+stream."""
 
 _MOTORS_LAYOUT: Final[Layout] = sen_layout(SenMotors, counts={"Speeds": 4, "Commands": 4})
 
@@ -219,8 +218,8 @@ class Robot:
             type_name = sched.sensor.type_name
             if type_name not in BOARD_SENSOR_TYPES or type_name in chosen:
                 continue
-            if type_name in _DOWN_LOOKING and any(abs(a) > 1e-9 for a in sched.mount.direction_rad):
-                continue
+            if any(abs(a) > 1e-9 for a in sched.mount.direction_rad):
+                continue  # the board's own sensors are aligned with the body (range: down)
             sched.board = True
             chosen[type_name] = sched
         for type_name in BOARD_SENSOR_TYPES:
@@ -261,6 +260,8 @@ class Robot:
             self.controller.reset()
         if "gps_mode" in changes:
             self.command.gps_mode = bool(changes.pop("gps_mode"))
+        if "height_mode" in changes:
+            self.command.height_mode = bool(changes.pop("height_mode"))
         for key, value in changes.items():
             setattr(self.command, key, float(value))
         c = self.command
