@@ -6,9 +6,10 @@ optical flow, GPS) are sampled by the engine at their own rates; every reading i
 spawn pose, as USARSim's INS is: the operator places the vehicle at a known start).
 
 - Attitude: a Mahony complementary filter on SO(3) (Mahony, Hamel, Pflimlin, "Nonlinear
-  complementary filters on the special orthogonal group", IEEE TAC 53(5), 2008), the filter
-  class the AscTec and ArduCopter-2 boards ran: the quaternion is propagated with the
-  bias-corrected gyro at each gyro reading; the accelerometer's "up" direction and the
+  complementary filters on the special orthogonal group", IEEE TAC 53(5), 2008), the
+  complementary-filter class of that era's boards (ArduPilot's DCM is one; AscTec's LL
+  firmware is closed, a complementary filter is our assumption): the quaternion is propagated
+  with the bias-corrected gyro at each gyro reading; the accelerometer's "up" direction and the
   magnetometer's heading (tilt-compensated with the *estimated* roll and pitch, against the
   local declination the board is configured with) give a correction ``kp * e`` and a gyro
   bias estimate ``-ki * integral(e)``.
