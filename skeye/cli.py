@@ -81,7 +81,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
     wind = make_settings(args.wind, parse_params(args.wind_params))
     sim = Simulation(
-        world, seed=args.seed, timestep_s=args.timestep, wind=wind, robot_dirs=tuple(args.robot_dir)
+        world, seed=args.seed, timestep_s=args.timestep, wind=wind,
+        robot_dirs=tuple(args.robot_dir), estimator=args.estimator,
     )
     _inject_fault(sim)
     stop = threading.Event()
@@ -120,7 +121,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
         print(
             f"skeye sim: world {world.name!r}, {args.mode} mode, step {args.timestep * 1000:g} ms, "
-            f"seed {args.seed}; control protocol on {args.host}:{server.port} ({where})",
+            f"seed {args.seed}, estimator {args.estimator or 'per robot file'}; "
+            f"control protocol on {args.host}:{server.port} ({where})",
             flush=True,
         )
         print(f"skeye sim: {native.status().describe()}", flush=True)
@@ -165,6 +167,14 @@ def _add_sim(sub: Any) -> None:
     p.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
     p.add_argument("--seed", type=int, default=0, help="seed of every random source")
     p.add_argument("--timestep", type=float, default=0.001, help="physics step in seconds")
+    p.add_argument(
+        "--estimator",
+        choices=("onboard", "truth"),
+        default=None,
+        help="the boards' state estimator for every robot: onboard (from the simulated sensor "
+        "readings; vehicles drift as real ones) or truth (an oracle: ground truth plus small "
+        "INS error processes); default: each robot file's [estimator] kind (onboard)",
+    )
     p.add_argument(
         "--wind", default="none", help="wind mode: none, constant, turbulence, random_force"
     )

@@ -40,6 +40,7 @@ COMPILED_MODULES: tuple[str, ...] = (
     "skeye.sim.state",
     "skeye.sim.frames",
     "skeye.sim.controller",
+    "skeye.sim.estimator",
     "skeye.sim.vehicle",
     "skeye.sim.wind",
     "skeye.sim.robot",

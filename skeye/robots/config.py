@@ -25,6 +25,7 @@ from skeye.robots.params import (
     AirframeParams,
     BatteryParams,
     ControllerParams,
+    EstimatorParams,
     dataclass_from_mapping,
 )
 
@@ -58,6 +59,7 @@ class RobotConfig:
     sensors: tuple[SensorMount, ...]
     source: str
     envelope: FlightEnvelope = field(default_factory=FlightEnvelope)
+    estimator: EstimatorParams = field(default_factory=EstimatorParams)
 
 
 _TOP_KEYS = {
@@ -70,6 +72,7 @@ _TOP_KEYS = {
     "controller",
     "sensors",
     "envelope",
+    "estimator",
 }
 
 
@@ -99,7 +102,7 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
             raise ConfigError(f"{source}: {key} must be a positive number, got {value!r}")
         rates[key] = float(value)
     tables = {}
-    for key in ("airframe", "battery", "controller", "envelope"):
+    for key in ("airframe", "battery", "controller", "envelope", "estimator"):
         table = data.get(key, {})
         if not isinstance(table, dict):
             raise ConfigError(f"{source}: [{key}] must be a table")
@@ -110,6 +113,9 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
         ControllerParams, tables["controller"], f"{source} [controller]"
     )
     envelope = dataclass_from_mapping(FlightEnvelope, tables["envelope"], f"{source} [envelope]")
+    estimator = dataclass_from_mapping(
+        EstimatorParams, tables["estimator"], f"{source} [estimator]"
+    )
     sensors_data = data.get("sensors", [])
     if not isinstance(sensors_data, list):
         raise ConfigError(f"{source}: 'sensors' must be an array of tables ([[sensors]])")
@@ -148,6 +154,7 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
         sensors=tuple(mounts),
         source=source,
         envelope=envelope,
+        estimator=estimator,
     )
 
 

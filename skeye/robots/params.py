@@ -20,6 +20,8 @@ from typing import Any, Final
 from skeye.errors import ConfigError
 
 GRAVITY_M_S2: Final = 9.81
+ESTIMATOR_KINDS: Final = ("onboard", "truth")
+"""``[estimator] kind``: the board's estimator from sensor readings, or the oracle."""
 
 
 def _check_positive(owner: str, name: str, value: float) -> None:
@@ -147,6 +149,7 @@ class ControllerParams:
     climb_integral_gain: float = 3.0
     height_gain: float = 1.8  # (m/s)/m
     max_accel_m_s2: float = 4.0
+    position_gain: float = 0.95  # (m/s)/m, GPS position hold; PX4's MPC_XY_P default
 
     def __post_init__(self) -> None:
         for name, value in ((f.name, getattr(self, f.name)) for f in fields(self)):
@@ -154,3 +157,51 @@ class ControllerParams:
                 raise ConfigError(f"controller: {name} must be a positive number, got {value!r}")
         if self.max_tilt_rad >= math.pi / 2:
             raise ConfigError(f"controller: max_tilt_rad must be < pi/2, got {self.max_tilt_rad}")
+
+
+@dataclass(frozen=True)
+class EstimatorParams:
+    """The board's estimator (skeye.sim.estimator): which one, and its noise parameters.
+
+    ``kind = "onboard"`` (default) estimates from the simulated sensor readings only;
+    ``"truth"`` is the oracle: ground truth plus the INS sensor's small error processes (what
+    skeye did before the onboard estimator; ``skeye sim --estimator truth`` overrides the
+    robot file). Sources of the defaults (docs/physics.md, "Onboard estimator"):
+
+    - attitude_kp 0.2 rad/s: ArduPilot's DCM complementary filter, AHRS_RP_P default 0.2;
+      attitude_ki = kp^2 / 4 = 0.01 rad/s^2: the critically damped bias loop of Mahony's filter
+      (error dynamics s^2 + kp s + ki); compass_gain 1.0: ArduPilot's AHRS_YAW_P default
+      equals AHRS_RP_P (0.2);
+    - accel_noise_m_s2 0.35, accel_bias_init_m_s2 0.2, accel_bias_walk_m_s3 0.003,
+      baro_noise_m 3.5, sonar_noise_m 0.1, flow_noise_rad_s 0.15,
+      flow_min_quality 1, flow_min_height_m 0.1, gps_pos_noise_m 0.5, gps_vel_noise_m_s 0.3:
+      PX4 EKF2's defaults EKF2_ACC_NOISE, EKF2_ABIAS_INIT, EKF2_ACC_B_NOISE, EKF2_BARO_NOISE,
+      EKF2_RNG_NOISE, EKF2_OF_N_MIN, EKF2_OF_QMIN, EKF2_MIN_RNG, EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE.
+    """
+
+    kind: str = "onboard"
+    attitude_kp: float = 0.2
+    attitude_ki: float = 0.01
+    compass_gain: float = 1.0
+    accel_noise_m_s2: float = 0.35
+    accel_bias_init_m_s2: float = 0.2
+    accel_bias_walk_m_s3: float = 0.003
+    baro_noise_m: float = 3.5
+    sonar_noise_m: float = 0.1
+    flow_noise_rad_s: float = 0.15
+    flow_min_quality: float = 1.0
+    flow_min_height_m: float = 0.1
+    gps_pos_noise_m: float = 0.5
+    gps_vel_noise_m_s: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.kind not in ESTIMATOR_KINDS:
+            raise ConfigError(
+                f"estimator: kind must be one of {list(ESTIMATOR_KINDS)}, got {self.kind!r}"
+            )
+        for f in fields(self):
+            if f.name == "kind":
+                continue
+            value = getattr(self, f.name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ConfigError(f"estimator: {f.name} must be a number >= 0, got {value!r}")

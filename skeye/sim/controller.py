@@ -6,10 +6,19 @@ on ground truth, so an estimate that drifts makes the vehicle drift as a real on
 - Attitude mode (``DRIVE {RollAngle} {PitchAngle} {RotationalVelocity} {Thrust}``): angle
   set-points -> P angle loop -> rate set-points -> PI rate loop -> body torques; collective
   thrust is ``Thrust * max_thrust`` straight from the stick, as on the real board.
-- Velocity mode (USARSim's aerial ``DRIVE``): forward/lateral velocity in the yaw-following
-  frame -> PI velocity loop -> acceleration -> tilt set-points (limited to ``max_tilt_rad``);
-  vertical: PI on climb rate, and when the climb command is zero a P loop holds the height
-  estimate where the command went to zero (height hold). Yaw rate goes straight to the rate loop.
+- Height mode (the AscTec LL board's height control; ``Command.height_mode`` with attitude):
+  angles as in attitude mode; the thrust stick is a climb rate around its centre,
+  ``(Thrust - 0.5) * 2 * max_climb``, and at the centre the height estimate is held.
+- Velocity mode (USARSim's aerial ``DRIVE``; the skeye extension board's flow-based velocity
+  hold): forward/lateral velocity in the yaw-following frame -> PI velocity loop on the
+  *estimated* velocity (optical flow indoors, so it drifts as flow drifts) -> acceleration ->
+  tilt set-points (limited to ``max_tilt_rad``); vertical: PI on climb rate, and when the climb
+  command is zero a P loop holds the height estimate where the command went to zero (height
+  hold). Yaw rate goes straight to the rate loop.
+- GPS mode (the AscTec LL board's GPS position hold; ``Command.gps_mode``): velocity mode
+  while the estimator has a GPS fix; with the horizontal sticks centred (zero forward and
+  lateral velocity) a P loop (``position_gain``) holds the position estimate where they were
+  centred.
 - Mixer: total thrust and torques -> per-rotor thrust for the '+' layout -> rotor speed
   commands (sqrt(f/kf)); roll/pitch keep priority over yaw when a rotor would saturate.
 
@@ -36,6 +45,8 @@ class Command:
     roll_rad: float = 0.0
     pitch_rad: float = 0.0
     thrust: float = 0.0  # 0..1 of max thrust
+    gps_mode: bool = False  # GPS mode: centred sticks hold the position while there is a fix
+    height_mode: bool = False  # with attitude: thrust stick = climb rate, height held at 0.5
 
 
 def _clamp(x: float, lo: float, hi: float) -> float:
@@ -56,6 +67,8 @@ class LowLevelController:
         self.vel_int = [0.0, 0.0]
         self.climb_int = 0.0
         self.hold_altitude_m = hold_altitude_m
+        self.hold_north_m: float | None = None
+        self.hold_east_m: float | None = None
 
     def update(
         self,
@@ -63,32 +76,56 @@ class LowLevelController:
         rpy: tuple[float, float, float],
         omega: tuple[float, float, float],
         vel_ned: tuple[float, float, float],
-        altitude_m: float,
+        pos_ned: tuple[float, float, float],
         max_rotor_speed_rad_s: float,
+        gps_hold: bool = False,
     ) -> list[float]:
         """One tick: estimate + command -> four rotor speed commands (rad/s).
+
+        ``gps_hold``: the estimator has a GPS fix, so centred sticks hold the position.
 
         Hot path (every board tick of every robot): written out on plain floats.
         """
         p, a, dt = self.p, self.a, self.dt
         roll, pitch, yaw = rpy
+        altitude_m = -pos_ned[2]
         if cmd.attitude:
             lim = p.max_tilt_rad * 1.6
             roll_sp = _clamp(cmd.roll_rad, -lim, lim)
             pitch_sp = _clamp(cmd.pitch_rad, -lim, lim)
-            thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
-            self.hold_altitude_m = None
+            if cmd.height_mode:
+                # Height mode: the thrust stick is a climb rate around its centre (0.5).
+                up = (_clamp(cmd.thrust, 0.0, 1.0) - 0.5) * 2.0 * p.max_climb_m_s
+                thrust = self._vertical(up, altitude_m, vel_ned[2], roll, pitch)
+            else:
+                thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
+                self.hold_altitude_m = None
         else:
             cy, sy = math.cos(yaw), math.sin(yaw)
             vn, ve, vd = vel_ned
             vmax, amax, ki = p.max_speed_m_s, p.max_accel_m_s2, p.velocity_integral_gain
             kv = p.velocity_gain
             vel_int = self.vel_int
+            fwd_sp = _clamp(cmd.forward_m_s, -vmax, vmax)
+            right_sp = _clamp(cmd.right_m_s, -vmax, vmax)
+            hold_n, hold_e = self.hold_north_m, self.hold_east_m
+            if cmd.gps_mode and gps_hold and fwd_sp == 0.0 and right_sp == 0.0:
+                # GPS mode, sticks centred: position hold -> velocity set-point (NED -> yaw frame).
+                if hold_n is None or hold_e is None:
+                    hold_n = self.hold_north_m = pos_ned[0]
+                    hold_e = self.hold_east_m = pos_ned[1]
+                kp = p.position_gain
+                sp_n = _clamp(kp * (hold_n - pos_ned[0]), -vmax, vmax)
+                sp_e = _clamp(kp * (hold_e - pos_ned[1]), -vmax, vmax)
+                fwd_sp = cy * sp_n + sy * sp_e
+                right_sp = -sy * sp_n + cy * sp_e
+            else:
+                self.hold_north_m = self.hold_east_m = None
             # Horizontal velocity loop -> accelerations in the yaw frame (forward, right).
-            err = _clamp(cmd.forward_m_s, -vmax, vmax) - (cy * vn + sy * ve)
+            err = fwd_sp - (cy * vn + sy * ve)
             i0 = vel_int[0] = _clamp(vel_int[0] + err * dt, -1.0, 1.0)
             acc_fwd = _clamp(kv * err + ki * i0, -amax, amax)
-            err = _clamp(cmd.right_m_s, -vmax, vmax) - (-sy * vn + cy * ve)
+            err = right_sp - (-sy * vn + cy * ve)
             i1 = vel_int[1] = _clamp(vel_int[1] + err * dt, -1.0, 1.0)
             acc_right = _clamp(kv * err + ki * i1, -amax, amax)
             tilt_max = p.max_tilt_rad
@@ -96,26 +133,7 @@ class LowLevelController:
             roll_sp = _clamp(
                 math.atan2(acc_right * math.cos(pitch_sp), GRAVITY_M_S2), -tilt_max, tilt_max
             )
-            # Vertical: climb-rate PI, with height hold while the climb command is zero.
-            climb_max = p.max_climb_m_s
-            up_cmd = _clamp(cmd.up_m_s, -climb_max, climb_max)
-            if up_cmd == 0.0:
-                if self.hold_altitude_m is None:
-                    self.hold_altitude_m = altitude_m
-                up_cmd = _clamp(
-                    p.height_gain * (self.hold_altitude_m - altitude_m), -climb_max, climb_max
-                )
-            else:
-                self.hold_altitude_m = None
-            err = up_cmd + vd
-            self.climb_int = _clamp(self.climb_int + err * dt, -2.0, 2.0)
-            a_up = _clamp(
-                p.climb_gain * err + p.climb_integral_gain * self.climb_int,
-                -GRAVITY_M_S2 * 0.8,
-                amax * 2,
-            )
-            tilt = math.cos(roll) * math.cos(pitch)
-            thrust = a.mass_kg * (GRAVITY_M_S2 + a_up) / (tilt if tilt > 0.5 else 0.5)
+            thrust = self._vertical(cmd.up_m_s, altitude_m, vd, roll, pitch)
         yaw_rate_sp = _clamp(cmd.yaw_rate_rad_s, -p.max_yaw_rate_rad_s, p.max_yaw_rate_rad_s)
         # Angle loop -> body rate set-points (Euler-rate approximation, fine for small tilt),
         # then the PI rate loop (P only on yaw) -> body torques.
@@ -132,6 +150,31 @@ class LowLevelController:
         rate_int[2] = _clamp(rate_int[2] + err * dt, -0.5, 0.5)
         tau_z = izz * (p.yaw_rate_gain * err)
         return self.mix(thrust, [tau_x, tau_y, tau_z], max_rotor_speed_rad_s)
+
+    def _vertical(
+        self, up_m_s: float, altitude_m: float, vd: float, roll: float, pitch: float
+    ) -> float:
+        """Climb-rate PI, with height hold while the climb command is zero -> thrust (N)."""
+        p, a, dt = self.p, self.a, self.dt
+        climb_max = p.max_climb_m_s
+        up_cmd = _clamp(up_m_s, -climb_max, climb_max)
+        if up_cmd == 0.0:
+            if self.hold_altitude_m is None:
+                self.hold_altitude_m = altitude_m
+            up_cmd = _clamp(
+                p.height_gain * (self.hold_altitude_m - altitude_m), -climb_max, climb_max
+            )
+        else:
+            self.hold_altitude_m = None
+        err = up_cmd + vd
+        self.climb_int = _clamp(self.climb_int + err * dt, -2.0, 2.0)
+        a_up = _clamp(
+            p.climb_gain * err + p.climb_integral_gain * self.climb_int,
+            -GRAVITY_M_S2 * 0.8,
+            p.max_accel_m_s2 * 2,
+        )
+        tilt = math.cos(roll) * math.cos(pitch)
+        return a.mass_kg * (GRAVITY_M_S2 + a_up) / (tilt if tilt > 0.5 else 0.5)
 
     def mix(
         self, thrust_n: float, torque: list[float], max_rotor_speed_rad_s: float

@@ -35,8 +35,9 @@ import numpy as np
 
 from skeye.errors import LocalProtocolError, PhysicsError
 from skeye.robots.config import RobotConfig, load_robot_config
+from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim import frames
-from skeye.sim.readings import Event, ReadingSink, RobotStopped
+from skeye.sim.readings import Event, ReadingSink, RobotStopped, SensorSample
 from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.state import BodyState
 from skeye.sim.wind import WindModel, WindSettings, make_settings
@@ -88,7 +89,15 @@ class Simulation:
         wind: WindSettings | None = None,
         offscreen_size: tuple[int, int] = (800, 600),
         robot_dirs: tuple[Path, ...] = (),
+        estimator: str | None = None,
     ) -> None:
+        """``estimator``: every robot's board estimator ("onboard" or "truth"), overriding the
+        robot files' ``[estimator] kind`` (``skeye sim --estimator``); None keeps them."""
+        if estimator is not None and estimator not in ESTIMATOR_KINDS:
+            raise LocalProtocolError(
+                f"estimator must be one of {list(ESTIMATOR_KINDS)}, got {estimator!r}"
+            )
+        self.estimator = estimator
         if not (math.isfinite(timestep_s) and 1e-5 <= timestep_s <= 0.01):
             raise LocalProtocolError(f"physics step must be in [1e-5, 0.01] s, got {timestep_s}")
         self.world = world
@@ -268,6 +277,8 @@ class Simulation:
             spawn_pos_ned_m=(pos[0], pos[1], pos[2]),
             spawn_rpy_rad=(rpy[0], rpy[1], rpy[2]),
             airborne=airborne,
+            estimator=self.estimator,
+            declination_rad=self._declination_rad(),
         )
         robot.flight.landed_since_s = self.time_s
         self.robots[name] = robot
@@ -286,6 +297,12 @@ class Simulation:
         # The board's first tick now, so the wrench is set from the first step on.
         self._board_tick(name, robot, self.body_state(name))
         return robot
+
+    def _declination_rad(self) -> float:
+        """The world field's declination: what the board is configured with (a real one takes
+        it from a table by position, as ArduPilot's COMPASS_AUTODEC does)."""
+        fn, fe, _ = (float(v) for v in self.world.magnetic_field_ned_ut)
+        return math.atan2(fe, fn) if fn * fn + fe * fe > 0.0 else 0.0
 
     def remove(self, name: str) -> None:
         if self.robots.pop(name, None) is not None:
@@ -449,8 +466,9 @@ class Simulation:
         for name, robot in self.robots.items():
             board = step % robot.board_decimation == 0
             due = [sched for sched in robot.sensors if step % sched.period_steps == 0]
+            hidden = [sched for sched in robot.board_sensors if step % sched.period_steps == 0]
             status = step % robot.status_period_steps == 0
-            if not (board or due or status):
+            if not (board or due or status or hidden):
                 continue
             if joints is None:  # one read of MuJoCo's arrays for all robots this step
                 joints = (self._qpos.tolist(), self._qvel.tolist(), self._qacc.tolist())
@@ -460,8 +478,8 @@ class Simulation:
                 t, joints[0][a : a + 7], joints[1][b : b + 6], joints[2][b : b + 3],
                 robot.rotors.speed_rad_s,
             )
-            if due or status:
-                self._emit_readings(robot, state, due, status)
+            if due or status or hidden:
+                self._emit_readings(robot, state, due, status, hidden)
             if board:
                 if not wind_advanced:
                     self.wind.advance(state.time_s, robot.tick_s)
@@ -514,20 +532,40 @@ class Simulation:
         self.remove(name)
 
     def _emit_readings(
-        self, robot: Robot, state: BodyState, due: list[ScheduledSensor], status: bool
+        self,
+        robot: Robot,
+        state: BodyState,
+        due: list[ScheduledSensor],
+        status: bool,
+        hidden: list[ScheduledSensor],
     ) -> None:
-        """Readings of the due sensors, then the status if due, for one robot."""
+        """Readings of the due sensors, then the status if due, for one robot; the board's
+        sensors' readings also go to its estimator (``hidden``: the board's only, unstreamed)."""
         events: list[Event] = []
         query = self._queries[robot.name]
-        for sched in due:
-            sensor = sched.sensor
-            if sensor.type_name == "Battery":
-                sensor.update_battery(
-                    robot.battery.voltage_v,
-                    robot.battery.current_a,
-                    robot.battery.state_of_charge,
-                )
-            events.append(sched.sample(state, query))
+        for sched in hidden:
+            robot.observe(sched.sensor.read(state, query))
+        # The board's sensors first, so an INS reading at this instant reports the estimate
+        # the board flies on now; the events keep the sensors' order.
+        samples: list[SensorSample | None] = [None] * len(due)
+        for board_first in (True, False):
+            for i, sched in enumerate(due):
+                if sched.board != board_first:
+                    continue
+                sensor = sched.sensor
+                if sensor.type_name == "Battery":
+                    sensor.update_battery(
+                        robot.battery.voltage_v,
+                        robot.battery.current_a,
+                        robot.battery.state_of_charge,
+                    )
+                sample = sched.sample(state, query)
+                if board_first:
+                    robot.observe(sample.reading)
+                samples[i] = sample
+        for done in samples:
+            if done is not None:
+                events.append(done)
         if status:
             events.append(robot.status(state.time_s))
         self.emit(robot, events)

@@ -1,10 +1,13 @@
 """One simulated vehicle at run time: its board (controller, motors, battery) and its sensors.
 
 How this works: the engine calls :meth:`Robot.board_tick` every board period with the vehicle's
-ground-truth :class:`BodyState`; the robot asks its INS for the onboard estimate, runs the
-low-level controller on that estimate, advances the motors and the battery, and returns the
-wrench (NED force and torque on the centre of mass) for the engine to apply. Sensors are
-sampled by the engine when due (:meth:`due_sensors`); the robot never touches MuJoCo.
+ground-truth :class:`BodyState`; the robot takes the onboard estimate from its board
+estimator (:mod:`skeye.sim.estimator`, fed by :meth:`Robot.observe` with the readings of the
+board's sensors, never ground truth) or, with ``--estimator truth``, from its INS sensor's
+oracle (ground truth plus small error processes), runs the low-level controller on it,
+advances the motors and the battery, and returns the wrench (NED force and torque on the
+centre of mass) for the engine to apply. Sensors are sampled by the engine when due (the
+board's sensors' readings also go to :meth:`Robot.observe`); the robot never touches MuJoCo.
 
 Flight state (``armed``, ``landed``) follows a small table: a robot spawned on the ground is
 disarmed; any DRIVE that asks for motion arms it; a robot that is landed and asked to go no
@@ -19,10 +22,12 @@ from typing import Any, Final
 
 import numpy as np
 
-from skeye.errors import LocalProtocolError, PhysicsError
+from skeye.errors import ConfigError, LocalProtocolError, PhysicsError
 from skeye.robots.config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
+from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
+from skeye.sim.estimator import BoardEstimator
 from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
 from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
 from skeye.sim.state import BodyState
@@ -39,11 +44,19 @@ class ScheduledSensor:
     sensor: Any
     period_steps: int
     mount: SensorMount
+    board: bool = False  # the board's estimator takes its readings (Robot.observe)
 
     def sample(self, state: BodyState, world: WorldQuery) -> SensorSample:
         """One typed reading of this sensor, named for the robot's sink."""
         return SensorSample(self.sensor.type_name, self.mount.name, self.sensor.read(state, world))
 
+
+BOARD_SENSOR_TYPES: Final = (
+    "Gyro", "Accelerometer", "MagneticCompass", "Barometer", "Sonar", "OpticalFlow", "GPS"
+)
+"""The sensors the board's estimator reads: the first mounted one of each type aligned with the
+body (so Sonar and OpticalFlow look straight down), else one the board has but does not
+stream."""
 
 _MOTORS_LAYOUT: Final[Layout] = sen_layout(SenMotors, counts={"Speeds": 4, "Commands": 4})
 
@@ -125,7 +138,11 @@ class Robot:
         spawn_pos_ned_m: tuple[float, float, float],
         spawn_rpy_rad: tuple[float, float, float],
         airborne: bool,
+        estimator: str | None = None,
+        declination_rad: float = 0.0,
     ) -> None:
+        """``estimator`` overrides the robot file's ``[estimator] kind`` ("onboard"/"truth");
+        ``declination_rad`` is the local magnetic declination the board is configured with."""
         self.name = name
         self.config = config
         self.sink = sink
@@ -174,6 +191,15 @@ class Robot:
             self.ins = build_sensor(
                 "INS", "INS", Mount(), {}, np.random.default_rng(rng.integers(0, 2**63))
             )
+        kind = estimator if estimator is not None else config.estimator.kind
+        if kind not in ESTIMATOR_KINDS:
+            raise ConfigError(f"estimator must be one of {list(ESTIMATOR_KINDS)}, got {kind!r}")
+        self.estimator_kind = kind
+        self.board_sensors: list[ScheduledSensor] = []  # sampled for the board, not streamed
+        self.estimator: BoardEstimator | None = None
+        if kind == "onboard":
+            self.estimator = self._build_estimator(physics_step_s, rng, declination_rad)
+            self.ins.board = self.estimator
         self.ground_effect = 1.0
         self._full_voltage_v = config.battery.cells * 4.2
         self._half_body_height_m = config.airframe.body_size_m[2] / 2
@@ -182,6 +208,46 @@ class Robot:
             self.flight.armed = True
             self.flight.landed = False
             self.rotors.set_speeds(config.airframe.hover_speed_rad_s)
+
+    def _build_estimator(
+        self, physics_step_s: float, rng: np.random.Generator, declination_rad: float
+    ) -> BoardEstimator:
+        """Pick (or add) the board's sensors and start its estimator at the spawn pose."""
+        chosen: dict[str, ScheduledSensor] = {}
+        for sched in self.sensors:
+            type_name = sched.sensor.type_name
+            if type_name not in BOARD_SENSOR_TYPES or type_name in chosen:
+                continue
+            if any(abs(a) > 1e-9 for a in sched.mount.direction_rad):
+                continue  # the board's own sensors are aligned with the body (range: down)
+            sched.board = True
+            chosen[type_name] = sched
+        for type_name in BOARD_SENSOR_TYPES:
+            if type_name in chosen:
+                continue
+            name = f"Board{type_name}"
+            sensor = build_sensor(
+                type_name, name, Mount(), {}, np.random.default_rng(rng.integers(0, 2**63))
+            )
+            period = max(1, round(1.0 / (sensor.rate_hz * physics_step_s)))
+            sched = ScheduledSensor(
+                sensor, period, SensorMount(type_name, name, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), ()),
+                True,
+            )
+            self.board_sensors.append(sched)
+            chosen[type_name] = sched
+        return BoardEstimator(
+            self.config.estimator,
+            self.spawn_pos_ned_m,
+            self.spawn_rpy_rad,
+            declination_rad,
+            float(chosen["OpticalFlow"].sensor.counts_per_rad),
+        )
+
+    def observe(self, reading: object) -> None:
+        """A reading of one of the board's sensors, for its estimator."""
+        if self.estimator is not None:
+            self.estimator.observe(reading)
 
     # -- commands ------------------------------------------------------------------------
     def drive(self, **changes: float | bool) -> None:
@@ -192,6 +258,10 @@ class Robot:
         if attitude != self.command.attitude:
             self.command = Command(attitude=attitude)
             self.controller.reset()
+        if "gps_mode" in changes:
+            self.command.gps_mode = bool(changes.pop("gps_mode"))
+        if "height_mode" in changes:
+            self.command.height_mode = bool(changes.pop("height_mode"))
         for key, value in changes.items():
             setattr(self.command, key, float(value))
         c = self.command
@@ -223,7 +293,9 @@ class Robot:
         """
         if self.flight.failed:
             return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-        est = self.ins.estimate_now(state)
+        estimator = self.estimator
+        est = estimator.estimate() if estimator is not None else self.ins.estimate_now(state)
+        gps_hold = estimator.has_gps_fix(state.time_s) if estimator is not None else False
         airframe = self.config.airframe
         battery = self.battery
         voltage_scale = min(1.0, battery.voltage_v / self._full_voltage_v + 0.15)
@@ -234,11 +306,14 @@ class Robot:
                 est.rpy_rad,
                 est.omega_frd_rad_s,
                 est.vel_ned_m_s,
-                -est.pos_ned_m[2],
+                est.pos_ned_m,
                 w_max,
+                gps_hold,
             )
         else:
             commands = [0.0, 0.0, 0.0, 0.0]
+            if estimator is not None:  # motors off: the board takes itself to be at rest
+                estimator.at_rest(state.time_s)
         self.rotors.advance(commands, w_max)
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = state.rot_body_to_ned
         vn, ve, vd = state.vel_ned_m_s

@@ -36,9 +36,10 @@ def sim_running(
     seed: int = 1,
     images: bool = False,
     robot_dirs: tuple[Path, ...] = (),
+    estimator: str | None = None,
 ) -> Iterator[SimHandle]:
     """A simulator on loopback port 0, like ``skeye sim`` (cli.cmd_sim) builds it."""
-    sim = Simulation(load_world(world), seed=seed, robot_dirs=robot_dirs)
+    sim = Simulation(load_world(world), seed=seed, robot_dirs=robot_dirs, estimator=estimator)
     with SimulationRunner(sim, mode=mode) as runner:
         cameras = None
         if images:
@@ -61,4 +62,12 @@ def sim_running(
 @pytest.fixture
 def lockstep_sim() -> Iterator[SimHandle]:
     with sim_running() as handle:
+        yield handle
+
+
+@pytest.fixture
+def truth_sim() -> Iterator[SimHandle]:
+    """Lockstep, boards on the oracle estimator (``--estimator truth``): for checks of the
+    navigation logic at centimetre precision."""
+    with sim_running(estimator="truth") as handle:
         yield handle

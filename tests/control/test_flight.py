@@ -18,8 +18,10 @@ from tests.control.conftest import SimHandle, sim_running
 ROBOTS = Path(__file__).resolve().parents[2] / "skeye/robots"
 
 
-def test_square_returns_within_5_cm_of_start(lockstep_sim: SimHandle) -> None:
-    with skeye.connect(lockstep_sim.address) as sim:
+def test_square_returns_within_5_cm_of_start(truth_sim: SimHandle) -> None:
+    # On the oracle estimator: 5-8 cm checks of fly_to's own precision; outdoors the onboard
+    # estimate follows the GPS's wander (docs/physics.md, onboard estimator).
+    with skeye.connect(truth_sim.address) as sim:
         assert sim.mode == "lockstep"
         copter = sim.spawn(Hummingbird, start="Pad1")  # default feedback: the INS estimate
         copter.take_off(1.5)

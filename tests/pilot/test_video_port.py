@@ -39,7 +39,11 @@ class Flight:
 @pytest.fixture
 def flight() -> Iterator[Flight]:
     with ExitStack() as stack:
-        control, images, _cameras = stack.enter_context(sim_with_images(mode="lockstep"))
+        # The oracle estimator: the hover check below is about the control loop, not about the
+        # onboard estimate's GPS wander outdoors.
+        control, images, _cameras = stack.enter_context(
+            sim_with_images(mode="lockstep", estimator="truth")
+        )
         sim = stack.enter_context(
             connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}")
         )

@@ -104,6 +104,14 @@ def lockstep_server() -> Iterator[ControlServer]:
 
 
 @pytest.fixture
+def truth_server() -> Iterator[ControlServer]:
+    """A lockstep simulator whose boards fly on the oracle estimator (``--estimator truth``):
+    for tests of the controller's own response, not of the estimate it flies on."""
+    with running_sim(estimator="truth") as server:
+        yield server
+
+
+@pytest.fixture
 def client_factory() -> Iterator[Callable[[ControlServer], LineClient]]:
     clients: list[LineClient] = []
 

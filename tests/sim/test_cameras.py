@@ -27,9 +27,9 @@ ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
 @contextmanager
 def sim_with_images(
-    mode: str = "lockstep", robot_dirs: tuple[Path, ...] = ()
+    mode: str = "lockstep", robot_dirs: tuple[Path, ...] = (), estimator: str | None = None
 ) -> Iterator[tuple[ControlServer, ImageServer, CameraSystem]]:
-    sim = Simulation(load_world("pad"), seed=3, robot_dirs=robot_dirs)
+    sim = Simulation(load_world("pad"), seed=3, robot_dirs=robot_dirs, estimator=estimator)
     buffer = FrameBuffer()
     with (
         SimulationRunner(sim, mode=mode) as runner,

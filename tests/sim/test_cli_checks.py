@@ -107,3 +107,26 @@ def test_bad_image_format_options_are_refused_before_anything_starts(argv: list[
     done = _skeye("sim", "--port", "0", *argv)
     assert done.returncode == 2 and message in done.stderr, done
     assert "control protocol on" not in done.stdout
+
+
+def test_estimator_option_reaches_the_simulator() -> None:
+    """``skeye sim --estimator truth`` says so at start-up and flies a robot; a kind that does
+    not exist is refused before anything listens."""
+    from skeye.processes import start_skeye, stop_process
+
+    sim, found = start_skeye(
+        ["sim", "--port", "0", "--mode", "lockstep", "--estimator", "truth"],
+        [r"estimator truth; control protocol on [\d.]+:(\d+)"], "skeye sim")
+    try:
+        with socket.create_connection(("127.0.0.1", int(found[0].group(1))), timeout=60) as c:
+            c.sendall(b"INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}\r\n")
+            reply = b""
+            while b"INIT" not in reply and b"ERR" not in reply:
+                data = c.recv(65536)
+                assert data, "the simulator closed the connection"
+                reply += data
+            assert b"ERR" not in reply and b"RES" in reply, reply
+    finally:
+        stop_process(sim)
+    done = _skeye("sim", "--port", "0", "--estimator", "oracle")
+    assert done.returncode == 2 and "--estimator" in done.stderr

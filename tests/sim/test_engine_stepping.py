@@ -47,9 +47,24 @@ def test_every_sensor_line_matches_format_message(world: str) -> None:
 
 
 def test_ins_stream_reports_the_estimate_the_board_flies_on() -> None:
-    """At a time where both the board and the INS stream run, they share one estimate (the
-    drift processes advance once per instant, not once per consumer)."""
+    """At a time where both the board and the INS stream run, they share one estimate: the
+    board estimator's, fed by this instant's readings before the INS reports."""
     sim = Simulation(load_world("pad"), seed=5)
+    robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
+                      location_ned_m=(0, 0, -1))
+    assert robot.estimator is not None
+    sim.step(200)  # 200 steps: a multiple of the board's 4, the INS's and the IMU's 20
+    est = robot.estimator.estimate()
+    reading = robot.ins.last
+    assert reading is not None and reading.time_s == pytest.approx(sim.time_s)
+    assert reading.location_ned_m == est.pos_ned_m
+    assert reading.velocity_ned_m_s == est.vel_ned_m_s
+
+
+def test_truth_estimator_ins_shares_the_oracle_estimate_with_the_board() -> None:
+    """With the oracle (``--estimator truth``) the board and the INS stream share one estimate
+    (the drift processes advance once per instant, not once per consumer)."""
+    sim = Simulation(load_world("pad"), seed=5, estimator="truth")
     robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                       location_ned_m=(0, 0, -1))
     ins = robot.ins

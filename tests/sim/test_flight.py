@@ -81,8 +81,10 @@ def test_motor_step_follows_time_constant(tmp_path: Path, client_factory):
     assert abs(tau / airframe.tau_up_s - 1.0) < 0.05, tau
 
 
-def test_drive_forward_reaches_speed(lockstep_server, client_factory):
-    c = client_factory(lockstep_server)
+def test_drive_forward_reaches_speed(truth_server, client_factory):
+    """The velocity loop's response (5 % of the set-point): on the oracle estimator, since
+    with the onboard one the flow estimate's own error is in the true speed."""
+    c = client_factory(truth_server)
     spawn_airborne(c, 2.0)
     c.step(1000)
     c.send("DRIVE {LinearVelocity 0.5}")
@@ -101,7 +103,9 @@ def test_hover_holds_height(lockstep_server, client_factory):
     spawn_airborne(c, 1.5)
     msgs = c.step(20000)
     alts = [-vec(v)[2] for _, v in sensor_series(msgs, "GroundTruth", "Location")]
-    assert max(abs(a - 1.5) for a in alts) < 0.02
+    # The board holds its sonar-aided height estimate (onboard estimator), not the true
+    # height: a few centimetres, not the 2 cm the oracle estimator held.
+    assert max(abs(a - 1.5) for a in alts) < 0.08
 
 
 def test_take_off_from_pad_and_land(lockstep_server, client_factory):
@@ -146,7 +150,10 @@ def test_sensors_agree_with_ground_truth(lockstep_server, client_factory):
     sonar_true = -truth[2] - 0.001 - 0.03  # above the pad surface, from the sonar's mount
     assert abs(np.median(sonar) - sonar_true) < 0.05
     ins = np.array([vec(v) for _, v in sensor_series(msgs, "INS", "Location")])
-    assert np.allclose(ins.mean(axis=0), truth, atol=0.1)
+    # The onboard estimate: height from the sonar, horizontal position GPS-aided (the GPS's
+    # own wander since the first fix, 1.5 m sigma with a 30 s correlation time).
+    assert abs(ins.mean(axis=0)[2] - truth[2]) < 0.1
+    assert math.hypot(*(ins.mean(axis=0)[:2] - truth[:2])) < 1.5
     baro = np.array([float(v) for _, v in sensor_series(msgs, "Barometer", "Altitude")])
     origin_alt = lockstep_server.runner.sim.world.geo_origin.altitude_m
     assert abs(baro.mean() - (origin_alt - truth[2])) < 1.0

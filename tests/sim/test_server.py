@@ -155,7 +155,9 @@ def test_start_poses_and_geo_conf():
 
 def test_wind_set_at_run_time_pushes_the_vehicle():
     def drift(wind: str | None) -> float:
-        with running_sim() as server:
+        # On the oracle estimator: this measures the wind's push on the controlled vehicle,
+        # not the onboard estimate's drift (tests/sim/test_estimator.py).
+        with running_sim(estimator="truth") as server:
             c = LineClient(server.port)
             c.expect("NFO")
             c.answer("INIT {ClassName hummingbird} {Location 0,0,-2}", "INIT")

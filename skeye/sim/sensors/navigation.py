@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
@@ -146,9 +146,14 @@ _INS_BLOCK_ROWS: Final = 512  # estimate() calls per block of pre-drawn normal d
 
 
 class INS(Sensor[InsReading]):
-    """The onboard estimate (AscTec-style attitude + position fusion), drifting as a real one.
+    """The onboard estimate, as the board reports it.
 
-    Error model (per axis, all in sim time; defaults chosen so a vehicle standing still for a
+    By default the robot attaches its board estimator (:mod:`skeye.sim.estimator`, fed only by
+    sensor readings) as :attr:`board` and the INS reports that estimator's output. With
+    ``--estimator truth`` (robot file ``[estimator] kind = "truth"``) it is the oracle below:
+    ground truth plus error processes, what skeye flew on before it had a board estimator.
+
+    Oracle error model (per axis, all in sim time; defaults chosen so a vehicle standing still for a
     minute drifts a few centimetres, as a well-tuned MEMS INS with flow/baro aiding does):
 
     - position: a random walk from zero at power-up, PosWalk 0.004 m/sqrt(s) horizontally
@@ -204,6 +209,9 @@ class INS(Sensor[InsReading]):
         self._k_pos = self._k_alt = self._a_att = self._k_rp = self._k_yaw = 0.0
         self._est: InsEstimate | None = None
         self._est_time_s: float | None = None
+        # The board's estimator (skeye.sim.estimator) when it runs on sensor readings: the
+        # stream then reports its output; None with ``--estimator truth`` (the oracle above).
+        self.board: Any = None
 
     def _set_dt(self, dt_s: float) -> None:
         p = self.params
@@ -273,8 +281,10 @@ class INS(Sensor[InsReading]):
         return self.estimate(state, t - last if last is not None and t > last else 0.0)
 
     def read(self, state: BodyState, world: WorldQuery) -> InsReading:
-        """The estimate at ``state.time_s`` as a reading (see :meth:`estimate_now`)."""
-        est = self.estimate_now(state)
+        """The estimate at ``state.time_s`` as a reading: the board estimator's output, or
+        with ``--estimator truth`` the oracle's (see :meth:`estimate_now`)."""
+        board = self.board
+        est = board.estimate() if board is not None else self.estimate_now(state)
         t = state.time_s
         self._last_time_s = t
         reading = InsReading(t, est.pos_ned_m, _wrap_rpy_2pi(est.rpy_rad), est.vel_ned_m_s)

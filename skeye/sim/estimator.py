@@ -1,0 +1,358 @@
+"""The onboard estimator of the emulated low-level board, fed only by sensor readings.
+
+How this works: the board's sensors (gyro, accelerometer, magnetometer, barometer, sonar,
+optical flow, GPS) are sampled by the engine at their own rates; every reading is handed to
+:meth:`BoardEstimator.observe`, and the estimator never sees ground truth (it is started at the
+spawn pose, as USARSim's INS is: the operator places the vehicle at a known start).
+
+- Attitude: a Mahony complementary filter on SO(3) (Mahony, Hamel, Pflimlin, "Nonlinear
+  complementary filters on the special orthogonal group", IEEE TAC 53(5), 2008), the
+  complementary-filter class of that era's boards (ArduPilot's DCM is one; AscTec's LL
+  firmware is closed, a complementary filter is our assumption): the quaternion is propagated
+  with the bias-corrected gyro at each gyro reading; the accelerometer's "up" direction and the
+  magnetometer's heading (tilt-compensated with the *estimated* roll and pitch, against the
+  local declination the board is configured with) give a correction ``kp * e`` and a gyro
+  bias estimate ``-ki * integral(e)``.
+- Translation: per NED axis a fixed-size 3-state error-state Kalman filter (position,
+  velocity, the accelerometer bias seen along that axis, which also takes up a small tilt
+  error times g), written out in scalars. Predicted with the accelerometer's specific force
+  rotated into NED plus gravity at each accelerometer reading. Corrected vertically by the
+  sonar height (tilt-corrected, over the ground level seen at the first echo) or else the
+  barometer (relative to its first reading); horizontally by optical-flow velocity (rates
+  de-rotated with the gyro, scaled by the height above ground) and by GPS position and
+  velocity when there is a fix (relative to the first fix: the board's home); zero velocity
+  while the board is disarmed. Without flow or GPS the horizontal velocity is
+  the integrated accelerometer, and it drifts as on a real vehicle.
+
+Readings are fused when they arrive (no delayed-state buffer): a sensor's latency shows up as
+estimate lag, as on boards of the AscTec era. Every noise parameter is in
+:class:`skeye.robots.params.EstimatorParams` (robot file ``[estimator]``), with its source.
+Hot path: plain floats, no numpy, no allocation beyond the output estimate.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+from skeye.geo import GeoOrigin
+from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
+from skeye.sim.sensors.inertial import AccelReading, BaroReading, CompassReading, GyroReading
+from skeye.sim.sensors.navigation import GpsReading, InsEstimate
+from skeye.sim.sensors.ranging import FlowReading, SonarReading
+
+_PI: Final = math.pi
+_TWO_PI: Final = 2.0 * math.pi
+
+
+def _wrap_pi(a: float) -> float:
+    return (a + _PI) % _TWO_PI - _PI
+
+
+class Axis:
+    """One NED axis in error-state form: position, velocity and the accelerometer bias seen
+    along it, with their 3x3 covariance written out as six scalars."""
+
+    def __init__(self, pos: float, pos_var: float, vel_var: float, bias_var: float) -> None:
+        self.p = pos
+        self.v = 0.0
+        self.b = 0.0
+        self.c00, self.c01, self.c02 = pos_var, 0.0, 0.0
+        self.c11, self.c12, self.c22 = vel_var, 0.0, bias_var
+
+    def predict(self, acc: float, dt: float, acc_var: float, bias_walk_var: float) -> None:
+        """x' = F x with F = [[1, dt, 0], [0, 1, -dt], [0, 0, 1]]; P' = F P F^T + Q."""
+        a = acc - self.b
+        dt2 = dt * dt
+        self.p += self.v * dt + 0.5 * a * dt2
+        self.v += a * dt
+        c00, c01, c02, c11, c12, c22 = self.c00, self.c01, self.c02, self.c11, self.c12, self.c22
+        self.c00 = c00 + 2.0 * dt * c01 + dt2 * c11 + 0.25 * acc_var * dt2 * dt2
+        self.c01 = c01 + dt * (c11 - c02) - dt2 * c12 + 0.5 * acc_var * dt2 * dt
+        self.c02 = c02 + dt * c12
+        self.c11 = c11 - 2.0 * dt * c12 + dt2 * c22 + acc_var * dt2
+        self.c12 = c12 - dt * c22
+        self.c22 = c22 + bias_walk_var * dt
+
+    def _correct(self, y: float, s: float, k0: float, k1: float, k2: float) -> None:
+        """x += K y; P -= K K^T s (K = P h / s for a measurement of one state)."""
+        self.p += k0 * y
+        self.v += k1 * y
+        self.b += k2 * y
+        self.c00 -= k0 * k0 * s
+        self.c01 -= k0 * k1 * s
+        self.c02 -= k0 * k2 * s
+        self.c11 -= k1 * k1 * s
+        self.c12 -= k1 * k2 * s
+        self.c22 -= k2 * k2 * s
+
+    def fuse_pos(self, z: float, var: float) -> None:
+        s = self.c00 + var
+        self._correct(z - self.p, s, self.c00 / s, self.c01 / s, self.c02 / s)
+
+    def fuse_vel(self, z: float, var: float) -> None:
+        s = self.c11 + var
+        self._correct(z - self.v, s, self.c01 / s, self.c11 / s, self.c12 / s)
+
+
+class BoardEstimator:
+    """Attitude (Mahony) + per-axis position/velocity Kalman filters, on sensor readings only."""
+
+    def __init__(
+        self,
+        params: EstimatorParams,
+        pos_ned_m: tuple[float, float, float],
+        rpy_rad: tuple[float, float, float],
+        declination_rad: float,
+        flow_counts_per_rad: float,
+    ) -> None:
+        self.p = params
+        self.declination_rad = declination_rad
+        self.flow_counts_per_rad = flow_counts_per_rad
+        roll, pitch, yaw = rpy_rad
+        cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+        cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+        cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+        self.q0 = cr * cp * cy + sr * sp * sy
+        self.q1 = sr * cp * cy - cr * sp * sy
+        self.q2 = cr * sp * cy + sr * cp * sy
+        self.q3 = cr * cp * sy - sr * sp * cy
+        self.bias = [0.0, 0.0, 0.0]  # estimated gyro bias, rad/s
+        self.err = [0.0, 0.0, 0.0]  # pending attitude correction (body), from accel + mag
+        self.omega = [0.0, 0.0, 0.0]  # last bias-corrected gyro reading, rad/s
+        self.gyro_t: float | None = None
+        self.acc_t: float | None = None
+        self.flow_t: float | None = None
+        bias_var = params.accel_bias_init_m_s2 * params.accel_bias_init_m_s2
+        self.axes = [
+            Axis(pos_ned_m[0], 0.01, 0.01, bias_var),
+            Axis(pos_ned_m[1], 0.01, 0.01, bias_var),
+            Axis(pos_ned_m[2], 0.01, 0.01, bias_var),
+        ]
+        self.ground_d: float | None = None  # NED down of the ground seen at the first echo
+        self.sonar_agl_m: float | None = None  # last valid sonar height above ground
+        self.sonar_t = -math.inf
+        self.baro_offset: float | None = None  # baro altitude + down, set at the first reading
+        self.home: GeoOrigin | None = None
+        self.home_ned: tuple[float, float] = (0.0, 0.0)
+        self.gps_t = -math.inf
+        self.rest_t = -math.inf
+        self.flow_used = 0
+        self.mag_yaw_err = 0.0  # compass heading minus estimated yaw, times compass_gain
+        self._est: InsEstimate | None = None
+
+    # -- attitude ------------------------------------------------------------------------
+    def rot(self) -> tuple[float, float, float, float, float, float, float, float, float]:
+        """The body-to-NED rotation, row major."""
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        return (
+            1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2),
+            2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1),
+            2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2),
+        )
+
+    def rpy(self) -> tuple[float, float, float]:
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        roll = math.atan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2))
+        s = 2 * (q0 * q2 - q3 * q1)
+        pitch = math.asin(s if -1.0 < s < 1.0 else (1.0 if s > 0 else -1.0))
+        yaw = math.atan2(2 * (q0 * q3 + q1 * q2), 1 - 2 * (q2 * q2 + q3 * q3))
+        return roll, pitch, yaw
+
+    def _gyro(self, t: float, w: tuple[float, float, float]) -> None:
+        b, e, p = self.bias, self.err, self.p
+        last = self.gyro_t
+        self.gyro_t = t
+        wx, wy, wz = w[0] - b[0], w[1] - b[1], w[2] - b[2]
+        self.omega = [wx, wy, wz]
+        if last is None or t <= last:
+            return
+        dt = t - last
+        # Bias from the integral of the error (Mahony's passive filter: b_dot = -ki e).
+        ki = p.attitude_ki
+        b[0] -= ki * e[0] * dt
+        b[1] -= ki * e[1] * dt
+        b[2] -= ki * e[2] * dt
+        kp = p.attitude_kp
+        wx += kp * e[0]
+        wy += kp * e[1]
+        wz += kp * e[2]
+        q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
+        h = 0.5 * dt
+        n0 = q0 + h * (-q1 * wx - q2 * wy - q3 * wz)
+        n1 = q1 + h * (q0 * wx + q2 * wz - q3 * wy)
+        n2 = q2 + h * (q0 * wy - q1 * wz + q3 * wx)
+        n3 = q3 + h * (q0 * wz + q1 * wy - q2 * wx)
+        norm = 1.0 / math.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
+        self.q0, self.q1, self.q2, self.q3 = n0 * norm, n1 * norm, n2 * norm, n3 * norm
+
+    def _accel(self, t: float, f: tuple[float, float, float]) -> None:
+        fx, fy, fz = f
+        r = self.rot()
+        # Translation: specific force to NED, plus gravity.
+        last = self.acc_t
+        self.acc_t = t
+        if last is not None and t > last:
+            dt = t - last
+            var = self.p.accel_noise_m_s2 * self.p.accel_noise_m_s2
+            walk = self.p.accel_bias_walk_m_s3 * self.p.accel_bias_walk_m_s3
+            ax = self.axes
+            ax[0].predict(r[0] * fx + r[1] * fy + r[2] * fz, dt, var, walk)
+            ax[1].predict(r[3] * fx + r[4] * fy + r[5] * fz, dt, var, walk)
+            ax[2].predict(r[6] * fx + r[7] * fy + r[8] * fz + GRAVITY_M_S2, dt, var, walk)
+        # Attitude: measured up (the specific force at rest is -g, i.e. up) against the
+        # estimated up (NED -z in the body frame).
+        norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+        if norm < 0.5 * GRAVITY_M_S2 or norm > 1.5 * GRAVITY_M_S2:
+            return  # not near 1 g: the direction says little about the tilt
+        mx, my, mz = fx / norm, fy / norm, fz / norm
+        ux, uy, uz = -r[6], -r[7], -r[8]
+        e = self.err
+        e[0] = my * uz - mz * uy
+        e[1] = mz * ux - mx * uz
+        e[2] = mx * uy - my * ux
+        self._mag_err_into(e)
+
+    def _mag_err_into(self, e: list[float]) -> None:
+        m = self.mag_yaw_err
+        if m == 0.0:
+            return
+        r = self.rot()
+        # A yaw error about NED down, expressed in the body frame (R^T (0, 0, m)).
+        e[0] += r[6] * m
+        e[1] += r[7] * m
+        e[2] += r[8] * m
+
+    def _compass(self, field: tuple[float, float, float]) -> None:
+        bx, by, bz = field
+        if bx * bx + by * by + bz * bz <= 0.0:
+            return
+        roll, pitch, _ = self.rpy()
+        cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
+        hy = cr * by - sr * bz
+        hz = sr * by + cr * bz
+        hx = cp * bx + sp * hz
+        heading = math.atan2(-hy, hx) + self.declination_rad  # true heading of the body x axis
+        _, _, yaw = self.rpy()
+        self.mag_yaw_err = self.p.compass_gain * _wrap_pi(heading - yaw)
+
+    # -- height, velocity, position ------------------------------------------------------
+    def _sonar(self, r: SonarReading) -> None:
+        if not r.echo:
+            self.sonar_agl_m = None
+            return
+        rot = self.rot()
+        agl = r.range_m * rot[8]  # slant range times cos(roll) cos(pitch)
+        down = self.axes[2]
+        if self.ground_d is None:
+            self.ground_d = down.p + agl
+        self.sonar_agl_m = agl
+        self.sonar_t = r.time_s
+        down.fuse_pos(self.ground_d - agl, self.p.sonar_noise_m * self.p.sonar_noise_m)
+
+    def _baro(self, r: BaroReading) -> None:
+        down = self.axes[2]
+        if self.baro_offset is None:
+            self.baro_offset = r.altitude_m + down.p
+            return
+        if r.time_s - self.sonar_t < 0.5:
+            return  # the sonar is the height reference while it has an echo
+        down.fuse_pos(self.baro_offset - r.altitude_m, self.p.baro_noise_m * self.p.baro_noise_m)
+
+    def height_above_ground_m(self) -> float | None:
+        """The height over the ground the flow looks at: sonar-aided, None when unknown."""
+        if self.ground_d is None:
+            return None
+        return self.ground_d - self.axes[2].p
+
+    def _flow(self, r: FlowReading) -> None:
+        last = self.flow_t
+        self.flow_t = r.time_s
+        if last is None or r.time_s <= last or r.quality < self.p.flow_min_quality:
+            return
+        h = self.height_above_ground_m()
+        if h is None or h < self.p.flow_min_height_m or r.time_s - self.sonar_t > 1.0:
+            return
+        dt = r.time_s - last
+        rot = self.rot()
+        tilt = rot[8]
+        if tilt < 0.7:
+            return
+        dist = h / tilt
+        k = 1.0 / (self.flow_counts_per_rad * dt)
+        w = self.omega
+        # The sensor sees (v_x / r + w_y, v_y / r - w_x): de-rotate, then scale by the range.
+        vbx = (r.delta_counts[0] * k - w[1]) * dist
+        vby = (r.delta_counts[1] * k + w[0]) * dist
+        ax = self.axes
+        vn, ve, vd = ax[0].v, ax[1].v, ax[2].v
+        vbz = rot[2] * vn + rot[5] * ve + rot[8] * vd
+        var = (self.p.flow_noise_rad_s * dist) ** 2
+        ax[0].fuse_vel(rot[0] * vbx + rot[1] * vby + rot[2] * vbz, var)
+        ax[1].fuse_vel(rot[3] * vbx + rot[4] * vby + rot[5] * vbz, var)
+        self.flow_used += 1
+
+    def _gps(self, r: GpsReading) -> None:
+        lat, lon, alt, vel = r.latitude_deg, r.longitude_deg, r.altitude_m, r.velocity_ned_m_s
+        if r.fix == 0 or lat is None or lon is None or alt is None or vel is None:
+            return
+        ax = self.axes
+        home = self.home
+        if home is None:
+            home = self.home = GeoOrigin(lat, lon, alt)
+            self.home_ned = (ax[0].p, ax[1].p)
+        n, e, _ = home.to_ned(lat, lon, alt)
+        pv = self.p.gps_pos_noise_m * self.p.gps_pos_noise_m
+        vv = self.p.gps_vel_noise_m_s * self.p.gps_vel_noise_m_s
+        ax[0].fuse_pos(self.home_ned[0] + n, pv)
+        ax[1].fuse_pos(self.home_ned[1] + e, pv)
+        ax[0].fuse_vel(vel[0], vv)
+        ax[1].fuse_vel(vel[1], vv)
+        self.gps_t = r.time_s
+
+    def at_rest(self, time_s: float) -> None:
+        """The board is disarmed (motors off), so at rest: fuse zero velocity every 0.2 s with
+        0.2 m/s noise (PX4 EKF2's zero-velocity update, zero_velocity_update.cpp)."""
+        if time_s - self.rest_t < 0.2:
+            return
+        self.rest_t = time_s
+        self._est = None
+        for axis in self.axes:
+            axis.fuse_vel(0.0, 0.04)
+
+    def has_gps_fix(self, time_s: float) -> bool:
+        """Whether a GPS fix was fused within the last second."""
+        return time_s - self.gps_t < 1.0
+
+    # -- in and out ----------------------------------------------------------------------
+    def observe(self, reading: object) -> None:
+        """Fuse one sensor reading (any type; the ones the board has no use for are ignored)."""
+        self._est = None
+        if isinstance(reading, GyroReading):
+            self._gyro(reading.time_s, reading.angular_velocity_rad_s)
+        elif isinstance(reading, AccelReading):
+            self._accel(reading.time_s, reading.proper_acceleration_m_s2)
+        elif isinstance(reading, CompassReading):
+            self._compass(reading.field_ut)
+        elif isinstance(reading, BaroReading):
+            self._baro(reading)
+        elif isinstance(reading, SonarReading):
+            self._sonar(reading)
+        elif isinstance(reading, FlowReading):
+            self._flow(reading)
+        elif isinstance(reading, GpsReading):
+            self._gps(reading)
+
+    def estimate(self) -> InsEstimate:
+        """The estimate now (cached until the next reading)."""
+        est = self._est
+        if est is None:
+            ax = self.axes
+            w = self.omega
+            est = self._est = InsEstimate(
+                (ax[0].p, ax[1].p, ax[2].p),
+                (ax[0].v, ax[1].v, ax[2].v),
+                self.rpy(),
+                (w[0], w[1], w[2]),
+            )
+        return est
