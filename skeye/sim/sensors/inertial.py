@@ -12,6 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
+import numpy as np
+
 from skeye.sim.frames import wrap_2pi
 from skeye.sim.sensors.base import (
     BiasedNoise,
@@ -21,7 +23,7 @@ from skeye.sim.sensors.base import (
     Vec3,
     WorldQuery,
 )
-from skeye.sim.state import BodyState, cross, mat_t_vec
+from skeye.sim.state import BodyState, Mat3, cross, mat_t_vec, mat_vec
 from skeye.wire.sim import sen_layout
 from skeye.wire.sim_format import Layout
 from skeye.wire.sim_messages import SenAccelerometer, SenBarometer, SenGyro, SenMagneticCompass
@@ -39,6 +41,30 @@ def _noise_params(
         Param("NoiseSigma", noise, f"white noise per sample, 1 sigma, {unit} ({ref})"),
         Param("BiasSigma", bias, f"constant bias drawn once, 1 sigma, {unit}"),
         Param("BiasWalk", walk, f"bias random walk, {unit} per sqrt(s)"),
+    )
+
+
+def _axis_params(scale: float, misalignment: float, ref: str) -> tuple[Param, Param]:
+    return (
+        Param("ScaleSigma", scale, f"scale-factor error per axis, drawn once, 1 sigma ({ref})"),
+        Param("MisalignmentSigma", misalignment,
+              f"cross-axis sensitivity per axis pair, drawn once, 1 sigma, rad ({ref})"),
+    )
+
+
+def axis_errors(rng: np.random.Generator, scale_sigma: float, misalignment_sigma: float) -> Mat3:
+    """A part's scale-factor and misalignment matrix, drawn once (at turn-on) from its seed.
+
+    ``I + diag(s) + M``: s per axis ~ N(0, scale_sigma), the off-diagonal entries of M
+    ~ N(0, misalignment_sigma) (cross-axis sensitivity: the small-angle misalignment of each
+    sensing axis toward the other two). Nine normal deviates, row by row.
+    """
+    d = rng.standard_normal(9).tolist()
+    s, m = scale_sigma, misalignment_sigma
+    return (
+        (1.0 + s * d[0], m * d[1], m * d[2]),
+        (m * d[3], 1.0 + s * d[4], m * d[5]),
+        (m * d[6], m * d[7], 1.0 + s * d[8]),
     )
 
 
@@ -67,23 +93,30 @@ class Accelerometer(Sensor[AccelReading]):
     the tangential term needs angular acceleration, which BodyState lacks, and is ignored:
     under 0.1 m/s^2 for r = 5 cm and 2 rad/s^2), rotated into the mount frame, then
     BiasedNoise. Defaults, MPU-6050-class: noise density 400 ug/sqrt(Hz) over a ~50 Hz
-    bandwidth gives NoiseSigma 0.03 m/s^2; BiasSigma 0.05 m/s^2 (5 mg residual after
-    calibration; the datasheet's uncalibrated zero-g offset is +-50 mg); BiasWalk
-    5e-4 m/s^2/sqrt(s). Default rate 100 Hz.
+    bandwidth gives NoiseSigma 0.03 m/s^2; BiasSigma 0.05 m/s^2 (the turn-on bias: 5 mg
+    residual after calibration; the datasheet's uncalibrated zero-g offset is +-50 mg); BiasWalk
+    5e-4 m/s^2/sqrt(s). Scale factor and misalignment (:func:`axis_errors`, applied before the
+    bias and noise): the MPU-6050 datasheet (PS-MPU-6000A-00 rev 3.4, table 6.2) gives an
+    initial calibration tolerance of +-3 % and a cross-axis sensitivity of +-2 %; read as 3-sigma
+    limits, ScaleSigma 0.01 and MisalignmentSigma 0.0067. Default rate 100 Hz.
     """
 
     type_name = "Accelerometer"
-    PARAMS = _noise_params("m/s^2", 0.03, 0.05, 5e-4, "MPU-6050: 400 ug/sqrt(Hz)")
+    PARAMS = (
+        *_noise_params("m/s^2", 0.03, 0.05, 5e-4, "MPU-6050: 400 ug/sqrt(Hz)"),
+        *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> AccelReading:
         omega = state.omega_frd_rad_s
         cx, cy, cz = cross(omega, cross(omega, self._pos_mount))
         fx, fy, fz = state.specific_force_frd_m_s2
-        x, y, z = self._body_to_sensor((fx + cx, fy + cy, fz + cz))
+        x, y, z = mat_vec(self._axes, self._body_to_sensor((fx + cx, fy + cy, fz + cz)))
         return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
@@ -111,18 +144,26 @@ class Gyro(Sensor[GyroReading]):
     Model: body rates rotated into the mount frame, then BiasedNoise. Defaults, MPU-6050-class:
     total RMS noise 0.05 deg/s at 100 Hz gives NoiseSigma 0.0009 rad/s; BiasSigma 0.005 rad/s
     (0.3 deg/s residual zero-rate offset after a still calibration; uncalibrated it is
-    +-20 deg/s); BiasWalk 1e-4 rad/s/sqrt(s). Default rate 100 Hz.
+    +-20 deg/s; this is the turn-on bias, drawn once from the seed); BiasWalk
+    1e-4 rad/s/sqrt(s). Scale factor and misalignment (:func:`axis_errors`): the MPU-6050
+    datasheet (PS-MPU-6000A-00 rev 3.4, table 6.1) gives a sensitivity scale factor tolerance
+    of +-3 % and a cross-axis sensitivity of +-2 %; read as 3-sigma limits, ScaleSigma 0.01 and
+    MisalignmentSigma 0.0067. Default rate 100 Hz.
     """
 
     type_name = "Gyro"
-    PARAMS = _noise_params("rad/s", 0.0009, 0.005, 1e-4, "MPU-6050: 0.05 deg/s RMS")
+    PARAMS = (
+        *_noise_params("rad/s", 0.0009, 0.005, 1e-4, "MPU-6050: 0.05 deg/s RMS"),
+        *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> GyroReading:
-        x, y, z = self._body_to_sensor(state.omega_frd_rad_s)
+        x, y, z = mat_vec(self._axes, self._body_to_sensor(state.omega_frd_rad_s))
         return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
