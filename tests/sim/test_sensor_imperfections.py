@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from skeye.sim.sensors import GPS, Accelerometer, Gyro, Sonar
+from skeye.sim.sensors import GPS, Accelerometer, Barometer, Gyro, Sonar
 from tests.sim.test_sensors import ORIGIN, FlatWorld, make, make_state
 
 
@@ -111,3 +111,26 @@ def test_gps_has_no_fix_before_acquisition_and_lags_by_its_latency() -> None:
         fixes.append((t, float(north)))
     lags = [t - north / speed for t, north in fixes]
     assert lags == pytest.approx([0.2] * len(lags), abs=1e-3)
+
+
+def test_baro_reads_low_in_ground_effect_from_the_rotor_wash() -> None:
+    kf, radius, hover_w = 8.54858e-6, 0.1, 441.7  # the Hummingbird (docs/physics.md)
+    baro = make(Barometer, NoiseSigma=0.0, BiasSigma=0.0, BiasWalk=0.0,
+                RotorThrustCoefficient=kf, RotorRadius=radius)
+    world = FlatWorld()
+    rotors = (hover_w,) * 4
+
+    def altitude_error(height: float, speeds: tuple[float, ...]) -> float:
+        state = make_state(pos=(0.0, 0.0, -height))
+        state.rotor_speed_rad_s = (speeds[0], speeds[1], speeds[2], speeds[3])
+        f = dict(baro.sample(state, world))
+        return float(f["Altitude"]) - (ORIGIN.altitude_m + height)
+
+    assert altitude_error(2.0, rotors) == pytest.approx(0.0, abs=1e-6)  # above 4 R: none
+    assert altitude_error(0.1, (0.0,) * 4) == pytest.approx(0.0, abs=1e-6)  # motors off
+    disk_loading = 4 * kf * hover_w**2 / (4 * math.pi * radius**2)
+    gain = 1.0 / (1.0 - (radius / (4 * 0.1)) ** 2)
+    assert baro.rotor_wash_pa(make_state(pos=(0.0, 0.0, -0.1)), world) == 0.0  # no rotor speeds
+    low = altitude_error(0.1, rotors)
+    assert low == pytest.approx(-(gain - 1.0) * disk_loading * 0.0832, rel=0.05)
+    assert low < altitude_error(0.2, rotors) < altitude_error(0.35, rotors) < 0.0

@@ -24,6 +24,7 @@ from skeye.sim.sensors.base import (
     WorldQuery,
 )
 from skeye.sim.state import BodyState, Mat3, cross, mat_t_vec, mat_vec
+from skeye.sim.vehicle import ground_effect_factor
 from skeye.wire.sim import sen_layout
 from skeye.wire.sim_format import Layout
 from skeye.wire.sim_messages import SenAccelerometer, SenBarometer, SenGyro, SenMagneticCompass
@@ -264,19 +265,53 @@ class Barometer(Sensor[BaroReading]):
     datasheet's absolute accuracy is +-150 Pa, normally removed by a ground reference: 10 Pa is
     what is left); BiasWalk 0.1 Pa/sqrt(s) (weather and thermal drift, ~7 cm a minute).
     Default rate 20 Hz.
+
+    Rotor wash in ground effect: near the ground the rotors' wake stagnates on it and raises
+    the pressure around the vehicle, so the barometer reads low (a known effect: flight
+    controllers' estimators ignore the baro near the ground for it). Model: the same
+    Cheeseman-Bennett ground-effect gain k(h) the vehicle's thrust gets
+    (:func:`skeye.sim.vehicle.ground_effect_factor`, h the sensor's height above the surface
+    below, one ray), read as a ground cushion: the extra thrust (k - 1) T is that extra
+    pressure over the rotor disks, ``dP = (k - 1) * sum(kf w_i^2) / (n pi R^2)``, added to the
+    static pressure. RotorThrustCoefficient (kf) and RotorRadius (R) are the airframe's (the
+    robot file sets them; kf 0, the default, is a barometer with no rotors). Above 4 R the
+    effect is 0; for the Hummingbird at hover it is 3.5 Pa (about 0.3 m) at h = R and 13 Pa
+    (about 1.1 m) at the 1.25 cap. The free-air prop wash over the static port depends on the
+    airframe's ducting and is not modelled.
     """
 
     type_name = "Barometer"
-    PARAMS = _noise_params("Pa", 1.5, 10.0, 0.1, "MS5611: 0.012 mbar RMS at OSR 4096")
+    PARAMS = (
+        *_noise_params("Pa", 1.5, 10.0, 0.1, "MS5611: 0.012 mbar RMS at OSR 4096"),
+        Param("RotorThrustCoefficient", 0.0,
+              "airframe's thrust per rotor / (rad/s)^2, N s^2 (0: no rotor wash)"),
+        Param("RotorRadius", 0.1, "airframe's rotor radius, m", exclusive=True),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 1, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+
+    def rotor_wash_pa(self, state: BodyState, world: WorldQuery) -> float:
+        """The ground-cushion overpressure at the sensor (Pa), 0 without rotors or ground."""
+        kf, radius = self.params["RotorThrustCoefficient"], self.params["RotorRadius"]
+        speeds = state.rotor_speed_rad_s
+        if kf <= 0.0 or not speeds:
+            return 0.0
+        height = world.ray_distance(self._pos_ned_m(state), (0.0, 0.0, 1.0), 4.0 * radius)
+        gain = ground_effect_factor(height, radius)
+        if gain <= 1.0:
+            return 0.0
+        thrust = 0.0
+        for w in speeds:
+            thrust += kf * w * w
+        return (gain - 1.0) * thrust / (len(speeds) * math.pi * radius * radius)
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> BaroReading:
         origin = world.geo_origin
         base_alt_m = origin.altitude_m if origin is not None else 0.0
         altitude_m = base_alt_m - self._pos_ned_m(state)[2]
         p0 = float(world.sea_level_pressure_pa)
-        pressure = self._noise.corrupt((isa_pressure_pa(altitude_m, p0),), dt_s)[0]
+        static = isa_pressure_pa(altitude_m, p0) + self.rotor_wash_pa(state, world)
+        pressure = self._noise.corrupt((static,), dt_s)[0]
         return BaroReading(state.time_s, pressure, isa_altitude_m(pressure, p0))
