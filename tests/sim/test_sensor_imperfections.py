@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from skeye.sim.sensors import GPS, Accelerometer, Barometer, Gyro, Sonar
+from skeye.sim.engine import RobotWorldQuery, Simulation
+from skeye.sim.sensors import GPS, Accelerometer, Barometer, Gyro, OpticalFlow, Sonar
+from skeye.sim.world import load_world
 from tests.sim.test_sensors import ORIGIN, FlatWorld, make, make_state
 
 
@@ -134,3 +137,42 @@ def test_baro_reads_low_in_ground_effect_from_the_rotor_wash() -> None:
     low = altitude_error(0.1, rotors)
     assert low == pytest.approx(-(gain - 1.0) * disk_loading * 0.0832, rel=0.05)
     assert low < altitude_error(0.2, rotors) < altitude_error(0.35, rotors) < 0.0
+
+
+def test_flow_quality_follows_the_texture_and_drops_out_over_a_plain_surface() -> None:
+    textured, plain = FlatWorld(contrast=0.3), FlatWorld(contrast=0.0)
+    flow = make(OpticalFlow, seed=4)
+    moving: dict[str, Any] = {"pos": (0.0, 0.0, -1.0), "vel": (0.5, 0.0, 0.0)}
+    over_texture = [dict(flow.sample(make_state(t=k / 50.0, **moving), textured))
+                    for k in range(100)]
+    over_plain = [dict(flow.sample(make_state(t=2.0 + k / 50.0, **moving), plain))
+                  for k in range(100)]
+    assert min(r["Quality"] for r in over_texture) > 80
+    total = sum(r["Delta"][0] for r in over_texture)  # 0.5 rad/s for 2 s
+    assert total == pytest.approx(flow.counts_per_rad * 1.0, rel=0.05)
+    assert all(r["Quality"] == 0 and r["Delta"] == (0, 0) for r in over_plain)
+    # Faint texture: quality in proportion to the contrast below ReferenceContrast.
+    faint = make(OpticalFlow, seed=4, QualitySigma=0.0)
+    q = dict(faint.sample(make_state(**moving), FlatWorld(contrast=0.05)))["Quality"]
+    assert q == round(100 * 0.05 / faint.params["ReferenceContrast"])
+
+
+def test_flow_quality_from_the_real_world_surface_under_the_sensor(tmp_path: Path) -> None:
+    # A plain ground (texture "none") with the textured pad at the origin: one vehicle hovers
+    # over the pad, one over the plain ground; the engine's ray tells which surface is under.
+    world_file = tmp_path / "plain.toml"
+    world_file.write_text(
+        'name = "plain"\n[ground]\nsize_m = 30.0\ntexture = "none"\n'
+        '[[pads]]\nname = "pad1"\npad = "skeye-4"\nposition_ned_m = [0.0, 0.0, 0.0]\n'
+        'yaw_rad = 0.0\n'
+    )
+    sim = Simulation(load_world(world_file), seed=2)
+    quality: dict[str, list[int]] = {}
+    for name, north in (("OverPad", 0.0), ("OverPlain", 10.0)):
+        robot = sim.spawn("hummingbird", name=name, sink=lambda events: None,
+                          location_ned_m=(north, 0.0, -1.0))
+        flow = next(s.sensor for s in robot.sensors if isinstance(s.sensor, OpticalFlow))
+        query = RobotWorldQuery(sim, name)
+        quality[name] = [flow.read(sim.body_state(name), query).quality for _ in range(20)]
+    assert min(quality["OverPad"]) > 80, quality
+    assert quality["OverPlain"] == [0] * 20

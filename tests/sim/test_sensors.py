@@ -53,6 +53,7 @@ class FlatWorld:
     magnetic_field_ned_ut: np.ndarray = field(default_factory=lambda: FIELD_NED_UT.copy())
     sea_level_pressure_pa: float = 101325.0
     ground_down_m: float = 0.0
+    contrast: float = 0.3  # RMS texture contrast of the ground (a textured floor)
 
     def ray_distance(
         self, origin_ned_m: np.ndarray, direction_ned: np.ndarray, max_range_m: float
@@ -67,6 +68,12 @@ class FlatWorld:
         self, origin_ned_m: Any, directions_ned: Any, max_range_m: float
     ) -> list[float | None]:
         return [self.ray_distance(origin_ned_m, d, max_range_m) for d in directions_ned]
+
+    def ray_surface(
+        self, origin_ned_m: Any, direction_ned: Any, max_range_m: float
+    ) -> tuple[float | None, float]:
+        distance = self.ray_distance(origin_ned_m, direction_ned, max_range_m)
+        return distance, self.contrast if distance is not None else 0.0
 
 
 def make_state(

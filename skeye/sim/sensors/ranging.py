@@ -191,11 +191,18 @@ class OpticalFlow(Sensor[FlowReading]):
     noise NoiseSigma 0.5 counts is added, fractions carry to the next reading, and each
     reading saturates at the 8-bit registers' [-128, 127].
 
-    Quality (SQUAL, 0..169): SurfaceQuality 100 (a textured floor) while the surface distance
-    is in [MinRange 0.3 m, MaxRange 5.0 m] (the lens' focus and texture limits); below MinRange
-    it falls linearly to 0 at distance 0 (defocus), above MaxRange linearly to 0 at twice
-    MaxRange; plus QualitySigma 3 white noise, rounded and clipped. With Quality 0 the sensor
-    sees nothing: Delta is (0, 0). Default rate 50 Hz.
+    Quality (SQUAL, 0..169) from the texture and the distance actually under the sensor: the
+    boresight ray returns the distance and the RMS luminance contrast c of the surface it hits
+    (``WorldQuery.ray_surface``: each surface's texture measured once when the world is built,
+    :mod:`skeye.sim.surface_contrast`). SQUAL = SurfaceQuality (100) x min(1, c /
+    ReferenceContrast) x the distance factor, plus QualitySigma 3 white noise, rounded and
+    clipped. The distance factor is 1 in [MinRange 0.3 m, MaxRange 5.0 m] (the lens' focus and
+    texture limits), falls linearly to 0 at distance 0 below (defocus) and to 0 at twice
+    MaxRange above. ReferenceContrast 0.1 is the simulator's choice, not a datasheet figure (the
+    ADNS-3080 datasheet gives SQUAL only as a count of features, up to 169): a surface of at
+    least that contrast tracks as well as a textured floor. A plain surface (c = 0) gives
+    SQUAL 0, and with Quality 0 the sensor sees nothing: Delta is (0, 0), a dropout. Lighting
+    is not modelled (the sensor's own LED lights what it sees). Default rate 50 Hz.
     """
 
     type_name = "OpticalFlow"
@@ -207,8 +214,10 @@ class OpticalFlow(Sensor[FlowReading]):
               exclusive=True, maximum=math.pi),
         Param("MinRange", 0.3, "nearest surface in focus, m"),
         Param("MaxRange", 5.0, "farthest surface with usable texture, m", exclusive=True),
-        Param("SurfaceQuality", 100, "SQUAL over a surface in range", 0, integer=True,
+        Param("SurfaceQuality", 100, "SQUAL over a textured surface in range", 0, integer=True,
               maximum=SQUAL_MAX),
+        Param("ReferenceContrast", 0.1, "RMS surface contrast that gives SurfaceQuality",
+              exclusive=True),
         Param("QualitySigma", 3.0, "white noise on SQUAL"),
         Param("NoiseSigma", 0.5, "white noise per reading on each Delta, counts"),
     )
@@ -230,9 +239,9 @@ class OpticalFlow(Sensor[FlowReading]):
         self._prev_rate: tuple[float, float] | None = None
         self._carry = [0.0, 0.0]
 
-    def _quality(self, distance_m: float | None) -> int:
+    def _quality(self, distance_m: float | None, contrast: float) -> int:
         p = self.params
-        if distance_m is None:
+        if distance_m is None or contrast <= 0.0:
             return 0
         lo, hi = p["MinRange"], p["MaxRange"]
         if distance_m < lo:
@@ -241,6 +250,7 @@ class OpticalFlow(Sensor[FlowReading]):
             scale = max(0.0, 2.0 - distance_m / hi)
         else:
             scale = 1.0
+        scale *= min(1.0, contrast / p["ReferenceContrast"])
         if scale <= 0.0:
             return 0
         q = p["SurfaceQuality"] * scale + p["QualitySigma"] * float(self.rng.standard_normal())
@@ -253,8 +263,8 @@ class OpticalFlow(Sensor[FlowReading]):
         rot_sn = self._rot_sensor_to_ned(state)
         origin = self._pos_ned_m(state)
         boresight = (rot_sn[0][2], rot_sn[1][2], rot_sn[2][2])
-        distance = world.ray_distance(origin, boresight, 2.0 * p["MaxRange"])
-        quality = self._quality(distance)
+        distance, contrast = world.ray_surface(origin, boresight, 2.0 * p["MaxRange"])
+        quality = self._quality(distance, contrast)
         if quality == 0 or distance is None or distance <= 0.0:
             self._prev_rate = None
             self._carry = [0.0, 0.0]
