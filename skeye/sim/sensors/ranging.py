@@ -2,9 +2,10 @@
 
 How this works: both look along their mount frame's +z axis (an identity mount looks straight
 down) and ask the world for ray distances. The sonar casts a small cone of rays and keeps the
-nearest echo; the flow sensor casts one ray for the distance to the surface and turns the
-sensor's velocity and rotation into image motion, accumulated as integer counts between
-readings (fractions carried over, so nothing is lost to rounding).
+nearest echo, one ranging per RangingTime, in whole centimetres; the flow sensor casts one ray
+for the distance to the surface and its texture contrast (its SQUAL) and turns the sensor's
+velocity and rotation into image motion, accumulated as integer counts between readings
+(fractions carried over, so nothing is lost to rounding).
 """
 
 from __future__ import annotations
