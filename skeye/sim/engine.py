@@ -40,6 +40,7 @@ from skeye.sim import frames
 from skeye.sim.readings import Event, ReadingSink, RobotStopped, SensorSample
 from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.state import BodyState
+from skeye.sim.surface_contrast import geom_contrasts
 from skeye.sim.wind import WindModel, WindSettings, make_settings
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
@@ -75,6 +76,11 @@ class RobotWorldQuery:
         self, origin_ned_m: Any, directions_ned: Any, max_range_m: float
     ) -> list[float | None]:
         return self._sim.ray_distances(self._robot, origin_ned_m, directions_ned, max_range_m)
+
+    def ray_surface(
+        self, origin_ned_m: Any, direction_ned: Any, max_range_m: float
+    ) -> tuple[float | None, float]:
+        return self._sim.ray_surface(self._robot, origin_ned_m, direction_ned, max_range_m)
 
 
 class Simulation:
@@ -119,6 +125,9 @@ class Simulation:
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
         self.xml_extras: list[Callable[[Robot], str]] = []
         self._ray_geomid = np.zeros(1, dtype=np.int32)
+        # RMS texture contrast of each geom, by id (skeye.sim.surface_contrast), for flow sensors.
+        self._contrast_by_name = geom_contrasts(world)
+        self._geom_contrast: list[float] = []
         self._ray_pnt = np.zeros(3)
         self._ray_vec = np.zeros(3)
         self.model: Any = None
@@ -198,6 +207,13 @@ class Simulation:
         )
         self.model = mujoco.MjModel.from_xml_string(xml, assets)
         self.data = mujoco.MjData(self.model)
+        contrast_by_name = self._contrast_by_name
+        self._geom_contrast = [
+            contrast_by_name.get(
+                mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, i) or "", 0.0
+            )
+            for i in range(self.model.ngeom)
+        ]
         self.data.time = self.time_s
         d = self.data
         self._qpos, self._qvel, self._qacc, self._xfrc = d.qpos, d.qvel, d.qacc, d.xfrc_applied
@@ -319,6 +335,16 @@ class Simulation:
         """First hit along a ray from a NED point, ignoring the robot itself."""
         return self._cast(origin_ned_m, direction_ned, self._slots[robot_name].body_id,
                           max_range_m)
+
+    def ray_surface(
+        self, robot_name: str, origin_ned_m: Any, direction_ned: Any, max_range_m: float
+    ) -> tuple[float | None, float]:
+        """:meth:`ray_distance` and the texture contrast of the surface hit (0 when none)."""
+        dist = self._cast(origin_ned_m, direction_ned, self._slots[robot_name].body_id,
+                          max_range_m)
+        if dist is None:
+            return None, 0.0
+        return dist, self._geom_contrast[int(self._ray_geomid[0])]
 
     def _cast(
         self, origin_ned_m: Any, direction_ned: Any, exclude_body: int, max_range_m: float

@@ -41,6 +41,8 @@ G = 9.81
 ORIGIN = GeoOrigin(39.1339, -77.2167, 120.0)
 FIELD_NED_UT = np.array([20.9, -4.0, 46.5])  # mid-Atlantic US: about -11 deg declination
 QUIET: dict[str, Any] = {"NoiseSigma": 0.0, "BiasSigma": 0.0, "BiasWalk": 0.0}
+IDEAL_AXES: dict[str, Any] = {"ScaleSigma": 0.0, "MisalignmentSigma": 0.0}  # IMU only
+IMU_QUIET: dict[str, Any] = {**QUIET, **IDEAL_AXES}
 
 
 @dataclass
@@ -51,6 +53,7 @@ class FlatWorld:
     magnetic_field_ned_ut: np.ndarray = field(default_factory=lambda: FIELD_NED_UT.copy())
     sea_level_pressure_pa: float = 101325.0
     ground_down_m: float = 0.0
+    contrast: float = 0.3  # RMS texture contrast of the ground (a textured floor)
 
     def ray_distance(
         self, origin_ned_m: np.ndarray, direction_ned: np.ndarray, max_range_m: float
@@ -65,6 +68,12 @@ class FlatWorld:
         self, origin_ned_m: Any, directions_ned: Any, max_range_m: float
     ) -> list[float | None]:
         return [self.ray_distance(origin_ned_m, d, max_range_m) for d in directions_ned]
+
+    def ray_surface(
+        self, origin_ned_m: Any, direction_ned: Any, max_range_m: float
+    ) -> tuple[float | None, float]:
+        distance = self.ray_distance(origin_ned_m, direction_ned, max_range_m)
+        return distance, self.contrast if distance is not None else 0.0
 
 
 def make_state(
@@ -144,21 +153,21 @@ def test_battery_reports_engine_values_and_refuses_before_update() -> None:
 
 
 def test_accelerometer_exact_without_noise_and_rotated_by_mount() -> None:
-    acc = make(Accelerometer, **QUIET)
+    acc = make(Accelerometer, **IMU_QUIET)
     f = dict(acc.sample(make_state(accel=(1.0, 0.0, 0.0)), FlatWorld()))
     assert f["ProperAcceleration"] == pytest.approx((1.0, 0.0, -G))
     # Mounted yawed +90 deg: body x is the sensor's -y.
-    acc = make(Accelerometer, mount=Mount(rpy_rad=(0.0, 0.0, math.pi / 2)), **QUIET)
+    acc = make(Accelerometer, mount=Mount(rpy_rad=(0.0, 0.0, math.pi / 2)), **IMU_QUIET)
     f = dict(acc.sample(make_state(accel=(1.0, 0.0, 0.0)), FlatWorld()))
     assert f["ProperAcceleration"] == pytest.approx((0.0, -1.0, -G), abs=1e-12)
     # Centripetal lever arm: 0.1 m forward, spinning 2 rad/s about z -> -0.4 m/s^2 along x.
-    acc = make(Accelerometer, mount=Mount(pos_frd_m=(0.1, 0.0, 0.0)), **QUIET)
+    acc = make(Accelerometer, mount=Mount(pos_frd_m=(0.1, 0.0, 0.0)), **IMU_QUIET)
     f = dict(acc.sample(make_state(omega=(0.0, 0.0, 2.0)), FlatWorld()))
     assert f["ProperAcceleration"] == pytest.approx((-0.4, 0.0, -G), abs=1e-12)
 
 
 def test_accelerometer_noise_statistics() -> None:
-    acc = make(Accelerometer, seed=7)
+    acc = make(Accelerometer, seed=7, **IDEAL_AXES)
     readings = np.array([r["ProperAcceleration"] for r in series(acc, 3000)])
     p = acc.params
     assert_mean_close(readings, np.array([0.0, 0.0, -G]), p["NoiseSigma"],
@@ -167,10 +176,10 @@ def test_accelerometer_noise_statistics() -> None:
 
 
 def test_gyro_rotated_and_noise_statistics() -> None:
-    gyro = make(Gyro, mount=Mount(rpy_rad=(0.0, 0.0, math.pi / 2)), **QUIET)
+    gyro = make(Gyro, mount=Mount(rpy_rad=(0.0, 0.0, math.pi / 2)), **IMU_QUIET)
     f = dict(gyro.sample(make_state(omega=(0.3, 0.0, -0.1)), FlatWorld()))
     assert f["AngularVelocity"] == pytest.approx((0.0, -0.3, -0.1), abs=1e-12)
-    gyro = make(Gyro, seed=3)
+    gyro = make(Gyro, seed=3, **IDEAL_AXES)
     omega = np.array([0.1, -0.2, 0.05])
     readings = np.array([r["AngularVelocity"]
                          for r in series(gyro, 3000, omega=tuple(omega))])
@@ -263,7 +272,7 @@ def test_gps_indoors_has_no_fix_and_no_position() -> None:
 
 
 def test_gps_fields_formats_and_error_statistics() -> None:
-    gps = make(GPS, seed=2)
+    gps = make(GPS, seed=2, FixTime=0.0)  # acquisition: tests/sim/test_sensor_imperfections.py
     n = 15000  # 3000 s at 5 Hz: about 50 correlation times
     readings = series(gps, n, pos=(3.0, -4.0, -1.0), vel=(0.5, 0.0, 0.0))
     first = readings[0]
@@ -296,24 +305,25 @@ def test_gps_fields_formats_and_error_statistics() -> None:
 
 def test_sonar_ranges_clamps_and_cone() -> None:
     world = FlatWorld()
-    quiet = make(Sonar, NoiseSigma=0.0)
+    quiet = make(Sonar, NoiseSigma=0.0, RangingTime=0.0)
     assert quiet.sample(make_state(pos=(0, 0, -2.0)), world) == [("Range", pytest.approx(2.0))]
     assert quiet.sample(make_state(pos=(0, 0, -10.0)), world) == [("Range", 6.0)]
     assert quiet.last is not None and not quiet.last.echo
     assert quiet.sample(make_state(pos=(0, 0, -0.03)), world) == [("Range", 0.06)]
     # Pitched 0.5 rad: the nearest ray of the cone is 0.3 rad off the boresight.
     f = dict(quiet.sample(make_state(pos=(0, 0, -1.0), rpy=(0.0, 0.5, 0.0)), world))
-    assert f["Range"] == pytest.approx(1.0 / math.cos(0.5 - 0.3))
+    assert f["Range"] == round(100.0 / math.cos(0.5 - 0.3)) / 100.0  # whole centimetres
     # Rolled 2 rad: even the nearest cone ray (1.7 rad off the vertical) points up: no echo.
     assert quiet.sample(make_state(pos=(0, 0, -1.0), rpy=(2.0, 0.0, 0.0)), world) == [
         ("Range", 6.0)]
     # Mount offset moves the sensor: 0.05 m below the body origin.
-    low = make(Sonar, mount=Mount(pos_frd_m=(0.0, 0.0, 0.05)), NoiseSigma=0.0)
+    low = make(Sonar, mount=Mount(pos_frd_m=(0.0, 0.0, 0.05)), NoiseSigma=0.0,
+               RangingTime=0.0)
     assert dict(low.sample(make_state(pos=(0, 0, -1.0)), world))["Range"] == pytest.approx(0.95)
 
 
 def test_sonar_noise_statistics() -> None:
-    sonar = make(Sonar, seed=4)
+    sonar = make(Sonar, seed=4, RangingTime=0.0)
     ranges = np.array([[r["Range"]] for r in series(sonar, 1500, pos=(0.0, 0.0, -1.5))])
     assert_mean_close(ranges, np.array([1.5]), 0.01, 0.0)
     assert float(ranges.std()) == pytest.approx(0.01, rel=0.15)

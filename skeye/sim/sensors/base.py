@@ -78,6 +78,11 @@ class WorldQuery(Protocol):
     ) -> list[float | None]:
         """:meth:`ray_distance` for several unit rays from one point (one call, cheaper)."""
 
+    def ray_surface(
+        self, origin_ned_m: Vec3, direction_ned: Vec3, max_range_m: float
+    ) -> tuple[float | None, float]:
+        """:meth:`ray_distance` and the RMS texture contrast of the surface hit (0 if none)."""
+
 
 @dataclass(frozen=True)
 class Mount:

@@ -12,6 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
+import numpy as np
+
 from skeye.sim.frames import wrap_2pi
 from skeye.sim.sensors.base import (
     BiasedNoise,
@@ -21,7 +23,8 @@ from skeye.sim.sensors.base import (
     Vec3,
     WorldQuery,
 )
-from skeye.sim.state import BodyState, cross, mat_t_vec
+from skeye.sim.state import BodyState, Mat3, cross, mat_t_vec, mat_vec
+from skeye.sim.vehicle import ground_effect_factor
 from skeye.wire.sim import sen_layout
 from skeye.wire.sim_format import Layout
 from skeye.wire.sim_messages import SenAccelerometer, SenBarometer, SenGyro, SenMagneticCompass
@@ -39,6 +42,30 @@ def _noise_params(
         Param("NoiseSigma", noise, f"white noise per sample, 1 sigma, {unit} ({ref})"),
         Param("BiasSigma", bias, f"constant bias drawn once, 1 sigma, {unit}"),
         Param("BiasWalk", walk, f"bias random walk, {unit} per sqrt(s)"),
+    )
+
+
+def _axis_params(scale: float, misalignment: float, ref: str) -> tuple[Param, Param]:
+    return (
+        Param("ScaleSigma", scale, f"scale-factor error per axis, drawn once, 1 sigma ({ref})"),
+        Param("MisalignmentSigma", misalignment,
+              f"cross-axis sensitivity per axis pair, drawn once, 1 sigma, rad ({ref})"),
+    )
+
+
+def axis_errors(rng: np.random.Generator, scale_sigma: float, misalignment_sigma: float) -> Mat3:
+    """A part's scale-factor and misalignment matrix, drawn once (at turn-on) from its seed.
+
+    ``I + diag(s) + M``: s per axis ~ N(0, scale_sigma), the off-diagonal entries of M
+    ~ N(0, misalignment_sigma) (cross-axis sensitivity: the small-angle misalignment of each
+    sensing axis toward the other two). Nine normal deviates, row by row.
+    """
+    d = rng.standard_normal(9).tolist()
+    s, m = scale_sigma, misalignment_sigma
+    return (
+        (1.0 + s * d[0], m * d[1], m * d[2]),
+        (m * d[3], 1.0 + s * d[4], m * d[5]),
+        (m * d[6], m * d[7], 1.0 + s * d[8]),
     )
 
 
@@ -67,23 +94,30 @@ class Accelerometer(Sensor[AccelReading]):
     the tangential term needs angular acceleration, which BodyState lacks, and is ignored:
     under 0.1 m/s^2 for r = 5 cm and 2 rad/s^2), rotated into the mount frame, then
     BiasedNoise. Defaults, MPU-6050-class: noise density 400 ug/sqrt(Hz) over a ~50 Hz
-    bandwidth gives NoiseSigma 0.03 m/s^2; BiasSigma 0.05 m/s^2 (5 mg residual after
-    calibration; the datasheet's uncalibrated zero-g offset is +-50 mg); BiasWalk
-    5e-4 m/s^2/sqrt(s). Default rate 100 Hz.
+    bandwidth gives NoiseSigma 0.03 m/s^2; BiasSigma 0.05 m/s^2 (the turn-on bias: 5 mg
+    residual after calibration; the datasheet's uncalibrated zero-g offset is +-50 mg); BiasWalk
+    5e-4 m/s^2/sqrt(s). Scale factor and misalignment (:func:`axis_errors`, applied before the
+    bias and noise): the MPU-6050 datasheet (PS-MPU-6000A-00 rev 3.4, table 6.2) gives an
+    initial calibration tolerance of +-3 % and a cross-axis sensitivity of +-2 %; read as 3-sigma
+    limits, ScaleSigma 0.01 and MisalignmentSigma 0.0067. Default rate 100 Hz.
     """
 
     type_name = "Accelerometer"
-    PARAMS = _noise_params("m/s^2", 0.03, 0.05, 5e-4, "MPU-6050: 400 ug/sqrt(Hz)")
+    PARAMS = (
+        *_noise_params("m/s^2", 0.03, 0.05, 5e-4, "MPU-6050: 400 ug/sqrt(Hz)"),
+        *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> AccelReading:
         omega = state.omega_frd_rad_s
         cx, cy, cz = cross(omega, cross(omega, self._pos_mount))
         fx, fy, fz = state.specific_force_frd_m_s2
-        x, y, z = self._body_to_sensor((fx + cx, fy + cy, fz + cz))
+        x, y, z = mat_vec(self._axes, self._body_to_sensor((fx + cx, fy + cy, fz + cz)))
         return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
@@ -111,18 +145,26 @@ class Gyro(Sensor[GyroReading]):
     Model: body rates rotated into the mount frame, then BiasedNoise. Defaults, MPU-6050-class:
     total RMS noise 0.05 deg/s at 100 Hz gives NoiseSigma 0.0009 rad/s; BiasSigma 0.005 rad/s
     (0.3 deg/s residual zero-rate offset after a still calibration; uncalibrated it is
-    +-20 deg/s); BiasWalk 1e-4 rad/s/sqrt(s). Default rate 100 Hz.
+    +-20 deg/s; this is the turn-on bias, drawn once from the seed); BiasWalk
+    1e-4 rad/s/sqrt(s). Scale factor and misalignment (:func:`axis_errors`): the MPU-6050
+    datasheet (PS-MPU-6000A-00 rev 3.4, table 6.1) gives a sensitivity scale factor tolerance
+    of +-3 % and a cross-axis sensitivity of +-2 %; read as 3-sigma limits, ScaleSigma 0.01 and
+    MisalignmentSigma 0.0067. Default rate 100 Hz.
     """
 
     type_name = "Gyro"
-    PARAMS = _noise_params("rad/s", 0.0009, 0.005, 1e-4, "MPU-6050: 0.05 deg/s RMS")
+    PARAMS = (
+        *_noise_params("rad/s", 0.0009, 0.005, 1e-4, "MPU-6050: 0.05 deg/s RMS"),
+        *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> GyroReading:
-        x, y, z = self._body_to_sensor(state.omega_frd_rad_s)
+        x, y, z = mat_vec(self._axes, self._body_to_sensor(state.omega_frd_rad_s))
         return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
 
 
@@ -223,19 +265,53 @@ class Barometer(Sensor[BaroReading]):
     datasheet's absolute accuracy is +-150 Pa, normally removed by a ground reference: 10 Pa is
     what is left); BiasWalk 0.1 Pa/sqrt(s) (weather and thermal drift, ~7 cm a minute).
     Default rate 20 Hz.
+
+    Rotor wash in ground effect: near the ground the rotors' wake stagnates on it and raises
+    the pressure around the vehicle, so the barometer reads low (a known effect: flight
+    controllers' estimators ignore the baro near the ground for it). Model: the same
+    Cheeseman-Bennett ground-effect gain k(h) the vehicle's thrust gets
+    (:func:`skeye.sim.vehicle.ground_effect_factor`, h the sensor's height above the surface
+    below, one ray), read as a ground cushion: the extra thrust (k - 1) T is that extra
+    pressure over the rotor disks, ``dP = (k - 1) * sum(kf w_i^2) / (n pi R^2)``, added to the
+    static pressure. RotorThrustCoefficient (kf) and RotorRadius (R) are the airframe's (the
+    robot file sets them; kf 0, the default, is a barometer with no rotors). Above 4 R the
+    effect is 0; for the Hummingbird at hover it is 3.5 Pa (about 0.3 m) at h = R and 13 Pa
+    (about 1.1 m) at the 1.25 cap. The free-air prop wash over the static port depends on the
+    airframe's ducting and is not modelled.
     """
 
     type_name = "Barometer"
-    PARAMS = _noise_params("Pa", 1.5, 10.0, 0.1, "MS5611: 0.012 mbar RMS at OSR 4096")
+    PARAMS = (
+        *_noise_params("Pa", 1.5, 10.0, 0.1, "MS5611: 0.012 mbar RMS at OSR 4096"),
+        Param("RotorThrustCoefficient", 0.0,
+              "airframe's thrust per rotor / (rad/s)^2, N s^2 (0: no rotor wash)"),
+        Param("RotorRadius", 0.1, "airframe's rotor radius, m", exclusive=True),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 1, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+
+    def rotor_wash_pa(self, state: BodyState, world: WorldQuery) -> float:
+        """The ground-cushion overpressure at the sensor (Pa), 0 without rotors or ground."""
+        kf, radius = self.params["RotorThrustCoefficient"], self.params["RotorRadius"]
+        speeds = state.rotor_speed_rad_s
+        if kf <= 0.0 or not speeds:
+            return 0.0
+        height = world.ray_distance(self._pos_ned_m(state), (0.0, 0.0, 1.0), 4.0 * radius)
+        gain = ground_effect_factor(height, radius)
+        if gain <= 1.0:
+            return 0.0
+        thrust = 0.0
+        for w in speeds:
+            thrust += kf * w * w
+        return (gain - 1.0) * thrust / (len(speeds) * math.pi * radius * radius)
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> BaroReading:
         origin = world.geo_origin
         base_alt_m = origin.altitude_m if origin is not None else 0.0
         altitude_m = base_alt_m - self._pos_ned_m(state)[2]
         p0 = float(world.sea_level_pressure_pa)
-        pressure = self._noise.corrupt((isa_pressure_pa(altitude_m, p0),), dt_s)[0]
+        static = isa_pressure_pa(altitude_m, p0) + self.rotor_wash_pa(state, world)
+        pressure = self._noise.corrupt((static,), dt_s)[0]
         return BaroReading(state.time_s, pressure, isa_altitude_m(pressure, p0))

@@ -370,6 +370,14 @@ class GPS(Sensor[GpsReading]):
     [MinSatellites 9, MaxSatellites 12], one step with probability 0.05 per reading.
     Latitude/Longitude are written in USARSim's ``39,8.0341,N`` form plus decimal degrees.
     Default rate 5 Hz (the NEO-6M's maximum).
+
+    Fix acquisition and latency: until FixTime after the first reading the receiver has no
+    fix (``{Fix 0} {Satellites 0}``); default 1 s, the u-blox LEA-6 datasheet's hot-start
+    time to first fix (26 s for a cold start: set FixTime 26). Each position and velocity is
+    that of Latency earlier (0.2 s: one measurement epoch at the 5 Hz rate, the solution being
+    reported an epoch after its measurements; the LEA-6 datasheet gives no latency figure),
+    interpolated linearly between the receiver's own past readings
+    (the oldest one before there is enough history).
     """
 
     type_name = "GPS"
@@ -381,6 +389,8 @@ class GPS(Sensor[GpsReading]):
         Param("MinSatellites", 9, "fewest satellites reported with a fix", 4, integer=True,
               maximum=32),
         Param("MaxSatellites", 12, "most satellites reported", 4, integer=True, maximum=32),
+        Param("FixTime", 1.0, "time to first fix from the first reading, s (LEA-6 hot start)"),
+        Param("Latency", 0.2, "age of the reported position and velocity, s", maximum=10.0),
     )
 
     def _check(self) -> None:
@@ -394,11 +404,37 @@ class GPS(Sensor[GpsReading]):
         self._error_ned_m: np.ndarray = self.rng.standard_normal(3) * self._sigma
         lo, hi = int(p["MinSatellites"]), int(p["MaxSatellites"])
         self._satellites = int(self.rng.integers(lo, hi + 1))
+        self._start_s: float | None = None
+        # (time, position NED, velocity NED) of past readings, oldest first.
+        self._history: list[tuple[float, Vec3, Vec3]] = []
+
+    def _delayed(self, t: float, pos: Vec3, vel: Vec3) -> tuple[Vec3, Vec3]:
+        """Position and velocity of Latency ago, from the history (which this extends)."""
+        hist = self._history
+        hist.append((t, pos, vel))
+        target = t - self.params["Latency"]
+        while len(hist) > 2 and hist[1][0] <= target:
+            del hist[0]
+        t0, p0, v0 = hist[0]
+        if target <= t0 or len(hist) == 1:
+            return p0, v0
+        t1, p1, v1 = hist[1]
+        a = (target - t0) / (t1 - t0) if t1 > t0 else 1.0
+        a = min(1.0, a)
+        return (
+            (p0[0] + a * (p1[0] - p0[0]), p0[1] + a * (p1[1] - p0[1]), p0[2] + a * (p1[2] - p0[2])),
+            (v0[0] + a * (v1[0] - v0[0]), v0[1] + a * (v1[1] - v0[1]), v0[2] + a * (v1[2] - v0[2])),
+        )
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> GpsReading:
         t = float(state.time_s)
         origin = world.geo_origin
         if origin is None:
+            return GpsReading(t, 0, 0)
+        pos, vel_true = self._delayed(t, self._pos_ned_m(state), vec3(state.vel_ned_m_s))
+        if self._start_s is None:
+            self._start_s = t
+        if t < self._start_s + self.params["FixTime"] - 1e-9:
             return GpsReading(t, 0, 0)
         if dt_s > 0.0:
             a = math.exp(-dt_s / self.params["CorrelationTime"])
@@ -409,9 +445,9 @@ class GPS(Sensor[GpsReading]):
             lo, hi = int(self.params["MinSatellites"]), int(self.params["MaxSatellites"])
             step = 1 if self.rng.random() < 0.5 else -1
             self._satellites = min(hi, max(lo, self._satellites + step))
-        n, e, d = vec3(np.add(self._pos_ned_m(state), self._error_ned_m))
+        n, e, d = vec3(np.add(pos, self._error_ned_m))
         lat, lon, alt = origin.to_geodetic(n, e, d)
-        vel = np.asarray(state.vel_ned_m_s, dtype=float) + self.params[
+        vel = np.asarray(vel_true, dtype=float) + self.params[
             "VelocitySigma"
         ] * self.rng.standard_normal(3)
         return GpsReading(t, 1, self._satellites, lat, lon, alt, vec3(vel))

@@ -2,9 +2,10 @@
 
 How this works: both look along their mount frame's +z axis (an identity mount looks straight
 down) and ask the world for ray distances. The sonar casts a small cone of rays and keeps the
-nearest echo; the flow sensor casts one ray for the distance to the surface and turns the
-sensor's velocity and rotation into image motion, accumulated as integer counts between
-readings (fractions carried over, so nothing is lost to rounding).
+nearest echo, one ranging per RangingTime, in whole centimetres; the flow sensor casts one ray
+for the distance to the surface and its texture contrast (its SQUAL) and turns the sensor's
+velocity and rotation into image motion, accumulated as integer counts between readings
+(fractions carried over, so nothing is lost to rounding).
 """
 
 from __future__ import annotations
@@ -48,10 +49,22 @@ class Sonar(Sensor[SonarReading]):
 
     Model: one ray along the boresight and BeamRays rays on a cone at half the BeamAngle; the
     nearest hit is the echo (slant distance, as time of flight measures it). Range = echo +
-    white noise, clamped to [MinRange, MaxRange]; MaxRange when no echo. Defaults: MinRange
+    white noise, clamped to [MinRange, MaxRange] and rounded to whole centimetres (the SRF10's
+    result registers in its centimetre mode); MaxRange when no echo. Defaults: MinRange
     0.06 m, MaxRange 6.0 m (the SRF10's rated 6 m), BeamAngle 0.6 rad full cone, BeamRays 8,
-    NoiseSigma 0.01 m (the SRF10 reports whole centimetres), rate 15 Hz (its ~65 ms ranging
-    time at full range).
+    NoiseSigma 0.01 m, rate 15 Hz.
+
+    Ranging time (Devantech SRF10 technical specification: a ranging takes 65 ms at the
+    default range setting): a ranging starts at a reading when none is in progress, measures
+    the geometry of that moment, and its result is released at the first reading at least
+    RangingTime later; until then every reading repeats the last released result (MaxRange,
+    no echo, before the first one). RangingTime 0 gives the ranging of the reading itself.
+
+    Missed and multiple echoes: each ranging independently misses its echo with probability
+    MissProbability (reported as no echo, MaxRange) or, with probability MultiEchoProbability,
+    reports the second echo (sound that went ground - vehicle - ground: twice the range; a
+    miss when that is beyond MaxRange). The SRF10 specification gives no rates for either, so
+    both default to 0: a scenario sets them (they are CONF parameters like the rest).
     """
 
     type_name = "Sonar"
@@ -62,14 +75,26 @@ class Sonar(Sensor[SonarReading]):
               exclusive=True),
         Param("BeamRays", 8, "rays on the cone besides the centre ray", integer=True, maximum=64),
         Param("NoiseSigma", 0.01, "white noise on the range, m"),
+        Param("RangingTime", 0.065, "time from the start of a ranging to its result, s "
+              "(SRF10: 65 ms)", maximum=10.0),
+        Param("MissProbability", 0.0, "chance that a ranging misses its echo", maximum=1.0),
+        Param("MultiEchoProbability", 0.0, "chance that a ranging reports the second echo",
+              maximum=1.0),
     )
 
     def _check(self) -> None:
-        lo, hi = self.params["MinRange"], self.params["MaxRange"]
+        p = self.params
+        lo, hi = p["MinRange"], p["MaxRange"]
         if not hi > lo:
             raise self._error("MaxRange", f"must be > MinRange ({lo:g}), got {hi:g}")
-        if self.params["BeamAngle"] >= math.pi:
-            raise self._error("BeamAngle", f"must be < pi, got {self.params['BeamAngle']:g}")
+        if p["BeamAngle"] >= math.pi:
+            raise self._error("BeamAngle", f"must be < pi, got {p['BeamAngle']:g}")
+        if p["MissProbability"] + p["MultiEchoProbability"] > 1.0:
+            raise self._error(
+                "MultiEchoProbability",
+                f"plus MissProbability ({p['MissProbability']:g}) must be <= 1, "
+                f"got {p['MultiEchoProbability']:g}",
+            )
 
     def _setup(self) -> None:
         half = self.params["BeamAngle"] / 2.0
@@ -80,8 +105,12 @@ class Sonar(Sensor[SonarReading]):
             rays.append((math.sin(half) * math.cos(phi), math.sin(half) * math.sin(phi),
                          math.cos(half)))
         self._rays_sensor: list[Vec3] = rays  # unit vectors, sensor frame
+        self._pending_start_s: float | None = None  # start of the ranging in progress
+        self._pending: tuple[float, bool] = (self.params["MaxRange"], False)
+        self._released: tuple[float, bool] = (self.params["MaxRange"], False)
 
-    def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> SonarReading:
+    def _ranging(self, state: BodyState, world: WorldQuery) -> tuple[float, bool]:
+        """One ranging of the present geometry: (range in whole cm as m, echo heard)."""
         p = self.params
         lo, hi = p["MinRange"], p["MaxRange"]
         origin = self._pos_ned_m(state)
@@ -89,11 +118,35 @@ class Sonar(Sensor[SonarReading]):
         hits = world.ray_distances(origin, [mat_vec(rot, r) for r in self._rays_sensor], hi)
         echoes = [h for h in hits if h is not None]
         nearest = min(echoes) if echoes else None
-        t = state.time_s
         if nearest is None:
-            return SonarReading(t, hi, False)
+            return (hi, False)
+        u = float(self.rng.random())
+        miss = p["MissProbability"]
+        if u < miss:
+            return (hi, False)
+        if u < miss + p["MultiEchoProbability"]:
+            nearest = 2.0 * nearest
+            if nearest > hi:
+                return (hi, False)
         measured = nearest + p["NoiseSigma"] * float(self.rng.standard_normal())
-        return SonarReading(t, min(hi, max(lo, measured)), True)
+        clamped = min(hi, max(lo, measured))
+        return (round(clamped * 100.0) / 100.0, True)
+
+    def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> SonarReading:
+        t = state.time_s
+        ranging_s = self.params["RangingTime"]
+        if ranging_s <= 0.0:
+            range_m, echo = self._ranging(state, world)
+            return SonarReading(t, range_m, echo)
+        start = self._pending_start_s
+        if start is not None and t >= start + ranging_s - 1e-9:
+            self._released = self._pending
+            start = None
+        if start is None:
+            self._pending = self._ranging(state, world)
+            self._pending_start_s = t
+        range_m, echo = self._released
+        return SonarReading(t, range_m, echo)
 
 
 _FLOW_LAYOUT: Final[Layout] = sen_layout(SenOpticalFlow)
@@ -139,11 +192,18 @@ class OpticalFlow(Sensor[FlowReading]):
     noise NoiseSigma 0.5 counts is added, fractions carry to the next reading, and each
     reading saturates at the 8-bit registers' [-128, 127].
 
-    Quality (SQUAL, 0..169): SurfaceQuality 100 (a textured floor) while the surface distance
-    is in [MinRange 0.3 m, MaxRange 5.0 m] (the lens' focus and texture limits); below MinRange
-    it falls linearly to 0 at distance 0 (defocus), above MaxRange linearly to 0 at twice
-    MaxRange; plus QualitySigma 3 white noise, rounded and clipped. With Quality 0 the sensor
-    sees nothing: Delta is (0, 0). Default rate 50 Hz.
+    Quality (SQUAL, 0..169) from the texture and the distance actually under the sensor: the
+    boresight ray returns the distance and the RMS luminance contrast c of the surface it hits
+    (``WorldQuery.ray_surface``: each surface's texture measured once when the world is built,
+    :mod:`skeye.sim.surface_contrast`). SQUAL = SurfaceQuality (100) x min(1, c /
+    ReferenceContrast) x the distance factor, plus QualitySigma 3 white noise, rounded and
+    clipped. The distance factor is 1 in [MinRange 0.3 m, MaxRange 5.0 m] (the lens' focus and
+    texture limits), falls linearly to 0 at distance 0 below (defocus) and to 0 at twice
+    MaxRange above. ReferenceContrast 0.1 is the simulator's choice, not a datasheet figure (the
+    ADNS-3080 datasheet gives SQUAL only as a count of features, up to 169): a surface of at
+    least that contrast tracks as well as a textured floor. A plain surface (c = 0) gives
+    SQUAL 0, and with Quality 0 the sensor sees nothing: Delta is (0, 0), a dropout. Lighting
+    is not modelled (the sensor's own LED lights what it sees). Default rate 50 Hz.
     """
 
     type_name = "OpticalFlow"
@@ -155,8 +215,10 @@ class OpticalFlow(Sensor[FlowReading]):
               exclusive=True, maximum=math.pi),
         Param("MinRange", 0.3, "nearest surface in focus, m"),
         Param("MaxRange", 5.0, "farthest surface with usable texture, m", exclusive=True),
-        Param("SurfaceQuality", 100, "SQUAL over a surface in range", 0, integer=True,
+        Param("SurfaceQuality", 100, "SQUAL over a textured surface in range", 0, integer=True,
               maximum=SQUAL_MAX),
+        Param("ReferenceContrast", 0.1, "RMS surface contrast that gives SurfaceQuality",
+              exclusive=True),
         Param("QualitySigma", 3.0, "white noise on SQUAL"),
         Param("NoiseSigma", 0.5, "white noise per reading on each Delta, counts"),
     )
@@ -178,9 +240,9 @@ class OpticalFlow(Sensor[FlowReading]):
         self._prev_rate: tuple[float, float] | None = None
         self._carry = [0.0, 0.0]
 
-    def _quality(self, distance_m: float | None) -> int:
+    def _quality(self, distance_m: float | None, contrast: float) -> int:
         p = self.params
-        if distance_m is None:
+        if distance_m is None or contrast <= 0.0:
             return 0
         lo, hi = p["MinRange"], p["MaxRange"]
         if distance_m < lo:
@@ -189,6 +251,7 @@ class OpticalFlow(Sensor[FlowReading]):
             scale = max(0.0, 2.0 - distance_m / hi)
         else:
             scale = 1.0
+        scale *= min(1.0, contrast / p["ReferenceContrast"])
         if scale <= 0.0:
             return 0
         q = p["SurfaceQuality"] * scale + p["QualitySigma"] * float(self.rng.standard_normal())
@@ -201,8 +264,8 @@ class OpticalFlow(Sensor[FlowReading]):
         rot_sn = self._rot_sensor_to_ned(state)
         origin = self._pos_ned_m(state)
         boresight = (rot_sn[0][2], rot_sn[1][2], rot_sn[2][2])
-        distance = world.ray_distance(origin, boresight, 2.0 * p["MaxRange"])
-        quality = self._quality(distance)
+        distance, contrast = world.ray_surface(origin, boresight, 2.0 * p["MaxRange"])
+        quality = self._quality(distance, contrast)
         if quality == 0 or distance is None or distance <= 0.0:
             self._prev_rate = None
             self._carry = [0.0, 0.0]
