@@ -45,7 +45,7 @@ def _angle(a: float) -> float:
 
 
 def run(world: str, moving: bool, sim_seconds: float, seed: int) -> dict[str, float]:
-    sim = Simulation(load_world(world), seed=seed)
+    sim = Simulation(load_world(world), seed=seed, estimator="onboard")
     robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                       location_ned_m=(0.0, 0.0, -1.5))
     assert robot.estimator is not None

@@ -105,9 +105,11 @@ class Airframe(Protocol):
         ...
 
     def attitude(
-        self, roll_rad: float, pitch_rad: float, yaw_rate_rad_s: float, thrust_fraction: float
+        self, roll_rad: float, pitch_rad: float, yaw_rate_rad_s: float, thrust_fraction: float,
+        height_mode: bool = False,
     ) -> None:
-        """Low-level stick input to the attitude controller (cancels any motion)."""
+        """Low-level stick input to the attitude controller (cancels any motion). In height mode
+        ``thrust_fraction`` is a climb rate around 0.5 (the LL board's height control)."""
         ...
 
     def advance(self, seconds: float) -> None:

@@ -411,31 +411,43 @@ class OnboardBoards:
         self._fire(FlightEvent.STICKS)
 
     def _fly_sticks(self, msg: CtrlInput, bits: CtrlBits) -> None:
-        if bits & (CtrlBits.HEIGHT_CONTROL | CtrlBits.GPS_POSITION_CONTROL):
-            # Height / GPS modes: sticks command velocities (thrust centred = hold height).
-            # Full stick = the vehicle's maximum speed / climb rate, limited (not refused) at
-            # the flight envelope's edge.
+        """The LL board's modes by the ctrl bits (sdk.h ``WO_CTRL_INPUT``): attitude mode (sticks
+        are angles, thrust is collective), height mode (0x10: angles, the thrust stick a climb
+        rate around its centre, height held there) and GPS mode (0x20: sticks are velocities,
+        full stick = the vehicle's maximum speed; centred they hold). At the flight envelope's
+        edge the outward part of a stick is removed, never refused: a climb at the ceiling, a
+        velocity or a tilt towards the radius limit."""
+        yaw = stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0
+        climb = (
+            max(-1.0, min(1.0, (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2)))
+            * self.settings.max_climb_m_s
+            if bits & CtrlBits.THRUST
+            else 0.0
+        )
+        if bits & CtrlBits.GPS_POSITION_CONTROL:
             full = self.settings.max_speed_m_s
             fwd = -msg.pitch / STICK_MAX * full if bits & CtrlBits.PITCH else 0.0
             right = msg.roll / STICK_MAX * full if bits & CtrlBits.ROLL else 0.0
-            up = (
-                max(-1.0, min(1.0, (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2)))
-                * self.settings.max_climb_m_s
-                if bits & CtrlBits.THRUST
-                else 0.0
-            )
-            yaw = stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0
             snap = self.airframe.snapshot()
             fwd, right, up = self.settings.envelope.limit_body_velocity(
-                self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], fwd, right, up
+                self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], fwd, right, climb
             )
             self.airframe.set_velocity(fwd, right, up, yaw, None)
             return
+        roll = stick_to_angle_rad(msg.roll) if bits & CtrlBits.ROLL else 0.0
+        pitch = stick_to_angle_rad(msg.pitch) if bits & CtrlBits.PITCH else 0.0
+        if bits & CtrlBits.HEIGHT_CONTROL:
+            # The tilt's direction is where the vehicle accelerates (forward = nose down).
+            snap = self.airframe.snapshot()
+            fwd, right, up = self.settings.envelope.limit_body_velocity(
+                self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], -pitch, roll, climb
+            )
+            full_climb = self.settings.max_climb_m_s
+            thrust = 0.5 + (up / full_climb / 2.0 if full_climb > 0 else 0.0)
+            self.airframe.attitude(right, -fwd, yaw, thrust, height_mode=True)
+            return
         self.airframe.attitude(
-            stick_to_angle_rad(msg.roll) if bits & CtrlBits.ROLL else 0.0,
-            stick_to_angle_rad(msg.pitch) if bits & CtrlBits.PITCH else 0.0,
-            stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0,
-            msg.thrust / THRUST_MAX if bits & CtrlBits.THRUST else 0.0,
+            roll, pitch, yaw, msg.thrust / THRUST_MAX if bits & CtrlBits.THRUST else 0.0
         )
 
     def _envelope_guard(self) -> None:

@@ -32,7 +32,7 @@ from skeye.errors import ConfigError
 from skeye.pilot.airframe import GpsFix, Snapshot
 from skeye.wire.sim_messages import Drive
 
-Attitude = tuple[float, float, float, float]
+Attitude = tuple[float, float, float, float, bool]  # roll, pitch, yaw rate, thrust, height mode
 FROZEN_TIMEOUT_S = 5.0
 """Realtime: sim time standing still this long (wall seconds) means the simulator is frozen."""
 
@@ -216,10 +216,11 @@ class SimAirframe:
         self.robot.land(wait=False)
 
     def attitude(
-        self, roll_rad: float, pitch_rad: float, yaw_rate_rad_s: float, thrust_fraction: float
+        self, roll_rad: float, pitch_rad: float, yaw_rate_rad_s: float, thrust_fraction: float,
+        height_mode: bool = False,
     ) -> None:
         with self._lock:
-            self._sticks = (roll_rad, pitch_rad, yaw_rate_rad_s, thrust_fraction)
+            self._sticks = (roll_rad, pitch_rad, yaw_rate_rad_s, thrust_fraction, height_mode)
             live = self._sticks_live
         if not live and (self.robot.busy or self.robot._motion is not None):
             # Replace the robot's motion by a one-shot velocity DRIVE that ends after a tick.
@@ -232,9 +233,10 @@ class SimAirframe:
             sticks = self._sticks
         if sticks is None or self.robot._motion is not None:
             return
-        roll, pitch, yaw_rate, thrust = sticks
+        roll, pitch, yaw_rate, thrust, height_mode = sticks
         self.connection.send_message(
-            Drive(roll_rad=roll, pitch_rad=pitch, yaw_rate_rad_s=yaw_rate, thrust_fraction=thrust)
+            Drive(roll_rad=roll, pitch_rad=pitch, yaw_rate_rad_s=yaw_rate, thrust_fraction=thrust,
+                  board_mode="height" if height_mode else None)
         )
         with self._lock:
             self._sticks_live = True

@@ -441,7 +441,11 @@ class ClientSession:
         limits = DriveLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s,
                              c.max_tilt_rad)
         drive = drive_in_si(msg, drive, limits)
-        changes: dict[str, Any] = {"attitude": drive.attitude}
+        changes: dict[str, Any] = {
+            "attitude": drive.attitude,
+            "height_mode": drive.board_mode == "height",
+            "gps_mode": drive.board_mode == "gps",
+        }
         for attr, value in (
             ("roll_rad", drive.roll_rad),
             ("pitch_rad", drive.pitch_rad),

@@ -360,7 +360,20 @@ def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
         RemoteProtocolError: a value beyond its bound (naming the key and the text).
     """
     normalized = bool(drive.normalized)
-    changes: dict[str, Any] = {}
+    mode = drive.board_mode
+    if mode is not None:
+        form = Drive.BOARD_MODES.get(mode.lower())
+        if form is None:
+            raise RemoteProtocolError(
+                f"DRIVE: BoardMode {mode!r} is not one of {', '.join(Drive.BOARD_MODES)}"
+            )
+        if form != drive.attitude:
+            raise RemoteProtocolError(
+                f"DRIVE: BoardMode {mode} goes with the "
+                f"{'attitude (RollAngle/PitchAngle/Thrust)' if form else 'velocity'} form"
+            )
+        mode = mode.lower()
+    changes: dict[str, Any] = {"board_mode": mode}
     for key, attr, limit in (
         ("LinearVelocity", "forward_m_s", limits.speed_m_s),
         ("LateralVelocity", "right_m_s", limits.speed_m_s),

@@ -98,7 +98,13 @@ class Drive:
     )
     normalized: bool | None = field(default=None, metadata=wire("Normalized", "bool"))
     name: str | None = field(default=None, metadata=wire("Name", "word"))
+    # skeye extension: the board mode the set-point is flown in (docs/physics.md, board modes):
+    # "height" with the attitude form (angles; Thrust is a climb rate around 0.5, height held
+    # at the centre), "gps" with the velocity form (centred sticks hold the position while the
+    # estimator has a GPS fix). Absent: attitude mode / flow velocity hold, by the form.
+    board_mode: str | None = field(default=None, metadata=wire("BoardMode", "word"))
 
+    BOARD_MODES: ClassVar[dict[str, bool]] = {"height": True, "gps": False}  # mode -> attitude
     ATTITUDE_KEYS: ClassVar[tuple[str, ...]] = ("RollAngle", "PitchAngle", "Thrust")
     VELOCITY_KEYS: ClassVar[tuple[str, ...]] = (
         "AltitudeVelocity",

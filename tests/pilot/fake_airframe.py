@@ -63,8 +63,10 @@ class FakeAirframe:
     def land(self) -> None:
         self._cmd("land")
 
-    def attitude(self, roll: float, pitch: float, yaw_rate: float, thrust: float) -> None:
+    def attitude(self, roll: float, pitch: float, yaw_rate: float, thrust: float,
+                 height_mode: bool = False) -> None:
         self._cmd("attitude", roll, pitch, yaw_rate, thrust, busy=False)
+        self.height_mode = height_mode
         if thrust > 0:
             self.snap = replace(self.snap, armed=True)
 

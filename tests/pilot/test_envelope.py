@@ -27,6 +27,7 @@ from skeye.wire.packets import PD, CtrlBits, NavState, NavStatus, SkeyeMask
 from tests.pilot.fake_airframe import FakeAirframe
 
 HEIGHT_MODE = int(CtrlBits(0x0F) | CtrlBits.HEIGHT_CONTROL)
+GPS_MODE = int(CtrlBits(0x0F) | CtrlBits.HEIGHT_CONTROL | CtrlBits.GPS_POSITION_CONTROL)
 
 
 def _refused(call: Callable[[], object], *words: str) -> str:
@@ -119,7 +120,16 @@ def test_a_vehicle_moving_out_of_the_envelope_is_stopped() -> None:
             v.move_by(forward_m=-5.0, frame="world")
             assert air.calls[-1][0] == "fly_to" and math.isclose(air.calls[-1][1][0], 15.5)
             # Sticks at the edge: the outward part is removed, not refused.
-            v.ctrl_input(0.0, -0.3, 0.0, 0.5, ctrl=HEIGHT_MODE)  # pitch forward = outward
+            # Height mode: sticks are angles; a tilt outward (pitch forward = north) is levelled.
+            v.ctrl_input(0.0, -0.3, 0.0, 0.5, ctrl=HEIGHT_MODE)
+            name, (roll, pitch, _yaw, thrust) = air.calls[-1]
+            assert name == "attitude" and air.height_mode
+            assert abs(pitch) < 1e-9 and abs(roll) < 1e-9 and abs(thrust - 0.5) < 0.01
+            v.ctrl_input(0.3, -0.3, 0.0, 0.5, ctrl=HEIGHT_MODE)  # east is along the edge: kept
+            name, (roll, pitch, _yaw, _thrust) = air.calls[-1]
+            assert name == "attitude" and abs(pitch) < 1e-9 and abs(roll - 0.3) < 1e-3
+            # GPS mode: sticks are velocities; the outward one is removed.
+            v.ctrl_input(0.0, -0.3, 0.0, 0.5, ctrl=GPS_MODE)
             name, (fwd, _right, up, _yaw) = air.calls[-1]
             assert name == "set_velocity" and abs(fwd) < 1e-9 and abs(up) < 0.01
 

@@ -49,7 +49,7 @@ def test_every_sensor_line_matches_format_message(world: str) -> None:
 def test_ins_stream_reports_the_estimate_the_board_flies_on() -> None:
     """At a time where both the board and the INS stream run, they share one estimate: the
     board estimator's, fed by this instant's readings before the INS reports."""
-    sim = Simulation(load_world("pad"), seed=5)
+    sim = Simulation(load_world("pad"), seed=5, estimator="onboard")
     robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                       location_ned_m=(0, 0, -1))
     assert robot.estimator is not None

@@ -106,7 +106,7 @@ def test_axis_filter_matches_the_matrix_kalman_filter() -> None:
 
 def _hover_velocity_error(robot_dirs: tuple[Path, ...], class_name: str) -> float:
     """Hover indoors (no GPS) for 10 s: |estimated - true| horizontal velocity at the end."""
-    sim = Simulation(load_world("indoor"), seed=2, robot_dirs=robot_dirs)
+    sim = Simulation(load_world("indoor"), seed=2, robot_dirs=robot_dirs, estimator="onboard")
     robot = sim.spawn(class_name, name="R1", sink=lambda events: None,
                       location_ned_m=(0.0, 0.0, -1.5))
     assert robot.estimator is not None

@@ -9,7 +9,7 @@ from skeye.sim.world import load_world
 
 
 def test_height_mode_holds_the_height_estimate_and_climbs_off_centre() -> None:
-    sim = Simulation(load_world("indoor"), seed=4)
+    sim = Simulation(load_world("indoor"), seed=4, estimator="onboard")
     robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                       location_ned_m=(0.0, 0.0, -1.5))
     robot.drive(attitude=True, height_mode=True, thrust=0.5)
@@ -29,7 +29,7 @@ def test_gps_mode_holds_the_position_estimate_outdoors_only() -> None:
     """Centred sticks in GPS mode hold the position estimate where they were centred; indoors
     (no fix) the same command is plain velocity hold."""
     for world, holds in (("pad", True), ("indoor", False)):
-        sim = Simulation(load_world(world), seed=4)
+        sim = Simulation(load_world(world), seed=4, estimator="onboard")
         robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
                           location_ned_m=(0.0, 0.0, -1.5))
         assert robot.estimator is not None
