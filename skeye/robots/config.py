@@ -21,6 +21,7 @@ from typing import Any
 
 from skeye.errors import ConfigError
 from skeye.pilot.envelope import FlightEnvelope
+from skeye.robots.camera_model import CameraModel, build_camera_model
 from skeye.robots.params import (
     AirframeParams,
     BatteryParams,
@@ -229,3 +230,37 @@ def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[floa
             return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
     which = f"camera named {camera!r}" if camera else "camera"
     raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")
+
+
+def camera_model(
+    robot: str | Path, camera: str | None = None, profile: str | None = None
+) -> CameraModel:
+    """The :class:`~skeye.robots.camera_model.CameraModel` of a robot class's camera (its
+    first, or the one named), under the robot file's profile or ``profile`` if given: the
+    intrinsics (``camera_matrix``, ``dist_coeffs``) frames are rendered through.
+
+    Raises:
+        ConfigError: unknown robot class or camera, or a bad camera key.
+    """
+    config = load_robot_config(robot)
+    for mount in config.sensors:
+        if mount.type_name.lower() != CAMERA_TYPE:
+            continue
+        if camera is not None and mount.name.lower() != camera.lower():
+            continue
+        params = dict(mount.params)
+        where = f"{config.source} camera {mount.name!r}"
+        size = []
+        for key, default in (("width", 800), ("height", 600)):
+            value = params.get(key, default)
+            if isinstance(value, bool) or not isinstance(value, int) or not 8 <= value <= 8192:
+                raise ConfigError(f"{where}: {key} must be an integer 8..8192, got {value!r}")
+            size.append(value)
+        fov = params.get("fov_h_rad", 1.309)
+        if isinstance(fov, bool) or not isinstance(fov, int | float) or not (
+            math.isfinite(fov) and 0.01 < fov < math.pi - 0.01
+        ):
+            raise ConfigError(f"{where}: fov_h_rad must be in (0.01, pi - 0.01), got {fov!r}")
+        return build_camera_model(params, size[0], size[1], float(fov), where, profile)
+    which = f"camera named {camera!r}" if camera else "camera"
+    raise ConfigError(f"robot class {config.class_name!r} has no {which}")

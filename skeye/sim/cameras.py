@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.robots.camera_model import CAMERA_MODEL_KEYS, CameraModel, build_camera_model
 from skeye.robots.config import SensorMount
 from skeye.sim import frames
 from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
@@ -39,7 +40,7 @@ from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
-_CAMERA_KEYS = {"width", "height", "fov_h_rad", "rate_hz", "near_m", "far_m"}
+_CAMERA_KEYS = {"width", "height", "fov_h_rad", "rate_hz", "near_m", "far_m"} | CAMERA_MODEL_KEYS
 
 
 @dataclass
@@ -55,12 +56,14 @@ class CameraSpec:
     near_m: float = 0.01
     far_m: float = 300.0
     camera_id: int = 0
+    model: CameraModel | None = None  # the lens and sensor (skeye.robots.camera_model)
     rendered: int = 0
     due: int = 0
     type_name: str = field(default="Camera", init=False)
 
     @classmethod
-    def from_mount(cls, mount: SensorMount, owner: str) -> CameraSpec:
+    def from_mount(cls, mount: SensorMount, owner: str, profile: str | None = None) -> CameraSpec:
+        """The camera of one robot-file entry; ``profile`` overrides the entry's (CLI)."""
         params = dict(mount.params)
         unknown = sorted(set(params) - _CAMERA_KEYS)
         where = f"{owner} camera {mount.name!r}"
@@ -84,6 +87,8 @@ class CameraSpec:
         check_fov(spec.fov_h_rad, where)
         if spec.near_m >= spec.far_m:
             raise ConfigError(f"{where}: near_m must be < far_m")
+        spec.model = build_camera_model(params, spec.width, spec.height, spec.fov_h_rad, where,
+                                        profile)
         return spec
 
     @property
