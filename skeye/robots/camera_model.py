@@ -109,6 +109,8 @@ _WEBCAM: dict[str, Any] = {
     "shadows": True,
 }
 
+WEBCAM_DIAGONAL_FOV_DEG = 78.0  # Logitech C920 HD Pro data sheet: "Diagonal field of view 78"
+
 _FIELDS = {f.name for f in fields(CameraModel)} - {"profile", "width", "height"}
 _INT_FIELDS = {"jpeg_quality", "noise_seed"}
 _BOOL_FIELDS = {"shadows"}
@@ -145,6 +147,10 @@ def build_camera_model(
     if chosen == "webcam":
         values.update(_WEBCAM)
         values["line_time_s"] = 1.0 / (30.0 * height)
+        # The lens's 78 degree diagonal field of view (Logitech C920 data sheet) over the
+        # image diagonal, as a pinhole focal length (the mount's fov_h_rad is not used).
+        f = (math.hypot(width, height) / 2.0) / math.tan(math.radians(WEBCAM_DIAGONAL_FOV_DEG) / 2)
+        values["fx_px"] = values["fy_px"] = f
     for key, value in params.items():
         if key == "profile" or key not in _FIELDS:
             continue
@@ -158,7 +164,29 @@ def build_camera_model(
     if model.line_time_s * height > 1.0:
         raise ConfigError(f"{where}: line_time_s * height must be <= 1 s, got "
                           f"{model.line_time_s * height:g} s")
+    _check_monotonic(model, where)
     return model
+
+
+def _check_monotonic(model: CameraModel, where: str) -> None:
+    """The radial distortion must not fold over inside the image: r (1 + k1 r^2 + k2 r^4 +
+    k3 r^6) must keep growing until it reaches the image corner's distorted radius."""
+    corner = max(
+        math.hypot((u - model.cx_px) / model.fx_px, (v - model.cy_px) / model.fy_px)
+        for u in (-0.5, model.width - 0.5) for v in (-0.5, model.height - 0.5)
+    )
+    r = 0.0
+    while True:
+        r2 = r * r
+        slope = 1 + 3 * model.k1 * r2 + 5 * model.k2 * r2 * r2 + 7 * model.k3 * r2 ** 3
+        if slope <= 0.05:
+            raise ConfigError(
+                f"{where}: distortion k1={model.k1:g} k2={model.k2:g} k3={model.k3:g} folds over "
+                f"at normalised radius {r:.3f}, inside the image (its corner is at distorted "
+                f"radius {corner:.3f}): use a longer focal length or smaller coefficients")
+        if r * (1 + model.k1 * r2 + model.k2 * r2 * r2 + model.k3 * r2 ** 3) > corner * 1.02:
+            return
+        r += 0.002
 
 
 def _check(key: str, value: Any, where: str) -> Any:
