@@ -213,18 +213,25 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
 
 
 def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[float, str]:
-    """The horizontal field of view of a robot class's camera (its first, or the one named):
-    its camera model's pinhole (``2 atan(width / 2 / fx)``), and a phrase saying where it
-    came from, for messages.
+    """The horizontal field of view of a robot class's camera (its first, or the one named),
+    and a phrase saying where it came from, for messages: the entry's ``fov_h_rad`` (the ideal
+    profile's pinhole; a camera model with its own focal length, such as the webcam profile,
+    has ``camera_model(...).fov_h_rad``, which the simulator reports in GETCONF).
 
     Raises:
-        ConfigError: unknown robot class, or no such camera.
+        ConfigError: unknown robot class, or no such camera with ``fov_h_rad``.
     """
-    model = camera_model(robot, camera)
     config = load_robot_config(robot)
-    name = next(m.name for m in config.sensors if m.type_name.lower() == CAMERA_TYPE and (
-        camera is None or m.name.lower() == camera.lower()))
-    return model.fov_h_rad, f"camera {name!r} of robot file {config.class_name}"
+    for mount in config.sensors:
+        if mount.type_name.lower() != "camera":
+            continue
+        if camera is not None and mount.name.lower() != camera.lower():
+            continue
+        fov = dict(mount.params).get("fov_h_rad")
+        if isinstance(fov, int | float) and not isinstance(fov, bool):
+            return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
+    which = f"camera named {camera!r}" if camera else "camera"
+    raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")
 
 
 def camera_model(

@@ -308,9 +308,12 @@ class CameraSystem:
             sim.model.vis.map.znear = min(c.near_m for c in cams) / extent
             sim.model.vis.map.zfar = max(c.far_m for c in cams) / extent
             # The lens's wide renders must fit the offscreen buffer (read at context creation).
+            # Only the lens's margin grows it: a camera larger than the buffer still fails.
             glob = sim.model.vis.global_
-            glob.offwidth = max(int(glob.offwidth), max(c.render_size[1] for c in cams))
-            glob.offheight = max(int(glob.offheight), max(c.render_size[0] for c in cams))
+            fits = [c for c in cams if c.width <= glob.offwidth and c.height <= glob.offheight]
+            if fits:
+                glob.offwidth = max(int(glob.offwidth), max(c.render_size[1] for c in fits))
+                glob.offheight = max(int(glob.offheight), max(c.render_size[0] for c in fits))
             if any(c.model is not None and c.model.shadows for c in cams):
                 # A camera model with shadows: the world's lights cast them (the vehicle
                 # shadows the pad), with a shadow map if the world had none.
