@@ -39,7 +39,7 @@ def sim_process(profile: str) -> Iterator[tuple[int, int, str]]:
     proc, found = start_skeye(
         ["sim", "--mode", "realtime", "--port", "0", "--image-port", "0",
          "--camera-profile", profile],
-        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)\)"],
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)"],
         "skeye sim",
     )
     try:
