@@ -155,7 +155,8 @@ class CameraSpec:
         ]
 
 
-SHADOW_MAP_PX = 2048  # shadow map size when the world file has shadows off
+SHADOW_MAP_PX = 1024  # shadow map size when the world file has shadows off
+SHADOW_HALF_SIZE_M = 4.0  # ... covering this half-size around the world origin
 
 _LENSES: dict[CameraModel, Lens] = {}
 
@@ -319,7 +320,11 @@ class CameraSystem:
                 # shadows the pad), with a shadow map if the world had none.
                 sim.model.light_castshadow[:] = 1
                 if int(sim.model.vis.quality.shadowsize) == 0:
+                    # A 1024-pixel map over +-4 m around the directional light's position
+                    # (above the world origin, where the pad is): sharp rotor shadows, and a
+                    # cheaper pass in software GL than a map spanning the whole world.
                     sim.model.vis.quality.shadowsize = SHADOW_MAP_PX
+                    sim.model.vis.map.shadowclip = SHADOW_HALF_SIZE_M / extent
 
     def _next_event_step(self, sim: Any) -> int:
         """The step index whose end reaches the next camera's due time or frame delivery."""
