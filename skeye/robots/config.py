@@ -208,7 +208,11 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
         if not folder.is_dir():
             raise ConfigError(f"--robot-dir {folder}: not a folder")
         for path in sorted(folder.glob("*.toml")):
-            configs.append(load_robot_config(folder / path.name))
+            config = load_robot_config(folder / path.name)
+            for mount in config.sensors:  # a bad camera model stops us here too
+                if mount.type_name.lower() == CAMERA_TYPE:
+                    mount_camera_model(config, mount)
+            configs.append(config)
     return configs
 
 
@@ -250,19 +254,30 @@ def camera_model(
             continue
         if camera is not None and mount.name.lower() != camera.lower():
             continue
-        params = dict(mount.params)
-        where = f"{config.source} camera {mount.name!r}"
-        size = []
-        for key, default in (("width", 800), ("height", 600)):
-            value = params.get(key, default)
-            if isinstance(value, bool) or not isinstance(value, int) or not 8 <= value <= 8192:
-                raise ConfigError(f"{where}: {key} must be an integer 8..8192, got {value!r}")
-            size.append(value)
-        fov = params.get("fov_h_rad", 1.309)
-        if isinstance(fov, bool) or not isinstance(fov, int | float) or not (
-            math.isfinite(fov) and 0.01 < fov < math.pi - 0.01
-        ):
-            raise ConfigError(f"{where}: fov_h_rad must be in (0.01, pi - 0.01), got {fov!r}")
-        return build_camera_model(params, size[0], size[1], float(fov), where, profile)
+        return mount_camera_model(config, mount, profile)
     which = f"camera named {camera!r}" if camera else "camera"
     raise ConfigError(f"robot class {config.class_name!r} has no {which}")
+
+
+def mount_camera_model(
+    config: RobotConfig, mount: SensorMount, profile: str | None = None
+) -> CameraModel:
+    """The camera model of one camera entry of a loaded robot class.
+
+    Raises:
+        ConfigError: a bad size, field of view or camera-model key (named with the file).
+    """
+    params = dict(mount.params)
+    where = f"{config.source} camera {mount.name!r}"
+    size = []
+    for key, default in (("width", 800), ("height", 600)):
+        value = params.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or not 8 <= value <= 8192:
+            raise ConfigError(f"{where}: {key} must be an integer 8..8192, got {value!r}")
+        size.append(value)
+    fov = params.get("fov_h_rad", 1.309)
+    if isinstance(fov, bool) or not isinstance(fov, int | float) or not (
+        math.isfinite(fov) and 0.01 < fov < math.pi - 0.01
+    ):
+        raise ConfigError(f"{where}: fov_h_rad must be in (0.01, pi - 0.01), got {fov!r}")
+    return build_camera_model(params, size[0], size[1], float(fov), where, profile)

@@ -233,3 +233,22 @@ def test_an_unknown_profile_is_refused():
     with pytest.raises(ConfigError, match="unknown camera profile 'fancy'"):
         CameraSystem(sim, FrameBuffer(), synchronous=True, profile="fancy")
     assert build_camera_model({}, 64, 48, 1.0, "x").profile == "ideal"
+
+
+def test_skeye_sim_checks_camera_models_and_the_profile_option(tmp_path: Path):
+    import subprocess
+    import sys
+
+    text = (ROBOTS / "hummingbird.toml").read_text()
+    text = text.replace('name = "hummingbird"', 'name = "badcam"', 1)
+    (tmp_path / "badcam.toml").write_text(text.replace('profile = "webcam"',
+                                                       'profile = "webcam"\nk1 = "strong"'))
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--port", "0",
+                           "--robot-dir", str(tmp_path)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2, done
+    assert "badcam.toml camera 'Down': k1 must be a finite number" in done.stderr
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--port", "0",
+                           "--camera-profile", "fisheye"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2 and "--camera-profile" in done.stderr
