@@ -2,7 +2,7 @@
 
 A Hummingbird hovers 0.6 m above the pad world's pad, offset so the pad sits off-centre where
 the lens distortion shows; a second pair is rolled at 3 rad/s (motion blur and rolling shutter).
-Each PNG is a half-size (400 x 300) crop-free downscale, to keep the repository small.
+Each PNG is a 2/5-size (320 x 240) downscale, to keep the repository small.
 
 Usage: MUJOCO_GL=egl python tools/camera_pictures.py [--out docs/img]
 """
@@ -57,7 +57,7 @@ def main() -> None:
     for profile in ("ideal", "webcam"):
         for rate, suffix in ((0.0, ""), (3.0, "-roll3")):
             rgb = frame(profile, rate)
-            small = cv2.resize(rgb, (rgb.shape[1] // 2, rgb.shape[0] // 2),
+            small = cv2.resize(rgb, (rgb.shape[1] * 2 // 5, rgb.shape[0] * 2 // 5),
                                interpolation=cv2.INTER_AREA)
             path = args.out / f"camera-{profile}{suffix}.png"
             cv2.imwrite(str(path), cv2.cvtColor(small, cv2.COLOR_RGB2BGR),
