@@ -2,12 +2,16 @@
 
 Starts ``skeye sim --mode realtime --image-port 0`` as its own process, spawns a Hummingbird
 hovering over the pad (downward camera 800x600, 30 fps), and streams frames (``SKEYE STREAM``
-with META on) to 1 and 4 clients in RAW, JPEG quality 85 and PNG. Latency is receipt time minus
-the wall time of the frame's sim time (the sim-to-wall offset comes from PING answers; in real
-time the clock runs at 1x), so it counts rendering, encoding and transfer. Also prints the
-simulator's real-time factor seen by the clients, and the renderer (MUJOCO_GL) used.
+with META on) to 1 and 4 clients in RAW, JPEG quality 85 and PNG, once per camera profile
+(``--camera-profile ideal`` and ``webcam``, docs/camera.md). Latency is receipt time minus
+the wall time of the frame's sim time, its capture instant (the sim-to-wall offset comes from
+PING answers; in real time the clock runs at 1x), so it counts rendering, the lens and sensor
+model, the webcam's capture latency, encoding and transfer. Also prints the simulator's
+real-time factor seen by the clients, the renderer (MUJOCO_GL) used, and the webcam profile's
+frame rate as a ratio to the ideal one measured in the same run (the machine may be shared).
 
 Usage: python benchmarks/bench_camera.py [--seconds 5] [--fps 30] [--clients 1 4]
+       [--formats raw jpeg png] [--profiles ideal webcam]
 """
 
 from __future__ import annotations
@@ -31,10 +35,11 @@ except ImportError:  # pragma: no cover
 
 
 @contextmanager
-def sim_process() -> Iterator[tuple[int, int, str]]:
+def sim_process(profile: str) -> Iterator[tuple[int, int, str]]:
     proc, found = start_skeye(
-        ["sim", "--mode", "realtime", "--port", "0", "--image-port", "0"],
-        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)\)"],
+        ["sim", "--mode", "realtime", "--port", "0", "--image-port", "0",
+         "--camera-profile", profile],
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)"],
         "skeye sim",
     )
     try:
@@ -78,21 +83,19 @@ def pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=5.0)
-    parser.add_argument("--fps", type=float, default=30.0)
-    parser.add_argument("--clients", type=int, nargs="+", default=[1, 4])
-    args = parser.parse_args()
-    with sim_process() as (control_port, image_port, gl):
+def run_profile(profile: str, args: argparse.Namespace) -> dict[str, float]:
+    """Stream every format to each client count; the RAW x1 frame rate and p50 latency."""
+    summary: dict[str, float] = {}
+    with sim_process(profile) as (control_port, image_port, gl):
         c = LineClient(control_port)
         c.expect("NFO")
         c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1.0}", "INIT")
         time.sleep(1.0)
         offset = clock_offset(c)
-        print(f"renderer: MuJoCo offscreen, MUJOCO_GL={gl}; {os.cpu_count()} cores; "
-              f"camera 800x600 at {args.fps:g} fps requested; simulator in real time")
-        for fmt in ("raw", "jpeg", "png"):
+        print(f"profile {profile}: renderer MuJoCo offscreen, MUJOCO_GL={gl}; "
+              f"{os.cpu_count()} cores; camera 800x600 at {args.fps:g} fps requested; "
+              "simulator in real time")
+        for fmt in args.formats:
             for n in args.clients:
                 results: list[list[tuple[int, float]]] = [[] for _ in range(n)]
                 t0 = time.time()
@@ -110,10 +113,31 @@ def main() -> None:
                 rtf = (s1 - s0) / (time.time() - t0)
                 rates = [len(r) / args.seconds for r in results]
                 lat = [x[1] for r in results for x in r]
-                print(f"{fmt.upper():4s} q85 x{n}: {min(rates):5.1f}-{max(rates):5.1f} frames/s "
-                      f"per client, latency p50 {pct(lat, 0.5):5.1f} ms p99 {pct(lat, 0.99):6.1f}"
-                      f" ms, sim real-time factor {rtf:.2f}")
+                print(f"  {fmt.upper():4s} q85 x{n}: {min(rates):5.1f}-{max(rates):5.1f} "
+                      f"frames/s per client, latency p50 {pct(lat, 0.5):5.1f} ms p99 "
+                      f"{pct(lat, 0.99):6.1f} ms, sim real-time factor {rtf:.2f}")
+                if fmt == args.formats[0] and n == args.clients[0]:
+                    summary = {"fps": min(rates), "p50_ms": pct(lat, 0.5)}
         c.close()
+    return summary
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--clients", type=int, nargs="+", default=[1, 4])
+    parser.add_argument("--formats", nargs="+", choices=("raw", "jpeg", "png"),
+                        default=["raw", "jpeg", "png"])
+    parser.add_argument("--profiles", nargs="+", choices=("ideal", "webcam"),
+                        default=["ideal", "webcam"])
+    args = parser.parse_args()
+    summaries = {profile: run_profile(profile, args) for profile in args.profiles}
+    if "ideal" in summaries and "webcam" in summaries and summaries["ideal"]["fps"] > 0:
+        ideal, webcam = summaries["ideal"], summaries["webcam"]
+        print(f"webcam / ideal ({args.formats[0].upper()} x{args.clients[0]}): frame rate "
+              f"{webcam['fps']:.1f} / {ideal['fps']:.1f} = {webcam['fps'] / ideal['fps']:.2f}; "
+              f"latency p50 {webcam['p50_ms']:.1f} ms vs {ideal['p50_ms']:.1f} ms")
 
 
 if __name__ == "__main__":

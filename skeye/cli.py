@@ -94,7 +94,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
             from skeye.sim.image_server import FrameBuffer, ImageServer
 
             buffer = FrameBuffer()
-            cameras = CameraSystem(sim, buffer, synchronous=args.mode == "lockstep")
+            cameras = CameraSystem(sim, buffer, synchronous=args.mode == "lockstep",
+                                   profile=args.camera_profile)
             stack.callback(cameras.close)
         recorder = None
         if args.record is not None:
@@ -195,6 +196,14 @@ def _add_sim(sub: Any) -> None:
         type=int,
         default=None,
         help="serve camera images on this port (5003 by convention; 0 = any free)",
+    )
+    p.add_argument(
+        "--camera-profile",
+        choices=("ideal", "webcam"),
+        default=None,
+        help="camera model of every robot camera, over the robot files' own (docs/camera.md): "
+        "ideal = perfect pinhole; webcam = Logitech C-series-class USB webcam (distortion, "
+        "noise, motion blur, rolling shutter, MJPEG, capture latency, shadows)",
     )
     p.add_argument(
         "--image-format",

@@ -21,6 +21,7 @@ from typing import Any
 
 from skeye.errors import ConfigError
 from skeye.pilot.envelope import FlightEnvelope
+from skeye.robots.camera_model import CameraModel, build_camera_model
 from skeye.robots.params import (
     AirframeParams,
     BatteryParams,
@@ -214,13 +215,19 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
         if not folder.is_dir():
             raise ConfigError(f"--robot-dir {folder}: not a folder")
         for path in sorted(folder.glob("*.toml")):
-            configs.append(load_robot_config(folder / path.name))
+            config = load_robot_config(folder / path.name)
+            for mount in config.sensors:  # a bad camera model stops us here too
+                if mount.type_name.lower() == CAMERA_TYPE:
+                    mount_camera_model(config, mount)
+            configs.append(config)
     return configs
 
 
 def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[float, str]:
     """The horizontal field of view of a robot class's camera (its first, or the one named),
-    and a phrase saying where it came from, for messages.
+    and a phrase saying where it came from, for messages: the entry's ``fov_h_rad`` (the ideal
+    profile's pinhole; a camera model with its own focal length, such as the webcam profile,
+    has ``camera_model(...).fov_h_rad``, which the simulator reports in GETCONF).
 
     Raises:
         ConfigError: unknown robot class, or no such camera with ``fov_h_rad``.
@@ -236,3 +243,48 @@ def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[floa
             return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
     which = f"camera named {camera!r}" if camera else "camera"
     raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")
+
+
+def camera_model(
+    robot: str | Path, camera: str | None = None, profile: str | None = None
+) -> CameraModel:
+    """The :class:`~skeye.robots.camera_model.CameraModel` of a robot class's camera (its
+    first, or the one named), under the robot file's profile or ``profile`` if given: the
+    intrinsics (``camera_matrix``, ``dist_coeffs``) frames are rendered through.
+
+    Raises:
+        ConfigError: unknown robot class or camera, or a bad camera key.
+    """
+    config = load_robot_config(robot)
+    for mount in config.sensors:
+        if mount.type_name.lower() != CAMERA_TYPE:
+            continue
+        if camera is not None and mount.name.lower() != camera.lower():
+            continue
+        return mount_camera_model(config, mount, profile)
+    which = f"camera named {camera!r}" if camera else "camera"
+    raise ConfigError(f"robot class {config.class_name!r} has no {which}")
+
+
+def mount_camera_model(
+    config: RobotConfig, mount: SensorMount, profile: str | None = None
+) -> CameraModel:
+    """The camera model of one camera entry of a loaded robot class.
+
+    Raises:
+        ConfigError: a bad size, field of view or camera-model key (named with the file).
+    """
+    params = dict(mount.params)
+    where = f"{config.source} camera {mount.name!r}"
+    size = []
+    for key, default in (("width", 800), ("height", 600)):
+        value = params.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or not 8 <= value <= 8192:
+            raise ConfigError(f"{where}: {key} must be an integer 8..8192, got {value!r}")
+        size.append(value)
+    fov = params.get("fov_h_rad", 1.309)
+    if isinstance(fov, bool) or not isinstance(fov, int | float) or not (
+        math.isfinite(fov) and 0.01 < fov < math.pi - 0.01
+    ):
+        raise ConfigError(f"{where}: fov_h_rad must be in (0.01, pi - 0.01), got {fov!r}")
+    return build_camera_model(params, size[0], size[1], float(fov), where, profile)

@@ -33,7 +33,7 @@ def sim_with_images(
     buffer = FrameBuffer()
     with (
         SimulationRunner(sim, mode=mode) as runner,
-        CameraSystem(sim, buffer, synchronous=mode == "lockstep") as cameras,
+        CameraSystem(sim, buffer, synchronous=mode == "lockstep", profile="ideal") as cameras,
         ControlServer(runner, port=0) as control,
         ImageServer(buffer, port=0) as images,
     ):

@@ -47,7 +47,7 @@ POSES = [
 def render() -> Iterator:
     sim = Simulation(load_world("pad"), seed=2)
     buffer = FrameBuffer()
-    cams = CameraSystem(sim, buffer, synchronous=True)
+    cams = CameraSystem(sim, buffer, synchronous=True, profile="ideal")
     count = [0]
 
     def shot(height, north, east, roll, pitch):
@@ -99,7 +99,7 @@ def test_a_border_seen_only_in_the_corners_does_not_veto_the_rest(render):
     at t = 2.034 s, with the slightly wrong attitude the INS gave the pilot."""
     sim = Simulation(load_world("pad"), seed=2)
     buffer = FrameBuffer()
-    cams = CameraSystem(sim, buffer, synchronous=True)
+    cams = CameraSystem(sim, buffer, synchronous=True, profile="ideal")
     try:
         body = (-0.00105, 0.01486, -0.35803)
         rpy = (0.00084, 0.00118, 0.0013)

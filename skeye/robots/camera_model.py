@@ -1,0 +1,219 @@
+"""The camera model of a robot file's camera, in OpenCV's calibration terms.
+
+How this works: a ``[[sensors]]`` entry with ``type = "Camera"`` may name a ``profile``
+(``ideal`` or ``webcam``) and override any of its figures with keys of the same names as the
+fields of :class:`CameraModel` below. :func:`camera_model` resolves the entry (width, height and
+``fov_h_rad`` give the pinhole when ``fx_px`` etc. are not given) into one frozen
+:class:`CameraModel`, the public description of the lens and sensor that the simulator renders
+through (``skeye.sim.lens``) and that a calibration (``skeye calibrate``) should recover:
+``camera_matrix`` and ``dist_coeffs`` are exactly what ``cv2.calibrateCamera`` returns.
+
+Profiles (sources in docs/camera.md):
+
+* ``ideal``: a perfect pinhole with the mount's float field of view, no distortion, noise,
+  blur, rolling shutter or latency, shadows off (algorithm debugging).
+* ``webcam``: a Logitech C-series-class USB webcam (C920 class): radial distortion
+  k1 = 0.12, k2 = -0.24, fixed exposure 10 ms, photon-transfer noise (EMVA 1288 model) with a
+  small-pixel CMOS's read noise and full well, a rolling shutter reading the rows out over the
+  frame time, 8-bit MJPEG output, capture latency with jitter, shadows on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+from skeye.errors import ConfigError
+
+PROFILES = ("ideal", "webcam")
+DEFAULT_PROFILE = "ideal"
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """One camera's lens, sensor and output, OpenCV conventions (pixel centres at integers).
+
+    Pinhole: ``u = fx_px * x_d + cx_px``, ``v = fy_px * y_d + cy_px`` with the distorted
+    normalised coordinates ``x_d, y_d`` of OpenCV's Brown-Conrady model (``k1 k2 p1 p2 k3``).
+    """
+
+    profile: str
+    width: int
+    height: int
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    k1: float = 0.0
+    k2: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    k3: float = 0.0
+    exposure_s: float = 0.0  # integration time of each row (motion blur)
+    line_time_s: float = 0.0  # rolling shutter: row i starts i * line_time_s after row 0
+    gain: float = 1.0  # analog gain: multiplies the system gain below
+    system_gain_dn_per_e: float = 0.0  # EMVA 1288 K at gain 1 (DN per electron); 0: no noise
+    read_noise_e: float = 0.0  # EMVA 1288 dark noise sigma_d (electrons)
+    jpeg_quality: int = 0  # MJPEG output: each frame JPEG-coded at this quality; 0: raw
+    latency_s: float = 0.0  # capture latency: frame delivered this long after its capture
+    latency_jitter_s: float = 0.0  # +- uniform jitter on the latency
+    shadows: bool = False
+    noise_seed: int = 0
+
+    @property
+    def camera_matrix(self) -> tuple[tuple[float, float, float], ...]:
+        """OpenCV's 3x3 K."""
+        return ((self.fx_px, 0.0, self.cx_px), (0.0, self.fy_px, self.cy_px), (0.0, 0.0, 1.0))
+
+    @property
+    def dist_coeffs(self) -> tuple[float, float, float, float, float]:
+        """OpenCV's ``(k1, k2, p1, p2, k3)``."""
+        return (self.k1, self.k2, self.p1, self.p2, self.k3)
+
+    @property
+    def distorted(self) -> bool:
+        return any(c != 0.0 for c in self.dist_coeffs)
+
+    @property
+    def fov_h_rad(self) -> float:
+        """The pinhole's horizontal field of view (edges of the outer pixels)."""
+        return 2.0 * math.atan((self.width / 2.0) / self.fx_px)
+
+    @property
+    def noisy(self) -> bool:
+        return self.system_gain_dn_per_e > 0.0
+
+
+# The webcam profile's figures (sources: docs/camera.md, "The webcam profile").
+_WEBCAM: dict[str, Any] = {
+    # Radial distortion of a Logitech-class USB webcam lens (issue 18's figures for USB webcams;
+    # the same order and signs as published OpenCV calibrations of C-series webcams).
+    "k1": 0.12,
+    "k2": -0.24,
+    # 10 ms: an indoor auto-exposure setting (C920 exposure_absolute 100 x 100 us units, UVC).
+    "exposure_s": 0.010,
+    # Rolling shutter reading the rows over a whole 30 fps frame period (worst case for a
+    # webcam sensor in 30 fps modes): line time = 1 / (30 * rows), set per size below.
+    "gain": 4.0,  # indoor light: the webcam's auto gain at a few times base gain
+    # Small-pixel (about 3 um) consumer CMOS: full well about 6000 e-, read noise about 3 e-
+    # (EMVA 1288 data sheets of such sensors); 8-bit output -> K = 255 / 6000 DN/e-.
+    "system_gain_dn_per_e": 255.0 / 6000.0,
+    "read_noise_e": 3.0,
+    # The C920 streams 800x600 at 30 fps as MJPEG over UVC; quality of its encoder about 85.
+    "jpeg_quality": 85,
+    # USB webcam capture latency (exposure end to frame in user space): about 60 ms with
+    # +-10 ms of jitter (published glass-to-glass measurements of C920-class webcams).
+    "latency_s": 0.060,
+    "latency_jitter_s": 0.010,
+    "shadows": True,
+}
+
+WEBCAM_DIAGONAL_FOV_DEG = 78.0  # Logitech C920 HD Pro data sheet: "Diagonal field of view 78"
+
+_FIELDS = {f.name for f in fields(CameraModel)} - {"profile", "width", "height"}
+_INT_FIELDS = {"jpeg_quality", "noise_seed"}
+_BOOL_FIELDS = {"shadows"}
+_SIGNED_FIELDS = {"k1", "k2", "p1", "p2", "k3"}
+_POSITIVE_FIELDS = {"fx_px", "fy_px", "gain"}
+CAMERA_MODEL_KEYS = frozenset(_FIELDS | {"profile"})
+
+
+def pinhole(width: int, height: int, fov_h_rad: float) -> dict[str, float]:
+    """fx = fy from the horizontal field of view, principal point at the image centre."""
+    f = (width / 2.0) / math.tan(fov_h_rad / 2.0)
+    return {"fx_px": f, "fy_px": f, "cx_px": (width - 1) / 2.0, "cy_px": (height - 1) / 2.0}
+
+
+def build_camera_model(
+    params: dict[str, Any],
+    width: int,
+    height: int,
+    fov_h_rad: float,
+    where: str,
+    profile: str | None = None,
+) -> CameraModel:
+    """The model of one camera entry: ``profile`` (argument, else the entry's, else ``ideal``),
+    then the entry's own keys over it.
+
+    Raises:
+        ConfigError: unknown profile, or a key with a bad value (the message names it).
+    """
+    chosen = profile if profile is not None else params.get("profile", DEFAULT_PROFILE)
+    if not isinstance(chosen, str) or chosen.lower() not in PROFILES:
+        raise ConfigError(f"{where}: unknown camera profile {chosen!r}; known: {list(PROFILES)}")
+    chosen = chosen.lower()
+    values: dict[str, Any] = dict(pinhole(width, height, fov_h_rad))
+    if chosen == "webcam":
+        values.update(_WEBCAM)
+        values["line_time_s"] = 1.0 / (30.0 * height)
+        # The lens's 78 degree diagonal field of view (Logitech C920 data sheet) over the
+        # image diagonal, as a pinhole focal length (the mount's fov_h_rad is not used).
+        f = (math.hypot(width, height) / 2.0) / math.tan(math.radians(WEBCAM_DIAGONAL_FOV_DEG) / 2)
+        values["fx_px"] = values["fy_px"] = f
+    for key, value in params.items():
+        if key == "profile" or key not in _FIELDS:
+            continue
+        values[key] = _check(key, value, where)
+    model = CameraModel(profile=chosen, width=width, height=height, **values)
+    if not (0 <= model.jpeg_quality <= 100):
+        raise ConfigError(f"{where}: jpeg_quality must be 0 (raw) .. 100, got {model.jpeg_quality}")
+    if model.latency_jitter_s > model.latency_s:
+        raise ConfigError(f"{where}: latency_jitter_s ({model.latency_jitter_s}) must not exceed "
+                          f"latency_s ({model.latency_s})")
+    if model.line_time_s * height > 1.0:
+        raise ConfigError(f"{where}: line_time_s * height must be <= 1 s, got "
+                          f"{model.line_time_s * height:g} s")
+    _check_monotonic(model, where)
+    return model
+
+
+def _check_monotonic(model: CameraModel, where: str) -> None:
+    """The radial distortion must not fold over inside the image: r (1 + k1 r^2 + k2 r^4 +
+    k3 r^6) must keep growing until it reaches the image corner's distorted radius."""
+    corner = max(
+        math.hypot((u - model.cx_px) / model.fx_px, (v - model.cy_px) / model.fy_px)
+        for u in (-0.5, model.width - 0.5) for v in (-0.5, model.height - 0.5)
+    )
+    r = 0.0
+    while True:
+        r2 = r * r
+        slope = 1 + 3 * model.k1 * r2 + 5 * model.k2 * r2 * r2 + 7 * model.k3 * r2 ** 3
+        if slope <= 0.05:
+            raise ConfigError(
+                f"{where}: distortion k1={model.k1:g} k2={model.k2:g} k3={model.k3:g} folds over "
+                f"at normalised radius {r:.3f}, inside the image (its corner is at distorted "
+                f"radius {corner:.3f}): use a longer focal length or smaller coefficients")
+        if r * (1 + model.k1 * r2 + model.k2 * r2 * r2 + model.k3 * r2 ** 3) > corner * 1.02:
+            return
+        r += 0.002
+
+
+def _check(key: str, value: Any, where: str) -> Any:
+    if key in _BOOL_FIELDS:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: {key} must be true or false, got {value!r}")
+        return value
+    if key in _INT_FIELDS:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ConfigError(f"{where}: {key} must be a non-negative integer, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConfigError(f"{where}: {key} must be a finite number, got {value!r}")
+    if key in _POSITIVE_FIELDS and not value > 0:
+        raise ConfigError(f"{where}: {key} must be positive, got {value!r}")
+    if key not in _SIGNED_FIELDS and key not in _POSITIVE_FIELDS and value < 0:
+        raise ConfigError(f"{where}: {key} must be >= 0, got {value!r}")
+    if key in _SIGNED_FIELDS and abs(value) > 10:
+        raise ConfigError(f"{where}: {key} must be within -10..10, got {value!r}")
+    return float(value)
+
+
+__all__ = [
+    "CAMERA_MODEL_KEYS",
+    "DEFAULT_PROFILE",
+    "PROFILES",
+    "CameraModel",
+    "build_camera_model",
+    "pinhole",
+]
