@@ -25,8 +25,9 @@ from tests.sim.test_cameras import ring_edges_along
 ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
 
-def test_the_hummingbird_flies_the_webcam_profile():
-    model = camera_model("hummingbird")
+def test_the_hummingbird_webcam_profile():
+    assert camera_model("hummingbird").profile == "ideal"  # its default, for now
+    model = camera_model("hummingbird", profile="webcam")
     assert model.profile == "webcam"
     assert (model.width, model.height) == (800, 600)
     assert model.dist_coeffs == (0.12, -0.24, 0.0, 0.0, 0.0)
@@ -72,7 +73,7 @@ def test_robot_file_overrides_and_bad_values_are_named():
 
 def test_distortion_maps_invert_opencv_projection():
     """Each output pixel's ray, projected by cv2.projectPoints, lands on that pixel."""
-    model = camera_model("hummingbird")
+    model = camera_model("hummingbird", profile="webcam")
     lens = Lens(model)
     rays = np.stack([lens.ray_x.ravel(), lens.ray_y.ravel(), np.ones(lens.ray_x.size)], 1)
     uv, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), np.array(model.camera_matrix),
@@ -102,7 +103,7 @@ def test_rendered_pad_rings_sit_where_opencv_projects_them():
     cam_height = 0.55
     sim = Simulation(load_world("pad"), seed=3)
     buffer = FrameBuffer()
-    with CameraSystem(sim, buffer, synchronous=True) as cams:
+    with CameraSystem(sim, buffer, synchronous=True, profile="webcam") as cams:
         body = (0.0, 0.0, -(cam_height + 0.035 + PAD_SURFACE_HEIGHT_M))
         frame, _ = first_frame(sim, buffer, "W1", body)
         model = sim.robots["W1"].cameras[0].model
@@ -125,7 +126,7 @@ def test_rendered_pad_rings_sit_where_opencv_projects_them():
 
 
 def test_noise_is_seeded_and_follows_the_photon_transfer_model():
-    model = camera_model("hummingbird")
+    model = camera_model("hummingbird", profile="webcam")
     lens = Lens(model)
     grey = np.full((model.height, model.width, 3), 128, np.uint8)
     a, b, c = lens.add_noise(grey, 5), lens.add_noise(grey, 5), lens.add_noise(grey, 6)
@@ -156,7 +157,7 @@ def edge_columns(image: np.ndarray, row: int) -> tuple[float, int]:
 
 
 def test_blur_grows_with_angular_rate():
-    base = replace(camera_model("hummingbird"), k1=0.0, k2=0.0, line_time_s=0.0,
+    base = replace(camera_model("hummingbird", profile="webcam"), k1=0.0, k2=0.0, line_time_s=0.0,
                    system_gain_dn_per_e=0.0, jpeg_quality=0)
     lens = Lens(base)
     render = edge_render(lens)
@@ -170,7 +171,7 @@ def test_blur_grows_with_angular_rate():
 
 
 def test_rolling_shutter_skews_a_rotating_view():
-    base = replace(camera_model("hummingbird"), k1=0.0, k2=0.0, exposure_s=0.0,
+    base = replace(camera_model("hummingbird", profile="webcam"), k1=0.0, k2=0.0, exposure_s=0.0,
                    system_gain_dn_per_e=0.0, jpeg_quality=0)
     lens = Lens(base)
     render = edge_render(lens)
@@ -189,13 +190,13 @@ def test_shadows_on_darken_the_ground_under_the_vehicle(tmp_path: Path):
     """Same view, the webcam profile with and without shadows: the vehicle shades the ground."""
     text = (ROBOTS / "hummingbird.toml").read_text()
     text = text.replace('name = "hummingbird"', 'name = "noshadow"', 1)
-    text = text.replace('profile = "webcam"', 'profile = "webcam"\nshadows = false')
+    text = text.replace('profile = "ideal"', 'profile = "ideal"\nshadows = false')
     (tmp_path / "noshadow.toml").write_text(text)
     frames = {}
     for cls in ("hummingbird", "noshadow"):
         sim = Simulation(load_world("pad"), seed=3, robot_dirs=(tmp_path,))
         buffer = FrameBuffer()
-        with CameraSystem(sim, buffer, synchronous=True):
+        with CameraSystem(sim, buffer, synchronous=True, profile="webcam"):
             sim.spawn(cls, name="S1", sink=lambda events: None, location_ned_m=(3.0, 2.0, -0.4))
             for _ in range(300):
                 sim.step(1)
@@ -214,7 +215,7 @@ def test_shadows_on_darken_the_ground_under_the_vehicle(tmp_path: Path):
 def test_frames_arrive_capture_latency_after_capture():
     sim = Simulation(load_world("pad"), seed=3)
     buffer = FrameBuffer()
-    with CameraSystem(sim, buffer, synchronous=True):
+    with CameraSystem(sim, buffer, synchronous=True, profile="webcam"):
         frame, arrived_s = first_frame(sim, buffer, "L1", (0.0, 0.0, -1.0))
         model = sim.robots["L1"].cameras[0].model
     assert model is not None
@@ -241,7 +242,7 @@ def test_skeye_sim_checks_camera_models_and_the_profile_option(tmp_path: Path):
 
     text = (ROBOTS / "hummingbird.toml").read_text()
     text = text.replace('name = "hummingbird"', 'name = "badcam"', 1)
-    (tmp_path / "badcam.toml").write_text(text.replace('profile = "webcam"',
+    (tmp_path / "badcam.toml").write_text(text.replace('profile = "ideal"',
                                                        'profile = "webcam"\nk1 = "strong"'))
     done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--port", "0",
                            "--robot-dir", str(tmp_path)], capture_output=True, text=True,
