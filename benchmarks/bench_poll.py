@@ -3,8 +3,8 @@
 Starts ``skeye sim`` (realtime, pad world, image server) and ``skeye pilot --images`` (the pad
 detector running on the down camera) as processes, the way ``skeye up`` does. The moment the
 pilot prints that it serves ground control, a plain-socket client (no skeye code on the wire
-path: ``>*>p`` + uint16 mask out, ``>*>`` frames with a CRC16 back) starts polling LL_STATUS
-the way fast ground stations do, and reports
+path but the CRC: ``>*>p`` + uint16 mask out, ``>*>`` frames with a CRC16 back) starts
+polling LL_STATUS the way fast ground stations do, and reports
 
 - start-up: the time from the "ground control on" line to the first answer, and how many
   polls went unanswered before it (issue 19, point 8: a client that polls at once is answered
@@ -31,20 +31,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from skeye.processes import start_skeye, stop_process
+from skeye.wire.crc import crc16
 
 LL_STATUS_MASK = 0x0001
 ALL_ASCTEC_MASK = 0x0001 | 0x0002 | 0x0004 | 0x0008 | 0x0010 | 0x0080 | 0x0100 | 0x0200
 POLL_PERIOD_S = 0.010  # the fast ground station: one poll every 10 ms
-
-
-def crc16(data: bytes) -> int:
-    """AscTec's CRC16 (the SDK's crc_update, as in the AutoPilot manual)."""
-    crc = 0x00FF
-    for byte in data:
-        d = byte ^ (crc & 0xFF)
-        d ^= (d << 4) & 0xFF
-        crc = (((d << 8) | (crc >> 8)) ^ (d >> 4) ^ (d << 3)) & 0xFFFF
-    return crc
 
 
 class RawPoller:
