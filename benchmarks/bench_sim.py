@@ -64,8 +64,11 @@ def robot_dir_with_board_rate(folder: Path, board_rate_hz: float) -> str:
 
 
 @contextmanager
-def sim_process(timestep: float, pure: bool = False, robot_dir: str | None = None) -> Iterator[int]:
+def sim_process(timestep: float, pure: bool = False, robot_dir: str | None = None,
+                estimator: str | None = None) -> Iterator[int]:
     extra = ["--robot-dir", robot_dir] if robot_dir else []
+    if estimator is not None:
+        extra += ["--estimator", estimator]
     proc, found = start_skeye(
         ["sim", "--mode", "lockstep", "--port", "0", "--timestep", str(timestep), *extra],
         [r"127\.0\.0\.1:(\d+)"], "skeye sim",
@@ -226,6 +229,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-pure", action="store_true",
                         help="skip the pure-Python simulator (no speed-up ratio)")
+    parser.add_argument("--estimator", choices=("onboard", "truth"), default=None,
+                        help="the boards' estimator (skeye sim --estimator; default: the robot "
+                        "file's)")
     parser.add_argument("--board-rate", type=float, default=None, metavar="HZ",
                         help="fly a Hummingbird whose board runs at HZ (default: its own 250 Hz)")
     args = parser.parse_args()
@@ -236,15 +242,18 @@ def main() -> None:
             robot_class = robot_dir_with_board_rate(Path(robot_dir), args.board_rate)
             board = f"{args.board_rate:g} Hz"
         print(f"machine: {os.cpu_count()} cores; physics step {args.timestep * 1000:g} ms; "
-              f"board {board}; lockstep")
+              f"board {board}; estimator {args.estimator or 'per robot file'}; lockstep")
         status = native.decide(environ={})
         print(status.describe())  # what the (compiled) simulator process will run
         print(f"CPU reference loop before: {reference_loop_ms():.1f} ms (lower = faster machine)")
-        port = stack.enter_context(sim_process(args.timestep, robot_dir=robot_dir))
+        port = stack.enter_context(
+            sim_process(args.timestep, robot_dir=robot_dir, estimator=args.estimator)
+        )
         pure_port = None
         if not args.no_pure and status.compiled:
             pure_port = stack.enter_context(
-                sim_process(args.timestep, pure=True, robot_dir=robot_dir)
+                sim_process(args.timestep, pure=True, robot_dir=robot_dir,
+                            estimator=args.estimator)
             )
         for n, target in ((1, 50.0), (10, 5.0)):
             runs, pure_runs = [], []
