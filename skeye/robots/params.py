@@ -166,10 +166,10 @@ class EstimatorParams:
     ``kind = "onboard"`` estimates from the simulated sensor readings only; ``"truth"``
     (default for now) is the oracle: ground truth plus the INS sensor's small error processes
     (``skeye sim --estimator onboard|truth`` overrides the robot file). The onboard estimator
-    is not yet the default: with the sensors' imperfections (GPS fix acquisition, optical-flow
-    dropouts over plain surfaces) the Hummingbird's take-off in the pad world did not settle
-    within the control library's 5 cm / 0.08 m/s in 16 s (docs/physics.md, "Onboard
-    estimator", known limits). Sources of the defaults (docs/physics.md, "Onboard estimator"):
+    is not yet the default: with the sensors' imperfections the Hummingbird's take-off in the
+    pad world settles within the control library's 5 cm / 0.08 m/s only after about 15.7 s of
+    its 16.4 s limit (docs/physics.md, "Onboard estimator", known limits). Sources of the
+    defaults (docs/physics.md, "Onboard estimator"):
 
     - attitude_kp 0.2 rad/s: ArduPilot's DCM complementary filter, AHRS_RP_P default 0.2;
       attitude_ki = kp^2 / 4 = 0.01 rad/s^2: the critically damped bias loop of Mahony's filter

@@ -9,9 +9,9 @@ up the number for the geom its boresight ray hits.
 How this works: the measure is the RMS contrast of the surface's luminance (standard deviation
 over mean, Rec. 601 luma), computed from the very texture MuJoCo shows: the procedural ground
 textures and the pad texture are decoded from their PNG bytes; MuJoCo's builtin checker of two
-colours a and b has |a - b| / (a + b); a surface of one colour (texture "none", boxes, the
-pads' hidden colliders are under their textured plane) has 0. Keys are geom names as
-:func:`skeye.sim.world.build_mjcf` writes them; a geom not named here (robots) has 0.
+colours a and b has |a - b| / (a + b); a surface of one colour (texture "none", boxes) has 0;
+a pad's collision box, whose top face is the pad's textured sheet, has the pad's. Keys are geom
+names as :func:`skeye.sim.world.build_mjcf` writes them; a geom not named here (robots) has 0.
 """
 
 from __future__ import annotations
@@ -49,5 +49,9 @@ def geom_contrasts(world: WorldDescription) -> dict[str, float]:
     elif ground.texture != "none":
         out["ground"] = png_contrast(ground_texture_png(ground.texture, ground.rgb, ground.rgb2))
     for pad in world.pads:
-        out[f"pad:{pad.name}"] = png_contrast(pad_texture_png(pad.pad))
+        contrast = png_contrast(pad_texture_png(pad.pad))
+        out[f"pad:{pad.name}"] = contrast
+        # The pad's collision box is the same sheet: its top face is the textured plane's
+        # height, so a ray may report either geom; both show the pad's texture.
+        out[f"pad:{pad.name}:collider"] = contrast
     return out

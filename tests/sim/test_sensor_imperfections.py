@@ -176,3 +176,13 @@ def test_flow_quality_from_the_real_world_surface_under_the_sensor(tmp_path: Pat
         quality[name] = [flow.read(sim.body_state(name), query).quality for _ in range(20)]
     assert min(quality["OverPad"]) > 80, quality
     assert quality["OverPlain"] == [0] * 20
+
+
+def test_the_pad_collider_shows_the_pad_texture_to_the_flow_sensor() -> None:
+    """The pad's collision box and its textured sheet share the top face: a ray may report
+    either, and both must read as the pad (a plain box read SQUAL 0 over the pad's middle)."""
+    from skeye.sim.surface_contrast import geom_contrasts
+    from skeye.sim.world import load_world
+
+    contrasts = geom_contrasts(load_world("pad"))
+    assert contrasts["pad:pad1:collider"] == contrasts["pad:pad1"] > 0.5
