@@ -31,7 +31,8 @@ def test_integral_compensates_a_steady_offset_and_is_bounded():
     for i in range(1, 300):
         sp = law.update(i / 30, True, 0.0, 0.08, 1.0)
     assert sp.right_m_s > first
-    assert sp.right_m_s <= 1.2 * 0.08 + 0.15 + 1e-9
+    p = PadHoldParams()
+    assert sp.right_m_s <= p.kp * 0.08 + p.integral_limit_m_s + 1e-9
 
 
 def test_landing_descends_only_when_centred_and_commits_low():
