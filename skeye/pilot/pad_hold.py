@@ -1,10 +1,13 @@
 """Position hold over the landing pad and autonomous landing on it: the control law.
 
 How this works (the paper's method, section 5): every processed camera frame gives the pad
-centre's offset in the level body frame (forward, right) and the height. While the offset is
-larger than the deadband (0.05 m by default) a PI controller turns it into a horizontal
-velocity command towards the pad, limited in magnitude to ``max_speed_m_s`` (0.3 m/s by
-default); inside the deadband the command is zero (the vehicle's own board then holds zero
+centre's offset in the level body frame (forward, right) and the height; the pilot predicts
+it to the present from the frame's capture pose (skeye.pilot.pad_track) and calls the law
+every control tick. While the offset is larger than the deadband (0.05 m by default) a PI
+controller turns it into a horizontal velocity command towards the pad, limited in magnitude
+to ``max_speed_m_s`` (0.3 m/s by default; the integral does not grow while the command is at
+the limit). The gains come from the loop's delay (:func:`loop_gains`, docs/pilot.md "Vision
+latency"). Inside the deadband the command is zero (the vehicle's own board then holds zero
 velocity on its INS estimate, and the integrator keeps its value so a steady push stays
 compensated). Vertically, HOLD keeps the height; LAND descends while the vehicle is over the
 pad (offset within ``centre_tolerance_m``), correcting down to a tighter deadband
@@ -158,13 +161,22 @@ class PadHoldLaw:
         deadband = min(p.deadband_m, p.landing_deadband_m) if landing else p.deadband_m
         if offset > deadband:
             lim = p.integral_limit_m_s / max(p.ki, 1e-9)
-            self._int_f = min(lim, max(-lim, self._int_f + forward_m * dt))
-            self._int_r = min(lim, max(-lim, self._int_r + right_m * dt))
-            vf = p.kp * forward_m + p.ki * self._int_f
-            vr = p.kp * right_m + p.ki * self._int_r
+            int_f = min(lim, max(-lim, self._int_f + forward_m * dt))
+            int_r = min(lim, max(-lim, self._int_r + right_m * dt))
+            vf = p.kp * forward_m + p.ki * int_f
+            vr = p.kp * right_m + p.ki * int_r
             speed = math.hypot(vf, vr)
             if speed > p.max_speed_m_s:
-                vf, vr = vf * p.max_speed_m_s / speed, vr * p.max_speed_m_s / speed
+                # Saturated: the integral stays as it was (conditional integration, against
+                # windup: a long approach at the speed limit would otherwise leave it pushing
+                # past the pad; Astrom & Murray, Feedback Systems, section 10.4).
+                vf = p.kp * forward_m + p.ki * self._int_f
+                vr = p.kp * right_m + p.ki * self._int_r
+                speed = math.hypot(vf, vr)
+                if speed > p.max_speed_m_s:
+                    vf, vr = vf * p.max_speed_m_s / speed, vr * p.max_speed_m_s / speed
+            else:
+                self._int_f, self._int_r = int_f, int_r
         else:
             vf = vr = 0.0
         up = 0.0
