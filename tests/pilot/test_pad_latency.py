@@ -153,3 +153,19 @@ def test_the_same_flights_without_the_prediction_are_measured():
         print(f"land on pad, {LATENCY_S * 1e3:.0f} ms latency, not predicted ({label}): from "
               f"{start:.2f} m, landed after {landed_s:.1f} s, {miss_m * 100:.1f} cm from the "
               "centre")
+
+
+def test_vision_too_slow_to_hold_is_said_and_the_vehicle_holds_still(caplog):
+    """Detections 1.5 s late (over the 1 s limit): refused, a warning, no pad navigation."""
+    with flight((0.3, 0.0), predict=True, latency_s=1.5) as f:
+        f.vehicle.take_off(1.5)
+        f.vehicle.wait_state(NavState.HOLDING, timeout_s=120)
+        start = f.truth()
+        f.vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
+        samples = f.record_until(lambda s: s[-1][0] >= start[0] + 6.0)
+        stats = f.vision.stats
+        assert stats.too_slow.startswith("vision too slow to hold") and stats.too_slow_count >= 2
+        assert stats.latency_s >= 1.5 - 1e-6
+    assert any("vision too slow to hold" in r.getMessage() for r in caplog.records)
+    # It stayed where it was (0.3 m off) instead of flying on 1.5 s old detections.
+    assert all(math.hypot(n - start[1], e - start[2]) < 0.05 for _, n, e, _ in samples)
