@@ -14,6 +14,14 @@ its connection, a late frame never answers a later request. In lockstep the loop
 ``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible; the
 simulator is paused meanwhile, so nothing flies unwatched.
 
+Latency (docs/pilot.md, "Vision latency"): each observation is used ``latency_s`` after its
+frame's capture (configured, or measured, or as soon as it is done), and the pad hold flies on
+it predicted to now: the control loop records the INS pose every tick (:class:`PoseHistory`),
+places each detection in the estimate's world frame with the pose at its capture time, and
+every control period computes the pad's offset from the pose now. A detection more than
+``max_latency_s`` late is refused and said (``stats.too_slow``, a warning): the vehicle holds
+still until detections are in time again.
+
 In pad modes the estimate also flies the vehicle through :class:`PadHoldLaw`: HOLD (1) keeps
 the pad centre within the deadband at up to the speed limit; LAND (2) descends onto it and
 hands over to the vehicle's own landing straight down. Pad navigation acts only while the
