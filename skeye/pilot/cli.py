@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import signal
 import threading
 from dataclasses import replace
@@ -100,6 +101,11 @@ def run(args: argparse.Namespace) -> int:
         except ConfigError as exc:
             print(f"skeye pilot: --calibration: {exc}", flush=True)
             return 2
+    try:
+        latency_s = vision_latency_s(args.vision_latency_ms)
+    except ConfigError as exc:
+        print(f"skeye pilot: {exc}", flush=True)
+        return 2
     lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
@@ -136,7 +142,9 @@ def run(args: argparse.Namespace) -> int:
             )
             vision = None
             if args.images is not None:
-                vision = pad_vision_factory(sim, robot, args.camera, calibration)
+                vision = pad_vision_factory(sim, robot, args.camera, calibration,
+                                            latency_s=latency_s,
+                                            predict=not args.no_vision_prediction)
             lockstep = sim.mode == "lockstep"
             tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
             video = None
@@ -190,11 +198,33 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def vision_latency_s(text: str) -> float | None:
+    """``--vision-latency-ms``: a number of milliseconds >= 0 (in seconds), or ``measured``
+    (None: each frame's measured processing time).
+
+    Raises:
+        ConfigError: anything else.
+    """
+    if text.strip().lower() == "measured":
+        return None
+    try:
+        ms = float(text)
+    except ValueError:
+        ms = math.nan
+    if not (math.isfinite(ms) and 0 <= ms <= 10_000):
+        raise ConfigError(f"--vision-latency-ms must be 0..10000 ms or 'measured', got {text!r}")
+    return ms / 1e3
+
+
 def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
-                       calibration: Any = None) -> Any:
+                       calibration: Any = None, *, latency_s: float | None = 0.0,
+                       predict: bool = True, params: Any = None) -> Any:
     """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator
     and the camera calibration (``skeye calibrate``) when one is given; a calibration for
-    another image size than the camera's is refused here, before the vision starts."""
+    another image size than the camera's is refused here, before the vision starts.
+    ``latency_s`` and ``predict``: :class:`skeye.pilot.vision.PadVision`'s (vision latency,
+    None = measured; fly on the offset predicted to now); ``params``: pad-hold gains and
+    limits (default: derived from the loop delay)."""
     from skeye.pilot.vision import PadVision
 
     fov_h_rad = camera_fov_rad(sim, camera)
@@ -209,7 +239,8 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
 
     def make(boards: Any, lock: Any) -> PadVision:
         return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
-                         calibration=calibration)
+                         calibration=calibration, latency_s=latency_s, predict=predict,
+                         params=params)
 
     return make
 
@@ -257,6 +288,22 @@ def register(subparsers: Any) -> None:
         metavar="CAMERA_TOML",
         help="the downward camera's calibration from `skeye calibrate` (camera matrix and lens "
         "distortion for the pad detector; default: the ideal pinhole of the camera's FOV)",
+    )
+    p.add_argument(
+        "--vision-latency-ms",
+        default="0",
+        metavar="MS|measured",
+        help="when a pad detection is used, in sim time after its frame's capture: 0 (default) "
+        "= as soon as the detector is done; N = N ms after the capture (in lockstep the "
+        "detector is busy until then, as a slower computer's would be); 'measured' = each "
+        "frame's measured processing time (lockstep; in realtime the real delay applies). "
+        "See docs/pilot.md, Vision latency",
+    )
+    p.add_argument(
+        "--no-vision-prediction",
+        action="store_true",
+        help="fly pad hold on each detection as it arrives instead of on the pad offset "
+        "predicted to now from its capture pose (for comparison; docs/pilot.md)",
     )
     p.add_argument(
         "--video-port",

@@ -1,10 +1,13 @@
 """Position hold over the landing pad and autonomous landing on it: the control law.
 
 How this works (the paper's method, section 5): every processed camera frame gives the pad
-centre's offset in the level body frame (forward, right) and the height. While the offset is
-larger than the deadband (0.05 m by default) a PI controller turns it into a horizontal
-velocity command towards the pad, limited in magnitude to ``max_speed_m_s`` (0.3 m/s by
-default); inside the deadband the command is zero (the vehicle's own board then holds zero
+centre's offset in the level body frame (forward, right) and the height; the pilot predicts
+it to the present from the frame's capture pose (skeye.pilot.pad_track) and calls the law
+every control tick. While the offset is larger than the deadband (0.05 m by default) a PI
+controller turns it into a horizontal velocity command towards the pad, limited in magnitude
+to ``max_speed_m_s`` (0.3 m/s by default; the integral does not grow while the command is at
+the limit). The gains come from the loop's delay (:func:`loop_gains`, docs/pilot.md "Vision
+latency"). Inside the deadband the command is zero (the vehicle's own board then holds zero
 velocity on its INS estimate, and the integrator keeps its value so a steady push stays
 compensated). Vertically, HOLD keeps the height; LAND descends while the vehicle is over the
 pad (offset within ``centre_tolerance_m``), correcting down to a tighter deadband
@@ -24,6 +27,60 @@ from dataclasses import dataclass
 
 from skeye.errors import LocalProtocolError
 
+VEHICLE_LAG_S = 1.0 / 2.8 + 1.0 / 7.0
+"""How late the vehicle follows a velocity command (s): its velocity loop's time constant
+(1 / velocity_gain, 2.8 /s) plus its attitude loop's (1 / angle_gain, 7 /s), the low-level
+controller's gains (skeye.robots.params.ControllerParams, docs/physics.md). A first-order lag
+of time constant T costs atan(w T) <= w T of phase, so counting it as a pure delay is safe."""
+CONTROL_PERIOD_S = 0.05
+"""The pilot's tick in lockstep (the control interface's 20 Hz); a command held for a tick
+is half a tick late on average (zero-order hold)."""
+PHASE_MARGIN_RAD = math.pi / 3
+"""60 degrees: the usual design target for a well damped loop (about 10 % overshoot;
+Astrom & Murray, Feedback Systems, 2008, section 11.3: phase margins of 30-60 degrees)."""
+INTEGRAL_RATIO = 0.1
+"""ki = INTEGRAL_RATIO * kp^2: the integrator's corner (ki/kp) a decade below the crossover
+(kp), so it costs atan(0.1) = 5.7 degrees of phase there."""
+
+
+def loop_gains(delay_s: float, phase_margin_rad: float = PHASE_MARGIN_RAD,
+               integral_ratio: float = INTEGRAL_RATIO) -> tuple[float, float]:
+    """PI gains (kp in (m/s)/m, ki in (m/s)/(m s)) for a position loop with ``delay_s`` of
+    delay in it, from its phase margin.
+
+    The loop: offset -> velocity command kp e + ki * integral(e) -> the vehicle's velocity (late by
+    the delay) -> position (an integrator). Its open-loop gain is
+    L(s) = (kp + ki/s) e^(-s delay) / s, crossing 1 at w = kp (for ki << kp^2), where the
+    phase is -pi/2 - kp delay - atan(ki / kp^2). Asking for a phase margin phi gives
+    kp = (pi/2 - phi - atan(ratio)) / delay; the delay margin (extra delay the loop takes
+    before it oscillates) is then phi / kp.
+
+    Raises:
+        LocalProtocolError: a delay <= 0 or a margin that leaves no gain.
+    """
+    if not (math.isfinite(delay_s) and delay_s > 0):
+        raise LocalProtocolError(f"pad hold: loop delay must be > 0 s, got {delay_s!r}")
+    phase = math.pi / 2 - phase_margin_rad - math.atan(integral_ratio)
+    if not phase > 0 or integral_ratio < 0:
+        raise LocalProtocolError(f"pad hold: a phase margin of {phase_margin_rad} rad leaves "
+                                 "no gain")
+    kp = phase / delay_s
+    return kp, integral_ratio * kp * kp
+
+
+def design_delay(latency_s: float, predicted: bool) -> float:
+    """The delay in the pad-hold loop: the vehicle's lag and half a tick; without the
+    prediction also the vision latency and half the detection period (one detection per
+    latency: the pipeline takes the next frame when it is done), both of which the
+    prediction removes (it flies on the offset predicted to now from the estimator)."""
+    delay = VEHICLE_LAG_S + CONTROL_PERIOD_S / 2
+    if not predicted:
+        delay += 1.5 * max(0.0, latency_s)
+    return delay
+
+
+_KP, _KI = loop_gains(design_delay(0.0, predicted=True))
+
 
 @dataclass(frozen=True)
 class PadHoldParams:
@@ -31,8 +88,8 @@ class PadHoldParams:
 
     deadband_m: float = 0.05
     max_speed_m_s: float = 0.3
-    kp: float = 1.2  # (m/s) per m of offset
-    ki: float = 0.15  # (m/s) per m s
+    kp: float = _KP  # (m/s) per m of offset: loop_gains(design_delay(...)), about 0.81
+    ki: float = _KI  # (m/s) per m s: about 0.065
     integral_limit_m_s: float = 0.15
     descent_m_s: float = 0.25
     final_descent_m_s: float = 0.12
@@ -104,13 +161,22 @@ class PadHoldLaw:
         deadband = min(p.deadband_m, p.landing_deadband_m) if landing else p.deadband_m
         if offset > deadband:
             lim = p.integral_limit_m_s / max(p.ki, 1e-9)
-            self._int_f = min(lim, max(-lim, self._int_f + forward_m * dt))
-            self._int_r = min(lim, max(-lim, self._int_r + right_m * dt))
-            vf = p.kp * forward_m + p.ki * self._int_f
-            vr = p.kp * right_m + p.ki * self._int_r
+            int_f = min(lim, max(-lim, self._int_f + forward_m * dt))
+            int_r = min(lim, max(-lim, self._int_r + right_m * dt))
+            vf = p.kp * forward_m + p.ki * int_f
+            vr = p.kp * right_m + p.ki * int_r
             speed = math.hypot(vf, vr)
             if speed > p.max_speed_m_s:
-                vf, vr = vf * p.max_speed_m_s / speed, vr * p.max_speed_m_s / speed
+                # Saturated: the integral stays as it was (conditional integration, against
+                # windup: a long approach at the speed limit would otherwise leave it pushing
+                # past the pad; Astrom & Murray, Feedback Systems, section 10.4).
+                vf = p.kp * forward_m + p.ki * self._int_f
+                vr = p.kp * right_m + p.ki * self._int_r
+                speed = math.hypot(vf, vr)
+                if speed > p.max_speed_m_s:
+                    vf, vr = vf * p.max_speed_m_s / speed, vr * p.max_speed_m_s / speed
+            else:
+                self._int_f, self._int_r = int_f, int_r
         else:
             vf = vr = 0.0
         up = 0.0

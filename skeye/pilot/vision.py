@@ -14,6 +14,14 @@ its connection, a late frame never answers a later request. In lockstep the loop
 ``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible; the
 simulator is paused meanwhile, so nothing flies unwatched.
 
+Latency (docs/pilot.md, "Vision latency"): each observation is used ``latency_s`` after its
+frame's capture (configured, or measured, or as soon as it is done), and the pad hold flies on
+it predicted to now: the control loop records the INS pose every tick (:class:`PoseHistory`),
+places each detection in the estimate's world frame with the pose at its capture time, and
+every control period computes the pad's offset from the pose now. A detection more than
+``max_latency_s`` late is refused and said (``stats.too_slow``, a warning): the vehicle holds
+still until detections are in time again.
+
 In pad modes the estimate also flies the vehicle through :class:`PadHoldLaw`: HOLD (1) keeps
 the pad centre within the deadband at up to the speed limit; LAND (2) descends onto it and
 hands over to the vehicle's own landing straight down. Pad navigation acts only while the
@@ -30,6 +38,7 @@ vehicle saw and detected. Handing it over never waits.
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -42,7 +51,14 @@ import cv2
 from skeye.errors import InvalidArgument, SkeyeError
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadObservation
-from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
+from skeye.pilot.pad_hold import (
+    CONTROL_PERIOD_S,
+    PadHoldLaw,
+    PadHoldParams,
+    design_delay,
+    loop_gains,
+)
+from skeye.pilot.pad_track import PadFix, Pose, PoseHistory, locate_pad, offset_now
 from skeye.pilot.video_server import CameraFrame
 from skeye.vision.calibration import CameraCalibration
 from skeye.vision.detector import PadEstimate, detect
@@ -89,10 +105,32 @@ class VisionStats:
     errors: int = 0
     last_error: str = ""
     video_errors: int = 0  # frames the video port could not carry (logged)
+    applied: int = 0  # observations handed to the boards and the pad hold
+    processing_s: float = 0.0  # the newest frame's fetch + detection time (wall clock)
+    latency_s: float = 0.0  # capture to use of the newest observation applied (sim time)
+    max_latency_s: float = 0.0
+    too_slow: str = ""  # why the vision is too slow to hold on (empty while it is not)
+    too_slow_count: int = 0  # observations refused for being too old
+
+
+MAX_VISION_LATENCY_S = 1.0
+"""Observations older than this when they arrive are too slow to hold on (docs/pilot.md):
+the prediction flies on the estimator's motion over the latency, and the onboard estimate's
+velocity error (a few cm/s, docs/physics.md) makes it wrong by the pad-hold deadband (5 cm)
+after about a second."""
 
 
 class PadVision:
-    """Detector + pad navigation: a worker thread detects, the pilot loop navigates."""
+    """Detector + pad navigation: a worker thread detects, the pilot loop navigates.
+
+    ``latency_s``: when a detection is used, in sim time after its frame's capture: 0 applies
+    it as soon as the detector is done (the real delay in realtime, none in lockstep); N > 0
+    applies it at capture + N (in lockstep the detector is then busy until that time and takes
+    the newest frame after it, as a real pipeline does); None ("measured") uses each frame's
+    measured processing time (wall clock) as its latency in lockstep. ``predict``: fly on the
+    pad offset predicted to now from each detection's capture pose (:mod:`skeye.pilot.pad_track`);
+    False flies on the detections as they arrive (the comparison case).
+    """
 
     def __init__(
         self,
@@ -107,28 +145,47 @@ class PadVision:
         lockstep_wait_s: float = 5.0,
         queue_size: int = 4,
         calibration: CameraCalibration | None = None,
+        latency_s: float | None = 0.0,
+        predict: bool = True,
+        max_latency_s: float = MAX_VISION_LATENCY_S,
     ) -> None:
         if queue_size < 1 or not lockstep_wait_s > 0:
             raise InvalidArgument(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
                              f"({queue_size}, {lockstep_wait_s})")
+        if latency_s is not None and not (math.isfinite(latency_s) and latency_s >= 0):
+            raise InvalidArgument(f"vision latency must be >= 0 s, got {latency_s!r}")
+        if not (math.isfinite(max_latency_s) and max_latency_s > 0):
+            raise InvalidArgument(f"max vision latency must be > 0 s, got {max_latency_s!r}")
         self.boards = boards
         self.robot = robot
         self.lock = lock
         self.fov_h_rad = fov_h_rad
         self.calibration = calibration  # skeye calibrate's camera.toml; None: ideal pinhole
         self.pad = pad
+        self.latency_s = latency_s
+        self.predict = predict
+        self.max_latency_s = max_latency_s
+        self._explicit_gains = params is not None
         self.base_params = params or PadHoldParams()
         self.law = PadHoldLaw(self.base_params)
         self.stats = VisionStats()
         self.lockstep = lockstep
         self.lockstep_wait_s = lockstep_wait_s
+        self.history = PoseHistory(max_latency_s + 1.0)
         self._last_frame = 0
         self._mode = PadAction.OFF
-        self._observations: queue.Queue[PadObservation] = queue.Queue(queue_size)
+        self._observations: queue.Queue[tuple[PadObservation, float]] = queue.Queue(queue_size)
         self._kick = threading.Event()
         self._stop = threading.Event()
         self._done = threading.Condition()
         self._attempted = 0  # newest announced frame the worker has dealt with
+        self._permit = 0  # lockstep: newest frame the worker may take
+        self._busy_until_s = -math.inf  # lockstep: the detector's result is not out before
+        self._pending: list[tuple[float, PadObservation]] = []  # (apply at, observation)
+        self._fix: PadFix | None = None  # the pad where the newest detection put it
+        self._missed_since_s: float | None = None  # capture time of the first miss since
+        self._newest_capture_s = -math.inf
+        self._last_nav_s = -math.inf
         self._worker: Worker | None = None
         self._video: Callable[[CameraFrame], None] | None = None
 
@@ -160,8 +217,16 @@ class PadVision:
             self._done.notify_all()
 
     # -- the control loop's side -------------------------------------------------------------
+    def _pose_now(self) -> Pose:
+        snap = self.boards.airframe.snapshot()  # the INS estimate, as the boards fly on it
+        n, e, d = snap.pos_ned_m
+        pose = Pose(snap.time_s, n, e, d, *snap.rpy_rad)
+        self.history.add(pose)
+        return pose
+
     def step(self) -> None:
-        """Called by the pilot loop after each tick: hand new observations to the boards.
+        """Called by the pilot loop after each tick: hand due observations to the boards and
+        fly the pad modes.
 
         Raises:
             WorkerFailed: the vision thread died (a bug); the pilot treats it as a failure.
@@ -169,9 +234,13 @@ class PadVision:
         worker = self.start()._worker
         assert worker is not None
         worker.check()
-        self._kick.set()
+        now = self._pose_now()
         latest = self.robot.camera.latest
-        if self.lockstep and latest is not None:
+        if not self.lockstep:
+            self._kick.set()
+        elif latest is not None and now.time_s >= self._busy_until_s - 1e-9:
+            self._permit = latest.frame  # the detector is free: it takes the newest frame
+            self._kick.set()
             with self._done:
                 self._done.wait_for(
                     lambda: self._attempted >= latest.frame or not worker.alive,
@@ -180,12 +249,72 @@ class PadVision:
             worker.check()
         while True:
             try:
-                obs = self._observations.get_nowait()
+                obs, processing_s = self._observations.get_nowait()
             except queue.Empty:
-                return
+                break
+            self.stats.processing_s = processing_s
+            if self.latency_s is None:
+                due = obs.frame_time_s + processing_s if self.lockstep else now.time_s
+            else:
+                due = obs.frame_time_s + self.latency_s
+            if self.lockstep:
+                self._busy_until_s = max(self._busy_until_s, due)
+            self._pending.append((due, obs))
+        self._pending.sort(key=lambda item: item[0])
+        while self._pending and self._pending[0][0] <= now.time_s + 1e-9:
+            _, obs = self._pending.pop(0)
             with self.lock:
                 self.boards.pad.on_frame(obs)
-                self._navigate(obs)
+                self._apply(obs, now)
+        if self.predict:
+            with self.lock:
+                self._navigate_tick(now)
+
+    def _apply(self, obs: PadObservation, now: Pose) -> None:
+        """One observation reaches the pad hold, ``now.time_s - obs.frame_time_s`` late."""
+        stats = self.stats
+        stats.applied += 1
+        age = max(0.0, now.time_s - obs.frame_time_s)
+        stats.latency_s = age
+        stats.max_latency_s = max(stats.max_latency_s, age)
+        then = self.history.at(obs.frame_time_s) if obs.found else None
+        if age > self.max_latency_s or (obs.found and then is None):
+            stats.too_slow_count += 1
+            if not stats.too_slow:
+                stats.too_slow = (f"vision too slow to hold: a detection arrived {age:.2f} s "
+                                  f"after its frame (limit {self.max_latency_s:.2f} s)")
+                log.warning("%s; pad navigation holds still until detections are in time",
+                            stats.too_slow)
+            return
+        if stats.too_slow:
+            log.warning("vision in time again (%.2f s): pad navigation resumes", age)
+            stats.too_slow = ""
+        self._newest_capture_s = max(self._newest_capture_s, obs.frame_time_s)
+        if obs.found and then is not None:
+            self._fix = locate_pad(obs.dx_m, obs.dy_m, obs.height_m, then)
+            self._missed_since_s = None
+        elif self._missed_since_s is None:
+            self._missed_since_s = obs.frame_time_s
+        if not self.predict:
+            self._navigate(obs.found, obs.dx_m, obs.dy_m, obs.height_m, now.time_s)
+
+    def _navigate_tick(self, now: Pose) -> None:
+        """Predicting: fly on the pad offset predicted to now, once per control period."""
+        if now.time_s - self._last_nav_s < CONTROL_PERIOD_S - 1e-6:
+            return
+        self._last_nav_s = now.time_s
+        if self._newest_capture_s == -math.inf:
+            return  # nothing seen yet (the first detection is still on its way)
+        fix = self._fix
+        seen = fix is not None and (
+            self._missed_since_s is None
+            or self._newest_capture_s - fix.capture_s < self.law.p.lost_after_s
+        )
+        if fix is None or not seen:
+            self._navigate(False, 0.0, 0.0, 0.0, now.time_s)
+            return
+        forward, right, height = offset_now(fix, now)
+        self._navigate(True, forward, right, height, now.time_s)
 
     # -- the worker's side -------------------------------------------------------------------
     def _run(self) -> None:
@@ -195,17 +324,20 @@ class PadVision:
             latest = self.robot.camera.latest
             if latest is None or latest.frame <= self._last_frame or self._stop.is_set():
                 continue
+            if self.lockstep and latest.frame > self._permit:
+                continue  # the detector is still busy with an earlier frame (sim time)
+            t0 = time.perf_counter()
             obs = self._process(latest.frame, latest.time_s)
             if obs is not None:
-                self._put(obs)
+                self._put((obs, time.perf_counter() - t0))
             with self._done:
                 self._attempted = max(self._attempted, latest.frame)
                 self._done.notify_all()
 
-    def _put(self, obs: PadObservation) -> None:
+    def _put(self, item: tuple[PadObservation, float]) -> None:
         while True:
             try:
-                self._observations.put_nowait(obs)
+                self._observations.put_nowait(item)
                 return
             except queue.Full:
                 try:
@@ -228,8 +360,14 @@ class PadVision:
         if image.frame <= self._last_frame:
             return None
         self._last_frame = image.frame
+        # The attitude at the frame's capture (the estimator's history), else the newest.
+        then = self.history.at(image.time_s)
         ins = self.robot.ins.latest
-        roll, pitch = (ins.rpy_rad[0], ins.rpy_rad[1]) if ins is not None else (0.0, 0.0)
+        if then is not None:
+            roll, pitch = then.roll_rad, then.pitch_rad
+        else:
+            roll, pitch = (ins.rpy_rad[0], ins.rpy_rad[1]) if ins is not None else (0.0, 0.0)
+        known = then is not None or ins is not None
         t0 = time.perf_counter()
         grey = cv2.cvtColor(image.bgr, cv2.COLOR_BGR2GRAY)
         est = detect(grey, self.fov_h_rad, self.pad, roll_rad=roll, pitch_rad=pitch,
@@ -238,7 +376,7 @@ class PadVision:
         self.stats.frames += 1
         video = self._video
         if video is not None:
-            attitude = (float(roll), float(pitch)) if ins is not None else (None, None)
+            attitude = (float(roll), float(pitch)) if known else (None, None)
             try:
                 video(CameraFrame(image.frame, image.time_s, image.bgr,
                                   wire_detection(est, *attitude), detect_ms))
@@ -254,24 +392,37 @@ class PadVision:
                                   est.offset_body_m[1], est.height_m, est.quality)
         return PadObservation(image.time_s, False)
 
-    def _navigate(self, obs: PadObservation) -> None:
+    def _gains(self) -> PadHoldParams:
+        """The pad-hold gains for this loop's delay (:func:`design_delay`), unless given."""
+        if self._explicit_gains:
+            return self.base_params
+        latency = self.latency_s if self.latency_s is not None else self.stats.latency_s
+        kp, ki = loop_gains(design_delay(latency, self.predict))
+        return replace(self.base_params, kp=kp, ki=ki)
+
+    def _navigate(self, found: bool, forward_m: float, right_m: float, height_m: float,
+                  time_s: float) -> None:
         boards = self.boards
         settings = boards.pad.settings
         mode = settings.mode
         if mode != self._mode:
             self._mode = mode
+            base = self._gains()
             self.law = PadHoldLaw(
                 replace(
-                    self.base_params,
-                    deadband_m=settings.deadband_m or self.base_params.deadband_m,
-                    max_speed_m_s=settings.max_speed_m_s or self.base_params.max_speed_m_s,
+                    base,
+                    deadband_m=settings.deadband_m or base.deadband_m,
+                    max_speed_m_s=settings.max_speed_m_s or base.max_speed_m_s,
                 )
             )
             if mode == PadAction.OFF and boards.state is NavState.HOLDING:
                 boards.airframe.hover()
         if mode == PadAction.OFF or boards.state is not NavState.HOLDING:
             return  # landed, taking off, flying a ground command, landing, failsafe: hands off
-        sp = self.law.update(obs.frame_time_s, obs.found, obs.dx_m, obs.dy_m, obs.height_m,
+        if self.stats.too_slow:
+            boards.airframe.set_velocity(0.0, 0.0, 0.0, 0.0, None)
+            return
+        sp = self.law.update(time_s, found, forward_m, right_m, height_m,
                              landing=mode == PadAction.LAND)
         if sp.searching:
             log.info("pad lost: holding and climbing slowly to find it")

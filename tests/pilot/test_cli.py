@@ -139,3 +139,14 @@ def test_pilot_hands_the_calibration_to_the_detector():
         make = pilot_cli.pad_vision_factory(sim, robot, "Down", good)
         vision = make(None, threading.Lock())
         assert isinstance(vision, PadVision) and vision.calibration is good
+
+
+def test_pilot_vision_latency_option_is_checked_before_anything_starts(capsys):
+    assert pilot_cli.vision_latency_s("300") == pytest.approx(0.3)
+    assert pilot_cli.vision_latency_s("0") == 0.0
+    assert pilot_cli.vision_latency_s("measured") is None
+    base = ["pilot", "--sim", "127.0.0.1:1", "--port", "0"]
+    for bad in ("-5", "fast", "nan"):
+        args = parser().parse_args([*base, "--vision-latency-ms", bad])
+        assert pilot_cli.run(args) == 2
+        assert "--vision-latency-ms must be" in capsys.readouterr().out

@@ -31,7 +31,8 @@ def test_integral_compensates_a_steady_offset_and_is_bounded():
     for i in range(1, 300):
         sp = law.update(i / 30, True, 0.0, 0.08, 1.0)
     assert sp.right_m_s > first
-    assert sp.right_m_s <= 1.2 * 0.08 + 0.15 + 1e-9
+    p = PadHoldParams()
+    assert sp.right_m_s <= p.kp * 0.08 + p.integral_limit_m_s + 1e-9
 
 
 def test_landing_descends_only_when_centred_and_commits_low():
@@ -61,3 +62,11 @@ def test_bad_parameters_are_refused():
         PadHoldParams(max_speed_m_s=0.0)
     with pytest.raises(LocalProtocolError, match="kp"):
         PadHoldParams(kp=float("nan"))
+
+
+def test_the_integral_does_not_wind_up_while_the_speed_is_at_its_limit():
+    law = PadHoldLaw(PadHoldParams(max_speed_m_s=0.3))
+    for i in range(400):  # 20 s approaching from 3 m at the speed limit
+        law.update(i * 0.05, True, 3.0, 0.0, 1.5)
+    # Just past the pad: the command turns back at once (no integral left pushing on).
+    assert law.update(20.0, True, -0.1, 0.0, 1.5).forward_m_s < 0
