@@ -22,12 +22,13 @@ from typing import Any
 
 import skeye
 from skeye.errors import LocalProtocolError
-from skeye.validate.experiments import RunSettings
+from skeye.validate.experiments import CAMERAS, ESTIMATORS, RunSettings
 
 EXPERIMENTS = ("E1", "E2")
 SETTINGS_FIELDS = {f.name: str(f.type) for f in dataclasses.fields(RunSettings)
                    if f.name not in ("seed", "quick")}
 """Parameters E1 and E2 take (fields of :class:`RunSettings`)."""
+SETTINGS_CHOICES = {"camera": CAMERAS, "estimator": ESTIMATORS}
 _SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
               "resources", "name"}
 
@@ -171,6 +172,10 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
                 raise LocalProtocolError(f"parameter {name} must be a number, got {v!r}")
             if kind == "str" and not isinstance(v, str):
                 raise LocalProtocolError(f"parameter {name} must be a string, got {v!r}")
+            choices = SETTINGS_CHOICES.get(name)
+            if choices is not None and v not in choices:
+                raise LocalProtocolError(f"parameter {name} must be one of "
+                                         f"{', '.join(choices)}, got {v!r}")
     trials = [Trial(experiment, params, seed, is_quick, script, timeout_s)
               for params in sets for seed in seeds]
     return SweepSpec(experiment, trials, names, float(resources.get("cpus", 1.0)),

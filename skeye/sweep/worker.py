@@ -40,18 +40,21 @@ def _figures_only(figures: dict[str, Any]) -> dict[str, float]:
 
 def run_experiment(trial: Trial, workdir: Path) -> tuple[dict[str, float], dict[str, Any]]:
     """Run the trial's experiment here; its figures and its series (for ``skeye validate``)."""
-    from skeye.validate.experiments import run_e1, run_e2
+    from skeye.validate.experiments import e1_runs, e2_runs
     from skeye.validate.report import e1_figures, e2_figures
 
     settings = trial.settings()
     if trial.experiment == "E1":
-        s1 = run_e1(settings, workdir)
-        return _figures_only(e1_figures(s1, trial.seed)), {"E1": dataclasses.asdict(s1)}
+        e1 = e1_runs(settings, workdir)
+        figures = e1_figures(e1["E1"], trial.seed)
+        if "E1_uncalibrated" in e1:
+            raw = e1_figures(e1["E1_uncalibrated"], trial.seed)
+            figures.update({f"uncalibrated_{k}": v for k, v in raw.items() if k != "seed"})
+        return _figures_only(figures), {k: dataclasses.asdict(v) for k, v in e1.items()}
     if trial.experiment == "E2":
-        s2 = run_e2(settings, workdir, vision=True)
-        base = run_e2(settings, workdir, vision=False)
-        return (_figures_only(e2_figures(s2, base, settings)),
-                {"E2": dataclasses.asdict(s2), "E2_baseline": dataclasses.asdict(base)})
+        e2 = e2_runs(settings, workdir)
+        figures = e2_figures(e2["E2"], e2["E2_velocity"], e2["E2_attitude"], settings)
+        return _figures_only(figures), {k: dataclasses.asdict(v) for k, v in e2.items()}
     assert trial.script is not None
     spec = importlib.util.spec_from_file_location("skeye_sweep_script", trial.script)
     if spec is None or spec.loader is None:

@@ -1,4 +1,5 @@
-"""``skeye validate [E1|E2|all] --seeds N --out DIR [--quick]``: the paper's experiments."""
+"""``skeye validate [E1|E2|all] --seeds N --out DIR [--quick] [--camera ideal|webcam]
+[--calibration FILE] [--estimator truth|onboard]``: the paper's experiments."""
 
 from __future__ import annotations
 
@@ -10,30 +11,61 @@ from pathlib import Path
 from typing import Any
 
 from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
 from skeye.sweep.cli import run_trials
 from skeye.sweep.spec import SweepSpec, Trial
-from skeye.validate.experiments import E1Series, E2Series, RunSettings
+from skeye.validate.calibration import calibrate_simulated_camera
+from skeye.validate.experiments import (
+    CAMERAS,
+    E2_RUNS,
+    ESTIMATORS,
+    E1Series,
+    E2Series,
+    RunSettings,
+)
 from skeye.validate.report import PAPER, median_summary, write_e1, write_e2, write_report
+from skeye.vision.calibration import CalibrationResult, load_calibration
 
 
 def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1,
-             workers: int | None = None, keep_recordings: bool = False) -> dict[str, Any]:
+             workers: int | None = None, keep_recordings: bool = False, *,
+             camera: str = "ideal", estimator: str = "truth",
+             calibration: Path | None = None) -> dict[str, Any]:
     """Run the experiments for ``seeds`` seeds on the sweep's local pool; write the report.
 
     Each (experiment, seed) is one trial of :mod:`skeye.sweep` (its own processes, in parallel
     up to ``workers``); the series come back from the trials and the report is built here.
+    ``camera`` is the camera profile every run renders through and ``estimator`` the boards'
+    state estimator. A camera other than the ideal pinhole is calibrated first, as a user
+    would (the checkerboard world, ``skeye calibrate``'s maths; ``out/calibration/``), unless
+    a ``calibration`` file is given; the pilot's detector uses it, and E1 is flown again
+    without it.
     """
     which = which.upper()
     if which not in ("E1", "E2", "ALL"):
         raise LocalProtocolError(f"unknown experiment {which!r}: E1, E2 or all")
     if seeds < 1:
         raise LocalProtocolError(f"--seeds must be >= 1, got {seeds}")
+    if camera not in CAMERAS:
+        raise LocalProtocolError(f"unknown camera profile {camera!r}: {', '.join(CAMERAS)}")
+    if estimator not in ESTIMATORS:
+        raise LocalProtocolError(f"unknown estimator {estimator!r}: {', '.join(ESTIMATORS)}")
+    if calibration is not None:
+        load_calibration(calibration)  # a bad file is named here, not in every trial
     experiments = ("E1", "E2") if which == "ALL" else (which,)
     out.mkdir(parents=True, exist_ok=True)
+    summary: dict[str, Any] = {"paper": PAPER}
+    if calibration is None and camera != "ideal":
+        calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
+        summary["calibration"] = calibration_figures(found, camera)
+    cal_path = str(calibration.resolve()) if calibration is not None else ""
+    summary["setup"] = {"camera": camera, "estimator": estimator, "calibration": cal_path}
+    params = {"camera": camera, "estimator": estimator, "calibration": cal_path}
     seed_list = list(range(first_seed, first_seed + seeds))
-    settings = {s: RunSettings(seed=s, quick=quick) for s in seed_list}
-    trials = [Trial(e, {}, s, quick, timeout_s=900.0 if quick else 7200.0)
+    settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
+                               calibration=cal_path) for s in seed_list}
+    trials = [Trial(e, dict(params), s, quick, timeout_s=900.0 if quick else 7200.0)
               for s in seed_list for e in experiments]
     spec = SweepSpec(which, trials, [])
     with tempfile.TemporaryDirectory(prefix="skeye-validate-") as tmp:
@@ -55,21 +87,36 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
                                        for r in failed))
         series = {(t.experiment, t.seed): json.loads(
             (Path(tmp) / f"{t.key}.series.json").read_text()) for t in trials}
-    summary: dict[str, Any] = {"paper": PAPER}
     if "E1" in experiments:
         e1 = {s: E1Series(**series["E1", s]["E1"]) for s in seed_list}
-        summary["E1"] = median_summary(write_e1(out, e1))
+        raw = ({s: E1Series(**series["E1", s]["E1_uncalibrated"]) for s in seed_list}
+               if cal_path else None)
+        summary["E1"] = median_summary(write_e1(out, e1, raw))
     if "E2" in experiments:
-        e2 = {s: (E2Series(**series["E2", s]["E2"]), E2Series(**series["E2", s]["E2_baseline"]))
-              for s in seed_list}
+        e2 = {s: {run: E2Series(**series["E2", s]["E2" if run == "vision" else f"E2_{run}"])
+                  for run in E2_RUNS} for s in seed_list}
         summary["E2"] = median_summary(write_e2(out, e2, settings))
     write_report(out, summary, quick, seed_list)
     return summary
 
 
+def calibration_figures(result: CalibrationResult, camera: str) -> dict[str, Any]:
+    """The calibration found beside the camera model the simulator rendered through."""
+    model = camera_model("hummingbird", profile=camera)
+    cal = result.calibration
+    names = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+    found = (cal.fx, cal.fy, cal.cx, cal.cy, *cal.dist)
+    truth = (model.fx_px, model.fy_px, model.cx_px, model.cy_px, *model.dist_coeffs)
+    return {"views_used": len(result.used), "rms_px": cal.rms_px,
+            "found": dict(zip(names, found, strict=True)),
+            "model": dict(zip(names, truth, strict=True))}
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     summary = validate(args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
-                       args.workers, args.keep_recordings)
+                       args.workers, args.keep_recordings, camera=args.camera,
+                       estimator=args.estimator,
+                       calibration=Path(args.calibration) if args.calibration else None)
     print((Path(args.out) / "report.md").read_text())
     del summary
     return 0
@@ -85,4 +132,12 @@ def register(sub: Any) -> None:
     p.add_argument("--workers", type=int, default=None, help="worker processes")
     p.add_argument("--keep-recordings", action="store_true",
                    help="keep the simulator recordings in the output folder")
+    p.add_argument("--camera", choices=CAMERAS, default="ideal",
+                   help="camera profile of every run (skeye sim --camera-profile); webcam is "
+                   "calibrated first unless --calibration is given")
+    p.add_argument("--calibration", default=None,
+                   help="a `skeye calibrate` file for the pilot's pad detector")
+    p.add_argument("--estimator", choices=ESTIMATORS, default="truth",
+                   help="the boards' state estimator (skeye sim --estimator): onboard flies on "
+                   "the simulated sensors, truth on the oracle")
     p.set_defaults(func=cmd_validate)

@@ -12,8 +12,16 @@ reads the simulator's state behind the pilot's back.
   10 s; for every processed frame: time, estimated height, true camera height.
 - E2: hover 0.70 m above the pad under the paper's random force (F_max 0.3 N redrawn every
   1/30 s), position hold on the pad (PAD_MODE 1: deadband 0.05 m, 0.3 m/s) for 5 minutes;
-  the horizontal distance of the vehicle from the pad centre, and the same run without vision
-  (the drift baseline: HOLD on the onboard estimate only).
+  the horizontal distance of the vehicle from the pad centre. Beside it, on the same seed and
+  disturbance, two baselines without vision: the board's velocity hold on its own estimate
+  (HOLD; with ``--estimator onboard`` that is the flow sensor's velocity, indoors as on the
+  skeye extension board) and attitude + height hold (AscTec height mode, CTRL_INPUT with
+  centred sticks: no horizontal feedback at all).
+
+The camera (``camera``: a ``skeye sim --camera-profile``) and the board's estimator
+(``estimator``: ``skeye sim --estimator``) are settings of every run; with a ``calibration``
+file the pilot's pad detector undistorts with it, and E1 is also flown without it (the bias a
+missing calibration causes).
 
 ``quick`` runs the same code for a fraction of the time (CI).
 """
@@ -25,7 +33,7 @@ import tempfile
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from skeye.errors import SkeyeError
@@ -38,6 +46,8 @@ from skeye.wire.packets import NavState, PadReport, SkeyeMask
 from skeye.wire.sim import decode_line
 from skeye.wire.sim_messages import SenGroundTruth
 
+CAMERAS = ("ideal", "webcam")  # RunSettings.camera: skeye sim --camera-profile
+ESTIMATORS = ("truth", "onboard")  # RunSettings.estimator: skeye sim --estimator
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3
 
@@ -54,6 +64,9 @@ class RunSettings:
     wind_params: str = ""  # extra ``--wind-params`` (k=v,...); f_max_n is added for random_force
     deadband_m: float = 0.05  # E2's PAD_MODE 1 deadband
     max_speed_m_s: float = 0.3  # E2's PAD_MODE 1 speed limit
+    camera: str = "ideal"  # the camera profile (skeye sim --camera-profile)
+    estimator: str = "truth"  # the boards' estimator (skeye sim --estimator)
+    calibration: str = ""  # a `skeye calibrate` file for the pilot's detector ("" = none)
 
     @property
     def e2_seconds(self) -> float:
@@ -88,9 +101,9 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
                  ) -> Iterator[Vehicle]:
     """Simulator + pilot as processes, and a ground client connected to the pilot."""
     sim_args = ["sim", "--mode", "lockstep", "--port", "0", "--seed", str(settings.seed),
-                "--record", str(record)]
+                "--record", str(record), "--estimator", settings.estimator]
     if vision:
-        sim_args += ["--image-port", "0"]
+        sim_args += ["--image-port", "0", "--camera-profile", settings.camera]
     if wind:
         sim_args += settings.wind_args()
     patterns = [r"control protocol on [\d.]+:(\d+)"]
@@ -104,6 +117,8 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
                       "--land-timeout", "60"]
         if vision:
             pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}"]
+            if settings.calibration:
+                pilot_args += ["--calibration", settings.calibration]
         pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
                                     "skeye pilot")
         stack.callback(stop_process, pilot)
@@ -185,7 +200,8 @@ def _interpolate(truth: Sequence[tuple[float, ...]], t: float) -> tuple[float, .
 
 # -- E1 ---------------------------------------------------------------------------------------
 def run_e1(settings: RunSettings, workdir: Path) -> E1Series:
-    record = workdir / f"e1_seed{settings.seed}.rec"
+    name = "e1" if settings.calibration or settings.camera == "ideal" else "e1_uncalibrated"
+    record = workdir / f"{name}_seed{settings.seed}.rec"
     pads: dict[float, PadReport] = {}
     lock = threading.Lock()
     plateaus = [(1.0, 10.0), (2.0, 10.0)] if not settings.quick else [(0.6, 2.0)]
@@ -221,17 +237,27 @@ def run_e1(settings: RunSettings, workdir: Path) -> E1Series:
 
 
 # -- E2 ---------------------------------------------------------------------------------------
-def run_e2(settings: RunSettings, workdir: Path, *, vision: bool) -> E2Series:
-    name = "e2" if vision else "e2_baseline"
-    record = workdir / f"{name}_seed{settings.seed}.rec"
+E2_RUNS = ("vision", "velocity", "attitude")  # pad hold; HOLD; height mode, centred sticks
+HEIGHT_MODE_STICKS = 0x1F  # CTRL_INPUT: roll, pitch, yaw, thrust from the sticks, height mode
+
+
+def run_e2(settings: RunSettings, workdir: Path, *, run: str) -> E2Series:
+    """One E2 run: ``vision`` (PAD_MODE 1), ``velocity`` (HOLD on the board's estimate) or
+    ``attitude`` (attitude + height hold: centred sticks in the AscTec height mode)."""
+    if run not in E2_RUNS:
+        raise SkeyeError(f"unknown E2 run {run!r}: {', '.join(E2_RUNS)}")
+    vision = run == "vision"
+    record = workdir / f"e2_{run}_seed{settings.seed}.rec"
     with flight_stack(settings, record, vision=vision, wind=True) as vehicle:
         vehicle.take_off(0.70 - 0.081)  # vehicle centre 0.70 m above the pad (0.081: on gear)
         start = _until_state(vehicle, NavState.HOLDING)
         if vision:
             vehicle.pad_mode(1, deadband_m=settings.deadband_m,
                              max_speed_m_s=settings.max_speed_m_s)
-        else:
+        elif run == "velocity":
             vehicle.hold()
+        else:
+            vehicle.ctrl_input(0.0, 0.0, 0.0, 0.5, ctrl=HEIGHT_MODE_STICKS)
         end = _wait_sim(vehicle, settings.e2_seconds, timeout_s=settings.e2_seconds * 10 + 600)
     series = E2Series()
     for t, n, e, _d, _tilt in _ground_truth(record):
@@ -239,6 +265,20 @@ def run_e2(settings: RunSettings, workdir: Path, *, vision: bool) -> E2Series:
             series.time_s.append(t - start)
             series.distance_m.append(math.hypot(n, e))
     return series
+
+
+def e1_runs(settings: RunSettings, workdir: Path) -> dict[str, E1Series]:
+    """E1, and with a calibration E1 again without it (``E1_uncalibrated``)."""
+    out = {"E1": run_e1(settings, workdir)}
+    if settings.calibration:
+        out["E1_uncalibrated"] = run_e1(replace(settings, calibration=""), workdir)
+    return out
+
+
+def e2_runs(settings: RunSettings, workdir: Path) -> dict[str, E2Series]:
+    """E2's three runs: ``E2`` (vision), ``E2_velocity`` and ``E2_attitude``."""
+    return {"E2" if run == "vision" else f"E2_{run}": run_e2(settings, workdir, run=run)
+            for run in E2_RUNS}
 
 
 def run_all(settings: RunSettings, experiments: tuple[str, ...], workdir: str | None = None
@@ -249,10 +289,9 @@ def run_all(settings: RunSettings, experiments: tuple[str, ...], workdir: str | 
         wd.mkdir(parents=True, exist_ok=True)
         out: dict[str, object] = {}
         if "E1" in experiments:
-            out["E1"] = run_e1(settings, wd)
+            out.update(e1_runs(settings, wd))
         if "E2" in experiments:
-            out["E2"] = run_e2(settings, wd, vision=True)
-            out["E2_baseline"] = run_e2(settings, wd, vision=False)
+            out.update(e2_runs(settings, wd))
         return out
 
 

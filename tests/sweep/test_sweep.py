@@ -29,8 +29,9 @@ seeds = {seeds}
 f_max_n = {forces}
 e2_duration_s = [1.0]
 """
-FIGURES = ("mean_m", "std_m", "max_m", "duration_s", "samples", "baseline_mean_m",
-           "baseline_std_m", "baseline_max_m", "baseline_final_m")
+FIGURES = ("mean_m", "std_m", "max_m", "final_m", "duration_s", "samples", "velocity_mean_m",
+           "velocity_std_m", "velocity_max_m", "velocity_final_m", "attitude_mean_m",
+           "attitude_std_m", "attitude_max_m", "attitude_final_m")
 
 
 def _spec(tmp: Path, seeds: str = "[1, 2]", name: str = "spec.toml",
@@ -218,6 +219,8 @@ def test_failed_trials_are_rows_with_their_error(tmp_path: Path):
         ('experiment = "E2"\n[grid]\ngain = [1, 2]', "E2 has no parameter"),
         ('experiment = "E2"\n[grid]\nf_max_n = ["x"]', "f_max_n must be a number"),
         ('experiment = "E2"\n[grid]\nf_max_n = []', "non-empty list"),
+        ('experiment = "E2"\n[grid]\ncamera = ["fisheye"]', "camera must be one of ideal, webcam"),
+        ('experiment = "E1"\n[grid]\nestimator = ["ekf"]', "estimator must be one of"),
         ('experiment = "E2"\ncolour = 1', "unknown spec keys"),
         ('experiment = "script"\nscript = "nope.py"', "does not exist"),
         ('experiment = "E2"\n[grid\n', "not valid TOML"),
