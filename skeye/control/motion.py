@@ -126,6 +126,7 @@ class DriveCommand:
     right_m_s: float = 0.0
     up_m_s: float = 0.0
     yaw_rate_rad_s: float = 0.0
+    board_mode: str | None = None  # "gps": the board's GPS mode (DRIVE {BoardMode gps})
 
     def to_message(self) -> Drive:
         """The velocity-form ``DRIVE`` of these set-points (the wire table spells it)."""
@@ -134,6 +135,7 @@ class DriveCommand:
             right_m_s=self.right_m_s,
             up_m_s=self.up_m_s,
             yaw_rate_rad_s=self.yaw_rate_rad_s,
+            board_mode=self.board_mode,
         )
 
 

@@ -464,9 +464,15 @@ class Robot(RobotSensors):
         duration_s: float | None = None,
         wait: bool = True,
         timeout_s: float | None = None,
+        board_mode: str | None = None,
     ) -> None:
         """Fly velocity set-points (heading frame); for ``duration_s`` then hover, or until
-        the next command when ``duration_s`` is None (then it returns at once)."""
+        the next command when ``duration_s`` is None (then it returns at once).
+        ``board_mode="gps"``: the board's GPS mode (``DRIVE {BoardMode gps}``: zero horizontal
+        set-points hold the GPS position while there is a fix, docs/protocols/simulator.md)."""
+        if board_mode not in (None, "gps"):
+            raise LocalProtocolError(f"set_velocity: board_mode must be None or 'gps', "
+                                     f"got {board_mode!r}")
         cfg = self.motion_config
         for label, value, limit in (
             ("forward_m_s", forward_m_s, cfg.max_speed_m_s),
@@ -476,7 +482,8 @@ class Robot(RobotSensors):
         ):
             if not (math.isfinite(value) and abs(value) <= limit + 1e-9):
                 raise LocalProtocolError(f"set_velocity: {label}={value} exceeds the limit {limit}")
-        motion = Velocity(DriveCommand(forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s), duration_s)
+        motion = Velocity(DriveCommand(forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s,
+                                       board_mode), duration_s)
         self._start(motion, "velocity", wait=wait, timeout_s=timeout_s, feedback=None)
 
     def hover(self, *, feedback: str | None = None) -> None:

@@ -92,8 +92,11 @@ class Airframe(Protocol):
         up_m_s: float,
         yaw_rate_rad_s: float,
         duration_s: float | None,
+        *,
+        gps_mode: bool = False,
     ) -> None:
-        """Fly at body-frame velocities (None: until replaced), then hover."""
+        """Fly at body-frame velocities (None: until replaced), then hover. ``gps_mode``: the
+        LL board's GPS mode (centred sticks hold the GPS position while there is a fix)."""
         ...
 
     def hover(self) -> None:

@@ -432,7 +432,7 @@ class OnboardBoards:
             fwd, right, up = self.settings.envelope.limit_body_velocity(
                 self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], fwd, right, climb
             )
-            self.airframe.set_velocity(fwd, right, up, yaw, None)
+            self.airframe.set_velocity(fwd, right, up, yaw, None, gps_mode=True)
             return
         roll = stick_to_angle_rad(msg.roll) if bits & CtrlBits.ROLL else 0.0
         pitch = stick_to_angle_rad(msg.pitch) if bits & CtrlBits.PITCH else 0.0

@@ -201,10 +201,13 @@ class SimAirframe:
         up_m_s: float,
         yaw_rate_rad_s: float,
         duration_s: float | None,
+        *,
+        gps_mode: bool = False,
     ) -> None:
         self._manual_off()
         self.robot.set_velocity(
-            forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s, duration_s=duration_s, wait=False
+            forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s, duration_s=duration_s, wait=False,
+            board_mode="gps" if gps_mode else None,
         )
 
     def hover(self) -> None:

@@ -13,6 +13,7 @@ class FakeAirframe:
     def __init__(self) -> None:
         self.calls: list[tuple[str, tuple[float, ...]]] = []
         self.busy = False
+        self.gps_mode = False  # the last set_velocity's
         self.snap = Snapshot(
             time_s=0.0,
             pos_ned_m=(0.0, 0.0, 0.0),
@@ -53,8 +54,10 @@ class FakeAirframe:
         self._cmd("turn_by", yaw_rad)
 
     def set_velocity(
-        self, fwd: float, right: float, up: float, yaw_rate: float, duration_s: float | None
+        self, fwd: float, right: float, up: float, yaw_rate: float, duration_s: float | None,
+        *, gps_mode: bool = False,
     ) -> None:
+        self.gps_mode = gps_mode
         self._cmd("set_velocity", fwd, right, up, yaw_rate, duration_s, busy=False)
 
     def hover(self) -> None:

@@ -132,6 +132,7 @@ def test_a_vehicle_moving_out_of_the_envelope_is_stopped() -> None:
             v.ctrl_input(0.0, -0.3, 0.0, 0.5, ctrl=GPS_MODE)
             name, (fwd, _right, up, _yaw) = air.calls[-1]
             assert name == "set_velocity" and abs(fwd) < 1e-9 and abs(up) < 0.01
+            assert air.gps_mode  # the LL board's GPS mode (DRIVE {BoardMode gps})
 
 
 def test_envelope_values_are_checked() -> None:

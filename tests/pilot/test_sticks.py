@@ -21,7 +21,7 @@ from skeye.link.vehicle import Vehicle
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from skeye.wire.packet_units import imu_calcdata_to_si
-from skeye.wire.packets import PD, ImuCalcData, PollMask
+from skeye.wire.packets import PD, ImuCalcData, NavState, PollMask, SkeyeMask
 from tests.sim.conftest import running_sim
 
 TILT_RAD = 0.2
@@ -43,11 +43,11 @@ def stick_flight() -> Iterator[tuple[Vehicle, object]]:
 
 
 def _fly(vehicle: Vehicle, robot, seconds: float, roll: float, pitch: float, yaw: float,
-         thrust: float) -> None:
+         thrust: float, ctrl: int = 0x0F) -> None:
     """Send the sticks as a ground station does (every few ticks) for ``seconds`` of sim time."""
     start = robot.ground_truth.latest.time_s
     for _ in range(100_000):
-        vehicle.ctrl_input(roll, pitch, yaw, thrust, 0x0F)
+        vehicle.ctrl_input(roll, pitch, yaw, thrust, ctrl)
         if robot.ground_truth.latest.time_s - start >= seconds:
             return
     raise AssertionError("sim time did not advance")
@@ -86,3 +86,33 @@ def test_attitude_sticks_tilt_and_move_the_vehicle(stick_flight) -> None:
     n0 = gt.position_ned_m[0]
     _fly(vehicle, robot, 1.0, 0.0, -TILT_RAD, 0.0, THRUST)
     assert robot.ground_truth.latest.position_ned_m[0] > n0 + 0.1  # and it flies forward
+
+
+def test_gps_mode_sticks_select_the_boards_gps_position_hold() -> None:
+    """CTRL_INPUT with the GPS bit (0x20) flies the LL board's GPS mode: the pilot's DRIVE
+    carries {BoardMode gps}, so centred sticks hold the GPS position estimate (the simulator
+    board's hold point is set) where a plain velocity hold would hold no point at all."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=5, estimator="onboard"))
+        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=10.0))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        pilot = stack.enter_context(PilotServer(SimAirframe(sim, robot), port=0, lockstep=True,
+                                                lockstep_rate=2.0, tick_s=0.05))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=300)
+
+        def hold_point() -> tuple[float | None, float | None]:
+            def read(s):
+                c = s.robots["R1"].controller
+                return c.hold_north_m, c.hold_east_m
+            return server.runner.call(read)
+
+        _fly(vehicle, robot, 2.0, 0.0, 0.0, 0.0, 0.5, ctrl=0x1F)  # height mode: no hold point
+        assert hold_point() == (None, None)
+        _fly(vehicle, robot, 2.0, 0.0, 0.0, 0.0, 0.5, ctrl=0x3F)  # + GPS mode
+        north, east = hold_point()
+        assert north is not None and east is not None
+        gt = robot.ground_truth.latest.position_ned_m
+        assert abs(north - gt[0]) < 0.5 and abs(east - gt[1]) < 0.5

@@ -1,10 +1,12 @@
 """``skeye calibrate`` end to end: the checkerboard world in the real simulator, frames fetched
 from its image server at several poses, a known lens distortion, and the command's answer.
 
-The simulator renders ideal pinhole frames; the known distortion is applied here
+Here the simulator renders ideal pinhole frames and the known distortion is applied by OpenCV
 (:func:`tests.vision.helpers.distort_image`) from a wider camera of the same focal length, so
-the distorted 800x600 frame has content out to its corners. Once the simulator has its own
-lens model, the wide robot gets the coefficients in its [camera] section instead.
+the distorted 800x600 frame has content out to its corners: three lenses, k1 from -0.2 to
++0.1. The simulator's own lens (the webcam profile, rendered through ``skeye/sim/lens.py``) is
+calibrated end to end in ``tests/validate/test_validate.py``
+(``test_webcam_validation_calibrates_first_and_shows_the_uncalibrated_bias``).
 """
 
 from __future__ import annotations
