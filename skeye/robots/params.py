@@ -179,7 +179,9 @@ class EstimatorParams:
       baro_noise_m 3.5, sonar_noise_m 0.1, flow_noise_rad_s 0.15,
       flow_min_quality 1, flow_min_height_m 0.1, gps_pos_noise_m 0.5, gps_vel_noise_m_s 0.3:
       PX4 EKF2's defaults EKF2_ACC_NOISE, EKF2_ABIAS_INIT, EKF2_ACC_B_NOISE, EKF2_BARO_NOISE,
-      EKF2_RNG_NOISE, EKF2_OF_N_MIN, EKF2_OF_QMIN, EKF2_MIN_RNG, EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE.
+      EKF2_RNG_NOISE, EKF2_OF_N_MIN, EKF2_OF_QMIN, EKF2_MIN_RNG, EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE;
+    - gps_delay_s 0.2: the age of a fix when the board gets it, configured as PX4's
+      EKF2_GPS_DELAY is; 0.2 s is the simulated receiver's ``Latency`` (docs/physics.md).
     """
 
     kind: str = "truth"
@@ -196,6 +198,7 @@ class EstimatorParams:
     flow_min_height_m: float = 0.1
     gps_pos_noise_m: float = 0.5
     gps_vel_noise_m_s: float = 0.3
+    gps_delay_s: float = 0.2
 
     def __post_init__(self) -> None:
         if self.kind not in ESTIMATOR_KINDS:

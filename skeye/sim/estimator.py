@@ -24,8 +24,13 @@ spawn pose, as USARSim's INS is: the operator places the vehicle at a known star
   while the board is disarmed. Without flow or GPS the horizontal velocity is
   the integrated accelerometer, and it drifts as on a real vehicle.
 
-Readings are fused when they arrive (no delayed-state buffer): a sensor's latency shows up as
-estimate lag, as on boards of the AscTec era. Every noise parameter is in
+Readings are fused when they arrive, except GPS: a receiver's fix describes where the vehicle
+was ``gps_delay_s`` ago (its latency, which the board is configured with), so it is compared
+with the horizontal estimate of that time, kept in a short history (``HISTORY`` entries, one
+per ``HISTORY_STEP_S``; the delay is clamped to the history's span), and the correction is
+applied to the estimate now and to the history (the delayed-innovation form of an inertial
+navigation's GPS fusion). Other sensors' latencies show up as estimate lag. Every noise
+parameter is in
 :class:`skeye.robots.params.EstimatorParams` (robot file ``[estimator]``), with its source.
 Hot path: plain floats, no numpy, no allocation beyond the output estimate.
 """
@@ -41,6 +46,8 @@ from skeye.sim.sensors.inertial import AccelReading, BaroReading, CompassReading
 from skeye.sim.sensors.navigation import GpsReading, InsEstimate
 from skeye.sim.sensors.ranging import FlowReading, SonarReading
 
+HISTORY: Final = 64  # horizontal estimate history entries (for the GPS delay)
+HISTORY_STEP_S: Final = 0.01  # one entry per this much sim time: 0.63 s of history
 _PI: Final = math.pi
 _TWO_PI: Final = 2.0 * math.pi
 
@@ -87,12 +94,24 @@ class Axis:
         self.c22 -= k2 * k2 * s
 
     def fuse_pos(self, z: float, var: float) -> None:
+        self.fuse_pos_innovation(z - self.p, var)
+
+    def fuse_pos_innovation(self, y: float, var: float) -> tuple[float, float]:
+        """Correct with a position innovation ``y``; the (position, velocity) change made."""
         s = self.c00 + var
-        self._correct(z - self.p, s, self.c00 / s, self.c01 / s, self.c02 / s)
+        k0, k1 = self.c00 / s, self.c01 / s
+        self._correct(y, s, k0, k1, self.c02 / s)
+        return k0 * y, k1 * y
 
     def fuse_vel(self, z: float, var: float) -> None:
+        self.fuse_vel_innovation(z - self.v, var)
+
+    def fuse_vel_innovation(self, y: float, var: float) -> tuple[float, float]:
+        """Correct with a velocity innovation ``y``; the (position, velocity) change made."""
         s = self.c11 + var
-        self._correct(z - self.v, s, self.c01 / s, self.c11 / s, self.c12 / s)
+        k0, k1 = self.c01 / s, self.c11 / s
+        self._correct(y, s, k0, k1, self.c12 / s)
+        return k0 * y, k1 * y
 
 
 class BoardEstimator:
@@ -138,6 +157,13 @@ class BoardEstimator:
         self.gps_t = -math.inf
         self.rest_t = -math.inf
         self.flow_used = 0
+        # History of the horizontal estimate (ring buffer): time, north/east position, velocity.
+        self.hist_t = [-math.inf] * HISTORY
+        self.hist_n = [0.0] * HISTORY
+        self.hist_e = [0.0] * HISTORY
+        self.hist_vn = [0.0] * HISTORY
+        self.hist_ve = [0.0] * HISTORY
+        self.hist_i = 0  # next slot
         self.mag_yaw_err = 0.0  # compass heading minus estimated yaw, times compass_gain
         self._est: InsEstimate | None = None
 
@@ -200,6 +226,13 @@ class BoardEstimator:
             ax[0].predict(r[0] * fx + r[1] * fy + r[2] * fz, dt, var, walk)
             ax[1].predict(r[3] * fx + r[4] * fy + r[5] * fz, dt, var, walk)
             ax[2].predict(r[6] * fx + r[7] * fy + r[8] * fz + GRAVITY_M_S2, dt, var, walk)
+            last_i = (self.hist_i - 1) % HISTORY
+            if t - self.hist_t[last_i] >= HISTORY_STEP_S - 1e-9:
+                i = self.hist_i
+                self.hist_t[i] = t
+                self.hist_n[i], self.hist_e[i] = ax[0].p, ax[1].p
+                self.hist_vn[i], self.hist_ve[i] = ax[0].v, ax[1].v
+                self.hist_i = (i + 1) % HISTORY
         # Attitude: measured up (the specific force at rest is -g, i.e. up) against the
         # estimated up (NED -z in the body frame).
         norm = math.sqrt(fx * fx + fy * fy + fz * fz)
@@ -298,17 +331,51 @@ class BoardEstimator:
             return
         ax = self.axes
         home = self.home
-        if home is None:
+        # The estimate when the fix was taken, against the fix; the corrections apply now and
+        # to every history entry (so the next fix is not compared with uncorrected states).
+        then_n, then_e, then_vn, then_ve = self._history_at(r.time_s - self.p.gps_delay_s)
+        if home is None:  # the first fix is home, where the estimate was when it was taken
             home = self.home = GeoOrigin(lat, lon, alt)
-            self.home_ned = (ax[0].p, ax[1].p)
+            self.home_ned = (then_n, then_e)
         n, e, _ = home.to_ned(lat, lon, alt)
         pv = self.p.gps_pos_noise_m * self.p.gps_pos_noise_m
         vv = self.p.gps_vel_noise_m_s * self.p.gps_vel_noise_m_s
-        ax[0].fuse_pos(self.home_ned[0] + n, pv)
-        ax[1].fuse_pos(self.home_ned[1] + e, pv)
-        ax[0].fuse_vel(vel[0], vv)
-        ax[1].fuse_vel(vel[1], vv)
+        dpn, dvn = ax[0].fuse_pos_innovation(self.home_ned[0] + n - then_n, pv)
+        dpe, dve = ax[1].fuse_pos_innovation(self.home_ned[1] + e - then_e, pv)
+        a, b = ax[0].fuse_vel_innovation(vel[0] - (then_vn + dvn), vv)
+        dpn, dvn = dpn + a, dvn + b
+        a, b = ax[1].fuse_vel_innovation(vel[1] - (then_ve + dve), vv)
+        dpe, dve = dpe + a, dve + b
+        for i in range(HISTORY):
+            self.hist_n[i] += dpn
+            self.hist_e[i] += dpe
+            self.hist_vn[i] += dvn
+            self.hist_ve[i] += dve
         self.gps_t = r.time_s
+
+    def _history_at(self, t: float) -> tuple[float, float, float, float]:
+        """The horizontal estimate (north, east, v north, v east) at time ``t``, interpolated
+        in the history; the newest entry for a time after it, the oldest for one before it."""
+        ax = self.axes
+        newest = (self.hist_i - 1) % HISTORY
+        if t >= self.hist_t[newest]:
+            return ax[0].p, ax[1].p, ax[0].v, ax[1].v
+        later = newest
+        for k in range(1, HISTORY):
+            i = (newest - k) % HISTORY
+            ti = self.hist_t[i]
+            if ti == -math.inf:
+                break
+            if ti <= t:
+                t1 = self.hist_t[later]
+                w = (t - ti) / (t1 - ti) if t1 > ti else 0.0
+                return (self.hist_n[i] + w * (self.hist_n[later] - self.hist_n[i]),
+                        self.hist_e[i] + w * (self.hist_e[later] - self.hist_e[i]),
+                        self.hist_vn[i] + w * (self.hist_vn[later] - self.hist_vn[i]),
+                        self.hist_ve[i] + w * (self.hist_ve[later] - self.hist_ve[i]))
+            later = i
+        return (self.hist_n[later], self.hist_e[later], self.hist_vn[later],
+                self.hist_ve[later])
 
     def at_rest(self, time_s: float) -> None:
         """The board is disarmed (motors off), so at rest: fuse zero velocity every 0.2 s with
