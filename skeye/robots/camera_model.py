@@ -12,9 +12,11 @@ Profiles (sources in docs/camera.md):
 
 * ``ideal``: a perfect pinhole with the mount's float field of view, no distortion, noise,
   blur, rolling shutter or latency, shadows off (algorithm debugging).
-* ``webcam``: a Logitech C-series-class USB webcam (C920 class): radial distortion
-  k1 = 0.12, k2 = -0.24, fixed exposure 10 ms, photon-transfer noise (EMVA 1288 model) with a
-  small-pixel CMOS's read noise and full well, a rolling shutter reading the rows out over the
+* ``webcam``: a Logitech HD Pro Webcam C920 at 4:3: the focal length and radial distortion of
+  a published OpenCV-model calibration of it at 800x600 (f 775.79 px, k1 0.112507,
+  k2 -0.272067, k3 0.15775; the focal length scaled with the image width), fixed exposure
+  10 ms, photon-transfer noise (EMVA 1288 model) with a small-pixel CMOS's read noise and full
+  well, a rolling shutter reading the rows out over the
   frame time, 8-bit MJPEG output, capture latency with jitter, shadows on.
 """
 
@@ -87,10 +89,12 @@ class CameraModel:
 
 # The webcam profile's figures (sources: docs/camera.md, "The webcam profile").
 _WEBCAM: dict[str, Any] = {
-    # Radial distortion of a Logitech-class USB webcam lens (issue 18's figures for USB webcams;
-    # the same order and signs as published OpenCV calibrations of C-series webcams).
-    "k1": 0.12,
-    "k2": -0.24,
+    # Radial distortion of a Logitech HD Pro Webcam C920 at 800x600: the published calibration
+    # by R. Atkinson (2018-05-30, 3DF Zephyr, OpenCV's model) in FIRST-Tech-Challenge's
+    # FtcRobotController, TeamCode/src/main/res/xml/teamwebcamcalibrations.xml.
+    "k1": 0.112507,
+    "k2": -0.272067,
+    "k3": 0.15775,
     # 10 ms: an indoor auto-exposure setting (C920 exposure_absolute 100 x 100 us units, UVC).
     "exposure_s": 0.010,
     # Rolling shutter reading the rows over a whole 30 fps frame period (worst case for a
@@ -109,7 +113,9 @@ _WEBCAM: dict[str, Any] = {
     "shadows": True,
 }
 
-WEBCAM_DIAGONAL_FOV_DEG = 78.0  # Logitech C920 HD Pro data sheet: "Diagonal field of view 78"
+# The same calibration's focal length at 800x600 (its 640x480 one, 622.0 px, is the same per
+# pixel of width to 0.2 %): scaled with the image width for other 4:3 sizes.
+WEBCAM_FOCAL_PX_AT_800 = 775.79
 
 _FIELDS = {f.name for f in fields(CameraModel)} - {"profile", "width", "height"}
 _INT_FIELDS = {"jpeg_quality", "noise_seed"}
@@ -147,10 +153,9 @@ def build_camera_model(
     if chosen == "webcam":
         values.update(_WEBCAM)
         values["line_time_s"] = 1.0 / (30.0 * height)
-        # The lens's 78 degree diagonal field of view (Logitech C920 data sheet) over the
-        # image diagonal, as a pinhole focal length (the mount's fov_h_rad is not used).
-        f = (math.hypot(width, height) / 2.0) / math.tan(math.radians(WEBCAM_DIAGONAL_FOV_DEG) / 2)
-        values["fx_px"] = values["fy_px"] = f
+        # The published C920 calibration's focal length, per pixel of image width (the mount's
+        # fov_h_rad is not used).
+        values["fx_px"] = values["fy_px"] = WEBCAM_FOCAL_PX_AT_800 * width / 800.0
     for key, value in params.items():
         if key == "profile" or key not in _FIELDS:
             continue

@@ -72,8 +72,8 @@ def where_it_lands(std_m: float, max_m: float) -> str:
             place = "between the paper's simulation and its real flight"
         else:
             place = "above the paper's real flight"
-        words.append(f"the {name} ({value * 100:.2f} cm) lies {place} "
-                     f"({sim * 100:.2f} / {real * 100:.1f} cm)")
+        words.append(f"the {name} ({value * 100:.2f} cm) lies {place} (paper: simulation "
+                     f"{sim * 100:.2f} cm, real flight {real * 100:.1f} cm)")
     return "; ".join(words)
 
 
@@ -171,6 +171,7 @@ def write_e2(out: Path, series_by_seed: dict[int, dict[str, E2Series]],
                 label=E2_RUN_LABELS[name])
     ax.axhline(5.0, color="tab:green", linestyle="--", linewidth=0.8, label="deadband 5 cm")
     ax.set_yscale("symlog", linthresh=20.0)
+    ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time since hold started (s)")
     ax.set_ylabel("distance from the pad centre (cm)")
     ax.set_title(f"E2: hold under random force, F_max {settings_by_seed[seed].f_max_n} "

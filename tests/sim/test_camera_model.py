@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from skeye.errors import ConfigError
-from skeye.robots.camera_model import WEBCAM_DIAGONAL_FOV_DEG, build_camera_model
+from skeye.robots.camera_model import WEBCAM_FOCAL_PX_AT_800, build_camera_model
 from skeye.robots.config import SensorMount, camera_fov_h_rad, camera_model
 from skeye.sim.cameras import CameraSpec, CameraSystem
 from skeye.sim.engine import Simulation
@@ -30,11 +30,10 @@ def test_the_hummingbird_webcam_profile():
     model = camera_model("hummingbird", profile="webcam")
     assert model.profile == "webcam"
     assert (model.width, model.height) == (800, 600)
-    assert model.dist_coeffs == (0.12, -0.24, 0.0, 0.0, 0.0)
+    assert model.dist_coeffs == (0.112507, -0.272067, 0.0, 0.0, 0.15775)
     assert model.shadows and model.jpeg_quality == 85 and model.latency_s > 0
-    # the 78 degree diagonal field of view over the image diagonal
-    f = 500.0 / math.tan(math.radians(WEBCAM_DIAGONAL_FOV_DEG) / 2)
-    assert model.fx_px == pytest.approx(f) and model.fy_px == pytest.approx(f)
+    # the published C920 calibration's focal length at 800x600
+    assert model.fx_px == WEBCAM_FOCAL_PX_AT_800 == model.fy_px == 775.79
     assert model.camera_matrix[0][2] == 399.5 and model.camera_matrix[1][2] == 299.5
     assert camera_fov_h_rad("hummingbird")[0] == 1.309  # the entry's (ideal) pinhole
     ideal = camera_model("hummingbird", profile="ideal")
@@ -100,7 +99,7 @@ def first_frame(sim: Simulation, buffer: FrameBuffer, name: str, body_ned, rate=
 def test_rendered_pad_rings_sit_where_opencv_projects_them():
     """A webcam frame straight above the pad: each ring edge along the centre row is where
     cv2.projectPoints puts that radius (the distortion moves the outer ones by pixels)."""
-    cam_height = 0.55
+    cam_height = 0.70  # the outer ring inside the 54.6 deg horizontal view
     sim = Simulation(load_world("pad"), seed=3)
     buffer = FrameBuffer()
     with CameraSystem(sim, buffer, synchronous=True, profile="webcam") as cams:
