@@ -183,6 +183,16 @@ def write_e2(out: Path, series_by_seed: dict[int, dict[str, E2Series]],
     return runs
 
 
+def _shown_path(path: str, out: Path) -> str:
+    """``path`` relative to the output folder when it lies inside it (the report travels)."""
+    if not path:
+        return "none"
+    try:
+        return f"`{Path(path).resolve().relative_to(out.resolve())}` (made by this run)"
+    except ValueError:
+        return f"`{path}`"
+
+
 def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[int]) -> None:
     setup = summary.get("setup", {})
     lines = [
@@ -190,7 +200,8 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         "",
         f"Seeds: {seeds}; mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
-        f"{setup.get('estimator', 'truth')}; calibration: {setup.get('calibration') or 'none'}.",
+        f"{setup.get('estimator', 'truth')}; calibration: "
+        f"{_shown_path(setup.get('calibration', ''), out)}.",
         "Simulator in lockstep, pilot with landing-pad vision on frames from the image server,",
         "a scripted ground client over the vehicle packet protocol. Figures are medians over",
         "the seeds, computed from the series in the CSV files.",
@@ -266,8 +277,9 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         lines += [
             "",
             "PAD_MODE 1 with deadband 0.05 m and 0.3 m/s for the vision run; the velocity hold "
-            "is HOLD on the board's own estimate (with the onboard estimator: optical flow); "
-            "the attitude run flies centred sticks in the AscTec height mode.",
+            "is HOLD on the board's own estimate (with the onboard estimator: optical flow and "
+            "sonar, and GPS where the world has a sky: the pad world does); the attitude run "
+            "flies centred sticks in the AscTec height mode.",
             "",
             f"Where skeye lands: {where_it_lands(e2['std_m'], e2['max_m'])}. "
             "Plot: `e2_distance.png`; series: `e2_series.csv`.",

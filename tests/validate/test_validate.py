@@ -100,7 +100,8 @@ def test_webcam_validation_calibrates_first_and_shows_the_uncalibrated_bias(tmp_
     assert e1["uncalibrated_rms_error_m"] > 2 * e1["rms_error_m"]
     rows = list(csv.DictReader(open(out / "e1_uncalibrated_series.csv")))
     assert len(rows) == e1["uncalibrated_frames"]
-    for needle in ("Camera calibration", "camera profile: webcam", "no calibration"):
+    for needle in ("Camera calibration", "camera profile: webcam", "no calibration",
+                   "calibration: `calibration/camera.toml` (made by this run)"):
         assert needle in report
 
 
