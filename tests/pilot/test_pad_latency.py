@@ -1,8 +1,9 @@
 """Pad hold and landing with a slow detector (issue 18): in lockstep, each detection is used
 300 ms of sim time after its frame's capture (``--vision-latency-ms 300``), so the figures do
 not depend on this machine's speed. The pilot predicts each detection to now from its capture
-pose (the INS history); the same flights without the prediction are measured and printed for
-comparison (docs/pilot.md, Vision latency), never asserted."""
+pose (the INS history). The same flights without the prediction, which assert nothing, are a
+benchmark: ``python benchmarks/bench_pad_latency.py --latency-ms 300`` (docs/pilot.md, Vision
+latency)."""
 
 from __future__ import annotations
 
@@ -136,23 +137,6 @@ def test_land_on_pad_from_3_m_with_300_ms_latency():
           f"landed after {landed_s:.1f} s, {miss_m * 100:.1f} cm from the centre")
     assert start == pytest.approx(3.0, abs=0.15)
     assert landed_s < 40.0 and miss_m < 0.05
-
-
-def test_the_same_flights_without_the_prediction_are_measured():
-    """Latency applied, prediction off: with the gains derived for that loop's longer delay,
-    and with the gains the pilot had before (kp 1.2, ki 0.15). The figures are printed for
-    the docs (docs/pilot.md, Vision latency), not asserted; benchmarks/bench_pad_latency.py
-    measures other latencies."""
-    for label, params in (("gains for its delay", None),
-                          ("previous gains", PadHoldParams(kp=1.2, ki=0.15))):
-        start, settled_s, late_m = hold_from_0_6_m(predict=False, params=params)
-        print(f"\npad hold, {LATENCY_S * 1e3:.0f} ms latency, not predicted ({label}): started "
-              f"{start:.2f} m off, within 0.1 m from {settled_s:.1f} s on, largest offset "
-              f"10-20 s: {late_m:.3f} m")
-        start, landed_s, miss_m = land_from_3_m(predict=False, params=params)
-        print(f"land on pad, {LATENCY_S * 1e3:.0f} ms latency, not predicted ({label}): from "
-              f"{start:.2f} m, landed after {landed_s:.1f} s, {miss_m * 100:.1f} cm from the "
-              "centre")
 
 
 def test_vision_too_slow_to_hold_is_said_and_the_vehicle_holds_still(caplog):
