@@ -41,15 +41,14 @@ def _figures_only(figures: dict[str, Any]) -> dict[str, float]:
 def run_experiment(trial: Trial, workdir: Path) -> tuple[dict[str, float], dict[str, Any]]:
     """Run the trial's experiment here; its figures and its series (for ``skeye validate``)."""
     from skeye.validate.experiments import e1_runs, e2_runs
-    from skeye.validate.report import e1_figures, e2_figures
+    from skeye.validate.report import add_uncalibrated, e1_figures, e2_figures
 
     settings = trial.settings()
     if trial.experiment == "E1":
         e1 = e1_runs(settings, workdir)
         figures = e1_figures(e1["E1"], trial.seed)
         if "E1_uncalibrated" in e1:
-            raw = e1_figures(e1["E1_uncalibrated"], trial.seed)
-            figures.update({f"uncalibrated_{k}": v for k, v in raw.items() if k != "seed"})
+            add_uncalibrated(figures, e1_figures(e1["E1_uncalibrated"], trial.seed))
         return _figures_only(figures), {k: dataclasses.asdict(v) for k, v in e1.items()}
     if trial.experiment == "E2":
         e2 = e2_runs(settings, workdir)

@@ -5,9 +5,9 @@ maths (:func:`skeye.vision.calibration.calibrate`) on the frames.
 How this works: each pose is a fresh vehicle spawned in the air in a lockstep simulator, whose
 first frame (its spawn state, taken before it moves) is used: the board in the centre of the
 image, near its corners and edges, and tilted (OpenCV's advice for pinning the distortion
-down). Where the board
-appears is worked out in pixels from the camera's focal length (asked of the simulator:
-``GETCONF`` ``FOV``), so a narrower or wider camera still sees the whole board in every view.
+down). Where the board appears is worked out in pixels from the camera's size and focal
+length (asked of the simulator: ``GETCONF`` ``Width``, ``Height``, ``FocalLength``), so a
+narrower or wider camera still sees the whole board in every view.
 ``skeye validate --camera webcam`` uses this when no ``--calibration`` is given;
 ``examples/capture_checkerboard.py`` does the same for a simulator a user runs.
 """

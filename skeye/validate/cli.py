@@ -23,6 +23,7 @@ from skeye.validate.experiments import (
     E1Series,
     E2Series,
     RunSettings,
+    e2_key,
 )
 from skeye.validate.report import PAPER, median_summary, write_e1, write_e2, write_report
 from skeye.vision.calibration import CalibrationResult, load_calibration
@@ -93,8 +94,8 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
                if cal_path else None)
         summary["E1"] = median_summary(write_e1(out, e1, raw))
     if "E2" in experiments:
-        e2 = {s: {run: E2Series(**series["E2", s]["E2" if run == "vision" else f"E2_{run}"])
-                  for run in E2_RUNS} for s in seed_list}
+        e2 = {s: {run: E2Series(**series["E2", s][e2_key(run)]) for run in E2_RUNS}
+              for s in seed_list}
         summary["E2"] = median_summary(write_e2(out, e2, settings))
     write_report(out, summary, quick, seed_list)
     return summary

@@ -14,9 +14,9 @@ reads the simulator's state behind the pilot's back.
   1/30 s), position hold on the pad (PAD_MODE 1: deadband 0.05 m, 0.3 m/s) for 5 minutes;
   the horizontal distance of the vehicle from the pad centre. Beside it, on the same seed and
   disturbance, two baselines without vision: the board's velocity hold on its own estimate
-  (HOLD; with ``--estimator onboard`` that is the flow sensor's velocity, indoors as on the
-  skeye extension board) and attitude + height hold (AscTec height mode, CTRL_INPUT with
-  centred sticks: no horizontal feedback at all).
+  (HOLD; with ``--estimator onboard`` that estimate comes from the optical flow and sonar, and
+  GPS where the world has a sky, as the pad world does) and attitude + height hold (AscTec
+  height mode, CTRL_INPUT with centred sticks: no horizontal feedback at all).
 
 The camera (``camera``: a ``skeye sim --camera-profile``) and the board's estimator
 (``estimator``: ``skeye sim --estimator``) are settings of every run; with a ``calibration``
@@ -199,8 +199,7 @@ def _interpolate(truth: Sequence[tuple[float, ...]], t: float) -> tuple[float, .
 
 
 # -- E1 ---------------------------------------------------------------------------------------
-def run_e1(settings: RunSettings, workdir: Path) -> E1Series:
-    name = "e1" if settings.calibration or settings.camera == "ideal" else "e1_uncalibrated"
+def run_e1(settings: RunSettings, workdir: Path, name: str = "e1") -> E1Series:
     record = workdir / f"{name}_seed{settings.seed}.rec"
     pads: dict[float, PadReport] = {}
     lock = threading.Lock()
@@ -271,14 +270,19 @@ def e1_runs(settings: RunSettings, workdir: Path) -> dict[str, E1Series]:
     """E1, and with a calibration E1 again without it (``E1_uncalibrated``)."""
     out = {"E1": run_e1(settings, workdir)}
     if settings.calibration:
-        out["E1_uncalibrated"] = run_e1(replace(settings, calibration=""), workdir)
+        out["E1_uncalibrated"] = run_e1(replace(settings, calibration=""), workdir,
+                                        "e1_uncalibrated")
     return out
 
 
+def e2_key(run: str) -> str:
+    """The series key of an E2 run: ``E2`` (vision), ``E2_velocity``, ``E2_attitude``."""
+    return "E2" if run == "vision" else f"E2_{run}"
+
+
 def e2_runs(settings: RunSettings, workdir: Path) -> dict[str, E2Series]:
-    """E2's three runs: ``E2`` (vision), ``E2_velocity`` and ``E2_attitude``."""
-    return {"E2" if run == "vision" else f"E2_{run}": run_e2(settings, workdir, run=run)
-            for run in E2_RUNS}
+    """E2's three runs, by :func:`e2_key`."""
+    return {e2_key(run): run_e2(settings, workdir, run=run) for run in E2_RUNS}
 
 
 def run_all(settings: RunSettings, experiments: tuple[str, ...], workdir: str | None = None

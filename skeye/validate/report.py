@@ -93,6 +93,12 @@ def median_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def add_uncalibrated(figures: dict[str, Any], uncalibrated: dict[str, Any]) -> None:
+    """Add the E1 flight without the calibration's figures to ``figures``, as
+    ``uncalibrated_*``."""
+    figures.update({f"uncalibrated_{k}": v for k, v in uncalibrated.items() if k != "seed"})
+
+
 def _write_e1_csv(path: Path, series_by_seed: dict[int, E1Series]) -> list[dict[str, Any]]:
     runs = []
     with open(path, "w", newline="") as f:
@@ -113,7 +119,7 @@ def write_e1(out: Path, series_by_seed: dict[int, E1Series],
     if uncalibrated:
         raw = _write_e1_csv(out / "e1_uncalibrated_series.csv", uncalibrated)
         for run, other in zip(runs, raw, strict=True):
-            run.update({f"uncalibrated_{k}": v for k, v in other.items() if k != "seed"})
+            add_uncalibrated(run, other)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -152,6 +152,8 @@ def test_illegal_requests_raise_before_sending(lockstep_sim: SimHandle) -> None:
             copter.take_off(1.0, feedback="compass")
         with pytest.raises(LocalProtocolError, match="exceeds"):
             copter.set_velocity(forward_m_s=50.0)
+        with pytest.raises(LocalProtocolError, match="board_mode must be None or 'gps'"):
+            copter.set_velocity(board_mode="height")
         assert copter.state is FlightState.LANDED
 
 
