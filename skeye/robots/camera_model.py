@@ -61,6 +61,7 @@ class CameraModel:
     latency_s: float = 0.0  # capture latency: frame delivered this long after its capture
     latency_jitter_s: float = 0.0  # +- uniform jitter on the latency
     shadows: bool = False
+    msaa_samples: int = 4  # renderer multisampling: 4 area-averages edge pixels, 0 point-samples
     noise_seed: int = 0
 
     @property
@@ -111,6 +112,9 @@ _WEBCAM: dict[str, Any] = {
     "latency_s": 0.060,
     "latency_jitter_s": 0.010,
     "shadows": True,
+    # Point-sampled render (no multisampling): software GL's 4x MSAA doubles the render time
+    # (docs/camera.md, "Rendering cost"); the lens remap's bilinear interpolation smooths edges.
+    "msaa_samples": 0,
 }
 
 # The same calibration's focal length at 800x600 (its 640x480 one, 622.0 px, is the same per
@@ -118,7 +122,7 @@ _WEBCAM: dict[str, Any] = {
 WEBCAM_FOCAL_PX_AT_800 = 775.79
 
 _FIELDS = {f.name for f in fields(CameraModel)} - {"profile", "width", "height"}
-_INT_FIELDS = {"jpeg_quality", "noise_seed"}
+_INT_FIELDS = {"jpeg_quality", "noise_seed", "msaa_samples"}
 _BOOL_FIELDS = {"shadows"}
 _SIGNED_FIELDS = {"k1", "k2", "p1", "p2", "k3"}
 _POSITIVE_FIELDS = {"fx_px", "fy_px", "gain"}
@@ -161,6 +165,9 @@ def build_camera_model(
             continue
         values[key] = _check(key, value, where)
     model = CameraModel(profile=chosen, width=width, height=height, **values)
+    if model.msaa_samples > 16:
+        raise ConfigError(f"{where}: msaa_samples must be 0 (point-sampled) .. 16, got "
+                          f"{model.msaa_samples}")
     if not (0 <= model.jpeg_quality <= 100):
         raise ConfigError(f"{where}: jpeg_quality must be 0 (raw) .. 100, got {model.jpeg_quality}")
     if model.latency_jitter_s > model.latency_s:

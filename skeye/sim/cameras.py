@@ -419,7 +419,7 @@ class CameraSystem:
 
         model = None
         data = None
-        renderers: dict[tuple[int, int], Any] = {}
+        renderers: dict[tuple[int, int, int], Any] = {}
         try:
             while not self._stop.is_set():
                 job = self._jobs.get()
@@ -440,10 +440,11 @@ class CameraSystem:
                     mujoco.mj_comVel(model, data)
                     mujoco.mj_camlight(model, data)
                     for robot, cam in job.shots:
-                        size = cam.render_size
-                        if size not in renderers:
-                            renderers[size] = _make_renderer(mujoco, model, *size)
-                        renderer = renderers[size]
+                        samples = cam.model.msaa_samples if cam.model is not None else 4
+                        spec = (*cam.render_size, samples)
+                        if spec not in renderers:
+                            renderers[spec] = _make_renderer(mujoco, model, *spec)
+                        renderer = renderers[spec]
                         name = camera_model_name(robot.name, cam.name)
                         shadows = cam.model is not None and cam.model.shadows
                         renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(shadows)
@@ -486,8 +487,13 @@ def _camera_index(model: Any, name: str) -> int:
     return int(idx)
 
 
-def _make_renderer(mujoco: Any, model: Any, height: int, width: int) -> Any:
+def _make_renderer(mujoco: Any, model: Any, height: int, width: int, samples: int) -> Any:
+    """A renderer of this size with ``samples``-fold multisampling (MuJoCo reads the model's
+    ``offsamples`` when it makes the GL context; the model's own value is put back)."""
     backend = os.environ.get("MUJOCO_GL", "?")
+    quality = model.vis.quality
+    before = int(quality.offsamples)
+    quality.offsamples = samples
     try:
         renderer = mujoco.Renderer(model, height=height, width=width)
     except Exception as exc:
@@ -497,6 +503,8 @@ def _make_renderer(mujoco: Any, model: Any, height: int, width: int) -> Any:
             "or OSMesa (apt-get install libosmesa6) for MUJOCO_GL=osmesa, or run with a display "
             "(MUJOCO_GL=glfw)"
         ) from exc
+    finally:
+        quality.offsamples = before
     flags = renderer.scene.flags
     flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
     flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0

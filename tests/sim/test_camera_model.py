@@ -59,6 +59,8 @@ def test_robot_file_overrides_and_bad_values_are_named():
         ({"fx_px": 0}, "fx_px must be positive"),
         ({"shadows": 1}, "shadows must be true or false"),
         ({"jpeg_quality": 101}, "jpeg_quality must be 0 (raw) .. 100"),
+        ({"msaa_samples": 32}, "msaa_samples must be 0 (point-sampled) .. 16"),
+        ({"msaa_samples": 2.5}, "msaa_samples must be a non-negative integer"),
         ({"latency_s": 0.01, "latency_jitter_s": 0.02}, "latency_jitter_s (0.02) must not exceed"),
         ({"profile": "webcam", "k2": -1.0}, "folds over"),
         ({"lens_colour": 3}, "unknown key(s) ['lens_colour']"),
@@ -209,6 +211,33 @@ def test_shadows_on_darken_the_ground_under_the_vehicle(tmp_path: Path):
     ratio = (frames["hummingbird"] + 1.0) / (frames["noshadow"] + 1.0)
     lit, shaded = np.mean(ratio > 1.2), np.mean(ratio < 1.05)
     assert lit > 0.05 and shaded > 0.05, (lit, shaded)
+
+
+def test_point_sampled_render_has_no_antialiased_geometry_edges(tmp_path: Path):
+    """``msaa_samples = 0`` (the webcam profile's) renders each pixel at one point: the pad's
+    outline against the ground (a geometry edge) loses the in-between greys of the 4x
+    multisampled render. The rings inside are texture: filtered alike in both."""
+    text = (ROBOTS / "hummingbird.toml").read_text()
+    text = text.replace('name = "hummingbird"', 'name = "pointsampled"', 1)
+    text = text.replace('profile = "ideal"', 'profile = "ideal"\nmsaa_samples = 0')
+    (tmp_path / "pointsampled.toml").write_text(text)
+    grey, mixed = {}, {}
+    for cls in ("hummingbird", "pointsampled"):
+        sim = Simulation(load_world("pad"), seed=3, robot_dirs=(tmp_path,))
+        buffer = FrameBuffer()
+        with CameraSystem(sim, buffer, synchronous=True):
+            sim.spawn(cls, name="S1", sink=lambda events: None,
+                      location_ned_m=(0.0, 0.0, -2.5), rotation_rpy_rad=(0.0, 0.0, 0.3))
+            sim.step(1)
+            frame = buffer.latest("S1/Down")
+            assert frame is not None
+            grey[cls] = cv2.cvtColor(np.array(frame.rgb), cv2.COLOR_RGB2GRAY).astype(float)
+        ground = float(np.median(grey[cls]))  # the pad covers a small part of the view
+        pad = grey[cls][200:400, 300:500]  # the pad and the ground around it
+        mixed[cls] = int(((pad > 0.2 * ground) & (pad < 0.8 * ground)).sum())
+    changed = np.abs(grey["hummingbird"] - grey["pointsampled"]) > 20
+    assert 100 < changed.sum() < 2000, changed.sum()  # the outline's pixels, nothing else
+    assert mixed["pointsampled"] < mixed["hummingbird"] - 150, mixed
 
 
 def test_frames_arrive_capture_latency_after_capture():
