@@ -1,7 +1,7 @@
 """Pad hold and landing in real time, vision as slow as this machine makes it (issue 18).
 
 Run: ``MUJOCO_GL=egl python benchmarks/bench_pad_realtime.py [--camera webcam|ideal]
-[--flights hold land land4]``.
+[--flights hold land land4] [--trace]``.
 
 What it does: with ``--camera webcam`` it first calibrates the simulated webcam as a user would
 (:func:`skeye.validate.calibration.calibrate_simulated_camera`, a lockstep simulator of the
@@ -55,7 +55,8 @@ def sim_time(vehicle: Vehicle) -> float:
     return nav_status_to_si(status).time_s if status is not None else 0.0
 
 
-def fly(name: str, camera: str, calibration: Path | None, workdir: Path) -> str:
+def fly(name: str, camera: str, calibration: Path | None, workdir: Path,
+        trace: bool = False) -> str:
     (north, east), height_m, yaw_rad, mode, limit_s = FLIGHTS[name]
     record = workdir / f"{name}.rec"
     ages: list[float] = []
@@ -100,7 +101,15 @@ def fly(name: str, camera: str, calibration: Path | None, workdir: Path) -> str:
         end = sim_time(vehicle)
         last_status = vehicle.nav_status()
         landed = last_status is not None and last_status.state is NavState.LANDED
-    truth = [(t, math.hypot(n, e)) for t, n, e, _d, _c in ground_truth(record) if t >= start]
+    track = [(t, n, e, d) for t, n, e, d, _c in ground_truth(record) if t >= start]
+    truth = [(t, math.hypot(n, e)) for t, n, e, _d in track]
+    if trace:
+        due = start
+        for t, n, e, d in track:
+            if t >= due:
+                print(f"  {name} t+{t - start:5.1f} s: north {n:+.2f} m, east {e:+.2f} m, "
+                      f"height {-d:.2f} m", flush=True)
+                due += 5.0
     with lock:
         age = (f"detection age median {statistics.median(ages) * 1e3:.0f} ms, p90 "
                f"{sorted(ages)[int(0.9 * (len(ages) - 1))] * 1e3:.0f} ms ({len(ages)} reports)"
@@ -125,13 +134,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--camera", choices=("webcam", "ideal"), default="webcam")
     ap.add_argument("--flights", nargs="+", choices=sorted(FLIGHTS), default=list(FLIGHTS))
+    ap.add_argument("--trace", action="store_true",
+                    help="print the true position every 5 s of each flight")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="skeye-pad-rt-") as tmp:
         calibration = None
         if args.camera != "ideal":
             calibration, _ = calibrate_simulated_camera(Path(tmp) / "calibration", args.camera)
         for name in args.flights:
-            print(fly(name, args.camera, calibration, Path(tmp)), flush=True)
+            print(fly(name, args.camera, calibration, Path(tmp), args.trace), flush=True)
 
 
 if __name__ == "__main__":

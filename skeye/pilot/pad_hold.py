@@ -9,14 +9,19 @@ to ``max_speed_m_s`` (0.3 m/s by default; the integral does not grow while the c
 the limit). The gains come from the loop's delay (:func:`loop_gains`, docs/pilot.md "Vision
 latency"). Inside the deadband the command is zero (the vehicle's own board then holds zero
 velocity on its INS estimate, and the integrator keeps its value so a steady push stays
-compensated). Vertically, HOLD keeps the height; LAND descends while the vehicle is over the
-pad (offset within ``centre_tolerance_m``), correcting down to a tighter deadband
-(``landing_deadband_m``) so it aims at the centre, more slowly near the ground, and commits to
-the touchdown below ``commit_height_m``, before the detector loses the pad (it needs two rings).
+compensated). Vertically, HOLD keeps the height; LAND descends while the pad is within a cone
+below the vehicle (offset at most ``descent_cone`` times the height, or ``centre_tolerance_m``:
+the pad stays well inside any camera's view while the approach goes on), correcting down to a
+tighter deadband (``landing_deadband_m``) so it aims at the centre; it descends at
+``high_descent_m_s`` above ``high_above_m``, ``descent_m_s`` below, ``final_descent_m_s``
+below ``slow_below_m``, and commits to the touchdown below ``commit_height_m`` once centred
+(offset within ``centre_tolerance_m``), before the detector loses the pad (it needs two rings).
 
-Losing the pad (no detection for ``lost_after_s``) makes the vehicle stop, then climb slowly
-(``search_climb_m_s``, up to ``search_ceiling_m``) to widen its view, and say so through
-``searching``. The law is pure: it takes observations and the time, returns set-points; the
+Losing the pad (no detection for ``lost_after_s``), or never having seen it, makes the vehicle
+stop, then climb (``search_climb_per_s`` of its height per second, so the view widens at a
+steady rate, within ``search_climb_min_m_s``..``search_climb_max_m_s``, up to
+``search_ceiling_m``) to widen its view, and say so through ``searching``. The law is pure: it
+takes observations, the vehicle's own height estimate and the time, returns set-points; the
 pilot owns the clock, the camera and the link.
 """
 
@@ -91,15 +96,20 @@ class PadHoldParams:
     kp: float = _KP  # (m/s) per m of offset: loop_gains(design_delay(...)), about 0.81
     ki: float = _KI  # (m/s) per m s: about 0.065
     integral_limit_m_s: float = 0.15
+    high_descent_m_s: float = 0.5  # ArduPilot Copter's LAND_SPEED default (50 cm/s)
+    high_above_m: float = 2.0
     descent_m_s: float = 0.25
     final_descent_m_s: float = 0.12
     slow_below_m: float = 0.8
+    descent_cone: float = 0.2  # descend while offset <= 0.2 x height (11 deg off the vertical)
     centre_tolerance_m: float = 0.08
     landing_deadband_m: float = 0.02  # LAND aims at the centre, not just near it
     commit_height_m: float = 0.5  # the detector needs two rings: lost below ~0.3 m
     lost_after_s: float = 0.5
-    search_climb_m_s: float = 0.1
-    search_ceiling_m: float = 4.0
+    search_climb_per_s: float = 0.1  # the view widens 10 % per second
+    search_climb_min_m_s: float = 0.1
+    search_climb_max_m_s: float = 0.5
+    search_ceiling_m: float = 8.0
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -143,16 +153,25 @@ class PadHoldLaw:
         height_m: float = 0.0,
         *,
         landing: bool = False,
+        altitude_m: float | None = None,
     ) -> PadSetpoint:
-        """One observation (or a frame without the pad) -> a velocity set-point."""
+        """One observation (or a frame without the pad) -> a velocity set-point.
+
+        ``height_m`` is the detection's (above the pad); ``altitude_m`` the vehicle's own
+        height estimate, which bounds the search when the pad is not seen (else the height of
+        the last detection does)."""
         p = self.p
         dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
         self._last_time_s = time_s
         if not found:
             if self._last_seen_s is None or time_s - self._last_seen_s >= p.lost_after_s:
-                climb = p.search_climb_m_s
-                if self._height_m is not None and self._height_m >= p.search_ceiling_m:
-                    climb = 0.0
+                height = altitude_m if altitude_m is not None else self._height_m
+                climb = p.search_climb_min_m_s
+                if height is not None:
+                    climb = min(p.search_climb_max_m_s,
+                                max(p.search_climb_min_m_s, p.search_climb_per_s * height))
+                    if height >= p.search_ceiling_m:
+                        climb = 0.0
                 return PadSetpoint(0.0, 0.0, climb, searching=True)
             return PadSetpoint(0.0, 0.0, 0.0)  # a missed frame or two: keep still
         self._last_seen_s = time_s
@@ -183,6 +202,12 @@ class PadHoldLaw:
         if landing:
             if height_m <= p.commit_height_m and offset <= p.centre_tolerance_m:
                 return PadSetpoint(vf, vr, -p.final_descent_m_s, touchdown=True)
-            if offset <= p.centre_tolerance_m:
-                up = -(p.final_descent_m_s if height_m < p.slow_below_m else p.descent_m_s)
+            cone = max(p.centre_tolerance_m, p.descent_cone * (height_m - p.commit_height_m))
+            if offset <= cone:
+                if height_m < p.slow_below_m:
+                    up = -p.final_descent_m_s
+                elif height_m > p.high_above_m:
+                    up = -p.high_descent_m_s
+                else:
+                    up = -p.descent_m_s
         return PadSetpoint(vf, vr, up)

@@ -296,7 +296,7 @@ class PadVision:
         elif self._missed_since_s is None:
             self._missed_since_s = obs.frame_time_s
         if not self.predict:
-            self._navigate(obs.found, obs.dx_m, obs.dy_m, obs.height_m, now.time_s)
+            self._navigate(obs.found, obs.dx_m, obs.dy_m, obs.height_m, now)
 
     def _navigate_tick(self, now: Pose) -> None:
         """Predicting: fly on the pad offset predicted to now, once per control period."""
@@ -311,10 +311,10 @@ class PadVision:
             or self._newest_capture_s - fix.capture_s < self.law.p.lost_after_s
         )
         if fix is None or not seen:
-            self._navigate(False, 0.0, 0.0, 0.0, now.time_s)
+            self._navigate(False, 0.0, 0.0, 0.0, now)
             return
         forward, right, height = offset_now(fix, now)
-        self._navigate(True, forward, right, height, now.time_s)
+        self._navigate(True, forward, right, height, now)
 
     # -- the worker's side -------------------------------------------------------------------
     def _run(self) -> None:
@@ -401,7 +401,7 @@ class PadVision:
         return replace(self.base_params, kp=kp, ki=ki)
 
     def _navigate(self, found: bool, forward_m: float, right_m: float, height_m: float,
-                  time_s: float) -> None:
+                  now: Pose) -> None:
         boards = self.boards
         settings = boards.pad.settings
         mode = settings.mode
@@ -422,8 +422,9 @@ class PadVision:
         if self.stats.too_slow:
             boards.airframe.set_velocity(0.0, 0.0, 0.0, 0.0, None)
             return
-        sp = self.law.update(time_s, found, forward_m, right_m, height_m,
-                             landing=mode == PadAction.LAND)
+        sp = self.law.update(now.time_s, found, forward_m, right_m, height_m,
+                             landing=mode == PadAction.LAND,
+                             altitude_m=boards.home_ned_m[2] - now.down_m)
         if sp.searching:
             log.info("pad lost: holding and climbing slowly to find it")
         if sp.touchdown:

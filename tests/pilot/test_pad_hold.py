@@ -35,11 +35,17 @@ def test_integral_compensates_a_steady_offset_and_is_bounded():
     assert sp.right_m_s <= p.kp * 0.08 + p.integral_limit_m_s + 1e-9
 
 
-def test_landing_descends_only_when_centred_and_commits_low():
+def test_landing_descends_within_the_cone_and_commits_low_when_centred():
     law = PadHoldLaw()
-    assert law.update(0.0, True, 0.2, 0.0, 1.5, landing=True).up_m_s == 0.0
+    # 1.5 m up, the cone is 0.2 x (1.5 - 0.5) = 0.2 m wide: approach first
+    assert law.update(0.0, True, 0.25, 0.0, 1.5, landing=True).up_m_s == 0.0
+    approach = law.update(0.05, True, 0.15, 0.0, 1.5, landing=True)
+    assert approach.up_m_s == -0.25 and approach.forward_m_s > 0  # descends while approaching
     assert law.update(0.1, True, 0.01, 0.0, 1.5, landing=True).up_m_s == -0.25
+    high = law.update(0.15, True, 0.5, 0.0, 4.5, landing=True)  # cone 0.8 m at 4.5 m
+    assert high.up_m_s == -0.5
     assert law.update(0.2, True, 0.01, 0.0, 0.6, landing=True).up_m_s == -0.12
+    assert law.update(0.22, True, 0.09, 0.0, 0.6, landing=True).up_m_s == 0.0  # not centred
     assert not law.update(0.25, True, 0.01, 0.0, 0.6, landing=True).touchdown
     final = law.update(0.3, True, 0.01, 0.0, 0.3, landing=True)
     assert final.touchdown and final.up_m_s < 0
@@ -55,6 +61,17 @@ def test_losing_the_pad_holds_then_searches_upwards_to_a_ceiling():
     assert (lost.forward_m_s, lost.right_m_s) == (0.0, 0.0)
     law.update(0.7, True, 0.0, 0.0, 2.1)
     assert law.update(1.5, False).up_m_s == 0.0  # at the ceiling: stop climbing
+
+
+def test_the_search_climbs_faster_higher_up_and_stops_at_the_ceiling_unseen():
+    """Never seen: the vehicle's own height sets the climb (10 % of it per second, 0.1-0.5 m/s)
+    and the ceiling."""
+    law = PadHoldLaw(PadHoldParams(search_ceiling_m=6.0))
+    assert law.update(0.0, False, altitude_m=0.8).up_m_s == pytest.approx(0.1)
+    assert law.update(0.1, False, altitude_m=3.0).up_m_s == pytest.approx(0.3)
+    assert law.update(0.2, False, altitude_m=5.5).up_m_s == pytest.approx(0.5)
+    at_top = law.update(0.3, False, altitude_m=6.0)
+    assert at_top.searching and at_top.up_m_s == 0.0
 
 
 def test_bad_parameters_are_refused():

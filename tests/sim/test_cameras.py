@@ -27,13 +27,14 @@ ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
 @contextmanager
 def sim_with_images(
-    mode: str = "lockstep", robot_dirs: tuple[Path, ...] = (), estimator: str | None = None
+    mode: str = "lockstep", robot_dirs: tuple[Path, ...] = (), estimator: str | None = None,
+    profile: str = "ideal",
 ) -> Iterator[tuple[ControlServer, ImageServer, CameraSystem]]:
     sim = Simulation(load_world("pad"), seed=3, robot_dirs=robot_dirs, estimator=estimator)
     buffer = FrameBuffer()
     with (
         SimulationRunner(sim, mode=mode) as runner,
-        CameraSystem(sim, buffer, synchronous=mode == "lockstep", profile="ideal") as cameras,
+        CameraSystem(sim, buffer, synchronous=mode == "lockstep", profile=profile) as cameras,
         ControlServer(runner, port=0) as control,
         ImageServer(buffer, port=0) as images,
     ):
