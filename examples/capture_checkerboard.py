@@ -1,7 +1,8 @@
 """Photograph the checkerboard world's board from 14 poses, for ``skeye calibrate``.
 
 Needs ``skeye sim --world checkerboard --mode lockstep --image-port 5003`` ($SKEYE_SIM,
-$SKEYE_IMAGES; add ``--camera-profile webcam`` for the webcam's lens); writes board00.png ...
+$SKEYE_IMAGES; the Hummingbird's webcam, or ``--camera-profile ideal`` for the pinhole); writes
+board00.png ...
 into $SKEYE_BOARD_DIR (default: the current folder). Each pose is a fresh vehicle whose first
 frame, taken before it moves, is kept: the board in the centre, near the corners and edges of
 the image, and tilted (docs/calibration.md; the poses are in skeye/validate/calibration.py).

@@ -50,6 +50,19 @@ def _running(pid: int) -> bool:
 
 
 @pytest.fixture(scope="session", autouse=True)
+def own_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """What skeye keeps in the user's cache (``skeye up``'s camera calibration) goes to the
+    session's own folder: tests never write in the home directory, and start from nothing."""
+    before = os.environ.get("XDG_CACHE_HOME")
+    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
+    yield
+    if before is None:
+        os.environ.pop("XDG_CACHE_HOME", None)
+    else:
+        os.environ["XDG_CACHE_HOME"] = before
+
+
+@pytest.fixture(scope="session", autouse=True)
 def no_orphans() -> Iterator[None]:
     yield
     left = [pid for pid in child_pids(os.getpid()) if _running(pid)]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 import subprocess
 import sys
@@ -45,13 +44,14 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
     if script.name == "camera.py":
         assert (tmp_path / "camera.png").stat().st_size > 1000
         assert "(600, 800, 3)" in done.stdout
-    if script.name == "capture_checkerboard.py":  # the frames calibrate the ideal camera
+    if script.name == "capture_checkerboard.py":  # the frames calibrate the default camera
         from skeye.cli import main
+        from skeye.robots.config import camera_model
         from skeye.vision.calibration import load_calibration
 
         boards = sorted(str(p) for p in tmp_path.glob("board*.png"))
         assert len(boards) == 14, done.stdout
         assert main(["calibrate", *boards, "--out", str(tmp_path / "camera.toml")]) == 0
         cal = load_calibration(tmp_path / "camera.toml")
-        f = 400 / math.tan(1.309 / 2)
-        assert abs(cal.fx / f - 1) < 0.01 and abs(cal.dist[0]) < 0.02, cal
+        lens = camera_model("hummingbird")  # the webcam's
+        assert abs(cal.fx / lens.fx_px - 1) < 0.01 and abs(cal.dist[0] - lens.k1) < 0.02, cal

@@ -12,12 +12,21 @@ them all: SIGTERM in reverse order, then SIGKILL for any that has not exited aft
 seconds. The pilot serves its camera on ``--video-port`` (default 7001) and ground control shows
 that. Before starting anything it checks that each of its five ports is free and names the
 option that moves a taken one.
+
+The pilot flies the robot's camera with its calibration, as on a real vehicle: with
+``--calibration auto`` (the default) and a robot camera whose lens distorts (the Hummingbird's
+``webcam`` profile), ``skeye up`` first calibrates that camera the way a user would (the
+checkerboard world photographed from 14 poses, then OpenCV's ``calibrateCamera``:
+:func:`skeye.validate.calibration.calibrate_simulated_camera`) and keeps the result in
+``$XDG_CACHE_HOME/skeye/calibration/`` (``~/.cache``), keyed by the camera model, so it is done
+once. ``--calibration FILE`` gives the pilot that file (``skeye calibrate``'s), ``none`` none.
 """
 
 from __future__ import annotations
 
 import argparse
 import atexit
+import hashlib
 import os
 import signal
 import socket
@@ -26,6 +35,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from skeye.errors import ConfigError
@@ -190,6 +200,46 @@ def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> boo
     return bool(dead)
 
 
+def pilot_calibration(choice: str, robot: str) -> Path | None:
+    """The calibration file ``skeye up`` gives the pilot: ``choice`` is ``auto``, ``none`` or a
+    file (see the module's docstring).
+
+    Raises:
+        ConfigError: a file that does not exist, an unknown robot, a calibration that failed.
+    """
+    from skeye.robots.config import CAMERA_TYPE, camera_model, load_robot_config
+
+    if choice == "none":
+        return None
+    if choice != "auto":
+        path = Path(choice)
+        if not path.is_file():
+            raise ConfigError(f"--calibration {choice}: no such file (or give auto or none)")
+        return path
+    if not any(m.type_name.lower() == CAMERA_TYPE for m in load_robot_config(robot).sensors):
+        return None  # a robot without a camera: nothing to calibrate
+    model = camera_model(robot)
+    if not model.distorted:
+        return None  # the ideal pinhole: the pilot's field of view from GETCONF is exact
+    key = hashlib.sha256(repr(model).encode()).hexdigest()[:12]
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    workdir = cache / "skeye" / "calibration" / f"{robot}-{model.profile}-{key}"
+    path = workdir / "camera.toml"
+    if path.is_file():
+        print(f"skeye up: the pilot uses the camera calibration {path}", flush=True)
+        return path
+    print(f"skeye up: calibrating the {robot}'s {model.profile} camera on the checkerboard "
+          f"world (once; kept in {workdir})", flush=True)
+    from skeye.validate.calibration import calibrate_simulated_camera
+
+    try:
+        path, _ = calibrate_simulated_camera(workdir, model.profile, robot=robot)
+    except Exception as exc:
+        raise ConfigError(f"calibrating the {robot}'s camera failed: {exc} (give "
+                          "--calibration FILE or none)") from exc
+    return path
+
+
 def run_up(args: argparse.Namespace) -> int:
     """Start simulator, pilot and ground control; stop them all on a signal."""
     from skeye.ground.guard import TOKEN_ENV, new_token
@@ -229,6 +279,7 @@ def run_up(args: argparse.Namespace) -> int:
             ("the pilot's video", "127.0.0.1", args.video_port, "--video-port"),
             ("ground control", args.host, args.ground_port, "--ground-port"),
         ])
+        calibration = pilot_calibration(args.calibration, args.robot)
         start(
             "simulator",
             _child_argv(
@@ -244,6 +295,7 @@ def run_up(args: argparse.Namespace) -> int:
                 "pilot", "--sim", f"127.0.0.1:{args.sim_port}",
                 "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
                 "--video-port", str(args.video_port), "--robot", args.robot,
+                *(["--calibration", str(calibration)] if calibration is not None else []),
             ),
             args.pilot_port,
         )
@@ -301,6 +353,10 @@ def _add_up(sub: Any) -> None:
                    help="the pilot's video port (camera frames with its pad detection)")
     p.add_argument("--ground-port", type=int, default=8080)
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
+    p.add_argument("--calibration", default="auto", metavar="auto|none|FILE",
+                   help="the pilot's camera calibration: auto (default) calibrates a "
+                        "distorting simulated camera once and keeps it; a skeye calibrate file; "
+                        "none")
     _add_allow_host(p)
     p.set_defaults(func=run_up)
 

@@ -223,28 +223,6 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
     return configs
 
 
-def camera_fov_h_rad(robot: str | Path, camera: str | None = None) -> tuple[float, str]:
-    """The horizontal field of view of a robot class's camera (its first, or the one named),
-    and a phrase saying where it came from, for messages: the entry's ``fov_h_rad`` (the ideal
-    profile's pinhole; a camera model with its own focal length, such as the webcam profile,
-    has ``camera_model(...).fov_h_rad``, which the simulator reports in GETCONF).
-
-    Raises:
-        ConfigError: unknown robot class, or no such camera with ``fov_h_rad``.
-    """
-    config = load_robot_config(robot)
-    for mount in config.sensors:
-        if mount.type_name.lower() != "camera":
-            continue
-        if camera is not None and mount.name.lower() != camera.lower():
-            continue
-        fov = dict(mount.params).get("fov_h_rad")
-        if isinstance(fov, int | float) and not isinstance(fov, bool):
-            return float(fov), f"camera {mount.name!r} of robot file {config.class_name}"
-    which = f"camera named {camera!r}" if camera else "camera"
-    raise ConfigError(f"robot class {config.class_name!r} has no {which} with fov_h_rad")
-
-
 def camera_model(
     robot: str | Path, camera: str | None = None, profile: str | None = None
 ) -> CameraModel:

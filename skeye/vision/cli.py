@@ -67,14 +67,18 @@ def cmd_detect(args: argparse.Namespace) -> int:
         if args.fov is None:  # not used for the geometry: the calibration's matrix is
             args.fov = calibration.fov_h_rad
     if args.fov is None:  # the camera the frame most likely came from: the robot file's
-        from skeye.robots.config import camera_fov_h_rad
+        from skeye.robots.config import camera_model
 
         try:
-            args.fov, source = camera_fov_h_rad(args.robot, args.camera)
+            model = camera_model(args.robot, args.camera)
         except ConfigError as exc:
             return _fail(f"{exc}; give --fov")
+        args.fov = model.fov_h_rad
+        lens = (f"; its lens distorts (k1 {model.k1:g}): give --calibration for exact figures"
+                if model.distorted and calibration is None else "")
         print(f"skeye vision detect: --fov not given: using {args.fov:g} rad, the horizontal "
-              f"field of view of the {source}", file=sys.stderr)
+              f"field of view of robot {args.robot}'s camera ({model.profile} profile){lens}",
+              file=sys.stderr)
     if not math.isfinite(args.fov) or not 0.0 < args.fov < math.pi:
         return _fail(f"--fov must be in (0, pi) radians, got {args.fov}")
     if (args.roll is None) != (args.pitch is None):
@@ -120,7 +124,8 @@ def register(subparsers: Any) -> None:
         "--fov",
         type=float,
         default=None,
-        help="horizontal field of view, rad (default: the --robot file's camera, e.g. 1.309)",
+        help="horizontal field of view, rad (default: the --robot file's camera under its "
+             "profile, e.g. 0.952 for the Hummingbird's webcam)",
     )
     d.add_argument("--robot", default="hummingbird",
                    help="robot class (or .toml) whose camera took the image, for the default FOV")

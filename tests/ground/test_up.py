@@ -50,6 +50,16 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
         token = lines[-1].split("?token=", 1)[1].split()[0]  # the page's secret, as printed
         children = _children(proc.pid)
         assert len(children) == 3
+        # The Hummingbird's webcam distorts: the pilot flies it with a calibration made from
+        # the simulator's checkerboard frames (once per cache: this session's own).
+        said = "".join(lines)
+        assert "calibrating the hummingbird's webcam camera" in said or \
+            "the pilot uses the camera calibration" in said, said
+        pilot_argv = [open(f"/proc/{pid}/cmdline").read().split("\0") for pid in children]
+        pilot_argv = [a for a in pilot_argv if "pilot" in a]
+        assert len(pilot_argv) == 1 and "--calibration" in pilot_argv[0], pilot_argv
+        calibration = pilot_argv[0][pilot_argv[0].index("--calibration") + 1]
+        assert calibration.startswith(os.environ["XDG_CACHE_HOME"]), calibration
 
         def connected() -> bool:
             request = urllib.request.Request(
@@ -95,6 +105,27 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
 def _run_up(*extra: str, timeout_s: float = 60) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "skeye.cli", "up", *extra],
                           capture_output=True, text=True, timeout=timeout_s)
+
+
+def test_the_pilots_calibration_choices(tmp_path) -> None:
+    import pytest
+
+    from skeye.errors import ConfigError
+    from skeye.ground.cli import pilot_calibration
+
+    assert pilot_calibration("none", "hummingbird") is None
+    given = tmp_path / "camera.toml"
+    given.write_text("")
+    assert pilot_calibration(str(given), "hummingbird") == given
+    with pytest.raises(ConfigError, match=r"--calibration nope\.toml: no such file"):
+        pilot_calibration("nope.toml", "hummingbird")
+    with pytest.raises(ConfigError, match="unknown robot class"):
+        pilot_calibration("auto", "no-such-robot")
+    sim, img, pilot, ground, video = _free_ports(5)
+    done = _run_up("--calibration", "nope.toml", "--sim-port", str(sim), "--image-port", str(img),
+                   "--pilot-port", str(pilot), "--ground-port", str(ground),
+                   "--video-port", str(video))
+    assert done.returncode == 1 and "--calibration nope.toml: no such file" in done.stderr
 
 
 def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None:

@@ -13,7 +13,7 @@ import pytest
 
 from skeye.errors import ConfigError
 from skeye.robots.camera_model import WEBCAM_FOCAL_PX_AT_800, build_camera_model
-from skeye.robots.config import SensorMount, camera_fov_h_rad, camera_model
+from skeye.robots.config import SensorMount, camera_model
 from skeye.sim.cameras import CameraSpec, CameraSystem
 from skeye.sim.engine import Simulation
 from skeye.sim.image_server import FrameBuffer
@@ -26,7 +26,7 @@ ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
 
 def test_the_hummingbird_webcam_profile():
-    assert camera_model("hummingbird").profile == "ideal"  # its default, for now
+    assert camera_model("hummingbird").profile == "webcam"  # its default
     model = camera_model("hummingbird", profile="webcam")
     assert model.profile == "webcam"
     assert (model.width, model.height) == (800, 600)
@@ -35,7 +35,6 @@ def test_the_hummingbird_webcam_profile():
     # the published C920 calibration's focal length at 800x600
     assert model.fx_px == WEBCAM_FOCAL_PX_AT_800 == model.fy_px == 775.79
     assert model.camera_matrix[0][2] == 399.5 and model.camera_matrix[1][2] == 299.5
-    assert camera_fov_h_rad("hummingbird")[0] == 1.309  # the entry's (ideal) pinhole
     ideal = camera_model("hummingbird", profile="ideal")
     assert ideal.dist_coeffs == (0.0,) * 5 and not ideal.noisy and not ideal.shadows
     assert ideal.fov_h_rad == pytest.approx(1.309, abs=1e-12)
@@ -191,7 +190,7 @@ def test_shadows_on_darken_the_ground_under_the_vehicle(tmp_path: Path):
     """Same view, the webcam profile with and without shadows: the vehicle shades the ground."""
     text = (ROBOTS / "hummingbird.toml").read_text()
     text = text.replace('name = "hummingbird"', 'name = "noshadow"', 1)
-    text = text.replace('profile = "ideal"', 'profile = "ideal"\nshadows = false')
+    text = text.replace('profile = "webcam"', 'profile = "webcam"\nshadows = false')
     (tmp_path / "noshadow.toml").write_text(text)
     frames = {}
     for cls in ("hummingbird", "noshadow"):
@@ -218,11 +217,12 @@ def test_point_sampled_render_has_no_antialiased_geometry_edges(tmp_path: Path):
     outline against the ground (a geometry edge) loses the in-between greys of the 4x
     multisampled render. The rings inside are texture: filtered alike in both."""
     text = (ROBOTS / "hummingbird.toml").read_text()
-    text = text.replace('name = "hummingbird"', 'name = "pointsampled"', 1)
-    text = text.replace('profile = "ideal"', 'profile = "ideal"\nmsaa_samples = 0')
-    (tmp_path / "pointsampled.toml").write_text(text)
+    for cls, samples in (("multisampled", 4), ("pointsampled", 0)):
+        (tmp_path / f"{cls}.toml").write_text(
+            text.replace('name = "hummingbird"', f'name = "{cls}"', 1)
+            .replace('profile = "webcam"', f'profile = "ideal"\nmsaa_samples = {samples}'))
     grey, mixed = {}, {}
-    for cls in ("hummingbird", "pointsampled"):
+    for cls in ("multisampled", "pointsampled"):
         sim = Simulation(load_world("pad"), seed=3, robot_dirs=(tmp_path,))
         buffer = FrameBuffer()
         with CameraSystem(sim, buffer, synchronous=True):
@@ -235,9 +235,9 @@ def test_point_sampled_render_has_no_antialiased_geometry_edges(tmp_path: Path):
         ground = float(np.median(grey[cls]))  # the pad covers a small part of the view
         pad = grey[cls][200:400, 300:500]  # the pad and the ground around it
         mixed[cls] = int(((pad > 0.2 * ground) & (pad < 0.8 * ground)).sum())
-    changed = np.abs(grey["hummingbird"] - grey["pointsampled"]) > 20
+    changed = np.abs(grey["multisampled"] - grey["pointsampled"]) > 20
     assert 100 < changed.sum() < 2000, changed.sum()  # the outline's pixels, nothing else
-    assert mixed["pointsampled"] < mixed["hummingbird"] - 150, mixed
+    assert mixed["pointsampled"] < mixed["multisampled"] - 150, mixed
 
 
 def test_frames_arrive_capture_latency_after_capture():
@@ -270,7 +270,8 @@ def test_skeye_sim_checks_camera_models_and_the_profile_option(tmp_path: Path):
 
     text = (ROBOTS / "hummingbird.toml").read_text()
     text = text.replace('name = "hummingbird"', 'name = "badcam"', 1)
-    (tmp_path / "badcam.toml").write_text(text.replace('profile = "ideal"',
+    assert 'profile = "webcam"' in text
+    (tmp_path / "badcam.toml").write_text(text.replace('profile = "webcam"',
                                                        'profile = "webcam"\nk1 = "strong"'))
     done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--port", "0",
                            "--robot-dir", str(tmp_path)], capture_output=True, text=True,

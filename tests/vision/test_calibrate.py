@@ -65,6 +65,7 @@ def wide_robot(tmp_path: Path) -> Path:
     old = f"width = {W}\nheight = {H}\nfov_h_rad = {FOV_H_RAD}"
     assert old in text
     text = text.replace(old, f"width = {W_WIDE}\nheight = {H_WIDE}\nfov_h_rad = {FOV_WIDE!r}")
+    text = text.replace('profile = "webcam"', 'profile = "ideal"')  # the pinhole, distorted here
     (tmp_path / "widecam.toml").write_text(text)
     return tmp_path
 

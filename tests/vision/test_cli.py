@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 
 import cv2
 import pytest
@@ -120,16 +121,24 @@ def test_pad_command_writes_files(tmp_path, capsys):
 
 
 def test_detect_takes_the_fov_from_the_robot_file_and_says_so(pad_png, capsys):
+    """Without --fov: the robot's camera under its profile (the Hummingbird's webcam, 0.952 rad;
+    the synthetic frame is a tilted 1.309 rad pinhole's, so the height comes out scaled by about
+    the focal lengths' ratio), and the advice to calibrate a lens that distorts."""
     assert run(["vision", "detect", str(pad_png), "--roll", "0.1", "--pitch", "-0.12"]) == 0
     captured = capsys.readouterr()
     out = json.loads(captured.out)
-    assert out["found"] is True and out["height_m"] == pytest.approx(1.2, rel=0.01)
-    assert ("--fov not given: using 1.309 rad, the horizontal field of view of the camera "
-            "'Down' of robot file hummingbird") in captured.err
-    assert run(["vision", "detect", str(pad_png), "--fov", "1.2"]) == 0
-    assert "--fov not given" not in capsys.readouterr().err
+    ratio = math.tan(1.309 / 2) / math.tan(0.9521046116251194 / 2)  # 1.49 (1.45 under tilt)
+    assert out["found"] is True and out["height_m"] == pytest.approx(1.2 * ratio, rel=0.05)
+    assert ("--fov not given: using 0.952105 rad, the horizontal field of view of robot "
+            "hummingbird's camera (webcam profile); its lens distorts") in captured.err
+    assert "give --calibration" in captured.err
+    assert run(["vision", "detect", str(pad_png), "--fov", "1.309", "--roll", "0.1",
+                "--pitch", "-0.12"]) == 0
+    captured = capsys.readouterr()
+    assert "--fov not given" not in captured.err
+    assert json.loads(captured.out)["height_m"] == pytest.approx(1.2, rel=0.01)
     assert run(["vision", "detect", str(pad_png), "--camera", "Front"]) == 2
-    assert "no camera named 'Front' with fov_h_rad; give --fov" in capsys.readouterr().err
+    assert "has no camera named 'Front'; give --fov" in capsys.readouterr().err
 
 
 def test_pad_command_tiles_over_paper(tmp_path, capsys):

@@ -49,6 +49,7 @@ def render(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[[Pose]
     text = text.replace('name = "hummingbird"', 'name = "widecam"', 1)
     text = text.replace(f"width = {W}\nheight = {H}\nfov_h_rad = {FOV_H_RAD}",
                         f"width = {W_WIDE}\nheight = {H_WIDE}\nfov_h_rad = {FOV_WIDE!r}")
+    text = text.replace('profile = "webcam"', 'profile = "ideal"')  # the pinhole, distorted here
     (robot_dir / "widecam.toml").write_text(text)
     sim = Simulation(load_world("pad"), seed=2, robot_dirs=(robot_dir,),
                      offscreen_size=(W_WIDE, H_WIDE))
