@@ -66,7 +66,7 @@ class Flight:
 def flight(location_ne_m: tuple[float, float], *, predict: bool,
            params: PadHoldParams | None = None, latency_s: float = LATENCY_S,
            profile: str = "ideal", calibration: CameraCalibration | None = None,
-           ) -> Iterator[Flight]:
+           lockstep_rate: float = 5.0) -> Iterator[Flight]:
     with ExitStack() as stack:
         # The oracle estimator: the hold is measured against ground truth in centimetres.
         control, images, _cameras = stack.enter_context(
@@ -77,8 +77,8 @@ def flight(location_ne_m: tuple[float, float], *, predict: bool,
         )
         robot = sim.spawn("hummingbird", location_ned_m=(*location_ne_m, 0.0))
         pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=5.0,
-                        tick_s=0.05,
+            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True,
+                        lockstep_rate=lockstep_rate, tick_s=0.05,
                         vision=pad_vision_factory(sim, robot, calibration=calibration,
                                                   latency_s=latency_s, predict=predict,
                                                   params=params))
@@ -110,11 +110,12 @@ def hold_from_0_6_m(predict: bool, params: PadHoldParams | None = None,
 
 def land_from_3_m(predict: bool, params: PadHoldParams | None = None,
                   latency_s: float = LATENCY_S, profile: str = "ideal",
-                  calibration: CameraCalibration | None = None) -> tuple[float, float, float]:
+                  calibration: CameraCalibration | None = None,
+                  lockstep_rate: float = 5.0) -> tuple[float, float, float]:
     """PAD_MODE LAND from 3 m east of the pad at 4.5 m: (start distance, time to landed, the
     landed position's distance from the pad centre), in m and s."""
     with flight((0.0, 3.0), predict=predict, params=params, latency_s=latency_s,
-                profile=profile, calibration=calibration) as f:
+                profile=profile, calibration=calibration, lockstep_rate=lockstep_rate) as f:
         f.vehicle.take_off(4.5)
         f.vehicle.wait_state(NavState.HOLDING, timeout_s=120)
         start = f.truth()
@@ -148,8 +149,9 @@ def test_land_on_pad_from_3_m_with_300_ms_latency():
 
 def test_land_on_pad_from_3_m_through_the_webcam_with_its_measured_latency():
     """The webcam profile (54.6 deg view: the pad 3 m away is out of sight from 4.5 m, so the
-    pilot climbs to find it; 60 ms capture latency, noise, blur, MJPEG) and the detections
-    used 110 ms after capture, the age measured in real time on the 2-core machine
+    pilot climbs to find it; 60 ms capture latency, noise, blur, MJPEG), the lockstep clock
+    paced at real time (at most one sim second per wall second), and the detections used
+    110 ms of sim time after capture, the age measured in real time on the 2-core machine
     (benchmarks/bench_pad_realtime.py --camera webcam: median 100 ms, p90 108 ms). The pilot
     has the lens's calibration (here the camera model's own figures; the calibration through
     the simulator's frames is tests/validate's)."""
@@ -157,7 +159,8 @@ def test_land_on_pad_from_3_m_through_the_webcam_with_its_measured_latency():
     calibration = CameraCalibration(model.width, model.height, model.fx_px, model.fy_px,
                                     model.cx_px, model.cy_px, model.dist_coeffs)
     start, landed_s, miss_m = land_from_3_m(predict=True, latency_s=WEBCAM_AGE_S,
-                                            profile="webcam", calibration=calibration)
+                                            profile="webcam", calibration=calibration,
+                                            lockstep_rate=1.0)
     print(f"\nland on pad through the webcam, {WEBCAM_AGE_S * 1e3:.0f} ms latency: from "
           f"{start:.2f} m, landed after {landed_s:.1f} s, {miss_m * 100:.1f} cm from the centre")
     assert start == pytest.approx(3.0, abs=0.15)
