@@ -140,6 +140,7 @@ def pad_json(msg: PadReport) -> dict[str, Any]:
         "height_m": _r(si.height_m),
         "quality": _r(si.quality, 3),
         "frame_time_s": _r(si.frame_time_s, 3),
+        "vision_too_slow": si.vision_too_slow,
     }
 
 

@@ -46,6 +46,7 @@ class PadController:
         self._lock = threading.Lock()
         self._settings = PadModeSi(PadAction.OFF, deadband_m=0.0, max_speed_m_s=0.0)
         self._latest: PadObservation | None = None
+        self._too_slow = False
 
     @property
     def settings(self) -> PadModeSi:
@@ -73,13 +74,18 @@ class PadController:
         with self._lock:
             self._latest = observation
 
+    def vision_too_slow(self, too_slow: bool) -> None:
+        """The vision pipeline says whether its detections come too late to hold on (the pad
+        modes then hold still): carried in every PAD packet (``vision``)."""
+        with self._lock:
+            self._too_slow = too_slow
+
     def report(self) -> PadReport:
         """The PAD packet: the latest estimate, or ``found=0`` when there is none."""
         with self._lock:
-            obs = self._latest
+            obs, slow = self._latest, self._too_slow
         if obs is None or not obs.found:
             frame_time_s = 0.0 if obs is None else obs.frame_time_s
-            return pad_report_from_si(PadSi(False, 0, 0.0, 0.0, 0.0, 0.0, frame_time_s))
-        return pad_report_from_si(
-            PadSi(True, obs.rings, obs.dx_m, obs.dy_m, obs.height_m, obs.quality, obs.frame_time_s)
-        )
+            return pad_report_from_si(PadSi(False, 0, 0.0, 0.0, 0.0, 0.0, frame_time_s, slow))
+        return pad_report_from_si(PadSi(True, obs.rings, obs.dx_m, obs.dy_m, obs.height_m,
+                                        obs.quality, obs.frame_time_s, slow))

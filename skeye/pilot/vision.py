@@ -285,10 +285,12 @@ class PadVision:
                                   f"after its frame (limit {self.max_latency_s:.2f} s)")
                 log.warning("%s; pad navigation holds still until detections are in time",
                             stats.too_slow)
+                self.boards.pad.vision_too_slow(True)
             return
         if stats.too_slow:
             log.warning("vision in time again (%.2f s): pad navigation resumes", age)
             stats.too_slow = ""
+            self.boards.pad.vision_too_slow(False)
         self._newest_capture_s = max(self._newest_capture_s, obs.frame_time_s)
         if obs.found and then is not None:
             self._fix = locate_pad(obs.dx_m, obs.dy_m, obs.height_m, then)

@@ -631,6 +631,7 @@ class PadReport(Message):
     height: int  # mm
     quality: int  # 0..1000
     frame_time: int  # ms
+    vision: int = 0  # 1: vision too slow to hold (the pad modes hold still), else 0
 
 
 @dataclass(frozen=True)
@@ -868,6 +869,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         *_plain(_I, "dx", "dy", "height", scale=MM),
         Field("quality", _H, 0, 1000, scale=QUALITY),
         Field("frame_time", "I", scale=MS),
+        Field("vision", _B, 0, 1),
     ),
     Result: Layout(
         PD.RESULT,

@@ -307,7 +307,8 @@ class NavStatusSi:
 
 @dataclass(frozen=True)
 class PadSi:
-    """PAD in SI: pad centre offset in body FRD, height, identified rings, quality 0..1."""
+    """PAD in SI: pad centre offset in body FRD, height, identified rings, quality 0..1, and
+    whether the pilot finds its vision too slow to hold on (the pad modes then hold still)."""
 
     found: Annotated[bool, _w("found", read=bool)]
     rings: Annotated[int, _w("rings")]
@@ -316,6 +317,7 @@ class PadSi:
     height_m: Annotated[float, _w("height")]
     quality: Annotated[float, _w("quality")]
     frame_time_s: Annotated[float, _w("frame_time")]
+    vision_too_slow: Annotated[bool, _w("vision", read=bool)] = False
 
 
 # --- skeye and AscTec commands ----------------------------------------------------------------

@@ -122,6 +122,9 @@ def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     assert t["nav"]["climb_m_s"] == 0.25 and t["nav"]["battery_v"] == 12.1
     assert t["pad"]["rings"] == [1, 3]
     assert (t["pad"]["dx_m"], t["pad"]["dy_m"], t["pad"]["quality"]) == (0.12, -0.05, 0.9)
+    assert t["pad"]["vision_too_slow"] is False
+    slow = pad_report_from_si(PadSi(False, 0, 0.0, 0.0, 0.0, 0.0, 41.9, vision_too_slow=True))
+    assert telemetry_json({PD.PAD: slow})["pad"]["vision_too_slow"] is True
 
 
 def test_speeds_are_checked_against_the_robot_files_limits() -> None:

@@ -24,7 +24,7 @@ from skeye.pilot.sim_airframe import SimAirframe
 from skeye.pilot.vision import PadVision
 from skeye.robots.config import camera_model
 from skeye.vision.calibration import CameraCalibration
-from skeye.wire.packets import NavState, SkeyeMask
+from skeye.wire.packets import PD, NavState, PadReport, SkeyeMask
 from tests.sim.test_cameras import sim_with_images
 
 LATENCY_S = 0.3
@@ -178,6 +178,10 @@ def test_vision_too_slow_to_hold_is_said_and_the_vehicle_holds_still(caplog):
         stats = f.vision.stats
         assert stats.too_slow.startswith("vision too slow to hold") and stats.too_slow_count >= 2
         assert stats.latency_s >= 1.5 - 1e-6
+        # ... and ground control hears it: the PAD packet's vision flag
+        f.vehicle.stream(0, int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD), 0.05)
+        pad = f.vehicle.wait_for(PD.PAD, timeout_s=60)
+        assert isinstance(pad, PadReport) and pad.vision == 1, pad
     assert any("vision too slow to hold" in r.getMessage() for r in caplog.records)
     # It stayed where it was (0.3 m off) instead of flying on 1.5 s old detections.
     assert all(math.hypot(n - start[1], e - start[2]) < 0.05 for _, n, e, _ in samples)

@@ -206,7 +206,11 @@ CASES: list[tuple[Message, bytes]] = [
     ),
     (
         PadReport(1, 0b101, -120, 40, 1800, 870, 98765),
-        vframe(0x91, "BBiiiHI", 1, 5, -120, 40, 1800, 870, 98765),
+        vframe(0x91, "BBiiiHIB", 1, 5, -120, 40, 1800, 870, 98765, 0),
+    ),
+    (
+        PadReport(0, 0, 0, 0, 0, 0, 98765, vision=1),  # vision too slow to hold
+        vframe(0x91, "BBiiiHIB", 0, 0, 0, 0, 0, 0, 98765, 1),
     ),
     (
         Result(PD.TAKE_OFF, ResultCode.OK, "taking off to 1.5 m ✓"),
@@ -271,7 +275,7 @@ SPEC_SIZES = {
     Stream: 6,
     Clock: 4,
     NavStatus: 30,
-    PadReport: 20,
+    PadReport: 21,
 }
 
 
@@ -643,6 +647,7 @@ def test_skeye_bad_stop_is_a_frame_error() -> None:
         lambda: NavStatus(6, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),  # type: ignore[arg-type]
         lambda: PadReport(2, 0, 0, 0, 0, 0, 0),
         lambda: PadReport(1, 0, 0, 0, 0, 1001, 0),
+        lambda: PadReport(1, 0, 0, 0, 0, 0, 0, 2),
         lambda: Result(0x80, 6, ""),  # type: ignore[arg-type]
         lambda: Result(0x80, 0, "x" * 1023),  # type: ignore[arg-type]
         lambda: Result(0x80, 0, "\ud800"),  # type: ignore[arg-type]

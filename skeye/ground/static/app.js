@@ -48,6 +48,17 @@ function onTelemetry(t) {
       logLine("pad landing finished: landed, pad mode back to off", "ok", "pad-landed");
     }
     S.padMode = n.pad_mode;
+    // the pilot says its detections come too late to hold on (PAD vision flag)
+    const slow = Boolean(pad && pad.vision_too_slow);
+    if (slow !== Boolean(S.visionSlow)) {
+      if (slow) {
+        logLine("vehicle: vision too slow to hold (detections over 1 s late): pad modes hold still",
+                "bad", "vision-slow");
+      } else if (S.visionSlow !== undefined) {
+        logLine("vehicle: vision in time again: pad navigation resumes", "ok", "vision-ok");
+      }
+      S.visionSlow = slow;
+    }
     const lastT = S.track[S.track.length - 1];
     if (!lastT || Math.hypot(lastT.north_m - n.north_m, lastT.east_m - n.east_m) > 0.02) {
       S.track.push({ north_m: n.north_m, east_m: n.east_m });
