@@ -28,6 +28,7 @@ import argparse
 import atexit
 import hashlib
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -212,31 +213,47 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     if choice == "none":
         return None
     if choice != "auto":
+        from skeye.vision.calibration import load_calibration
+
         path = Path(choice)
         if not path.is_file():
             raise ConfigError(f"--calibration {choice}: no such file (or give auto or none)")
+        try:
+            load_calibration(path)  # a bad file is refused here, before anything starts
+        except Exception as exc:
+            raise ConfigError(f"--calibration {choice}: {exc}") from None
         return path
     if not any(m.type_name.lower() == CAMERA_TYPE for m in load_robot_config(robot).sensors):
         return None  # a robot without a camera: nothing to calibrate
     model = camera_model(robot)
     if not model.distorted:
         return None  # the ideal pinhole: the pilot's field of view from GETCONF is exact
-    key = hashlib.sha256(repr(model).encode()).hexdigest()[:12]
+    from skeye import __version__
+    from skeye.validate.calibration import BOARD, board_poses, calibrate_simulated_camera
+
+    # The key: the camera model, the procedure (board, poses) and the simulator's version.
+    ident = repr((model, BOARD, board_poses(model.width, model.height, model.fx_px),
+                  __version__))
+    key = hashlib.sha256(ident.encode()).hexdigest()[:12]
     cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    workdir = cache / "skeye" / "calibration" / f"{robot}-{model.profile}-{key}"
+    workdir = cache / "skeye" / "calibration" / f"{Path(robot).stem}-{model.profile}-{key}"
     path = workdir / "camera.toml"
     if path.is_file():
         print(f"skeye up: the pilot uses the camera calibration {path}", flush=True)
         return path
     print(f"skeye up: calibrating the {robot}'s {model.profile} camera on the checkerboard "
           f"world (once; kept in {workdir})", flush=True)
-    from skeye.validate.calibration import calibrate_simulated_camera
-
+    partial = workdir.with_name(f"{workdir.name}.{os.getpid()}.partial")
     try:
-        path, _ = calibrate_simulated_camera(workdir, model.profile, robot=robot)
+        calibrate_simulated_camera(partial, model.profile, robot=robot)
+        if not workdir.exists():
+            os.replace(partial, workdir)  # whole or not at all
     except Exception as exc:
         raise ConfigError(f"calibrating the {robot}'s camera failed: {exc} (give "
                           "--calibration FILE or none)") from exc
+    finally:
+        if partial.exists():
+            shutil.rmtree(partial, ignore_errors=True)
     return path
 
 
@@ -280,6 +297,8 @@ def run_up(args: argparse.Namespace) -> int:
             ("ground control", args.host, args.ground_port, "--ground-port"),
         ])
         calibration = pilot_calibration(args.calibration, args.robot)
+        if stop.is_set():  # Ctrl-C while calibrating: start nothing
+            raise ConfigError("stopped while calibrating the camera")
         start(
             "simulator",
             _child_argv(

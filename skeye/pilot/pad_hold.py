@@ -10,7 +10,8 @@ the limit). The gains come from the loop's delay (:func:`loop_gains`, docs/pilot
 latency"). Inside the deadband the command is zero (the vehicle's own board then holds zero
 velocity on its INS estimate, and the integrator keeps its value so a steady push stays
 compensated). Vertically, HOLD keeps the height; LAND descends while the pad is within a cone
-below the vehicle (offset at most ``descent_cone`` times the height, or ``centre_tolerance_m``:
+below the vehicle (offset at most ``descent_cone`` times the height above ``commit_height_m``,
+or ``centre_tolerance_m``:
 the pad stays well inside any camera's view while the approach goes on), correcting down to a
 tighter deadband (``landing_deadband_m``) so it aims at the centre; it descends at
 ``high_descent_m_s`` above ``high_above_m``, ``descent_m_s`` below, ``final_descent_m_s``
@@ -20,9 +21,9 @@ below ``slow_below_m``, and commits to the touchdown below ``commit_height_m`` o
 Losing the pad (no detection for ``lost_after_s``), or never having seen it, makes the vehicle
 stop, then climb (``search_climb_per_s`` of its height per second, so the view widens at a
 steady rate, within ``search_climb_min_m_s``..``search_climb_max_m_s``, up to
-``search_ceiling_m``) to widen its view, and say so through ``searching``. The law is pure: it
-takes observations, the vehicle's own height estimate and the time, returns set-points; the
-pilot owns the clock, the camera and the link.
+``search_ceiling_m``; not at all while no height is known) to widen its view, and say so
+through ``searching``. The law is pure: it takes observations, the vehicle's own height
+estimate and the time, returns set-points; the pilot owns the clock, the camera and the link.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ class PadHoldParams:
     descent_m_s: float = 0.25
     final_descent_m_s: float = 0.12
     slow_below_m: float = 0.8
-    descent_cone: float = 0.2  # descend while offset <= 0.2 x height (11 deg off the vertical)
+    descent_cone: float = 0.2  # descend while offset <= 0.2 x (height - commit): 11 deg
     centre_tolerance_m: float = 0.08
     landing_deadband_m: float = 0.02  # LAND aims at the centre, not just near it
     commit_height_m: float = 0.5  # the detector needs two rings: lost below ~0.3 m
@@ -166,12 +167,10 @@ class PadHoldLaw:
         if not found:
             if self._last_seen_s is None or time_s - self._last_seen_s >= p.lost_after_s:
                 height = altitude_m if altitude_m is not None else self._height_m
-                climb = p.search_climb_min_m_s
-                if height is not None:
+                climb = 0.0  # no height known: no ceiling to stop at, so no climb
+                if height is not None and height < p.search_ceiling_m:
                     climb = min(p.search_climb_max_m_s,
                                 max(p.search_climb_min_m_s, p.search_climb_per_s * height))
-                    if height >= p.search_ceiling_m:
-                        climb = 0.0
                 return PadSetpoint(0.0, 0.0, climb, searching=True)
             return PadSetpoint(0.0, 0.0, 0.0)  # a missed frame or two: keep still
         self._last_seen_s = time_s

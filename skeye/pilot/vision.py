@@ -428,7 +428,7 @@ class PadVision:
                              landing=mode == PadAction.LAND,
                              altitude_m=boards.home_ned_m[2] - now.down_m)
         if sp.searching:
-            log.info("pad lost: holding and climbing slowly to find it")
+            log.info("pad not seen: holding, climbing to widen the view up to the search ceiling")
         if sp.touchdown:
             boards.land()  # the final descent is the vehicle's own landing, straight down
             return

@@ -113,7 +113,7 @@ _WEBCAM: dict[str, Any] = {
     "latency_jitter_s": 0.010,
     "shadows": True,
     # Point-sampled render (no multisampling): software GL's 4x MSAA doubles the render time
-    # (docs/camera.md, "Rendering cost"); the lens remap's bilinear interpolation smooths edges.
+    # (docs/camera.md, "Cost"); the lens remap's bilinear interpolation smooths edges.
     "msaa_samples": 0,
 }
 

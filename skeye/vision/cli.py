@@ -75,7 +75,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
             return _fail(f"{exc}; give --fov")
         args.fov = model.fov_h_rad
         lens = (f"; its lens distorts (k1 {model.k1:g}): give --calibration for exact figures"
-                if model.distorted and calibration is None else "")
+                if model.distorted else "")
         print(f"skeye vision detect: --fov not given: using {args.fov:g} rad, the horizontal "
               f"field of view of robot {args.robot}'s camera ({model.profile} profile){lens}",
               file=sys.stderr)

@@ -112,13 +112,21 @@ def test_the_pilots_calibration_choices(tmp_path) -> None:
 
     from skeye.errors import ConfigError
     from skeye.ground.cli import pilot_calibration
+    from skeye.robots.config import camera_model
+    from skeye.vision.calibration import CameraCalibration
 
     assert pilot_calibration("none", "hummingbird") is None
+    model = camera_model("hummingbird")
     given = tmp_path / "camera.toml"
-    given.write_text("")
+    CameraCalibration(model.width, model.height, model.fx_px, model.fy_px, model.cx_px,
+                      model.cy_px, model.dist_coeffs).save(given)
     assert pilot_calibration(str(given), "hummingbird") == given
     with pytest.raises(ConfigError, match=r"--calibration nope\.toml: no such file"):
         pilot_calibration("nope.toml", "hummingbird")
+    junk = tmp_path / "junk.toml"
+    junk.write_text("this is [not a calibration")
+    with pytest.raises(ConfigError, match=r"--calibration .*junk\.toml: "):
+        pilot_calibration(str(junk), "hummingbird")
     with pytest.raises(ConfigError, match="unknown robot class"):
         pilot_calibration("auto", "no-such-robot")
     sim, img, pilot, ground, video = _free_ports(5)

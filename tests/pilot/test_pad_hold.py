@@ -72,6 +72,9 @@ def test_the_search_climbs_faster_higher_up_and_stops_at_the_ceiling_unseen():
     assert law.update(0.2, False, altitude_m=5.5).up_m_s == pytest.approx(0.5)
     at_top = law.update(0.3, False, altitude_m=6.0)
     assert at_top.searching and at_top.up_m_s == 0.0
+    # no height at all (never seen, no estimate given): no ceiling to stop at, so no climb
+    blind = PadHoldLaw().update(0.0, False)
+    assert blind.searching and blind.up_m_s == 0.0
 
 
 def test_bad_parameters_are_refused():

@@ -52,9 +52,9 @@ function onTelemetry(t) {
     const slow = Boolean(pad && pad.vision_too_slow);
     if (slow !== Boolean(S.visionSlow)) {
       if (slow) {
-        logLine("vehicle: vision too slow to hold (detections over 1 s late): pad modes hold still",
-                "bad", "vision-slow");
-      } else if (S.visionSlow !== undefined) {
+        logLine("vehicle: vision too slow to hold (detections too late to use): pad navigation " +
+                "holds still", "bad", "vision-slow");
+      } else {
         logLine("vehicle: vision in time again: pad navigation resumes", "ok", "vision-ok");
       }
       S.visionSlow = slow;
