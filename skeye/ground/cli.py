@@ -208,7 +208,7 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     Raises:
         ConfigError: a file that does not exist, an unknown robot, a calibration that failed.
     """
-    from skeye.robots.config import CAMERA_TYPE, camera_model, load_robot_config
+    from skeye.robots.config import CAMERA_TYPE, load_robot_config, mount_camera_model
 
     if choice == "none":
         return None
@@ -223,9 +223,11 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
         except Exception as exc:
             raise ConfigError(f"--calibration {choice}: {exc}") from None
         return path
-    if not any(m.type_name.lower() == CAMERA_TYPE for m in load_robot_config(robot).sensors):
+    config = load_robot_config(robot)
+    mount = next((m for m in config.sensors if m.type_name.lower() == CAMERA_TYPE), None)
+    if mount is None:
         return None  # a robot without a camera: nothing to calibrate
-    model = camera_model(robot)
+    model = mount_camera_model(config, mount)  # its first camera, as camera_model() takes
     if not model.distorted:
         return None  # the ideal pinhole: the pilot's field of view from GETCONF is exact
     from skeye import __version__

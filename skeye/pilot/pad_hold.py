@@ -11,12 +11,12 @@ latency"). Inside the deadband the command is zero (the vehicle's own board then
 velocity on its INS estimate, and the integrator keeps its value so a steady push stays
 compensated). Vertically, HOLD keeps the height; LAND descends while the pad is within a cone
 below the vehicle (offset at most ``descent_cone`` times the height above ``commit_height_m``,
-or ``centre_tolerance_m``:
-the pad stays well inside any camera's view while the approach goes on), correcting down to a
-tighter deadband (``landing_deadband_m``) so it aims at the centre; it descends at
-``high_descent_m_s`` above ``high_above_m``, ``descent_m_s`` below, ``final_descent_m_s``
-below ``slow_below_m``, and commits to the touchdown below ``commit_height_m`` once centred
-(offset within ``centre_tolerance_m``), before the detector loses the pad (it needs two rings).
+or ``centre_tolerance_m``: the pad stays well inside any camera's view while the approach goes
+on), correcting down to a tighter deadband (``landing_deadband_m``) so it aims at the
+centre; it descends at ``high_descent_m_s`` above ``high_above_m``, ``descent_m_s`` below,
+``final_descent_m_s`` below ``slow_below_m``, and commits to the touchdown below
+``commit_height_m`` once centred (offset within ``centre_tolerance_m``), before the detector
+loses the pad (it needs two rings).
 
 Losing the pad (no detection for ``lost_after_s``), or never having seen it, makes the vehicle
 stop, then climb (``search_climb_per_s`` of its height per second, so the view widens at a

@@ -113,6 +113,12 @@ class CameraSpec:
         return (self.height, self.width)
 
     @property
+    def render_samples(self) -> int:
+        """The render's multisampling: the camera model's (its default without one)."""
+        return (self.model.msaa_samples if self.model is not None
+                else CameraModel.msaa_samples)
+
+    @property
     def fovy_deg(self) -> float:
         """MuJoCo's vertical field of view (degrees, float) from the horizontal one (the
         lens's wide render where the camera model has one)."""
@@ -440,8 +446,7 @@ class CameraSystem:
                     mujoco.mj_comVel(model, data)
                     mujoco.mj_camlight(model, data)
                     for robot, cam in job.shots:
-                        samples = cam.model.msaa_samples if cam.model is not None else 4
-                        spec = (*cam.render_size, samples)
+                        spec = (*cam.render_size, cam.render_samples)
                         if spec not in renderers:
                             renderers[spec] = _make_renderer(mujoco, model, *spec)
                         renderer = renderers[spec]

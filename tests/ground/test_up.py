@@ -113,13 +113,11 @@ def test_the_pilots_calibration_choices(tmp_path) -> None:
     from skeye.errors import ConfigError
     from skeye.ground.cli import pilot_calibration
     from skeye.robots.config import camera_model
-    from skeye.vision.calibration import CameraCalibration
+    from tests.vision.helpers import model_calibration
 
     assert pilot_calibration("none", "hummingbird") is None
-    model = camera_model("hummingbird")
     given = tmp_path / "camera.toml"
-    CameraCalibration(model.width, model.height, model.fx_px, model.fy_px, model.cx_px,
-                      model.cy_px, model.dist_coeffs).save(given)
+    model_calibration(camera_model("hummingbird")).save(given)
     assert pilot_calibration(str(given), "hummingbird") == given
     with pytest.raises(ConfigError, match=r"--calibration nope\.toml: no such file"):
         pilot_calibration("nope.toml", "hummingbird")

@@ -26,6 +26,7 @@ from skeye.robots.config import camera_model
 from skeye.vision.calibration import CameraCalibration
 from skeye.wire.packets import PD, NavState, PadReport, SkeyeMask
 from tests.sim.test_cameras import sim_with_images
+from tests.vision.helpers import model_calibration
 
 LATENCY_S = 0.3
 WEBCAM_AGE_S = 0.11
@@ -156,8 +157,7 @@ def test_land_on_pad_from_3_m_through_the_webcam_with_its_measured_latency():
     has the lens's calibration (here the camera model's own figures; the calibration through
     the simulator's frames is tests/validate's)."""
     model = camera_model("hummingbird", profile="webcam")
-    calibration = CameraCalibration(model.width, model.height, model.fx_px, model.fy_px,
-                                    model.cx_px, model.cy_px, model.dist_coeffs)
+    calibration = model_calibration(model)
     start, landed_s, miss_m = land_from_3_m(predict=True, latency_s=WEBCAM_AGE_S,
                                             profile="webcam", calibration=calibration,
                                             lockstep_rate=1.0)

@@ -7,7 +7,8 @@ import math
 import cv2
 import numpy as np
 
-from skeye.vision.calibration import undistort_points
+from skeye.robots.camera_model import CameraModel
+from skeye.vision.calibration import CameraCalibration, undistort_points
 from skeye.vision.camera import camera_to_level, intrinsics
 from skeye.vision.pad import SKEYE_4, PadDefinition
 
@@ -160,3 +161,9 @@ def rolling_shutter(g: np.ndarray, skew_px: float) -> np.ndarray:
     y, x = np.mgrid[0:h, 0:w].astype(np.float32)
     mx = x - np.float32(skew_px) * (y / (h - 1) - 0.5)
     return cv2.remap(g, mx, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def model_calibration(model: CameraModel) -> CameraCalibration:
+    """The calibration a perfect ``skeye calibrate`` would give for this camera model."""
+    return CameraCalibration(model.width, model.height, model.fx_px, model.fy_px, model.cx_px,
+                             model.cy_px, model.dist_coeffs)
