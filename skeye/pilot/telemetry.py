@@ -76,8 +76,8 @@ class BoardStatus:
 
 class GeoAnchor:
     """The vehicle's position estimate in latitude/longitude: its INS position (NED, smooth,
-    drifting millimetres a minute) anchored to the GPS by the mean offset between every fix and
-    the INS position at that time. A single fix wanders metres (multipath, 30 s correlation);
+    drifting slowly) anchored to the GPS by the mean offset between every fix and
+    the INS position at that time. A single fix wanders metres (multipath, 300 s correlation);
     the mean of many is steadier, and the estimate moves only as the INS says the vehicle moved.
     This is what GPS_DATA_ADVANCED reports as its "best estimate"."""
 

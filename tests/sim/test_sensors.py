@@ -273,7 +273,7 @@ def test_gps_indoors_has_no_fix_and_no_position() -> None:
 
 def test_gps_fields_formats_and_error_statistics() -> None:
     gps = make(GPS, seed=2, FixTime=0.0)  # acquisition: tests/sim/test_sensor_imperfections.py
-    n = 15000  # 3000 s at 5 Hz: about 50 correlation times
+    n = 15000  # 3000 s at 5 Hz: 10 correlation times of 300 s
     readings = series(gps, n, pos=(3.0, -4.0, -1.0), vel=(0.5, 0.0, 0.0))
     first = readings[0]
     # USARSim's GPSSensor order: Latitude, Longitude first, Fix, Satellites last
@@ -293,9 +293,13 @@ def test_gps_fields_formats_and_error_statistics() -> None:
     rms = np.sqrt((err**2).mean(axis=0))
     sigma = np.array([p["HorizontalSigma"], p["HorizontalSigma"], p["VerticalSigma"]])
     assert np.all(rms > 0.5 * sigma) and np.all(rms < 1.6 * sigma), rms
-    # Correlated: consecutive errors 0.2 s apart are nearly the same.
+    # Correlated: consecutive errors 0.2 s apart are nearly the same, and the error moves
+    # slowly, as a static receiver's does: sigma sqrt(2 (1 - exp(-1 s / 300 s))) = 0.12 m in a
+    # second per axis, where a 30 s process moved 0.38 m.
     lag1 = np.corrcoef(err[:-1, 0], err[1:, 0])[0, 1]
     assert lag1 > 0.95
+    step_1s = np.sqrt((np.diff(err[::5, :2], axis=0) ** 2).mean())
+    assert 0.08 < step_1s < 0.16, step_1s
     vel = np.array([r["VelocityNED"] for r in readings])
     assert_mean_close(vel, np.array([0.5, 0.0, 0.0]), p["VelocitySigma"], 0.0)
 

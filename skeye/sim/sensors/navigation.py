@@ -365,7 +365,11 @@ class GPS(Sensor[GpsReading]):
     Otherwise its position error is a first-order Gauss-Markov process per axis (correlated, the
     way multipath and atmosphere errors wander): HorizontalSigma 1.5 m per axis (CEP =
     1.18 sigma = 1.8 m, between the NEO-6M's 2.5 m and the NEO-M8N's 2.0 m CEP), VerticalSigma
-    3.0 m, CorrelationTime 30 s, started from its stationary distribution. Velocity: white
+    3.0 m, CorrelationTime 300 s, started from its stationary distribution. The correlation
+    time is that of measured static receivers: a consumer receiver's horizontal error about
+    1.5 m sigma over a 700 s recording, changing on "the order of several hundred seconds"
+    (docs/physics.md, GPS row); so the error moves about 1.5 sqrt(2 / 300) = 0.12 m in a second,
+    not the 0.39 m of a 30 s process. Velocity: white
     noise VelocitySigma 0.05 m/s (u-blox speed accuracy). Satellites: an integer random walk in
     [MinSatellites 9, MaxSatellites 12], one step with probability 0.05 per reading.
     Latitude/Longitude are written in USARSim's ``39,8.0341,N`` form plus decimal degrees.
@@ -384,7 +388,8 @@ class GPS(Sensor[GpsReading]):
     PARAMS = (
         Param("HorizontalSigma", 1.5, "horizontal position error, stationary sigma per axis, m"),
         Param("VerticalSigma", 3.0, "vertical position error, stationary sigma, m"),
-        Param("CorrelationTime", 30.0, "position error correlation time, s", exclusive=True),
+        Param("CorrelationTime", 300.0, "position error correlation time, s",
+              exclusive=True),
         Param("VelocitySigma", 0.05, "velocity white noise, m/s"),
         Param("MinSatellites", 9, "fewest satellites reported with a fix", 4, integer=True,
               maximum=32),
