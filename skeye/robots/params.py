@@ -165,10 +165,7 @@ class EstimatorParams:
 
     ``kind = "onboard"`` estimates from the simulated sensor readings only; ``"truth"``
     (default for now) is the oracle: ground truth plus the INS sensor's small error processes
-    (``skeye sim --estimator onboard|truth`` overrides the robot file). The onboard estimator
-    is not yet the default: with the sensors' imperfections the Hummingbird's take-off in the
-    pad world settles within the control library's 5 cm / 0.08 m/s only after about 15.7 s of
-    its 16.4 s limit (docs/physics.md, "Onboard estimator", known limits). Sources of the
+    (``skeye sim --estimator onboard|truth`` overrides the robot file). Sources of the
     defaults (docs/physics.md, "Onboard estimator"):
 
     - attitude_kp 0.2 rad/s: ArduPilot's DCM complementary filter, AHRS_RP_P default 0.2;
@@ -181,7 +178,10 @@ class EstimatorParams:
       PX4 EKF2's defaults EKF2_ACC_NOISE, EKF2_ABIAS_INIT, EKF2_ACC_B_NOISE, EKF2_BARO_NOISE,
       EKF2_RNG_NOISE, EKF2_OF_N_MIN, EKF2_OF_QMIN, EKF2_MIN_RNG, EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE;
     - gps_delay_s 0.2: the age of a fix when the board gets it, configured as PX4's
-      EKF2_GPS_DELAY is; 0.2 s is the simulated receiver's ``Latency`` (docs/physics.md).
+      EKF2_GPS_DELAY is; 0.2 s is the simulated receiver's ``Latency`` (docs/physics.md);
+    - tilt_noise_rad_s 0.015: PX4 EKF2's EKF2_GYR_NOISE, the rate noise that drives its tilt
+      error states; here the per-axis bias state carries g times the tilt error, so its random
+      walk is (accel_bias_walk_m_s3^2 + (g tilt_noise_rad_s)^2)^0.5.
     """
 
     kind: str = "truth"
@@ -199,6 +199,7 @@ class EstimatorParams:
     gps_pos_noise_m: float = 0.5
     gps_vel_noise_m_s: float = 0.3
     gps_delay_s: float = 0.2
+    tilt_noise_rad_s: float = 0.015
 
     def __post_init__(self) -> None:
         if self.kind not in ESTIMATOR_KINDS:

@@ -310,6 +310,11 @@ class Simulation:
             slot = self._slots[name]
             robot.controller.reset(hold_altitude_m=-pos[2])
             self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
+        # The board's power-up calibration. In the air the vehicle stands for one that took off
+        # earlier, so its board calibrated on the ground before; its readings at the spawn
+        # instant (no motion yet) give the gyro bias, while the accelerometer, free of any
+        # force there, says nothing and the spawn attitude is kept.
+        robot.power_up(self.body_state(name), self._queries[name])
         # The board's first tick now, so the wrench is set from the first step on.
         self._board_tick(name, robot, self.body_state(name))
         return robot

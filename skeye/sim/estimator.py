@@ -128,14 +128,8 @@ class BoardEstimator:
         self.p = params
         self.declination_rad = declination_rad
         self.flow_counts_per_rad = flow_counts_per_rad
-        roll, pitch, yaw = rpy_rad
-        cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-        cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-        cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-        self.q0 = cr * cp * cy + sr * sp * sy
-        self.q1 = sr * cp * cy - cr * sp * sy
-        self.q2 = cr * sp * cy + sr * cp * sy
-        self.q3 = cr * cp * sy - sr * sp * cy
+        self.q0, self.q1, self.q2, self.q3 = 1.0, 0.0, 0.0, 0.0
+        self._set_rpy(rpy_rad[0], rpy_rad[1], rpy_rad[2])
         self.bias = [0.0, 0.0, 0.0]  # estimated gyro bias, rad/s
         self.err = [0.0, 0.0, 0.0]  # pending attitude correction (body), from accel + mag
         self.omega = [0.0, 0.0, 0.0]  # last bias-corrected gyro reading, rad/s
@@ -168,6 +162,37 @@ class BoardEstimator:
         self._est: InsEstimate | None = None
 
     # -- attitude ------------------------------------------------------------------------
+    def _set_rpy(self, roll: float, pitch: float, yaw: float) -> None:
+        cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+        cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+        cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+        self.q0 = cr * cp * cy + sr * sp * sy
+        self.q1 = sr * cp * cy - cr * sp * sy
+        self.q2 = cr * sp * cy + sr * cp * sy
+        self.q3 = cr * cp * sy - sr * sp * cy
+        self._est = None
+
+    def align_at_rest(
+        self,
+        gyro_rad_s: list[tuple[float, float, float]],
+        specific_force_m_s2: list[tuple[float, float, float]],
+    ) -> None:
+        """The board's power-up calibration, from gyro and accelerometer readings taken while
+        the vehicle stood still: the gyro bias is their mean (ArduPilot's start-up gyro
+        calibration, INS_GYR_CAL), roll and pitch are levelled on the mean specific force
+        (PX4 EKF2's initial tilt alignment); the heading is kept."""
+        if gyro_rad_s:
+            n = float(len(gyro_rad_s))
+            self.bias = [sum(w[i] for w in gyro_rad_s) / n for i in range(3)]
+        if specific_force_m_s2:
+            n = float(len(specific_force_m_s2))
+            fx, fy, fz = (sum(f[i] for f in specific_force_m_s2) / n for i in range(3))
+            norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+            if 0.5 * GRAVITY_M_S2 < norm < 1.5 * GRAVITY_M_S2:
+                _, _, yaw = self.rpy()
+                self._set_rpy(math.atan2(-fy, -fz), math.atan2(fx, math.sqrt(fy * fy + fz * fz)),
+                              yaw)
+
     def rot(self) -> tuple[float, float, float, float, float, float, float, float, float]:
         """The body-to-NED rotation, row major."""
         q0, q1, q2, q3 = self.q0, self.q1, self.q2, self.q3
@@ -221,7 +246,10 @@ class BoardEstimator:
         if last is not None and t > last:
             dt = t - last
             var = self.p.accel_noise_m_s2 * self.p.accel_noise_m_s2
-            walk = self.p.accel_bias_walk_m_s3 * self.p.accel_bias_walk_m_s3
+            # The bias state also carries g times the attitude's tilt error, which wanders as
+            # the gyro's noise integrates (EKF2's tilt states, driven by EKF2_GYR_NOISE).
+            tilt = GRAVITY_M_S2 * self.p.tilt_noise_rad_s
+            walk = self.p.accel_bias_walk_m_s3 * self.p.accel_bias_walk_m_s3 + tilt * tilt
             ax = self.axes
             ax[0].predict(r[0] * fx + r[1] * fy + r[2] * fz, dt, var, walk)
             ax[1].predict(r[3] * fx + r[4] * fy + r[5] * fz, dt, var, walk)

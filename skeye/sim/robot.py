@@ -58,6 +58,9 @@ BOARD_SENSOR_TYPES: Final = (
 body (so Sonar and OpticalFlow look straight down), else one the board has but does not
 stream."""
 
+POWER_UP_S: Final = 1.0
+"""How long the board's power-up calibration averages its gyro and accelerometer (at rest)."""
+
 _MOTORS_LAYOUT: Final[Layout] = sen_layout(SenMotors, counts={"Speeds": 4, "Commands": 4})
 
 
@@ -243,6 +246,27 @@ class Robot:
             declination_rad,
             float(chosen["OpticalFlow"].sensor.counts_per_rad),
         )
+
+    def power_up(self, state: BodyState, world: WorldQuery) -> None:
+        """The board's power-up calibration at the spawn pose, the vehicle still: one second's
+        worth of its own gyro and accelerometer readings (at their rates) go to the estimator's
+        :meth:`BoardEstimator.align_at_rest`. Readings only, never ground truth."""
+        estimator = self.estimator
+        if estimator is None:
+            return
+        gyro: list[tuple[float, float, float]] = []
+        accel: list[tuple[float, float, float]] = []
+        for sched in self.sensors + self.board_sensors:
+            if not sched.board:
+                continue
+            sensor = sched.sensor
+            if sensor.type_name == "Gyro":
+                for _ in range(max(1, round(sensor.rate_hz * POWER_UP_S))):
+                    gyro.append(sensor.read(state, world).angular_velocity_rad_s)
+            elif sensor.type_name == "Accelerometer":
+                for _ in range(max(1, round(sensor.rate_hz * POWER_UP_S))):
+                    accel.append(sensor.read(state, world).proper_acceleration_m_s2)
+        estimator.align_at_rest(gyro, accel)
 
     def observe(self, reading: object) -> None:
         """A reading of one of the board's sensors, for its estimator."""

@@ -16,7 +16,7 @@ import pytest
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.geo import GeoOrigin
 from skeye.robots.params import EstimatorParams
-from skeye.sim.engine import Simulation
+from skeye.sim.engine import RobotWorldQuery, Simulation
 from skeye.sim.estimator import Axis, BoardEstimator
 from skeye.sim.sensors import AccelReading, CompassReading, GpsReading, GyroReading
 from skeye.sim.world import load_world
@@ -115,6 +115,48 @@ def _hover_velocity_error(robot_dirs: tuple[Path, ...], class_name: str) -> floa
     truth = sim.body_state("R1").vel_ned_m_s
     est = robot.estimator.estimate().vel_ned_m_s
     return math.hypot(truth[0] - est[0], truth[1] - est[1])
+
+
+def test_the_power_up_calibration_takes_the_gyro_bias_and_the_tilt_from_readings() -> None:
+    """The board's power-up calibration averages readings taken standing still: the gyro's
+    mean becomes its bias estimate (the body rate flown on is then unbiased at once, where
+    Mahony's integral needs tens of seconds), and roll and pitch level on the mean specific
+    force, whatever the spawn pose said; the heading is kept."""
+    est = BoardEstimator(EstimatorParams(), (0.0, 0.0, -1.0), (0.0, 0.0, 0.3), 0.0, 163.0)
+    rng = np.random.default_rng(4)
+    gyro = [tuple(float(v) for v in (0.004, -0.006, 0.002) + 0.001 * rng.standard_normal(3))
+            for _ in range(50)]
+    tilt = 0.02  # the accelerometer says: rolled 0.02 rad right
+    accel = [(0.0, -G * math.sin(tilt), -G * math.cos(tilt))] * 50
+    est.align_at_rest(gyro, accel)  # type: ignore[arg-type]
+    assert est.bias == pytest.approx([0.004, -0.006, 0.002], abs=0.0005)
+    roll, pitch, yaw = est.estimate().rpy_rad
+    assert roll == pytest.approx(tilt, abs=1e-9)
+    assert abs(pitch) < 1e-9 and yaw == pytest.approx(0.3, abs=1e-9)
+    est.observe(GyroReading(0.0, gyro[0]))
+    assert max(abs(w) for w in est.estimate().omega_frd_rad_s) < 0.004
+
+
+def test_a_vehicle_spawned_on_the_ground_starts_calibrated() -> None:
+    """Spawned on its gear, the board calibrates from its own sensors as it powers up: the
+    estimated gyro bias is the mean of that gyro's readings at rest (its turn-on bias), not
+    zero. A vehicle spawned in the air stands for one whose board calibrated before take-off:
+    its gyro bias is found the same way, its attitude stays the spawn pose (the accelerometer
+    feels no force at the spawn instant)."""
+    sim = Simulation(load_world("pad"), seed=3, estimator="onboard")
+    grounded = sim.spawn("hummingbird", name="G", sink=lambda events: None, start="Pad1")
+    airborne = sim.spawn("hummingbird", name="A", sink=lambda events: None,
+                         location_ned_m=(5.0, 5.0, -2.0))
+    assert grounded.estimator is not None and airborne.estimator is not None
+    assert max(abs(b) for b in airborne.estimator.bias) > 0.001
+    assert airborne.estimator.rpy() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    gyro = next(s.sensor for s in grounded.sensors + grounded.board_sensors
+                if s.board and s.sensor.type_name == "Gyro")
+    query = RobotWorldQuery(sim, "G")
+    readings = [gyro.read(sim.body_state("G"), query).angular_velocity_rad_s for _ in range(200)]
+    mean = np.mean(np.array(readings), axis=0)
+    assert np.abs(mean).max() > 0.001  # the part has a turn-on bias to find
+    assert np.array(grounded.estimator.bias) == pytest.approx(mean, abs=0.0005)
 
 
 def test_cutting_the_optical_flow_makes_velocity_drift(tmp_path: Path) -> None:
