@@ -8,6 +8,14 @@ it is done. Position motions run four PI controllers, as the paper's design has 
 (anti-windup: it also stops integrating while its output saturates in the error's direction) and
 its output; the horizontal speed is limited as a vector so diagonal moves are not faster.
 
+Arrival: a position motion is done when the position error is within its tolerance and the
+speed below ``settle_speed_m_s``, either at this tick or averaged over the last
+``settle_window_s``. The second form is for a vehicle flying on its own estimate (the board's
+onboard estimator): hovering over the target, that estimate jitters by centimetres about it
+(hover on the Hummingbird's sensors, pad world: error from the target 4.8 cm at the median,
+8.8 cm at the 90th percentile, speed 7.7 cm/s at the median; docs/physics.md), so the
+instantaneous test would pass only now and then while the vehicle is, on average, there.
+
 Invariants: time is an argument (``state.time_s``), so a motion behaves the same at any
 wall-clock speed; a position motion is done only when the position error is within its
 tolerance and the speed has settled; angles are compared wrapped to (-pi, pi].
@@ -16,6 +24,7 @@ tolerance and the speed has settled; angles are compared wrapped to (-pi, pi].
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
@@ -69,6 +78,8 @@ class MotionConfig:
     yaw_tolerance_rad: float = 0.05
     settle_speed_m_s: float = 0.08
     """A position motion is done once within tolerance *and* slower than this."""
+    settle_window_s: float = 1.0
+    """... now, or on the position error and velocity averaged over this much sim time."""
     land_speed_m_s: float = 0.4
     take_off_speed_m_s: float = 0.6
     control_rate_hz: float = 20.0
@@ -83,6 +94,7 @@ class MotionConfig:
             "tolerance_m",
             "yaw_tolerance_rad",
             "settle_speed_m_s",
+            "settle_window_s",
             "land_speed_m_s",
             "take_off_speed_m_s",
             "control_rate_hz",
@@ -251,6 +263,8 @@ class GoTo(Motion):
         self.angular = PIController(config.angular)
         self._last_s: float | None = None
         self.error_m = math.inf
+        # (time, error north/east/up, velocity north/east/down) over the last settle window
+        self._recent: deque[tuple[float, float, float, float, float, float, float]] = deque()
         if start is not None:
             dn, de, dd = (t - p for t, p in zip(target.position_ned_m, start.position_ned_m,
                                                 strict=True))
@@ -276,13 +290,30 @@ class GoTo(Motion):
         yaw_rate = self.angular.update(e_yaw, dt, self.config.max_yaw_rate_rad_s)
         vel = state.velocity_ned_m_s
         settled = vel is None or math.sqrt(sum(v * v for v in vel)) < self.config.settle_speed_m_s
-        if (
-            self.error_m <= self.tolerance_m
-            and abs(e_yaw) <= self.config.yaw_tolerance_rad
-            and settled
+        on_average = self._settled_on_average(state.time_s, (en, ee, e_up), vel)
+        if abs(e_yaw) <= self.config.yaw_tolerance_rad and (
+            (self.error_m <= self.tolerance_m and settled) or on_average
         ):
             self.done = True
         return DriveCommand(forward, right, up, yaw_rate)
+
+    def _settled_on_average(self, time_s: float, error: Vec3, vel: Vec3 | None) -> bool:
+        """Whether the error and velocity averaged over the last settle window (once that
+        much time has been seen) are within the tolerance and the settle speed."""
+        recent = self._recent
+        vn, ve, vd = vel if vel is not None else (0.0, 0.0, 0.0)
+        recent.append((time_s, error[0], error[1], error[2], vn, ve, vd))
+        start = time_s - self.config.settle_window_s
+        while len(recent) > 1 and recent[1][0] <= start + 1e-9:
+            recent.popleft()
+        if recent[0][0] > start + 1e-9:
+            return False  # not a whole window yet
+        n = len(recent)
+        mean = [sum(entry[i] for entry in recent) / n for i in range(1, 7)]
+        return (
+            math.sqrt(mean[0] ** 2 + mean[1] ** 2 + mean[2] ** 2) <= self.tolerance_m
+            and math.sqrt(mean[3] ** 2 + mean[4] ** 2 + mean[5] ** 2) < self.config.settle_speed_m_s
+        )
 
 
 class Hold(GoTo):
