@@ -163,9 +163,10 @@ class ControllerParams:
 class EstimatorParams:
     """The board's estimator (skeye.sim.estimator): which one, and its noise parameters.
 
-    ``kind = "onboard"`` estimates from the simulated sensor readings only; ``"truth"``
-    (default for now) is the oracle: ground truth plus the INS sensor's small error processes
-    (``skeye sim --estimator onboard|truth`` overrides the robot file). Sources of the
+    ``kind = "onboard"`` (the default) estimates from the simulated sensor readings only;
+    ``"truth"`` is the oracle: ground truth plus the INS sensor's small error processes, for
+    users who want the navigation out of the way (``skeye sim --estimator onboard|truth``
+    overrides the robot file). Sources of the
     defaults (docs/physics.md, "Onboard estimator"):
 
     - attitude_kp 0.2 rad/s: ArduPilot's DCM complementary filter, AHRS_RP_P default 0.2;
@@ -184,7 +185,7 @@ class EstimatorParams:
       walk is (accel_bias_walk_m_s3^2 + (g tilt_noise_rad_s)^2)^0.5.
     """
 
-    kind: str = "truth"
+    kind: str = "onboard"
     attitude_kp: float = 0.2
     attitude_ki: float = 0.01
     compass_gain: float = 1.0

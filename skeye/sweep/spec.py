@@ -22,13 +22,13 @@ from typing import Any
 
 import skeye
 from skeye.errors import LocalProtocolError
-from skeye.validate.experiments import CAMERAS, ESTIMATORS, RunSettings
+from skeye.validate.experiments import CAMERAS, ESTIMATORS, WORLDS, RunSettings
 
 EXPERIMENTS = ("E1", "E2")
 SETTINGS_FIELDS = {f.name: str(f.type) for f in dataclasses.fields(RunSettings)
                    if f.name not in ("seed", "quick")}
 """Parameters E1 and E2 take (fields of :class:`RunSettings`)."""
-SETTINGS_CHOICES = {"camera": CAMERAS, "estimator": ESTIMATORS}
+SETTINGS_CHOICES = {"camera": CAMERAS, "estimator": ESTIMATORS, "world": WORLDS}
 _SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
               "resources", "name"}
 

@@ -1,5 +1,6 @@
 """``skeye validate [E1|E2|all] --seeds N --out DIR [--quick] [--camera ideal|webcam]
-[--calibration FILE] [--estimator truth|onboard]``: the paper's experiments."""
+[--calibration FILE] [--estimator onboard|truth] [--world pad|indoor]``: the paper's
+experiments."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from skeye.validate.experiments import (
     CAMERAS,
     E2_RUNS,
     ESTIMATORS,
+    WORLDS,
     E1Series,
     E2Series,
     RunSettings,
@@ -31,17 +33,17 @@ from skeye.vision.calibration import CalibrationResult, load_calibration
 
 def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1,
              workers: int | None = None, keep_recordings: bool = False, *,
-             camera: str = "ideal", estimator: str = "truth",
+             camera: str = "ideal", estimator: str = "onboard", world: str = "pad",
              calibration: Path | None = None) -> dict[str, Any]:
     """Run the experiments for ``seeds`` seeds on the sweep's local pool; write the report.
 
     Each (experiment, seed) is one trial of :mod:`skeye.sweep` (its own processes, in parallel
     up to ``workers``); the series come back from the trials and the report is built here.
-    ``camera`` is the camera profile every run renders through and ``estimator`` the boards'
-    state estimator. A camera other than the ideal pinhole is calibrated first, as a user
-    would (the checkerboard world, ``skeye calibrate``'s maths; ``out/calibration/``), unless
-    a ``calibration`` file is given; the pilot's detector uses it, and E1 is flown again
-    without it.
+    ``camera`` is the camera profile every run renders through, ``estimator`` the boards'
+    state estimator and ``world`` the built-in world flown in. A camera other than the ideal
+    pinhole is calibrated first, as a user would (the checkerboard world, ``skeye
+    calibrate``'s maths; ``out/calibration/``), unless a ``calibration`` file is given; the
+    pilot's detector uses it, and E1 is flown again without it.
     """
     which = which.upper()
     if which not in ("E1", "E2", "ALL"):
@@ -52,6 +54,8 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         raise LocalProtocolError(f"unknown camera profile {camera!r}: {', '.join(CAMERAS)}")
     if estimator not in ESTIMATORS:
         raise LocalProtocolError(f"unknown estimator {estimator!r}: {', '.join(ESTIMATORS)}")
+    if world not in WORLDS:
+        raise LocalProtocolError(f"unknown world {world!r}: {', '.join(WORLDS)}")
     if calibration is not None:
         load_calibration(calibration)  # a bad file is named here, not in every trial
     experiments = ("E1", "E2") if which == "ALL" else (which,)
@@ -61,11 +65,12 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
         summary["calibration"] = calibration_figures(found, camera)
     cal_path = str(calibration.resolve()) if calibration is not None else ""
-    summary["setup"] = {"camera": camera, "estimator": estimator, "calibration": cal_path}
-    params = {"camera": camera, "estimator": estimator, "calibration": cal_path}
+    summary["setup"] = {"camera": camera, "estimator": estimator, "world": world,
+                        "calibration": cal_path}
+    params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path}
     seed_list = list(range(first_seed, first_seed + seeds))
     settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
-                               calibration=cal_path) for s in seed_list}
+                               world=world, calibration=cal_path) for s in seed_list}
     trials = [Trial(e, dict(params), s, quick, timeout_s=900.0 if quick else 7200.0)
               for s in seed_list for e in experiments]
     spec = SweepSpec(which, trials, [])
@@ -116,7 +121,7 @@ def calibration_figures(result: CalibrationResult, camera: str) -> dict[str, Any
 def cmd_validate(args: argparse.Namespace) -> int:
     summary = validate(args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
                        args.workers, args.keep_recordings, camera=args.camera,
-                       estimator=args.estimator,
+                       estimator=args.estimator, world=args.world,
                        calibration=Path(args.calibration) if args.calibration else None)
     print((Path(args.out) / "report.md").read_text())
     del summary
@@ -138,7 +143,10 @@ def register(sub: Any) -> None:
                    "calibrated first unless --calibration is given")
     p.add_argument("--calibration", default=None,
                    help="a `skeye calibrate` file for the pilot's pad detector")
-    p.add_argument("--estimator", choices=ESTIMATORS, default="truth",
+    p.add_argument("--estimator", choices=ESTIMATORS, default="onboard",
                    help="the boards' state estimator (skeye sim --estimator): onboard flies on "
                    "the simulated sensors, truth on the oracle")
+    p.add_argument("--world", choices=WORLDS, default="pad",
+                   help="the world flown in: pad (outdoors, GPS) or indoor (no GPS: the "
+                   "velocity hold is optical flow only, as on the paper's extension board)")
     p.set_defaults(func=cmd_validate)

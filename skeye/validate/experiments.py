@@ -14,12 +14,15 @@ reads the simulator's state behind the pilot's back.
   1/30 s), position hold on the pad (PAD_MODE 1: deadband 0.05 m, 0.3 m/s) for 5 minutes;
   the horizontal distance of the vehicle from the pad centre. Beside it, on the same seed and
   disturbance, two baselines without vision: the board's velocity hold on its own estimate
-  (HOLD; with ``--estimator onboard`` that estimate comes from the optical flow and sonar, and
-  GPS where the world has a sky, as the pad world does) and attitude + height hold (AscTec
+  (HOLD; with the onboard estimator that estimate comes from the optical flow and sonar, and
+  GPS where the world has a sky: the pad world does, the indoor world does not, so there it is
+  the flow-only hold of the paper's extension board) and attitude + height hold (AscTec
   height mode, CTRL_INPUT with centred sticks: no horizontal feedback at all).
 
-The camera (``camera``: a ``skeye sim --camera-profile``) and the board's estimator
-(``estimator``: ``skeye sim --estimator``) are settings of every run; with a ``calibration``
+The camera (``camera``: a ``skeye sim --camera-profile``), the board's estimator
+(``estimator``: ``skeye sim --estimator``) and the world (``world``: ``pad``, outdoors with
+GPS, or ``indoor``, no GPS; both have the pad at the origin) are settings of every run; with a
+``calibration``
 file the pilot's pad detector undistorts with it, and E1 is also flown without it (the bias a
 missing calibration causes).
 
@@ -47,7 +50,8 @@ from skeye.wire.sim import decode_line
 from skeye.wire.sim_messages import SenGroundTruth
 
 CAMERAS = ("ideal", "webcam")  # RunSettings.camera: skeye sim --camera-profile
-ESTIMATORS = ("truth", "onboard")  # RunSettings.estimator: skeye sim --estimator
+ESTIMATORS = ("onboard", "truth")  # RunSettings.estimator: skeye sim --estimator
+WORLDS = ("pad", "indoor")  # RunSettings.world: built-in worlds with the pad at the origin
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3
 
@@ -65,7 +69,8 @@ class RunSettings:
     deadband_m: float = 0.05  # E2's PAD_MODE 1 deadband
     max_speed_m_s: float = 0.3  # E2's PAD_MODE 1 speed limit
     camera: str = "ideal"  # the camera profile (skeye sim --camera-profile)
-    estimator: str = "truth"  # the boards' estimator (skeye sim --estimator)
+    estimator: str = "onboard"  # the boards' estimator (skeye sim --estimator)
+    world: str = "pad"  # the built-in world (skeye sim --world): pad (GPS) or indoor (none)
     calibration: str = ""  # a `skeye calibrate` file for the pilot's detector ("" = none)
 
     @property
@@ -101,7 +106,8 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
                  ) -> Iterator[Vehicle]:
     """Simulator + pilot as processes, and a ground client connected to the pilot."""
     sim_args = ["sim", "--mode", "lockstep", "--port", "0", "--seed", str(settings.seed),
-                "--record", str(record), "--estimator", settings.estimator]
+                "--record", str(record), "--estimator", settings.estimator,
+                "--world", settings.world]
     if vision:
         sim_args += ["--image-port", "0", "--camera-profile", settings.camera]
     if wind:

@@ -206,7 +206,7 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         "",
         f"Seeds: {seeds}; mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
-        f"{setup.get('estimator', 'truth')}; calibration: "
+        f"{setup.get('estimator', 'truth')}; world: {setup.get('world', 'pad')}; calibration: "
         f"{_shown_path(setup.get('calibration', ''), out)}.",
         "Simulator in lockstep, pilot with landing-pad vision on frames from the image server,",
         "a scripted ground client over the vehicle packet protocol. Figures are medians over",
@@ -284,7 +284,8 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
             "",
             "PAD_MODE 1 with deadband 0.05 m and 0.3 m/s for the vision run; the velocity hold "
             "is HOLD on the board's own estimate (with the onboard estimator: optical flow and "
-            "sonar, and GPS where the world has a sky: the pad world does); the attitude run "
+            "sonar, and GPS where the world has a sky: the pad world does, the indoor world "
+            "does not); the attitude run "
             "flies centred sticks in the AscTec height mode.",
             "",
             f"Where skeye lands: {where_it_lands(e2['std_m'], e2['max_m'])}. "

@@ -56,7 +56,8 @@ def test_quick_validation_reports_every_figure_from_its_series(tmp_path: Path):
     assert e2["duration_s"] > 15 and e2["f_max_n"] == 0.3
     # With no horizontal feedback the random force carries the vehicle away; the holds stay.
     assert e2["attitude_max_m"] > 0.5 > max(e2["max_m"], e2["velocity_max_m"])
-    assert summary["setup"] == {"camera": "ideal", "estimator": "truth", "calibration": ""}
+    assert summary["setup"] == {"camera": "ideal", "estimator": "onboard", "world": "pad",
+                                "calibration": ""}
     assert summary["paper"] == {"E1_max_rel_error": 0.02, "E2_std_m": 0.0249, "E2_max_m": 0.1327}
 
     # Every figure docs/experiments.md names appears in the report, beside the paper's.
@@ -114,5 +115,7 @@ def test_bad_arguments_are_refused(tmp_path: Path):
         validate("E1", seeds=1, out=tmp_path, quick=True, camera="fisheye")
     with pytest.raises(LocalProtocolError, match="unknown estimator 'ekf'"):
         validate("E1", seeds=1, out=tmp_path, quick=True, estimator="ekf")
+    with pytest.raises(LocalProtocolError, match="unknown world 'moon'"):
+        validate("E1", seeds=1, out=tmp_path, quick=True, world="moon")
     with pytest.raises(SkeyeError, match=r"no-such\.toml"):
         validate("E1", seeds=1, out=tmp_path, quick=True, calibration=tmp_path / "no-such.toml")
