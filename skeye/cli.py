@@ -174,8 +174,8 @@ def _add_sim(sub: Any) -> None:
         default=None,
         help="the boards' state estimator for every robot: onboard (from the simulated sensor "
         "readings; vehicles drift as real ones) or truth (an oracle: ground truth plus small "
-        "INS error processes); default: each robot file's [estimator] kind (onboard for the "
-        "built-in robots)",
+        "INS error processes); default: each robot file's [estimator] kind, which defaults "
+        "to onboard",
     )
     p.add_argument(
         "--wind", default="none", help="wind mode: none, constant, turbulence, random_force"

@@ -10,15 +10,18 @@ its output; the horizontal speed is limited as a vector so diagonal moves are no
 
 Arrival: a position motion is done when the position error is within its tolerance and the
 speed below ``settle_speed_m_s``, either at this tick or averaged over the last
-``settle_window_s``. The second form is for a vehicle flying on its own estimate (the board's
-onboard estimator): hovering over the target, that estimate jitters by centimetres about it
-(hover on the Hummingbird's sensors, pad world: error from the target 4.8 cm at the median,
-8.8 cm at the 90th percentile, speed 7.7 cm/s at the median; docs/physics.md), so the
-instantaneous test would pass only now and then while the vehicle is, on average, there.
+``settle_window_s`` (the error's RMS then within twice the tolerance and the mean speed below
+twice the settle speed, so a swing through the target does not count). The second form is for
+a vehicle flying on its own estimate (the board's onboard estimator): hovering over the
+target, that estimate jitters by centimetres about it (hover on the Hummingbird's sensors, pad
+world: error from the target 4.8 cm at the median, 8.8 cm at the 90th percentile, speed
+7.8 cm/s at the median; docs/physics.md), so the instantaneous test would pass only now and
+then while the vehicle is, on average, there.
 
 Invariants: time is an argument (``state.time_s``), so a motion behaves the same at any
 wall-clock speed; a position motion is done only when the position error is within its
-tolerance and the speed has settled; angles are compared wrapped to (-pi, pi].
+tolerance and the speed has settled, at one tick or on average over the settle window; angles
+are compared wrapped to (-pi, pi].
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Final
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.wire.sim_messages import Drive
@@ -79,7 +83,8 @@ class MotionConfig:
     settle_speed_m_s: float = 0.08
     """A position motion is done once within tolerance *and* slower than this."""
     settle_window_s: float = 1.0
-    """... now, or on the position error and velocity averaged over this much sim time."""
+    """... now, or on the position error and velocity averaged over this much sim time
+    (with their spread within twice the tolerance and settle speed)."""
     land_speed_m_s: float = 0.4
     take_off_speed_m_s: float = 0.6
     control_rate_hz: float = 20.0
@@ -103,6 +108,10 @@ class MotionConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"MotionConfig.{name} must be a positive number, got {value!r}")
+
+
+MIN_WINDOW_SAMPLES: Final = 5
+"""Fewest control ticks an averaged arrival test rests on (a gap in the feedback leaves fewer)."""
 
 
 class PIController:
@@ -298,21 +307,29 @@ class GoTo(Motion):
         return DriveCommand(forward, right, up, yaw_rate)
 
     def _settled_on_average(self, time_s: float, error: Vec3, vel: Vec3 | None) -> bool:
-        """Whether the error and velocity averaged over the last settle window (once that
-        much time has been seen) are within the tolerance and the settle speed."""
+        """Whether, over the last settle window (once that much time has been seen, in at
+        least ``MIN_WINDOW_SAMPLES`` ticks), the mean error vector is within the tolerance and
+        the mean velocity below the settle speed, while the error's RMS stays within twice
+        the tolerance and the mean speed below twice the settle speed: jitter about the
+        target passes, a swing through it does not."""
         recent = self._recent
         vn, ve, vd = vel if vel is not None else (0.0, 0.0, 0.0)
         recent.append((time_s, error[0], error[1], error[2], vn, ve, vd))
         start = time_s - self.config.settle_window_s
         while len(recent) > 1 and recent[1][0] <= start + 1e-9:
             recent.popleft()
-        if recent[0][0] > start + 1e-9:
-            return False  # not a whole window yet
         n = len(recent)
+        if recent[0][0] > start + 1e-9 or n < MIN_WINDOW_SAMPLES:
+            return False  # not a whole window yet
         mean = [sum(entry[i] for entry in recent) / n for i in range(1, 7)]
+        error_ms = sum(e[1] * e[1] + e[2] * e[2] + e[3] * e[3] for e in recent) / n
+        speed = sum(math.sqrt(e[4] * e[4] + e[5] * e[5] + e[6] * e[6]) for e in recent) / n
+        tol, settle = self.tolerance_m, self.config.settle_speed_m_s
         return (
-            math.sqrt(mean[0] ** 2 + mean[1] ** 2 + mean[2] ** 2) <= self.tolerance_m
-            and math.sqrt(mean[3] ** 2 + mean[4] ** 2 + mean[5] ** 2) < self.config.settle_speed_m_s
+            math.sqrt(mean[0] ** 2 + mean[1] ** 2 + mean[2] ** 2) <= tol
+            and math.sqrt(error_ms) <= 2.0 * tol
+            and math.sqrt(mean[3] ** 2 + mean[4] ** 2 + mean[5] ** 2) < settle
+            and speed < 2.0 * settle
         )
 
 

@@ -181,8 +181,9 @@ class EstimatorParams:
     - gps_delay_s 0.2: the age of a fix when the board gets it, configured as PX4's
       EKF2_GPS_DELAY is; 0.2 s is the simulated receiver's ``Latency`` (docs/physics.md);
     - tilt_noise_rad_s 0.015: PX4 EKF2's EKF2_GYR_NOISE, the rate noise that drives its tilt
-      error states; here the per-axis bias state carries g times the tilt error, so its random
-      walk is (accel_bias_walk_m_s3^2 + (g tilt_noise_rad_s)^2)^0.5.
+      error states; here the north and east bias states carry g times the tilt error, so their
+      random walk is (accel_bias_walk_m_s3^2 + (g tilt_noise_rad_s)^2)^0.5 (vertically a tilt
+      error is second order: accel_bias_walk_m_s3 alone).
     """
 
     kind: str = "onboard"

@@ -246,13 +246,15 @@ class BoardEstimator:
         if last is not None and t > last:
             dt = t - last
             var = self.p.accel_noise_m_s2 * self.p.accel_noise_m_s2
-            # The bias state also carries g times the attitude's tilt error, which wanders as
-            # the gyro's noise integrates (EKF2's tilt states, driven by EKF2_GYR_NOISE).
+            walk = self.p.accel_bias_walk_m_s3 * self.p.accel_bias_walk_m_s3
+            # A horizontal bias state also carries g times the attitude's tilt error, which
+            # wanders as the gyro's noise integrates (EKF2's tilt states, driven by
+            # EKF2_GYR_NOISE); vertically a tilt error is second order.
             tilt = GRAVITY_M_S2 * self.p.tilt_noise_rad_s
-            walk = self.p.accel_bias_walk_m_s3 * self.p.accel_bias_walk_m_s3 + tilt * tilt
+            walk_h = walk + tilt * tilt
             ax = self.axes
-            ax[0].predict(r[0] * fx + r[1] * fy + r[2] * fz, dt, var, walk)
-            ax[1].predict(r[3] * fx + r[4] * fy + r[5] * fz, dt, var, walk)
+            ax[0].predict(r[0] * fx + r[1] * fy + r[2] * fz, dt, var, walk_h)
+            ax[1].predict(r[3] * fx + r[4] * fy + r[5] * fz, dt, var, walk_h)
             ax[2].predict(r[6] * fx + r[7] * fy + r[8] * fz + GRAVITY_M_S2, dt, var, walk)
             last_i = (self.hist_i - 1) % HISTORY
             if t - self.hist_t[last_i] >= HISTORY_STEP_S - 1e-9:

@@ -165,6 +165,8 @@ def test_goto_is_done_when_its_feedback_jitters_about_the_target_on_average() ->
     assert not done
     done, _ = fly(0.08, 0.07, 5.0)  # jittering about a point 8 cm off
     assert not done
+    done, _ = fly(0.0, 0.3, 5.0)  # swinging 0.3 m through the target: on average there, but
+    assert not done  # its RMS error (0.3 m) is over twice the tolerance
     with pytest.raises(ConfigError, match="settle_window_s"):
         MotionConfig(settle_window_s=0.0)
 

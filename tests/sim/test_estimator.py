@@ -157,6 +157,15 @@ def test_a_vehicle_spawned_on_the_ground_starts_calibrated() -> None:
     mean = np.mean(np.array(readings), axis=0)
     assert np.abs(mean).max() > 0.001  # the part has a turn-on bias to find
     assert np.array(grounded.estimator.bias) == pytest.approx(mean, abs=0.0005)
+    # Roll and pitch are the accelerometer's, not the spawn pose's (level on the pad).
+    accel = next(s.sensor for s in grounded.sensors + grounded.board_sensors
+                 if s.board and s.sensor.type_name == "Accelerometer")
+    fx, fy, fz = np.mean(np.array([accel.read(sim.body_state("G"), query).proper_acceleration_m_s2
+                                   for _ in range(200)]), axis=0)
+    roll, pitch, _ = grounded.estimator.rpy()
+    assert roll == pytest.approx(math.atan2(-fy, -fz), abs=0.001)
+    assert pitch == pytest.approx(math.atan2(fx, math.hypot(fy, fz)), abs=0.001)
+    assert max(abs(roll), abs(pitch)) > 0.001  # the part's errors tilt it off the true level
 
 
 def test_cutting_the_optical_flow_makes_velocity_drift(tmp_path: Path) -> None:

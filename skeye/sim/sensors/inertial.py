@@ -144,12 +144,14 @@ class Gyro(Sensor[GyroReading]):
 
     Model: body rates rotated into the mount frame, then BiasedNoise. Defaults, MPU-6050-class:
     total RMS noise 0.05 deg/s at 100 Hz gives NoiseSigma 0.0009 rad/s; BiasSigma 0.005 rad/s
-    (0.3 deg/s residual zero-rate offset after a still calibration; uncalibrated it is
-    +-20 deg/s; this is the turn-on bias, drawn once from the seed); BiasWalk
-    1e-4 rad/s/sqrt(s). Scale factor and misalignment (:func:`axis_errors`): the MPU-6050
-    datasheet (PS-MPU-6000A-00 rev 3.4, table 6.1) gives a sensitivity scale factor tolerance
-    of +-3 % and a cross-axis sensitivity of +-2 %; read as 3-sigma limits, ScaleSigma 0.01 and
-    MisalignmentSigma 0.0067. Default rate 100 Hz.
+    (0.3 deg/s: the zero-rate offset a client reading this stream sees, the simulator's
+    choice, where the uncalibrated part is +-20 deg/s; this is the turn-on bias, drawn once
+    from the seed); BiasWalk 1e-4 rad/s/sqrt(s). The board's own power-up calibration
+    (skeye.sim.robot.Robot.power_up) averages the turn-on bias away for its estimator, leaving
+    the averaging noise and the walk; the stream keeps it. Scale factor and misalignment
+    (:func:`axis_errors`): the MPU-6050 datasheet (PS-MPU-6000A-00 rev 3.4, table 6.1) gives a
+    sensitivity scale factor tolerance of +-3 % and a cross-axis sensitivity of +-2 %; read as
+    3-sigma limits, ScaleSigma 0.01 and MisalignmentSigma 0.0067. Default rate 100 Hz.
     """
 
     type_name = "Gyro"
