@@ -65,9 +65,8 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
         summary["calibration"] = calibration_figures(found, camera)
     cal_path = str(calibration.resolve()) if calibration is not None else ""
-    summary["setup"] = {"camera": camera, "estimator": estimator, "world": world,
-                        "calibration": cal_path}
     params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path}
+    summary["setup"] = dict(params)
     seed_list = list(range(first_seed, first_seed + seeds))
     settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
                                world=world, calibration=cal_path) for s in seed_list}

@@ -22,9 +22,8 @@ reads the simulator's state behind the pilot's back.
 The camera (``camera``: a ``skeye sim --camera-profile``), the board's estimator
 (``estimator``: ``skeye sim --estimator``) and the world (``world``: ``pad``, outdoors with
 GPS, or ``indoor``, no GPS; both have the pad at the origin) are settings of every run; with a
-``calibration``
-file the pilot's pad detector undistorts with it, and E1 is also flown without it (the bias a
-missing calibration causes).
+``calibration`` file the pilot's pad detector undistorts with it, and E1 is also flown without
+it (the bias a missing calibration causes).
 
 ``quick`` runs the same code for a fraction of the time (CI).
 """

@@ -285,8 +285,7 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
             "PAD_MODE 1 with deadband 0.05 m and 0.3 m/s for the vision run; the velocity hold "
             "is HOLD on the board's own estimate (with the onboard estimator: optical flow and "
             "sonar, and GPS where the world has a sky: the pad world does, the indoor world "
-            "does not); the attitude run "
-            "flies centred sticks in the AscTec height mode.",
+            "does not); the attitude run flies centred sticks in the AscTec height mode.",
             "",
             f"Where skeye lands: {where_it_lands(e2['std_m'], e2['max_m'])}. "
             "Plot: `e2_distance.png`; series: `e2_series.csv`.",

@@ -14,11 +14,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from skeye.sim.engine import Simulation
-from skeye.sim.runner import SimulationRunner
-from skeye.sim.server import ControlServer
-from skeye.sim.world import load_world
 from tests.compat.usarsim_client import UsarClient, blocks, unreal_float
+from tests.control.conftest import sim_running
 
 
 def _battery(lines: list[str]) -> list[tuple[float, int]]:
@@ -36,9 +33,8 @@ def steady_client() -> Iterator[UsarClient]:
     """A lockstep simulator whose boards fly on the oracle estimator: a hover without the
     onboard estimate's centimetre corrections, so the draw is steady (on the onboard estimator
     the same hover's figure swings by a few seconds, 0.3 %, as the corrections come and go)."""
-    sim = Simulation(load_world("pad"), seed=1, estimator="truth")
-    with SimulationRunner(sim, mode="lockstep") as runner, ControlServer(runner, port=0) as srv:
-        c = UsarClient(srv.port)
+    with sim_running(estimator="truth") as handle:
+        c = UsarClient(handle.server.port)
         yield c
         c.close()
 
