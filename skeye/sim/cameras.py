@@ -296,14 +296,21 @@ class CameraSystem:
                     cam.camera_id = self._next_id
                     self._next_id += 1
                 current[key] = cam.camera_id
-                if key not in self._known:
+                if self._known.get(key) != cam.camera_id:
+                    # New, or a new robot under a gone one's name: its own slot and id.
+                    if key in self._known:
+                        self.buffer.remove_camera(key)
+                    self._last_delivery.pop(key, None)
                     self.buffer.register_camera(key, cam.camera_id)
                     # The first frame comes at the robot's first step (from its spawn state),
                     # then on the camera's grid of sim times k / rate.
                     cam.due = math.floor(sim.time_s * cam.rate_hz + 1e-9)
         for key in set(self._known) - set(current):
             self.buffer.remove_camera(key)
+            self._last_delivery.pop(key, None)
         self._known = current
+        with self._pending_lock:  # frames of cameras that went wait for nobody
+            self._pending = [p for p in self._pending if self._is_current(p[4])]
         for robot in sim.robots.values():
             for cam in robot.cameras:
                 cam_id = _camera_index(sim.model, camera_model_name(robot.name, cam.name))
@@ -388,9 +395,15 @@ class CameraSystem:
         for _, _, robot, cam, frame in sorted(due, key=lambda p: (p[0], p[1])):
             self._publish(robot, cam, frame, lockstep=True)
 
+    def _is_current(self, frame: Frame) -> bool:
+        """True while the camera that took ``frame`` still exists (not a gone robot's camera,
+        nor one of a robot since spawned under the same name)."""
+        return self._known.get(frame.camera) == frame.camera_id
+
     def _publish(self, robot: Any, cam: CameraSpec, frame: Frame, *, lockstep: bool) -> None:
-        if frame.camera in self._known:
-            self.buffer.publish(frame)
+        if not self._is_current(frame):
+            return  # its robot went while the frame was rendered or waited out its latency
+        self.buffer.publish(frame)
         shot = CameraFrame(frame.sim_time_s, cam.name, frame.number)
         if lockstep:  # in order, with the step's lines
             self.sim.emit(robot, [shot])

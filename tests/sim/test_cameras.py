@@ -218,6 +218,38 @@ def test_camera_frames_are_announced_in_lockstep():
     assert len(frames) == 7  # t = 0, 1/30, ..., 6/30 within the first 0.2 s
 
 
+@pytest.mark.parametrize("profile", ["webcam", "ideal"])
+def test_lockstep_images_serve_robots_spawned_one_after_another(profile):
+    """The README's workflow: one lockstep simulator with an image port, the examples run one
+    after another, each spawning R1 afresh. Each robot gets its own frames (numbered from 1
+    under a new camera id), even while the gone robot's frames still wait out the webcam's
+    capture latency."""
+    with sim_with_images(profile=profile) as (control, images, cameras):
+        ids = []
+        for run in range(3):
+            c = LineClient(control.port)
+            c.expect("NFO")
+            assert c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}",
+                            "INIT").type == "RES"
+            msgs = c.step(200)
+            shots = [int(m.require("Frame")) for m in msgs
+                     if m.type == "SEN" and m.get("Type") == "Camera"]
+            assert shots and shots == list(range(1, len(shots) + 1)), (run, shots)
+            with ImageClient("127.0.0.1", images.port) as img:
+                img.select_camera("R1/Down")
+                img.set_meta(True)
+                frame = img.get_frame()
+            assert frame.meta is not None and frame.meta.frame_number == shots[-1], run
+            ids.append(frame.meta.camera_id)
+            c.close()
+            # The robot goes with its client; the next one must not meet its frames.
+            deadline = time.monotonic() + 30
+            while cameras.buffer.camera_id("R1/Down") == ids[-1]:
+                assert time.monotonic() < deadline, "robot R1 was not removed"
+                time.sleep(0.01)
+    assert len(set(ids)) == 3, ids
+
+
 def test_snapshot_saves_png_and_jpeg(tmp_path):
     import cv2
 
