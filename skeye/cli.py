@@ -69,6 +69,7 @@ def image_defaults(args: argparse.Namespace) -> tuple[Any, int | None]:
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
+    from skeye.processes import check_ports_free
     from skeye.robots.config import validate_robot_dirs
     from skeye.sim.engine import Simulation
     from skeye.sim.runner import SimulationRunner
@@ -77,6 +78,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from skeye.sim.world import load_world
 
     image_format, image_quality = image_defaults(args)  # before anything starts
+    ports = [("the simulator's control protocol", args.host, args.port, "--port")]
+    if args.image_port is not None:
+        ports.append(("the simulator's image server", args.host, args.image_port,
+                      "--image-port"))
+    check_ports_free(ports)  # named, with the option that moves it, before MuJoCo loads
     world = load_world(args.world)
     validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
     wind = make_settings(args.wind, parse_params(args.wind_params))

@@ -40,6 +40,18 @@ def test_sim_refuses_to_start_with_a_robot_file_that_has_a_typo(tmp_path: Path) 
     assert done.returncode == 2 and "not a folder" in done.stderr
 
 
+@pytest.mark.parametrize("which", ["--port", "--image-port"])
+def test_sim_on_a_taken_port_names_it_and_the_option_that_moves_it(which: str) -> None:
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        argv = ["sim", "--port", "0", "--image-port", "0", which, str(port)]
+        done = _skeye(*argv)
+    assert done.returncode == 2, done
+    assert f"port {port} on 127.0.0.1" in done.stderr and "already in use" in done.stderr
+    assert f"{which} PORT" in done.stderr
+    assert "Errno" not in done.stderr and "control protocol on" not in done.stdout
+
+
 def test_snapshot_without_an_image_server_names_the_address_and_the_option() -> None:
     with socket.create_server(("127.0.0.1", 0)) as probe:
         port = probe.getsockname()[1]  # free once closed: nothing listens there
