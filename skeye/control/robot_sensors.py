@@ -141,10 +141,21 @@ class RobotSensors:
         return self.sensor("Camera")  # type: ignore[return-value]
 
     def position(self) -> tuple[float, float, float]:
-        """``(north_m, east_m, altitude_m)`` from ground truth (altitude up positive)."""
+        """``(north_m, east_m, altitude_m)`` from ground truth (altitude up positive): where
+        the simulator has the vehicle."""
         reading = self.ground_truth.latest
         if reading is None:
             raise LinkTimeout(f"{self.name}: no ground-truth reading yet")
+        n, e, d = reading.position_ned_m
+        return (n, e, -d)
+
+    def estimated_position(self) -> tuple[float, float, float]:
+        """``(north_m, east_m, altitude_m)`` from the board's own estimate (INS): where the
+        vehicle believes it is, and what its motions fly on (it drifts from :meth:`position`
+        as a real estimate does: docs/physics.md)."""
+        reading = self.ins.latest
+        if reading is None:
+            raise LinkTimeout(f"{self.name}: no INS reading yet")
         n, e, d = reading.position_ned_m
         return (n, e, -d)
 
