@@ -2,15 +2,21 @@
 
 How this works: the spec expands to trials (:mod:`skeye.sweep.spec`); those whose rows already
 exist in ``DIR/trials`` without an error are skipped; the rest go to the backend, and each row
-is stored the moment it comes back. A rich progress bar shows trials done, failed and running and
-the time left. At the end the tables and the report are written from every row of the spec.
+is stored the moment it comes back. On a terminal a rich progress bar shows trials done, failed
+and running and the time left; elsewhere (a log file, a batch job) one line per finished trial
+says the same. At the end the tables and the report are written from every row of the spec.
+SIGTERM or SIGHUP stop a sweep as Ctrl-C does: the running trials are killed, their temporary
+folders removed, and the stored rows kept (rerun to resume).
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,6 +24,7 @@ from typing import Any
 from skeye.sweep.backends import Backend, make_backend
 from skeye.sweep.results import ResultStore, write_report, write_tables
 from skeye.sweep.spec import SweepSpec, load_spec
+from skeye.sweep.worker import stop_running_trials
 
 
 @dataclass
@@ -44,10 +51,20 @@ def run_trials(spec: SweepSpec, out: Path, backend: Backend, label: str = "sweep
     todo = [t for t in spec.trials if not store.done(t.key)]
     result = SweepResult(skipped=len(spec.trials) - len(todo))
     counts = {"failed": 0, "running": 0}
+    on_terminal = show_progress and sys.stderr.isatty()
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                         TextColumn("failed {task.fields[failed]}, running {task.fields[running]}"),
                         TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn(),
-                        disable=not show_progress, transient=False)
+                        disable=not on_terminal, transient=False)
+    start = time.monotonic()
+
+    def log_line(text: str) -> None:  # off a terminal the bar is silent: plain lines instead
+        if show_progress and not on_terminal:
+            print(f"[{time.monotonic() - start:7.0f} s] {label}: {text}", file=sys.stderr,
+                  flush=True)
+
+    log_line(f"{len(todo)} trials to run, {result.skipped} done before, on {backend.workers} "
+             "worker(s)")
     with progress:
         task = progress.add_task(f"{label}: {len(todo)} to run, {result.skipped} done before",
                                  total=len(todo), failed=0, running=0)
@@ -62,6 +79,12 @@ def run_trials(spec: SweepSpec, out: Path, backend: Backend, label: str = "sweep
             if row.get("error"):
                 counts["failed"] += 1
             progress.update(task, advance=1, failed=counts["failed"])
+            left = len(todo) - result.ran
+            eta = (time.monotonic() - start) / result.ran * left
+            outcome = f"failed: {row['error']}" if row.get("error") else "ok"
+            log_line(f"{result.ran}/{len(todo)} trial {row['key']} (seed {row.get('seed')}) "
+                     f"{outcome} in {row.get('wall_s', 0):.0f} s; {counts['failed']} failed, "
+                     f"{counts['running']} running, about {eta:.0f} s left")
     result.failed = counts["failed"]
     result.rows = [r for t in spec.trials if (r := store.get(t.key)) is not None]
     return result
@@ -84,9 +107,36 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
     return result
 
 
+@contextmanager
+def stop_cleanly_on_signals() -> Iterator[None]:
+    """SIGTERM and SIGHUP end the run as Ctrl-C does (KeyboardInterrupt through the ``finally``
+    blocks), after killing the running trials, so none outlives the sweep and every temporary
+    folder is removed. Only in the main thread (where Python delivers signals)."""
+
+    def stop(signum: int, frame: Any) -> None:
+        stop_running_trials()
+        raise KeyboardInterrupt(f"stopped by signal {signal.Signals(signum).name}")
+
+    before = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    except KeyboardInterrupt:
+        stop_running_trials()
+        raise
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
-    result = sweep(Path(args.spec), Path(args.out), args.backend, args.address, args.workers,
-                   True if args.quick else None)
+    try:
+        with stop_cleanly_on_signals():
+            result = sweep(Path(args.spec), Path(args.out), args.backend, args.address,
+                           args.workers, True if args.quick else None)
+    except KeyboardInterrupt as exc:
+        print(f"skeye sweep: {exc or 'interrupted'}; the finished trials are kept in "
+              f"{args.out}/trials (rerun to resume)", file=sys.stderr)
+        return 130
     print(f"{len(result.rows)} trials: {result.ran} run now, {result.skipped} from earlier runs, "
           f"{result.failed} failed; results in {args.out}/results.csv, report in "
           f"{args.out}/report.md", file=sys.stderr)

@@ -22,6 +22,9 @@ from skeye.sweep.spec import SweepSpec
 
 FIXED = ["key", "experiment", "seed", "quick"]
 TAIL = ["wall_s", "host", "skeye_version", "code_version", "error"]
+# What a run was, not what it measured (E2's series length): kept in the rows, not summarised
+# or plotted as figures.
+RUN_DESCRIPTORS = frozenset({"duration_s", "samples"})
 
 
 class ResultStore:
@@ -60,9 +63,10 @@ def columns(rows: list[dict[str, Any]], params: list[str]) -> list[str]:
 
 
 def figure_names(rows: list[dict[str, Any]], params: list[str]) -> list[str]:
+    """The measured figures of the rows (numeric columns, not the run's descriptors)."""
     cols = columns(rows, params)
     return [c for c in cols[len(FIXED) + len(params):-len(TAIL)]
-            if any(_num(r.get(c)) is not None for r in rows)]
+            if c not in RUN_DESCRIPTORS and any(_num(r.get(c)) is not None for r in rows)]
 
 
 def _num(v: Any) -> float | None:

@@ -33,6 +33,23 @@ from skeye.sweep.spec import Trial
 
 LOG_TAIL_LINES = 8
 
+# Trial process groups running now in this process (their pids), so that a sweep stopped by a
+# signal can end them at once: each waiting thread then cleans up its temporary folder.
+_running: set[int] = set()
+_running_lock = threading.Lock()
+
+
+def stop_running_trials() -> int:
+    """Kill every trial process group this process is running; how many there were."""
+    with _running_lock:
+        pids = list(_running)
+    for pid in pids:
+        try:
+            os.killpg(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    return len(pids)
+
 
 def _figures_only(figures: dict[str, Any]) -> dict[str, float]:
     return {k: v for k, v in figures.items() if k != "seed"}
@@ -94,6 +111,8 @@ def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
         with open(log_file, "w") as log:
             proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=log,
                                     stderr=subprocess.STDOUT, start_new_session=True)
+        with _running_lock:
+            _running.add(proc.pid)
         try:
             proc.wait(trial.timeout_s)
         except subprocess.TimeoutExpired:
@@ -104,6 +123,8 @@ def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
             except ProcessLookupError:
                 pass
             proc.wait()
+            with _running_lock:
+                _running.discard(proc.pid)
             if proc.stdin is not None:
                 proc.stdin.close()
         if result_file.exists():

@@ -73,6 +73,8 @@ def test_local_sweep_writes_one_row_per_trial_and_a_report(local_run):
     assert "## by f_max_n" in report and "plot_f_max_n.png" in report
     assert (out / "plot_f_max_n.png").stat().st_size > 0
     assert "## by seed" not in report and "e2_duration_s" not in report.split("## by")[1]
+    # The run's descriptors (series length) are rows, not figures to summarise or plot.
+    assert "duration_s" not in report.split("## by")[1] and "samples" not in report
 
 
 def test_resumed_sweep_runs_only_what_is_missing(local_run, tmp_path: Path):
@@ -247,3 +249,56 @@ def test_bad_command_lines_are_refused(tmp_path: Path):
                               str(tmp_path / "o"), *args], capture_output=True, text=True,
                              timeout=120)
         assert run.returncode != 0 and match in run.stderr + run.stdout
+
+
+SLOW = """
+import os
+import time
+
+def trial(settings, params, workdir):
+    if params["mode"] == "hang":
+        with open(os.environ["SWEEP_TEST_PIDFILE"], "w") as f:
+            f.write(str(os.getpid()))
+        time.sleep(600)
+    return {"height_m": 1.0}
+"""
+
+
+def test_sweep_off_a_terminal_logs_lines_and_sigterm_leaves_nothing_behind(tmp_path: Path):
+    """Issue 34 item 6: with stderr not a terminal, each finished trial is a plain line; a
+    SIGTERM kills the running trials, removes their temporary folders and keeps the rows."""
+    (tmp_path / "flight.py").write_text(SLOW)
+    spec = tmp_path / "s.toml"
+    spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [1]\n'
+                    'timeout_s = 900\n[grid]\nmode = ["ok", "hang"]\n')
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    pidfile = tmp_path / "hang.pid"
+    env = dict(os.environ, TMPDIR=str(tmp), SWEEP_TEST_PIDFILE=str(pidfile))
+    proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
+                             str(tmp_path / "out"), "--workers", "2"],
+                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
+    assert proc.stderr is not None
+    lines = []
+    try:
+        for line in proc.stderr:  # an event wait: the ok trial's line
+            lines.append(line)
+            if "1/2 trial" in line:
+                break
+        deadline = time.monotonic() + 300  # a stuck guard: the hang trial has started
+        while not pidfile.exists() or not pidfile.read_text():
+            assert time.monotonic() < deadline, lines
+            time.sleep(0.05)
+        hang_pid = int(pidfile.read_text())
+        assert list(tmp.glob("skeye-trial-*")), "the running trial has its folder"
+        proc.send_signal(signal.SIGTERM)
+        rest = proc.stderr.read()
+        assert proc.wait(60) == 130
+    finally:
+        proc.kill()
+    assert "2 trials to run" in lines[0] and "ok in" in lines[-1], lines
+    assert "stopped by signal SIGTERM" in rest and "rerun to resume" in rest, rest
+    assert not list(tmp.glob("skeye-trial-*")), list(tmp.iterdir())
+    assert not Path(f"/proc/{hang_pid}").exists() or \
+        Path(f"/proc/{hang_pid}/stat").read_text().split(")")[1].split()[0] == "Z"
+    assert len(list((tmp_path / "out" / "trials").glob("*.json"))) == 1  # the ok row kept
