@@ -246,8 +246,13 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     print(f"skeye up: calibrating the {robot}'s {model.profile} camera on the checkerboard "
           f"world (once; kept in {workdir})", flush=True)
     partial = workdir.with_name(f"{workdir.name}.{os.getpid()}.partial")
+    start = time.monotonic()
+
+    def progress(step: str) -> None:
+        print(f"skeye up: calibrating [{time.monotonic() - start:5.1f} s]: {step}", flush=True)
+
     try:
-        calibrate_simulated_camera(partial, model.profile, robot=robot)
+        calibrate_simulated_camera(partial, model.profile, robot=robot, progress=progress)
         if not workdir.exists():
             os.replace(partial, workdir)  # whole or not at all
     except Exception as exc:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -84,9 +85,13 @@ def _has_frame(camera: Any) -> bool:
     return camera.latest is not None
 
 
+Progress = Callable[[str], None]  # told what a long step is doing, for a user who waits
+
+
 def capture_board(sim_address: str, images_address: str, robot: str = "hummingbird",
-                  camera: str = "Down") -> list[np.ndarray]:
-    """The 14 views' frames (BGR) from a lockstep simulator of the checkerboard world."""
+                  camera: str = "Down", progress: Progress | None = None) -> list[np.ndarray]:
+    """The 14 views' frames (BGR) from a lockstep simulator of the checkerboard world;
+    ``progress`` is told of each view taken."""
     import skeye
 
     frames: list[np.ndarray] = []
@@ -114,6 +119,9 @@ def capture_board(sim_address: str, images_address: str, robot: str = "hummingbi
                                        f"{image.frame}, not the spawn-state frame "
                                        f"{first.frame if first else '?'}")
             frames.append(image.bgr)
+            if progress is not None:
+                of = f" of {len(poses)}" if len(frames) > 1 else ""  # known after the first
+                progress(f"view {len(frames)}{of} photographed")
             if len(frames) == 1:  # the camera's size and focal length, now that one exists
                 conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
                 poses = board_poses(int(conf.get_float("Width")),
@@ -123,19 +131,25 @@ def capture_board(sim_address: str, images_address: str, robot: str = "hummingbi
 
 
 def calibrate_simulated_camera(workdir: Path, camera_profile: str, seed: int = 1,
-                               robot: str = "hummingbird") -> tuple[Path, CalibrationResult]:
+                               robot: str = "hummingbird", progress: Progress | None = None
+                               ) -> tuple[Path, CalibrationResult]:
     """Start ``skeye sim`` on the checkerboard world with ``camera_profile``, photograph the
-    board, calibrate; the calibration file written (``workdir/camera.toml``) and the result."""
+    board, calibrate; the calibration file written (``workdir/camera.toml``) and the result.
+    ``progress`` is told of each step (the simulator starting, each view, the solve)."""
     workdir.mkdir(parents=True, exist_ok=True)
+    if progress is not None:
+        progress("starting a lockstep simulator of the checkerboard world")
     sim, found = start_skeye(
         ["sim", "--world", "checkerboard", "--mode", "lockstep", "--port", "0",
          "--image-port", "0", "--seed", str(seed), "--camera-profile", camera_profile],
         [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"], "skeye sim")
     try:
         frames = capture_board(f"127.0.0.1:{found[0].group(1)}",
-                               f"127.0.0.1:{found[1].group(1)}", robot)
+                               f"127.0.0.1:{found[1].group(1)}", robot, progress=progress)
     finally:
         stop_process(sim)
+    if progress is not None:
+        progress(f"solving for the lens with OpenCV's calibrateCamera on {len(frames)} views")
     images = []
     for i, bgr in enumerate(frames):
         path = workdir / f"board{i:02d}.png"

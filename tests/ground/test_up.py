@@ -55,6 +55,10 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
         said = "".join(lines)
         assert "calibrating the hummingbird's webcam camera" in said or \
             "the pilot uses the camera calibration" in said, said
+        if "calibrating the" in said:  # never silent for long: each step says itself
+            for step in ("starting a lockstep simulator", "view 1 photographed",
+                         "view 14 of 14 photographed", "solving for the lens"):
+                assert f"]: {step}" in said, (step, said)
         pilot_argv = [open(f"/proc/{pid}/cmdline").read().split("\0") for pid in children]
         pilot_argv = [a for a in pilot_argv if "pilot" in a]
         assert len(pilot_argv) == 1 and "--calibration" in pilot_argv[0], pilot_argv
