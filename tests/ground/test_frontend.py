@@ -157,6 +157,13 @@ def test_every_field_comes_from_the_command_table(page: Any) -> None:
                 assert arg.help in f["title"], f
             if arg.limit:
                 assert described["limit"]["key"] in f["title"], f
+                # the limit in the field's own unit (degrees per second for the yaw rate)
+                at_most = round(described["limit"]["value"] * k, 3)
+                assert f"at most {at_most:g} {arg.display_unit}".rstrip() in f["title"], f
+    # A latitude to 1 cm fits its field (it showed "50.812").
+    width = page.evaluate("document.getElementById('arg-goto_gps-latitude_deg')"
+                          ".getBoundingClientRect().width")
+    assert width >= 120, width
     # The vehicle's limits reach the fields: yaw rate 100 °/s, speeds 3 m/s.
     assert close(float(shown["arg-velocity-yaw_rate_rad_s"]["max"]),
                  math.degrees(LIMITS.max_yaw_rate_rad_s))
@@ -340,6 +347,10 @@ def test_plots_have_legends_and_zoom(page: Any) -> None:
                            timeout=30_000)
     legend = page.inner_text("#plot-height .u-legend")
     assert "height above ground" in legend
+    # the cursor's time in the legend has seconds (uPlot's default shows minutes only)
+    shown = page.evaluate("plots.height.plot.series[0].value(plots.height.plot, "
+                          "new Date(2026, 0, 1, 13, 4, 5).getTime() / 1000)")
+    assert shown == "13:04:05", shown
     assert "forward" in page.inner_text("#plot-pad .u-legend")
     assert page.is_visible("#plot-pad .plot-empty")  # no pad estimate in these rows
     box = page.locator("#plot-height .u-over").bounding_box()

@@ -35,7 +35,12 @@ export function displayRange(arg) {
 export function fieldTitle(arg) {
   const parts = [];
   if (arg.help) parts.push(arg.help);
-  if (arg.limit) parts.push(`at most ${arg.limit.value} (${arg.limit.key}, ${arg.limit.source})`);
+  if (arg.limit) {  // in the field's own unit; the robot file's key and SI value beside it
+    const shown = Number(toDisplay(arg.limit.value, arg.si_unit, arg.unit).toFixed(3));
+    const unit = arg.unit ? ` ${arg.unit}` : "";
+    parts.push(`at most ${shown}${unit} (${arg.limit.key} = ${arg.limit.value} ` +
+               `${arg.si_unit}, ${arg.limit.source})`);
+  }
   return parts.join("; ");
 }
 

@@ -48,7 +48,9 @@ export class TimePlot {
       scales: { x: { time: true }, y: { range: (u, lo, hi) => paddedRange(lo, hi) } },
       axes: [{ ...AXIS, values: (u, vals) => vals.map(clockTime) },
         { ...AXIS, size: 48, values: (u, vals) => vals.map((v) => v.toFixed(2)) }],
-      series: [{ label: "time" },
+      // the cursor's time in the legend: the same clock as the axis, with seconds
+      series: [{ label: "time", value: (u, v) => (v === null || v === undefined ? "—"
+        : clockTime(v)) },
         ...series.map((s) => ({ label: s.label, stroke: s.stroke, width: 2, value }))],
       cursor: { drag: { x: true, y: false } },
       legend: { live: true },
