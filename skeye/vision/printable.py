@@ -7,8 +7,10 @@ keeps them as vectors (page size in points = metres / 0.0254 * 72); PNG is raste
 requested DPI and carries that DPI in its metadata, so printing at 100 % gives the true size.
 
 A pad larger than a home printer's paper is tiled (``paper="a4"`` or ``"letter"``, PDF only):
-:func:`plan_tiles` cuts the true-scale page into paper-sized tiles that overlap by
-``TILE_OVERLAP_M``, in whichever orientation needs fewer sheets; each sheet shows its part of
+:func:`plan_tiles` cuts the true-scale page into the fewest paper-sized tiles that overlap by at
+least ``TILE_OVERLAP_M``, in whichever orientation needs fewer sheets, and spreads them evenly
+so the first and last tile of a row or column end at the page's edges (every sheet carries as
+much of the pad as its neighbours, none is mostly blank); each sheet shows its part of
 the pad, dashed lines where its neighbours' parts begin, red ``+`` registration marks inside the
 overlaps (each appears on both sheets it joins: lay one over the other), its row and column,
 and a 100 mm scale bar to check the printer did not scale it (as AprilTag and ArUco print
@@ -105,6 +107,8 @@ class TilePlan:
     rows: int
     cols: int
     tiles: tuple[Tile, ...]
+    overlap_x_m: float  # between neighbours in a row (0 with one column)
+    overlap_y_m: float  # between neighbours in a column (0 with one row)
 
     @property
     def sheet_m(self) -> tuple[float, float]:
@@ -124,12 +128,13 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
         usable_w, usable_h = sheet_w - 2 * PAPER_MARGIN_M, sheet_h - 2 * PAPER_MARGIN_M
         cols = _count(page_side_m, usable_w)
         rows = _count(page_side_m, usable_h)
-        tiles = tuple(
-            Tile(r + 1, c + 1, c * (usable_w - TILE_OVERLAP_M),
-                 page_side_m - usable_h - r * (usable_h - TILE_OVERLAP_M), usable_w, usable_h)
-            for r in range(rows) for c in range(cols)
-        )
-        plan = TilePlan(paper, landscape, page_side_m, rows, cols, tiles)
+        xs = _starts(page_side_m, usable_w, cols)  # left edges, left to right
+        ys = _starts(page_side_m, usable_h, rows)[::-1]  # bottom edges, row 1 at the top
+        tiles = tuple(Tile(r + 1, c + 1, xs[c], ys[r], usable_w, usable_h)
+                      for r in range(rows) for c in range(cols))
+        plan = TilePlan(paper, landscape, page_side_m, rows, cols, tiles,
+                        usable_w - (xs[1] - xs[0]) if cols > 1 else 0.0,
+                        usable_h - (ys[0] - ys[1]) if rows > 1 else 0.0)
         if best is None or len(plan.tiles) < len(best.tiles):
             best = plan
     assert best is not None
@@ -142,6 +147,15 @@ def _count(length_m: float, usable_m: float) -> int:
     return math.ceil((length_m - TILE_OVERLAP_M) / (usable_m - TILE_OVERLAP_M) - 1e-9)
 
 
+def _starts(length_m: float, usable_m: float, count: int) -> list[float]:
+    """Where ``count`` tiles of ``usable_m`` start so they span ``length_m`` evenly: the first
+    at 0, the last ending at ``length_m`` (one tile: centred on the page)."""
+    if count == 1:
+        return [(length_m - usable_m) / 2]
+    step = (length_m - usable_m) / (count - 1)
+    return [i * step for i in range(count)]
+
+
 def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> TilePlan:
     from matplotlib.backends.backend_pdf import PdfPages
     from matplotlib.figure import Figure
@@ -150,11 +164,12 @@ def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> 
     side = page_size_m(pad, margin_m)
     plan = plan_tiles(side, paper)
     sheet_w, sheet_h = plan.sheet_m
-    step_x = plan.tiles[0].width_m - TILE_OVERLAP_M
-    step_y = plan.tiles[0].height_m - TILE_OVERLAP_M
+    first_row = [t for t in plan.tiles if t.row == 1]
+    first_col = [t for t in plan.tiles if t.col == 1]
+    ov_x, ov_y = plan.overlap_x_m, plan.overlap_y_m
     # registration marks: centred in every overlap strip, at every crossing of the strips
-    xs = [c * step_x + TILE_OVERLAP_M / 2 for c in range(1, plan.cols)]
-    ys = [side - r * step_y - TILE_OVERLAP_M / 2 for r in range(1, plan.rows)]
+    xs = [t.x0_m + ov_x / 2 for t in first_row[1:]]
+    ys = [t.y0_m + t.height_m - ov_y / 2 for t in first_col[1:]]
     mark_xs = xs or [side / 2]
     mark_ys = ys or [side / 2]
     with PdfPages(out) as pdf:
@@ -168,10 +183,10 @@ def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> 
             ax.axis("off")
             _draw_pad(ax, pad, margin_m)
             for x in xs:  # where the right/left neighbour's part begins / ends
-                for edge in (x - TILE_OVERLAP_M / 2, x + TILE_OVERLAP_M / 2):
+                for edge in (x - ov_x / 2, x + ov_x / 2):
                     ax.axvline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
             for y in ys:
-                for edge in (y - TILE_OVERLAP_M / 2, y + TILE_OVERLAP_M / 2):
+                for edge in (y - ov_y / 2, y + ov_y / 2):
                     ax.axhline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
             arm = 0.004
             for mx in mark_xs:
@@ -192,8 +207,8 @@ def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> 
             fig.text(x1 + 0.01, y_bar,
                      f"<- this bar must measure {SCALE_BAR_M * 1000:.0f} mm (print at 100 %)  |  "
                      f"{pad.name} sheet row {tile.row}/{plan.rows}, column {tile.col}/"
-                     f"{plan.cols}; overlap {TILE_OVERLAP_M * 1000:.0f} mm between the dashed "
-                     "lines: lay the + marks on each other",
+                     f"{plan.cols}; overlap {ov_x * 1000:.0f} mm across, {ov_y * 1000:.0f} mm "
+                     "down, between the dashed lines: lay the + marks on each other",
                      fontsize=5.5, va="center", color="0.2")
             pdf.savefig(fig)
     return plan

@@ -161,21 +161,32 @@ def test_pad_tiles_over_home_printer_paper(tmp_path, paper, sheet_pt):
 
     side = page_size_m(SKEYE_4)
     plan = plan_tiles(side, paper)
-    # every sheet fits the paper's printable area; together they cover the whole page, and
-    # neighbours overlap by exactly TILE_OVERLAP_M
+    # every sheet fits the paper's printable area; together they cover exactly the page (no
+    # sheet reaches past it: none is mostly blank), and neighbours overlap by the plan's
+    # overlap, at least TILE_OVERLAP_M
     w, h = PAPERS_M[paper]
     for t in plan.tiles:
         assert t.width_m == pytest.approx((h if plan.landscape else w) - 2 * PAPER_MARGIN_M)
         assert t.height_m == pytest.approx((w if plan.landscape else h) - 2 * PAPER_MARGIN_M)
+        assert -1e-9 <= t.x0_m and t.x0_m + t.width_m <= side + 1e-9, t
+        assert -1e-9 <= t.y0_m and t.y0_m + t.height_m <= side + 1e-9, t
     assert min(t.x0_m for t in plan.tiles) == 0 and max(t.y0_m + t.height_m for t in plan.tiles
                                                         ) == pytest.approx(side)
-    assert max(t.x0_m + t.width_m for t in plan.tiles) >= side
-    assert min(t.y0_m for t in plan.tiles) <= 0
+    assert max(t.x0_m + t.width_m for t in plan.tiles) == pytest.approx(side)
+    assert min(t.y0_m for t in plan.tiles) == pytest.approx(0, abs=1e-12)
+    assert plan.overlap_x_m >= TILE_OVERLAP_M and plan.overlap_y_m >= TILE_OVERLAP_M
     by_place = {(t.row, t.col): t for t in plan.tiles}
-    a, b = by_place[(1, 1)], by_place[(1, 2)]
-    assert a.x0_m + a.width_m - b.x0_m == pytest.approx(TILE_OVERLAP_M)
-    below = by_place[(2, 1)]
-    assert below.y0_m + below.height_m - a.y0_m == pytest.approx(TILE_OVERLAP_M)
+    for (row, col), t in by_place.items():
+        if (row, col + 1) in by_place:
+            assert t.x0_m + t.width_m - by_place[row, col + 1].x0_m == pytest.approx(
+                plan.overlap_x_m)
+        if (row + 1, col) in by_place:
+            below = by_place[row + 1, col]
+            assert below.y0_m + below.height_m - t.y0_m == pytest.approx(plan.overlap_y_m)
+    # the fewest sheets: one fewer column or row would leave a gap even with no overlap
+    usable_w, usable_h = plan.tiles[0].width_m, plan.tiles[0].height_m
+    assert (plan.cols - 1) * (usable_w - TILE_OVERLAP_M) + TILE_OVERLAP_M < side
+    assert (plan.rows - 1) * (usable_h - TILE_OVERLAP_M) + TILE_OVERLAP_M < side
     out = write_printable(SKEYE_4, tmp_path / "pad.pdf", paper=paper)
     data = out.read_bytes()
     assert len(re.findall(rb"/Type /Page[^s]", data)) == len(plan.tiles) == plan.rows * plan.cols
