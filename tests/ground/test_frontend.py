@@ -71,13 +71,15 @@ def page(web: UvicornThread) -> Iterator[Any]:
 
 def js(pg: Any, body: str) -> Any:
     """Run ``body`` (an async function body) with the page's modules imported as
-    ``units, forms, telemetry, plots, keyboard, command``; returns what it returns."""
+    ``units, forms, telemetry, plots, keyboard, command, events``; returns what it returns."""
     return pg.evaluate(
         "async () => {"
-        " const [units, forms, telemetry, plots, keyboard, command] = await Promise.all(["
+        " const [units, forms, telemetry, plots, keyboard, command, events] ="
+        " await Promise.all(["
         " import('/static/js/units.js'), import('/static/js/forms.js'),"
         " import('/static/js/telemetry.js'), import('/static/js/plots.js'),"
-        " import('/static/js/keyboard.js'), import('/static/js/command.js')]);"
+        " import('/static/js/keyboard.js'), import('/static/js/command.js'),"
+        " import('/static/js/events.js')]);"
         f" {body} }}"
     )
 
@@ -368,3 +370,26 @@ def test_plots_have_legends_and_zoom(page: Any) -> None:
                            timeout=10_000)
     page.wait_for_function("(() => { const x = plots.height.plot.scales.x;"
                            " return Math.abs(x.max - x.min - 60) < 1e-6; })()", timeout=10_000)
+
+
+def test_vehicle_events_are_rate_limited_per_kind(page: Any) -> None:
+    """Issue 34 item 3: 69 on/off lines in 9 minutes buried the answers. Vehicle events have
+    their own list, and a kind that comes again within a minute updates its line."""
+    r = js(page, """
+        const log = document.getElementById('event-log');
+        log.replaceChildren();
+        const t0 = 1e6;
+        for (let i = 0; i < 40; i++) {  // on and off every 3 s for 2 minutes
+          events.eventLine('vision', i % 2 ? 'in time again' : 'too slow', i % 2 ? 'ok' : 'bad',
+                           t0 + 3 * i);
+        }
+        events.eventLine('pad-landed', 'pad landing finished', 'ok', t0 + 120);
+        const lines = [...log.children].map(li => [li.dataset.kind, li.dataset.text,
+                                                     Number(li.dataset.repeats)]);
+        return {lines, answers: document.getElementById('cmd-log').children.length};""")
+    lines = r["lines"]
+    assert lines[0] == ["pad-landed", "pad landing finished", 1], lines
+    vision = [line for line in lines if line[0] == "vision"]
+    assert len(vision) == 2 and sum(n for _, _, n in vision) == 40, vision  # one a minute
+    assert vision[0][1] == "in time again"  # the newest state on top
+    assert r["answers"] == 0  # none of it in the commands' answers

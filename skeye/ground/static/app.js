@@ -3,8 +3,9 @@
 // no build step, nothing loaded from elsewhere; the one library, uPlot, is vendored under
 // static/vendor/uplot. Units are SI from the server; only the display converts.
 
-import { failPending, logLine, onResult } from "./js/command.js";
+import { failPending, onResult } from "./js/command.js";
 import { $, banner, pill, setText, wsUrl } from "./js/dom.js";
+import { eventLine } from "./js/events.js";
 import { showFrame, showVideoState } from "./js/camera.js";
 import { wireControls } from "./js/controls.js";
 import { indexCommands, limitsSummary, renderForms } from "./js/forms.js";
@@ -45,17 +46,17 @@ function onTelemetry(t) {
   const n = t.nav, pad = t.pad;
   if (n) {
     if (S.padMode === "land" && n.pad_mode === "off" && n.state === "landed") {
-      logLine("pad landing finished: landed, pad mode back to off", "ok", "pad-landed");
+      eventLine("pad-landed", "pad landing finished: landed, pad mode back to off", "ok");
     }
     S.padMode = n.pad_mode;
     // the pilot says its detections come too late to hold on (PAD vision flag)
     const slow = Boolean(pad && pad.vision_too_slow);
     if (slow !== Boolean(S.visionSlow)) {
       if (slow) {
-        logLine("vehicle: vision too slow to hold (detections too late to use): pad navigation " +
-                "holds still", "bad", "vision-slow");
+        eventLine("vision", "vision too slow to hold (detections too late to use): pad " +
+                  "navigation holds still", "bad");
       } else {
-        logLine("vehicle: vision in time again: pad navigation resumes", "ok", "vision-ok");
+        eventLine("vision", "vision in time again: pad navigation resumes", "ok");
       }
       S.visionSlow = slow;
     }
