@@ -103,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
             return 2
     try:
         latency_s = vision_latency_s(args.vision_latency_ms)
+        check_policy_options(args)
     except ConfigError as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
@@ -141,7 +142,9 @@ def run(args: argparse.Namespace) -> int:
                 envelope=envelope,
             )
             vision = None
-            if args.images is not None:
+            if args.images is not None and args.policy is not None:
+                vision = policy_vision_factory(sim, robot, args, calibration, latency_s)
+            elif args.images is not None:
                 vision = pad_vision_factory(sim, robot, args.camera, calibration,
                                             latency_s=latency_s,
                                             predict=not args.no_vision_prediction)
@@ -218,14 +221,18 @@ def vision_latency_s(text: str) -> float | None:
 
 def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
                        calibration: Any = None, *, latency_s: float | None = 0.0,
-                       predict: bool = True, params: Any = None) -> Any:
+                       predict: bool = True, params: Any = None,
+                       vision_class: Any = None) -> Any:
     """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator
     and the camera calibration (``skeye calibrate``) when one is given; a calibration for
     another image size than the camera's is refused here, before the vision starts.
     ``latency_s`` and ``predict``: :class:`skeye.pilot.vision.PadVision`'s (vision latency,
     None = measured; fly on the offset predicted to now); ``params``: pad-hold gains and
-    limits (default: derived from the loop delay)."""
+    limits (default: derived from the loop delay); ``vision_class``: a PadVision subclass
+    (``--policy``: :class:`skeye.pilot.policy.DetectOnlyVision`)."""
     from skeye.pilot.vision import PadVision
+
+    cls = vision_class or PadVision
 
     fov_h_rad = camera_fov_rad(sim, camera)
     lockstep = sim.mode == "lockstep"
@@ -238,11 +245,56 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
                 f"camera {camera} gives {width:g}x{height:g}: calibrate it at that resolution")
 
     def make(boards: Any, lock: Any) -> PadVision:
-        return PadVision(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
+        return cls(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
                          calibration=calibration, latency_s=latency_s, predict=predict,
                          params=params)
 
     return make
+
+
+def check_policy_options(args: argparse.Namespace) -> None:
+    """The ``--policy*`` options, checked before the simulator is reached (ConfigError)."""
+    if args.policy is None:
+        return
+    from skeye.pilot.policy import OBSERVATIONS, load_policy
+
+    if args.images is None:
+        raise ConfigError("--policy flies on the pad vision: it needs --images")
+    if args.policy_observation not in OBSERVATIONS:
+        raise ConfigError(f"--policy-observation must be one of {list(OBSERVATIONS)}")
+    if not (math.isfinite(args.policy_rate) and 0.5 <= args.policy_rate <= 1000):
+        raise ConfigError(f"--policy-rate must be 0.5..1000 Hz, got {args.policy_rate:g}")
+    args.policy_image_size = image_size(args.policy_image_size)
+    args.policy = load_policy(args.policy)  # a policy that does not load stops us here
+
+
+def image_size(text: Any) -> tuple[int, int]:
+    """``--policy-image-size WxH`` (8..2048 each) as (width, height); ConfigError if not."""
+    if isinstance(text, tuple):
+        return text
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        w = h = 0
+    if not (8 <= w <= 2048 and 8 <= h <= 2048):
+        raise ConfigError(f"--policy-image-size must be WIDTHxHEIGHT, 8..2048 each, got {text!r}")
+    return (w, h)
+
+
+def policy_vision_factory(sim: Any, robot: Any, args: argparse.Namespace, calibration: Any,
+                          latency_s: float | None) -> Any:
+    """``--policy``: the pilot's vision detecting only, with the policy flying in the pad
+    modes (:class:`skeye.pilot.policy.PolicyPilot`, docs/gym.md "The pilot adapter")."""
+    from skeye.pilot.policy import ActionLimits, DetectOnlyVision, policy_factory
+
+    cfg = robot.motion_config
+    make_vision = pad_vision_factory(sim, robot, args.camera, calibration, latency_s=latency_s,
+                                     vision_class=DetectOnlyVision)
+    return policy_factory(
+        make_vision, args.policy, observation=args.policy_observation,
+        limits=ActionLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s),
+        period_s=1.0 / args.policy_rate, image_size=args.policy_image_size,
+    )
 
 
 def video_options_problem(args: argparse.Namespace) -> str:
@@ -330,6 +382,23 @@ def register(subparsers: Any) -> None:
         default=DEFAULT_MAX_CLIENTS,
         help=f"video clients served at once (default {DEFAULT_MAX_CLIENTS})",
     )
+    p.add_argument(
+        "--policy",
+        default=None,
+        metavar="MODULE:CALLABLE",
+        help="fly a policy (observation -> action, e.g. one learned in skeye.gym) in place of "
+        "the pad-hold law while PAD_MODE is HOLD or LAND; needs --images (docs/gym.md)",
+    )
+    p.add_argument(
+        "--policy-observation",
+        default="pad",
+        help="what the policy observes: pad (state + pad detection, PadLanding-v0's default) "
+        "or image (state + grey camera image)",
+    )
+    p.add_argument("--policy-rate", type=float, default=20.0,
+                   help="policy calls per sim second (the environments' control_rate_hz; 20)")
+    p.add_argument("--policy-image-size", default="80x60", metavar="WxH",
+                   help="the image observation's size (the environments' image_size; 80x60)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")

@@ -16,6 +16,8 @@ names as :func:`skeye.sim.world.build_mjcf` writes them; a geom not named here (
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -29,8 +31,12 @@ def _luma(rgb: Vec3) -> float:
     return _LUMA[0] * rgb[0] + _LUMA[1] * rgb[1] + _LUMA[2] * rgb[2]
 
 
+@functools.lru_cache(maxsize=16)
 def png_contrast(png: bytes) -> float:
-    """RMS contrast (std / mean of luminance) of an encoded image; 0 for a black one."""
+    """RMS contrast (std / mean of luminance) of an encoded image; 0 for a black one.
+
+    Cached by the bytes: every :class:`~skeye.sim.engine.Simulation` of a world decodes the
+    same textures (a learning environment makes one per episode: 50 ms of decoding each)."""
     grey = cv2.imdecode(np.frombuffer(png, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
     if grey is None:
         raise ValueError("not an image")

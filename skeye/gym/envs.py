@@ -1,0 +1,216 @@
+"""The Gymnasium environments: one vehicle, one task, the simulation in this process.
+
+How this works: :class:`SkeyeEnv` is a :class:`gymnasium.Env` over a
+:class:`~skeye.gym.tasks.Task` and a :class:`~skeye.gym.flight.Flight`. ``reset`` makes a new
+flight (a new :class:`~skeye.sim.engine.Simulation` seeded from the environment's generator,
+so ``reset(seed=s)`` repeats an episode bit for bit), spawns the vehicle hovering at the task's
+start, and lets one control period pass with it holding still, so the first observation
+carries real readings. ``step`` hands the action to the vehicle's board as the pilot would
+(:func:`skeye.pilot.policy.velocity_setpoint` or :func:`~skeye.pilot.policy.attitude_setpoint`
+through the pilot's airframe interface), steps one control period (``1 / control_rate_hz``
+of sim time, in lockstep: the camera frames of that period are rendered, and the pilot's
+vision has taken the newest), and returns the task's observation, reward and ending.
+
+Keywords of ``gymnasium.make`` (docs/gym.md, "Options"): the :class:`FlightSettings` fields
+(robot, robot_dir, world, estimator, wind, wind_params, sensor_noise, control_rate_hz, camera,
+camera_name, vision_latency_s, calibration, timestep_s), ``action`` (Hover, GoTo: "velocity"
+or "attitude"), ``episode_s``, ``render_mode`` ("rgb_array": the downward camera's newest
+frame, where the task renders it), and PadLanding's observation, image_size, start_offset_m,
+start_height_m and pad_tolerance_m.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, SupportsFloat
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from skeye.errors import ConfigError
+from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
+from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
+from skeye.pilot.policy import (
+    DEFAULT_IMAGE_SIZE,
+    ActionLimits,
+    attitude_setpoint,
+    velocity_setpoint,
+)
+from skeye.robots.config import RobotConfig
+
+ACTIONS = ("velocity", "attitude")
+
+
+def action_limits(config: RobotConfig) -> ActionLimits:
+    """What an action of 1 means for this robot (its [controller] limits)."""
+    c = config.controller
+    return ActionLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s, c.max_tilt_rad)
+
+
+def apply_action(vehicle: Vehicle, kind: str, action: Any, limits: ActionLimits) -> None:
+    """Fly one action: a velocity or stick set-point through the pilot's airframe interface."""
+    if kind == "velocity":
+        forward, right, up, yaw_rate = velocity_setpoint(action, limits)
+        vehicle.airframe.set_velocity(forward, right, up, yaw_rate, None)
+    else:
+        roll, pitch, yaw_rate, thrust = attitude_setpoint(action, limits)
+        vehicle.airframe.attitude(roll, pitch, yaw_rate, thrust)
+
+
+def task_origin(task: Task, flight_world: Any) -> tuple[float, float, float]:
+    """Where a single environment's episodes are placed: the pad (PadLanding) or the world
+    origin."""
+    if isinstance(task, PadLanding):
+        n, e, d = pad_centre(flight_world)
+        return (float(n), float(e), float(d))
+    return (0.0, 0.0, 0.0)
+
+
+class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
+    """One vehicle flying one task (see the module docstring)."""
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 20}  # noqa: RUF012
+
+    def __init__(self, task: Task, *, action: str = "velocity", episode_s: float | None = None,
+                 render_mode: str | None = None, **settings: Any) -> None:
+        if action not in ACTIONS:
+            raise ConfigError(f"action must be one of {list(ACTIONS)}, got {action!r}")
+        if task.needs_camera and action != "velocity":
+            raise ConfigError(f"{task.name} flies velocity set-points only")
+        if task.needs_camera:
+            settings.setdefault("camera", "webcam")
+        self.settings = FlightSettings.from_kwargs(**settings)
+        if task.needs_camera and self.settings.camera is None:
+            raise ConfigError(f"{task.name} needs the camera: camera must be webcam or ideal")
+        if render_mode is not None and (render_mode != "rgb_array" or self.settings.camera is None):
+            raise ConfigError(f"render_mode {render_mode!r}: only 'rgb_array', with a camera")
+        if episode_s is not None:
+            if not (math.isfinite(episode_s) and episode_s > 0):
+                raise ConfigError(f"episode_s must be > 0, got {episode_s!r}")
+            task.episode_s = float(episode_s)
+        self.task = task
+        self.action_kind = action
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.settings.control_rate_hz,
+                         "render_modes": ["rgb_array"] if self.settings.camera else []}
+        self.setup = prepare(self.settings)  # the robot, world and camera, checked now
+        self.limits = action_limits(self.setup.config)
+        self.origin = task_origin(task, self.setup.world)
+        self.observation_space = task.observation_space()
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        self.flight: Flight | None = None
+        self.vehicle: Vehicle | None = None
+        self.episode: Episode | None = None
+        self._started_s = 0.0
+
+    # -- gymnasium ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[Any, dict[str, Any]]:
+        """A new episode; ``options`` may fix ``start_ned_m``, ``yaw_rad`` and (Hover, GoTo)
+        ``target_ned_m`` instead of drawing them."""
+        super().reset(seed=seed)
+        self._close_flight()
+        episode = self.task.start(self.np_random, self.origin)
+        override_start(episode, options)
+        flight = Flight(self.setup, int(self.np_random.integers(2**31)))
+        try:
+            vehicle = flight.spawn("R1", episode.start_ned_m, episode.yaw_rad)
+            vehicle.airframe.hover()
+            flight.step()
+        except BaseException:
+            flight.close()
+            raise
+        self.flight, self.vehicle, self.episode = flight, vehicle, episode
+        self._started_s = flight.time_s
+        return self._observe(), self._info()
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        flight, vehicle, episode = self.flight, self.vehicle, self.episode
+        if flight is None or vehicle is None or episode is None:
+            raise gymnasium.error.ResetNeeded("call reset() before step()")
+        if vehicle.alive:
+            apply_action(vehicle, self.action_kind, action, self.limits)
+        flight.step()
+        reward, terminated = self.task.judge(vehicle, episode)
+        truncated = not terminated and flight.time_s - self._started_s >= (
+            self.task.episode_s - 1e-9)
+        return self._observe(), float(reward), terminated, truncated, self._info()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array" or self.flight is None:
+            return None
+        cameras = self.flight.cameras
+        if cameras is None:
+            return None
+        frame = cameras.buffer.latest(f"R1/{self.settings.camera_name}")
+        if frame is None:  # the first frame is still on its way (the capture latency)
+            width, height = self.setup.camera_size
+            return np.zeros((height, width, 3), dtype=np.uint8)
+        return np.array(frame.rgb)
+
+    def close(self) -> None:
+        self._close_flight()
+        super().close()
+
+    # -- helpers -----------------------------------------------------------------------------
+    def _observe(self) -> Any:
+        assert self.flight is not None and self.vehicle is not None and self.episode is not None
+        snap = self.vehicle.airframe.snapshot()
+        return self.task.observe(self.vehicle, snap, self.episode)
+
+    def _info(self) -> dict[str, Any]:
+        assert self.flight is not None and self.episode is not None
+        return {"sim_time_s": self.flight.time_s - self._started_s, **self.episode.info}
+
+    def _close_flight(self) -> None:
+        if self.flight is not None:
+            self.flight.close()
+        self.flight = self.vehicle = self.episode = None
+
+
+def override_start(episode: Episode, options: dict[str, Any] | None) -> None:
+    """``reset(options=...)``: a fixed start, heading or target instead of the drawn ones."""
+    if not options:
+        return
+    unknown = sorted(set(options) - {"start_ned_m", "yaw_rad", "target_ned_m"})
+    if unknown:
+        raise ConfigError(f"unknown reset option(s) {unknown}; known: start_ned_m, yaw_rad, "
+                          "target_ned_m")
+    for key in ("start_ned_m", "target_ned_m"):
+        if key in options:
+            value = tuple(float(v) for v in options[key])
+            if len(value) != 3 or not all(math.isfinite(v) for v in value):
+                raise ConfigError(f"{key} must be three finite numbers (north, east, down m)")
+            setattr(episode, key, value)
+    if "yaw_rad" in options:
+        episode.yaw_rad = float(options["yaw_rad"])
+
+
+class HoverEnv(SkeyeEnv):
+    """``skeye/Hover-v0``: hold a point (:class:`skeye.gym.tasks.Hover`)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(Hover(), **kwargs)
+
+
+class GoToEnv(SkeyeEnv):
+    """``skeye/GoTo-v0``: fly to a target (:class:`skeye.gym.tasks.GoTo`)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(GoTo(), **kwargs)
+
+
+class PadLandingEnv(SkeyeEnv):
+    """``skeye/PadLanding-v0``: land on the pad (:class:`skeye.gym.tasks.PadLanding`); the
+    paper's disturbance (``wind="random_force"``, F_max 0.3 N, as ``skeye validate``'s E2)
+    unless told otherwise."""
+
+    def __init__(self, *, observation: str = "pad",
+                 image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE, start_offset_m: float = 0.4,
+                 start_height_m: tuple[float, float] = (1.5, 2.5), pad_tolerance_m: float = 0.15,
+                 **kwargs: Any) -> None:
+        kwargs.setdefault("wind", "random_force")
+        task = PadLanding(observation, tuple(image_size), start_offset_m,  # type: ignore[arg-type]
+                          tuple(start_height_m), pad_tolerance_m)  # type: ignore[arg-type]
+        super().__init__(task, **kwargs)

@@ -1,0 +1,331 @@
+"""The in-process world behind the environments: one simulation, its vehicles, their pilots.
+
+How this works: a :class:`Flight` is one :class:`skeye.sim.engine.Simulation` (the world file,
+the robot file, the board estimator, the wind: exactly what ``skeye sim`` runs), stepped in
+lockstep one control period at a time, with a :class:`~skeye.sim.cameras.CameraSystem` in
+lockstep (``skeye sim --image-port ... --camera-profile``) when the task needs the camera. Each
+:class:`Vehicle` is one robot in it, seen from the pilot's side (:mod:`skeye.gym.board`): its
+snapshot, its airframe, and, with the camera, the pilot's own vision
+(:class:`~skeye.pilot.policy.DetectOnlyVision`, i.e. :class:`~skeye.pilot.vision.PadVision`
+detecting in lockstep with the configured latency) on an :class:`~skeye.pilot.boards.OnboardBoards`
+whose pad controller keeps the newest observation. A single environment flies one vehicle per
+flight and makes a new flight per episode (so ``reset(seed=...)`` repeats an episode bit for
+bit); the batched vector environment flies N vehicles in one flight and respawns each one
+alone when its episode ends.
+
+:class:`FlightSettings` holds what ``gymnasium.make(..., **kwargs)`` may configure; each value is
+checked once, and a bad one is a :class:`~skeye.errors.ConfigError` naming it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skeye.errors import ConfigError
+from skeye.gym.board import BoardView, InProcessAirframe, InProcessCamera, VisionRobot, wrap_pi
+from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.pad_track import Pose
+from skeye.pilot.policy import DetectOnlyVision, ObservedPad
+from skeye.pilot.video_server import CameraFrame
+from skeye.pilot.vision import MAX_VISION_LATENCY_S
+from skeye.robots.camera_model import PROFILES
+from skeye.robots.config import CAMERA_TYPE, RobotConfig, load_robot_config, mount_camera_model
+from skeye.sim.cameras import CameraSystem
+from skeye.sim.engine import Simulation
+from skeye.sim.image_server import FrameBuffer
+from skeye.sim.sensors import SENSOR_CLASSES
+from skeye.sim.state import BodyState
+from skeye.sim.wind import make_settings, parse_params
+from skeye.sim.world import WorldDescription, load_world
+from skeye.sim.world_model import PadPlacement
+from skeye.vision.calibration import CameraCalibration, load_calibration
+
+NOISE_SUFFIXES = ("sigma", "noise", "walk")
+"""``sensor_noise`` scales every sensor parameter whose name ends so (NoiseSigma, BiasWalk...)."""
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """What an environment may configure (docs/gym.md, "Options")."""
+
+    robot: str = "hummingbird"  # a robot class: built-in, or a <name>.toml in robot_dir
+    robot_dir: tuple[Path, ...] = ()  # folders of robot files (skeye sim --robot-dir)
+    world: str = "pad"  # a built-in world or a world file (skeye sim --world)
+    estimator: str | None = "onboard"  # the board's estimator (None: the robot file's)
+    wind: str = "none"  # a skeye sim --wind mode
+    wind_params: Mapping[str, float] = field(default_factory=dict)  # its --wind-params
+    sensor_noise: float = 1.0  # a factor on every sensor's noise, bias and walk parameters
+    control_rate_hz: float = 20.0  # actions (and observations) per sim second
+    camera: str | None = None  # a camera profile (webcam, ideal), None: no camera rendered
+    camera_name: str = "Down"
+    vision_latency_s: float = 0.0  # the pilot's --vision-latency-ms, in seconds
+    calibration: str | None = None  # a skeye calibrate file ("model": the camera model's own)
+    timestep_s: float = 0.001  # the physics step (skeye sim --timestep)
+
+    def __post_init__(self) -> None:
+        for name in ("sensor_noise", "control_rate_hz", "vision_latency_s", "timestep_s"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ConfigError(f"{name} must be a number, got {value!r}")
+        if not (math.isfinite(self.sensor_noise) and 0.0 <= self.sensor_noise <= 100.0):
+            raise ConfigError(f"sensor_noise must be a factor 0..100, got {self.sensor_noise!r}")
+        if not (math.isfinite(self.control_rate_hz) and 0.5 <= self.control_rate_hz <= 1000.0):
+            raise ConfigError(f"control_rate_hz must be 0.5..1000, got {self.control_rate_hz!r}")
+        if not (math.isfinite(self.vision_latency_s)
+                and 0.0 <= self.vision_latency_s < MAX_VISION_LATENCY_S):
+            raise ConfigError(f"vision_latency_s must be in [0, {MAX_VISION_LATENCY_S:g}) s "
+                              f"(the pilot refuses later detections), got "
+                              f"{self.vision_latency_s!r}")
+        if self.camera is not None and self.camera not in PROFILES:
+            raise ConfigError(f"camera must be one of {list(PROFILES)}, got {self.camera!r}")
+        make_settings(self.wind, dict(self.wind_params))  # names a bad mode or parameter
+        period = 1.0 / (self.control_rate_hz * self.timestep_s)
+        if abs(period - round(period)) > 1e-6:
+            raise ConfigError(f"control_rate_hz {self.control_rate_hz:g} is not a whole number "
+                              f"of physics steps of {self.timestep_s:g} s")
+
+    @classmethod
+    def from_kwargs(cls, **kwargs: Any) -> FlightSettings:
+        """Settings from ``gymnasium.make`` keywords (wind_params also as ``"k=v,k=v"``)."""
+        unknown = sorted(set(kwargs) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise ConfigError(f"unknown option(s) {unknown}; known: "
+                              f"{sorted(cls.__dataclass_fields__)}")
+        if isinstance(kwargs.get("wind_params"), str):
+            kwargs["wind_params"] = parse_params(kwargs["wind_params"])
+        if "robot_dir" in kwargs:
+            dirs = kwargs["robot_dir"]
+            dirs = [dirs] if isinstance(dirs, str | Path) else list(dirs or ())
+            kwargs["robot_dir"] = tuple(Path(d) for d in dirs)
+        return cls(**kwargs)
+
+    @property
+    def period_steps(self) -> int:
+        return round(1.0 / (self.control_rate_hz * self.timestep_s))
+
+
+def scale_noise(config: RobotConfig, factor: float) -> RobotConfig:
+    """The robot with every mounted sensor's noise, bias and walk parameters (names ending in
+    Sigma, Noise, Walk) times ``factor``; 1 leaves it as it is."""
+    if factor == 1.0:
+        return config
+    mounts = []
+    for mount in config.sensors:
+        cls = SENSOR_CLASSES.get(mount.type_name.lower())
+        if cls is None:
+            mounts.append(mount)
+            continue
+        given = {k.replace("_", "").lower(): (k, v) for k, v in mount.params}
+        params = dict(mount.params)
+        for param in cls.all_params():
+            norm = param.key.lower()
+            if not norm.endswith(NOISE_SUFFIXES):
+                continue
+            key, value = given.get(norm, (param.key, param.default))
+            params[key] = float(value) * factor
+        mounts.append(replace(mount, params=tuple(params.items())))
+    return replace(config, sensors=tuple(mounts))
+
+
+class Vehicle:
+    """One robot of a flight as the pilot sees it (see the module docstring)."""
+
+    def __init__(self, flight: Flight, name: str, location_ned_m: tuple[float, float, float],
+                 yaw_rad: float) -> None:
+        self.flight = flight
+        self.name = name
+        sim = flight.sim
+        self.view = BoardView(flight.config)
+        self.robot = sim.spawn(flight.config.class_name, config=flight.config, name=name,
+                               sink=self.view.sink, location_ned_m=location_ned_m,
+                               rotation_rpy_rad=(0.0, 0.0, yaw_rad))
+        # The robot's status as it stands now (the STA a client finds at spawn): flying.
+        self.view.sink([self.robot.status(sim.time_s)])
+        self.airframe = InProcessAirframe(sim, name, self.view)
+        self.spawn_pose = Pose(sim.time_s, *location_ned_m, 0.0, 0.0, wrap_pi(yaw_rad))
+        below = sim.ray_distance(name, location_ned_m, (0.0, 0.0, 1.0), 1000.0)
+        ground_down_m = location_ned_m[2] + (below if below is not None else 0.0)
+        # Home: where the vehicle would stand on the ground below its spawn point, as the
+        # pilot's home is the estimate at take-off.
+        self.home_ned_m = (location_ned_m[0], location_ned_m[1],
+                           ground_down_m - flight.config.airframe.gear_height_m)
+        self.vision: DetectOnlyVision | None = None
+        self.pad: ObservedPad | None = None
+        self.boards: OnboardBoards | None = None
+        self._frame: CameraFrame | None = None
+
+    def start_vision(self) -> None:
+        """The pilot's vision on this vehicle (after its first readings: the boards start
+        from a snapshot)."""
+        flight = self.flight
+        if flight.cameras is None or self.vision is not None:
+            return
+        self.pad = ObservedPad()
+        self.boards = OnboardBoards(self.airframe, pad=self.pad)
+        key = f"{self.name}/{flight.settings.camera_name}"
+        robot = VisionRobot(InProcessCamera(flight.cameras.buffer, key), self.view)
+        self.vision = DetectOnlyVision(
+            self.boards, robot, flight.lock, fov_h_rad=flight.fov_h_rad, lockstep=True,
+            calibration=flight.calibration, latency_s=flight.settings.vision_latency_s,
+        )
+        # The pilot's pose history reaches back to its start; this vision starts a control
+        # period after the spawn, so the estimate's poses of that period go in first (else the
+        # first frames, captured before, would have no pose to be placed with): the board's
+        # estimate at power-up is the spawn pose, then the INS readings.
+        self.vision.history.add(self.spawn_pose)
+        for ins in self.view.ins_readings:
+            n, e, d = ins.location_ned_m
+            roll, pitch, yaw = (wrap_pi(a) for a in ins.orientation_rad)
+            self.vision.history.add(Pose(ins.time_s, n, e, d, roll, pitch, yaw))
+        self.vision.attach_video(self._on_frame)
+        self.vision.start()
+
+    def _on_frame(self, frame: CameraFrame) -> None:
+        self._frame = frame  # what the vision looked at, as the pilot's video port gets it
+
+    def frame_bgr(self) -> np.ndarray | None:
+        """The newest camera frame the vision looked at (BGR), None before the first."""
+        return None if self._frame is None else self._frame.bgr
+
+    def close(self) -> None:
+        if self.vision is not None:
+            self.vision.close()
+            self.vision = None
+
+    def truth(self) -> BodyState:
+        """Ground truth (for rewards and termination only: never in an observation)."""
+        return self.flight.sim.body_state(self.name)
+
+    @property
+    def alive(self) -> bool:
+        return self.name in self.flight.sim.robots
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The loaded, checked parts of a flight, made once per environment: the robot (its noise
+    scaled), the world (its pads placed), and the camera's field of view and calibration."""
+
+    settings: FlightSettings
+    config: RobotConfig
+    world: WorldDescription
+    fov_h_rad: float = 0.0
+    calibration: CameraCalibration | None = None
+    camera_size: tuple[int, int] = (0, 0)  # (width, height) of the camera's frames
+
+
+def prepare(settings: FlightSettings,
+            pads_ned_m: tuple[tuple[float, float], ...] | None = None) -> Setup:
+    """Load and check everything a flight needs (ConfigError names what is wrong).
+    ``pads_ned_m``: the world's first pad copied to each (north, east) point."""
+    world = load_world(settings.world)
+    if pads_ned_m is not None:
+        world = with_pads(world, pads_ned_m)
+    config = scale_noise(load_robot_config(settings.robot, settings.robot_dir, allow_paths=True),
+                         settings.sensor_noise)
+    if settings.camera is None:
+        return Setup(settings, config, world)
+    mount = next((m for m in config.sensors if m.type_name.lower() == CAMERA_TYPE
+                  and m.name.lower() == settings.camera_name.lower()), None)
+    if mount is None:
+        raise ConfigError(f"robot {config.class_name} has no camera named "
+                          f"{settings.camera_name!r}")
+    model = mount_camera_model(config, mount, settings.camera)
+    calibration = None
+    if settings.calibration is not None and settings.calibration != "model":
+        calibration = load_calibration(Path(settings.calibration))
+        if (calibration.width_px, calibration.height_px) != (model.width, model.height):
+            raise ConfigError(f"calibration is for {calibration.width_px}x"
+                              f"{calibration.height_px} images, the camera gives "
+                              f"{model.width}x{model.height}")
+    elif settings.camera != "ideal" or settings.calibration == "model":
+        # The camera model's own intrinsics: what a perfect `skeye calibrate` finds.
+        calibration = CameraCalibration(model.width, model.height, model.fx_px, model.fy_px,
+                                        model.cx_px, model.cy_px, model.dist_coeffs)
+    return Setup(settings, config, world, model.fov_h_rad, calibration,
+                 (model.width, model.height))
+
+
+class Flight:
+    """One in-process simulation with its vehicles (see the module docstring)."""
+
+    def __init__(self, setup: Setup, seed: int) -> None:
+        import threading
+
+        settings = setup.settings
+        self.setup = setup
+        self.settings = settings
+        self.world = setup.world
+        self.config = setup.config
+        self.fov_h_rad = setup.fov_h_rad
+        self.calibration = setup.calibration
+        self.sim = Simulation(setup.world, seed=seed, timestep_s=settings.timestep_s,
+                              wind=make_settings(settings.wind, dict(settings.wind_params)),
+                              robot_dirs=settings.robot_dir, estimator=settings.estimator)
+        self.lock = threading.Lock()
+        self.vehicles: dict[str, Vehicle] = {}
+        self.cameras: CameraSystem | None = None
+        if settings.camera is not None:
+            self.cameras = CameraSystem(self.sim, FrameBuffer(), synchronous=True,
+                                        profile=settings.camera)
+
+    def spawn(self, name: str, location_ned_m: tuple[float, float, float],
+              yaw_rad: float) -> Vehicle:
+        vehicle = Vehicle(self, name, location_ned_m, yaw_rad)
+        self.vehicles[name] = vehicle
+        return vehicle
+
+    def remove(self, name: str) -> None:
+        vehicle = self.vehicles.pop(name, None)
+        if vehicle is not None:
+            vehicle.close()
+        self.sim.remove(name)
+
+    def step(self) -> None:
+        """One control period of sim time, then each vehicle's vision takes its frame."""
+        self.sim.step(self.settings.period_steps)
+        for vehicle in self.vehicles.values():
+            if self.cameras is not None and vehicle.alive:
+                if vehicle.vision is None:
+                    vehicle.start_vision()
+                assert vehicle.vision is not None
+                vehicle.vision.step()
+
+    @property
+    def time_s(self) -> float:
+        return self.sim.time_s
+
+    def close(self) -> None:
+        for vehicle in self.vehicles.values():
+            vehicle.close()
+        if self.cameras is not None:
+            self.cameras.close()
+
+
+def with_pads(world: WorldDescription,
+              pads_ned_m: tuple[tuple[float, float], ...]) -> WorldDescription:
+    """The world with its first pad copied to each (north, east) point (none kept elsewhere)."""
+    if not world.pads:
+        raise ConfigError(f"world {world.name!r} has no landing pad")
+    first = world.pads[0]
+    pads = tuple(
+        PadPlacement(f"{first.name}_{i}", first.pad, (n, e, first.position_ned_m[2]),
+                     first.yaw_rad)
+        for i, (n, e) in enumerate(pads_ned_m)
+    )
+    return replace(world, pads=pads)
+
+
+def pad_centre(world: WorldDescription, index: int = 0) -> np.ndarray:
+    """A pad's centre (NED, on its surface)."""
+    if len(world.pads) <= index:
+        raise ConfigError(f"world {world.name!r} has no landing pad {index}")
+    pad = world.pads[index]
+    n, e, _ = pad.position_ned_m
+    return np.array((n, e, pad.surface_down_m))

@@ -1,0 +1,216 @@
+"""The batched vector environment: N vehicles in one simulated world, stepped together.
+
+How this works: :class:`SkeyeVectorEnv` is a :class:`gymnasium.vector.VectorEnv` whose N
+sub-environments are N vehicles of one :class:`~skeye.gym.flight.Flight` (one
+:class:`~skeye.sim.engine.Simulation`, one MuJoCo world: one ``step`` call advances them all,
+and one render job draws every camera). Each vehicle has its own cell of the world
+(``spacing_m`` apart on a square grid, its own landing pad for PadLanding: far enough apart
+that no camera sees a neighbour), its own task episode, observation and reward, computed as
+the single environment computes them (:mod:`skeye.gym.tasks`). A vehicle whose episode ended
+is taken out of the world and spawned again at its next start at the next ``step`` (Gymnasium's
+next-step autoreset: that step returns its first observation, reward 0, not terminated); the
+others fly on undisturbed, their state carried across the world's rebuild exactly.
+
+``reset(seed=s)`` makes a new world seeded from ``s``: the same seed and actions give the same
+batch of episodes, bit for bit. The keywords are the single environment's
+(:mod:`skeye.gym.envs`) plus ``spacing_m``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
+
+from skeye.errors import ConfigError
+from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
+from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
+from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
+
+DEFAULT_SPACING_M = 10.0
+"""Between vehicles' cells: PadLanding's area is 3 m and the webcam sees about 1.5 m around
+itself from 2.5 m up, so 10 m keeps every neighbour out of every view."""
+
+
+def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
+    """``num`` (north, east) points on a square grid centred on the origin."""
+    side = math.ceil(math.sqrt(num))
+    half = (side - 1) / 2.0
+    return [((i // side - half) * spacing_m, (i % side - half) * spacing_m) for i in range(num)]
+
+
+class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
+    """N vehicles flying one task in one world (see the module docstring)."""
+
+    metadata: dict[str, Any] = {  # noqa: RUF012  (Gymnasium's class attribute)
+        "autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, task_factory: Callable[[], Task], num_envs: int, *,
+                 spacing_m: float = DEFAULT_SPACING_M, action: str = "velocity",
+                 episode_s: float | None = None, **settings: Any) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
+            raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
+        if not (math.isfinite(spacing_m) and spacing_m >= 2.0):
+            raise ConfigError(f"spacing_m must be >= 2 m, got {spacing_m!r}")
+        if action not in ACTIONS:
+            raise ConfigError(f"action must be one of {list(ACTIONS)}, got {action!r}")
+        self.tasks = [task_factory() for _ in range(num_envs)]
+        task = self.tasks[0]
+        if task.needs_camera:
+            settings.setdefault("camera", "webcam")
+            if action != "velocity":
+                raise ConfigError(f"{task.name} flies velocity set-points only")
+        if episode_s is not None:
+            if not (math.isfinite(episode_s) and episode_s > 0):
+                raise ConfigError(f"episode_s must be > 0, got {episode_s!r}")
+            for t in self.tasks:
+                t.episode_s = float(episode_s)
+        self.settings = FlightSettings.from_kwargs(**settings)
+        cells = grid(num_envs, spacing_m)
+        self.setup = prepare(self.settings, tuple(cells) if task.needs_camera else None)
+        if task.needs_camera:
+            pads = self.setup.world.pads
+            self.origins = [(p.position_ned_m[0], p.position_ned_m[1], p.surface_down_m)
+                            for p in pads]
+        else:
+            self.origins = [(n, e, 0.0) for n, e in cells]
+        self.num_envs = num_envs
+        self.action_kind = action
+        self.limits = action_limits(self.setup.config)
+        self.single_observation_space = task.observation_space()
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.flight: Flight | None = None
+        self.vehicles: list[Vehicle | None] = [None] * num_envs
+        self.episodes: list[Episode | None] = [None] * num_envs
+        self._started_s = np.zeros(num_envs)
+        self._autoreset = np.zeros(num_envs, dtype=bool)
+
+    def _name(self, i: int) -> str:
+        return f"V{i}"
+
+    def _start(self, i: int, options: dict[str, Any] | None = None) -> None:
+        """Spawn vehicle ``i`` at a new episode's start (taking out the old one)."""
+        assert self.flight is not None
+        if self.vehicles[i] is not None:
+            self.flight.remove(self._name(i))
+        episode = self.tasks[i].start(self.np_random, self.origins[i])
+        override_start(episode, options)
+        vehicle = self.flight.spawn(self._name(i), episode.start_ned_m, episode.yaw_rad)
+        vehicle.airframe.hover()
+        self.vehicles[i], self.episodes[i] = vehicle, episode
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        if options:
+            raise ConfigError("the batched vector environment takes no reset options")
+        self._close_flight()
+        self.flight = Flight(self.setup, int(self.np_random.integers(2**31)))
+        for i in range(self.num_envs):
+            self._start(i)
+        self.flight.step()
+        self._started_s[:] = self.flight.time_s
+        self._autoreset[:] = False
+        infos: dict[str, Any] = {}
+        for i in range(self.num_envs):
+            infos = self._add_info(infos, self._info(i), i)
+        return self._observations(), infos
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        flight = self.flight
+        if flight is None:
+            raise ConfigError("call reset() before step()")
+        actions = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 4)
+        restarted = self._autoreset.copy()
+        for i in range(self.num_envs):
+            if restarted[i]:
+                self._start(i)
+                continue
+            vehicle = self.vehicles[i]
+            assert vehicle is not None
+            if vehicle.alive:
+                apply_action(vehicle, self.action_kind, actions[i], self.limits)
+        flight.step()
+        rewards = np.zeros(self.num_envs, dtype=np.float64)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        infos: dict[str, Any] = {}
+        for i in range(self.num_envs):
+            vehicle, episode = self.vehicles[i], self.episodes[i]
+            assert vehicle is not None and episode is not None
+            if restarted[i]:
+                self._started_s[i] = flight.time_s
+            else:
+                reward, term = self.tasks[i].judge(vehicle, episode)
+                rewards[i], terminated[i] = reward, term
+                truncated[i] = not term and flight.time_s - self._started_s[i] >= (
+                    self.tasks[i].episode_s - 1e-9)
+            infos = self._add_info(infos, self._info(i), i)
+        self._autoreset = terminated | truncated
+        return self._observations(), rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._close_flight()
+
+    # -- helpers -----------------------------------------------------------------------------
+    def _observations(self) -> Any:
+        items = []
+        for i in range(self.num_envs):
+            vehicle, episode = self.vehicles[i], self.episodes[i]
+            assert vehicle is not None and episode is not None
+            items.append(self.tasks[i].observe(vehicle, vehicle.airframe.snapshot(), episode))
+        out: Any = create_empty_array(self.single_observation_space, self.num_envs)
+        return concatenate(self.single_observation_space, items, out)
+
+    def _info(self, i: int) -> dict[str, Any]:
+        assert self.flight is not None
+        episode = self.episodes[i]
+        assert episode is not None
+        return {"sim_time_s": self.flight.time_s - self._started_s[i], **episode.info}
+
+    def _close_flight(self) -> None:
+        if self.flight is not None:
+            self.flight.close()
+        self.flight = None
+        self.vehicles = [None] * self.num_envs
+        self.episodes = [None] * self.num_envs
+
+
+class HoverVectorEnv(SkeyeVectorEnv):
+    """``skeye/Hover-v0`` batched (``gymnasium.make_vec(..., vectorization_mode=
+    "vector_entry_point")``)."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__(Hover, num_envs, **kwargs)
+
+
+class GoToVectorEnv(SkeyeVectorEnv):
+    """``skeye/GoTo-v0`` batched."""
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        super().__init__(GoTo, num_envs, **kwargs)
+
+
+class PadLandingVectorEnv(SkeyeVectorEnv):
+    """``skeye/PadLanding-v0`` batched: one pad per vehicle."""
+
+    def __init__(self, num_envs: int = 1, *, observation: str = "pad",
+                 image_size: tuple[int, int] = (80, 60), start_offset_m: float = 0.4,
+                 start_height_m: tuple[float, float] = (1.5, 2.5),
+                 pad_tolerance_m: float = 0.15, **kwargs: Any) -> None:
+        kwargs.setdefault("wind", "random_force")
+
+        def task() -> Task:
+            return PadLanding(observation, (int(image_size[0]), int(image_size[1])),
+                              start_offset_m, (float(start_height_m[0]), float(start_height_m[1])),
+                              pad_tolerance_m)
+
+        super().__init__(task, num_envs, **kwargs)

@@ -1,0 +1,196 @@
+"""The Gymnasium environments: Gymnasium's own checker, seeding, vector environments, options."""
+
+from __future__ import annotations
+
+import socket
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import skeye.gym
+from skeye.errors import ConfigError
+from skeye.pilot.policy import PAD_FIELDS, STATE_FIELDS
+
+
+@pytest.mark.parametrize("env_id", skeye.gym.ENV_IDS)
+def test_gymnasiums_checker_passes_every_registered_environment(env_id: str) -> None:
+    env = gymnasium.make(env_id)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # Gymnasium's warnings are failures here
+            check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+def test_the_checker_passes_the_image_observation() -> None:
+    env = gymnasium.make("skeye/PadLanding-v0", observation="image", camera="ideal",
+                         image_size=(64, 48))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            check_env(env.unwrapped)
+        obs, _ = env.reset(seed=2)
+        assert obs["image"].shape == (48, 64, 1) and obs["image"].dtype == np.uint8
+        for _ in range(3):
+            obs, *_ = env.step(np.zeros(4, dtype=np.float32))
+        assert obs["image"].std() > 5  # a real frame (the pad on grass), not a blank one
+    finally:
+        env.close()
+
+
+def _episode(env: gymnasium.Env, seed: int, steps: int) -> tuple[list, list]:
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(99)
+    observations, rewards = [obs], []
+    for _ in range(steps):
+        obs, reward, terminated, truncated, _ = env.step(
+            rng.uniform(-0.3, 0.3, size=4).astype(np.float32))
+        observations.append(obs)
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    return observations, rewards
+
+
+def _same(a: list, b: list) -> bool:
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b, strict=True):
+        if isinstance(x, dict):
+            if not all(np.array_equal(x[k], y[k]) for k in x):
+                return False
+        elif not np.array_equal(x, y):
+            return False
+    return True
+
+
+@pytest.mark.parametrize("env_id,kwargs,steps", [
+    ("skeye/Hover-v0", {"wind": "turbulence"}, 60),
+    ("skeye/PadLanding-v0", {"camera": "webcam", "observation": "image"}, 12),
+])
+def test_reset_with_a_seed_repeats_an_episode_bit_for_bit(env_id, kwargs, steps) -> None:
+    env = gymnasium.make(env_id, **kwargs)
+    try:
+        first = _episode(env, 7, steps)
+        again = _episode(env, 7, steps)
+        other = _episode(env, 8, steps)
+    finally:
+        env.close()
+    assert _same(first[0], again[0]) and first[1] == again[1]
+    assert not _same(first[0], other[0])
+
+
+def test_the_state_is_what_the_board_knows_and_the_pad_is_the_pilots_detection(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_sockets(*args: object, **kwargs: object) -> None:
+        raise AssertionError("an environment opened a socket")
+
+    monkeypatch.setattr(socket, "socket", no_sockets)
+    env = gymnasium.make("skeye/PadLanding-v0", camera="ideal", wind="none")
+    try:
+        obs, _ = env.reset(seed=1, options={"start_ned_m": (0.3, 0.0, -1.5), "yaw_rad": 0.0})
+        assert obs.shape == (len(STATE_FIELDS) + len(PAD_FIELDS),)
+        for _ in range(4):
+            obs, _reward, terminated, truncated, _info = env.step(np.zeros(4, np.float32))
+        state = dict(zip(STATE_FIELDS + PAD_FIELDS, obs.tolist(), strict=True))
+        truth = env.unwrapped.vehicle.truth()
+    finally:
+        env.close()
+    # Home is the ground below the spawn point: the height is the estimate's, about 1.5 m
+    # less the landing gear, and the accelerometer feels gravity.
+    assert -state["down_m"] == pytest.approx(1.5 - 0.08, abs=0.1)
+    assert state["accel_z_m_s2"] == pytest.approx(-9.8, abs=0.5) and state["landed"] == 0
+    # The pad 0.3 m behind, seen from 1.5 m: the detector's level-frame offset and height.
+    assert state["pad_found"] == 1 and state["pad_forward_m"] == pytest.approx(-0.3, abs=0.05)
+    assert state["pad_height_m"] == pytest.approx(-truth.pos_ned_m[2] - 0.035, abs=0.05)
+    assert 0 <= state["pad_age_s"] < 0.1 and not terminated and not truncated
+
+
+def test_pad_landing_ends_at_touchdown_and_judges_it_on_the_truth() -> None:
+    env = gymnasium.make("skeye/PadLanding-v0", camera="ideal", wind="none",
+                         start_height_m=(0.6, 0.6))
+    try:
+        env.reset(seed=3, options={"start_ned_m": (0.5, 0.0, -0.6)})
+        for _ in range(200):  # straight down, 0.5 m off the centre: off the pad
+            _, reward, terminated, _, info = env.step(np.array((0, 0, -0.2, 0), np.float32))
+            if terminated:
+                break
+    finally:
+        env.close()
+    assert terminated and reward == -10.0 and info["success"] is False
+    assert info["touchdown_error_m"] == pytest.approx(0.5, abs=0.1)
+
+
+@pytest.mark.parametrize("mode", ["sync", "async", "vector_entry_point"])
+def test_vector_environments_step_and_reset_their_vehicles(mode: str) -> None:
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=3, vectorization_mode=mode,
+                              episode_s=0.5)
+    try:
+        obs, _ = envs.reset(seed=5)
+        assert obs.shape == (3, 19) and obs.dtype == np.float32
+        ended = np.zeros(3, dtype=bool)
+        for step in range(11):
+            obs, rewards, _terminated, truncated, infos = envs.step(np.zeros((3, 4), np.float32))
+            if step == 9:
+                ended = truncated  # the 10th step of 0.05 s ends the 0.5 s episodes
+            if step == 10:  # next-step autoreset: fresh episodes, no reward
+                assert np.all(ended) and np.all(rewards == 0)
+                assert np.allclose(infos["sim_time_s"], 0.0)
+        assert np.all(np.isfinite(obs))
+    finally:
+        envs.close()
+
+
+def test_the_batched_environment_flies_its_vehicles_in_one_world_repeatably() -> None:
+    def run() -> np.ndarray:
+        envs = gymnasium.make_vec("skeye/PadLanding-v0", num_envs=4, camera="ideal",
+                                  vectorization_mode="vector_entry_point")
+        try:
+            obs, _ = envs.reset(seed=11)
+            flight = envs.unwrapped.flight
+            assert len(flight.sim.robots) == 4 and len(flight.world.pads) == 4
+            for _ in range(4):
+                obs, *_ = envs.step(np.zeros((4, 4), np.float32))
+            return obs
+        finally:
+            envs.close()
+
+    first, again = run(), run()
+    assert np.array_equal(first, again)
+    found = first[:, len(STATE_FIELDS)]
+    assert np.all(found == 1)  # each vehicle sees its own pad below it
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"wind": "hurricane"}, "unknown mode"),
+    ({"sensor_noise": -1}, "sensor_noise"),
+    ({"camera": "fisheye"}, "camera must be one of"),
+    ({"control_rate_hz": 333}, "whole number of physics steps"),
+    ({"no_such_option": 1}, "unknown option"),
+    ({"robot": "zeppelin"}, "unknown robot class"),
+])
+def test_bad_options_are_refused_with_their_name(kwargs: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        gymnasium.make("skeye/Hover-v0", **kwargs)
+
+
+def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
+    from skeye.gym.flight import scale_noise
+    from skeye.robots.config import load_robot_config
+
+    config = scale_noise(load_robot_config("hummingbird"), 0.0)
+    gyro = next(m for m in config.sensors if m.type_name == "Gyro")
+    params = dict(gyro.params)
+    assert params["NoiseSigma"] == 0.0 and params["BiasWalk"] == 0.0
+    env = gymnasium.make("skeye/Hover-v0", sensor_noise=0.0, estimator="truth")
+    try:
+        env.reset(seed=0)
+        for _ in range(3):
+            obs, *_ = env.step(np.zeros(4, np.float32))
+    finally:
+        env.close()
+    assert abs(obs[STATE_FIELDS.index("roll_rate_rad_s")]) < 0.01
