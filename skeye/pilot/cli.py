@@ -16,6 +16,11 @@ With ``--images`` the pilot runs the landing-pad detector on its camera; ``--vid
 to ground control (docs/protocols/video.md; ``skeye ground --video tcp://HOST:PORT``), bound to
 ``--host`` like the packet port. An onboard ``skeye pilot`` with a real camera serves the same
 port the same way.
+
+With ``--policy module:callable`` (and ``--images``) a policy, e.g. one learned in skeye's
+Gymnasium environments, flies the vehicle in place of the pad-hold law while PAD_MODE is HOLD or
+LAND, on the same observation the environments give it (:mod:`skeye.pilot.policy`,
+docs/gym.md).
 """
 
 from __future__ import annotations

@@ -1,0 +1,144 @@
+"""The same observation on both sides: the environments' snapshot against the pilot's
+SimAirframe, the scripted lander in the environment, and the same lander flying the real pilot
+(``skeye pilot --policy``) on the simulator."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skeye.control.connection import connect
+from skeye.gym.board import BoardView
+from skeye.link.vehicle import Vehicle
+from skeye.pilot.cli import pad_vision_factory
+from skeye.pilot.policy import (
+    ActionLimits,
+    DetectOnlyVision,
+    PolicyPilot,
+    load_policy,
+    policy_factory,
+    state_vector,
+)
+from skeye.pilot.server import PilotServer
+from skeye.pilot.sim_airframe import SimAirframe
+from skeye.robots.config import load_robot_config
+from skeye.sim.engine import Simulation
+from skeye.wire.packets import NavState, SkeyeMask
+from tests.control.conftest import sim_running
+from tests.sim.test_cameras import sim_with_images
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "examples" / "gym"
+
+
+def test_the_in_process_snapshot_is_the_pilots_to_the_wires_rounding() -> None:
+    """One flight on a real control server: the pilot's SimAirframe reads the robot's text
+    stream, and the environments' BoardView takes the same typed readings from the engine (a
+    second sink beside the server's); their snapshots agree to the wire's rounding."""
+    view = BoardView(load_robot_config("hummingbird"))
+
+    def tee(sim: Simulation) -> None:
+        robot = sim.robots["R1"]
+        server_sink = robot.sink
+
+        def both(events: list) -> None:
+            server_sink(events)
+            view.sink(events)
+
+        robot.sink = both
+
+    with sim_running(seed=4) as handle, connect(handle.address) as sim:
+        robot = sim.spawn("hummingbird", location_ned_m=(0.5, -0.2, -1.2), name="R1")
+        handle.runner.call(tee)
+        airframe = SimAirframe(sim, robot)
+        robot.set_velocity(0.4, -0.2, 0.1, 0.3)
+        sim.run_for(1.5)
+        pilot = airframe.snapshot()
+        ours = view.snapshot(sim.time_s)
+    assert ours.time_s == pytest.approx(pilot.time_s, abs=1e-9)
+    home = (0.0, 0.0, 0.0)
+    ours_v, pilot_v = state_vector(ours, home), state_vector(pilot, home)
+    assert np.allclose(ours_v, pilot_v, atol=1e-3), ours_v - pilot_v
+    assert ours_v[3] != 0.0 and ours_v[11] != 0.0  # it moved and turned: not a trivial match
+    assert ours.armed == pilot.armed and ours.landed == pilot.landed
+    assert ours.baro_altitude_m == pytest.approx(pilot.baro_altitude_m, abs=1e-3)
+    assert ours.mag_heading_rad == pytest.approx(pilot.mag_heading_rad, abs=1e-3)
+    assert ours.thrust_fraction == pytest.approx(pilot.thrust_fraction, abs=1e-3)
+    assert ours.battery_v == pytest.approx(pilot.battery_v, abs=1e-3)
+
+
+def test_the_scripted_controller_lands_on_the_pad_through_the_webcam() -> None:
+    """The example at a small count (docs/gym.md has the 20-episode figure)."""
+    done = subprocess.run(
+        [sys.executable, str(EXAMPLES / "pad_landing_scripted.py"), "--episodes", "2",
+         "--seed", "100"],
+        capture_output=True, text=True, timeout=600, cwd=ROOT,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "landed on the pad in 2 of 2 episodes" in done.stdout, done.stdout
+
+
+def test_load_policy_names_what_is_wrong(monkeypatch: pytest.MonkeyPatch) -> None:
+    from skeye.errors import ConfigError
+
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    lander = load_policy("pad_landing_scripted:ScriptedLander")
+    assert callable(lander)
+    for spec, message in (("nocolon", "module:callable"), ("no_such_mod:x", "cannot import"),
+                          ("pad_landing_scripted:Nope", "has no"),
+                          ("pad_landing_scripted:LAND_SPEED_M_S", "not callable")):
+        with pytest.raises(ConfigError, match=message):
+            load_policy(spec)
+
+
+def test_skeye_pilot_refuses_a_policy_without_images_or_that_does_not_load() -> None:
+    from skeye.cli import main
+
+    assert main(["pilot", "--policy", "pad_landing_scripted:ScriptedLander"]) == 2
+    assert main(["pilot", "--images", "127.0.0.1:1", "--policy", "no_such_module:f"]) == 2
+
+
+@pytest.fixture
+def policy_flight(monkeypatch: pytest.MonkeyPatch
+                  ) -> Iterator[tuple[Vehicle, object, PilotServer]]:
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    with ExitStack() as stack:
+        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep"))
+        sim = stack.enter_context(
+            connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}"))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        cfg = robot.motion_config
+        vision = policy_factory(
+            pad_vision_factory(sim, robot, vision_class=DetectOnlyVision),
+            load_policy("pad_landing_scripted:ScriptedLander"), observation="pad",
+            limits=ActionLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s),
+            period_s=0.05)
+        pilot = stack.enter_context(
+            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=5.0,
+                        tick_s=0.05, vision=vision))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        yield vehicle, control, pilot
+
+
+def test_the_pilot_flies_the_policy_that_solves_the_environment(policy_flight) -> None:
+    vehicle, control, pilot = policy_flight
+    assert isinstance(pilot.vision, PolicyPilot)
+    vehicle.stream(0, int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD), 0.05)
+    vehicle.take_off(1.5)
+    vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+    vehicle.move_by(forward_m=0.3, right_m=-0.2)
+    vehicle.wait_state(NavState.FLYING, timeout_s=60)
+    vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+    assert pilot.vision.calls == 0  # PAD_MODE 0: the policy does not fly
+    vehicle.pad_mode(2, deadband_m=0.05, max_speed_m_s=0.3)
+    vehicle.wait_state(NavState.LANDED, timeout_s=120)
+    north, east, _ = control.runner.call(lambda sim: tuple(sim.body_state("R1").pos_ned_m))
+    assert math.hypot(north, east) < 0.1, (north, east)
+    assert pilot.vision.calls > 20 and pilot.vision.vision.stats.detections > 20
