@@ -53,6 +53,7 @@ class ScriptedLander:
     def __call__(self, obs: object) -> np.ndarray:
         state = obs["state"] if isinstance(obs, dict) else obs
         n, e, d, _, _, _, roll, pitch, yaw = (float(v) for v in state[:9])
+        landed = float(state[15]) > 0.5
         found, forward, right, height, _, age = (float(v) for v in state[16:22])
         self.time_s += self.period_s
         now = Pose(self.time_s, n, e, d, roll, pitch, yaw)
@@ -66,6 +67,10 @@ class ScriptedLander:
                 self.missed_since_s = None
             elif not found and self.missed_since_s is None:
                 self.missed_since_s = capture_s
+        if landed and self.hold_at is not None:
+            # On the ground: straight down and nothing else, so the board stops the motors
+            # after its second on the ground (a horizontal set-point would arm it again).
+            return self._action(0.0, 0.0, -LAND_SPEED_M_S)
         if self.hold_at is not None:
             return self._land(now)
         fix = self.fix

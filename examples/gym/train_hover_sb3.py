@@ -23,6 +23,12 @@ import numpy as np
 import skeye.gym  # noqa: F401  (registers the environments)
 
 
+def make_hover() -> gymnasium.Env:  # type: ignore[type-arg]
+    """One Hover-v0 (a function, so SB3's worker processes can make their own)."""
+
+    return gymnasium.make("skeye/Hover-v0")
+
+
 def evaluate(act, episodes: int, seed: int) -> float:  # type: ignore[no-untyped-def]
     """Mean return of ``act(obs) -> action`` over seeded Hover-v0 episodes."""
     env = gymnasium.make("skeye/Hover-v0")
@@ -59,7 +65,7 @@ def main() -> None:
     parser.add_argument("--out", default="hover_ppo")
     parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes")
     args = parser.parse_args()
-    envs = make_vec_env("skeye/Hover-v0", n_envs=args.envs, seed=0,
+    envs = make_vec_env(make_hover, n_envs=args.envs, seed=0,
                         vec_env_cls=SubprocVecEnv if args.envs > 1 else None)
     model = PPO("MlpPolicy", envs, n_steps=512, batch_size=256, device="cpu", seed=0,
                 verbose=0)

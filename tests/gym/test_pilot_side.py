@@ -138,7 +138,7 @@ def test_the_pilot_flies_the_policy_that_solves_the_environment(policy_flight) -
     vehicle.wait_state(NavState.HOLDING, timeout_s=60)
     assert pilot.vision.calls == 0  # PAD_MODE 0: the policy does not fly
     vehicle.pad_mode(2, deadband_m=0.05, max_speed_m_s=0.3)
-    vehicle.wait_state(NavState.LANDED, timeout_s=120)
+    vehicle.wait_state(NavState.LANDED, timeout_s=300)
     north, east, _ = control.runner.call(lambda sim: tuple(sim.body_state("R1").pos_ned_m))
     assert math.hypot(north, east) < 0.1, (north, east)
     assert pilot.vision.calls > 20 and pilot.vision.vision.stats.detections > 20
