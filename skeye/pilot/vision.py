@@ -119,6 +119,62 @@ the prediction flies on the estimator's motion over the latency, and the onboard
 velocity error (a few cm/s, docs/physics.md) makes it wrong by the pad-hold deadband (5 cm)
 after about a second."""
 
+VISION_RECOVERY_S = 1.0
+"""Once too slow, the vision counts as in time again only after its detections have all been
+in time for this long (sim time): one late detection among prompt ones does not flip the pad
+modes between holding still and navigating (a design choice, docs/pilot.md)."""
+
+WARNING_REPEAT_S = 60.0
+"""At most one "too slow" warning a minute in the log; the ones held back are counted."""
+
+
+class RateLimited:
+    """At most one message per ``period_s`` (``clock``: wall seconds); :meth:`say` returns the
+    text to log, with how many were held back since the last one, or None to hold it back."""
+
+    def __init__(self, period_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.period_s = period_s
+        self._clock = clock
+        self._said_at = -math.inf
+        self._held = 0
+
+    def say(self, text: str) -> str | None:
+        now = self._clock()
+        if now - self._said_at < self.period_s:
+            self._held += 1
+            return None
+        held = (f" ({self._held} more such in the last {now - self._said_at:.0f} s)"
+                if self._held else "")
+        self._said_at, self._held = now, 0
+        return text + held
+
+
+@dataclass
+class LateVision:
+    """Whether the vision is too slow to hold on, with hysteresis: one late detection turns
+    it on at once (safety first: the pad modes hold still); only ``recovery_s`` of detections
+    all in time turn it off. :meth:`update` returns the new state when it changes, else None."""
+
+    recovery_s: float = VISION_RECOVERY_S
+    on: bool = False
+    in_time_since_s: float | None = None
+
+    def update(self, late: bool, now_s: float) -> bool | None:
+        if late:
+            self.in_time_since_s = None
+            if self.on:
+                return None
+            self.on = True
+            return True
+        if not self.on:
+            return None
+        if self.in_time_since_s is None:
+            self.in_time_since_s = now_s
+        if now_s - self.in_time_since_s < self.recovery_s - 1e-9:
+            return None
+        self.on, self.in_time_since_s = False, None
+        return False
+
 
 class PadVision:
     """Detector + pad navigation: a worker thread detects, the pilot loop navigates.
@@ -169,6 +225,8 @@ class PadVision:
         self.base_params = params or PadHoldParams()
         self.law = PadHoldLaw(self.base_params)
         self.stats = VisionStats()
+        self._late = LateVision()
+        self._warnings = RateLimited(WARNING_REPEAT_S)  # the "too slow" warnings
         self.lockstep = lockstep
         self.lockstep_wait_s = lockstep_wait_s
         self.history = PoseHistory(max_latency_s + 1.0)
@@ -278,19 +336,25 @@ class PadVision:
         stats.latency_s = age
         stats.max_latency_s = max(stats.max_latency_s, age)
         then = self.history.at(obs.frame_time_s) if obs.found else None
-        if age > self.max_latency_s or (obs.found and then is None):
+        late = age > self.max_latency_s or (obs.found and then is None)
+        if late:
             stats.too_slow_count += 1
-            if not stats.too_slow:
-                stats.too_slow = (f"vision too slow to hold: a detection arrived {age:.2f} s "
-                                  f"after its frame (limit {self.max_latency_s:.2f} s)")
-                log.warning("%s; pad navigation holds still until detections are in time",
-                            stats.too_slow)
-                self.boards.pad.vision_too_slow(True)
-            return
-        if stats.too_slow:
-            log.warning("vision in time again (%.2f s): pad navigation resumes", age)
+        change = self._late.update(late, now.time_s)
+        if change is True:
+            stats.too_slow = (f"vision too slow to hold: a detection arrived {age:.2f} s "
+                              f"after its frame (limit {self.max_latency_s:.2f} s)")
+            text = self._warnings.say(f"{stats.too_slow}; pad navigation holds still until "
+                                      f"detections are in time for {self._late.recovery_s:g} s")
+            if text is not None:
+                log.warning("%s", text)
+            self.boards.pad.vision_too_slow(True)
+        elif change is False:
+            log.info("vision in time again (%.2f s) for %g s: pad navigation resumes", age,
+                     self._late.recovery_s)
             stats.too_slow = ""
             self.boards.pad.vision_too_slow(False)
+        if self._late.on:
+            return
         self._newest_capture_s = max(self._newest_capture_s, obs.frame_time_s)
         if obs.found and then is not None:
             self._fix = locate_pad(obs.dx_m, obs.dy_m, obs.height_m, then)
