@@ -165,8 +165,9 @@ def load_robot_config(
     """A robot class by name or a TOML path.
 
     Names resolve to the built-ins (``USARBot.`` prefix and case ignored), then to
-    ``<dir>/<name>.toml`` in ``search_dirs`` (``skeye sim --robot-dir``). A path is accepted only
-    with ``allow_paths`` (the command line, not the network: a client may not read files).
+    ``<dir>/<name>.toml`` in ``search_dirs`` (``skeye sim --robot-dir``; case ignored too, as
+    USARSim's class names: ``MyQuad.toml`` is ``myquad``). A path is accepted only with
+    ``allow_paths`` (the command line, not the network: a client may not read files).
     """
     candidate = str(name_or_path)
     short = candidate.split(".", 1)[1] if candidate.lower().startswith("usarbot.") else candidate
@@ -178,8 +179,8 @@ def load_robot_config(
     else:
         if short.replace("_", "").replace("-", "").isalnum():
             for folder in search_dirs:
-                if (Path(folder) / f"{short}.toml").is_file():
-                    path = Path(folder) / f"{short}.toml"
+                path = _class_file(Path(folder), short)
+                if path is not None:
                     break
         if path is None and allow_paths and candidate.endswith(".toml"):
             path = Path(candidate)
@@ -201,6 +202,23 @@ def load_robot_config(
     return parse_robot_config(data, source)
 
 
+def _class_file(folder: Path, name: str) -> Path | None:
+    """``<folder>/<name>.toml``, the name's case ignored (an exact match first).
+
+    Raises:
+        ConfigError: two files whose names differ only in case and neither matches exactly.
+    """
+    exact = folder / f"{name}.toml"
+    if exact.is_file():
+        return exact
+    found = sorted(p for p in folder.glob("*.toml")
+                   if p.stem.casefold() == name.casefold() and p.is_file())
+    if len(found) > 1:
+        raise ConfigError(f"robot class {name!r} is ambiguous in {folder}: "
+                          f"{', '.join(p.name for p in found)} (class names ignore case)")
+    return found[0] if found else None
+
+
 def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
     """Load every ``*.toml`` in each ``--robot-dir`` folder, so a typo stops ``skeye sim`` at
     start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
@@ -214,7 +232,12 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
         folder = Path(folder)
         if not folder.is_dir():
             raise ConfigError(f"--robot-dir {folder}: not a folder")
-        for path in sorted(folder.glob("*.toml")):
+        paths = sorted(folder.glob("*.toml"))
+        stems = [p.stem.casefold() for p in paths]
+        for path in paths:
+            if stems.count(path.stem.casefold()) > 1:
+                raise ConfigError(f"--robot-dir {folder}: {path.name} and another file name "
+                                  "the same robot class (class names ignore case)")
             config = load_robot_config(folder / path.name)
             for mount in config.sensors:  # a bad camera model stops us here too
                 if mount.type_name.lower() == CAMERA_TYPE:

@@ -19,6 +19,12 @@ on ground truth, so an estimate that drifts makes the vehicle drift as a real on
   while the estimator has a GPS fix; with the horizontal sticks centred (zero forward and
   lateral velocity) a P loop (``position_gain``) holds the position estimate where they were
   centred.
+- Per axis (USARSim's ``AerialVehicle.Drive``: each DRIVE field sets its own axis, the others
+  keep theirs): the pitch axis flies either an angle or a forward velocity, the roll axis an
+  angle or a right velocity, the vertical axis the thrust stick or a climb rate. The two
+  modes above are the cases where every axis is of one form; a mixed set-point flies each
+  axis as its form says (an angle axis with the velocity loop of the other axis, a climb rate
+  with angles: the height-hold loop above).
 - Mixer: total thrust and torques -> per-rotor thrust for the '+' layout -> rotor speed
   commands (sqrt(f/kf)); roll/pitch keep priority over yaw when a rotor would saturate.
 
@@ -35,9 +41,14 @@ from skeye.robots.params import GRAVITY_M_S2, AirframeParams, ControllerParams
 
 @dataclass
 class Command:
-    """The current set-point; velocity mode unless ``attitude`` is set."""
+    """The current set-point, per axis: the pitch axis flies ``pitch_rad`` when ``pitch_angle``
+    is set, else ``forward_m_s``; the roll axis ``roll_rad`` when ``roll_angle``, else
+    ``right_m_s``; the vertical axis ``thrust`` when ``thrust_vertical``, else ``up_m_s``.
+    Velocity mode when none is set, attitude mode (:attr:`attitude`) when all three are."""
 
-    attitude: bool = False
+    pitch_angle: bool = False
+    roll_angle: bool = False
+    thrust_vertical: bool = False
     forward_m_s: float = 0.0
     right_m_s: float = 0.0
     up_m_s: float = 0.0
@@ -47,6 +58,16 @@ class Command:
     thrust: float = 0.0  # 0..1 of max thrust
     gps_mode: bool = False  # GPS mode: centred sticks hold the position while there is a fix
     height_mode: bool = False  # with attitude: thrust stick = climb rate, height held at 0.5
+
+    @property
+    def attitude(self) -> bool:
+        """Every axis in the attitude form (angles and the thrust stick): attitude mode."""
+        return self.pitch_angle and self.roll_angle and self.thrust_vertical
+
+    @property
+    def velocity(self) -> bool:
+        """Every axis in the velocity form: velocity mode."""
+        return not (self.pitch_angle or self.roll_angle or self.thrust_vertical)
 
 
 def _clamp(x: float, lo: float, hi: float) -> float:
@@ -69,6 +90,20 @@ class LowLevelController:
         self.hold_altitude_m = hold_altitude_m
         self.hold_north_m: float | None = None
         self.hold_east_m: float | None = None
+
+    def reset_axes(self, pitch: bool, roll: bool, vertical: bool) -> None:
+        """Forget the state of the axes that changed form: a pitch or roll axis's velocity
+        integrator and the GPS hold point, the vertical axis's climb integrator and height
+        hold (taken anew where the climb command is next zero)."""
+        if pitch:
+            self.vel_int[0] = 0.0
+        if roll:
+            self.vel_int[1] = 0.0
+        if pitch or roll:
+            self.hold_north_m = self.hold_east_m = None
+        if vertical:
+            self.climb_int = 0.0
+            self.hold_altitude_m = None
 
     def update(
         self,
@@ -100,6 +135,8 @@ class LowLevelController:
             else:
                 thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
                 self.hold_altitude_m = None
+        elif not cmd.velocity:
+            roll_sp, pitch_sp, thrust = self._mixed(cmd, yaw, vel_ned, altitude_m, roll, pitch)
         else:
             cy, sy = math.cos(yaw), math.sin(yaw)
             vn, ve, vd = vel_ned
@@ -150,6 +187,58 @@ class LowLevelController:
         rate_int[2] = _clamp(rate_int[2] + err * dt, -0.5, 0.5)
         tau_z = izz * (p.yaw_rate_gain * err)
         return self.mix(thrust, [tau_x, tau_y, tau_z], max_rotor_speed_rad_s)
+
+    def _mixed(
+        self,
+        cmd: Command,
+        yaw: float,
+        vel_ned: tuple[float, float, float],
+        altitude_m: float,
+        roll: float,
+        pitch: float,
+    ) -> tuple[float, float, float]:
+        """A set-point whose axes are of both forms: (roll and pitch set-points, thrust N).
+
+        An angle axis flies its angle (its velocity integrator rests at 0); a velocity axis
+        the velocity loop of velocity mode; the vertical axis the thrust stick (height mode:
+        a climb rate around its centre) or the climb-rate loop with its height hold. No GPS
+        position hold: that needs both horizontal axes on velocities."""
+        p, a, dt = self.p, self.a, self.dt
+        lim = p.max_tilt_rad * 1.6
+        tilt_max = p.max_tilt_rad
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        vn, ve, vd = vel_ned
+        vmax, amax = p.max_speed_m_s, p.max_accel_m_s2
+        kv, ki = p.velocity_gain, p.velocity_integral_gain
+        vel_int = self.vel_int
+        self.hold_north_m = self.hold_east_m = None
+        if cmd.pitch_angle:
+            pitch_sp = _clamp(cmd.pitch_rad, -lim, lim)
+            vel_int[0] = 0.0
+        else:
+            err = _clamp(cmd.forward_m_s, -vmax, vmax) - (cy * vn + sy * ve)
+            i0 = vel_int[0] = _clamp(vel_int[0] + err * dt, -1.0, 1.0)
+            acc_fwd = _clamp(kv * err + ki * i0, -amax, amax)
+            pitch_sp = _clamp(-math.atan2(acc_fwd, GRAVITY_M_S2), -tilt_max, tilt_max)
+        if cmd.roll_angle:
+            roll_sp = _clamp(cmd.roll_rad, -lim, lim)
+            vel_int[1] = 0.0
+        else:
+            err = _clamp(cmd.right_m_s, -vmax, vmax) - (-sy * vn + cy * ve)
+            i1 = vel_int[1] = _clamp(vel_int[1] + err * dt, -1.0, 1.0)
+            acc_right = _clamp(kv * err + ki * i1, -amax, amax)
+            roll_sp = _clamp(
+                math.atan2(acc_right * math.cos(pitch_sp), GRAVITY_M_S2), -tilt_max, tilt_max
+            )
+        if not cmd.thrust_vertical:
+            thrust = self._vertical(cmd.up_m_s, altitude_m, vd, roll, pitch)
+        elif cmd.height_mode:
+            up = (_clamp(cmd.thrust, 0.0, 1.0) - 0.5) * 2.0 * p.max_climb_m_s
+            thrust = self._vertical(up, altitude_m, vd, roll, pitch)
+        else:
+            thrust = _clamp(cmd.thrust, 0.0, 1.0) * a.max_thrust_n
+            self.hold_altitude_m = None
+        return roll_sp, pitch_sp, thrust
 
     def _vertical(
         self, up_m_s: float, altitude_m: float, vd: float, roll: float, pitch: float

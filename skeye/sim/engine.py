@@ -249,8 +249,11 @@ class Simulation:
         config: RobotConfig | None = None,
     ) -> Robot:
         """Add a robot. On a start pose (or a location at or below the ground) it stands on its
-        landing gear; a location in the air spawns it hovering, motors running. ``sink`` takes
-        the robot's readings (:mod:`skeye.sim.readings`) after each :meth:`step` call."""
+        landing gear; a location in the air spawns it hovering, motors running. A location
+        below the ground (down > 0: every world's ground plane is at down 0) stands it on the
+        surface straight above (the ground, or what stands on it there, such as a pad): it is
+        never spawned inside the ground, which would launch it. ``sink`` takes the robot's
+        readings (:mod:`skeye.sim.readings`) after each :meth:`step` call."""
         config = config or load_robot_config(class_name, self.robot_dirs, allow_paths=False)
         self._spawned += 1
         name = name or f"R{self._spawned}"
@@ -274,6 +277,8 @@ class Simulation:
         elif location_ned_m is not None:
             ln, le, ld = (float(v) for v in location_ned_m)
             pos = (ln, le, ld)
+            if ld > 0.0:  # below the ground: onto the surface above, 1 cm over it
+                pos = (ln, le, self._surface_down(ln, le) - 0.01)
             rpy = rotation_rpy_rad
             below = self._ground_below(pos)
             if below is not None and below < gear + 0.02:
@@ -329,6 +334,22 @@ class Simulation:
         if self.robots.pop(name, None) is not None:
             self._queries.pop(name, None)
             self._rebuild()
+
+    def _surface_down(self, north_m: float, east_m: float) -> float:
+        """NED down of the surface at a point: the ground (down 0) or, where something stands
+        on the ground there (a pad, a box), its top. Found from below, where only what stands
+        on the ground is in the way: a ray cast up from under the ground meets that thing's
+        underside (the ground plane is not hit from below); a ray cast down from over its
+        bounding sphere then meets its top."""
+        start_down = 1.0  # below every collider's underside (a pad's reaches 2 cm down)
+        hit = self._cast((north_m, east_m, start_down), (0.0, 0.0, -1.0), -1, math.inf)
+        if hit is None or start_down - hit < -0.05:
+            return 0.0  # nothing there, or only something well above the ground (a ceiling)
+        geom = int(self._ray_geomid[0])
+        top_z = float(self.data.geom_xpos[geom][2]) + float(self.model.geom_rbound[geom])
+        above_down = -(top_z + 0.05)
+        top = self._cast((north_m, east_m, above_down), (0.0, 0.0, 1.0), -1, math.inf)
+        return 0.0 if top is None else above_down + top
 
     def _ground_below(self, pos_ned: tuple[float, float, float]) -> float | None:
         """Distance from a NED point straight down to the first geom, or None."""

@@ -275,33 +275,65 @@ class Robot:
 
     # -- commands ------------------------------------------------------------------------
     def drive(self, **changes: float | bool) -> None:
-        """Update the set-point; arms the motors when the command asks for motion."""
+        """Update the set-point; arms the motors when the command asks for motion.
+
+        Each value sets its own axis and selects that axis's form (USARSim's
+        ``AerialVehicle.Drive``): ``pitch_rad`` / ``forward_m_s`` the pitch axis, ``roll_rad`` /
+        ``right_m_s`` the roll axis, ``thrust`` / ``up_m_s`` the vertical axis; an axis not
+        named keeps its form and value. ``attitude`` (True or False) first puts every axis in
+        that form with its values cleared. A switch of all three axes at once resets the
+        controller, as a change of mode does; a switch of some resets only theirs."""
         if self.flight.failed:
             raise LocalProtocolError(f"robot {self.name} is stopped: {self.flight.failed}")
-        attitude = bool(changes.pop("attitude", self.command.attitude))
-        if attitude != self.command.attitude:
-            self.command = Command(attitude=attitude)
-            self.controller.reset()
-        if "gps_mode" in changes:
-            self.command.gps_mode = bool(changes.pop("gps_mode"))
-        if "height_mode" in changes:
-            self.command.height_mode = bool(changes.pop("height_mode"))
-        for key, value in changes.items():
-            setattr(self.command, key, float(value))
         c = self.command
-        wants_motion = (
-            (c.thrust > 0.0)
-            if c.attitude
-            else (
-                c.up_m_s > 0.0
-                or c.forward_m_s != 0.0
-                or c.right_m_s != 0.0
-                or c.yaw_rate_rad_s != 0.0
-            )
-        )
-        if wants_motion and not self.flight.armed and not self.battery.empty:
+        form = changes.pop("attitude", None)
+        if form is not None:
+            whole = bool(form)
+            if not (c.attitude if whole else c.velocity):
+                c = self.command = Command(pitch_angle=whole, roll_angle=whole,
+                                           thrust_vertical=whole)
+                self.controller.reset()
+        if "gps_mode" in changes:
+            c.gps_mode = bool(changes.pop("gps_mode"))
+        if "height_mode" in changes:
+            c.height_mode = bool(changes.pop("height_mode"))
+        pitch = roll = vertical = False
+        for key, value in changes.items():
+            if key == "pitch_rad" or key == "forward_m_s":
+                if c.pitch_angle != (key == "pitch_rad"):
+                    c.pitch_angle = key == "pitch_rad"
+                    c.pitch_rad = c.forward_m_s = 0.0
+                    pitch = True
+            elif key == "roll_rad" or key == "right_m_s":
+                if c.roll_angle != (key == "roll_rad"):
+                    c.roll_angle = key == "roll_rad"
+                    c.roll_rad = c.right_m_s = 0.0
+                    roll = True
+            elif (key == "thrust" or key == "up_m_s") and c.thrust_vertical != (key == "thrust"):
+                c.thrust_vertical = key == "thrust"
+                c.thrust = c.up_m_s = 0.0
+                vertical = True
+            setattr(c, key, float(value))
+        if pitch and roll and vertical:
+            self.controller.reset()
+        elif pitch or roll or vertical:
+            self.controller.reset_axes(pitch, roll, vertical)
+        if self._wants_motion() and not self.flight.armed and not self.battery.empty:
             self.flight.armed = True
             self.controller.reset()
+
+    def _wants_motion(self) -> bool:
+        """Whether the set-point asks the vehicle to move: a thrust stick above 0, a climb, or
+        (with a climb-rate vertical axis) a horizontal velocity or a yaw rate."""
+        c = self.command
+        if c.thrust_vertical:
+            return c.thrust > 0.0
+        return (
+            c.up_m_s > 0.0
+            or (not c.pitch_angle and c.forward_m_s != 0.0)
+            or (not c.roll_angle and c.right_m_s != 0.0)
+            or c.yaw_rate_rad_s != 0.0
+        )
 
     # -- the board -----------------------------------------------------------------------
     def board_tick(
@@ -377,10 +409,11 @@ class Robot:
             f.landed_since_s = state.time_s
         f.landed = landed_now
         c = self.command
-        asks_up = (c.thrust > 0.3) if c.attitude else (c.up_m_s > 0.0)
+        asks_up = (c.thrust > 0.3) if c.thrust_vertical else (c.up_m_s > 0.0)
         if f.armed and f.landed and not asks_up and state.time_s - f.landed_since_s >= 1.0:
             f.armed = False
-            self.command = Command(attitude=c.attitude)
+            self.command = Command(pitch_angle=c.pitch_angle, roll_angle=c.roll_angle,
+                                   thrust_vertical=c.thrust_vertical)
             self.controller.reset()
         if self.battery.empty and f.armed:
             f.armed = False

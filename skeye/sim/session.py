@@ -427,8 +427,12 @@ class ClientSession:
                 rotation_rpy_rad=init.rotation_rpy_rad or (0.0, 0.0, 0.0),
                 start=init.start,
             )
+            placed = robot_note(init, robot.spawn_pos_ned_m)
+            if placed is not None:
+                log.info("client %s: INIT %s", self.peer, placed)
+            said = "; ".join(n for n in (note, placed) if n) or None
             # Answer from the engine thread, before the first STA/SEN of this robot.
-            self.send(encode(Res("INIT", name=robot.name, status="OK", note=note)))
+            self.send(encode(Res("INIT", name=robot.name, status="OK", note=said)))
             return robot.name, robot.config
 
         self.robot_name, self.robot_config = self.server.runner.call(spawn)
@@ -441,8 +445,8 @@ class ClientSession:
         limits = DriveLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s,
                              c.max_tilt_rad)
         drive = drive_in_si(msg, drive, limits)
+        # Each field sets its own axis; the axes left out keep theirs (AerialVehicle.Drive).
         changes: dict[str, Any] = {
-            "attitude": drive.attitude,
             "height_mode": drive.board_mode == "height",
             "gps_mode": drive.board_mode == "gps",
         }
@@ -465,6 +469,13 @@ class ClientSession:
             robot.drive(**changes)
 
         self.server.runner.call(apply)
+        # A value that was not plain, or an angle the same line's velocity overrode: say how
+        # it was read (USARSim answers DRIVE with nothing; a RES is ignored by its clients).
+        notes = usarsim_notes(msg)
+        if notes:
+            note = "; ".join(notes)
+            log.info("client %s: DRIVE %s", self.peer, note)
+            self.send(encode(Res("DRIVE", status="OK", note=note)))
 
     def cmd_getstartposes(self, msg: Message, command: GetStartPoses) -> None:
         self.send(encode(StartPoses(tuple(self.server.runner.sim.start_poses()))))
@@ -565,6 +576,16 @@ _HANDLERS: dict[str, Callable[[ClientSession, Message, Any], None]] = {
     "STEP": ClientSession.cmd_step,
     "PING": ClientSession.cmd_ping,
 }
+
+
+def robot_note(init: Init, spawned_ned_m: tuple[float, float, float]) -> str | None:
+    """What INIT's answer says when the robot was not put where its Location said: a location
+    below the ground (down > 0) stands it on the surface above (see ``Simulation.spawn``)."""
+    if init.start is not None or init.location_ned_m is None or init.location_ned_m[2] <= 0.0:
+        return None
+    n, e, d = spawned_ned_m
+    return (f"Location down {init.location_ned_m[2]:g} m is below the ground (NED: down is "
+            f"positive); the robot stands on the surface there, at {n:g},{e:g},{d:g}")
 
 
 def _require(value: str | None, key: str) -> str:

@@ -47,12 +47,10 @@ class StreamEncoder:
         return entry[1].format((reading.time_s, *reading.values()))
 
     def status_line(self, status: StatusReading) -> bytes:
-        """``STA {Type AerialVehicle} {Name n} {Time t} ...`` of a robot's status."""
+        """``STA {Time t} {Battery n} {Name n} ...`` of a robot's status."""
         fmt = self._sta.get(status.robot)
         if fmt is None:
-            fmt = self._sta[status.robot] = wire.line_format(
-                Sta, {"Type": "AerialVehicle", "Name": status.robot}
-            )
+            fmt = self._sta[status.robot] = wire.line_format(Sta, {"Name": status.robot})
         # Whole seconds, as USARSim's Battery.ExpectedLifeTime (int(energy / discharge rate)).
         return fmt.format((status.time_s, int(status.battery_s), status.voltage_v,
                            status.current_a, status.armed, status.landed))

@@ -55,6 +55,9 @@ class Battery:
     hover current, so the figure is sensible from the first status line: the time the vehicle
     could still hover, as USARSim's ``Battery.ExpectedLifeTime`` starts from the rated life
     (its ``averageDischarge`` starts at ``maxEnergy / batteryLife``) rather than from nothing.
+    The figure never rises: when the draw falls back to hover after a climb, or to the
+    avionics at touchdown, it holds until the estimate comes down to it (USARSim's discharges
+    at a steady rate, so its figure only counts down; a client shows "minutes left").
 
     Args:
         params: the battery's parameters.
@@ -72,6 +75,7 @@ class Battery:
             hover_shaft_power_w / params.efficiency + params.avionics_power_w, self.voltage_v
         )
         self._avg_current_a = self.hover_current_a
+        self._life_s = self._estimate_s()
 
     def _current_for(self, electrical_w: float, ocv: float) -> float:
         """The current that delivers this electrical power: P = I * (OCV - I R), smaller root;
@@ -104,15 +108,22 @@ class Battery:
         # Smoothed current for the remaining-life estimate (time constant 2 s).
         k = min(1.0, dt_s / 2.0)
         self._avg_current_a += k * (current - self._avg_current_a)
+        estimate = self._estimate_s()
+        if estimate < self._life_s:
+            self._life_s = estimate
 
-    @property
-    def remaining_s(self) -> float:
-        """Remaining life (s) at the recent average current, never above the hover time."""
+    def _estimate_s(self) -> float:
+        """Life left (s) at the recent average current, never above the hover time."""
         if self.empty:
             return 0.0
         current = max(self._avg_current_a, self.hover_current_a,
                       self.params.avionics_power_w / max(self.voltage_v, 1.0))
         return self.charge_c / current
+
+    @property
+    def remaining_s(self) -> float:
+        """Remaining life (s): the lowest estimate so far (it never rises; see the class)."""
+        return self._life_s
 
 
 class RotorModel:

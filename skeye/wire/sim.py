@@ -44,6 +44,7 @@ from skeye.wire.sim_lines import (
     format_error,
     format_message,
     parse_line,
+    parse_usarsim_float,
     parse_usarsim_vector,
 )
 from skeye.wire.sim_messages import (
@@ -87,6 +88,7 @@ __all__ = [
     "res_time_s",
     "sen_layout",
     "sen_line_format",
+    "usarsim_drive",
     "usarsim_notes",
 ]
 
@@ -222,27 +224,64 @@ def _check_init(init: Init) -> None:
 
 
 def _check_drive_form(msg: Message) -> None:
-    has_att = any(msg.has(k) for k in Drive.ATTITUDE_KEYS)
-    has_vel = any(msg.has(k) for k in Drive.VELOCITY_KEYS)
-    if has_att and has_vel:
+    if msg.has("Thrust") and msg.has("AltitudeVelocity"):
         raise RemoteProtocolError(
-            "DRIVE mixes the attitude form (RollAngle, PitchAngle, Thrust) with the velocity form"
+            "DRIVE: Thrust and AltitudeVelocity both set the vertical axis; send one of them"
         )
     known = {f.key.lower() for f in CODECS["DRIVE"].fields}
     unknown = [k for k, _ in msg.fields if k.lower() not in known]
     if unknown:
         raise RemoteProtocolError(f"DRIVE: unknown segment(s) {unknown}")
-    if not (has_att or has_vel or msg.has("RotationalVelocity")):
+    if not any(msg.has(k) for k in (*Drive.ATTITUDE_KEYS, *Drive.VELOCITY_KEYS,
+                                     "RotationalVelocity")):
         raise RemoteProtocolError("DRIVE needs at least one velocity or attitude segment")
 
 
+def _usarsim_scalars(msg: Message) -> tuple[Message, list[str]]:
+    """A DRIVE's numbers read as USARSim reads them (:func:`parse_usarsim_float`): the line
+    with each number that was not plain replaced by what was read, and a note for each."""
+    codec = CODECS["DRIVE"]
+    fields: list[tuple[str, str]] = []
+    notes: list[str] = []
+    for key, text in msg.fields:
+        try:
+            spec: FieldSpec | None = codec.spec(key)
+        except KeyError:
+            spec = None
+        if spec is not None and spec.kind == "float":
+            value, note = parse_usarsim_float(spec.key, text)
+            if note is not None:
+                notes.append(note)
+                text = repr(value)
+        fields.append((key, text))
+    return Message(msg.type, tuple(fields), msg.blocks), notes
+
+
+def _axis_notes(msg: Message) -> list[str]:
+    """Where a DRIVE gives one axis both its velocity and its angle: the velocity is flown
+    (USARSim moves the vehicle at the velocity; the angle only sets its look)."""
+    notes = []
+    for velocity, angle in Drive.AXES[:2]:  # vertical: refused by _check_drive_form
+        if msg.has(velocity) and msg.has(angle):
+            notes.append(f"{angle} not flown: {velocity} sets that axis in the same DRIVE "
+                         "(as in USARSim, where the velocity moves the vehicle)")
+    return notes
+
+
 def usarsim_notes(msg: Message) -> list[str]:
-    """How the ``uvec3`` vectors of a command (INIT's Location and Rotation) were read, for
-    each one that was not three plain numbers (see
-    :func:`~skeye.wire.sim_lines.parse_usarsim_vector`); empty when all were plain."""
+    """How a command was read where it was not plain: INIT's ``uvec3`` vectors (Location,
+    Rotation; :func:`~skeye.wire.sim_lines.parse_usarsim_vector`) and DRIVE's numbers
+    (:func:`~skeye.wire.sim_lines.parse_usarsim_float`) read as USARSim reads them, and a
+    DRIVE axis given both its velocity and its angle; empty when all was plain.
+
+    Raises:
+        RemoteProtocolError: as :func:`decode` (a DRIVE number with no leading number).
+    """
     codec = CODECS.get(msg.type)
     if codec is None:
         return []
+    if codec.cls is Drive:
+        return _usarsim_scalars(msg)[1] + _axis_notes(msg)
     notes = []
     for spec in codec.fields:
         text = msg.get(spec.key) if spec.kind == "uvec3" else None
@@ -251,6 +290,16 @@ def usarsim_notes(msg: Message) -> list[str]:
             if note is not None:
                 notes.append(note)
     return notes
+
+
+def usarsim_drive(msg: Message) -> Message:
+    """A DRIVE line with its numbers as USARSim reads them (``0,5`` -> ``0.0``): the line
+    :func:`drive_in_si` checks the limits on.
+
+    Raises:
+        RemoteProtocolError: a number with no leading number at all.
+    """
+    return _usarsim_scalars(msg)[0]
 
 
 def _decode_sen(msg: Message) -> Sen | SenOther:
@@ -293,6 +342,7 @@ def decode(msg: Message) -> Any:
     if codec is None:
         raise RemoteProtocolError(f"unknown command {word}")
     if codec.cls is Drive:
+        msg = usarsim_drive(msg)
         _check_drive_form(msg)
     result = codec.cls(**_decode_fields(codec, msg))
     if isinstance(result, Init):
@@ -359,6 +409,7 @@ def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
     Raises:
         RemoteProtocolError: a value beyond its bound (naming the key and the text).
     """
+    msg = usarsim_drive(msg)
     normalized = bool(drive.normalized)
     mode = drive.board_mode
     if mode is not None:
@@ -367,13 +418,19 @@ def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
             raise RemoteProtocolError(
                 f"DRIVE: BoardMode {mode!r} is not one of {', '.join(Drive.BOARD_MODES)}"
             )
-        if form != drive.attitude:
+        if form != drive.attitude or (form and drive.velocity):
             raise RemoteProtocolError(
                 f"DRIVE: BoardMode {mode} goes with the "
-                f"{'attitude (RollAngle/PitchAngle/Thrust)' if form else 'velocity'} form"
+                f"{'attitude (RollAngle/PitchAngle/Thrust)' if form else 'velocity'} form "
+                "alone"
             )
         mode = mode.lower()
     changes: dict[str, Any] = {"board_mode": mode}
+    # An axis given its velocity and its angle flies the velocity (see _axis_notes).
+    if drive.forward_m_s is not None:
+        changes["pitch_rad"] = None
+    if drive.right_m_s is not None:
+        changes["roll_rad"] = None
     for key, attr, limit in (
         ("LinearVelocity", "forward_m_s", limits.speed_m_s),
         ("LateralVelocity", "right_m_s", limits.speed_m_s),
@@ -382,7 +439,7 @@ def drive_in_si(msg: Message, drive: Drive, limits: DriveLimits) -> Drive:
         ("RollAngle", "roll_rad", limits.tilt_rad),
         ("PitchAngle", "pitch_rad", limits.tilt_rad),
     ):
-        if getattr(drive, attr) is None:
+        if getattr(drive, attr) is None or (attr in changes and changes[attr] is None):
             continue
         scale = CODECS["DRIVE"].spec(key).scale
         if normalized:

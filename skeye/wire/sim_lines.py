@@ -117,6 +117,30 @@ def _unreal_float(key: str, text: str, whole: str) -> float:
     return value
 
 
+def parse_usarsim_float(key: str, text: str) -> tuple[float, str | None]:
+    """A client's number read as UnrealScript's ``float()`` reads it (USARSim's
+    ``AerialVehicle.Drive`` reads each DRIVE value so): the leading number, the rest ignored,
+    so ``0,000000`` (a decimal comma) reads 0 and ``1,5`` reads 1.
+
+    Returns:
+        The value and, when the text is not a plain number, a note saying how it was read (for
+        the answer and the log); None for plain text.
+
+    Raises:
+        RemoteProtocolError: text with no leading number at all (``float()`` would read 0:
+            skeye refuses it rather than stop an axis on a typo), or a number too large.
+    """
+    stripped = text.strip()
+    if _FLOAT_TEXT.match(stripped):
+        return _parse_float(key, stripped), None
+    if _LEADING_FLOAT.match(text) is None:
+        raise RemoteProtocolError(f"{key}: {text!r} is not a number")
+    value = _unreal_float(key, text, text)
+    note = (f"{key} {text!r} read as {value:g} as USARSim's float() reads it (the leading "
+            "number); send numbers with '.' decimals")
+    return value, note
+
+
 def parse_usarsim_vector(key: str, text: str) -> tuple[tuple[float, float, float], str | None]:
     """A client's ``x,y,z`` read as USARSim's ``Utilities.ParseVector`` reads it.
 

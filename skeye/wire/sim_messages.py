@@ -75,7 +75,12 @@ class Init:
 
 @dataclass(frozen=True)
 class Drive:
-    """``DRIVE``: the attitude form (roll, pitch, thrust) or the velocity form, yaw rate in both.
+    """``DRIVE``: set-points per axis, as USARSim's ``AerialVehicle.Drive``: each field sets its
+    own axis and the axes left out keep theirs. The pitch axis takes ``LinearVelocity`` or
+    ``PitchAngle``, the roll axis ``LateralVelocity`` or ``RollAngle``, the vertical axis
+    ``AltitudeVelocity`` or ``Thrust`` (a skeye extension), the yaw axis
+    ``RotationalVelocity``. All of one form make the attitude form (roll, pitch, thrust) or
+    the velocity form.
 
     The fields are SI (m/s, rad, rad/s); on the wire ``RollAngle`` and ``PitchAngle`` are degrees
     and ``RotationalVelocity`` deg/s, as in USARSim's ``AerialVehicle.uc`` (``AngleFromDeg``).
@@ -111,13 +116,24 @@ class Drive:
         "LinearVelocity",
         "LateralVelocity",
     )
+    AXES: ClassVar[tuple[tuple[str, str], ...]] = (
+        ("LinearVelocity", "PitchAngle"),
+        ("LateralVelocity", "RollAngle"),
+        ("AltitudeVelocity", "Thrust"),
+    )
+    """Each axis's (velocity form, attitude form) key."""
 
     @property
     def attitude(self) -> bool:
-        """Whether this is the attitude form."""
+        """Whether some axis is given in the attitude form (roll, pitch, thrust)."""
         return not (
             self.roll_rad is None and self.pitch_rad is None and self.thrust_fraction is None
         )
+
+    @property
+    def velocity(self) -> bool:
+        """Whether some axis is given in the velocity form (forward, right, up)."""
+        return not (self.forward_m_s is None and self.right_m_s is None and self.up_m_s is None)
 
 
 @dataclass(frozen=True)
@@ -181,14 +197,15 @@ class Sta:
     """``STA``: a robot's status: battery life left (whole s), voltage, current, flight state.
 
     ``{Time t} {Battery n}`` come first, as USARSim's ``USARVehicle.GetStatus`` writes them (an
-    integer ``Battery``, as its ``Battery.ExpectedLifeTime``); skeye's keys follow.
+    integer ``Battery``, as its ``Battery.ExpectedLifeTime``); skeye's keys follow. There is no
+    ``{Type}``: UDK writes none for an aerial vehicle, and a UT2004-era client reads one as
+    UT2004's status layout for that type (a ``Type`` in a line read is ignored).
     """
 
     WORD: ClassVar[str] = "STA"
     time_s: float = field(metadata=wire("Time", "float", min_value=0.0))
     battery_s: int | None = field(default=None, metadata=wire("Battery", "int", min_value=0))
     """None: not given (a simulator that writes no Battery)."""
-    type: str = field(default="AerialVehicle", metadata=wire("Type", "word"))
     name: str | None = field(default=None, metadata=wire("Name", "word"))
     voltage_v: float | None = field(default=None, metadata=wire("Voltage", "float"))
     current_a: float | None = field(default=None, metadata=wire("Current", "float"))

@@ -41,7 +41,7 @@ def test_every_sensor_line_matches_format_message(world: str) -> None:
     status = encoder.status_line(robot.status(sim.time_s))
     battery, *rest = robot.status_fields()  # USARSim's STA starts {Time} {Battery}
     assert status == format_message(
-        "STA", ("Time", sim.time_s), battery, ("Type", "AerialVehicle"), ("Name", "R1"), *rest,
+        "STA", ("Time", sim.time_s), battery, ("Name", "R1"), *rest,
     )
     assert parse_line(status.decode().strip()).get_bool("Armed") is True
 

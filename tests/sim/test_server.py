@@ -58,7 +58,7 @@ def test_every_bad_line_gets_err_and_the_connection_stays_usable():
             ("DRIVE {LinearVelocity nan}", "not a number"),
             ("DRIVE {LinearVelocity 99}", "range"),
             ("DRIVE {Thrust 1.5}", "range"),
-            ("DRIVE {RollAngle 0.1} {LinearVelocity 1}", "mixes"),
+            ("DRIVE {Thrust 0.3} {AltitudeVelocity 1}", "vertical axis"),
             ("DRIVE {Normalized true} {LinearVelocity 150}", "range"),
             ("DRIVE {Banana 1}", "unknown segment"),
             ("INIT {ClassName hummingbird} {Location 0,0,-1}", "one robot per connection"),

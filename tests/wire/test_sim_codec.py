@@ -161,7 +161,7 @@ def test_the_table_covers_every_message_class() -> None:
          b"ERR {Command PHYSICS} {Name R1} {Reason robot stopped: NaN}\r\n"),
         (Sta(name="R1", time_s=0.5, battery_s=600, voltage_v=12.6, current_a=3.0,
              armed=True, landed=False),
-         b"STA {Time 0.500000} {Battery 600} {Type AerialVehicle} {Name R1} "
+         b"STA {Time 0.500000} {Battery 600} {Name R1} "
          b"{Voltage 12.600000} {Current 3.000000} {Armed true} {Landed false}\r\n"),
         (SenOpticalFlow(1.0, "Flow", (3.0, -4.0), 120),
          b"SEN {Time 1.000000} {Type OpticalFlow} {Name Flow} {Delta 3,-4} {Quality 120}\r\n"),
@@ -180,7 +180,7 @@ def test_known_lines(message: Any, line: bytes) -> None:
         ("INIT {ClassName x}", "INIT needs {Location x,y,z} or {Start name}"),
         ("INIT {ClassName x} {Location 0,0,0} {Rotation 0,0,90}", "radians, not degrees"),
         ("INIT {ClassName x} {Location 2e4,0,0}", "outside the world"),
-        ("DRIVE {RollAngle 0.1} {LinearVelocity 1}", "mixes the attitude form"),
+        ("DRIVE {Thrust 0.3} {AltitudeVelocity 1}", "both set the vertical axis"),
         ("DRIVE {Speed 1}", "unknown segment(s) ['Speed']"),
         ("DRIVE {Normalized true}", "needs at least one velocity or attitude segment"),
         ("DRIVE {Thrust 1.5}", "Thrust: '1.5' is out of range [0.0, 1.0]"),
@@ -291,7 +291,7 @@ def test_line_format_writes_what_encode_writes() -> None:
     fmt = sim.line_format(SenMotors, {"Name": "M"}, layout)
     assert fmt.format((0.5, *(1.0,) * 4, *(2.0,) * 4, 9.5)) == sim.encode(motors)
     sta = Sta(name="R1", time_s=1.0, battery_s=5, voltage_v=12.0, current_a=1.0, armed=True)
-    fmt = sim.line_format(Sta, {"Type": "AerialVehicle", "Name": "R1"})
+    fmt = sim.line_format(Sta, {"Name": "R1"})
     assert fmt.format((1.0, 5, 12.0, 1.0, True, False)) == sim.encode(sta)
 
 

@@ -57,8 +57,11 @@ class Sonar(Sensor[SonarReading]):
     Ranging time (Devantech SRF10 technical specification: a ranging takes 65 ms at the
     default range setting): a ranging starts at a reading when none is in progress, measures
     the geometry of that moment, and its result is released at the first reading at least
-    RangingTime later; until then every reading repeats the last released result (MaxRange,
-    no echo, before the first one). RangingTime 0 gives the ranging of the reading itself.
+    RangingTime later; until then every reading repeats the last released result. The first
+    reading carries a ranging of its own moment: the sensor has been ranging since the board
+    powered up (its power-up calibration precedes the first reading), so a vehicle standing
+    on the ground reports the ground from its first line, not the "no echo" MaxRange.
+    RangingTime 0 gives the ranging of the reading itself.
 
     Missed and multiple echoes: each ranging independently misses its echo with probability
     MissProbability (reported as no echo, MaxRange) or, with probability MultiEchoProbability,
@@ -108,6 +111,7 @@ class Sonar(Sensor[SonarReading]):
         self._pending_start_s: float | None = None  # start of the ranging in progress
         self._pending: tuple[float, bool] = (self.params["MaxRange"], False)
         self._released: tuple[float, bool] = (self.params["MaxRange"], False)
+        self._ranged = False  # whether a ranging was released yet
 
     def _ranging(self, state: BodyState, world: WorldQuery) -> tuple[float, bool]:
         """One ranging of the present geometry: (range in whole cm as m, echo heard)."""
@@ -145,6 +149,9 @@ class Sonar(Sensor[SonarReading]):
         if start is None:
             self._pending = self._ranging(state, world)
             self._pending_start_s = t
+            if not self._ranged:  # the first reading: a ranging is ready (see the class)
+                self._released = self._pending
+                self._ranged = True
         range_m, echo = self._released
         return SonarReading(t, range_m, echo)
 
