@@ -18,6 +18,14 @@ Link loss: while airborne, no packet for ``link_timeout_s`` -> FAILSAFE (hover),
 ``land_timeout_s`` more -> LANDING. A packet arriving in FAILSAFE stops the land countdown; the
 vehicle keeps holding until ground control commands it.
 
+Sticks: CTRL_INPUT with its axis bits set, the motors running, takes over from whatever flies
+the vehicle (take-off, a move, a pad mode, a landing, a failsafe) and the state says MANUAL
+(``skeye.pilot.states``; docs/pilot.md). An axis whose bit is clear is flown from the R/C on
+the real board; there is none here, so it holds: centre stick (level, no yaw rate) and, for
+the thrust, the height held. The motors start with thrust 0 and full negative yaw held
+``GESTURE_HOLD_S`` and stop (on the ground only) with thrust 0 and full positive yaw, as the
+AscTec AutoPilot SDK's ``motor_on_off`` example gives them.
+
 Flight envelope (``skeye.pilot.envelope``, like PX4's geofence): every command with a target
 is checked against a ceiling above home and a radius around it and refused with RESULT code 3
 and a reason when outside; stick and open-ended velocity input is limited at the envelope's
@@ -90,9 +98,10 @@ from skeye.wire.packets import (
 )
 
 NO_COMMAND_PD = 0x00  # RESULT.command_pd when the answer names no command
-GESTURE_HOLD_S = 1.0  # thrust 0 + full yaw held this long starts or stops the motors
+GESTURE_HOLD_S = 1.0  # thrust 0 + full yaw held this long starts (yaw < 0) or stops the motors
 GESTURE_YAW_MIN = 2000  # "full yaw": |yaw stick| at least this (of 2047)
 GESTURE_THRUST_MAX = 50  # "thrust 0": thrust stick at most this (of 4095)
+AXIS_BITS = CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
 # Sim time after a stick command during which "on the ground and disarmed" is not read as a
 # touchdown: the snapshot may predate the simulator's answer to the stick DRIVE that armed
 # it (a board tick can run between sending the DRIVE and the next STA). Without it, sticks
@@ -114,6 +123,11 @@ class BoardSettings:
     max_speed_m_s: float = 3.0
     max_climb_m_s: float = 1.5  # full thrust stick in height / GPS mode
     envelope: FlightEnvelope = field(default_factory=FlightEnvelope)  # ceiling, radius
+
+
+_AIRBORNE = (NavState.TAKING_OFF, NavState.FLYING, NavState.HOLDING, NavState.MANUAL)
+"""States in which a lost link (or vehicle) starts the failsafe: in MANUAL the sticks come
+over that link, so losing it is PX4's and ArduPilot's radio failsafe."""
 
 
 def _frd_to_ned(vec_frd: tuple[float, float, float], yaw_rad: float) -> tuple[float, float]:
@@ -148,7 +162,12 @@ class OnboardBoards:
         self._sticks = CtrlInput(0, 0, 0, 0, 0)
         self._sticks_sim_s = -math.inf  # sim time of the last stick command flown
         self._gesture_since_s: float | None = None
+        self._gesture_start = False  # the gesture held: start (yaw < 0) or stop (yaw > 0)
         self._gesture_done = False
+        self._motor_time_s = 0.0  # sim time the motors have turned (LL_STATUS up_time)
+        self._motors_seen_s: float | None = None  # sim time they were last seen turning
+        self.takeovers = 0  # times the sticks took over from another state
+        self.taken_over_from: NavState | None = None  # the state they took over from, last
         self._waypoint: Waypoint | None = None
         self._waypoint_target: tuple[float, float, float] | None = None  # NED
         self._waypoint_status = 0
@@ -391,32 +410,44 @@ class OnboardBoards:
     def _ctrl_input(self, msg: CtrlInput, now_s: float) -> None:
         self._sticks = msg
         gesture = msg.thrust <= GESTURE_THRUST_MAX and abs(msg.yaw) >= GESTURE_YAW_MIN
-        if not gesture:
+        start = msg.yaw < 0
+        if not gesture or start != self._gesture_start:
             self._gesture_since_s = None
             self._gesture_done = False
-        elif self._gesture_since_s is None:
+        if gesture and self._gesture_since_s is None:
             self._gesture_since_s = now_s
+            self._gesture_start = start
         self._check_gesture(now_s)
         if not self.motors_on or gesture:
             return  # the low-level board ignores the sticks until the motors run
         bits = CtrlBits(msg.ctrl)
-        if not bits:
+        if not bits & AXIS_BITS:
             return  # no axis taken from the serial input
-        if self.state is NavState.LANDED and msg.thrust <= GESTURE_THRUST_MAX:
-            return  # motors idling on the ground
+        if self.state is NavState.LANDED and (
+            not bits & CtrlBits.THRUST or msg.thrust <= GESTURE_THRUST_MAX
+        ):
+            return  # motors idling on the ground: nothing asks them up
         self.flight.check(FlightEvent.STICKS)
+        before = self.state
         self._end_motion()
-        self._sticks_sim_s = self.airframe.snapshot().time_s
-        self._fly_sticks(msg, bits)
+        if before is not NavState.MANUAL:  # the sticks take over (docs/pilot.md)
+            self.takeovers += 1
+            self.taken_over_from = before
+            self.pad.stop()
+        if self._fly_sticks(msg, bits):
+            self._sticks_sim_s = self.airframe.snapshot().time_s
         self._fire(FlightEvent.STICKS)
 
-    def _fly_sticks(self, msg: CtrlInput, bits: CtrlBits) -> None:
+    def _fly_sticks(self, msg: CtrlInput, bits: CtrlBits) -> bool:
         """The LL board's modes by the ctrl bits (sdk.h ``WO_CTRL_INPUT``): attitude mode (sticks
         are angles, thrust is collective), height mode (0x10: angles, the thrust stick a climb
         rate around its centre, height held there) and GPS mode (0x20: sticks are velocities,
-        full stick = the vehicle's maximum speed; centred they hold). At the flight envelope's
-        edge the outward part of a stick is removed, never refused: a climb at the ceiling, a
-        velocity or a tilt towards the radius limit."""
+        full stick = the vehicle's maximum speed; centred they hold). An axis whose bit is clear
+        holds (no R/C here to fly it): centre stick, and the height held for the thrust. At
+        the flight envelope's edge the outward part of a stick is removed, never refused: a
+        climb at the ceiling, a velocity or a tilt towards the radius limit.
+
+        Returns whether the command asks the vehicle to move (it arms a disarmed one)."""
         yaw = stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0
         climb = (
             max(-1.0, min(1.0, (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2)))
@@ -433,10 +464,10 @@ class OnboardBoards:
                 self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], fwd, right, climb
             )
             self.airframe.set_velocity(fwd, right, up, yaw, None, gps_mode=True)
-            return
+            return up > 0.0 or fwd != 0.0 or right != 0.0 or yaw != 0.0
         roll = stick_to_angle_rad(msg.roll) if bits & CtrlBits.ROLL else 0.0
         pitch = stick_to_angle_rad(msg.pitch) if bits & CtrlBits.PITCH else 0.0
-        if bits & CtrlBits.HEIGHT_CONTROL:
+        if bits & CtrlBits.HEIGHT_CONTROL or not bits & CtrlBits.THRUST:
             # The tilt's direction is where the vehicle accelerates (forward = nose down).
             snap = self.airframe.snapshot()
             fwd, right, up = self.settings.envelope.limit_body_velocity(
@@ -445,10 +476,10 @@ class OnboardBoards:
             full_climb = self.settings.max_climb_m_s
             thrust = 0.5 + (up / full_climb / 2.0 if full_climb > 0 else 0.0)
             self.airframe.attitude(right, -fwd, yaw, thrust, height_mode=True)
-            return
-        self.airframe.attitude(
-            roll, pitch, yaw, msg.thrust / THRUST_MAX if bits & CtrlBits.THRUST else 0.0
-        )
+            return thrust > 0.0
+        thrust = msg.thrust / THRUST_MAX
+        self.airframe.attitude(roll, pitch, yaw, thrust)
+        return thrust > 0.0
 
     def _envelope_guard(self) -> None:
         """Stop a flying vehicle that is beyond the envelope and still moving out."""
@@ -465,15 +496,20 @@ class OnboardBoards:
         self._fire(FlightEvent.ARRIVED)
 
     def _check_gesture(self, now_s: float) -> None:
+        """A gesture held for its time: start the motors (full negative yaw) if they are off,
+        stop them (full positive yaw) if they run on the ground; else nothing (the AscTec
+        gestures are one for each, so a stop meant for motors that already stopped by
+        themselves leaves them stopped)."""
         since = self._gesture_since_s
         if since is None or self._gesture_done or now_s - since < GESTURE_HOLD_S:
             return
         self._gesture_done = True
-        if not self.motors_on:
-            self.motors_on = True  # idle until thrust comes up; state stays LANDED
+        if self._gesture_start:
+            if not self.motors_on:
+                self.motors_on = True  # idle until thrust comes up; state stays LANDED
             return
         snap = self.airframe.snapshot()
-        if snap.landed or self.state is NavState.LANDED:
+        if self.motors_on and (snap.landed or self.state is NavState.LANDED):
             self.motors_on = False
             self.airframe.attitude(0.0, 0.0, 0.0, 0.0)
             self._fire(FlightEvent.MOTORS_OFF)
@@ -496,10 +532,23 @@ class OnboardBoards:
             out.append(self.pad.report())
         return out
 
+    def _count_motor_time(self, snap: Snapshot) -> None:
+        """Add the sim time since the last look while the motors turn (LL_STATUS up_time)."""
+        running = self.motors_on or snap.armed
+        seen = self._motors_seen_s
+        if running and seen is not None and snap.time_s > seen:
+            self._motor_time_s += snap.time_s - seen
+        if running:
+            self._motors_seen_s = snap.time_s if seen is None else max(seen, snap.time_s)
+        else:
+            self._motors_seen_s = None
+
     def _progress(self, now_s: float) -> None:
         state = self.state
         snap = self.airframe.snapshot()
         self.geo.add(snap.gps, snap.pos_ned_m)
+        self._count_motor_time(snap)
+        self.telemetry.observe(snap, self.motors_on or snap.armed)
         if state is NavState.TAKING_OFF and not self.airframe.busy:
             self._fire(FlightEvent.CLIMBED)
         elif state is NavState.FLYING:
@@ -517,7 +566,8 @@ class OnboardBoards:
             self.pad.landing_finished()
         on_ground = (snap.landed and not snap.armed
                      and snap.time_s > self._sticks_sim_s + STICK_ARM_SETTLE_S)
-        if on_ground and self.state in (NavState.FLYING, NavState.HOLDING, NavState.FAILSAFE):
+        if on_ground and self.state in (NavState.FLYING, NavState.HOLDING, NavState.FAILSAFE,
+                                        NavState.MANUAL):
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
             self._end_motion()
@@ -526,7 +576,7 @@ class OnboardBoards:
     def _failsafe(self, now_s: float) -> None:
         state = self.state
         silent_s = now_s - self._last_packet_s
-        if state in (NavState.TAKING_OFF, NavState.FLYING, NavState.HOLDING):
+        if state in _AIRBORNE:
             if silent_s >= self.settings.link_timeout_s:
                 self._fire(FlightEvent.LINK_LOST)
                 self._end_motion()
@@ -544,7 +594,7 @@ class OnboardBoards:
         In the air that is FAILSAFE (hold, then land after the land timeout: the commands go
         to an airframe that may refuse them, which the loop tolerates); on the ground, nothing.
         """
-        if self.state in (NavState.TAKING_OFF, NavState.FLYING, NavState.HOLDING):
+        if self.state in _AIRBORNE:
             self._fire(FlightEvent.LINK_LOST)
             self._end_motion()
             self._failsafe_since_s = now_s
@@ -574,11 +624,14 @@ class OnboardBoards:
             waypoint=self._waypoint,
             waypoint_target=self._waypoint_target,
             waypoint_status=self._waypoint_status,
+            motor_time_s=self._motor_time_s,
         )
 
     def poll(self, mask: int) -> list[Message]:
         """One frame per requested structure, in mask-bit order."""
-        return self.telemetry.poll(mask, self.airframe.snapshot(), self.status())
+        snap = self.airframe.snapshot()
+        self._count_motor_time(snap)
+        return self.telemetry.poll(mask, snap, self.status())
 
     def nav_status(self) -> Message:
         """NAV_STATUS from the onboard estimate (``Telemetry.nav_status``)."""

@@ -69,6 +69,12 @@ class PadController:
             if self._settings.mode is PadAction.LAND:
                 self._settings = replace(self._settings, mode=PadAction.OFF)
 
+    def stop(self) -> None:
+        """The sticks took over (any pad mode is an automatic mode they end): mode OFF, as
+        PX4's precision landing ends when the sticks override it."""
+        with self._lock:
+            self._settings = replace(self._settings, mode=PadAction.OFF)
+
     def on_frame(self, observation: PadObservation) -> None:
         """Record the estimate from one camera frame (called by the vision pipeline)."""
         with self._lock:

@@ -7,6 +7,13 @@ that are refused because the vehicle is in the middle of something it finishes b
 RESULT code the pilot answers (4 refused in this state, 5 busy), so a command that does not fit
 the state is rejected before anything is sent to the simulator. States are the NAV_STATUS
 states of docs/protocols/packets.md.
+
+The sticks always win (docs/pilot.md, "Manual sticks take over"): STICKS (CTRL_INPUT with its
+axis bits set, motors running) is legal in every state and leads to MANUAL, whatever flew the
+vehicle before (a take-off, a move, a pad mode, a landing, a failsafe), as PX4 hands an
+automatic mode to the sticks when they move (COM_RC_OVERRIDE). MANUAL ends as a real
+autopilot's manual mode does: by a mode change from ground control (HOLD, a move, LAND), by
+the motors stopping on the ground, or by losing the link the sticks come over (FAILSAFE).
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ class FlightEvent(Enum):
     HOLD = "hold"  # HOLD
     LAND = "land"  # LAND, >*>we
     TOUCHDOWN = "touched down, motors off"
-    STICKS = "manual stick input"  # CTRL_INPUT with thrust while motors run
+    STICKS = "manual stick input"  # CTRL_INPUT with axis bits while the motors run
     MOTORS_OFF = "motors stopped on the ground"
     LINK_LOST = "ground link lost"
     LAND_TIMEOUT = "no ground link for the land timeout"
@@ -38,7 +45,6 @@ S, E = NavState, FlightEvent
 
 TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     (S.LANDED, E.TAKE_OFF): S.TAKING_OFF,
-    (S.LANDED, E.STICKS): S.FLYING,
     (S.LANDED, E.MOTORS_OFF): S.LANDED,
     (S.LANDED, E.TOUCHDOWN): S.LANDED,
     (S.LANDED, E.LINK_LOST): S.LANDED,
@@ -47,7 +53,6 @@ TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     (S.TAKING_OFF, E.LAND): S.LANDING,
     (S.TAKING_OFF, E.LINK_LOST): S.FAILSAFE,
     (S.FLYING, E.MOVE): S.FLYING,
-    (S.FLYING, E.STICKS): S.FLYING,
     (S.FLYING, E.ARRIVED): S.HOLDING,
     (S.FLYING, E.HOLD): S.HOLDING,
     (S.FLYING, E.LAND): S.LANDING,
@@ -55,7 +60,6 @@ TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     (S.FLYING, E.MOTORS_OFF): S.LANDED,
     (S.FLYING, E.LINK_LOST): S.FAILSAFE,
     (S.HOLDING, E.MOVE): S.FLYING,
-    (S.HOLDING, E.STICKS): S.FLYING,
     (S.HOLDING, E.HOLD): S.HOLDING,
     (S.HOLDING, E.ARRIVED): S.HOLDING,
     (S.HOLDING, E.LAND): S.LANDING,
@@ -74,6 +78,15 @@ TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     (S.FAILSAFE, E.LAND_TIMEOUT): S.LANDING,
     (S.FAILSAFE, E.TOUCHDOWN): S.LANDED,
     (S.FAILSAFE, E.LINK_LOST): S.FAILSAFE,
+    (S.MANUAL, E.MOVE): S.FLYING,
+    (S.MANUAL, E.HOLD): S.HOLDING,
+    (S.MANUAL, E.LAND): S.LANDING,
+    (S.MANUAL, E.TOUCHDOWN): S.LANDED,
+    (S.MANUAL, E.MOTORS_OFF): S.LANDED,
+    (S.MANUAL, E.LINK_LOST): S.FAILSAFE,
+    # The sticks take over from every state (the rule in the module docstring).
+    **{(state, E.STICKS): S.MANUAL for state in (
+        S.LANDED, S.TAKING_OFF, S.FLYING, S.HOLDING, S.LANDING, S.FAILSAFE, S.MANUAL)},
 }
 
 # Refused with code 5: the vehicle is doing something it finishes by itself; ask again later.
@@ -81,10 +94,8 @@ BUSY: frozenset[tuple[NavState, FlightEvent]] = frozenset(
     {
         (S.TAKING_OFF, E.TAKE_OFF),
         (S.TAKING_OFF, E.MOVE),
-        (S.TAKING_OFF, E.STICKS),
         (S.LANDING, E.TAKE_OFF),
         (S.LANDING, E.MOVE),
-        (S.LANDING, E.STICKS),
     }
 )
 

@@ -13,6 +13,15 @@ scalings of IMU_CALCDATA (gyro 64.8 counts per deg/s, acc 10000 = 1 g) and the f
 0.01 uT, pressure
 in Pa; the simulator has no temperature model, so both temperature fields report 25.00 degC
 (2500).
+
+Heights: IMU_CALCDATA ``height`` (fused) and ``height_reference`` ("measured by the pressure
+sensor") are both above the world origin: the pressure height is zeroed on the fused height
+while the motors are off and frozen when they start, as ArduPilot and PX4 zero the barometer
+on the ground before arming (``Telemetry.observe``), so it then moves as the barometer says.
+LL_STATUS ``flying`` is 1 while the motors turn (idling included: AscTec drivers read it as
+"motors on"), ``up_time`` the seconds they have turned ("Time motors are turning", the
+header's comment). CONTROLLER_OUTPUT carries the sticks scaled as the header's 0..200 =
+-100..+100 % (thrust 0..200 = 0..100 %).
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ from skeye.geo import GeoOrigin
 from skeye.pilot.airframe import GpsFix, Snapshot
 from skeye.wire.packet_defs import GPS_FIX_VALID, NavState
 from skeye.wire.packet_units import (
+    STICK_MAX,
     GpsBestSi,
     GpsSi,
     ImuCalcSi,
@@ -72,6 +82,7 @@ class BoardStatus:
     waypoint: Waypoint | None  # the uploaded one
     waypoint_target: Vec3 | None  # NED, while flying to a relative waypoint
     waypoint_status: int  # NavigationStatus bits
+    motor_time_s: float = 0.0  # sim time the motors have turned (LL_STATUS up_time)
 
 
 class GeoAnchor:
@@ -116,13 +127,24 @@ RC_SERIAL_ENABLED = 4095
 RC_MODE_MANUAL, RC_MODE_HEIGHT, RC_MODE_GPS = 0, 2048, 4095
 
 
+def _percent_200(stick: int) -> int:
+    """A stick (-2047..2047) as CONTROLLER_OUTPUT's "0..200 = -100..+100 %"."""
+    return clamp(round(100 + stick * 100 / STICK_MAX), 0, 200)
+
+
 class Telemetry:
     """Builds the vehicle's structures; ``poll`` answers a poll mask, ``nav_status`` NAV_STATUS."""
 
     def __init__(self, first: Snapshot) -> None:
-        self._start_sim_s = first.time_s
         self.geo = GeoAnchor()
         self.geo.add(first.gps, first.pos_ned_m)
+        self._baro_offset_m = first.baro_altitude_m - first.altitude_m
+
+    def observe(self, snap: Snapshot, motors_running: bool) -> None:
+        """Every tick: while the motors are off the pressure height is zeroed on the fused
+        height (``height_reference`` reads ``height`` on the ground); running, it is kept."""
+        if not motors_running:
+            self._baro_offset_m = snap.baro_altitude_m - snap.altitude_m
 
     def poll(self, mask: int, snap: Snapshot, status: BoardStatus) -> list[Message]:
         """One frame per requested structure, in mask-bit order."""
@@ -141,7 +163,10 @@ class Telemetry:
     def _ll_status(self, snap: Snapshot, status: BoardStatus) -> LlStatus:
         battery_mv = wire_value(LlStatus, "battery_voltage_1", snap.battery_v)
         flight_mode = 0x01  # attitude control always on
-        if status.state is not NavState.LANDED and status.sticks.ctrl & CtrlBits.HEIGHT_CONTROL:
+        ctrl = status.sticks.ctrl
+        if status.state is not NavState.LANDED and (
+            ctrl & CtrlBits.HEIGHT_CONTROL or not ctrl & CtrlBits.THRUST  # thrust bit off: held
+        ):
             flight_mode |= 0x02
         if status.motion_pending or status.state in (NavState.HOLDING, NavState.FAILSAFE):
             flight_mode |= 0x06  # height and position hold
@@ -152,10 +177,10 @@ class Telemetry:
             cpu_load=CPU_LOAD_CYCLES_S,
             compass_enabled=1,
             chksum_error=min(255, status.checksum_errors),
-            flying=int(not snap.landed),
+            flying=int(snap.armed or status.motors_on),  # motors turning, idle included
             motors_on=int(snap.armed or status.motors_on),
             flightMode=flight_mode,
-            up_time=clamp(int(snap.time_s - self._start_sim_s), *INT16),
+            up_time=clamp(int(status.motor_time_s), *INT16),  # "Time motors are turning"
         )
 
     def imu_si(self, snap: Snapshot) -> ImuCalcSi:
@@ -195,7 +220,7 @@ class Telemetry:
             height_m=snap.altitude_m,
             climb_rate_m_s=-vd,
             baro_climb_rate_m_s=snap.baro_climb_m_s,
-            baro_height_m=snap.baro_altitude_m,
+            baro_height_m=snap.baro_altitude_m - self._baro_offset_m,
         )
 
     def _imu_calc(self, snap: Snapshot, status: BoardStatus) -> Message:
@@ -235,9 +260,9 @@ class Telemetry:
     def _controller_output(self, snap: Snapshot, status: BoardStatus) -> ControllerOutput:
         s = status.sticks
         return ControllerOutput(
-            nick=s.pitch,
-            roll=s.roll,
-            yaw=s.yaw,
+            nick=_percent_200(s.pitch),
+            roll=_percent_200(s.roll),
+            yaw=_percent_200(s.yaw),
             thrust=wire_value(ControllerOutput, "thrust", snap.thrust_fraction),
         )
 

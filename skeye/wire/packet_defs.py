@@ -163,6 +163,7 @@ class NavState(IntEnum):
     HOLDING = 3
     LANDING = 4
     FAILSAFE = 5
+    MANUAL = 6  # CTRL_INPUT sticks fly it: they took over from whatever flew it before
 
 
 class PadAction(IntEnum):

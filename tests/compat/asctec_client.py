@@ -18,10 +18,12 @@ import time
 
 PD_LL_STATUS = 0x02
 PD_IMU_CALCDATA = 0x03
+PD_CONTROLLER_OUTPUT = 0x11
 PD_RC_DATA = 0x15
 POLL_LL_STATUS = 0x0001
 POLL_IMU_CALCDATA = 0x0004
 POLL_RC_DATA = 0x0008
+POLL_CONTROLLER_OUTPUT = 0x0010
 
 # LL_STATUS: short battery_voltage_1, battery_voltage_2, status, cpu_load; char compass_enabled,
 # chksum_error, flying, motors_on; short flightMode, up_time.
@@ -33,6 +35,9 @@ LL_STATUS = struct.Struct("<4h4b2h")
 IMU_CALCDATA = struct.Struct("<3i3i3h3h2ii3ii3iiiii")
 # RC_DATA: unsigned short channels_in[8], channels_out[8]; unsigned char lock.
 RC_DATA = struct.Struct("<8H8HB")
+# CONTROLLER_OUTPUT: int nick, roll, yaw ("attitude controller outputs; 0..200 = -100..+100 %");
+# int thrust ("current thrust (height controller output); 0..200 = 0..100 %").
+CONTROLLER_OUTPUT = struct.Struct("<4i")
 
 
 def crc16(data: bytes) -> int:
@@ -77,6 +82,9 @@ class AscTecClient:
 
     def rc_data(self) -> tuple[int, ...]:
         return RC_DATA.unpack(self.poll(POLL_RC_DATA, PD_RC_DATA))
+
+    def controller_output(self) -> tuple[int, ...]:
+        return CONTROLLER_OUTPUT.unpack(self.poll(POLL_CONTROLLER_OUTPUT, PD_CONTROLLER_OUTPUT))
 
     # -- reading -----------------------------------------------------------------------------
     def _recv(self, deadline: float) -> None:

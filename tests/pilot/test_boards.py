@@ -254,7 +254,7 @@ def test_no_failsafe_on_the_ground():
 
 def test_motor_gesture_starts_motors_then_sticks_fly():
     air, boards = make()
-    gesture = encode(CtrlInput(0, 0, 2047, 0, 0x0F))
+    gesture = encode(CtrlInput(0, 0, -2047, 0, 0x0F))  # full negative yaw: start (AscTec SDK)
     for i in range(10):
         assert send(boards, gesture, now_s=i * 0.1) == [Ack(PD.CTRL_INPUT)]
     assert not boards.motors_on  # 0.9 s: not yet
@@ -262,7 +262,7 @@ def test_motor_gesture_starts_motors_then_sticks_fly():
     assert boards.motors_on and boards.state is NavState.LANDED
     assert "attitude" not in air.names()
     send(boards, encode(CtrlInput(400, -400, 0, 2500, 0x0F)), now_s=1.1)
-    assert boards.state is NavState.FLYING
+    assert boards.state is NavState.MANUAL
     name, (roll, pitch, _yaw_rate, thrust) = air.calls[-1]
     assert name == "attitude" and thrust == pytest.approx(2500 / 4095)
     assert pitch == pytest.approx(0.174533, rel=1e-4) and roll == pytest.approx(-0.174533, rel=1e-4)
@@ -281,8 +281,11 @@ def test_motor_gesture_stops_motors_on_the_ground():
     assert boards.motors_on
     for _ in range(12):  # release, then hold again
         send(boards, encode(CtrlInput(0, 0, 0, 0, 0x0F)), now_s=2.0)
-    for i in range(12):
+    for i in range(12):  # the start gesture again: they run already, nothing changes
         send(boards, encode(CtrlInput(0, 0, -2047, 0, 0x0F)), now_s=3.0 + i * 0.1)
+    assert boards.motors_on
+    for i in range(12):  # full positive yaw: stop
+        send(boards, encode(CtrlInput(0, 0, 2047, 0, 0x0F)), now_s=5.0 + i * 0.1)
     assert not boards.motors_on and air.calls[-1] == ("attitude", (0.0, 0.0, 0.0, 0.0))
 
 
@@ -296,6 +299,12 @@ def test_state_table_raises_on_illegal_transitions():
         fsm.fire(FlightEvent.MOVE)
     assert info.value.code is ResultCode.BUSY
     assert fsm.state is NavState.TAKING_OFF
+    # The sticks take over from every state (docs/pilot.md), a take-off included.
+    assert fsm.fire(FlightEvent.STICKS) is NavState.MANUAL
+    assert fsm.fire(FlightEvent.HOLD) is NavState.HOLDING
+    for state in (NavState.LANDED, NavState.TAKING_OFF, NavState.FLYING, NavState.HOLDING,
+                  NavState.LANDING, NavState.FAILSAFE, NavState.MANUAL):
+        assert TRANSITIONS[(state, FlightEvent.STICKS)] is NavState.MANUAL
     # Every state can be left towards the ground somehow.
     for state in NavState:
         reachable = {nxt for (s, _), nxt in TRANSITIONS.items() if s is state}

@@ -86,6 +86,8 @@ def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
             assert air.names()[-1] == "land"
         air.finish(landed=True, armed=False)
         with Vehicle.open(pilot.address) as v:
+            v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+            v.wait_state(NavState.LANDED, timeout_s=30)  # the boards saw the touchdown
             ll = v.poll(1)[PD.LL_STATUS]
             assert isinstance(ll, LlStatus) and ll.flying == 0
             deadline = time.monotonic() + 30.0

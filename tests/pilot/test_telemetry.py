@@ -52,6 +52,7 @@ def test_status_shows_in_the_structures() -> None:
         checksum_errors=300,
         waypoint_target=(3.0, 4.0, 0.0),
         home_ned_m=(0.0, 0.0, 1.0),
+        motor_time_s=10.4,  # up_time: the seconds the motors have turned
     )
     ll, rc, way = telemetry.poll(0x0001 | 0x0008 | 0x0100, snap, status)
     assert isinstance(ll, LlStatus) and isinstance(rc, RcData) and isinstance(way, CurrentWay)
