@@ -482,8 +482,10 @@ class OnboardBoards:
         return thrust > 0.0
 
     def _envelope_guard(self) -> None:
-        """Stop a flying vehicle that is beyond the envelope and still moving out."""
-        if self.state is not NavState.FLYING:
+        """Stop a flying vehicle that is beyond the envelope and still moving out (flown by a
+        motion or by the sticks, as PX4's geofence acts in manual modes too; the next stick
+        command takes over again, and the sticks are limited at the edge)."""
+        if self.state is not NavState.FLYING and self.state is not NavState.MANUAL:
             return
         snap = self.airframe.snapshot()
         reason = self.settings.envelope.breach(self.home_ned_m, snap.pos_ned_m, snap.vel_ned_m_s)

@@ -79,6 +79,7 @@ TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     (S.FAILSAFE, E.TOUCHDOWN): S.LANDED,
     (S.FAILSAFE, E.LINK_LOST): S.FAILSAFE,
     (S.MANUAL, E.MOVE): S.FLYING,
+    (S.MANUAL, E.ARRIVED): S.HOLDING,  # stopped at the flight envelope's edge
     (S.MANUAL, E.HOLD): S.HOLDING,
     (S.MANUAL, E.LAND): S.LANDING,
     (S.MANUAL, E.TOUCHDOWN): S.LANDED,

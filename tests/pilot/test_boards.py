@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skeye.pilot.boards import BoardSettings, OnboardBoards
+from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.states import TRANSITIONS, FlightEvent, FlightStateMachine, IllegalTransition
 from skeye.wire.crc import crc16
 from skeye.wire.packets import (
@@ -377,3 +378,17 @@ def test_gps_best_estimate_is_the_ins_position_anchored_to_the_mean_fix():
     assert math.hypot(n - truth[0], e - truth[1]) < 0.05  # the mean fix: errors cancel
     n, e, _ = origin.to_ned(raw.latitude_deg, raw.longitude_deg, 0.0)
     assert math.hypot(n - truth[0], e - truth[1]) > 1.0  # the last raw fix is 1.6 m off
+
+
+def test_the_envelope_stops_stick_flight_beyond_it_and_the_sticks_take_over_again():
+    air = FakeAirframe()
+    boards = OnboardBoards(air, BoardSettings(envelope=FlightEnvelope(max_radius_m=20.0)))
+    airborne(boards, air)
+    send(boards, encode(CtrlInput(-600, 0, 0, 2500, 0x0F)))  # attitude mode: not limited
+    assert boards.state is NavState.MANUAL
+    air.finish(pos_ned_m=(20.5, 0.0, -1.0), vel_ned_m_s=(2.0, 0.0, 0.0))
+    boards.tick(0.1)
+    assert boards.state is NavState.HOLDING and air.names()[-1] == "hover"
+    assert boards.envelope_stops == 1
+    send(boards, encode(CtrlInput(600, 0, 0, 2500, 0x0F)), now_s=0.2)  # back in: the sticks win
+    assert boards.state is NavState.MANUAL
