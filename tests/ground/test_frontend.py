@@ -325,6 +325,19 @@ def test_telemetry_formatting(page: Any) -> None:
                             "velocity: not sent (422) — bad"]
 
 
+def test_a_sticks_take_over_is_logged_with_the_state_it_ended(page: Any) -> None:
+    r = js(page, """
+        return {lines: [telemetry.stateChangeLine('failsafe', 'manual'),
+                        telemetry.stateChangeLine('taking_off', 'manual'),
+                        telemetry.stateChangeLine('manual', 'manual'),
+                        telemetry.stateChangeLine('holding', 'flying'),
+                        telemetry.stateChangeLine(null, 'manual')],
+                cls: telemetry.FLIGHT_CLASSES.manual};""")
+    assert r["lines"] == ["vehicle: manual sticks took over (was failsafe)",
+                          "vehicle: manual sticks took over (was taking off)", None, None, None]
+    assert r["cls"] == "warn"
+
+
 def test_plot_data_helpers(page: Any) -> None:
     r = js(page, """
         const rows = [{t: 1, a: 1, b: null}, {t: 2, a: 2}, {t: 3, a: null, b: 5}];

@@ -14,7 +14,7 @@ import { renderKeyboard, wireKeyboard } from "./js/keyboard.js";
 import { drawMap } from "./js/map.js";
 import { TimePlot } from "./js/plots.js";
 import { S } from "./js/state.js";
-import { showReadouts } from "./js/telemetry.js";
+import { showReadouts, stateChangeLine } from "./js/telemetry.js";
 import { connectVideo } from "./js/video.js";
 
 const PLOT_WINDOW_S = 60;
@@ -49,6 +49,9 @@ function onTelemetry(t) {
       eventLine("pad-landed", "pad landing finished: landed, pad mode back to off", "ok");
     }
     S.padMode = n.pad_mode;
+    const change = stateChangeLine(S.flightState, n.state);
+    if (change) logLine(change, "bad", "takeover");
+    S.flightState = n.state;
     // the pilot says its detections come too late to hold on (PAD vision flag)
     const slow = Boolean(pad && pad.vision_too_slow);
     if (slow !== Boolean(S.visionSlow)) {

@@ -14,6 +14,7 @@ export const S = {
   commands: null,     // Map name -> command, from the server's table (hello)
   keyboard: null,     // the keyboard's speed field and timing (hello)
   padMode: null,
+  flightState: null,  // the vehicle's last NAV_STATUS state (a change to manual is logged)
   hellos: 0,          // hello messages so far: one per (re)connection to the server
 };
 

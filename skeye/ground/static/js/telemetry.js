@@ -9,7 +9,14 @@ export const fmt = (v, d = 2, unit = "") => (v === null || v === undefined || Nu
 export const LINK_CLASSES = { connected: "good", connecting: "warn", refused: "bad",
   disconnected: "bad", closed: "bad" };
 export const FLIGHT_CLASSES = { landed: "neutral", taking_off: "warn", flying: "good",
-  holding: "good", landing: "warn", failsafe: "bad" };
+  holding: "good", landing: "warn", failsafe: "bad", manual: "warn" };
+
+// The log line when the flight state changes to ``now`` from ``before`` (null: no line). The
+// sticks take over from every automatic mode (docs/pilot.md): the page says from which.
+export function stateChangeLine(before, now) {
+  if (!before || before === now || now !== "manual") return null;
+  return `vehicle: manual sticks took over (was ${before.replace("_", " ")})`;
+}
 
 // [id, text, value] for every readout the message carries (value undefined: text only).
 export function readouts(t) {
