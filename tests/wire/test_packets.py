@@ -600,7 +600,7 @@ def test_vehicle_side_error_kinds() -> None:
         (raw_vframe(0x92, b"\x80"), ErrorKind.BAD_LENGTH),
         (raw_vframe(0x92, b"\x80\x09"), ErrorKind.BAD_VALUE),  # result code 9
         (raw_vframe(0x92, b"\x80\x00\xff\xfe"), ErrorKind.BAD_VALUE),  # not UTF-8
-        (vframe(0x90, "BBiiiihhhHI", 6, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0), ErrorKind.BAD_VALUE),
+        (vframe(0x90, "BBiiiihhhHI", 255, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0), ErrorKind.BAD_VALUE),
         (vframe(0x11, "iiii", 0, 0, 0, 201), ErrorKind.BAD_VALUE),
         (encode(Ack(PD.LAUNCH))[:4] + b"x", ErrorKind.BAD_STOP),
         (b">a\x02a<", ErrorKind.UNKNOWN_PD),
@@ -644,7 +644,7 @@ def test_skeye_bad_stop_is_a_frame_error() -> None:
         lambda: GotoGps(0, 1_800_000_001, 0, 0),
         lambda: Stream(0x0040, 0, 0),
         lambda: Stream(0, 0x0004, 0),
-        lambda: NavStatus(6, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),  # type: ignore[arg-type]
+        lambda: NavStatus(255, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),  # type: ignore[arg-type]
         lambda: PadReport(2, 0, 0, 0, 0, 0, 0),
         lambda: PadReport(1, 0, 0, 0, 0, 1001, 0),
         lambda: PadReport(1, 0, 0, 0, 0, 0, 0, 2),
