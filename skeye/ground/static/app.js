@@ -50,7 +50,7 @@ function onTelemetry(t) {
     }
     S.padMode = n.pad_mode;
     const change = stateChangeLine(S.flightState, n.state);
-    if (change) logLine(change, "bad", "takeover");
+    if (change) eventLine("takeover", change, "bad");
     S.flightState = n.state;
     // the pilot says its detections come too late to hold on (PAD vision flag)
     const slow = Boolean(pad && pad.vision_too_slow);
