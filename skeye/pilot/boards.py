@@ -173,6 +173,7 @@ class OnboardBoards:
         self._waypoint_status = 0
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
+        self.motion_changes = 0  # bumped by every command or event that replaces the motion
         self.envelope_stops = 0  # times the envelope stopped a vehicle moving out
         self.envelope_reason = ""  # why, the last time
         self.clock_until_s = 0.0  # sim time granted by CLOCK (used with --ground-clock)
@@ -269,6 +270,7 @@ class OnboardBoards:
 
     # -- commands ------------------------------------------------------------------------
     def _end_motion(self) -> None:
+        self.motion_changes += 1
         self._motion_pending = False
         self._velocity_until_s = None
         self._waypoint_target = None

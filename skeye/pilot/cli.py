@@ -30,6 +30,7 @@ import logging
 import math
 import signal
 import threading
+from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -112,6 +113,14 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
+    try:
+        for uri in args.mavlink or ():
+            from skeye.mavlink.transport import check_free
+
+            check_free(uri)  # a bad URI or a taken port stops us before the robot is spawned
+    except ConfigError as exc:
+        print(f"skeye pilot: --mavlink: {exc}", flush=True)
+        return 2
     lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
@@ -183,18 +192,22 @@ def run(args: argparse.Namespace) -> int:
             stop = threading.Event()
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, lambda *_: stop.set())
-            with server:
+            mavlink = open_mavlink(server, args)
+            with server, mavlink or nullcontext():
                 mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
                 print(
                     f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
                     f"ground control on {server.address}; flight envelope: "
                     f"{envelope.describe()} ({envelope_source})"
-                    f"{'; video on ' + video.address if video is not None else ''}",
+                    f"{'; video on ' + video.address if video is not None else ''}"
+                    f"{'; MAVLink on ' + ', '.join(mavlink.addresses) if mavlink else ''}",
                     flush=True,
                 )
                 while not stop.wait(0.2):
                     if server.loop_error is not None:
                         raise server.loop_error
+                    if mavlink is not None:
+                        mavlink.check()  # its thread died: WorkerFailed names the cause
                     if video is not None:
                         video.check()  # its thread died: WorkerFailed names the cause
             print("skeye pilot: stopping", flush=True)
@@ -204,6 +217,18 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
+
+
+def open_mavlink(server: PilotServer, args: argparse.Namespace) -> Any:
+    """The MAVLink endpoint on ``--mavlink`` links (None without): a second client of the
+    pilot's boards, beside the AscTec link (docs/protocols/mavlink.md)."""
+    if not args.mavlink:
+        return None
+    from skeye.pilot.mavlink_server import MavlinkServer
+    from skeye.pilot.mavlink_vehicle import Settings
+
+    return MavlinkServer(server.boards, server.lock, list(args.mavlink),
+                         settings=Settings(pad_vision=args.images is not None))
 
 
 def vision_latency_s(text: str) -> float | None:
@@ -404,6 +429,16 @@ def register(subparsers: Any) -> None:
                    help="policy calls per sim second (the environments' control_rate_hz; 20)")
     p.add_argument("--policy-image-size", default="80x60", metavar="WxH",
                    help="the image observation's size (the environments' image_size; 80x60)")
+    p.add_argument(
+        "--mavlink",
+        action="append",
+        default=None,
+        metavar="URI",
+        help="also serve the vehicle as a MAVLink 2 autopilot on this link (repeatable): "
+        "udpout://127.0.0.1:14550 sends to QGroundControl, udpout://127.0.0.1:14540 to a "
+        "MAVSDK script, udp://127.0.0.1:14560 listens, tcp://127.0.0.1:5760 serves TCP, "
+        "serial:///dev/ttyUSB0?baud=57600 a radio (docs/protocols/mavlink.md)",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")

@@ -11,6 +11,7 @@ ends with the touchdown: the mode goes back to OFF (``landing_finished``).
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from skeye.wire.packet_units import PadModeSi, PadSi, pad_mode_to_si, pad_report_from_si
@@ -47,6 +48,7 @@ class PadController:
         self._settings = PadModeSi(PadAction.OFF, deadband_m=0.0, max_speed_m_s=0.0)
         self._latest: PadObservation | None = None
         self._too_slow = False
+        self._listeners: list[Callable[[PadObservation], None]] = []
 
     @property
     def settings(self) -> PadModeSi:
@@ -76,9 +78,18 @@ class PadController:
             self._settings = replace(self._settings, mode=PadAction.OFF)
 
     def on_frame(self, observation: PadObservation) -> None:
-        """Record the estimate from one camera frame (called by the vision pipeline)."""
+        """Record the estimate from one camera frame (called by the vision pipeline) and hand
+        it to every listener (the MAVLink endpoint's LANDING_TARGET); listeners must not block."""
         with self._lock:
             self._latest = observation
+            listeners = list(self._listeners)
+        for listener in listeners:
+            listener(observation)
+
+    def add_listener(self, listener: Callable[[PadObservation], None]) -> None:
+        """Call ``listener`` with every observation ``on_frame`` records."""
+        with self._lock:
+            self._listeners.append(listener)
 
     def vision_too_slow(self, too_slow: bool) -> None:
         """The vision pipeline says whether its detections come too late to hold on (the pad

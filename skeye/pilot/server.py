@@ -180,6 +180,11 @@ class PilotServer:
             self.port = self._listener.getsockname()[1]
 
     @property
+    def lock(self) -> threading.Lock:
+        """The lock every call into the boards takes (the MAVLink endpoint takes it too)."""
+        return self._lock
+
+    @property
     def address(self) -> str:
         """Where the pilot listens: ``tcp://host:port`` or the serial URI."""
         return self.serial_uri or f"tcp://{self.host}:{self.port}"

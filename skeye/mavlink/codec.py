@@ -1,0 +1,100 @@
+"""MAVLink 2 frames to messages and back, through pymavlink's common dialect.
+
+How this works: :class:`MavCodec` owns one pymavlink ``MAVLink`` object per direction it is
+used for: ``encode`` packs a message with this system's ids and its own sequence numbers;
+:class:`MavParser` is one peer's receive state (a frame may arrive cut anywhere), whose
+``feed`` returns decoded messages and :class:`BadFrame` items, never raising: pymavlink's
+robust parsing turns a bad CRC, an unknown message id or garbage into ``MAVLink_bad_data``,
+which becomes a ``BadFrame`` with its reason. The dialect module is ``dialect`` (message
+classes, enums and ``MAVLINK_MSG_ID_*``).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+from typing import Any
+
+from pymavlink.dialects.v20 import common as dialect
+
+from skeye.errors import LocalProtocolError
+
+MavMessage = Any  # a pymavlink MAVLink_message (the dialect's classes are not typed)
+
+GCS_COMPONENTS = range(190, 200)  # MAV_COMP_ID_MISSIONPLANNER .. (QGC 190, MAVSDK 190)
+MAX_STATUSTEXT = 50  # STATUSTEXT's text field, bytes
+
+
+@dataclass(frozen=True)
+class BadFrame:
+    """Bytes that were not a message of the dialect: a bad CRC, an unknown id, garbage."""
+
+    reason: str
+    size: int
+    msg_id: int | None = None  # when the header named one
+
+
+class MavParser:
+    """One peer's receive side: bytes in, messages (or ``BadFrame``) out; never raises."""
+
+    def __init__(self) -> None:
+        self._mav = dialect.MAVLink(None, srcSystem=0, srcComponent=0)
+        self._mav.robust_parsing = True
+        self.bad = 0  # bad frames seen
+
+    def feed(self, data: bytes) -> list[MavMessage | BadFrame]:
+        out: list[MavMessage | BadFrame] = []
+        try:
+            msgs = self._mav.parse_buffer(data) or []
+        except Exception as exc:  # pymavlink raises a few plain errors even when robust
+            self._mav = dialect.MAVLink(None, srcSystem=0, srcComponent=0)
+            self._mav.robust_parsing = True
+            self.bad += 1
+            return [BadFrame(f"unreadable frame: {exc}", len(data))]
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                self.bad += 1
+                reason = str(getattr(msg, "reason", "bad data"))
+                out.append(BadFrame(reason, len(msg.get_msgbuf()), _msg_id_in(reason)))
+            else:
+                out.append(msg)
+        return out
+
+
+def _msg_id_in(reason: str) -> int | None:
+    """The message id an 'unknown MAVLink message ID 12345' reason names."""
+    if "unknown MAVLink message ID" not in reason:
+        return None
+    digits = "".join(c for c in reason.rsplit("ID", 1)[-1] if c.isdigit())
+    return int(digits) if digits else None
+
+
+class MavCodec:
+    """Encode messages as this system/component (sequence numbers kept here)."""
+
+    def __init__(self, system_id: int = 1, component_id: int = 1) -> None:
+        if not (1 <= system_id <= 255 and 0 <= component_id <= 255):
+            raise LocalProtocolError(f"MAVLink ids out of range: {system_id}/{component_id}")
+        self.system_id = system_id
+        self.component_id = component_id
+        self._mav = dialect.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+
+    @property
+    def mav(self) -> Any:
+        """The pymavlink object whose ``*_encode`` methods build messages."""
+        return self._mav
+
+    def encode(self, msg: MavMessage) -> bytes:
+        """One MAVLink 2 frame."""
+        return bytes(msg.pack(self._mav))
+
+
+def statustext(codec: MavCodec, severity: int, text: str) -> list[MavMessage]:
+    """STATUSTEXT message(s): text over 50 bytes goes in chunks with one id (MAVLink 2)."""
+    data = text.encode("utf-8", "replace")
+    if len(data) <= MAX_STATUSTEXT:
+        return [codec.mav.statustext_encode(severity, data)]
+    chunks = [data[i:i + MAX_STATUSTEXT] for i in range(0, len(data), MAX_STATUSTEXT)][:8]
+    ident = (zlib.crc32(data) & 0xFFFE) + 1
+    return [codec.mav.statustext_encode(severity, chunk, ident, n)
+            for n, chunk in enumerate(chunks)]

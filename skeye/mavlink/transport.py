@@ -1,0 +1,330 @@
+"""Thin byte carriers for MAVLink: UDP (listening or sending), TCP (server or client), serial.
+
+How this works: a :class:`MavTransport` is non-blocking: ``fileobjs()`` are what a selector
+waits on, ``poll()`` returns the ``(bytes, peer)`` that arrived, ``send(data, peer)`` writes one
+frame to a peer (``None``: to every peer it knows). A peer is whatever identifies the other end
+(a UDP address, a TCP connection, the serial line). The URIs (:func:`open_transport`):
+
+- ``udp://HOST:PORT`` (or ``udpin://``): bind HOST:PORT and serve whoever sends to it (each
+  sender's address becomes a peer; a vehicle endpoint answers every ground station).
+- ``udpout://HOST:PORT``: send to HOST:PORT from a local port on 127.0.0.1 (``?bind=ADDR`` to
+  choose), as PX4 SITL sends to QGroundControl's 14550 and MAVSDK's 14540; replies come back
+  to that local port.
+- ``tcp://HOST:PORT``: listen for TCP clients (server side, as ArduPilot SITL's 5760);
+  ``tcpout://HOST:PORT``: connect to one (client side).
+- ``serial:///dev/ttyACM0?baud=921600``: a serial line (pyserial); its one peer is the line.
+
+Nothing here knows MAVLink: framing is the codec's (pymavlink). Servers bind 127.0.0.1 unless
+the URI names another address. ``close`` is idempotent.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Hashable
+from typing import Any, Protocol
+from urllib.parse import parse_qs, urlsplit
+
+from skeye.errors import ConfigError, LinkClosed
+
+Peer = Hashable
+MAX_DATAGRAM = 65535
+MAX_PEERS = 8  # ground stations one listening link serves; others are told and ignored
+TCP_CLIENTS = 4
+
+
+class MavTransport(Protocol):
+    name: str
+
+    def fileobjs(self) -> list[Any]: ...
+
+    def poll(self) -> list[tuple[bytes, Peer]]: ...
+
+    def send(self, data: bytes, peer: Peer | None = None) -> None: ...
+
+    @property
+    def peers(self) -> list[Peer]: ...
+
+    def close(self) -> None: ...
+
+
+class UdpTransport:
+    """A UDP socket: listening (peers are who sent) or sending to one remote address."""
+
+    def __init__(self, host: str, port: int, *, remote: tuple[str, int] | None = None,
+                 max_peers: int = MAX_PEERS) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind((host, port))
+        except OSError as exc:
+            self.sock.close()
+            raise ConfigError(f"cannot bind UDP {host}:{port}: {exc}") from None
+        self.sock.setblocking(False)
+        self.remote = remote
+        self.max_peers = max_peers
+        self._peers: list[Peer] = [remote] if remote is not None else []
+        self.refused_peers = 0
+        self.port = self.sock.getsockname()[1]
+        self.name = (f"udpout://{remote[0]}:{remote[1]}" if remote is not None
+                     else f"udp://{host}:{self.port}")
+
+    def fileobjs(self) -> list[Any]:
+        return [self.sock]
+
+    @property
+    def peers(self) -> list[Peer]:
+        return list(self._peers)
+
+    def poll(self) -> list[tuple[bytes, Peer]]:
+        out: list[tuple[bytes, Peer]] = []
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return out
+            except OSError:  # ICMP port unreachable from a peer that went away
+                return out
+            if addr not in self._peers:
+                if len(self._peers) >= self.max_peers:
+                    self.refused_peers += 1
+                    out.append((data, ("refused", addr)))
+                    continue
+                self._peers.append(addr)
+            out.append((data, addr))
+
+    def send(self, data: bytes, peer: Peer | None = None) -> None:
+        targets = self._peers if peer is None else [peer]
+        for target in targets:
+            addr = target[1] if isinstance(target, tuple) and target[:1] == ("refused",) else target
+            try:
+                self.sock.sendto(data, addr)  # type: ignore[arg-type]
+            except (BlockingIOError, InterruptedError):
+                pass  # the kernel buffer is full: telemetry is dropped, never waited for
+            except OSError:
+                pass  # nobody listening there (yet): UDP does not care
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class TcpServerTransport:
+    """A TCP listener; each accepted connection is a peer (at most ``max_clients``)."""
+
+    def __init__(self, host: str, port: int, max_clients: int = TCP_CLIENTS) -> None:
+        try:
+            self.listener = socket.create_server((host, port))
+        except OSError as exc:
+            raise ConfigError(f"cannot listen on TCP {host}:{port}: {exc}") from None
+        self.listener.setblocking(False)
+        self.port = self.listener.getsockname()[1]
+        self.max_clients = max_clients
+        self.clients: list[socket.socket] = []
+        self.refused_clients = 0
+        self.name = f"tcp://{host}:{self.port}"
+
+    def fileobjs(self) -> list[Any]:
+        return [self.listener, *self.clients]
+
+    @property
+    def peers(self) -> list[Peer]:
+        return list(self.clients)
+
+    def poll(self) -> list[tuple[bytes, Peer]]:
+        out: list[tuple[bytes, Peer]] = []
+        while True:
+            try:
+                conn, _ = self.listener.accept()
+            except (BlockingIOError, InterruptedError, OSError):
+                break
+            if len(self.clients) >= self.max_clients:
+                self.refused_clients += 1
+                conn.close()
+                continue
+            conn.setblocking(False)
+            self.clients.append(conn)
+        for conn in list(self.clients):
+            try:
+                data = conn.recv(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                continue
+            except OSError:
+                data = b""
+            if not data:
+                self._drop(conn)
+                continue
+            out.append((data, conn))
+        return out
+
+    def _drop(self, conn: socket.socket) -> None:
+        if conn in self.clients:
+            self.clients.remove(conn)
+        conn.close()
+
+    def send(self, data: bytes, peer: Peer | None = None) -> None:
+        targets = list(self.clients) if peer is None else [peer]
+        for conn in targets:
+            if not isinstance(conn, socket.socket) or conn not in self.clients:
+                continue
+            try:
+                conn.send(data)  # whole frames or nothing: a full buffer drops this frame
+            except (BlockingIOError, InterruptedError):
+                pass
+            except OSError:
+                self._drop(conn)
+
+    def close(self) -> None:
+        for conn in list(self.clients):
+            self._drop(conn)
+        self.listener.close()
+
+
+class TcpClientTransport:
+    """A TCP connection to a MAVLink server (a flight controller's or SITL's TCP port)."""
+
+    def __init__(self, host: str, port: int, timeout_s: float = 5.0) -> None:
+        try:
+            self.sock = socket.create_connection((host, port), timeout=timeout_s)
+        except OSError as exc:
+            raise LinkClosed(f"cannot connect to tcp://{host}:{port}: {exc}") from None
+        self.sock.setblocking(False)
+        self.name = f"tcpout://{host}:{port}"
+        self.closed = False
+
+    def fileobjs(self) -> list[Any]:
+        return [] if self.closed else [self.sock]
+
+    @property
+    def peers(self) -> list[Peer]:
+        return [] if self.closed else ["tcp"]
+
+    def poll(self) -> list[tuple[bytes, Peer]]:
+        if self.closed:
+            return []
+        try:
+            data = self.sock.recv(MAX_DATAGRAM)
+        except (BlockingIOError, InterruptedError):
+            return []
+        except OSError:
+            data = b""
+        if not data:
+            self.close()
+            raise LinkClosed(f"{self.name}: the connection closed")
+        return [(data, "tcp")]
+
+    def send(self, data: bytes, peer: Peer | None = None) -> None:
+        if self.closed:
+            raise LinkClosed(f"{self.name}: the connection is closed")
+        try:
+            self.sock.sendall(data)
+        except OSError as exc:
+            self.close()
+            raise LinkClosed(f"{self.name}: {exc}") from None
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self.sock.close()
+
+
+class SerialTransport:
+    """A serial line (pyserial); one peer."""
+
+    def __init__(self, device: str, baud: int) -> None:
+        import serial
+
+        try:
+            self.port = serial.Serial(device, baud, timeout=0, write_timeout=0.5)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise ConfigError(f"cannot open serial {device} at {baud} baud: {exc}") from None
+        self.name = f"serial://{device}?baud={baud}"
+
+    def fileobjs(self) -> list[Any]:
+        return [self.port]
+
+    @property
+    def peers(self) -> list[Peer]:
+        return ["serial"]
+
+    def poll(self) -> list[tuple[bytes, Peer]]:
+        try:
+            data = self.port.read(self.port.in_waiting or 1)
+        except OSError as exc:
+            raise LinkClosed(f"{self.name}: {exc}") from None
+        return [(bytes(data), "serial")] if data else []
+
+    def send(self, data: bytes, peer: Peer | None = None) -> None:
+        try:
+            self.port.write(data)
+        except Exception as exc:  # pyserial's SerialTimeoutException / OSError
+            raise LinkClosed(f"{self.name}: {exc}") from None
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
+    """``(scheme, host_or_device, port, query)`` of a MAVLink link URI.
+
+    Raises:
+        ConfigError: an unknown scheme, a missing or bad port.
+    """
+    parts = urlsplit(uri)
+    scheme = parts.scheme.lower()
+    query = {k: v[-1] for k, v in parse_qs(parts.query).items()}
+    if scheme == "serial":
+        device = (parts.netloc + parts.path) if parts.netloc else parts.path
+        if not device:
+            raise ConfigError(f"{uri}: give the serial device, e.g. serial:///dev/ttyACM0")
+        return scheme, device, 0, query
+    if scheme not in ("udp", "udpin", "udpout", "tcp", "tcpout"):
+        raise ConfigError(f"{uri}: MAVLink links are udp://, udpout://, tcp://, tcpout:// or "
+                          "serial:// URIs")
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if port is None or not parts.hostname:
+        raise ConfigError(f"{uri}: give HOST:PORT, e.g. {scheme}://127.0.0.1:14540")
+    return ("udp" if scheme == "udpin" else scheme), parts.hostname, port, query
+
+
+def open_transport(uri: str) -> MavTransport:
+    """Open the link a URI names (see the module's docstring).
+
+    Raises:
+        ConfigError: a bad URI, a port that cannot be bound, a serial device that cannot open.
+        LinkClosed: a TCP server that cannot be reached.
+    """
+    scheme, host, port, query = parse_uri(uri)
+    if scheme == "udp":
+        return UdpTransport(host, port)
+    if scheme == "udpout":
+        return UdpTransport(query.get("bind", "127.0.0.1"), 0, remote=(host, port))
+    if scheme == "tcp":
+        return TcpServerTransport(host, port)
+    if scheme == "tcpout":
+        return TcpClientTransport(host, port)
+    try:
+        baud = int(query.get("baud", "57600"))
+    except ValueError:
+        raise ConfigError(f"{uri}: baud must be a number") from None
+    return SerialTransport(host, baud)
+
+
+def check_free(uri: str, option: str = "--mavlink") -> None:
+    """Raise ``ConfigError`` naming ``option`` if a listening link's port is taken (or the URI
+    is bad); sending links (udpout, tcpout) and serial lines have nothing to check here."""
+    scheme, host, port, _ = parse_uri(uri)
+    if scheme not in ("udp", "tcp") or port == 0:
+        return
+    kind = socket.SOCK_DGRAM if scheme == "udp" else socket.SOCK_STREAM
+    with socket.socket(socket.AF_INET, kind) as probe:
+        if scheme == "tcp":
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError:
+            raise ConfigError(
+                f"{scheme.upper()} port {port} on {host} (for the MAVLink link {uri}) is already "
+                f"in use - another skeye or autopilot running? Move it with {option} URI"
+            ) from None

@@ -1,0 +1,1019 @@
+"""The pilot's vehicle as a MAVLink autopilot: commands, missions, parameters, telemetry; sans-IO.
+
+How this works: :class:`MavlinkVehicle` sits beside the AscTec packet link as a second client of
+the same :class:`~skeye.pilot.boards.OnboardBoards`. ``handle(link, peer, msg, now_s)`` takes
+one decoded message and returns :class:`Out` items (a message and where it goes);
+``tick(now_s)`` runs what depends on time (the streams, the mission and return programs, the
+offboard-loss and auto-disarm timers, mission transfer retries). The caller holds the boards'
+lock around both, and gives the wall clock as the boards get it.
+
+One vehicle, two links: every motion a MAVLink command asks for is made of the boards' own
+commands (TAKE_OFF, LAND, HOLD, MOVE_BY in the world frame, VELOCITY, CTRL_INPUT, PAD_MODE)
+handed to ``boards.handle``, so the flight-state table, the flight envelope, the speed limits
+and the link-loss failsafe apply exactly as over the AscTec link, and a refusal's RESULT code
+and reason become COMMAND_ACK's result and a STATUSTEXT. Every message from a ground station
+counts for the link-loss timer as a packet does (an empty poll). The last command wins,
+whichever link it came on; a program the endpoint runs (mission, return, precision landing,
+offboard) notes the boards' ``motion_changes`` after each of its own commands and stops, with a
+STATUSTEXT, when any other command changed the motion.
+
+Modes: the reported PX4 mode is ``MODE_TABLE[(state, program)]`` (``skeye.mavlink.modes``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mav
+
+from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.geo import GeoOrigin
+from skeye.mavlink.codec import BadFrame, MavCodec, MavMessage, statustext
+from skeye.mavlink.mission import MissionItem, MissionProtocol
+from skeye.mavlink.modes import MODE_TABLE, REQUESTS, Program, Px4Mode, Request
+from skeye.mavlink.params import ParamSpec, ParamTable
+from skeye.mavlink.streams import MessageScheduler
+from skeye.pilot import mavlink_telemetry as telem
+from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.envelope import FlightEnvelope
+from skeye.pilot.pad import PadObservation
+from skeye.wire.packet_defs import NavState, PadAction, ResultCode
+from skeye.wire.packets import (
+    CtrlBits,
+    CtrlInput,
+    Hold,
+    Land,
+    Message,
+    MoveBy,
+    MoveFrame,
+    PadMode,
+    Poll,
+    Result,
+    TakeOff,
+    Velocity,
+)
+
+log = logging.getLogger(__name__)
+
+FORCE_MAGIC = 21196.0  # COMPONENT_ARM_DISARM param2: force (PX4, ArduPilot)
+GCS_TIMEOUT_S = 10.0  # a ground station silent this long is forgotten
+NOTICE_EVERY_S = 2.0  # the same refusal or bad-input notice at most this often per peer
+DUPLICATE_WINDOW_S = 1.0  # a command repeated within this is acked again, not re-run
+ARRIVED_RADIUS_M = 0.5
+MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
+               | CtrlBits.GPS_POSITION_CONTROL)
+RESULT_OF_CODE = {
+    ResultCode.BAD_VALUE: mav.MAV_RESULT_DENIED,
+    ResultCode.REFUSED: mav.MAV_RESULT_TEMPORARILY_REJECTED,
+    ResultCode.BUSY: mav.MAV_RESULT_TEMPORARILY_REJECTED,
+    ResultCode.BAD_CHECKSUM: mav.MAV_RESULT_DENIED,
+    ResultCode.BAD_LENGTH: mav.MAV_RESULT_DENIED,
+}
+
+
+@dataclass(frozen=True)
+class Out:
+    """A message to send: on link ``link`` (None: every link) to ``peer`` (None: every peer)."""
+
+    msg: MavMessage
+    link: int | None = None
+    peer: Hashable | None = None
+
+
+class Refused(SkeyeError):
+    """A command refused: ``result`` is the MAV_RESULT, the message the reason."""
+
+    def __init__(self, result: int, reason: str) -> None:
+        super().__init__(reason)
+        self.result = result
+
+
+@dataclass(frozen=True)
+class Command:
+    """COMMAND_LONG and COMMAND_INT in one form (x, y in degrees x 1e7 for COMMAND_INT)."""
+
+    command: int
+    params: tuple[float, ...]  # param1..param7 (COMMAND_INT: 5, 6 as given, 7 = z)
+    frame: int | None  # COMMAND_INT's frame; None for COMMAND_LONG
+    x: int = 0
+    y: int = 0
+
+    @classmethod
+    def of(cls, msg: MavMessage) -> Command:
+        if msg.get_type() == "COMMAND_INT":
+            return cls(int(msg.command), (msg.param1, msg.param2, msg.param3, msg.param4,
+                                          float(msg.x), float(msg.y), msg.z),
+                       int(msg.frame), int(msg.x), int(msg.y))
+        return cls(int(msg.command), (msg.param1, msg.param2, msg.param3, msg.param4,
+                                      msg.param5, msg.param6, msg.param7), None)
+
+    def p(self, n: int) -> float:
+        return float(self.params[n - 1])
+
+
+@dataclass
+class Settings:
+    """The endpoint's own settings (parameters beside the boards')."""
+
+    takeoff_alt_m: float = 2.5  # PX4 MIS_TAKEOFF_ALT default
+    rtl_alt_m: float = 15.0  # ArduPilot RTL_ALT's default, 15 m (PX4's RTL_RETURN_ALT: 60 m)
+    offboard_loss_s: float = 1.0  # PX4 COM_OF_LOSS_T default
+    disarm_preflight_s: float = 10.0  # PX4 COM_DISARM_PRFLT default
+    pad_vision: bool = False  # the pilot runs pad detection (precision landing possible)
+
+
+@dataclass
+class _Step:
+    """Where a program is: its item or phase, the motion it started, when it waits until."""
+
+    index: int = 0
+    phase: str = "start"
+    mark: int = -1
+    wait_until_s: float | None = None
+
+
+@dataclass
+class _Link:
+    scheduler: MessageScheduler
+    peers_seen: dict[Hashable, float] = field(default_factory=dict)
+
+
+class MavlinkVehicle:
+    """The MAVLink side of one vehicle (see the module docstring)."""
+
+    def __init__(self, boards: OnboardBoards, *, settings: Settings | None = None,
+                 max_speed_m_s: float | None = None, system_id: int = 1,
+                 now_s: float = 0.0) -> None:
+        self.boards = boards
+        self.settings = settings or Settings()
+        self.codec = MavCodec(system_id, 1)
+        self.max_speed_limit_m_s = max_speed_m_s or boards.settings.max_speed_m_s
+        self.program = Program.NONE
+        self.step = _Step()
+        self.mission = MissionProtocol(self.codec, self._check_item)
+        self.mission_current = 0
+        self.mission_state = mav.MISSION_STATE_NO_MISSION
+        self.cruise_m_s: float | None = None  # DO_CHANGE_SPEED
+        self.params = ParamTable(self._param_specs(), self.codec)
+        self.altitude = telem.AltitudeAnchor()
+        self.links: list[_Link] = []
+        self.gcs: dict[tuple[int, int], float] = {}
+        self.bad_frames = 0
+        self.ignored = 0  # messages understood but not acted on
+        self.refusals = 0
+        self.acks: dict[int, int] = {}  # MAV_RESULT -> count
+        self._notices: dict[tuple[Hashable, str], float] = {}
+        self._recent: dict[tuple[Hashable, Command], tuple[float, int]] = {}
+        self._armed_at_s: float | None = None
+        self._setpoint: tuple[MavMessage, float] | None = None
+        self._applied_target: tuple[float, float, float] | None = None
+        self._targets: deque[PadObservation] = deque(maxlen=64)
+        self.landing_targets = 0
+        self._now_s = now_s
+
+    # -- links ---------------------------------------------------------------------------
+    def add_link(self, now_s: float) -> int:
+        """A new link (its own message intervals); returns its number."""
+        self.links.append(_Link(MessageScheduler(now_s)))
+        return len(self.links) - 1
+
+    # -- parameters ----------------------------------------------------------------------
+    def _board_setting(self, name: str) -> Callable[[float], None]:
+        def set_value(value: float) -> None:
+            changes: dict[str, Any] = {name: value}
+            self.boards.settings = replace(self.boards.settings, **changes)
+        return set_value
+
+    def _envelope_setting(self, name: str) -> Callable[[float], None]:
+        def set_value(value: float) -> None:
+            env = replace(self.boards.settings.envelope, **{name: value})
+            self.boards.settings = replace(self.boards.settings, envelope=env)
+        return set_value
+
+    def _endpoint_setting(self, name: str) -> Callable[[float], None]:
+        def set_value(value: float) -> None:
+            setattr(self.settings, name, value)
+        return set_value
+
+    def _param_specs(self) -> list[ParamSpec]:
+        b = lambda: self.boards.settings  # noqa: E731
+        s = self.settings
+        top = self.max_speed_limit_m_s
+        return [
+            ParamSpec("MIS_TAKEOFF_ALT", 0.5, 80.0, "m", "take-off height above home",
+                      lambda: s.takeoff_alt_m, self._endpoint_setting("takeoff_alt_m")),
+            ParamSpec("RTL_RETURN_ALT", 0.0, 150.0, "m", "return height above home",
+                      lambda: s.rtl_alt_m, self._endpoint_setting("rtl_alt_m")),
+            ParamSpec("MPC_XY_CRUISE", 0.1, top, "m/s", "speed of moves that name none",
+                      lambda: b().default_speed_m_s, self._board_setting("default_speed_m_s")),
+            ParamSpec("MPC_XY_VEL_MAX", 0.1, top, "m/s",
+                      "fastest horizontal speed a command may ask for (the robot file's limit "
+                      "at most)", lambda: b().max_speed_m_s, self._board_setting("max_speed_m_s")),
+            ParamSpec("GF_MAX_VER_DIST", 1.0, 10_000.0, "m", "flight envelope ceiling above home",
+                      lambda: b().envelope.ceiling_m, self._envelope_setting("ceiling_m")),
+            ParamSpec("GF_MAX_HOR_DIST", 1.0, 100_000.0, "m",
+                      "flight envelope radius around home", lambda: b().envelope.max_radius_m,
+                      self._envelope_setting("max_radius_m")),
+            ParamSpec("COM_DL_LOSS_T", 0.5, 300.0, "s",
+                      "ground link silent this long: failsafe (hover)",
+                      lambda: b().link_timeout_s, self._board_setting("link_timeout_s")),
+            ParamSpec("SKY_LAND_TIMEOUT", 1.0, 3600.0, "s",
+                      "in failsafe this long: land", lambda: b().land_timeout_s,
+                      self._board_setting("land_timeout_s")),
+            ParamSpec("COM_OF_LOSS_T", 0.1, 60.0, "s", "offboard setpoints lost: hold",
+                      lambda: s.offboard_loss_s, self._endpoint_setting("offboard_loss_s")),
+            ParamSpec("COM_DISARM_PRFLT", 0.0, 600.0, "s",
+                      "armed on the ground without taking off: disarm (0: never)",
+                      lambda: s.disarm_preflight_s, self._endpoint_setting("disarm_preflight_s")),
+        ]
+
+    # -- the vehicle ---------------------------------------------------------------------
+    @property
+    def armed(self) -> bool:
+        return bool(self.boards.motors_on or self.boards.airframe.snapshot().armed)
+
+    @property
+    def mode(self) -> Px4Mode:
+        return MODE_TABLE[(self.boards.state, self.program)]
+
+    def origin(self) -> GeoOrigin | None:
+        """The geodetic position of the estimate's NED origin (None before a GPS fix)."""
+        latlon = self.boards.geo.estimate((0.0, 0.0, 0.0))
+        alt = self.altitude.origin_amsl_m
+        if latlon is None or alt is None:
+            return None
+        return GeoOrigin(latlon[0], latlon[1], alt)
+
+    def view(self) -> telem.VehicleView:
+        snap = self.boards.airframe.snapshot()
+        self.altitude.add(snap)
+        total = len(self.mission.items)
+        return telem.VehicleView(
+            snap=snap, state=self.boards.state, mode=self.mode, armed=self.armed,
+            home_ned_m=self.boards.home_ned_m, origin=self.origin(),
+            healthy=not getattr(self.boards.airframe, "lost", None),
+            bad_frames=self.bad_frames,
+            mission_seq=min(self.mission_current, max(0, total - 1)), mission_total=total,
+            mission_state=self.mission_state if total else mav.MISSION_STATE_NO_MISSION,
+            mission_active=self.program is Program.MISSION)
+
+    # -- messages in ---------------------------------------------------------------------
+    def handle(self, link: int, peer: Hashable, msg: MavMessage | BadFrame,
+               now_s: float) -> list[Out]:
+        """Answer one message (or bad frame) from ``peer`` on ``link``."""
+        self._now_s = now_s
+        reply = lambda items: [Out(m, link, peer) for m in items]  # noqa: E731
+        if isinstance(msg, BadFrame):
+            self.bad_frames += 1
+            what = (f"unknown message id {msg.msg_id}" if msg.msg_id is not None
+                    else f"bad MAVLink frame ({msg.reason[:60]})")
+            return reply(self._notice(peer, "bad", mav.MAV_SEVERITY_WARNING,
+                                      f"{what}: ignored"))
+        if isinstance(peer, tuple) and peer[:1] == ("refused",):
+            return reply(self._notice(peer, "full", mav.MAV_SEVERITY_WARNING,
+                                      "too many ground stations on this link: ignored"))
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if src[0] == self.codec.system_id and src[1] == self.codec.component_id:
+            return []  # our own messages echoed back
+        out: list[Out] = []
+        self.links[link].peers_seen[peer] = now_s
+        if src not in self.gcs and msg.get_type() == "HEARTBEAT":
+            out += self._new_station(src, link, peer, now_s)
+        if msg.get_type() == "HEARTBEAT" or src in self.gcs:
+            self.gcs[src] = now_s
+        self.boards.handle(Poll(0), now_s)  # a message from the ground: the link is alive
+        kind = msg.get_type()
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            if not self._for_us(msg):
+                return out
+            return out + reply(self._command(peer, msg))
+        if kind.startswith("PARAM_"):
+            if kind == "PARAM_VALUE":
+                return out
+            if kind != "PARAM_REQUEST_LIST" and not self._for_us(msg):
+                return out
+            return out + reply(self.params.handle(msg))
+        if kind.startswith("MISSION_"):
+            if not self._for_us(msg):
+                return out
+            if kind == "MISSION_SET_CURRENT":
+                return out + reply(self._set_current(int(msg.seq)))
+            answer = self.mission.handle(msg, now_s)
+            if kind == "MISSION_COUNT" or kind.startswith("MISSION_ITEM"):
+                answer += self._mission_notice(answer)
+            return out + reply(answer)
+        if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
+            if self._for_us(msg):
+                self._setpoint = (msg, now_s)
+                if self.program is Program.OFFBOARD:
+                    out += reply(self._apply_setpoint(msg))
+            return out
+        if kind == "MANUAL_CONTROL":
+            if int(msg.target) in (0, self.codec.system_id) and self.program is Program.MANUAL:
+                out += reply(self._manual(msg, now_s))
+            return out
+        if kind == "TIMESYNC":
+            if msg.tc1 == 0:
+                out.append(Out(self.codec.mav.timesync_encode(int(now_s * 1e9), msg.ts1),
+                               link, peer))
+            return out
+        if kind == "PING" and msg.target_system == 0:
+            out.append(Out(self.codec.mav.ping_encode(int(now_s * 1e6), msg.seq,
+                                                      src[0], src[1]), link, peer))
+            return out
+        self.ignored += 1  # HEARTBEAT, SYSTEM_TIME, ...: nothing to do
+        return out
+
+    def _for_us(self, msg: MavMessage) -> bool:
+        ts = int(getattr(msg, "target_system", 0))
+        tc = int(getattr(msg, "target_component", 0))
+        return ts in (0, self.codec.system_id) and tc in (0, self.codec.component_id)
+
+    def _new_station(self, src: tuple[int, int], link: int, peer: Hashable,
+                     now_s: float) -> list[Out]:
+        live = [s for s, t in self.gcs.items() if now_s - t < GCS_TIMEOUT_S]
+        if not live:
+            return []
+        text = (f"ground station {src[0]}/{src[1]} joined; {len(live) + 1} connected: the last "
+                "command wins")
+        return [Out(m) for m in statustext(self.codec, mav.MAV_SEVERITY_NOTICE, text)]
+
+    def _notice(self, peer: Hashable, key: str, severity: int, text: str) -> list[MavMessage]:
+        """A STATUSTEXT, at most once per ``NOTICE_EVERY_S`` for the same peer and key."""
+        last = self._notices.get((peer, key))
+        if last is not None and self._now_s - last < NOTICE_EVERY_S:
+            return []
+        if len(self._notices) > 1024:
+            self._notices.clear()
+        self._notices[(peer, key)] = self._now_s
+        return statustext(self.codec, severity, text)
+
+    def _mission_notice(self, answer: list[MavMessage]) -> list[MavMessage]:
+        for m in answer:
+            if m.get_type() == "MISSION_ACK" and m.type != mav.MAV_MISSION_ACCEPTED:
+                reason = self.mission.rejections[-1] if self.mission.rejections else "refused"
+                return statustext(self.codec, mav.MAV_SEVERITY_WARNING,
+                                  f"mission refused: {reason}")
+            if m.get_type() == "MISSION_ACK":
+                self.mission_current = 0
+                self.mission_state = mav.MISSION_STATE_NOT_STARTED
+                if self.program is Program.MISSION:
+                    self._stop_program("the mission was replaced")
+        return []
+
+    # -- commands ------------------------------------------------------------------------
+    def _command(self, peer: Hashable, msg: MavMessage) -> list[MavMessage]:
+        cmd = Command.of(msg)
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        key = (peer, cmd)
+        seen = self._recent.get(key)
+        if seen is not None and self._now_s - seen[0] < DUPLICATE_WINDOW_S:
+            return [self._ack(cmd.command, seen[1], src)]  # a retransmission: same answer
+        extra: list[MavMessage] = []
+        try:
+            handler = COMMANDS.get(cmd.command)
+            if handler is None:
+                raise Refused(mav.MAV_RESULT_UNSUPPORTED,
+                              f"command {cmd.command} is not supported by this vehicle")
+            extra = handler(self, cmd) or []
+            result = mav.MAV_RESULT_ACCEPTED
+        except Refused as exc:
+            result = exc.result
+            self.refusals += 1
+            extra = self._notice(peer, f"cmd{cmd.command}:{exc}", mav.MAV_SEVERITY_WARNING,
+                                 f"{_command_name(cmd.command)}: {exc}")
+        except LocalProtocolError as exc:  # a value the boards' packets cannot carry
+            result = mav.MAV_RESULT_DENIED
+            self.refusals += 1
+            extra = self._notice(peer, f"cmd{cmd.command}:{exc}", mav.MAV_SEVERITY_WARNING,
+                                 f"{_command_name(cmd.command)}: {exc}")
+        if len(self._recent) > 256:
+            self._recent.clear()
+        self._recent[key] = (self._now_s, result)
+        self.acks[result] = self.acks.get(result, 0) + 1
+        return [self._ack(cmd.command, result, src), *extra]
+
+    def _ack(self, command: int, result: int, src: tuple[int, int]) -> MavMessage:
+        return self.codec.mav.command_ack_encode(command, result, 0, 0, src[0], src[1])
+
+    def _board(self, msg: Message) -> None:
+        """Hand one command to the boards; a refusal raises ``Refused`` with its reason."""
+        for reply in self.boards.handle(msg, self._now_s):
+            if isinstance(reply, Result) and reply.code != ResultCode.OK:
+                raise Refused(RESULT_OF_CODE.get(ResultCode(reply.code),
+                                                 mav.MAV_RESULT_DENIED),
+                              reply.reason or ResultCode(reply.code).name.lower())
+
+    def _mine(self) -> None:
+        """The boards' motion now is this endpoint's (a program checks it is still so)."""
+        self.step.mark = self.boards.motion_changes
+
+    def _snap(self) -> Any:
+        return self.boards.airframe.snapshot()
+
+    def _airborne(self) -> bool:
+        return self.boards.state not in (NavState.LANDED,) and self.boards.state.name != "CRASHED"
+
+    def _fly_to(self, target_ned_m: tuple[float, float, float], speed_m_s: float | None) -> None:
+        """MOVE_BY (world frame) from where the vehicle is to a NED target; HOLD if there."""
+        n, e, d = self._snap().pos_ned_m
+        delta = [round((t - c) * 1e3) for t, c in zip(target_ned_m, (n, e, d), strict=True)]
+        if delta == [0, 0, 0]:
+            self._board(Hold())
+            return
+        speed = speed_m_s if speed_m_s is not None else self.cruise_m_s
+        self._board(MoveBy(delta[0], delta[1], delta[2], 0, MoveFrame.WORLD_NED,
+                           round((speed or 0.0) * 1e3)))
+
+    def _global_to_ned(self, lat_e7: int, lon_e7: int, alt_m: float,
+                       frame: int | None) -> tuple[float, float, float]:
+        """A global target (COMMAND_INT x/y or MISSION_ITEM_INT) in the estimate's NED frame."""
+        origin = self.origin()
+        if origin is None:
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                          "no GPS position yet: global targets cannot be placed")
+        n, e, _ = origin.to_ned(lat_e7 / 1e7, lon_e7 / 1e7, origin.altitude_m)
+        if frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+            d = self.boards.home_ned_m[2] - alt_m
+        else:
+            d = origin.altitude_m - alt_m
+        return n, e, d
+
+    def _arm(self, cmd: Command) -> None:
+        if cmd.p(1) == 1.0:
+            lost = getattr(self.boards.airframe, "lost", None)
+            if lost:
+                raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED, f"not armable: {lost}")
+            if self.boards.state is NavState.LANDED and not self.boards.motors_on:
+                self.boards.motors_on = True
+                self._armed_at_s = self._now_s
+            return
+        if cmd.p(1) != 0.0:
+            raise Refused(mav.MAV_RESULT_DENIED, f"param1 must be 0 or 1, not {cmd.p(1):g}")
+        if self.boards.state is NavState.LANDED:
+            self.boards.motors_on = False
+            self._armed_at_s = None
+            return
+        if cmd.p(2) == FORCE_MAGIC:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          "a skeye vehicle never stops its motors in the air: land")
+        raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED, "in the air: land first")
+
+    def _takeoff(self, cmd: Command) -> None:
+        if not self.armed:
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED, "disarmed: arm first")
+        alt = cmd.p(7)
+        if math.isnan(alt):
+            height = self.settings.takeoff_alt_m
+        else:
+            origin = self.origin()
+            if origin is None:
+                raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                              "no GPS altitude yet: leave param7 NaN (MIS_TAKEOFF_ALT)")
+            height = alt - (origin.altitude_m - self._snap().pos_ned_m[2])
+        if not (math.isfinite(height) and height >= 0.1):
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"take-off altitude {alt:g} m AMSL is not above the vehicle")
+        self._start(Program.NONE)
+        self._board(TakeOff(round(height * 1e3)))
+
+    def _land(self, cmd: Command) -> None:
+        precision = cmd.p(2)
+        if precision in (1.0, 2.0) and (self.settings.pad_vision or precision == 2.0):
+            self._precland()
+            return
+        self._start(Program.NONE)
+        self._board(Land())
+
+    def _precland(self) -> None:
+        if not self.settings.pad_vision:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          "precision landing needs the pad vision (skeye pilot --images)")
+        if not self._airborne():
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED, "landed")
+        self._board(Hold())
+        self._board(PadMode(PadAction.LAND, 0, 0))
+        self._start(Program.PRECLAND)
+        self._mine()
+
+    def _rtl(self, cmd: Command | None = None) -> None:
+        if not self._airborne():
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED, "landed: nothing to return from")
+        self._start(Program.RTL)
+
+    def _reposition(self, cmd: Command) -> None:
+        if cmd.frame is None:
+            raise Refused(mav.MAV_RESULT_DENIED, "DO_REPOSITION is a COMMAND_INT")
+        snap = self._snap()
+        z = cmd.p(7)
+        if cmd.x == 0 and cmd.y == 0:
+            n, e, _ = snap.pos_ned_m
+        else:
+            n, e, _ = self._global_to_ned(cmd.x, cmd.y, 0.0, cmd.frame)
+        if math.isnan(z):
+            d = snap.pos_ned_m[2]
+        else:
+            d = self._global_to_ned(cmd.x or 1, cmd.y or 1, z, cmd.frame)[2]
+        speed = cmd.p(1) if math.isfinite(cmd.p(1)) and cmd.p(1) > 0 else None
+        self._start(Program.NONE)
+        self._fly_to((n, e, d), speed)
+
+    def _change_speed(self, cmd: Command) -> None:
+        speed = cmd.p(2)
+        if speed == -1.0:
+            self.cruise_m_s = None
+            return
+        limit = self.boards.settings.max_speed_m_s
+        if not (math.isfinite(speed) and 0 < speed <= limit + 1e-9):
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"speed {speed:g} m/s: must be above 0 and at most {limit:g} m/s")
+        self.cruise_m_s = speed
+
+    def _set_mode(self, cmd: Command) -> None:
+        if not int(cmd.p(1)) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          "only PX4 custom modes (base mode with CUSTOM_MODE_ENABLED)")
+        mode = Px4Mode.from_custom(int(cmd.p(2)), int(cmd.p(3)))
+        request = REQUESTS.get(mode) if mode is not None else None
+        if request is None:
+            name = mode.name if mode is not None else f"{cmd.p(2):g}/{cmd.p(3):g}"
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"mode {name} is not flown by this vehicle (attitude sticks come "
+                          "over its AscTec link)")
+        if mode == self.mode and request is not Request.MISSION:
+            return
+        if request is Request.HOLD:
+            self._start(Program.NONE)
+            if self._airborne():
+                self._board(Hold())
+        elif request is Request.MISSION:
+            self._start_mission(self.mission_current)
+        elif request is Request.RTL:
+            self._rtl()
+        elif request is Request.LAND:
+            self._start(Program.NONE)
+            self._board(Land())
+        elif request is Request.TAKEOFF:
+            self._takeoff(Command(mav.MAV_CMD_NAV_TAKEOFF, (0,) * 6 + (math.nan,), None))
+        elif request is Request.OFFBOARD:
+            sp = self._setpoint
+            if sp is None or self._now_s - sp[1] > self.settings.offboard_loss_s:
+                raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                              "offboard needs setpoints first (none within COM_OF_LOSS_T)")
+            if not self._airborne():
+                raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                              "take off first: offboard flies a vehicle in the air")
+            self._start(Program.OFFBOARD)
+            self._applied_target = None
+            self._apply_setpoint(sp[0])
+        elif request is Request.MANUAL:
+            self._start(Program.MANUAL)
+            if self._airborne():
+                self._board(Hold())
+        elif request is Request.PRECLAND:
+            self._precland()
+
+    def _mission_start(self, cmd: Command) -> None:
+        first = int(cmd.p(1)) if math.isfinite(cmd.p(1)) else 0
+        self._start_mission(first)
+
+    def _set_current_cmd(self, cmd: Command) -> None:
+        seq = int(cmd.p(1)) if math.isfinite(cmd.p(1)) else -1
+        if not 0 <= seq < len(self.mission.items):
+            raise Refused(mav.MAV_RESULT_DENIED, f"no mission item {cmd.p(1):g}")
+        self._set_current(seq)
+
+    def _set_current(self, seq: int) -> list[MavMessage]:
+        if not 0 <= seq < len(self.mission.items):
+            return statustext(self.codec, mav.MAV_SEVERITY_WARNING, f"no mission item {seq}")
+        self.mission_current = seq
+        if self.program is Program.MISSION:
+            self.step = _Step(index=seq)
+        return [telem.mission_current(self.codec, self.view())]
+
+    def _message_interval(self, cmd: Command) -> None:
+        msg_id, interval_us = int(cmd.p(1)), cmd.p(2)
+        interval = None if interval_us == -1 else max(0.0, interval_us) / 1e6
+        if not math.isfinite(interval_us) or interval_us < -1:
+            raise Refused(mav.MAV_RESULT_DENIED, f"interval {interval_us:g} us")
+        try:
+            for link in self._links_of_command():
+                link.scheduler.set_interval(msg_id, interval, self._now_s)
+        except LocalProtocolError as exc:
+            raise Refused(mav.MAV_RESULT_DENIED, str(exc)) from None
+
+    def _links_of_command(self) -> list[_Link]:
+        return self.links  # one scheduler per link; a command sets it on every link
+
+    def _get_interval(self, cmd: Command) -> list[MavMessage]:
+        msg_id = int(cmd.p(1))
+        if not self.links or not self.links[0].scheduler.streamable(msg_id):
+            raise Refused(mav.MAV_RESULT_DENIED, f"message {msg_id} is not streamed")
+        interval = self.links[0].scheduler.interval_s(msg_id)
+        return [self.codec.mav.message_interval_encode(
+            msg_id, -1 if interval is None else round(interval * 1e6))]
+
+    def _request_message(self, cmd: Command) -> list[MavMessage]:
+        msg_id = int(cmd.p(1)) if math.isfinite(cmd.p(1)) else -1
+        if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return [telem.autopilot_version(self.codec)]
+        builder = telem.BUILDERS.get(msg_id)
+        if builder is None:
+            raise Refused(mav.MAV_RESULT_DENIED, f"message {cmd.p(1):g} is not available")
+        msg = builder(self.codec, self.view())
+        if msg is None:
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                          f"message {msg_id} needs a GPS position (none yet)")
+        return [msg]
+
+    def _capabilities(self, cmd: Command) -> list[MavMessage]:
+        return [telem.autopilot_version(self.codec)]
+
+    # -- offboard and sticks -------------------------------------------------------------
+    def _apply_setpoint(self, msg: MavMessage) -> list[MavMessage]:
+        """Fly one offboard setpoint: a position (MOVE_BY to it, once per target) or a
+        velocity (VELOCITY lasting COM_OF_LOSS_T, so lost setpoints end in a hover)."""
+        mask = int(msg.type_mask)
+        pos_ignored = mask & 0b111 == 0b111
+        vel_ignored = mask & 0b111000 == 0b111000
+        snap = self._snap()
+        try:
+            if not pos_ignored:
+                target = self._setpoint_position(msg, snap)
+                if (self._applied_target is not None
+                        and max(abs(a - b) for a, b in zip(target, self._applied_target,
+                                                           strict=True)) < 0.02
+                        and self.boards.motion_changes == self.step.mark):
+                    return []
+                self._fly_to(target, None)
+                self._applied_target = target
+            elif not vel_ignored:
+                vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
+                if int(msg.get_msgId()) == mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED and \
+                        int(msg.coordinate_frame) in (mav.MAV_FRAME_BODY_NED,
+                                                      mav.MAV_FRAME_BODY_OFFSET_NED,
+                                                      mav.MAV_FRAME_BODY_FRD):
+                    fwd, right = vn, ve
+                else:
+                    yaw = snap.rpy_rad[2]
+                    fwd = math.cos(yaw) * vn + math.sin(yaw) * ve
+                    right = -math.sin(yaw) * vn + math.cos(yaw) * ve
+                yaw_rate = 0.0 if mask & 0b100000000000 else float(msg.yaw_rate)
+                if not all(map(math.isfinite, (fwd, right, vd, yaw_rate))):
+                    raise Refused(mav.MAV_RESULT_DENIED, "velocity setpoint is not a number")
+                self._applied_target = None
+                self._board(Velocity(round(fwd * 1e3), round(right * 1e3), round(vd * 1e3),
+                                     round(yaw_rate * 1e3),
+                                     round(self.settings.offboard_loss_s * 1e3)))
+            else:
+                return []
+        except (Refused, LocalProtocolError) as exc:
+            return self._notice("offboard", str(exc), mav.MAV_SEVERITY_WARNING,
+                                f"offboard setpoint refused: {exc}")
+        self._mine()
+        return []
+
+    def _setpoint_position(self, msg: MavMessage, snap: Any) -> tuple[float, float, float]:
+        if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
+            return self._global_to_ned(int(msg.lat_int), int(msg.lon_int), float(msg.alt),
+                                       int(msg.coordinate_frame))
+        x, y, z = float(msg.x), float(msg.y), float(msg.z)
+        if not all(map(math.isfinite, (x, y, z))):
+            raise Refused(mav.MAV_RESULT_DENIED, "position setpoint is not a number")
+        frame = int(msg.coordinate_frame)
+        n, e, d = snap.pos_ned_m
+        if frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD):
+            yaw = snap.rpy_rad[2]
+            return (n + math.cos(yaw) * x - math.sin(yaw) * y,
+                    e + math.sin(yaw) * x + math.cos(yaw) * y, d + z)
+        if frame == mav.MAV_FRAME_LOCAL_OFFSET_NED:
+            return n + x, e + y, d + z
+        return x, y, z
+
+    def _manual(self, msg: MavMessage, now_s: float) -> list[MavMessage]:
+        """MANUAL_CONTROL as the AscTec link's sticks in GPS mode (velocities)."""
+        scale = lambda v: max(-2047, min(2047, round(float(v) * 2047 / 1000)))  # noqa: E731
+        thrust = max(0, min(4095, round(max(0.0, float(msg.z)) * 4095 / 1000)))
+        try:
+            self._board(CtrlInput(-scale(msg.x), scale(msg.y), scale(msg.r), thrust,
+                                  int(MANUAL_CTRL)))
+        except Refused as exc:
+            return self._notice("manual", str(exc), mav.MAV_SEVERITY_WARNING,
+                                f"sticks refused: {exc}")
+        self._mine()
+        return []
+
+    # -- programs ------------------------------------------------------------------------
+    def _start(self, program: Program) -> None:
+        if self.program is Program.PRECLAND and program is not Program.PRECLAND:
+            self.boards.pad.landing_finished()
+        self.program = program
+        self.step = _Step(index=self.mission_current if program is Program.MISSION else 0)
+        self.step.mark = self.boards.motion_changes
+
+    def _stop_program(self, why: str) -> list[Out]:
+        was = self.program
+        self.program = Program.NONE
+        if was is Program.MISSION:
+            self.mission_state = mav.MISSION_STATE_PAUSED
+        if was is Program.NONE:
+            return []
+        return [Out(m) for m in statustext(self.codec, mav.MAV_SEVERITY_NOTICE,
+                                           f"{was.value} stopped: {why}")]
+
+    def _start_mission(self, first: int) -> None:
+        items = self.mission.items
+        if not items:
+            raise Refused(mav.MAV_RESULT_DENIED, "no mission uploaded")
+        if not 0 <= first < len(items):
+            raise Refused(mav.MAV_RESULT_DENIED, f"no mission item {first}")
+        if not self._airborne() and items[first].command != mav.MAV_CMD_NAV_TAKEOFF:
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                          "landed: the mission must start with a take-off item")
+        self.mission_current = first
+        self.mission_state = mav.MISSION_STATE_ACTIVE
+        self._start(Program.MISSION)
+
+    def _check_item(self, item: MissionItem) -> tuple[int, str] | None:
+        """The vehicle's checks on a mission item: a position inside the flight envelope."""
+        if item.command not in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF,
+                                mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LAND):
+            if item.command == mav.MAV_CMD_DO_CHANGE_SPEED and item.param2 > \
+                    self.boards.settings.max_speed_m_s + 1e-9:
+                return (mav.MAV_MISSION_INVALID_PARAM2,
+                        f"item {item.seq}: speed {item.param2:g} m/s is over this vehicle's "
+                        f"limit of {self.boards.settings.max_speed_m_s:g} m/s")
+            return None
+        if item.x == 0 and item.y == 0:
+            return None  # "here": PX4 flies the item where the vehicle is
+        try:
+            target = self._global_to_ned(item.x, item.y, item.z, item.frame)
+        except Refused as exc:
+            return mav.MAV_MISSION_ERROR, f"item {item.seq}: {exc}"
+        envelope: FlightEnvelope = self.boards.settings.envelope
+        reason = envelope.check_target(self.boards.home_ned_m, target)
+        if reason is not None:
+            code = (mav.MAV_MISSION_INVALID_PARAM7 if "above" in reason or "below" in reason
+                    else mav.MAV_MISSION_INVALID_PARAM5_X)
+            return code, f"item {item.seq}: {reason}"
+        return None
+
+    def _interrupted(self) -> bool:
+        return self.boards.motion_changes != self.step.mark
+
+    def _run_program(self, now_s: float) -> list[Out]:
+        """One look at the running program: start its next step when the last one is done."""
+        program = self.program
+        if program is Program.NONE or program is Program.MANUAL:
+            return []
+        state = self.boards.state
+        if program is Program.OFFBOARD:
+            sp = self._setpoint
+            if sp is None or now_s - sp[1] > self.settings.offboard_loss_s:
+                out = self._stop_program("offboard setpoints lost: holding")
+                if self._airborne():
+                    try:
+                        self._board(Hold())
+                    except Refused:
+                        pass
+                return out
+            if self._interrupted():
+                return self._stop_program("another command took over")
+            return []
+        if self._interrupted():
+            return self._stop_program("another command took over")
+        if state is NavState.FAILSAFE:
+            return self._stop_program("link-loss failsafe")
+        try:
+            if program is Program.PRECLAND:
+                if state is NavState.LANDED:
+                    self.program = Program.NONE
+                return []
+            if program is Program.RTL:
+                return self._rtl_step(state)
+            return self._mission_step(state, now_s)
+        except (Refused, LocalProtocolError) as exc:
+            return self._stop_program(str(exc))
+
+    def _rtl_step(self, state: NavState) -> list[Out]:
+        st = self.step
+        if st.phase != "start" and state not in (NavState.HOLDING, NavState.LANDED):
+            return []  # the current phase is still under way
+        snap = self._snap()
+        home = self.boards.home_ned_m
+        n, e, d = snap.pos_ned_m
+        if st.phase == "start":
+            st.phase = "climb"
+            climb_to = home[2] - self.settings.rtl_alt_m
+            if d > climb_to + 0.05:
+                self._fly_to((n, e, climb_to), None)
+                self._mine()
+                return []
+        if st.phase == "climb":
+            st.phase = "return"
+            if math.hypot(home[0] - n, home[1] - e) > ARRIVED_RADIUS_M:
+                self._fly_to((home[0], home[1], d), None)
+                self._mine()
+                return []
+        if st.phase == "return":
+            st.phase = "land"
+            self._board(Land())
+            self._mine()
+            return []
+        if st.phase == "land" and state is NavState.LANDED:
+            self.program = Program.NONE
+        return []
+
+    def _mission_step(self, state: NavState, now_s: float) -> list[Out]:
+        st = self.step
+        items = self.mission.items
+        snap = self._snap()
+        if st.phase == "wait":
+            if st.wait_until_s is not None and snap.time_s < st.wait_until_s:
+                return []
+            return self._item_done()
+        if st.phase == "going":
+            item = items[st.index]
+            if item.command == mav.MAV_CMD_NAV_LAND:
+                if state is NavState.LANDED:
+                    return self._item_done()
+                return []
+            if state not in (NavState.HOLDING,):
+                return []
+            hold = item.param1 if item.command in (mav.MAV_CMD_NAV_WAYPOINT,
+                                                   mav.MAV_CMD_NAV_LOITER_TIME) else 0.0
+            if hold > 0 and math.isfinite(hold):
+                st.phase, st.wait_until_s = "wait", snap.time_s + hold
+                return []
+            return self._item_done()
+        if st.index >= len(items):
+            return self._mission_complete()
+        item = items[st.index]
+        self.mission_current = st.index
+        cmd = item.command
+        if cmd == mav.MAV_CMD_DO_CHANGE_SPEED:
+            self.cruise_m_s = None if item.param2 == -1 else item.param2
+            return self._item_done()
+        if cmd == mav.MAV_CMD_NAV_DELAY:
+            st.phase, st.wait_until_s = "wait", snap.time_s + item.param1
+            return []
+        if cmd == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            out = self._reached(st.index)
+            self.mission_state = mav.MISSION_STATE_COMPLETE
+            self._start(Program.RTL)
+            return out
+        here = item.x == 0 and item.y == 0
+        if cmd == mav.MAV_CMD_NAV_TAKEOFF and not self._airborne():
+            if not self.armed:
+                return []  # waits for the arming
+            if item.relative_alt or here:
+                height = item.z
+            else:  # AMSL: above where the vehicle stands
+                height = snap.pos_ned_m[2] - self._global_to_ned(item.x, item.y, item.z,
+                                                                 item.frame)[2]
+            self._board(TakeOff(round(max(0.1, height) * 1e3)))
+            self._mine()
+            st.phase = "going"
+            return []
+        if cmd == mav.MAV_CMD_NAV_LAND:
+            if not here:
+                target = self._global_to_ned(item.x, item.y, item.z, item.frame)
+                n, e, d = snap.pos_ned_m
+                if math.hypot(target[0] - n, target[1] - e) > ARRIVED_RADIUS_M:
+                    self._fly_to((target[0], target[1], d), None)
+                    self._mine()
+                    st.phase = "to-land"
+                    return []
+            self._board(Land())
+            self._mine()
+            st.phase = "going"
+            return []
+        if st.phase == "to-land":
+            return []
+        target = (snap.pos_ned_m if here else
+                  self._global_to_ned(item.x, item.y, item.z, item.frame))
+        self._fly_to(target, None)
+        self._mine()
+        st.phase = "going"
+        return []
+
+    def _reached(self, seq: int) -> list[Out]:
+        return [Out(self.codec.mav.mission_item_reached_encode(seq))]
+
+    def _item_done(self) -> list[Out]:
+        st = self.step
+        out = self._reached(st.index)
+        self.step = _Step(index=st.index + 1, mark=st.mark)
+        self.mission_current = min(st.index + 1, max(0, len(self.mission.items) - 1))
+        out += [Out(telem.mission_current(self.codec, self.view()))]
+        return out
+
+    def _mission_complete(self) -> list[Out]:
+        self.program = Program.NONE
+        self.mission_state = mav.MISSION_STATE_COMPLETE
+        return [Out(telem.mission_current(self.codec, self.view())),
+                *[Out(m) for m in statustext(self.codec, mav.MAV_SEVERITY_INFO,
+                                             "mission complete")]]
+
+    # -- time ----------------------------------------------------------------------------
+    def on_pad(self, obs: PadObservation) -> None:
+        """A pad detection from the vision (any thread): sent as LANDING_TARGET at the next
+        tick."""
+        if obs.found:
+            self._targets.append(obs)
+
+    def _landing_targets(self) -> list[Out]:
+        out = []
+        snap = None
+        while self._targets:
+            obs = self._targets.popleft()
+            snap = snap or self._snap()
+            out.append(Out(landing_target(self.codec, obs, snap.rpy_rad[2])))
+            self.landing_targets += 1
+        return out
+
+    def tick(self, now_s: float) -> list[Out]:
+        """Streams due, programs advanced, timers checked."""
+        self._now_s = now_s
+        out: list[Out] = []
+        state = self.boards.state
+        if self._armed_at_s is not None:
+            if state is not NavState.LANDED or not self.boards.motors_on:
+                self._armed_at_s = None
+            elif (self.settings.disarm_preflight_s > 0
+                  and now_s - self._armed_at_s >= self.settings.disarm_preflight_s):
+                self.boards.motors_on = False
+                self._armed_at_s = None
+                out += [Out(m) for m in statustext(
+                    self.codec, mav.MAV_SEVERITY_NOTICE,
+                    "disarmed: no take-off within COM_DISARM_PRFLT")]
+        if self.program is Program.PRECLAND and self.boards.pad.mode is not PadAction.LAND \
+                and state is not NavState.LANDING:
+            out += self._stop_program("the pad landing mode was changed")
+        out += self._run_program(now_s)
+        out += [Out(m) for m in self.mission.tick(now_s)]
+        out += self._landing_targets()
+        view = None
+        for i, link in enumerate(self.links):
+            due = link.scheduler.due(now_s)
+            if not due:
+                continue
+            view = view or self.view()
+            for msg_id in due:
+                msg = telem.BUILDERS[msg_id](self.codec, view)
+                if msg is not None:
+                    out.append(Out(msg, i))
+        for src, seen in list(self.gcs.items()):
+            if now_s - seen > GCS_TIMEOUT_S:
+                del self.gcs[src]
+        return out
+
+
+def landing_target(codec: MavCodec, obs: PadObservation, yaw_rad: float) -> MavMessage:
+    """LANDING_TARGET from one pad detection.
+
+    The detector gives the pad's offset in the level, yaw-aligned body frame (forward, right;
+    roll and pitch removed) and the camera's height above it. ``angle_x``/``angle_y`` are the
+    target's angles in that frame as an image sees them (x right, y back: ``atan(right / h)``,
+    ``atan(-forward / h)``), ``distance`` the slant range; x, y, z are the pad's position
+    relative to the vehicle in MAV_FRAME_LOCAL_NED (north, east, down: the frame PX4's
+    precision landing takes positions in), turned by the estimate's yaw.
+    """
+    fwd, right, h = obs.dx_m, obs.dy_m, max(obs.height_m, 1e-3)
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    north, east = c * fwd - s * right, s * fwd + c * right
+    distance = math.sqrt(fwd * fwd + right * right + h * h)
+    return codec.mav.landing_target_encode(
+        int(obs.frame_time_s * 1e6), 0, mav.MAV_FRAME_LOCAL_NED, math.atan2(right, h),
+        math.atan2(-fwd, h), distance, 0.0, 0.0, north, east, h, [1.0, 0.0, 0.0, 0.0],
+        mav.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1)
+
+
+def _command_name(command: int) -> str:
+    entry = mav.enums["MAV_CMD"].get(command)
+    return entry.name.replace("MAV_CMD_", "") if entry is not None else f"command {command}"
+
+
+
+
+COMMANDS: dict[int, Callable[[MavlinkVehicle, Command], list[MavMessage] | None]] = {
+    mav.MAV_CMD_COMPONENT_ARM_DISARM: MavlinkVehicle._arm,
+    mav.MAV_CMD_NAV_TAKEOFF: MavlinkVehicle._takeoff,
+    mav.MAV_CMD_NAV_LAND: MavlinkVehicle._land,
+    mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: MavlinkVehicle._rtl,
+    mav.MAV_CMD_DO_REPOSITION: MavlinkVehicle._reposition,
+    mav.MAV_CMD_DO_CHANGE_SPEED: MavlinkVehicle._change_speed,
+    mav.MAV_CMD_DO_SET_MODE: MavlinkVehicle._set_mode,
+    mav.MAV_CMD_MISSION_START: MavlinkVehicle._mission_start,
+    mav.MAV_CMD_DO_SET_MISSION_CURRENT: MavlinkVehicle._set_current_cmd,
+    mav.MAV_CMD_SET_MESSAGE_INTERVAL: MavlinkVehicle._message_interval,
+    mav.MAV_CMD_GET_MESSAGE_INTERVAL: MavlinkVehicle._get_interval,
+    mav.MAV_CMD_REQUEST_MESSAGE: MavlinkVehicle._request_message,
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: MavlinkVehicle._capabilities,
+}
+"""The commands this vehicle flies (COMMAND_LONG or COMMAND_INT); any other is UNSUPPORTED."""
