@@ -296,6 +296,7 @@ def run_up(args: argparse.Namespace) -> int:
     parent = ParentWatch()
     status = 0
     try:
+        mavlink = up_mavlink_links(args)  # a bad URI or a taken port: nothing starts
         check_ports_free([
             ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
             ("the image server", "127.0.0.1", args.image_port, "--image-port"),
@@ -322,6 +323,7 @@ def run_up(args: argparse.Namespace) -> int:
                 "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
                 "--video-port", str(args.video_port), "--robot", args.robot,
                 *(["--calibration", str(calibration)] if calibration is not None else []),
+                *[f"--mavlink={uri}" for uri in mavlink],
             ),
             args.pilot_port,
         )
@@ -338,7 +340,8 @@ def run_up(args: argparse.Namespace) -> int:
         print(
             f"skeye up: open http://127.0.0.1:{args.ground_port}/?token={token}  "
             f"(simulator {args.sim_port}, "
-            f"images {args.image_port}, pilot {args.pilot_port}, video {args.video_port}); "
+            f"images {args.image_port}, pilot {args.pilot_port}, video {args.video_port}"
+            f"{'; MAVLink ' + ', '.join(mavlink) if mavlink else ''}); "
             "Ctrl-C stops everything",
             flush=True,
         )
@@ -363,6 +366,36 @@ def run_up(args: argparse.Namespace) -> int:
     return status
 
 
+DEFAULT_MAVLINK = ("udpout://127.0.0.1:14550", "udpout://127.0.0.1:14540")
+"""``skeye up``'s MAVLink links, as PX4 SITL's: to QGroundControl (14550) and to a MAVSDK or
+pymavlink script (14540), each listening there."""
+
+
+def up_mavlink_links(args: argparse.Namespace) -> list[str]:
+    """The pilot's ``--mavlink`` links (``--mavlink`` given: those; ``--no-mavlink``: none),
+    checked before anything starts.
+
+    Raises:
+        ConfigError: a bad URI or a listening port already taken.
+    """
+    from skeye.mavlink.transport import check_free
+
+    if args.no_mavlink:
+        return []
+    try:
+        import pymavlink  # noqa: F401  (the `mavlink` extra)
+    except ImportError:
+        if args.mavlink:
+            raise ConfigError("--mavlink needs pymavlink: pip install 'skeye[mavlink]'") from None
+        print("skeye up: MAVLink off (pymavlink is not installed: pip install "
+              "'skeye[mavlink]')", flush=True)
+        return []
+    links = list(args.mavlink or DEFAULT_MAVLINK)
+    for uri in links:
+        check_free(uri)
+    return links
+
+
 def _add_up(sub: Any) -> None:
     p = sub.add_parser(
         "up",
@@ -378,6 +411,12 @@ def _add_up(sub: Any) -> None:
     p.add_argument("--video-port", type=int, default=7001,
                    help="the pilot's video port (camera frames with its pad detection)")
     p.add_argument("--ground-port", type=int, default=8080)
+    mav = p.add_mutually_exclusive_group()
+    mav.add_argument("--mavlink", action="append", default=None, metavar="URI",
+                     help="the pilot's MAVLink links (repeatable; default: "
+                     + " and ".join(DEFAULT_MAVLINK) + ", as PX4 SITL sends to QGroundControl "
+                     "and MAVSDK; docs/protocols/mavlink.md)")
+    mav.add_argument("--no-mavlink", action="store_true", help="serve no MAVLink link")
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
     p.add_argument("--calibration", default="auto", metavar="auto|none|FILE",
                    help="the pilot's camera calibration: auto (default) calibrates a "

@@ -1,0 +1,133 @@
+"""Fixtures for the MAVLink tests: a skeye vehicle with its MAVLink endpoint on loopback, and
+pymavlink clients of it.
+
+The vehicle runs in this process on a lockstep simulator (``tests.control.conftest``), paced
+(``lockstep_rate``) so that a client's wall-clock reactions (MAVSDK's command timeouts, the
+ground station heartbeat) stay in step with sim time; its link is ``udpout://`` to a free port
+where the client listens, as ``skeye up`` sends to QGroundControl's 14550 and MAVSDK's 14540.
+"""
+
+from __future__ import annotations
+
+import re
+import socket
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pymavlink import mavutil
+
+from skeye.control.connection import connect
+from skeye.pilot.boards import BoardSettings
+from skeye.pilot.mavlink_server import MavlinkServer
+from skeye.pilot.mavlink_vehicle import Settings
+from skeye.pilot.server import PilotServer
+from skeye.pilot.sim_airframe import SimAirframe
+from tests.control.conftest import sim_running
+
+GCS = (255, 190)  # QGroundControl's system and component ids
+SMALL_CAMERA_ROBOT = "mavtest"
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def small_camera_robot(folder: Path) -> Path:
+    """A hummingbird with a 320x240 ideal camera at 10 frames/s (cheap to render)."""
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    text = re.sub(r'(?m)^name = "hummingbird"', f'name = "{SMALL_CAMERA_ROBOT}"', text, count=1)
+    text = re.sub(r"(?m)^width = 800$", "width = 320", text)
+    text = re.sub(r"(?m)^height = 600$", "height = 240", text)
+    text = re.sub(r"(?m)^rate_hz = 30$", "rate_hz = 10", text)
+    text = re.sub(r'(?m)^profile = "webcam"$', 'profile = "ideal"', text)
+    (folder / f"{SMALL_CAMERA_ROBOT}.toml").write_text(text, encoding="utf-8")
+    return folder
+
+
+@dataclass
+class MavVehicle:
+    """A pilot with its MAVLink endpoint, and where a client listens for it."""
+
+    port: int
+    pilot: PilotServer
+    robot: Any
+    mavlink: MavlinkServer
+    sim: Any
+
+    def client(self, source: tuple[int, int] = GCS) -> Any:
+        """A pymavlink connection on the port the vehicle sends to."""
+        conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
+                                          source_system=source[0], source_component=source[1])
+        return conn
+
+    def truth(self) -> tuple[float, float, float]:
+        reading = self.robot.ground_truth.latest
+        assert reading is not None
+        return tuple(reading.position_ned_m)
+
+
+@contextmanager
+def mav_vehicle(*, rate: float = 4.0, images: bool = False, robot_dir: Path | None = None,
+                estimator: str | None = None, uris: list[str] | None = None,
+                ) -> Iterator[MavVehicle]:
+    """A lockstep simulator, the pilot on it and its MAVLink endpoint (udpout to a free port)."""
+    with ExitStack() as stack:
+        handle = stack.enter_context(sim_running(
+            images=images, robot_dirs=(robot_dir,) if robot_dir else (), estimator=estimator))
+        sim = stack.enter_context(connect(handle.address, images=handle.images))
+        robot = sim.spawn(SMALL_CAMERA_ROBOT if robot_dir else "hummingbird", start="Pad1")
+        airframe = SimAirframe(sim, robot)
+        mc = robot.motion_config
+        settings = BoardSettings(max_speed_m_s=mc.max_speed_m_s,
+                                 default_speed_m_s=min(1.0, mc.max_speed_m_s),
+                                 max_climb_m_s=mc.max_climb_m_s)
+        vision = None
+        if images:
+            from skeye.pilot.cli import pad_vision_factory
+
+            vision = pad_vision_factory(sim, robot)
+        pilot = stack.enter_context(PilotServer(
+            airframe, port=0, settings=settings, lockstep=True, lockstep_rate=rate,
+            tick_s=1.0 / mc.control_rate_hz, vision=vision))
+        port = free_udp_port()
+        server = stack.enter_context(MavlinkServer(
+            pilot.boards, pilot.lock, uris or [f"udpout://127.0.0.1:{port}"],
+            settings=Settings(pad_vision=images)))
+        yield MavVehicle(port, pilot, robot, server, sim)
+
+
+def wait_for(conn: Any, kinds: str | list[str], pred: Callable[[Any], bool] = lambda m: True,
+             timeout_s: float = 60.0, heartbeat: bool = True) -> Any:
+    """The next message of ``kinds`` from the vehicle for which ``pred`` holds; sends the ground
+    station's heartbeat every second meanwhile (the vehicle's link-loss timer needs it).
+    ``timeout_s`` is a stuck guard only."""
+    deadline = time.monotonic() + timeout_s
+    next_hb = 0.0
+    while True:
+        now = time.monotonic()
+        if heartbeat and now >= next_hb:
+            conn.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS,
+                                    mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            next_hb = now + 1.0
+        assert now < deadline, f"no {kinds} as expected within {timeout_s} s"
+        msg = conn.recv_match(type=kinds, blocking=True, timeout=0.2)
+        if msg is not None and msg.get_srcSystem() == 1 and pred(msg):
+            return msg
+
+
+def command(conn: Any, cmd: int, *params: float, timeout_s: float = 20.0) -> tuple[int, str]:
+    """COMMAND_LONG to the vehicle; returns its COMMAND_ACK result and any STATUSTEXT after it."""
+    p = [*params, *([0.0] * (7 - len(params)))]
+    conn.mav.command_long_send(1, 1, cmd, 0, *p)
+    ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == cmd, timeout_s)
+    text = ""
+    if ack.result != mavutil.mavlink.MAV_RESULT_ACCEPTED:
+        text = wait_for(conn, "STATUSTEXT", timeout_s=timeout_s).text
+    return int(ack.result), text
