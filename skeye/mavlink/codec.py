@@ -38,21 +38,39 @@ class MavParser:
     """One peer's receive side: bytes in, messages (or ``BadFrame``) out; never raises."""
 
     def __init__(self) -> None:
-        self._mav = dialect.MAVLink(None, srcSystem=0, srcComponent=0)
-        self._mav.robust_parsing = True
+        self._reset()
         self.bad = 0  # bad frames seen
 
-    def feed(self, data: bytes) -> list[MavMessage | BadFrame]:
+    def _reset(self) -> None:
+        self._mav = dialect.MAVLink(None, srcSystem=0, srcComponent=0)
+        self._mav.robust_parsing = True
+
+    def feed(self, data: bytes, *, datagram: bool = False) -> list[MavMessage | BadFrame]:
+        """Messages in ``data``. ``datagram``: ``data`` is one UDP datagram, which holds whole
+        frames only: a frame left unfinished at its end is bad, and the next datagram starts
+        afresh (else a garbage length could swallow the next datagram's real frames)."""
+        out = self._feed(data)
+        if datagram and self._mav.buf_len() > 0:
+            self.bad += 1
+            out.append(BadFrame("a frame cut short at the datagram's end", self._mav.buf_len()))
+            self._reset()
+        return out
+
+    def _feed(self, data: bytes) -> list[MavMessage | BadFrame]:
         out: list[MavMessage | BadFrame] = []
         try:
             msgs = self._mav.parse_buffer(data) or []
         except Exception as exc:  # pymavlink raises a few plain errors even when robust
-            self._mav = dialect.MAVLink(None, srcSystem=0, srcComponent=0)
-            self._mav.robust_parsing = True
+            self._reset()
             self.bad += 1
             return [BadFrame(f"unreadable frame: {exc}", len(data))]
         for msg in msgs:
-            if msg.get_type() == "BAD_DATA":
+            if isinstance(msg, dialect.MAVLink_unknown):  # a frame of another dialect
+                self.bad += 1
+                msg_id = int(msg.get_type().rsplit("_", 1)[-1])  # "UNKNOWN_60000"
+                out.append(BadFrame(f"unknown MAVLink message ID {msg_id}",
+                                    len(msg.get_msgbuf()), msg_id))
+            elif msg.get_type() == "BAD_DATA":
                 self.bad += 1
                 reason = str(getattr(msg, "reason", "bad data"))
                 out.append(BadFrame(reason, len(msg.get_msgbuf()), _msg_id_in(reason)))

@@ -35,6 +35,7 @@ TCP_CLIENTS = 4
 
 class MavTransport(Protocol):
     name: str
+    datagram: bool  # each poll() chunk is one datagram of whole frames (UDP)
 
     def fileobjs(self) -> list[Any]: ...
 
@@ -64,6 +65,7 @@ class UdpTransport:
         self.max_peers = max_peers
         self._peers: list[Peer] = [remote] if remote is not None else []
         self.refused_peers = 0
+        self.datagram = True
         self.port = self.sock.getsockname()[1]
         self.name = (f"udpout://{remote[0]}:{remote[1]}" if remote is not None
                      else f"udp://{host}:{self.port}")
@@ -120,6 +122,7 @@ class TcpServerTransport:
         self.max_clients = max_clients
         self.clients: list[socket.socket] = []
         self.refused_clients = 0
+        self.datagram = False
         self.name = f"tcp://{host}:{self.port}"
 
     def fileobjs(self) -> list[Any]:
@@ -189,6 +192,7 @@ class TcpClientTransport:
         self.sock.setblocking(False)
         self.name = f"tcpout://{host}:{port}"
         self.closed = False
+        self.datagram = False
 
     def fileobjs(self) -> list[Any]:
         return [] if self.closed else [self.sock]
@@ -237,6 +241,7 @@ class SerialTransport:
         except (serial.SerialException, OSError, ValueError) as exc:
             raise ConfigError(f"cannot open serial {device} at {baud} baud: {exc}") from None
         self.name = f"serial://{device}?baud={baud}"
+        self.datagram = False
 
     def fileobjs(self) -> list[Any]:
         return [self.port]

@@ -145,7 +145,7 @@ class MavlinkServer:
                     for gone in [p for p in parsers if p not in live]:
                         del parsers[gone]
                 parser = parsers[peer] = MavParser()
-            for msg in parser.feed(data):
+            for msg in parser.feed(data, datagram=transport.datagram):
                 self.received += 1
                 try:
                     with self.lock:

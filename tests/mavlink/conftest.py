@@ -122,6 +122,20 @@ def wait_for(conn: Any, kinds: str | list[str], pred: Callable[[Any], bool] = la
             return msg
 
 
+def statustext(conn: Any, timeout_s: float = 20.0) -> str:
+    """The next STATUSTEXT's whole text (MAVLink 2 sends a long one in 50-byte chunks)."""
+    first = wait_for(conn, "STATUSTEXT", timeout_s=timeout_s)
+    text = first.text
+    if first.id == 0:
+        return str(text)
+    while len(text.encode()) % 50 == 0:
+        more = wait_for(conn, "STATUSTEXT", lambda m: m.id == first.id, timeout_s)
+        text += more.text
+        if len(more.text.encode()) < 50:
+            break
+    return str(text)
+
+
 def command(conn: Any, cmd: int, *params: float, timeout_s: float = 20.0) -> tuple[int, str]:
     """COMMAND_LONG to the vehicle; returns its COMMAND_ACK result and any STATUSTEXT after it."""
     p = [*params, *([0.0] * (7 - len(params)))]
@@ -129,5 +143,5 @@ def command(conn: Any, cmd: int, *params: float, timeout_s: float = 20.0) -> tup
     ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == cmd, timeout_s)
     text = ""
     if ack.result != mavutil.mavlink.MAV_RESULT_ACCEPTED:
-        text = wait_for(conn, "STATUSTEXT", timeout_s=timeout_s).text
+        text = statustext(conn, timeout_s)
     return int(ack.result), text

@@ -1,0 +1,202 @@
+"""Bad input over MAVLink: every malformed or unknown message, out-of-range command, absurd
+mission, second ground station and flood gets its COMMAND_ACK / MISSION_ACK / STATUSTEXT, and
+the vehicle keeps flying (hovering where it was, answering the next command)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as dialect
+
+from tests.mavlink.conftest import (
+    GCS,
+    MavVehicle,
+    command,
+    free_udp_port,
+    mav_vehicle,
+    statustext,
+    wait_for,
+)
+
+M = mavutil.mavlink
+
+
+def _airborne(v: MavVehicle):
+    conn = v.client()
+    wait_for(conn, "GLOBAL_POSITION_INT")
+    assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
+    assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
+    wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
+             and m.system_status == M.MAV_STATE_ACTIVE)
+    return conn
+
+
+def _where(conn) -> tuple[float, float, float]:
+    """The vehicle's own position estimate (LOCAL_POSITION_NED), which its hover holds."""
+    msg = wait_for(conn, "LOCAL_POSITION_NED")
+    return (msg.x, msg.y, msg.z)
+
+
+def _still_hovering(v: MavVehicle, conn, where: tuple[float, float, float]) -> None:
+    """The vehicle holds where it was (its estimate within 0.2 m) and answers a command."""
+    hb = wait_for(conn, "HEARTBEAT", lambda m: True)
+    assert mavutil.mode_string_v10(hb) == "LOITER"
+    assert hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    assert math.dist(_where(conn), where) < 0.2
+    assert command(conn, M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION)[0] == 0
+    assert v.mavlink.errors == 0
+
+
+@pytest.fixture
+def flying() -> Iterator[tuple[MavVehicle, object]]:
+    with mav_vehicle() as v:
+        yield v, _airborne(v)
+
+
+def test_malformed_and_unknown_messages_are_answered_and_change_nothing(flying):
+    v, conn = flying
+    where = _where(conn)
+    send = conn.write  # raw bytes from the client's own socket: the answers come back there
+    unknown = bytes([0xFD, 2, 0, 0, 7, 255, 190]) + (60000).to_bytes(3, "little") + b"ab\0\0"
+    send(unknown)
+    text = statustext(conn)
+    assert "unknown message id 60000" in text
+    mav = dialect.MAVLink(None, 255, 190)
+    frame = bytearray(mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav))
+    frame[-1] ^= 0xFF
+    time.sleep(2.1)  # one notice per kind every 2 s
+    send(bytes(frame))
+    assert "bad MAVLink frame" in statustext(conn)
+    send(b"\xfd" + bytes(range(256)) * 3)
+    _still_hovering(v, conn, where)
+    assert v.mavlink.vehicle.bad_frames >= 3
+
+
+def test_commands_out_of_range_are_refused_with_their_reason(flying):
+    v, conn = flying
+    where = _where(conn)
+    result, text = command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 7)
+    assert result == M.MAV_RESULT_DENIED and "param1 must be 0 or 1" in text
+    result, text = command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196)
+    assert result == M.MAV_RESULT_DENIED and "never stops its motors in the air" in text
+    result, text = command(conn, M.MAV_CMD_DO_CHANGE_SPEED, 1, 50.0)
+    assert result == M.MAV_RESULT_DENIED and "at most 3 m/s" in text
+    result, text = command(conn, 31999)
+    assert result == M.MAV_RESULT_UNSUPPORTED and "not supported" in text
+    result, text = command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL, 9999, 1000)
+    assert result == M.MAV_RESULT_DENIED and "not streamed" in text
+    result, text = command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL,
+                           M.MAVLINK_MSG_ID_ATTITUDE, 10)  # 100 kHz
+    assert result == M.MAV_RESULT_DENIED and "out of range" in text
+    result, text = command(conn, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 5)
+    assert result == M.MAV_RESULT_DENIED and "ACRO" in text
+    result, text = command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)
+    assert result == M.MAV_RESULT_TEMPORARILY_REJECTED and "take off" in text
+    # 2 km north: outside the flight envelope's 500 m radius, refused by the boards themselves.
+    pos = wait_for(conn, "GLOBAL_POSITION_INT")
+    conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION,
+                              0, 0, -1, 1, 0, math.nan, pos.lat + 180_000, pos.lon, 2.0)
+    ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+    assert ack.result == M.MAV_RESULT_DENIED
+    assert "outside the flight envelope" in statustext(conn)
+    # Parameters: out of range and unknown names are refused, the value stays.
+    conn.mav.param_set_send(1, 1, b"MPC_XY_VEL_MAX", 99.0, M.MAV_PARAM_TYPE_REAL32)
+    echo = wait_for(conn, "PARAM_VALUE", lambda m: m.param_id == "MPC_XY_VEL_MAX")
+    assert echo.param_value == pytest.approx(3.0)
+    assert "must be 0.1..3" in statustext(conn)
+    conn.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, M.MAV_PARAM_TYPE_REAL32)
+    assert "no parameter 'NO_SUCH_PARAM'" in statustext(conn)
+    assert v.mavlink.vehicle.acks.get(M.MAV_RESULT_ACCEPTED, 0) >= 2
+    _still_hovering(v, conn, where)
+
+
+def _mission_ack(conn, item: dict, count: int = 1) -> tuple[int, str]:
+    conn.mav.mission_count_send(1, 1, count, M.MAV_MISSION_TYPE_MISSION)
+    msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"])
+    if msg.get_type() == "MISSION_REQUEST_INT":
+        fields = dict(seq=0, frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                      command=M.MAV_CMD_NAV_WAYPOINT, current=1, autocontinue=1, param1=0.0,
+                      param2=0.5, param3=0.0, param4=math.nan, x=0, y=0, z=2.0)
+        fields.update(item)
+        conn.mav.mission_item_int_send(1, 1, *fields.values(), M.MAV_MISSION_TYPE_MISSION)
+        msg = wait_for(conn, "MISSION_ACK")
+    text = "" if msg.type == 0 else statustext(conn)
+    return int(msg.type), text
+
+
+def test_a_mission_with_absurd_items_is_refused_and_the_old_one_kept(flying):
+    v, conn = flying
+    where = _where(conn)
+    pos = wait_for(conn, "GLOBAL_POSITION_INT")
+    good = dict(x=pos.lat + 100, y=pos.lon, z=2.0)
+    assert _mission_ack(conn, good)[0] == M.MAV_MISSION_ACCEPTED
+    cases = [
+        (dict(x=pos.lat, y=pos.lon, z=math.nan), M.MAV_MISSION_INVALID_PARAM7, "not a number"),
+        (dict(x=2_000_000_000, y=pos.lon), M.MAV_MISSION_INVALID_PARAM5_X, "latitude"),
+        (dict(x=pos.lat, y=pos.lon, z=5000.0), M.MAV_MISSION_INVALID_PARAM7, "ceiling"),
+        (dict(x=pos.lat + 90_000, y=pos.lon), M.MAV_MISSION_INVALID_PARAM5_X, "radius"),
+        (dict(command=M.MAV_CMD_DO_SET_SERVO), M.MAV_MISSION_UNSUPPORTED, "not supported"),
+        (dict(frame=M.MAV_FRAME_LOCAL_NED, x=1, y=1), M.MAV_MISSION_UNSUPPORTED_FRAME, "frame"),
+    ]
+    for item, code, words in cases:
+        time.sleep(0.05)
+        result, text = _mission_ack(conn, item)
+        assert (result, words in text) == (code, True), (item, result, text)
+    result, text = _mission_ack(conn, {}, count=60_000)
+    assert result == M.MAV_MISSION_NO_SPACE and "at most 500" in text
+    conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
+    assert wait_for(conn, "MISSION_COUNT").count == 1
+    conn.mav.mission_request_int_send(1, 1, 0, M.MAV_MISSION_TYPE_MISSION)
+    kept = wait_for(conn, "MISSION_ITEM_INT")
+    assert (kept.x, kept.y) == (good["x"], good["y"])
+    _still_hovering(v, conn, where)
+
+
+def test_a_second_ground_station_is_served_and_both_are_told():
+    port = free_udp_port()
+    with mav_vehicle(uris=[f"udp://127.0.0.1:{port}"]) as v:
+        first = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                           source_system=GCS[0], source_component=GCS[1])
+        wait_for(first, "HEARTBEAT")
+        second = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=254,
+                                            source_component=190)
+        second.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        for conn in (first, second):
+            note = wait_for(conn, "STATUSTEXT", lambda m: "joined" in m.text)
+            assert "254/190 joined; 2 connected" in note.text
+        assert command(second, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
+        assert command(first, M.MAV_CMD_COMPONENT_ARM_DISARM, 0)[0] == 0
+        hb = wait_for(second, "HEARTBEAT")
+        assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED  # the last command won
+        assert len(v.mavlink.transports[0].peers) == 2
+
+
+def test_a_flood_of_10000_messages_leaves_the_vehicle_flying(flying):
+    v, conn = flying
+    where = _where(conn)
+    mav = dialect.MAVLink(None, 255, 190)
+    junk = [
+        mav.command_long_encode(1, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav),
+        mav.param_request_read_encode(1, 1, b"NOPE", -1).pack(mav),
+        mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav),
+        b"\xfd\x09garbage!garbage!",
+        mav.mission_item_int_encode(1, 1, 7, 6, 16, 0, 1, 0, 0, 0, 0, 1, 1, 1, 0).pack(mav),
+    ]
+    before = v.mavlink.received
+    deadline = time.monotonic() + 300  # a stuck guard: the flood takes seconds
+    for k in range(10_000):
+        conn.write(junk[k % len(junk)])
+        # As fast as the vehicle reads: a burst beyond the kernel's socket buffer would only
+        # be dropped there (UDP), never reaching the vehicle.
+        while k - (v.mavlink.received - before) > 100:
+            assert time.monotonic() < deadline, "the vehicle stopped reading"
+            time.sleep(0.001)
+    while v.mavlink.received - before < 10_000:
+        assert time.monotonic() < deadline, "the vehicle stopped reading"
+        time.sleep(0.01)
+    _still_hovering(v, conn, where)
+    assert v.mavlink.vehicle.bad_frames >= 2000  # the garbage was seen as such
