@@ -121,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye pilot: --mavlink: {exc}", flush=True)
         return 2
+    if args.airframe is not None:
+        return run_companion(args, envelope, envelope_source)
     lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
@@ -216,6 +218,62 @@ def run(args: argparse.Namespace) -> int:
         if lost or isinstance(exc, LinkClosed):
             return EXIT_LOST_SIMULATOR
         return 1
+    return 0
+
+
+# -- --airframe mavlink://: the pilot as a flight controller's companion computer -------------
+# (Issue 29 turns the airframe into a URI registry; this wiring registers the mavlink:// scheme
+# by hand until then: skeye.pilot.mavlink_airframe.open_mavlink_airframe is its factory.)
+
+
+def run_companion(args: argparse.Namespace, envelope: FlightEnvelope, source: str) -> int:
+    """``skeye pilot --airframe mavlink://...``: fly a MAVLink flight controller instead of a
+    simulated robot; ground control, failsafes and the envelope as with any airframe."""
+    from skeye.pilot.mavlink_airframe import open_mavlink_airframe
+
+    if args.images is not None or args.video_port is not None:
+        print("skeye pilot: --airframe mavlink:// flies without the pad vision here: its camera "
+              "comes from the simulator's --images only for a simulated robot (camera sources "
+              "by URI are the onboard install's)", flush=True)
+        return 2
+    settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout,
+                             envelope=envelope)
+    try:
+        if not args.serial:
+            from skeye.processes import check_ports_free
+
+            check_ports_free([("the pilot", args.host, args.port, "--port")])
+        airframe = open_mavlink_airframe(args.airframe, wait_s=args.timeout)
+    except SkeyeError as exc:
+        print(f"skeye pilot: --airframe: {exc}", flush=True)
+        return 4 if isinstance(exc, LinkClosed) else 2
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        server = PilotServer(
+            airframe, host=args.host, port=None if args.serial else args.port,
+            serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
+            settings=settings, tick_s=args.tick)
+        server.boards.pad.add_listener(airframe.landing_target)
+        mavlink = open_mavlink(server, args)
+        with server, mavlink or nullcontext():
+            print(f"skeye pilot: flight controller on {airframe.transport.name}; ground control "
+                  f"on {server.address}; flight envelope: {envelope.describe()} ({source})"
+                  f"{'; MAVLink on ' + ', '.join(mavlink.addresses) if mavlink else ''}",
+                  flush=True)
+            while not stop.wait(0.2):
+                if server.loop_error is not None:
+                    raise server.loop_error
+                airframe.check()
+                if mavlink is not None:
+                    mavlink.check()
+        print("skeye pilot: stopping", flush=True)
+    except SkeyeError as exc:
+        print(f"skeye pilot: {exc}", flush=True)
+        return 1
+    finally:
+        airframe.close()
     return 0
 
 
@@ -429,6 +487,15 @@ def register(subparsers: Any) -> None:
                    help="policy calls per sim second (the environments' control_rate_hz; 20)")
     p.add_argument("--policy-image-size", default="80x60", metavar="WxH",
                    help="the image observation's size (the environments' image_size; 80x60)")
+    p.add_argument(
+        "--airframe",
+        default=None,
+        metavar="URI",
+        help="fly a MAVLink flight controller instead of a simulated robot (the pilot as its "
+        "companion computer, offboard control): mavlink://serial/dev/ttyACM0?baud=921600, "
+        "mavlink://udp/127.0.0.1:14540 (it sends there), mavlink://udpout/HOST:PORT, "
+        "mavlink://tcp/HOST:PORT; --sim is then not used",
+    )
     p.add_argument(
         "--mavlink",
         action="append",

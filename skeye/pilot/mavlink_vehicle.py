@@ -174,6 +174,7 @@ class MavlinkVehicle:
         self._applied_target: tuple[float, float, float] | None = None
         self._targets: deque[PadObservation] = deque(maxlen=64)
         self.landing_targets = 0
+        self.landing_targets_in = 0
         self._now_s = now_s
 
     # -- links ---------------------------------------------------------------------------
@@ -317,6 +318,9 @@ class MavlinkVehicle:
             if int(msg.target) in (0, self.codec.system_id) and self.program is Program.MANUAL:
                 out += reply(self._manual(msg, now_s))
             return out
+        if kind == "LANDING_TARGET":
+            self.landing_targets_in += 1  # a companion's detections (this vehicle's own
+            return out  # precision landing flies on its own pad vision)
         if kind == "TIMESYNC":
             if msg.tc1 == 0:
                 out.append(Out(self.codec.mav.timesync_encode(int(now_s * 1e9), msg.ts1),
