@@ -324,6 +324,7 @@ def run_up(args: argparse.Namespace) -> int:
                 "--video-port", str(args.video_port), "--robot", args.robot,
                 *(["--calibration", str(calibration)] if calibration is not None else []),
                 *[f"--mavlink={uri}" for uri in mavlink],
+                *([f"--rtp-video={args.rtp_video}"] if args.rtp_video else []),
             ),
             args.pilot_port,
         )
@@ -417,6 +418,9 @@ def _add_up(sub: Any) -> None:
                      + " and ".join(DEFAULT_MAVLINK) + ", as PX4 SITL sends to QGroundControl "
                      "and MAVSDK; docs/protocols/mavlink.md)")
     mav.add_argument("--no-mavlink", action="store_true", help="serve no MAVLink link")
+    p.add_argument("--rtp-video", default=None, metavar="udp://HOST:PORT",
+                   help="the pilot also sends its camera as H.264 RTP there (QGroundControl: "
+                   "udp://127.0.0.1:5600)")
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
     p.add_argument("--calibration", default="auto", metavar="auto|none|FILE",
                    help="the pilot's camera calibration: auto (default) calibrates a "

@@ -113,6 +113,21 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
+    if args.rtp_video is not None:
+        from skeye.pilot.rtp_video import parse_rtp_uri
+
+        try:
+            parse_rtp_uri(args.rtp_video)
+            import av  # noqa: F401  (the `mavlink` extra)
+        except ImportError:
+            print("skeye pilot: --rtp-video needs PyAV: pip install 'skeye[mavlink]'", flush=True)
+            return 2
+        except ConfigError as exc:
+            print(f"skeye pilot: --rtp-video: {exc}", flush=True)
+            return 2
+        if args.images is None:
+            print("skeye pilot: --rtp-video sends the camera: it needs --images", flush=True)
+            return 2
     try:
         for uri in args.mavlink or ():
             from skeye.mavlink.transport import check_free
@@ -195,7 +210,8 @@ def run(args: argparse.Namespace) -> int:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, lambda *_: stop.set())
             mavlink = open_mavlink(server, args)
-            with server, mavlink or nullcontext():
+            rtp = open_rtp_video(server, video, args)
+            with server, mavlink or nullcontext(), rtp or nullcontext():
                 mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
                 print(
                     f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
@@ -210,6 +226,8 @@ def run(args: argparse.Namespace) -> int:
                         raise server.loop_error
                     if mavlink is not None:
                         mavlink.check()  # its thread died: WorkerFailed names the cause
+                    if rtp is not None:
+                        rtp.check()
                     if video is not None:
                         video.check()  # its thread died: WorkerFailed names the cause
             print("skeye pilot: stopping", flush=True)
@@ -287,6 +305,26 @@ def open_mavlink(server: PilotServer, args: argparse.Namespace) -> Any:
 
     return MavlinkServer(server.boards, server.lock, list(args.mavlink),
                          settings=Settings(pad_vision=args.images is not None))
+
+
+def open_rtp_video(server: PilotServer, video: Any, args: argparse.Namespace) -> Any:
+    """``--rtp-video udp://HOST:PORT``: the vision's frames with their detections as H.264
+    over RTP (QGroundControl's UDP 5600), beside the video port (None without)."""
+    if not args.rtp_video:
+        return None
+    from skeye.pilot.rtp_video import RtpVideo
+
+    rtp = RtpVideo(args.rtp_video, max_fps=args.rtp_fps)
+    sinks = [rtp.publish] + ([video.publish] if video is not None else [])
+
+    def publish(frame: Any) -> None:  # neither sink waits (both swap a newest-frame slot)
+        for sink in sinks:
+            sink(frame)
+
+    if server.vision is None:
+        raise ConfigError("--rtp-video sends the camera: it needs --images")
+    server.vision.attach_video(publish)
+    return rtp
 
 
 def vision_latency_s(text: str) -> float | None:
@@ -506,6 +544,15 @@ def register(subparsers: Any) -> None:
         "MAVSDK script, udp://127.0.0.1:14560 listens, tcp://127.0.0.1:5760 serves TCP, "
         "serial:///dev/ttyUSB0?baud=57600 a radio (docs/protocols/mavlink.md)",
     )
+    p.add_argument(
+        "--rtp-video",
+        default=None,
+        metavar="udp://HOST:PORT",
+        help="also send the camera with the pad detection drawn on it as H.264 over RTP "
+        "(QGroundControl's UDP video on udp://127.0.0.1:5600; needs --images and PyAV)",
+    )
+    p.add_argument("--rtp-fps", type=float, default=10.0,
+                   help="most frames per second of the RTP video (default 10)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")

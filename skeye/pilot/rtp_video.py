@@ -1,0 +1,189 @@
+"""The pilot's camera as H.264 over RTP on UDP, for MAVLink ground stations (QGroundControl's
+UDP 5600 convention).
+
+How this works: :class:`RtpVideo` takes the frames the pad vision looked at
+(:meth:`publish`, from the vision thread: it only swaps the newest-frame slot, never waits), and
+its own worker thread (``pilot-rtp-video``) draws the detection over each frame (the pad centre,
+the ring ellipses, the height), encodes it with FFmpeg's libx264 through PyAV (``ultrafast``,
+``zerolatency``: no B-frames, a key frame every second) and sends it as RTP (payload type 96,
+RFC 6184 packetisation by FFmpeg's RTP muxer) to ``udp://HOST:PORT``. At most ``max_fps``
+frames a second are encoded; a frame that comes while one is being encoded replaces the older.
+QGroundControl shows it with its video source set to "UDP h.264 Video Stream" on port 5600;
+other players need the stream described by :meth:`sdp` (docs/protocols/mavlink.md). The
+encoder opens on the first frame (the camera's size). ``close`` is idempotent.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from fractions import Fraction
+from typing import Any
+from urllib.parse import urlsplit
+
+import cv2
+import numpy as np
+
+from skeye.errors import ConfigError
+from skeye.pilot.video_server import CameraFrame
+from skeye.workers import Worker
+
+log = logging.getLogger(__name__)
+
+PAYLOAD_TYPE = 96
+DEFAULT_RTP_FPS = 10.0
+DEFAULT_BITRATE = 1_000_000  # bit/s
+GREEN = (0, 200, 0)
+RED = (0, 0, 230)
+
+
+def parse_rtp_uri(uri: str) -> tuple[str, int]:
+    """``udp://HOST:PORT`` -> (host, port).
+
+    Raises:
+        ConfigError: another scheme, or no port.
+    """
+    parts = urlsplit(uri)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme != "udp" or not parts.hostname or port is None:
+        raise ConfigError(f"{uri}: the RTP video goes to udp://HOST:PORT, e.g. "
+                          "udp://127.0.0.1:5600")
+    return parts.hostname, port
+
+
+def overlay(frame: CameraFrame) -> np.ndarray:
+    """The frame with its detection drawn on it (a copy)."""
+    img = np.ascontiguousarray(frame.bgr).copy()
+    det = frame.detection
+    for ring in det.ellipses:
+        (cx, cy), (a, b) = ring.center_px, ring.semi_axes_px
+        cv2.ellipse(img, (round(cx), round(cy)), (max(1, round(a)), max(1, round(b))),
+                    math.degrees(ring.angle_rad), 0, 360, GREEN, 1, cv2.LINE_AA)
+    if det.found and det.center_px is not None:
+        cx, cy = (round(v) for v in det.center_px)
+        cv2.drawMarker(img, (cx, cy), RED, cv2.MARKER_CROSS, 14, 2)
+    text = (f"pad {det.height_m:.2f} m" if det.found and det.height_m is not None
+            else "no pad")
+    cv2.putText(img, f"{text}  t={frame.time_s:.1f}s", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                GREEN if det.found else RED, 1, cv2.LINE_AA)
+    return img
+
+
+class RtpVideo:
+    """Encode published frames as H.264 and send them as RTP to one UDP address."""
+
+    def __init__(self, uri: str, *, max_fps: float = DEFAULT_RTP_FPS,
+                 bitrate: int = DEFAULT_BITRATE) -> None:
+        import av  # the `mavlink` extra (PyAV: FFmpeg with libx264)
+
+        if "libx264" not in av.codecs_available:
+            raise ConfigError("PyAV has no libx264 encoder here: no H.264 RTP video")
+        if not 0.1 <= max_fps <= 60:
+            raise ConfigError(f"RTP video frame rate must be 0.1..60 frames/s, got {max_fps:g}")
+        self.host, self.port = parse_rtp_uri(uri)
+        self.address = f"udp://{self.host}:{self.port}"
+        self.max_fps = max_fps
+        self.bitrate = bitrate
+        self.frames_sent = 0
+        self.packets_sent = 0
+        self.size: tuple[int, int] | None = None
+        self._slot: CameraFrame | None = None
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._worker: Worker | None = None
+
+    def publish(self, frame: CameraFrame) -> None:
+        """Offer a frame (the newest wins; never blocks)."""
+        with self._cond:
+            self._slot = frame
+            self._cond.notify()
+
+    def start(self) -> RtpVideo:
+        if self._worker is None:
+            self._worker = Worker(self._run, "pilot-rtp-video").start()
+        return self
+
+    def check(self) -> None:
+        if self._worker is not None:
+            self._worker.check()
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        if self._worker is not None:
+            self._worker.join(timeout_s)
+
+    def __enter__(self) -> RtpVideo:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def sdp(self) -> str:
+        """The session description a player needs for this stream (QGroundControl does not)."""
+        return (f"v=0\r\no=- 0 0 IN IP4 {self.host}\r\ns=skeye pilot camera\r\n"
+                f"c=IN IP4 {self.host}\r\nt=0 0\r\nm=video {self.port} RTP/AVP {PAYLOAD_TYPE}\r\n"
+                f"a=rtpmap:{PAYLOAD_TYPE} H264/90000\r\n"
+                f"a=fmtp:{PAYLOAD_TYPE} packetization-mode=1\r\n")
+
+    def _open(self, width: int, height: int) -> tuple[Any, Any]:
+        import av
+
+        container = av.open(f"rtp://{self.host}:{self.port}?pkt_size=1200", mode="w",
+                            format="rtp")
+        stream = container.add_stream("libx264", rate=Fraction(round(self.max_fps * 1000), 1000))
+        stream.width, stream.height = width, height
+        stream.pix_fmt = "yuv420p"
+        stream.bit_rate = self.bitrate
+        stream.options = {"preset": "ultrafast", "tune": "zerolatency",
+                          "g": str(max(1, round(self.max_fps))), "bf": "0"}
+        stream.codec_context.time_base = Fraction(1, 90_000)
+        return container, stream
+
+    def _run(self) -> None:
+        import av
+
+        container: Any = None
+        stream: Any = None
+        last_s = -math.inf
+        start_s = time.monotonic()
+        try:
+            while not self._stop.is_set():
+                with self._cond:
+                    self._cond.wait_for(lambda: self._slot is not None or self._stop.is_set(),
+                                        0.5)
+                    frame, self._slot = self._slot, None
+                if frame is None or self._stop.is_set():
+                    continue
+                wait = last_s + 1.0 / self.max_fps - time.monotonic()
+                if wait > 0:
+                    self._stop.wait(wait)
+                    with self._cond:  # a newer frame may have come meanwhile
+                        frame = self._slot or frame
+                        self._slot = None
+                last_s = time.monotonic()
+                img = overlay(frame)
+                height, width = img.shape[:2]
+                width, height = width - width % 2, height - height % 2  # 4:2:0 needs even sizes
+                if container is None:
+                    container, stream = self._open(width, height)
+                    self.size = (width, height)
+                picture = av.VideoFrame.from_ndarray(img[:height, :width], format="bgr24")
+                picture.pts = round((last_s - start_s) * 90_000)
+                picture.time_base = Fraction(1, 90_000)
+                for packet in stream.encode(picture):
+                    container.mux(packet)
+                    self.packets_sent += 1
+                self.frames_sent += 1
+        finally:
+            if container is not None:
+                try:
+                    container.close()
+                except Exception as exc:  # closing a UDP sender: nothing to lose
+                    log.debug("RTP video close: %s", exc)

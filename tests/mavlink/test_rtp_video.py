@@ -1,0 +1,61 @@
+"""The pilot's camera as H.264 over RTP (QGroundControl's UDP 5600 convention), decoded by a
+third-party decoder (FFmpeg, through PyAV) from the session description the module gives."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+av = pytest.importorskip("av")
+
+from skeye.errors import ConfigError  # noqa: E402
+from skeye.pilot.rtp_video import RtpVideo  # noqa: E402
+from skeye.pilot.video_server import CameraFrame  # noqa: E402
+from skeye.wire.video import Detection  # noqa: E402
+from tests.mavlink.conftest import free_udp_port  # noqa: E402
+
+
+def test_ffmpeg_decodes_the_stream_with_the_detection_drawn(tmp_path: Path):
+    video = RtpVideo(f"udp://127.0.0.1:{free_udp_port()}", max_fps=10.0).start()
+    sdp = tmp_path / "skeye.sdp"
+    sdp.write_text(video.sdp())
+    frames: list[np.ndarray] = []
+    opened = threading.Event()
+
+    def play() -> None:
+        player = av.open(str(sdp), format="sdp", timeout=10,
+                         options={"protocol_whitelist": "file,udp,rtp"})
+        opened.set()
+        for frame in player.decode(video=0):
+            frames.append(frame.to_ndarray(format="bgr24"))
+            if len(frames) >= 5:
+                break
+        player.close()
+
+    player = threading.Thread(target=play, daemon=True)
+    player.start()
+    assert opened.wait(30)
+    found = Detection(True, (160.0, 120.0), 1.5, (0.0, 0.0), (0.0, 0.0))
+    deadline = time.monotonic() + 60  # a stuck guard: 5 frames take about a second
+    k = 0
+    while len(frames) < 5 and time.monotonic() < deadline:
+        grey = np.full((240, 320, 3), 90, np.uint8)
+        video.publish(CameraFrame(k, k * 0.1, grey, found, 3.0))
+        k += 1
+        time.sleep(0.05)
+    player.join(10)
+    video.close()
+    assert len(frames) >= 5 and frames[-1].shape == (240, 320, 3)
+    b, g, r = (int(c) for c in frames[-1][120, 160])
+    assert r > 150 and g < 80 and b < 80  # the red cross on the pad's centre
+    assert abs(int(frames[-1][200, 40].mean()) - 90) < 10  # the picture itself
+    assert video.frames_sent >= 5
+
+
+def test_only_udp_uris_are_taken():
+    with pytest.raises(ConfigError, match="udp://HOST:PORT"):
+        RtpVideo("tcp://127.0.0.1:5600")
