@@ -10,7 +10,7 @@ SET_POSITION_TARGET_LOCAL_NED (velocity) in OFFBOARD mode. Command-to-effect lat
 wall time from sending the command to the first telemetry (NAV_STATUS streamed every 10 ms;
 LOCAL_POSITION_NED at 100 Hz) whose velocity is 0.1 m/s in the commanded direction: the
 command's path, the pilot, the simulator and the vehicle's own acceleration, the same on both
-links. Then the telemetry each link delivers per second.
+links. Each trial starts from rest (below 3 cm/s). Then the telemetry each link delivers per second.
 
 ``pad``: pad hold (PAD_MODE HOLD started 0.6 m off the pad at 1.5 m; the first time within
 10 cm, the largest offset 10-20 s later) and pad landing (PAD_MODE LAND from 0.5 m off at 2 m;
@@ -133,6 +133,12 @@ def bench_link(trials: int) -> None:
                                                      [f"udpout://127.0.0.1:{port}"]))
         mav = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255,
                                          source_component=190)
+        def drain() -> None:
+            # Telemetry that arrived while this script did something else: a full socket
+            # buffer would drop the answer to the next command.
+            while mav.recv_match(blocking=False) is not None:
+                pass
+
         stop = threading.Event()
         threading.Thread(target=heartbeat_loop, args=(mav, stop), daemon=True).start()
         stack.callback(stop.set)
@@ -161,10 +167,6 @@ def bench_link(trials: int) -> None:
                                                        velocity_mask, 0, 0, 0, vn, 0, 0, 0, 0,
                                                        0, 0, 0)
 
-        def drain() -> None:
-            while mav.recv_match(blocking=False) is not None:
-                pass  # telemetry that arrived before the command
-
         def mavlink_trial(sign: float) -> float:
             drain()
             t0 = time.perf_counter()
@@ -175,12 +177,19 @@ def bench_link(trials: int) -> None:
                     return time.perf_counter() - t0
 
         def settle() -> None:
-            time.sleep(1.2)  # the 0.6 s move and the stop
+            """Until the vehicle is still (below 3 cm/s): each trial starts from a hover."""
+            time.sleep(0.6)  # the move
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline:
+                nav = vehicle.wait_for(PD.NAV_STATUS, timeout_s=10)
+                if math.hypot(nav.vx, nav.vy) < 30:  # mm/s
+                    return
 
         asctec: list[float] = []
         for k in range(trials):
             asctec.append(asctec_trial(1.0 if k % 2 == 0 else -1.0))
             settle()
+        drain()
         setpoint(0.0)
         main, sub = 6, 0
         mav.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0,
@@ -193,16 +202,19 @@ def bench_link(trials: int) -> None:
             while time.monotonic() < end:  # offboard setpoints keep coming, as a script sends
                 setpoint(0.5 * (1.0 if k % 2 == 0 else -1.0))
                 time.sleep(0.05)
-            setpoint(0.0)
-            for _ in range(12):
+            deadline = time.monotonic() + 20  # until still (below 3 cm/s), as settle()
+            while time.monotonic() < deadline:
                 setpoint(0.0)
-                time.sleep(0.05)
+                msg = mav_wait(mav, "LOCAL_POSITION_NED")
+                if math.hypot(msg.vx, msg.vy) < 0.03:
+                    break
         for name, values in (("AscTec VELOCITY -> NAV_STATUS", asctec),
                              ("MAVLink offboard velocity -> LOCAL_POSITION_NED", mavlink)):
             ms = [v * 1e3 for v in values]
             print(f"command to effect, {name}: p50 {statistics.median(ms):.0f} ms, "
                   f"p99 {percentile(ms, 0.99):.0f} ms ({len(ms)} trials)", flush=True)
         # Telemetry rates: MAVLink's default intervals, and the AscTec stream.
+        drain()
         mav.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
                                   M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 0, 0, 0, 0, 0, 0)
         mav_wait(mav, "COMMAND_ACK")

@@ -67,7 +67,7 @@ def _vehicle() -> tuple[MavlinkVehicle, MavCodec]:
     return vehicle, MavCodec(255, 190)
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(messages(), min_size=1, max_size=8), st.floats(0.0, 100.0))
 def test_any_message_is_answered_without_an_exception(msgs, start_s):
     vehicle, client = _vehicle()
@@ -83,7 +83,7 @@ def test_any_message_is_answered_without_an_exception(msgs, start_s):
             vehicle.codec.encode(out.msg)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(st.binary(max_size=600))
 def test_arbitrary_bytes_give_messages_or_bad_frames(data):
     vehicle, _ = _vehicle()
