@@ -10,7 +10,10 @@ SET_POSITION_TARGET_LOCAL_NED (velocity) in OFFBOARD mode. Command-to-effect lat
 wall time from sending the command to the first telemetry (NAV_STATUS streamed every 10 ms;
 LOCAL_POSITION_NED at 100 Hz) whose velocity is 0.1 m/s in the commanded direction: the
 command's path, the pilot, the simulator and the vehicle's own acceleration, the same on both
-links. Each trial starts from rest (below 3 cm/s). Then the telemetry each link delivers per second.
+links; and the time until the pilot's boards took the command (the link's own part). Each
+trial starts from rest (below 3 cm/s) holding a zero velocity (a VELOCITY of zero; a
+zero offboard setpoint), so both links start from the same state. Then the telemetry each link
+delivers per second.
 
 ``pad``: pad hold (PAD_MODE HOLD started 0.6 m off the pad at 1.5 m; the first time within
 10 cm, the largest offset 10-20 s later) and pad landing (PAD_MODE LAND from 0.5 m off at 2 m;
@@ -59,7 +62,8 @@ from skeye.sim.image_server import FrameBuffer, ImageServer
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import load_world
-from skeye.wire.packets import PD, NavState, PadAction, SkeyeMask
+from skeye.wire.packet_units import velocity_from_si
+from skeye.wire.packets import PD, NavState, PadAction, SkeyeMask, encode
 
 M = mavutil.mavlink
 ROBOT = "benchcam"
@@ -148,13 +152,25 @@ def bench_link(trials: int) -> None:
         vehicle.take_off(1.5)
         vehicle.wait_state(NavState.HOLDING, timeout_s=60)
 
-        def asctec_trial(sign: float) -> float:
+        def delivered(before: int, t0: float) -> float:
+            """Seconds from ``t0`` until the pilot's boards took the command."""
+            deadline = time.monotonic() + 10
+            while pilot.boards.motion_changes == before:
+                if time.monotonic() > deadline:
+                    raise TimeoutError("the command never reached the boards")
+                time.sleep(0.0002)
+            return time.perf_counter() - t0
+
+        def asctec_trial(sign: float) -> tuple[float, float]:
+            packet = encode(velocity_from_si((0.5 * sign, 0.0, 0.0), 0.0, 0.6))  # facing north
+            before = pilot.boards.motion_changes
             t0 = time.perf_counter()
-            vehicle.set_velocity(forward_m_s=0.5 * sign, duration_s=0.6)  # facing north
+            vehicle.send_raw(packet)
+            reached = delivered(before, t0)
             while True:
                 nav = vehicle.wait_for(PD.NAV_STATUS, timeout_s=10)
                 if nav.vx * sign / 1e3 > 0.1:
-                    return time.perf_counter() - t0
+                    return reached, time.perf_counter() - t0
 
         for msg_id in (M.MAVLINK_MSG_ID_LOCAL_POSITION_NED,):
             mav.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 10_000,
@@ -167,25 +183,29 @@ def bench_link(trials: int) -> None:
                                                        velocity_mask, 0, 0, 0, vn, 0, 0, 0, 0,
                                                        0, 0, 0)
 
-        def mavlink_trial(sign: float) -> float:
+        def mavlink_trial(sign: float) -> tuple[float, float]:
             drain()
+            before = pilot.boards.motion_changes
             t0 = time.perf_counter()
             setpoint(0.5 * sign)
+            reached = delivered(before, t0)
             while True:
                 msg = mav_wait(mav, "LOCAL_POSITION_NED")
                 if msg.vx * sign > 0.1:
-                    return time.perf_counter() - t0
+                    return reached, time.perf_counter() - t0
 
         def settle() -> None:
-            """Until the vehicle is still (below 3 cm/s): each trial starts from a hover."""
+            """Until the vehicle is still (below 3 cm/s), holding a zero velocity: each trial
+            starts as a MAVLink one does, between offboard velocity setpoints of zero."""
             time.sleep(0.6)  # the move
+            vehicle.set_velocity()  # zero, until replaced
             deadline = time.monotonic() + 20
             while time.monotonic() < deadline:
                 nav = vehicle.wait_for(PD.NAV_STATUS, timeout_s=10)
                 if math.hypot(nav.vx, nav.vy) < 30:  # mm/s
                     return
 
-        asctec: list[float] = []
+        asctec: list[tuple[float, float]] = []
         for k in range(trials):
             asctec.append(asctec_trial(1.0 if k % 2 == 0 else -1.0))
             settle()
@@ -195,7 +215,7 @@ def bench_link(trials: int) -> None:
         mav.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0,
                                   M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub, 0, 0, 0, 0)
         mav_wait(mav, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_SET_MODE)
-        mavlink: list[float] = []
+        mavlink: list[tuple[float, float]] = []
         for k in range(trials):
             mavlink.append(mavlink_trial(1.0 if k % 2 == 0 else -1.0))
             end = time.monotonic() + 0.6
@@ -210,9 +230,12 @@ def bench_link(trials: int) -> None:
                     break
         for name, values in (("AscTec VELOCITY -> NAV_STATUS", asctec),
                              ("MAVLink offboard velocity -> LOCAL_POSITION_NED", mavlink)):
-            ms = [v * 1e3 for v in values]
-            print(f"command to effect, {name}: p50 {statistics.median(ms):.0f} ms, "
-                  f"p99 {percentile(ms, 0.99):.0f} ms ({len(ms)} trials)", flush=True)
+            reach = [v[0] * 1e3 for v in values]
+            ms = [v[1] * 1e3 for v in values]
+            print(f"{name}: command to the boards p50 {statistics.median(reach):.2f} ms, "
+                  f"p99 {percentile(reach, 0.99):.2f} ms; command to effect p50 "
+                  f"{statistics.median(ms):.0f} ms, p99 {percentile(ms, 0.99):.0f} ms "
+                  f"({len(ms)} trials)", flush=True)
         # Telemetry rates: MAVLink's default intervals, and the AscTec stream.
         drain()
         mav.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0,

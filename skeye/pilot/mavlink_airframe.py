@@ -194,7 +194,7 @@ class MavlinkAirframe:
                     targets, self._targets = self._targets, []
                     yaw = self._latest["ATTITUDE"].yaw if "ATTITUDE" in self._latest else 0.0
                 for obs in targets:
-                    from skeye.pilot.mavlink_vehicle import landing_target
+                    from skeye.pilot.mavlink_types import landing_target
 
                     out.append(landing_target(self.codec, obs, yaw))
                     self.landing_targets += 1

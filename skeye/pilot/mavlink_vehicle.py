@@ -31,7 +31,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mav
 
-from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.errors import LocalProtocolError
 from skeye.geo import GeoOrigin
 from skeye.mavlink.codec import BadFrame, MavCodec, MavMessage, statustext
 from skeye.mavlink.mission import MissionItem, MissionProtocol
@@ -41,6 +41,17 @@ from skeye.mavlink.streams import MessageScheduler
 from skeye.pilot import mavlink_telemetry as telem
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.envelope import FlightEnvelope
+from skeye.pilot.mavlink_types import (
+    FORCE_MAGIC,
+    RESULT_OF_CODE,
+    Command,
+    Out,
+    Refused,
+    Settings,
+    Step,
+    command_name,
+    landing_target,
+)
 from skeye.pilot.pad import PadObservation
 from skeye.wire.packet_defs import NavState, PadAction, ResultCode
 from skeye.wire.packets import (
@@ -60,81 +71,13 @@ from skeye.wire.packets import (
 
 log = logging.getLogger(__name__)
 
-FORCE_MAGIC = 21196.0  # COMPONENT_ARM_DISARM param2: force (PX4, ArduPilot)
 GCS_TIMEOUT_S = 10.0  # a ground station silent this long is forgotten
 NOTICE_EVERY_S = 2.0  # the same refusal or bad-input notice at most this often per peer
 DUPLICATE_WINDOW_S = 1.0  # a command repeated within this is acked again, not re-run
 ARRIVED_RADIUS_M = 0.5
 MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                | CtrlBits.GPS_POSITION_CONTROL)
-RESULT_OF_CODE = {
-    ResultCode.BAD_VALUE: mav.MAV_RESULT_DENIED,
-    ResultCode.REFUSED: mav.MAV_RESULT_TEMPORARILY_REJECTED,
-    ResultCode.BUSY: mav.MAV_RESULT_TEMPORARILY_REJECTED,
-    ResultCode.BAD_CHECKSUM: mav.MAV_RESULT_DENIED,
-    ResultCode.BAD_LENGTH: mav.MAV_RESULT_DENIED,
-}
 
-
-@dataclass(frozen=True)
-class Out:
-    """A message to send: on link ``link`` (None: every link) to ``peer`` (None: every peer)."""
-
-    msg: MavMessage
-    link: int | None = None
-    peer: Hashable | None = None
-
-
-class Refused(SkeyeError):
-    """A command refused: ``result`` is the MAV_RESULT, the message the reason."""
-
-    def __init__(self, result: int, reason: str) -> None:
-        super().__init__(reason)
-        self.result = result
-
-
-@dataclass(frozen=True)
-class Command:
-    """COMMAND_LONG and COMMAND_INT in one form (x, y in degrees x 1e7 for COMMAND_INT)."""
-
-    command: int
-    params: tuple[float, ...]  # param1..param7 (COMMAND_INT: 5, 6 as given, 7 = z)
-    frame: int | None  # COMMAND_INT's frame; None for COMMAND_LONG
-    x: int = 0
-    y: int = 0
-
-    @classmethod
-    def of(cls, msg: MavMessage) -> Command:
-        if msg.get_type() == "COMMAND_INT":
-            return cls(int(msg.command), (msg.param1, msg.param2, msg.param3, msg.param4,
-                                          float(msg.x), float(msg.y), msg.z),
-                       int(msg.frame), int(msg.x), int(msg.y))
-        return cls(int(msg.command), (msg.param1, msg.param2, msg.param3, msg.param4,
-                                      msg.param5, msg.param6, msg.param7), None)
-
-    def p(self, n: int) -> float:
-        return float(self.params[n - 1])
-
-
-@dataclass
-class Settings:
-    """The endpoint's own settings (parameters beside the boards')."""
-
-    takeoff_alt_m: float = 2.5  # PX4 MIS_TAKEOFF_ALT default
-    rtl_alt_m: float = 15.0  # ArduPilot RTL_ALT's default, 15 m (PX4's RTL_RETURN_ALT: 60 m)
-    offboard_loss_s: float = 1.0  # PX4 COM_OF_LOSS_T default
-    disarm_preflight_s: float = 10.0  # PX4 COM_DISARM_PRFLT default
-    pad_vision: bool = False  # the pilot runs pad detection (precision landing possible)
-
-
-@dataclass
-class _Step:
-    """Where a program is: its item or phase, the motion it started, when it waits until."""
-
-    index: int = 0
-    phase: str = "start"
-    mark: int = -1
-    wait_until_s: float | None = None
 
 
 @dataclass
@@ -154,7 +97,7 @@ class MavlinkVehicle:
         self.codec = MavCodec(system_id, 1)
         self.max_speed_limit_m_s = max_speed_m_s or boards.settings.max_speed_m_s
         self.program = Program.NONE
-        self.step = _Step()
+        self.step = Step()
         self.mission = MissionProtocol(self.codec, self._check_item)
         self.mission_current = 0
         self.mission_state = mav.MISSION_STATE_NO_MISSION
@@ -390,12 +333,12 @@ class MavlinkVehicle:
             result = exc.result
             self.refusals += 1
             extra = self._notice(peer, f"cmd{cmd.command}:{exc}", mav.MAV_SEVERITY_WARNING,
-                                 f"{_command_name(cmd.command)}: {exc}")
+                                 f"{command_name(cmd.command)}: {exc}")
         except LocalProtocolError as exc:  # a value the boards' packets cannot carry
             result = mav.MAV_RESULT_DENIED
             self.refusals += 1
             extra = self._notice(peer, f"cmd{cmd.command}:{exc}", mav.MAV_SEVERITY_WARNING,
-                                 f"{_command_name(cmd.command)}: {exc}")
+                                 f"{command_name(cmd.command)}: {exc}")
         if len(self._recent) > 256:
             self._recent.clear()
         self._recent[key] = (self._now_s, result)
@@ -597,7 +540,7 @@ class MavlinkVehicle:
             return statustext(self.codec, mav.MAV_SEVERITY_WARNING, f"no mission item {seq}")
         self.mission_current = seq
         if self.program is Program.MISSION:
-            self.step = _Step(index=seq)
+            self.step = Step(index=seq)
         return [telem.mission_current(self.codec, self.view())]
 
     def _message_interval(self, cmd: Command) -> None:
@@ -717,7 +660,7 @@ class MavlinkVehicle:
         if self.program is Program.PRECLAND and program is not Program.PRECLAND:
             self.boards.pad.landing_finished()
         self.program = program
-        self.step = _Step(index=self.mission_current if program is Program.MISSION else 0)
+        self.step = Step(index=self.mission_current if program is Program.MISSION else 0)
         self.step.mark = self.boards.motion_changes
 
     def _stop_program(self, why: str) -> list[Out]:
@@ -912,7 +855,7 @@ class MavlinkVehicle:
     def _item_done(self) -> list[Out]:
         st = self.step
         out = self._reached(st.index)
-        self.step = _Step(index=st.index + 1, mark=st.mark)
+        self.step = Step(index=st.index + 1, mark=st.mark)
         self.mission_current = min(st.index + 1, max(0, len(self.mission.items) - 1))
         out += [Out(telem.mission_current(self.codec, self.view()))]
         return out
@@ -976,33 +919,6 @@ class MavlinkVehicle:
             if now_s - seen > GCS_TIMEOUT_S:
                 del self.gcs[src]
         return out
-
-
-def landing_target(codec: MavCodec, obs: PadObservation, yaw_rad: float) -> MavMessage:
-    """LANDING_TARGET from one pad detection.
-
-    The detector gives the pad's offset in the level, yaw-aligned body frame (forward, right;
-    roll and pitch removed) and the camera's height above it. ``angle_x``/``angle_y`` are the
-    target's angles in that frame as an image sees them (x right, y back: ``atan(right / h)``,
-    ``atan(-forward / h)``), ``distance`` the slant range; x, y, z are the pad's position
-    relative to the vehicle in MAV_FRAME_LOCAL_NED (north, east, down: the frame PX4's
-    precision landing takes positions in), turned by the estimate's yaw.
-    """
-    fwd, right, h = obs.dx_m, obs.dy_m, max(obs.height_m, 1e-3)
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    north, east = c * fwd - s * right, s * fwd + c * right
-    distance = math.sqrt(fwd * fwd + right * right + h * h)
-    return codec.mav.landing_target_encode(
-        int(obs.frame_time_s * 1e6), 0, mav.MAV_FRAME_LOCAL_NED, math.atan2(right, h),
-        math.atan2(-fwd, h), distance, 0.0, 0.0, north, east, h, [1.0, 0.0, 0.0, 0.0],
-        mav.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1)
-
-
-def _command_name(command: int) -> str:
-    entry = mav.enums["MAV_CMD"].get(command)
-    return entry.name.replace("MAV_CMD_", "") if entry is not None else f"command {command}"
-
-
 
 
 COMMANDS: dict[int, Callable[[MavlinkVehicle, Command], list[MavMessage] | None]] = {
