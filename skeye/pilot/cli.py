@@ -218,7 +218,8 @@ def run(args: argparse.Namespace) -> int:
                     f"ground control on {server.address}; flight envelope: "
                     f"{envelope.describe()} ({envelope_source})"
                     f"{'; video on ' + video.address if video is not None else ''}"
-                    f"{'; MAVLink on ' + ', '.join(mavlink.addresses) if mavlink else ''}",
+                    f"{'; MAVLink on ' + ', '.join(mavlink.addresses) if mavlink else ''}"
+                    f"{'; H.264 RTP video to ' + rtp.address if rtp else ''}",
                     flush=True,
                 )
                 while not stop.wait(0.2):
