@@ -492,8 +492,9 @@ class MavlinkVehicle:
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"mode {name} is not flown by this vehicle (attitude sticks come "
                           "over its AscTec link)")
-        if mode == self.mode and request is not Request.MISSION:
-            return
+        if mode == self.mode and request is not Request.MISSION \
+                and self.boards.state is not NavState.FAILSAFE:
+            return  # already so (in the failsafe, Hold is the way out: it is sent)
         if request is Request.HOLD:
             self._start(Program.NONE)
             if self._airborne():

@@ -103,6 +103,12 @@ def test_commands_out_of_range_are_refused_with_their_reason(flying):
     ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
     assert ack.result == M.MAV_RESULT_DENIED
     assert "outside the flight envelope" in statustext(conn)
+    # The speed limit: a reposition faster than the robot file's 3 m/s is refused, not capped.
+    conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION,
+                              0, 0, 5.0, 1, 0, math.nan, pos.lat + 100, pos.lon, 2.0)
+    ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+    assert ack.result == M.MAV_RESULT_DENIED
+    assert "over this vehicle's limit of 3 m/s" in statustext(conn)
     # Parameters: out of range and unknown names are refused, the value stays.
     conn.mav.param_set_send(1, 1, b"MPC_XY_VEL_MAX", 99.0, M.MAV_PARAM_TYPE_REAL32)
     echo = wait_for(conn, "PARAM_VALUE", lambda m: m.param_id == "MPC_XY_VEL_MAX")
@@ -200,3 +206,22 @@ def test_a_flood_of_10000_messages_leaves_the_vehicle_flying(flying):
         time.sleep(0.01)
     _still_hovering(v, conn, where)
     assert v.mavlink.vehicle.bad_frames >= 2000  # the garbage was seen as such
+
+
+def test_a_silent_ground_station_triggers_the_link_loss_failsafe(flying):
+    """The failsafe of the AscTec link, over MAVLink: no message from any ground station for
+    COM_DL_LOSS_T and the vehicle hovers in FAILSAFE (MAV_STATE_CRITICAL); messages again stop
+    the land countdown, and a mode command takes it back."""
+    v, conn = flying
+    conn.mav.param_set_send(1, 1, b"COM_DL_LOSS_T", 1.0, M.MAV_PARAM_TYPE_REAL32)
+    wait_for(conn, "PARAM_VALUE", lambda m: m.param_id == "COM_DL_LOSS_T")
+    assert v.pilot.boards.settings.link_timeout_s == 1.0
+    critical = wait_for(conn, "HEARTBEAT", lambda m: m.system_status == M.MAV_STATE_CRITICAL,
+                        heartbeat=False)
+    assert mavutil.mode_string_v10(critical) == "LOITER"
+    assert v.pilot.boards.state.name == "FAILSAFE"
+    hold = conn.mode_mapping()["LOITER"]
+    assert command(conn, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                   *hold[1:])[0] == 0
+    wait_for(conn, "HEARTBEAT", lambda m: m.system_status == M.MAV_STATE_ACTIVE)
+    assert v.pilot.boards.state.name == "HOLDING"

@@ -1,5 +1,6 @@
 """LANDING_TARGET from the pilot's own pad detection: one per detection, at the camera's rate
-while the pad is in view, with angles that match the pad's true bearing within 1 degree."""
+while the pad is in view, with angles that match the pad's true bearing within 1 degree; then a
+precision landing (NAV_LAND, precision required) onto the pad."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ FRAME_RATE_HZ = 10.0  # the test robot's camera (conftest.small_camera_robot)
 
 
 def test_landing_targets_come_at_the_detection_rate_with_the_true_bearing(tmp_path: Path):
-    with mav_vehicle(rate=1.0, images=True, robot_dir=small_camera_robot(tmp_path),
+    with mav_vehicle(rate=2.0, images=True, robot_dir=small_camera_robot(tmp_path),
                      estimator="truth") as v:
         conn = v.client()
         wait_for(conn, "GLOBAL_POSITION_INT")
@@ -63,3 +64,11 @@ def test_landing_targets_come_at_the_detection_rate_with_the_true_bearing(tmp_pa
         print(f"{len(targets)} LANDING_TARGETs over {last - first:.2f} s, worst angle error "
               f"{worst:.3f} deg")
         assert worst < 1.0
+
+        # Precision landing: the pilot's pad landing, reported as PX4's AUTO.PRECLAND.
+        assert command(conn, M.MAV_CMD_NAV_LAND, 0, 2, 0, math.nan)[0] == 0
+        wait_for(conn, "HEARTBEAT", lambda m: m.custom_mode == (4 << 16) | (9 << 24))
+        wait_for(conn, "EXTENDED_SYS_STATE",
+                 lambda m: m.landed_state == M.MAV_LANDED_STATE_ON_GROUND, timeout_s=120)
+        north, east, _ = v.truth()
+        assert math.hypot(north, east) < 0.08, (north, east)
