@@ -1,0 +1,63 @@
+"""The endpoint on each kind of link: a serial line (two pseudo-terminals back to back) and a TCP
+server, with pymavlink on the other end; the vehicle is the boards on a scripted airframe."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from pymavlink import mavutil
+
+from skeye.link.transport import pty_null_modem
+from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.mavlink_server import MavlinkServer
+from tests.mavlink.conftest import wait_for
+from tests.pilot.fake_airframe import FakeAirframe
+
+M = mavutil.mavlink
+
+
+@contextmanager
+def endpoint(uri: str) -> Iterator[MavlinkServer]:
+    boards = OnboardBoards(FakeAirframe())
+    with MavlinkServer(boards, threading.Lock(), [uri]) as server:
+        yield server
+
+
+def _params(conn) -> set[str]:
+    conn.mav.param_request_list_send(1, 1)
+    names = set()
+    first = wait_for(conn, "PARAM_VALUE")
+    names.add(first.param_id)
+    while len(names) < first.param_count:
+        names.add(wait_for(conn, "PARAM_VALUE").param_id)
+    return names
+
+
+def test_the_vehicle_answers_over_a_serial_line():
+    with pty_null_modem() as (vehicle_end, ground_end), \
+            endpoint(f"serial://{vehicle_end}?baud=57600") as server:
+        conn = mavutil.mavlink_connection(ground_end, baud=57600, source_system=255,
+                                          source_component=190)
+        try:
+            hb = wait_for(conn, "HEARTBEAT")
+            assert hb.autopilot == M.MAV_AUTOPILOT_PX4
+            assert {"MIS_TAKEOFF_ALT", "COM_DL_LOSS_T", "GF_MAX_VER_DIST"} <= _params(conn)
+            assert server.addresses == [f"serial://{vehicle_end}?baud=57600"]
+        finally:
+            conn.close()
+
+
+def test_the_vehicle_serves_tcp_clients():
+    with endpoint("tcp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        conns = [mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=s,
+                                            source_component=190) for s in (255, 254)]
+        try:
+            for conn in conns:
+                wait_for(conn, "HEARTBEAT")
+                assert "RTL_RETURN_ALT" in _params(conn)
+        finally:
+            for conn in conns:
+                conn.close()
