@@ -1,5 +1,5 @@
-"""``Airframe`` over MAVLink: the pilot as the companion computer of a PX4 / ArduPilot-style
-flight controller (``mavlink://`` airframe URIs).
+"""``Airframe`` over MAVLink: the pilot as the companion computer of a PX4-style flight
+controller (``mavlink://`` airframe URIs; PX4's Offboard mode, not ArduPilot's GUIDED).
 
 How this works: :class:`MavlinkAirframe` owns one MAVLink link to the flight controller
 (``skeye.mavlink.transport``) and one worker thread (``airframe-mavlink``) that alone reads and
