@@ -385,11 +385,14 @@ class MavlinkVehicle:
             raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                           "no GPS position yet: global targets cannot be placed")
         n, e, _ = origin.to_ned(lat_e7 / 1e7, lon_e7 / 1e7, origin.altitude_m)
+        return n, e, self._down_of(alt_m, frame, origin)
+
+    def _down_of(self, alt_m: float, frame: int | None, origin: GeoOrigin) -> float:
+        """The NED down coordinate of an altitude: above home in the relative frames, above
+        mean sea level in the others."""
         if frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
-            d = self.boards.home_ned_m[2] - alt_m
-        else:
-            d = origin.altitude_m - alt_m
-        return n, e, d
+            return self.boards.home_ned_m[2] - alt_m
+        return origin.altitude_m - alt_m
 
     def _arm(self, cmd: Command) -> None:
         if cmd.p(1) == 1.0:
@@ -456,16 +459,20 @@ class MavlinkVehicle:
     def _reposition(self, cmd: Command) -> None:
         if cmd.frame is None:
             raise Refused(mav.MAV_RESULT_DENIED, "DO_REPOSITION is a COMMAND_INT")
+        if cmd.frame not in (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                             mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"frame {cmd.frame}: give GLOBAL_INT or GLOBAL_RELATIVE_ALT_INT")
         snap = self._snap()
-        z = cmd.p(7)
-        if cmd.x == 0 and cmd.y == 0:
-            n, e, _ = snap.pos_ned_m
-        else:
+        n, e, d = snap.pos_ned_m
+        if not (cmd.x == 0 and cmd.y == 0):  # 0/0: here
             n, e, _ = self._global_to_ned(cmd.x, cmd.y, 0.0, cmd.frame)
-        if math.isnan(z):
-            d = snap.pos_ned_m[2]
-        else:
-            d = self._global_to_ned(cmd.x or 1, cmd.y or 1, z, cmd.frame)[2]
+        origin = self.origin()
+        if not math.isnan(cmd.p(7)) and origin is not None:  # NaN: keep the altitude
+            d = self._down_of(cmd.p(7), cmd.frame, origin)
+        elif not math.isnan(cmd.p(7)):
+            raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                          "no GPS position yet: global targets cannot be placed")
         speed = cmd.p(1) if math.isfinite(cmd.p(1)) and cmd.p(1) > 0 else None
         self._start(Program.NONE)
         self._fly_to((n, e, d), speed)
