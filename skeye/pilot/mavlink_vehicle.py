@@ -118,6 +118,7 @@ class MavlinkVehicle:
         self._targets: deque[PadObservation] = deque(maxlen=64)
         self.landing_targets = 0
         self.landing_targets_in = 0
+        self._status: tuple[Px4Mode, bool, NavState] | None = None  # the last one told
         self._now_s = now_s
 
     # -- links ---------------------------------------------------------------------------
@@ -914,8 +915,14 @@ class MavlinkVehicle:
         out += [Out(m) for m in self.mission.tick(now_s)]
         out += self._landing_targets()
         view = None
+        status = (self.mode, self.armed, self.boards.state)
+        changed = status != self._status
+        self._status = status
         for i, link in enumerate(self.links):
             due = link.scheduler.due(now_s)
+            if changed and mav.MAVLINK_MSG_ID_HEARTBEAT not in due \
+                    and link.scheduler.interval_s(mav.MAVLINK_MSG_ID_HEARTBEAT) is not None:
+                due.append(mav.MAVLINK_MSG_ID_HEARTBEAT)  # a new mode is told at once
             if not due:
                 continue
             view = view or self.view()

@@ -69,6 +69,7 @@ def test_mavsdk_flies_a_skeye_vehicle(skeye_vehicle):
         action.arm()
         until(telemetry.armed, "armed")
         action.takeoff()
+        until(lambda: telemetry.flight_mode() == FlightMode.TAKEOFF, "the take-off mode")
         until(lambda: telemetry.in_air() and telemetry.flight_mode() == FlightMode.HOLD
               and telemetry.position().relative_altitude_m > 1.8, "the take-off")
         here = telemetry.position()
