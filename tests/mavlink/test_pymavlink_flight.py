@@ -77,11 +77,14 @@ def test_a_pymavlink_script_flies_the_whole_flight():
         assert command(conn, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                        *mission[1:]) == (0, "")
         reached = set()
+        here = None  # the newest position before each MISSION_ITEM_REACHED (messages in order)
         while len(reached) < 3:
-            msg = wait_for(conn, ["MISSION_ITEM_REACHED", "MISSION_CURRENT"], timeout_s=120)
-            if msg.get_type() == "MISSION_ITEM_REACHED":
+            msg = wait_for(conn, ["MISSION_ITEM_REACHED", "GLOBAL_POSITION_INT"], timeout_s=120)
+            if msg.get_type() == "GLOBAL_POSITION_INT":
+                here = msg
+            else:
                 reached.add(msg.seq)
-                here = wait_for(conn, "GLOBAL_POSITION_INT")
+                assert here is not None
                 assert _metres(here.lat / 1e7, here.lon / 1e7, *items[msg.seq][:2]) < 0.5
         wait_for(conn, "MISSION_CURRENT", lambda m: m.mission_state == M.MISSION_STATE_COMPLETE)
 
