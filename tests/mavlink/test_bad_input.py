@@ -176,8 +176,10 @@ def test_a_second_ground_station_is_served_and_both_are_told():
             assert "254/190 joined; 2 connected" in note.text
         assert command(second, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
         assert command(first, M.MAV_CMD_COMPONENT_ARM_DISARM, 0)[0] == 0
-        hb = wait_for(second, "HEARTBEAT")
-        assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED  # the last command won
+        # The last command won: both stations hear the vehicle disarmed.
+        for conn in (first, second):
+            wait_for(conn, "HEARTBEAT", lambda m: not m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+        assert not v.pilot.boards.motors_on
         assert len(v.mavlink.transports[0].peers) == 2
 
 
