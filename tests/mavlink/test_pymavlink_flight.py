@@ -35,7 +35,9 @@ def _upload(conn, items: list[tuple[float, float, float]]) -> int:
 
 
 def test_a_pymavlink_script_flies_the_whole_flight():
-    with mav_vehicle() as v:
+    # The oracle estimator: the end checks the simulator's ground truth against home (on the
+    # onboard estimate the GPS-aided position wanders a metre or more: docs/physics.md).
+    with mav_vehicle(estimator="truth") as v:
         conn = v.client()
         hb = wait_for(conn, "HEARTBEAT")
         assert hb.type == M.MAV_TYPE_QUADROTOR and hb.autopilot == M.MAV_AUTOPILOT_PX4
@@ -98,9 +100,9 @@ def test_a_pymavlink_script_flies_the_whole_flight():
         assert abs(down.relative_alt) < 150  # mm: on the ground it took off from
         assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 0) == (0, "")
         wait_for(conn, "HEARTBEAT", lambda m: not m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
-        # The simulator agrees: back within a metre of where it started (the onboard estimate
-        # drifts; docs/physics.md), and nothing the script sent was refused.
+        # The simulator agrees: back where it started (on the pad at the origin), and nothing
+        # the script sent was refused.
         n, e, _ = v.truth()
-        assert math.hypot(n, e) < 1.0, (n, e, start)
+        assert math.hypot(n, e) < 0.3, (n, e, start)
         assert v.mavlink.vehicle.refusals == 0
         assert v.mavlink.errors == 0
