@@ -20,6 +20,13 @@ from typing import Any, Final
 from skeye.errors import ConfigError
 
 GRAVITY_M_S2: Final = 9.81
+FROM_SENSORS: Final = math.nan
+"""An ``[estimator]`` setting left to the board's sensors' own figures (the robot derives it)."""
+SENSOR_DERIVED: Final = (
+    "accel_noise_m_s2", "tilt_noise_rad_s", "baro_noise_m", "sonar_noise_m", "flow_noise_rad_s",
+    "gps_pos_noise_m", "gps_vel_noise_m_s", "gps_delay_s",
+)
+"""The ``[estimator]`` settings that default to the figures of the sensors the board reads."""
 ESTIMATOR_KINDS: Final = ("onboard", "truth")
 """``[estimator] kind``: the board's estimator from sensor readings, or the oracle."""
 
@@ -173,35 +180,33 @@ class EstimatorParams:
       attitude_ki = kp^2 / 4 = 0.01 rad/s^2: the critically damped bias loop of Mahony's filter
       (error dynamics s^2 + kp s + ki); compass_gain 1.0: ArduPilot's AHRS_YAW_P default
       equals AHRS_RP_P (0.2);
-    - accel_noise_m_s2 0.35, accel_bias_init_m_s2 0.2, accel_bias_walk_m_s3 0.003,
-      baro_noise_m 3.5, sonar_noise_m 0.1, flow_noise_rad_s 0.15,
-      flow_min_quality 1, flow_min_height_m 0.1, gps_pos_noise_m 0.5, gps_vel_noise_m_s 0.3:
-      PX4 EKF2's defaults EKF2_ACC_NOISE, EKF2_ABIAS_INIT, EKF2_ACC_B_NOISE, EKF2_BARO_NOISE,
-      EKF2_RNG_NOISE, EKF2_OF_N_MIN, EKF2_OF_QMIN, EKF2_MIN_RNG, EKF2_GPS_P_NOISE, EKF2_GPS_V_NOISE;
-    - gps_delay_s 0.2: the age of a fix when the board gets it, configured as PX4's
-      EKF2_GPS_DELAY is; 0.2 s is the simulated receiver's ``Latency`` (docs/physics.md);
-    - tilt_noise_rad_s 0.015: PX4 EKF2's EKF2_GYR_NOISE, the rate noise that drives its tilt
-      error states; here the north and east bias states carry g times the tilt error, so their
-      random walk is (accel_bias_walk_m_s3^2 + (g tilt_noise_rad_s)^2)^0.5 (vertically a tilt
-      error is second order: accel_bias_walk_m_s3 alone).
+    - accel_bias_init_m_s2 0.2, accel_bias_walk_m_s3 0.003, flow_min_quality 1,
+      flow_min_height_m 0.1: PX4 EKF2's defaults EKF2_ABIAS_INIT, EKF2_ACC_B_NOISE,
+      EKF2_OF_QMIN, EKF2_MIN_RNG;
+    - the measurement noises (accel_noise_m_s2, tilt_noise_rad_s, baro_noise_m, sonar_noise_m,
+      flow_noise_rad_s, gps_pos_noise_m, gps_vel_noise_m_s) and gps_delay_s default to NaN,
+      "from the board's sensors": the robot derives each from the parameters of the sensor
+      the board reads (:func:`skeye.sim.estimator.from_sensor_figures`, docs/physics.md), so
+      the filter is told what its sensors deliver, one source of truth; a number in the robot
+      file's ``[estimator]`` table overrides it.
     """
 
     kind: str = "onboard"
     attitude_kp: float = 0.2
     attitude_ki: float = 0.01
     compass_gain: float = 1.0
-    accel_noise_m_s2: float = 0.35
+    accel_noise_m_s2: float = FROM_SENSORS
     accel_bias_init_m_s2: float = 0.2
     accel_bias_walk_m_s3: float = 0.003
-    baro_noise_m: float = 3.5
-    sonar_noise_m: float = 0.1
-    flow_noise_rad_s: float = 0.15
+    baro_noise_m: float = FROM_SENSORS
+    sonar_noise_m: float = FROM_SENSORS
+    flow_noise_rad_s: float = FROM_SENSORS
     flow_min_quality: float = 1.0
     flow_min_height_m: float = 0.1
-    gps_pos_noise_m: float = 0.5
-    gps_vel_noise_m_s: float = 0.3
-    gps_delay_s: float = 0.2
-    tilt_noise_rad_s: float = 0.015
+    gps_pos_noise_m: float = FROM_SENSORS
+    gps_vel_noise_m_s: float = FROM_SENSORS
+    gps_delay_s: float = FROM_SENSORS
+    tilt_noise_rad_s: float = FROM_SENSORS
 
     def __post_init__(self) -> None:
         if self.kind not in ESTIMATOR_KINDS:
@@ -212,5 +217,12 @@ class EstimatorParams:
             if f.name == "kind":
                 continue
             value = getattr(self, f.name)
+            if f.name in SENSOR_DERIVED and math.isnan(value):
+                continue  # from the board's sensors (the robot fills it in)
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"estimator: {f.name} must be a number >= 0, got {value!r}")
+
+    @property
+    def derived(self) -> bool:
+        """Whether every sensor-derived setting has its value (none is still NaN)."""
+        return not any(math.isnan(getattr(self, name)) for name in SENSOR_DERIVED)

@@ -38,14 +38,33 @@ Hot path: plain floats, no numpy, no allocation beyond the output estimate.
 from __future__ import annotations
 
 import math
-from typing import Final
+from dataclasses import replace
+from typing import Any, Final
+
+import numpy as np
 
 from skeye.geo import GeoOrigin
 from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
-from skeye.sim.sensors.inertial import AccelReading, BaroReading, CompassReading, GyroReading
-from skeye.sim.sensors.navigation import GpsReading, InsEstimate
-from skeye.sim.sensors.ranging import FlowReading, SonarReading
+from skeye.sim.sensors.base import Mount
+from skeye.sim.sensors.inertial import (
+    Accelerometer,
+    AccelReading,
+    Barometer,
+    BaroReading,
+    CompassReading,
+    Gyro,
+    GyroReading,
+)
+from skeye.sim.sensors.navigation import GPS, GpsReading, InsEstimate
+from skeye.sim.sensors.ranging import FlowReading, OpticalFlow, Sonar, SonarReading
 
+REST_POS_NOISE_M: Final = 0.5
+"""The stationary position's noise while disarmed: PX4 EKF2's fake-position fusion on the
+ground (fake_pos_control.cpp: 0.5 m while not in the air)."""
+REST_VEL_NOISE_M_S: Final = 0.2
+"""Zero-velocity update noise while disarmed: PX4 EKF2 (zero_velocity_update.cpp)."""
+M_PER_PA: Final = 1.0 / (1.225 * GRAVITY_M_S2)
+"""Height per pascal near sea level (ISA density 1.225 kg/m^3): 8.3 cm/Pa."""
 HISTORY: Final = 64  # horizontal estimate history entries (for the GPS delay)
 HISTORY_STEP_S: Final = 0.01  # one entry per this much sim time: 0.63 s of history
 _PI: Final = math.pi
@@ -125,7 +144,7 @@ class BoardEstimator:
         declination_rad: float,
         flow_counts_per_rad: float,
     ) -> None:
-        self.p = params
+        self.p = params if params.derived else with_default_sensors(params)
         self.declination_rad = declination_rad
         self.flow_counts_per_rad = flow_counts_per_rad
         self.q0, self.q1, self.q2, self.q3 = 1.0, 0.0, 0.0, 0.0
@@ -149,7 +168,13 @@ class BoardEstimator:
         self.home: GeoOrigin | None = None
         self.home_ned: tuple[float, float] = (0.0, 0.0)
         self.gps_t = -math.inf
-        self.rest_t = -math.inf
+        self.rest_t = -math.inf  # last stationary update
+        self.rest_seen_t = -math.inf  # last tick the board was at rest (disarmed)
+        self.rest_pos: tuple[float, float] | None = None  # where the vehicle came to rest
+        # Height above the baro's first reading on pressure alone (with the accelerometer):
+        # what the AscTec LL board's height mode holds.
+        self.press = Axis(pos_ned_m[2], 0.01, 0.01, bias_var)
+        self.sonar_half_beam_rad = 0.0  # the sonar's beam half-angle (from its figures)
         self.flow_used = 0
         # History of the horizontal estimate (ring buffer): time, north/east position, velocity.
         self.hist_t = [-math.inf] * HISTORY
@@ -255,7 +280,9 @@ class BoardEstimator:
             ax = self.axes
             ax[0].predict(r[0] * fx + r[1] * fy + r[2] * fz, dt, var, walk_h)
             ax[1].predict(r[3] * fx + r[4] * fy + r[5] * fz, dt, var, walk_h)
-            ax[2].predict(r[6] * fx + r[7] * fy + r[8] * fz + GRAVITY_M_S2, dt, var, walk)
+            a_down = r[6] * fx + r[7] * fy + r[8] * fz + GRAVITY_M_S2
+            ax[2].predict(a_down, dt, var, walk)
+            self.press.predict(a_down, dt, var, walk)
             last_i = (self.hist_i - 1) % HISTORY
             if t - self.hist_t[last_i] >= HISTORY_STEP_S - 1e-9:
                 i = self.hist_i
@@ -305,7 +332,10 @@ class BoardEstimator:
             self.sonar_agl_m = None
             return
         rot = self.rot()
-        agl = r.range_m * rot[8]  # slant range times cos(roll) cos(pitch)
+        # Over flat ground the nearest echo of a cone comes from the ray nearest the vertical:
+        # straight down while the tilt is within the beam's half-angle, else from its edge.
+        tilt = math.acos(max(-1.0, min(1.0, rot[8])))
+        agl = r.range_m * math.cos(max(0.0, tilt - self.sonar_half_beam_rad))
         down = self.axes[2]
         if self.ground_d is None:
             self.ground_d = down.p + agl
@@ -317,10 +347,18 @@ class BoardEstimator:
         down = self.axes[2]
         if self.baro_offset is None:
             self.baro_offset = r.altitude_m + down.p
+            self.press.p = down.p
             return
+        var = self.p.baro_noise_m * self.p.baro_noise_m
+        self.press.fuse_pos(self.baro_offset - r.altitude_m, var)
         if r.time_s - self.sonar_t < 0.5:
             return  # the sonar is the height reference while it has an echo
-        down.fuse_pos(self.baro_offset - r.altitude_m, self.p.baro_noise_m * self.p.baro_noise_m)
+        down.fuse_pos(self.baro_offset - r.altitude_m, var)
+
+    def pressure_down(self) -> tuple[float, float]:
+        """The pressure-altitude height (NED down, m) and its rate (m/s): what the AscTec LL
+        board's height mode holds (barometer and accelerometer, never the sonar)."""
+        return self.press.p, self.press.v
 
     def height_above_ground_m(self) -> float | None:
         """The height over the ground the flow looks at: sonar-aided, None when unknown."""
@@ -368,6 +406,11 @@ class BoardEstimator:
             home = self.home = GeoOrigin(lat, lon, alt)
             self.home_ned = (then_n, then_e)
         n, e, _ = home.to_ned(lat, lon, alt)
+        if self.resting(r.time_s):
+            # Standing still, any motion of the fix is the receiver's own error: the board
+            # re-anchors home to the stationary estimate (the fix's offset moves with the
+            # error), so the estimate stays put and nothing jumps when the motors start.
+            self.home_ned = (then_n - n, then_e - e)
         pv = self.p.gps_pos_noise_m * self.p.gps_pos_noise_m
         vv = self.p.gps_vel_noise_m_s * self.p.gps_vel_noise_m_s
         dpn, dvn = ax[0].fuse_pos_innovation(self.home_ned[0] + n - then_n, pv)
@@ -407,15 +450,33 @@ class BoardEstimator:
         return (self.hist_n[later], self.hist_e[later], self.hist_vn[later],
                 self.hist_ve[later])
 
+    def resting(self, time_s: float) -> bool:
+        """Whether the board was at rest (disarmed) within the last 0.1 s."""
+        return time_s - self.rest_seen_t < 0.1
+
     def at_rest(self, time_s: float) -> None:
-        """The board is disarmed (motors off), so at rest: fuse zero velocity every 0.2 s with
-        0.2 m/s noise (PX4 EKF2's zero-velocity update, zero_velocity_update.cpp)."""
+        """The board is disarmed (motors off), so at rest. Every 0.2 s: zero velocity with
+        0.2 m/s noise (PX4 EKF2's zero-velocity update, zero_velocity_update.cpp) and the
+        horizontal position where it came to rest with 0.5 m noise (EKF2's fake-position
+        fusion on the ground, fake_pos_control.cpp); GPS meanwhile re-anchors to it (``_gps``).
+        So a parked vehicle's estimate does not wander with the receiver's error."""
+        if not self.resting(time_s):
+            self.rest_pos = None
+        self.rest_seen_t = time_s
         if time_s - self.rest_t < 0.2:
             return
         self.rest_t = time_s
         self._est = None
-        for axis in self.axes:
-            axis.fuse_vel(0.0, 0.04)
+        ax = self.axes
+        if self.rest_pos is None:
+            self.rest_pos = (ax[0].p, ax[1].p)
+        vel_var = REST_VEL_NOISE_M_S * REST_VEL_NOISE_M_S
+        pos_var = REST_POS_NOISE_M * REST_POS_NOISE_M
+        for axis in ax:
+            axis.fuse_vel(0.0, vel_var)
+        self.press.fuse_vel(0.0, vel_var)
+        ax[0].fuse_pos(self.rest_pos[0], pos_var)
+        ax[1].fuse_pos(self.rest_pos[1], pos_var)
 
     def has_gps_fix(self, time_s: float) -> bool:
         """Whether a GPS fix was fused within the last second."""
@@ -453,3 +514,79 @@ class BoardEstimator:
                 (w[0], w[1], w[2]),
             )
         return est
+
+
+def from_sensor_figures(
+    params: EstimatorParams,
+    accel: Accelerometer,
+    gyro: Gyro,
+    baro: Barometer,
+    sonar: Sonar,
+    flow: OpticalFlow,
+    gps: GPS,
+    rotors: int = 4,
+) -> EstimatorParams:
+    """The estimator's settings with every one left to the sensors (NaN) filled in from the
+    figures of the sensors the board reads: the filter is told what its sensors deliver
+    (docs/physics.md, "Onboard estimator"). A setting the robot file gave is kept.
+
+    - accel_noise_m_s2: the accelerometer's white noise and its in-flight vibration at the
+      vibration's reference rotor speed (hover), per axis, root-sum-square;
+    - tilt_noise_rad_s: the gyro's angle random walk, its noise and vibration per reading
+      times sqrt(1 / rate) (rad/sqrt(s): how the tilt error of integrating it wanders);
+    - baro_noise_m: the barometer's white noise (Pa) at 8.3 cm/Pa;
+    - sonar_noise_m: the sonar's noise and its whole-centimetre rounding (1 cm / sqrt(12));
+    - flow_noise_rad_s: the flow sensor's count noise per reading over counts-per-radian and
+      its period, with the gyro's (its rates are de-rotated with the gyro);
+    - gps_pos_noise_m, gps_vel_noise_m_s, gps_delay_s: the receiver's HorizontalSigma,
+      VelocitySigma and Latency.
+    """
+    a, g, b, s, f, r = (accel.params, gyro.params, baro.params, sonar.params, flow.params,
+                        gps.params)
+    gyro_total = math.hypot(g["NoiseSigma"], gyro.vibration.rms_at(rotors))
+    flow_rate = f["NoiseSigma"] / (flow.counts_per_rad / flow.rate_hz)
+    derived = {
+        "accel_noise_m_s2": math.hypot(a["NoiseSigma"], accel.vibration.rms_at(rotors)),
+        "tilt_noise_rad_s": gyro_total * math.sqrt(1.0 / gyro.rate_hz),
+        "baro_noise_m": b["NoiseSigma"] * M_PER_PA,
+        "sonar_noise_m": math.hypot(s["NoiseSigma"], 0.01 / math.sqrt(12.0)),
+        "flow_noise_rad_s": math.hypot(flow_rate, gyro_total),
+        "gps_pos_noise_m": r["HorizontalSigma"],
+        "gps_vel_noise_m_s": r["VelocitySigma"],
+        "gps_delay_s": r["Latency"],
+    }
+
+    def pick(name: str) -> float:
+        value = float(getattr(params, name))
+        return derived[name] if math.isnan(value) else value
+
+    return replace(
+        params,
+        accel_noise_m_s2=pick("accel_noise_m_s2"),
+        tilt_noise_rad_s=pick("tilt_noise_rad_s"),
+        baro_noise_m=pick("baro_noise_m"),
+        sonar_noise_m=pick("sonar_noise_m"),
+        flow_noise_rad_s=pick("flow_noise_rad_s"),
+        gps_pos_noise_m=pick("gps_pos_noise_m"),
+        gps_vel_noise_m_s=pick("gps_vel_noise_m_s"),
+        gps_delay_s=pick("gps_delay_s"),
+    )
+
+
+def with_default_sensors(params: EstimatorParams) -> EstimatorParams:
+    """:func:`from_sensor_figures` for a board with every sensor at its class defaults (an
+    estimator built on its own, outside a robot)."""
+    rng = np.random.default_rng(0)
+    mount = Mount()
+
+    def make(type_name: str) -> Any:
+        return SENSOR_BUILDERS[type_name](type_name, mount, {}, rng)
+
+    return from_sensor_figures(params, make("Accelerometer"), make("Gyro"), make("Barometer"),
+                               make("Sonar"), make("OpticalFlow"), make("GPS"))
+
+
+SENSOR_BUILDERS: Final[dict[str, Any]] = {
+    "Accelerometer": Accelerometer, "Gyro": Gyro, "Barometer": Barometer, "Sonar": Sonar,
+    "OpticalFlow": OpticalFlow, "GPS": GPS,
+}

@@ -27,7 +27,7 @@ from skeye.robots.config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMou
 from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
-from skeye.sim.estimator import BoardEstimator
+from skeye.sim.estimator import BoardEstimator, from_sensor_figures
 from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
 from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
 from skeye.sim.state import BodyState
@@ -239,13 +239,21 @@ class Robot:
             )
             self.board_sensors.append(sched)
             chosen[type_name] = sched
-        return BoardEstimator(
-            self.config.estimator,
+        board = {name: sched.sensor for name, sched in chosen.items()}
+        board["Gyro"].share_board(board["Accelerometer"])
+        params = from_sensor_figures(
+            self.config.estimator, board["Accelerometer"], board["Gyro"], board["Barometer"],
+            board["Sonar"], board["OpticalFlow"], board["GPS"],
+        )
+        estimator = BoardEstimator(
+            params,
             self.spawn_pos_ned_m,
             self.spawn_rpy_rad,
             declination_rad,
-            float(chosen["OpticalFlow"].sensor.counts_per_rad),
+            float(board["OpticalFlow"].counts_per_rad),
         )
+        estimator.sonar_half_beam_rad = 0.5 * float(board["Sonar"].params["BeamAngle"])
+        return estimator
 
     def power_up(self, state: BodyState, world: WorldQuery) -> None:
         """The board's power-up calibration at the spawn pose, the vehicle still: one second's
@@ -254,6 +262,11 @@ class Robot:
         estimator = self.estimator
         if estimator is None:
             return
+        # The calibration runs with the motors off (a vehicle spawned in the air calibrated on
+        # the ground before it took off): no rotor vibration in these readings.
+        state = BodyState(state.time_s, state.pos_ned_m, state.vel_ned_m_s, state.quat_ned,
+                          state.rpy_rad, state.rot_body_to_ned, state.omega_frd_rad_s,
+                          state.accel_ned_m_s2, state.specific_force_frd_m_s2)
         gyro: list[tuple[float, float, float]] = []
         accel: list[tuple[float, float, float]] = []
         for sched in self.sensors + self.board_sensors:
@@ -357,12 +370,17 @@ class Robot:
         voltage_scale = min(1.0, battery.voltage_v / self._full_voltage_v + 0.15)
         w_max = airframe.max_rotor_speed_rad_s * voltage_scale
         if self.flight.armed and not battery.empty:
+            pos, vel = est.pos_ned_m, est.vel_ned_m_s
+            if estimator is not None and self.command.attitude and self.command.height_mode:
+                # The AscTec LL board's height mode holds its pressure altitude.
+                down, rate = estimator.pressure_down()
+                pos, vel = (pos[0], pos[1], down), (vel[0], vel[1], rate)
             commands = self.controller.update(
                 self.command,
                 est.rpy_rad,
                 est.omega_frd_rad_s,
-                est.vel_ned_m_s,
-                est.pos_ned_m,
+                vel,
+                pos,
                 w_max,
                 gps_hold,
             )

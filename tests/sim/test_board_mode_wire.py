@@ -23,7 +23,9 @@ def test_height_mode_holds_then_climbs(client_factory) -> None:
         c.send("DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0.5} {BoardMode height}")
         start = _height_m(c.step(100))
         held = _height_m(c.step(2000))  # 2 s at the centre: the height is held
-        assert abs(held - start) < 0.15, (start, held)
+        # on the board's pressure altitude, as the AscTec LL board holds it: within a few
+        # of the barometer's 1.5 Pa (0.125 m) noise sigma, the filtered estimate's wander
+        assert abs(held - start) < 4 * 0.125, (start, held)
         c.send("DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0.8} {BoardMode height}")
         climbed = _height_m(c.step(2000))  # above the centre: a climb rate
         assert climbed > held + 0.5, (held, climbed)

@@ -56,7 +56,8 @@ def test_sonar_missed_and_multiple_echoes_at_the_configured_rates() -> None:
     assert [dict(again.sample(make_state(t=k / 15.0, pos=(0.0, 0.0, -1.5)), world))["Range"]
             for k in range(n)] == ranges
     # A second echo beyond MaxRange is no echo.
-    far = make(Sonar, seed=1, NoiseSigma=0.0, RangingTime=0.0, MultiEchoProbability=1.0)
+    far = make(Sonar, seed=1, NoiseSigma=0.0, RangingTime=0.0, MissProbability=0.0,
+               MultiEchoProbability=1.0)
     assert far.sample(make_state(pos=(0.0, 0.0, -4.0)), world) == [("Range", 6.0)]
     assert far.last is not None and not far.last.echo
 
@@ -92,7 +93,7 @@ def test_imu_scale_factor_and_misalignment_follow_the_datasheet_spread() -> None
     assert xy.std() == pytest.approx(math.hypot(p["MisalignmentSigma"], bias / omega), rel=0.2)
     # Switched off, a still bias-free gyro reads the rate exactly.
     ideal = make(Gyro, NoiseSigma=0.0, BiasSigma=0.0, BiasWalk=0.0, ScaleSigma=0.0,
-                 MisalignmentSigma=0.0)
+                 MisalignmentSigma=0.0, GSensitivity=0.0)
     assert dict(ideal.sample(make_state(omega=(0.0, 0.0, omega)), FlatWorld()))[
         "AngularVelocity"] == (0.0, 0.0, omega)
 

@@ -176,7 +176,8 @@ def test_accelerometer_noise_statistics() -> None:
 
 
 def test_gyro_rotated_and_noise_statistics() -> None:
-    gyro = make(Gyro, mount=Mount(rpy_rad=(0.0, 0.0, math.pi / 2)), **IMU_QUIET)
+    gyro = make(Gyro, mount=Mount(rpy_rad=(0.0, 0.0, math.pi / 2)), GSensitivity=0.0,
+                **IMU_QUIET)
     f = dict(gyro.sample(make_state(omega=(0.3, 0.0, -0.1)), FlatWorld()))
     assert f["AngularVelocity"] == pytest.approx((0.0, -0.3, -0.1), abs=1e-12)
     gyro = make(Gyro, seed=3, **IDEAL_AXES)
@@ -294,12 +295,13 @@ def test_gps_fields_formats_and_error_statistics() -> None:
     sigma = np.array([p["HorizontalSigma"], p["HorizontalSigma"], p["VerticalSigma"]])
     assert np.all(rms > 0.5 * sigma) and np.all(rms < 1.6 * sigma), rms
     # Correlated: consecutive errors 0.2 s apart are nearly the same, and the error moves
-    # slowly, as a static receiver's does: sigma sqrt(2 (1 - exp(-1 s / 300 s))) = 0.12 m in a
-    # second per axis, where a 30 s process moved 0.38 m.
+    # slowly, as a static receiver's does: sigma sqrt(2 (1 - exp(-1 s / 300 s))) = 0.17 m in a
+    # second per axis (sigma 2.12 m), where a 30 s process moved 0.54 m.
     lag1 = np.corrcoef(err[:-1, 0], err[1:, 0])[0, 1]
     assert lag1 > 0.95
     step_1s = np.sqrt((np.diff(err[::5, :2], axis=0) ** 2).mean())
-    assert 0.08 < step_1s < 0.16, step_1s
+    expected = p["HorizontalSigma"] * math.sqrt(2.0 * (1.0 - math.exp(-1.0 / 300.0)))
+    assert 0.7 * expected < step_1s < 1.3 * expected, (step_1s, expected)
     vel = np.array([r["VelocityNED"] for r in readings])
     assert_mean_close(vel, np.array([0.5, 0.0, 0.0]), p["VelocitySigma"], 0.0)
 
@@ -309,7 +311,7 @@ def test_gps_fields_formats_and_error_statistics() -> None:
 
 def test_sonar_ranges_clamps_and_cone() -> None:
     world = FlatWorld()
-    quiet = make(Sonar, NoiseSigma=0.0, RangingTime=0.0)
+    quiet = make(Sonar, NoiseSigma=0.0, RangingTime=0.0, BeamAngle=0.6, MissProbability=0.0)
     assert quiet.sample(make_state(pos=(0, 0, -2.0)), world) == [("Range", pytest.approx(2.0))]
     assert quiet.sample(make_state(pos=(0, 0, -10.0)), world) == [("Range", 6.0)]
     assert quiet.last is not None and not quiet.last.echo
@@ -327,10 +329,14 @@ def test_sonar_ranges_clamps_and_cone() -> None:
 
 
 def test_sonar_noise_statistics() -> None:
-    sonar = make(Sonar, seed=4, RangingTime=0.0)
+    sonar = make(Sonar, seed=4, RangingTime=0.0, MissProbability=0.0)
+    sigma = sonar.params["NoiseSigma"]
     ranges = np.array([[r["Range"]] for r in series(sonar, 1500, pos=(0.0, 0.0, -1.5))])
-    assert_mean_close(ranges, np.array([1.5]), 0.01, 0.0)
-    assert float(ranges.std()) == pytest.approx(0.01, rel=0.15)
+    assert_mean_close(ranges, np.array([1.5]), sigma, 0.0)
+    # whole centimetres add 1 cm / sqrt(12) of rounding
+    expected = math.hypot(sigma, 0.01 / math.sqrt(12.0))
+    assert float(ranges.std()) == pytest.approx(expected, rel=0.15)
+
 
 
 # --- optical flow -----------------------------------------------------------------------------
@@ -480,7 +486,7 @@ def test_defaults_rates_and_conf_geo_fields() -> None:
                          {"max_range": 4, "rate_hz": 10}, np.random.default_rng(0))
     assert isinstance(sonar, Sonar) and sonar.rate_hz == 10.0
     assert sonar.conf_fields()[:4] == [("Rate", 10.0), ("MaxRange", 4.0), ("MinRange", 0.06),
-                                       ("BeamAngle", 0.6)]
+                                       ("BeamAngle", 1.257)]
     geo = dict(sonar.geo_fields())
     assert geo["Location"] == (0.0, 0.0, 0.05)
     assert geo["Orientation"] == pytest.approx((0.0, 2 * math.pi - 0.1, 0.0))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from skeye.sim.sensors.base import (
     Vec3,
     WorldQuery,
 )
+from skeye.sim.sensors.vibration import RotorVibration, clip3
 from skeye.sim.state import BodyState, Mat3, cross, mat_t_vec, mat_vec
 from skeye.sim.vehicle import ground_effect_factor
 from skeye.wire.sim import sen_layout
@@ -51,6 +52,38 @@ def _axis_params(scale: float, misalignment: float, ref: str) -> tuple[Param, Pa
         Param("MisalignmentSigma", misalignment,
               f"cross-axis sensitivity per axis pair, drawn once, 1 sigma, rad ({ref})"),
     )
+
+
+HOVER_SPEED_RAD_S: Final = 441.7
+"""The reference rotor speed of the vibration amplitudes: the Hummingbird's hover (physics.md)."""
+
+
+def _vibration_params(
+    unit: str, rotor: float, blade: float, broadband: float, limit: float, ref: str
+) -> tuple[Param, ...]:
+    return (
+        Param("VibrationRotor", rotor,
+              f"vibration line at the rotor frequency, amplitude per rotor per axis at "
+              f"VibrationSpeed, {unit} ({ref})"),
+        Param("VibrationBladePass", blade,
+              f"vibration line at the blade-pass frequency, amplitude per rotor per axis at "
+              f"VibrationSpeed, {unit} ({ref})"),
+        Param("VibrationBroadband", broadband,
+              f"broadband vibration, RMS per axis at VibrationSpeed, {unit} ({ref})"),
+        Param("VibrationSpeed", HOVER_SPEED_RAD_S,
+              "rotor speed at which the vibration amplitudes are given, rad/s", exclusive=True),
+        Param("Blades", 2, "blades per rotor (blade-pass = blades x rotor frequency)", 1,
+              integer=True, maximum=8),
+        Param("Bandwidth", 330.0, "the sensor's low-pass corner (first order), Hz; 0: none"),
+        Param("Range", limit, f"measurement range, +-{unit}: readings clip there; 0: none"),
+    )
+
+
+def _vibration(sensor: Sensor[Any]) -> RotorVibration:
+    p = sensor.params
+    return RotorVibration(sensor.rng, p["VibrationRotor"], p["VibrationBladePass"],
+                          p["VibrationBroadband"], p["VibrationSpeed"], int(p["Blades"]),
+                          p["Bandwidth"])
 
 
 def axis_errors(rng: np.random.Generator, scale_sigma: float, misalignment_sigma: float) -> Mat3:
@@ -100,25 +133,40 @@ class Accelerometer(Sensor[AccelReading]):
     bias and noise): the MPU-6050 datasheet (PS-MPU-6000A-00 rev 3.4, table 6.2) gives an
     initial calibration tolerance of +-3 % and a cross-axis sensitivity of +-2 %; read as 3-sigma
     limits, ScaleSigma 0.01 and MisalignmentSigma 0.0067. Default rate 100 Hz.
+
+    In-flight vibration (:mod:`.vibration`), added to the specific force before the axis
+    errors: lines at the rotor and blade-pass frequencies and broadband content, scaled with
+    the rotor speeds squared, sampled at the reading instants (so aliased), then clipped at
+    Range (16 g: the MPU-6050's widest full scale). The defaults give 1.1 m/s^2 RMS per axis at
+    the Hummingbird's hover speed: the EuRoC MAV dataset's ADIS16448 on an AscTec multirotor in
+    hover carries 0.9-1.3 m/s^2 above 10 Hz (docs/physics.md, "In-flight vibration"); how that
+    splits into lines and broadband is an assumption (two thirds of the variance in the lines).
     """
 
     type_name = "Accelerometer"
     PARAMS = (
         *_noise_params("m/s^2", 0.03, 0.05, 5e-4, "MPU-6050: 400 ug/sqrt(Hz)"),
         *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
+        *_vibration_params("m/s^2", 0.449, 0.449, 0.635, 156.9,
+                           "EuRoC ADIS16448 in hover: 1.1 m/s^2 RMS per axis"),
     )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
         self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
+        self.vibration = _vibration(self)
+        self._range = p["Range"]
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> AccelReading:
         omega = state.omega_frd_rad_s
         cx, cy, cz = cross(omega, cross(omega, self._pos_mount))
         fx, fy, fz = state.specific_force_frd_m_s2
-        x, y, z = mat_vec(self._axes, self._body_to_sensor((fx + cx, fy + cy, fz + cz)))
-        return AccelReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
+        vx, vy, vz = self.vibration.sample(state.rotor_speed_rad_s, dt_s)
+        x, y, z = mat_vec(self._axes, self._body_to_sensor(
+            (fx + cx + vx, fy + cy + vy, fz + cz + vz)))
+        x, y, z = self._noise.corrupt3(x, y, z, dt_s)
+        return AccelReading(state.time_s, clip3(x, y, z, self._range))
 
 
 _GYRO_LAYOUT: Final[Layout] = sen_layout(SenGyro)
@@ -152,22 +200,61 @@ class Gyro(Sensor[GyroReading]):
     (:func:`axis_errors`): the MPU-6050 datasheet (PS-MPU-6000A-00 rev 3.4, table 6.1) gives a
     sensitivity scale factor tolerance of +-3 % and a cross-axis sensitivity of +-2 %; read as
     3-sigma limits, ScaleSigma 0.01 and MisalignmentSigma 0.0067. Default rate 100 Hz.
+
+    In-flight vibration as the accelerometer's (:mod:`.vibration`): 0.065 rad/s RMS per axis
+    at the Hummingbird's hover speed (EuRoC's ADIS16448 in hover: 0.06-0.07 rad/s above
+    10 Hz), clipped at Range (2000 deg/s, the MPU-6050's widest full scale). g-sensitivity: a
+    rate error G f with f the specific force the part feels (vibration included) and G a 3x3
+    matrix drawn once, entries N(0, GSensitivity): the MPU-6050's linear acceleration
+    sensitivity 0.1 deg/s/g (PS-MPU-6000A-00 rev 3.4, table 6.1) = 1.78e-4 rad/s per m/s^2.
     """
 
     type_name = "Gyro"
     PARAMS = (
         *_noise_params("rad/s", 0.0009, 0.005, 1e-4, "MPU-6050: 0.05 deg/s RMS"),
         *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
+        *_vibration_params("rad/s", 0.0265, 0.0265, 0.0375, 34.9,
+                           "EuRoC ADIS16448 in hover: 0.065 rad/s RMS per axis"),
+        Param("GSensitivity", 1.78e-4,
+              "rate error per m/s^2 of specific force, per axis pair, drawn once, 1 sigma, "
+              "rad/s/(m/s^2) (MPU-6050: 0.1 deg/s/g)"),
     )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
         self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
+        self.vibration = _vibration(self)
+        self._range = p["Range"]
+        g = p["GSensitivity"]
+        self._g_sens: Mat3 | None = None
+        if g > 0.0:
+            d = self.rng.standard_normal(9).tolist()
+            self._g_sens = ((g * d[0], g * d[1], g * d[2]), (g * d[3], g * d[4], g * d[5]),
+                            (g * d[6], g * d[7], g * d[8]))
+        # The specific force the gyro feels: set by the engine from the accelerometer's
+        # vibration when both ride on one board; else the rigid body's.
+        self._accel: Accelerometer | None = None
+
+    def share_board(self, accel: Accelerometer) -> None:
+        """The accelerometer on the same board: its vibration is what the gyro's
+        g-sensitivity feels."""
+        self._accel = accel
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> GyroReading:
-        x, y, z = mat_vec(self._axes, self._body_to_sensor(state.omega_frd_rad_s))
-        return GyroReading(state.time_s, self._noise.corrupt3(x, y, z, dt_s))
+        wx, wy, wz = state.omega_frd_rad_s
+        vx, vy, vz = self.vibration.sample(state.rotor_speed_rad_s, dt_s)
+        g = self._g_sens
+        if g is not None:
+            fx, fy, fz = state.specific_force_frd_m_s2
+            accel = self._accel
+            if accel is not None and accel.last is not None:
+                fx, fy, fz = accel.last.proper_acceleration_m_s2
+            gx, gy, gz = mat_vec(g, (fx, fy, fz))
+            vx, vy, vz = vx + gx, vy + gy, vz + gz
+        x, y, z = mat_vec(self._axes, self._body_to_sensor((wx + vx, wy + vy, wz + vz)))
+        x, y, z = self._noise.corrupt3(x, y, z, dt_s)
+        return GyroReading(state.time_s, clip3(x, y, z, self._range))
 
 
 _COMPASS_LAYOUT: Final[Layout] = sen_layout(SenMagneticCompass)
@@ -201,19 +288,56 @@ class MagneticCompass(Sensor[CompassReading]):
     quantisation at the 1.3 Ga gain NoiseSigma 0.3 uT (about 0.015 rad of heading at a 20 uT
     horizontal field); BiasSigma 1.0 uT (residual hard iron after calibration); BiasWalk
     0.005 uT/sqrt(s) (thermal drift). Default rate 20 Hz.
+
+    Motor currents: the currents to the motors make a field of their own at the board, fixed
+    in the body frame and growing with the current. The current follows the shaft power, so the
+    rotor speeds cubed: the field is MotorField x sum(w_i^3) / (n MotorSpeed^3) (MotorField at
+    every rotor at MotorSpeed, the Hummingbird's hover), along a body-frame direction drawn once
+    from the seed. MotorField 2.2 uT is an assumption at the edge of what ArduPilot's compass /
+    motor calibration (compassmot) calls acceptable, 30 % of the earth's field (about 50 uT) at
+    full throttle: full throttle draws (838 / 441.7)^3 = 6.8 times the hover current, so 15 uT
+    there and 2.2 uT in hover. A board compensates it only when it has been calibrated for it
+    (compassmot); the simulated board has not.
     """
 
     type_name = "MagneticCompass"
-    PARAMS = _noise_params("uT", 0.3, 1.0, 0.005, "HMC5883L: 2 mG noise floor")
+    PARAMS = (
+        *_noise_params("uT", 0.3, 1.0, 0.005, "HMC5883L: 2 mG noise floor"),
+        Param("MotorField", 2.2, "field of the motor currents at MotorSpeed, uT (assumption: "
+              "ArduPilot compassmot's 30 % of the earth field at full throttle)"),
+        Param("MotorSpeed", HOVER_SPEED_RAD_S, "rotor speed at which MotorField is given, rad/s",
+              exclusive=True),
+    )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        u = self.rng.standard_normal(3).tolist()
+        norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) or 1.0
+        k = p["MotorField"] / norm
+        self._motor_dir: Vec3 = (k * u[0], k * u[1], k * u[2])
+
+    def motor_field_ut(self, speeds: tuple[float, ...]) -> float:
+        """The magnitude of the motor currents' field at these rotor speeds, uT."""
+        if not speeds:
+            return 0.0
+        ref = self.params["MotorSpeed"]
+        total = 0.0
+        for w in speeds:
+            r = w / ref
+            total += r * r * r
+        return self.params["MotorField"] * total / len(speeds)
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> CompassReading:
         rot = self._rot_sensor_to_ned(state)
         fx, fy, fz = world.magnetic_field_ned_ut
-        b = self._noise.corrupt3(*mat_t_vec(rot, (float(fx), float(fy), float(fz))), dt_s)
+        mx, my, mz = mat_t_vec(rot, (float(fx), float(fy), float(fz)))
+        scale = self.motor_field_ut(state.rotor_speed_rad_s) / max(self.params["MotorField"],
+                                                                  1e-12)
+        if scale > 0.0:
+            dx, dy, dz = self._body_to_sensor(self._motor_dir)
+            mx, my, mz = mx + scale * dx, my + scale * dy, mz + scale * dz
+        b = self._noise.corrupt3(mx, my, mz, dt_s)
         r20, r21, r22 = rot[2]
         roll = math.atan2(r21, r22)
         pitch = math.asin(max(-1.0, min(1.0, -r20)))

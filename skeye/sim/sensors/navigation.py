@@ -363,12 +363,13 @@ class GPS(Sensor[GpsReading]):
 
     Without a geodetic origin (indoors) it reports ``{Fix 0} {Satellites 0}`` and nothing else.
     Otherwise its position error is a first-order Gauss-Markov process per axis (correlated, the
-    way multipath and atmosphere errors wander): HorizontalSigma 1.5 m per axis (CEP =
-    1.18 sigma = 1.8 m, between the NEO-6M's 2.5 m and the NEO-M8N's 2.0 m CEP), VerticalSigma
-    3.0 m, CorrelationTime 300 s, started from its stationary distribution. The correlation
+    way multipath and atmosphere errors wander): HorizontalSigma 2.12 m per axis (the u-blox
+    LEA-6 data sheet's 2.5 m CEP horizontal accuracy; CEP = 1.18 sigma for a circular normal
+    error), VerticalSigma 3.0 m (assumption: the data sheet gives no vertical figure),
+    CorrelationTime 300 s, started from its stationary distribution. The correlation
     time is that of measured static receivers: a consumer receiver's horizontal error about
     1.5 m sigma over a 700 s recording, changing on "the order of several hundred seconds"
-    (docs/physics.md, GPS row); so the error moves about 1.5 sqrt(2 / 300) = 0.12 m in a second,
+    (docs/physics.md, GPS row); so the error moves about 2.12 sqrt(2 / 300) = 0.17 m in a second,
     not the 0.39 m of a 30 s process. Velocity: white
     noise VelocitySigma 0.05 m/s (u-blox speed accuracy). Satellites: an integer random walk in
     [MinSatellites 9, MaxSatellites 12], one step with probability 0.05 per reading.
@@ -386,7 +387,8 @@ class GPS(Sensor[GpsReading]):
 
     type_name = "GPS"
     PARAMS = (
-        Param("HorizontalSigma", 1.5, "horizontal position error, stationary sigma per axis, m"),
+        Param("HorizontalSigma", 2.12,
+              "horizontal position error, stationary sigma per axis, m (LEA-6: 2.5 m CEP)"),
         Param("VerticalSigma", 3.0, "vertical position error, stationary sigma, m"),
         Param("CorrelationTime", 300.0, "position error correlation time, s",
               exclusive=True),

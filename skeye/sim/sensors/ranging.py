@@ -51,8 +51,10 @@ class Sonar(Sensor[SonarReading]):
     nearest hit is the echo (slant distance, as time of flight measures it). Range = echo +
     white noise, clamped to [MinRange, MaxRange] and rounded to whole centimetres (the SRF10's
     result registers in its centimetre mode); MaxRange when no echo. Defaults: MinRange
-    0.06 m, MaxRange 6.0 m (the SRF10's rated 6 m), BeamAngle 0.6 rad full cone, BeamRays 8,
-    NoiseSigma 0.01 m, rate 15 Hz.
+    0.06 m, MaxRange 6.0 m (the SRF10's rated 6 m), BeamAngle 1.257 rad (72 deg: Devantech's
+    SRF10 beam width at the -6 dB points, robot-electronics.co.uk "Ultrasonic Rangers FAQ"),
+    BeamRays 8, NoiseSigma 0.0175 m (Devantech: "We quote 3-4cm" accuracy, read as 2 sigma of
+    3.5 cm), rate 15 Hz.
 
     Ranging time (Devantech SRF10 technical specification: a ranging takes 65 ms at the
     default range setting): a ranging starts at a reading when none is in progress, measures
@@ -66,21 +68,24 @@ class Sonar(Sensor[SonarReading]):
     Missed and multiple echoes: each ranging independently misses its echo with probability
     MissProbability (reported as no echo, MaxRange) or, with probability MultiEchoProbability,
     reports the second echo (sound that went ground - vehicle - ground: twice the range; a
-    miss when that is beyond MaxRange). The SRF10 specification gives no rates for either, so
-    both default to 0: a scenario sets them (they are CONF parameters like the rest).
+    miss when that is beyond MaxRange). The SRF10 specification gives no rates for either:
+    MissProbability 0.02 is an assumption (an occasional ranging lost to rotor noise and soft
+    ground, an order of magnitude, not a measured figure); MultiEchoProbability defaults to 0.
     """
 
     type_name = "Sonar"
     PARAMS = (
         Param("MaxRange", 6.0, "longest range reported, m", exclusive=True),
         Param("MinRange", 0.06, "shortest range reported, m"),
-        Param("BeamAngle", 0.6, "full cone angle of the beam, rad", maximum=math.pi,
+        Param("BeamAngle", 1.257, "full cone angle of the beam, rad (SRF10: 72 deg at -6 dB)",
+              maximum=math.pi,
               exclusive=True),
         Param("BeamRays", 8, "rays on the cone besides the centre ray", integer=True, maximum=64),
-        Param("NoiseSigma", 0.01, "white noise on the range, m"),
+        Param("NoiseSigma", 0.0175, "white noise on the range, m (SRF10: 3-4 cm as 2 sigma)"),
         Param("RangingTime", 0.065, "time from the start of a ranging to its result, s "
               "(SRF10: 65 ms)", maximum=10.0),
-        Param("MissProbability", 0.0, "chance that a ranging misses its echo", maximum=1.0),
+        Param("MissProbability", 0.02, "chance that a ranging misses its echo (assumption)",
+              maximum=1.0),
         Param("MultiEchoProbability", 0.0, "chance that a ranging reports the second echo",
               maximum=1.0),
     )
