@@ -48,6 +48,7 @@ COMPILED_MODULES: tuple[str, ...] = (
     "skeye.sim.sensors.inertial",
     "skeye.sim.sensors.navigation",
     "skeye.sim.sensors.ranging",
+    "skeye.sim.sensors.vibration",
     "skeye.sim.engine",
 )
 """Modules compiled by mypyc at install time (dotted names)."""

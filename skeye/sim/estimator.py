@@ -38,7 +38,6 @@ Hot path: plain floats, no numpy, no allocation beyond the output estimate.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Any, Final
 
 import numpy as np
@@ -560,16 +559,24 @@ def from_sensor_figures(
         value = float(getattr(params, name))
         return derived[name] if math.isnan(value) else value
 
-    return replace(
-        params,
+    # Built field by field (not dataclasses.replace): mypyc compiles both dataclasses.
+    return EstimatorParams(
+        kind=params.kind,
+        attitude_kp=params.attitude_kp,
+        attitude_ki=params.attitude_ki,
+        compass_gain=params.compass_gain,
         accel_noise_m_s2=pick("accel_noise_m_s2"),
-        tilt_noise_rad_s=pick("tilt_noise_rad_s"),
+        accel_bias_init_m_s2=params.accel_bias_init_m_s2,
+        accel_bias_walk_m_s3=params.accel_bias_walk_m_s3,
         baro_noise_m=pick("baro_noise_m"),
         sonar_noise_m=pick("sonar_noise_m"),
         flow_noise_rad_s=pick("flow_noise_rad_s"),
+        flow_min_quality=params.flow_min_quality,
+        flow_min_height_m=params.flow_min_height_m,
         gps_pos_noise_m=pick("gps_pos_noise_m"),
         gps_vel_noise_m_s=pick("gps_vel_noise_m_s"),
         gps_delay_s=pick("gps_delay_s"),
+        tilt_noise_rad_s=pick("tilt_noise_rad_s"),
     )
 
 

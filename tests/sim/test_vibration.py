@@ -133,3 +133,18 @@ def test_estimator_settings_come_from_the_sensors() -> None:
     assert robot.estimator.p.tilt_noise_rad_s == pytest.approx(
         math.hypot(board_gyro.params["NoiseSigma"], board_gyro.vibration.rms_at(4))
         / math.sqrt(board_gyro.rate_hz))
+
+
+def test_deriving_keeps_every_other_setting() -> None:
+    from dataclasses import fields
+
+    from skeye.robots.params import SENSOR_DERIVED
+
+    sensors = [make(cls) for cls in (Accelerometer, Gyro, Barometer, Sonar, OpticalFlow, GPS)]
+    given = EstimatorParams(kind="truth", attitude_kp=0.3, attitude_ki=0.02, compass_gain=0.5,
+                            accel_bias_init_m_s2=0.1, accel_bias_walk_m_s3=0.004,
+                            flow_min_quality=5.0, flow_min_height_m=0.2)
+    derived = from_sensor_figures(given, *sensors)  # type: ignore[arg-type]
+    for f in fields(EstimatorParams):
+        if f.name not in SENSOR_DERIVED:
+            assert getattr(derived, f.name) == getattr(given, f.name), f.name
