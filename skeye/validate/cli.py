@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.pilot.cli import vision_latency_s
 from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
 from skeye.sweep.cli import run_trials
@@ -20,6 +21,7 @@ from skeye.validate.calibration import calibrate_simulated_camera
 from skeye.validate.experiments import (
     CAMERAS,
     E2_RUNS,
+    E2_WINDS,
     ESTIMATORS,
     WORLDS,
     E1Series,
@@ -34,7 +36,8 @@ from skeye.vision.calibration import CalibrationResult, load_calibration
 def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1,
              workers: int | None = None, keep_recordings: bool = False, *,
              camera: str = "ideal", estimator: str = "onboard", world: str = "pad",
-             calibration: Path | None = None) -> dict[str, Any]:
+             calibration: Path | None = None, wind: str = "dryden",
+             vision_latency: str = "measured") -> dict[str, Any]:
     """Run the experiments for ``seeds`` seeds on the sweep's local pool; write the report.
 
     Each (experiment, seed) is one trial of :mod:`skeye.sweep` (its own processes, in parallel
@@ -56,6 +59,9 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         raise LocalProtocolError(f"unknown estimator {estimator!r}: {', '.join(ESTIMATORS)}")
     if world not in WORLDS:
         raise LocalProtocolError(f"unknown world {world!r}: {', '.join(WORLDS)}")
+    if wind not in E2_WINDS:
+        raise LocalProtocolError(f"unknown E2 disturbance {wind!r}: {', '.join(E2_WINDS)}")
+    vision_latency_s(vision_latency)  # refused here, not in every trial
     if calibration is not None:
         load_calibration(calibration)  # a bad file is named here, not in every trial
     experiments = ("E1", "E2") if which == "ALL" else (which,)
@@ -65,11 +71,13 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
         summary["calibration"] = calibration_figures(found, camera)
     cal_path = str(calibration.resolve()) if calibration is not None else ""
-    params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path}
+    params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path,
+              "wind": wind, "vision_latency": vision_latency}
     summary["setup"] = dict(params)
     seed_list = list(range(first_seed, first_seed + seeds))
     settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
-                               world=world, calibration=cal_path) for s in seed_list}
+                               world=world, calibration=cal_path, wind=wind,
+                               vision_latency=vision_latency) for s in seed_list}
     trials = [Trial(e, dict(params), s, quick, timeout_s=900.0 if quick else 7200.0)
               for s in seed_list for e in experiments]
     spec = SweepSpec(which, trials, [])
@@ -121,7 +129,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     summary = validate(args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
                        args.workers, args.keep_recordings, camera=args.camera,
                        estimator=args.estimator, world=args.world,
-                       calibration=Path(args.calibration) if args.calibration else None)
+                       calibration=Path(args.calibration) if args.calibration else None,
+                       wind=args.wind, vision_latency=args.vision_latency_ms)
     print((Path(args.out) / "report.md").read_text())
     del summary
     return 0
@@ -145,6 +154,14 @@ def register(sub: Any) -> None:
     p.add_argument("--estimator", choices=ESTIMATORS, default="onboard",
                    help="the boards' state estimator (skeye sim --estimator): onboard flies on "
                    "the simulated sensors, truth on the oracle")
+    p.add_argument("--wind", choices=E2_WINDS, default="dryden",
+                   help="E2's disturbance: dryden (MIL-F-8785C low-altitude gusts with a mean "
+                   "wind, the default), random_force (the paper's own: a force on the centre "
+                   "of mass, F_max 0.3 N redrawn every 1/30 s) or none")
+    p.add_argument("--vision-latency-ms", default="measured", metavar="MS|measured",
+                   help="when the pilot uses a pad detection: 'measured' (default), the "
+                   "detector's own processing time as on a real computer; N fixes it at N ms "
+                   "after the frame (skeye pilot --vision-latency-ms)")
     p.add_argument("--world", choices=WORLDS, default="pad",
                    help="the world flown in: pad (outdoors, GPS) or indoor (no GPS: the "
                    "velocity hold is optical flow only, as on the paper's extension board)")

@@ -63,8 +63,13 @@ class RunSettings:
     quick: bool = False
     f_max_n: float = F_MAX_N
     e2_duration_s: float = 300.0
-    wind: str = "random_force"  # E2's disturbance: a ``skeye sim --wind`` mode
+    # E2's disturbance, a ``skeye sim --wind`` mode: MIL-F-8785C low-altitude Dryden gusts with
+    # a mean wind (docs/physics.md, Wind); ``random_force`` is the paper's own disturbance.
+    wind: str = "dryden"
     wind_params: str = ""  # extra ``--wind-params`` (k=v,...); f_max_n is added for random_force
+    # When a pad detection is used (``skeye pilot --vision-latency-ms``): ``measured``, the
+    # detector's own processing time, as on a real computer; a number of ms fixes it.
+    vision_latency: str = "measured"
     deadband_m: float = 0.05  # E2's PAD_MODE 1 deadband
     max_speed_m_s: float = 0.3  # E2's PAD_MODE 1 speed limit
     camera: str = "ideal"  # the camera profile (skeye sim --camera-profile)
@@ -84,6 +89,18 @@ class RunSettings:
         if self.wind == "random_force" and not any(p.startswith("f_max_n=") for p in params):
             params.append(f"f_max_n={self.f_max_n}")
         return ["--wind", self.wind] + (["--wind-params", ",".join(params)] if params else [])
+
+    def describe_wind(self) -> str:
+        """E2's disturbance in words, with the parameters given (else the simulator's)."""
+        if self.wind == "none":
+            return "still air"
+        args = self.wind_args()
+        what = {"dryden": "MIL-F-8785C low-altitude Dryden gusts with their mean wind",
+                "random_force": "the paper's random force on the centre of mass",
+                "turbulence": "skeye's first-order turbulence",
+                "constant": "a steady wind"}.get(self.wind, self.wind)
+        given = args[3] if len(args) > 3 else "the simulator's defaults, docs/physics.md"
+        return f"{what} (skeye sim --wind {self.wind}: {given})"
 
 
 @dataclass
@@ -121,7 +138,8 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
                       "--lockstep-rate", "0", "--ground-clock", "--link-timeout", "30",
                       "--land-timeout", "60"]
         if vision:
-            pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}"]
+            pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}",
+                           "--vision-latency-ms", settings.vision_latency]
             if settings.calibration:
                 pilot_args += ["--calibration", settings.calibration]
         pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
@@ -238,6 +256,10 @@ def run_e1(settings: RunSettings, workdir: Path, name: str = "e1") -> E1Series:
         series.estimated_m.append(report.height_m if report.found else None)
         series.true_m.append(-down - CAMERA_BELOW_CENTRE_M * tilt - PAD_SURFACE_HEIGHT_M)
     return series
+
+
+E2_WINDS = ("dryden", "random_force", "none")
+"""E2's disturbances (``skeye validate --wind``): the default gust model, the paper's force."""
 
 
 # -- E2 ---------------------------------------------------------------------------------------

@@ -57,7 +57,14 @@ def e2_figures(series: E2Series, velocity: E2Series, attitude: E2Series,
     out.update(_distance_figures(velocity, "velocity_"))
     out.update(_distance_figures(attitude, "attitude_"))
     out.update(f_max_n=settings.f_max_n, seed=settings.seed)
+    out.update(disturbance=settings.describe_wind(), vision_latency=settings.vision_latency)
     return out
+
+
+def _latency_words(latency: str) -> str:
+    if latency == "measured":
+        return "after the detector's measured processing time (as on a real computer)"
+    return f"{latency} ms after their frame (fixed on request)"
 
 
 def where_it_lands(std_m: float, max_m: float) -> str:
@@ -89,6 +96,8 @@ def median_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
             values = [r[key] for r in runs]
             out[key] = statistics.median(values)
             out[f"{key}_spread"] = [min(values), max(values)]
+        elif isinstance(value, str):
+            out[key] = value  # a setting, the same for every run
     out["runs"] = runs
     return out
 
@@ -180,8 +189,7 @@ def write_e2(out: Path, series_by_seed: dict[int, dict[str, E2Series]],
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time since hold started (s)")
     ax.set_ylabel("distance from the pad centre (cm)")
-    ax.set_title(f"E2: hold under random force, F_max {settings_by_seed[seed].f_max_n} "
-                 f"N (seed {seed})")
+    ax.set_title(f"E2: hold under {settings_by_seed[seed].wind} (seed {seed})")
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -266,9 +274,11 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         lines += [
             "## E2: position hold over the pad under wind (paper Fig. 7)",
             "",
-            f"Random force on the centre of mass, F_max {e2['f_max_n']} N redrawn every 1/30 s; "
+            f"Disturbance: {e2.get('disturbance', 'random force')}; "
             f"{e2['duration_s']:.0f} s of sim time per run, the same seed and disturbance for "
-            "the three runs. Distance of the vehicle from the pad centre:",
+            "the three runs; the vision run's pad detections are used "
+            f"{_latency_words(e2.get('vision_latency', '0'))}. Distance of the vehicle from "
+            "the pad centre:",
             "",
             "| run | mean | std | max | final | paper (sim) std / max | paper (real) std / max |",
             "| --- | --- | --- | --- | --- | --- | --- |",
