@@ -113,6 +113,10 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
+    if not (math.isfinite(args.frame_jitter_ms) and 0.0 <= args.frame_jitter_ms <= 1000.0):
+        print(f"skeye pilot: --frame-jitter-ms must be 0..1000 ms, got {args.frame_jitter_ms}",
+              flush=True)
+        return 2
     if args.rtp_video is not None:
         from skeye.pilot.rtp_video import parse_rtp_uri
 
@@ -178,7 +182,9 @@ def run(args: argparse.Namespace) -> int:
             elif args.images is not None:
                 vision = pad_vision_factory(sim, robot, args.camera, calibration,
                                             latency_s=latency_s,
-                                            predict=not args.no_vision_prediction)
+                                            predict=not args.no_vision_prediction,
+                                            frame_time=args.frame_time,
+                                            frame_jitter_s=args.frame_jitter_ms / 1e3)
             lockstep = sim.mode == "lockstep"
             tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
             video = None
@@ -349,14 +355,17 @@ def vision_latency_s(text: str) -> float | None:
 def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
                        calibration: Any = None, *, latency_s: float | None = 0.0,
                        predict: bool = True, params: Any = None,
-                       vision_class: Any = None) -> Any:
+                       vision_class: Any = None, frame_time: str = "arrival",
+                       frame_jitter_s: float = 0.0) -> Any:
     """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator
     and the camera calibration (``skeye calibrate``) when one is given; a calibration for
     another image size than the camera's is refused here, before the vision starts.
     ``latency_s`` and ``predict``: :class:`skeye.pilot.vision.PadVision`'s (vision latency,
     None = measured; fly on the offset predicted to now); ``params``: pad-hold gains and
     limits (default: derived from the loop delay); ``vision_class``: a PadVision subclass
-    (``--policy``: :class:`skeye.pilot.policy.DetectOnlyVision`)."""
+    (``--policy``: :class:`skeye.pilot.policy.DetectOnlyVision`); ``frame_time`` and
+    ``frame_jitter_s``: what a frame's time is (its arrival at the pilot, or its capture),
+    and the host's jitter."""
     from skeye.pilot.vision import PadVision
 
     cls = vision_class or PadVision
@@ -374,7 +383,7 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
     def make(boards: Any, lock: Any) -> PadVision:
         return cls(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
                          calibration=calibration, latency_s=latency_s, predict=predict,
-                         params=params)
+                         params=params, frame_time=frame_time, frame_jitter_s=frame_jitter_s)
 
     return make
 
@@ -477,6 +486,23 @@ def register(subparsers: Any) -> None:
         "detector is busy until then, as a slower computer's would be); 'measured' = each "
         "frame's measured processing time (lockstep; in realtime the real delay applies). "
         "See docs/pilot.md, Vision latency",
+    )
+    p.add_argument(
+        "--frame-time",
+        choices=("arrival", "capture"),
+        default="arrival",
+        help="a camera frame's time to the pilot: arrival (default), when it reached the "
+        "pilot, as a host timestamps a USB webcam's frames (the capture latency unknown); "
+        "capture, the simulator's exact capture time (the comparison case). See docs/pilot.md, "
+        "Frame times",
+    )
+    p.add_argument(
+        "--frame-jitter-ms",
+        type=float,
+        default=0.0,
+        metavar="MS",
+        help="the host's timestamp jitter on each frame's arrival: uniform in 0..MS ms, seeded "
+        "(default 0; the simulated webcam's own delivery jitter is the camera model's)",
     )
     p.add_argument(
         "--no-vision-prediction",

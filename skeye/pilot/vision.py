@@ -14,8 +14,14 @@ its connection, a late frame never answers a later request. In lockstep the loop
 ``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible; the
 simulator is paused meanwhile, so nothing flies unwatched.
 
+Frame times (docs/pilot.md, "Frame times"): by default a frame's time is when it reached the
+pilot, as a host sees a USB webcam's frames: the control loop notes the sim time at which each
+frame's announcement arrived (plus a configurable, seeded host jitter), and the capture latency
+stays unknown to it, so the camera and the IMU disagree as on a real vehicle. ``frame_time =
+"capture"`` uses the simulator's exact capture time instead (the comparison case).
+
 Latency (docs/pilot.md, "Vision latency"): each observation is used ``latency_s`` after its
-frame's capture (configured, or measured, or as soon as it is done), and the pad hold flies on
+frame's time (configured, or measured, or as soon as it is done), and the pad hold flies on
 it predicted to now: the control loop records the INS pose every tick (:class:`PoseHistory`),
 places each detection in the estimate's world frame with the pose at its capture time, and
 every control period computes the pad's offset from the pose now. A detection more than
@@ -40,6 +46,7 @@ from __future__ import annotations
 import logging
 import math
 import queue
+import random
 import threading
 import time
 from collections.abc import Callable
@@ -112,6 +119,10 @@ class VisionStats:
     too_slow: str = ""  # why the vision is too slow to hold on (empty while it is not)
     too_slow_count: int = 0  # observations refused for being too old
 
+
+FRAME_TIMES = ("arrival", "capture")
+"""What a frame's time is to the pilot: when it arrived (a host's view), or its exact capture."""
+ARRIVALS_KEPT = 64  # frames whose arrival time is remembered
 
 MAX_VISION_LATENCY_S = 1.0
 """Observations older than this when they arrive are too slow to hold on (docs/pilot.md):
@@ -204,6 +215,9 @@ class PadVision:
         latency_s: float | None = 0.0,
         predict: bool = True,
         max_latency_s: float = MAX_VISION_LATENCY_S,
+        frame_time: str = "arrival",
+        frame_jitter_s: float = 0.0,
+        seed: int = 0,
     ) -> None:
         if queue_size < 1 or not lockstep_wait_s > 0:
             raise InvalidArgument(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
@@ -212,6 +226,16 @@ class PadVision:
             raise InvalidArgument(f"vision latency must be >= 0 s, got {latency_s!r}")
         if not (math.isfinite(max_latency_s) and max_latency_s > 0):
             raise InvalidArgument(f"max vision latency must be > 0 s, got {max_latency_s!r}")
+        if frame_time not in FRAME_TIMES:
+            raise InvalidArgument(f"frame time must be one of {', '.join(FRAME_TIMES)}, "
+                                  f"got {frame_time!r}")
+        if not (math.isfinite(frame_jitter_s) and 0.0 <= frame_jitter_s <= 1.0):
+            raise InvalidArgument(f"frame jitter must be 0..1 s, got {frame_jitter_s!r}")
+        self.frame_time = frame_time
+        self.frame_jitter_s = frame_jitter_s
+        self._jitter_rng = random.Random(seed)
+        self._arrivals: dict[int, float] = {}  # frame number -> when the pilot saw it (sim)
+        self._arrivals_lock = threading.Lock()
         self.boards = boards
         self.robot = robot
         self.lock = lock
@@ -294,6 +318,8 @@ class PadVision:
         worker.check()
         now = self._pose_now()
         latest = self.robot.camera.latest
+        if latest is not None:
+            self._note_arrival(latest.frame, now.time_s)
         if not self.lockstep:
             self._kick.set()
         elif latest is not None and now.time_s >= self._busy_until_s - 1e-9:
@@ -400,6 +426,27 @@ class PadVision:
                 self._attempted = max(self._attempted, latest.frame)
                 self._done.notify_all()
 
+    def _note_arrival(self, frame: int, now_s: float) -> None:
+        """The sim time the pilot first saw ``frame`` announced, plus the host's jitter."""
+        with self._arrivals_lock:
+            if frame in self._arrivals:
+                return
+            jitter = self._jitter_rng.uniform(0.0, self.frame_jitter_s) if self.frame_jitter_s \
+                else 0.0
+            self._arrivals[frame] = now_s + jitter
+            while len(self._arrivals) > ARRIVALS_KEPT:
+                del self._arrivals[min(self._arrivals)]
+
+    def frame_time_s(self, frame: int, capture_s: float) -> float:
+        """The time the pilot gives a frame: its arrival (default) or its capture time."""
+        if self.frame_time == "capture":
+            return capture_s
+        with self._arrivals_lock:
+            arrived = self._arrivals.get(frame)
+            if arrived is None:  # fetched before its announcement was seen: newer than all
+                arrived = max(self._arrivals.values(), default=capture_s)
+        return max(arrived, capture_s)
+
     def _put(self, item: tuple[PadObservation, float]) -> None:
         while True:
             try:
@@ -422,12 +469,13 @@ class PadVision:
             log.warning("camera frame not available (pad not seen): %s", exc)
             self._last_frame = announced
             self._stop.wait(0.1)  # do not hammer a server that is down
-            return PadObservation(announced_time_s, False)
+            return PadObservation(self.frame_time_s(announced, announced_time_s), False)
         if image.frame <= self._last_frame:
             return None
         self._last_frame = image.frame
-        # The attitude at the frame's capture (the estimator's history), else the newest.
-        then = self.history.at(image.time_s)
+        frame_s = self.frame_time_s(image.frame, image.time_s)
+        # The attitude at the frame's time (the estimator's history), else the newest.
+        then = self.history.at(frame_s)
         ins = self.robot.ins.latest
         if then is not None:
             roll, pitch = then.roll_rad, then.pitch_rad
@@ -444,7 +492,7 @@ class PadVision:
         if video is not None:
             attitude = (float(roll), float(pitch)) if known else (None, None)
             try:
-                video(CameraFrame(image.frame, image.time_s, image.bgr,
+                video(CameraFrame(image.frame, frame_s, image.bgr,
                                   wire_detection(est, *attitude), detect_ms))
             except SkeyeError as exc:  # a value the video protocol cannot carry: not served
                 self.stats.video_errors += 1
@@ -454,9 +502,9 @@ class PadVision:
             bits = 0
             for ring in est.rings:
                 bits |= 1 << (ring - 1)
-            return PadObservation(image.time_s, True, bits, est.offset_body_m[0],
+            return PadObservation(frame_s, True, bits, est.offset_body_m[0],
                                   est.offset_body_m[1], est.height_m, est.quality)
-        return PadObservation(image.time_s, False)
+        return PadObservation(frame_s, False)
 
     def _gains(self) -> PadHoldParams:
         """The pad-hold gains for this loop's delay (:func:`design_delay`), unless given."""
