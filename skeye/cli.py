@@ -313,6 +313,12 @@ def _add_validate(sub: Any) -> None:
     register(sub)
 
 
+def _add_logs(sub: Any) -> None:
+    from skeye.sim.log_replay import register
+
+    register(sub)
+
+
 def _add_sweep(sub: Any) -> None:
     from skeye.sweep.cli import register
 
@@ -332,6 +338,7 @@ _REGISTRARS: list[Callable[[Any], None]] = [
     _add_sweep,
     _add_replay,
     _add_plot,
+    _add_logs,
 ]
 
 

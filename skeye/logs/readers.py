@@ -1,0 +1,214 @@
+"""Readers of real flight logs: EuRoC-style CSV folders, PX4 ULog files, ROS bags.
+
+How this works: each reader returns an :class:`ImuLog`: the IMU's samples (time, gyro rad/s,
+specific force m/s^2, in the IMU's own axes, as logged) and, where the log has one, a ground
+truth track (time, position, attitude quaternion w x y z of the IMU or body in the world) with
+the direction of the world's vertical axis ("up" for EuRoC's and ROS's z-up worlds, "down"
+for PX4's NED). Nothing is resampled or filtered. PX4 ULog needs ``pyulog`` and ROS bags
+``rosbags`` (the ``logs`` extra); EuRoC CSV needs nothing but numpy. :func:`read_log` picks the
+reader from the path (a folder: EuRoC; ``.ulg``: ULog; ``.bag`` or a rosbag2 folder: ROS).
+
+Invariants: times are seconds from the log's first IMU sample; arrays are float64, one row per
+sample; a log without IMU samples, or with times that go backwards, is refused (ConfigError
+naming the file).
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skeye.errors import ConfigError
+
+LOG_FORMATS = ("auto", "euroc", "ulog", "rosbag")
+
+
+@dataclass(frozen=True)
+class TruthTrack:
+    """A log's ground truth: times (s), positions (m), quaternions w x y z (body -> world)."""
+
+    t_s: np.ndarray
+    pos_m: np.ndarray
+    quat_wxyz: np.ndarray
+    world_z: str  # "up" (EuRoC, ROS) or "down" (PX4's NED)
+
+
+@dataclass(frozen=True)
+class ImuLog:
+    """A log's IMU samples in the IMU's own axes, and its ground truth if it has one."""
+
+    name: str
+    t_s: np.ndarray
+    gyro_rad_s: np.ndarray
+    accel_m_s2: np.ndarray
+    truth: TruthTrack | None = None
+
+    @property
+    def rate_hz(self) -> float:
+        """The median sample rate."""
+        return float(1.0 / np.median(np.diff(self.t_s)))
+
+    def span(self, start_s: float | None, end_s: float | None) -> ImuLog:
+        """The samples from ``start_s`` to ``end_s`` (seconds from the first; None: the end)."""
+        lo = self.t_s[0] if start_s is None else start_s
+        hi = self.t_s[-1] if end_s is None else end_s
+        keep = (self.t_s >= lo) & (self.t_s <= hi)
+        if int(keep.sum()) < 2:
+            raise ConfigError(f"{self.name}: no IMU samples between {lo:g} and {hi:g} s")
+        return ImuLog(self.name, self.t_s[keep], self.gyro_rad_s[keep], self.accel_m_s2[keep],
+                      self.truth)
+
+
+def _checked(name: str, t_ns_or_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+             scale: float, truth: TruthTrack | None) -> ImuLog:
+    if len(t_ns_or_s) < 2:
+        raise ConfigError(f"{name}: fewer than two IMU samples")
+    t = (t_ns_or_s - t_ns_or_s[0]) * scale
+    if np.any(np.diff(t) <= 0.0):
+        raise ConfigError(f"{name}: IMU times do not increase")
+    if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
+        raise ConfigError(f"{name}: IMU samples that are not numbers")
+    if truth is not None:
+        t0 = t_ns_or_s[0]
+        truth = TruthTrack((truth.t_s - t0) * scale, truth.pos_m, truth.quat_wxyz, truth.world_z)
+    return ImuLog(name, t, gyro.astype(float), accel.astype(float), truth)
+
+
+def _csv_rows(path: Path) -> np.ndarray:
+    try:
+        with open(path, newline="") as f:
+            rows = [r for r in csv.reader(f) if r and not r[0].lstrip().startswith("#")]
+        return np.array(rows, dtype=float)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: not a readable EuRoC CSV file: {exc}") from None
+
+
+def read_euroc(folder: Path) -> ImuLog:
+    """An EuRoC MAV dataset folder (``mav0/`` or the folder holding it): ``imu0/data.csv``
+    (timestamp ns, w_RS_S x y z rad/s, a_RS_S x y z m/s^2) and, if present,
+    ``state_groundtruth_estimate0/data.csv`` (timestamp ns, p_RS_R x y z m, q_RS w x y z)."""
+    root = folder / "mav0" if (folder / "mav0").is_dir() else folder
+    imu_csv = root / "imu0" / "data.csv"
+    if not imu_csv.is_file():
+        raise ConfigError(f"{folder}: no imu0/data.csv (an EuRoC-style folder has mav0/imu0/)")
+    imu = _csv_rows(imu_csv)
+    if imu.ndim != 2 or imu.shape[1] < 7:
+        raise ConfigError(f"{imu_csv}: expected 7 columns (timestamp, w xyz, a xyz)")
+    truth = None
+    gt_csv = root / "state_groundtruth_estimate0" / "data.csv"
+    if gt_csv.is_file():
+        gt = _csv_rows(gt_csv)
+        if gt.ndim == 2 and gt.shape[1] >= 8:
+            truth = TruthTrack(gt[:, 0], gt[:, 1:4], gt[:, 4:8], "up")
+    return _checked(str(folder), imu[:, 0], imu[:, 1:4], imu[:, 4:7], 1e-9, truth)
+
+
+def read_ulog(path: Path) -> ImuLog:
+    """A PX4 ULog: ``sensor_combined`` (gyro_rad, accelerometer_m_s2, FRD body) and, in a
+    simulation's log, ``vehicle_local_position_groundtruth`` + ``vehicle_attitude_groundtruth``
+    (NED)."""
+    try:
+        from pyulog import ULog
+    except ImportError:
+        raise ConfigError("reading ULog files needs pyulog: pip install 'skeye[logs]'") from None
+    try:
+        ulog = ULog(str(path), ["sensor_combined", "vehicle_local_position_groundtruth",
+                                "vehicle_attitude_groundtruth"])
+    except Exception as exc:  # pyulog raises bare exceptions on a damaged file
+        raise ConfigError(f"{path}: not a readable ULog file: {exc}") from None
+    topics = {d.name: d.data for d in ulog.data_list}
+    imu = topics.get("sensor_combined")
+    if imu is None:
+        raise ConfigError(f"{path}: no sensor_combined topic (the IMU)")
+    t = np.asarray(imu["timestamp"], dtype=float)
+    gyro = np.column_stack([imu[f"gyro_rad[{i}]"] for i in range(3)])
+    accel = np.column_stack([imu[f"accelerometer_m_s2[{i}]"] for i in range(3)])
+    truth = None
+    pos, att = topics.get("vehicle_local_position_groundtruth"), topics.get(
+        "vehicle_attitude_groundtruth")
+    if pos is not None and att is not None:
+        tp = np.asarray(pos["timestamp"], dtype=float)
+        quat = np.column_stack([np.interp(tp, att["timestamp"], att[f"q[{i}]"])
+                                for i in range(4)])
+        truth = TruthTrack(tp, np.column_stack([pos["x"], pos["y"], pos["z"]]), quat, "down")
+    return _checked(str(path), t, gyro, accel, 1e-6, truth)
+
+
+def read_rosbag(path: Path, imu_topic: str | None = None,
+                truth_topic: str | None = None) -> ImuLog:
+    """A ROS 1 bag or a ROS 2 bag folder: ``sensor_msgs/msg/Imu`` (the first such topic unless
+    ``imu_topic``) and ground truth from a ``geometry_msgs/msg/TransformStamped``,
+    ``PoseStamped`` or ``nav_msgs/msg/Odometry`` topic (``truth_topic``, else the first), in a
+    z-up world as ROS's REP 103 has it."""
+    try:
+        from rosbags.highlevel import AnyReader
+    except ImportError:
+        raise ConfigError("reading ROS bags needs rosbags: pip install 'skeye[logs]'") from None
+    imu_rows: list[list[float]] = []
+    truth_rows: list[list[float]] = []
+    truth_types = ("geometry_msgs/msg/TransformStamped", "geometry_msgs/msg/PoseStamped",
+                   "nav_msgs/msg/Odometry")
+    try:
+        with AnyReader([path]) as reader:
+            conns = reader.connections
+            imu_conn = [c for c in conns if (c.topic == imu_topic if imu_topic
+                                             else c.msgtype == "sensor_msgs/msg/Imu")][:1]
+            if not imu_conn:
+                raise ConfigError(f"{path}: no IMU topic"
+                                  + (f" {imu_topic!r}" if imu_topic else " (sensor_msgs/Imu)"))
+            gt_conn = [c for c in conns if (c.topic == truth_topic if truth_topic
+                                            else c.msgtype in truth_types)][:1]
+            for conn, _t, raw in reader.messages(connections=imu_conn + gt_conn):
+                msg: Any = reader.deserialize(raw, conn.msgtype)
+                stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+                if conn in imu_conn:
+                    w, a = msg.angular_velocity, msg.linear_acceleration
+                    imu_rows.append([stamp, w.x, w.y, w.z, a.x, a.y, a.z])
+                    continue
+                if conn.msgtype == "geometry_msgs/msg/TransformStamped":
+                    p, q = msg.transform.translation, msg.transform.rotation
+                elif conn.msgtype == "nav_msgs/msg/Odometry":
+                    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+                else:
+                    p, q = msg.pose.position, msg.pose.orientation
+                truth_rows.append([stamp, p.x, p.y, p.z, q.w, q.x, q.y, q.z])
+    except ConfigError:
+        raise
+    except Exception as exc:  # rosbags raises its own errors on a damaged bag
+        raise ConfigError(f"{path}: not a readable ROS bag: {exc}") from None
+    if not imu_rows:
+        raise ConfigError(f"{path}: the IMU topic has no messages")
+    imu = np.array(sorted(imu_rows))
+    truth = None
+    if truth_rows:
+        gt = np.array(sorted(truth_rows))
+        truth = TruthTrack(gt[:, 0], gt[:, 1:4], gt[:, 4:8], "up")
+    return _checked(str(path), imu[:, 0], imu[:, 1:4], imu[:, 4:7], 1.0, truth)
+
+
+def read_log(path: Path, fmt: str = "auto", *, imu_topic: str | None = None,
+             truth_topic: str | None = None) -> ImuLog:
+    """Read a log, its format named or told by the path (see the module doc)."""
+    if fmt not in LOG_FORMATS:
+        raise ConfigError(f"unknown log format {fmt!r}: {', '.join(LOG_FORMATS)}")
+    if not path.exists():
+        raise ConfigError(f"{path}: no such file or folder")
+    if fmt == "auto":
+        if path.suffix == ".ulg":
+            fmt = "ulog"
+        elif path.suffix == ".bag" or (path.is_dir() and (path / "metadata.yaml").is_file()):
+            fmt = "rosbag"
+        elif path.is_dir():
+            fmt = "euroc"
+        else:
+            raise ConfigError(f"{path}: cannot tell the log format (.ulg, .bag, a rosbag2 or "
+                              "EuRoC folder); name it with --format")
+    if fmt == "euroc":
+        return read_euroc(path)
+    if fmt == "ulog":
+        return read_ulog(path)
+    return read_rosbag(path, imu_topic, truth_topic)

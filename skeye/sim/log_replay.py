@@ -1,0 +1,278 @@
+"""``skeye logs``: a real flight log's IMU against the simulated one, and the board estimator
+replayed on the log's sensors.
+
+How this works: the log is read by :mod:`skeye.logs.readers` and measured by
+:mod:`skeye.logs.analysis` (vibration above 10 Hz, Allan deviation at 1 s). The simulated IMU
+is the robot file's own accelerometer and gyro (the Hummingbird's by default), sampled at the
+log's rate in a level hover with the rotors at the vibration's reference speed, for as long as
+the log (at most 120 s), and measured the same way. The replay feeds the log's gyro and
+accelerometer samples, turned into a body frame whose z axis is the log's first second's
+gravity, to :class:`skeye.sim.estimator.BoardEstimator` (power-up calibration on that first
+second, as the simulated board does), and compares the estimate's tilt with the log's ground
+truth: the angle between the estimated and the true "down" in the body frame (roll and pitch
+together; heading needs a compass the IMU logs lack). The simulated IMU goes through the same
+replay against its known level attitude, so the two tilt errors stand side by side.
+
+Limits: the log is assumed to start at rest for one second (EuRoC's and PX4's logs start on the
+ground); only the IMU is replayed (position needs the log's aiding sensors, which EuRoC lacks).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skeye.errors import ConfigError
+from skeye.logs.analysis import imu_figures, spectrum
+from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
+from skeye.robots.config import load_robot_config
+from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
+from skeye.sim.estimator import BoardEstimator
+from skeye.sim.sensors import Accelerometer, AccelReading, Gyro, GyroReading, Mount
+from skeye.sim.sensors.inertial import HOVER_SPEED_RAD_S
+from skeye.sim.state import BodyState
+
+EUROC_HOVER: dict[str, tuple[float, float]] = {
+    "accel_band_rms": (0.9, 1.3),
+    "gyro_band_rms": (0.06, 0.07),
+}
+"""Published in-flight figures: the EuRoC MAV dataset's ADIS16448 (200 Hz) on an AscTec
+multirotor in hover, content above 10 Hz, per axis (m/s^2, rad/s): the range measured over its
+hover segments (docs/physics.md, "In-flight vibration")."""
+
+REST_S = 1.0  # the log's first second: at rest, for the power-up calibration
+
+
+def _quat_rows(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _align(f_sensor: np.ndarray) -> np.ndarray:
+    """The rotation (sensor -> body) that takes the mean specific force at rest to body -z."""
+    a = f_sensor / np.linalg.norm(f_sensor)
+    b = np.array([0.0, 0.0, -1.0])
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    if np.linalg.norm(v) < 1e-9:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
+def replay_tilt(t_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                truth: TruthTrack | None, every_s: float = 0.05) -> dict[str, float]:
+    """The board estimator on these IMU samples; its tilt error against ``truth`` (a level
+    vehicle when None), RMS and maximum in degrees."""
+    rest = t_s < t_s[0] + REST_S
+    if int(rest.sum()) < 2:
+        raise ConfigError("the log's first second has too few IMU samples to calibrate on")
+    rot = _align(accel[rest].mean(axis=0))
+    gyro_b = gyro @ rot.T
+    accel_b = accel @ rot.T
+    est = BoardEstimator(EstimatorParams(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 163.0)
+    est.align_at_rest([(w[0], w[1], w[2]) for w in gyro_b[rest].tolist()],
+                      [(f[0], f[1], f[2]) for f in accel_b[rest].tolist()])
+    errors: list[float] = []
+    next_s = t_s[0] + REST_S
+    j = 0
+    for k in range(len(t_s)):
+        t = float(t_s[k])
+        wx, wy, wz = gyro_b[k].tolist()
+        fx, fy, fz = accel_b[k].tolist()
+        est.observe(GyroReading(t, (wx, wy, wz)))
+        est.observe(AccelReading(t, (fx, fy, fz)))
+        if t < next_s:
+            continue
+        next_s = t + every_s
+        r = est.rot()
+        down_est = np.array([r[6], r[7], r[8]])  # NED down in the body frame
+        if truth is None:
+            down_true = np.array([0.0, 0.0, 1.0])
+        else:
+            while j + 1 < len(truth.t_s) and truth.t_s[j + 1] <= t:
+                j += 1
+            if abs(truth.t_s[j] - t) > 0.1:
+                continue  # no truth near this instant
+            world_down = np.array([0.0, 0.0, 1.0 if truth.world_z == "down" else -1.0])
+            down_true = rot @ (_quat_rows(truth.quat_wxyz[j]).T @ world_down)
+        cos = float(np.clip(np.dot(down_est, down_true), -1.0, 1.0))
+        errors.append(math.degrees(math.acos(cos)))
+    if not errors:
+        return {}
+    e = np.array(errors)
+    return {"tilt_rms_deg": float(np.sqrt(np.mean(e * e))), "tilt_max_deg": float(e.max()),
+            "tilt_samples": float(len(e))}
+
+
+def simulated_imu(rate_hz: float, seconds: float, robot: str = "hummingbird", seed: int = 1
+                  ) -> ImuLog:
+    """The robot file's accelerometer and gyro in a level hover (rotors at the vibration's
+    reference speed, at rest on the ground for the first second), sampled at ``rate_hz``."""
+    config = load_robot_config(robot)
+    params: dict[str, dict[str, object]] = {}
+    for mount in config.sensors:
+        key = mount.type_name.lower()
+        if key in ("accelerometer", "gyro") and key not in params:
+            params[key] = {k: v for k, v in mount.params if k not in ("rate_hz", "rate")}
+    rng = np.random.default_rng(seed)
+    acc = Accelerometer("IMU", Mount(), params.get("accelerometer", {}), rng)
+    gyr = Gyro("IMU", Mount(), params.get("gyro", {}), rng)
+    gyr.share_board(acc)
+    speed = float(acc.params["VibrationSpeed"]) or HOVER_SPEED_RAD_S
+    n = int(seconds * rate_hz)
+    t = np.arange(n) / rate_hz
+    g_rows, a_rows = [], []
+    world: Any = _NoWorld()
+    for k in range(n):
+        w = speed if t[k] >= REST_S else 0.0
+        rotors = (w, w, w, w)
+        state = BodyState(float(t[k]), specific_force_frd_m_s2=(0.0, 0.0, -GRAVITY_M_S2),
+                          rotor_speed_rad_s=rotors)
+        a_rows.append(acc.read(state, world).proper_acceleration_m_s2)
+        g_rows.append(gyr.read(state, world).angular_velocity_rad_s)
+    return ImuLog(f"simulated {robot}", t, np.array(g_rows), np.array(a_rows))
+
+
+class _NoWorld:
+    """The inertial sensors ask nothing of the world."""
+
+    geo_origin = None
+    magnetic_field_ned_ut = np.zeros(3)
+    sea_level_pressure_pa = 101325.0
+
+
+def compare(log: ImuLog, robot: str = "hummingbird") -> dict[str, Any]:
+    """The log's figures, the simulated IMU's at the log's rate, and both replays."""
+    rate = log.rate_hz
+    flight = log.span(log.t_s[0] + REST_S, None)
+    sim = simulated_imu(rate, min(120.0, float(log.t_s[-1] - log.t_s[0])), robot)
+    sim_flight = sim.span(REST_S, None)
+    return {
+        "log": log.name, "rate_hz": rate, "seconds": float(log.t_s[-1] - log.t_s[0]),
+        "real": {**imu_figures(flight.gyro_rad_s, flight.accel_m_s2, rate),
+                 **replay_tilt(log.t_s, log.gyro_rad_s, log.accel_m_s2, log.truth)},
+        "simulated": {**imu_figures(sim_flight.gyro_rad_s, sim_flight.accel_m_s2, rate),
+                      **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)},
+        "has_truth": log.truth is not None,
+    }
+
+
+ROWS = (
+    ("accel_band_rms", "accelerometer vibration above 10 Hz", "m/s^2", 1.0),
+    ("gyro_band_rms", "gyro vibration above 10 Hz", "rad/s", 1.0),
+    ("accel_adev_1s", "accelerometer Allan deviation at 1 s", "m/s^2", 1.0),
+    ("gyro_adev_1s", "gyro Allan deviation at 1 s", "rad/s", 1.0),
+    ("tilt_rms_deg", "board estimator tilt error, RMS", "deg", 1.0),
+    ("tilt_max_deg", "board estimator tilt error, max", "deg", 1.0),
+)
+
+
+def report_table(result: dict[str, Any]) -> str:
+    """The side-by-side table (Markdown)."""
+    lines = [f"Log: {result['log']} ({result['seconds']:.1f} s at {result['rate_hz']:.1f} Hz)",
+             "",
+             "| figure | real (log) | simulated | EuRoC hover (published) |",
+             "| --- | --- | --- | --- |"]
+    for key, label, unit, _ in ROWS:
+        real = result["real"].get(key)
+        sim = result["simulated"].get(key)
+        ref = EUROC_HOVER.get(key)
+        lines.append(
+            f"| {label} ({unit}) | {'-' if real is None else f'{real:.4g}'} | "
+            f"{'-' if sim is None else f'{sim:.4g}'} | "
+            f"{'-' if ref is None else f'{ref[0]:g}-{ref[1]:g}'} |")
+    if not result["has_truth"]:
+        lines += ["", "The log has no ground truth: no tilt error for it."]
+    return "\n".join(lines)
+
+
+def plot(result_logs: list[ImuLog], path: Path) -> None:
+    """Amplitude spectra of the logs' (and the simulated) accelerometer and gyro, axis mean,
+    with EuRoC's published band level marked."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 4.2))
+    for col, (attr, unit, key) in enumerate((("accel_m_s2", "m/s^2", "accel_band_rms"),
+                                             ("gyro_rad_s", "rad/s", "gyro_band_rms"))):
+        ax = fig.add_subplot(1, 2, col + 1)
+        for log in result_logs:
+            data = getattr(log.span(REST_S, None), attr)
+            freqs, asd = spectrum(data[:, 0], log.rate_hz)
+            power = asd ** 2
+            for i in (1, 2):
+                power = power + spectrum(data[:, i], log.rate_hz)[1] ** 2
+            ax.semilogy(freqs, np.sqrt(power / 3.0), linewidth=1, label=log.name)
+        lo, hi = EUROC_HOVER[key]
+        ax.set_title(f"{'accelerometer' if col == 0 else 'gyro'}: EuRoC hover "
+                     f"{lo:g}-{hi:g} {unit} RMS above 10 Hz")
+        ax.axvline(10.0, color="grey", linestyle=":", linewidth=0.8)
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel(f"amplitude spectral density ({unit}/sqrt(Hz))")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def cmd_logs(args: argparse.Namespace) -> int:
+    logs: list[ImuLog] = []
+    if args.log is not None:
+        log = read_log(Path(args.log), args.format, imu_topic=args.imu_topic,
+                       truth_topic=args.truth_topic)
+        log = log.span(args.start, args.end)
+        result = compare(log, args.robot)
+        logs.append(log)
+        rate = log.rate_hz
+    else:
+        rate = args.rate
+        if not (math.isfinite(rate) and 10.0 <= rate <= 10000.0):
+            raise ConfigError(f"--rate must be 10..10000 Hz, got {rate}")
+        sim = simulated_imu(rate, args.seconds, args.robot)
+        result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": args.seconds,
+                  "real": {}, "has_truth": False,
+                  "simulated": {**imu_figures(sim.span(REST_S, None).gyro_rad_s,
+                                              sim.span(REST_S, None).accel_m_s2, rate),
+                                **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)}}
+    logs.append(simulated_imu(rate, min(120.0, result["seconds"]), args.robot))
+    print(report_table(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=2))
+    if args.plot:
+        plot(logs, Path(args.plot))
+        print(f"\nspectra: {args.plot}")
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "logs", help="a real flight log's IMU against the simulated one (docs/physics.md)",
+        description="Read a real flight log (EuRoC-style CSV folder, PX4 ULog, ROS bag), "
+        "measure its IMU (vibration above 10 Hz, Allan deviation), replay it through the "
+        "board estimator against the log's ground truth, and print the simulated IMU's "
+        "figures beside it. Without a log: the simulated figures alone.")
+    p.add_argument("log", nargs="?", default=None,
+                   help="the log: an EuRoC folder (mav0/), a .ulg file, a .bag or rosbag2 folder")
+    p.add_argument("--format", choices=LOG_FORMATS, default="auto")
+    p.add_argument("--imu-topic", default=None, help="ROS bags: the IMU topic")
+    p.add_argument("--truth-topic", default=None, help="ROS bags: the ground-truth topic")
+    p.add_argument("--start", type=float, default=None, help="first second used (from the log's "
+                   "first IMU sample; the default: all)")
+    p.add_argument("--end", type=float, default=None, help="last second used")
+    p.add_argument("--robot", default="hummingbird", help="the robot whose IMU is simulated")
+    p.add_argument("--rate", type=float, default=200.0,
+                   help="without a log: the simulated IMU's rate (Hz; EuRoC's is 200)")
+    p.add_argument("--seconds", type=float, default=60.0,
+                   help="without a log: how long the simulated hover is")
+    p.add_argument("--plot", default=None, metavar="PNG", help="write the spectra here")
+    p.add_argument("--json", default=None, metavar="FILE", help="write the figures here")
+    p.set_defaults(func=cmd_logs)
