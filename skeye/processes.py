@@ -11,7 +11,10 @@ holds even when the parent is SIGKILLed), every child is stopped by an ``atexit`
 parent exits without stopping it, and :func:`stop_processes` stops a group of children with one
 shared deadline: SIGTERM to all, then SIGKILL to whoever is left.
 
-Also here: :func:`check_ports_free` (``skeye up`` and ``skeye pilot`` check their ports before
+Also here: :func:`machine_scale` and :func:`scaled_s`, which stretch a wall-clock safety
+deadline with the machine's load (``skeye validate`` and its calibration wait on sim time where
+they can; what is left is a guard against a child that stopped making progress);
+:func:`check_ports_free` (``skeye up`` and ``skeye pilot`` check their ports before
 starting anything) and :class:`ParentWatch` (``skeye up`` stops when ``make run`` is signalled).
 """
 
@@ -38,6 +41,35 @@ it served (once serving, a lost simulator is a failsafe, not an exit): ``skeye u
 for the simulator's own exit status, the root cause."""
 
 _PR_SET_PDEATHSIG = 1
+
+
+TIMEOUT_SCALE_ENV = "SKEYE_TIMEOUT_SCALE"
+
+
+def machine_scale() -> float:
+    """How much slower than a quiet machine this one runs now: the one-minute load average per
+    core, at least 1 (a quiet machine: 1; two busy loops on two cores: about 2). The
+    environment variable ``SKEYE_TIMEOUT_SCALE`` (a number >= 1) sets it instead."""
+    given = os.environ.get(TIMEOUT_SCALE_ENV)
+    if given:
+        try:
+            value = float(given)
+        except ValueError:
+            raise ConfigError(f"{TIMEOUT_SCALE_ENV} must be a number, got {given!r}") from None
+        if not (value >= 1.0 and value < 1e6):
+            raise ConfigError(f"{TIMEOUT_SCALE_ENV} must be >= 1, got {given!r}")
+        return value
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        return 1.0
+    return max(1.0, load / (os.cpu_count() or 1))
+
+
+def scaled_s(base_s: float) -> float:
+    """A wall-clock deadline of ``base_s`` on a quiet machine, stretched by :func:`machine_scale`
+    (taken now: the load when the wait starts)."""
+    return base_s * machine_scale()
 
 
 def die_with_parent() -> Callable[[], None] | None:

@@ -26,7 +26,7 @@ import numpy as np
 
 from skeye.control.motion import MotionConfig
 from skeye.errors import SkeyeError
-from skeye.processes import start_skeye, stop_process
+from skeye.processes import scaled_s, start_skeye, stop_process
 from skeye.vision.calibration import Board, CalibrationResult, calibrate
 
 BOARD = Board(9, 6, 0.025)  # the checkerboard world's board: 9x6 inner corners, 25 mm squares
@@ -100,7 +100,9 @@ def capture_board(sim_address: str, images_address: str, robot: str = "hummingbi
         pose = poses[len(frames)]
         # One robot a connection; its clock steps 2 ms at a time (FRAME_WAIT_RATE_HZ), so the
         # spawn-state frame is still the newest one when it is fetched.
-        with skeye.connect(sim_address, images=images_address,
+        # Wall-clock guards stretched with the machine's load: the first readings and frame
+        # come as fast as the lockstep simulator renders, which a busy host slows.
+        with skeye.connect(sim_address, images=images_address, timeout_s=scaled_s(10.0),
                            motion=MotionConfig(control_rate_hz=FRAME_WAIT_RATE_HZ)) as sim:
             if sim.mode != "lockstep":
                 raise SkeyeError("the simulator must run in lockstep: a vehicle spawned "
@@ -142,7 +144,8 @@ def calibrate_simulated_camera(workdir: Path, camera_profile: str, seed: int = 1
     sim, found = start_skeye(
         ["sim", "--world", "checkerboard", "--mode", "lockstep", "--port", "0",
          "--image-port", "0", "--seed", str(seed), "--camera-profile", camera_profile],
-        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"], "skeye sim")
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"], "skeye sim",
+        timeout_s=scaled_s(180.0))
     try:
         frames = capture_board(f"127.0.0.1:{found[0].group(1)}",
                                f"127.0.0.1:{found[1].group(1)}", robot, progress=progress)

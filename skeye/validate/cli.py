@@ -13,6 +13,7 @@ from typing import Any
 
 from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.pilot.cli import vision_latency_s
+from skeye.processes import scaled_s
 from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
 from skeye.sweep.cli import run_trials
@@ -78,7 +79,8 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
                                world=world, calibration=cal_path, wind=wind,
                                vision_latency=vision_latency) for s in seed_list}
-    trials = [Trial(e, dict(params), s, quick, timeout_s=900.0 if quick else 7200.0)
+    limit_s = scaled_s(900.0 if quick else 7200.0)  # a guard; the runs wait on sim time
+    trials = [Trial(e, dict(params), s, quick, timeout_s=limit_s)
               for s in seed_list for e in experiments]
     spec = SweepSpec(which, trials, [])
     with tempfile.TemporaryDirectory(prefix="skeye-validate-") as tmp:

@@ -40,7 +40,7 @@ from pathlib import Path
 
 from skeye.errors import SkeyeError
 from skeye.link.vehicle import Vehicle
-from skeye.processes import start_skeye, stop_process
+from skeye.processes import scaled_s, start_skeye, stop_process
 from skeye.recording.records import RecordingReader
 from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
 from skeye.wire.packet_units import nav_status_to_si, pad_report_to_si
@@ -132,20 +132,20 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
     if vision:
         patterns.append(r"image server on [\d.]+:(\d+)")
     with ExitStack() as stack:
-        sim, found = start_skeye(sim_args, patterns, "skeye sim")
+        sim, found = start_skeye(sim_args, patterns, "skeye sim", timeout_s=scaled_s(180.0))
         stack.callback(stop_process, sim)
         pilot_args = ["pilot", "--sim", f"127.0.0.1:{found[0].group(1)}", "--port", "0",
-                      "--lockstep-rate", "0", "--ground-clock", "--link-timeout", "30",
-                      "--land-timeout", "60"]
+                      "--lockstep-rate", "0", "--ground-clock", "--link-timeout",
+                      f"{scaled_s(30.0):.0f}", "--land-timeout", f"{scaled_s(60.0):.0f}"]
         if vision:
             pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}",
                            "--vision-latency-ms", settings.vision_latency]
             if settings.calibration:
                 pilot_args += ["--calibration", settings.calibration]
         pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
-                                    "skeye pilot")
+                                    "skeye pilot", timeout_s=scaled_s(180.0))
         stack.callback(stop_process, pilot)
-        vehicle = stack.enter_context(Vehicle.open(pfound[0].group(1), timeout_s=30.0))
+        vehicle = stack.enter_context(Vehicle.open(pfound[0].group(1), timeout_s=scaled_s(30.0)))
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD), 0.005)
         yield vehicle
 
@@ -153,7 +153,7 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
 def _sim_time(vehicle: Vehicle) -> float:
     from skeye.wire.packets import PD
 
-    msg = vehicle.wait_for(PD.NAV_STATUS, timeout_s=30)
+    msg = vehicle.wait_for(PD.NAV_STATUS, timeout_s=scaled_s(30.0))
     return nav_status_to_si(msg).time_s  # type: ignore[arg-type]
 
 
@@ -169,7 +169,7 @@ def _wait_sim(vehicle: Vehicle, seconds: float, timeout_s: float, *, step_s: flo
     end = now + seconds
     while now < end - 1e-6:
         until = end if step_s is None else min(end, now + step_s)
-        now = nav_status_to_si(vehicle.run_until(until, timeout_s=timeout_s)).time_s
+        now = nav_status_to_si(vehicle.run_until(until, timeout_s=scaled_s(timeout_s))).time_s
     return now
 
 
@@ -178,7 +178,7 @@ def _until_state(vehicle: Vehicle, state: NavState, limit_s: float = 600.0) -> f
     now = _sim_time(vehicle)
     end = now + limit_s
     while True:
-        nav = vehicle.run_until(now + STEP_S, timeout_s=60)
+        nav = vehicle.run_until(now + STEP_S, timeout_s=scaled_s(60.0))
         now = nav_status_to_si(nav).time_s
         if nav.state is state:
             return now
