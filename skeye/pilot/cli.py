@@ -184,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
                                             latency_s=latency_s,
                                             predict=not args.no_vision_prediction,
                                             frame_time=args.frame_time,
-                                            frame_jitter_s=args.frame_jitter_ms / 1e3)
+                                            frame_jitter_s=args.frame_jitter_ms / 1e3,
+                                            pad_source=args.pad_source)
             lockstep = sim.mode == "lockstep"
             tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
             video = None
@@ -356,7 +357,7 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
                        calibration: Any = None, *, latency_s: float | None = 0.0,
                        predict: bool = True, params: Any = None,
                        vision_class: Any = None, frame_time: str = "arrival",
-                       frame_jitter_s: float = 0.0) -> Any:
+                       frame_jitter_s: float = 0.0, pad_source: str = "vision") -> Any:
     """A factory for the pilot's PadVision, with the camera's float FOV asked of the simulator
     and the camera calibration (``skeye calibrate``) when one is given; a calibration for
     another image size than the camera's is refused here, before the vision starts.
@@ -383,7 +384,8 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
     def make(boards: Any, lock: Any) -> PadVision:
         return cls(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
                          calibration=calibration, latency_s=latency_s, predict=predict,
-                         params=params, frame_time=frame_time, frame_jitter_s=frame_jitter_s)
+                         params=params, frame_time=frame_time, frame_jitter_s=frame_jitter_s,
+                         pad_source=pad_source)
 
     return make
 
@@ -495,6 +497,14 @@ def register(subparsers: Any) -> None:
         "pilot, as a host timestamps a USB webcam's frames (the capture latency unknown); "
         "capture, the simulator's exact capture time (the comparison case). See docs/pilot.md, "
         "Frame times",
+    )
+    p.add_argument(
+        "--pad-source",
+        choices=("vision", "truth"),
+        default="vision",
+        help="where pad observations come from: vision (default), the detector on the camera "
+        "frames; truth, the simulator's ground truth at each frame's time in place of the "
+        "detection (a comparison mode: a perfect detector, same timing)",
     )
     p.add_argument(
         "--frame-jitter-ms",

@@ -19,6 +19,10 @@ pilot, as a host sees a USB webcam's frames: the control loop notes the sim time
 frame's announcement arrived (plus a configurable, seeded host jitter), and the capture latency
 stays unknown to it, so the camera and the IMU disagree as on a real vehicle. ``frame_time =
 "capture"`` uses the simulator's exact capture time instead (the comparison case).
+``pad_source = "truth"`` (``skeye pilot --pad-source truth``) replaces each detection with the
+pad's offset from the simulator's ground truth at the frame's time, the frames still fetched
+and detected so the timing is the same: what the vision run would do with a perfect detector.
+It reads ground truth, so it is a comparison mode, named so, never a way to fly.
 
 Latency (docs/pilot.md, "Vision latency"): each observation is used ``latency_s`` after its
 frame's time (configured, or measured, or as soon as it is done), and the pad hold flies on
@@ -120,6 +124,10 @@ class VisionStats:
     too_slow_count: int = 0  # observations refused for being too old
 
 
+PAD_SOURCES = ("vision", "truth")
+"""Where pad observations come from: the detector, or (for comparison only) ground truth."""
+CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
+PAD_SURFACE_M = 0.001  # the pad's printed surface above the ground (docs/landing-pad.md)
 FRAME_TIMES = ("arrival", "capture")
 """What a frame's time is to the pilot: when it arrived (a host's view), or its exact capture."""
 ARRIVALS_KEPT = 64  # frames whose arrival time is remembered
@@ -218,6 +226,7 @@ class PadVision:
         frame_time: str = "arrival",
         frame_jitter_s: float = 0.0,
         seed: int = 0,
+        pad_source: str = "vision",
     ) -> None:
         if queue_size < 1 or not lockstep_wait_s > 0:
             raise InvalidArgument(f"queue_size >= 1 and lockstep_wait_s > 0 needed "
@@ -231,6 +240,11 @@ class PadVision:
                                   f"got {frame_time!r}")
         if not (math.isfinite(frame_jitter_s) and 0.0 <= frame_jitter_s <= 1.0):
             raise InvalidArgument(f"frame jitter must be 0..1 s, got {frame_jitter_s!r}")
+        if pad_source not in PAD_SOURCES:
+            raise InvalidArgument(f"pad source must be one of {', '.join(PAD_SOURCES)}, "
+                                  f"got {pad_source!r}")
+        self.pad_source = pad_source
+        self._truth: list[tuple[float, float, float, float, float]] = []  # t, n, e, d, yaw
         self.frame_time = frame_time
         self.frame_jitter_s = frame_jitter_s
         self._jitter_rng = random.Random(seed)
@@ -320,6 +334,8 @@ class PadVision:
         latest = self.robot.camera.latest
         if latest is not None:
             self._note_arrival(latest.frame, now.time_s)
+        if self.pad_source == "truth":
+            self._note_truth()
         if not self.lockstep:
             self._kick.set()
         elif latest is not None and now.time_s >= self._busy_until_s - 1e-9:
@@ -426,6 +442,31 @@ class PadVision:
                 self._attempted = max(self._attempted, latest.frame)
                 self._done.notify_all()
 
+    def _note_truth(self) -> None:
+        """Keep the simulator's ground truth (``--pad-source truth`` only): the last 2 s."""
+        gt = self.robot.ground_truth.latest
+        if gt is None or (self._truth and self._truth[-1][0] >= gt.time_s):
+            return
+        n, e, d = gt.position_ned_m
+        with self._arrivals_lock:
+            self._truth.append((gt.time_s, n, e, d, gt.rpy_rad[2]))
+            while self._truth and self._truth[0][0] < gt.time_s - 2.0:
+                self._truth.pop(0)
+
+    def _truth_observation(self, frame_s: float) -> PadObservation:
+        """The pad's offset and height from ground truth at ``frame_s`` (the pad at the world
+        origin, as in the pad and indoor worlds): a perfect detector, for comparison."""
+        with self._arrivals_lock:
+            before = [row for row in self._truth if row[0] <= frame_s + 1e-9]
+            row = before[-1] if before else (self._truth[0] if self._truth else None)
+        if row is None:
+            return PadObservation(frame_s, False)
+        _, n, e, d, yaw = row
+        c, s = math.cos(yaw), math.sin(yaw)
+        forward, right = c * -n + s * -e, -s * -n + c * -e
+        height = -d - CAMERA_BELOW_CENTRE_M - PAD_SURFACE_M
+        return PadObservation(frame_s, True, 0b1111, forward, right, height, 1.0)
+
     def _note_arrival(self, frame: int, now_s: float) -> None:
         """The sim time the pilot first saw ``frame`` announced, plus the host's jitter."""
         with self._arrivals_lock:
@@ -497,6 +538,8 @@ class PadVision:
             except SkeyeError as exc:  # a value the video protocol cannot carry: not served
                 self.stats.video_errors += 1
                 log.warning("frame %d not served on the video port: %s", image.frame, exc)
+        if self.pad_source == "truth":
+            return self._truth_observation(frame_s)
         if est.found and est.offset_body_m is not None and est.height_m is not None:
             self.stats.detections += 1
             bits = 0

@@ -24,6 +24,7 @@ from skeye.validate.experiments import (
     E2_RUNS,
     E2_WINDS,
     ESTIMATORS,
+    PAD_SOURCES,
     WORLDS,
     E1Series,
     E2Series,
@@ -38,7 +39,7 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
              workers: int | None = None, keep_recordings: bool = False, *,
              camera: str = "ideal", estimator: str = "onboard", world: str = "pad",
              calibration: Path | None = None, wind: str = "dryden",
-             vision_latency: str = "measured") -> dict[str, Any]:
+             vision_latency: str = "measured", pad_source: str = "vision") -> dict[str, Any]:
     """Run the experiments for ``seeds`` seeds on the sweep's local pool; write the report.
 
     Each (experiment, seed) is one trial of :mod:`skeye.sweep` (its own processes, in parallel
@@ -63,6 +64,8 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     if wind not in E2_WINDS:
         raise LocalProtocolError(f"unknown E2 disturbance {wind!r}: {', '.join(E2_WINDS)}")
     vision_latency_s(vision_latency)  # refused here, not in every trial
+    if pad_source not in PAD_SOURCES:
+        raise LocalProtocolError(f"unknown pad source {pad_source!r}: {', '.join(PAD_SOURCES)}")
     if calibration is not None:
         load_calibration(calibration)  # a bad file is named here, not in every trial
     experiments = ("E1", "E2") if which == "ALL" else (which,)
@@ -73,12 +76,13 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         summary["calibration"] = calibration_figures(found, camera)
     cal_path = str(calibration.resolve()) if calibration is not None else ""
     params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path,
-              "wind": wind, "vision_latency": vision_latency}
+              "wind": wind, "vision_latency": vision_latency, "pad_source": pad_source}
     summary["setup"] = dict(params)
     seed_list = list(range(first_seed, first_seed + seeds))
     settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
                                world=world, calibration=cal_path, wind=wind,
-                               vision_latency=vision_latency) for s in seed_list}
+                               vision_latency=vision_latency, pad_source=pad_source)
+                for s in seed_list}
     limit_s = scaled_s(900.0 if quick else 7200.0)  # a guard; the runs wait on sim time
     trials = [Trial(e, dict(params), s, quick, timeout_s=limit_s)
               for s in seed_list for e in experiments]
@@ -132,7 +136,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
                        args.workers, args.keep_recordings, camera=args.camera,
                        estimator=args.estimator, world=args.world,
                        calibration=Path(args.calibration) if args.calibration else None,
-                       wind=args.wind, vision_latency=args.vision_latency_ms)
+                       wind=args.wind, vision_latency=args.vision_latency_ms,
+                       pad_source=args.pad_source)
     print((Path(args.out) / "report.md").read_text())
     del summary
     return 0
@@ -164,6 +169,10 @@ def register(sub: Any) -> None:
                    help="when the pilot uses a pad detection: 'measured' (default), the "
                    "detector's own processing time as on a real computer; N fixes it at N ms "
                    "after the frame (skeye pilot --vision-latency-ms)")
+    p.add_argument("--pad-source", choices=PAD_SOURCES, default="vision",
+                   help="the vision runs' pad observations: vision (the detector, default) or "
+                   "truth (ground truth in place of each detection, same frames and timing: "
+                   "what a perfect detector would give, for comparison)")
     p.add_argument("--world", choices=WORLDS, default="pad",
                    help="the world flown in: pad (outdoors, GPS) or indoor (no GPS: the "
                    "velocity hold is optical flow only, as on the paper's extension board)")

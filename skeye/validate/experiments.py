@@ -70,6 +70,9 @@ class RunSettings:
     # When a pad detection is used (``skeye pilot --vision-latency-ms``): ``measured``, the
     # detector's own processing time, as on a real computer; a number of ms fixes it.
     vision_latency: str = "measured"
+    # The vision run's pad observations: "vision" (the detector) or "truth" (ground truth in
+    # place of each detection, same frames and timing: the comparison case).
+    pad_source: str = "vision"
     deadband_m: float = 0.05  # E2's PAD_MODE 1 deadband
     max_speed_m_s: float = 0.3  # E2's PAD_MODE 1 speed limit
     camera: str = "ideal"  # the camera profile (skeye sim --camera-profile)
@@ -139,7 +142,8 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
                       f"{scaled_s(30.0):.0f}", "--land-timeout", f"{scaled_s(60.0):.0f}"]
         if vision:
             pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}",
-                           "--vision-latency-ms", settings.vision_latency]
+                           "--vision-latency-ms", settings.vision_latency,
+                           "--pad-source", settings.pad_source]
             if settings.calibration:
                 pilot_args += ["--calibration", settings.calibration]
         pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
@@ -259,6 +263,7 @@ def run_e1(settings: RunSettings, workdir: Path, name: str = "e1") -> E1Series:
 
 
 E2_WINDS = ("dryden", "random_force", "none")
+PAD_SOURCES = ("vision", "truth")  # RunSettings.pad_source: skeye pilot --pad-source
 """E2's disturbances (``skeye validate --wind``): the default gust model, the paper's force."""
 
 

@@ -207,6 +207,12 @@ def _shown_path(path: str, out: Path) -> str:
         return f"`{path}`"
 
 
+def _truth_note(setup: dict[str, Any]) -> str:
+    if setup.get("pad_source") == "truth":
+        return " (ground truth in place of the detector: a comparison run)"
+    return ""
+
+
 def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[int]) -> None:
     setup = summary.get("setup", {})
     lines = [
@@ -215,7 +221,10 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         f"Seeds: {seeds}; mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
         f"{setup.get('estimator', 'truth')}; world: {setup.get('world', 'pad')}; calibration: "
-        f"{_shown_path(setup.get('calibration', ''), out)}.",
+        f"{_shown_path(setup.get('calibration', ''), out)}; E2 disturbance: "
+        f"{setup.get('wind', 'random_force')}; vision latency: "
+        f"{setup.get('vision_latency', '0')}; pad observations: "
+        f"{setup.get('pad_source', 'vision')}{_truth_note(setup)}.",
         "Simulator in lockstep, pilot with landing-pad vision on frames from the image server,",
         "a scripted ground client over the vehicle packet protocol. Figures are medians over",
         "the seeds, computed from the series in the CSV files.",
