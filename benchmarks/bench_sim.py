@@ -23,6 +23,10 @@ alternately, so the printed speed-up is a ratio taken within one run (``--no-pur
 The built-in robots' boards (controller, motor model) run at 250 Hz on the 1 kHz physics step;
 ``--board-rate 1000`` measures a copy of the Hummingbird whose board runs at every physics step.
 
+The Hummingbird's IMU carries its in-flight vibration (docs/physics.md), so every figure is with
+vibration on; the in-process runs are repeated, alternately, on a copy of the Hummingbird whose
+IMU vibration is zero, and the on / off ratio printed: what the vibration model costs.
+
 Usage: python benchmarks/bench_sim.py [--sim-seconds 20] [--timestep 0.001] [--repeats 3]
        [--board-rate HZ] [--no-pure]
 """
@@ -59,6 +63,28 @@ def robot_dir_with_board_rate(folder: Path, board_rate_hz: float) -> str:
         lines.append(line)
     text = "\n".join(lines) + "\n"
     assert tomllib.loads(text)["board_rate_hz"] == board_rate_hz
+    (folder / f"{name}.toml").write_text(text)
+    return name
+
+
+def robot_dir_without_vibration(folder: Path) -> str:
+    """Write a copy of the Hummingbird whose IMU has no vibration; return its class."""
+    text = (resources.files("skeye.robots") / "hummingbird.toml").read_text()
+    name = "hummingbird_still"
+    lines = []
+    in_imu = False
+    for line in text.splitlines():
+        if line.startswith("name ="):
+            line = f'name = "{name}"'
+        if line.startswith("type ="):
+            in_imu = line.split("=")[1].strip().strip('"') in ("Accelerometer", "Gyro")
+        lines.append(line)
+        if in_imu and line.startswith("name ="):
+            lines += ["vibration_rotor = 0", "vibration_blade_pass = 0",
+                      "vibration_broadband = 0"]
+    text = "\n".join(lines) + "\n"
+    sensors = tomllib.loads(text)["sensors"]
+    assert sum(1 for s in sensors if s.get("vibration_rotor") == 0) == 2
     (folder / f"{name}.toml").write_text(text)
     return name
 
@@ -296,6 +322,18 @@ def main() -> None:
             print(f"in-process, 1 vehicle, no TCP, {what}: best {max(rtfs):6.1f}x  median "
                   f"{statistics.median(rtfs):6.1f}x  ({runs_in[0][1]} per run; "
                   f"{native.status().describe()} in this process)")
+        if args.board_rate is None:
+            still_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="skeye-bench-"))
+            still = robot_dir_without_vibration(Path(still_dir))
+            on, off = [], []
+            for _ in range(max(1, args.repeats)):  # alternate, so both see the same host
+                on.append(measure_in_process_rtf(1, args.sim_seconds, args.timestep,
+                                                 robot_class, robot_dir)[0])
+                off.append(measure_in_process_rtf(1, args.sim_seconds, args.timestep, still,
+                                                  still_dir)[0])
+            print(f"in-process, 1 vehicle, IMU vibration on: median {statistics.median(on):6.1f}x"
+                  f"; off: median {statistics.median(off):6.1f}x; on / off "
+                  f"{statistics.median(on) / statistics.median(off):.2f}")
     print(f"CPU reference loop after: {reference_loop_ms():.1f} ms")
 
 

@@ -48,3 +48,18 @@ def test_in_process_measurement_steps_without_a_server() -> None:
     assert rtf > 0 and readings > 0
     rtf, lines = measure_in_process_rtf(1, 0.2, 0.001, "hummingbird", encode=True)
     assert rtf > 0 and lines == readings  # one line per reading
+
+
+def test_still_copy_has_no_imu_vibration(tmp_path: Path) -> None:
+    from bench_sim import robot_dir_without_vibration
+
+    from skeye.sim.engine import Simulation
+    from skeye.sim.world import load_world
+
+    name = robot_dir_without_vibration(tmp_path)
+    sim = Simulation(load_world("pad"), seed=1, robot_dirs=(tmp_path,))
+    robot = sim.spawn(name, name="R1", sink=lambda events: None, location_ned_m=(0, 0, -1.0))
+    imu = [s.sensor for s in robot.sensors if s.sensor.type_name in ("Accelerometer", "Gyro")]
+    assert len(imu) == 2 and not any(s.vibration.enabled for s in imu)
+    rtf, readings = measure_in_process_rtf(1, 0.2, 0.001, name, str(tmp_path))
+    assert rtf > 0 and readings > 0
