@@ -54,10 +54,11 @@ def test_quick_validation_reports_every_figure_from_its_series(tmp_path: Path):
         assert e2[prefix + "max_m"] == pytest.approx(max(d), abs=1e-4)
         assert e2[prefix + "final_m"] == pytest.approx(d[-1], abs=1e-4)
     assert e2["duration_s"] > 15 and e2["f_max_n"] == 0.3
-    # With no horizontal feedback the random force carries the vehicle away; the holds stay.
+    # With no horizontal feedback the wind carries the vehicle away; the holds stay.
     assert e2["attitude_max_m"] > 0.5 > max(e2["max_m"], e2["velocity_max_m"])
     assert summary["setup"] == {"camera": "ideal", "estimator": "onboard", "world": "pad",
-                                "calibration": ""}
+                                "calibration": "", "wind": "dryden",
+                                "vision_latency": "measured", "pad_source": "vision"}
     assert summary["paper"] == {"E1_max_rel_error": 0.02, "E2_std_m": 0.0249, "E2_max_m": 0.1327}
 
     # Every figure docs/experiments.md names appears in the report, beside the paper's.
