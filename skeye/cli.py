@@ -184,7 +184,8 @@ def _add_sim(sub: Any) -> None:
         "to onboard",
     )
     p.add_argument(
-        "--wind", default="none", help="wind mode: none, constant, turbulence, random_force"
+        "--wind", default="none", help="wind mode: none, constant, turbulence, dryden "
+        "(MIL-F-8785C low-altitude gusts), random_force (docs/physics.md, Wind)"
     )
     p.add_argument(
         "--wind-params",
