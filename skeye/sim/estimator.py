@@ -529,8 +529,9 @@ def from_sensor_figures(
     figures of the sensors the board reads: the filter is told what its sensors deliver
     (docs/physics.md, "Onboard estimator"). A setting the robot file gave is kept.
 
-    - accel_noise_m_s2: the accelerometer's white noise and its in-flight vibration at the
-      vibration's reference rotor speed (hover), per axis, root-sum-square;
+    - accel_noise_m_s2: the accelerometer's white noise and the in-flight vibration its readings
+      carry at its rate and the vibration's reference rotor speed (hover), per axis,
+      root-sum-square;
     - tilt_noise_rad_s: the gyro's angle random walk, its noise and vibration per reading
       times sqrt(1 / rate) (rad/sqrt(s): how the tilt error of integrating it wanders);
     - baro_noise_m: the barometer's white noise (Pa) at 8.3 cm/Pa;
@@ -542,10 +543,11 @@ def from_sensor_figures(
     """
     a, g, b, s, f, r = (accel.params, gyro.params, baro.params, sonar.params, flow.params,
                         gps.params)
-    gyro_total = math.hypot(g["NoiseSigma"], gyro.vibration.rms_at(rotors))
+    gyro_total = math.hypot(g["NoiseSigma"], gyro.vibration.rms_sampled(rotors, gyro.rate_hz))
     flow_rate = f["NoiseSigma"] / (flow.counts_per_rad / flow.rate_hz)
     derived = {
-        "accel_noise_m_s2": math.hypot(a["NoiseSigma"], accel.vibration.rms_at(rotors)),
+        "accel_noise_m_s2": math.hypot(a["NoiseSigma"],
+                                       accel.vibration.rms_sampled(rotors, accel.rate_hz)),
         "tilt_noise_rad_s": gyro_total * math.sqrt(1.0 / gyro.rate_hz),
         "baro_noise_m": b["NoiseSigma"] * M_PER_PA,
         "sonar_noise_m": math.hypot(s["NoiseSigma"], 0.01 / math.sqrt(12.0)),

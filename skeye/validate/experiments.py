@@ -121,9 +121,11 @@ class E2Series:
 
 # -- processes --------------------------------------------------------------------------------
 @contextmanager
-def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: bool
-                 ) -> Iterator[Vehicle]:
-    """Simulator + pilot as processes, and a ground client connected to the pilot."""
+def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: bool,
+                 frame_time: str = "arrival") -> Iterator[Vehicle]:
+    """Simulator + pilot as processes, and a ground client connected to the pilot.
+    ``frame_time``: the pilot's ``--frame-time`` (E1 measures the detector against the truth
+    at each frame's capture, so it flies with "capture"; E2 with the host's "arrival")."""
     sim_args = ["sim", "--mode", "lockstep", "--port", "0", "--seed", str(settings.seed),
                 "--record", str(record), "--estimator", settings.estimator,
                 "--world", settings.world]
@@ -143,7 +145,7 @@ def flight_stack(settings: RunSettings, record: Path, *, vision: bool, wind: boo
         if vision:
             pilot_args += ["--images", f"127.0.0.1:{found[1].group(1)}",
                            "--vision-latency-ms", settings.vision_latency,
-                           "--pad-source", settings.pad_source]
+                           "--pad-source", settings.pad_source, "--frame-time", frame_time]
             if settings.calibration:
                 pilot_args += ["--calibration", settings.calibration]
         pilot, pfound = start_skeye(pilot_args, [r"ground control on (tcp://[\d.]+:\d+)"],
@@ -231,7 +233,7 @@ def run_e1(settings: RunSettings, workdir: Path, name: str = "e1") -> E1Series:
     pads: dict[float, PadReport] = {}
     lock = threading.Lock()
     plateaus = [(1.0, 10.0), (2.0, 10.0)] if not settings.quick else [(0.6, 2.0)]
-    with flight_stack(settings, record, vision=True, wind=False) as vehicle:
+    with flight_stack(settings, record, vision=True, wind=False, frame_time="capture") as vehicle:
 
         def on_packet(msg: object) -> None:
             if isinstance(msg, PadReport):

@@ -136,19 +136,21 @@ class Accelerometer(Sensor[AccelReading]):
 
     In-flight vibration (:mod:`.vibration`), added to the specific force before the axis
     errors: lines at the rotor and blade-pass frequencies and broadband content, scaled with
-    the rotor speeds squared, sampled at the reading instants (so aliased), then clipped at
-    Range (16 g: the MPU-6050's widest full scale). The defaults give 1.1 m/s^2 RMS per axis at
-    the Hummingbird's hover speed: the EuRoC MAV dataset's ADIS16448 on an AscTec multirotor in
-    hover carries 0.9-1.3 m/s^2 above 10 Hz (docs/physics.md, "In-flight vibration"); how that
-    splits into lines and broadband is an assumption (two thirds of the variance in the lines).
+    the rotor speeds squared, each reading the mean over its interval (the part's decimation
+    filter; the lines alias through its sidelobes), then clipped at Range (16 g: the MPU-6050's
+    widest full scale). The defaults give 1.1 m/s^2 RMS per axis in readings at 200 Hz at the
+    Hummingbird's hover speed (2.36 m/s^2 instantaneous): the EuRoC MAV dataset's ADIS16448 on
+    an AscTec multirotor in hover carries 0.9-1.3 m/s^2 above 10 Hz at 200 Hz (docs/physics.md,
+    "In-flight vibration"); how that splits into lines and broadband is an assumption (two
+    thirds of the variance in the two lines, equally, at 200 Hz).
     """
 
     type_name = "Accelerometer"
     PARAMS = (
         *_noise_params("m/s^2", 0.03, 0.05, 5e-4, "MPU-6050: 400 ug/sqrt(Hz)"),
         *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
-        *_vibration_params("m/s^2", 0.449, 0.449, 0.635, 156.9,
-                           "EuRoC ADIS16448 in hover: 1.1 m/s^2 RMS per axis"),
+        *_vibration_params("m/s^2", 0.568, 1.342, 1.154, 156.9,
+                           "EuRoC ADIS16448 in hover: 1.1 m/s^2 RMS per axis at 200 Hz"),
     )
 
     def _setup(self) -> None:
@@ -202,19 +204,20 @@ class Gyro(Sensor[GyroReading]):
     3-sigma limits, ScaleSigma 0.01 and MisalignmentSigma 0.0067. Default rate 100 Hz.
 
     In-flight vibration as the accelerometer's (:mod:`.vibration`): 0.065 rad/s RMS per axis
-    at the Hummingbird's hover speed (EuRoC's ADIS16448 in hover: 0.06-0.07 rad/s above
-    10 Hz), clipped at Range (2000 deg/s, the MPU-6050's widest full scale). g-sensitivity: a
-    rate error G f with f the specific force the part feels (vibration included) and G a 3x3
-    matrix drawn once, entries N(0, GSensitivity): the MPU-6050's linear acceleration
-    sensitivity 0.1 deg/s/g (PS-MPU-6000A-00 rev 3.4, table 6.1) = 1.78e-4 rad/s per m/s^2.
+    in readings at 200 Hz at the Hummingbird's hover speed (EuRoC's ADIS16448 in hover:
+    0.06-0.07 rad/s above 10 Hz), clipped at Range (2000 deg/s, the MPU-6050's widest full
+    scale). g-sensitivity: a rate error G f with f the specific force the part feels
+    (vibration included) and G a 3x3 matrix drawn once, entries N(0, GSensitivity): the
+    MPU-6050's linear acceleration sensitivity 0.1 deg/s/g (PS-MPU-6000A-00 rev 3.4, table
+    6.1) = 1.78e-4 rad/s per m/s^2.
     """
 
     type_name = "Gyro"
     PARAMS = (
         *_noise_params("rad/s", 0.0009, 0.005, 1e-4, "MPU-6050: 0.05 deg/s RMS"),
         *_axis_params(0.01, 0.0067, "MPU-6050: +-3 %, +-2 % cross-axis as 3 sigma"),
-        *_vibration_params("rad/s", 0.0265, 0.0265, 0.0375, 34.9,
-                           "EuRoC ADIS16448 in hover: 0.065 rad/s RMS per axis"),
+        *_vibration_params("rad/s", 0.0335, 0.0793, 0.0682, 34.9,
+                           "EuRoC ADIS16448 in hover: 0.065 rad/s RMS per axis at 200 Hz"),
         Param("GSensitivity", 1.78e-4,
               "rate error per m/s^2 of specific force, per axis pair, drawn once, 1 sigma, "
               "rad/s/(m/s^2) (MPU-6050: 0.1 deg/s/g)"),
