@@ -71,18 +71,15 @@ def test_attitude_sticks_tilt_and_move_the_vehicle(stick_flight) -> None:
         raise AssertionError("the stick gesture never started the motors")
     _fly(vehicle, robot, 1.5, TILT_RAD, 0.0, 0.0, THRUST)  # roll right
     gt = robot.ground_truth.latest
-    assert gt.rpy_rad[0] == pytest.approx(TILT_RAD, abs=0.05), gt  # the estimate's error: below
+    assert gt.rpy_rad[0] == pytest.approx(TILT_RAD, abs=0.03), gt
     assert _imu(vehicle).roll_rad == pytest.approx(TILT_RAD, abs=0.03)
     east_after_roll = gt.position_ned_m[1]
     assert east_after_roll > 0.1, gt  # leaning right moves it east (yaw ~ north)
 
     _fly(vehicle, robot, 1.5, 0.0, -TILT_RAD, 0.0, THRUST)  # pitch forward (nose down)
     gt = robot.ground_truth.latest
-    # The board flies its estimate to the sticks; the true angles are off by the estimate's
-    # error, roll/pitch 0.8-0.9 deg RMS with the IMU's in-flight vibration (bench_estimator,
-    # docs/physics.md): 3 sigma, 0.05 rad, more while the collective climbs hard.
-    assert gt.rpy_rad[0] == pytest.approx(0.0, abs=0.05), gt
-    assert gt.rpy_rad[1] == pytest.approx(-TILT_RAD, abs=0.05), gt
+    assert gt.rpy_rad[0] == pytest.approx(0.0, abs=0.03), gt
+    assert gt.rpy_rad[1] == pytest.approx(-TILT_RAD, abs=0.03), gt
     imu = _imu(vehicle)
     assert imu.roll_rad == pytest.approx(0.0, abs=0.03)
     assert imu.pitch_rad == pytest.approx(-TILT_RAD, abs=0.03)
