@@ -585,6 +585,13 @@ def from_sensor_figures(
     )
 
 
+SENSOR_BUILDERS: Final[dict[str, Any]] = {
+    "Accelerometer": Accelerometer, "Gyro": Gyro, "Barometer": Barometer, "Sonar": Sonar,
+    "OpticalFlow": OpticalFlow, "GPS": GPS,
+}
+"""The board's sensor classes, for :func:`with_default_sensors`."""
+
+
 def with_default_sensors(params: EstimatorParams) -> EstimatorParams:
     """:func:`from_sensor_figures` for a board with every sensor at its class defaults (an
     estimator built on its own, outside a robot)."""
@@ -596,9 +603,3 @@ def with_default_sensors(params: EstimatorParams) -> EstimatorParams:
 
     return from_sensor_figures(params, make("Accelerometer"), make("Gyro"), make("Barometer"),
                                make("Sonar"), make("OpticalFlow"), make("GPS"))
-
-
-SENSOR_BUILDERS: Final[dict[str, Any]] = {
-    "Accelerometer": Accelerometer, "Gyro": Gyro, "Barometer": Barometer, "Sonar": Sonar,
-    "OpticalFlow": OpticalFlow, "GPS": GPS,
-}
