@@ -57,11 +57,11 @@ from skeye.sim.sensors.inertial import (
 from skeye.sim.sensors.navigation import GPS, GpsReading, InsEstimate
 from skeye.sim.sensors.ranging import FlowReading, OpticalFlow, Sonar, SonarReading
 
-REST_POS_NOISE_M: Final = 0.5
+REST_POS_NOISE_M: Final = 0.01
 """The stationary position's noise while disarmed. PX4 EKF2 fuses a fake position at the last
 known one while it has no horizontal aiding (fake_pos_control.cpp): 0.01 m on the ground at
-rest, 0.5 m on the ground otherwise; skeye's board does it at rest with GPS too (re-anchoring
-the receiver, ``_gps``), with the looser 0.5 m."""
+rest (0.5 m on the ground otherwise); skeye's board does it at rest with GPS too (re-anchoring
+the receiver, ``_gps``)."""
 REST_VEL_NOISE_M_S: Final = 0.2
 """Zero-velocity update noise while disarmed: PX4 EKF2 (zero_velocity_update.cpp)."""
 M_PER_PA: Final = 1.0 / (1.225 * GRAVITY_M_S2)
@@ -458,9 +458,9 @@ class BoardEstimator:
     def at_rest(self, time_s: float) -> None:
         """The board is disarmed (motors off), so at rest. Every 0.2 s: zero velocity with
         0.2 m/s noise (PX4 EKF2's zero-velocity update, zero_velocity_update.cpp) and the
-        horizontal position where it came to rest with 0.5 m noise (EKF2's fake-position
-        fusion, fake_pos_control.cpp, which EKF2 uses only without horizontal aiding and at
-        0.01 m when at rest; here also with GPS, which meanwhile re-anchors to it, ``_gps``).
+        horizontal position where it came to rest with 0.01 m noise (EKF2's fake-position
+        fusion at rest on the ground, fake_pos_control.cpp, which EKF2 uses only without
+        horizontal aiding; here also with GPS, which meanwhile re-anchors to it, ``_gps``).
         So a parked vehicle's estimate does not wander with the receiver's error."""
         if not self.resting(time_s):
             self.rest_pos = None
