@@ -27,6 +27,7 @@ quick = true
 seeds = {seeds}
 [grid]
 f_max_n = {forces}
+wind = ["random_force"]
 e2_duration_s = [1.0]
 """
 FIGURES = ("mean_m", "std_m", "max_m", "final_m", "duration_s", "samples", "velocity_mean_m",
