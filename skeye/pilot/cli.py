@@ -383,9 +383,9 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
 
     def make(boards: Any, lock: Any) -> PadVision:
         return cls(boards, robot, lock, fov_h_rad=fov_h_rad, lockstep=lockstep,
-                         calibration=calibration, latency_s=latency_s, predict=predict,
-                         params=params, frame_time=frame_time, frame_jitter_s=frame_jitter_s,
-                         pad_source=pad_source)
+                   calibration=calibration, latency_s=latency_s, predict=predict,
+                   params=params, frame_time=frame_time, frame_jitter_s=frame_jitter_s,
+                   pad_source=pad_source)
 
     return make
 
