@@ -47,7 +47,9 @@ from skeye.sim.world_model import PadPlacement
 from skeye.vision.calibration import CameraCalibration, load_calibration
 
 NOISE_SUFFIXES = ("sigma", "noise", "walk")
-"""``sensor_noise`` scales every sensor parameter whose name ends so (NoiseSigma, BiasWalk...)."""
+"""``sensor_noise`` scales every sensor parameter whose name ends so (NoiseSigma, BiasWalk...),
+and the rotor-driven vibration's amplitudes (VIBRATION_KEYS)."""
+VIBRATION_KEYS = ("vibrationrotor", "vibrationbladepass", "vibrationbroadband")
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,7 @@ class FlightSettings:
 
 def scale_noise(config: RobotConfig, factor: float) -> RobotConfig:
     """The robot with every mounted sensor's noise, bias and walk parameters (names ending in
-    Sigma, Noise, Walk) times ``factor``; 1 leaves it as it is."""
+    Sigma, Noise, Walk) and vibration amplitudes times ``factor``; 1 leaves it as it is."""
     if factor == 1.0:
         return config
     mounts = []
@@ -125,7 +127,7 @@ def scale_noise(config: RobotConfig, factor: float) -> RobotConfig:
         params = dict(mount.params)
         for param in cls.all_params():
             norm = param.key.lower()
-            if not norm.endswith(NOISE_SUFFIXES):
+            if not (norm.endswith(NOISE_SUFFIXES) or norm in VIBRATION_KEYS):
                 continue
             key, value = given.get(norm, (param.key, param.default))
             params[key] = float(value) * factor

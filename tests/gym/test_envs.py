@@ -184,8 +184,10 @@ def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
 
     config = scale_noise(load_robot_config("hummingbird"), 0.0)
     gyro = next(m for m in config.sensors if m.type_name == "Gyro")
-    params = dict(gyro.params)
-    assert params["NoiseSigma"] == 0.0 and params["BiasWalk"] == 0.0
+    params = {k.replace("_", "").lower(): v for k, v in gyro.params}  # as the loader reads them
+    for name in ("noisesigma", "biaswalk", "vibrationrotor", "vibrationbladepass",
+                 "vibrationbroadband"):
+        assert params[name] == 0.0, name
     env = gymnasium.make("skeye/Hover-v0", sensor_noise=0.0, estimator="truth")
     try:
         env.reset(seed=0)

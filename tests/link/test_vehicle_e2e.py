@@ -30,6 +30,9 @@ from tests.sim.conftest import running_sim
 
 POS_TOL_M = 0.25  # INS estimate vs ground truth over a short flight
 ATT_TOL_RAD = 0.05
+VIBRATION_RMS_M_S2 = 1.1  # the accelerometer's in-flight vibration, RMS per axis at 200 Hz
+# (docs/physics.md, "In-flight vibration"; the board's 50 Hz readings average it down)
+ACC_SAMPLES = 8
 
 
 @pytest.fixture(params=["tcp", "serial"])
@@ -68,8 +71,16 @@ def check_against_ground_truth(vehicle: Vehicle, robot) -> None:
     assert calc.pitch_rad == pytest.approx(gt.rpy_rad[1], abs=ATT_TOL_RAD)
     yaw_err = math.remainder(calc.yaw_rad - gt.rpy_rad[2], 2 * math.pi)
     assert abs(yaw_err) < ATT_TOL_RAD
-    # Hovering: the accelerometer feels about 1 g up (body z down: -1 g).
-    assert calc.acc_body_frd_m_s2[2] == pytest.approx(-9.81, abs=1.0)
+    # Hovering: the accelerometer feels about 1 g up (body z down: -1 g), under the rotors'
+    # vibration: the mean of readings a NAV_STATUS frame apart, within 4 of its sigmas.
+    acc_z = [calc.acc_body_frd_m_s2[2]]
+    while len(acc_z) < ACC_SAMPLES:
+        vehicle.wait_for(PD.NAV_STATUS, timeout_s=5)
+        msg = vehicle.poll(int(PollMask.IMU_CALCDATA))[PD.IMU_CALCDATA]
+        assert isinstance(msg, ImuCalcData)
+        acc_z.append(imu_calcdata_to_si(msg).acc_body_frd_m_s2[2])
+    assert sum(acc_z) / len(acc_z) == pytest.approx(
+        -9.81, abs=4 * VIBRATION_RMS_M_S2 / math.sqrt(ACC_SAMPLES)), acc_z
 
 
 def test_take_off_move_goto_land(flight):
