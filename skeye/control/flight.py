@@ -2,7 +2,8 @@
 
 How this works: :data:`TRANSITIONS` maps ``(state, event) -> state``; :func:`transition` looks a
 pair up and raises LocalProtocolError naming both when the table has no such pair, before any
-command is sent. ``failed`` is reachable from every state (a physics stop).
+command is sent. ``failed`` is reachable from every state (a physics stop, a crash), and so is
+``reset`` (the simulator respawned the robot: it stands landed, or hovers where it was put).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ TRANSITIONS: dict[tuple[FlightState, str], FlightState] = {
     **{(s, "land"): _S.LANDING for s in _AIRBORNE},
     **{(s, "landed"): _S.LANDED for s in _AIRBORNE},
     **{(s, "failed"): _S.FAILED for s in FlightState},
+    **{(s, "reset"): _S.LANDED for s in FlightState},
 }
 """``(state, event) -> state``; a pair not in the table is an illegal request."""
 

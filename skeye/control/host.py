@@ -47,6 +47,10 @@ class RobotHost(Protocol):
         """Queue one typed command (a :mod:`skeye.wire.sim_messages` dataclass)."""
         ...
 
+    def request_message(self, message: Any, timeout_s: float | None = None) -> Any:
+        """Send one typed command and wait for its typed answer."""
+        ...
+
     def image_client(self) -> ImageClient:
         """A new client of the simulator's image server."""
         ...

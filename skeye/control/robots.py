@@ -35,7 +35,7 @@ from skeye.errors import (
 )
 from skeye.geo import GeoOrigin
 from skeye.wire.sim_lines import Message
-from skeye.wire.sim_messages import RobotConf
+from skeye.wire.sim_messages import Reset, RobotConf
 
 from .camera import CameraSensor
 from .flight import TRANSITIONS, FlightState, transition
@@ -89,6 +89,8 @@ class Robot(RobotSensors):
         self.mounted: list[tuple[str, str]] = []
         self.sensors: dict[tuple[str, str], Sensor[Any]] = {}
         self.state = FlightState.LANDED
+        self.crashed: str | None = None
+        """Why the simulator says this robot crashed (``ERR {Command CRASH}``), until a reset."""
         self.rejections: list[CommandRejected] = []
         advance = connection.clock.advance_period if connection.mode == "lockstep" else None
         self._advance = advance
@@ -140,6 +142,10 @@ class Robot(RobotSensors):
             self.connection.timeout_s,
             f"{self.name}: first readings",
         )
+        self._hold_if_airborne()
+
+    def _hold_if_airborne(self) -> None:
+        """A robot that spawned in the air holds where it is."""
         status = self.status.latest
         if status is not None and not status.landed:
             state = self._nav_state(self.feedback)
@@ -147,6 +153,56 @@ class Robot(RobotSensors):
                 self.state = FlightState.HOLDING
                 self._motion = Hold(Target(state.position_ned_m, state.yaw_rad),
                                     self.motion_config)
+
+    def reset(
+        self,
+        *,
+        start: str | None = None,
+        location_ned_m: tuple[float, float, float] | None = None,
+        rotation_rpy_rad: tuple[float, float, float] | None = None,
+        home_ned_m: tuple[float, float, float] | None = None,
+        timeout_s: float | None = None,
+    ) -> None:
+        """``RESET``: the simulator respawns this robot, still, with a fresh board, where it was
+        spawned (or at ``start`` / ``location_ned_m``); a crashed robot flies again. Ends the
+        current motion, and returns once the robot streams from its new pose.
+
+        ``home_ned_m``: the new pose's position, for take-offs (default: the location given,
+        else the home it had; a start pose elsewhere needs it).
+
+        Raises:
+            CommandRejected: the simulator refused (an unknown start pose...).
+            LinkTimeout: no answer, or no reading from the new pose, within ``timeout_s``.
+        """
+        self.connection.check()
+        with self._lock:
+            old, self._motion = self._motion, None
+            if old is not None and not old.done and old.error is None:
+                old.error = MotionCancelled(f"{self.name}: {old.name} ended by a reset")
+            self._rejection = None
+        before_s = self.connection.time_s
+        self.connection.request_message(
+            Reset(start=start, location_ned_m=location_ned_m, rotation_rpy_rad=rotation_rpy_rad),
+            timeout_s=timeout_s,
+        )
+        with self._lock:
+            self.crashed = None
+            self.state = transition(self.state, "reset", self.name)
+            if home_ned_m is not None:
+                self.home_ned_m = home_ned_m
+            elif location_ned_m is not None:
+                self.home_ned_m = location_ned_m
+        need: list[Sensor[Any]] = [self.status]
+        for type_key in ("groundtruth", "ins"):
+            found = self._find(type_key)
+            if found is not None:
+                need.append(found)
+        self.connection.clock.wait_until(
+            lambda: all(s.latest is not None and s.latest.time_s > before_s for s in need),
+            self.connection.timeout_s if timeout_s is None else timeout_s,
+            f"{self.name}: first readings after the reset",
+        )
+        self._hold_if_airborne()
 
     # -- message thread --------------------------------------------------------------------
     def on_sensor(self, msg: Message) -> None:
@@ -164,10 +220,12 @@ class Robot(RobotSensors):
         command = (msg.get("Command") or "").upper()
         reason = msg.get("Reason") or "no reason given"
         error: SkeyeError
-        if command == "PHYSICS":
+        if command in ("PHYSICS", "CRASH"):
             error = PhysicsError(f"{self.name}: {reason}")
             with self._lock:
                 self.state = FlightState.FAILED
+                if command == "CRASH":
+                    self.crashed = reason
         else:
             error = CommandRejected(f"{command}: {reason}")
         if isinstance(error, CommandRejected):

@@ -37,7 +37,7 @@ from skeye.errors import LocalProtocolError, PhysicsError
 from skeye.robots.config import RobotConfig, load_robot_config
 from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim import frames
-from skeye.sim.readings import Event, ReadingSink, RobotStopped, SensorSample
+from skeye.sim.readings import Event, ReadingSink, RobotCrashed, RobotStopped, SensorSample
 from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.state import BodyState
 from skeye.sim.surface_contrast import geom_contrasts
@@ -114,6 +114,7 @@ class Simulation:
         self.robot_dirs = tuple(Path(p) for p in robot_dirs)
         self.robots: dict[str, Robot] = {}
         self._spawned = 0
+        self._resets = 0
         self._slots: dict[str, _Slot] = {}
         self._queries: dict[str, RobotWorldQuery] = {}
         self.wind = WindModel(wind or make_settings("none"), np.random.default_rng([seed, 7]))
@@ -263,33 +264,7 @@ class Simulation:
             raise LocalProtocolError(f"a robot named {name!r} already exists")
         if not name.replace("_", "").replace("-", "").isalnum():
             raise LocalProtocolError(f"robot name {name!r} may hold only letters, digits, - and _")
-        gear = config.airframe.gear_height_m
-        if start is not None:
-            poses = {p.lower(): v for p, v in self.world.start_poses.items()}
-            if start.lower() not in poses:
-                raise LocalProtocolError(
-                    f"unknown start pose {start!r}; known: {', '.join(self.world.start_poses)}"
-                )
-            pose = poses[start.lower()]
-            gn, ge, gd = (float(v) for v in pose.position_ned_m)
-            pos = (gn, ge, gd - gear)
-            rr, rp, ry = (float(v) for v in pose.rpy_rad)
-            rpy = (rr, rp, ry)
-            airborne = False
-        elif location_ned_m is not None:
-            ln, le, ld = (float(v) for v in location_ned_m)
-            pos = (ln, le, ld)
-            if ld > 0.0:  # below the ground: onto the surface above, 1 cm over it
-                pos = (ln, le, self._surface_down(ln, le) - 0.01)
-            rpy = rotation_rpy_rad
-            below = self._ground_below(pos)
-            if below is not None and below < gear + 0.02:
-                pos = (pos[0], pos[1], pos[2] + below - gear)
-                airborne = False
-            else:
-                airborne = True
-        else:
-            raise LocalProtocolError("INIT needs {Location x,y,z} or {Start name}")
+        pos, rpy, airborne = self._spawn_pose(config, start, location_ned_m, rotation_rpy_rad)
         rng = np.random.default_rng([self.seed, 1000 + self._spawned])
         robot = Robot(
             name,
@@ -313,10 +288,49 @@ class Simulation:
             del self._queries[name]
             self._rebuild()
             raise
+        self._start_robot(name, robot, pos, airborne)
+        return robot
+
+    def _spawn_pose(
+        self,
+        config: RobotConfig,
+        start: str | None,
+        location_ned_m: tuple[float, float, float] | None,
+        rotation_rpy_rad: tuple[float, float, float],
+        exclude_body: int = -1,
+    ) -> tuple[tuple[float, float, float], tuple[float, float, float], bool]:
+        """Where a robot of ``config`` spawns: (position NED, roll/pitch/yaw, airborne). On a
+        start pose, or a location at or below the ground (``exclude_body``: the robot's own
+        body, when it is already in the world), it stands on its gear."""
+        gear = config.airframe.gear_height_m
+        if start is not None:
+            poses = {p.lower(): v for p, v in self.world.start_poses.items()}
+            if start.lower() not in poses:
+                raise LocalProtocolError(
+                    f"unknown start pose {start!r}; known: {', '.join(self.world.start_poses)}"
+                )
+            pose = poses[start.lower()]
+            gn, ge, gd = (float(v) for v in pose.position_ned_m)
+            rr, rp, ry = (float(v) for v in pose.rpy_rad)
+            return (gn, ge, gd - gear), (rr, rp, ry), False
+        if location_ned_m is None:
+            raise LocalProtocolError("INIT needs {Location x,y,z} or {Start name}")
+        ln, le, ld = (float(v) for v in location_ned_m)
+        rr, rp, ry = (float(v) for v in rotation_rpy_rad)
+        if ld > 0.0:  # below the ground: onto the surface above, 1 cm over it
+            ld = self._surface_down(ln, le) - 0.01
+        below = self._cast((ln, le, ld), (0.0, 0.0, 1.0), exclude_body, math.inf)
+        if below is not None and below < gear + 0.02:
+            return (ln, le, ld + below - gear), (rr, rp, ry), False
+        return (ln, le, ld), (rr, rp, ry), True
+
+    def _start_robot(self, name: str, robot: Robot, pos: tuple[float, float, float],
+                     airborne: bool) -> None:
+        """A robot just placed at its spawn pose: still, its board calibrated, its first tick."""
+        slot = self._slots[name]
         if airborne:
-            slot = self._slots[name]
             robot.controller.reset(hold_altitude_m=-pos[2])
-            self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
+        self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
         # The board's power-up calibration. In the air the vehicle stands for one that took off
         # earlier, so its board calibrated on the ground before; its readings at the spawn
         # instant (no motion yet) give the gyro bias, while the accelerometer, free of any
@@ -324,6 +338,58 @@ class Simulation:
         robot.power_up(self.body_state(name), self._queries[name])
         # The board's first tick now, so the wrench is set from the first step on.
         self._board_tick(name, robot, self.body_state(name))
+
+    def reset_robot(
+        self,
+        name: str,
+        *,
+        start: str | None = None,
+        location_ned_m: tuple[float, float, float] | None = None,
+        rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> Robot:
+        """Respawn a robot where it was spawned (or at ``start`` / ``location_ned_m``): a fresh
+        board (motors, battery, estimator, crash detector) and a still body at that pose. It
+        keeps its name, sink and cameras (their ids and frame numbers go on), so its clients
+        carry on. The world is not rebuilt.
+
+        Raises:
+            LocalProtocolError: no such robot, or an unknown start pose.
+        """
+        old = self.robots.get(name)
+        if old is None:
+            raise LocalProtocolError(f"no robot named {name!r}")
+        slot = self._slots[name]
+        if start is None and location_ned_m is None:
+            pos, rpy, airborne = old.spawn_pos_ned_m, old.spawn_rpy_rad, old.spawn_airborne
+        else:
+            pos, rpy, airborne = self._spawn_pose(old.config, start, location_ned_m,
+                                                  rotation_rpy_rad, slot.body_id)
+        self._resets += 1
+        robot = Robot(
+            name,
+            old.config,
+            physics_step_s=self.dt,
+            rng=np.random.default_rng([self.seed, 5000 + self._resets]),
+            sink=old.sink,
+            spawn_pos_ned_m=pos,
+            spawn_rpy_rad=rpy,
+            airborne=airborne,
+            estimator=self.estimator,
+            declination_rad=self._declination_rad(),
+        )
+        robot.cameras = old.cameras
+        robot.flight.landed_since_s = self.time_s
+        self.robots[name] = robot
+        d = self.data
+        a = slot.qpos_adr
+        d.qpos[a : a + 3] = frames.ned_to_mj(pos)
+        d.qpos[a + 3 : a + 7] = frames.quat_ned_to_mj(frames.euler_to_quat(*rpy))
+        d.qacc[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
+        d.xfrc_applied[slot.body_id] = 0.0
+        mujoco.mj_forward(self.model, d)
+        self._start_robot(name, robot, pos, airborne)
+        log.info("robot %s reset at %s (%s)", name, tuple(round(v, 3) for v in pos),
+                 "in the air" if airborne else "on the ground")
         return robot
 
     def _declination_rad(self) -> float:
@@ -352,10 +418,6 @@ class Simulation:
         above_down = -(top_z + 0.05)
         top = self._cast((north_m, east_m, above_down), (0.0, 0.0, 1.0), -1, math.inf)
         return 0.0 if top is None else above_down + top
-
-    def _ground_below(self, pos_ned: tuple[float, float, float]) -> float | None:
-        """Distance from a NED point straight down to the first geom, or None."""
-        return self._cast(pos_ned, (0.0, 0.0, 1.0), -1, math.inf)
 
     def ray_distance(
         self, robot_name: str, origin_ned_m: Any, direction_ned: Any, max_range_m: float
@@ -596,6 +658,11 @@ class Simulation:
             self._xfrc_flat, 6 * slot.body_id,
             (force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]), torque,
         )
+        if robot.crash_news is not None:
+            cause = robot.crash_news
+            robot.crash_news = None
+            log.warning("robot %s crashed at %.3f s: %s", name, state.time_s, cause)
+            self.emit(robot, [RobotCrashed(name, state.time_s, cause)])
 
     def _park(self, name: str) -> None:
         """Park a failed body far above the world with finite state and no force, so MuJoCo's

@@ -4,7 +4,8 @@ How this works: the engine (:mod:`skeye.sim.engine`), the robots and the cameras
 text. Each physics step collects, per robot, the events it produced: a :class:`SensorSample`
 for each sensor that was due (the sensor's own typed reading, see
 :class:`skeye.sim.sensors.Reading`), a :class:`StatusReading` when the status is due, a
-:class:`CameraFrame` when a camera rendered, a :class:`RobotStopped` when the robot failed. When
+:class:`CameraFrame` when a camera rendered, a :class:`RobotCrashed` when the robot crashed (it
+stays in the world, motors off), a :class:`RobotStopped` when the robot failed. When
 the ``step()`` call ends the engine hands each robot's events, in order, to the robot's
 :data:`ReadingSink` in one call. The control server's sink turns them into protocol lines
 (:mod:`skeye.sim.stream`); an in-process user (a benchmark, a test, a learning environment) can
@@ -30,6 +31,7 @@ __all__ = [
     "CameraFrame",
     "Event",
     "ReadingSink",
+    "RobotCrashed",
     "RobotStopped",
     "SensorSample",
     "StatusReading",
@@ -98,7 +100,17 @@ class RobotStopped:
     reason: str
 
 
-Event = SensorSample | StatusReading | CameraFrame | RobotStopped
+@dataclass(frozen=True)
+class RobotCrashed:
+    """The robot crashed (:mod:`skeye.sim.crash`): its motors stopped and it refuses ``DRIVE``
+    until it is reset; ``cause`` says why."""
+
+    robot: str
+    time_s: float
+    cause: str
+
+
+Event = SensorSample | StatusReading | CameraFrame | RobotStopped | RobotCrashed
 ReadingSink = Callable[[list[Event]], None]
 """Takes one robot's events of one ``step()`` call, in order (never an empty list)."""
 

@@ -11,7 +11,9 @@ board's sensors' readings also go to :meth:`Robot.observe`); the robot never tou
 
 Flight state (``armed``, ``landed``) follows a small table: a robot spawned on the ground is
 disarmed; any DRIVE that asks for motion arms it; a robot that is landed and asked to go no
-higher for one second disarms (motors stop), as the AscTec board does.
+higher for one second disarms (motors stop), as the AscTec board does. A robot whose crash
+detector fires (:mod:`skeye.sim.crash`: tumbled, or a hard impact) is crashed: its motors stop,
+as PX4's flight termination stops them, and every DRIVE is refused until the engine resets it.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from skeye.robots.config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMou
 from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
+from skeye.sim.crash import CrashDetector
 from skeye.sim.estimator import BoardEstimator, from_sensor_figures
 from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
 from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
@@ -124,6 +127,7 @@ class FlightState:
     landed: bool = True
     landed_since_s: float = 0.0
     failed: str | None = None
+    crashed: str | None = None  # the crash's cause (skeye.sim.crash), until a reset
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -164,6 +168,10 @@ class Robot:
         self.battery = Battery(config.battery, RotorModel.hover_power_w(config.airframe))
         self.command = Command()
         self.flight = FlightState()
+        self.crash = CrashDetector()
+        self.crash_news: str | None = None
+        """A crash's cause, set on the tick it happened; the engine reports and clears it."""
+        self.spawn_airborne = airborne
         self.status_period_steps = max(1, round(1.0 / (config.status_rate_hz * physics_step_s)))
         # The engine's schedule: the periods (steps) of the sensors and the status, and the next
         # step at which one of them falls due (skeye.sim.engine keeps them).
@@ -302,6 +310,10 @@ class Robot:
         controller, as a change of mode does; a switch of some resets only theirs."""
         if self.flight.failed:
             raise LocalProtocolError(f"robot {self.name} is stopped: {self.flight.failed}")
+        if self.flight.crashed:
+            raise LocalProtocolError(
+                f"robot {self.name} crashed ({self.flight.crashed}): send RESET to bring it back"
+            )
         c = self.command
         form = changes.pop("attitude", None)
         if form is not None:
@@ -366,6 +378,10 @@ class Robot:
         """
         if self.flight.failed:
             return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        roll, pitch, _ = state.rpy_rad
+        cause = self.crash.update(state.time_s, roll, pitch, state.vel_ned_m_s, in_contact)
+        if cause is not None:
+            self._crashed(cause)
         estimator = self.estimator
         est = estimator.estimate() if estimator is not None else self.ins.estimate_now(state)
         gps_hold = estimator.has_gps_fix(state.time_s) if estimator is not None else False
@@ -422,6 +438,15 @@ class Robot:
         )
         self._update_flight_state(state, in_contact)
         return force, torque
+
+    def _crashed(self, cause: str) -> None:
+        """Flight termination: motors off, set-points cleared, DRIVE refused until a reset."""
+        f = self.flight
+        f.crashed = cause
+        f.armed = False
+        self.command = Command(attitude=self.command.attitude)
+        self.controller.reset()
+        self.crash_news = cause
 
     def _update_flight_state(self, state: BodyState, in_contact: bool) -> None:
         f = self.flight

@@ -59,6 +59,7 @@ from skeye.wire.sim_messages import (
     Init,
     Ping,
     Res,
+    Reset,
     RobotConf,
     Set,
     StartPoses,
@@ -115,7 +116,7 @@ TRANSITIONS: dict[tuple[Conn, ConnEvent], Conn] = {
 """(state, event) -> state. A robot-driving connection is never closed for being quiet (a
 hovering robot needs no commands; TCP keepalive finds dead peers): BOUND has no QUIET row."""
 
-NEEDS_ROBOT = frozenset({"DRIVE", "GETCONF", "GETGEO"})
+NEEDS_ROBOT = frozenset({"DRIVE", "GETCONF", "GETGEO", "RESET"})
 """Commands refused until INIT has bound a robot (SET checks per Type: Camera needs one)."""
 
 ONCE = frozenset({"INIT"})
@@ -439,6 +440,21 @@ class ClientSession:
         self.stopped_reason = None
         self.states.bind()
 
+    def cmd_reset(self, msg: Message, reset: Reset) -> None:
+        """Respawn this connection's robot (crashed or not): where it was spawned, or at the
+        start pose or location given. Answered from the engine thread before the robot's first
+        reading at its new pose."""
+        name = self._robot("RESET")
+        note = "; ".join(usarsim_notes(msg)) or None
+
+        def respawn(sim: Simulation) -> None:
+            sim.reset_robot(name, start=reset.start, location_ned_m=reset.location_ned_m,
+                            rotation_rpy_rad=reset.rotation_rpy_rad or (0.0, 0.0, 0.0))
+            self.send(encode(Res("RESET", name=name, status="OK", note=note)))
+
+        self.server.runner.call(respawn)
+        log.info("client %s reset robot %s", self.peer, name)
+
     def cmd_drive(self, msg: Message, drive: Drive) -> None:
         name = self._robot("DRIVE")
         c = self.robot_config.controller
@@ -569,6 +585,7 @@ class ClientSession:
 _HANDLERS: dict[str, Callable[[ClientSession, Message, Any], None]] = {
     "INIT": ClientSession.cmd_init,
     "DRIVE": ClientSession.cmd_drive,
+    "RESET": ClientSession.cmd_reset,
     "GETSTARTPOSES": ClientSession.cmd_getstartposes,
     "GETGEO": ClientSession.cmd_getgeo,
     "GETCONF": ClientSession.cmd_getconf,

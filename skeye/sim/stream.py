@@ -17,6 +17,7 @@ from skeye.sim.readings import (
     CameraFrame,
     Event,
     ReadingSink,
+    RobotCrashed,
     RobotStopped,
     SensorSample,
     StatusReading,
@@ -25,7 +26,11 @@ from skeye.wire import sim as wire
 from skeye.wire.sim_format import Layout, LineFormat
 from skeye.wire.sim_messages import Err, SenCamera, Sta
 
-__all__ = ["StreamEncoder", "text_sink"]
+__all__ = ["CRASH_COMMAND", "StreamEncoder", "text_sink"]
+
+CRASH_COMMAND = "CRASH"
+"""``ERR {Command CRASH} {Name robot} {Reason crashed: cause}``: the robot crashed
+(docs/protocols/simulator.md)."""
 
 
 class StreamEncoder:
@@ -67,6 +72,9 @@ class StreamEncoder:
                 lines.append(wire.encode(SenCamera(event.time_s, event.camera, event.frame)))
             elif isinstance(event, RobotStopped):
                 lines.append(wire.encode(Err(event.command, event.robot, event.reason)))
+            elif isinstance(event, RobotCrashed):
+                reason = f"crashed: {event.cause}"
+                lines.append(wire.encode(Err(CRASH_COMMAND, event.robot, reason)))
             else:
                 raise TypeError(f"not a simulator event: {event!r}")  # a bug in the engine
         return b"".join(lines)

@@ -61,6 +61,7 @@ from skeye.wire.sim_messages import (
     Nfo,
     Ping,
     Res,
+    Reset,
     RobotConf,
     Sen,
     SenOther,
@@ -147,7 +148,9 @@ def _codec(cls: type) -> Codec:
     return Codec(cls.WORD, cls, tuple(specs))  # type: ignore[attr-defined]
 
 
-COMMANDS: tuple[type, ...] = (Init, Drive, Step, Set, Ping, GetConf, GetGeo, GetStartPoses)
+COMMANDS: tuple[type, ...] = (
+    Init, Drive, Step, Set, Ping, GetConf, GetGeo, GetStartPoses, Reset
+)
 """The commands a client sends."""
 
 CODECS: dict[str, Codec] = {
@@ -208,14 +211,16 @@ def _decode_fields(codec: Codec, msg: Message, skip: Iterable[str] = ()) -> dict
     return out
 
 
-def _check_init(init: Init) -> None:
+def _check_init(init: Init | Reset) -> None:
+    """INIT's (and RESET's) place: a start pose or a location within the world, a rotation
+    within 2 pi (RESET may give neither: where the robot was spawned)."""
     if init.rotation_rpy_rad is not None and any(abs(v) > 2 * math.pi
                                                  for v in init.rotation_rpy_rad):
         raise RemoteProtocolError(
             f"Rotation {init.rotation_rpy_rad} must be in [-2pi, 2pi] rad per axis "
             "(radians, not degrees)"
         )
-    if init.start is None and init.location_ned_m is None:
+    if isinstance(init, Init) and init.start is None and init.location_ned_m is None:
         raise RemoteProtocolError("INIT needs {Location x,y,z} or {Start name}")
     if init.location_ned_m is not None and any(abs(v) > 1.0e4 for v in init.location_ned_m):
         raise RemoteProtocolError(
@@ -345,7 +350,7 @@ def decode(msg: Message) -> Any:
         msg = usarsim_drive(msg)
         _check_drive_form(msg)
     result = codec.cls(**_decode_fields(codec, msg))
-    if isinstance(result, Init):
+    if isinstance(result, Init | Reset):
         _check_init(result)
     return result
 

@@ -5,10 +5,10 @@ declared once, in the field's metadata (:func:`wire`), and :mod:`skeye.wire.sim`
 table from them. Units are SI and named in the field (``time_s``, ``location_ned_m``,
 ``roll_rad``); angles are radians. A field whose default is None is optional on the wire: it is
 left out when None and None when absent. Commands (client to simulator) are :class:`Init`,
-:class:`Drive`, :class:`Step`, :class:`Set`, :class:`Ping`, :class:`GetConf`, :class:`GetGeo`,
-:class:`GetStartPoses`; messages (simulator to client) are :class:`Sta`, one ``Sen*`` class per
-sensor Type, :class:`Res`, :class:`Err`, :class:`Nfo`, :class:`StartPoses`, :class:`Conf` and
-:class:`Geo`.
+:class:`Drive`, :class:`Reset`, :class:`Step`, :class:`Set`, :class:`Ping`, :class:`GetConf`,
+:class:`GetGeo`, :class:`GetStartPoses`; messages (simulator to client) are :class:`Sta`, one
+``Sen*`` class per sensor Type, :class:`Res`, :class:`Err`, :class:`Nfo`, :class:`StartPoses`,
+:class:`Conf` and :class:`Geo`.
 
 Invariants: messages never change after they are built; the field order of a class is the order
 of its blocks on the wire (the simulator's stream bytes depend on it).
@@ -134,6 +134,18 @@ class Drive:
     def velocity(self) -> bool:
         """Whether some axis is given in the velocity form (forward, right, up)."""
         return not (self.forward_m_s is None and self.right_m_s is None and self.up_m_s is None)
+
+
+@dataclass(frozen=True)
+class Reset:
+    """``RESET``: respawn the connection's robot, still, with a fresh board (a skeye extension):
+    at a start pose, at a NED location (and rotation), or, with neither, where it was spawned.
+    It keeps its name and cameras; a crashed robot flies again."""
+
+    WORD: ClassVar[str] = "RESET"
+    start: str | None = field(default=None, metadata=wire("Start", "word"))
+    location_ned_m: Vec3 | None = field(default=None, metadata=wire("Location", "uvec3"))
+    rotation_rpy_rad: Vec3 | None = field(default=None, metadata=wire("Rotation", "uvec3"))
 
 
 @dataclass(frozen=True)

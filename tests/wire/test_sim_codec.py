@@ -135,7 +135,7 @@ def test_every_message_round_trips(message: Any) -> None:
 def test_the_table_covers_every_message_class() -> None:
     words = {codec.word for codec in sim.CODECS.values()}
     assert words == {"INIT", "DRIVE", "STEP", "SET", "PING", "GETCONF", "GETGEO",
-                     "GETSTARTPOSES", "STA", "RES", "ERR", "NFO"}
+                     "GETSTARTPOSES", "RESET", "STA", "RES", "ERR", "NFO"}
     assert {c.TYPE for c in SEN_CLASSES} == {
         "GroundTruth", "INS", "Accelerometer", "Gyro", "MagneticCompass", "Barometer", "GPS",
         "Sonar", "OpticalFlow", "Battery", "Motors", "Camera"}
