@@ -90,7 +90,11 @@ class Robot(RobotSensors):
         self.sensors: dict[tuple[str, str], Sensor[Any]] = {}
         self.state = FlightState.LANDED
         self.crashed: str | None = None
-        """Why the simulator says this robot crashed (``ERR {Command CRASH}``), until a reset."""
+        """Why the simulator says this robot crashed (``ERR {Command CRASH}``, or ``PHYSICS``:
+        it removed the robot), until a reset."""
+        self.removed = False
+        """The simulator removed this robot (``ERR {Command PHYSICS}``): only a new INIT, on a
+        new connection, brings a vehicle back."""
         self.rejections: list[CommandRejected] = []
         advance = connection.clock.advance_period if connection.mode == "lockstep" else None
         self._advance = advance
@@ -162,10 +166,12 @@ class Robot(RobotSensors):
         rotation_rpy_rad: tuple[float, float, float] | None = None,
         home_ned_m: tuple[float, float, float] | None = None,
         timeout_s: float | None = None,
+        wait: bool = True,
     ) -> None:
         """``RESET``: the simulator respawns this robot, still, with a fresh board, where it was
         spawned (or at ``start`` / ``location_ned_m``); a crashed robot flies again. Ends the
-        current motion, and returns once the robot streams from its new pose.
+        current motion, and returns once the simulator answered and (``wait``) the robot
+        streams from its new pose.
 
         ``home_ned_m``: the new pose's position, for take-offs (default: the location given,
         else the home it had; a start pose elsewhere needs it).
@@ -192,6 +198,8 @@ class Robot(RobotSensors):
                 self.home_ned_m = home_ned_m
             elif location_ned_m is not None:
                 self.home_ned_m = location_ned_m
+        if not wait:
+            return
         need: list[Sensor[Any]] = [self.status]
         for type_key in ("groundtruth", "ins"):
             found = self._find(type_key)
@@ -224,8 +232,8 @@ class Robot(RobotSensors):
             error = PhysicsError(f"{self.name}: {reason}")
             with self._lock:
                 self.state = FlightState.FAILED
-                if command == "CRASH":
-                    self.crashed = reason
+                self.crashed = reason
+                self.removed = self.removed or command == "PHYSICS"
         else:
             error = CommandRejected(f"{command}: {reason}")
         if isinstance(error, CommandRejected):

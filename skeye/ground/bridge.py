@@ -420,6 +420,8 @@ class VehicleBridge:
         with self._lock:
             self._vehicle = vehicle
             self._connects += 1
+        with self._lock:
+            self._last_error = ""  # connected now: an old failure is no longer the news
         self._fire(LinkEvent.UP, "")
         return vehicle
 
@@ -451,6 +453,11 @@ class VehicleBridge:
         with self._lock:
             if self._vehicle is vehicle:
                 self._vehicle = None
+            # What the lost vehicle last said is not its state now: the page shows no telemetry
+            # (and the link's state and error) until a vehicle speaks again.
+            self._latest.clear()
+            self._pad_offset = None
+            self._seq += 1
             self._frame_errors_closed += vehicle.frame_errors
             self._garbage_closed += vehicle.parser.garbage_bytes
             self._round_trip_s = None

@@ -234,6 +234,8 @@ COMMANDS: dict[str, CommandSpec] = {
         ),
         CommandSpec("land", "LAND 0x84", (), "descend and stop the motors"),
         CommandSpec("hold", "HOLD 0x85", (), "stop and hover here"),
+        CommandSpec("reset", "RESET 0x88", (),
+                    "bring a crashed vehicle back at home (the simulator respawns it)"),
         CommandSpec(
             "pad_mode",
             "PAD_MODE 0x86",
@@ -328,6 +330,7 @@ _RUNNERS: dict[str, Callable[..., Result | Ack]] = {
     "take_off": Vehicle.take_off,
     "land": Vehicle.land,
     "hold": Vehicle.hold,
+    "reset": Vehicle.reset,
     "pad_mode": Vehicle.pad_mode,
 }
 

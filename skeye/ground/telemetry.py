@@ -29,6 +29,7 @@ from skeye.wire.packets import (
     CurrentWay,
     GpsData,
     GpsDataAdvanced,
+    Health,
     ImuCalcData,
     LlStatus,
     Message,
@@ -156,6 +157,11 @@ def waypoint_json(msg: CurrentWay) -> dict[str, Any]:
     }
 
 
+def health_json(msg: Health) -> dict[str, Any]:
+    """HEALTH: ``ok``, ``crashed`` or ``lost``, and why (the pilot's words)."""
+    return {"status": msg.status.name.lower(), "reason": msg.reason}
+
+
 def telemetry_json(latest: Mapping[PD, Message]) -> dict[str, Any]:
     """Every section the page shows; a section is None until its structure has arrived."""
 
@@ -169,7 +175,9 @@ def telemetry_json(latest: Mapping[PD, Message]) -> dict[str, Any]:
     gps = get(PD.GPS_DATA_ADVANCED, GpsDataAdvanced) or get(PD.GPS_DATA, GpsData)
     pad = get(PD.PAD, PadReport)
     way = get(PD.CURRENT_WAY, CurrentWay)
+    health = get(PD.HEALTH, Health)
     return {
+        "health": None if health is None else health_json(health),
         "nav": None if nav is None else nav_json(nav),
         "imu": None if imu is None else imu_json(imu),
         "status": None if status is None else status_json(status),
@@ -181,6 +189,7 @@ def telemetry_json(latest: Mapping[PD, Message]) -> dict[str, Any]:
 
 __all__ = [
     "gps_json",
+    "health_json",
     "imu_json",
     "nav_json",
     "pad_json",

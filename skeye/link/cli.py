@@ -95,6 +95,8 @@ def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
         answer = vehicle.land()
     elif cmd == "hold":
         answer = vehicle.hold()
+    elif cmd == "reset":
+        answer = vehicle.reset()
     elif cmd == "velocity":
         answer = vehicle.set_velocity(
             args.forward, args.right, args.up, math.radians(args.yaw_rate_deg_s), args.duration
@@ -153,6 +155,7 @@ def register(subparsers: Any) -> None:
     c.add_argument("height", type=float, help="metres above the take-off point")
     sub.add_parser("land", help="descend and stop motors")
     sub.add_parser("hold", help="stop and hover here")
+    sub.add_parser("reset", help="bring a crashed vehicle back at home (respawn in the simulator)")
     c = sub.add_parser("velocity", help="fly at body-frame velocities")
     c.add_argument("forward", type=float, help="m/s")
     c.add_argument("right", type=float, help="m/s")

@@ -45,6 +45,7 @@ from skeye.wire.packets import (
     ComeHome,
     EndFlight,
     FrameError,
+    Health,
     Hold,
     Land,
     Launch,
@@ -55,6 +56,7 @@ from skeye.wire.packets import (
     PadAction,
     Poll,
     PollMask,
+    Reset,
     Result,
     ResultCode,
     SkeyeMask,
@@ -353,6 +355,17 @@ class Vehicle:
     def hold(self) -> Result | Ack:
         """Stop and hover here."""
         return self.command(Hold())
+
+    def reset(self) -> Result | Ack:
+        """Bring the vehicle back at home, still (the way out of CRASHED; a simulated vehicle
+        respawns at its start pose)."""
+        return self.command(Reset())
+
+    @property
+    def health(self) -> Health | None:
+        """The latest HEALTH the vehicle sent (None before the first)."""
+        msg = self.latest.get(PD.HEALTH)
+        return msg if isinstance(msg, Health) else None
 
     def set_velocity(
         self,

@@ -48,6 +48,7 @@ class Snapshot:
     armed: bool  # motors running
     landed: bool  # resting on the ground
     thrust_fraction: float  # total rotor thrust / maximum thrust, 0..1
+    crashed: str = ""  # why the vehicle crashed ("" while it has not): see Airframe.reset
 
     @property
     def altitude_m(self) -> float:
@@ -117,4 +118,10 @@ class Airframe(Protocol):
 
     def advance(self, seconds: float) -> None:
         """Let sim time pass when the simulator is in lockstep (no-op in realtime)."""
+        ...
+
+    def reset(self) -> str:
+        """Bring a crashed (or landed) vehicle back at home, still, motors off: a simulated one
+        respawns at its start pose; returns what was done, for the log. Raises SkeyeError when
+        it cannot (the vehicle below is lost)."""
         ...

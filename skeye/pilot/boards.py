@@ -14,6 +14,12 @@ per requested structure. Decode errors that name a command get that command's RE
 counted. Refusals come from the flight-state table (``skeye.pilot.states``): code 4 "refused in
 this state", code 5 "busy".
 
+Crashes (the airframe's snapshot says ``crashed``: the simulator's crash detector, or the
+robot removed): CRASHED from any state; every command but RESET (and PAD_MODE, STREAM, polls)
+is refused with the cause; RESET asks the airframe to bring the vehicle back (LANDED). The
+vehicle's health (OK, CRASHED, LOST with the reason) goes to ground control in HEALTH packets:
+pushed when it changes, and streamed with NAV_STATUS once a second.
+
 Link loss: while airborne, no packet for ``link_timeout_s`` -> FAILSAFE (hover), then after
 ``land_timeout_s`` more -> LANDING. A packet arriving in FAILSAFE stops the land countdown; the
 vehicle keeps holding until ground control commands it.
@@ -77,6 +83,8 @@ from skeye.wire.packets import (
     ErrorKind,
     FrameError,
     GotoGps,
+    Health,
+    HealthStatus,
     Hold,
     Land,
     Launch,
@@ -86,6 +94,7 @@ from skeye.wire.packets import (
     NavigationStatus,
     PadMode,
     Poll,
+    Reset,
     Result,
     ResultCode,
     SkeyeMask,
@@ -108,6 +117,7 @@ AXIS_BITS = CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
 # that lift the vehicle off were followed by a TOUCHDOWN, motors "off" and every later stick
 # ignored while the vehicle flew on the first one.
 STICK_ARM_SETTLE_S = 0.5
+HEALTH_PERIOD_S = 1.0  # HEALTH streamed with NAV_STATUS at most this often
 
 
 @dataclass(frozen=True)
@@ -178,6 +188,9 @@ class OnboardBoards:
         self.envelope_reason = ""  # why, the last time
         self.clock_until_s = 0.0  # sim time granted by CLOCK (used with --ground-clock)
         self.telemetry = Telemetry(snap)
+        self.health = Health(HealthStatus.OK)
+        self._health_news = False  # changed since the last tick: push it
+        self._health_next_s = now_s
 
     # -- state ---------------------------------------------------------------------------
     @property
@@ -209,7 +222,10 @@ class OnboardBoards:
             reply = self._dispatch(event, now_s)
         except IllegalTransition as exc:
             self.errors["refused"] += 1
-            return [Result(pd, exc.code, str(exc))]
+            reason = str(exc)
+            if self.state is NavState.CRASHED:
+                reason += f" ({self.health.reason}); send RESET to bring it back"
+            return [Result(pd, exc.code, reason[: Result.MAX_REASON_BYTES // 4])]
         except _Refused as exc:
             self.errors["refused"] += 1
             return [Result(pd, exc.code, exc.reason)]
@@ -258,7 +274,9 @@ class OnboardBoards:
         elif isinstance(msg, GotoGps):
             self._goto_gps(msg)
         elif isinstance(msg, PadMode):
-            self.pad.set_mode(msg)
+            self._pad_mode(msg)
+        elif isinstance(msg, Reset):
+            self._reset()
         elif isinstance(msg, Stream):
             self._stream = msg if msg.period > 0 else None
             self._stream_next_s = now_s
@@ -331,6 +349,39 @@ class OnboardBoards:
                 f"speed {speed:g} m/s is over this vehicle's limit of {limit:g} m/s",
             )
         return speed
+
+    def _pad_mode(self, msg: PadMode) -> None:
+        """PAD_MODE: a correction speed over the vehicle's limit is refused, as for MOVE_BY."""
+        if msg.max_speed:
+            self._speed(si_value(msg, "max_speed"))
+        self.pad.set_mode(msg)
+
+    def _reset(self) -> None:
+        """RESET: the airframe brings the vehicle back at home; it stands LANDED there."""
+        self.flight.check(FlightEvent.RESET)
+        what = self.airframe.reset()
+        self._back(FlightEvent.RESET, what)
+
+    def respawned(self, what: str) -> None:
+        """A new vehicle under the pilot (re-attached to a restarted simulator): LANDED."""
+        self._back(FlightEvent.RESPAWNED, what)
+
+    def _back(self, event: FlightEvent, what: str) -> None:
+        self._fire(event)
+        self._end_motion()
+        self.motors_on = False
+        self._failsafe_since_s = None
+        self.pad.landing_finished()
+        snap = self.airframe.snapshot()
+        self.home_ned_m = snap.pos_ned_m
+        self.telemetry = Telemetry(snap)
+        self._set_health(HealthStatus.OK, what)
+
+    def _set_health(self, status: HealthStatus, reason: str) -> None:
+        reason = reason[: Health.MAX_REASON_BYTES // 4]
+        if (status, reason) != (self.health.status, self.health.reason):
+            self.health = Health(status, reason)
+            self._health_news = True
 
     def _velocity(self, msg: Velocity, now_s: float) -> None:
         self.flight.check(FlightEvent.MOVE)
@@ -507,6 +558,8 @@ class OnboardBoards:
         since = self._gesture_since_s
         if since is None or self._gesture_done or now_s - since < GESTURE_HOLD_S:
             return
+        if self.state is NavState.CRASHED:
+            return  # a wreck's motors stay off until RESET
         self._gesture_done = True
         if self._gesture_start:
             if not self.motors_on:
@@ -520,18 +573,29 @@ class OnboardBoards:
 
     # -- time ----------------------------------------------------------------------------
     def tick(self, now_s: float) -> list[Message]:
-        """Advance time-dependent behaviour; returns packets to push (streamed telemetry)."""
+        """Advance time-dependent behaviour; returns packets to push (streamed telemetry, and
+        HEALTH when it changed)."""
         self._check_gesture(now_s)
         self._progress(now_s)
         self._envelope_guard()
         self._failsafe(now_s)
+        out: list[Message] = []
+        if self._health_news:
+            self._health_news = False
+            out.append(self.health)
         if self._stream is None or now_s < self._stream_next_s:
-            return []
+            return out
         period_s = si_value(self._stream, "period")
         self._stream_next_s = max(self._stream_next_s + period_s, now_s - period_s)
-        out = self.poll(self._stream.poll_mask)
+        out += self.poll(self._stream.poll_mask)
         if self._stream.skeye_mask & SkeyeMask.NAV_STATUS:
-            out.append(self.nav_status())
+            nav = self.nav_status()
+            if nav is not None:
+                out.append(nav)
+            if now_s >= self._health_next_s:  # the health now, for a station that came late
+                self._health_next_s = now_s + HEALTH_PERIOD_S
+                if not out or out[0] is not self.health:
+                    out.append(self.health)
         if self._stream.skeye_mask & SkeyeMask.PAD:
             out.append(self.pad.report())
         return out
@@ -550,6 +614,9 @@ class OnboardBoards:
     def _progress(self, now_s: float) -> None:
         state = self.state
         snap = self.airframe.snapshot()
+        if snap.crashed and state is not NavState.CRASHED:
+            self._crash(snap.crashed)
+            return
         self.geo.add(snap.gps, snap.pos_ned_m)
         self._count_motor_time(snap)
         self.telemetry.observe(snap, self.motors_on or snap.armed)
@@ -577,6 +644,15 @@ class OnboardBoards:
             self._end_motion()
             self.pad.landing_finished()
 
+    def _crash(self, cause: str) -> None:
+        """The vehicle crashed: CRASHED, whatever it was doing; the cause goes to the ground."""
+        self._fire(FlightEvent.CRASH)
+        self._end_motion()
+        self.motors_on = False
+        self._failsafe_since_s = None
+        self.pad.landing_finished()
+        self._set_health(HealthStatus.CRASHED, cause)
+
     def _failsafe(self, now_s: float) -> None:
         state = self.state
         silent_s = now_s - self._last_packet_s
@@ -592,12 +668,14 @@ class OnboardBoards:
                 self.airframe.land()
                 self._failsafe_since_s = None
 
-    def vehicle_lost(self, now_s: float) -> None:
+    def vehicle_lost(self, now_s: float, reason: str = "") -> None:
         """The vehicle below stopped answering (simulator gone): failsafe as on link loss.
 
         In the air that is FAILSAFE (hold, then land after the land timeout: the commands go
         to an airframe that may refuse them, which the loop tolerates); on the ground, nothing.
+        The health is LOST, with ``reason``.
         """
+        self._set_health(HealthStatus.LOST, reason or "the vehicle stopped answering")
         if self.state in _AIRBORNE:
             self._fire(FlightEvent.LINK_LOST)
             self._end_motion()
@@ -637,9 +715,11 @@ class OnboardBoards:
         self._count_motor_time(snap)
         return self.telemetry.poll(mask, snap, self.status())
 
-    def nav_status(self) -> Message:
-        """NAV_STATUS from the onboard estimate (``Telemetry.nav_status``)."""
-        return self.telemetry.nav_status(self.airframe.snapshot(), self.status())
+    def nav_status(self) -> Message | None:
+        """NAV_STATUS from the onboard estimate (``Telemetry.nav_status``); None when the
+        snapshot's values do not fit it (counted in ``telemetry.unfit``)."""
+        snap, status = self.airframe.snapshot(), self.status()
+        return self.telemetry.built("NAV_STATUS", lambda: self.telemetry.nav_status(snap, status))
 
 
 class _Refused(Exception):

@@ -149,9 +149,12 @@ def run(args: argparse.Namespace) -> int:
             ports.append(("the pilot's video", args.host, args.video_port, "--video-port"))
         if ports:  # before the robot is spawned: a taken port leaves nothing behind
             check_ports_free(ports)
-        with connect(args.sim, images=args.images, timeout_s=args.timeout) as sim:
-            sim.add_close_hook(lambda error: None if sim.closed else lost.append(error))
+        def attach() -> tuple[Any, Any]:
+            """Connect to the simulator and spawn the robot: at start, and again whenever the
+            simulator comes back after it was lost (the pilot re-attaches)."""
+            sim = connect(args.sim, images=args.images, timeout_s=args.timeout)
             try:
+                sim.add_close_hook(lambda error: None if sim.closed else lost.append(error))
                 if args.location is not None:
                     north, east, down = (float(v) for v in args.location.split(","))
                     robot = sim.spawn(
@@ -160,14 +163,23 @@ def run(args: argparse.Namespace) -> int:
                 else:
                     robot = sim.spawn(args.robot, start=args.start, name=args.name)
             except SkeyeError as exc:
+                sim.close()
                 if "already exists" in str(exc):
                     raise SkeyeError(
                         f"{exc}; another pilot or client flies it - give this one another "
                         "name with --name"
                     ) from None
                 raise
-            # Flies by the robot file's speed limits.
-            airframe = SimAirframe(sim, robot, frozen_timeout_s=args.sim_frozen_timeout)
+            except BaseException:
+                sim.close()
+                raise
+            return sim, robot
+
+        sim, robot = attach()
+        # Flies by the robot file's speed limits; re-attaches when the simulator comes back.
+        airframe = SimAirframe(sim, robot, frozen_timeout_s=args.sim_frozen_timeout,
+                               attach=attach)
+        try:
             settings = BoardSettings(
                 link_timeout_s=settings.link_timeout_s,
                 land_timeout_s=settings.land_timeout_s,
@@ -239,6 +251,8 @@ def run(args: argparse.Namespace) -> int:
                     if video is not None:
                         video.check()  # its thread died: WorkerFailed names the cause
             print("skeye pilot: stopping", flush=True)
+        finally:
+            airframe.connection.close()  # the simulator removes the robot
     except SkeyeError as exc:
         print(f"skeye pilot: {exc}", flush=True)
         if lost or isinstance(exc, LinkClosed):

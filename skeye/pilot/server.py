@@ -27,6 +27,13 @@ How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with thread
   fast as the CPU allows). Time given to the boards is the wall clock (``time.monotonic``):
   the link-loss timeouts are about the radio link, which runs on wall time.
 
+When the vehicle below is lost (the simulator died, froze, or removed the robot and a RESET
+asked for a new one) and the airframe can re-attach (``SimAirframe`` with an ``attach``
+factory: ``needs_attach``), a re-attach thread tries every ``reattach_s`` to connect and spawn
+anew, off the loop; the loop swaps the new vehicle in (``bind``), points the vision at it,
+tells the boards (LANDED, HEALTH OK) and logs it. Until then the loop keeps ticking: the ground
+link, telemetry and failsafe go on, and HEALTH says LOST and why.
+
 With a video server (``video=``, :mod:`skeye.pilot.video_server`), the vision's frames and
 detections are served on the vehicle's video port; it starts and stops with this server.
 
@@ -75,6 +82,8 @@ SEND_BUFFER_BYTES = 64 * 1024
 pilot's outbox (where it can be dropped), not in megabytes of kernel buffer going stale."""
 HTTP_METHODS = (b"GET ", b"POST ", b"PUT ", b"HEAD ", b"OPTIONS ", b"DELETE ", b"PATCH ",
                 b"CONNECT ", b"TRACE ")
+REATTACH_S = 1.0
+"""How often the pilot tries to re-attach to a lost simulator."""
 KEEPALIVE_IDLE_S = 10
 KEEPALIVE_INTERVAL_S = 5
 KEEPALIVE_COUNT = 3
@@ -137,6 +146,7 @@ class PilotServer:
         clock: Callable[[], float] = time.monotonic,
         vision: Callable[[OnboardBoards, threading.Lock], Any] | None = None,
         video: VideoServer | None = None,
+        reattach_s: float = REATTACH_S,
     ) -> None:
         if (port is None) == (serial_uri is None):
             raise ConfigError("PilotServer needs exactly one of port= or serial_uri=")
@@ -154,6 +164,11 @@ class PilotServer:
         self.turned_away = 0
         self.loop_error: BaseException | None = None
         self.vehicle_lost: str | None = None  # why the simulator/vehicle stopped answering
+        self.reattach_s = reattach_s
+        self.reattached = 0  # times a new vehicle was swapped in
+        self.loop_faults = 0  # ticks whose boards or vision step raised (reported, not fatal)
+        self._faults_said: set[str] = set()
+        self._attached: tuple[Any, Any] | None = None  # from the re-attach thread to the loop
         self._lock = threading.Lock()
         # The landing-pad vision (skeye.pilot.vision.PadVision), stepped after every tick.
         self.vision = vision(self.boards, self._lock) if vision is not None else None
@@ -195,6 +210,8 @@ class PilotServer:
         if self.video is not None:
             self.video.start()
         self._spawn(self._loop, "pilot-loop")
+        if hasattr(self.airframe, "attach_new"):
+            self._spawn(self._reattach_loop, "pilot-reattach")
         if self._listener is not None:
             self._spawn(self._accept_loop, "pilot-accept")
         else:
@@ -398,23 +415,85 @@ class PilotServer:
             self.vehicle_lost = reason
             log.error("vehicle lost: %s; ground link kept, failsafe applies", reason)
             with self._lock:
-                self.boards.vehicle_lost(self.clock())
+                self.boards.vehicle_lost(self.clock(), reason)
+
+    # -- re-attaching ----------------------------------------------------------------------
+    def _reattach_loop(self) -> None:
+        """Off the loop: connect and spawn anew while the airframe needs it; the loop swaps
+        the result in. Failures are expected (the simulator is not back yet) and logged once
+        per distinct reason."""
+        airframe: Any = self.airframe
+        said = ""
+        while not self._stop.wait(self.reattach_s):
+            if self._attached is not None or not airframe.needs_attach:
+                said = ""
+                continue
+            try:
+                pair = airframe.attach_new()
+            except (SkeyeError, OSError) as exc:
+                if str(exc) != said:
+                    said = str(exc)
+                    log.warning("re-attaching: the simulator is not back yet: %s", exc)
+                continue
+            self._attached = pair
+
+    def _swap_in(self) -> None:
+        """The loop's side: fly the re-attached vehicle (its thread handed it over)."""
+        pair, self._attached = self._attached, None
+        if pair is None:
+            return
+        airframe: Any = self.airframe
+        with self._lock:
+            what = airframe.bind(*pair)
+            if self.vision is not None and hasattr(self.vision, "rebind"):
+                self.vision.rebind(airframe.robot)
+            self.boards.respawned(what)
+            self.vehicle_lost = None
+        self.reattached += 1
+        log.warning("vehicle back: %s", what)
+
+    def _tick(self) -> list[Message]:
+        """The boards' tick; a value they cannot handle is reported (counted, logged once per
+        kind) and the loop goes on: it is not a lost vehicle."""
+        try:
+            with self._lock:
+                return self.boards.tick(self.clock())
+        except Exception as exc:
+            self._loop_fault("the boards' tick", exc)
+            return []
+
+    def _step_vision(self) -> None:
+        """The vision's control-loop side; its failures are reported like the tick's."""
+        if self.vision is None:
+            return
+        try:
+            self.vision.step()
+        except Exception as exc:
+            self._loop_fault("the vision's step", exc)
+
+    def _loop_fault(self, where: str, exc: Exception) -> None:
+        self.loop_faults += 1
+        kind = f"{where}: {type(exc).__name__}"
+        if kind not in self._faults_said:
+            self._faults_said.add(kind)
+            log.error("%s failed, the loop goes on (said once per kind): %s", where, exc,
+                      exc_info=exc)
 
     def _loop(self) -> None:
         try:
             next_s = self.clock()
             while not self._stop.is_set():
                 try:
-                    with self._lock:
-                        out = self.boards.tick(self.clock())
+                    if self._attached is not None:
+                        self._swap_in()
+                    out = self._tick()
                     session = self._session
                     if session is not None and out:
                         self._send(session, out, droppable=True)  # never blocks the loop
                     if self.vehicle_lost is None and not self._clock_held():
                         self._check_vehicle()
                         self.airframe.advance(self.tick_s)  # no-op for time unless lockstep
-                        if self.vision is not None:
-                            self.vision.step()
+                        self._step_vision()
                     elif self.ground_clock:
                         self._stop.wait(0.001)  # wait for a CLOCK grant
                         continue

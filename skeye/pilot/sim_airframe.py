@@ -16,6 +16,14 @@ A frozen simulator is as lost as a dead one (:attr:`SimAirframe.lost`): in realt
 (the newest time any line carried) must move within ``frozen_timeout_s`` of wall time; in
 lockstep, a ``STEP`` that was answered must have moved it. Otherwise the pilot's failsafe
 applies, exactly as when the simulator's connection drops.
+
+Crashes: the simulator's ``ERR {Command CRASH}`` (or ``PHYSICS``: it removed the robot) is the
+snapshot's ``crashed``; :meth:`SimAirframe.reset` sends ``RESET`` (the robot respawns at its
+start pose, keeping its cameras), or, for a robot the simulator removed, asks for a new one.
+Re-attaching: with an ``attach`` factory (a new connection and a newly spawned robot, as
+``skeye pilot`` made the first), :attr:`SimAirframe.needs_attach` says when the simulator is
+lost (or a respawn was asked for); the pilot's re-attach thread calls :meth:`attach_new`, and
+the loop swaps the result in with :meth:`bind`.
 """
 
 from __future__ import annotations
@@ -28,7 +36,7 @@ from dataclasses import replace
 
 from skeye.control.connection import Connection
 from skeye.control.robots import Robot
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, SkeyeError
 from skeye.pilot.airframe import GpsFix, Snapshot
 from skeye.wire.sim_messages import Drive
 
@@ -47,9 +55,18 @@ class SimAirframe:
         *,
         frozen_timeout_s: float = FROZEN_TIMEOUT_S,
         clock: Callable[[], float] = time.monotonic,
+        attach: Callable[[], tuple[Connection, Robot]] | None = None,
     ) -> None:
         if not (math.isfinite(frozen_timeout_s) and frozen_timeout_s > 0):
             raise ConfigError(f"--sim-frozen-timeout must be > 0 s, got {frozen_timeout_s!r}")
+        self.frozen_timeout_s = frozen_timeout_s
+        self._clock = clock
+        self._attach = attach
+        self._respawn = False  # a RESET of a robot the simulator removed: a new one is due
+        self._lock = threading.Lock()
+        self._bind(connection, robot)
+
+    def _bind(self, connection: Connection, robot: Robot) -> None:
         self.connection = connection
         self.robot = robot
         # One set of speed limits: the robot file's [controller] table as the simulator reports
@@ -63,12 +80,9 @@ class SimAirframe:
             max_yaw_rate_rad_s=robot.limits.get("MaxYawRate", cfg.max_yaw_rate_rad_s),
         )
         self.lockstep = connection.mode == "lockstep"
-        self.frozen_timeout_s = frozen_timeout_s
-        self._clock = clock
         self._seen_time_s = connection.time_s
-        self._seen_at_s = clock()
+        self._seen_at_s = self._clock()
         self._frozen: str | None = None
-        self._lock = threading.Lock()
         self._sticks: Attitude | None = None  # deferred until the robot's motion is idle
         self._sticks_live = False
         mass = robot.limits.get("Mass")
@@ -78,6 +92,57 @@ class SimAirframe:
         self._last_baro: tuple[float, float] | None = None
         self._baro_climb_m_s = 0.0
 
+    # -- crashes and re-attaching ---------------------------------------------------------
+    def reset(self) -> str:
+        """RESET the robot (it respawns at its start pose, still, keeping its cameras); a robot
+        the simulator removed gets a new one through :meth:`attach_new` instead. Returns what
+        was done.
+
+        Raises:
+            SkeyeError: the simulator is lost, refused, or did not answer.
+        """
+        lost = self.lost
+        if lost is not None:
+            raise SkeyeError(f"cannot reset: {lost}")
+        self._manual_off()
+        robot = self.robot
+        if robot.removed:
+            if self._attach is None:
+                raise SkeyeError(f"robot {robot.name} was removed by the simulator")
+            self._respawn = True
+            return f"the simulator removed {robot.name}: spawning a new one"
+        robot.reset(wait=False)
+        return f"{robot.name} reset at its start pose"
+
+    @property
+    def needs_attach(self) -> bool:
+        """A new connection and robot are due: the simulator is lost, or a removed robot was
+        reset (and there is a way to attach)."""
+        return self._attach is not None and (self._respawn or self.lost is not None)
+
+    def attach_new(self) -> tuple[Connection, Robot]:
+        """Connect and spawn anew with the ``attach`` factory (closing the old connection first,
+        so the robot's name is free); the caller hands the result to :meth:`bind`.
+
+        Raises:
+            SkeyeError, OSError: the simulator is not (yet) there.
+        """
+        if self._attach is None:
+            raise SkeyeError("this airframe cannot re-attach (no attach factory)")
+        self.connection.close()
+        return self._attach()
+
+    def bind(self, connection: Connection, robot: Robot) -> str:
+        """Fly the new connection's robot from now on; returns what happened, for the log."""
+        old = self.connection
+        with self._lock:
+            self._bind(connection, robot)
+            self._respawn = False
+        if old is not connection:
+            old.close()
+        return (f"simulator at {connection.peer} ({connection.mode}): robot {robot.name} "
+                f"respawned at its start pose")
+
     @property
     def lost(self) -> str | None:
         """Why the simulator link is down (it died or closed), or None while it is up."""
@@ -85,7 +150,8 @@ class SimAirframe:
             return f"simulator lost: {self.connection.error}"
         if self.connection.closed:
             return "simulator lost: the connection is closed"
-        if self._frozen is None and not self.lockstep:
+        if self._frozen is None and not self.lockstep and not self.robot.removed:
+            # (a removed robot streams nothing: its silence is a crash, not a frozen simulator)
             now, t = self._clock(), self.connection.time_s
             if t != self._seen_time_s:
                 self._seen_time_s, self._seen_at_s = t, now
@@ -99,6 +165,12 @@ class SimAirframe:
     @property
     def busy(self) -> bool:
         return self.robot.busy
+
+    def _ready(self) -> Robot:
+        """The robot, for a motion command; refused while a new one is being spawned."""
+        if self._respawn:
+            raise SkeyeError(f"{self.robot.name} is being respawned: try again in a moment")
+        return self.robot
 
     def snapshot(self) -> Snapshot:
         r = self.robot
@@ -158,6 +230,7 @@ class SimAirframe:
             armed=status.armed if status else False,
             landed=status.landed if status else True,
             thrust_fraction=thrust_fraction,
+            crashed="" if self._respawn else (r.crashed or ""),
         )
 
     # -- commands ------------------------------------------------------------------------
@@ -167,8 +240,9 @@ class SimAirframe:
             self._sticks_live = False
 
     def take_off(self, altitude_m: float) -> None:
+        robot = self._ready()
         self._manual_off()
-        self.robot.take_off(altitude_m + self.robot.home_ned_m[2], wait=False)
+        robot.take_off(altitude_m + robot.home_ned_m[2], wait=False)
 
     def fly_to(self, north_m: float, east_m: float, altitude_m: float, speed_m_s: float) -> None:
         self._manual_off()

@@ -9,11 +9,14 @@ the state is rejected before anything is sent to the simulator. States are the N
 states of docs/protocols/packets.md.
 
 The sticks always win (docs/pilot.md, "Manual sticks take over"): STICKS (CTRL_INPUT with its
-axis bits set, motors running) is legal in every state and leads to MANUAL, whatever flew the
+axis bits set, motors running) is legal in every state but CRASHED and leads to MANUAL, whatever flew the
 vehicle before (a take-off, a move, a pad mode, a landing, a failsafe), as PX4 hands an
 automatic mode to the sticks when they move (COM_RC_OVERRIDE). MANUAL ends as a real
 autopilot's manual mode does: by a mode change from ground control (HOLD, a move, LAND), by
 the motors stopping on the ground, or by losing the link the sticks come over (FAILSAFE).
+CRASHED is entered from every state when the vehicle crashes, and left only by RESET (or by a
+new vehicle, when the pilot re-attaches to a restarted simulator: RESPAWNED, also from every
+state); the sticks do not take over a crashed vehicle.
 """
 
 from __future__ import annotations
@@ -39,6 +42,9 @@ class FlightEvent(Enum):
     MOTORS_OFF = "motors stopped on the ground"
     LINK_LOST = "ground link lost"
     LAND_TIMEOUT = "no ground link for the land timeout"
+    CRASH = "the vehicle crashed"  # tumbled, a hard impact, removed by the simulator
+    RESET = "reset"  # RESET: the vehicle back at home, still
+    RESPAWNED = "the vehicle came back"  # the pilot re-attached to a restarted simulator
 
 
 S, E = NavState, FlightEvent
@@ -88,6 +94,14 @@ TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     # The sticks take over from every state (the rule in the module docstring).
     **{(state, E.STICKS): S.MANUAL for state in (
         S.LANDED, S.TAKING_OFF, S.FLYING, S.HOLDING, S.LANDING, S.FAILSAFE, S.MANUAL)},
+    # A crash ends whatever the vehicle was doing; only RESET (or a new vehicle) ends a crash.
+    **{(state, E.CRASH): S.CRASHED for state in NavState},
+    (S.CRASHED, E.RESET): S.LANDED,
+    (S.LANDED, E.RESET): S.LANDED,
+    (S.CRASHED, E.LINK_LOST): S.CRASHED,
+    (S.CRASHED, E.TOUCHDOWN): S.CRASHED,
+    (S.CRASHED, E.MOTORS_OFF): S.CRASHED,
+    **{(state, E.RESPAWNED): S.LANDED for state in NavState},
 }
 
 # Refused with code 5: the vehicle is doing something it finishes by itself; ask again later.

@@ -22,13 +22,21 @@ LL_STATUS ``flying`` is 1 while the motors turn (idling included: AscTec drivers
 "motors on"), ``up_time`` the seconds they have turned ("Time motors are turning", the
 header's comment). CONTROLLER_OUTPUT carries the sticks scaled as the header's 0..200 =
 -100..+100 % (thrust 0..200 = 0..100 %).
+No value stops the telemetry: a structure that a snapshot's values cannot fill (a NaN, a
+figure beyond its field: a tumbling or runaway vehicle) is left out of that answer, counted in
+``Telemetry.unfit`` by structure, and logged once per structure; the others still go out.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
+from skeye.errors import SkeyeError
 from skeye.geo import GeoOrigin
 from skeye.pilot.airframe import GpsFix, Snapshot
 from skeye.wire.packet_defs import GPS_FIX_VALID, NavState
@@ -59,6 +67,8 @@ from skeye.wire.packets import (
     Waypoint,
 )
 from skeye.wire.scales import clamp
+
+log = logging.getLogger(__name__)
 
 TEMPERATURE_CENTI_DEGC = 2500
 CPU_LOAD_CYCLES_S = 1000
@@ -139,12 +149,25 @@ class Telemetry:
         self.geo = GeoAnchor()
         self.geo.add(first.gps, first.pos_ned_m)
         self._baro_offset_m = first.baro_altitude_m - first.altitude_m
+        self.unfit: Counter[str] = Counter()  # structures left out: values they cannot carry
 
     def observe(self, snap: Snapshot, motors_running: bool) -> None:
         """Every tick: while the motors are off the pressure height is zeroed on the fused
         height (``height_reference`` reads ``height`` on the ground); running, it is kept."""
         if not motors_running:
             self._baro_offset_m = snap.baro_altitude_m - snap.altitude_m
+
+    def built(self, name: str, build: Callable[[], Message]) -> Message | None:
+        """``build()``, or None (counted, logged once per structure) when the snapshot's values
+        do not fit the structure."""
+        try:
+            return build()
+        except (SkeyeError, ArithmeticError, ValueError) as exc:
+            self.unfit[name] += 1
+            if self.unfit[name] == 1:
+                log.warning("telemetry: %s left out, a value does not fit it (said once): %s",
+                            name, exc)
+            return None
 
     def poll(self, mask: int, snap: Snapshot, status: BoardStatus) -> list[Message]:
         """One frame per requested structure, in mask-bit order."""
@@ -158,7 +181,13 @@ class Telemetry:
             PollMask.CURRENT_WAY: self._current_way,
             PollMask.GPS_DATA_ADVANCED: self._gps_advanced,
         }
-        return [build(snap, status) for bit, build in builders.items() if mask & bit]
+        out = []
+        for bit, build in builders.items():
+            if mask & bit:
+                msg = self.built(bit.name or "", partial(build, snap, status))
+                if msg is not None:
+                    out.append(msg)
+        return out
 
     def _ll_status(self, snap: Snapshot, status: BoardStatus) -> LlStatus:
         battery_mv = wire_value(LlStatus, "battery_voltage_1", snap.battery_v)

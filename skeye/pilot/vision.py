@@ -10,9 +10,15 @@ bounded queue (the oldest is dropped when it is full); the control loop's :meth:
 drains it into the boards' :class:`PadController` (the PAD packet) without ever waiting on the
 camera. A camera error (timeout, reset, refused, image server restarted) counts as "pad not
 seen" for that frame; the camera reconnects on the next frame, and since a failed request drops
-its connection, a late frame never answers a later request. In lockstep the loop waits (at most
-``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible; the
-simulator is paused meanwhile, so nothing flies unwatched.
+its connection, a late frame never answers a later request. No value kills the worker: an
+attitude the camera cannot look at the ground through (roll or pitch not finite, or at or
+beyond 90 deg: a tumbling vehicle) is "pad not seen" without running the detector, and any
+other failure on one frame is counted in :class:`VisionStats` (``errors``, ``last_error``),
+logged once per kind, and that frame is "pad not seen"; the worker goes on with the next.
+When the pilot re-attaches to a new robot, :meth:`PadVision.rebind` points the vision at it.
+In lockstep the loop waits (at most ``lockstep_wait_s``) for the frame of the step it just
+made, so a run stays reproducible; the simulator is paused meanwhile, so nothing flies
+unwatched.
 
 Frame times (docs/pilot.md, "Frame times"): by default a frame's time is when it reached the
 pilot, as a host sees a USB webcam's frames: the control loop notes the sim time at which each
@@ -72,7 +78,7 @@ from skeye.pilot.pad_hold import (
 from skeye.pilot.pad_track import PadFix, Pose, PoseHistory, locate_pad, offset_now
 from skeye.pilot.video_server import CameraFrame
 from skeye.vision.calibration import CameraCalibration
-from skeye.vision.detector import PadEstimate, detect
+from skeye.vision.detector import NOT_FOUND, PadEstimate, detect
 from skeye.vision.pad import SKEYE_4, PadDefinition
 from skeye.wire.packets import NavState, PadAction
 from skeye.wire.video import Detection, RingEllipse
@@ -122,6 +128,15 @@ class VisionStats:
     max_latency_s: float = 0.0
     too_slow: str = ""  # why the vision is too slow to hold on (empty while it is not)
     too_slow_count: int = 0  # observations refused for being too old
+    bad_attitude: int = 0  # frames not looked at: the attitude points the camera off the ground
+
+
+def looks_at_ground(roll_rad: float, pitch_rad: float) -> bool:
+    """Whether a downward camera at this attitude sees the ground plane at all: roll and pitch
+    finite and within (-90, 90) deg, the detector's domain."""
+    limit = math.pi / 2
+    return (math.isfinite(roll_rad) and math.isfinite(pitch_rad)
+            and abs(roll_rad) < limit and abs(pitch_rad) < limit)
 
 
 PAD_SOURCES = ("vision", "truth")
@@ -285,6 +300,27 @@ class PadVision:
         self._worker: Worker | None = None
         self._video: Callable[[CameraFrame], None] | None = None
 
+    def rebind(self, robot: Any) -> None:
+        """Look through ``robot``'s camera from now on (the pilot re-attached to a new robot):
+        its frame numbers start again, and nothing seen through the old one is kept."""
+        with self._done:
+            self.robot = robot
+            self._last_frame = 0
+            self._attempted = 0
+            self._permit = 0
+            self._busy_until_s = -math.inf
+            self._pending = []
+            self._fix = None
+            self._missed_since_s = None
+            self._newest_capture_s = -math.inf
+            self._last_nav_s = -math.inf
+            self.history = PoseHistory(self.max_latency_s + 1.0)
+        while True:
+            try:
+                self._observations.get_nowait()
+            except queue.Empty:
+                break
+
     def attach_video(self, sink: Callable[[CameraFrame], None] | None) -> None:
         """Hand every frame looked at, with its detection, to ``sink`` (it must not block)."""
         self._video = sink
@@ -322,14 +358,17 @@ class PadVision:
 
     def step(self) -> None:
         """Called by the pilot loop after each tick: hand due observations to the boards and
-        fly the pad modes.
-
-        Raises:
-            WorkerFailed: the vision thread died (a bug); the pilot treats it as a failure.
-        """
+        fly the pad modes. A vision thread that died anyway (a bug outside its per-frame guard)
+        is reported (``stats``, the log) and started again: the pad is not seen meanwhile."""
         worker = self.start()._worker
         assert worker is not None
-        worker.check()
+        if worker.error is not None:
+            self.stats.errors += 1
+            self.stats.last_error = f"vision thread failed: {worker.error!r}"
+            log.error("%s; starting it again", self.stats.last_error)
+            self._worker = None
+            worker = self.start()._worker
+            assert worker is not None
         now = self._pose_now()
         latest = self.robot.camera.latest
         if latest is not None:
@@ -346,7 +385,6 @@ class PadVision:
                     lambda: self._attempted >= latest.frame or not worker.alive,
                     self.lockstep_wait_s,
                 )
-            worker.check()
         while True:
             try:
                 obs, processing_s = self._observations.get_nowait()
@@ -435,7 +473,10 @@ class PadVision:
             if self.lockstep and latest.frame > self._permit:
                 continue  # the detector is still busy with an earlier frame (sim time)
             t0 = time.perf_counter()
-            obs = self._process(latest.frame, latest.time_s)
+            try:
+                obs = self._process(latest.frame, latest.time_s)
+            except Exception as exc:  # one frame's failure, whatever the value: not seen
+                obs = self._failed(latest.frame, latest.time_s, exc)
             if obs is not None:
                 self._put((obs, time.perf_counter() - t0))
             with self._done:
@@ -488,6 +529,19 @@ class PadVision:
                 arrived = max(self._arrivals.values(), default=capture_s)
         return max(arrived, capture_s)
 
+    def _failed(self, frame: int, time_s: float, exc: Exception) -> PadObservation:
+        """A frame the worker could not handle: counted and said (once per kind of failure),
+        and the pad is not seen in it."""
+        stats = self.stats
+        stats.errors += 1
+        first = not stats.last_error.startswith(type(exc).__name__)
+        stats.last_error = f"{type(exc).__name__}: {exc}"
+        if first:
+            log.warning("vision: frame %d failed (pad not seen; said once per kind of "
+                        "failure): %s", frame, stats.last_error, exc_info=exc)
+        self._last_frame = max(self._last_frame, frame)
+        return PadObservation(time_s, False)
+
     def _put(self, item: tuple[PadObservation, float]) -> None:
         while True:
             try:
@@ -524,9 +578,17 @@ class PadVision:
             roll, pitch = (ins.rpy_rad[0], ins.rpy_rad[1]) if ins is not None else (0.0, 0.0)
         known = then is not None or ins is not None
         t0 = time.perf_counter()
-        grey = cv2.cvtColor(image.bgr, cv2.COLOR_BGR2GRAY)
-        est = detect(grey, self.fov_h_rad, self.pad, roll_rad=roll, pitch_rad=pitch,
-                     calibration=self.calibration)
+        if looks_at_ground(roll, pitch):
+            grey = cv2.cvtColor(image.bgr, cv2.COLOR_BGR2GRAY)
+            est = detect(grey, self.fov_h_rad, self.pad, roll_rad=roll, pitch_rad=pitch,
+                         calibration=self.calibration)
+        else:  # a tumbling vehicle: its camera is not looking down at any pad
+            self.stats.bad_attitude += 1
+            if self.stats.bad_attitude == 1:
+                log.warning("vision: roll %.3f / pitch %.3f rad points the camera away from the "
+                            "ground: pad not seen", roll, pitch)
+            est = NOT_FOUND
+            known = False
         detect_ms = (time.perf_counter() - t0) * 1e3
         self.stats.frames += 1
         video = self._video

@@ -70,10 +70,12 @@ class PD(IntEnum):
     HOLD = 0x85
     PAD_MODE = 0x86
     STREAM = 0x87
+    RESET = 0x88
     CLOCK = 0x8E
     NAV_STATUS = 0x90
     PAD = 0x91
     RESULT = 0x92
+    HEALTH = 0x93
 
 
 ACK_PDS = frozenset(
@@ -164,6 +166,15 @@ class NavState(IntEnum):
     LANDING = 4
     FAILSAFE = 5
     MANUAL = 6  # CTRL_INPUT sticks fly it: they took over from whatever flew it before
+    CRASHED = 7  # the vehicle crashed (HEALTH says why); only RESET brings it back
+
+
+class HealthStatus(IntEnum):
+    """HEALTH ``status``: whether the vehicle below the pilot is whole and answering."""
+
+    OK = 0
+    CRASHED = 1  # the vehicle crashed (tumbled, a hard impact, removed by the simulator)
+    LOST = 2  # the vehicle below stopped answering (simulator gone or frozen)
 
 
 class PadAction(IntEnum):
@@ -582,6 +593,12 @@ class PadMode(Message):
 
 
 @dataclass(frozen=True)
+class Reset(Message):
+    """RESET: bring the vehicle back at home, still, motors off (a simulated vehicle respawns
+    at its start pose); the way out of CRASHED."""
+
+
+@dataclass(frozen=True)
 class Stream(Message):
     """STREAM: push the masked telemetry every ``period`` ms (0 = stop)."""
 
@@ -647,16 +664,34 @@ class Result(Message):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not isinstance(self.reason, str):
-            raise LocalProtocolError(f"Result.reason must be a str, got {self.reason!r}")
-        try:
-            n = len(self.reason.encode("utf-8"))
-        except UnicodeEncodeError as exc:  # lone surrogates
-            raise LocalProtocolError(f"Result.reason is not encodable as UTF-8: {exc}") from None
-        if n > self.MAX_REASON_BYTES:
-            raise LocalProtocolError(
-                f"Result.reason is {n} bytes of UTF-8, more than {self.MAX_REASON_BYTES}"
-            )
+        _check_reason(self.reason, self.MAX_REASON_BYTES, "Result.reason")
+
+
+def _check_reason(reason: object, max_bytes: int, what: str) -> None:
+    """A text tail: a str of at most ``max_bytes`` of UTF-8."""
+    if not isinstance(reason, str):
+        raise LocalProtocolError(f"{what} must be a str, got {reason!r}")
+    try:
+        n = len(reason.encode("utf-8"))
+    except UnicodeEncodeError as exc:  # lone surrogates
+        raise LocalProtocolError(f"{what} is not encodable as UTF-8: {exc}") from None
+    if n > max_bytes:
+        raise LocalProtocolError(f"{what} is {n} bytes of UTF-8, more than {max_bytes}")
+
+
+@dataclass(frozen=True)
+class Health(Message):
+    """HEALTH: the vehicle's health now and why (pushed when it changes, streamed with
+    NAV_STATUS while it is not OK)."""
+
+    status: HealthStatus
+    reason: str = ""
+
+    MAX_REASON_BYTES: ClassVar[int] = MAX_PAYLOAD - 1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_reason(self.reason, self.MAX_REASON_BYTES, "Health.reason")
 
 
 @dataclass(frozen=True)
@@ -853,6 +888,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("period", _H, scale=MS),
     ),
     Clock: _s(PD.CLOCK, Field("until", "I", scale=MS)),
+    Reset: _s(PD.RESET),
     NavStatus: _v(
         PD.NAV_STATUS,
         Field("state", _B, 0, max(NavState), enum=NavState),
@@ -876,6 +912,12 @@ LAYOUTS: dict[type[Message], Layout] = {
         PD.RESULT,
         FrameKind.VEHICLE,
         (Field("command_pd", _B), Field("code", _B, 0, max(ResultCode), enum=ResultCode)),
+        tail="reason",
+    ),
+    Health: Layout(
+        PD.HEALTH,
+        FrameKind.VEHICLE,
+        (Field("status", _B, 0, max(HealthStatus), enum=HealthStatus),),
         tail="reason",
     ),
     Ack: Layout(None, FrameKind.ACK, (Field("pd", _B, enum=PD),)),

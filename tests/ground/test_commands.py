@@ -13,7 +13,7 @@ from skeye.ground.bridge import LinkEvent, LinkState, PacketRate, next_link_stat
 from skeye.ground.commands import COMMANDS, GroundCommand, describe_commands, parse_command
 from skeye.ground.telemetry import telemetry_json
 from skeye.wire.packet_units import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
-from skeye.wire.packets import PD, NavState, PadAction
+from skeye.wire.packets import PD, Health, HealthStatus, NavState, PadAction
 
 
 def test_defaults_are_filled_in() -> None:
@@ -108,7 +108,8 @@ def test_packet_rate_over_a_window() -> None:
 
 def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     assert telemetry_json({}) == {
-        "nav": None, "imu": None, "status": None, "gps": None, "pad": None, "waypoint": None,
+        "health": None, "nav": None, "imu": None, "status": None, "gps": None, "pad": None,
+        "waypoint": None,
     }
     nav = nav_status_from_si(
         NavStatusSi(NavState.HOLDING, PadAction.HOLD, (1.5, -2.25, -3.0), math.radians(90),
@@ -125,6 +126,9 @@ def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     assert t["pad"]["vision_too_slow"] is False
     slow = pad_report_from_si(PadSi(False, 0, 0.0, 0.0, 0.0, 0.0, 41.9, vision_too_slow=True))
     assert telemetry_json({PD.PAD: slow})["pad"]["vision_too_slow"] is True
+    crashed = Health(HealthStatus.CRASHED, "crashed: hard impact at 3.2 m/s")
+    assert telemetry_json({PD.HEALTH: crashed})["health"] == {
+        "status": "crashed", "reason": "crashed: hard impact at 3.2 m/s"}
 
 
 def test_speeds_are_checked_against_the_robot_files_limits() -> None:

@@ -76,6 +76,12 @@ class FakeAirframe:
     def advance(self, seconds: float) -> None:
         pass
 
+    def reset(self) -> str:
+        self._cmd("reset", busy=False)
+        self.snap = replace(self.snap, crashed="", armed=False, landed=True,
+                            pos_ned_m=(0.0, 0.0, 0.0), vel_ned_m_s=(0.0, 0.0, 0.0))
+        return "reset at home"
+
     def finish(self, **changes: object) -> None:
         """The current motion is done; the snapshot takes ``changes``."""
         self.busy = False

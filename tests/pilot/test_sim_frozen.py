@@ -92,6 +92,7 @@ def test_frozen_detection_needs_sim_time_to_stand_still() -> None:
     class _Robot:
         limits: ClassVar[dict[str, float]] = {}
         motion_config = MotionConfig()
+        removed = False
 
     now = [100.0]
     conn = _Conn()

@@ -13,7 +13,8 @@ from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
-from skeye.wire.packets import PD, NavState, PollMask, SkeyeMask
+from skeye.wire.packets import PD, HealthStatus, NavState, PollMask, SkeyeMask
+from tests.ground.conftest import wait_until
 from tests.sim.conftest import running_sim
 
 
@@ -43,3 +44,49 @@ def test_simulator_killed_under_the_pilot():
             vehicle.move_by(forward_m=1.0)
         assert info.value.code == 4
         assert PD.LL_STATUS in vehicle.poll(int(PollMask.LL_STATUS))
+
+
+def test_the_pilot_reattaches_when_its_simulator_comes_back():
+    """Recovery (issue 31): the simulator at the same address again, the pilot spawns its robot
+    there and says so; the vehicle is LANDED and flies. Before, a pilot that lost its
+    simulator stayed lost until restarted."""
+    with ExitStack() as stack:
+        first = stack.enter_context(running_sim(mode="lockstep", seed=4))
+        address = f"127.0.0.1:{first.port}"
+
+        def attach():
+            sim = connect(address, timeout_s=5.0)
+            try:
+                return sim, sim.spawn("hummingbird", start="Pad1")
+            except BaseException:
+                sim.close()
+                raise
+
+        sim, robot = attach()
+        airframe = SimAirframe(sim, robot, attach=attach)
+        pilot = stack.enter_context(
+            PilotServer(airframe, port=0, lockstep=True, lockstep_rate=0.0, tick_s=0.05,
+                        settings=BoardSettings(land_timeout_s=60.0), reattach_s=0.2))
+        stack.callback(lambda: airframe.connection.close())
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=5.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=30)
+
+        first.close()  # the simulator goes away (its engine too)
+        first.runner.close()
+        vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        wait_until(lambda: vehicle.health is not None
+                   and vehicle.health.status is HealthStatus.LOST, 10, "HEALTH LOST")
+        assert "simulator" in vehicle.health.reason
+
+        # A new simulator at the same address: the pilot finds it by itself.
+        again = stack.enter_context(running_sim(mode="lockstep", seed=5, port=first.port))
+        assert again.port == first.port
+        vehicle.wait_state(NavState.LANDED, timeout_s=30)
+        wait_until(lambda: vehicle.health is not None
+                   and vehicle.health.status is HealthStatus.OK, 10, "HEALTH OK")
+        assert "respawned" in vehicle.health.reason
+        assert pilot.reattached == 1 and pilot.vehicle_lost is None and pilot.loop_error is None
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=30)

@@ -92,8 +92,9 @@ def running_sim(
     robot_dirs: tuple[Path, ...] = (),
     **kwargs: object,
 ) -> Iterator[ControlServer]:
+    port = int(kwargs.pop("port", 0))  # type: ignore[call-overload]
     sim = Simulation(load_world(world), seed=seed, robot_dirs=robot_dirs, **kwargs)  # type: ignore[arg-type]
-    with SimulationRunner(sim, mode=mode) as runner, ControlServer(runner, port=0) as server:
+    with SimulationRunner(sim, mode=mode) as runner, ControlServer(runner, port=port) as server:
         yield server
 
 

@@ -36,7 +36,7 @@ def test_the_probe_wind_line_crashes_a_landed_vehicle_and_reset_brings_it_back(
     assert c.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}", "INIT").type == "RES"
     c.step(500)
     assert c.answer(PROBE_WIND, "SET").type == "RES"
-    took_s, err = _step_until_crash(c, 2.0)
+    _, err = _step_until_crash(c, 2.0)
     assert err.get("Name") == "R1"
     reason = err.get("Reason") or ""
     assert reason.startswith("crashed: "), reason

@@ -34,6 +34,8 @@ from skeye.wire.packets import (
     GotoGps,
     GpsData,
     GpsDataAdvanced,
+    Health,
+    HealthStatus,
     Hold,
     ImuCalcData,
     ImuRawData,
@@ -51,6 +53,7 @@ from skeye.wire.packets import (
     Poll,
     PollMask,
     RcData,
+    Reset,
     Result,
     ResultCode,
     SkeyeMask,
@@ -128,6 +131,7 @@ CASES: list[tuple[Message, bytes]] = [
     ),
     (Land(), bytes.fromhex("3e2a3e73 0000 84 ff00 3c233c")),  # CRC of nothing = init 0x00FF
     (Hold(), bytes.fromhex("3e2a3e73 0000 85 ff00 3c233c")),
+    (Reset(), bytes.fromhex("3e2a3e73 0000 88 ff00 3c233c")),
     (WaypointGoto(), b">*>wg"),
     (Launch(), b">*>wl"),
     (EndFlight(), b">*>we"),
@@ -216,6 +220,15 @@ CASES: list[tuple[Message, bytes]] = [
         Result(PD.TAKE_OFF, ResultCode.OK, "taking off to 1.5 m ✓"),
         raw_vframe(0x92, bytes((0x83, 0)) + "taking off to 1.5 m ✓".encode()),
     ),
+    (
+        Health(HealthStatus.CRASHED, "crashed: tumbled"),
+        raw_vframe(0x93, bytes((1,)) + b"crashed: tumbled"),
+    ),
+    (Health(HealthStatus.OK), raw_vframe(0x93, bytes((0,)))),
+    (
+        NavStatus(NavState.CRASHED, PadAction.OFF, 0, 0, 0, 0, 0, 0, 0, 11800, 5000),
+        vframe(0x90, "BBiiiihhhHI", 7, 0, 0, 0, 0, 0, 0, 0, 0, 11800, 5000),
+    ),
     (Ack(PD.CTRL_INPUT), b">a\x17a<"),
 ]
 
@@ -271,11 +284,13 @@ SPEC_SIZES = {
     TakeOff: 4,
     Land: 0,
     Hold: 0,
+    Reset: 0,
     PadMode: 5,
     Stream: 6,
     Clock: 4,
     NavStatus: 30,
     PadReport: 21,
+    Health: 1,
 }
 
 
@@ -536,7 +551,7 @@ def test_skeye_bad_value(pd: int, fmt: str, values: tuple[int, ...], field: str)
     assert field in err.reason
 
 
-@pytest.mark.parametrize("pd", [0x88, 0x8F, 0x90, 0x02, 0x00, 0xFF])
+@pytest.mark.parametrize("pd", [0x89, 0x8F, 0x90, 0x02, 0x00, 0xFF])
 def test_skeye_unknown_pd_is_bad_value(pd: int) -> None:
     parser = CommandStreamParser()
     err = _only(parser.feed(raw_vframe(pd, b"", start=b">*>s")))
@@ -712,3 +727,14 @@ def test_feeding_something_other_than_bytes_is_a_protocol_error() -> None:
         with pytest.raises(LocalProtocolError, match="feed takes bytes, got str"):
             parser.feed(">*>p")  # type: ignore[arg-type]
         assert parser.feed(bytearray(b"xx")) == [] and parser.garbage_bytes == 2
+
+
+def test_a_nav_state_the_table_lacks_is_a_bad_value() -> None:
+    """CRASHED is 7; 6 is MANUAL's (issue 30), and until this table has it, a NAV_STATUS that
+    carries 6 is refused, never read as some other state."""
+    wire = vframe(0x90, "BBiiiihhhHI", 6, 0, 0, 0, 0, 0, 0, 0, 0, 11800, 5000)
+    events = VehicleStreamParser().feed(wire)
+    if 6 in {int(s) for s in NavState}:
+        assert isinstance(events[0], NavStatus)
+    else:
+        assert isinstance(events[0], FrameError) and "state" in events[0].reason

@@ -9,7 +9,8 @@ export const fmt = (v, d = 2, unit = "") => (v === null || v === undefined || Nu
 export const LINK_CLASSES = { connected: "good", connecting: "warn", refused: "bad",
   disconnected: "bad", closed: "bad" };
 export const FLIGHT_CLASSES = { landed: "neutral", taking_off: "warn", flying: "good",
-  holding: "good", landing: "warn", failsafe: "bad", manual: "warn" };
+  holding: "good", landing: "warn", failsafe: "bad", manual: "warn",
+  crashed: "bad" };
 
 // The log line when the flight state changes to ``now`` from ``before`` (null: no line). The
 // sticks take over from every automatic mode (docs/pilot.md): the page says from which.
@@ -81,12 +82,20 @@ export function showStatus(t) {
   const L = t.link;
   pill("link-state", `vehicle: ${L.state}`, LINK_CLASSES[L.state] || "bad", { state: L.state });
   $("link-state").title = L.last_error ? `${L.uri}: ${L.last_error}` : L.uri;
+  // The vehicle's health (HEALTH: crashed or lost, and why) while it is not ok.
+  const h = t.health;
   if (L.state === "refused") {
     banner(`The vehicle refused this ground station: ${L.last_error}`);
     $("banner").dataset.kind = "link";
-  } else if ($("banner").dataset.kind === "link") {
+  } else if (h && h.status !== "ok") {
+    const what = h.status === "crashed" ? "Vehicle crashed" : "Vehicle lost";
+    banner(`${what}: ${h.reason}${h.status === "crashed" ? " (Reset brings it back)" : ""}`);
+    $("banner").dataset.kind = "health";
+    $("banner").dataset.health = h.status;
+  } else if (["link", "health"].includes($("banner").dataset.kind)) {
     banner("");
     $("banner").dataset.kind = "";
+    $("banner").dataset.health = "";
   }
   const n = t.nav;
   if (n) {
