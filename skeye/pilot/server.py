@@ -2,10 +2,17 @@
 
 How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with threads:
 
-- an accept thread (TCP) hands each connection a ``TcpLink``. Exactly one client is served: a
-  connection arriving while another is served gets ``RESULT(0x00, code 5, reason)`` and is
-  closed; the first is not touched. A serial port is the single client for the whole run.
-- one reader thread per served link alone calls ``link.recv``, feeds a fresh
+- an accept thread (TCP) hands each connection a ``TcpLink`` and its own reader thread at
+  once: it never waits on a client. Exactly one client is served: a connection arriving while
+  another is served gets ``RESULT(0x00, code 5, reason)`` (after a short grace, in its own
+  thread, for a holder that has just hung up) and is closed; the first is not touched. A
+  connection becomes the served client with its first packet (or bad frame), so idle
+  connections never hold the slot; before that, one peer (a local user however many loopback
+  addresses it binds, or a remote address: :func:`skeye.peers.peer_key`) holds at most
+  ``MAX_PENDING_PER_PEER`` connections (a newer one replaces its oldest). A serial port is the
+  single client for the whole run. Running out of file descriptors is logged and waited out,
+  never the end of the accept thread.
+- one reader thread per link alone calls ``link.recv``, feeds a fresh
   ``CommandStreamParser`` and answers each event at once (``boards.handle``), so a poll's
   round trip never waits for the loop. Garbage is counted by the parser and the boards; the
   reader never stops on bad input.
@@ -15,7 +22,7 @@ How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with thread
   timeout; the loop keeps ticking and the vehicle is never declared lost for it.
 - a TCP client that sends no valid packet within the link timeout of connecting is closed (a
   silent connection must not hold the one client slot); a client whose last packet is older
-  than the link timeout is replaced by the next one that connects. Accepted sockets use TCP
+  than the link timeout is replaced by the next one that sends a packet. Accepted sockets use TCP
   keepalive, so a peer that vanished without a FIN is noticed. The link-loss failsafe counts
   from the last packet: a connection alone (without packets) does not reset it.
 - a TCP connection whose first bytes are an HTTP request line (``POST /...``) is closed before
@@ -54,6 +61,7 @@ from typing import Any
 
 from skeye.errors import ConfigError, InvalidArgument, SkeyeError
 from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
+from skeye.peers import accept_failed, socket_peer_key
 from skeye.pilot.airframe import Airframe
 from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
 from skeye.pilot.outbox import Outbox
@@ -72,6 +80,10 @@ log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 7000
 DEFAULT_TICK_S = 0.01
+MAX_PENDING_PER_PEER = 4
+"""Connections one peer (a local user, a remote address) may hold before their first packet."""
+MAX_PENDING = 32
+"""Connections all peers together may hold before their first packet."""
 HANDOVER_GRACE_S = 0.5
 """How long a new ground station waits for the current one's connection to finish closing (it
 may have hung up a moment ago, its reader not yet noticed) before being turned away as busy."""
@@ -89,14 +101,16 @@ KEEPALIVE_INTERVAL_S = 5
 KEEPALIVE_COUNT = 3
 
 
-@dataclass
+@dataclass(eq=False)
 class ClientSession:
-    """One served ground client: its link, its outbox, and when it last sent a packet."""
+    """One ground client: its link, its outbox (once served), and when it last sent a packet."""
 
     link: Link
-    outbox: Outbox
+    outbox: Outbox | None
     connected_s: float
     tcp: bool
+    key: str = ""  # whose connection it is (skeye.peers): a local user or a remote address
+    claimed: bool = False  # the served client (its first packet took the slot)
     last_packet_s: float | None = None
     packets: int = 0  # valid packets (not garbage) received
 
@@ -180,6 +194,8 @@ class PilotServer:
         self._session: ClientSession | None = None
         self.closed_idle = 0  # TCP clients closed for sending nothing after connecting
         self.replaced_silent = 0  # silent clients replaced by a new one
+        self.replaced_pending = 0  # connections closed for a newer one of the same peer
+        self._candidates: list[ClientSession] = []  # connected, not served yet
         self.refused_http = 0  # connections closed for sending an HTTP request
         self._client_lock = threading.Lock()
         self._client_changed = threading.Condition(self._client_lock)
@@ -238,10 +254,13 @@ class PilotServer:
         with self._client_lock:
             client = self._client
             session = self._session
+            pending = list(self._candidates)
         if client is not None:
             client.close()
-        if session is not None:
+        if session is not None and session.outbox is not None:
             session.outbox.close()
+        for waiting in pending:
+            waiting.link.close()
         for t in self._threads:
             t.join(timeout_s)  # returns at once for the calling thread's own worker
         close_vision = getattr(self.vision, "close", None)
@@ -262,6 +281,12 @@ class PilotServer:
         self.close()
 
     @property
+    def pending(self) -> int:
+        """TCP connections accepted that have not sent their first packet yet."""
+        with self._client_lock:
+            return len(self._candidates)
+
+    @property
     def client(self) -> Link | None:
         """The ground-control link being served, if any."""
         return self._client
@@ -280,39 +305,48 @@ class PilotServer:
         return self.clock() - last >= self.boards.settings.link_timeout_s
 
     def _accept_loop(self) -> None:
+        """Accept and hand over at once: this thread never waits on a client."""
         assert self._listener is not None
+        said_s = 0.0
         while not self._stop.is_set():
             try:
                 sock, _ = self._listener.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                break
+            except OSError as exc:
+                when = accept_failed(exc, said_s, "pilot")
+                if when is None:
+                    break
+                said_s = when
+                continue
             try:
                 _tune(sock)
             except OSError:
                 pass
-            link = TcpLink(sock, send_timeout_s=SEND_TIMEOUT_S)
-            with self._client_changed:
-                self._client_changed.wait_for(
-                    lambda: self._client is None or self._client.closed, HANDOVER_GRACE_S
-                )
-                busy = self._client is not None and not self._client.closed
-                current = self._client.name if busy and self._client else ""
-                session = self._session
-            if busy and session is not None and self._silent(session):
-                self.replaced_silent += 1
-                log.info(
-                    "ground control on %s silent for the link timeout: replaced by %s",
-                    session.link.name,
-                    link.name,
-                )
-                session.link.close()
-                busy = False
-            if busy:
-                self._turn_away(link, current)
-            else:
-                self._serve(link)
+            key = socket_peer_key(sock)
+            self._candidate(TcpLink(sock, send_timeout_s=SEND_TIMEOUT_S), key)
+
+    def _candidate(self, link: Link, key: str) -> None:
+        """A new TCP connection: it reads on its own thread and becomes the served client with
+        its first packet. A peer holds at most ``MAX_PENDING_PER_PEER`` such connections
+        (its oldest is closed for a new one), all peers together ``MAX_PENDING``."""
+        session = ClientSession(link, None, self.clock(), tcp=True, key=key)
+        closing: list[ClientSession] = []
+        with self._client_lock:
+            mine = [c for c in self._candidates if c.key == key]
+            if len(mine) >= MAX_PENDING_PER_PEER:
+                closing.append(mine[0])
+            elif len(self._candidates) >= MAX_PENDING:
+                closing.append(self._candidates[0])
+            for old in closing:
+                self._candidates.remove(old)
+            self._candidates.append(session)
+        for old in closing:
+            self.replaced_pending += 1
+            log.info("%s: a newer connection of %s replaces it before its first packet",
+                     old.link.name, old.key)
+            old.link.close()
+        self._spawn(self._read_loop, f"pilot-read-{link.name}", session)
 
     def _turn_away(self, link: Link, current: str) -> None:
         self.turned_away += 1
@@ -325,16 +359,53 @@ class PilotServer:
         link.close()
 
     def _serve(self, link: Link) -> None:
-        session = ClientSession(
-            link, Outbox(link).start(), self.clock(), tcp=isinstance(link, TcpLink)
-        )
-        with self._client_lock:
-            self._client = link
-            self._session = session
+        """The serial port: the one client for the whole run."""
+        session = ClientSession(link, None, self.clock(), tcp=False)
+        self._claim(session)
+        self._spawn(self._read_loop, f"pilot-read-{link.name}", session)
+
+    def _busy_with(self) -> str:
+        """The served client's name while it is live (connected and not silent), else ""; a
+        silent one is closed here (the caller is taking its place). Under ``_client_lock``."""
+        client, served = self._client, self._session
+        if client is None or client.closed or served is None:
+            return ""
+        if self._silent(served):
+            self.replaced_silent += 1
+            log.info("ground control on %s silent for the link timeout: replaced",
+                     served.link.name)
+            client.close()
+            return ""
+        return client.name
+
+    def _claim(self, session: ClientSession) -> bool:
+        """Make ``session`` the served client if the slot is free (or its holder silent):
+        True; else False (it is turned away)."""
+        with self._client_changed:
+            if session.tcp:
+                # The holder may have hung up a moment ago, its reader not yet noticed.
+                self._client_changed.wait_for(lambda: not self._busy_with(), HANDOVER_GRACE_S)
+                current = self._busy_with()
+                if session in self._candidates:
+                    self._candidates.remove(session)
+                if current:
+                    session.claimed = False
+                else:
+                    session.claimed = True
+            else:
+                current = ""
+                session.claimed = True
+            if session.claimed:
+                session.outbox = Outbox(session.link).start()
+                self._client = session.link
+                self._session = session
+        if not session.claimed:
+            self._turn_away(session.link, current)
+            return False
         with self._lock:
             self.boards.client_gone(self.clock())  # a new client starts with no stream
-        log.info("serving ground control on %s", link.name)
-        self._spawn(self._read_loop, f"pilot-read-{link.name}", session)
+        log.info("serving ground control on %s", session.link.name)
+        return True
 
     def _read_loop(self, session: ClientSession) -> None:
         link = session.link
@@ -342,6 +413,19 @@ class PilotServer:
         timeout_s = self.boards.settings.link_timeout_s
         head: bytes | None = b""  # first bytes, until they cannot start an HTTP request
         try:
+            if session.tcp:
+                # A station that connects while another is served is told so at once (after
+                # the hand-over grace), without waiting for its first packet.
+                with self._client_changed:
+                    self._client_changed.wait_for(lambda: not self._busy_with(),
+                                                  HANDOVER_GRACE_S)
+                    current = self._busy_with()
+                if current:
+                    with self._client_lock:
+                        if session in self._candidates:
+                            self._candidates.remove(session)
+                    self._turn_away(link, current)
+                    return
             while not self._stop.is_set():
                 if session.tcp and session.packets == 0:
                     if self.clock() - session.connected_s >= timeout_s:
@@ -368,6 +452,8 @@ class PilotServer:
                     data, head = head, None
                 for event in parser.feed(data):
                     now = self.clock()
+                    if not session.claimed and not self._claim(session):
+                        return  # its first packet (or error) found another station served
                     if not isinstance(event, FrameError):
                         session.packets += 1
                         session.last_packet_s = now
@@ -377,21 +463,24 @@ class PilotServer:
         except LinkClosed:
             pass
         finally:
-            session.outbox.close()
+            if session.outbox is not None:
+                session.outbox.close()
             link.close()
             with self._client_changed:
-                current = self._client is link
-                if current:
+                if session in self._candidates:
+                    self._candidates.remove(session)
+                was_served = self._client is link
+                if was_served:
                     self._client = None
                     self._session = None
                 self._client_changed.notify_all()
-            if current:
+            if was_served:
                 with self._lock:
                     self.boards.client_gone(self.clock())
-            log.info("ground control on %s went away", link.name)
+                log.info("ground control on %s went away", link.name)
 
     def _send(self, session: ClientSession, replies: list[Message], *, droppable: bool) -> None:
-        if replies:
+        if replies and session.outbox is not None:
             session.outbox.put(b"".join(encode(m) for m in replies), droppable=droppable)
 
     # -- the loop ------------------------------------------------------------------------

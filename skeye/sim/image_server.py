@@ -11,10 +11,15 @@ How this works:
   built from the newest frame only when the previous one has gone out: a slow or stalled client
   simply receives fewer frames, and never holds a lock or blocks anyone else. Reading stops while
   the request queue is full, so a client that floods requests is held back by TCP.
-* Slots are bounded: ``max_clients`` connections, ``max_clients_per_peer`` from one address. A
-  connection that sends no complete request within ``handshake_timeout_s`` of connecting, or
-  that makes no progress (no request received, no byte sent to it) for ``idle_timeout_s``, gets
-  an error frame naming the reason and is closed: idle or stalled clients cannot hold the slots.
+* Slots are bounded: ``max_clients`` connections, ``max_clients_per_peer`` of one peer
+  (:func:`skeye.peers.peer_key`: a local user however many loopback addresses it binds, or a
+  remote address). A peer at its cap that connects again replaces its own connection that has
+  made no progress longest among those not streaming (it gets an error frame saying so); only
+  when all of them stream is the new one refused. A connection that sends no complete request
+  within ``handshake_timeout_s`` of connecting, or that makes no progress (no request received,
+  no byte sent to it) for ``idle_timeout_s``, gets an error frame naming the reason and is
+  closed: idle or stalled clients cannot hold the slots. The accept thread never waits on a
+  client, and a shortage of file descriptors is logged and waited out.
 * ``close()`` wakes every thread through its socket pair and joins them all within a deadline.
 """
 
@@ -29,6 +34,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from skeye.errors import SkeyeError
+from skeye.peers import accept_failed, socket_peer_key
 from skeye.pixels import encode_image
 from skeye.sim.frame_store import Frame, FrameBuffer
 from skeye.sim.limits import check_server_limits
@@ -65,7 +71,7 @@ _IDLE_WAKE_S = 1.0  # safety net: a client loop looks around at least this often
 _STREAM_EARLY = 0.2  # a stream frame may go this fraction of a period before its slot
 HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send a complete request within this
 IDLE_TIMEOUT_S = 120.0  # no request and no byte sent for this long: the connection is closed
-MAX_CLIENTS_PER_PEER = 32  # connections from one peer address (half the default 64 slots)
+MAX_CLIENTS_PER_PEER = 32  # connections of one peer, a user or address (half the 64 slots)
 
 
 @dataclass(frozen=True)
@@ -118,6 +124,8 @@ class _ClientHandler:
         self.closed_reason: str | None = None
         self._watch = 0  # the buffer's watcher handle (set on the client's thread)
         self.peer_host = address.rpartition(":")[0]
+        self.peer_key = self.peer_host  # whose slot it takes (skeye.peers); set by the server
+        self.replaced: str | None = None  # why a newer connection of its peer took its slot
         self.frames_sent = 0
         self.errors_sent = 0
         self.bytes_sent = 0
@@ -201,12 +209,33 @@ class _ClientHandler:
             return self._active_s + self._server.handshake_timeout_s
         return self._active_s + self._server.idle_timeout_s
 
+    @property
+    def idle_since_s(self) -> float:
+        """When it last made progress (a request received or a byte sent)."""
+        return self._active_s
+
+    @property
+    def streaming(self) -> bool:
+        """Whether it streams, or has work under way: a connection a new one never replaces."""
+        return self._stream_period_s is not None or bool(self._queue) or bool(self._out)
+
+    def replace(self, reason: str) -> None:
+        """A newer connection of the same peer takes this one's slot (safe from any thread):
+        it gets an error frame with ``reason`` and is closed."""
+        self.replaced = reason
+        self._poke()
+
     def _check_idle(self, now: float) -> None:
-        """Close a connection that sent no request in time, or made no progress for long."""
-        if self.closed_reason is not None or now < self._idle_deadline_s():
+        """Close a connection that sent no request in time, made no progress for long, or was
+        replaced."""
+        if self.closed_reason is not None:
+            return
+        if self.replaced is None and now < self._idle_deadline_s():
             return
         server = self._server
-        if not self._got_request:
+        if self.replaced is not None:
+            reason = self.replaced
+        elif not self._got_request:
             reason = f"no request within {server.handshake_timeout_s:g} s of connecting; closed"
         else:
             reason = f"idle for {server.idle_timeout_s:g} s (no request, nothing read); closed"
@@ -514,14 +543,22 @@ class ImageServer:
                 self._handlers.remove(handler)
 
     def _accept_loop(self) -> None:
+        said_s = 0.0
         try:  # a failure is logged with its traceback by the Worker and kept as its error
             with selectors.DefaultSelector() as sel:
                 sel.register(self._listener, selectors.EVENT_READ)
                 sel.register(self._wake_r, selectors.EVENT_READ)
                 while not self._closed:
                     for key, _ in sel.select(_IDLE_WAKE_S):
-                        if key.fileobj is self._listener:
+                        if key.fileobj is not self._listener:
+                            continue
+                        try:
                             self._accept_one()
+                        except OSError as exc:
+                            when = accept_failed(exc, said_s, "image server")
+                            if when is None:
+                                raise
+                            said_s = when
         finally:
             if self._closed:
                 self._listener.close()
@@ -531,22 +568,37 @@ class ImageServer:
             sock, peer = self._listener.accept()
         except (BlockingIOError, ConnectionAbortedError):
             return
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        except OSError:  # the client went already
+            sock.close()
+            return
         address = f"{peer[0]}:{peer[1]}"
+        key = socket_peer_key(sock)
         with self._lock:
-            same_peer = sum(1 for h in self._handlers if h.peer_host == peer[0])
+            mine = [h for h in self._handlers if h.peer_key == key and h.replaced is None]
             reason = ""
-            if self._closed or len(self._handlers) >= self._max_clients:
+            replaced: _ClientHandler | None = None
+            if self._closed:
+                reason = "the image server is closing"
+            elif len(mine) >= self.max_clients_per_peer:
+                quiet = [h for h in mine if not h.streaming]
+                if quiet:
+                    replaced = min(quiet, key=lambda h: h.idle_since_s)
+                    replaced.replace(f"replaced by a newer connection of {key} "
+                                     f"({self.max_clients_per_peer} per user or address); "
+                                     "closed")
+                else:
+                    reason = (f"too many clients from {key} ({self.max_clients_per_peer} per "
+                              "user or address, all streaming)")
+            elif len(self._handlers) >= self._max_clients:
                 reason = "too many clients"
-            elif same_peer >= self.max_clients_per_peer:
-                reason = (f"too many clients from {peer[0]} "
-                          f"({self.max_clients_per_peer} per address)")
             refuse = bool(reason)
             if not refuse:
-                refuse = False
                 handler = _ClientHandler(
                     self, sock, address, self._default_format, self._default_quality
                 )
+                handler.peer_key = key
                 self._handlers.append(handler)
                 handler.thread.start()
         if refuse:

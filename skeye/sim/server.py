@@ -6,10 +6,16 @@ commands: see :mod:`skeye.sim.session`), after checking the slots; the first lin
 gets is the ``NFO`` greeting.
 
 Slots are bounded: at most ``max_clients`` connections, at most ``max_clients_per_peer`` from
-one peer address, and a connection that sends no line within ``handshake_timeout_s`` of
-connecting, or (while it drives no robot) none for ``idle_timeout_s``, gets
-``ERR {Command CONNECT}`` with the reason and is closed. A connection driving a robot is never
-closed for being quiet (a hovering robot needs no commands); TCP keepalive finds its dead peers.
+one peer (:func:`skeye.peers.peer_key`: a local user, however many loopback addresses it
+binds, or a remote address), and a connection that sends no line within
+``handshake_timeout_s`` of connecting, or (while it drives no robot) none for
+``idle_timeout_s``, gets ``ERR {Command CONNECT}`` with the reason and is closed. A connection
+driving a robot is never closed for being quiet (a hovering robot needs no commands); TCP
+keepalive finds its dead peers. A peer at its cap that connects again replaces its own
+connection that has been quiet longest among those without a robot (it gets ``ERR {Command
+CONNECT}`` saying so); only when all of them drive robots is the new one refused. The accept
+thread never waits on a client: a refusal is one non-blocking send, and running out of file
+descriptors (``EMFILE``) is logged (once a second at most) and waited out, never the end of it.
 
 If the engine thread dies (:attr:`SimulationRunner.error`), every client gets
 ``ERR {Command ENGINE} {Reason ...}`` naming the failure at once and is closed, and so is every
@@ -30,6 +36,7 @@ import socket
 import threading
 from collections.abc import Callable
 
+from skeye.peers import accept_failed, socket_peer_key
 from skeye.sim.limits import check_server_limits
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.session import (
@@ -49,7 +56,7 @@ log = logging.getLogger(__name__)
 
 HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send its first line within this
 IDLE_TIMEOUT_S = 120.0  # a connection without a robot must send a line at least this often
-MAX_CLIENTS_PER_PEER = 64  # connections from one peer address (half the default 128 slots)
+MAX_CLIENTS_PER_PEER = 64  # connections of one peer, a user or address (half the 128 slots)
 
 
 def _keepalive(sock: socket.socket) -> None:
@@ -126,43 +133,72 @@ class ControlServer:
                           time_step_s=sim.dt, mode=self.runner.mode))
 
     def _accept_loop(self) -> None:
+        said_s = 0.0
         while not self._closing.is_set():
             try:
                 sock, addr = self._listener.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                break
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            _keepalive(sock)
-            session = ClientSession(self, sock, f"{addr[0]}:{addr[1]}", next(self._conn_ids))
-            refusal: bytes | None = None
-            with self._lock:
-                same_peer = sum(1 for s in self._sessions if s.peer_host == addr[0])
-                if self.runner.error is not None:
-                    refusal = self._engine_error_line(self.runner.error)
-                elif len(self._sessions) >= self.max_clients:
-                    refusal = encode(Err("CONNECT", reason="too many clients"))
-                elif same_peer >= self.max_clients_per_peer:
-                    refusal = encode(Err(
-                        "CONNECT", reason=f"too many clients from {addr[0]} "
-                        f"({self.max_clients_per_peer} per address)"))
-                else:
-                    self._sessions.add(session)
-            if refusal is not None:
-                log.warning("refusing client %s: %s", session.peer, refusal.decode().strip())
-                try:
-                    sock.settimeout(1.0)
-                    sock.sendall(refusal)
-                except OSError:
-                    pass
-                sock.close()
+            except OSError as exc:
+                when = accept_failed(exc, said_s, "control server")
+                if when is None:
+                    break
+                said_s = when
                 continue
-            if self.observers:
-                self.notify(session.conn_id, "+", session.peer.encode())
-            session.send(self.nfo_line())
-            session.start()
-            log.info("client %s connected", session.peer)
+            try:
+                self._admit(sock, f"{addr[0]}:{addr[1]}")
+            except OSError as exc:  # the client went already: nothing to serve
+                log.info("client %s:%s gone while connecting: %s", addr[0], addr[1], exc)
+                sock.close()
+
+    def _admit(self, sock: socket.socket, peer: str) -> None:
+        """A new connection: served, or refused with one non-blocking line (never waits)."""
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        _keepalive(sock)
+        key = socket_peer_key(sock)
+        session = ClientSession(self, sock, peer, next(self._conn_ids), peer_key=key)
+        refusal: bytes | None = None
+        replaced: ClientSession | None = None
+        with self._lock:
+            mine = [s for s in self._sessions if s.peer_key == key and not s.replaced]
+            if self.runner.error is not None:
+                refusal = self._engine_error_line(self.runner.error)
+            elif len(mine) >= self.max_clients_per_peer:
+                idle = [s for s in mine if s.robot_name is None]
+                if idle:
+                    replaced = min(idle, key=lambda s: s.last_line_s)
+                    replaced.replaced = True
+                    self._sessions.add(session)
+                else:
+                    refusal = encode(Err(
+                        "CONNECT", reason=f"too many clients from {key} "
+                        f"({self.max_clients_per_peer} per user or address, all driving "
+                        "robots)"))
+            elif len(self._sessions) >= self.max_clients:
+                refusal = encode(Err("CONNECT", reason="too many clients"))
+            else:
+                self._sessions.add(session)
+        if replaced is not None:
+            log.info("client %s replaces %s, its quietest connection without a robot (%s)",
+                     peer, replaced.peer, key)
+            replaced.send(encode(Err(
+                "CONNECT", reason=f"replaced by a newer connection of {key} "
+                f"({self.max_clients_per_peer} per user or address); closed")))
+            replaced.end()
+        if refusal is not None:
+            log.warning("refusing client %s: %s", session.peer, refusal.decode().strip())
+            try:
+                sock.setblocking(False)
+                sock.send(refusal)
+            except OSError:
+                pass
+            sock.close()
+            return
+        if self.observers:
+            self.notify(session.conn_id, "+", session.peer.encode())
+        session.send(self.nfo_line())
+        session.start()
+        log.info("client %s connected (%s)", session.peer, key)
 
     def forget(self, session: ClientSession) -> None:
         """A session ended: free its slot and tell the observers."""

@@ -209,11 +209,15 @@ def _line_bytes(event: Message | LineError) -> bytes:
 class ClientSession:
     """One connection: its reader and writer threads and, after INIT, its robot."""
 
-    def __init__(self, server: SessionHost, sock: socket.socket, peer: str, conn_id: int) -> None:
+    def __init__(self, server: SessionHost, sock: socket.socket, peer: str, conn_id: int,
+                 peer_key: str = "") -> None:
         self.server = server
         self.sock = sock
         self.peer = peer
         self.peer_host = peer.rpartition(":")[0]
+        self.peer_key = peer_key or self.peer_host  # whose slot it takes (skeye.peers)
+        self.last_line_s = time.monotonic()  # when the client last sent a line (or connected)
+        self.replaced = False  # a newer connection of the same peer took its slot
         self.conn_id = conn_id
         self.states = ConnectionStates()
         self.robot_name: str | None = None
@@ -314,7 +318,7 @@ class ClientSession:
                         break
                     if b"\n" in data:
                         self.states.line()
-                        last_s = time.monotonic()
+                        last_s = self.last_line_s = time.monotonic()
                     if not self._feed(decoder, data):
                         return
         finally:
@@ -432,6 +436,9 @@ class ClientSession:
             if placed is not None:
                 log.info("client %s: INIT %s", self.peer, placed)
             said = "; ".join(n for n in (note, placed) if n) or None
+            # Bound before the answer goes out: a client that has it drives a robot, also for
+            # the server's slot decisions (a connection driving a robot is never replaced).
+            self.robot_name, self.robot_config = robot.name, robot.config
             # Answer from the engine thread, before the first STA/SEN of this robot.
             self.send(encode(Res("INIT", name=robot.name, status="OK", note=said)))
             return robot.name, robot.config

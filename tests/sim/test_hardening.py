@@ -222,17 +222,20 @@ def test_control_server_closes_idle_connections_and_limits_slots_per_peer() -> N
             pilot.expect("NFO")
             assert pilot.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}",
                                 "INIT").type == "RES"
-            # A fourth connection from the same address is refused, naming the limit.
+            # A fourth connection of the same user takes the slot of its quietest connection
+            # without a robot (the silent one), which is told why and closed.
             extra = LineClient(server.port)
-            err = extra.read_until(_is_err("CONNECT"), timeout_s=30)[1]
-            assert "per address" in (err.get("Reason") or ""), err
-            _closed(extra)
+            extra.expect("NFO")
             err = silent.read_until(_is_err("CONNECT"), timeout_s=30)[1]
-            assert "no command within 1 s" in (err.get("Reason") or ""), err
+            assert "replaced by a newer connection" in (err.get("Reason") or ""), err
+            assert "per user or address" in (err.get("Reason") or ""), err
             _closed(silent)
             err = talker.read_until(_is_err("CONNECT"), timeout_s=30)[1]
             assert "idle for 2 s" in (err.get("Reason") or ""), err
             _closed(talker)
+            err = extra.read_until(_is_err("CONNECT"), timeout_s=30)[1]
+            assert "no command within 1 s" in (err.get("Reason") or ""), err
+            _closed(extra)
             # The robot's connection outlives both timeouts and keeps streaming.
             t_closed = _ping_time(pilot)
             pilot.read_until(lambda m: m.type == "SEN" and float(m.require("Time")) > t_closed + 3,
@@ -243,6 +246,19 @@ def test_control_server_closes_idle_connections_and_limits_slots_per_peer() -> N
             again.expect("NFO")
             assert again.answer("PING {Id 3}", "PING").type == "RES"
             for c in (silent, talker, pilot, extra, again):
+                c.close()
+        # When every connection of the user drives a robot, a new one is refused.
+        with ControlServer(base.runner, port=0, max_clients_per_peer=1) as server:
+            flying = LineClient(server.port)
+            flying.expect("NFO")
+            assert flying.answer("INIT {ClassName hummingbird} {Name R2} {Start Pad1}",
+                                 "INIT").type == "RES"
+            refused = LineClient(server.port)
+            err = refused.read_until(_is_err("CONNECT"), timeout_s=30)[1]
+            assert "all driving robots" in (err.get("Reason") or ""), err
+            _closed(refused)
+            assert flying.answer("PING {Id 4}", "PING").type == "RES"
+            for c in (flying, refused):
                 c.close()
 
 
@@ -274,10 +290,11 @@ def test_image_server_closes_idle_connections_and_limits_slots_per_peer() -> Non
         silent = _RawImage(server.port)
         half = _RawImage(server.port)
         half.sock.sendall(b"SKEYE FORM")  # half a request, never finished
-        refused = _RawImage(server.port)
-        assert "per address" in refused.error_then_eof()
-        assert "no request within 1 s" in silent.error_then_eof()
+        # A third connection of the same user takes the slot of its quietest one (silent).
+        newer = _RawImage(server.port)
+        assert "replaced by a newer connection" in silent.error_then_eof()
         assert "no request within 1 s" in half.error_then_eof()
+        assert "no request within 1 s" in newer.error_then_eof()
         deadline = time.monotonic() + 30
         while server.client_count() and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -286,7 +303,18 @@ def test_image_server_closes_idle_connections_and_limits_slots_per_peer() -> Non
         once = _RawImage(server.port)
         once.sock.sendall(b"SKEYE META on\n")
         assert "idle for 2 s" in once.error_then_eof()
-        for c in (silent, half, refused, once):
+        for c in (silent, half, newer, once):
+            c.close()
+    # When every connection of the user streams, a new one is refused.
+    with ImageServer(FrameBuffer(), port=0, max_clients_per_peer=1) as server:
+        streaming = _RawImage(server.port)
+        streaming.sock.sendall(b"SKEYE STREAM 5\n")
+        deadline = time.monotonic() + 30  # until the server has read its request
+        while not any(h.streaming for h in server._handlers) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        refused = _RawImage(server.port)
+        assert "all streaming" in refused.error_then_eof()
+        for c in (streaming, refused):
             c.close()
 
 
