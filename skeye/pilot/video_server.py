@@ -9,8 +9,12 @@ the control loop can be slowed by a viewer. That thread alone owns every socket 
 sans-IO :class:`~skeye.wire.video.VideoConnection` per client:
 
 - a client must SUBSCRIBE within ``subscribe_timeout_s`` of connecting, else it gets ERROR and
-  is closed (an idle connection does not hold one of the ``max_clients`` slots); a connection
-  beyond ``max_clients`` gets ERROR ("busy") and is closed at once;
+  is closed (an idle connection does not hold one of the ``max_clients`` slots); one peer (a
+  local user however many loopback addresses it binds, or a remote address:
+  :func:`skeye.peers.peer_key`) holds all slots but one (at least one); a new connection
+  beyond a cap takes the place of the oldest connection that has not subscribed (its peer's own
+  first), and only when every one in its way streams does it get ERROR ("busy") and is closed
+  at once; running short of file descriptors is waited out;
 - bytes that are not the protocol (an HTTP request, garbage, a message the client may not send)
   get ERROR naming the problem and the connection is closed; other clients are not touched;
 - the newest frame is JPEG-encoded once (OpenCV, ``jpeg_quality``) when some client will take
@@ -39,6 +43,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
+from skeye.peers import accept_failed, socket_peer_key
 from skeye.wire.video import (
     DEFAULT_JPEG_QUALITY,
     Detection,
@@ -100,6 +105,7 @@ class _Client:
     stalled_since_s: float | None = None  # output waiting, no byte taken since
     frames_sent: int = 0
     dropped: int = 0
+    key: str = ""  # whose connection it is (skeye.peers)
 
     @property
     def streaming(self) -> bool:
@@ -145,6 +151,7 @@ class VideoServer:
                 f"{subscribe_timeout_s}, {send_timeout_s})"
             )
         self.max_clients = max_clients
+        self.max_clients_per_peer = max(1, max_clients - 1)  # one slot left for someone else
         self.subscribe_timeout_s = subscribe_timeout_s
         self.send_timeout_s = send_timeout_s
         self.clock = clock
@@ -154,6 +161,7 @@ class VideoServer:
         self.bad_frames = 0  # frames that could not be encoded (logged, skipped)
         self.frames_sent = 0
         self.turned_away = 0  # refused: all slots taken
+        self._accept_said_s = 0.0  # when a failing accept() was last logged
         self.bad_clients = 0  # closed for bytes that are not the protocol
         self.idle_closed = 0  # closed for not subscribing in time
         self.slow_closed = 0  # closed for taking nothing for send_timeout_s
@@ -277,7 +285,12 @@ class VideoServer:
     def _accept(self, sel: selectors.BaseSelector) -> None:
         try:
             sock, addr = self._listener.accept()
-        except (BlockingIOError, OSError):
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            when = accept_failed(exc, self._accept_said_s, "video server")
+            if when is not None:
+                self._accept_said_s = when  # waited a moment: the selector would spin
             return
         peer = f"{addr[0]}:{addr[1]}" if isinstance(addr, tuple) else str(addr)
         sock.setblocking(False)
@@ -287,14 +300,31 @@ class VideoServer:
         except OSError:
             pass
         conn = VideoConnection(Role.SERVER)
-        if len(self._clients) >= self.max_clients:
+        key = socket_peer_key(sock)
+        mine = [c for c in self._clients.values() if c.key == key]
+        at_cap = len(mine) >= self.max_clients_per_peer
+        full = len(self._clients) >= self.max_clients
+        if at_cap or full:
+            idle = [c for c in (mine if at_cap else self._clients.values()) if not c.streaming]
+            if idle:
+                old = min(idle, key=lambda c: c.connected_s)
+                self._drop(sel, old, f"replaced by a newer connection of {old.key} (it had "
+                           "not subscribed)")
+                full = False
+            else:
+                full = True
+        if full:
             self.turned_away += 1
             reason = f"busy: this vehicle serves {self.max_clients} video clients at once"
+            if len(mine) >= self.max_clients_per_peer:
+                reason = (f"busy: {key} has {len(mine)} of this vehicle's {self.max_clients} "
+                          f"video slots, all streaming (at most {self.max_clients_per_peer} "
+                          "per user or address)")
             log.info("video: turning away %s: %s", peer, reason)
             self._send_last(sock, conn, reason)
             sock.close()
             return
-        client = _Client(sock, peer, conn, self.clock(), bytearray())
+        client = _Client(sock, peer, conn, self.clock(), bytearray(), key=key)
         with self._lock:
             self._clients[sock.fileno()] = client
         sel.register(sock, selectors.EVENT_READ, "client")

@@ -138,14 +138,9 @@ def test_garbage_gets_an_error_and_others_are_not_touched(server: VideoServer) -
 
 def test_idle_and_surplus_clients_are_closed_with_a_reason(server: VideoServer) -> None:
     idle = socket.create_connection(("127.0.0.1", server.port), timeout=60)
-    viewers = [Viewer(server.port) for _ in range(2)]
-    for v in viewers:
-        assert isinstance(v.next(), Hello)
-    wait_until(lambda: len(server.clients()) == 3, 30, "three clients")
-    surplus = Viewer(server.port)
-    msg = surplus.next()
-    assert isinstance(msg, Error) and "busy" in msg.reason and "3 video clients" in msg.reason
-    assert server.turned_away == 1
+    viewer = Viewer(server.port)
+    assert isinstance(viewer.next(), Hello)
+    wait_until(lambda: len(server.clients()) == 2, 30, "two clients")
     conn = VideoConnection(Role.CLIENT)
     conn.send(Subscribe(1.0))
     data = b""
@@ -154,10 +149,38 @@ def test_idle_and_surplus_clients_are_closed_with_a_reason(server: VideoServer) 
     (error,) = conn.receive_data(data)
     assert isinstance(error, Error) and "no SUBSCRIBE within 1 s" in error.reason
     assert server.idle_closed == 1
-    wait_until(lambda: len(server.clients()) == 2, 30, "the idle client gone")
-    late = Viewer(server.port)  # its slot is free again
-    assert isinstance(late.next(), Hello)
-    for c in (idle, surplus, late, *viewers):
+    wait_until(lambda: len(server.clients()) == 1, 30, "the idle client gone")
+    # One user holds all slots but one (2 of 3): with two viewers, a third of the same user is
+    # turned away, naming the cap.
+    second = Viewer(server.port)
+    assert isinstance(second.next(), Hello)
+    wait_until(lambda: sum(c.state == "streaming" for c in server.clients()) == 2, 30,
+               "two viewers")
+    surplus = Viewer(server.port)
+    msg = surplus.next()
+    assert isinstance(msg, Error) and "busy" in msg.reason and "2 of" in msg.reason, msg
+    assert server.turned_away == 1
+    for c in (idle, surplus, viewer, second):
+        c.close()
+
+
+def test_a_connection_that_never_subscribes_gives_its_slot_to_a_viewer(
+        server: VideoServer) -> None:
+    """Idle connections (from however many loopback addresses) never keep a viewer out: at its
+    cap, a user's new connection takes the place of its oldest one that has not subscribed."""
+    idle = [socket.create_connection(("127.0.0.1", server.port), timeout=60) for _ in range(2)]
+    wait_until(lambda: len(server.clients()) == 2, 30, "two idle connections")
+    viewer = Viewer(server.port)
+    assert isinstance(viewer.next(), Hello)
+    conn = VideoConnection(Role.CLIENT)
+    conn.send(Subscribe(1.0))
+    data = b""
+    while chunk := idle[0].recv(4096):  # the oldest: replaced at once
+        data += chunk
+    (error,) = conn.receive_data(data)
+    assert isinstance(error, Error) and "replaced by a newer connection" in error.reason
+    assert server.turned_away == 0
+    for c in (*idle, viewer):
         c.close()
 
 
