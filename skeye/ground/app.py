@@ -44,6 +44,7 @@ from typing import Any
 from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.websockets import WebSocketDisconnected
 
 from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.ground.bridge import VehicleBridge, VehicleUnavailable
@@ -62,6 +63,7 @@ from skeye.ground.guard import (
     Guard,
     parse_json_limited,
 )
+from skeye.ground.limits import ConnectionLimits, server_config
 from skeye.ground.video import VideoRelay
 
 log = logging.getLogger(__name__)
@@ -107,15 +109,17 @@ async def perform(
     return (200 if outcome.ok else 409), outcome.to_json()
 
 
-def uvicorn_config(app: Any, log_level: str = "warning") -> Any:
-    """The uvicorn settings every ground server runs with: WebSocket messages at most
-    ``MAX_WS_MESSAGE_BYTES`` (larger: closed with 1009), a short receive queue per socket (a
-    flooding client is held back by TCP, not buffered), no pings (the page reconnects)."""
-    import uvicorn
-
-    return uvicorn.Config(
+def uvicorn_config(app: Any, log_level: str = "warning",
+                   limits: ConnectionLimits | None = None) -> Any:
+    """The uvicorn settings every ground server runs with: the connection limits of
+    :mod:`skeye.ground.limits` (header and keep-alive timeouts, concurrency, connections per
+    peer), WebSocket messages at most ``MAX_WS_MESSAGE_BYTES`` (larger: closed with 1009), a
+    short receive queue per socket (a flooding client is held back by TCP, not buffered), no
+    pings (the page reconnects)."""
+    return server_config(
         app,
-        log_level=log_level,
+        log_level,
+        limits=limits,
         ws_ping_interval=None,
         ws_max_size=MAX_WS_MESSAGE_BYTES,
         ws_max_queue=4,
@@ -202,23 +206,33 @@ def create_app(
     async def telemetry_ws(ws: WebSocket) -> None:
         await ws.accept()
         send_lock = asyncio.Lock()
+        gone = asyncio.Event()  # the page went: nothing more is sent, every task ends quietly
 
         async def send(msg: dict[str, Any]) -> None:
+            if gone.is_set():
+                raise WebSocketDisconnect(1006)
             async with send_lock:
-                await ws.send_json(msg)
+                try:
+                    await ws.send_json(msg)
+                except (WebSocketDisconnect, WebSocketDisconnected, OSError):
+                    gone.set()  # a reply (a 429, a result) to a page that has gone
+                    raise WebSocketDisconnect(1006) from None
 
         async def pusher() -> None:
             last_seq = -1
             last_sent = 0.0
             loop = asyncio.get_running_loop()
-            while True:
-                now = loop.time()
-                if bridge.seq != last_seq or now - last_sent >= 1.0:
-                    snap = bridge.snapshot()
-                    last_seq, last_sent = snap["seq"], now
-                    snap["video"] = video_status()
-                    await send(snap)
-                await asyncio.sleep(period_s)
+            try:
+                while True:
+                    now = loop.time()
+                    if bridge.seq != last_seq or now - last_sent >= 1.0:
+                        snap = bridge.snapshot()
+                        last_seq, last_sent = snap["seq"], now
+                        snap["video"] = video_status()
+                        await send(snap)
+                    await asyncio.sleep(period_s)
+            except WebSocketDisconnect:
+                return  # the page went
 
         async def run_command(msg: dict[str, Any]) -> None:
             ident = msg.get("id")
@@ -228,7 +242,10 @@ def create_app(
                 )
             except CommandError as exc:
                 status, answer = exc.status, {"error": exc.message}
-            await send({"type": "result", "id": ident, "status": status, **answer})
+            try:
+                await send({"type": "result", "id": ident, "status": status, **answer})
+            except WebSocketDisconnect:
+                return  # the page went before its answer
 
         await send(
             {
@@ -283,8 +300,8 @@ def create_app(
                 task = asyncio.create_task(run_command(msg))
                 tasks.add(task)
                 task.add_done_callback(tasks.discard)
-        except WebSocketDisconnect:
-            pass
+        except (WebSocketDisconnect, WebSocketDisconnected, OSError):
+            pass  # the page went (a close or a reply to a page that had gone)
         finally:
             push.cancel()
             for task in list(tasks):
@@ -307,7 +324,7 @@ def create_app(
                     await ws.send_bytes(latest.jpeg)
                 else:
                     await asyncio.sleep(0.5 / video.fps)
-        except WebSocketDisconnect:
-            pass
+        except (WebSocketDisconnect, WebSocketDisconnected, OSError):
+            pass  # the page went
 
     return app

@@ -42,6 +42,8 @@ from typing import Any
 from skeye.errors import ConfigError
 from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent
 
+HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
+MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
 STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
 START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to import MuJoCo
 
@@ -54,8 +56,12 @@ def run_ground(args: argparse.Namespace) -> int:
     from skeye.ground.bridge import VehicleBridge
     from skeye.ground.commands import VehicleLimits
     from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
+    from skeye.ground.limits import ConnectionLimits, limit_repeats
     from skeye.ground.video import VideoRelay, parse_video_uri
 
+    if not (args.header_timeout > 0 and args.max_connections_per_peer >= 1):
+        raise ConfigError(f"--header-timeout must be > 0 s and --max-connections-per-peer >= 1, "
+                          f"got {args.header_timeout!r}, {args.max_connections_per_peer!r}")
     try:
         security = GroundSecurity(
             token=os.environ.get(TOKEN_ENV) or new_token(),
@@ -75,7 +81,10 @@ def run_ground(args: argparse.Namespace) -> int:
             app = create_app(
                 bridge, video, security=security, limits=VehicleLimits.for_robot(args.robot)
             )
-            server = uvicorn.Server(uvicorn_config(app))
+            limits = ConnectionLimits(header_timeout_s=args.header_timeout,
+                                      max_per_peer=args.max_connections_per_peer)
+            server = uvicorn.Server(uvicorn_config(app, limits=limits))
+            limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
             shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
             shown = f"[{shown}]" if ":" in shown else shown
             print(
@@ -117,6 +126,12 @@ def _add_ground(sub: Any) -> None:
                    help="the most camera frames per second asked of the vehicle (default 8)")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    p.add_argument("--header-timeout", type=float, default=HEADER_TIMEOUT_S, metavar="S",
+                   help="close a connection whose request head is not complete within S "
+                   f"seconds of connecting (408; default {HEADER_TIMEOUT_S:g})")
+    p.add_argument("--max-connections-per-peer", type=int, default=MAX_PER_PEER, metavar="N",
+                   help="connections one local user (however many loopback addresses it "
+                   f"binds) or remote address may hold (default {MAX_PER_PEER})")
     _add_allow_host(p)
     p.set_defaults(func=run_ground)
 

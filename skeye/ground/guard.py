@@ -19,17 +19,20 @@ the problem:
 4. **POST bodies**: ``Content-Type: application/json`` (415; this is what a browser cannot send
    cross-origin without a CORS preflight, which this server never grants), at most
    ``MAX_BODY_BYTES`` (413), read here in full before the app runs.
-5. **POST rate** (429, ``Retry-After: 1``): ``POST_RATE_HZ`` per client address on average,
-   bursts of ``POST_BURST``, so a loop of POSTs cannot monopolise the vehicle bridge.
+5. **POST rate** (429, ``Retry-After: 1``): ``POST_RATE_HZ`` per client on average, bursts of
+   ``POST_BURST``, so a loop of POSTs cannot monopolise the vehicle bridge. A client is a peer
+   of :func:`skeye.peers.peer_key`: a local user however many loopback addresses it binds, or a
+   remote address.
 
 Tokens are compared in constant time. ``parse_json_limited`` (bodies and WebSocket messages)
 refuses JSON nested deeper than ``MAX_JSON_DEPTH`` before parsing it. ``CommandRate`` is a
 token bucket, pure (time is an argument), that the app keeps per WebSocket connection and this
-gate per client address for POSTs.
+gate per client (peer) for POSTs.
 """
 
 from __future__ import annotations
 
+import functools
 import ipaddress
 import json
 import logging
@@ -42,6 +45,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from skeye.errors import InvalidArgument
+from skeye.peers import peer_key
 
 log = logging.getLogger(__name__)
 
@@ -208,7 +212,14 @@ POST_RATE_HZ = 10.0
 WebSocket; a script with ``curl`` needs a few per second), so a loop of POSTs from one machine
 cannot monopolise the vehicle bridge or the event loop."""
 POST_BURST = 20
-MAX_TRACKED_CLIENTS = 1024  # client addresses with a POST bucket; the oldest is forgotten
+MAX_TRACKED_CLIENTS = 1024  # clients with a POST bucket; the oldest is forgotten
+
+
+@functools.lru_cache(maxsize=1024)
+def _peer_key(client: tuple[str, int], server: tuple[str, int]) -> str:
+    """:func:`skeye.peers.peer_key`, once per connection (a keep-alive connection's requests
+    share its four-tuple)."""
+    return peer_key(client, server)
 
 
 class Guard:
@@ -226,9 +237,14 @@ class Guard:
         self._post_rates: dict[str, CommandRate] = {}
 
     def _post_allowed(self, scope: Scope) -> bool:
-        """One token from this client address's bucket (insertion order = age)."""
-        client = scope.get("client")
-        peer = str(client[0]) if client else "?"
+        """One token from this client's bucket (insertion order = age)."""
+        client, server = scope.get("client"), scope.get("server")
+        peer = "?"
+        if client:
+            peer = str(client[0])
+            if server and server[1] is not None:
+                peer = _peer_key((str(client[0]), int(client[1])), (str(server[0]),
+                                                                   int(server[1])))
         now = time.monotonic()
         rate = self._post_rates.pop(peer, None)
         if rate is None:

@@ -55,7 +55,7 @@ class UvicornThread:
     """The ground app served by uvicorn in a thread, on a free port, with ``skeye ground``'s
     settings (``uvicorn_config``); ``token`` is the app's secret."""
 
-    def __init__(self, app: Any, token: str = "") -> None:
+    def __init__(self, app: Any, token: str = "", limits: Any = None) -> None:
         import uvicorn
 
         from skeye.ground.app import uvicorn_config
@@ -63,7 +63,7 @@ class UvicornThread:
         self.token = token
         self.sock = socket.create_server(("127.0.0.1", 0))
         self.port = self.sock.getsockname()[1]
-        self.server = uvicorn.Server(uvicorn_config(app))
+        self.server = uvicorn.Server(uvicorn_config(app, limits=limits))
         self.thread = threading.Thread(
             target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True
         )
