@@ -7,9 +7,14 @@ port (``skeye pilot --video-port``): the page shows the frames and detections th
 
 ``skeye up`` starts ``skeye sim`` (with its image server), ``skeye pilot`` and ``skeye ground``
 as child processes on this machine, waits until each one listens, prints the URL, and on Ctrl-C
-or SIGTERM (or when one of them dies, or when the ``make`` that started it is signalled) stops
+or SIGTERM (or when one of them fails, or when the ``make`` that started it is signalled) stops
 them all: SIGTERM in reverse order, then SIGKILL for any that has not exited after a few
-seconds. The pilot serves its camera on ``--video-port`` (default 7001) and ground control shows
+seconds. A child that was killed (by a signal, or stopped with status 0 by one it caught) is
+started again on the same ports, as systemd's ``Restart=on-abnormal`` does, at most
+``RESTART_BURST`` times in ``RESTART_WINDOW_S``: the pilot re-attaches to a restarted
+simulator, ground control reconnects to a restarted pilot. A child that exits with an error
+status (the simulator's engine failed: 3; a bad option: 2; ...) stops everything, saying why.
+The pilot serves its camera on ``--video-port`` (default 7001) and ground control shows
 that. Before starting anything it checks that each of its five ports is free and names the
 option that moves a taken one.
 
@@ -45,6 +50,10 @@ from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
 STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
+RESTART_BURST = 5
+"""Restarts of one child within ``RESTART_WINDOW_S`` before skeye up gives up (systemd's default
+``StartLimitBurst`` is 5)."""
+RESTART_WINDOW_S = 600.0
 START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to import MuJoCo
 
 
@@ -79,11 +88,12 @@ def run_ground(args: argparse.Namespace) -> int:
             video = VideoRelay(*video_at, fps=args.video_fps).start()
         try:
             app = create_app(
-                bridge, video, security=security, limits=VehicleLimits.for_robot(args.robot)
+                bridge, video, security=security,
+                limits=VehicleLimits.for_robot(args.robot, tuple(Path(d) for d in args.robot_dir)),
             )
-            limits = ConnectionLimits(header_timeout_s=args.header_timeout,
-                                      max_per_peer=args.max_connections_per_peer)
-            server = uvicorn.Server(uvicorn_config(app, limits=limits))
+            connections = ConnectionLimits(header_timeout_s=args.header_timeout,
+                                           max_per_peer=args.max_connections_per_peer)
+            server = uvicorn.Server(uvicorn_config(app, limits=connections))
             limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
             shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
             shown = f"[{shown}]" if ":" in shown else shown
@@ -122,6 +132,8 @@ def _add_ground(sub: Any) -> None:
         default="hummingbird",
         help="the vehicle's robot class: the speed limits commands are checked against",
     )
+    p.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
+                   help="a folder of robot files where --robot is looked up (as skeye sim's)")
     p.add_argument("--video-fps", type=float, default=8.0,
                    help="the most camera frames per second asked of the vehicle (default 8)")
     p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
@@ -216,6 +228,21 @@ def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> boo
     return bool(dead)
 
 
+def restartable(status: int | None) -> bool:
+    """Whether a child that ended with ``status`` is started again (see the module comment):
+    killed by a signal (negative status), or stopped by one it caught (0)."""
+    return status is not None and status <= 0
+
+
+def _signal_name(status: int) -> str:
+    if status >= 0:
+        return f"status {status}"
+    try:
+        return signal.Signals(-status).name
+    except ValueError:
+        return f"signal {-status}"
+
+
 def pilot_calibration(choice: str, robot: str) -> Path | None:
     """The calibration file ``skeye up`` gives the pilot: ``choice`` is ``auto``, ``none`` or a
     file (see the module's docstring).
@@ -295,16 +322,45 @@ def run_up(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
     children: list[tuple[str, subprocess.Popen[bytes]]] = []
+    commands: dict[str, tuple[list[str], tuple[int, ...]]] = {}  # what -> argv, its ports
+    restarts: dict[str, list[float]] = {}  # what -> when it was restarted
 
     # Every exit path stops the children: the finally below, atexit if something escapes it,
     # and the kernel (PR_SET_PDEATHSIG) if this process is killed outright.
     atexit.register(_stop_all, children)
 
-    def start(what: str, argv: list[str], port: int) -> None:
+    def start(what: str, argv: list[str], *ports: int) -> None:
         child = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL,
                                  preexec_fn=die_with_parent())
-        children.append((what, child))
-        _wait_listening(port, child, what, START_DEADLINE_S, stop)
+        commands[what] = (argv, ports)
+        for i, (name, _) in enumerate(children):
+            if name == what:
+                children[i] = (what, child)
+                break
+        else:
+            children.append((what, child))
+        for port in ports:
+            _wait_listening(port, child, what, START_DEADLINE_S, stop)
+
+    def restart_dead() -> bool:
+        """Start again every child that was killed (True), unless one failed or restarted too
+        often (False: stop everything)."""
+        dead = [(w, c) for w, c in children if c.poll() is not None]
+        if not dead:
+            return True
+        now = time.monotonic()
+        for what, child in dead:
+            recent = [t for t in restarts.get(what, []) if now - t < RESTART_WINDOW_S]
+            if stop.is_set() or not restartable(child.returncode) or len(recent) >= RESTART_BURST:
+                return False
+            restarts[what] = [*recent, now]
+            print(f"skeye up: {what} exited ({_signal_name(child.returncode or 0)}); starting "
+                  f"it again (restart {len(recent) + 1} of {RESTART_BURST} in "
+                  f"{RESTART_WINDOW_S:g} s)", flush=True)
+            argv, ports = commands[what]
+            start(what, argv, *ports)
+            print(f"skeye up: {what} is back", flush=True)
+        return True
 
     from skeye.processes import ParentWatch, check_ports_free
 
@@ -322,21 +378,21 @@ def run_up(args: argparse.Namespace) -> int:
         calibration = pilot_calibration(args.calibration, args.robot)
         if stop.is_set():  # Ctrl-C while calibrating: start nothing
             raise ConfigError("stopped while calibrating the camera")
+        robot_dirs = [f"--robot-dir={d}" for d in args.robot_dir or ()]
         start(
             "simulator",
             _child_argv(
                 "sim", "--world", args.world, "--port", str(args.sim_port),
-                "--image-port", str(args.image_port), "--seed", str(args.seed),
+                "--image-port", str(args.image_port), "--seed", str(args.seed), *robot_dirs,
             ),
-            args.image_port,
+            args.image_port, args.sim_port,
         )
-        _wait_listening(args.sim_port, children[0][1], "simulator", START_DEADLINE_S, stop)
         start(
             "pilot",
             _child_argv(
                 "pilot", "--sim", f"127.0.0.1:{args.sim_port}",
                 "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
-                "--video-port", str(args.video_port), "--robot", args.robot,
+                "--video-port", str(args.video_port), "--robot", args.robot, *robot_dirs[:1],
                 *(["--calibration", str(calibration)] if calibration is not None else []),
                 *[f"--mavlink={uri}" for uri in mavlink],
                 *([f"--rtp-video={args.rtp_video}"] if args.rtp_video else []),
@@ -348,7 +404,7 @@ def run_up(args: argparse.Namespace) -> int:
             _child_argv(
                 "ground", "--vehicle", f"tcp://127.0.0.1:{args.pilot_port}",
                 "--video", f"tcp://127.0.0.1:{args.video_port}", "--port", str(args.ground_port),
-                "--host", args.host, "--robot", args.robot,
+                "--host", args.host, "--robot", args.robot, *robot_dirs,
                 *[f"--allow-host={h}" for h in args.allow_host or ()],
             ),
             args.ground_port,
@@ -366,7 +422,7 @@ def run_up(args: argparse.Namespace) -> int:
             if going is not None:
                 print(f"skeye up: {going}; stopping", flush=True)
                 break
-            if _report_dead(children):
+            if not restart_dead() and _report_dead(children):
                 status = 1
                 break
     except ConfigError as exc:
@@ -437,6 +493,9 @@ def _add_up(sub: Any) -> None:
                    help="the pilot also sends its camera as H.264 RTP there (QGroundControl: "
                    "udp://127.0.0.1:5600)")
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
+    p.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
+                   help="a folder of robot files for the simulator (and the pilot's envelope), "
+                   "as skeye sim --robot-dir; repeatable")
     p.add_argument("--calibration", default="auto", metavar="auto|none|FILE",
                    help="the pilot's camera calibration: auto (default) calibrates a "
                         "distorting simulated camera once and keeps it; a skeye calibrate file; "

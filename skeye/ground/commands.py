@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from skeye.errors import LocalProtocolError
@@ -46,11 +47,12 @@ class VehicleLimits:
     source: str  # where they come from, for messages: "robot file hummingbird"
 
     @classmethod
-    def for_robot(cls, robot: str) -> VehicleLimits:
-        """The limits of a robot class (name or TOML path), as ``skeye sim`` loads it."""
+    def for_robot(cls, robot: str, robot_dirs: tuple[Path, ...] = ()) -> VehicleLimits:
+        """The limits of a robot class (name or TOML path), as ``skeye sim`` loads it (with
+        its ``--robot-dir`` folders)."""
         from skeye.robots.config import load_robot_config
 
-        config = load_robot_config(robot)
+        config = load_robot_config(robot, robot_dirs)
         c = config.controller
         return cls(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s,
                    f"robot file {config.class_name}")
