@@ -115,7 +115,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 "wind": args.wind,
             }
             # Entered before the server, so it closes after it and keeps the last lines.
-            recorder = stack.enter_context(Recorder(args.record, meta))
+            recorder = stack.enter_context(Recorder(
+                args.record, meta, max_bytes=round(args.record_max_mb * 2**20),
+                rotate=args.record_rotate, max_parts=args.record_parts))
         limits: dict[str, Any] = {
             "handshake_timeout_s": args.handshake_timeout,
             "idle_timeout_s": args.idle_timeout,
@@ -258,6 +260,19 @@ def _add_sim(sub: Any) -> None:
         metavar="FILE",
         help="record every line sent and received, and ground truth, to FILE (docs/recording.md)",
     )
+    p.add_argument(
+        "--record-max-mb",
+        type=float,
+        default=1024.0,
+        metavar="MB",
+        help="the recording stops (or, with --record-rotate, goes on in FILE.2, FILE.3, ...) "
+        "when it reaches MB MiB, and stops when the disk has less than 256 MiB left "
+        "(default 1024)",
+    )
+    p.add_argument("--record-rotate", action="store_true",
+                   help="at --record-max-mb, go on in a new part instead of stopping")
+    p.add_argument("--record-parts", type=int, default=10, metavar="N",
+                   help="the most parts --record-rotate writes before it stops (default 10)")
     p.set_defaults(func=cmd_sim)
 
 

@@ -17,8 +17,16 @@ pure codec; they round-trip.
 queue (never blocks the engine or a client thread; when the queue is full the record is counted
 and dropped, and a ``!`` note says how many). One writer thread formats records, writes them and
 flushes and fsyncs the file at least every ``flush_interval_s`` (0.5 s) and on close, so a
-killed simulator loses at most the last second. The recorder writes exactly one file, the one
-it was given, and refuses to overwrite an existing one.
+killed simulator loses at most the last second. The recorder writes the file it was given and
+refuses to overwrite an existing one.
+
+Size: a recording never grows past ``max_bytes`` (``skeye sim --record-max-mb``, default
+:data:`DEFAULT_MAX_BYTES`), nor is it written while the disk holds less than
+``min_free_bytes`` (:data:`DEFAULT_MIN_FREE_BYTES`). At either limit it stops: a ``!`` note
+says why, the log says so once, and later records are counted in ``dropped`` (the simulator
+runs on). With ``rotate`` it goes on in a new part instead, ``FILE.2``, ``FILE.3``, ... (each
+a whole recording with its own header, whose settings name the part and the one before), up to
+``max_parts`` parts; a part that exists already is never overwritten (recording stops there).
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import logging
 import math
 import os
 import queue
+import shutil
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -48,6 +57,13 @@ DIRECTIONS = frozenset((SENT, RECEIVED, CONNECTED, DISCONNECTED, TRUTH, NOTE))
 DEFAULT_FLUSH_INTERVAL_S = 0.5
 DEFAULT_TRUTH_RATE_HZ = 20.0
 DEFAULT_QUEUE_RECORDS = 200_000
+DEFAULT_MAX_BYTES = 1024 * 1024 * 1024
+"""1 GiB: about five hours of one hovering vehicle with a camera (the probe measured 80 MB in
+23 min, 3.5 MB/min)."""
+DEFAULT_MIN_FREE_BYTES = 256 * 1024 * 1024
+"""Recording stops when the disk has less than this left (256 MiB): the rest is the system's."""
+DEFAULT_MAX_PARTS = 10
+_DISK_CHECK_S = 1.0  # how often the free space is looked at
 
 
 @dataclass(frozen=True)
@@ -195,18 +211,25 @@ class Recorder:
         flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S,
         queue_records: int = DEFAULT_QUEUE_RECORDS,
         wall_clock: Callable[[], float] = time.time,
+        max_bytes: int = DEFAULT_MAX_BYTES,
+        rotate: bool = False,
+        max_parts: int = DEFAULT_MAX_PARTS,
+        min_free_bytes: int = DEFAULT_MIN_FREE_BYTES,
     ) -> None:
         if not (0.0 < flush_interval_s <= 1.0):
             raise LocalProtocolError(f"flush interval must be in (0, 1] s, got {flush_interval_s}")
+        if max_bytes < 64 * 1024 or max_parts < 1 or min_free_bytes < 0:
+            raise ConfigError(f"recording size limit must be >= 64 KiB and parts >= 1, got "
+                              f"{max_bytes} B, {max_parts} parts")
         self.path = Path(path)
-        try:
-            self._file: IO[bytes] = self.path.open("xb")
-        except FileExistsError:
-            raise ConfigError(
-                f"recording {self.path} already exists; choose another name or delete it"
-            ) from None
-        except OSError as exc:
-            raise ConfigError(f"cannot create recording {self.path}: {exc.strerror}") from None
+        self.max_bytes = max_bytes
+        self.rotate = rotate
+        self.max_parts = max_parts
+        self.min_free_bytes = min_free_bytes
+        self.parts = [self.path]  # every file written, in order
+        self.stopped: str | None = None  # why recording stopped early (size, disk), if it did
+        self._meta = dict(meta or {})
+        self._file: IO[bytes] = self._create(self.path)
         self._clock = wall_clock
         self._sim_time: Callable[[], float] = lambda: 0.0
         self._flush_interval_s = flush_interval_s
@@ -218,12 +241,97 @@ class Recorder:
         self._closed = False
         self._lock = threading.Lock()
         self._detach: list[Callable[[], None]] = []
-        self._file.write(format_header({"started_unix_s": wall_clock(), **(meta or {})}))
+        self._bytes = self._file.write(format_header({"started_unix_s": wall_clock(),
+                                                      **self._meta}))
         self._file.flush()
+        self._disk_checked_s = -math.inf
         self.failure: BaseException | None = None
         """Why the writer thread stopped early (a bug; a failed write is logged and noted)."""
         self._thread = Worker(self._write_loop, "skeye-recorder", on_error=self._writer_failed)
         self._thread.start()
+
+    @staticmethod
+    def _create(path: Path) -> IO[bytes]:
+        try:
+            return path.open("xb")
+        except FileExistsError:
+            raise ConfigError(
+                f"recording {path} already exists; choose another name or delete it"
+            ) from None
+        except OSError as exc:
+            raise ConfigError(f"cannot create recording {path}: {exc.strerror}") from None
+
+    def _room(self, data: list[bytes]) -> list[bytes]:
+        """The records of ``data`` that may still be written to the current part (writer
+        thread); at a limit the part is ended: the next one is opened (``rotate``) or
+        recording stops. What cannot be written is counted in ``dropped``."""
+        now = time.monotonic()
+        if now - self._disk_checked_s >= _DISK_CHECK_S:
+            self._disk_checked_s = now
+            try:
+                free = shutil.disk_usage(self.path.parent or ".").free
+            except OSError:
+                free = None
+            if free is not None and free < self.min_free_bytes:
+                self._stop(f"the disk holds {free / 2**20:.0f} MiB, less than the "
+                           f"{self.min_free_bytes / 2**20:.0f} MiB recording leaves free")
+        fits: list[bytes] = []
+        for i, record in enumerate(data):
+            if self.stopped is not None:
+                self.dropped += len(data) - i
+                return fits
+            if self._bytes + len(record) > self.max_bytes - 256:  # room for the last note
+                self._write_all(fits)
+                fits = []
+                self._part_full()
+                if self.stopped is not None:
+                    self.dropped += len(data) - i
+                    return fits
+            fits.append(record)
+            self._bytes += len(record)
+        return fits
+
+    def _write_all(self, records: list[bytes]) -> None:
+        if records:
+            self._file.write(b"".join(records))
+            self.written += len(records)
+
+    def _note(self, text: str) -> None:
+        record = format_record(Record(self._clock(), self._sim_time(), 0, NOTE, text))
+        self._file.write(record)
+        self._bytes += len(record)
+
+    def _part_full(self) -> None:
+        limit = f"{self.max_bytes / 2**20:g} MiB"
+        if not self.rotate:
+            self._stop(f"{self.path} reached its size limit of {limit} (--record-max-mb)")
+            return
+        if len(self.parts) >= self.max_parts:
+            self._stop(f"{len(self.parts)} parts of {limit} written, the most "
+                       "--record-parts allows")
+            return
+        nxt = self.path.with_name(f"{self.path.name}.{len(self.parts) + 1}")
+        try:
+            new = self._create(nxt)
+        except ConfigError as exc:
+            self._stop(str(exc))
+            return
+        self._note(f"recording continues in {nxt.name} (size limit {limit})")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._file.close()
+        self._file = new
+        self.parts.append(nxt)
+        log.warning("recording: %s is full (%s); continuing in %s", self.parts[-2], limit, nxt)
+        meta = {**self._meta, "part": len(self.parts), "continues": self.parts[-2].name}
+        self._bytes = self._file.write(format_header({"started_unix_s": self._clock(), **meta}))
+
+    def _stop(self, why: str) -> None:
+        if self.stopped is not None:
+            return
+        self.stopped = why
+        log.error("recording stops: %s; the simulator goes on", why)
+        self._note(f"recording stopped: {why}")
 
     def __enter__(self) -> Recorder:
         return self
@@ -235,6 +343,9 @@ class Recorder:
     def observe(self, conn_id: int, direction: str, data: bytes) -> None:
         """A :data:`~skeye.sim.server.LineObserver`: timestamp and queue; never blocks."""
         if self._closed:
+            return
+        if self.stopped is not None:
+            self.dropped += 1
             return
         try:
             self._queue.put_nowait((self._clock(), self._sim_time(), conn_id, direction, data))
@@ -282,14 +393,14 @@ class Recorder:
                     done = True
                     break
                 self._format(entry, out)
-            if self.dropped != reported_drops:
+            if self.dropped != reported_drops and self.stopped is None:
                 note = f"dropped {self.dropped - reported_drops} records (queue full)"
                 reported_drops = self.dropped
                 out.append(format_record(Record(self._clock(), self._sim_time(), 0, NOTE, note)))
             try:
                 if out:
-                    f.write(b"".join(out))
-                    self.written += len(out)
+                    self._write_all(self._room(out))
+                f = self._file
                 if done or time.monotonic() - last_flush >= self._flush_interval_s:
                     f.flush()
                     os.fsync(f.fileno())

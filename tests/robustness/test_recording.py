@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import signal
 import socket
+import threading
 import time
 from pathlib import Path
 
@@ -244,3 +246,69 @@ def test_battery_panel_shows_flight_time_left_only_while_flying(
                    battery_landed=[True, True, False, False])
     left = flight_time_left_min(t)
     assert np.isnan(left[:2]).all() and left[2:] == pytest.approx([10.0, 590 / 60])
+
+
+def _flying_client(port: int) -> socket.socket:
+    """A client that spawns a hovering robot: its stream fills the recording."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+    sock.sendall(b"INIT {ClassName hummingbird} {Name R1} {Location 0,0,-2}\r\n")
+    return sock
+
+
+def _records_of(path: Path) -> list[Record]:
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("#skeye-recording")
+    return [parse_record(line) for line in lines[1:]]
+
+
+def _read_away(sock: socket.socket, stop: threading.Event) -> None:
+    sock.settimeout(0.5)
+    while not stop.is_set():
+        try:
+            if not sock.recv(1 << 16):
+                return
+        except TimeoutError:
+            continue
+        except OSError:
+            return
+
+
+@pytest.mark.parametrize("rotate", [False, True])
+def test_a_recording_stops_or_rotates_at_its_size_limit(tmp_path: Path, rotate: bool) -> None:
+    """Issue 31: a recording grew without bound (80 MB in 23 min). Now it never passes
+    --record-max-mb: it stops with a note saying why, or goes on in FILE.2, FILE.3 up to
+    --record-parts; the simulator serves on either way."""
+    path = tmp_path / "flight.rec"
+    limit = 64 * 1024
+    extra = ["--record-rotate", "--record-parts", "3"] if rotate else []
+    with sim_process("--record", str(path), "--record-max-mb", str(limit / 2**20),
+                     *extra) as (_proc, ports, _banner):
+        client = _flying_client(ports["control"])
+        stop = threading.Event()
+        reader = threading.Thread(target=_read_away, args=(client, stop), daemon=True)
+        reader.start()
+        last = tmp_path / ("flight.rec.3" if rotate else "flight.rec")
+        assert wait_for(lambda: last.exists() and "recording stopped" in last.read_text(), 120)
+        size = last.stat().st_size
+        time.sleep(1.5)  # the stream goes on: nothing more is written
+        assert last.stat().st_size == size
+        with socket.create_connection(("127.0.0.1", ports["control"]), timeout=30) as s:
+            f = s.makefile("rb")
+            assert f.readline().startswith(b"NFO")
+            s.sendall(b"PING {Id after}\r\n")
+            assert f.readline().startswith(b"RES {Command PING}")  # serving on
+        stop.set()
+        client.close()
+    parts = sorted(tmp_path.glob("flight.rec*"))
+    assert len(parts) == (3 if rotate else 1), parts
+    for part in parts:
+        assert part.stat().st_size <= limit, (part, part.stat().st_size)
+        assert _records_of(part)  # every part a whole recording
+    notes = [r.line for r in _records_of(last) if r.direction == NOTE]
+    assert notes and notes[-1].startswith("recording stopped: "), notes
+    assert ("3 parts" in notes[-1]) if rotate else ("size limit" in notes[-1])
+    if rotate:
+        first = [r.line for r in _records_of(parts[0]) if r.direction == NOTE]
+        assert first[-1] == "recording continues in flight.rec.2 (size limit 0.0625 MiB)"
+        assert json.loads(parts[1].read_text().splitlines()[0].split(" ", 2)[2])["continues"] \
+            == "flight.rec"
