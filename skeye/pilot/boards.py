@@ -45,6 +45,7 @@ decides what happens.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import Counter
 from collections.abc import Callable
@@ -105,6 +106,8 @@ from skeye.wire.packets import (
     WaypointGoto,
     WaypointProps,
 )
+
+log = logging.getLogger(__name__)
 
 NO_COMMAND_PD = 0x00  # RESULT.command_pd when the answer names no command
 GESTURE_HOLD_S = 1.0  # thrust 0 + full yaw held this long starts (yaw < 0) or stops the motors
@@ -235,6 +238,11 @@ class OnboardBoards:
         except SkeyeError as exc:  # the vehicle cannot do it now (no GPS fix, stale sensor)
             self.errors["refused"] += 1
             return [Result(pd, ResultCode.REFUSED, str(exc)[: Result.MAX_REASON_BYTES // 4])]
+        except (ArithmeticError, ValueError) as exc:  # a value it cannot fly on (NaN estimate)
+            self.errors["failed"] += 1
+            why = f"failed: {type(exc).__name__}: {exc}"[: Result.MAX_REASON_BYTES // 4]
+            log.warning("command 0x%02x %s", pd, why)
+            return [Result(pd, ResultCode.REFUSED, why)]
         return [reply]
 
     def _dispatch(self, msg: Message, now_s: float) -> Message:
