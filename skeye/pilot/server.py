@@ -206,7 +206,7 @@ class PilotServer:
         self.port: int | None = None
         self.serial_uri = serial_uri
         if port is not None:
-            self._listener = socket.create_server((host, port))
+            self._listener = socket.create_server((host, port), backlog=socket.SOMAXCONN)
             self._listener.settimeout(0.2)
             self.port = self._listener.getsockname()[1]
 

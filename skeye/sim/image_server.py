@@ -481,7 +481,9 @@ class ImageServer:
         self._lock = threading.Lock()
         self._handlers: list[_ClientHandler] = []
         self._closed = False
-        self._listener = socket.create_server((host, port), backlog=16)
+        # A full accept queue drops new SYNs: a real client then waits out TCP's 1 s (3 s, ...)
+        # retransmission while attackers' connections wait to be turned away. Keep it long.
+        self._listener = socket.create_server((host, port), backlog=socket.SOMAXCONN)
         self._listener.setblocking(False)
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -553,7 +555,8 @@ class ImageServer:
                         if key.fileobj is not self._listener:
                             continue
                         try:
-                            self._accept_one()
+                            while self._accept_one():  # every connection waiting, at once
+                                pass
                         except OSError as exc:
                             when = accept_failed(exc, said_s, "image server")
                             if when is None:
@@ -563,16 +566,21 @@ class ImageServer:
             if self._closed:
                 self._listener.close()
 
-    def _accept_one(self) -> None:
+    def _accept_one(self) -> bool:
+        """Accept one waiting connection; False when none waits (or the server closes)."""
+        if self._closed:
+            return False
         try:
             sock, peer = self._listener.accept()
-        except (BlockingIOError, ConnectionAbortedError):
-            return
+        except BlockingIOError:
+            return False
+        except ConnectionAbortedError:
+            return True
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except OSError:  # the client went already
             sock.close()
-            return
+            return True
         address = f"{peer[0]}:{peer[1]}"
         key = socket_peer_key(sock)
         with self._lock:
@@ -611,3 +619,4 @@ class ImageServer:
             except OSError:
                 pass
             sock.close()
+        return True

@@ -99,7 +99,8 @@ class ControlServer:
         self._sessions: set[ClientSession] = set()
         self._lock = threading.Lock()
         self._closing = threading.Event()
-        self._listener = socket.create_server((host, port), reuse_port=False)
+        self._listener = socket.create_server((host, port), reuse_port=False,
+                                              backlog=socket.SOMAXCONN)
         self._listener.settimeout(0.2)
         self.host = host
         self.port = self._listener.getsockname()[1]
