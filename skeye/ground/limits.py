@@ -10,7 +10,9 @@ protocol with two additions uvicorn lacks:
 
 - **a header timeout**: a connection must complete its request head within
   ``header_timeout_s`` of connecting (and of its previous response, on keep-alive); else it is
-  answered 408 and closed. A client that trickles one header byte every 2 s holds nothing.
+  answered 408 and closed (closed without a word when it sent nothing at all: a browser's spare
+  connection, which a stray 408 could be mistaken on for the answer to its next request). A
+  client that trickles one header byte every 2 s holds nothing.
 - **a per-peer connection cap**: one peer (:func:`skeye.peers.peer_key`: a local user however
   many loopback addresses it binds, or a remote address) holds at most ``max_per_peer``
   connections (WebSockets included). A new connection beyond it takes the place of that
@@ -32,7 +34,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-import h11
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
@@ -121,6 +122,7 @@ class LimitedH11Protocol(H11Protocol):
         self.peer = ""
         self.connected_s = 0.0
         self.awaiting_head = True
+        self._head_bytes = False  # a byte of the awaited head has come
         self._head_timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
@@ -140,6 +142,7 @@ class LimitedH11Protocol(H11Protocol):
 
     def _arm(self) -> None:
         self.awaiting_head = True
+        self._head_bytes = False
         if self._head_timer is not None:
             self._head_timer.cancel()
         self._head_timer = self.loop.call_later(self.limits.header_timeout_s, self._head_late)
@@ -150,13 +153,19 @@ class LimitedH11Protocol(H11Protocol):
             self.limits.timed_out += 1
             log.info("closing a connection of %s: no complete request head within %g s",
                      self.peer, self.limits.header_timeout_s)
-            self.transport.write(_TIMEOUT_408)
+            if self._head_bytes:
+                self.transport.write(_TIMEOUT_408)
             self.transport.close()
 
     def data_received(self, data: bytes) -> None:
+        self._head_bytes = True
+        cycle = self.cycle
         super().data_received(data)
-        if self.awaiting_head and self.conn.their_state is not h11.IDLE:
-            self.awaiting_head = False  # the head is in: the request is the app's now
+        # The head is in when it started a new request cycle (or a WebSocket took the
+        # connection over): the request is the app's now.
+        if self.awaiting_head and (self.cycle is not cycle
+                                   or self.transport.get_protocol() is not self):
+            self.awaiting_head = False
             if self._head_timer is not None:
                 self._head_timer.cancel()
                 self._head_timer = None

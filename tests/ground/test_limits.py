@@ -201,3 +201,30 @@ def test_skeye_ground_at_a_low_descriptor_limit_serves_a_real_client_under_attac
             proc.wait(30)
         except subprocess.TimeoutExpired:
             proc.kill()
+
+
+def test_a_trickled_second_request_on_a_kept_alive_connection_is_closed_too(ground) -> None:
+    web, limits = ground
+    sock = socket.create_connection(("127.0.0.1", web.port), timeout=30)
+    head = (f"GET /api/state HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Skeye-Token: {web.token}\r\n\r\n"
+            .encode())
+    sock.sendall(head)
+    first = b""
+    while b"\r\n\r\n" not in first:
+        first += sock.recv(65536)
+    assert first.startswith(b"HTTP/1.1 200"), first[:100]
+    answer = b""
+    try:
+        for byte in head:  # the next request, one byte at a time
+            sock.sendall(bytes([byte]))
+            time.sleep(0.1)
+    except (BrokenPipeError, ConnectionResetError):
+        pass
+    try:
+        while chunk := sock.recv(65536):
+            answer += chunk
+    except ConnectionResetError:
+        pass
+    sock.close()
+    assert b"HTTP/1.1 408" in answer or b"HTTP/1.1 200" not in answer, answer[-300:]
+    assert limits.timed_out == 1
