@@ -2,9 +2,11 @@
 
 It connects to a simulator (``--sim``), spawns a robot and serves one ground-control client over
 TCP (``--port``, default 7000, bound to 127.0.0.1 unless ``--host``) or a serial line
-(``--serial /dev/ttyUSB0 --baud 57600``). When the simulator runs in lockstep the pilot drives
-its clock: ``--lockstep-rate`` sim seconds per wall second (1 = real time, 0 = as fast as the
-CPU allows).
+(``--serial /dev/ttyUSB0 --baud 57600``). When the simulator goes away the pilot keeps serving
+(the vehicle is lost: failsafe), tries every second to connect again at the same address, and
+when the simulator is back spawns its robot there again and says so. When the simulator runs
+in lockstep the pilot drives its clock: ``--lockstep-rate`` sim seconds per wall second (1 =
+real time, 0 = as fast as the CPU allows).
 
 The flight envelope (``skeye.pilot.envelope``: ceiling above home, radius around home) comes
 from the robot class's file (``[envelope]``; a class outside the built-ins is looked up in

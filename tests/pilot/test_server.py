@@ -117,3 +117,18 @@ def test_a_quiet_ground_station_keeps_the_link_alive_with_its_heartbeat():
             v.wait_state(NavState.HOLDING, timeout_s=30)
             time.sleep(3.0)  # well past the link timeout, sending no command
             assert pilot.boards.state is NavState.HOLDING
+
+
+def test_pad_mode_max_speed_is_checked_against_the_vehicles_limit():
+    """Issue 31: PAD_MODE's max speed was stored whatever it was; now over the vehicle's limit
+    (its robot file's max_speed_m_s, here 3 m/s) it is refused with code 3 naming the limit, as
+    MOVE_BY's speed is."""
+    air = FakeAirframe()
+    with PilotServer(air, port=0, settings=BoardSettings(max_speed_m_s=3.0)) as pilot, \
+            Vehicle.open(pilot.address) as v:
+        with pytest.raises(CommandRejected) as info:
+            v.pad_mode("hold", 0.05, 5.0)
+        assert info.value.code == 3 and "limit of 3 m/s" in info.value.reason
+        assert pilot.boards.pad.settings.max_speed_m_s == 0.0  # nothing stored
+        v.pad_mode("hold", 0.05, 0.5)
+        assert pilot.boards.pad.settings.max_speed_m_s == pytest.approx(0.5)
