@@ -105,14 +105,29 @@ def _send_to_simulator(port: int, line: bytes) -> None:
 def test_crash_reset_and_a_simulator_restart_on_skeye_up(up: Up) -> None:
     wait_until(lambda: up.nav_state() == "landed", 300, "ground control showing the vehicle")
 
-    # 1. The probe's wind line: CRASHED with the cause on the page within 2 s.
-    _send_to_simulator(up.sim, PROBE_WIND)
-    sent_s = time.monotonic()
-    seen = wait_until(lambda: (s := up.state()).get("nav", {}) and s["nav"]["state"] == "crashed"
-                      and (s.get("health") or {}).get("status") == "crashed" and s, 60,
-                      "ground control showing CRASHED")
-    shown_s = time.monotonic() - sent_s
-    print(f"ground showed CRASHED {shown_s:.2f} s after the wind line: {seen['health']}")
+    # 1. The probe's wind line: CRASHED with the cause on the page within 2 s. The line draws
+    # the force's direction and magnitude (uniform in 0..50 N) when it arrives: a draw under
+    # what the gear's friction and footprint hold (about 5 N, one in ten) moves nothing, and the
+    # line is sent again (a new draw), as the probe would.
+    def crashed() -> dict[str, Any] | None:
+        s = up.state()
+        if (s.get("nav") or {}).get("state") == "crashed" and \
+                (s.get("health") or {}).get("status") == "crashed":
+            return s
+        return None
+
+    draws = 0
+    seen = None
+    while seen is None and draws < 6:
+        _send_to_simulator(up.sim, PROBE_WIND)
+        draws += 1
+        sent_s = time.monotonic()
+        while seen is None and time.monotonic() - sent_s < 2.0:
+            seen = crashed()
+        shown_s = time.monotonic() - sent_s
+    assert seen is not None, "six draws of the probe's wind, no CRASHED within 2 s of any"
+    print(f"ground showed CRASHED {shown_s:.2f} s after the wind line (draw {draws}): "
+          f"{seen['health']}")
     assert shown_s < 2.0, shown_s
     assert "crashed" in seen["health"]["reason"]
     refused = up.command("take_off", height_m=1.0)

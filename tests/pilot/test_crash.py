@@ -9,7 +9,7 @@ looks on ("pad not seen"), take-off is refused naming the crash, and RESET bring
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
@@ -46,11 +46,15 @@ def _lockstep_sim_with_images(robots: Path) -> Iterator[tuple[ControlServer, Ima
         yield control, images
 
 
-def _fly(stack: ExitStack, control: ControlServer, images: ImageServer, **spawn: object
+def _fly(stack: ExitStack, control: ControlServer, images: ImageServer,
+         before: Callable[[], None] = lambda: None, **spawn: object
          ) -> tuple[PilotServer, PadVision, Vehicle]:
+    """A pilot on a robot spawned as ``spawn`` says; ``before`` runs before the pilot steps the
+    lockstep simulator (so what it sets happens at a known step)."""
     sim = stack.enter_context(connect(f"127.0.0.1:{control.port}",
                                       images=f"127.0.0.1:{images.port}", timeout_s=60.0))
     robot = sim.spawn(SMALL_CAMERA_ROBOT, **spawn)  # type: ignore[arg-type]
+    before()
     pilot = stack.enter_context(PilotServer(
         SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0, tick_s=0.02,
         settings=BoardSettings(link_timeout_s=600.0), vision=pad_vision_factory(sim, robot)))
@@ -61,13 +65,15 @@ def _fly(stack: ExitStack, control: ControlServer, images: ImageServer, **spawn:
 
 
 def test_the_probe_wind_line_is_a_crash_and_reset_brings_the_vehicle_back(tmp_path) -> None:
+    """The vehicle on the pad, as under ``skeye up``; the probe's line is sent before the pilot
+    steps the lockstep simulator, so the force it draws (direction and magnitude uniform: a
+    draw under what the vehicle's gear holds would not move it) is the same every run."""
     with ExitStack() as stack:
         control, images = stack.enter_context(_lockstep_sim_with_images(_robot_dir(tmp_path)))
-        pilot, vision, vehicle = _fly(stack, control, images, start="Pad1")
-        vehicle.take_off(1.0)
-        vehicle.wait_state(NavState.HOLDING, timeout_s=120)
         wind = stack.enter_context(connect(f"127.0.0.1:{control.port}", timeout_s=60.0))
-        wind.set_wind("random_force", "f_max_n=50,tick_s=3600")  # the probe's line
+        pilot, vision, vehicle = _fly(
+            stack, control, images, start="Pad1",
+            before=lambda: wind.set_wind("random_force", "f_max_n=50,tick_s=3600"))
 
         vehicle.wait_state(NavState.CRASHED, timeout_s=120)
         health = wait_until(lambda: vehicle.health if vehicle.health and
