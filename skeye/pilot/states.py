@@ -9,9 +9,9 @@ the state is rejected before anything is sent to the simulator. States are the N
 states of docs/protocols/packets.md.
 
 The sticks always win (docs/pilot.md, "Manual sticks take over"): STICKS (CTRL_INPUT with its
-axis bits set, motors running) is legal in every state but CRASHED and leads to MANUAL, whatever flew the
-vehicle before (a take-off, a move, a pad mode, a landing, a failsafe), as PX4 hands an
-automatic mode to the sticks when they move (COM_RC_OVERRIDE). MANUAL ends as a real
+axis bits set, motors running) is legal in every state but CRASHED and leads to MANUAL,
+whatever flew the vehicle before (a take-off, a move, a pad mode, a landing, a failsafe), as
+PX4 hands an automatic mode to the sticks when they move (COM_RC_OVERRIDE). MANUAL ends as a real
 autopilot's manual mode does: by a mode change from ground control (HOLD, a move, LAND), by
 the motors stopping on the ground, or by losing the link the sticks come over (FAILSAFE).
 CRASHED is entered from every state when the vehicle crashes, and left only by RESET (or by a
