@@ -25,11 +25,17 @@ import logging
 import math
 import signal
 import threading
+from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from skeye.errors import ConfigError, LinkClosed, SkeyeError
+from skeye.errors import ConfigError, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.pilot.airframe import (
+    AirframeOptions,
+    airframe_scheme,
+    open_airframe,
+)
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
@@ -71,19 +77,36 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     return envelope, source
 
 
+def airframe_options(args: argparse.Namespace) -> AirframeOptions:
+    """The pilot's options as every airframe backend takes them."""
+    location = None
+    if args.location is not None:
+        try:
+            north, east, down = (float(v) for v in args.location.split(","))
+        except ValueError:
+            raise ConfigError(f"--location must be north,east,down in m, got "
+                              f"{args.location!r}") from None
+        location = (north, east, down)
+    return AirframeOptions(
+        robot=args.robot, name=args.name, start=args.start, location_ned_m=location,
+        images=args.images, timeout_s=args.timeout, frozen_timeout_s=args.sim_frozen_timeout,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code (0; 1 for an error; 2 for a
-    bad option; :data:`EXIT_LOST_SIMULATOR` when the simulator link failed)."""
-    from skeye.control.connection import connect
-    from skeye.pilot.sim_airframe import SimAirframe
+    bad option; :data:`EXIT_LOST_SIMULATOR` when the vehicle (simulator or LL board) could not
+    be reached, or its link failed)."""
     from skeye.processes import check_ports_free
 
+    airframe_uri = args.airframe or f"sim://{args.sim}"
     try:
         envelope, envelope_source = flight_envelope(args)
-    except ConfigError as exc:
+        airframe_scheme(airframe_uri)
+        options = airframe_options(args)
+    except (ConfigError, LocalProtocolError) as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
-    settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
     if args.video_port is not None:
         problem = video_options_problem(args)
         if problem:
@@ -106,79 +129,68 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
-    lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
+    airframe: Any = None
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
         if args.video_port is not None:
             ports.append(("the pilot's video", args.host, args.video_port, "--video-port"))
         if ports:  # before the robot is spawned: a taken port leaves nothing behind
             check_ports_free(ports)
-        with connect(args.sim, images=args.images, timeout_s=args.timeout) as sim:
-            sim.add_close_hook(lambda error: None if sim.closed else lost.append(error))
-            try:
-                if args.location is not None:
-                    north, east, down = (float(v) for v in args.location.split(","))
-                    robot = sim.spawn(
-                        args.robot, location_ned_m=(north, east, down), name=args.name
-                    )
-                else:
-                    robot = sim.spawn(args.robot, start=args.start, name=args.name)
-            except SkeyeError as exc:
-                if "already exists" in str(exc):
-                    raise SkeyeError(
-                        f"{exc}; another pilot or client flies it - give this one another "
-                        "name with --name"
-                    ) from None
-                raise
-            # Flies by the robot file's speed limits.
-            airframe = SimAirframe(sim, robot, frozen_timeout_s=args.sim_frozen_timeout)
+        airframe = open_airframe(airframe_uri, options)
+        with ExitStack() as stack:
+            stack.callback(airframe.close)
+            limits = airframe.limits
             settings = BoardSettings(
-                link_timeout_s=settings.link_timeout_s,
-                land_timeout_s=settings.land_timeout_s,
-                max_speed_m_s=robot.motion_config.max_speed_m_s,
-                default_speed_m_s=min(1.0, robot.motion_config.max_speed_m_s),
-                max_climb_m_s=robot.motion_config.max_climb_m_s,
+                link_timeout_s=args.link_timeout,
+                land_timeout_s=args.land_timeout,
+                max_speed_m_s=limits.max_speed_m_s,
+                default_speed_m_s=min(1.0, limits.max_speed_m_s),
+                max_climb_m_s=limits.max_climb_m_s,
                 envelope=envelope,
             )
             vision = None
+            fov_source: Any = None
             if args.images is not None:
+                sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
+                if sim is None or robot is None:
+                    print(f"skeye pilot: --images reads the camera of a robot the pilot spawned "
+                          f"(sim://); {airframe_uri} has none: give --camera URI", flush=True)
+                    return 2
+                fov_source = sim
                 vision = pad_vision_factory(sim, robot, args.camera, calibration,
                                             latency_s=latency_s,
                                             predict=not args.no_vision_prediction)
-            lockstep = sim.mode == "lockstep"
-            tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
+            lockstep = airframe.lockstep
+            tick_s = airframe.control_period_s if lockstep else args.tick
             video = None
             if args.video_port is not None:
                 video = VideoServer(
-                    host=args.host, port=args.video_port, camera=f"{robot.name}/{args.camera}",
-                    fov_h_rad=camera_fov_rad(sim, args.camera), jpeg_quality=args.video_quality,
-                    max_fps=args.video_fps, max_clients=args.video_clients,
+                    host=args.host, port=args.video_port, camera=f"{args.name}/{args.camera}",
+                    fov_h_rad=camera_fov_rad(fov_source, args.camera),
+                    jpeg_quality=args.video_quality, max_fps=args.video_fps,
+                    max_clients=args.video_clients,
                 )
-            try:
-                server = PilotServer(
-                    airframe,
-                    host=args.host,
-                    port=None if args.serial else args.port,
-                    serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
-                    settings=settings,
-                    tick_s=tick_s,
-                    lockstep=lockstep,
-                    lockstep_rate=args.lockstep_rate,
-                    ground_clock=args.ground_clock,
-                    vision=vision,
-                    video=video,
-                )
-            except BaseException:
-                if video is not None:
-                    video.close()
-                raise
+                stack.callback(video.close)
+            server = PilotServer(
+                airframe,
+                host=args.host,
+                port=None if args.serial else args.port,
+                serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
+                settings=settings,
+                tick_s=tick_s,
+                lockstep=lockstep,
+                lockstep_rate=args.lockstep_rate,
+                ground_clock=args.ground_clock,
+                vision=vision,
+                video=video,
+            )
             stop = threading.Event()
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, lambda *_: stop.set())
             with server:
                 mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
                 print(
-                    f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
+                    f"skeye pilot: {airframe.describe()} ({mode}); "
                     f"ground control on {server.address}; flight envelope: "
                     f"{envelope.describe()} ({envelope_source})"
                     f"{'; video on ' + video.address if video is not None else ''}",
@@ -192,7 +204,9 @@ def run(args: argparse.Namespace) -> int:
             print("skeye pilot: stopping", flush=True)
     except SkeyeError as exc:
         print(f"skeye pilot: {exc}", flush=True)
-        if lost or isinstance(exc, LinkClosed):
+        if airframe is None and isinstance(exc, (LinkClosed, LinkTimeout)):
+            return EXIT_LOST_SIMULATOR  # the vehicle (or simulator) cannot be reached
+        if getattr(airframe, "link_failed", None) is not None or isinstance(exc, LinkClosed):
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
@@ -275,7 +289,16 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address")
+    p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address (the "
+                   "airframe sim://ADDRESS when --airframe is not given)")
+    p.add_argument(
+        "--airframe",
+        default=None,
+        metavar="URI",
+        help="the vehicle to fly: sim://HOST:PORT (a robot of the simulator; default "
+        "sim://<--sim>), asctec-ll://serial/dev/ttyS1?baud=57600 or asctec-ll://tcp/HOST:PORT "
+        "(an AscTec low-level board, real or `skeye sim --ll-board`); docs/onboard.md",
+    )
     p.add_argument(
         "--images",
         default=None,
