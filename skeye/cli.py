@@ -77,6 +77,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from skeye.sim.world import load_world
 
     image_format, image_quality = image_defaults(args)  # before anything starts
+    ll_boards = ll_board_specs(args)
     world = load_world(args.world)
     validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
     wind = make_settings(args.wind, parse_params(args.wind_params))
@@ -142,6 +143,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 f"{f' {image_quality}' if image_quality is not None else ''} by default)",
                 flush=True,
             )
+        if ll_boards:
+            from skeye.hil.cli import describe, start_ll_board
+
+            for spec in ll_boards:
+                board = start_ll_board(stack, spec, f"127.0.0.1:{server.port}", host=args.host)
+                print(f"skeye sim: {describe(board)}", flush=True)
         if args.host == "127.0.0.1":
             print(
                 "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",
@@ -157,6 +164,21 @@ def cmd_sim(args: argparse.Namespace) -> int:
         else:
             print("skeye sim: stopping", flush=True)
     return ENGINE_FAILED_STATUS if runner.error is not None else 0
+
+
+def ll_board_specs(args: argparse.Namespace) -> list[Any]:
+    """``--ll-board`` values, parsed before anything starts (ConfigError names a bad one)."""
+    if not args.ll_board:
+        return []
+    from skeye.hil.cli import parse_ll_board
+
+    specs = [parse_ll_board(text) for text in args.ll_board]
+    names = [spec.name for spec in specs]
+    if len(set(names)) != len(names):
+        from skeye.errors import ConfigError
+
+        raise ConfigError(f"--ll-board names must differ, got {', '.join(names)}")
+    return specs
 
 
 def _add_sim(sub: Any) -> None:
@@ -249,6 +271,16 @@ def _add_sim(sub: Any) -> None:
         default=None,
         metavar="FILE",
         help="record every line sent and received, and ground truth, to FILE (docs/recording.md)",
+    )
+    p.add_argument(
+        "--ll-board",
+        action="append",
+        default=[],
+        metavar="NAME=LINE",
+        help="spawn robot NAME and present it as an AscTec low-level board on LINE: pty (a "
+        "pseudo-terminal; its path is printed), tcp:PORT or serial:DEVICE; options after "
+        "commas: robot=CLASS, start=POSE, baud=N, serial_timeout=S; repeatable. The pilot "
+        "flies it with --airframe asctec-ll://... (docs/onboard.md)",
     )
     p.set_defaults(func=cmd_sim)
 
