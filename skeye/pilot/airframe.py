@@ -153,8 +153,10 @@ class AirframeOptions:
     """What ``skeye pilot`` tells every backend; each uses the fields that apply to it.
 
     ``robot``, ``name``, ``start`` / ``location_ned_m`` and ``images`` are about spawning a
-    robot in the simulator (``sim://``); ``timeout_s`` bounds connecting and each answer;
-    ``frozen_timeout_s`` is the realtime frozen-simulator check (``sim://``).
+    robot in the simulator (``sim://``); ``robot`` and ``robot_dirs`` also name the robot file
+    whose limits a real vehicle's backend takes (``asctec-ll://``: the stick scales);
+    ``timeout_s`` bounds connecting and each answer; ``frozen_timeout_s`` is the realtime
+    frozen-simulator check (``sim://``).
     """
 
     robot: str = "hummingbird"
@@ -164,6 +166,7 @@ class AirframeOptions:
     images: str | None = None
     timeout_s: float = 10.0
     frozen_timeout_s: float = 5.0
+    robot_dirs: tuple[str, ...] = ()  # where robot files outside the built-ins are found
 
 
 @runtime_checkable

@@ -37,6 +37,7 @@ from skeye.pilot.airframe import (
     open_airframe,
 )
 from skeye.pilot.boards import BoardSettings
+from skeye.pilot.camera import camera_scheme
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
 from skeye.pilot.video_server import (
@@ -90,6 +91,7 @@ def airframe_options(args: argparse.Namespace) -> AirframeOptions:
     return AirframeOptions(
         robot=args.robot, name=args.name, start=args.start, location_ned_m=location,
         images=args.images, timeout_s=args.timeout, frozen_timeout_s=args.sim_frozen_timeout,
+        robot_dirs=(args.robot_dir,) if args.robot_dir else (),
     )
 
 
@@ -112,12 +114,20 @@ def run(args: argparse.Namespace) -> int:
         if problem:
             print(f"skeye pilot: {problem}", flush=True)
             return 2
+    camera_uri = args.camera if "://" in args.camera else None
+    if camera_uri is not None:
+        try:
+            camera_scheme(camera_uri)
+        except LocalProtocolError as exc:
+            print(f"skeye pilot: --camera: {exc}", flush=True)
+            return 2
     calibration = None
     if args.calibration is not None:
         from skeye.vision.calibration import load_calibration
 
-        if args.images is None:
-            print("skeye pilot: --calibration is for the pad vision: it needs --images", flush=True)
+        if args.images is None and camera_uri is None:
+            print("skeye pilot: --calibration is for the pad vision: it needs --images or "
+                  "--camera URI", flush=True)
             return 2
         try:
             calibration = load_calibration(args.calibration)
@@ -149,14 +159,32 @@ def run(args: argparse.Namespace) -> int:
                 envelope=envelope,
             )
             vision = None
-            fov_source: Any = None
-            if args.images is not None:
+            camera_name, fov_h_rad = args.camera, None
+            if camera_uri is not None:
+                source = open_camera_for(camera_uri, airframe, args.name, calibration,
+                                         args.timeout)
+                stack.callback(source.close)
+                fov_h_rad = source.fov_h_rad
+                if calibration is None and fov_h_rad is None:
+                    print(f"skeye pilot: --camera {camera_uri}: its field of view is not known: "
+                          "add fov_deg= to the URI, or give --calibration camera.toml (skeye "
+                          "calibrate)", flush=True)
+                    return 2
+                if source.lost:
+                    print(f"skeye pilot: {source.lost}; the pad modes hold still until it "
+                          "gives frames", flush=True)
+                camera_name = camera_uri
+                vision = camera_vision_factory(source, fov_h_rad, calibration,
+                                               lockstep=airframe.lockstep, latency_s=latency_s,
+                                               predict=not args.no_vision_prediction)
+            elif args.images is not None:
                 sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
                 if sim is None or robot is None:
                     print(f"skeye pilot: --images reads the camera of a robot the pilot spawned "
                           f"(sim://); {airframe_uri} has none: give --camera URI", flush=True)
                     return 2
-                fov_source = sim
+                fov_h_rad = camera_fov_rad(sim, args.camera)
+                camera_name = f"{args.name}/{args.camera}"
                 vision = pad_vision_factory(sim, robot, args.camera, calibration,
                                             latency_s=latency_s,
                                             predict=not args.no_vision_prediction)
@@ -165,8 +193,9 @@ def run(args: argparse.Namespace) -> int:
             video = None
             if args.video_port is not None:
                 video = VideoServer(
-                    host=args.host, port=args.video_port, camera=f"{args.name}/{args.camera}",
-                    fov_h_rad=camera_fov_rad(fov_source, args.camera),
+                    host=args.host, port=args.video_port, camera=camera_name,
+                    fov_h_rad=fov_h_rad if fov_h_rad is not None else (
+                        calibration.fov_h_rad if calibration is not None else 0.0),
                     jpeg_quality=args.video_quality, max_fps=args.video_fps,
                     max_clients=args.video_clients,
                 )
@@ -210,6 +239,55 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
+
+
+def open_camera_for(uri: str, airframe: Any, robot_name: str, calibration: Any,
+                    timeout_s: float) -> Any:
+    """Open ``--camera URI`` on the airframe's clock. A ``sim://`` camera of the robot a
+    ``sim://`` airframe spawned gets its field of view from the simulator.
+
+    Raises:
+        LocalProtocolError / CameraError: a bad URI, or a camera that cannot be opened.
+    """
+    from skeye.pilot.camera import CameraOptions, open_camera
+
+    fov = None
+    sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
+    if sim is not None and robot is not None and uri.lower().startswith("sim://"):
+        from skeye.pilot.camera_sim import parse_sim_camera
+
+        _, _, name, _ = parse_sim_camera(uri, robot.name)
+        owner, _, camera = name.partition("/")
+        if owner == robot.name:
+            fov = camera_fov_rad(sim, camera)
+    if airframe.clock_is_sim:
+        def clock() -> float:
+            return float(airframe.snapshot().time_s)
+    else:
+        import time
+
+        clock = time.monotonic
+    size = (calibration.width_px, calibration.height_px) if calibration is not None else None
+    options = CameraOptions(clock=clock, clock_is_sim=airframe.clock_is_sim, robot=robot_name,
+                            fov_h_rad=fov, size_px=size, timeout_s=timeout_s)
+    return open_camera(uri, options)
+
+
+def camera_vision_factory(source: Any, fov_h_rad: float | None, calibration: Any = None, *,
+                          lockstep: bool = False, latency_s: float | None = 0.0,
+                          predict: bool = True, params: Any = None) -> Any:
+    """A factory for the pilot's PadVision on a camera source (``--camera URI``): the same
+    detector, calibration and latency handling as on the simulator's camera."""
+    from skeye.pilot.camera import CameraMount
+    from skeye.pilot.vision import PadVision
+
+    def make(boards: Any, lock: Any) -> PadVision:
+        return PadVision(boards, CameraMount(source), lock,
+                         fov_h_rad=fov_h_rad if fov_h_rad is not None else 0.0,
+                         lockstep=lockstep, calibration=calibration, latency_s=latency_s,
+                         predict=predict, params=params)
+
+    return make
 
 
 def vision_latency_s(text: str) -> float | None:
@@ -262,8 +340,9 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
 def video_options_problem(args: argparse.Namespace) -> str:
     """What is wrong with the ``--video-*`` options ('' when nothing), checked before the
     simulator is reached."""
-    if args.images is None:
-        return "--video-port serves the camera: it needs --images (the image server)"
+    if args.images is None and "://" not in args.camera:
+        return ("--video-port serves the camera: it needs --images (the image server) or "
+                "--camera URI")
     if not 1 <= args.video_quality <= 100:
         return f"--video-quality must be 1..100, got {args.video_quality}"
     if not 0.01 <= args.video_fps <= 1000:
@@ -304,7 +383,15 @@ def register(subparsers: Any) -> None:
         default=None,
         help="image server address (e.g. 127.0.0.1:5003): enables landing-pad vision",
     )
-    p.add_argument("--camera", default="Down", help="the downward camera's name")
+    p.add_argument(
+        "--camera",
+        default="Down",
+        metavar="NAME|URI",
+        help="the downward camera: a camera name of the spawned robot (with --images), or a "
+        "URI: sim://HOST:PORT/ROBOT/CAMERA (the simulator's image server), "
+        "v4l2:///dev/video0?width=800&height=600&fps=30 (a real camera), file://video.mp4 "
+        "(a recorded video, at its frame rate); docs/onboard.md",
+    )
     p.add_argument(
         "--calibration",
         default=None,

@@ -8,11 +8,12 @@ one processed (``SEN {Type Camera}``), the worker fetches the newest frame from 
 pitch, exactly as ``skeye vision detect`` does on a real camera image. The estimate goes into a
 bounded queue (the oldest is dropped when it is full); the control loop's :meth:`PadVision.step`
 drains it into the boards' :class:`PadController` (the PAD packet) without ever waiting on the
-camera. A camera error (timeout, reset, refused, image server restarted) counts as "pad not
-seen" for that frame; the camera reconnects on the next frame, and since a failed request drops
-its connection, a late frame never answers a later request. In lockstep the loop waits (at most
-``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible; the
-simulator is paused meanwhile, so nothing flies unwatched.
+camera. A camera error (timeout, reset, refused, image server restarted, a device unplugged)
+counts as "pad not seen" for that frame, and the pad modes hold still (no search) until a
+frame comes again (``stats.camera_lost``); the camera reconnects on the next frame, and since
+a failed request drops its connection, a late frame never answers a later request. In
+lockstep the loop waits (at most ``lockstep_wait_s``) for the frame of the step it just made,
+so a run stays reproducible; the simulator is paused meanwhile, so nothing flies unwatched.
 
 Latency (docs/pilot.md, "Vision latency"): each observation is used ``latency_s`` after its
 frame's capture (configured, or measured, or as soon as it is done), and the pad hold flies on
@@ -111,6 +112,7 @@ class VisionStats:
     max_latency_s: float = 0.0
     too_slow: str = ""  # why the vision is too slow to hold on (empty while it is not)
     too_slow_count: int = 0  # observations refused for being too old
+    camera_lost: str = ""  # why the camera gives no frames (empty while it does)
 
 
 MAX_VISION_LATENCY_S = 1.0
@@ -355,10 +357,16 @@ class PadVision:
         except SkeyeError as exc:
             self.stats.errors += 1
             self.stats.last_error = str(exc)
-            log.warning("camera frame not available (pad not seen): %s", exc)
+            if not self.stats.camera_lost:
+                log.warning("camera lost (pad not seen; the pad modes hold still until frames "
+                            "come again): %s", exc)
+            self.stats.camera_lost = str(exc)
             self._last_frame = announced
             self._stop.wait(0.1)  # do not hammer a server that is down
             return PadObservation(announced_time_s, False)
+        if self.stats.camera_lost:
+            log.warning("camera frames again: pad navigation resumes")
+            self.stats.camera_lost = ""
         if image.frame <= self._last_frame:
             return None
         self._last_frame = image.frame
@@ -421,7 +429,7 @@ class PadVision:
                 boards.airframe.hover()
         if mode == PadAction.OFF or boards.state is not NavState.HOLDING:
             return  # landed, taking off, flying a ground command, landing, failsafe: hands off
-        if self.stats.too_slow:
+        if self.stats.too_slow or self.stats.camera_lost:
             boards.airframe.set_velocity(0.0, 0.0, 0.0, 0.0, None)
             return
         sp = self.law.update(now.time_s, found, forward_m, right_m, height_m,
