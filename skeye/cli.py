@@ -18,6 +18,9 @@ from skeye.errors import SkeyeError
 from skeye.processes import wait_for_signal
 
 ENGINE_FAILED_STATUS = 3
+EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
+            "uvicorn": "ground"}
+"""A dependency that lives in an extra (pyproject.toml) -> the extra's name."""
 FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
 """Fault injection for tests (docs/reliability.md): the engine raises once sim time passes this."""
 
@@ -146,9 +149,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
         if ll_boards:
             from skeye.hil.cli import describe, start_ll_board
 
+            image_port = images.port if cameras is not None else None
             for spec in ll_boards:
                 board = start_ll_board(stack, spec, f"127.0.0.1:{server.port}", host=args.host)
-                print(f"skeye sim: {describe(board)}", flush=True)
+                print(f"skeye sim: {describe(board, image_port, args.host)}", flush=True)
         if args.host == "127.0.0.1":
             print(
                 "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",
@@ -383,6 +387,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         return int(args.func(args))
+    except ModuleNotFoundError as exc:
+        extra = EXTRA_OF.get((exc.name or "").split(".")[0])
+        if extra is None:
+            raise
+        print(f"skeye {args.command}: error: {exc.name} is not installed: this command needs "
+              f"skeye's {extra} extra (pip install 'skeye[{extra}]'; the base install is the "
+              "onboard pilot's, docs/onboard.md)", file=sys.stderr)
+        return 2
     except SkeyeError as exc:
         print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -137,13 +137,40 @@ def start_ll_board(stack: ExitStack, spec: LLBoardSpec, control_address: str, *,
         rate=spec.rate if lockstep else None,
     )
     stack.enter_context(server)
+    server.camera = _camera(sim, spec.robot)
     return server
 
 
-def describe(server: LLBoardServer) -> str:
-    """The start-up line of one board."""
+def _camera(sim: object, robot: str) -> tuple[str, float] | None:
+    """The robot's downward camera: (name, horizontal FOV in rad, as the simulator has it)."""
+    from skeye.errors import SkeyeError
+    from skeye.robots.config import load_robot_config
+
+    try:
+        mounts = load_robot_config(robot).sensors
+    except SkeyeError:
+        return None  # a class from --robot-dir: the pilot is told no camera URI
+    for mount in mounts:
+        if mount.type_name.lower() == "camera":
+            try:
+                conf = sim.request("GETCONF", ("Type", "Camera"),  # type: ignore[attr-defined]
+                                   ("Name", mount.name))
+                return mount.name, float(conf.get_float("FOV"))
+            except SkeyeError:
+                return None
+    return None
+
+
+def describe(server: LLBoardServer, image_port: int | None = None,
+             host: str = "127.0.0.1") -> str:
+    """The start-up line of one board: where its line is, and the ``skeye pilot`` options
+    that fly it (``--camera`` too when the simulator serves images)."""
     uri = server.line.client_uri()
     if server.lockstep and server.rate is None:
         uri += ("&" if "?" in uri else "?") + "lockstep=1"
+    camera = ""
+    if image_port is not None and server.camera is not None:
+        name, fov = server.camera
+        camera = (f" --camera sim://{host}:{image_port}/{server.name}/{name}?fov_rad={fov!r}")
     return (f"{server.name} plays an AscTec LL board on {server.line.address} "
-            f"(skeye pilot --airframe {uri})")
+            f"(skeye pilot --airframe {uri}{camera})")

@@ -12,12 +12,14 @@ client of the simulator). Two workers:
   ``until`` (ms of sim time) advances the simulator to it, in steps of one control period,
   ticking the board after each, and is then answered RESULT code 0 with the sim time reached
   in its reason (``sim time 12.350000 s``); a grant already passed is answered at once, so a
-  client learns the time by granting 0. If the client leaves the line (a pseudo-terminal
-  closed, a TCP connection gone) the board's clock runs on by itself at real time: a vehicle
-  does not freeze because its onboard computer went away, and the serial timeout's emergency
-  procedure plays out. It goes back to granted time when a client grants again. Before any
-  client has been on the line, lockstep time does not move. With ``rate`` (for AscTec programs,
-  which grant no time) the board drives the lockstep clock itself at that pace.
+  client learns the time by granting 0, and the same grant sent again before it is reached is
+  answered at once with the time so far (the board is alive, only busy). If the client leaves
+  the line (a pseudo-terminal closed, a TCP connection gone) the board's clock runs on by
+  itself at real time: a vehicle does not freeze because its onboard computer went away, and
+  the serial timeout's emergency procedure plays out. It goes back to granted time when a
+  client grants again. Before any client has been on the line, lockstep time does not move.
+  With ``rate`` (for AscTec programs, which grant no time) the board drives the lockstep clock
+  itself at that pace.
 
 The board's time is the simulator's. A simulator that goes away (the control connection
 failed) is logged and the server stops answering; ``error`` says why.
@@ -26,6 +28,7 @@ failed) is logged and the server stops answering; ``error`` says why.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -48,6 +51,7 @@ from skeye.workers import Worker
 log = logging.getLogger(__name__)
 
 REALTIME_TICK_S = 0.01
+REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
 
 
 class LLBoardServer:
@@ -92,11 +96,14 @@ class LLBoardServer:
         self.parser = CommandStreamParser()
         self.error: str | None = None
         self.free_running = False
+        self.camera: tuple[str, float] | None = None  # the robot's camera: name, FOV (rad)
         self._lock = threading.Lock()  # every call into the board
         self._grants: list[float] = []
         self._granted = threading.Condition()
         self._stop = threading.Event()
         self._workers: list[Worker] = []
+        self._reported: tuple[int, int] = (0, 0)
+        self._reported_at = -REPORT_EVERY_S
 
     # -- lifecycle -----------------------------------------------------------------------
     def start(self) -> LLBoardServer:
@@ -141,6 +148,16 @@ class LLBoardServer:
                 with self._lock:
                     replies = self.board.handle(event, self.sim_time())
                 self._send(replies)
+            self._report_line()
+
+    def _report_line(self) -> None:
+        """Say (at most every ``REPORT_EVERY_S``) that the line carries garbage."""
+        errors = (self.parser.garbage_bytes, sum(self.parser.errors.values()))
+        now = time.monotonic()
+        if errors != self._reported and now - self._reported_at >= REPORT_EVERY_S:
+            log.warning("LL board %s: %d bytes of garbage skipped, %d bad frames on its line so "
+                        "far", self.name, *errors)
+            self._reported, self._reported_at = errors, now
 
     def _send(self, replies: list[Message]) -> None:
         if replies:
@@ -148,8 +165,13 @@ class LLBoardServer:
 
     def _grant(self, until_s: float) -> None:
         with self._granted:
-            self._grants.append(until_s)
+            again = until_s in self._grants
+            if not again:
+                self._grants.append(until_s)
             self._granted.notify_all()
+        if again:  # asked again while the simulator steps: say where it is (it is alive)
+            self._send([Result(int(PD.CLOCK), ResultCode.OK,
+                               f"sim time {self.sim_time():.6f} s")])
 
     def _answer_grants(self) -> None:
         """Answer every grant the sim time has reached."""
@@ -194,9 +216,11 @@ class LLBoardServer:
                     if self.free_running:
                         log.info("LL board %s: a client grants the clock again", self.name)
                         self.free_running = False
-                    while (target - self.sim_time() > self.time_step_s / 2
-                           and not self._stop.is_set()):
-                        self._advance(min(self.tick_s, target - self.sim_time()))
+                    while not self._stop.is_set():
+                        steps = math.floor((target - self.sim_time()) / self.time_step_s + 0.5)
+                        if steps < 1:
+                            break
+                        self._advance(min(self.tick_s, steps * self.time_step_s))
                         self._tick()
                     self._answer_grants()
                 elif self.rate is not None:  # the board's own clock, paced

@@ -56,7 +56,7 @@ from skeye.link.vehicle import Vehicle
 from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits
 from skeye.pilot.ll_control import LLEstimate, StickPilot, Sticks, Velocity, nav_state
 from skeye.wire.packet_units import s_to_ms
-from skeye.wire.packets import Clock, CtrlInput, PollMask, Result
+from skeye.wire.packets import PD, Clock, CtrlInput, PollMask, ResultCode, encode
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -67,6 +67,7 @@ SLOW_EVERY = 20  # cycles: 1 Hz
 SLOW = int(PollMask.RC_DATA | PollMask.IMU_RAWDATA | PollMask.CONTROLLER_OUTPUT)
 FIRST_POLL = int(EVERY_CYCLE | PollMask.GPS_DATA_ADVANCED | SLOW)
 SIM_TIME = re.compile(r"sim time (-?[0-9.]+) s")
+REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,8 @@ class AscTecLLAirframe:
         self._io_lock = threading.Lock()  # one cycle at a time on the line
         self._lost: str | None = None
         self._silent = 0
+        self._reported: tuple[int, int] = (0, 0)
+        self._reported_at = -REPORT_EVERY_S
         self._granted_s = 0.0
         self._stop = threading.Event()
         self._worker: Worker | None = None
@@ -194,14 +197,40 @@ class AscTecLLAirframe:
 
     # -- the line --------------------------------------------------------------------------
     def _grant(self, until_s: float) -> float:
-        """CLOCK: the board answers once sim time reached ``until_s``; the time reached."""
-        reply = self.vehicle.command(Clock(max(0, s_to_ms(until_s))),
-                                     timeout_s=self.settings.clock_timeout_s)
-        match = SIM_TIME.search(reply.reason) if isinstance(reply, Result) else None
-        if match is None:
-            raise CommandRejected("the LL board did not say its sim time: is it an emulated "
-                                  "board (skeye sim --ll-board) in lockstep?")
-        return float(match.group(1))
+        """CLOCK: the board answers once sim time reached ``until_s``; the time reached.
+
+        A grant is idempotent, so one whose answer is lost on the line (garbage) is sent again
+        every ``timeout_s``; the board answers a grant it is still working towards with the
+        time so far, which shows it alive. Answers for earlier times are skipped; no answer to
+        ``silent_after`` grants in a row is a silent board (LinkTimeout).
+        """
+        until_ms = max(0, s_to_ms(until_s))
+        packet = encode(Clock(until_ms))
+        deadline = time.monotonic() + self.settings.clock_timeout_s
+        self.vehicle.send_raw(packet)
+        unanswered = 0
+        while True:
+            try:
+                reply = self.vehicle.wait_result(int(PD.CLOCK), self.settings.timeout_s)
+            except LinkTimeout:
+                unanswered += 1
+                if unanswered > self.settings.silent_after or time.monotonic() > deadline:
+                    raise LinkTimeout(f"the LL board did not reach sim time {until_s:.3f} s "
+                                      f"(no answer to {unanswered} grants)") from None
+                # Lost on the line, or the simulator is busy: asking again gets the time so
+                # far from a board that is alive.
+                self.vehicle.send_raw(packet)
+                continue
+            unanswered = 0
+            if reply.code is not ResultCode.OK:
+                raise CommandRejected(reply.reason, int(reply.code))
+            match = SIM_TIME.search(reply.reason)
+            if match is None:
+                raise CommandRejected("the LL board did not say its sim time: is it an "
+                                      "emulated board (skeye sim --ll-board) in lockstep?")
+            reached = float(match.group(1))
+            if reached >= until_ms / 1000.0 - 0.0005:
+                return reached
 
     def _poll(self, mask: int, time_s: float | None = None) -> None:
         frames = self.vehicle.poll(mask, timeout_s=self.settings.timeout_s)
@@ -229,6 +258,7 @@ class AscTecLLAirframe:
                 self._poll(mask, time_s)
                 self.cycles += 1
                 self._silent = 0
+                self._report_line()
             except LinkTimeout as exc:
                 self._silent += 1
                 if self._silent >= self.settings.silent_after:
@@ -251,6 +281,20 @@ class AscTecLLAirframe:
 
     def _sticks(self) -> CtrlInput:
         return self.pilot.sticks(self.estimate.snapshot())
+
+    def line_errors(self) -> tuple[int, int]:
+        """(garbage bytes skipped, bad frames) read from the board so far."""
+        parser = self.vehicle.parser
+        return parser.garbage_bytes, self.vehicle.frame_errors
+
+    def _report_line(self) -> None:
+        """Say (at most every ``REPORT_EVERY_S``) that the line carries garbage."""
+        errors = self.line_errors()
+        now = time.monotonic()
+        if errors != self._reported and now - self._reported_at >= REPORT_EVERY_S:
+            log.warning("LL board line %s: %d bytes of garbage skipped, %d bad frames so far",
+                        self.vehicle.link.name, *errors)
+            self._reported, self._reported_at = errors, now
 
     def _lose(self, reason: str) -> None:
         if self._lost is None:

@@ -237,6 +237,13 @@ class PadVision:
         assert worker is not None
         worker.check()
         now = self._pose_now()
+        lost = getattr(self.robot.camera, "lost", None)  # a source that knows it has no frames
+        if lost and not self.stats.camera_lost:
+            log.warning("camera lost (pad not seen; the pad modes hold still until frames "
+                        "come again): %s", lost)
+            self.stats.camera_lost = lost
+            with self.lock:
+                self.boards.pad.on_frame(PadObservation(now.time_s, False))
         latest = self.robot.camera.latest
         if not self.lockstep:
             self._kick.set()
