@@ -15,8 +15,10 @@ peak memory, and what that is as a share of one core at 20 ticks and 30 frames a
 deadband, 0.3 m/s, ``--e2-s`` of sim time, 20 by default as in ``skeye validate --quick``) and a
 pad landing (PAD_MODE 2 from 1.2 m, 0.5 m off the pad), each flown on ``sim://`` and through
 the emulated LL board on a pseudo-terminal, same seed, full camera, lockstep with the time
-granted by the ground (reproducible). Printed: std / max distance from the pad centre, time
-to land and the miss, per airframe and their ratio (docs/pilot.md, "On an AscTec LL board").
+granted by the ground (reproducible), each pad mode started at the same sim time on both (the
+random force is a sequence in sim time: both flights meet the same gusts). Printed: std /
+max distance from the pad centre, time to land and the miss, per airframe and their ratio
+(docs/pilot.md, "On an AscTec LL board").
 
 Usage: ``python benchmarks/bench_onboard.py [--only cpu|hil] [--seeds 1 2 3]``. Figures from
 a loaded machine are not CPU budgets: state ``uptime`` with them.
@@ -44,13 +46,6 @@ from skeye.pilot.airframe import AirframeOptions, open_airframe
 from skeye.pilot.cli import camera_vision_factory, open_camera_for, pad_vision_factory
 from skeye.pilot.server import PilotServer
 from skeye.processes import start_skeye, stop_process
-from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation
-from skeye.sim.image_server import FrameBuffer, ImageServer
-from skeye.sim.runner import SimulationRunner
-from skeye.sim.server import ControlServer
-from skeye.sim.wind import make_settings
-from skeye.sim.world import load_world
 from skeye.wire.packets import NavState, SkeyeMask
 
 TICK_HZ = 20.0
@@ -140,14 +135,24 @@ def cpu(hold_s: float) -> None:
           f"newest frame's fetch + detection took {detect_s * 1e3:.1f} ms of wall time)")
     share = tick_cpu * TICK_HZ + frame_cpu * CAMERA_FPS
     print(f"at {TICK_HZ:g} ticks/s and {CAMERA_FPS:g} frames/s: {share * 100:.0f} % of one core "
-          f"of this machine; peak memory of this process {rss_mib:.0f} MiB "
-          f"(includes the benchmark's own imports)")
+          f"of this machine; peak memory of this process {rss_mib:.0f} MiB (the pilot and "
+          "the benchmark's ground client; no MuJoCo)")
     print(f"load average now: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 
 # -- the HIL flights ---------------------------------------------------------------------------
 @contextmanager
 def flight(kind: str, seed: int) -> Iterator[tuple[Vehicle, PilotServer, list, list]]:
+    # The simulator in this process (imported here: the cpu run measures a pilot's memory
+    # without MuJoCo, as on the vehicle).
+    from skeye.sim.cameras import CameraSystem
+    from skeye.sim.engine import Simulation
+    from skeye.sim.image_server import FrameBuffer, ImageServer
+    from skeye.sim.runner import SimulationRunner
+    from skeye.sim.server import ControlServer
+    from skeye.sim.wind import make_settings
+    from skeye.sim.world import load_world
+
     with ExitStack() as stack:
         sim = Simulation(load_world("pad"), seed=seed,
                          wind=make_settings("random_force", {"f_max_n": 0.3}))
@@ -201,10 +206,21 @@ def until(vehicle: Vehicle, pilot: PilotServer, granted: list, state: NavState) 
     return granted[0]
 
 
+HOLD_FROM_S = 8.0  # sim time PAD_MODE HOLD starts at on both airframes (the same gusts)
+LAND_FROM_S = 12.0  # ... and PAD_MODE LAND
+
+
+def run_to(vehicle: Vehicle, granted: list, time_s: float) -> None:
+    if granted[0] > time_s:
+        raise RuntimeError(f"already at {granted[0]} s, past {time_s} s")
+    run(vehicle, granted, time_s - granted[0])
+
+
 def e2(kind: str, seed: int, hold_s: float) -> tuple[float, float]:
     with flight(kind, seed) as (vehicle, pilot, truth, granted):
         vehicle.take_off(0.70 - 0.081)
         until(vehicle, pilot, granted, NavState.HOLDING)
+        run_to(vehicle, granted, HOLD_FROM_S)
         vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
         start = granted[0]
         run(vehicle, granted, hold_s)
@@ -219,6 +235,7 @@ def landing(kind: str, seed: int) -> tuple[float, float]:
         vehicle.move_by(right_m=0.5, speed_m_s=0.5)
         run(vehicle, granted, 0.25)
         until(vehicle, pilot, granted, NavState.HOLDING)
+        run_to(vehicle, granted, LAND_FROM_S)
         start = granted[0]
         vehicle.pad_mode(2, deadband_m=0.05, max_speed_m_s=0.3)
         landed = until(vehicle, pilot, granted, NavState.LANDED)

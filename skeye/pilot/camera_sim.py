@@ -3,10 +3,11 @@
 How this works: the source needs no control connection, so it serves a robot the pilot did
 not spawn (the robot ``skeye sim --ll-board`` flies as the hardware in the loop). Two image
 clients (docs/protocols/images.md): ``latest`` asks one for a 1x1 sub-rectangle with the
-META header (the newest frame's number and sim time, 32 bytes on the wire) at most every
-``probe_interval_s``; ``image()`` fetches the newest whole frame (RAW + META) on the other, so
-the vision's worker and the control loop never share a connection. A failed request drops its
-connection (a late frame never answers a later one) and raises :class:`CameraError`.
+META header (the newest frame's number and sim time, 32 bytes on the wire), at most every
+``probe_interval_s`` of wall time unless the vehicle's clock moved (in lockstep: every step);
+``image()`` fetches the newest whole frame (RAW + META) on the other, so the vision's worker
+and the control loop never share a connection. A failed request drops its connection (a late
+frame never answers a later one) and raises :class:`CameraError`.
 
 Times: frames carry the simulator's time. When the vehicle's clock is the simulator's
 (``sim://`` airframe, lockstep ``asctec-ll://``) they pass through; otherwise (a realtime
@@ -79,6 +80,7 @@ class SimCamera:
         self._locks = {"probe": threading.Lock(), "image": threading.Lock()}
         self._latest: FrameInfo | None = None
         self._probed_at = -1e9
+        self._probed_vehicle_s = -1e9
         self._offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)
         self._lost: str | None = None
         self._checked = False
@@ -121,10 +123,12 @@ class SimCamera:
     @property
     def latest(self) -> FrameInfo | None:
         now = time.monotonic()
-        if now - self._probed_at < self.probe_interval_s:
-            return self._latest
+        vehicle_now = self.options.clock()
+        if (now - self._probed_at < self.probe_interval_s
+                and vehicle_now == self._probed_vehicle_s):
+            return self._latest  # asked again at the same moment (lockstep: the same step)
         with self._locks["probe"]:
-            self._probed_at = now
+            self._probed_at, self._probed_vehicle_s = now, vehicle_now
             try:
                 frame = self._client("probe").get_subrect(0, 0, 1, 1)
             except SkeyeError as exc:

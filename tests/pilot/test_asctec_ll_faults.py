@@ -10,6 +10,8 @@
   at start, a line nobody answers: the pilot does not start, and says why;
 - the camera unplugged mid-flight (the image server closed): said, and the pad hold keeps still
   instead of climbing to search.
+
+And a realtime flight through the board (a real board's case: the pilot's own 20 Hz cycle).
 """
 
 from __future__ import annotations
@@ -246,3 +248,26 @@ def test_the_camera_unplugged_mid_flight_holds_the_pad_mode_still(caplog):
         assert pilot.loop_error is None and pilot.vehicle_lost is None
         assert not pilot.boards.pad.report().found
     assert "camera lost" in caplog.text
+
+
+def test_a_realtime_flight_through_the_ll_board():
+    """A real board runs in real time: the pilot's LL cycle is its own 20 Hz worker and the
+    snapshot's clock the onboard computer's; take off, hold, land (states and heights from the
+    board's own reports, waits on the vehicle's answers)."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="realtime", seed=8, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=pty"), f"127.0.0.1:{server.port}")
+        airframe = open_airframe(board.line.client_uri(), AirframeOptions())
+        stack.callback(airframe.close)
+        assert not airframe.lockstep and not airframe.clock_is_sim
+        pilot = stack.enter_context(PilotServer(airframe, port=0))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+        assert airframe.snapshot().altitude_m == pytest.approx(1.0 + 0.08, abs=0.2)
+        assert abs(airframe.snapshot().time_s - time.monotonic()) < 1.0  # the local clock
+        vehicle.land()
+        vehicle.wait_state(NavState.LANDED, timeout_s=60)
+        assert airframe.cycles > 40  # the worker's cycles flew it (20 Hz: 2 s)
+        assert pilot.vehicle_lost is None and board.board.emergencies == 0
