@@ -418,10 +418,12 @@ class OnboardBoards:
         edge the outward part of a stick is removed, never refused: a climb at the ceiling, a
         velocity or a tilt towards the radius limit."""
         yaw = stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0
+        # The stick's centre (2047.5) lies between two counts: both are "centred", a climb of
+        # exactly zero, so the board holds the height (else 2048 climbed at 0.4 mm/s for ever).
+        off_centre = msg.thrust - THRUST_MAX / 2
         climb = (
-            max(-1.0, min(1.0, (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2)))
-            * self.settings.max_climb_m_s
-            if bits & CtrlBits.THRUST
+            max(-1.0, min(1.0, off_centre / (THRUST_MAX / 2))) * self.settings.max_climb_m_s
+            if bits & CtrlBits.THRUST and abs(off_centre) > 0.5
             else 0.0
         )
         if bits & CtrlBits.GPS_POSITION_CONTROL:

@@ -19,8 +19,9 @@ what the board's serial protocol offers: it polls structures and sends CTRL_INPU
   (``ctrl`` 0x2F: full stick = the vehicle's maximum speed, the thrust stick a climb rate around
   its centre, centred sticks hold the position). Positions (take-off, fly-to, turn) and the
   landing are the client-side motions of :mod:`skeye.control.motion` on this estimate, flown
-  with the same GPS-mode sticks; a hover is centred sticks (the board's own position hold), and
-  so is the horizontal part of a take-off (straight up where it is). A landing holds the
+  with the same GPS-mode sticks, and after arriving they hold the target with the same PI, as
+  ``sim://``'s motion control does; a hover is centred sticks (the board's own position hold),
+  and so is the horizontal part of a take-off (straight up where it is). A landing holds the
   position with the pilot's own PI, as on ``sim://`` (the board's softer P hold let the final
   descent of a pad landing drift 2-6 cm more under E2's disturbance).
   Direct stick input from ground control is passed on in attitude or height mode. The motors
@@ -41,6 +42,7 @@ from dataclasses import dataclass, replace
 from skeye.control.motion import (
     DriveCommand,
     GoTo,
+    Hold,
     Land,
     Motion,
     MotionConfig,
@@ -338,8 +340,8 @@ class StickPilot:
 
     def _motion(self, motion: Motion, snap: Snapshot) -> DriveCommand | None:
         """Step a position motion; None once it is done (then the vehicle hovers, or idles
-        after a landing)."""
-        if motion.done:
+        after a landing). A hold (after a move) never ends by itself."""
+        if motion.done and not motion.holds:
             return None
         if isinstance(motion, Land) and snap.landed:
             # Touched down: stop the motors with the gesture (the board stops them only so);
@@ -362,8 +364,17 @@ class StickPilot:
             self.error = exc
             self.intent = None
             return None
-        if motion.done:
-            self.intent = None  # arrived: hover (the board holds); landed: idle
+        if motion.done and not motion.holds:
+            if isinstance(motion, GoTo):
+                # Arrived: hold the target, as sim://'s motion control does after a move (the
+                # arrival is within 5 cm; the hold goes on to it).
+                hold = Hold(motion.target, self.config)
+                hold.name = motion.name
+                hold.linear, hold.lateral = motion.linear, motion.lateral
+                hold.vertical, hold.angular = motion.vertical, motion.angular
+                self.intent = hold
+                return self._motion(hold, snap)
+            self.intent = None  # landed: idle
             return None
         if motion.name == "take_off":
             # Straight up: centred horizontal sticks, the board holds the position.
