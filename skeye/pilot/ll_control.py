@@ -25,9 +25,10 @@ what the board's serial protocol offers: it polls structures and sends CTRL_INPU
   position with the pilot's own PI, as on ``sim://`` (the board's softer P hold let the final
   descent of a pad landing drift 2-6 cm more under E2's disturbance).
   Direct stick input from ground control is passed on in attitude or height mode. The motors
-  start and stop with AscTec's gesture (thrust 0, full yaw, held until LL_STATUS says so);
-  the pilot does that itself before a take-off or stick flight, and after ground control
-  stopped the motors on the ground.
+  start with AscTec's gesture (thrust 0, full yaw, held until LL_STATUS says so), before a
+  take-off or stick flight; they stop on the ground by the board itself (landed and not asked
+  to climb), the pilot leaving it every axis, and with the gesture only if the board has not
+  stopped them after ``MOTORS_STOP_WAIT_S``.
 
 Invariants: time is an argument; nothing here blocks or owns a socket; every CTRL_INPUT is in
 range (the stick scales clamp).
@@ -88,6 +89,7 @@ GPS_STICKS = int(CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                  | CtrlBits.GPS_POSITION_CONTROL)
 ATTITUDE_STICKS = int(CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST)
 GESTURE_MOTORS_OFF_AFTER_S = 0.5  # landed this long with zero thrust asked: stop the motors
+MOTORS_STOP_WAIT_S = 3.0  # on the ground, the board's own stop is awaited this long first
 
 
 def _wrap(angle_rad: float) -> float:
@@ -250,6 +252,7 @@ class StickPilot:
         self.motors_wanted: bool | None = None  # a gesture under way: on (True) or off
         self.error: SkeyeError | None = None  # why the last motion failed
         self._landed_idle_since: float | None = None
+        self._off_since: float | None = None  # when the pilot began to stop the motors
 
     # -- what the boards ask for -----------------------------------------------------------
     @property
@@ -297,12 +300,13 @@ class StickPilot:
         if self.motors_wanted is not None:
             if bool(snap.armed) == self.motors_wanted:
                 self.motors_wanted = None
+                self._off_since = None
             else:
-                return CtrlInput(0, 0, GESTURE_YAW, GESTURE_THRUST, GPS_STICKS)
+                return self._motor_sticks(now)
         if isinstance(self.intent, Land) and snap.landed:
             self._motion(self.intent, snap)
             if self.motors_wanted is False:
-                return CtrlInput(0, 0, GESTURE_YAW, GESTURE_THRUST, GPS_STICKS)
+                return self._motor_sticks(now)
         if self.take_off_target is not None:
             target, self.take_off_target = self.take_off_target, None
             self._climb(target, nav_state(snap))
@@ -322,7 +326,7 @@ class StickPilot:
         if isinstance(intent, Sticks):
             if not snap.armed and intent.thrust_fraction * THRUST_MAX > 50:
                 self.motors_wanted = True  # stick flight needs the motors: the gesture first
-                return CtrlInput(0, 0, GESTURE_YAW, GESTURE_THRUST, GPS_STICKS)
+                return self._motor_sticks(now)
             if snap.armed and snap.landed and intent.thrust_fraction == 0.0:
                 # Ground control stopped the motors (its own gesture): pass that on.
                 if self._landed_idle_since is None:
@@ -338,14 +342,27 @@ class StickPilot:
             return CtrlInput(0, 0, 0, 0, GPS_STICKS)  # idle on the ground: motors stay off
         return self.velocity_sticks(0.0, 0.0, 0.0, 0.0)  # hover: the board holds
 
+    def _motor_sticks(self, now_s: float) -> CtrlInput:
+        """Sticks that start (or stop) the motors. Stopping on the ground, the pilot first
+        leaves every axis to the board (``ctrl`` 0) for ``MOTORS_STOP_WAIT_S``: landed and not
+        asked to climb, the board stops its motors itself (as AscTec's does); only then the
+        gesture. The gesture toggles, so sending it while the board stops the motors by itself
+        (a cycle before the pilot hears of it) would start them again."""
+        if self.motors_wanted is False:
+            if self._off_since is None:
+                self._off_since = now_s
+            if now_s - self._off_since < MOTORS_STOP_WAIT_S:
+                return CtrlInput(0, 0, 0, 0, 0)
+        return CtrlInput(0, 0, GESTURE_YAW, GESTURE_THRUST, GPS_STICKS)
+
     def _motion(self, motion: Motion, snap: Snapshot) -> DriveCommand | None:
         """Step a position motion; None once it is done (then the vehicle hovers, or idles
         after a landing). A hold (after a move) never ends by itself."""
         if motion.done and not motion.holds:
             return None
         if isinstance(motion, Land) and snap.landed:
-            # Touched down: stop the motors with the gesture (the board stops them only so);
-            # the landing is done once LL_STATUS says they are off.
+            # Touched down: the motors stop (``_motor_sticks``); the landing is done once
+            # LL_STATUS says they are off.
             self.intent = None
             if snap.armed:
                 self.motors_wanted = False

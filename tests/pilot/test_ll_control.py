@@ -120,15 +120,20 @@ def test_a_take_off_gives_the_gesture_until_the_motors_run_then_climbs_and_holds
     assert not pilot.busy
 
 
-def test_a_landing_stops_the_motors_with_the_gesture_once_down():
+def test_a_landing_leaves_the_board_to_stop_the_motors_then_gestures():
     pilot = StickPilot(LIMITS)
     air = snap_of(True, False, 0.0, 1.0)
     pilot.land(nav_state(air))
     assert pilot.sticks(air).thrust < 2048 and pilot.busy  # descending
-    down = snap_of(True, True, 5.0)
-    assert pilot.sticks(down) == CtrlInput(0, 0, -2047, 0, GPS_STICKS) and pilot.busy
+    # Down: every axis to the board (ctrl 0), which stops its motors itself ...
+    assert pilot.sticks(snap_of(True, True, 5.0)) == CtrlInput(0, 0, 0, 0, 0) and pilot.busy
+    assert pilot.sticks(snap_of(True, True, 7.9)) == CtrlInput(0, 0, 0, 0, 0)
     off = snap_of(False, True, 6.1)
     assert pilot.sticks(off) == CtrlInput(0, 0, 0, 0, GPS_STICKS) and not pilot.busy
+    # ... and the gesture only for a board that has not, 3 s on.
+    pilot.land(nav_state(air))
+    pilot.sticks(snap_of(True, True, 10.0))
+    assert pilot.sticks(snap_of(True, True, 13.1)) == CtrlInput(0, 0, -2047, 0, GPS_STICKS)
 
 
 def test_stick_flight_starts_the_motors_first_and_a_timed_velocity_ends():
