@@ -16,8 +16,10 @@ NATIVE_SOURCES := $(shell $(PYTHON) skeye/native.py --sources)
 
 # skeye/buildprogress.py runs `pip install -v` and shows only its progress lines (which step,
 # which file is compiling), so a slow build never looks hung.
+# The simulator and ground control are extras of the package (the base install is the
+# onboard pilot's, docs/onboard.md): the development environment takes both.
 $(VENV)/.installed: $(BIN)/python pyproject.toml setup.py skeye/native.py $(NATIVE_SOURCES)
-	$(BIN)/python skeye/buildprogress.py -e '.[mavlink]'
+	$(BIN)/python skeye/buildprogress.py -e '.[sim,ground,mavlink]'
 	touch $@
 
 # The test extras only (the package itself is already built and installed above).

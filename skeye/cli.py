@@ -18,6 +18,9 @@ from skeye.errors import SkeyeError
 from skeye.processes import wait_for_signal
 
 ENGINE_FAILED_STATUS = 3
+EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
+            "uvicorn": "ground"}
+"""A dependency that lives in an extra (pyproject.toml) -> the extra's name."""
 FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
 """Fault injection for tests (docs/reliability.md): the engine raises once sim time passes this."""
 
@@ -83,6 +86,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         ports.append(("the simulator's image server", args.host, args.image_port,
                       "--image-port"))
     check_ports_free(ports)  # named, with the option that moves it, before MuJoCo loads
+    ll_boards = ll_board_specs(args)
     world = load_world(args.world)
     validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
     wind = make_settings(args.wind, parse_params(args.wind_params))
@@ -151,6 +155,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 flush=True,
             )
             print(f"skeye sim: camera renderer: {cameras.describe_renderer()}", flush=True)
+        if ll_boards:
+            from skeye.hil.cli import describe, start_ll_board
+
+            image_port = images.port if cameras is not None else None
+            for spec in ll_boards:
+                board = start_ll_board(stack, spec, f"127.0.0.1:{server.port}", host=args.host)
+                print(f"skeye sim: {describe(board, image_port, args.host)}", flush=True)
         if args.host == "127.0.0.1":
             print(
                 "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",
@@ -166,6 +177,21 @@ def cmd_sim(args: argparse.Namespace) -> int:
         else:
             print("skeye sim: stopping", flush=True)
     return ENGINE_FAILED_STATUS if runner.error is not None else 0
+
+
+def ll_board_specs(args: argparse.Namespace) -> list[Any]:
+    """``--ll-board`` values, parsed before anything starts (ConfigError names a bad one)."""
+    if not args.ll_board:
+        return []
+    from skeye.hil.cli import parse_ll_board
+
+    specs = [parse_ll_board(text) for text in args.ll_board]
+    names = [spec.name for spec in specs]
+    if len(set(names)) != len(names):
+        from skeye.errors import ConfigError
+
+        raise ConfigError(f"--ll-board names must differ, got {', '.join(names)}")
+    return specs
 
 
 def _add_sim(sub: Any) -> None:
@@ -273,6 +299,16 @@ def _add_sim(sub: Any) -> None:
                    help="at --record-max-mb, go on in a new part instead of stopping")
     p.add_argument("--record-parts", type=int, default=10, metavar="N",
                    help="the most parts --record-rotate writes before it stops (default 10)")
+    p.add_argument(
+        "--ll-board",
+        action="append",
+        default=[],
+        metavar="NAME=LINE",
+        help="spawn robot NAME and present it as an AscTec low-level board on LINE: pty (a "
+        "pseudo-terminal; its path is printed), tcp:PORT or serial:DEVICE; options after "
+        "commas: robot=CLASS, start=POSE, baud=N, serial_timeout=S; repeatable. The pilot "
+        "flies it with --airframe asctec-ll://... (docs/onboard.md)",
+    )
     p.set_defaults(func=cmd_sim)
 
 
@@ -381,6 +417,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         return int(args.func(args))
+    except ModuleNotFoundError as exc:
+        extra = EXTRA_OF.get((exc.name or "").split(".")[0])
+        if extra is None:
+            raise
+        print(f"skeye {args.command}: error: {exc.name} is not installed: this command needs "
+              f"skeye's {extra} extra (pip install 'skeye[{extra}]'; the base install is the "
+              "onboard pilot's, docs/onboard.md)", file=sys.stderr)
+        return 2
     except SkeyeError as exc:
         print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
         return 2

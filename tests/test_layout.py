@@ -242,7 +242,9 @@ def test_clients_neither_load_mujoco_nor_set_its_gl_backend() -> None:
                "skeye.ground.cli", "skeye.ground.app", "skeye.vision.cli", "skeye.validate.cli",
                "skeye.sweep.cli", "skeye.recording.replay", "skeye.recording.plotting",
                "skeye.recording.snapshot", "skeye.robots.config", "skeye.wire.images",
-               "skeye.link.vehicle", "skeye.pixels", "skeye.pilot.policy"]
+               "skeye.link.vehicle", "skeye.pixels", "skeye.pilot.policy",
+               "skeye.pilot.asctec_ll", "skeye.pilot.camera_sim", "skeye.pilot.camera_v4l2",
+               "skeye.pilot.camera_file", "skeye.hil.cli", "skeye.hil.ll_server"]
     code = textwrap.dedent(f"""
         import importlib, os, sys
         for name in {clients!r}:

@@ -207,6 +207,11 @@ class InProcessAirframe:
                          yaw_rate_rad_s=yaw_rate_rad_s, thrust=thrust_fraction,
                          height_mode=height_mode)
 
+    def reset(self) -> str:
+        """A crashed vehicle comes back with the episode (``env.reset()``), not through the
+        boards: refused, naming that."""
+        raise SkeyeError("an environment's vehicle comes back with env.reset(), not RESET")
+
     def advance(self, seconds: float) -> None:
         """Let ``seconds`` of sim time pass (whole physics steps); a timed velocity ends in
         a hover."""

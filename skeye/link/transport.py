@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 import select
 import socket
+import termios
 import threading
 import time
 import tty
@@ -179,7 +180,9 @@ class SerialLink(Link):
         try:
             self._port.write(data)
             self._port.flush()
-        except (self._serial_error, OSError, TypeError) as exc:
+        # termios.error is not an OSError: pyserial's flush (tcdrain) raises it when the line
+        # hung up (a pseudo-terminal whose other end closed).
+        except (self._serial_error, OSError, TypeError, termios.error) as exc:
             self._closed.set()
             raise LinkClosed(f"{self.name}: {exc}") from None
 
@@ -189,7 +192,7 @@ class SerialLink(Link):
             if not ready:
                 return b""
             data: bytes = self._port.read(max(1, self._port.in_waiting))
-        except (self._serial_error, OSError, ValueError, TypeError) as exc:
+        except (self._serial_error, OSError, ValueError, TypeError, termios.error) as exc:
             if self._closed.is_set():
                 raise LinkClosed(f"{self.name}: link is closed") from None
             self._closed.set()

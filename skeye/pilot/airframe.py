@@ -2,16 +2,33 @@
 
 How this works: ``Airframe`` is the narrow interface the boards (``skeye.pilot.boards``) drive;
 ``Snapshot`` is one consistent set of the latest sensor readings in SI (NED world, FRD body,
-altitude positive up). ``skeye.pilot.sim_airframe.SimAirframe`` implements it on a robot of the
-simulator through ``skeye.control``; tests implement it with a scripted fake. Keeping the boards
-behind this interface keeps them free of sockets and threads (they take the time as an
-argument), so their protocol behaviour is tested without a simulator.
+altitude positive up). Keeping the boards behind this interface keeps them free of sockets and
+threads (they take the time as an argument), so their protocol behaviour is tested without a
+simulator; tests implement it with a scripted fake.
+
+Backends are chosen by URI, as Crazyflie's link drivers are (``radio://``, ``usb://``): one
+module per backend, a registry by scheme, and :func:`open_airframe` picks the module.
+
+- ``sim://HOST:PORT``: a robot of the simulator through ``skeye.control``
+  (:mod:`skeye.pilot.sim_airframe`);
+- ``asctec-ll://serial/dev/ttyS1?baud=57600`` or ``asctec-ll://tcp/HOST:PORT``: a real AscTec
+  low-level board over its serial protocol, or the simulator playing one (``skeye sim
+  --ll-board``) (:mod:`skeye.pilot.asctec_ll`).
+
+A new backend is one entry in :data:`BACKENDS` (or a :func:`register_airframe` call): a
+function ``open(uri, options) -> AirframeBackend``, named as ``"module:function"`` so that the
+registry imports a backend's dependencies only when its scheme is used.
+tests/pilot/test_airframe_backends.py is the conformance test every backend passes.
 """
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
+
+from skeye.errors import LocalProtocolError
 
 Vec3 = tuple[float, float, float]
 
@@ -125,3 +142,119 @@ class Airframe(Protocol):
         respawns at its start pose; returns what was done, for the log. Raises SkeyeError when
         it cannot (the vehicle below is lost)."""
         ...
+
+
+# -- backends by URI ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VehicleLimits:
+    """The one set of speed limits the boards check commands against (the robot file's
+    ``[controller]`` table on the simulator; the vehicle's configuration on a real one)."""
+
+    max_speed_m_s: float = 3.0
+    max_climb_m_s: float = 1.5
+    max_yaw_rate_rad_s: float = 1.745
+
+
+@dataclass(frozen=True)
+class AirframeOptions:
+    """What ``skeye pilot`` tells every backend; each uses the fields that apply to it.
+
+    ``robot``, ``name``, ``start`` / ``location_ned_m`` and ``images`` are about spawning a
+    robot in the simulator (``sim://``); ``robot`` and ``robot_dirs`` also name the robot file
+    whose limits a real vehicle's backend takes (``asctec-ll://``: the stick scales);
+    ``timeout_s`` bounds connecting and each answer; ``frozen_timeout_s`` is the realtime
+    frozen-simulator check (``sim://``).
+    """
+
+    robot: str = "hummingbird"
+    name: str = "R1"
+    start: str | None = "Pad1"
+    location_ned_m: Vec3 | None = None
+    images: str | None = None
+    timeout_s: float = 10.0
+    frozen_timeout_s: float = 5.0
+    robot_dirs: tuple[str, ...] = ()  # where robot files outside the built-ins are found
+
+
+@runtime_checkable
+class AirframeBackend(Airframe, Protocol):
+    """An opened vehicle: the ``Airframe`` the boards drive, plus what the pilot needs to run it.
+
+    ``lockstep``: ``advance`` moves a simulator's clock (the pilot then drives time);
+    ``control_period_s``: the period the pilot ticks at in lockstep; ``clock_is_sim``: the
+    snapshot's ``time_s`` is simulator time (else the onboard computer's monotonic clock);
+    ``lost``: why the vehicle stopped answering (None while it answers).
+    """
+
+    uri: str
+    limits: VehicleLimits
+    lockstep: bool
+    control_period_s: float
+    clock_is_sim: bool
+
+    @property
+    def lost(self) -> str | None: ...
+
+    def describe(self) -> str:
+        """One line for the start-up message: what is flown, and where."""
+        ...
+
+    def close(self) -> None:
+        """Release the vehicle's link (idempotent)."""
+        ...
+
+
+AirframeOpener = Callable[[str, AirframeOptions], AirframeBackend]
+
+BACKENDS: dict[str, str | AirframeOpener] = {
+    "sim": "skeye.pilot.sim_airframe:open_sim_airframe",
+    "asctec-ll": "skeye.pilot.asctec_ll:open_asctec_ll",
+    "mavlink": "skeye.pilot.mavlink_airframe:open_mavlink_backend",
+}
+"""Scheme -> opener (a function, or ``"module:function"`` imported when the scheme is used)."""
+
+
+def register_airframe(scheme: str, opener: str | AirframeOpener) -> None:
+    """Add (or replace) the backend for ``scheme://`` URIs."""
+    if not scheme or "://" in scheme or scheme != scheme.lower():
+        raise LocalProtocolError(f"airframe scheme must be a lower-case name, got {scheme!r}")
+    BACKENDS[scheme] = opener
+
+
+def airframe_scheme(uri: str) -> str:
+    """The scheme of an airframe URI, checked against the registry.
+
+    Raises:
+        LocalProtocolError: no ``scheme://``, or no backend for it.
+    """
+    scheme, sep, _ = uri.partition("://")
+    if not sep or not scheme:
+        raise LocalProtocolError(
+            f"airframe {uri!r}: expected a URI such as sim://127.0.0.1:3000 or "
+            f"asctec-ll://serial/dev/ttyS1?baud=57600")
+    scheme = scheme.lower()
+    if scheme not in BACKENDS:
+        raise LocalProtocolError(
+            f"airframe {uri!r}: no backend for {scheme}:// (known: "
+            f"{', '.join(s + '://' for s in sorted(BACKENDS))})")
+    return scheme
+
+
+def _opener(scheme: str) -> AirframeOpener:
+    entry = BACKENDS[scheme]
+    if not isinstance(entry, str):
+        return entry
+    module, _, name = entry.partition(":")
+    opener: AirframeOpener = getattr(importlib.import_module(module), name)
+    return opener
+
+
+def open_airframe(uri: str, options: AirframeOptions | None = None) -> AirframeBackend:
+    """Open the vehicle a URI names (see the module docstring for the schemes).
+
+    Raises:
+        LocalProtocolError: a malformed URI or an unknown scheme.
+        LinkClosed / LinkTimeout: the vehicle (or simulator) cannot be reached.
+        SkeyeError: the backend refused (a robot name taken, a board that is not an LL board).
+    """
+    return _opener(airframe_scheme(uri))(uri, options or AirframeOptions())

@@ -510,10 +510,12 @@ class OnboardBoards:
 
         Returns whether the command asks the vehicle to move (it arms a disarmed one)."""
         yaw = stick_to_yaw_rate_rad_s(msg.yaw) if bits & CtrlBits.YAW else 0.0
+        # The stick's centre (2047.5) lies between two counts: both are "centred", a climb of
+        # exactly zero, so the board holds the height (else 2048 climbed at 0.4 mm/s for ever).
+        off_centre = msg.thrust - THRUST_MAX / 2
         climb = (
-            max(-1.0, min(1.0, (msg.thrust - THRUST_MAX / 2) / (THRUST_MAX / 2)))
-            * self.settings.max_climb_m_s
-            if bits & CtrlBits.THRUST
+            max(-1.0, min(1.0, off_centre / (THRUST_MAX / 2))) * self.settings.max_climb_m_s
+            if bits & CtrlBits.THRUST and abs(off_centre) > 0.5
             else 0.0
         )
         if bits & CtrlBits.GPS_POSITION_CONTROL:

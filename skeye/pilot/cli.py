@@ -32,13 +32,19 @@ import logging
 import math
 import signal
 import threading
-from contextlib import nullcontext
+from contextlib import ExitStack, nullcontext
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from skeye.errors import ConfigError, LinkClosed, SkeyeError
+from skeye.errors import ConfigError, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.pilot.airframe import (
+    AirframeOptions,
+    airframe_scheme,
+    open_airframe,
+)
 from skeye.pilot.boards import BoardSettings
+from skeye.pilot.camera import camera_scheme
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
 from skeye.pilot.video_server import (
@@ -79,30 +85,57 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     return envelope, source
 
 
+def airframe_options(args: argparse.Namespace) -> AirframeOptions:
+    """The pilot's options as every airframe backend takes them."""
+    location = None
+    if args.location is not None:
+        try:
+            north, east, down = (float(v) for v in args.location.split(","))
+        except ValueError:
+            raise ConfigError(f"--location must be north,east,down in m, got "
+                              f"{args.location!r}") from None
+        location = (north, east, down)
+    return AirframeOptions(
+        robot=args.robot, name=args.name, start=args.start, location_ned_m=location,
+        images=args.images, timeout_s=args.timeout, frozen_timeout_s=args.sim_frozen_timeout,
+        robot_dirs=(args.robot_dir,) if args.robot_dir else (),
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code (0; 1 for an error; 2 for a
-    bad option; :data:`EXIT_LOST_SIMULATOR` when the simulator link failed)."""
-    from skeye.control.connection import connect
-    from skeye.pilot.sim_airframe import SimAirframe
+    bad option; :data:`EXIT_LOST_SIMULATOR` when the vehicle (simulator, LL board or flight
+    controller) could not be reached, or its link failed)."""
     from skeye.processes import check_ports_free
 
+    airframe_uri = args.airframe or f"sim://{args.sim}"
     try:
         envelope, envelope_source = flight_envelope(args)
-    except ConfigError as exc:
+        airframe_scheme(airframe_uri)
+        options = airframe_options(args)
+    except (ConfigError, LocalProtocolError) as exc:
         print(f"skeye pilot: {exc}", flush=True)
         return 2
-    settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout)
     if args.video_port is not None:
         problem = video_options_problem(args)
         if problem:
             print(f"skeye pilot: {problem}", flush=True)
             return 2
+    camera_uri = args.camera if "://" in args.camera else None
+    if camera_uri is not None:
+        try:
+            camera_scheme(camera_uri)
+        except LocalProtocolError as exc:
+            print(f"skeye pilot: --camera: {exc}", flush=True)
+            return 2
+    has_camera = args.images is not None or camera_uri is not None
     calibration = None
     if args.calibration is not None:
         from skeye.vision.calibration import load_calibration
 
-        if args.images is None:
-            print("skeye pilot: --calibration is for the pad vision: it needs --images", flush=True)
+        if not has_camera:
+            print("skeye pilot: --calibration is for the pad vision: it needs --images or "
+                  "--camera URI", flush=True)
             return 2
         try:
             calibration = load_calibration(args.calibration)
@@ -131,8 +164,9 @@ def run(args: argparse.Namespace) -> int:
         except ConfigError as exc:
             print(f"skeye pilot: --rtp-video: {exc}", flush=True)
             return 2
-        if args.images is None:
-            print("skeye pilot: --rtp-video sends the camera: it needs --images", flush=True)
+        if not has_camera:
+            print("skeye pilot: --rtp-video sends the camera: it needs --images or --camera URI",
+                  flush=True)
             return 2
     try:
         for uri in args.mavlink or ():
@@ -142,100 +176,103 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"skeye pilot: --mavlink: {exc}", flush=True)
         return 2
-    if args.airframe is not None:
-        return run_companion(args, envelope, envelope_source)
-    lost: list[SkeyeError] = []  # the simulator link's failure, if it failed before our close
+    airframe: Any = None
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
         if args.video_port is not None:
             ports.append(("the pilot's video", args.host, args.video_port, "--video-port"))
-        if ports:  # before the robot is spawned: a taken port leaves nothing behind
+        if ports:  # before the vehicle is opened: a taken port leaves nothing behind
             check_ports_free(ports)
-        def attach() -> tuple[Any, Any]:
-            """Connect to the simulator and spawn the robot: at start, and again whenever the
-            simulator comes back after it was lost (the pilot re-attaches)."""
-            sim = connect(args.sim, images=args.images, timeout_s=args.timeout)
-            try:
-                sim.add_close_hook(lambda error: None if sim.closed else lost.append(error))
-                if args.location is not None:
-                    north, east, down = (float(v) for v in args.location.split(","))
-                    robot = sim.spawn(
-                        args.robot, location_ned_m=(north, east, down), name=args.name
-                    )
-                else:
-                    robot = sim.spawn(args.robot, start=args.start, name=args.name)
-            except SkeyeError as exc:
-                sim.close()
-                if "already exists" in str(exc):
-                    raise SkeyeError(
-                        f"{exc}; another pilot or client flies it - give this one another "
-                        "name with --name"
-                    ) from None
-                raise
-            except BaseException:
-                sim.close()
-                raise
-            return sim, robot
-
-        sim, robot = attach()
-        # Flies by the robot file's speed limits; re-attaches when the simulator comes back.
-        airframe = SimAirframe(sim, robot, frozen_timeout_s=args.sim_frozen_timeout,
-                               attach=attach)
         try:
+            airframe = open_airframe(airframe_uri, options)
+        except (ConfigError, LocalProtocolError) as exc:  # a URI its backend refused
+            print(f"skeye pilot: --airframe: {exc}", flush=True)
+            return 2
+        with ExitStack() as stack:
+            stack.callback(airframe.close)
+            limits = airframe.limits
             settings = BoardSettings(
-                link_timeout_s=settings.link_timeout_s,
-                land_timeout_s=settings.land_timeout_s,
-                max_speed_m_s=robot.motion_config.max_speed_m_s,
-                default_speed_m_s=min(1.0, robot.motion_config.max_speed_m_s),
-                max_climb_m_s=robot.motion_config.max_climb_m_s,
+                link_timeout_s=args.link_timeout,
+                land_timeout_s=args.land_timeout,
+                max_speed_m_s=limits.max_speed_m_s,
+                default_speed_m_s=min(1.0, limits.max_speed_m_s),
+                max_climb_m_s=limits.max_climb_m_s,
                 envelope=envelope,
             )
             vision = None
-            if args.images is not None and args.policy is not None:
-                vision = policy_vision_factory(sim, robot, args, calibration, latency_s)
+            camera_name, fov_h_rad = args.camera, None
+            if camera_uri is not None:
+                source = open_camera_for(camera_uri, airframe, args.name, calibration,
+                                         args.timeout)
+                stack.callback(source.close)
+                fov_h_rad = source.fov_h_rad
+                if calibration is None and fov_h_rad is None:
+                    print(f"skeye pilot: --camera {camera_uri}: its field of view is not known: "
+                          "add fov_deg= to the URI, or give --calibration camera.toml (skeye "
+                          "calibrate)", flush=True)
+                    return 2
+                if source.lost:
+                    print(f"skeye pilot: {source.lost}; the pad modes hold still until it "
+                          "gives frames", flush=True)
+                camera_name = camera_uri
+                vision = camera_vision_factory(source, fov_h_rad, calibration,
+                                               lockstep=airframe.lockstep, latency_s=latency_s,
+                                               predict=not args.no_vision_prediction)
             elif args.images is not None:
-                vision = pad_vision_factory(sim, robot, args.camera, calibration,
-                                            latency_s=latency_s,
-                                            predict=not args.no_vision_prediction,
-                                            frame_time=args.frame_time,
-                                            frame_jitter_s=args.frame_jitter_ms / 1e3,
-                                            pad_source=args.pad_source)
-            lockstep = sim.mode == "lockstep"
-            tick_s = 1.0 / robot.motion_config.control_rate_hz if lockstep else args.tick
+                sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
+                if sim is None or robot is None:
+                    print(f"skeye pilot: --images reads the camera of a robot the pilot spawned "
+                          f"(sim://); {airframe_uri} has none: give --camera URI", flush=True)
+                    return 2
+                fov_h_rad = camera_fov_rad(sim, args.camera)
+                camera_name = f"{args.name}/{args.camera}"
+                if args.policy is not None:
+                    vision = policy_vision_factory(sim, robot, args, calibration, latency_s)
+                else:
+                    vision = pad_vision_factory(sim, robot, args.camera, calibration,
+                                                latency_s=latency_s,
+                                                predict=not args.no_vision_prediction,
+                                                frame_time=args.frame_time,
+                                                frame_jitter_s=args.frame_jitter_ms / 1e3,
+                                                pad_source=args.pad_source)
+            lockstep = airframe.lockstep
+            tick_s = airframe.control_period_s if lockstep else args.tick
             video = None
             if args.video_port is not None:
                 video = VideoServer(
-                    host=args.host, port=args.video_port, camera=f"{robot.name}/{args.camera}",
-                    fov_h_rad=camera_fov_rad(sim, args.camera), jpeg_quality=args.video_quality,
-                    max_fps=args.video_fps, max_clients=args.video_clients,
+                    host=args.host, port=args.video_port, camera=camera_name,
+                    fov_h_rad=fov_h_rad if fov_h_rad is not None else (
+                        calibration.fov_h_rad if calibration is not None else 0.0),
+                    jpeg_quality=args.video_quality, max_fps=args.video_fps,
+                    max_clients=args.video_clients,
                 )
-            try:
-                server = PilotServer(
-                    airframe,
-                    host=args.host,
-                    port=None if args.serial else args.port,
-                    serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
-                    settings=settings,
-                    tick_s=tick_s,
-                    lockstep=lockstep,
-                    lockstep_rate=args.lockstep_rate,
-                    ground_clock=args.ground_clock,
-                    vision=vision,
-                    video=video,
-                )
-            except BaseException:
-                if video is not None:
-                    video.close()
-                raise
+                stack.callback(video.close)
+            server = PilotServer(
+                airframe,
+                host=args.host,
+                port=None if args.serial else args.port,
+                serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
+                settings=settings,
+                tick_s=tick_s,
+                lockstep=lockstep,
+                lockstep_rate=args.lockstep_rate,
+                ground_clock=args.ground_clock,
+                vision=vision,
+                video=video,
+            )
+            forward = getattr(airframe, "landing_target", None)
+            if forward is not None:  # a flight controller takes the detections (LANDING_TARGET)
+                server.boards.pad.add_listener(forward)
             stop = threading.Event()
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, lambda *_: stop.set())
-            mavlink = open_mavlink(server, args)
+            mavlink = open_mavlink(server, args, pad_vision=vision is not None)
             rtp = open_rtp_video(server, video, args)
+            airframe_check = getattr(airframe, "check", None)
             with server, mavlink or nullcontext(), rtp or nullcontext():
                 mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
                 print(
-                    f"skeye pilot: {robot.name} in {sim.level or 'the simulator'} ({mode}); "
+                    f"skeye pilot: {airframe.describe()} ({mode}); "
                     f"ground control on {server.address}; flight envelope: "
                     f"{envelope.describe()} ({envelope_source})"
                     f"{'; video on ' + video.address if video is not None else ''}"
@@ -246,80 +283,26 @@ def run(args: argparse.Namespace) -> int:
                 while not stop.wait(0.2):
                     if server.loop_error is not None:
                         raise server.loop_error
+                    if airframe_check is not None:
+                        airframe_check()  # its link thread died: WorkerFailed names the cause
                     if mavlink is not None:
-                        mavlink.check()  # its thread died: WorkerFailed names the cause
+                        mavlink.check()
                     if rtp is not None:
                         rtp.check()
                     if video is not None:
-                        video.check()  # its thread died: WorkerFailed names the cause
+                        video.check()
             print("skeye pilot: stopping", flush=True)
-        finally:
-            airframe.connection.close()  # the simulator removes the robot
     except SkeyeError as exc:
         print(f"skeye pilot: {exc}", flush=True)
-        if lost or isinstance(exc, LinkClosed):
+        if airframe is None and isinstance(exc, (LinkClosed, LinkTimeout)):
+            return EXIT_LOST_SIMULATOR  # the vehicle (or simulator) cannot be reached
+        if getattr(airframe, "link_failed", None) is not None or isinstance(exc, LinkClosed):
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
 
 
-# -- --airframe mavlink://: the pilot as a flight controller's companion computer -------------
-# (Issue 29 turns the airframe into a URI registry; this wiring registers the mavlink:// scheme
-# by hand until then: skeye.pilot.mavlink_airframe.open_mavlink_airframe is its factory.)
-
-
-def run_companion(args: argparse.Namespace, envelope: FlightEnvelope, source: str) -> int:
-    """``skeye pilot --airframe mavlink://...``: fly a MAVLink flight controller instead of a
-    simulated robot; ground control, failsafes and the envelope as with any airframe."""
-    from skeye.pilot.mavlink_airframe import open_mavlink_airframe
-
-    if args.images is not None or args.video_port is not None:
-        print("skeye pilot: --airframe mavlink:// flies without the pad vision here: its camera "
-              "comes from the simulator's --images only for a simulated robot (camera sources "
-              "by URI are the onboard install's)", flush=True)
-        return 2
-    settings = BoardSettings(link_timeout_s=args.link_timeout, land_timeout_s=args.land_timeout,
-                             envelope=envelope)
-    try:
-        if not args.serial:
-            from skeye.processes import check_ports_free
-
-            check_ports_free([("the pilot", args.host, args.port, "--port")])
-        airframe = open_mavlink_airframe(args.airframe, wait_s=args.timeout)
-    except SkeyeError as exc:
-        print(f"skeye pilot: --airframe: {exc}", flush=True)
-        return 4 if isinstance(exc, LinkClosed) else 2
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    try:
-        server = PilotServer(
-            airframe, host=args.host, port=None if args.serial else args.port,
-            serial_uri=f"serial://{args.serial}?baud={args.baud}" if args.serial else None,
-            settings=settings, tick_s=args.tick)
-        server.boards.pad.add_listener(airframe.landing_target)
-        mavlink = open_mavlink(server, args)
-        with server, mavlink or nullcontext():
-            print(f"skeye pilot: flight controller on {airframe.transport.name}; ground control "
-                  f"on {server.address}; flight envelope: {envelope.describe()} ({source})"
-                  f"{'; MAVLink on ' + ', '.join(mavlink.addresses) if mavlink else ''}",
-                  flush=True)
-            while not stop.wait(0.2):
-                if server.loop_error is not None:
-                    raise server.loop_error
-                airframe.check()
-                if mavlink is not None:
-                    mavlink.check()
-        print("skeye pilot: stopping", flush=True)
-    except SkeyeError as exc:
-        print(f"skeye pilot: {exc}", flush=True)
-        return 1
-    finally:
-        airframe.close()
-    return 0
-
-
-def open_mavlink(server: PilotServer, args: argparse.Namespace) -> Any:
+def open_mavlink(server: PilotServer, args: argparse.Namespace, pad_vision: bool = False) -> Any:
     """The MAVLink endpoint on ``--mavlink`` links (None without): a second client of the
     pilot's boards, beside the AscTec link (docs/protocols/mavlink.md)."""
     if not args.mavlink:
@@ -328,7 +311,7 @@ def open_mavlink(server: PilotServer, args: argparse.Namespace) -> Any:
     from skeye.pilot.mavlink_vehicle import Settings
 
     return MavlinkServer(server.boards, server.lock, list(args.mavlink),
-                         settings=Settings(pad_vision=args.images is not None))
+                         settings=Settings(pad_vision=pad_vision))
 
 
 def open_rtp_video(server: PilotServer, video: Any, args: argparse.Namespace) -> Any:
@@ -346,9 +329,58 @@ def open_rtp_video(server: PilotServer, video: Any, args: argparse.Namespace) ->
             sink(frame)
 
     if server.vision is None:
-        raise ConfigError("--rtp-video sends the camera: it needs --images")
+        raise ConfigError("--rtp-video sends the camera: it needs --images or --camera URI")
     server.vision.attach_video(publish)
     return rtp
+
+
+def open_camera_for(uri: str, airframe: Any, robot_name: str, calibration: Any,
+                    timeout_s: float) -> Any:
+    """Open ``--camera URI`` on the airframe's clock. A ``sim://`` camera of the robot a
+    ``sim://`` airframe spawned gets its field of view from the simulator.
+
+    Raises:
+        LocalProtocolError / CameraError: a bad URI, or a camera that cannot be opened.
+    """
+    from skeye.pilot.camera import CameraOptions, open_camera
+
+    fov = None
+    sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
+    if sim is not None and robot is not None and uri.lower().startswith("sim://"):
+        from skeye.pilot.camera_sim import parse_sim_camera
+
+        _, _, name, _ = parse_sim_camera(uri, robot.name)
+        owner, _, camera = name.partition("/")
+        if owner == robot.name:
+            fov = camera_fov_rad(sim, camera)
+    if airframe.clock_is_sim:
+        def clock() -> float:
+            return float(airframe.snapshot().time_s)
+    else:
+        import time
+
+        clock = time.monotonic
+    size = (calibration.width_px, calibration.height_px) if calibration is not None else None
+    options = CameraOptions(clock=clock, clock_is_sim=airframe.clock_is_sim, robot=robot_name,
+                            fov_h_rad=fov, size_px=size, timeout_s=timeout_s)
+    return open_camera(uri, options)
+
+
+def camera_vision_factory(source: Any, fov_h_rad: float | None, calibration: Any = None, *,
+                          lockstep: bool = False, latency_s: float | None = 0.0,
+                          predict: bool = True, params: Any = None) -> Any:
+    """A factory for the pilot's PadVision on a camera source (``--camera URI``): the same
+    detector, calibration and latency handling as on the simulator's camera."""
+    from skeye.pilot.camera import CameraMount
+    from skeye.pilot.vision import PadVision
+
+    def make(boards: Any, lock: Any) -> PadVision:
+        return PadVision(boards, CameraMount(source), lock,
+                         fov_h_rad=fov_h_rad if fov_h_rad is not None else 0.0,
+                         lockstep=lockstep, calibration=calibration, latency_s=latency_s,
+                         predict=predict, params=params)
+
+    return make
 
 
 def vision_latency_s(text: str) -> float | None:
@@ -454,8 +486,9 @@ def policy_vision_factory(sim: Any, robot: Any, args: argparse.Namespace, calibr
 def video_options_problem(args: argparse.Namespace) -> str:
     """What is wrong with the ``--video-*`` options ('' when nothing), checked before the
     simulator is reached."""
-    if args.images is None:
-        return "--video-port serves the camera: it needs --images (the image server)"
+    if args.images is None and "://" not in args.camera:
+        return ("--video-port serves the camera: it needs --images (the image server) or "
+                "--camera URI")
     if not 1 <= args.video_quality <= 100:
         return f"--video-quality must be 1..100, got {args.video_quality}"
     if not 0.01 <= args.video_fps <= 1000:
@@ -481,13 +514,33 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address")
+    p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address (the "
+                   "airframe sim://ADDRESS when --airframe is not given)")
+    p.add_argument(
+        "--airframe",
+        default=None,
+        metavar="URI",
+        help="the vehicle to fly: sim://HOST:PORT (a robot of the simulator; default "
+        "sim://<--sim>), asctec-ll://serial/dev/ttyS1?baud=57600 or asctec-ll://tcp/HOST:PORT "
+        "(an AscTec low-level board, real or `skeye sim --ll-board`; docs/onboard.md), "
+        "mavlink://serial/dev/ttyACM0?baud=921600, mavlink://udp/127.0.0.1:14540 (the "
+        "controller sends there), mavlink://udpout/HOST:PORT or mavlink://tcp/HOST:PORT (a "
+        "PX4-style flight controller in offboard control; docs/protocols/mavlink.md)",
+    )
     p.add_argument(
         "--images",
         default=None,
         help="image server address (e.g. 127.0.0.1:5003): enables landing-pad vision",
     )
-    p.add_argument("--camera", default="Down", help="the downward camera's name")
+    p.add_argument(
+        "--camera",
+        default="Down",
+        metavar="NAME|URI",
+        help="the downward camera: a camera name of the spawned robot (with --images), or a "
+        "URI: sim://HOST:PORT/ROBOT/CAMERA (the simulator's image server), "
+        "v4l2:///dev/video0?width=800&height=600&fps=30 (a real camera), file://video.mp4 "
+        "(a recorded video, at its frame rate); docs/onboard.md",
+    )
     p.add_argument(
         "--calibration",
         default=None,
@@ -578,15 +631,6 @@ def register(subparsers: Any) -> None:
                    help="policy calls per sim second (the environments' control_rate_hz; 20)")
     p.add_argument("--policy-image-size", default="80x60", metavar="WxH",
                    help="the image observation's size (the environments' image_size; 80x60)")
-    p.add_argument(
-        "--airframe",
-        default=None,
-        metavar="URI",
-        help="fly a MAVLink flight controller instead of a simulated robot (the pilot as its "
-        "companion computer, offboard control): mavlink://serial/dev/ttyACM0?baud=921600, "
-        "mavlink://udp/127.0.0.1:14540 (it sends there), mavlink://udpout/HOST:PORT, "
-        "mavlink://tcp/HOST:PORT; --sim is then not used",
-    )
     p.add_argument(
         "--mavlink",
         action="append",

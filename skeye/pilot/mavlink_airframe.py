@@ -41,7 +41,7 @@ from skeye.errors import ConfigError, LinkClosed, SkeyeError
 from skeye.mavlink.codec import BadFrame, MavCodec, MavParser
 from skeye.mavlink.modes import Px4Mode
 from skeye.mavlink.transport import MavTransport, open_transport
-from skeye.pilot.airframe import GpsFix, Snapshot
+from skeye.pilot.airframe import AirframeOptions, GpsFix, Snapshot, VehicleLimits
 from skeye.pilot.pad import PadObservation
 from skeye.workers import Worker
 
@@ -69,7 +69,16 @@ class _Pending:
 
 
 class MavlinkAirframe:
-    """A flight controller over MAVLink, as the boards' ``Airframe``."""
+    """A flight controller over MAVLink, as the boards' ``Airframe`` (and the pilot's
+    ``mavlink://`` backend: :func:`open_mavlink_backend`)."""
+
+    lockstep = False  # the controller keeps its own time
+    clock_is_sim = False  # snapshot times are this computer's monotonic clock
+    uri = "mavlink://"
+    limits = VehicleLimits()
+    """The speed limits the boards check commands against: skeye's defaults (3 m/s, climb
+    1.5 m/s, yaw 100 deg/s), below PX4's own (MPC_XY_VEL_MAX 12 m/s ...), which the
+    controller applies on top (docs/protocols/mavlink.md)."""
 
     def __init__(
         self,
@@ -143,6 +152,19 @@ class MavlinkAirframe:
         if self._worker is not None:
             self._worker.join(timeout_s)
         self.transport.close()
+
+    @property
+    def control_period_s(self) -> float:
+        """How often the set-points stream (the pilot ticks at this in lockstep; here never)."""
+        return self.setpoint_period_s
+
+    def describe(self) -> str:
+        return f"a MAVLink flight controller on {self.transport.name} (offboard control)"
+
+    def reset(self) -> str:
+        """RESET of a real vehicle: nothing to respawn (a crashed one is put back on its feet
+        by hand); on the ground it stands LANDED again."""
+        return f"{self.describe()}: a real vehicle, nothing to reset"
 
     def __enter__(self) -> MavlinkAirframe:
         return self.start()
@@ -487,3 +509,11 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
     except BaseException:
         airframe.close()
         raise
+
+
+def open_mavlink_backend(uri: str, options: AirframeOptions) -> MavlinkAirframe:
+    """The ``mavlink://`` airframe backend (``skeye pilot --airframe mavlink://...``): waits
+    up to ``options.timeout_s`` for the controller."""
+    airframe = open_mavlink_airframe(uri, wait_s=options.timeout_s)
+    airframe.uri = uri
+    return airframe

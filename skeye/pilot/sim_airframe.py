@@ -12,6 +12,10 @@ limits the boards and ground control check commands against. Altitudes: the cont
 interface's ``take_off`` is relative to the spawn point;
 everything here is above the world origin (``-down``).
 
+As the ``sim://HOST:PORT`` backend (:func:`open_sim_airframe`, chosen by ``skeye pilot
+--airframe``), it connects, spawns the robot ``AirframeOptions`` describe and owns both: its
+``close`` closes the connection, and the simulator removes the robot.
+
 A frozen simulator is as lost as a dead one (:attr:`SimAirframe.lost`): in realtime, sim time
 (the newest time any line carried) must move within ``frozen_timeout_s`` of wall time; in
 lockstep, a ``STEP`` that was answered must have moved it. Otherwise the pilot's failsafe
@@ -34,10 +38,10 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
-from skeye.control.connection import Connection
+from skeye.control.connection import Connection, connect
 from skeye.control.robots import Robot
-from skeye.errors import ConfigError, SkeyeError
-from skeye.pilot.airframe import GpsFix, Snapshot
+from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.pilot.airframe import AirframeOptions, GpsFix, Snapshot, VehicleLimits
 from skeye.wire.sim_messages import Drive
 
 Attitude = tuple[float, float, float, float, bool]  # roll, pitch, yaw rate, thrust, height mode
@@ -56,12 +60,14 @@ class SimAirframe:
         frozen_timeout_s: float = FROZEN_TIMEOUT_S,
         clock: Callable[[], float] = time.monotonic,
         attach: Callable[[], tuple[Connection, Robot]] | None = None,
+        owns_connection: bool = False,
     ) -> None:
         if not (math.isfinite(frozen_timeout_s) and frozen_timeout_s > 0):
             raise ConfigError(f"--sim-frozen-timeout must be > 0 s, got {frozen_timeout_s!r}")
         self.frozen_timeout_s = frozen_timeout_s
         self._clock = clock
         self._attach = attach
+        self._owns_connection = owns_connection
         self._respawn = False  # a RESET of a robot the simulator removed: a new one is due
         self._lock = threading.Lock()
         self._bind(connection, robot)
@@ -80,6 +86,15 @@ class SimAirframe:
             max_yaw_rate_rad_s=robot.limits.get("MaxYawRate", cfg.max_yaw_rate_rad_s),
         )
         self.lockstep = connection.mode == "lockstep"
+        cfg = robot.motion_config
+        self.limits = VehicleLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s)
+        self.control_period_s = 1.0 / cfg.control_rate_hz
+        self.clock_is_sim = True
+        self.uri = f"sim://{getattr(connection, 'peer', '?')}"
+        self.link_failed: SkeyeError | None = None  # the link went down, not closed by us
+        add_hook = getattr(connection, "add_close_hook", None)  # a test's stand-in may lack it
+        if add_hook is not None:
+            add_hook(self._on_link_down)
         self._seen_time_s = connection.time_s
         self._seen_at_s = self._clock()
         self._frozen: str | None = None
@@ -171,6 +186,20 @@ class SimAirframe:
         if self._respawn:
             raise SkeyeError(f"{self.robot.name} is being respawned: try again in a moment")
         return self.robot
+
+    def _on_link_down(self, error: SkeyeError) -> None:
+        if not self.connection.closed:
+            self.link_failed = error
+
+    def describe(self) -> str:
+        level = getattr(self.connection, "level", "") or "the simulator"
+        return (f"{self.robot.name} in {level} at {self.uri} "
+                f"({'lockstep' if self.lockstep else 'realtime'})")
+
+    def close(self) -> None:
+        """Close the simulator connection if this backend opened it (idempotent)."""
+        if self._owns_connection:
+            self.connection.close()
 
     def snapshot(self) -> Snapshot:
         r = self.robot
@@ -330,3 +359,62 @@ class SimAirframe:
                 self._frozen = (
                     f"simulator frozen: STEP answered but sim time stayed at {after:.3f} s"
                 )
+
+
+def sim_address(uri: str) -> str:
+    """``HOST:PORT`` of a ``sim://HOST:PORT`` URI (the port defaults to 3000).
+
+    Raises:
+        LocalProtocolError: not a ``sim://`` URI, or one with a path or options.
+    """
+    scheme, sep, rest = uri.partition("://")
+    if scheme.lower() != "sim" or not sep:
+        raise LocalProtocolError(f"airframe {uri!r}: expected sim://HOST:PORT")
+    if not rest or "/" in rest or "?" in rest:
+        raise LocalProtocolError(
+            f"airframe {uri!r}: expected sim://HOST:PORT (the simulator's control port), "
+            "with no path or options")
+    return rest if ":" in rest.rsplit("]", 1)[-1] else f"{rest}:3000"
+
+
+def open_sim_airframe(uri: str, options: AirframeOptions) -> SimAirframe:
+    """The ``sim://`` backend: connect to the simulator, spawn the robot, fly it.
+
+    Raises:
+        LocalProtocolError: a bad URI.
+        LinkClosed / LinkTimeout: the simulator cannot be reached.
+        SkeyeError: the spawn was refused (a name already taken: the hint says ``--name``).
+    """
+    address = sim_address(uri)
+
+    def attach() -> tuple[Connection, Robot]:
+        """Connect and spawn: at start, and again whenever the simulator comes back after it
+        was lost (the pilot re-attaches: :attr:`SimAirframe.needs_attach`)."""
+        sim = connect(address, images=options.images, timeout_s=options.timeout_s)
+        try:
+            if options.location_ned_m is not None:
+                robot = sim.spawn(options.robot, location_ned_m=options.location_ned_m,
+                                  name=options.name)
+            else:
+                robot = sim.spawn(options.robot, start=options.start or "Pad1",
+                                  name=options.name)
+        except SkeyeError as exc:
+            sim.close()
+            if "already exists" in str(exc):
+                raise SkeyeError(
+                    f"{exc}; another pilot or client flies it - give this one another "
+                    "name with --name"
+                ) from None
+            raise
+        except BaseException:
+            sim.close()
+            raise
+        return sim, robot
+
+    sim, robot = attach()
+    try:
+        return SimAirframe(sim, robot, frozen_timeout_s=options.frozen_timeout_s,
+                           attach=attach, owns_connection=True)
+    except BaseException:
+        sim.close()
+        raise

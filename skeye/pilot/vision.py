@@ -8,17 +8,18 @@ one processed (``SEN {Type Camera}``), the worker fetches the newest frame from 
 pitch, exactly as ``skeye vision detect`` does on a real camera image. The estimate goes into a
 bounded queue (the oldest is dropped when it is full); the control loop's :meth:`PadVision.step`
 drains it into the boards' :class:`PadController` (the PAD packet) without ever waiting on the
-camera. A camera error (timeout, reset, refused, image server restarted) counts as "pad not
-seen" for that frame; the camera reconnects on the next frame, and since a failed request drops
-its connection, a late frame never answers a later request. No value kills the worker: an
-attitude the camera cannot look at the ground through (roll or pitch not finite, or at or
-beyond 90 deg: a tumbling vehicle) is "pad not seen" without running the detector, and any
-other failure on one frame is counted in :class:`VisionStats` (``errors``, ``last_error``),
-logged once per kind, and that frame is "pad not seen"; the worker goes on with the next.
-When the pilot re-attaches to a new robot, :meth:`PadVision.rebind` points the vision at it.
-In lockstep the loop waits (at most ``lockstep_wait_s``) for the frame of the step it just
-made, so a run stays reproducible; the simulator is paused meanwhile, so nothing flies
-unwatched.
+camera. A camera error (timeout, reset, refused, image server restarted, a device unplugged)
+counts as "pad not seen" for that frame, and the pad modes hold still (no search) until a
+frame comes again (``stats.camera_lost``); the camera reconnects on the next frame, and since
+a failed request drops its connection, a late frame never answers a later request. No value
+kills the worker: an attitude the camera cannot look at the ground through (roll or pitch not
+finite, or at or beyond 90 deg: a tumbling vehicle) is "pad not seen" without running the
+detector, and any other failure on one frame is counted in :class:`VisionStats` (``errors``,
+``last_error``), logged once per kind, and that frame is "pad not seen"; the worker goes on
+with the next. When the pilot re-attaches to a new robot, :meth:`PadVision.rebind` points the
+vision at it. In lockstep the loop waits (at most ``lockstep_wait_s``) for the frame of the
+step it just made, so a run stays reproducible; the simulator is paused meanwhile, so nothing
+flies unwatched.
 
 Frame times (docs/pilot.md, "Frame times"): by default a frame's time is when it reached the
 pilot, as a host sees a USB webcam's frames: the control loop notes the sim time at which each
@@ -129,6 +130,7 @@ class VisionStats:
     too_slow: str = ""  # why the vision is too slow to hold on (empty while it is not)
     too_slow_count: int = 0  # observations refused for being too old
     bad_attitude: int = 0  # frames not looked at: the attitude points the camera off the ground
+    camera_lost: str = ""  # why the camera gives no frames (empty while it does)
 
 
 def looks_at_ground(roll_rad: float, pitch_rad: float) -> bool:
@@ -370,6 +372,13 @@ class PadVision:
             worker = self.start()._worker
             assert worker is not None
         now = self._pose_now()
+        lost = getattr(self.robot.camera, "lost", None)  # a source that knows it has no frames
+        if lost and not self.stats.camera_lost:
+            log.warning("camera lost (pad not seen; the pad modes hold still until frames "
+                        "come again): %s", lost)
+            self.stats.camera_lost = lost
+            with self.lock:
+                self.boards.pad.on_frame(PadObservation(now.time_s, False))
         latest = self.robot.camera.latest
         if latest is not None:
             self._note_arrival(latest.frame, now.time_s)
@@ -561,10 +570,16 @@ class PadVision:
         except SkeyeError as exc:
             self.stats.errors += 1
             self.stats.last_error = str(exc)
-            log.warning("camera frame not available (pad not seen): %s", exc)
+            if not self.stats.camera_lost:
+                log.warning("camera lost (pad not seen; the pad modes hold still until frames "
+                            "come again): %s", exc)
+            self.stats.camera_lost = str(exc)
             self._last_frame = announced
             self._stop.wait(0.1)  # do not hammer a server that is down
             return PadObservation(self.frame_time_s(announced, announced_time_s), False)
+        if self.stats.camera_lost:
+            log.warning("camera frames again: pad navigation resumes")
+            self.stats.camera_lost = ""
         if image.frame <= self._last_frame:
             return None
         self._last_frame = image.frame
@@ -638,7 +653,7 @@ class PadVision:
                 boards.airframe.hover()
         if mode == PadAction.OFF or boards.state is not NavState.HOLDING:
             return  # landed, taking off, flying a ground command, landing, failsafe: hands off
-        if self.stats.too_slow:
+        if self.stats.too_slow or self.stats.camera_lost:
             boards.airframe.set_velocity(0.0, 0.0, 0.0, 0.0, None)
             return
         sp = self.law.update(now.time_s, found, forward_m, right_m, height_m,

@@ -444,7 +444,9 @@ class Robot:
         f = self.flight
         f.crashed = cause
         f.armed = False
-        self.command = Command(attitude=self.command.attitude)
+        c = self.command  # each axis keeps its form, its set-point cleared
+        self.command = Command(pitch_angle=c.pitch_angle, roll_angle=c.roll_angle,
+                               thrust_vertical=c.thrust_vertical)
         self.controller.reset()
         self.crash_news = cause
 

@@ -1,0 +1,246 @@
+"""A simulated robot served as an AscTec LL board on a line: the board's I/O and its clock.
+
+How this works: :class:`LLBoardServer` owns a :class:`~skeye.hil.line.BoardLine` and an
+:class:`~skeye.hil.ll_board.LLBoard` over the robot's ``SimAirframe`` (a ``skeye.control``
+client of the simulator). Two workers:
+
+- ``ll-read-NAME`` alone reads the line, feeds a ``CommandStreamParser`` and writes each
+  answer at once (a poll's answer never waits for the clock). A CLOCK is queued for the clock
+  worker.
+- ``ll-clock-NAME`` ticks the board. In realtime it does so every ``tick_s`` of wall time. In
+  lockstep the simulator's time moves only as the client on the line grants it: CLOCK
+  ``until`` (ms of sim time) advances the simulator to it, in steps of one control period,
+  ticking the board after each, and is then answered RESULT code 0 with the sim time reached
+  in its reason (``sim time 12.350000 s``); a grant already passed is answered at once, so a
+  client learns the time by granting 0, and the same grant sent again before it is reached is
+  answered at once with the time so far (the board is alive, only busy). If the client leaves
+  the line (a pseudo-terminal closed, a TCP connection gone) the board's clock runs on by
+  itself at real time: a vehicle does not freeze because its onboard computer went away, and
+  the serial timeout's emergency procedure plays out. It goes back to granted time when a
+  client grants again. Before any client has been on the line, lockstep time does not move.
+  With ``rate`` (for AscTec programs, which grant no time) the board drives the lockstep clock
+  itself at that pace.
+
+The board's time is the simulator's. A simulator that goes away (the control connection
+failed) is logged and the server stops answering; ``error`` says why.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+
+from skeye.errors import SkeyeError
+from skeye.hil.line import BoardLine
+from skeye.hil.ll_board import LLBoard, LLSettings
+from skeye.pilot.airframe import Airframe
+from skeye.wire.packets import (
+    PD,
+    Clock,
+    CommandStreamParser,
+    Message,
+    Result,
+    ResultCode,
+    encode,
+)
+from skeye.workers import Worker
+
+log = logging.getLogger(__name__)
+
+REALTIME_TICK_S = 0.01
+REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
+
+
+class LLBoardServer:
+    """Serve ``airframe`` as an AscTec LL board on ``line`` (a context manager).
+
+    Args:
+        airframe: the simulated robot (``SimAirframe``: ``advance`` steps a lockstep simulator).
+        line: the board's end of the serial line.
+        sim_time: the simulator's current time (s).
+        name: the robot's name (thread names, log lines).
+        lockstep: the simulator is in lockstep: time moves by the client's CLOCK grants.
+        tick_s: the board's tick (lockstep: the step a grant is advanced by; the robot's
+            control period).
+        time_step_s: the simulator's physics step (a grant is reached to within half of one).
+        rate: lockstep, for clients that grant no time (any AscTec program): the board drives
+            the clock itself, ``rate`` sim seconds per wall second.
+        settings: the board's own figures (serial timeout, the emergency wait, stick scales).
+    """
+
+    def __init__(
+        self,
+        airframe: Airframe,
+        line: BoardLine,
+        sim_time: Callable[[], float],
+        *,
+        name: str = "R1",
+        lockstep: bool = False,
+        tick_s: float = 0.05,
+        time_step_s: float = 0.001,
+        settings: LLSettings | None = None,
+        rate: float | None = None,
+    ) -> None:
+        self.airframe = airframe
+        self.line = line
+        self.sim_time = sim_time
+        self.name = name
+        self.lockstep = lockstep
+        self.tick_s = tick_s
+        self.time_step_s = time_step_s
+        self.rate = rate
+        self.board = LLBoard(airframe, settings, now_s=sim_time())
+        self.parser = CommandStreamParser()
+        self.error: str | None = None
+        self.free_running = False
+        self.camera: tuple[str, float] | None = None  # the robot's camera: name, FOV (rad)
+        self._lock = threading.Lock()  # every call into the board
+        self._grants: list[float] = []
+        self._granted = threading.Condition()
+        self._stop = threading.Event()
+        self._workers: list[Worker] = []
+        self._reported: tuple[int, int] = (0, 0)
+        self._reported_at = -REPORT_EVERY_S
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def start(self) -> LLBoardServer:
+        self._workers = [
+            Worker(self._read_loop, f"ll-read-{self.name}").start(),
+            Worker(self._clock_loop, f"ll-clock-{self.name}").start(),
+        ]
+        return self
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Stop both workers and close the line (idempotent)."""
+        self._stop.set()
+        with self._granted:
+            self._granted.notify_all()
+        self.line.close()
+        for w in self._workers:
+            w.join(timeout_s)
+
+    def __enter__(self) -> LLBoardServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def check(self) -> None:
+        """Raise ``WorkerFailed`` if a worker died on an exception (a bug)."""
+        for w in self._workers:
+            w.check()
+
+    # -- the line ------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self.line.recv(0.1)
+            except SkeyeError:
+                return  # the line was closed
+            if not data or self.error is not None:
+                continue
+            for event in self.parser.feed(data):
+                if isinstance(event, Clock):
+                    self._grant(event.until / 1000.0)
+                with self._lock:
+                    replies = self.board.handle(event, self.sim_time())
+                self._send(replies)
+            self._report_line()
+
+    def _report_line(self) -> None:
+        """Say (at most every ``REPORT_EVERY_S``) that the line carries garbage."""
+        errors = (self.parser.garbage_bytes, sum(self.parser.errors.values()))
+        now = time.monotonic()
+        if errors != self._reported and now - self._reported_at >= REPORT_EVERY_S:
+            log.warning("LL board %s: %d bytes of garbage skipped, %d bad frames on its line so "
+                        "far", self.name, *errors)
+            self._reported, self._reported_at = errors, now
+
+    def _send(self, replies: list[Message]) -> None:
+        if replies:
+            self.line.send(b"".join(encode(m) for m in replies))
+
+    def _grant(self, until_s: float) -> None:
+        with self._granted:
+            again = until_s in self._grants
+            if not again:
+                self._grants.append(until_s)
+            self._granted.notify_all()
+        if again:  # asked again while the simulator steps: say where it is (it is alive)
+            self._send([Result(int(PD.CLOCK), ResultCode.OK,
+                               f"sim time {self.sim_time():.6f} s")])
+
+    def _answer_grants(self) -> None:
+        """Answer every grant the sim time has reached."""
+        now = self.sim_time()
+        with self._granted:
+            slack = self.time_step_s / 2
+            due = [g for g in self._grants if g <= now + slack]
+            self._grants = [g for g in self._grants if g > now + slack]
+        for _ in due:
+            self._send([Result(int(PD.CLOCK), ResultCode.OK, f"sim time {now:.6f} s")])
+
+    # -- the clock -----------------------------------------------------------------------
+    def _tick(self) -> None:
+        with self._lock:
+            self.board.tick(self.sim_time())
+
+    def _advance(self, seconds: float) -> None:
+        self.airframe.advance(seconds)
+        lost = getattr(self.airframe, "lost", None)
+        if lost:
+            raise SkeyeError(lost)
+
+    def _clock_loop(self) -> None:
+        next_s = time.monotonic()
+        while not self._stop.is_set() and self.error is None:
+            try:
+                if not self.lockstep:
+                    self._tick()
+                    self._advance(0.0)  # sends sticks deferred while a motion ran
+                    self._answer_grants()
+                    next_s += self.tick_s
+                    delay = next_s - time.monotonic()
+                    if delay < -1.0:
+                        next_s = time.monotonic()
+                    self._stop.wait(max(0.0, delay))
+                    continue
+                with self._granted:
+                    self._granted.wait_for(lambda: bool(self._grants) or self._stop.is_set(),
+                                           0.1)
+                    target = max(self._grants, default=None)
+                if target is not None:
+                    if self.free_running:
+                        log.info("LL board %s: a client grants the clock again", self.name)
+                        self.free_running = False
+                    while not self._stop.is_set():
+                        steps = math.floor((target - self.sim_time()) / self.time_step_s + 0.5)
+                        if steps < 1:
+                            break
+                        self._advance(min(self.tick_s, steps * self.time_step_s))
+                        self._tick()
+                    self._answer_grants()
+                elif self.rate is not None:  # the board's own clock, paced
+                    self._advance(self.tick_s)
+                    self._tick()
+                    next_s += self.tick_s / self.rate
+                    delay = next_s - time.monotonic()
+                    if delay < -1.0:
+                        next_s = time.monotonic()
+                    self._stop.wait(max(0.0, delay))
+                elif self.line.plugged is False and self.line.ever_plugged:
+                    if not self.free_running:
+                        log.warning("LL board %s: the client left the line: the board's clock "
+                                    "runs on at real time", self.name)
+                        self.free_running = True
+                        next_s = time.monotonic()
+                    self._advance(self.tick_s)
+                    self._tick()
+                    next_s += self.tick_s
+                    self._stop.wait(max(0.0, next_s - time.monotonic()))
+            except SkeyeError as exc:
+                self.error = f"simulator lost: {exc}"
+                log.error("LL board %s: %s; the board stops answering", self.name, self.error)

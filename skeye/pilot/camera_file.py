@@ -1,0 +1,165 @@
+"""``file://video.mp4``: a recorded video as the pilot's camera, played at its frame rate.
+
+How this works: OpenCV reads the file (its FFmpeg backend: MP4, MKV, AVI...). The video is
+paced on the vehicle's clock: the first ``latest`` starts it, and frame k (from 0) is due
+``k / fps`` seconds later, its capture time that instant, so in lockstep a video plays in sim
+time and a run stays reproducible. ``image()`` decodes up to the due frame (frames the vision
+had no time for are skipped, as a live camera's would be). At the end the camera is reported
+ended (``lost``; the pad modes hold still), unless ``loop=1`` starts it again.
+
+URI: ``file://video.mp4`` (relative to the working directory), ``file:///abs/video.mkv``;
+options ``fps=`` (when the file's own rate is missing or wrong), ``loop=1``, ``fov_deg=`` /
+``fov_rad=``. A lossless recording (FFV1 in MKV or AVI) gives the detector the very pixels
+that were recorded; a lossy one (MP4) close ones.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from pathlib import Path
+from urllib.parse import parse_qs, unquote, urlsplit
+
+import cv2
+import numpy as np
+
+from skeye.errors import LocalProtocolError
+from skeye.pilot.camera import (
+    CameraError,
+    CameraImage,
+    CameraOptions,
+    FrameInfo,
+    check_size,
+    fov_option,
+)
+
+
+def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]:
+    """(path, fps or None, loop, fov or None) of a ``file://`` camera URI.
+
+    Raises:
+        LocalProtocolError: naming what is wrong.
+    """
+    parts = urlsplit(uri)
+    if parts.scheme.lower() != "file":
+        raise LocalProtocolError(f"camera {uri!r}: expected file://PATH")
+    path = unquote(parts.netloc + parts.path)
+    if not path:
+        raise LocalProtocolError(f"camera {uri!r}: expected file://PATH (a video file)")
+    query = parse_qs(parts.query, keep_blank_values=True)
+    unknown = sorted(set(query) - {"fps", "loop", "fov_deg", "fov_rad"})
+    if unknown:
+        raise LocalProtocolError(f"camera {uri!r}: unknown option(s) {unknown} (fps, loop, "
+                                 "fov_deg, fov_rad)")
+    fps = None
+    if "fps" in query:
+        try:
+            fps = float(query["fps"][-1])
+        except ValueError:
+            fps = math.nan
+        if not (math.isfinite(fps) and 0 < fps <= 1000):
+            raise LocalProtocolError(f"camera {uri!r}: fps={query['fps'][-1]} is not 0..1000")
+    loop_text = query.get("loop", ["0"])[-1]
+    if loop_text not in ("0", "1"):
+        raise LocalProtocolError(f"camera {uri!r}: loop={loop_text} is not 0 or 1")
+    return Path(path), fps, loop_text == "1", fov_option(uri, query)
+
+
+class FileCamera:
+    """A video file, paced at its frame rate on the vehicle's clock."""
+
+    def __init__(self, uri: str, path: Path, options: CameraOptions, *, fps: float | None = None,
+                 loop: bool = False, fov_h_rad: float | None = None) -> None:
+        self.uri = uri
+        self.path = path
+        self.options = options
+        self.loop = loop
+        self.fov_h_rad = fov_h_rad if fov_h_rad is not None else options.fov_h_rad
+        self._cap = cv2.VideoCapture(str(path))
+        if not self._cap.isOpened():
+            raise CameraError(f"camera {uri}: cannot open {path} as a video "
+                              f"({'no such file' if not path.exists() else 'not a video'})")
+        file_fps = self._cap.get(cv2.CAP_PROP_FPS)
+        self.fps = fps or (file_fps if file_fps and math.isfinite(file_fps) else 0.0)
+        if not self.fps > 0:
+            self._cap.release()
+            raise CameraError(f"camera {uri}: the file gives no frame rate: add ?fps=")
+        count = self._cap.get(cv2.CAP_PROP_FRAME_COUNT)
+        self.frame_count = int(count) if count and count > 0 else None
+        self.width_px = int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH))
+        self.height_px = int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        check_size(uri, options.size_px, self.width_px, self.height_px)
+        self._lock = threading.Lock()
+        self._start_s: float | None = None
+        self._decoded = 0  # frames read from the file so far (this pass)
+        self._pass = 0  # times the video started over (loop)
+        self._ended = False
+        self._frame: np.ndarray | None = None
+
+    def _due(self) -> int:
+        """How many frames are due by now (1 = the first)."""
+        now = self.options.clock()
+        if self._start_s is None:
+            self._start_s = now
+        return math.floor((now - self._start_s) * self.fps + 1e-9) + 1
+
+    @property
+    def latest(self) -> FrameInfo | None:
+        if self._ended:  # nothing new will come
+            return None if self._frame is None else self._info(self._decoded)
+        return self._info(self._due())  # past the end: image() then says it ended
+
+    def _info(self, number: int) -> FrameInfo:
+        assert self._start_s is not None
+        return FrameInfo(number, self._start_s + (number - 1) / self.fps)
+
+    def image(self) -> CameraImage:
+        with self._lock:
+            if self._ended:
+                raise CameraError(self.lost or f"camera {self.uri}: ended")
+            due = self._due() - self._pass * (self.frame_count or 0)
+            frame = self._frame
+            while self._decoded < due:
+                ok = self._cap.grab()
+                if not ok:
+                    if self.loop and self._decoded > 0:
+                        self.frame_count = self._decoded
+                        self._pass += 1
+                        self._cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                        due -= self._decoded
+                        self._decoded = 0
+                        continue
+                    self._ended = True
+                    raise CameraError(self.lost or f"camera {self.uri}: ended")
+                self._decoded += 1
+                if self._decoded == due:
+                    ok, frame = self._cap.retrieve()
+                    if not ok:
+                        raise CameraError(f"camera {self.uri}: frame {self._decoded} does not "
+                                          "decode")
+                    self._frame = frame
+            if frame is None:
+                raise CameraError(f"camera {self.uri}: no frame yet")
+            number = self._decoded + self._pass * (self.frame_count or 0)
+            info = self._info(number)
+            return CameraImage(info.frame, info.time_s, frame)
+
+    @property
+    def lost(self) -> str | None:
+        if self._ended:
+            return f"camera {self.uri}: the video ended after {self._decoded} frames"
+        return None
+
+    def close(self) -> None:
+        with self._lock:
+            self._cap.release()
+
+
+def open_file_camera(uri: str, options: CameraOptions) -> FileCamera:
+    """The ``file://`` camera source.
+
+    Raises:
+        LocalProtocolError: a bad URI; CameraError: the file cannot be read as a video.
+    """
+    path, fps, loop, fov = parse_file_camera(uri)
+    return FileCamera(uri, path, options, fps=fps, loop=loop, fov_h_rad=fov)

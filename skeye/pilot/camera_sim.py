@@ -1,0 +1,185 @@
+"""``sim://HOST:PORT/ROBOT/CAMERA``: a camera of the simulator, from its image server alone.
+
+How this works: the source needs no control connection, so it serves a robot the pilot did
+not spawn (the robot ``skeye sim --ll-board`` flies as the hardware in the loop). Two image
+clients (docs/protocols/images.md): ``latest`` asks one for a 1x1 sub-rectangle with the
+META header (the newest frame's number and sim time, 32 bytes on the wire), at most every
+``probe_interval_s`` of wall time unless the vehicle's clock moved (in lockstep: every step);
+``image()`` fetches the newest whole frame (RAW + META) on the other, so the vision's worker
+and the control loop never share a connection. A failed request drops its connection (a late
+frame never answers a later one) and raises :class:`CameraError`.
+
+Times: frames carry the simulator's time. When the vehicle's clock is the simulator's
+(``sim://`` airframe, lockstep ``asctec-ll://``) they pass through; otherwise (a realtime
+``asctec-ll://`` flight: the onboard computer's monotonic clock) each is mapped by the offset
+``clock - sim time`` seen when the newest frame arrived, the smallest of the last
+``OFFSET_WINDOW`` (the smallest is the one least delayed by the line).
+
+Field of view: ``fov_rad=`` / ``fov_deg=`` in the URI (``skeye sim --ll-board`` prints it),
+else the pilot's (asked of the simulator on a ``sim://`` airframe), else a calibration file.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from urllib.parse import parse_qs, urlsplit
+
+from skeye.control.image_client import ImageClient
+from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.pilot.camera import (
+    CameraError,
+    CameraImage,
+    CameraOptions,
+    FrameInfo,
+    check_size,
+    fov_option,
+)
+from skeye.pixels import frame_image
+
+OFFSET_WINDOW = 50
+
+
+def parse_sim_camera(uri: str, robot: str = "R1") -> tuple[str, int, str, float | None]:
+    """(host, port, ``robot/camera``, fov or None) of a ``sim://`` camera URI.
+
+    Raises:
+        LocalProtocolError: naming what is wrong.
+    """
+    parts = urlsplit(uri)
+    if parts.scheme.lower() != "sim" or not parts.hostname or parts.port is None:
+        raise LocalProtocolError(f"camera {uri!r}: expected sim://HOST:PORT/ROBOT/CAMERA "
+                                 "(the image server's address)")
+    name = parts.path.strip("/")
+    if not name or name.count("/") > 1:
+        raise LocalProtocolError(f"camera {uri!r}: expected sim://HOST:PORT/ROBOT/CAMERA or "
+                                 "sim://HOST:PORT/CAMERA")
+    if "/" not in name:
+        name = f"{robot}/{name}"
+    query = parse_qs(parts.query, keep_blank_values=True)
+    unknown = sorted(set(query) - {"fov_deg", "fov_rad"})
+    if unknown:
+        raise LocalProtocolError(f"camera {uri!r}: unknown option(s) {unknown} (fov_deg, "
+                                 "fov_rad)")
+    return parts.hostname, parts.port, name, fov_option(uri, query)
+
+
+class SimCamera:
+    """The simulator's camera through its image server (see the module docstring)."""
+
+    def __init__(self, uri: str, host: str, port: int, name: str, options: CameraOptions,
+                 fov_h_rad: float | None = None, probe_interval_s: float = 0.005) -> None:
+        self.uri = uri
+        self.host, self.port, self.name = host, port, name
+        self.options = options
+        self.fov_h_rad = fov_h_rad if fov_h_rad is not None else options.fov_h_rad
+        self.probe_interval_s = probe_interval_s
+        self.errors = 0
+        self._clients: dict[str, ImageClient | None] = {"probe": None, "image": None}
+        self._locks = {"probe": threading.Lock(), "image": threading.Lock()}
+        self._latest: FrameInfo | None = None
+        self._probed_at = -1e9
+        self._probed_vehicle_s = -1e9
+        self._offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)
+        self._lost: str | None = None
+        self._checked = False
+
+    # -- connections -----------------------------------------------------------------------
+    def _client(self, which: str) -> ImageClient:
+        client = self._clients[which]
+        if client is None:
+            client = ImageClient(self.host, self.port, timeout_s=self.options.timeout_s)
+            try:
+                client.select_camera(self.name)
+                client.set_format("raw")
+                client.set_meta(True)
+            except BaseException:
+                client.close()
+                raise
+            self._clients[which] = client
+        return client
+
+    def _drop(self, which: str) -> None:
+        client = self._clients[which]
+        if client is not None:
+            client.close()
+            self._clients[which] = None
+
+    def _vehicle_time(self, sim_time_s: float, received_s: float | None = None) -> float:
+        if self.options.clock_is_sim:
+            return sim_time_s
+        now = self.options.clock() if received_s is None else received_s
+        self._offsets.append(now - sim_time_s)
+        return sim_time_s + min(self._offsets)
+
+    def _failed(self, which: str, exc: BaseException) -> CameraError:
+        self._drop(which)
+        self.errors += 1
+        self._lost = f"camera {self.uri}: {exc}"
+        return CameraError(self._lost)
+
+    # -- the source ------------------------------------------------------------------------
+    @property
+    def latest(self) -> FrameInfo | None:
+        now = time.monotonic()
+        vehicle_now = self.options.clock()
+        if (now - self._probed_at < self.probe_interval_s
+                and vehicle_now == self._probed_vehicle_s):
+            return self._latest  # asked again at the same moment (lockstep: the same step)
+        with self._locks["probe"]:
+            self._probed_at, self._probed_vehicle_s = now, vehicle_now
+            try:
+                frame = self._client("probe").get_subrect(0, 0, 1, 1)
+            except SkeyeError as exc:
+                self._failed("probe", exc)
+                return self._latest
+            meta = frame.meta
+            if meta is not None and (self._latest is None
+                                     or meta.frame_number > self._latest.frame):
+                self._latest = FrameInfo(meta.frame_number, self._vehicle_time(meta.sim_time_s))
+        return self._latest
+
+    def image(self) -> CameraImage:
+        with self._locks["image"]:
+            try:
+                frame = self._client("image").get_frame()
+                bgr = frame_image(frame)
+            except SkeyeError as exc:
+                raise self._failed("image", exc) from exc
+        if frame.meta is None:
+            raise self._failed("image", CameraError("the image server sent no META header"))
+        if not self._checked:
+            try:
+                check_size(self.uri, self.options.size_px, bgr.shape[1], bgr.shape[0])
+            except CameraError as exc:
+                self._lost = str(exc)
+                raise
+            self._checked = True
+        self._lost = None
+        known = self._latest
+        if known is not None and known.frame == frame.meta.frame_number:
+            info = known  # the time it was announced with
+        else:
+            info = FrameInfo(frame.meta.frame_number, self._vehicle_time(frame.meta.sim_time_s))
+        if self._latest is None or info.frame > self._latest.frame:
+            self._latest = info
+        return CameraImage(info.frame, info.time_s, bgr)
+
+    @property
+    def lost(self) -> str | None:
+        return self._lost
+
+    def close(self) -> None:
+        for which in ("probe", "image"):
+            client = self._clients[which]
+            if client is not None:
+                client.close()  # wakes a request blocked on it
+            with self._locks[which]:
+                self._drop(which)
+
+
+def open_sim_camera(uri: str, options: CameraOptions) -> SimCamera:
+    """The ``sim://`` camera source (nothing is connected until the first frame is asked)."""
+    host, port, name, fov = parse_sim_camera(uri, options.robot)
+    return SimCamera(uri, host, port, name, options, fov)

@@ -1,0 +1,195 @@
+"""Every airframe backend passes one conformance test; the registry picks them by URI.
+
+A backend (skeye/pilot/airframe.py) is opened by ``open_airframe(uri, options)`` and must then
+behave as the boards expect of any vehicle: a sane snapshot at rest, a take-off that is busy
+until the height is reached, velocities that move it, a hover, a landing that ends landed with
+the motors off, a ``describe`` line, ``lost`` None while it answers, and an idempotent
+``close``. The sim:// and asctec-ll:// backends fly a lockstep simulator (the latter through
+the simulator's emulated LL board on a pseudo-terminal), where ``advance`` drives the time; the
+mavlink:// one flies skeye's own MAVLink vehicle on a real-time simulator (a flight controller
+keeps its own clock), waited on in sim time. A new backend adds its entry to
+``BACKEND_FIXTURES``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+
+import pytest
+
+from skeye.errors import LocalProtocolError
+from skeye.hil.cli import parse_ll_board, start_ll_board
+from skeye.pilot import airframe as airframe_module
+from skeye.pilot.airframe import (
+    AirframeBackend,
+    AirframeOptions,
+    airframe_scheme,
+    open_airframe,
+    register_airframe,
+)
+from skeye.pilot.asctec_ll import parse_asctec_ll
+from skeye.pilot.sim_airframe import sim_address
+from tests.sim.conftest import running_sim
+
+Truth = Callable[[], tuple[float, float, float, float]]  # sim time, north, east, down
+
+
+@contextmanager
+def sim_backend() -> Iterator[tuple[AirframeBackend, Truth]]:
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=5, estimator="truth"))
+        air = open_airframe(f"sim://127.0.0.1:{server.port}", AirframeOptions())
+        stack.callback(air.close)
+        yield air, _truth(server)
+
+
+@contextmanager
+def asctec_ll_backend() -> Iterator[tuple[AirframeBackend, Truth]]:
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=5, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=pty"), f"127.0.0.1:{server.port}")
+        air = open_airframe(board.line.client_uri() + "?lockstep=1", AirframeOptions())
+        stack.callback(air.close)
+        yield air, _truth(server)
+
+
+@contextmanager
+def mavlink_backend() -> Iterator[tuple[AirframeBackend, Truth]]:
+    from skeye.control.connection import connect
+    from skeye.pilot.mavlink_server import MavlinkServer
+    from skeye.pilot.server import PilotServer
+    from skeye.pilot.sim_airframe import SimAirframe
+    from tests.mavlink.conftest import free_udp_port
+
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="realtime", seed=5, estimator="truth"))
+        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=30.0))
+        controller = stack.enter_context(PilotServer(SimAirframe(sim, sim.spawn(
+            "hummingbird", start="Pad1")), port=0))
+        port = free_udp_port()
+        stack.enter_context(MavlinkServer(controller.boards, controller.lock,
+                                          [f"udp://127.0.0.1:{port}"]))
+        air = open_airframe(f"mavlink://udpout/127.0.0.1:{port}", AirframeOptions(timeout_s=60))
+        stack.callback(air.close)
+        yield air, _truth(server)
+
+
+def _truth(server) -> Truth:
+    def read():
+        return server.runner.call(
+            lambda s: (s.time_s, *(float(v) for v in s.body_state("R1").pos_ned_m)))
+    return read
+
+
+BACKEND_FIXTURES = {"sim": sim_backend, "asctec-ll": asctec_ll_backend,
+                    "mavlink": mavlink_backend}
+WALL_PER_SIM_S = 20.0  # a stuck guard for the real-time backend, not a speed expectation
+
+
+def advance_until(air: AirframeBackend, done: Callable[[], bool], limit_s: float,
+                  truth: Truth) -> None:
+    """Until ``done()``, for at most ``limit_s`` of sim time: a lockstep backend's ``advance``
+    moves the time; a real-time one's vehicle keeps its own (waited on here)."""
+    start = truth()[0]
+    wall_deadline = time.monotonic() + WALL_PER_SIM_S * limit_s + 60.0
+    while not done():
+        assert truth()[0] <= start + limit_s, f"not done in {limit_s} s of sim time"
+        assert time.monotonic() < wall_deadline, "the vehicle's time stopped"
+        if air.lockstep:
+            air.advance(air.control_period_s)
+        else:
+            time.sleep(air.control_period_s)
+            air.advance(0.0)
+        assert air.lost is None, air.lost
+
+
+def test_every_scheme_in_the_registry_has_a_conformance_fixture():
+    assert set(airframe_module.BACKENDS) <= set(BACKEND_FIXTURES)
+
+
+@pytest.mark.parametrize("scheme", sorted(BACKEND_FIXTURES))
+def test_backend_conformance(scheme):
+    with BACKEND_FIXTURES[scheme]() as (air, truth):
+        assert isinstance(air, AirframeBackend)
+        assert air.uri.startswith(scheme + "://") and air.describe()
+        assert air.lockstep == air.clock_is_sim  # a lockstep vehicle runs on sim time
+        assert air.control_period_s > 0 and air.lost is None
+        assert air.limits.max_speed_m_s > 0 and air.limits.max_climb_m_s > 0
+        snap = air.snapshot()
+        assert snap.landed and not snap.armed and not air.busy
+        assert 9.0 < -snap.specific_force_frd_m_s2[2] < 10.6  # gravity, at rest
+        assert all(abs(a) < 0.1 for a in snap.rpy_rad[:2]) and snap.battery_v > 9.0
+        ground_m = snap.altitude_m
+
+        air.take_off(ground_m + 1.0)
+        air.advance(air.control_period_s if air.lockstep else 0.0)
+        assert air.busy
+        advance_until(air, lambda: not air.busy, 30.0, truth)
+        _, n0, e0, d0 = truth()
+        assert air.snapshot().altitude_m == pytest.approx(ground_m + 1.0, abs=0.15)
+        assert -d0 == pytest.approx(ground_m + 1.0, abs=0.2) and not air.snapshot().landed
+
+        air.set_velocity(0.5, 0.0, 0.0, 0.0, 2.0)  # facing north: 1 m north
+        t_start = truth()[0]
+        advance_until(air, lambda: truth()[0] >= t_start + 3.0, 5.0, truth)
+        air.hover()
+        advance_until(air, lambda: truth()[0] >= t_start + 5.0, 3.0, truth)
+        _, n1, e1, _ = truth()
+        assert n1 - n0 == pytest.approx(1.0, abs=0.3) and abs(e1 - e0) < 0.3
+
+        air.land()
+        advance_until(air, lambda: not air.busy, 30.0, truth)
+        snap = air.snapshot()
+        assert snap.landed and not snap.armed
+        assert -truth()[3] < 0.15
+        assert air.lost is None
+        air.close()
+        air.close()  # idempotent
+
+
+@pytest.mark.parametrize(("uri", "words"), [
+    ("127.0.0.1:3000", "expected a URI"),
+    ("udp://x:1", "no backend for udp://"),
+    ("sim://h:1/path", "no path or options"),
+    ("asctec-ll://usb/x", "must be serial/DEVICE or tcp/HOST:PORT"),
+    ("asctec-ll://tcp/host", "expected asctec-ll://tcp/HOST:PORT"),
+    ("asctec-ll://serial/dev/ttyS1?baud=x", "baud=x"),
+    ("asctec-ll://serial/dev/ttyS1?speed=9", "unknown option"),
+    ("asctec-ll://tcp/h:1?baud=9600", "baud is for a serial line"),
+    ("asctec-ll://serial/dev/ttyS1?lockstep=maybe", "lockstep=maybe"),
+])
+def test_bad_airframe_uris_are_named(uri, words):
+    with pytest.raises(LocalProtocolError, match=words):
+        airframe_scheme(uri)
+        if uri.startswith("sim://"):
+            sim_address(uri)
+        else:
+            parse_asctec_ll(uri)
+
+
+def test_uris_parse():
+    assert sim_address("sim://127.0.0.1:3000") == "127.0.0.1:3000"
+    assert sim_address("sim://localhost") == "localhost:3000"
+    s = parse_asctec_ll("asctec-ll://serial/dev/ttyS1?baud=57600")
+    assert s.link_uri == "serial:///dev/ttyS1?baud=57600" and not s.lockstep
+    s = parse_asctec_ll("asctec-ll://tcp/10.0.0.2:7100?lockstep=1&rate_hz=50")
+    assert s.link_uri == "tcp://10.0.0.2:7100" and s.lockstep and s.rate_hz == 50
+
+
+def test_a_new_scheme_is_one_registration():
+    opened = []
+
+    def opener(uri: str, options: AirframeOptions):
+        opened.append((uri, options.name))
+        return "an airframe"
+
+    register_airframe("test-only", opener)
+    try:
+        assert open_airframe("test-only://x", AirframeOptions(name="R7")) == "an airframe"
+        assert opened == [("test-only://x", "R7")]
+    finally:
+        del airframe_module.BACKENDS["test-only"]
+    with pytest.raises(LocalProtocolError):
+        register_airframe("Bad://", opener)

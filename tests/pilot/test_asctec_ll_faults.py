@@ -1,0 +1,273 @@
+"""Bad input on the way to an AscTec LL board (issue 29): each named, the failsafe as documented
+(docs/onboard.md), nothing hangs.
+
+- the serial line unplugged mid-flight (the simulator's board on a pseudo-terminal, its end
+  closed): the pilot says "LL board lost" and goes to FAILSAFE; the board, hearing nothing,
+  starts its emergency procedure (hold 5 s, then land) and lands;
+- garbage on the line both ways (a TCP line through a proxy that adds random bytes): counted
+  and said, the flight goes on;
+- the LL board silent (the proxy drops everything it sends): "LL board silent", FAILSAFE;
+  at start, a line nobody answers: the pilot does not start, and says why;
+- the camera unplugged mid-flight (the image server closed): said, and the pad hold keeps still
+  instead of climbing to search.
+
+And a realtime flight through the board (a real board's case: the pilot's own 20 Hz cycle).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+
+import pytest
+
+from skeye.errors import LinkTimeout
+from skeye.hil.cli import parse_ll_board, start_ll_board
+from skeye.hil.ll_server import LLBoardServer
+from skeye.link.vehicle import Vehicle
+from skeye.pilot import cli as pilot_cli
+from skeye.pilot.airframe import AirframeOptions, open_airframe
+from skeye.pilot.cli import camera_vision_factory, open_camera_for
+from skeye.pilot.server import PilotServer
+from skeye.wire.packets import NavState, SkeyeMask
+from skeye.workers import Worker
+from tests.sim.conftest import running_sim
+from tests.sim.test_cameras import sim_with_images
+
+
+def wait_until(predicate, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert time.monotonic() < deadline, f"{what}: not within {timeout_s} s"
+        time.sleep(0.02)
+
+
+class Proxy:
+    """A TCP middleman between the pilot and the board's TCP line: it can add garbage, drop
+    what the board says (a silent board), or be cut."""
+
+    def __init__(self, port: int) -> None:
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self.listener.getsockname()[1]
+        self.target = port
+        self.garbage = False
+        self.silent = False
+        self.injected = 0
+        self.rng = random.Random(7)
+        self.socks: list[socket.socket] = []
+        self.stop = threading.Event()
+        self.workers = [Worker(self._accept, "test-proxy-accept").start()]
+
+    def _accept(self) -> None:
+        self.listener.settimeout(0.1)
+        while not self.stop.is_set():
+            try:
+                a, _ = self.listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            b = socket.create_connection(("127.0.0.1", self.target))
+            self.socks += [a, b]
+            self.workers.append(Worker(self._pipe, "test-proxy-up", args=(a, b, False)).start())
+            self.workers.append(Worker(self._pipe, "test-proxy-down", args=(b, a, True)).start())
+
+    def _pipe(self, src: socket.socket, dst: socket.socket, from_board: bool) -> None:
+        src.settimeout(0.1)
+        while not self.stop.is_set():
+            try:
+                data = src.recv(4096)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not data:
+                return
+            if from_board and self.silent:
+                continue
+            if self.garbage and self.rng.random() < 0.3:
+                junk = bytes(self.rng.randrange(256) for _ in range(self.rng.randrange(1, 40)))
+                self.injected += len(junk)
+                data = junk + data
+            try:
+                dst.sendall(data)
+            except OSError:
+                return
+
+    def close(self) -> None:
+        self.stop.set()
+        self.listener.close()
+        for s in self.socks:
+            s.close()
+        for w in self.workers:
+            w.join(2.0)
+
+
+@dataclass
+class Hil:
+    board: LLBoardServer
+    pilot: PilotServer
+    vehicle: Vehicle
+    truth: object
+
+    def position(self) -> tuple[float, float, float]:
+        return self.truth.runner.call(  # type: ignore[attr-defined]
+            lambda s: tuple(float(v) for v in s.body_state("R1").pos_ned_m))
+
+
+@contextmanager
+def hovering(line: str, proxy: bool = False) -> Iterator[tuple[Hil, Proxy | None]]:
+    """The pilot on the simulator's LL board (lockstep), hovering 1 m up."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=6, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board(f"R1={line}"), f"127.0.0.1:{server.port}")
+        uri = board.line.client_uri()
+        middle = None
+        if proxy:
+            middle = Proxy(int(board.line.address.rsplit(":", 1)[1]))
+            stack.callback(middle.close)
+            uri = f"asctec-ll://tcp/127.0.0.1:{middle.port}"
+        airframe = open_airframe(uri + "?lockstep=1", AirframeOptions())
+        stack.callback(airframe.close)
+        pilot = stack.enter_context(PilotServer(airframe, port=0, lockstep=True,
+                                                lockstep_rate=2.0, tick_s=0.05))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+        yield Hil(board, pilot, vehicle, server), middle
+
+
+def test_the_serial_line_unplugged_mid_flight(caplog):
+    with hovering("pty") as (hil, _):
+        assert hil.position()[2] < -0.9
+        hil.board.line.unplug()
+        wait_until(lambda: hil.pilot.vehicle_lost is not None, 10, "the pilot sees it")
+        assert hil.pilot.vehicle_lost.startswith("LL board lost")
+        hil.vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        # The board's own failsafe: silent line -> hold 5 s -> land, on its own clock.
+        wait_until(lambda: hil.board.board.emergencies == 1, 10, "the board's emergency")
+        assert hil.board.free_running
+        wait_until(lambda: hil.board.board.boards.state is NavState.LANDED, 30,
+                   "the board lands the vehicle")
+        assert hil.position()[2] > -0.15
+        hil.vehicle.poll()  # ground control is still answered
+    text = caplog.text
+    assert "vehicle lost: LL board lost" in text and "emergency procedure" in text
+
+
+def test_garbage_on_the_line_is_counted_and_said_and_the_flight_goes_on(caplog):
+    with hovering("tcp:0", proxy=True) as (hil, proxy):
+        start = hil.position()
+        proxy.garbage = True
+        t0 = hil.vehicle.nav_status().time
+        wait_until(lambda: hil.vehicle.nav_status().time > t0 + 4000, 60, "4 s of flight")
+        proxy.garbage = False
+        assert proxy.injected > 100
+        assert hil.pilot.vehicle_lost is None and hil.pilot.boards.state is NavState.HOLDING
+        assert math.dist(hil.position(), start) < 0.3
+        garbage, _bad = hil.pilot.airframe.line_errors()  # type: ignore[attr-defined]
+        assert garbage > 0 and hil.board.parser.garbage_bytes > 0
+    assert "bytes of garbage skipped" in caplog.text
+
+
+def test_the_ll_board_silent_mid_flight():
+    with hovering("tcp:0", proxy=True) as (hil, proxy):
+        proxy.silent = True
+        wait_until(lambda: hil.pilot.vehicle_lost is not None, 20, "the pilot sees it")
+        assert hil.pilot.vehicle_lost.startswith("LL board silent")
+        hil.vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        hil.vehicle.poll()  # ground control is still answered
+
+
+def test_a_line_nobody_answers_stops_the_pilot_at_start(capsys):
+    master, slave = os.openpty()
+    try:
+        path = os.ttyname(slave)
+        started = time.monotonic()
+        with pytest.raises(LinkTimeout, match="LL board silent"):
+            open_airframe(f"asctec-ll://serial{path}?timeout_s=0.3", AirframeOptions())
+        assert time.monotonic() - started < 5.0
+        args = pilot_cli_parser().parse_args(
+            ["pilot", "--airframe", f"asctec-ll://serial{path}?timeout_s=0.3", "--port", "0"])
+        assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR
+        assert "LL board silent" in capsys.readouterr().out
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def pilot_cli_parser():
+    import argparse
+
+    p = argparse.ArgumentParser(prog="skeye")
+    pilot_cli.register(p.add_subparsers(dest="cmd", required=True))
+    return p
+
+
+def test_the_camera_unplugged_mid_flight_holds_the_pad_mode_still(caplog):
+    with ExitStack() as stack:
+        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep",
+                                                                 estimator="truth"))
+        airframe = open_airframe(f"sim://127.0.0.1:{control.port}", AirframeOptions())
+        stack.callback(airframe.close)
+        fov = airframe.connection.request(  # type: ignore[attr-defined]
+            "GETCONF", ("Type", "Camera"), ("Name", "Down")).get_float("FOV")
+        uri = f"sim://127.0.0.1:{images.port}/R1/Down?fov_rad={fov!r}"
+        camera = open_camera_for(uri, airframe, "R1", None, 2.0)
+        stack.callback(camera.close)
+        pilot = stack.enter_context(PilotServer(
+            airframe, port=0, lockstep=True, lockstep_rate=3.0, tick_s=0.05,
+            vision=camera_vision_factory(camera, camera.fov_h_rad, lockstep=True)))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+        vehicle.take_off(1.2)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+        vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
+        vision = pilot.vision
+        wait_until(lambda: vision.stats.detections > 10, 60, "the pad seen")
+
+        def height() -> float:
+            return -control.runner.call(lambda s: float(s.body_state("R1").pos_ned_m[2]))
+
+        images.close()  # unplugged
+        wait_until(lambda: bool(vision.stats.camera_lost), 30, "the camera reported lost")
+        assert uri in vision.stats.camera_lost
+        h0, t0 = height(), vehicle.nav_status().time
+        wait_until(lambda: vehicle.nav_status().time > t0 + 3000, 60, "3 s more")
+        # Not seeing the pad would climb to search (10 % of the height per second); a lost
+        # camera holds still.
+        assert abs(height() - h0) < 0.1
+        assert pilot.loop_error is None and pilot.vehicle_lost is None
+        assert not pilot.boards.pad.report().found
+    assert "camera lost" in caplog.text
+
+
+def test_a_realtime_flight_through_the_ll_board():
+    """A real board runs in real time: the pilot's LL cycle is its own 20 Hz worker and the
+    snapshot's clock the onboard computer's; take off, hold, land (states and heights from the
+    board's own reports, waits on the vehicle's answers)."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="realtime", seed=8, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=pty"), f"127.0.0.1:{server.port}")
+        airframe = open_airframe(board.line.client_uri(), AirframeOptions())
+        stack.callback(airframe.close)
+        assert not airframe.lockstep and not airframe.clock_is_sim
+        pilot = stack.enter_context(PilotServer(airframe, port=0))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+        assert airframe.snapshot().altitude_m == pytest.approx(1.0 + 0.08, abs=0.2)
+        assert abs(airframe.snapshot().time_s - time.monotonic()) < 1.0  # the local clock
+        vehicle.land()
+        vehicle.wait_state(NavState.LANDED, timeout_s=60)
+        assert airframe.cycles > 40  # the worker's cycles flew it (20 Hz: 2 s)
+        assert pilot.vehicle_lost is None and board.board.emergencies == 0
