@@ -380,6 +380,7 @@ class Simulation:
         robot.cameras = old.cameras
         robot.flight.landed_since_s = self.time_s
         self.robots[name] = robot
+        self._update_schedule()  # the new board's sensors fall due on the engine's schedule
         d = self.data
         a = slot.qpos_adr
         d.qpos[a : a + 3] = frames.ned_to_mj(pos)
