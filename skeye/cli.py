@@ -148,6 +148,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 f"{f' {image_quality}' if image_quality is not None else ''} by default)",
                 flush=True,
             )
+            print(f"skeye sim: camera renderer: {cameras.describe_renderer()}", flush=True)
         if args.host == "127.0.0.1":
             print(
                 "skeye sim: bound to 127.0.0.1 only; use --host 0.0.0.0 to accept other machines",

@@ -17,7 +17,8 @@ Profiles (sources in docs/camera.md):
   k2 -0.272067, k3 0.15775; the focal length scaled with the image width), fixed exposure
   10 ms, photon-transfer noise (EMVA 1288 model) with a small-pixel CMOS's read noise and full
   well, a rolling shutter reading the rows out over the
-  frame time, 8-bit MJPEG output, capture latency with jitter, shadows on.
+  frame time, the lens's cos^4 fall-off (vignetting), auto-exposure with its lag, 8-bit MJPEG
+  output, capture latency with jitter, soft shadows on.
 """
 
 from __future__ import annotations
@@ -63,6 +64,16 @@ class CameraModel:
     shadows: bool = False
     msaa_samples: int = 4  # renderer multisampling: 4 area-averages edge pixels, 0 point-samples
     noise_seed: int = 0
+    # Relative illumination cos^n of a pixel's field angle (vignetting); 0: none, 4: the cos^4 law.
+    vignetting_exponent: float = 0.0
+    # Auto-exposure: each frame's exposure time and gain follow the mean of the frames before
+    # (skeye.sim.exposure); off: every frame at exposure_s and gain.
+    auto_exposure: bool = False
+    ae_target_dn: float = 118.0  # the mean level (DN) auto-exposure steers to
+    ae_time_constant_s: float = 0.3  # its lag: first-order, this time constant
+    exposure_min_s: float = 0.0003  # the exposure time's range under auto-exposure
+    exposure_max_s: float = 1.0 / 30.0
+    gain_max: float = 5.0  # the analog gain's upper limit under auto-exposure (lower: 1)
 
     @property
     def camera_matrix(self) -> tuple[tuple[float, float, float], ...]:
@@ -115,6 +126,12 @@ _WEBCAM: dict[str, Any] = {
     # Point-sampled render (no multisampling): software GL's 4x MSAA doubles the render time
     # (docs/camera.md, "Cost"); the lens remap's bilinear interpolation smooths edges.
     "msaa_samples": 0,
+    # The cos^4 law of natural vignetting (assumption: the C920's relative illumination and its
+    # image processor's lens-shading correction are not published).
+    "vignetting_exponent": 4.0,
+    # Auto-exposure on, as the C920 ships (V4L2 exposure_auto 3, aperture priority): exposure
+    # 0.3 ms .. 1/30 s (exposure_absolute 3..333 at 30 fps), gain 1..5 (gain 100..500).
+    "auto_exposure": True,
 }
 
 # The same calibration's focal length at 800x600 (its 640x480 one, 622.0 px, is the same per
@@ -123,9 +140,10 @@ WEBCAM_FOCAL_PX_AT_800 = 775.79
 
 _FIELDS = {f.name for f in fields(CameraModel)} - {"profile", "width", "height"}
 _INT_FIELDS = {"jpeg_quality", "noise_seed", "msaa_samples"}
-_BOOL_FIELDS = {"shadows"}
+_BOOL_FIELDS = {"shadows", "auto_exposure"}
 _SIGNED_FIELDS = {"k1", "k2", "p1", "p2", "k3"}
-_POSITIVE_FIELDS = {"fx_px", "fy_px", "gain"}
+_POSITIVE_FIELDS = {"fx_px", "fy_px", "gain", "ae_target_dn", "ae_time_constant_s",
+                    "exposure_min_s", "exposure_max_s", "gain_max"}
 CAMERA_MODEL_KEYS = frozenset(_FIELDS | {"profile"})
 
 
@@ -173,6 +191,17 @@ def build_camera_model(
     if model.latency_jitter_s > model.latency_s:
         raise ConfigError(f"{where}: latency_jitter_s ({model.latency_jitter_s}) must not exceed "
                           f"latency_s ({model.latency_s})")
+    if model.ae_target_dn > 255.0:
+        raise ConfigError(f"{where}: ae_target_dn must be within 0..255, got {model.ae_target_dn}")
+    if model.exposure_min_s > model.exposure_max_s:
+        raise ConfigError(f"{where}: exposure_min_s ({model.exposure_min_s:g}) must not exceed "
+                          f"exposure_max_s ({model.exposure_max_s:g})")
+    if model.gain_max < 1.0:
+        raise ConfigError(f"{where}: gain_max must be >= 1 (the sensor's base gain), got "
+                          f"{model.gain_max}")
+    if model.vignetting_exponent > 16.0:
+        raise ConfigError(f"{where}: vignetting_exponent must be within 0..16, got "
+                          f"{model.vignetting_exponent}")
     if model.line_time_s * height > 1.0:
         raise ConfigError(f"{where}: line_time_s * height must be <= 1 s, got "
                           f"{model.line_time_s * height:g} s")

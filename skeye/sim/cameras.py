@@ -7,21 +7,31 @@ body. An identity mount looks straight down like every downward sensor (boresigh
 with the image's top towards the body's front (sensor +x) and its right towards sensor +y.
 
 :class:`CameraSystem` hooks into the engine. When a camera is due (frame n at the first step
-with ``t >= n / rate``), the engine thread snapshots ``qpos`` and hands it to one render thread
-that owns the OpenGL context (EGL or OSMesa contexts belong to the thread that made them). The
-render thread recomputes kinematics on its own ``MjData``, renders, publishes the frame to the
-image server's :class:`FrameBuffer` and hands a :class:`~skeye.sim.readings.CameraFrame` to the
-robot's sink (which the control server sends as ``SEN {Type Camera} {Name n} {Frame k}``). In
-lockstep mode the engine waits for the render, so frames are exact and
-reproducible; in real time it never waits: a snapshot that finds the renderer busy is skipped
-(counted in ``skipped``) and the frame numbers show clients what was rendered.
+with ``t >= n / rate``), the engine thread snapshots ``qpos`` and ``qvel`` (a
+:class:`~skeye.sim.render.WorldState`, shared by the cameras due at that step), numbers the
+frame and publishes it to the image server's :class:`FrameBuffer` with a
+:class:`~skeye.sim.readings.CameraFrame` for the robot's sink (the control server sends it as
+``SEN {Type Camera} {Name n} {Frame k}``), at once or after the camera model's capture latency.
+The pixels are made by one render thread that owns the OpenGL contexts (EGL or OSMesa contexts
+belong to the thread that made them; :mod:`skeye.sim.render`), and only for someone:
+
+* a frame of a camera some image client watches (:meth:`FrameBuffer.wanted`: a client is
+  connected that selected it, or has not selected any and it is the first camera) is queued
+  for rendering when it is taken, so it is ready by its delivery;
+* any other frame is rendered when its pixels are first asked for (``Frame.rgb``: an image
+  client's request, the pilot's vision), from its snapshot: the same pixels, later. A frame
+  nobody asks for costs a copy of ``qpos`` and ``qvel``.
+
+In lockstep every watched frame is rendered in order (the engine waits when more than
+``LOCKSTEP_BACKLOG`` are queued), so a run is reproducible; in real time the engine never
+waits, and a watched frame superseded before its render began is left to be rendered on
+request (counted in ``skipped``).
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import os
 import queue
 import threading
 from dataclasses import dataclass, field, replace
@@ -39,10 +49,12 @@ from skeye.robots.camera_model import (
 )
 from skeye.robots.config import SensorMount
 from skeye.sim import frames
+from skeye.sim.exposure import AutoExposure
 from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
 from skeye.sim.image_server import Frame, FrameBuffer
-from skeye.sim.lens import Lens, Motion
+from skeye.sim.lens import Lens
 from skeye.sim.readings import CameraFrame, RobotStopped
+from skeye.sim.render import RENDER_TIMEOUT_S, ShotRenderer, WorldState, camera_index
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -65,7 +77,9 @@ class CameraSpec:
     camera_id: int = 0
     model: CameraModel | None = None  # the lens and sensor (skeye.robots.camera_model)
     lens: Lens | None = None  # its image path; None: the ideal pinhole, rendered as is
-    rendered: int = 0
+    auto_exposure: AutoExposure | None = None  # its exposure state (with a lens)
+    captured: int = 0  # frames taken (their numbers), rendered or not
+    rendered: int = 0  # frames rendered
     due: int = 0
     type_name: str = field(default="Camera", init=False)
 
@@ -104,6 +118,7 @@ class CameraSpec:
         self.model = model
         self.fov_h_rad = model.fov_h_rad
         self.lens = lens_for(model)
+        self.auto_exposure = AutoExposure(model) if self.lens is not None else None
 
     @property
     def render_size(self) -> tuple[int, int]:
@@ -161,9 +176,6 @@ class CameraSpec:
         ]
 
 
-SHADOW_MAP_PX = 1024  # shadow map size when the world file has shadows off
-SHADOW_HALF_SIZE_M = 4.0  # ... covering this half-size around the world origin
-
 _LENSES: dict[CameraModel, Lens] = {}
 
 
@@ -172,7 +184,8 @@ def lens_for(model: CameraModel) -> Lens | None:
     perfect pinhole with nothing to add."""
     trivial = not (model.distorted or model.noisy or model.jpeg_quality or model.exposure_s
                    or model.line_time_s or model.cx_px != (model.width - 1) / 2.0
-                   or model.cy_px != (model.height - 1) / 2.0 or model.fx_px != model.fy_px)
+                   or model.cy_px != (model.height - 1) / 2.0 or model.fx_px != model.fy_px
+                   or model.vignetting_exponent or model.auto_exposure)
     if trivial:
         return None
     if model not in _LENSES:
@@ -180,21 +193,6 @@ def lens_for(model: CameraModel) -> Lens | None:
             _LENSES.clear()
         _LENSES[model] = Lens(model)
     return _LENSES[model]
-
-
-def camera_motion(mujoco: Any, model: Any, data: Any, cam_id: int) -> Motion:
-    """The camera's motion at the state in ``data`` (after mj_kinematics/comPos/comVel), in
-    OpenCV camera axes (MuJoCo's camera: x right, y up, looking along -z)."""
-    vel = np.zeros(6)
-    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_CAMERA, cam_id, vel, 1)
-    xmat = data.cam_xmat[cam_id].reshape(3, 3)
-    down = -xmat[2, :]  # world -z in the camera's axes
-    return Motion(
-        omega_rad_s=(float(vel[0]), float(-vel[1]), float(-vel[2])),
-        velocity_m_s=(float(vel[3]), float(-vel[4]), float(-vel[5])),
-        down=(float(down[0]), float(-down[1]), float(-down[2])),
-        height_m=float(data.cam_xpos[cam_id][2]),
-    )
 
 
 def check_fov(fov_h_rad: float, where: str) -> None:
@@ -206,14 +204,43 @@ def camera_model_name(robot: str, camera: str) -> str:
     return f"robot:{robot}:cam:{camera}"
 
 
-@dataclass
-class _Job:
-    model: Any
-    qpos: np.ndarray
-    qvel: np.ndarray
-    time_s: float
-    shots: list[tuple[Any, CameraSpec]]  # (robot, camera)
-    done: threading.Event | None
+LOCKSTEP_BACKLOG = 2  # in lockstep the engine waits while more watched frames await their render
+
+
+class _Shot:
+    """One frame of one camera: the snapshot it is rendered from. It is rendered at once when
+    someone watches the camera (FrameBuffer.wanted), else when its pixels are first asked for
+    (the frame's PixelSource)."""
+
+    def __init__(self, system: CameraSystem, robot: Any, cam: CameraSpec, key: str, number: int,
+                 state: WorldState) -> None:
+        self.system = system
+        self.robot = robot
+        self.cam = cam
+        self.key = key
+        self.number = number
+        self.state = state
+        self.done = threading.Event()
+        self.result: tuple[np.ndarray, bytes | None] | None = None
+        self.error: str | None = None
+        self.queued = False
+        self.eager = False
+        self.waiters = 0
+
+    def pixels(self) -> tuple[np.ndarray, bytes | None]:
+        if not self.done.is_set():
+            self.system._request(self, eager=False)
+            try:
+                if not self.done.wait(RENDER_TIMEOUT_S):
+                    raise SkeyeError(f"camera {self.key} frame {self.number}: not rendered "
+                                     f"within {RENDER_TIMEOUT_S:g} s")
+            finally:
+                with self.system._lock:
+                    self.waiters -= 1
+        if self.error is not None:
+            raise SkeyeError(self.error)
+        assert self.result is not None
+        return self.result
 
 
 class CameraSystem:
@@ -222,19 +249,27 @@ class CameraSystem:
     def __init__(self, sim: Any, buffer: FrameBuffer, *, synchronous: bool,
                  profile: str | None = None) -> None:
         """``profile``: the camera model profile every camera uses (``skeye sim
-        --camera-profile``), over the robot files' own; None keeps theirs."""
+        --camera-profile``), over the robot files' own; None keeps theirs. ``synchronous``
+        (lockstep): every watched frame is rendered, the engine waiting when they pile up;
+        otherwise (real time) a watched frame superseded before its render starts is left
+        unrendered unless someone asks for it (counted in ``skipped``)."""
         if profile is not None and profile not in PROFILES:
             raise ConfigError(f"unknown camera profile {profile!r}; known: {list(PROFILES)}")
         self.profile = profile
         self.sim = sim
         self.buffer = buffer
         self.synchronous = synchronous
-        self.skipped = 0
+        self.skipped = 0  # watched frames left unrendered (real time: a newer one was due)
+        self.rendered = 0  # frames rendered, all cameras
         self.error: str | None = None
+        self.renderer_description: str | None = None  # the OpenGL renderer, once probed
+        self._described = threading.Event()
         self._next_id = 1
         self._known: dict[str, int] = {}
-        self._jobs: queue.Queue[_Job | None] = queue.Queue(maxsize=1)
-        self._ready = threading.Event()
+        self._queue: queue.Queue[_Shot | None] = queue.Queue()
+        self._lock = threading.Condition()
+        self._backlog = 0  # eager shots queued and not rendered
+        self._newest_eager: dict[str, int] = {}
         self._stop = threading.Event()
         sim.xml_extras.append(self._xml)
         sim.rebuild_hooks.append(self._on_rebuild)
@@ -249,26 +284,35 @@ class CameraSystem:
         self._worker = Worker(self._render_loop, "skeye-render", on_error=self._render_died)
         self._worker.start()
 
+    def describe_renderer(self, timeout_s: float = 30.0) -> str:
+        """The OpenGL renderer the cameras render on (probed when the render thread starts)."""
+        self._described.wait(timeout_s)
+        return self.renderer_description or "unknown (the render thread did not say)"
+
     def _render_died(self, exc: BaseException) -> None:
-        """The render thread itself failed: record why and release a waiting engine."""
+        """The render thread itself failed: record why and release every waiting shot."""
         self.error = f"camera rendering stopped: {type(exc).__name__}: {exc}"
+        self._described.set()
+        self._fail_queued(self.error)
+
+    def _fail_queued(self, reason: str) -> None:
         while True:
             try:
-                job = self._jobs.get_nowait()
+                shot = self._queue.get_nowait()
             except queue.Empty:
                 return
-            if job is not None and job.done is not None:
-                job.done.set()
+            if shot is not None and not shot.done.is_set():
+                shot.error = reason
+                shot.done.set()
+                self._finished(shot)
 
     def close(self, timeout_s: float = 5.0) -> None:
         if self._stop.is_set():
             return
         self._stop.set()
-        try:
-            self._jobs.put(None, timeout=timeout_s)
-        except queue.Full:
-            pass
+        self._queue.put(None)
         self._worker.join(timeout_s)
+        self._fail_queued("the simulator's cameras were closed")
 
     def __enter__(self) -> CameraSystem:
         return self
@@ -301,6 +345,7 @@ class CameraSystem:
                     if key in self._known:
                         self.buffer.remove_camera(key)
                     self._last_delivery.pop(key, None)
+                    self._newest_eager.pop(key, None)
                     self.buffer.register_camera(key, cam.camera_id)
                     # The first frame comes at the robot's first step (from its spawn state),
                     # then on the camera's grid of sim times k / rate.
@@ -308,12 +353,13 @@ class CameraSystem:
         for key in set(self._known) - set(current):
             self.buffer.remove_camera(key)
             self._last_delivery.pop(key, None)
+            self._newest_eager.pop(key, None)
         self._known = current
         with self._pending_lock:  # frames of cameras that went wait for nobody
             self._pending = [p for p in self._pending if self._is_current(p[4])]
         for robot in sim.robots.values():
             for cam in robot.cameras:
-                cam_id = _camera_index(sim.model, camera_model_name(robot.name, cam.name))
+                cam_id = camera_index(sim.model, camera_model_name(robot.name, cam.name))
                 sim.model.cam_fovy[cam_id] = cam.fovy_deg
         # Absolute near/far clip planes: MuJoCo scales them by the model's extent.
         cams = [c for r in sim.robots.values() for c in r.cameras]
@@ -328,16 +374,6 @@ class CameraSystem:
             if fits:
                 glob.offwidth = max(int(glob.offwidth), max(c.render_size[1] for c in fits))
                 glob.offheight = max(int(glob.offheight), max(c.render_size[0] for c in fits))
-            if any(c.model is not None and c.model.shadows for c in cams):
-                # A camera model with shadows: the world's lights cast them (the vehicle
-                # shadows the pad), with a shadow map if the world had none.
-                sim.model.light_castshadow[:] = 1
-                if int(sim.model.vis.quality.shadowsize) == 0:
-                    # A 1024-pixel map over +-4 m around the directional light's position
-                    # (above the world origin, where the pad is): sharp rotor shadows, and a
-                    # cheaper pass in software GL than a map spanning the whole world.
-                    sim.model.vis.quality.shadowsize = SHADOW_MAP_PX
-                    sim.model.vis.map.shadowclip = SHADOW_HALF_SIZE_M / extent
 
     def _next_event_step(self, sim: Any) -> int:
         """The step index whose end reaches the next camera's due time or frame delivery."""
@@ -353,37 +389,57 @@ class CameraSystem:
 
     def _on_step(self, sim: Any) -> None:
         if self.error is not None:
-            if not self._reported:  # realtime: the render thread failed since the last step
+            if not self._reported:  # the render thread failed since the last step
                 self._reported = True
                 self._report_error()
             return
         t = sim.time_s
         self._deliver_due(t)
-        shots = []
+        state: WorldState | None = None
         for robot in sim.robots.values():
             for cam in robot.cameras:
-                if t + 1e-9 >= cam.due / cam.rate_hz:
+                if t + 1e-9 < cam.due / cam.rate_hz:
+                    continue
+                cam.due += 1
+                while t + 1e-9 >= cam.due / cam.rate_hz:  # never fall behind the clock
                     cam.due += 1
-                    while t + 1e-9 >= cam.due / cam.rate_hz:  # never fall behind the clock
-                        cam.due += 1
-                    shots.append((robot, cam))
-        if not shots:
-            return
-        job = _Job(sim.model, sim.data.qpos.copy(), sim.data.qvel.copy(), t, shots,
-                   threading.Event() if self.synchronous else None)
-        if self.synchronous:
-            self._jobs.put(job)
-            assert job.done is not None
-            if not job.done.wait(60.0):
-                raise SkeyeError("camera rendering timed out (60 s)")
-            if self.error is not None:
-                self._reported = True
-                self._report_error()
+                if state is None:  # one snapshot for every camera due at this step
+                    state = WorldState(sim.model, sim.data.qpos.copy(), sim.data.qvel.copy(), t)
+                self._capture(robot, cam, state)
+        if self.synchronous and state is not None:
+            self._wait_backlog()
+
+    def _capture(self, robot: Any, cam: CameraSpec, state: WorldState) -> None:
+        """Number a frame of ``cam`` at ``state``, start its render if it is watched, and
+        publish it now or after its capture latency."""
+        key = f"{robot.name}/{cam.name}"
+        cam.captured += 1
+        shot = _Shot(self, robot, cam, key, cam.captured, state)
+        model = cam.model
+        frame = Frame(key, cam.camera_id, cam.captured, state.time_s, source=shot,
+                      width=cam.width, height=cam.height,
+                      jpeg_quality=model.jpeg_quality if model is not None else 0)
+        if self.buffer.wanted(key):
+            self._request(shot, eager=True)
+        if model is not None and model.latency_s > 0:
+            when = self._delivery_time(cam, key, state.time_s, cam.captured)
+            with self._pending_lock:
+                self._seq += 1
+                self._pending.append((when, self._seq, robot, cam, frame))
         else:
-            try:
-                self._jobs.put_nowait(job)
-            except queue.Full:
-                self.skipped += len(shots)
+            self._publish(robot, cam, frame)
+
+    def _wait_backlog(self) -> None:
+        """Lockstep: hold the engine while more watched frames wait for their render than
+        LOCKSTEP_BACKLOG (every one is rendered, in order: a run stays reproducible)."""
+        with self._lock:
+            if not self._lock.wait_for(
+                lambda: self._backlog <= LOCKSTEP_BACKLOG or self.error is not None
+                or self._stop.is_set(), RENDER_TIMEOUT_S):
+                raise SkeyeError(f"camera rendering timed out ({RENDER_TIMEOUT_S:g} s)")
+        if self.error is not None and not self._reported:
+            self._reported = True
+            self._report_error()
 
     def _deliver_due(self, t: float) -> None:
         """Publish the frames whose capture latency has passed by sim time ``t``."""
@@ -393,22 +449,18 @@ class CameraSystem:
                 return
             self._pending = [p for p in self._pending if p[0] > t + 1e-9]
         for _, _, robot, cam, frame in sorted(due, key=lambda p: (p[0], p[1])):
-            self._publish(robot, cam, frame, lockstep=True)
+            self._publish(robot, cam, frame)
 
     def _is_current(self, frame: Frame) -> bool:
         """True while the camera that took ``frame`` still exists (not a gone robot's camera,
         nor one of a robot since spawned under the same name)."""
         return self._known.get(frame.camera) == frame.camera_id
 
-    def _publish(self, robot: Any, cam: CameraSpec, frame: Frame, *, lockstep: bool) -> None:
+    def _publish(self, robot: Any, cam: CameraSpec, frame: Frame) -> None:
         if not self._is_current(frame):
-            return  # its robot went while the frame was rendered or waited out its latency
+            return  # its robot went while the frame waited out its latency
         self.buffer.publish(frame)
-        shot = CameraFrame(frame.sim_time_s, cam.name, frame.number)
-        if lockstep:  # in order, with the step's lines
-            self.sim.emit(robot, [shot])
-        else:
-            robot.sink([shot])
+        self.sim.emit(robot, [CameraFrame(frame.sim_time_s, cam.name, frame.number)])
 
     def _delivery_time(self, cam: CameraSpec, key: str, capture_s: float, number: int) -> float:
         """Capture time + latency +- jitter (seeded by the camera model's noise seed and the
@@ -432,102 +484,76 @@ class CameraSystem:
             if robot.cameras:
                 robot.sink([RobotStopped(robot.name, "CAMERA", reason)])
 
+    # -- any thread ------------------------------------------------------------------------
+    def _request(self, shot: _Shot, *, eager: bool) -> None:
+        """Queue ``shot`` for the render thread (once); a waiter counts itself in."""
+        with self._lock:
+            if not eager:
+                shot.waiters += 1
+            if self._stop.is_set() or self.error is not None:
+                shot.error = self.error or "the simulator's cameras were closed"
+                shot.done.set()
+                return
+            if eager:
+                shot.eager = True
+                self._newest_eager[shot.key] = shot.number
+            if shot.queued or shot.done.is_set():
+                return
+            shot.queued = True
+            if eager:
+                self._backlog += 1
+        self._queue.put(shot)
+
+    def _finished(self, shot: _Shot) -> None:
+        with self._lock:
+            if shot.eager:
+                shot.eager = False
+                self._backlog -= 1
+            self._lock.notify_all()
+
     # -- render thread -------------------------------------------------------------------
     def _render_loop(self) -> None:
-        import mujoco
-
-        model = None
-        data = None
-        renderers: dict[tuple[int, int, int], Any] = {}
+        renderer = ShotRenderer()
         try:
+            try:
+                self.renderer_description = renderer.describe()
+                log.info("camera renderer: %s", self.renderer_description)
+            except Exception as exc:  # reported again, with advice, at the first frame
+                log.warning("camera renderer: cannot make an OpenGL context: %s", exc)
+            finally:
+                self._described.set()
             while not self._stop.is_set():
-                job = self._jobs.get()
-                if job is None:
+                shot = self._queue.get()
+                if shot is None:
                     break
+                with self._lock:
+                    shot.queued = False
+                    skip = (not self.synchronous and shot.waiters == 0
+                            and self._newest_eager.get(shot.key, 0) > shot.number)
+                if shot.done.is_set():
+                    continue
+                if skip:  # real time: a newer frame of this camera is on its way
+                    self.skipped += 1
+                    self._finished(shot)
+                    continue
                 try:
-                    if job.model is not model:
-                        for r in renderers.values():
-                            r.close()
-                        renderers = {}
-                        model = job.model
-                        data = mujoco.MjData(model)
-                    assert data is not None
-                    data.qpos[:] = job.qpos
-                    data.qvel[:] = job.qvel
-                    mujoco.mj_kinematics(model, data)
-                    mujoco.mj_comPos(model, data)
-                    mujoco.mj_comVel(model, data)
-                    mujoco.mj_camlight(model, data)
-                    for robot, cam in job.shots:
-                        spec = (*cam.render_size, cam.render_samples)
-                        if spec not in renderers:
-                            renderers[spec] = _make_renderer(mujoco, model, *spec)
-                        renderer = renderers[spec]
-                        name = camera_model_name(robot.name, cam.name)
-                        shadows = cam.model is not None and cam.model.shadows
-                        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(shadows)
-                        renderer.update_scene(data, camera=name)
-                        rgb = renderer.render()
-                        cam.rendered += 1
-                        if cam.lens is not None:
-                            motion = camera_motion(mujoco, model, data,
-                                                   _camera_index(model, name))
-                            rgb = cam.lens.apply(rgb, motion, cam.rendered)
-                        key = f"{robot.name}/{cam.name}"
-                        frame = Frame(key, cam.camera_id, cam.rendered, job.time_s, rgb)
-                        if cam.model is not None and cam.model.latency_s > 0:
-                            when = self._delivery_time(cam, key, job.time_s, cam.rendered)
-                            with self._pending_lock:
-                                self._seq += 1
-                                self._pending.append((when, self._seq, robot, cam, frame))
-                        else:
-                            self._publish(robot, cam, frame, lockstep=job.done is not None)
+                    name = camera_model_name(shot.robot.name, shot.cam.name)
+                    rgb, jpeg, _ = renderer.render(shot.state, name, shot.cam, shot.number)
+                    shot.result = (rgb, jpeg)
+                    shot.cam.rendered += 1
+                    self.rendered += 1
                 except SkeyeError as exc:
-                    self.error = str(exc)
+                    shot.error = self.error = str(exc)
                     log.error("%s", exc)
                 except Exception as exc:  # a GL failure must reach the clients, not kill us
-                    self.error = f"camera rendering failed: {type(exc).__name__}: {exc}"
+                    shot.error = self.error = (f"camera rendering failed: {type(exc).__name__}: "
+                                               f"{exc}")
                     log.exception("camera rendering failed")
                 finally:
-                    if job.done is not None:
-                        job.done.set()
+                    shot.done.set()
+                    self._finished(shot)
         finally:
-            for r in renderers.values():
-                r.close()
-
-
-def _camera_index(model: Any, name: str) -> int:
-    import mujoco
-
-    idx = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, name)
-    if idx < 0:
-        raise LocalProtocolError(f"no camera {name} in the model")
-    return int(idx)
-
-
-def _make_renderer(mujoco: Any, model: Any, height: int, width: int, samples: int) -> Any:
-    """A renderer of this size with ``samples``-fold multisampling (MuJoCo reads the model's
-    ``offsamples`` when it makes the GL context; the model's own value is put back)."""
-    backend = os.environ.get("MUJOCO_GL", "?")
-    quality = model.vis.quality
-    before = int(quality.offsamples)
-    quality.offsamples = samples
-    try:
-        renderer = mujoco.Renderer(model, height=height, width=width)
-    except Exception as exc:
-        raise SkeyeError(
-            f"cannot render camera images with MUJOCO_GL={backend}: {exc}. Install an OpenGL "
-            "backend: Mesa's EGL (apt-get install libegl1 libgl1-mesa-dri) for MUJOCO_GL=egl, "
-            "or OSMesa (apt-get install libosmesa6) for MUJOCO_GL=osmesa, or run with a display "
-            "(MUJOCO_GL=glfw)"
-        ) from exc
-    finally:
-        quality.offsamples = before
-    flags = renderer.scene.flags
-    flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
-    flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
-    flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
-    return renderer
+            renderer.close()
 
 
 def set_camera_fov(sim: Any, robot_name: str, camera: str, fov_h_rad: float) -> None:
@@ -541,7 +567,7 @@ def set_camera_fov(sim: Any, robot_name: str, camera: str, fov_h_rad: float) -> 
             cam.fov_h_rad = fov_h_rad
             if cam.model is not None:  # a zoom: the same lens model, a new focal length
                 cam.set_model(replace(cam.model, **pinhole(cam.width, cam.height, fov_h_rad)))
-            index = _camera_index(sim.model, camera_model_name(robot_name, cam.name))
+            index = camera_index(sim.model, camera_model_name(robot_name, cam.name))
             sim.model.cam_fovy[index] = cam.fovy_deg
             return
     raise LocalProtocolError(f"robot {robot_name} has no camera named {camera!r}")

@@ -17,13 +17,14 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from skeye.errors import LocalProtocolError
 from skeye.pixels import encode_image
 from skeye.wire.image_requests import SelectCamera
-from skeye.wire.images import UINT32_MAX, FrameType, ImageFormat
+from skeye.wire.images import UINT32_MAX, FrameType, ImageFormat, jpeg_type_for_quality
 
 log = logging.getLogger(__name__)
 
@@ -32,24 +33,46 @@ _ENCODE_WAIT_S = 5.0  # a thread waiting on another's encoding gives up and enco
 FrameListener = Callable[[str], None]
 
 
-@dataclass(frozen=True, eq=False)
-class Frame:
-    """One rendered image of one camera.
+class PixelSource(Protocol):
+    """Where a frame's pixels come from when it was published before they existed (the
+    simulator renders a frame only when someone asks for it: skeye.sim.cameras)."""
 
-    ``number`` counts frames rendered by that camera, from 1; ``rgb`` is (H, W, 3) uint8, rows top
-    to bottom, RGB order. Publishing hands the array over: the buffer marks it read-only.
+    def pixels(self) -> tuple[np.ndarray, bytes | None]:
+        """The frame's RGB pixels and its camera's JPEG bytes (None for a raw camera); blocks
+        until they exist. Raises SkeyeError when they cannot be made."""
+        ...
+
+
+class Frame:
+    """One image of one camera.
+
+    ``number`` counts the camera's frames, from 1; ``rgb`` is (H, W, 3) uint8, rows top to
+    bottom, RGB order. Publishing hands the array over: the buffer marks it read-only. A frame
+    may be published before its pixels exist (``source``, with ``width`` and ``height``): the
+    first reader of ``rgb`` (or ``jpeg``) waits for them, the others share the result. ``jpeg``
+    holds the camera's own JPEG bytes of the same pixels (a webcam's MJPEG), coded at
+    ``jpeg_quality``; an image client asking for JPEG at that quality gets them as they are.
     """
 
-    camera: str
-    camera_id: int
-    number: int
-    sim_time_s: float
-    rgb: np.ndarray
+    __slots__ = ("_jpeg", "_lock", "_rgb", "_source", "camera", "camera_id", "height",
+                 "jpeg_quality", "number", "sim_time_s", "width")
 
-    def __post_init__(self) -> None:
-        SelectCamera(self.camera)  # the same naming rule as the wire
-        for name, low in (("camera_id", 0), ("number", 1)):
-            value = getattr(self, name)
+    def __init__(
+        self,
+        camera: str,
+        camera_id: int,
+        number: int,
+        sim_time_s: float,
+        rgb: np.ndarray | None = None,
+        *,
+        jpeg: bytes | None = None,
+        jpeg_quality: int = 0,
+        source: PixelSource | None = None,
+        width: int = 0,
+        height: int = 0,
+    ) -> None:
+        SelectCamera(camera)  # the same naming rule as the wire
+        for name, value, low in (("camera_id", camera_id, 0), ("number", number, 1)):
             if (
                 isinstance(value, bool)
                 or not isinstance(value, int)
@@ -58,23 +81,75 @@ class Frame:
                 raise LocalProtocolError(
                     f"Frame.{name} must be an integer {low}-2^32-1, got {value!r}"
                 )
-        if not math.isfinite(self.sim_time_s):
-            raise LocalProtocolError(f"Frame.sim_time_s must be finite, got {self.sim_time_s!r}")
-        rgb = self.rgb
-        if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3:
+        if not math.isfinite(sim_time_s):
+            raise LocalProtocolError(f"Frame.sim_time_s must be finite, got {sim_time_s!r}")
+        self.camera = camera
+        self.camera_id = camera_id
+        self.number = number
+        self.sim_time_s = sim_time_s
+        self.jpeg_quality = jpeg_quality
+        self._jpeg = jpeg
+        self._source = source
+        self._lock = threading.Lock()
+        if rgb is not None:
+            _check_rgb(rgb)
+            self._rgb: np.ndarray | None = rgb
+            self.height, self.width = int(rgb.shape[0]), int(rgb.shape[1])
+        elif source is None:
             raise LocalProtocolError("Frame.rgb must be an (H, W, 3) uint8 array")
-        if rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
-            raise LocalProtocolError(f"Frame.rgb must have shape (H, W, 3), got {rgb.shape}")
+        else:
+            if width < 1 or height < 1:
+                raise LocalProtocolError("a Frame without pixels yet needs its width and height")
+            self._rgb = None
+            self.width, self.height = width, height
 
     @property
-    def width(self) -> int:
-        """Image width, px."""
-        return int(self.rgb.shape[1])
+    def ready(self) -> bool:
+        """True once the pixels exist."""
+        return self._rgb is not None
 
     @property
-    def height(self) -> int:
-        """Image height, px."""
-        return int(self.rgb.shape[0])
+    def rgb(self) -> np.ndarray:
+        """The pixels (read-only once published); made on first use for a frame with a source."""
+        rgb = self._rgb
+        if rgb is None:
+            rgb = self._fetch()
+        return rgb
+
+    @property
+    def jpeg(self) -> bytes | None:
+        """The camera's JPEG of these pixels, or None."""
+        if self._rgb is None:
+            self._fetch()
+        return self._jpeg
+
+    def _fetch(self) -> np.ndarray:
+        with self._lock:
+            if self._rgb is None:
+                assert self._source is not None
+                rgb, jpeg = self._source.pixels()
+                _check_rgb(rgb)
+                if rgb.shape[:2] != (self.height, self.width):
+                    raise LocalProtocolError(
+                        f"frame {self.camera} {self.number}: pixels are {rgb.shape[1]}x"
+                        f"{rgb.shape[0]}, not {self.width}x{self.height}")
+                rgb.flags.writeable = False
+                self._jpeg = jpeg
+                self._rgb = rgb
+                self._source = None
+            return self._rgb
+
+    def __repr__(self) -> str:
+        state = "" if self.ready else ", pixels pending"
+        return (f"Frame({self.camera!r}, id {self.camera_id}, #{self.number}, "
+                f"t={self.sim_time_s:.3f}, {self.width}x{self.height}{state})")
+
+
+def _check_rgb(rgb: object) -> None:
+    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 3:
+        raise LocalProtocolError("Frame.rgb must be an (H, W, 3) uint8 array")
+    if rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
+        raise LocalProtocolError(f"Frame.rgb must have shape (H, W, 3), got {rgb.shape}")
 
 
 @dataclass
@@ -117,7 +192,7 @@ class _EncodeCache:
                 self._entries.move_to_end(key)
         if owner:
             try:
-                entry.result = encode_image(frame.rgb, kind, quality)
+                entry.result = _encode(frame, kind, quality)
             finally:
                 entry.done.set()
                 with self._lock:
@@ -127,7 +202,17 @@ class _EncodeCache:
             return entry.result
         if entry.done.wait(_ENCODE_WAIT_S) and entry.result is not None:
             return entry.result
-        return encode_image(frame.rgb, kind, quality)  # the owner failed or is stuck
+        return _encode(frame, kind, quality)  # the owner failed or is stuck
+
+
+def _encode(frame: Frame, kind: ImageFormat, quality: int | None) -> tuple[FrameType, bytes]:
+    """The frame in a format: the camera's own JPEG when it is one at the quality asked for
+    (a webcam's MJPEG stream, passed on as a real image server passes a camera's frames)."""
+    if kind is ImageFormat.JPEG and quality is not None and quality == frame.jpeg_quality:
+        jpeg = frame.jpeg
+        if jpeg is not None:
+            return jpeg_type_for_quality(quality), jpeg
+    return encode_image(frame.rgb, kind, quality)
 
 
 class FrameBuffer:
@@ -138,6 +223,9 @@ class FrameBuffer:
         self._slots: dict[str, _CameraSlot] = {}  # insertion order = registration order
         self._listeners: tuple[FrameListener, ...] = ()
         self._cache = _EncodeCache(cache_entries)
+        # Who may receive each camera's frames: watcher handle -> camera (None: the first).
+        self._watchers: dict[int, str | None] = {}
+        self._next_watcher = 1
 
     def register_camera(self, name: str, camera_id: int) -> None:
         """Make a camera known before its first frame (keeps the camera order stable)."""
@@ -166,7 +254,8 @@ class FrameBuffer:
         Raises:
             LocalProtocolError: the camera id changed or the frame number did not increase.
         """
-        frame.rgb.flags.writeable = False
+        if frame.ready:
+            frame.rgb.flags.writeable = False
         with self._cond:
             slot = self._slots.get(frame.camera)
             if slot is None:
@@ -182,6 +271,37 @@ class FrameBuffer:
             slot.frame = frame
             self._cond.notify_all()
         self._notify(frame.camera)
+
+    def watch(self, camera: str | None = None) -> int:
+        """Say that someone (an image client) may ask for ``camera``'s frames (None: whichever
+        camera is first); returns a handle for :meth:`rewatch` and :meth:`unwatch`. The
+        simulator renders a frame at once only for a watched camera (:meth:`wanted`), else
+        when it is asked for."""
+        with self._cond:
+            handle = self._next_watcher
+            self._next_watcher += 1
+            self._watchers[handle] = camera
+            return handle
+
+    def rewatch(self, handle: int, camera: str | None) -> None:
+        """The watcher ``handle`` now wants ``camera`` (None: the first camera)."""
+        with self._cond:
+            if handle in self._watchers:
+                self._watchers[handle] = camera
+
+    def unwatch(self, handle: int) -> None:
+        """The watcher is gone; unknown handles are ignored."""
+        with self._cond:
+            self._watchers.pop(handle, None)
+
+    def wanted(self, camera: str) -> bool:
+        """True while some watcher may ask for this camera's frames."""
+        with self._cond:
+            if not self._watchers:
+                return False
+            first = next(iter(self._slots), None)
+            return any(w == camera or (w is None and first == camera)
+                       for w in self._watchers.values())
 
     def cameras(self) -> list[str]:
         """Camera names in order of registration or first publication."""

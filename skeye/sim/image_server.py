@@ -28,6 +28,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 
+from skeye.errors import SkeyeError
 from skeye.pixels import encode_image
 from skeye.sim.frame_store import Frame, FrameBuffer
 from skeye.sim.limits import check_server_limits
@@ -115,6 +116,7 @@ class _ClientHandler:
         self._got_request = False
         self._active_s = time.monotonic()  # last request received or byte sent
         self.closed_reason: str | None = None
+        self._watch = 0  # the buffer's watcher handle (set on the client's thread)
         self.peer_host = address.rpartition(":")[0]
         self.frames_sent = 0
         self.errors_sent = 0
@@ -142,6 +144,7 @@ class _ClientHandler:
     def _run(self) -> None:
         log.info("image client %s connected", self.address)
         self._buffer.add_listener(self._on_publish)
+        self._watch = self._buffer.watch(None)  # frames of the first camera until SELECT
         try:
             self._loop()
         except OSError as exc:
@@ -149,6 +152,7 @@ class _ClientHandler:
         except Exception:
             log.exception("image client %s: handler failed", self.address)
         finally:
+            self._buffer.unwatch(self._watch)
             self._buffer.remove_listener(self._on_publish)
             for s in (self._sock, self._wake_r, self._wake_w):
                 s.close()
@@ -314,6 +318,7 @@ class _ClientHandler:
                     if name != self.camera:
                         self._last_sent_number = 0
                     self.camera = name
+                    self._buffer.rewatch(self._watch, name)
                 else:
                     known = ", ".join(self._buffer.cameras()) or "none"
                     self._send_error(f"unknown camera {name!r} (cameras: {known})")
@@ -365,15 +370,20 @@ class _ClientHandler:
         return True
 
     def _send_frame(self, frame: Frame, rect: tuple[int, int, int, int] | None) -> None:
-        if rect is None:
-            base, payload = self._buffer.encoded(frame, self._format, self._quality)
-            width, height = frame.width, frame.height
-            if self.camera is None or frame.camera == self.camera:
+        try:  # a frame published before its pixels: this waits for its render
+            if rect is None:
+                base, payload = self._buffer.encoded(frame, self._format, self._quality)
+                width, height = frame.width, frame.height
+            else:
+                x, y, width, height = rect
+                crop = frame.rgb[y : y + height, x : x + width]
+                base, payload = encode_image(crop, self._format, self._quality)
+        except SkeyeError as exc:
+            self._send_error(f"camera {frame.camera} frame {frame.number}: {exc}")
+            return
+        finally:
+            if rect is None and (self.camera is None or frame.camera == self.camera):
                 self._last_sent_number = max(self._last_sent_number, frame.number)
-        else:
-            x, y, width, height = rect
-            crop = frame.rgb[y : y + height, x : x + width]
-            base, payload = encode_image(crop, self._format, self._quality)
         if self._meta:
             head = meta_header(frame.number, frame.sim_time_s, frame.camera_id, width, height)
             parts = [

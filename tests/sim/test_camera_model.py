@@ -16,6 +16,7 @@ from skeye.robots.camera_model import WEBCAM_FOCAL_PX_AT_800, build_camera_model
 from skeye.robots.config import SensorMount, camera_model
 from skeye.sim.cameras import CameraSpec, CameraSystem
 from skeye.sim.engine import Simulation
+from skeye.sim.exposure import AutoExposure
 from skeye.sim.image_server import FrameBuffer
 from skeye.sim.lens import Lens, Motion
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
@@ -87,12 +88,13 @@ def test_distortion_maps_invert_opencv_projection():
     assert lens.map_y.min() > 0 and lens.map_y.max() < lens.render_height - 1
 
 
-def first_frame(sim: Simulation, buffer: FrameBuffer, name: str, body_ned, rate=None):
-    sim.spawn("hummingbird", name=name, sink=lambda events: None, location_ned_m=body_ned)
+def first_frame(sim: Simulation, buffer: FrameBuffer, name: str, body_ned, cls="hummingbird"):
+    sim.spawn(cls, name=name, sink=lambda events: None, location_ned_m=body_ned)
     for _ in range(300):  # past the capture latency
         sim.step(1)
         frame = buffer.latest(f"{name}/Down")
         if frame is not None:
+            assert frame.rgb.shape[2] == 3  # its pixels, while the cameras run (on request)
             return frame, sim.time_s
     raise AssertionError("no frame")
 
@@ -158,7 +160,7 @@ def edge_columns(image: np.ndarray, row: int) -> tuple[float, int]:
 
 def test_blur_grows_with_angular_rate():
     base = replace(camera_model("hummingbird", profile="webcam"), k1=0.0, k2=0.0, line_time_s=0.0,
-                   system_gain_dn_per_e=0.0, jpeg_quality=0)
+                   system_gain_dn_per_e=0.0, jpeg_quality=0, vignetting_exponent=0.0)
     lens = Lens(base)
     render = edge_render(lens)
     widths = []
@@ -172,7 +174,7 @@ def test_blur_grows_with_angular_rate():
 
 def test_rolling_shutter_skews_a_rotating_view():
     base = replace(camera_model("hummingbird", profile="webcam"), k1=0.0, k2=0.0, exposure_s=0.0,
-                   system_gain_dn_per_e=0.0, jpeg_quality=0)
+                   system_gain_dn_per_e=0.0, jpeg_quality=0, vignetting_exponent=0.0)
     lens = Lens(base)
     render = edge_render(lens)
     rate = 2.0  # the vehicle rolling: about the camera's image-down axis
@@ -186,30 +188,157 @@ def test_rolling_shutter_skews_a_rotating_view():
     assert edge_columns(still, 10)[0] == pytest.approx(edge_columns(still, 589)[0], abs=0.05)
 
 
-def test_shadows_on_darken_the_ground_under_the_vehicle(tmp_path: Path):
-    """Same view, the webcam profile with and without shadows: the vehicle shades the ground."""
+def webcam_variant(tmp_path: Path, name: str, extra: str) -> str:
+    """A copy of the Hummingbird whose webcam entry has ``extra`` lines; its class name."""
     text = (ROBOTS / "hummingbird.toml").read_text()
-    text = text.replace('name = "hummingbird"', 'name = "noshadow"', 1)
-    text = text.replace('profile = "webcam"', 'profile = "webcam"\nshadows = false')
-    (tmp_path / "noshadow.toml").write_text(text)
-    frames = {}
-    for cls in ("hummingbird", "noshadow"):
-        sim = Simulation(load_world("pad"), seed=3, robot_dirs=(tmp_path,))
-        buffer = FrameBuffer()
-        with CameraSystem(sim, buffer, synchronous=True, profile="webcam"):
-            sim.spawn(cls, name="S1", sink=lambda events: None, location_ned_m=(3.0, 2.0, -0.4))
-            for _ in range(300):
-                sim.step(1)
-                if buffer.latest("S1/Down") is not None:
-                    break
+    text = text.replace('name = "hummingbird"', f'name = "{name}"', 1)
+    (tmp_path / f"{name}.toml").write_text(
+        text.replace('profile = "webcam"', f'profile = "webcam"\n{extra}'))
+    return name
+
+
+def still_frame(tmp_path: Path, cls: str, body_ned, frames_s: float = 0.0) -> np.ndarray:
+    """The grey level of cls's camera frame at ``body_ned`` (hovering), ``frames_s`` of sim
+    time after the first."""
+    sim = Simulation(load_world("pad"), seed=3, robot_dirs=(tmp_path,))
+    buffer = FrameBuffer()
+    with CameraSystem(sim, buffer, synchronous=True):
+        frame, _ = first_frame(sim, buffer, "S1", body_ned, cls=cls)
+        if frames_s:
+            sim.step(round(frames_s / sim.dt))
             frame = buffer.latest("S1/Down")
-            assert frame is not None
-            frames[cls] = cv2.cvtColor(np.array(frame.rgb), cv2.COLOR_RGB2GRAY).astype(float)
-    # MuJoCo's shadow pass brightens the lit ground (sun + headlight) and leaves the shaded
-    # ground at about the shadowless frame's (headlight only): both parts are in view.
-    ratio = (frames["hummingbird"] + 1.0) / (frames["noshadow"] + 1.0)
-    lit, shaded = np.mean(ratio > 1.2), np.mean(ratio < 1.05)
-    assert lit > 0.05 and shaded > 0.05, (lit, shaded)
+        return cv2.cvtColor(np.array(frame.rgb), cv2.COLOR_RGB2GRAY).astype(float)
+
+
+# Noise, MJPEG and auto-exposure off: two frames of one view differ only by what is tested.
+_PLAIN = "system_gain_dn_per_e = 0.0\njpeg_quality = 0\nauto_exposure = false"
+
+
+def test_soft_shadows_darken_the_ground_and_leave_lit_ground_alone(tmp_path: Path):
+    """The webcam's shadows: the vehicle shades the grass below it by the share of light the
+    sun gives (the lit ground keeps its brightness: MuJoCo's own shadow pass made it 13-32 %
+    brighter), and the shadow's edge is a penumbra of several pixels, not a texel staircase."""
+    shadow = webcam_variant(tmp_path, "withshadow", _PLAIN)
+    plain = webcam_variant(tmp_path, "noshadow", _PLAIN + "\nshadows = false")
+    body = (3.0, 2.0, -0.4)
+    ratio = (still_frame(tmp_path, shadow, body) + 1.0) / (still_frame(tmp_path, plain, body) + 1.0)
+    lit = np.abs(ratio - 1.0) < 0.03
+    # In the pad world the sun gives 0.45 of the light's diffuse 0.45 + headlight 0.35 + 0.55
+    # on level ground, about a third: the shade keeps about two thirds.
+    shaded = ratio < 0.8
+    assert lit.mean() > 0.3 and shaded.mean() > 0.05, (lit.mean(), shaded.mean())
+    depth = float(np.median(ratio[ratio < 0.75]))
+    assert 0.55 < depth < 0.8, depth
+    # The edge: pixels between 20 % and 80 % of the way from the shade to the light, per pixel
+    # of edge length (a hard edge has about one, blurred by the lens's interpolation).
+    low, high = depth + 0.2 * (1.0 - depth), depth + 0.8 * (1.0 - depth)
+    band = int(((ratio > low) & (ratio < high)).sum())
+    mask = (ratio < (depth + 1.0) / 2).astype(np.uint8)
+    contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    length = sum(cv2.arcLength(c, True) for c in contours)
+    assert band / length > 3.0, (band, length)
+
+
+def test_no_shadow_lattice_on_the_lit_pad(tmp_path: Path):
+    """MuJoCo's shadow pass left a lattice of grey dots on lit surfaces (2.0 % of the white
+    pad's pixels more than 15 DN darker than their neighbours; 0.02 % without shadows): gone."""
+    shadow = webcam_variant(tmp_path, "withshadow", _PLAIN)
+    plain = webcam_variant(tmp_path, "noshadow", _PLAIN + "\nshadows = false")
+
+    def dots(grey: np.ndarray) -> float:
+        median = cv2.medianBlur(grey.astype(np.uint8), 5).astype(float)
+        white = median > 180
+        assert white.sum() > 50_000  # the pad fills much of the view
+        return float(((median - grey > 15) & white).sum() / white.sum())
+
+    body = (0.05, 0.0, -1.0)
+    with_shadows, without = dots(still_frame(tmp_path, shadow, body)), dots(
+        still_frame(tmp_path, plain, body))
+    assert with_shadows < 0.001 and with_shadows < without + 0.0005, (with_shadows, without)
+
+
+def test_vignetting_follows_the_cos4_law():
+    model = replace(camera_model("hummingbird", profile="webcam"), system_gain_dn_per_e=0.0,
+                    jpeg_quality=0, auto_exposure=False)
+    assert model.vignetting_exponent == 4.0
+    lens = Lens(model)
+    flat = np.full((lens.render_height, lens.render_width, 3), 200, np.uint8)
+    image = lens.apply(flat, Motion(), 1)[:, :, 1].astype(float)
+    h, w = image.shape
+    assert image[h // 2, w // 2] == pytest.approx(200, abs=1)
+    for v, u in ((0, 0), (0, w - 1), (h - 1, 0), (h - 1, w - 1), (h // 2, 0)):
+        x, y = lens.ray_x[v, u], lens.ray_y[v, u]
+        cos_theta = 1.0 / math.sqrt(1.0 + x * x + y * y)
+        assert image[v, u] == pytest.approx(200 * cos_theta ** 4, abs=1.0), (v, u)
+    assert image[0, 0] < 0.6 * 200  # the C920 at 4:3: the corner is 33 deg off the axis
+    off = Lens(replace(model, vignetting_exponent=0.0)).apply(flat, Motion(), 1)
+    assert int(off.min()) == int(off.max()) == 200
+
+
+def run_auto_exposure(model, scene_dn, seconds, ae=None, start_s=0.0):
+    """Frames at 30 fps of a scene whose mean is ``scene_dn(t)`` at the nominal settings;
+    returns the AutoExposure and [(t, exposure, mean DN)]."""
+    ae = ae or AutoExposure(model)
+    out = []
+    for k in range(round(seconds * 30)):
+        t = start_s + k / 30
+        exposure = ae.exposure_at(t)
+        mean = min(255.0, scene_dn(t) * exposure.brightness)
+        ae.metered(t, exposure, mean)
+        out.append((t, exposure, mean))
+    return ae, out
+
+
+def test_auto_exposure_steers_to_its_target_with_its_lag():
+    model = camera_model("hummingbird", profile="webcam")
+    assert model.auto_exposure and model.ae_target_dn == 118.0
+    tau = model.ae_time_constant_s
+    # A dark scene (40 DN at 10 ms, gain 4): the exposure time carries the change, gain stays.
+    _, frames = run_auto_exposure(model, lambda t: 40.0, 3.0)
+    assert frames[0][2] == 40.0 and frames[0][1].exposure_s == model.exposure_s
+    _, exposure, mean = frames[-1]
+    assert mean == pytest.approx(model.ae_target_dn, rel=0.01)
+    assert exposure.gain == model.gain and exposure.exposure_s == pytest.approx(0.0295, rel=0.01)
+    # The lag: one time constant after the first metered frame (t = 0), 63 % of the log error
+    # is gone.
+    goal = math.log(model.ae_target_dn / 40.0)
+    done = [math.log(e.brightness) / goal for t, e, _ in frames if abs(t - tau) < 1e-6]
+    assert done == [pytest.approx(1 - math.exp(-1), abs=0.01)]
+    # Darker still: the exposure time reaches the frame period, then the gain rises to its
+    # limit; the frame stays darker than the target.
+    _, frames = run_auto_exposure(model, lambda t: 20.0, 3.0)
+    exposure, mean = frames[-1][1], frames[-1][2]
+    assert exposure.exposure_s == model.exposure_max_s
+    assert exposure.gain == pytest.approx(model.gain_max, rel=1e-3)
+    assert mean == pytest.approx(20.0 * (1 / 30) * 5.0 / (0.010 * 4.0), rel=0.01)
+    assert mean < 118
+    # A bright scene: shorter exposures (less motion blur).
+    _, frames = run_auto_exposure(model, lambda t: 240.0, 3.0)
+    assert frames[-1][1].exposure_s == pytest.approx(0.010 * 118 / 240, rel=0.02)
+    # A change of scene: the next frame is still exposed for the scene before.
+    _, frames = run_auto_exposure(model, lambda t: 40.0 if t < 2.0 else 120.0, 3.0)
+    before = [e for t, e, _ in frames if t < 2.0][-1]
+    after = [m for t, _, m in frames if t >= 2.0]
+    assert after[0] == 255.0 and 120.0 * before.brightness > 255.0  # over-exposed, clipped
+    assert after[-1] == pytest.approx(118.0, rel=0.06)  # clipped frames meter low: slower
+    # Off: the nominal settings, whatever the scene.
+    fixed = replace(model, auto_exposure=False)
+    _, frames = run_auto_exposure(fixed, lambda t: 40.0, 1.0)
+    assert {(e.exposure_s, e.gain) for _, e, _ in frames} == {(0.010, 4.0)}
+
+
+def test_auto_exposure_time_sets_the_blur_and_its_gain_the_noise():
+    model = replace(camera_model("hummingbird", profile="webcam"), jpeg_quality=0,
+                    vignetting_exponent=0.0)
+    lens = Lens(model)
+    turning = Motion(omega_rad_s=(0.0, 1.0, 0.0))
+    assert lens.blur_length_px(turning, 0.02) == pytest.approx(
+        2 * lens.blur_length_px(turning, 0.01), rel=1e-3)  # first order in the exposure
+    grey = np.full((model.height, model.width, 3), 100, np.uint8)
+    low, high = (np.std(lens.add_noise(grey, 3, gain).astype(float)) for gain in (1.0, 4.0))
+    k = model.system_gain_dn_per_e
+    assert low == pytest.approx(math.sqrt(k * 100 + (k * 3) ** 2), rel=0.05)
+    assert high == pytest.approx(math.sqrt(4 * k * 100 + (4 * k * 3) ** 2), rel=0.05)
 
 
 def test_point_sampled_render_has_no_antialiased_geometry_edges(tmp_path: Path):

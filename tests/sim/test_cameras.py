@@ -72,9 +72,9 @@ def test_rendered_pad_matches_pinhole_model():
                  f"{-altitude}}}", "INIT")
         c.step(1)  # frame 1 is rendered from the state at the first step
         frame = cameras.buffer.latest("R1/Down")
+        assert frame is not None and frame.number == 1
+        grey = frame.rgb.mean(axis=2)  # made on request, while the simulator runs
         c.close()
-    assert frame is not None and frame.number == 1
-    grey = frame.rgb.mean(axis=2)
     h, w = grey.shape
     f = (w / 2) / math.tan(1.309 / 2)
     cam_height = altitude - 0.035 - PAD_SURFACE_HEIGHT_M
@@ -269,4 +269,71 @@ def test_snapshot_saves_png_and_jpeg(tmp_path):
             save_snapshot(f"127.0.0.1:{images.port}", tmp_path / "frame.gif")
         with pytest.raises(LocalProtocolError, match="port"):
             save_snapshot("127.0.0.1:notaport", tmp_path / "x.png")
+        c.close()
+
+
+def _camera_shots(msgs) -> list[int]:
+    return [int(m.require("Frame")) for m in msgs if m.type == "SEN" and m.get("Type") == "Camera"]
+
+
+def _wait(condition, what: str, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.01)
+
+
+def test_frames_are_rendered_only_for_someone():
+    """A camera nobody watches costs no render: its frames are numbered and announced, and
+    one is rendered when asked for; while an image client watches it, every frame is."""
+    with sim_with_images(profile="webcam") as (control, images, cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        cam = cameras.sim.robots["R1"].cameras[0]
+        shots = _camera_shots(c.step(500))
+        assert len(shots) >= 12 and cam.captured >= len(shots) and cam.rendered == 0
+        with ImageClient("127.0.0.1", images.port) as img:
+            img.select_camera("R1/Down")
+            img.set_meta(True)
+            frame = img.get_frame()  # the newest announced frame, rendered now
+            assert frame.meta is not None and frame.meta.frame_number == shots[-1]
+            assert cam.rendered == 1
+            _wait(lambda: cameras.buffer.wanted("R1/Down"), "the client's SELECT")
+            watched_from = cam.captured
+            shots = _camera_shots(c.step(500))
+            assert len(shots) >= 14
+            _wait(lambda: cam.rendered == 1 + cam.captured - watched_from, "eager renders")
+            assert cameras.skipped == 0  # lockstep: every watched frame
+            again = img.get_frame()
+            assert again.meta is not None and again.meta.frame_number == shots[-1]
+            assert cam.rendered == 1 + cam.captured - watched_from  # it was ready
+        _wait(lambda: not cameras.buffer.wanted("R1/Down"), "the client's goodbye")
+        before = cam.rendered
+        assert _camera_shots(c.step(500))
+        assert cam.rendered == before
+        c.close()
+
+
+def test_a_jpeg_client_gets_the_webcams_own_mjpeg():
+    """The webcam codes each frame as MJPEG (its quality 85); a client asking for JPEG at that
+    quality receives those very bytes, another quality is coded afresh from the pixels."""
+    with sim_with_images(profile="webcam") as (control, images, cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        c.step(200)
+        newest = cameras.buffer.latest("R1/Down")
+        assert newest is not None and newest.jpeg_quality == 85
+        with ImageClient("127.0.0.1", images.port) as img:
+            img.select_camera("R1/Down")
+            img.set_format("jpeg", quality=85)
+            same = img.get_frame()
+            img.set_format("jpeg", quality=50)
+            other = img.get_frame()
+        assert newest.jpeg is not None and same.data == newest.jpeg
+        assert other.data != newest.jpeg and frame_image(other).shape == (600, 800, 3)
+        # The MJPEG bytes decode to the frame's own pixels (RGB order kept).
+        decoded = frame_image(same)[:, :, ::-1]
+        assert np.array_equal(decoded, newest.rgb)
         c.close()
