@@ -1,64 +1,69 @@
 """Camera benchmark: frames/s and render-to-receipt latency from the real simulator.
 
-Starts ``skeye sim --mode realtime --image-port 0`` as its own process, spawns a Hummingbird
-hovering over the pad (downward camera 800x600, 30 fps), and streams frames (``SKEYE STREAM``
-with META on) to 1 and 4 clients in RAW, JPEG quality 85 and PNG, once per camera profile
-(``--camera-profile ideal`` and ``webcam``, docs/camera.md). Latency is receipt time minus
-the wall time of the frame's sim time, its capture instant (the sim-to-wall offset comes from
-PING answers; in real time the clock runs at 1x), so it counts rendering, the lens and sensor
-model, the webcam's capture latency, encoding and transfer. Also prints the simulator's
-real-time factor seen by the clients, the renderer (MUJOCO_GL) used, and the webcam profile's
-frame rate as a ratio to the ideal one measured in the same run (the machine may be shared).
+Real time (the default): starts ``skeye sim --mode realtime --image-port 0`` as its own process,
+spawns a Hummingbird hovering over the pad (downward camera 800x600, 30 fps), and streams frames
+(``SKEYE STREAM`` with META on) to 1 and 4 clients in RAW, JPEG quality 85 and PNG, once per
+camera profile (``--camera-profile ideal`` and ``webcam``, docs/camera.md). Latency is receipt
+time minus the wall time of the frame's sim time, its capture instant (the sim-to-wall offset
+comes from PING answers; in real time the clock runs at 1x), so it counts rendering, the lens
+and sensor model, the webcam's capture latency, encoding and transfer. Also prints the
+simulator's real-time factor seen by the clients, the OpenGL renderer the simulator reports,
+and the webcam profile's frame rate as a ratio to the ideal one measured in the same run (the
+machine may be shared: the load average is printed before and after).
+
+Lockstep (``--lockstep 1 10``): ``skeye sim --mode lockstep`` with N vehicles hovering, each
+with its own connection and image client (RAW + META, as the pilot's vision asks); the
+benchmark steps the world one camera period at a time and fetches every vehicle's newest frame
+after each step, as a sweep or a learner with camera observations does. Prints frames per wall
+second (all vehicles together) and the real-time factor.
 
 Usage: python benchmarks/bench_camera.py [--seconds 5] [--fps 30] [--clients 1 4]
-       [--formats raw jpeg png] [--profiles ideal webcam]
+       [--formats raw jpeg png] [--profiles ideal webcam] [--lockstep N ...] [--only-lockstep]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import sys
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 
+from skeye.control.connection import Connection
 from skeye.control.image_client import ImageClient
 from skeye.processes import start_skeye, stop_process
 
-try:  # run from a checkout without installing
-    from tests.sim.conftest import LineClient
-except ImportError:  # pragma: no cover
-    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    from tests.sim.conftest import LineClient
+
+def load() -> str:
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.2f}, {five:.2f}, {fifteen:.2f} ({os.cpu_count()} cores)"
 
 
 @contextmanager
-def sim_process(profile: str) -> Iterator[tuple[int, int, str]]:
+def sim_process(profile: str, mode: str = "realtime") -> Iterator[tuple[int, int, str]]:
+    """``skeye sim`` with an image server; (control port, image port, renderer)."""
     proc, found = start_skeye(
-        ["sim", "--mode", "realtime", "--port", "0", "--image-port", "0",
-         "--camera-profile", profile],
-        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+) \(MUJOCO_GL=(\w+)"],
+        ["sim", "--mode", mode, "--port", "0", "--image-port", "0", "--camera-profile", profile],
+        [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)",
+         r"camera renderer: (.*)"],
         "skeye sim",
     )
     try:
-        yield int(found[0].group(1)), int(found[1].group(1)), found[1].group(2)
+        yield int(found[0].group(1)), int(found[1].group(1)), found[2].group(1).strip()
     finally:
         stop_process(proc)
 
 
-def clock_offset(c: LineClient) -> float:
+def clock_offset(conn: Connection) -> float:
     """wall - sim, from the fastest of several PINGs (real-time mode)."""
     best = None
-    for i in range(20):
+    for _ in range(20):
         t0 = time.time()
-        c.send(f"PING {{Id o{i}}}")
-        res = c.read_until(lambda m, i=i: m.type == "RES" and m.get("Id") == f"o{i}")[1]
+        sim_time = conn.ping()
         t1 = time.time()
-        offset = (t0 + t1) / 2 - float(res.require("Time"))
         if best is None or (t1 - t0) < best[0]:
-            best = (t1 - t0, offset)
+            best = (t1 - t0, (t0 + t1) / 2 - sim_time)
     assert best is not None
     return best[1]
 
@@ -84,23 +89,20 @@ def pct(values: list[float], q: float) -> float:
 
 
 def run_profile(profile: str, args: argparse.Namespace) -> dict[str, float]:
-    """Stream every format to each client count; the RAW x1 frame rate and p50 latency."""
+    """Stream every format to each client count; the first format's x1 frame rate and p50."""
     summary: dict[str, float] = {}
-    with sim_process(profile) as (control_port, image_port, gl):
-        c = LineClient(control_port)
-        c.expect("NFO")
-        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1.0}", "INIT")
+    with sim_process(profile) as (control_port, image_port, renderer), \
+            Connection(f"127.0.0.1:{control_port}", timeout_s=30) as conn:
+        conn.spawn("hummingbird", location_ned_m=(0.0, 0.0, -1.0))
         time.sleep(1.0)
-        offset = clock_offset(c)
-        print(f"profile {profile}: renderer MuJoCo offscreen, MUJOCO_GL={gl}; "
-              f"{os.cpu_count()} cores; camera 800x600 at {args.fps:g} fps requested; "
-              "simulator in real time")
+        offset = clock_offset(conn)
+        print(f"profile {profile}: renderer {renderer}; camera 800x600 at {args.fps:g} fps "
+              "requested; simulator in real time")
         for fmt in args.formats:
             for n in args.clients:
                 results: list[list[tuple[int, float]]] = [[] for _ in range(n)]
                 t0 = time.time()
-                c.send("PING {Id s0}")
-                s0 = float(c.read_until(lambda m: m.get("Id") == "s0")[1].require("Time"))
+                s0 = conn.ping()
                 threads = [threading.Thread(target=stream, args=(image_port, fmt, args.fps,
                                                                  args.seconds, offset, r))
                            for r in results]
@@ -108,18 +110,55 @@ def run_profile(profile: str, args: argparse.Namespace) -> dict[str, float]:
                     t.start()
                 for t in threads:
                     t.join()
-                c.send("PING {Id s1}")
-                s1 = float(c.read_until(lambda m: m.get("Id") == "s1")[1].require("Time"))
-                rtf = (s1 - s0) / (time.time() - t0)
+                rtf = (conn.ping() - s0) / (time.time() - t0)
                 rates = [len(r) / args.seconds for r in results]
                 lat = [x[1] for r in results for x in r]
                 print(f"  {fmt.upper():4s} q85 x{n}: {min(rates):5.1f}-{max(rates):5.1f} "
                       f"frames/s per client, latency p50 {pct(lat, 0.5):5.1f} ms p99 "
-                      f"{pct(lat, 0.99):6.1f} ms, sim real-time factor {rtf:.2f}")
+                      f"{pct(lat, 0.99):6.1f} ms, sim real-time factor {rtf:.2f}", flush=True)
                 if fmt == args.formats[0] and n == args.clients[0]:
                     summary = {"fps": min(rates), "p50_ms": pct(lat, 0.5)}
-        c.close()
     return summary
+
+
+def run_lockstep(vehicles: int, args: argparse.Namespace) -> None:
+    """Step one camera period at a time; after each, every vehicle's newest frame."""
+    with sim_process(args.lockstep_profile, "lockstep") as (control_port, image_port, renderer), \
+            ExitStack() as stack:
+        conns = []
+        images = []
+        for i in range(vehicles):
+            conn = stack.enter_context(Connection(f"127.0.0.1:{control_port}", timeout_s=60))
+            conn.spawn("hummingbird", name=f"R{i + 1}",
+                       location_ned_m=(2.0 * (i % 5), 2.0 * (i // 5), -1.0 - 0.1 * i))
+            conns.append(conn)
+            img = stack.enter_context(ImageClient("127.0.0.1", image_port, timeout_s=60))
+            img.select_camera(f"R{i + 1}/Down")
+            img.set_format("raw")
+            img.set_meta(True)
+            images.append(img)
+        period_steps = round(1.0 / (30.0 * conns[0].time_step_s))
+        conns[0].step(period_steps)  # the first frames, and the image clients' selections
+        for img in images:
+            img.get_frame()
+        frames = 0
+        last = [0] * vehicles
+        s0 = conns[0].ping()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < args.seconds:
+            conns[0].step(period_steps)
+            for i, img in enumerate(images):
+                frame = img.get_frame()
+                assert frame.meta is not None
+                if frame.meta.frame_number > last[i]:
+                    frames += 1
+                    last[i] = frame.meta.frame_number
+        wall = time.monotonic() - t0
+        rtf = (conns[0].ping() - s0) / wall
+        print(f"lockstep, {args.lockstep_profile} 800x600, {vehicles} vehicle(s), renderer "
+              f"{renderer}: {frames / wall:6.1f} frames per wall second ({frames} new frames "
+              f"in {wall:.1f} s, every vehicle's newest after each 1/30 s step), real-time "
+              f"factor {rtf:.2f}", flush=True)
 
 
 def main() -> None:
@@ -131,13 +170,24 @@ def main() -> None:
                         default=["raw", "jpeg", "png"])
     parser.add_argument("--profiles", nargs="+", choices=("ideal", "webcam"),
                         default=["ideal", "webcam"])
+    parser.add_argument("--lockstep", type=int, nargs="*", default=[],
+                        help="also the lockstep figure with these numbers of vehicles")
+    parser.add_argument("--lockstep-profile", choices=("ideal", "webcam"), default="webcam")
+    parser.add_argument("--only-lockstep", action="store_true",
+                        help="skip the real-time streams")
     args = parser.parse_args()
-    summaries = {profile: run_profile(profile, args) for profile in args.profiles}
-    if "ideal" in summaries and "webcam" in summaries and summaries["ideal"]["fps"] > 0:
-        ideal, webcam = summaries["ideal"], summaries["webcam"]
-        print(f"webcam / ideal ({args.formats[0].upper()} x{args.clients[0]}): frame rate "
-              f"{webcam['fps']:.1f} / {ideal['fps']:.1f} = {webcam['fps'] / ideal['fps']:.2f}; "
-              f"latency p50 {webcam['p50_ms']:.1f} ms vs {ideal['p50_ms']:.1f} ms")
+    print(f"bench_camera: {load()} at the start")
+    if not args.only_lockstep:
+        summaries = {profile: run_profile(profile, args) for profile in args.profiles}
+        if "ideal" in summaries and "webcam" in summaries and summaries["ideal"]["fps"] > 0:
+            ideal, webcam = summaries["ideal"], summaries["webcam"]
+            print(f"webcam / ideal ({args.formats[0].upper()} x{args.clients[0]}): frame rate "
+                  f"{webcam['fps']:.1f} / {ideal['fps']:.1f} = "
+                  f"{webcam['fps'] / ideal['fps']:.2f}; latency p50 {webcam['p50_ms']:.1f} ms "
+                  f"vs {ideal['p50_ms']:.1f} ms")
+    for vehicles in args.lockstep:
+        run_lockstep(vehicles, args)
+    print(f"bench_camera: {load()} at the end")
 
 
 if __name__ == "__main__":
