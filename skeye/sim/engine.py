@@ -137,6 +137,7 @@ class Simulation:
         self._qvel: Any = None
         self._qacc: Any = None
         self._xfrc: Any = None
+        self._xfrc_flat: memoryview[float] = memoryview(b"").cast("d")
         self._rebuild()
 
     # -- model ---------------------------------------------------------------------------
@@ -217,6 +218,7 @@ class Simulation:
         self.data.time = self.time_s
         d = self.data
         self._qpos, self._qvel, self._qacc, self._xfrc = d.qpos, d.qvel, d.qacc, d.xfrc_applied
+        self._xfrc_flat = memoryview(d.xfrc_applied).cast("B").cast("d")
         self._slots = {}
         for name in self.robots:
             body_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"robot:{name}")
@@ -451,8 +453,22 @@ class Simulation:
 
     def _check_states(self) -> None:
         """Stop every robot whose state went bad between steps (a task can write MuJoCo's
-        state), before MuJoCo sees it: its own NaN guard would reset the whole world."""
+        state), before MuJoCo sees it: its own NaN guard would reset the whole world.
+
+        The same test as :func:`check_state` on the robot's :class:`BodyState`, on MuJoCo's
+        joint values directly (the frame change only flips signs, which the bounds ignore)."""
+        qpos, qvel = self._qpos.tolist(), self._qvel.tolist()
         for name in list(self.robots):
+            slot = self._slots[name]
+            a, b = slot.qpos_adr, slot.qvel_adr
+            px, py, pz = qpos[a], qpos[a + 1], qpos[a + 2]
+            vx, vy, vz = qvel[b], qvel[b + 1], qvel[b + 2]
+            wx, wy, wz = qvel[b + 3], qvel[b + 4], qvel[b + 5]
+            total = px + py + pz + vx + vy + vz + wx + wy + wz
+            if (math.isfinite(total) and max(abs(px), abs(py), abs(pz)) <= 1.0e5
+                    and vx * vx + vy * vy + vz * vz <= 150.0**2
+                    and wx * wx + wy * wy + wz * wz <= 200.0**2):
+                continue
             try:
                 check_state(name, self.body_state(name))
             except PhysicsError as exc:
@@ -467,6 +483,13 @@ class Simulation:
             periods.add(robot.board_decimation)
             periods.add(robot.status_period_steps)
             periods.update(s.period_steps for s in robot.sensors)
+            # The robot's own sensing periods: between their multiples an event has nothing
+            # but the board for it (see _step_to_event).
+            sensing = {robot.status_period_steps}
+            sensing.update(s.period_steps for s in robot.sensors)
+            sensing.update(s.period_steps for s in robot.board_sensors)
+            robot.sensing_periods = sorted(sensing)
+            robot.next_sensing_step = 0
         self._periods = sorted(periods)
 
     def _next_event_step(self) -> int:
@@ -509,7 +532,7 @@ class Simulation:
         """``count`` physics steps, then whatever falls due at the new step count, robot by
         robot: sensors are sampled (and status reported) from the state now, then the board
         ticks on that same state and sets the wrench MuJoCo applies until its next tick."""
-        mujoco.mj_step(self.model, self.data, nstep=count)
+        mujoco.mj_step(self.model, self.data, count)
         self.steps = step = self.steps + count
         failed: list[tuple[str, str]] = []
         wind_advanced = False
@@ -517,9 +540,20 @@ class Simulation:
         t = step * self.dt
         for name, robot in self.robots.items():
             board = step % robot.board_decimation == 0
-            due = [sched for sched in robot.sensors if step % sched.period_steps == 0]
-            hidden = [sched for sched in robot.board_sensors if step % sched.period_steps == 0]
-            status = step % robot.status_period_steps == 0
+            due: list[ScheduledSensor] = []
+            hidden: list[ScheduledSensor] = []
+            status = False
+            if step >= robot.next_sensing_step:  # else no sensor nor status is due now
+                due = [sched for sched in robot.sensors if step % sched.period_steps == 0]
+                hidden = [sched for sched in robot.board_sensors
+                          if step % sched.period_steps == 0]
+                status = step % robot.status_period_steps == 0
+                following = step + 1_000_000
+                for p in robot.sensing_periods:
+                    k = (step // p + 1) * p
+                    if k < following:
+                        following = k
+                robot.next_sensing_step = following
             if not (board or due or status or hidden):
                 continue
             if joints is None:  # one read of MuJoCo's arrays for all robots this step
@@ -558,8 +592,9 @@ class Simulation:
             state, ground, self._in_contact(slot.body_id), self.wind.air_velocity_ned()
         )
         wf = self.wind.force_ned()
-        self._xfrc[slot.body_id] = frames.ned_wrench_to_mj(
-            (force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]), torque
+        frames.put_ned_wrench_mj(
+            self._xfrc_flat, 6 * slot.body_id,
+            (force[0] + wf[0], force[1] + wf[1], force[2] + wf[2]), torque,
         )
 
     def _park(self, name: str) -> None:

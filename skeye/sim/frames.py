@@ -141,3 +141,16 @@ def ned_wrench_to_mj(
         -torque_ned[1],
         -torque_ned[2],
     )
+
+
+def put_ned_wrench_mj(
+    out: memoryview[float], index: int, force_ned: Sequence[float], torque_ned: Sequence[float]
+) -> None:
+    """:func:`ned_wrench_to_mj` written into ``out[index:index + 6]`` (a flat float view of
+    MuJoCo's ``xfrc_applied``): the engine's hot path, without a tuple or numpy's conversion."""
+    out[index] = force_ned[0]
+    out[index + 1] = -force_ned[1]
+    out[index + 2] = -force_ned[2]
+    out[index + 3] = torque_ned[0]
+    out[index + 4] = -torque_ned[1]
+    out[index + 5] = -torque_ned[2]

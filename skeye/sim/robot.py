@@ -165,6 +165,10 @@ class Robot:
         self.command = Command()
         self.flight = FlightState()
         self.status_period_steps = max(1, round(1.0 / (config.status_rate_hz * physics_step_s)))
+        # The engine's schedule: the periods (steps) of the sensors and the status, and the next
+        # step at which one of them falls due (skeye.sim.engine keeps them).
+        self.sensing_periods: list[int] = []
+        self.next_sensing_step = 0
         self.sensors: list[ScheduledSensor] = []
         self.cameras: list[CameraSpec] = []
         self.ins: Any = None
@@ -468,7 +472,7 @@ def check_state(name: str, state: BodyState) -> None:
     vx, vy, vz = state.vel_ned_m_s
     wx, wy, wz = state.omega_frd_rad_s
     total = px + py + pz + vx + vy + vz + wx + wy + wz
-    if not math.isfinite(total):
+    if math.isnan(total - total):  # inf or NaN (math.isnan compiles to C; isfinite does not)
         raise PhysicsError(f"robot {name}: NaN in the simulated state")
     if max(abs(px), abs(py), abs(pz)) > 1.0e5 or vx * vx + vy * vy + vz * vz > 150.0**2:
         raise PhysicsError(f"robot {name}: the simulation diverged (runaway position or speed)")
