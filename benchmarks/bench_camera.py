@@ -17,18 +17,26 @@ benchmark steps the world one camera period at a time and fetches every vehicle'
 after each step, as a sweep or a learner with camera observations does. Prints frames per wall
 second (all vehicles together) and the real-time factor.
 
+Stages (``--stages``): in this process, the webcam frame's steps one by one on the
+Hummingbird hovering 1 m over the pad (the render without shadows, the soft-shadow term, MuJoCo's
+own shadow pass for comparison, the lens still and turning at 0.5 rad/s, the MJPEG code and
+decode), each the best and the median of ``--stage-repeats`` alternating rounds.
+
 Usage: python benchmarks/bench_camera.py [--seconds 5] [--fps 30] [--clients 1 4]
        [--formats raw jpeg png] [--profiles ideal webcam] [--lockstep N ...] [--only-lockstep]
+       [--stages] [--stage-repeats 10]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from typing import Any
 
 from skeye.control.connection import Connection
 from skeye.control.image_client import ImageClient
@@ -161,6 +169,82 @@ def run_lockstep(vehicles: int, args: argparse.Namespace) -> None:
               f"factor {rtf:.2f}", flush=True)
 
 
+def run_stages(args: argparse.Namespace) -> None:
+    """Each step of a webcam frame, in this process (see the module comment)."""
+    import statistics
+
+    import cv2
+    import mujoco
+
+    from skeye.sim.cameras import CameraSystem, camera_model_name
+    from skeye.sim.engine import Simulation
+    from skeye.sim.image_server import FrameBuffer
+    from skeye.sim.lens import Motion
+    from skeye.sim.render import HEADROOM, ShotRenderer, WorldState, camera_index, camera_motion
+    from skeye.sim.world import load_world
+
+    sim = Simulation(load_world("pad"), seed=3)
+    with CameraSystem(sim, FrameBuffer(), synchronous=True, profile="webcam"):
+        sim.spawn("hummingbird", name="R1", sink=lambda events: None,
+                  location_ned_m=(0.1, 0.0, -1.0))
+        sim.step(5)
+    cam = sim.robots["R1"].cameras[0]
+    lens = cam.lens
+    assert lens is not None
+    name = camera_model_name("R1", "Down")
+    state = WorldState(sim.model, sim.data.qpos.copy(), sim.data.qvel.copy(), sim.time_s)
+    shots = ShotRenderer()
+    print(f"stages: renderer {shots.describe()}; render {cam.render_size[1]}x"
+          f"{cam.render_size[0]} for the 800x600 webcam frame")
+    shots.render(state, name, cam, 1)  # loads the state, makes the contexts
+    data = shots._data
+    height, width = cam.render_size
+    cam_id = camera_index(sim.model, name)
+    plain = shots._renderer(height, width, cam.render_samples)
+    own = shots._renderer(height, width, cam.render_samples, 1024)  # MuJoCo's shadow pass
+
+    # MuJoCo's own pass as skeye used it before: a 1024-pixel map over +-4 m of the origin.
+    own._mjr_context.shadowClip = 4.0
+
+    def render(renderer: Any, shadows: int) -> Any:
+        scene = renderer.scene
+        scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+        renderer.update_scene(data, camera=name)
+        for i in range(scene.nlight):  # the world's lights cast shadows in this pass
+            if not scene.lights[i].headlight:
+                scene.lights[i].castshadow = shadows
+        return renderer.render()
+
+    rgb = render(plain, 0)
+    still = camera_motion(mujoco, sim.model, data, cam_id)
+    turning = Motion(omega_rad_s=(0.3, 0.4, 0.0), height_m=1.0)
+    image = lens.apply(rgb, still, 1, None, HEADROOM)
+    bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    stages = {
+        "render, no shadows": lambda: render(plain, 0),
+        "soft-shadow term (3 quarter-size renders)": lambda: shots._shadow_term(
+            name, cam_id, height, width, lens.focal_px, 1.0),
+        "for comparison: MuJoCo's shadow pass": lambda: render(own, 1),
+        "lens, camera still (remap, gain, noise, MJPEG)": lambda: lens.process(
+            rgb, still, 1, None, HEADROOM),
+        f"lens, turning 0.5 rad/s ({math.ceil(lens.blur_length_px(turning))} blur samples)":
+            lambda: lens.process(rgb, turning, 1, None, HEADROOM),
+        "MJPEG code + decode (in the lens)": lambda: cv2.imdecode(
+            cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, 85])[1], cv2.IMREAD_COLOR_RGB),
+        "whole frame (ShotRenderer.render)": lambda: shots.render(state, name, cam, 1),
+    }
+    times: dict[str, list[float]] = {key: [] for key in stages}
+    for _ in range(args.stage_repeats):
+        for key, fn in stages.items():
+            t0 = time.perf_counter()
+            for _ in range(3):
+                fn()
+            times[key].append((time.perf_counter() - t0) / 3 * 1000.0)
+    for key, values in times.items():
+        print(f"  {key:48s} best {min(values):6.2f} ms, median {statistics.median(values):6.2f} ms")
+    shots.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0)
@@ -175,9 +259,14 @@ def main() -> None:
     parser.add_argument("--lockstep-profile", choices=("ideal", "webcam"), default="webcam")
     parser.add_argument("--only-lockstep", action="store_true",
                         help="skip the real-time streams")
+    parser.add_argument("--stages", action="store_true",
+                        help="only the in-process timing of each step of a webcam frame")
+    parser.add_argument("--stage-repeats", type=int, default=10)
     args = parser.parse_args()
     print(f"bench_camera: {load()} at the start")
-    if not args.only_lockstep:
+    if args.stages:
+        run_stages(args)
+    elif not args.only_lockstep:
         summaries = {profile: run_profile(profile, args) for profile in args.profiles}
         if "ideal" in summaries and "webcam" in summaries and summaries["ideal"]["fps"] > 0:
             ideal, webcam = summaries["ideal"], summaries["webcam"]
@@ -185,7 +274,7 @@ def main() -> None:
                   f"{webcam['fps']:.1f} / {ideal['fps']:.1f} = "
                   f"{webcam['fps'] / ideal['fps']:.2f}; latency p50 {webcam['p50_ms']:.1f} ms "
                   f"vs {ideal['p50_ms']:.1f} ms")
-    for vehicles in args.lockstep:
+    for vehicles in [] if args.stages else args.lockstep:
         run_lockstep(vehicles, args)
     print(f"bench_camera: {load()} at the end")
 

@@ -48,9 +48,9 @@ log = logging.getLogger(__name__)
 
 HEADROOM = 2.0  # lights dimmed by this in a lens camera's render; the lens multiplies it back
 SHADOW_DOWNSCALE = 4  # the shadow term is rendered at 1 / this of the image's size
-SHADOW_MAP_PX = 1024  # the shadow map's size (pixels a side)
+SHADOW_MAP_PX = 512  # the shadow map's size (pixels a side): it covers the view only
 SHADOW_DEPTH_RANGE_M = 10_000.0  # the shadow pass's depth range: sets MuJoCo's depth offset
-SHADOW_MIN_HALF_SIZE_M = 1.0  # the shadow map covers at least +-this around the view's centre
+SHADOW_MIN_HALF_SIZE_M = 0.5  # the shadow map covers at least +-this around the view's centre
 SHADOW_MAX_HALF_SIZE_M = 60.0
 _DIRECTIONAL = 1  # mjtLightType.mjLIGHT_DIRECTIONAL
 ROTOR_GEOM_MARK = ":rotor"  # skeye.sim.engine names each robot's rotor discs robot:<name>:rotor<i>
@@ -251,7 +251,9 @@ class ShotRenderer:
         # two shadow-map texels (the map's own resolution), and a little for the small render.
         texel_px = 2.0 * half / SHADOW_MAP_PX * focal_px / max(cam_height_m, 0.05)
         width_px = max(_penumbra_rad(scene) * focal_px, 2.0 * texel_px)
-        sigma = max(0.7, width_px / 4.0 / SHADOW_DOWNSCALE)
+        # the penumbra as a Gaussian of that full width at half maximum, in the small render;
+        # at least one of its pixels (the small render samples each pixel at one point)
+        sigma = max(1.0, width_px / 2.355 / SHADOW_DOWNSCALE)
         ratio = cv2.GaussianBlur(ratio, (0, 0), sigma)
         term = cv2.resize(ratio, (width, height), interpolation=cv2.INTER_LINEAR)
         return cv2.convertScaleAbs(term)
