@@ -24,8 +24,9 @@ belong to the thread that made them; :mod:`skeye.sim.render`), and only for some
 
 In lockstep every watched frame is rendered in order (the engine waits when more than
 ``LOCKSTEP_BACKLOG`` are queued), so a run is reproducible; in real time the engine never
-waits, and a watched frame superseded before its render began is left to be rendered on
-request (counted in ``skipped``).
+waits, and a watched frame whose render has not begun when a newer frame of its camera is
+published is left unrendered (nobody can ask the buffer for it any more; counted in
+``skipped``), unless someone waits for its pixels.
 """
 
 from __future__ import annotations
@@ -251,15 +252,15 @@ class CameraSystem:
         """``profile``: the camera model profile every camera uses (``skeye sim
         --camera-profile``), over the robot files' own; None keeps theirs. ``synchronous``
         (lockstep): every watched frame is rendered, the engine waiting when they pile up;
-        otherwise (real time) a watched frame superseded before its render starts is left
-        unrendered unless someone asks for it (counted in ``skipped``)."""
+        otherwise (real time) a watched frame whose render has not begun when a newer one is
+        published is left unrendered unless someone waits for it (counted in ``skipped``)."""
         if profile is not None and profile not in PROFILES:
             raise ConfigError(f"unknown camera profile {profile!r}; known: {list(PROFILES)}")
         self.profile = profile
         self.sim = sim
         self.buffer = buffer
         self.synchronous = synchronous
-        self.skipped = 0  # watched frames left unrendered (real time: a newer one was due)
+        self.skipped = 0  # watched frames left unrendered (real time: a newer one was out)
         self.rendered = 0  # frames rendered, all cameras
         self.error: str | None = None
         self.renderer_description: str | None = None  # the OpenGL renderer, once probed
@@ -269,7 +270,7 @@ class CameraSystem:
         self._queue: queue.Queue[_Shot | None] = queue.Queue()
         self._lock = threading.Condition()
         self._backlog = 0  # eager shots queued and not rendered
-        self._newest_eager: dict[str, int] = {}
+        self._newest_published: dict[str, int] = {}  # by camera: the newest frame out
         self._stop = threading.Event()
         sim.xml_extras.append(self._xml)
         sim.rebuild_hooks.append(self._on_rebuild)
@@ -345,7 +346,7 @@ class CameraSystem:
                     if key in self._known:
                         self.buffer.remove_camera(key)
                     self._last_delivery.pop(key, None)
-                    self._newest_eager.pop(key, None)
+                    self._newest_published.pop(key, None)
                     self.buffer.register_camera(key, cam.camera_id)
                     # The first frame comes at the robot's first step (from its spawn state),
                     # then on the camera's grid of sim times k / rate.
@@ -353,7 +354,7 @@ class CameraSystem:
         for key in set(self._known) - set(current):
             self.buffer.remove_camera(key)
             self._last_delivery.pop(key, None)
-            self._newest_eager.pop(key, None)
+            self._newest_published.pop(key, None)
         self._known = current
         with self._pending_lock:  # frames of cameras that went wait for nobody
             self._pending = [p for p in self._pending if self._is_current(p[4])]
@@ -460,6 +461,8 @@ class CameraSystem:
         if not self._is_current(frame):
             return  # its robot went while the frame waited out its latency
         self.buffer.publish(frame)
+        with self._lock:
+            self._newest_published[frame.camera] = frame.number
         self.sim.emit(robot, [CameraFrame(frame.sim_time_s, cam.name, frame.number)])
 
     def _delivery_time(self, cam: CameraSpec, key: str, capture_s: float, number: int) -> float:
@@ -496,7 +499,6 @@ class CameraSystem:
                 return
             if eager:
                 shot.eager = True
-                self._newest_eager[shot.key] = shot.number
             if shot.queued or shot.done.is_set():
                 return
             shot.queued = True
@@ -529,10 +531,10 @@ class CameraSystem:
                 with self._lock:
                     shot.queued = False
                     skip = (not self.synchronous and shot.waiters == 0
-                            and self._newest_eager.get(shot.key, 0) > shot.number)
+                            and self._newest_published.get(shot.key, 0) > shot.number)
                 if shot.done.is_set():
                     continue
-                if skip:  # real time: a newer frame of this camera is on its way
+                if skip:  # real time: a newer frame is out, nobody will ask for this one
                     self.skipped += 1
                     self._finished(shot)
                     continue
