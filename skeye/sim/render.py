@@ -291,9 +291,11 @@ class ShotRenderer:
         centre[2] = 0.0
         for i in range(scene.nlight):
             light = scene.lights[i]
-            if light.headlight or int(light.type) != _DIRECTIONAL:
+            if light.headlight:
                 continue
-            light.castshadow = 1
+            light.castshadow = 1  # every world light casts (a spot light from where it is)
+            if int(light.type) != _DIRECTIONAL:
+                continue
             direction = np.array(light.dir, dtype=float)
             norm = float(np.linalg.norm(direction)) or 1.0
             light.pos[:] = centre - direction / norm * (height + 20.0)
