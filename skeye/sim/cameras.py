@@ -375,6 +375,17 @@ class CameraSystem:
             if fits:
                 glob.offwidth = max(int(glob.offwidth), max(c.render_size[1] for c in fits))
                 glob.offheight = max(int(glob.offheight), max(c.render_size[0] for c in fits))
+            # A camera that cannot be rendered is said at once, not when a frame is first asked
+            # for (frames are rendered only for someone).
+            for robot in sim.robots.values():
+                for cam in robot.cameras:
+                    if self.error is None and (cam.width > glob.offwidth
+                                               or cam.height > glob.offheight):
+                        self.error = (
+                            f"camera {robot.name}/{cam.name}: a {cam.width}x{cam.height} image "
+                            f"does not fit the offscreen buffer (framebuffer width "
+                            f"{glob.offwidth}, height {glob.offheight}); use a smaller camera")
+                        log.error("%s", self.error)
 
     def _next_event_step(self, sim: Any) -> int:
         """The step index whose end reaches the next camera's due time or frame delivery."""
