@@ -2,8 +2,9 @@
 # The camera and engine figures of docs/performance.md on a machine with a GPU (NVIDIA EGL), in
 # one short run (about 4 minutes): which renderer skeye finds, the webcam frame's stages, the
 # real-time streams (1 and 4 clients, ideal and webcam), the lockstep camera figure (1 and 10
-# vehicles) and the engine against raw mj_step. Output goes to stdout and, when $OUT is set, to
-# $OUT/gpu_figures.txt.
+# vehicles), examples/takeoff_land.py in lockstep with and without --image-port, and the engine
+# against raw mj_step (meaningful only where the hot path is compiled: the first line says).
+# Output goes to stdout and, when $OUT is set, to $OUT/gpu_figures.txt.
 #
 # Usage: benchmarks/gpu_figures.sh [PYTHON]    (default: .venv/bin/python, else python3)
 set -u
@@ -22,3 +23,17 @@ run "$PY" benchmarks/bench_camera.py --stages --stage-repeats 5
 run "$PY" benchmarks/bench_camera.py --seconds 5 --clients 1 4 --formats jpeg --profiles ideal webcam
 run "$PY" benchmarks/bench_camera.py --only-lockstep --lockstep 1 10 --seconds 5
 run "$PY" benchmarks/bench_limit.py --vehicles 1 10 --sim-seconds 3 --repeats 3
+
+# examples/takeoff_land.py against a lockstep simulator, without and with an image server
+for images in "" "--image-port 0"; do
+  "$PY" -m skeye.cli sim --mode lockstep --port 0 $images > /tmp/skeye_gpu_sim.log 2>&1 &
+  sim=$!
+  for _ in $(seq 300); do grep -q "bound to" /tmp/skeye_gpu_sim.log && break; sleep 0.1; done
+  port=$(sed -n 's/.*control protocol on [0-9.]*:\([0-9]*\).*/\1/p' /tmp/skeye_gpu_sim.log)
+  start=$(date +%s%N)
+  SKEYE_SIM=127.0.0.1:$port timeout 150 "$PY" examples/takeoff_land.py > /dev/null 2>&1
+  rc=$?
+  took_ms=$(( ($(date +%s%N) - start) / 1000000 ))
+  echo "takeoff_land.py, lockstep ${images:-without images}: ${took_ms} ms (rc $rc)" | tee -a "$LOG"
+  kill $sim; wait $sim 2>/dev/null
+done
