@@ -69,7 +69,7 @@ class CameraModel:
     # Auto-exposure: each frame's exposure time and gain follow the mean of the frames before
     # (skeye.sim.exposure); off: every frame at exposure_s and gain.
     auto_exposure: bool = False
-    ae_target_dn: float = 118.0  # the mean level (DN) auto-exposure steers to
+    ae_target_dn: float = 118.0  # the mean luma (DN) auto-exposure steers to
     ae_time_constant_s: float = 0.3  # its lag: first-order, this time constant
     exposure_min_s: float = 0.0003  # the exposure time's range under auto-exposure
     exposure_max_s: float = 1.0 / 30.0

@@ -2,8 +2,8 @@
 
 How this works (docs/camera.md, "Auto-exposure"): the rendered image stands for the signal at
 the camera model's nominal settings (``exposure_s``, ``gain``). Auto-exposure scales it by a
-brightness factor ``b`` (1 at the nominal settings) that it steers so that a frame's mean level
-reaches ``ae_target_dn``. After each frame it meters (mean DN over the frame, before noise) it
+brightness factor ``b`` (1 at the nominal settings) that it steers so that a frame's mean luma
+reaches ``ae_target_dn``. After each frame it meters (mean luma over the frame, before noise) it
 sets a new goal, ``b_goal = b * ae_target_dn / mean``, and ``log b`` relaxes towards
 ``log b_goal`` as a first-order lag with time constant ``ae_time_constant_s`` in sim time: the
 frame after a change of scene is still exposed for the scene before (the lag of a real

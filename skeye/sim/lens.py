@@ -20,7 +20,7 @@ the inverse direction). Per frame:
 * Exposure and vignetting: the remapped signal is multiplied, in one pass, by the frame's
   brightness (its exposure time and gain against the model's nominal ones:
   :mod:`skeye.sim.exposure`, auto-exposure) and by the lens's relative illumination
-  ``cos^n`` of each pixel's field angle; the frame's mean level is metered here, before noise.
+  ``cos^n`` of each pixel's field angle; the frame's mean luma is metered here, before noise.
 * Noise: EMVA 1288's photon-transfer model, ``var(DN) = K * mean(DN) + K^2 sigma_d^2`` with
   ``K = system_gain_dn_per_e * gain`` (the frame's gain), drawn from a seeded bank of normal
   deviates (a frame's offset into the bank comes from the seed and the frame number:
@@ -43,6 +43,7 @@ from skeye.robots.camera_model import CameraModel
 from skeye.sim.exposure import Exposure, nominal
 
 _CV: Any = cv2  # for calls the OpenCV stubs do not describe (a None second map)
+_LUMA_RGB = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 MOTION_MARGIN = 0.08  # render this much wider than the lens needs, for motion (fraction)
 MAX_BLUR_SAMPLES = 8
 _GRID_STEP_PX = 16
@@ -178,7 +179,9 @@ class Lens:
                     cv2.accumulate(warped, acc)
             assert acc is not None
             image = self._gain(acc, scale / samples)
-        mean_dn = float(np.mean(image[::4, ::4]))
+        # The mean luma (Y of JPEG's YCbCr, ITU-R BT.601 weights, RGB order) auto-exposure
+        # meters, on every 4th pixel of every 4th row.
+        mean_dn = float(np.mean(image[::4, ::4].reshape(-1, 3) @ _LUMA_RGB))
         if model.noisy:
             image = self.add_noise(image, frame_number, exposure.gain)
         jpeg: bytes | None = None

@@ -327,6 +327,18 @@ def test_auto_exposure_steers_to_its_target_with_its_lag():
     assert {(e.exposure_s, e.gain) for _, e, _ in frames} == {(0.010, 4.0)}
 
 
+def test_webcam_frames_settle_at_the_auto_exposure_target(tmp_path: Path):
+    """The simulator's webcam meters each rendered frame's mean luma: over the grass, whose
+    render at the nominal settings is darker, a frame 1.5 s (5 time constants) after the
+    first is at the target; only the two frames are rendered, the lag runs in sim time."""
+    cls = webcam_variant(tmp_path, "aecam", "")
+    first = still_frame(tmp_path, cls, (3.0, 2.0, -1.5))
+    settled = still_frame(tmp_path, cls, (3.0, 2.0, -1.5), frames_s=1.5)
+    target = camera_model("hummingbird", profile="webcam").ae_target_dn
+    assert abs(float(first.mean()) - target) > 10
+    assert float(settled.mean()) == pytest.approx(target, abs=4)
+
+
 def test_auto_exposure_time_sets_the_blur_and_its_gain_the_noise():
     model = replace(camera_model("hummingbird", profile="webcam"), jpeg_quality=0,
                     vignetting_exponent=0.0)
