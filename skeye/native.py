@@ -49,6 +49,7 @@ COMPILED_MODULES: tuple[str, ...] = (
     "skeye.sim.sensors.navigation",
     "skeye.sim.sensors.ranging",
     "skeye.sim.sensors.vibration",
+    "skeye.sim.readings",
     "skeye.sim.raycast",
     "skeye.sim.engine",
 )

@@ -466,7 +466,7 @@ class Simulation:
             vx, vy, vz = qvel[b], qvel[b + 1], qvel[b + 2]
             wx, wy, wz = qvel[b + 3], qvel[b + 4], qvel[b + 5]
             total = px + py + pz + vx + vy + vz + wx + wy + wz
-            if (math.isfinite(total) and max(abs(px), abs(py), abs(pz)) <= 1.0e5
+            if (math.isfinite(total) and max(max(abs(px), abs(py)), abs(pz)) <= 1.0e5
                     and vx * vx + vy * vy + vz * vz <= 150.0**2
                     and wx * wx + wy * wy + wz * wz <= 200.0**2):
                 continue
@@ -561,11 +561,9 @@ class Simulation:
             if joints is None:  # one read of MuJoCo's arrays for all robots this step
                 joints = (self._qpos.tolist(), self._qvel.tolist(), self._qacc.tolist())
             slot = self._slots[name]
-            a, b = slot.qpos_adr, slot.qvel_adr
-            state = frames.free_joint_state(
-                t, joints[0][a : a + 7], joints[1][b : b + 6], joints[2][b : b + 3],
-                robot.rotors.speed_rad_s,
-            )
+            state = frames.free_joint_state(t, joints[0], joints[1], joints[2],
+                                            robot.rotors.speed_rad_s, slot.qpos_adr,
+                                            slot.qvel_adr)
             if due or status or hidden:
                 self._emit_readings(robot, state, due, status, hidden)
             if board:
@@ -634,25 +632,25 @@ class Simulation:
         events: list[Event] = []
         query = self._queries[robot.name]
         for sched in hidden:
-            robot.observe(sched.sensor.read(state, query))
+            robot.observe(sched.read(state, query))
         # The board's sensors first, so an INS reading at this instant reports the estimate
         # the board flies on now; the events keep the sensors' order.
         samples: list[SensorSample | None] = [None] * len(due)
         for board_first in (True, False):
-            for i, sched in enumerate(due):
+            for i in range(len(due)):
+                sched = due[i]
                 if sched.board != board_first:
                     continue
-                sensor = sched.sensor
-                if sensor.type_name == "Battery":
-                    sensor.update_battery(
+                if sched.type_name == "Battery":
+                    sched.sensor.update_battery(
                         robot.battery.voltage_v,
                         robot.battery.current_a,
                         robot.battery.state_of_charge,
                     )
-                sample = sched.sample(state, query)
+                reading = sched.read(state, query)
                 if board_first:
-                    robot.observe(sample.reading)
-                samples[i] = sample
+                    robot.observe(reading)
+                samples[i] = SensorSample(sched.type_name, sched.name, reading)
         for done in samples:
             if done is not None:
                 events.append(done)

@@ -1,30 +1,33 @@
-"""Ray casts for the robots' range sensors that skip the robots a ray cannot reach.
+"""Ray casts for the robots' range sensors; a bundle of rays skips the robots it cannot reach.
 
-Why: MuJoCo's ``mj_ray`` tests every geom of the model, and ``mj_multiRay`` first works out the
-angular extent, seen from the ray's origin, of every geom within its range (eight corners, two
-``atan2`` each). With ten Hummingbirds the model holds 130 robot geoms and 3 of the pad world's,
-so a sonar reading cost about 300 000 instructions, almost all of it on the other vehicles'
-arms, rotors and landing gear, which the downward cone never meets.
+Why: MuJoCo's ``mj_multiRay`` (the sonar's cone: nine rays from one point) first works out the
+angular extent, seen from the rays' origin, of every geom within their range: eight corners,
+two ``atan2`` each. With ten Hummingbirds the model holds 130 robot geoms and 3 of the pad
+world's, so a sonar reading cost about 200 000 instructions, almost all of them on the other
+vehicles' arms, rotors and landing gear, which the downward cone never meets. A single ray
+(``mj_ray``: the flow sensor's, the barometer's, the ground below the rotors) tests every
+geom's bounding sphere, about 100 instructions a robot geom: a quarter of a cast's cost.
 
 How this works: every robot geom is built in geom group :data:`ROBOT_GEOM_GROUP` (2, drawn like
 the world's groups 0 and 1 under MuJoCo's default visual options), and the world's geoms are in
 other groups. When the model is built, each robot gets a bounding sphere: its body's position
 (``xpos``) and the largest distance from it of its geoms' own bounding spheres (``geom_rbound``,
-the sphere MuJoCo's ray functions test first). A ray from a robot's sensor is tested against the
-sphere of every other robot over the part of the ray within its range; when it meets none,
-MuJoCo is asked about the world's geoms only (``geomgroup`` without group 2), else about every
-geom as before.
+the sphere MuJoCo's ray functions test first). The rays of a cast (one, or a bundle) lie in a
+cone about their mean direction; when the sphere of no other robot meets that cone within the
+rays' range, MuJoCo is asked about the world's geoms only (``geomgroup`` without group 2), else
+about every geom as before.
 
 The two answers are the same to the bit, for every distance the sensors keep (those within
 their range): MuJoCo computes each geom's intersection on its own (``mju_rayGeom`` and kin, the
 same function with the same arguments in both casts) and keeps the nearest, the first geom on a
-tie. A robot geom whose bounding sphere the ray misses within the range has no hit there, so the
-nearest hit within the range, and its geom, are the world's either way; a hit beyond the range
-is reported as none either way. The spheres are tested with a margin of a micrometre, and the
-robot bodies' positions are MuJoCo's ``xpos``, computed in the same pass as the ``geom_xpos`` its
-ray functions use. Where the model does not allow the shortcut (a geom in group 2 that belongs
-to no robot, a robot with moving parts, or the casting robot carrying geoms on a child body,
-which ``bodyexclude`` would not exclude), every cast asks about every geom.
+tie. A robot geom whose bounding sphere the rays miss within the range has no hit there, so the
+nearest hit within the range is the world's either way; a hit beyond the range is reported as
+none either way. The spheres carry a margin of a micrometre, and the robot bodies' positions are
+MuJoCo's ``xpos``, computed in the same pass as the ``geom_xpos`` its ray functions use. Where
+the model does not allow the shortcut (a geom in group 2 that belongs to no robot, a robot with
+moving parts, or the casting robot carrying geoms on a child body, which ``bodyexclude`` would
+not exclude), every cast asks about every geom. tests/sim/test_raycast.py compares both with
+MuJoCo's casts over every geom.
 
 Invariant: :meth:`RayCaster.moved` is called whenever MuJoCo's kinematics change (after each
 ``mj_step``, ``mj_forward``, or a model rebuild), so the bodies' positions are read again.
@@ -184,8 +187,7 @@ class RayCaster:
         pnt[0], pnt[1], pnt[2] = px, py, pz
         vec[0], vec[1], vec[2] = ux, uy, uz
         group: Any = None
-        if exclude_body >= 0 and self._world_suffices(px, py, pz, [ux, uy, uz], 1, exclude_body,
-                                                      max_range):
+        if self._world_suffices(px, py, pz, [ux, uy, uz], 1, exclude_body, max_range):
             group = self._world_only
         geomid = self._geomid
         dist = float(mujoco.mj_ray(self._model, self._data, self._pnt, self._vec, group, 1,
@@ -195,16 +197,17 @@ class RayCaster:
 
     def cast_many(self, px: float, py: float, pz: float, rays: list[float], n: int,
                   exclude_body: int, max_range: float) -> list[float]:
-        """:meth:`cast` for ``n`` unit rays from one point (``rays``: x, y, z each), in one
-        ``mj_multiRay`` call (geoms beyond ``max_range`` are left out: -1)."""
+        """Distances along ``n`` unit rays from one point (``rays``: x, y, z each) to the first
+        geom not on ``exclude_body``, -1 where nothing is hit, in one ``mj_multiRay`` call
+        (geoms beyond ``max_range`` are left out: only distances up to it are exact, see the
+        module doc)."""
         buffers = self._many.get(n)
         if buffers is None:
             buffers = self._many[n] = _Rays(n)
         pnt = self._pnt_view
         pnt[0], pnt[1], pnt[2] = px, py, pz
         group: Any = None
-        if exclude_body >= 0 and self._world_suffices(px, py, pz, rays, n, exclude_body,
-                                                      max_range):
+        if self._world_suffices(px, py, pz, rays, n, exclude_body, max_range):
             group = self._world_only
         mujoco.mj_multiRay(self._model, self._data, self._pnt, np.array(rays), group, 1,
                            exclude_body, buffers.geomid, buffers.dist, None, n, max_range)

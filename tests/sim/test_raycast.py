@@ -8,8 +8,6 @@ MuJoCo's ``mj_ray`` / ``mj_multiRay`` over the whole model.
 
 from __future__ import annotations
 
-import math
-
 import mujoco
 import numpy as np
 
@@ -65,19 +63,18 @@ def test_single_rays_match_mujoco_over_every_geom() -> None:
     geomid = np.zeros(1, dtype=np.int32)
     hit_robot = hit_world = 0
     for body, centre in zip(bodies, centres, strict=True):
-        for origin in (centre, centre + (0.0, 0.0, -0.03)):
-            for u in _directions(rng, origin, centres):
-                for max_range in (0.4, 1.0, 6.0, math.inf):
-                    full = mujoco.mj_ray(model, data, origin, u, None, 1, body, geomid)
-                    mine = caster.cast(*origin, *u, body, max_range)
-                    if 0.0 <= full <= max_range:
-                        assert mine == full and caster.geom == int(geomid[0])
-                        if int(model.geom_group[caster.geom]) == ROBOT_GEOM_GROUP:
-                            hit_robot += 1
-                        else:
-                            hit_world += 1
+        for u in _directions(rng, centre, centres):
+            for max_range in (0.4, 1.0, 6.0, 1e9):
+                full = mujoco.mj_ray(model, data, centre, u, None, 1, body, geomid)
+                mine = caster.cast(*centre, *u, body, max_range)
+                if 0.0 <= full <= max_range:
+                    assert mine == full and caster.geom == int(geomid[0])
+                    if int(model.geom_group[caster.geom]) == ROBOT_GEOM_GROUP:
+                        hit_robot += 1
                     else:
-                        assert not 0.0 <= mine <= max_range
+                        hit_world += 1
+                else:
+                    assert not 0.0 <= mine <= max_range
     assert hit_robot > 20 and hit_world > 20  # both kinds of answer were compared
 
 
@@ -89,22 +86,52 @@ def test_ray_bundles_match_mujoco_over_every_geom() -> None:
     caster.rebuild(model, data, bodies)
     centres = np.array([data.xpos[b] for b in bodies])
     rng = np.random.default_rng(8)
-    compared = 0
+    hit_robot = hit_world = 0
     for body, centre in zip(bodies, centres, strict=True):
         directions = _directions(rng, centre, centres)
-        for start in range(0, len(directions) - 9, 5):  # bundles of 9, like the sonar's cone
+        for start in range(0, len(directions) - 9, 3):  # bundles of 9, like the sonar's cone
             bundle = directions[start:start + 9]
-            for max_range in (0.4, 3.0, 6.0):
+            for max_range in (0.4, 3.0, 6.0, 100.0):
                 dist = np.zeros(9)
                 geomid = np.zeros(9, dtype=np.int32)
                 mujoco.mj_multiRay(model, data, centre, bundle.reshape(-1), None, 1, body,
                                    geomid, dist, None, 9, max_range)
                 mine = caster.cast_many(*centre, bundle.reshape(-1).tolist(), 9, body,
                                         max_range)
-                for full, got in zip(dist.tolist(), mine, strict=True):
+                for full, geom, got in zip(dist.tolist(), geomid.tolist(), mine, strict=True):
                     if 0.0 <= full <= max_range:
                         assert got == full
-                        compared += 1
+                        if int(model.geom_group[geom]) == ROBOT_GEOM_GROUP:
+                            hit_robot += 1
+                        else:
+                            hit_world += 1
                     else:
                         assert not 0.0 <= got <= max_range
-    assert compared > 100
+    assert hit_robot > 50 and hit_world > 50  # both kinds of answer were compared
+
+
+def test_a_cone_sees_the_world_beside_other_robots_and_the_robot_below() -> None:
+    """A downward cone from a vehicle hovering 2 m beside the others: the world's geoms alone
+    give its answer (MuJoCo asked about those only answers the same); a downward cone from a
+    vehicle right above another hits that one, as MuJoCo's cast over every geom does."""
+    sim = _sim()
+    model, data = sim.model, sim.data
+    bodies = _bodies(sim)
+    caster = RayCaster()
+    caster.rebuild(model, data, bodies)
+    down = [0.0, 0.0, -1.0] * 3 + [0.3, 0.0, -0.954, -0.3, 0.0, -0.954, 0.0, 0.3, -0.954]
+    dist = np.zeros(6)
+    geomid = np.zeros(6, dtype=np.int32)
+    world_only = np.array([1, 1, 0, 1, 1, 1], dtype=np.uint8)
+    far = bodies[3]  # R3 hovers 2 m beside R0 with nothing below it but the ground
+    origin = data.xpos[far]
+    mujoco.mj_multiRay(model, data, origin, np.array(down), world_only, 1, far, geomid, dist,
+                       None, 6, 6.0)
+    assert caster.cast_many(*origin, down, 6, far, 6.0) == dist.tolist()
+    assert all(int(model.geom_group[g]) != ROBOT_GEOM_GROUP for g in geomid.tolist())
+    above = bodies[1]  # R1 hovers 0.4 m right above R0
+    got = caster.cast_many(*data.xpos[above], down, 6, above, 6.0)
+    mujoco.mj_multiRay(model, data, data.xpos[above], np.array(down), None, 1, above, geomid,
+                       dist, None, 6, 6.0)
+    assert got == dist.tolist()
+    assert int(model.geom_bodyid[int(geomid[0])]) == bodies[0]  # it hit R0
