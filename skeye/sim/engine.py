@@ -326,7 +326,7 @@ class Simulation:
         # force there, says nothing and the spawn attitude is kept.
         robot.power_up(self.body_state(name), self._queries[name])
         # The board's first tick now, so the wrench is set from the first step on.
-        self._board_tick(name, robot, self.body_state(name))
+        self._board_tick(name, robot, self.body_state(name), self._bodies_in_contact())
         return robot
 
     def _declination_rad(self) -> float:
@@ -426,13 +426,15 @@ class Simulation:
             self.robots[name].rotors.speed_rad_s,
         )
 
-    def _in_contact(self, body_id: int) -> bool:
+    def _bodies_in_contact(self) -> set[int]:
+        """The bodies that touch something now (MuJoCo's contacts of the last step)."""
         d, m = self.data, self.model
+        bodies: set[int] = set()
         for i in range(d.ncon):
             c = d.contact[i]
-            if m.geom_bodyid[c.geom1] == body_id or m.geom_bodyid[c.geom2] == body_id:
-                return True
-        return False
+            bodies.add(int(m.geom_bodyid[c.geom1]))
+            bodies.add(int(m.geom_bodyid[c.geom2]))
+        return bodies
 
     # -- stepping ------------------------------------------------------------------------
     def step(self, count: int = 1) -> None:
@@ -539,6 +541,7 @@ class Simulation:
         failed: list[tuple[str, str]] = []
         wind_advanced = False
         joints: tuple[list[float], list[float], list[float]] | None = None
+        contacts: set[int] | None = None  # read once, for all robots whose board ticks
         t = step * self.dt
         for name, robot in self.robots.items():
             board = step % robot.board_decimation == 0
@@ -570,8 +573,10 @@ class Simulation:
                 if not wind_advanced:
                     self.wind.advance(state.time_s, robot.tick_s)
                     wind_advanced = True
+                if contacts is None:
+                    contacts = self._bodies_in_contact()
                 try:
-                    self._board_tick(name, robot, state)
+                    self._board_tick(name, robot, state, contacts)
                 except PhysicsError as exc:
                     failed.append((name, str(exc)))
                     self._park(name)
@@ -580,8 +585,10 @@ class Simulation:
         for hook in self.step_hooks:
             hook(self)
 
-    def _board_tick(self, name: str, robot: Robot, state: BodyState) -> None:
-        """Run one robot's board on ``state`` and set the wrench on its body."""
+    def _board_tick(self, name: str, robot: Robot, state: BodyState,
+                    contacts: set[int]) -> None:
+        """Run one robot's board on ``state`` and set the wrench on its body (``contacts``:
+        the bodies touching something now)."""
         check_state(name, state)
         slot = self._slots[name]
         if self.steps % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
@@ -590,7 +597,7 @@ class Simulation:
         else:
             ground = robot.ground_distance_m
         force, torque = robot.board_tick(
-            state, ground, self._in_contact(slot.body_id), self.wind.air_velocity_ned()
+            state, ground, slot.body_id in contacts, self.wind.air_velocity_ned()
         )
         wf = self.wind.force_ned()
         frames.put_ned_wrench_mj(

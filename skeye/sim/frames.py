@@ -151,7 +151,8 @@ def ned_wrench_to_mj(
 
 
 def put_ned_wrench_mj(
-    out: memoryview[float], index: int, force_ned: Sequence[float], torque_ned: Sequence[float]
+    out: memoryview[float], index: int, force_ned: tuple[float, float, float],
+    torque_ned: tuple[float, float, float],
 ) -> None:
     """:func:`ned_wrench_to_mj` written into ``out[index:index + 6]`` (a flat float view of
     MuJoCo's ``xfrc_applied``): the engine's hot path, without a tuple or numpy's conversion."""

@@ -184,7 +184,7 @@ class WindModel:
             return
         v = max(1.0, mean)
         x = self._dryden
-        n = self.rng.standard_normal(3).tolist()
+        n: list[float] = self.rng.standard_normal(3).tolist()  # typed: native arithmetic
         t_u = l_u / v
         a = math.exp(-dt_s / t_u)
         x[0] = a * x[0] + sig_u * math.sqrt(1.0 - a * a) * n[0]

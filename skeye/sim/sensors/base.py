@@ -354,7 +354,7 @@ class BiasedNoise:
         if self.bias_walk > 0.0 and dt_s > 0.0:
             k = self.bias_walk * math.sqrt(dt_s)
             for i in range(n):
-                bias[i] += k * row[i]
+                bias[i] = bias[i] + k * row[i]  # not +=: generic in mypyc on list items
         sigma = self.noise_sigma
         return [value[i] + bias[i] + sigma * row[n + i] for i in range(n)]
 
@@ -364,8 +364,8 @@ class BiasedNoise:
         b = self._bias
         if self.bias_walk > 0.0 and dt_s > 0.0:
             k = self.bias_walk * math.sqrt(dt_s)
-            b[0] += k * row[0]
-            b[1] += k * row[1]
-            b[2] += k * row[2]
+            b[0] = b[0] + k * row[0]  # not +=: generic in mypyc on list items
+            b[1] = b[1] + k * row[1]
+            b[2] = b[2] + k * row[2]
         s = self.noise_sigma
         return (x + b[0] + s * row[3], y + b[1] + s * row[4], z + b[2] + s * row[5])

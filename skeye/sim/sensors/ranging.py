@@ -292,7 +292,7 @@ class OpticalFlow(Sensor[FlowReading]):
         if prev is None:
             prev, dt_s = rate, 1.0 / self.rate_hz
         self._prev_rate = rate
-        noise = self.rng.standard_normal(2).tolist()
+        noise: list[float] = self.rng.standard_normal(2).tolist()  # typed: native arithmetic
         delta: list[int] = []
         for axis in range(2):
             total = (

@@ -137,10 +137,10 @@ class RotorVibration:
         if self.broadband > 0.0 and mean_sq > 0.0:
             k = self.broadband * mean_sq / n * math.sqrt(
                 _broadband_share(self.bandwidth_hz, dt_s))
-            dx, dy, dz = self.rng.standard_normal(3).tolist()
-            x += k * dx
-            y += k * dy
-            z += k * dz
+            d: list[float] = self.rng.standard_normal(3).tolist()  # typed: native arithmetic
+            x += k * d[0]
+            y += k * d[1]
+            z += k * d[2]
         return (x, y, z)
 
 
