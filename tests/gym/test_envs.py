@@ -184,8 +184,8 @@ def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
 
     config = scale_noise(load_robot_config("hummingbird"), 0.0)
     gyro = next(m for m in config.sensors if m.type_name == "Gyro")
-    params = dict(gyro.params)
-    assert params["NoiseSigma"] == 0.0 and params["BiasWalk"] == 0.0
+    params = {key.replace("_", "").lower(): value for key, value in gyro.params}  # any spelling
+    assert params["noisesigma"] == 0.0 and params["biaswalk"] == 0.0
     env = gymnasium.make("skeye/Hover-v0", sensor_noise=0.0, estimator="truth")
     try:
         env.reset(seed=0)
