@@ -49,6 +49,8 @@ COMPILED_MODULES: tuple[str, ...] = (
     "skeye.sim.sensors.navigation",
     "skeye.sim.sensors.ranging",
     "skeye.sim.sensors.vibration",
+    "skeye.sim.readings",
+    "skeye.sim.raycast",
     "skeye.sim.engine",
 )
 """Modules compiled by mypyc at install time (dotted names)."""

@@ -37,6 +37,7 @@ from skeye.errors import LocalProtocolError, PhysicsError
 from skeye.robots.config import RobotConfig, load_robot_config
 from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim import frames
+from skeye.sim.raycast import ROBOT_GEOM_GROUP, RayCaster
 from skeye.sim.readings import Event, ReadingSink, RobotCrashed, RobotStopped, SensorSample
 from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.state import BodyState
@@ -125,12 +126,10 @@ class Simulation:
         self._periods: list[int] = []
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
         self.xml_extras: list[Callable[[Robot], str]] = []
-        self._ray_geomid = np.zeros(1, dtype=np.int32)
+        self._rays = RayCaster()
         # RMS texture contrast of each geom, by id (skeye.sim.surface_contrast), for flow sensors.
         self._contrast_by_name = geom_contrasts(world)
         self._geom_contrast: list[float] = []
-        self._ray_pnt = np.zeros(3)
-        self._ray_vec = np.zeros(3)
         self.model: Any = None
         self.data: Any = None
         # Views of MjData's arrays (each attribute access on MjData makes a new view).
@@ -161,7 +160,7 @@ class Simulation:
             f'<inertial pos="0 0 0" mass="{a.mass_kg:.9g}" '
             f'diaginertia="{ixx:.9g} {iyy:.9g} {izz:.9g}"/>',
             f'<geom name="{n}:hull" type="box" size="{bx:.6g} {by:.6g} {bz:.6g}" '
-            f'rgba="0.15 0.15 0.18 1" mass="0" condim="3"/>',
+            f'rgba="0.15 0.15 0.18 1" mass="0" condim="3" group="{ROBOT_GEOM_GROUP}"/>',
         ]
         for i, (ux, uy) in enumerate(
             ((1, 0), (0, -1), (-1, 0), (0, 1))
@@ -169,18 +168,20 @@ class Simulation:
             x, y = ux * arm, uy * arm
             parts.append(
                 f'<geom name="{n}:arm{i}" type="capsule" fromto="0 0 0 {x:.6g} {y:.6g} 0" '
-                f'size="0.008" rgba="0.2 0.2 0.25 1" mass="0" contype="0" conaffinity="0"/>'
+                f'size="0.008" rgba="0.2 0.2 0.25 1" mass="0" contype="0" conaffinity="0" '
+                f'group="{ROBOT_GEOM_GROUP}"/>'
             )
             color = "0.9 0.3 0.2 0.6" if i == 0 else "0.3 0.3 0.35 0.6"
             parts.append(
                 f'<geom name="{n}:rotor{i}" type="cylinder" pos="{x:.6g} {y:.6g} 0.02" '
-                f'size="{rr:.6g} 0.003" rgba="{color}" mass="0" contype="0" conaffinity="0"/>'
+                f'size="{rr:.6g} 0.003" rgba="{color}" mass="0" contype="0" conaffinity="0" '
+                f'group="{ROBOT_GEOM_GROUP}"/>'
             )
         for gx, gy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
             parts.append(
                 f'<geom name="{n}:gear{gx}{gy}" type="sphere" size="0.012" '
                 f'pos="{gx * bx:.6g} {gy * by:.6g} {-(gear - 0.012):.6g}" rgba="0.1 0.1 0.1 1" '
-                f'mass="0" friction="1.0 0.01 0.001"/>'
+                f'mass="0" friction="1.0 0.01 0.001" group="{ROBOT_GEOM_GROUP}"/>'
             )
         parts.extend(self.robot_xml_extras(robot))
         parts.append("</body>")
@@ -235,6 +236,8 @@ class Simulation:
                 self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = qvel
                 self.data.xfrc_applied[body_id] = wrench
         mujoco.mj_forward(self.model, self.data)
+        self._rays.rebuild(self.model, self.data,
+                           [slot.body_id for slot in self._slots.values()])
         self._update_schedule()
         for hook in self.rebuild_hooks:
             hook(self)
@@ -319,7 +322,7 @@ class Simulation:
         rr, rp, ry = (float(v) for v in rotation_rpy_rad)
         if ld > 0.0:  # below the ground: onto the surface above, 1 cm over it
             ld = self._surface_down(ln, le) - 0.01
-        below = self._cast((ln, le, ld), (0.0, 0.0, 1.0), exclude_body, math.inf)
+        below = self._cast(ln, le, ld, 0.0, 0.0, 1.0, exclude_body, math.inf)
         if below is not None and below < gear + 0.02:
             return (ln, le, ld + below - gear), (rr, rp, ry), False
         return (ln, le, ld), (rr, rp, ry), True
@@ -337,7 +340,7 @@ class Simulation:
         # force there, says nothing and the spawn attitude is kept.
         robot.power_up(self.body_state(name), self._queries[name])
         # The board's first tick now, so the wrench is set from the first step on.
-        self._board_tick(name, robot, self.body_state(name))
+        self._board_tick(name, robot, self.body_state(name), self._bodies_in_contact())
 
     def reset_robot(
         self,
@@ -388,6 +391,7 @@ class Simulation:
         d.qacc[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
         d.xfrc_applied[slot.body_id] = 0.0
         mujoco.mj_forward(self.model, d)
+        self._rays.moved()  # the robot jumped: the ray casts read the positions again
         self._start_robot(name, robot, pos, airborne)
         log.info("robot %s reset at %s (%s)", name, tuple(round(v, 3) for v in pos),
                  "in the air" if airborne else "on the ground")
@@ -411,48 +415,45 @@ class Simulation:
         underside (the ground plane is not hit from below); a ray cast down from over its
         bounding sphere then meets its top."""
         start_down = 1.0  # below every collider's underside (a pad's reaches 2 cm down)
-        hit = self._cast((north_m, east_m, start_down), (0.0, 0.0, -1.0), -1, math.inf)
+        hit = self._cast(north_m, east_m, start_down, 0.0, 0.0, -1.0, -1, math.inf)
         if hit is None or start_down - hit < -0.05:
             return 0.0  # nothing there, or only something well above the ground (a ceiling)
-        geom = int(self._ray_geomid[0])
+        geom = self._rays.geom
         top_z = float(self.data.geom_xpos[geom][2]) + float(self.model.geom_rbound[geom])
         above_down = -(top_z + 0.05)
-        top = self._cast((north_m, east_m, above_down), (0.0, 0.0, 1.0), -1, math.inf)
+        top = self._cast(north_m, east_m, above_down, 0.0, 0.0, 1.0, -1, math.inf)
         return 0.0 if top is None else above_down + top
 
     def ray_distance(
         self, robot_name: str, origin_ned_m: Any, direction_ned: Any, max_range_m: float
     ) -> float | None:
         """First hit along a ray from a NED point, ignoring the robot itself."""
-        return self._cast(origin_ned_m, direction_ned, self._slots[robot_name].body_id,
-                          max_range_m)
+        ox, oy, oz = origin_ned_m
+        dx, dy, dz = direction_ned
+        return self._cast(float(ox), float(oy), float(oz), float(dx), float(dy), float(dz),
+                          self._slots[robot_name].body_id, max_range_m)
 
     def ray_surface(
         self, robot_name: str, origin_ned_m: Any, direction_ned: Any, max_range_m: float
     ) -> tuple[float | None, float]:
         """:meth:`ray_distance` and the texture contrast of the surface hit (0 when none)."""
-        dist = self._cast(origin_ned_m, direction_ned, self._slots[robot_name].body_id,
-                          max_range_m)
+        dist = self.ray_distance(robot_name, origin_ned_m, direction_ned, max_range_m)
         if dist is None:
             return None, 0.0
-        return dist, self._geom_contrast[int(self._ray_geomid[0])]
+        return dist, self._geom_contrast[self._rays.geom]
 
-    def _cast(
-        self, origin_ned_m: Any, direction_ned: Any, exclude_body: int, max_range_m: float
-    ) -> float | None:
-        """One MuJoCo ray (NED in, metres out); None when nothing is hit within range."""
-        dx, dy, dz = frames.ned_to_mj_floats(direction_ned)
-        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+    def _cast(self, north_m: float, east_m: float, down_m: float, dn: float, de: float,
+              dd: float, exclude_body: int, max_range_m: float) -> float | None:
+        """One MuJoCo ray from a NED point along a NED direction (metres out); None when
+        nothing is hit within range. The geom hit is ``self._rays.geom``."""
+        norm = math.sqrt(dn * dn + de * de + dd * dd)
         if norm == 0.0:
             return None
-        pnt, vec = self._ray_pnt, self._ray_vec
-        pnt[0], pnt[1], pnt[2] = frames.ned_to_mj_floats(origin_ned_m)
-        vec[0], vec[1], vec[2] = dx / norm, dy / norm, dz / norm
-        dist = mujoco.mj_ray(self.model, self.data, pnt, vec, None, 1, exclude_body,
-                             self._ray_geomid)
+        dist = self._rays.cast(north_m, -east_m, -down_m, dn / norm, -de / norm, -dd / norm,
+                               exclude_body, max_range_m)
         if dist < 0 or dist > max_range_m:
             return None
-        return float(dist)
+        return dist
 
     def ray_distances(
         self, robot_name: str, origin_ned_m: Any, directions_ned: Any, max_range_m: float
@@ -461,20 +462,20 @@ class Simulation:
         n = len(directions_ned)
         if n == 0:
             return []
-        vec = np.empty((n, 3))
-        for i, direction in enumerate(directions_ned):
-            x, y, z = frames.ned_to_mj_floats(direction)
+        rays: list[float] = []
+        for direction in directions_ned:
+            dx, dy, dz = direction
+            x, y, z = float(dx), -float(dy), -float(dz)
             norm = math.sqrt(x * x + y * y + z * z)
             if norm == 0.0:
                 raise LocalProtocolError("a ray direction must not be zero")
-            vec[i, 0], vec[i, 1], vec[i, 2] = x / norm, y / norm, z / norm
-        pnt = self._ray_pnt
-        pnt[0], pnt[1], pnt[2] = frames.ned_to_mj_floats(origin_ned_m)
-        dist = np.empty(n)
-        geomid = np.empty(n, dtype=np.int32)
-        mujoco.mj_multiRay(self.model, self.data, pnt, vec.reshape(-1), None, 1,
-                           self._slots[robot_name].body_id, geomid, dist, None, n, max_range_m)
-        return [d if 0.0 <= d <= max_range_m else None for d in dist.tolist()]
+            rays.append(x / norm)
+            rays.append(y / norm)
+            rays.append(z / norm)
+        ox, oy, oz = origin_ned_m
+        dist = self._rays.cast_many(float(ox), -float(oy), -float(oz), rays, n,
+                                    self._slots[robot_name].body_id, max_range_m)
+        return [d if 0.0 <= d <= max_range_m else None for d in dist]
 
     def body_state(self, name: str) -> BodyState:
         """Ground truth of a robot in NED/FRD."""
@@ -489,13 +490,15 @@ class Simulation:
             self.robots[name].rotors.speed_rad_s,
         )
 
-    def _in_contact(self, body_id: int) -> bool:
+    def _bodies_in_contact(self) -> set[int]:
+        """The bodies that touch something now (MuJoCo's contacts of the last step)."""
         d, m = self.data, self.model
+        bodies: set[int] = set()
         for i in range(d.ncon):
             c = d.contact[i]
-            if m.geom_bodyid[c.geom1] == body_id or m.geom_bodyid[c.geom2] == body_id:
-                return True
-        return False
+            bodies.add(int(m.geom_bodyid[c.geom1]))
+            bodies.add(int(m.geom_bodyid[c.geom2]))
+        return bodies
 
     # -- stepping ------------------------------------------------------------------------
     def step(self, count: int = 1) -> None:
@@ -512,6 +515,7 @@ class Simulation:
                 # The quiet steps and the one after which something is due: one MuJoCo call.
                 self._step_to_event(min(self._next_event_step(), target - 1) - self.steps + 1)
         finally:
+            self._rays.moved()  # whoever holds the data next may move it
             self.flush()
 
     def _check_states(self) -> None:
@@ -528,7 +532,7 @@ class Simulation:
             vx, vy, vz = qvel[b], qvel[b + 1], qvel[b + 2]
             wx, wy, wz = qvel[b + 3], qvel[b + 4], qvel[b + 5]
             total = px + py + pz + vx + vy + vz + wx + wy + wz
-            if (math.isfinite(total) and max(abs(px), abs(py), abs(pz)) <= 1.0e5
+            if (math.isfinite(total) and max(max(abs(px), abs(py)), abs(pz)) <= 1.0e5
                     and vx * vx + vy * vy + vz * vz <= 150.0**2
                     and wx * wx + wy * wy + wz * wz <= 200.0**2):
                 continue
@@ -596,10 +600,12 @@ class Simulation:
         robot: sensors are sampled (and status reported) from the state now, then the board
         ticks on that same state and sets the wrench MuJoCo applies until its next tick."""
         mujoco.mj_step(self.model, self.data, count)
+        self._rays.moved()
         self.steps = step = self.steps + count
         failed: list[tuple[str, str]] = []
         wind_advanced = False
         joints: tuple[list[float], list[float], list[float]] | None = None
+        contacts: set[int] | None = None  # read once, for all robots whose board ticks
         t = step * self.dt
         for name, robot in self.robots.items():
             board = step % robot.board_decimation == 0
@@ -622,19 +628,19 @@ class Simulation:
             if joints is None:  # one read of MuJoCo's arrays for all robots this step
                 joints = (self._qpos.tolist(), self._qvel.tolist(), self._qacc.tolist())
             slot = self._slots[name]
-            a, b = slot.qpos_adr, slot.qvel_adr
-            state = frames.free_joint_state(
-                t, joints[0][a : a + 7], joints[1][b : b + 6], joints[2][b : b + 3],
-                robot.rotors.speed_rad_s,
-            )
+            state = frames.free_joint_state(t, joints[0], joints[1], joints[2],
+                                            robot.rotors.speed_rad_s, slot.qpos_adr,
+                                            slot.qvel_adr)
             if due or status or hidden:
                 self._emit_readings(robot, state, due, status, hidden)
             if board:
                 if not wind_advanced:
                     self.wind.advance(state.time_s, robot.tick_s)
                     wind_advanced = True
+                if contacts is None:
+                    contacts = self._bodies_in_contact()
                 try:
-                    self._board_tick(name, robot, state)
+                    self._board_tick(name, robot, state, contacts)
                 except PhysicsError as exc:
                     failed.append((name, str(exc)))
                     self._park(name)
@@ -643,16 +649,19 @@ class Simulation:
         for hook in self.step_hooks:
             hook(self)
 
-    def _board_tick(self, name: str, robot: Robot, state: BodyState) -> None:
-        """Run one robot's board on ``state`` and set the wrench on its body."""
+    def _board_tick(self, name: str, robot: Robot, state: BodyState,
+                    contacts: set[int]) -> None:
+        """Run one robot's board on ``state`` and set the wrench on its body (``contacts``:
+        the bodies touching something now)."""
         check_state(name, state)
         slot = self._slots[name]
         if self.steps % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
-            ground = self._cast(state.pos_ned_m, (0.0, 0.0, 1.0), slot.body_id, 10.0)
+            pn, pe, pd = state.pos_ned_m
+            ground = self._cast(pn, pe, pd, 0.0, 0.0, 1.0, slot.body_id, 10.0)
         else:
             ground = robot.ground_distance_m
         force, torque = robot.board_tick(
-            state, ground, self._in_contact(slot.body_id), self.wind.air_velocity_ned()
+            state, ground, slot.body_id in contacts, self.wind.air_velocity_ned()
         )
         wf = self.wind.force_ned()
         frames.put_ned_wrench_mj(
@@ -699,25 +708,25 @@ class Simulation:
         events: list[Event] = []
         query = self._queries[robot.name]
         for sched in hidden:
-            robot.observe(sched.sensor.read(state, query))
+            robot.observe(sched.read(state, query))
         # The board's sensors first, so an INS reading at this instant reports the estimate
         # the board flies on now; the events keep the sensors' order.
         samples: list[SensorSample | None] = [None] * len(due)
         for board_first in (True, False):
-            for i, sched in enumerate(due):
+            for i in range(len(due)):
+                sched = due[i]
                 if sched.board != board_first:
                     continue
-                sensor = sched.sensor
-                if sensor.type_name == "Battery":
-                    sensor.update_battery(
+                if sched.type_name == "Battery":
+                    sched.sensor.update_battery(
                         robot.battery.voltage_v,
                         robot.battery.current_a,
                         robot.battery.state_of_charge,
                     )
-                sample = sched.sample(state, query)
+                reading = sched.read(state, query)
                 if board_first:
-                    robot.observe(sample.reading)
-                samples[i] = sample
+                    robot.observe(reading)
+                samples[i] = SensorSample(sched.type_name, sched.name, reading)
         for done in samples:
             if done is not None:
                 events.append(done)

@@ -247,9 +247,9 @@ class BoardEstimator:
         dt = t - last
         # Bias from the integral of the error (Mahony's passive filter: b_dot = -ki e).
         ki = p.attitude_ki
-        b[0] -= ki * e[0] * dt
-        b[1] -= ki * e[1] * dt
-        b[2] -= ki * e[2] * dt
+        b[0] = b[0] - ki * e[0] * dt  # not -=: a list item's -= is a generic call in mypyc
+        b[1] = b[1] - ki * e[1] * dt
+        b[2] = b[2] - ki * e[2] * dt
         kp = p.attitude_kp
         wx += kp * e[0]
         wy += kp * e[1]
@@ -310,9 +310,9 @@ class BoardEstimator:
             return
         r = self.rot()
         # A yaw error about NED down, expressed in the body frame (R^T (0, 0, m)).
-        e[0] += r[6] * m
-        e[1] += r[7] * m
-        e[2] += r[8] * m
+        e[0] = e[0] + r[6] * m  # not +=: a list item's += is a generic call in mypyc
+        e[1] = e[1] + r[7] * m
+        e[2] = e[2] + r[8] * m
 
     def _compass(self, field: tuple[float, float, float]) -> None:
         bx, by, bz = field
@@ -421,10 +421,10 @@ class BoardEstimator:
         a, b = ax[1].fuse_vel_innovation(vel[1] - (then_ve + dve), vv)
         dpe, dve = dpe + a, dve + b
         for i in range(HISTORY):
-            self.hist_n[i] += dpn
-            self.hist_e[i] += dpe
-            self.hist_vn[i] += dvn
-            self.hist_ve[i] += dve
+            self.hist_n[i] = self.hist_n[i] + dpn  # not +=: generic in mypyc on list items
+            self.hist_e[i] = self.hist_e[i] + dpe
+            self.hist_vn[i] = self.hist_vn[i] + dvn
+            self.hist_ve[i] = self.hist_ve[i] + dve
         self.gps_t = r.time_s
 
     def _history_at(self, t: float) -> tuple[float, float, float, float]:

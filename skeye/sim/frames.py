@@ -59,7 +59,10 @@ def quat_to_matrix(q: Vec3) -> np.ndarray:
 
 def wrap_2pi(angle_rad: float) -> float:
     """Wrap to [0, 2 pi), as USARSim writes orientations."""
-    a = math.fmod(angle_rad, 2.0 * math.pi)
+    if -2.0 * math.pi < angle_rad < 2.0 * math.pi:
+        a = angle_rad  # what fmod gives there, exactly, without its call (not compiled to C)
+    else:
+        a = math.fmod(angle_rad, 2.0 * math.pi)
     if a < 0.0:
         a += 2.0 * math.pi
     if a >= 2.0 * math.pi:  # fmod of a tiny negative number can round up to 2 pi
@@ -74,18 +77,22 @@ def wrap_pi(angle_rad: float) -> float:
 
 def free_joint_state(
     time_s: float,
-    qpos: Sequence[float],
-    qvel: Sequence[float],
-    qacc: Sequence[float],
-    rotor_speed_rad_s: Sequence[float] = (0.0, 0.0, 0.0, 0.0),
+    qpos: list[float],
+    qvel: list[float],
+    qacc: list[float],
+    rotor_speed_rad_s: list[float] | None = None,
+    qpos_adr: int = 0,
+    qvel_adr: int = 0,
 ) -> BodyState:
-    """A MuJoCo free joint's (qpos[7], qvel[6], qacc[3]) -> the body's state in NED/FRD.
+    """A MuJoCo free joint's (qpos[7], qvel[6], qacc[3], from ``qpos_adr`` and ``qvel_adr`` in
+    the lists: the whole model's ``tolist()`` will do) -> the body's state in NED/FRD.
 
     Plain floats: this runs every board tick of every robot. MuJoCo's free-joint linear
     velocity is in the world frame and its angular velocity in the body frame. The specific
     force is ``R^T (a - g)`` with g = +9.81 m/s^2 down (what an accelerometer feels).
     """
-    w, x, y, z = qpos[3], qpos[4], -qpos[5], -qpos[6]
+    a, b = qpos_adr, qvel_adr
+    w, x, y, z = qpos[a + 3], qpos[a + 4], -qpos[a + 5], -qpos[a + 6]
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
     r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)
@@ -93,24 +100,24 @@ def free_joint_state(
     r20, r21, r22 = 2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)
     s = -r20
     pitch = math.asin(1.0 if s > 1.0 else -1.0 if s < -1.0 else s)
-    ax, ay, az = qacc[0], -qacc[1], -qacc[2]
+    ax, ay, az = qacc[b], -qacc[b + 1], -qacc[b + 2]
     gz = az - 9.81
-    w0, w1, w2, w3 = rotor_speed_rad_s
+    speeds = rotor_speed_rad_s if rotor_speed_rad_s is not None else [0.0, 0.0, 0.0, 0.0]
     return BodyState(
         time_s,
-        (qpos[0], -qpos[1], -qpos[2]),
-        (qvel[0], -qvel[1], -qvel[2]),
+        (qpos[a], -qpos[a + 1], -qpos[a + 2]),
+        (qvel[b], -qvel[b + 1], -qvel[b + 2]),
         (w, x, y, z),
         (math.atan2(r21, r22), pitch, math.atan2(r10, r00)),
         ((r00, r01, r02), (r10, r11, r12), (r20, r21, r22)),
-        (qvel[3], -qvel[4], -qvel[5]),
+        (qvel[b + 3], -qvel[b + 4], -qvel[b + 5]),
         (ax, ay, az),
         (
             r00 * ax + r10 * ay + r20 * gz,
             r01 * ax + r11 * ay + r21 * gz,
             r02 * ax + r12 * ay + r22 * gz,
         ),
-        (w0, w1, w2, w3),
+        (speeds[0], speeds[1], speeds[2], speeds[3]),
     )
 
 
@@ -144,7 +151,8 @@ def ned_wrench_to_mj(
 
 
 def put_ned_wrench_mj(
-    out: memoryview[float], index: int, force_ned: Sequence[float], torque_ned: Sequence[float]
+    out: memoryview[float], index: int, force_ned: tuple[float, float, float],
+    torque_ned: tuple[float, float, float],
 ) -> None:
     """:func:`ned_wrench_to_mj` written into ``out[index:index + 6]`` (a flat float view of
     MuJoCo's ``xfrc_applied``): the engine's hot path, without a tuple or numpy's conversion."""

@@ -26,13 +26,13 @@ import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, PhysicsError
 from skeye.robots.config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
-from skeye.robots.params import ESTIMATOR_KINDS
+from skeye.robots.params import ESTIMATOR_KINDS, AirframeParams
 from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
 from skeye.sim.crash import CrashDetector
 from skeye.sim.estimator import BoardEstimator, from_sensor_figures
 from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
-from skeye.sim.sensors import Mount, Reading, WorldQuery, build_sensor
+from skeye.sim.sensors import INS, Mount, Reading, Sensor, WorldQuery, build_sensor
 from skeye.sim.state import BodyState
 from skeye.sim.vehicle import Battery, RotorModel, ground_effect_factor
 from skeye.wire.sim import sen_layout
@@ -49,9 +49,23 @@ class ScheduledSensor:
     mount: SensorMount
     board: bool = False  # the board's estimator takes its readings (Robot.observe)
 
+    def __post_init__(self) -> None:
+        # Typed once, for the hot path: a call on ``Any`` is a generic Python call.
+        sensor = self.sensor
+        self.reader: Sensor[Any] | None = sensor if isinstance(sensor, Sensor) else None
+        self.type_name: str = sensor.type_name
+        self.name: str = self.mount.name
+
+    def read(self, state: BodyState, world: WorldQuery) -> Any:
+        """One typed reading of this sensor."""
+        reader = self.reader
+        if reader is not None:
+            return reader.read(state, world)
+        return self.sensor.read(state, world)
+
     def sample(self, state: BodyState, world: WorldQuery) -> SensorSample:
         """One typed reading of this sensor, named for the robot's sink."""
-        return SensorSample(self.sensor.type_name, self.mount.name, self.sensor.read(state, world))
+        return SensorSample(self.type_name, self.name, self.read(state, world))
 
 
 BOARD_SENSOR_TYPES: Final = (
@@ -179,7 +193,7 @@ class Robot:
         self.next_sensing_step = 0
         self.sensors: list[ScheduledSensor] = []
         self.cameras: list[CameraSpec] = []
-        self.ins: Any = None
+        ins: INS | None = None
         for mount in config.sensors:
             type_key = mount.type_name.lower()
             params = dict(mount.params)
@@ -199,13 +213,16 @@ class Robot:
                 )
             period = max(1, round(1.0 / (sensor.rate_hz * physics_step_s)))
             self.sensors.append(ScheduledSensor(sensor, period, mount))
-            if sensor.type_name == "INS" and self.ins is None:
-                self.ins = sensor
-        if self.ins is None:
+            if isinstance(sensor, INS) and ins is None:
+                ins = sensor
+        if ins is None:
             # The board always has an estimator, even when no INS is streamed to the client.
-            self.ins = build_sensor(
+            built = build_sensor(
                 "INS", "INS", Mount(), {}, np.random.default_rng(rng.integers(0, 2**63))
             )
+            assert isinstance(built, INS)
+            ins = built
+        self.ins: INS = ins
         kind = estimator if estimator is not None else config.estimator.kind
         if kind not in ESTIMATOR_KINDS:
             raise ConfigError(f"estimator must be one of {list(ESTIMATOR_KINDS)}, got {kind!r}")
@@ -216,6 +233,7 @@ class Robot:
             self.estimator = self._build_estimator(physics_step_s, rng, declination_rad)
             self.ins.board = self.estimator
         self.ground_effect = 1.0
+        self.airframe: AirframeParams = config.airframe  # typed: the board reads it every tick
         self._full_voltage_v = config.battery.cells * 4.2
         self._half_body_height_m = config.airframe.body_size_m[2] / 2
         self.ground_distance_m: float | None = None
@@ -385,7 +403,7 @@ class Robot:
         estimator = self.estimator
         est = estimator.estimate() if estimator is not None else self.ins.estimate_now(state)
         gps_hold = estimator.has_gps_fix(state.time_s) if estimator is not None else False
-        airframe = self.config.airframe
+        airframe = self.airframe
         battery = self.battery
         voltage_scale = min(1.0, battery.voltage_v / self._full_voltage_v + 0.15)
         w_max = airframe.max_rotor_speed_rad_s * voltage_scale
@@ -501,7 +519,7 @@ def check_state(name: str, state: BodyState) -> None:
     total = px + py + pz + vx + vy + vz + wx + wy + wz
     if math.isnan(total - total):  # inf or NaN (math.isnan compiles to C; isfinite does not)
         raise PhysicsError(f"robot {name}: NaN in the simulated state")
-    if max(abs(px), abs(py), abs(pz)) > 1.0e5 or vx * vx + vy * vy + vz * vz > 150.0**2:
+    if max(max(abs(px), abs(py)), abs(pz)) > 1.0e5 or vx * vx + vy * vy + vz * vz > 150.0**2:
         raise PhysicsError(f"robot {name}: the simulation diverged (runaway position or speed)")
     if wx * wx + wy * wy + wz * wz > 200.0**2:
         raise PhysicsError(f"robot {name}: the simulation diverged (runaway rotation rate)")

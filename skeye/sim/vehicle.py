@@ -116,7 +116,7 @@ class Battery:
         """Life left (s) at the recent average current, never above the hover time."""
         if self.empty:
             return 0.0
-        current = max(self._avg_current_a, self.hover_current_a,
+        current = max(max(self._avg_current_a, self.hover_current_a),
                       self.params.avionics_power_w / max(self.voltage_v, 1.0))
         return self.charge_c / current
 

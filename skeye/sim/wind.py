@@ -147,14 +147,19 @@ class WindModel:
         # Wind blowing *from* frm moves air towards frm + pi.
         self._mean = (-speed * math.cos(frm), -speed * math.sin(frm), 0.0)
         self._dryden = [0.0, 0.0, 0.0, 0.0, 0.0]  # u, then (x1, x2) for v and for w
+        # What every board tick uses, worked out once (the settings never change).
+        self._params = s
+        self._mean_speed = max(1.0, math.hypot(self._mean[0], self._mean[1]))
+        self._profile = (dryden_profile(s["w20_m_s"], s["height_m"]) if settings.mode == "dryden"
+                         else (0.0, 0.0, 0.0, 0.0, 0.0))
+        self._from_rad = frm
 
     def advance(self, time_s: float, dt_s: float) -> None:
         """Advance the random processes to ``time_s`` (called once per board tick)."""
         mode = self.settings.mode
         if mode == "turbulence":
-            s = dict(self.settings.params)
-            sigma = s["sigma_m_s"]
-            v = max(1.0, math.hypot(self._mean[0], self._mean[1]))
+            sigma = self._params["sigma_m_s"]
+            v = self._mean_speed
             for axis, (length, sig) in enumerate(((30.0, sigma), (30.0, sigma), (10.0, sigma / 2))):
                 a = math.exp(-dt_s * v / length)
                 self._gust[axis] = a * self._gust[axis] + sig * math.sqrt(1 - a * a) * float(
@@ -174,13 +179,12 @@ class WindModel:
         """Dryden's shaping filters one step: u exactly (first order), v and w (second order)
         by Euler-Maruyama (dt << T: 4 ms against T >= 1 s), each driven by white noise of
         intensity sigma^2 T so its output variance is sigma^2."""
-        s = dict(self.settings.params)
-        mean, sig_u, sig_w, l_u, l_w = dryden_profile(s["w20_m_s"], s["height_m"])
+        mean, sig_u, sig_w, l_u, l_w = self._profile
         if sig_w <= 0.0 or dt_s <= 0.0:
             return
         v = max(1.0, mean)
         x = self._dryden
-        n = self.rng.standard_normal(3).tolist()
+        n: list[float] = self.rng.standard_normal(3).tolist()  # typed: native arithmetic
         t_u = l_u / v
         a = math.exp(-dt_s / t_u)
         x[0] = a * x[0] + sig_u * math.sqrt(1.0 - a * a) * n[0]
@@ -194,7 +198,7 @@ class WindModel:
         gust_v = root3 * x[1] + (1.0 - root3) * x[2]
         gust_w = root3 * x[3] + (1.0 - root3) * x[4]
         # Along the mean wind (towards where it blows), across it, and up (NED: -down).
-        frm = math.radians(s["from_deg"])
+        frm = self._from_rad
         cu, su = -math.cos(frm), -math.sin(frm)
         self._gust = [cu * x[0] - su * gust_v, su * x[0] + cu * gust_v, -gust_w]
 

@@ -34,7 +34,7 @@ from skeye.sim.sensors import (
     isa_altitude_m,
     isa_pressure_pa,
 )
-from skeye.sim.sensors.base import vec3
+from skeye.sim.sensors.base import NormalStream, vec3
 from skeye.sim.state import BodyState
 
 G = 9.81
@@ -551,3 +551,14 @@ def test_any_parameters_build_a_sensor_or_raise_config_error(type_key: str,
         sensor.update_battery(12.0, 1.0, 0.5)
     fields = sensor.sample(make_state(pos=(0, 0, -1.0)), FlatWorld())
     assert fields and all(isinstance(k, str) for k, _ in fields)
+
+
+@given(st.lists(st.integers(1, 3000), min_size=1, max_size=12), st.integers(0, 2**32))
+@settings(max_examples=25, deadline=None)
+def test_a_normal_stream_hands_out_the_generators_own_sequence(sizes: list[int], seed: int):
+    """Requests of any size, across the stream's block boundaries, give the same numbers as
+    drawing each request from the Generator when it is made."""
+    stream = NormalStream(np.random.default_rng(seed))
+    direct = np.random.default_rng(seed)
+    for k in sizes:
+        assert stream.take(k) == direct.standard_normal(k).tolist()

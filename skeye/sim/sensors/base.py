@@ -10,7 +10,9 @@ turns ground truth (:class:`~skeye.sim.state.BodyState`, NED world, FRD body, SI
 :class:`WorldQuery` into the ``SEN`` fields that follow ``{Time} {Type} {Name}``.
 
 Invariants: every random draw comes from the sensor's own Generator, in an order fixed by the
-sequence of calls, so the same seed and the same calls give the same readings bit for bit. Time
+sequence of calls, so the same seed and the same calls give the same readings bit for bit. The
+sensors that draw only normal deviates once set up take them through :class:`NormalStream`
+(``Sensor.normals``): the same numbers in the same order, drawn ahead in blocks. Time
 for random walks is sim time (``state.time_s``), never the wall clock; a time that does not
 move forward advances no random walk.
 
@@ -185,6 +187,7 @@ class Sensor(Generic[R]):
                 and all(isinstance(v, int | float) and math.isfinite(v) for v in vec)
             ):
                 raise self._error(label, f"must be 3 finite numbers, got {vec!r}")
+        self.normals = NormalStream(rng)  # nothing drawn until a sensor takes from it
         self.params: dict[str, float] = self._parse(params)
         self.rate_hz: float = float(self.params["Rate"])
         self._rot_mount = rpy_matrix(vec3(mount.rpy_rad))  # sensor -> body
@@ -305,6 +308,40 @@ class Sensor(Generic[R]):
 
 
 _NOISE_BLOCK: Final = 256  # corrupt() calls per block of pre-drawn normal deviates
+_STREAM_BLOCK: Final = 4096  # normal deviates a NormalStream draws at a time (at least)
+
+
+class NormalStream:
+    """A Generator's standard normal deviates, drawn ahead in blocks, handed out in order.
+
+    ``take(k)`` returns the next ``k`` deviates: the same numbers, in the same order, as
+    ``rng.standard_normal(k)`` called at that moment would give. numpy's Generator draws each
+    normal deviate on its own from its bit stream (ziggurat), so one draw of N is the same as
+    any sequence of draws adding up to N; one numpy call then serves hundreds of requests (a
+    call costs about as much as 100 deviates). Nothing is drawn before the first request, so a
+    sensor may still draw its constants from the Generator while it is set up; after that,
+    everything it draws from that Generator must come through the stream (which is ahead of
+    the Generator), and nothing but normal deviates.
+    """
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self._buffer: list[float] = []
+        self._next = 0
+
+    def take(self, k: int) -> list[float]:
+        """The next ``k`` standard normal deviates."""
+        i = self._next
+        buffer = self._buffer
+        if i + k <= len(buffer):
+            self._next = i + k
+            return buffer[i : i + k]
+        out = buffer[i:]
+        need = k - len(out)
+        buffer = self._buffer = self.rng.standard_normal(max(_STREAM_BLOCK, need)).tolist()
+        out.extend(buffer[:need])
+        self._next = need
+        return out
 
 
 class BiasedNoise:
@@ -312,9 +349,10 @@ class BiasedNoise:
 
     ``corrupt(x, dt)`` first advances the bias by ``walk * sqrt(dt) * N(0, 1)`` per channel
     (a Wiener process in sim time, so its statistics do not depend on the sample rate), then
-    returns ``x + bias + sigma * N(0, 1)``. Normal deviates are drawn from the Generator in
-    blocks (2n per call: walk, then noise), so the sequence depends only on the seed and the
-    number of calls.
+    returns ``x + bias + sigma * N(0, 1)``. The constant bias is drawn from the Generator when
+    this is made; the rest in blocks (2n per call: walk, then noise) of 256 calls from
+    ``normals`` (the Generator's :class:`NormalStream`, shared with the sensor's other draws),
+    so the sequence depends only on the seed and the number of calls.
     """
 
     def __init__(
@@ -324,8 +362,10 @@ class BiasedNoise:
         noise_sigma: float,
         bias_sigma: float,
         bias_walk: float,
+        normals: NormalStream | None = None,
     ) -> None:
         self.rng = rng
+        self.normals = normals if normals is not None else NormalStream(rng)
         self.n = n
         self.noise_sigma = noise_sigma
         self.bias_walk = bias_walk
@@ -341,7 +381,9 @@ class BiasedNoise:
     def _next_row(self) -> list[float]:
         i = self._row_i
         if i >= len(self._rows):
-            self._rows = self.rng.standard_normal((_NOISE_BLOCK, 2 * self.n)).tolist()
+            width = 2 * self.n
+            flat = self.normals.take(_NOISE_BLOCK * width)  # rows as numpy's (256, 2n) block
+            self._rows = [flat[j * width : (j + 1) * width] for j in range(_NOISE_BLOCK)]
             i = 0
         self._row_i = i + 1
         return self._rows[i]
@@ -354,7 +396,7 @@ class BiasedNoise:
         if self.bias_walk > 0.0 and dt_s > 0.0:
             k = self.bias_walk * math.sqrt(dt_s)
             for i in range(n):
-                bias[i] += k * row[i]
+                bias[i] = bias[i] + k * row[i]  # not +=: generic in mypyc on list items
         sigma = self.noise_sigma
         return [value[i] + bias[i] + sigma * row[n + i] for i in range(n)]
 
@@ -364,8 +406,8 @@ class BiasedNoise:
         b = self._bias
         if self.bias_walk > 0.0 and dt_s > 0.0:
             k = self.bias_walk * math.sqrt(dt_s)
-            b[0] += k * row[0]
-            b[1] += k * row[1]
-            b[2] += k * row[2]
+            b[0] = b[0] + k * row[0]  # not +=: generic in mypyc on list items
+            b[1] = b[1] + k * row[1]
+            b[2] = b[2] + k * row[2]
         s = self.noise_sigma
         return (x + b[0] + s * row[3], y + b[1] + s * row[4], z + b[2] + s * row[5])

@@ -83,7 +83,7 @@ def _vibration(sensor: Sensor[Any]) -> RotorVibration:
     p = sensor.params
     return RotorVibration(sensor.rng, p["VibrationRotor"], p["VibrationBladePass"],
                           p["VibrationBroadband"], p["VibrationSpeed"], int(p["Blades"]),
-                          p["Bandwidth"])
+                          p["Bandwidth"], sensor.normals)
 
 
 def axis_errors(rng: np.random.Generator, scale_sigma: float, misalignment_sigma: float) -> Mat3:
@@ -155,7 +155,8 @@ class Accelerometer(Sensor[AccelReading]):
 
     def _setup(self) -> None:
         p = self.params
-        self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"],
+                                  self.normals)
         self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
         self.vibration = _vibration(self)
         self._range = p["Range"]
@@ -225,7 +226,8 @@ class Gyro(Sensor[GyroReading]):
 
     def _setup(self) -> None:
         p = self.params
-        self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"],
+                                  self.normals)
         self._axes = axis_errors(self.rng, p["ScaleSigma"], p["MisalignmentSigma"])
         self.vibration = _vibration(self)
         self._range = p["Range"]
@@ -314,7 +316,8 @@ class MagneticCompass(Sensor[CompassReading]):
 
     def _setup(self) -> None:
         p = self.params
-        self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._noise = BiasedNoise(self.rng, 3, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"],
+                                  self.normals)
         u = self.rng.standard_normal(3).tolist()
         norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) or 1.0
         k = p["MotorField"] / norm
@@ -419,7 +422,8 @@ class Barometer(Sensor[BaroReading]):
 
     def _setup(self) -> None:
         p = self.params
-        self._noise = BiasedNoise(self.rng, 1, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"])
+        self._noise = BiasedNoise(self.rng, 1, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"],
+                                  self.normals)
 
     def rotor_wash_pa(self, state: BodyState, world: WorldQuery) -> float:
         """The ground-cushion overpressure at the sensor (Pa), 0 without rotors or ground."""

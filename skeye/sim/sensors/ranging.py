@@ -266,7 +266,7 @@ class OpticalFlow(Sensor[FlowReading]):
         scale *= min(1.0, contrast / p["ReferenceContrast"])
         if scale <= 0.0:
             return 0
-        q = p["SurfaceQuality"] * scale + p["QualitySigma"] * float(self.rng.standard_normal())
+        q = p["SurfaceQuality"] * scale + p["QualitySigma"] * self.normals.take(1)[0]
         return int(min(SQUAL_MAX, max(0, round(q))))
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> FlowReading:
@@ -292,7 +292,7 @@ class OpticalFlow(Sensor[FlowReading]):
         if prev is None:
             prev, dt_s = rate, 1.0 / self.rate_hz
         self._prev_rate = rate
-        noise = self.rng.standard_normal(2).tolist()
+        noise = self.normals.take(2)
         delta: list[int] = []
         for axis in range(2):
             total = (

@@ -39,6 +39,7 @@ from typing import Final
 
 import numpy as np
 
+from skeye.sim.sensors.base import NormalStream
 from skeye.sim.state import Vec3
 
 _TWO_PI: Final = 2.0 * math.pi
@@ -57,7 +58,10 @@ class RotorVibration:
         ref_speed_rad_s: float,
         blades: int,
         bandwidth_hz: float,
+        normals: NormalStream | None = None,
     ) -> None:
+        """``normals``: the Generator's :class:`NormalStream` where the sensor has one (the
+        broadband's deviates come from it); the phases are drawn from ``rng`` itself, now."""
         self.rotor_amp = rotor_amp
         self.blade_amp = blade_amp
         self.broadband = broadband
@@ -66,6 +70,7 @@ class RotorVibration:
         self.bandwidth_hz = bandwidth_hz
         self.enabled = rotor_amp > 0.0 or blade_amp > 0.0 or broadband > 0.0
         self.rng = rng
+        self.normals = normals if normals is not None else NormalStream(rng)
         # theta[rotor][harmonic * 3 + axis], drawn once (the part and its mounting).
         self._theta: list[list[float]] = (
             rng.uniform(0.0, _TWO_PI, (MAX_ROTORS, 6)).tolist() if self.enabled else []
@@ -137,10 +142,10 @@ class RotorVibration:
         if self.broadband > 0.0 and mean_sq > 0.0:
             k = self.broadband * mean_sq / n * math.sqrt(
                 _broadband_share(self.bandwidth_hz, dt_s))
-            dx, dy, dz = self.rng.standard_normal(3).tolist()
-            x += k * dx
-            y += k * dy
-            z += k * dz
+            d = self.normals.take(3)
+            x += k * d[0]
+            y += k * d[1]
+            z += k * d[2]
         return (x, y, z)
 
 
