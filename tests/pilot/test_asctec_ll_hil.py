@@ -9,11 +9,12 @@ force, F_max 0.3 N, PAD_MODE 1 with 5 cm deadband and 0.3 m/s; here 8 s of it) a
 landing (PAD_MODE 2 from 1.2 m, 0.5 m off the pad): the HIL figures must be within 1.5x of
 the ``sim://`` ones.
 
-Seed 7: over seeds 1-8 (this hold, 320x240 camera, 2026-11-26) the ratios asctec-ll / sim
-were 0.89-1.60 for the standard deviation (median 1.2; one of eight, seed 2, above 1.5:
-1.75 / 1.10 cm in this short window) and 0.93-1.38 for the maximum; seed 7 is at the median
-(1.14 and 1.12). The difference is the board's GPS hold (docs/pilot.md, "On an AscTec LL
-board").
+Seed 5: over seeds 1-8 (this hold, 320x240 camera, the code with the realism round's sensors
+and the sticks' take-over rule, 2026-11-26) the ratios asctec-ll / sim were 0.57-1.40 for the
+standard deviation (median 1.0) and 0.65-1.55 for the maximum (one of eight, seed 7, above
+1.5: 8.35 / 5.38 cm); seed 5 is at the median (1.06 and 1.01). Before those changes seed 7 was
+the median (1.14 and 1.12). The difference is the board's GPS hold (docs/pilot.md, "On an
+AscTec LL board").
 
 Lean for CI: lockstep, the time granted by a scripted ground client (``--ground-clock``), so
 both runs are reproducible on any machine, and each pad mode starts at the same sim time on
@@ -83,7 +84,7 @@ class Flight:
 
 
 @contextmanager
-def flight(kind: str, robot_dir: Path, seed: int = 7) -> Iterator[Flight]:
+def flight(kind: str, robot_dir: Path, seed: int = 5) -> Iterator[Flight]:
     """A lockstep simulator with E2's disturbance, and a pilot on ``kind`` (sim or hil)."""
     with ExitStack() as stack:
         sim = Simulation(load_world("pad"), seed=seed, robot_dirs=(robot_dir,),
