@@ -20,6 +20,13 @@ Published figures the numbers should resemble (printed with them):
   data sheet);
 - height: SRF10 sonar resolution 1 cm (Devantech SRF10 technical specification).
 
+The estimator also states its own accuracy (the 1-sigma of its covariance, SEN INS
+``PositionSigma``, shown on the ground page as the estimate's "±"). The last two columns test
+that statement: the horizontal error divided by the stated horizontal 1-sigma (DRMS,
+sqrt(var_n + var_e)), median and 95th percentile. For an honest (consistent) estimator
+whose error is a circular Gaussian these are 0.83 and 1.73; larger means the estimator
+believes itself better than it is. A last run stands landed and disarmed (the at-rest updates).
+
 Usage: python benchmarks/bench_estimator.py [--sim-seconds 60] [--seed 1]
 """
 
@@ -44,12 +51,19 @@ def _angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def run(world: str, moving: bool, sim_seconds: float, seed: int) -> dict[str, float]:
+# err / DRMS of a circular 2-D Gaussian: P(r <= k DRMS) = 1 - exp(-k^2), so the median is
+# sqrt(ln 2) and the 95th percentile sqrt(ln 20).
+CONSISTENT = (math.sqrt(math.log(2.0)), math.sqrt(math.log(20.0)))
+
+
+def run(world: str, moving: bool, sim_seconds: float, seed: int,
+        landed: bool = False) -> dict[str, float]:
     sim = Simulation(load_world(world), seed=seed, estimator="onboard")
     robot = sim.spawn("hummingbird", name="R1", sink=lambda events: None,
-                      location_ned_m=(0.0, 0.0, -1.5))
+                      location_ned_m=(0.0, 0.0, 0.0 if landed else -1.5))
     assert robot.estimator is not None
     sim.step(2000)  # settle after the spawn
+    ratios: list[float] = []
     start = sim.body_state("R1").pos_ned_m
     sums = {"rp": 0.0, "yaw": 0.0, "h": 0.0, "v": 0.0}
     n = 0
@@ -67,6 +81,10 @@ def run(world: str, moving: bool, sim_seconds: float, seed: int) -> dict[str, fl
         sums["h"] += (e.pos_ned_m[2] - s.pos_ned_m[2]) ** 2
         sums["v"] += ((e.vel_ned_m_s[0] - s.vel_ned_m_s[0]) ** 2
                       + (e.vel_ned_m_s[1] - s.vel_ned_m_s[1]) ** 2)
+        if e.pos_sigma_ned_m is not None:
+            drms = math.hypot(e.pos_sigma_ned_m[0], e.pos_sigma_ned_m[1])
+            err = math.hypot(e.pos_ned_m[0] - s.pos_ned_m[0], e.pos_ned_m[1] - s.pos_ned_m[1])
+            ratios.append(err / drms)
         n += 1
     s = sim.body_state("R1")
     e = robot.estimator.estimate()
@@ -79,7 +97,16 @@ def run(world: str, moving: bool, sim_seconds: float, seed: int) -> dict[str, fl
         "pos_m_min": math.hypot(e.pos_ned_m[0] - s.pos_ned_m[0],
                                 e.pos_ned_m[1] - s.pos_ned_m[1]) / minutes,
         "true_m_min": math.hypot(s.pos_ned_m[0] - start[0], s.pos_ned_m[1] - start[1]) / minutes,
+        "ratio_p50": _quantile(ratios, 0.5),
+        "ratio_p95": _quantile(ratios, 0.95),
     }
+
+
+def _quantile(values: list[float], q: float) -> float:
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def main() -> None:
@@ -90,18 +117,21 @@ def main() -> None:
     print(f"bench_estimator: {native.status().describe()}; {args.sim_seconds:g} s per run, "
           f"seed {args.seed}")
     print(f"{'run':<18}{'roll/pitch':>11}{'yaw':>7}{'height':>8}{'vel':>7}{'est drift':>11}"
-          f"{'true drift':>12}  wall")
-    print(f"{'':<18}{'deg RMS':>11}{'deg':>7}{'m RMS':>8}{'m/s':>7}{'m/min':>11}{'m/min':>12}")
+          f"{'true drift':>12}{'err/sigma':>11}{'':>6}  wall")
+    print(f"{'':<18}{'deg RMS':>11}{'deg':>7}{'m RMS':>8}{'m/s':>7}{'m/min':>11}{'m/min':>12}"
+          f"{'p50':>11}{'p95':>6}")
     for world in ("indoor", "pad"):
-        for moving in (False, True):
+        for moving, landed in ((False, False), (True, False), (False, True)):
             t0 = time.perf_counter()
-            r = run(world, moving, args.sim_seconds, args.seed)
+            r = run(world, moving, args.sim_seconds, args.seed, landed=landed)
             wall = time.perf_counter() - t0
-            name = f"{world} {'moving' if moving else 'hover'}"
+            name = f"{world} {'moving' if moving else 'landed' if landed else 'hover'}"
             true = f"{r['true_m_min']:12.2f}" if not moving else f"{'-':>12}"
             print(f"{name:<18}{r['rp_deg']:11.2f}{r['yaw_deg']:7.2f}{r['h_m']:8.3f}"
-                  f"{r['v_m_s']:7.3f}{r['pos_m_min']:11.2f}{true}  {wall:.1f} s")
+                  f"{r['v_m_s']:7.3f}{r['pos_m_min']:11.2f}{true}{r['ratio_p50']:11.2f}"
+                  f"{r['ratio_p95']:6.2f}  {wall:.1f} s")
         print(f"  published: {PUBLISHED[world]}")
+    print(f"  err/sigma of an honest estimator: p50 {CONSISTENT[0]:.2f}, p95 {CONSISTENT[1]:.2f}")
     print("  published: MEMS AHRS 0.5 deg roll/pitch, 2 deg heading (VN-100); "
           "SRF10 sonar 1 cm resolution")
 

@@ -97,7 +97,8 @@ class GroundTruthReading(PoseReading):
 
 @dataclass(frozen=True)
 class InsReading(PoseReading):
-    pass
+    position_sigma_ned_m: Vec3 | None = None
+    """The estimator's 1-sigma per position axis (m), None where the simulator sends none."""
 
 
 @dataclass(frozen=True)
@@ -351,7 +352,7 @@ class InsSensor(Sensor[InsReading]):
     def convert(self, message: Any) -> InsReading:
         s: SenIns = message
         return InsReading(s.time_s, s.location_ned_m, _rpy(s.orientation_rpy_rad),
-                          s.velocity_ned_m_s)
+                          s.velocity_ned_m_s, s.position_sigma_ned_m)
 
 
 class AccelerometerSensor(Sensor[AccelerometerReading]):

@@ -57,6 +57,7 @@ from skeye.wire.packets import (
     Result,
     ResultCode,
     SkeyeMask,
+    VehicleInfo,
 )
 from skeye.workers import Worker
 
@@ -65,7 +66,8 @@ log = logging.getLogger(__name__)
 RATE_WINDOW_S = 2.0
 # GPS_DATA_ADVANCED: the receiver's fix and the vehicle's fused position estimate ("here").
 STREAM_POLL_MASK = int(PollMask.LL_STATUS | PollMask.IMU_CALCDATA | PollMask.GPS_DATA_ADVANCED)
-STREAM_SKEYE_MASK = int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD)
+# TRUTH: a simulated vehicle's truth, shown beside the estimate (a real vehicle sends none)
+STREAM_SKEYE_MASK = int(SkeyeMask.NAV_STATUS | SkeyeMask.PAD | SkeyeMask.TRUTH)
 KEEPALIVE_MASK = int(PollMask.CURRENT_WAY)  # not streamed, so its answer times the round trip
 HISTORY_POINTS = 3000  # NAV_STATUS samples kept for a page that opens late (5 min at 10 Hz)
 
@@ -180,6 +182,8 @@ class VehicleBridge:
         command_timeout_s: how long a command waits for its RESULT.
         open_vehicle: how to open a URI (tests inject in-memory links).
         clock: monotonic seconds.
+        on_vehicle: called (on the reader thread) with each vehicle's VEHICLE message when it
+            first arrives after a connect, or when it changes: which vehicle was reached.
     """
 
     def __init__(
@@ -193,6 +197,7 @@ class VehicleBridge:
         command_timeout_s: float = 3.0,
         open_vehicle: Callable[[str, float], Vehicle] = Vehicle.open,
         clock: Callable[[], float] = time.monotonic,
+        on_vehicle: Callable[[VehicleInfo], None] | None = None,
     ) -> None:
         if not 0 < keepalive_s < stale_s:
             raise InvalidArgument(f"need 0 < keepalive_s < stale_s, got {keepalive_s}, {stale_s}")
@@ -221,6 +226,8 @@ class VehicleBridge:
         self._seq = 0
         self._history: deque[dict[str, float]] = deque(maxlen=HISTORY_POINTS)
         self._pad_offset: tuple[float, float] | None = None
+        self._on_vehicle = on_vehicle
+        self._vehicle_info: VehicleInfo | None = None  # what the connected vehicle said it is
         self._t0_s = clock()
         self._stop = threading.Event()
         self._thread: Worker | None = None
@@ -356,6 +363,12 @@ class VehicleBridge:
                     point["pad_dx_m"], point["pad_dy_m"] = self._pad_offset
                 self._history.append(point)
             self._seq += 1
+            news = isinstance(msg, VehicleInfo) and msg != self._vehicle_info
+            if isinstance(msg, VehicleInfo):
+                self._vehicle_info = msg
+        if news and self._on_vehicle is not None:
+            assert isinstance(msg, VehicleInfo)
+            self._on_vehicle(msg)
 
     # -- commands (web app threads) ------------------------------------------------------------
     def execute(self, command: GroundCommand) -> CommandOutcome:
@@ -457,6 +470,7 @@ class VehicleBridge:
             # (and the link's state and error) until a vehicle speaks again.
             self._latest.clear()
             self._pad_offset = None
+            self._vehicle_info = None
             self._seq += 1
             self._frame_errors_closed += vehicle.frame_errors
             self._garbage_closed += vehicle.parser.garbage_bytes

@@ -67,6 +67,7 @@ def run_ground(args: argparse.Namespace) -> int:
     from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
     from skeye.ground.limits import ConnectionLimits, limit_repeats
     from skeye.ground.video import VideoRelay, parse_video_uri
+    from skeye.wire.packets import VehicleInfo
 
     if not (args.header_timeout > 0 and args.max_connections_per_peer >= 1):
         raise ConfigError(f"--header-timeout must be > 0 s and --max-connections-per-peer >= 1, "
@@ -82,7 +83,12 @@ def run_ground(args: argparse.Namespace) -> int:
     video_at = parse_video_uri(args.video) if args.video else None
     sock = socket.create_server((args.host, args.port))
     port = sock.getsockname()[1]
-    with VehicleBridge(args.vehicle) as bridge:
+    def reached(info: VehicleInfo) -> None:
+        kind = "simulated" if info.simulated else "a real vehicle"
+        print(f"skeye ground: reached {info.description or 'a vehicle'} ({kind}) at "
+              f"{args.vehicle}", flush=True)
+
+    with VehicleBridge(args.vehicle, on_vehicle=reached) as bridge:
         video = None
         if video_at is not None:
             video = VideoRelay(*video_at, fps=args.video_fps).start()

@@ -22,6 +22,7 @@ from skeye.wire.packet_units import (
     mv_to_v,
     nav_status_to_si,
     pad_report_to_si,
+    truth_to_si,
 )
 from skeye.wire.packets import (
     GPS_FIX_VALID,
@@ -36,6 +37,8 @@ from skeye.wire.packets import (
     NavigationStatus,
     NavStatus,
     PadReport,
+    Truth,
+    VehicleInfo,
 )
 
 
@@ -67,7 +70,28 @@ def nav_json(msg: NavStatus) -> dict[str, Any]:
         "climb_m_s": _r(-si.vel_ned_m_s[2]),
         "battery_v": _r(si.battery_v, 3),
         "time_s": _r(si.time_s, 3),
+        # the estimate's own 1-sigma (horizontal DRMS, vertical); None: the vehicle states none
+        "sigma_h_m": _r(si.sigma_h_m) if msg.sigma_h else None,
+        "sigma_v_m": _r(si.sigma_v_m) if msg.sigma_v else None,
     }
+
+
+def truth_json(msg: Truth) -> dict[str, Any]:
+    """TRUTH: a simulated vehicle's true position (NAV_STATUS's frame) and heading."""
+    si = truth_to_si(msg)
+    north, east, down = si.pos_ned_m
+    return {
+        "north_m": _r(north),
+        "east_m": _r(east),
+        "height_m": _r(-down),
+        "yaw_deg": _deg(si.yaw_rad),
+        "time_s": _r(si.time_s, 3),
+    }
+
+
+def vehicle_json(msg: VehicleInfo) -> dict[str, Any]:
+    """VEHICLE: whether the vehicle is simulated, and the pilot's line naming it."""
+    return {"simulated": bool(msg.simulated), "description": msg.description}
 
 
 def imu_json(msg: ImuCalcData) -> dict[str, Any]:
@@ -176,7 +200,13 @@ def telemetry_json(latest: Mapping[PD, Message]) -> dict[str, Any]:
     pad = get(PD.PAD, PadReport)
     way = get(PD.CURRENT_WAY, CurrentWay)
     health = get(PD.HEALTH, Health)
+    vehicle = get(PD.VEHICLE, VehicleInfo)
+    truth = get(PD.TRUTH, Truth)
+    simulated = vehicle is not None and bool(vehicle.simulated)
     return {
+        "vehicle": None if vehicle is None else vehicle_json(vehicle),
+        # the simulator's truth, only while the vehicle says it is simulated
+        "truth": truth_json(truth) if truth is not None and simulated else None,
         "health": None if health is None else health_json(health),
         "nav": None if nav is None else nav_json(nav),
         "imu": None if imu is None else imu_json(imu),
@@ -195,5 +225,7 @@ __all__ = [
     "pad_json",
     "status_json",
     "telemetry_json",
+    "truth_json",
+    "vehicle_json",
     "waypoint_json",
 ]

@@ -170,6 +170,9 @@ class InProcessAirframe:
     def snapshot(self) -> Snapshot:
         return self.view.snapshot(self.sim.time_s)
 
+    def describe(self) -> str:
+        return f"{self.name} in an in-process simulation"
+
     def _refuse(self, what: str) -> None:
         raise SkeyeError(f"{what} is a motion of the control interface; the in-process "
                          "vehicle takes set-points only (set_velocity, attitude, hover)")

@@ -189,5 +189,5 @@ def register(subparsers: Any) -> None:
     c.add_argument("seconds", type=float)
     c.add_argument("--period", type=float, default=0.1, help="seconds between pushes")
     c.add_argument("--poll-mask", default="0", help="structures (0x... or names)")
-    c.add_argument("--skeye-mask", default="nav_status", help="nav_status,pad (or 0x...)")
+    c.add_argument("--skeye-mask", default="nav_status", help="nav_status,pad,truth (or 0x...)")
     p.set_defaults(func=run)

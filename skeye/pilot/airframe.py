@@ -66,6 +66,12 @@ class Snapshot:
     landed: bool  # resting on the ground
     thrust_fraction: float  # total rotor thrust / maximum thrust, 0..1
     crashed: str = ""  # why the vehicle crashed ("" while it has not): see Airframe.reset
+    # The estimate's own 1-sigma per NED position axis (m), where the estimator states one.
+    pos_sigma_ned_m: Vec3 | None = None
+    # A simulated vehicle's true position (NED, m) and heading (rad), for display beside the
+    # estimate; None for a vehicle whose truth nobody knows (a real one). Never flown on.
+    truth_ned_m: Vec3 | None = None
+    truth_yaw_rad: float | None = None
 
     @property
     def altitude_m(self) -> float:
@@ -143,6 +149,10 @@ class Airframe(Protocol):
         it cannot (the vehicle below is lost)."""
         ...
 
+    def describe(self) -> str:
+        """One line naming what is flown and where (the start-up message; VEHICLE's text)."""
+        ...
+
 
 # -- backends by URI ---------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -194,10 +204,6 @@ class AirframeBackend(Airframe, Protocol):
 
     @property
     def lost(self) -> str | None: ...
-
-    def describe(self) -> str:
-        """One line for the start-up message: what is flown, and where."""
-        ...
 
     def close(self) -> None:
         """Release the vehicle's link (idempotent)."""

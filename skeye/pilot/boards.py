@@ -101,6 +101,7 @@ from skeye.wire.packets import (
     SkeyeMask,
     Stream,
     TakeOff,
+    VehicleInfo,
     Velocity,
     Waypoint,
     WaypointGoto,
@@ -606,9 +607,25 @@ class OnboardBoards:
                 self._health_next_s = now_s + HEALTH_PERIOD_S
                 if not out or out[0] is not self.health:
                     out.append(self.health)
+                out.append(self.vehicle_info())
+        if self._stream.skeye_mask & SkeyeMask.TRUTH:
+            snap, status = self.airframe.snapshot(), self.status()
+            truth = (self.telemetry.built("TRUTH", lambda: self.telemetry.truth(snap, status))
+                     if snap.truth_ned_m is not None else None)
+            if truth is not None:
+                out.append(truth)
         if self._stream.skeye_mask & SkeyeMask.PAD:
             out.append(self.pad.report())
         return out
+
+    def vehicle_info(self) -> VehicleInfo:
+        """VEHICLE: whether the airframe is simulated (it then knows its truth) and what it is."""
+        text = self.airframe.describe()
+        data = text.encode("utf-8")[: VehicleInfo.MAX_DESCRIPTION_BYTES]
+        return VehicleInfo(
+            simulated=int(self.airframe.snapshot().truth_ned_m is not None),
+            description=data.decode("utf-8", errors="ignore"),
+        )
 
     def _count_motor_time(self, snap: Snapshot) -> None:
         """Add the sim time since the last look while the motors turn (LL_STATUS up_time)."""

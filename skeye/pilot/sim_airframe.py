@@ -260,6 +260,9 @@ class SimAirframe:
             landed=status.landed if status else True,
             thrust_fraction=thrust_fraction,
             crashed="" if self._respawn else (r.crashed or ""),
+            pos_sigma_ned_m=ins.position_sigma_ned_m if ins is not None else None,
+            truth_ned_m=gt.position_ned_m if gt is not None else None,
+            truth_yaw_rad=gt.rpy_rad[2] if gt is not None else None,
         )
 
     # -- commands ------------------------------------------------------------------------

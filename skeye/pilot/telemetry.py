@@ -46,10 +46,12 @@ from skeye.wire.packet_units import (
     GpsSi,
     ImuCalcSi,
     NavStatusSi,
+    TruthSi,
     gps_data_advanced_from_si,
     gps_data_from_si,
     imu_calcdata_from_si,
     nav_status_from_si,
+    truth_from_si,
     wire_value,
 )
 from skeye.wire.packets import (
@@ -74,6 +76,7 @@ TEMPERATURE_CENTI_DEGC = 2500
 CPU_LOAD_CYCLES_S = 1000
 INT16 = (-(2**15), 2**15 - 1)
 WAYPOINT_NEAR_M = 20.0
+SIGMA_FLOOR_M = 0.001  # NAV_STATUS's sigma resolution; 0 on the wire means "not known"
 
 Vec3 = tuple[float, float, float]
 
@@ -357,6 +360,12 @@ class Telemetry:
         ``-down`` is the height above ground that TAKE_OFF and GOTO_GPS heights mean: 0 when
         landed there, 1.5 after "take off to 1.5 m"."""
         north, east, down = snap.pos_ned_m
+        sigma_h = sigma_v = 0.0  # not known
+        if snap.pos_sigma_ned_m is not None:
+            sn, se, sd = snap.pos_sigma_ned_m
+            # at least 1 mm: 0 on the wire means "not known"
+            sigma_h = max(SIGMA_FLOOR_M, math.sqrt(sn * sn + se * se))
+            sigma_v = max(SIGMA_FLOOR_M, sd)
         return nav_status_from_si(
             NavStatusSi(
                 state=status.state,
@@ -365,6 +374,22 @@ class Telemetry:
                 yaw_rad=snap.rpy_rad[2],
                 vel_ned_m_s=snap.vel_ned_m_s,
                 battery_v=snap.battery_v,
+                time_s=max(0.0, snap.time_s),
+                sigma_h_m=sigma_h,
+                sigma_v_m=sigma_v,
+            )
+        )
+
+    def truth(self, snap: Snapshot, status: BoardStatus) -> Message:
+        """TRUTH: a simulated vehicle's true position, in NAV_STATUS's frame (down from the
+        ground at home); only for an airframe that knows its truth (never a real vehicle)."""
+        if snap.truth_ned_m is None:
+            raise SkeyeError("TRUTH: this vehicle's airframe knows no truth (a real vehicle)")
+        north, east, down = snap.truth_ned_m
+        return truth_from_si(
+            TruthSi(
+                pos_ned_m=(north, east, down - status.home_ned_m[2]),
+                yaw_rad=snap.truth_yaw_rad if snap.truth_yaw_rad is not None else 0.0,
                 time_s=max(0.0, snap.time_s),
             )
         )

@@ -514,6 +514,8 @@ class BoardEstimator:
                 (ax[0].v, ax[1].v, ax[2].v),
                 self.rpy(),
                 (w[0], w[1], w[2]),
+                (math.sqrt(max(0.0, ax[0].c00)), math.sqrt(max(0.0, ax[1].c00)),
+                 math.sqrt(max(0.0, ax[2].c00))),
             )
         return est
 

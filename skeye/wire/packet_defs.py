@@ -76,6 +76,8 @@ class PD(IntEnum):
     PAD = 0x91
     RESULT = 0x92
     HEALTH = 0x93
+    VEHICLE = 0x94
+    TRUTH = 0x95
 
 
 ACK_PDS = frozenset(
@@ -125,6 +127,7 @@ class SkeyeMask(IntFlag):
 
     NAV_STATUS = 0x0001
     PAD = 0x0002
+    TRUTH = 0x0004  # a simulated vehicle's ground truth (nothing from a real one)
 
 
 class CtrlBits(IntFlag):
@@ -636,6 +639,8 @@ class NavStatus(Message):
     vz: int
     battery: int  # mV
     time: int  # ms
+    sigma_h: int = 0  # mm, the position estimate's horizontal 1-sigma (0: not known)
+    sigma_v: int = 0  # mm, its vertical 1-sigma (0: not known)
 
 
 @dataclass(frozen=True)
@@ -692,6 +697,33 @@ class Health(Message):
     def __post_init__(self) -> None:
         super().__post_init__()
         _check_reason(self.reason, self.MAX_REASON_BYTES, "Health.reason")
+
+
+@dataclass(frozen=True)
+class VehicleInfo(Message):
+    """VEHICLE: what the pilot flies (streamed with NAV_STATUS once a second): whether it is
+    simulated, and a line naming it and where it is reached (``skeye ground`` shows it)."""
+
+    simulated: int  # 1: a robot of the simulator (TRUTH can be asked for), 0: a real vehicle
+    description: str = ""
+
+    MAX_DESCRIPTION_BYTES: ClassVar[int] = 200
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_reason(self.description, self.MAX_DESCRIPTION_BYTES, "VehicleInfo.description")
+
+
+@dataclass(frozen=True)
+class Truth(Message):
+    """TRUTH: a simulated vehicle's true position and heading (the simulator's ground truth,
+    world NED), for display beside the estimate; a real vehicle sends none."""
+
+    x: int  # mm north
+    y: int  # mm east
+    z: int  # mm down
+    yaw: int  # 1/1000 deg
+    time: int  # ms
 
 
 @dataclass(frozen=True)
@@ -898,6 +930,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         *_plain(_h, "vx", "vy", "vz", scale=MM_S, saturate=True),
         Field("battery", _H, scale=MV),
         Field("time", "I", scale=MS),
+        *_plain(_H, "sigma_h", "sigma_v", scale=MM, saturate=True),
     ),
     PadReport: _v(
         PD.PAD,
@@ -919,6 +952,18 @@ LAYOUTS: dict[type[Message], Layout] = {
         FrameKind.VEHICLE,
         (Field("status", _B, 0, max(HealthStatus), enum=HealthStatus),),
         tail="reason",
+    ),
+    VehicleInfo: Layout(
+        PD.VEHICLE,
+        FrameKind.VEHICLE,
+        (Field("simulated", _B, 0, 1),),
+        tail="description",
+    ),
+    Truth: _v(
+        PD.TRUTH,
+        *_plain(_I, "x", "y", "z", scale=MM),
+        Field("yaw", _I, scale=HEADING_MDEG),
+        Field("time", "I", scale=MS),
     ),
     Ack: Layout(None, FrameKind.ACK, (Field("pd", _B, enum=PD),)),
 }

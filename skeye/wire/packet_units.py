@@ -51,6 +51,7 @@ from skeye.wire.packet_defs import (
     PadMode,
     PadReport,
     TakeOff,
+    Truth,
     Velocity,
     Waypoint,
     WaypointProps,
@@ -303,6 +304,19 @@ class NavStatusSi:
     vel_ned_m_s: Annotated[Vec3, _w("vx", "vy", "vz")]
     battery_v: Annotated[float, _w("battery")]
     time_s: Annotated[float, _w("time")]
+    # The estimate's own 1-sigma, horizontal (sqrt(var_n + var_e), GNSS's "DRMS") and vertical;
+    # 0: not known (the vehicle's estimator states none).
+    sigma_h_m: Annotated[float, _w("sigma_h")] = 0.0
+    sigma_v_m: Annotated[float, _w("sigma_v")] = 0.0
+
+
+@dataclass(frozen=True)
+class TruthSi:
+    """TRUTH in SI: a simulated vehicle's true position (world NED) and heading."""
+
+    pos_ned_m: Annotated[Vec3, _w("x", "y", "z")]
+    yaw_rad: Annotated[float, _w("yaw")]
+    time_s: Annotated[float, _w("time")]
 
 
 @dataclass(frozen=True)
@@ -429,6 +443,7 @@ def _pair(cls: type[M], view: type[V]) -> tuple[Callable[[V], M], Callable[[M], 
 imu_calcdata_from_si, imu_calcdata_to_si = _pair(ImuCalcData, ImuCalcSi)
 gps_data_from_si = _pair(GpsData, GpsSi)[0]
 nav_status_from_si, nav_status_to_si = _pair(NavStatus, NavStatusSi)
+truth_from_si, truth_to_si = _pair(Truth, TruthSi)
 pad_report_from_si, pad_report_to_si = _pair(PadReport, PadSi)
 ctrl_input_to_si = _pair(CtrlInput, StickSi)[1]
 velocity_to_si = _pair(Velocity, VelocitySi)[1]

@@ -250,6 +250,9 @@ class SenIns(Sen):
     location_ned_m: Vec3 = field(metadata=wire("Location", "vec3"))
     orientation_rpy_rad: Vec3 = field(metadata=wire("Orientation", "vec3"))
     velocity_ned_m_s: Vec3 | None = field(default=None, metadata=wire("Velocity", "vec3"))
+    position_sigma_ned_m: Vec3 | None = field(default=None, metadata=wire("PositionSigma", "vec3"))
+    """The estimator's own 1-sigma of each position axis (the square root of its covariance's
+    diagonal), m; absent where the estimate has no covariance (``--estimator truth``)."""
 
 
 @dataclass(frozen=True)

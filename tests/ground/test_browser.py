@@ -238,6 +238,40 @@ def test_velocity_command_moves_the_vehicle(page: Any, stack: Stack) -> None:
     assert readout_n == shown_n
 
 
+def test_the_map_labels_the_estimate_with_its_sigma_and_the_simulator_truth(
+    page: Any, stack: Stack
+) -> None:
+    """Issue 34: the map says what each position is. The estimate (what the vehicle flies on)
+    with its estimator's 1-sigma, and, the vehicle being simulated, the simulator's truth as
+    its own marker; the top bar names the vehicle the ground station reached."""
+    page_ready(page)
+    wait_js(page, "S.telemetry.truth && S.telemetry.nav.sigma_h_m && S.telemetry.vehicle", 10,
+            "the truth, the estimate's sigma and the vehicle's name")
+    estimate = page.inner_text("#map-estimate")
+    assert estimate.startswith("estimate (onboard)") and "± " in estimate, estimate
+    sigma_m = value(page, "#map-estimate")
+    assert 0.0 < sigma_m < 100.0, sigma_m  # the estimator's own figure, stated
+    assert page.is_visible("#map-truth")
+    legend = page.inner_text("#map-truth")
+    assert legend.startswith("simulator truth"), legend
+    assert page.get_attribute("#vehicle-name", "data-simulated") == "true"
+    assert stack.pilot.name in page.inner_text("#vehicle-name")
+    # The marker is the simulator's truth as of the telemetry's time: it can differ from the
+    # truth read here only by what the vehicle moves between the two times, plus rounding.
+    shown_t, shown_n, shown_e = page.evaluate(
+        "[S.telemetry.truth.time_s, S.telemetry.truth.north_m, S.telemetry.truth.east_m]")
+    truth = stack.pilot.robot.ground_truth.latest
+    tolerance_m = 0.01 + value(page, "#limits") * abs(truth.time_s - shown_t)
+    assert math.hypot(shown_n - truth.position_ned_m[0], shown_e - truth.position_ned_m[1]) \
+        <= tolerance_m, (shown_t, shown_n, shown_e, truth)
+    # the legend's offset is the distance between the two markers it names
+    nav_n, nav_e, truth_n, truth_e = page.evaluate(
+        "[S.telemetry.nav.north_m, S.telemetry.nav.east_m, S.telemetry.truth.north_m,"
+        " S.telemetry.truth.east_m]")
+    assert value(page, "#map-truth") == pytest.approx(
+        math.hypot(nav_n - truth_n, nav_e - truth_e), abs=0.02)
+
+
 def test_here_fills_the_position_estimate_and_says_so(page: Any, stack: Stack) -> None:
     # Item 9: "here" fills the vehicle's position estimate (GPS_DATA_ADVANCED), not the fix.
     from skeye.geo import GeoOrigin

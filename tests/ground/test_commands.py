@@ -108,6 +108,7 @@ def test_packet_rate_over_a_window() -> None:
 
 def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     assert telemetry_json({}) == {
+        "vehicle": None, "truth": None,
         "health": None, "nav": None, "imu": None, "status": None, "gps": None, "pad": None,
         "waypoint": None,
     }
@@ -129,6 +130,29 @@ def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     crashed = Health(HealthStatus.CRASHED, "crashed: hard impact at 3.2 m/s")
     assert telemetry_json({PD.HEALTH: crashed})["health"] == {
         "status": "crashed", "reason": "crashed: hard impact at 3.2 m/s"}
+    assert (t["nav"]["sigma_h_m"], t["nav"]["sigma_v_m"]) == (None, None)  # not stated
+
+
+def test_the_estimate_s_sigma_and_the_truth_only_while_the_vehicle_is_simulated() -> None:
+    from skeye.wire.packet_units import TruthSi, truth_from_si
+    from skeye.wire.packets import VehicleInfo
+
+    nav = nav_status_from_si(
+        NavStatusSi(NavState.LANDED, PadAction.OFF, (1.0, 2.0, 0.0), 0.0, (0.0, 0.0, 0.0),
+                    12.1, 42.0, sigma_h_m=0.034, sigma_v_m=0.012)
+    )
+    truth = truth_from_si(TruthSi((1.25, 1.5, 0.0), math.radians(45.0), 42.0))
+    sim = VehicleInfo(1, "R1 in pad at sim://127.0.0.1:3000 (lockstep)")
+    t = telemetry_json({PD.NAV_STATUS: nav, PD.TRUTH: truth, PD.VEHICLE: sim})
+    assert (t["nav"]["sigma_h_m"], t["nav"]["sigma_v_m"]) == (0.034, 0.012)
+    assert t["vehicle"] == {"simulated": True, "description": sim.description}
+    assert t["truth"] == {"north_m": 1.25, "east_m": 1.5, "height_m": 0.0, "yaw_deg": 45.0,
+                          "time_s": 42.0}
+    # a real vehicle's page never shows a truth marker, whatever arrived
+    real = VehicleInfo(0, "a MAVLink flight controller on udp:127.0.0.1:14540")
+    t = telemetry_json({PD.NAV_STATUS: nav, PD.TRUTH: truth, PD.VEHICLE: real})
+    assert t["truth"] is None and t["vehicle"]["simulated"] is False
+    assert telemetry_json({PD.NAV_STATUS: nav, PD.TRUTH: truth})["truth"] is None  # unnamed
 
 
 def test_speeds_are_checked_against_the_robot_files_limits() -> None:

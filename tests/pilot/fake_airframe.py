@@ -36,6 +36,9 @@ class FakeAirframe:
     def snapshot(self) -> Snapshot:
         return self.snap
 
+    def describe(self) -> str:
+        return "a scripted airframe (tests/pilot/fake_airframe.py)"
+
     def _cmd(self, name: str, *args: float | None, busy: bool = True) -> None:
         self.calls.append((name, tuple(a for a in args if a is not None)))
         self.busy = busy

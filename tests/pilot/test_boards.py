@@ -356,6 +356,36 @@ def test_nav_status_height_is_above_the_ground_at_home():
     assert nav.z == -1500  # "take off to 1.5 m" shows 1.5 m
 
 
+def test_the_stream_names_the_vehicle_and_sends_truth_only_for_a_simulated_one():
+    """VEHICLE once a second with NAV_STATUS; TRUTH when asked for and the airframe knows its
+    truth (a simulated one), in NAV_STATUS's frame; NAV_STATUS carries the estimate's sigma."""
+    from skeye.wire.packets import Truth, VehicleInfo
+
+    air, boards = make()
+    air.finish(pos_ned_m=(2.0, 3.0, -0.09))
+    boards = OnboardBoards(air, BoardSettings(), now_s=0.0)
+    mask = int(SkeyeMask.NAV_STATUS | SkeyeMask.TRUTH)
+    send(boards, encode(Stream(0, mask, 100)))
+    out = boards.tick(0.0)
+    info = next(m for m in out if isinstance(m, VehicleInfo))
+    assert info == VehicleInfo(0, air.describe())  # a real vehicle, as far as it says
+    assert not any(isinstance(m, Truth) for m in out)  # it knows no truth: none is made up
+    nav = next(m for m in out if isinstance(m, NavStatus))
+    assert (nav.sigma_h, nav.sigma_v) == (0, 0)  # not stated
+    air.finish(pos_sigma_ned_m=(0.03, 0.04, 0.0002), truth_ned_m=(2.5, 2.5, -0.09),
+               truth_yaw_rad=math.radians(90.0))
+    out = boards.tick(0.15)
+    nav = next(m for m in out if isinstance(m, NavStatus))
+    assert (nav.sigma_h, nav.sigma_v) == (50, 1)  # sqrt(30^2 + 40^2) mm; at least 1 mm
+    truth = next(m for m in out if isinstance(m, Truth))
+    assert (truth.x, truth.y, truth.z, truth.yaw) == (2500, 2500, 0, 90000)
+    assert not any(isinstance(m, VehicleInfo) for m in out)  # once a second
+    info = next(m for m in boards.tick(1.05) if isinstance(m, VehicleInfo))
+    assert info.simulated == 1
+    send(boards, encode(Stream(0, int(SkeyeMask.NAV_STATUS), 100)), now_s=1.1)
+    assert not any(isinstance(m, Truth) for m in boards.tick(1.3))  # not asked for
+
+
 def test_gps_best_estimate_is_the_ins_position_anchored_to_the_mean_fix():
     from skeye.geo import GeoOrigin
     from skeye.pilot.airframe import GpsFix

@@ -50,12 +50,17 @@ def test_frozen_realtime_simulator_puts_the_pilot_in_failsafe() -> None:
             vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
             vehicle.take_off(1.0)
             vehicle.wait_state(NavState.HOLDING, timeout_s=120)
+        # its address and the vehicle it reached (issue 34), in whichever order they come
+        either = (r"skeye ground: (?:http://127.0.0.1:(\d+)/\?token=([\w-]+)|reached (.+) "
+                  r"\((simulated|a real vehicle)\) at )")
         ground_proc, gfound = start_skeye(
-            ["ground", "--vehicle", pilot.address, "--port", "0"],
-            [r"skeye ground: http://127.0.0.1:(\d+)/\?token=([\w-]+)"], "ground control",
-            timeout_s=120)
+            ["ground", "--vehicle", pilot.address, "--port", "0"], [either, either],
+            "ground control", timeout_s=120)
         stack.callback(stop_process, ground_proc)
-        gport, token = int(gfound[0].group(1)), gfound[0].group(2)
+        web = next(m for m in gfound if m.group(1))
+        reached = next(m for m in gfound if m.group(3))
+        gport, token = int(web.group(1)), web.group(2)
+        assert reached.group(4) == "simulated" and robot.name in reached.group(3), reached.group(0)
         wait_until(lambda: (_ground_state(gport, token)["nav"] or {}).get("state") == "holding", 60,
                    "ground control shows the vehicle holding")
         assert pilot.vehicle_lost is None

@@ -59,6 +59,8 @@ from skeye.wire.packets import (
     SkeyeMask,
     Stream,
     TakeOff,
+    Truth,
+    VehicleInfo,
     VehicleStreamParser,
     Velocity,
     Waypoint,
@@ -206,7 +208,21 @@ CASES: list[tuple[Message, bytes]] = [
         NavStatus(
             NavState.FLYING, PadAction.HOLD, 1000, -2000, -1500, 90000, 10, -20, 30, 11800, 123456
         ),
-        vframe(0x90, "BBiiiihhhHI", 2, 1, 1000, -2000, -1500, 90000, 10, -20, 30, 11800, 123456),
+        vframe(0x90, "BBiiiihhhHIHH", 2, 1, 1000, -2000, -1500, 90000, 10, -20, 30, 11800, 123456,
+               0, 0),
+    ),
+    (  # with the estimate's 1-sigma: 45 mm horizontal, 12 mm vertical
+        NavStatus(NavState.LANDED, PadAction.OFF, 1, 2, 3, 4, 0, 0, 0, 11800, 7000, 45, 12),
+        vframe(0x90, "BBiiiihhhHIHH", 0, 0, 1, 2, 3, 4, 0, 0, 0, 11800, 7000, 45, 12),
+    ),
+    (
+        VehicleInfo(1, "R1 in pad at sim://127.0.0.1:3000 (lockstep)"),
+        raw_vframe(0x94, bytes((1,)) + b"R1 in pad at sim://127.0.0.1:3000 (lockstep)"),
+    ),
+    (VehicleInfo(0), raw_vframe(0x94, bytes((0,)))),
+    (
+        Truth(1500, -250, -1200, 359999, 123456),
+        vframe(0x95, "iiiiI", 1500, -250, -1200, 359999, 123456),
     ),
     (
         PadReport(1, 0b101, -120, 40, 1800, 870, 98765),
@@ -227,7 +243,7 @@ CASES: list[tuple[Message, bytes]] = [
     (Health(HealthStatus.OK), raw_vframe(0x93, bytes((0,)))),
     (
         NavStatus(NavState.CRASHED, PadAction.OFF, 0, 0, 0, 0, 0, 0, 0, 11800, 5000),
-        vframe(0x90, "BBiiiihhhHI", 7, 0, 0, 0, 0, 0, 0, 0, 0, 11800, 5000),
+        vframe(0x90, "BBiiiihhhHIHH", 7, 0, 0, 0, 0, 0, 0, 0, 0, 11800, 5000, 0, 0),
     ),
     (Ack(PD.CTRL_INPUT), b">a\x17a<"),
 ]
@@ -288,9 +304,11 @@ SPEC_SIZES = {
     PadMode: 5,
     Stream: 6,
     Clock: 4,
-    NavStatus: 30,
+    NavStatus: 34,
     PadReport: 21,
     Health: 1,
+    VehicleInfo: 1,
+    Truth: 20,
 }
 
 
@@ -384,8 +402,9 @@ def messages(draw: st.DrawFn, cls: type[Message]) -> Message:
         kwargs[f.name] = draw(st.lists(ints, min_size=f.count, max_size=f.count).map(tuple)
                               if f.count > 1 else ints)  # fmt: skip
     if layout.tail is not None:
-        reason = draw(st.text(max_size=40) | st.text(min_size=300, max_size=340))
-        assume(len(reason.encode("utf-8")) <= Result.MAX_REASON_BYTES)
+        cap = getattr(cls, "MAX_DESCRIPTION_BYTES", Result.MAX_REASON_BYTES)
+        reason = draw(st.text(max_size=40) | st.text(min_size=cap // 2, max_size=cap // 2 + 40))
+        assume(len(reason.encode("utf-8")) <= cap)
         kwargs[layout.tail] = reason
     try:
         return cls(**kwargs)
@@ -542,7 +561,7 @@ def test_skeye_bad_length(pd: int, payload: bytes) -> None:
         (0x81, "iiiiBH", (0, 0, 0, 0, 2, 0), "frame"),
         (0x82, "iiiH", (900_000_001, 0, 0, 0), "latitude"),
         (0x87, "HHH", (0x0020, 0, 10), "poll_mask"),
-        (0x87, "HHH", (0, 0x0004, 10), "skeye_mask"),
+        (0x87, "HHH", (0, 0x0008, 10), "skeye_mask"),
     ],
 )
 def test_skeye_bad_value(pd: int, fmt: str, values: tuple[int, ...], field: str) -> None:
@@ -615,7 +634,8 @@ def test_vehicle_side_error_kinds() -> None:
         (raw_vframe(0x92, b"\x80"), ErrorKind.BAD_LENGTH),
         (raw_vframe(0x92, b"\x80\x09"), ErrorKind.BAD_VALUE),  # result code 9
         (raw_vframe(0x92, b"\x80\x00\xff\xfe"), ErrorKind.BAD_VALUE),  # not UTF-8
-        (vframe(0x90, "BBiiiihhhHI", 255, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0), ErrorKind.BAD_VALUE),
+        (vframe(0x90, "BBiiiihhhHIHH", 255, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
+         ErrorKind.BAD_VALUE),
         (vframe(0x11, "iiii", 0, 0, 0, 201), ErrorKind.BAD_VALUE),
         (encode(Ack(PD.LAUNCH))[:4] + b"x", ErrorKind.BAD_STOP),
         (b">a\x02a<", ErrorKind.UNKNOWN_PD),
@@ -658,7 +678,7 @@ def test_skeye_bad_stop_is_a_frame_error() -> None:
         lambda: MoveBy(0, 0, 0, 0, 2, 0),  # type: ignore[arg-type]
         lambda: GotoGps(0, 1_800_000_001, 0, 0),
         lambda: Stream(0x0040, 0, 0),
-        lambda: Stream(0, 0x0004, 0),
+        lambda: Stream(0, 0x0008, 0),
         lambda: NavStatus(255, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),  # type: ignore[arg-type]
         lambda: PadReport(2, 0, 0, 0, 0, 0, 0),
         lambda: PadReport(1, 0, 0, 0, 0, 1001, 0),
@@ -732,7 +752,7 @@ def test_feeding_something_other_than_bytes_is_a_protocol_error() -> None:
 def test_a_nav_state_the_table_lacks_is_a_bad_value() -> None:
     """CRASHED is 7; 6 is MANUAL's (issue 30), and until this table has it, a NAV_STATUS that
     carries 6 is refused, never read as some other state."""
-    wire = vframe(0x90, "BBiiiihhhHI", 6, 0, 0, 0, 0, 0, 0, 0, 0, 11800, 5000)
+    wire = vframe(0x90, "BBiiiihhhHIHH", 6, 0, 0, 0, 0, 0, 0, 0, 0, 11800, 5000, 0, 0)
     events = VehicleStreamParser().feed(wire)
     if 6 in {int(s) for s in NavState}:
         assert isinstance(events[0], NavStatus)

@@ -282,10 +282,12 @@ def test_init_vectors_read_as_usarsim_parse_vector() -> None:
 
 
 def test_line_format_writes_what_encode_writes() -> None:
-    ins = SenIns(1.25, "INS", (1.0, 2.0, -3.0), (0.1, 0.2, 0.3), (0.0, 0.5, 0.0))
+    ins = SenIns(1.25, "INS", (1.0, 2.0, -3.0), (0.1, 0.2, 0.3), (0.0, 0.5, 0.0),
+                 (0.02, 0.02, 0.05))
     fmt = sim.line_format(SenIns, {"Name": "INS"})
-    values = (1.25, 1.0, 2.0, -3.0, 0.1, 0.2, 0.3, 0.0, 0.5, 0.0)
+    values = (1.25, 1.0, 2.0, -3.0, 0.1, 0.2, 0.3, 0.0, 0.5, 0.0, 0.02, 0.02, 0.05)
     assert fmt.format(values) == sim.encode(ins)
+    assert b"{PositionSigma 0.020000,0.020000,0.050000}" in sim.encode(ins)
     motors = SenMotors(0.5, "M", (1.0,) * 4, (2.0,) * 4, 9.5)
     layout = sim.sen_layout(SenMotors, counts={"Speeds": 4, "Commands": 4})
     fmt = sim.line_format(SenMotors, {"Name": "M"}, layout)

@@ -100,6 +100,7 @@ class InsEstimate:
     vel_ned_m_s: Vec3
     rpy_rad: Vec3
     omega_frd_rad_s: Vec3
+    pos_sigma_ned_m: Vec3 | None  # the estimator's 1-sigma per position axis; None: no covariance
 
     def __init__(
         self,
@@ -107,14 +108,17 @@ class InsEstimate:
         vel_ned_m_s: Vec3,
         rpy_rad: Vec3,
         omega_frd_rad_s: Vec3,
+        pos_sigma_ned_m: Vec3 | None = None,
     ) -> None:
         self.pos_ned_m = pos_ned_m
         self.vel_ned_m_s = vel_ned_m_s
         self.rpy_rad = rpy_rad
         self.omega_frd_rad_s = omega_frd_rad_s
+        self.pos_sigma_ned_m = pos_sigma_ned_m
 
 
-_INS_LAYOUT: Final[Layout] = sen_layout(SenIns)
+_INS_LAYOUT: Final[Layout] = sen_layout(SenIns, ("Location", "Orientation", "Velocity"))
+_INS_SIGMA_LAYOUT: Final[Layout] = sen_layout(SenIns)
 
 
 @dataclass
@@ -122,6 +126,7 @@ class InsReading(Reading):
     location_ned_m: Vec3
     orientation_rad: Vec3  # [0, 2 pi)
     velocity_ned_m_s: Vec3
+    position_sigma_ned_m: Vec3 | None  # the board estimator's; None for the oracle
 
     def __init__(
         self,
@@ -129,17 +134,22 @@ class InsReading(Reading):
         location_ned_m: Vec3,
         orientation_rad: Vec3,
         velocity_ned_m_s: Vec3,
+        position_sigma_ned_m: Vec3 | None = None,
     ) -> None:
         self.time_s = time_s
         self.location_ned_m = location_ned_m
         self.orientation_rad = orientation_rad
         self.velocity_ned_m_s = velocity_ned_m_s
+        self.position_sigma_ned_m = position_sigma_ned_m
 
     def layout(self) -> Layout:
-        return _INS_LAYOUT
+        return _INS_LAYOUT if self.position_sigma_ned_m is None else _INS_SIGMA_LAYOUT
 
     def values(self) -> tuple[object, ...]:
-        return (*self.location_ned_m, *self.orientation_rad, *self.velocity_ned_m_s)
+        sigma = self.position_sigma_ned_m
+        if sigma is None:
+            return (*self.location_ned_m, *self.orientation_rad, *self.velocity_ned_m_s)
+        return (*self.location_ned_m, *self.orientation_rad, *self.velocity_ned_m_s, *sigma)
 
 
 _INS_BLOCK_ROWS: Final = 512  # estimate() calls per block of pre-drawn normal deviates (18 each)
@@ -168,7 +178,8 @@ class INS(Sensor[InsReading]):
     - body rates: white noise RateNoise 0.001 rad/s plus a constant bias RateBiasSigma
       0.0005 rad/s (a calibrated gyro).
 
-    SEN fields: Location, Orientation (wrapped to [0, 2 pi)) and, as an extension, Velocity.
+    SEN fields: Location, Orientation (wrapped to [0, 2 pi)) and, as extensions, Velocity and
+    (from the board estimator, not the oracle) PositionSigma, its 1-sigma per axis.
     Default rate 50 Hz. :meth:`estimate_now` is what the low-level controller calls each
     period; :meth:`read` reports the estimate at the sample's time (the same one when the
     controller already asked at that time, so the drift advances once per instant).
@@ -287,7 +298,8 @@ class INS(Sensor[InsReading]):
         est = board.estimate() if board is not None else self.estimate_now(state)
         t = state.time_s
         self._last_time_s = t
-        reading = InsReading(t, est.pos_ned_m, _wrap_rpy_2pi(est.rpy_rad), est.vel_ned_m_s)
+        reading = InsReading(t, est.pos_ned_m, _wrap_rpy_2pi(est.rpy_rad), est.vel_ned_m_s,
+                             est.pos_sigma_ned_m)
         self.last = reading
         return reading
 

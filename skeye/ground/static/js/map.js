@@ -1,5 +1,7 @@
 // The Track card: top-down map, north up, auto-scaled grid, the world origin (the default
-// world's pad), home, the drawn track and the vehicle with its heading.
+// world's pad), home, the drawn track and the vehicle with its heading: where its onboard
+// estimate puts it, with the estimator's 1-sigma as a circle, and, for a simulated vehicle,
+// the simulator's truth as a separate marker (the legend under the map names both).
 
 import { $ } from "./dom.js";
 import { S } from "./state.js";
@@ -9,11 +11,13 @@ export function drawMap() {
   const W = c.width, H = c.height;
   g.clearRect(0, 0, W, H);
   const n = S.telemetry && S.telemetry.nav;
+  const tr = S.telemetry && S.telemetry.truth;
   const pts = S.track.slice();
   if (n) pts.push({ north_m: n.north_m, east_m: n.east_m });
+  const fit = tr ? pts.concat([{ north_m: tr.north_m, east_m: tr.east_m }]) : pts;
   // fit: centre on the vehicle's surroundings, at least +-3 m, always include the origin
   let minN = -1, maxN = 1, minE = -1, maxE = 1;
-  for (const p of pts) {
+  for (const p of fit) {
     minN = Math.min(minN, p.north_m); maxN = Math.max(maxN, p.north_m);
     minE = Math.min(minE, p.east_m); maxE = Math.max(maxE, p.east_m);
   }
@@ -49,7 +53,22 @@ export function drawMap() {
     pts.forEach((p, i) => (i ? g.lineTo : g.moveTo).call(g, X(p.east_m), Y(p.north_m)));
     g.stroke();
   }
-  // vehicle
+  // the simulator's truth: a hollow orange diamond with its heading tick
+  if (tr) {
+    const x = X(tr.east_m), y = Y(tr.north_m), yaw = tr.yaw_deg * Math.PI / 180;
+    g.strokeStyle = "#ffa23a"; g.lineWidth = 2; g.beginPath();
+    g.moveTo(x, y - 9); g.lineTo(x + 9, y); g.lineTo(x, y + 9); g.lineTo(x - 9, y); g.closePath();
+    g.moveTo(x, y); g.lineTo(x + 16 * Math.sin(yaw), y - 16 * Math.cos(yaw)); g.stroke();
+    g.fillStyle = "#ffa23a"; g.fillText("simulator truth", x + 12, y + 14);
+  }
+  // the estimate's 1-sigma (horizontal): a circle around the vehicle
+  if (n && n.sigma_h_m) {
+    g.strokeStyle = "rgba(255,255,255,0.45)"; g.fillStyle = "rgba(255,255,255,0.08)";
+    g.lineWidth = 1; g.beginPath();
+    g.arc(X(n.east_m), Y(n.north_m), Math.max(2, n.sigma_h_m * scale), 0, 2 * Math.PI);
+    g.fill(); g.stroke();
+  }
+  // vehicle (its onboard estimate)
   if (n) {
     const yaw = n.yaw_deg * Math.PI / 180;
     g.save(); g.translate(X(n.east_m), Y(n.north_m)); g.rotate(yaw);
@@ -57,6 +76,8 @@ export function drawMap() {
     g.beginPath(); g.moveTo(0, -14); g.lineTo(9, 10); g.lineTo(0, 5); g.lineTo(-9, 10);
     g.closePath(); g.fill(); g.stroke(); g.restore();
     g.fillStyle = "#d8e0e8";
+    g.textAlign = "right"; g.fillText("estimate", X(n.east_m) - 12, Y(n.north_m) - 10);
+    g.textAlign = "left";
     g.fillText(`N ${n.north_m.toFixed(2)}  E ${n.east_m.toFixed(2)}  ↑ ${n.height_m.toFixed(2)} m`, 8, 16);
   }
 }

@@ -67,6 +67,20 @@ export function readouts(t) {
     put("ro-uptime", `${st.up_time_s} s`);
     if (!n) put("ro-battery", fmt(st.battery_v, 2, " V"), st.battery_v);
   }
+  if (n) {
+    const pm = n.sigma_h_m === null || n.sigma_h_m === undefined ? "± not stated"
+      : `± ${n.sigma_h_m.toFixed(2)} m`;
+    put("map-estimate", `estimate (onboard): N ${n.north_m.toFixed(2)} E ${n.east_m.toFixed(2)} ${pm}`,
+      n.sigma_h_m);
+  }
+  const tr = t.truth;
+  if (tr && n) {
+    const off = Math.hypot(n.north_m - tr.north_m, n.east_m - tr.east_m);
+    put("map-truth", `simulator truth: N ${tr.north_m.toFixed(2)} E ${tr.east_m.toFixed(2)} ` +
+      `(estimate off by ${off.toFixed(2)} m)`, off);
+  }
+  const v = t.vehicle;
+  if (v) put("vehicle-name", `flying: ${v.description}${v.simulated ? "" : " (real vehicle)"}`);
   if (gps) {
     put("ro-latlon", `${gps.latitude_deg.toFixed(7)}, ${gps.longitude_deg.toFixed(7)}`);
     put("ro-gpsfix", gps.fix ? "3D fix" : "no fix");
@@ -97,6 +111,10 @@ export function showStatus(t) {
     $("banner").dataset.kind = "";
     $("banner").dataset.health = "";
   }
+  // the truth marker's legend: only while the vehicle is simulated and sends its truth
+  $("map-truth").hidden = !t.truth;
+  const v = t.vehicle;
+  if (v) $("vehicle-name").dataset.simulated = v.simulated ? "true" : "false";
   const n = t.nav;
   if (n) {
     pill("flight-state", `state: ${n.state.replace("_", " ")}`,
