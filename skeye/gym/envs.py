@@ -30,7 +30,7 @@ from gymnasium import spaces
 
 from skeye.errors import ConfigError
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
-from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
+from skeye.gym.tasks import PAD_TOLERANCE_M, Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
     ActionLimits,
@@ -208,7 +208,8 @@ class PadLandingEnv(SkeyeEnv):
 
     def __init__(self, *, observation: str = "pad",
                  image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE, start_offset_m: float = 0.4,
-                 start_height_m: tuple[float, float] = (1.5, 2.5), pad_tolerance_m: float = 0.15,
+                 start_height_m: tuple[float, float] = (1.5, 2.5),
+                 pad_tolerance_m: float = PAD_TOLERANCE_M,
                  **kwargs: Any) -> None:
         kwargs.setdefault("wind", "random_force")
         task = PadLanding(observation, tuple(image_size), start_offset_m,  # type: ignore[arg-type]

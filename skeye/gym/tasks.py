@@ -51,6 +51,7 @@ from skeye.sim.state import BodyState
 Vec3 = tuple[float, float, float]
 CRASH_REWARD = -10.0
 SUCCESS_REWARD = 10.0
+PAD_TOLERANCE_M = 0.15  # PadLanding's success: touchdown this close to the pad centre
 MAX_TILT_RAD = math.radians(60.0)
 CEILING_M = 10.0
 TARGET_FIELDS = ("target_north_m", "target_east_m", "target_down_m")
@@ -188,7 +189,7 @@ class PadLanding(Task):
 
     def __init__(self, observation: str = "pad", image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
                  start_offset_m: float = 0.4, start_height_m: tuple[float, float] = (1.5, 2.5),
-                 pad_tolerance_m: float = 0.15) -> None:
+                 pad_tolerance_m: float = PAD_TOLERANCE_M) -> None:
         if observation not in OBSERVATIONS:
             raise ConfigError(f"observation must be one of {list(OBSERVATIONS)}, "
                               f"got {observation!r}")

