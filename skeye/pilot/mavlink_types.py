@@ -65,6 +65,14 @@ class Command:
     def p(self, n: int) -> float:
         return float(self.params[n - 1])
 
+    def whole(self, n: int, what: str) -> int:
+        """param ``n`` as the integer it carries (an id, a mode, flags), as PX4 casts it;
+        refused (MAV_RESULT_DENIED) when it is NaN or infinite, which no integer is."""
+        value = self.p(n)
+        if not math.isfinite(value):
+            raise Refused(mav.MAV_RESULT_DENIED, f"{what} (param{n}) is {value}, not a number")
+        return int(value)
+
 
 @dataclass
 class Settings:

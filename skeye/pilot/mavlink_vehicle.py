@@ -490,10 +490,11 @@ class MavlinkVehicle:
         self.cruise_m_s = speed
 
     def _set_mode(self, cmd: Command) -> None:
-        if not int(cmd.p(1)) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        if not cmd.whole(1, "base mode") & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             raise Refused(mav.MAV_RESULT_DENIED,
                           "only PX4 custom modes (base mode with CUSTOM_MODE_ENABLED)")
-        mode = Px4Mode.from_custom(int(cmd.p(2)), int(cmd.p(3)))
+        mode = Px4Mode.from_custom(cmd.whole(2, "custom main mode"),
+                                   cmd.whole(3, "custom sub mode"))
         request = REQUESTS.get(mode) if mode is not None else None
         if request is None:
             name = mode.name if mode is not None else f"{cmd.p(2):g}/{cmd.p(3):g}"
@@ -553,7 +554,7 @@ class MavlinkVehicle:
         return [telem.mission_current(self.codec, self.view())]
 
     def _message_interval(self, cmd: Command) -> None:
-        msg_id, interval_us = int(cmd.p(1)), cmd.p(2)
+        msg_id, interval_us = cmd.whole(1, "message id"), cmd.p(2)
         interval = None if interval_us == -1 else max(0.0, interval_us) / 1e6
         if not math.isfinite(interval_us) or interval_us < -1:
             raise Refused(mav.MAV_RESULT_DENIED, f"interval {interval_us:g} us")
@@ -567,7 +568,7 @@ class MavlinkVehicle:
         return self.links  # one scheduler per link; a command sets it on every link
 
     def _get_interval(self, cmd: Command) -> list[MavMessage]:
-        msg_id = int(cmd.p(1))
+        msg_id = cmd.whole(1, "message id")
         if not self.links or not self.links[0].scheduler.streamable(msg_id):
             raise Refused(mav.MAV_RESULT_DENIED, f"message {msg_id} is not streamed")
         interval = self.links[0].scheduler.interval_s(msg_id)

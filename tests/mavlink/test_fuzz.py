@@ -91,3 +91,22 @@ def test_arbitrary_bytes_give_messages_or_bad_frames(data):
     for item in parser.feed(data, datagram=True):
         for out in vehicle.handle(0, ("127.0.0.1", 1), item, 1.0):
             vehicle.codec.encode(out.msg)
+
+
+def test_every_command_with_non_finite_params_gets_its_ack() -> None:
+    """Every MAV_CMD of the dialect, as COMMAND_LONG with all seven params NaN, then +inf, then
+    -inf: each is answered with its COMMAND_ACK (accepted or not), never an exception. (The
+    fuzz above once found SET_MESSAGE_INTERVAL and GET_MESSAGE_INTERVAL casting a NaN
+    message id to int.)"""
+    for bad in (math.nan, math.inf, -math.inf):
+        vehicle, client = _vehicle()
+        parser = MavParser()
+        for command in COMMANDS:
+            msg = dialect.MAVLink_command_long_message(1, 1, command, 0, *([bad] * 7))
+            answers = []
+            for decoded in parser.feed(client.encode(msg), datagram=True):
+                answers += vehicle.handle(0, ("127.0.0.1", 1), decoded, 1.0)
+            acks = [a.msg for a in answers if a.msg.get_type() == "COMMAND_ACK"]
+            assert [a.command for a in acks] == [command], (command, bad, answers)
+            for out in answers:
+                vehicle.codec.encode(out.msg)
