@@ -87,7 +87,8 @@ def _extreme_frames(low: bool) -> bytes:
                 value = 0 if low else f.bits
             kwargs[f.name] = tuple(value for _ in range(f.count)) if f.count > 1 else value
         if layout.tail is not None:
-            kwargs[layout.tail] = "" if low else "\u00e9" * 400
+            longest = getattr(cls, "MAX_DESCRIPTION_BYTES", getattr(cls, "MAX_REASON_BYTES", 800))
+            kwargs[layout.tail] = "" if low else "\u00e9" * min(400, longest // 2)
         try:
             data += encode(cls(**kwargs))
         except Exception:  # a cross-field rule refuses this combination: leave it out
