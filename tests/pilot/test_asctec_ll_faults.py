@@ -49,6 +49,22 @@ def wait_until(predicate, timeout_s: float, what: str) -> None:
         time.sleep(0.02)
 
 
+WALL_PER_SIM_S = 20.0  # a stuck stack, not a slow one: how many wall seconds a sim second may take
+
+
+def wait_sim(board: LLBoardServer, predicate, sim_s: float, what: str) -> None:
+    """Wait until ``predicate()`` holds within ``sim_s`` of the board's (simulator's) time:
+    on a busy machine sim time runs slower than the wall clock, and the board's procedures
+    count sim time; a wall-clock ceiling only catches a stuck stack."""
+    start = board.sim_time()
+    ceiling_s = max(60.0, WALL_PER_SIM_S * sim_s)
+    deadline = time.monotonic() + ceiling_s
+    while not predicate():
+        assert board.sim_time() <= start + sim_s, f"{what}: not within {sim_s} s of sim time"
+        assert time.monotonic() < deadline, f"{what}: the stack is stuck ({ceiling_s:.0f} s)"
+        time.sleep(0.02)
+
+
 class Proxy:
     """A TCP middleman between the pilot and the board's TCP line: it can add garbage, drop
     what the board says (a silent board), or be cut."""
@@ -152,11 +168,13 @@ def test_the_serial_line_unplugged_mid_flight(caplog):
         wait_until(lambda: hil.pilot.vehicle_lost is not None, 10, "the pilot sees it")
         assert hil.pilot.vehicle_lost.startswith("LL board lost")
         hil.vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
-        # The board's own failsafe: silent line -> hold 5 s -> land, on its own clock.
-        wait_until(lambda: hil.board.board.emergencies == 1, 10, "the board's emergency")
+        # The board's own failsafe: silent line -> hold 5 s -> land, on its own clock (its
+        # serial timeout is 0.5 s of sim time: within 2 s of it, however slow the machine).
+        wait_sim(hil.board, lambda: hil.board.board.emergencies == 1, 2.0,
+                 "the board's emergency")
         assert hil.board.free_running
-        wait_until(lambda: hil.board.board.boards.state is NavState.LANDED, 30,
-                   "the board lands the vehicle")
+        wait_sim(hil.board, lambda: hil.board.board.boards.state is NavState.LANDED, 30.0,
+                 "the board lands the vehicle")
         assert hil.position()[2] > -0.15
         hil.vehicle.poll()  # ground control is still answered
     text = caplog.text
