@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 UP_ARGS ?=   # more `skeye up` options for `make run`, e.g. UP_ARGS="--ground-port 8081"
+# pytest-xdist workers for `make test` (auto: one per core); a test file stays on one worker.
+TEST_WORKERS ?= auto
 
 .PHONY: run test lint bench clean chromium
 
@@ -37,7 +39,8 @@ run: $(VENV)/.installed
 test: $(VENV)/.test-installed chromium
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	SKEYE_REQUIRE_COMPILED=1 MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/python -m pytest -q
+	SKEYE_REQUIRE_COMPILED=1 MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/python -m pytest -q \
+		-n $(TEST_WORKERS) --dist loadfile
 
 # Browser tests drive the distribution's Chromium (never a browser downloaded by Playwright).
 chromium:
