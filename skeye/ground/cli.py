@@ -84,9 +84,12 @@ def run_ground(args: argparse.Namespace) -> int:
     sock = socket.create_server((args.host, args.port))
     port = sock.getsockname()[1]
     def reached(info: VehicleInfo) -> None:
+        # the vehicle's own words: printable characters only (no terminal escapes), and one
+        # write, so the line never interleaves with the main thread's
+        said = "".join(c for c in info.description if c.isprintable()) or "a vehicle"
         kind = "simulated" if info.simulated else "a real vehicle"
-        print(f"skeye ground: reached {info.description or 'a vehicle'} ({kind}) at "
-              f"{args.vehicle}", flush=True)
+        sys.stdout.write(f"skeye ground: reached {said} ({kind}) at {args.vehicle}\n")
+        sys.stdout.flush()
 
     with VehicleBridge(args.vehicle, on_vehicle=reached) as bridge:
         video = None

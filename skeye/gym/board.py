@@ -141,6 +141,9 @@ class BoardView:
             armed=status.armed if status else False,
             landed=status.landed if status else True,
             thrust_fraction=thrust_fraction,
+            pos_sigma_ned_m=getattr(ins, "position_sigma_ned_m", None) if ins else None,
+            truth_ned_m=gt.location_ned_m if gt else None,
+            truth_yaw_rad=wrap_pi(gt.orientation_rad[2]) if gt else None,
         )
 
 

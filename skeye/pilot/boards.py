@@ -607,7 +607,9 @@ class OnboardBoards:
                 self._health_next_s = now_s + HEALTH_PERIOD_S
                 if not out or out[0] is not self.health:
                     out.append(self.health)
-                out.append(self.vehicle_info())
+                info = self.telemetry.built("VEHICLE", self.vehicle_info)
+                if info is not None:
+                    out.append(info)
         if self._stream.skeye_mask & SkeyeMask.TRUTH:
             snap, status = self.airframe.snapshot(), self.status()
             truth = (self.telemetry.built("TRUTH", lambda: self.telemetry.truth(snap, status))
@@ -621,7 +623,7 @@ class OnboardBoards:
     def vehicle_info(self) -> VehicleInfo:
         """VEHICLE: whether the airframe is simulated (it then knows its truth) and what it is."""
         text = self.airframe.describe()
-        data = text.encode("utf-8")[: VehicleInfo.MAX_DESCRIPTION_BYTES]
+        data = text.encode("utf-8", errors="replace")[: VehicleInfo.MAX_DESCRIPTION_BYTES]
         return VehicleInfo(
             simulated=int(self.airframe.snapshot().truth_ned_m is not None),
             description=data.decode("utf-8", errors="ignore"),

@@ -77,6 +77,13 @@ CPU_LOAD_CYCLES_S = 1000
 INT16 = (-(2**15), 2**15 - 1)
 WAYPOINT_NEAR_M = 20.0
 SIGMA_FLOOR_M = 0.001  # NAV_STATUS's sigma resolution; 0 on the wire means "not known"
+SIGMA_TOP_M = 65.535  # its uint16 mm field's top (saturated)
+# The GPS receiver's stated horizontal accuracy: 2.5 m CEP (u-blox LEA-6 data sheet, the
+# simulated receiver's figure too: docs/physics.md), as GPS_DATA reports it. For a circular
+# normal error CEP = 1.1774 sigma per axis, so its DRMS (sqrt(var_n + var_e)) is
+# sqrt(2) * 2.5 / 1.1774 = 3.0 m.
+GPS_CEP_M = 2.5
+GPS_DRMS_M = math.sqrt(2.0) * GPS_CEP_M / 1.1774
 
 Vec3 = tuple[float, float, float]
 
@@ -143,6 +150,14 @@ RC_MODE_MANUAL, RC_MODE_HEIGHT, RC_MODE_GPS = 0, 2048, 4095
 def _percent_200(stick: int) -> int:
     """A stick (-2047..2047) as CONTROLLER_OUTPUT's "0..200 = -100..+100 %"."""
     return clamp(round(100 + stick * 100 / STICK_MAX), 0, 200)
+
+
+def _sigma_on_wire(sigma_m: float) -> float:
+    """A stated 1-sigma as NAV_STATUS carries it: at least 1 mm (0 means "not known"), a
+    diverged filter's NaN as "not known", an infinite one at the field's top."""
+    if math.isnan(sigma_m):
+        return 0.0
+    return min(SIGMA_TOP_M, max(SIGMA_FLOOR_M, sigma_m))
 
 
 class Telemetry:
@@ -313,7 +328,7 @@ class Telemetry:
             vel_east_m_s=ve,
             vel_north_m_s=vn,
             heading_rad=heading,
-            horizontal_accuracy_m=2.5,
+            horizontal_accuracy_m=GPS_CEP_M,
             vertical_accuracy_m=5.0,
             speed_accuracy_m_s=0.2,
             num_sv=g.satellites,
@@ -363,9 +378,15 @@ class Telemetry:
         sigma_h = sigma_v = 0.0  # not known
         if snap.pos_sigma_ned_m is not None:
             sn, se, sd = snap.pos_sigma_ned_m
-            # at least 1 mm: 0 on the wire means "not known"
-            sigma_h = max(SIGMA_FLOOR_M, math.sqrt(sn * sn + se * se))
-            sigma_v = max(SIGMA_FLOOR_M, sd)
+            var_h = sn * sn + se * se
+            if snap.gps is not None and snap.gps.fix:
+                # GPS-aided, the estimate is tied to the receiver, whose error the filter
+                # takes for white noise though it wanders over minutes: its covariance alone
+                # then claims centimetres where the truth is metres away (bench_estimator,
+                # docs/physics.md). The receiver's own stated accuracy is added.
+                var_h += GPS_DRMS_M * GPS_DRMS_M
+            sigma_h = _sigma_on_wire(math.sqrt(var_h))
+            sigma_v = _sigma_on_wire(sd)
         return nav_status_from_si(
             NavStatusSi(
                 state=status.state,

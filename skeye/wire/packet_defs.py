@@ -716,12 +716,12 @@ class VehicleInfo(Message):
 
 @dataclass(frozen=True)
 class Truth(Message):
-    """TRUTH: a simulated vehicle's true position and heading (the simulator's ground truth,
-    world NED), for display beside the estimate; a real vehicle sends none."""
+    """TRUTH: a simulated vehicle's true position and heading (the simulator's ground truth)
+    in NAV_STATUS's frame, for display beside the estimate; a real vehicle sends none."""
 
-    x: int  # mm north
+    x: int  # mm north of the world origin
     y: int  # mm east
-    z: int  # mm down
+    z: int  # mm down from the ground at home (NAV_STATUS's z)
     yaw: int  # 1/1000 deg
     time: int  # ms
 

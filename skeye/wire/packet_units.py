@@ -312,7 +312,8 @@ class NavStatusSi:
 
 @dataclass(frozen=True)
 class TruthSi:
-    """TRUTH in SI: a simulated vehicle's true position (world NED) and heading."""
+    """TRUTH in SI: a simulated vehicle's true position (NAV_STATUS's frame: north and east of
+    the world origin, down from the ground at home) and heading."""
 
     pos_ned_m: Annotated[Vec3, _w("x", "y", "z")]
     yaw_rad: Annotated[float, _w("yaw")]

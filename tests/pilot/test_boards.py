@@ -359,6 +359,9 @@ def test_nav_status_height_is_above_the_ground_at_home():
 def test_the_stream_names_the_vehicle_and_sends_truth_only_for_a_simulated_one():
     """VEHICLE once a second with NAV_STATUS; TRUTH when asked for and the airframe knows its
     truth (a simulated one), in NAV_STATUS's frame; NAV_STATUS carries the estimate's sigma."""
+    from dataclasses import replace
+
+    from skeye.pilot.telemetry import GPS_DRMS_M
     from skeye.wire.packets import Truth, VehicleInfo
 
     air, boards = make()
@@ -376,7 +379,10 @@ def test_the_stream_names_the_vehicle_and_sends_truth_only_for_a_simulated_one()
                truth_yaw_rad=math.radians(90.0))
     out = boards.tick(0.15)
     nav = next(m for m in out if isinstance(m, NavStatus))
-    assert (nav.sigma_h, nav.sigma_v) == (50, 1)  # sqrt(30^2 + 40^2) mm; at least 1 mm
+    # GPS-aided: the filter's sqrt(30^2 + 40^2) = 50 mm with the receiver's 2.5 m CEP (3.0 m
+    # DRMS) added, which the filter does not model; vertical: at least 1 mm
+    assert (nav.sigma_h, nav.sigma_v) == (round(math.hypot(0.05, GPS_DRMS_M) * 1000), 1)
+    assert GPS_DRMS_M == pytest.approx(3.0, abs=0.01)
     truth = next(m for m in out if isinstance(m, Truth))
     assert (truth.x, truth.y, truth.z, truth.yaw) == (2500, 2500, 0, 90000)
     assert not any(isinstance(m, VehicleInfo) for m in out)  # once a second
@@ -384,6 +390,12 @@ def test_the_stream_names_the_vehicle_and_sends_truth_only_for_a_simulated_one()
     assert info.simulated == 1
     send(boards, encode(Stream(0, int(SkeyeMask.NAV_STATUS), 100)), now_s=1.1)
     assert not any(isinstance(m, Truth) for m in boards.tick(1.3))  # not asked for
+    air.finish(gps=replace(air.snap.gps, fix=False))  # indoors: the filter's own figure
+    nav = next(m for m in boards.tick(1.5) if isinstance(m, NavStatus))
+    assert nav.sigma_h == 50
+    air.finish(pos_sigma_ned_m=(math.nan, 0.0, math.inf))  # a diverged filter
+    nav = next(m for m in boards.tick(1.7) if isinstance(m, NavStatus))
+    assert (nav.sigma_h, nav.sigma_v) == (0, 0xFFFF)  # not known; saturated
 
 
 def test_gps_best_estimate_is_the_ins_position_anchored_to_the_mean_fix():

@@ -80,7 +80,8 @@ export function readouts(t) {
       `(estimate off by ${off.toFixed(2)} m)`, off);
   }
   const v = t.vehicle;
-  if (v) put("vehicle-name", `flying: ${v.description}${v.simulated ? "" : " (real vehicle)"}`);
+  put("vehicle-name", v ? `flying: ${v.description}${v.simulated ? "" : " (real vehicle)"}`
+    : "flying: —");
   if (gps) {
     put("ro-latlon", `${gps.latitude_deg.toFixed(7)}, ${gps.longitude_deg.toFixed(7)}`);
     put("ro-gpsfix", gps.fix ? "3D fix" : "no fix");
@@ -112,9 +113,9 @@ export function showStatus(t) {
     $("banner").dataset.health = "";
   }
   // the truth marker's legend: only while the vehicle is simulated and sends its truth
-  $("map-truth").hidden = !t.truth;
+  $("map-truth").hidden = !(t.truth && t.nav);
   const v = t.vehicle;
-  if (v) $("vehicle-name").dataset.simulated = v.simulated ? "true" : "false";
+  $("vehicle-name").dataset.simulated = v ? (v.simulated ? "true" : "false") : "";
   const n = t.nav;
   if (n) {
     pill("flight-state", `state: ${n.state.replace("_", " ")}`,
