@@ -145,16 +145,26 @@ def start_skeye(
     found: list[re.Match[str]] = []
     deadline = time.monotonic() + timeout_s
     seen: list[str] = []
-    while len(found) < len(patterns):
-        line = proc.stdout.readline()
-        if not line or time.monotonic() > deadline:
-            proc.kill()
-            proc.wait(5)
-            raise SkeyeError(f"{what} did not start: {''.join(seen[-5:]) or 'no output'}")
-        seen.append(line)
-        m = re.search(patterns[len(found)], line)
-        if m:
-            found.append(m)
+    # readline() blocks while the child is silent: at the deadline the child is killed, which
+    # ends the read, so a child that never prints the line fails here instead of hanging
+    killer = threading.Timer(timeout_s, proc.kill)
+    killer.daemon = True
+    killer.start()
+    try:
+        while len(found) < len(patterns):
+            line = proc.stdout.readline()
+            if not line or time.monotonic() > deadline:
+                proc.kill()
+                proc.wait(5)
+                late = f" within {timeout_s:g} s" if time.monotonic() > deadline else ""
+                raise SkeyeError(f"{what} did not start{late}: "
+                                 f"{''.join(seen[-5:]) or 'no output'}")
+            seen.append(line)
+            m = re.search(patterns[len(found)], line)
+            if m:
+                found.append(m)
+    finally:
+        killer.cancel()
     stdout = proc.stdout
     threading.Thread(target=stdout.read, name=f"drain-{what}", daemon=True).start()
     return proc, found

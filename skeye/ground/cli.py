@@ -106,11 +106,12 @@ def run_ground(args: argparse.Namespace) -> int:
             limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
             shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
             shown = f"[{shown}]" if ":" in shown else shown
-            print(
+            # one write (print writes the text and its newline apart): the bridge's thread
+            # prints the vehicle it reached, and a line of its must never land inside this one
+            sys.stdout.write(
                 f"skeye ground: http://{shown}:{port}/?token={security.token} (vehicle "
-                f"{args.vehicle}{', video ' + args.video if args.video else ''})",
-                flush=True,
-            )
+                f"{args.vehicle}{', video ' + args.video if args.video else ''})\n")
+            sys.stdout.flush()
             server.run(sockets=[sock])  # returns on SIGINT / SIGTERM
         finally:
             if video is not None:
