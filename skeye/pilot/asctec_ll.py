@@ -66,6 +66,10 @@ GPS_EVERY = 4  # cycles: 5 Hz at 20 Hz, the receiver's rate
 SLOW_EVERY = 20  # cycles: 1 Hz
 SLOW = int(PollMask.RC_DATA | PollMask.IMU_RAWDATA | PollMask.CONTROLLER_OUTPUT)
 FIRST_POLL = int(EVERY_CYCLE | PollMask.GPS_DATA_ADVANCED | SLOW)
+# The first poll is asked this often (each with the answer deadline) before the board counts as
+# silent: a board just powered up, or one emulated on a loaded host, may miss the first; in
+# flight a missed answer is counted towards silent_after instead.
+FIRST_CONTACT_TRIES = 3
 SIM_TIME = re.compile(r"sim time (-?[0-9.]+) s")
 REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
 
@@ -188,7 +192,16 @@ class AscTecLLAirframe:
         self._worker: Worker | None = None
         if self.lockstep:
             self._granted_s = self._grant(0.0)  # a grant already passed: answered with the time
-        self._poll(FIRST_POLL, self._granted_s if self.lockstep else clock())
+        for attempt in range(1, FIRST_CONTACT_TRIES + 1):
+            try:
+                self._poll(FIRST_POLL, self._granted_s if self.lockstep else clock())
+                break
+            except LinkTimeout:
+                if attempt == FIRST_CONTACT_TRIES:
+                    raise
+                log.info("the LL board did not answer the first poll within %g s: asking "
+                         "again (%d of %d)", self.settings.timeout_s, attempt + 1,
+                         FIRST_CONTACT_TRIES)
         if self.estimate.serial_switch is False:
             log.warning("the R/C's serial switch is off: the LL board ignores the pilot's "
                         "sticks until the safety pilot switches it on")
