@@ -290,8 +290,13 @@ def test_here_fills_the_position_estimate_and_says_so(page: Any, stack: Stack) -
     origin = GeoOrigin(geo.latitude_deg, geo.longitude_deg, 0.0)
     n, e, _ = origin.to_ned(lat, lon, 0.0)
     truth = stack.pilot.ground_truth()
-    # the estimate is the INS position plus the mean GPS offset: within the fixes' spread
-    assert math.hypot(n - truth[0], e - truth[1]) < 6.0, (n, e, truth)
+    # The estimate is the INS position plus the mean GPS offset, so it is as far from the truth
+    # as the receiver's error: within 3 times the accuracy the vehicle states for it (its
+    # horizontal DRMS, the receiver's 2.5 m CEP included; a 2-D normal error exceeds 3 DRMS
+    # with probability e^-9). A fixed 6 m was exceeded once (6.04 m) with both cores busy.
+    sigma_h_m = page.evaluate("S.telemetry.nav.sigma_h_m")
+    assert sigma_h_m, "the vehicle states no accuracy for its estimate"
+    assert math.hypot(n - truth[0], e - truth[1]) < 3.0 * sigma_h_m, (n, e, truth, sigma_h_m)
 
 
 def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
