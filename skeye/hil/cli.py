@@ -44,6 +44,17 @@ class LLBoardSpec:
     rate: float | None = None  # lockstep: the board drives the clock at this pace
 
 
+def _up_to(value: str, top: float, refusal: str) -> float:
+    """``value`` as a number above 0 and at most ``top``; else ConfigError(refusal, got ...)."""
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.nan
+    if not (math.isfinite(number) and 0 < number <= top):
+        raise ConfigError(f"{refusal}, got {value!r}")
+    return number
+
+
 def parse_ll_board(text: str) -> LLBoardSpec:
     """Parse ``NAME=pty|tcp:PORT|serial:DEVICE[,key=value...]``.
 
@@ -88,23 +99,11 @@ def parse_ll_board(text: str) -> LLBoardSpec:
                                   "a positive number")
             fields["baud"] = int(value)
         elif key == "rate":
-            try:
-                rate = float(value)
-            except ValueError:
-                rate = math.nan
-            if not (math.isfinite(rate) and 0 < rate <= 1000):
-                raise ConfigError(f"--ll-board {text!r}: rate must be 0..1000 sim seconds per "
-                                  f"wall second, got {value!r}")
-            fields["rate"] = rate
+            fields["rate"] = _up_to(value, 1000.0, f"--ll-board {text!r}: rate must be 0..1000 "
+                                                   "sim seconds per wall second")
         elif key == "serial_timeout":
-            try:
-                seconds = float(value)
-            except ValueError:
-                seconds = math.nan
-            if not (math.isfinite(seconds) and 0 < seconds <= 60):
-                raise ConfigError(f"--ll-board {text!r}: serial_timeout must be 0..60 s, "
-                                  f"got {value!r}")
-            fields["serial_timeout_s"] = seconds
+            fields["serial_timeout_s"] = _up_to(
+                value, 60.0, f"--ll-board {text!r}: serial_timeout must be 0..60 s")
         else:
             raise ConfigError(f"--ll-board {text!r}: unknown option {key!r} (robot, start, "
                               "baud, serial_timeout, rate)")
