@@ -426,8 +426,11 @@ def test_page_survives_pilot_restart(page: Any, stack: Stack) -> None:
     wait_js(page, "document.querySelector('#link-state').dataset.state !== 'connected'",
             15, "the page to show the link down")
     stack.restart_pilot(down_s=0.5)
+    # connected, and its telemetry there (the link comes up before the new pilot's first
+    # NAV_STATUS, and the page shows none from the pilot that went away)
     wait_js(page, f"Number(document.querySelector('#lq-connects').dataset.value) > {connects}"
-                  " && document.querySelector('#link-state').dataset.state === 'connected'",
+                  " && document.querySelector('#link-state').dataset.state === 'connected'"
+                  " && S.telemetry && S.telemetry.nav",
             20, "the page to reconnect to the restarted pilot")
     t0 = page.evaluate("S.telemetry.nav.time_s")
     wait_js(page, f"S.telemetry.nav.time_s > {t0}", 10, "telemetry from the new pilot")
