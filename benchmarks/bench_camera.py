@@ -6,7 +6,10 @@ spawns a Hummingbird hovering over the pad (downward camera 800x600, 30 fps), an
 camera profile (``--camera-profile ideal`` and ``webcam``, docs/camera.md). Latency is receipt
 time minus the wall time of the frame's sim time, its capture instant (the sim-to-wall offset
 comes from PING answers; in real time the clock runs at 1x), so it counts rendering, the lens
-and sensor model, the webcam's capture latency, encoding and transfer. Also prints the
+and sensor model, the webcam's capture latency, encoding and transfer. A client's frame rate
+is its steady rate, the frames after its first one over the time from the first to the last
+(``--seconds`` of them); the wait for the first frame, which includes starting the renderer when
+no client watched before, is printed beside it. Also prints the
 simulator's real-time factor seen by the clients, the OpenGL renderer the simulator reports,
 and the webcam profile's frame rate as a ratio to the ideal one measured in the same run (the
 machine may be shared: the load average is printed before and after).
@@ -77,17 +80,17 @@ def clock_offset(conn: Connection) -> float:
 
 
 def stream(port: int, fmt: str, fps: float, seconds: float, offset: float,
-           out: list[tuple[int, float]]) -> None:
+           out: list[tuple[int, float, float]]) -> None:
+    """Frames for ``seconds`` after the first one: (frame number, latency s, arrival time s)."""
     with ImageClient("127.0.0.1", port, timeout_s=10) as img:
         img.select_camera("R1/Down")
         img.set_format(fmt, quality=85)
         img.set_meta(True)
-        start = time.time()
         for frame in img.stream(fps):
             now = time.time()
             assert frame.meta is not None
-            out.append((frame.meta.frame_number, now - (frame.meta.sim_time_s + offset)))
-            if now - start > seconds:
+            out.append((frame.meta.frame_number, now - (frame.meta.sim_time_s + offset), now))
+            if now - out[0][2] >= seconds:
                 break
 
 
@@ -108,7 +111,7 @@ def run_profile(profile: str, args: argparse.Namespace) -> dict[str, float]:
               "requested; simulator in real time")
         for fmt in args.formats:
             for n in args.clients:
-                results: list[list[tuple[int, float]]] = [[] for _ in range(n)]
+                results: list[list[tuple[int, float, float]]] = [[] for _ in range(n)]
                 t0 = time.time()
                 s0 = conn.ping()
                 threads = [threading.Thread(target=stream, args=(image_port, fmt, args.fps,
@@ -119,11 +122,16 @@ def run_profile(profile: str, args: argparse.Namespace) -> dict[str, float]:
                 for t in threads:
                     t.join()
                 rtf = (conn.ping() - s0) / (time.time() - t0)
-                rates = [len(r) / args.seconds for r in results]
+                # The rate counts the intervals between the first frame and the last (the
+                # pipeline's steady rate); the wait for the first frame, which includes the
+                # renderer's start when nobody was watching before, is printed beside it.
+                rates = [(len(r) - 1) / (r[-1][2] - r[0][2]) for r in results]
+                first_ms = max(r[0][2] for r in results) - t0
                 lat = [x[1] for r in results for x in r]
                 print(f"  {fmt.upper():4s} q85 x{n}: {min(rates):5.1f}-{max(rates):5.1f} "
                       f"frames/s per client, latency p50 {pct(lat, 0.5):5.1f} ms p99 "
-                      f"{pct(lat, 0.99):6.1f} ms, sim real-time factor {rtf:.2f}", flush=True)
+                      f"{pct(lat, 0.99):6.1f} ms, first frame after {first_ms * 1000:.0f} ms, "
+                      f"sim real-time factor {rtf:.2f}", flush=True)
                 if fmt == args.formats[0] and n == args.clients[0]:
                     summary = {"fps": min(rates), "p50_ms": pct(lat, 0.5)}
     return summary
