@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import SkeyeError
-from skeye.pilot.airframe import GpsFix, Snapshot
+from skeye.pilot.airframe import BaroClimb, GpsFix, Snapshot
 from skeye.robots.config import RobotConfig
 from skeye.sim.engine import Simulation
 from skeye.sim.image_server import FrameBuffer
@@ -63,8 +63,7 @@ class BoardView:
         self.frame: CameraFrame | None = None
         self.stopped: str | None = None
         self._mass_kg = config.airframe.mass_kg
-        self._last_baro: tuple[float, float] | None = None
-        self._baro_climb_m_s = 0.0
+        self._baro_climb = BaroClimb()
 
     def sink(self, events: list[Event]) -> None:
         names, latest = self.names, self.latest
@@ -101,12 +100,7 @@ class BoardView:
         baro, gps, battery, motors = get("Barometer"), get("GPS"), get("Battery"), get("Motors")
         status = self.status
         if baro is not None:
-            if self._last_baro is not None and baro.time_s > self._last_baro[0] + 0.05:
-                t0, a0 = self._last_baro
-                self._baro_climb_m_s = (baro.altitude_m - a0) / (baro.time_s - t0)
-                self._last_baro = (baro.time_s, baro.altitude_m)
-            elif self._last_baro is None:
-                self._last_baro = (baro.time_s, baro.altitude_m)
+            self._baro_climb.update(baro.time_s, baro.altitude_m)
         fix = None
         if gps is not None:
             if gps.fix > 0:
@@ -134,7 +128,7 @@ class BoardView:
             mag_heading_rad=wrap_pi(compass.magnetic_angle_rad) if compass else rpy[2],
             baro_pressure_pa=baro.pressure_pa if baro else 101325.0,
             baro_altitude_m=baro.altitude_m if baro else -pose.location_ned_m[2],
-            baro_climb_m_s=self._baro_climb_m_s,
+            baro_climb_m_s=self._baro_climb.climb_m_s,
             gps=fix,
             battery_v=(battery.voltage_v if battery
                        else (status.voltage_v if status and status.voltage_v else 0.0)),

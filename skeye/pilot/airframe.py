@@ -79,6 +79,28 @@ class Snapshot:
         return -self.pos_ned_m[2]
 
 
+class BaroClimb:
+    """The climb rate a backend derives from its pressure altitudes for ``Snapshot``: the
+    altitude change over the time between readings at least 50 ms apart (the newest rate is
+    kept in between)."""
+
+    MIN_INTERVAL_S = 0.05
+
+    def __init__(self) -> None:
+        self._last: tuple[float, float] | None = None  # (time s, altitude m)
+        self.climb_m_s = 0.0
+
+    def update(self, time_s: float, altitude_m: float) -> float:
+        """Take one pressure-altitude reading; the climb rate, m/s (up positive)."""
+        if self._last is None:
+            self._last = (time_s, altitude_m)
+        elif time_s > self._last[0] + self.MIN_INTERVAL_S:
+            t0, a0 = self._last
+            self.climb_m_s = (altitude_m - a0) / (time_s - t0)
+            self._last = (time_s, altitude_m)
+        return self.climb_m_s
+
+
 class Airframe(Protocol):
     """Motion commands and sensor access of one vehicle. Commands return at once."""
 

@@ -41,7 +41,13 @@ from dataclasses import replace
 from skeye.control.connection import Connection, connect
 from skeye.control.robots import Robot
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
-from skeye.pilot.airframe import AirframeOptions, GpsFix, Snapshot, VehicleLimits
+from skeye.pilot.airframe import (
+    AirframeOptions,
+    BaroClimb,
+    GpsFix,
+    Snapshot,
+    VehicleLimits,
+)
 from skeye.wire.sim_messages import Drive
 
 Attitude = tuple[float, float, float, float, bool]  # roll, pitch, yaw rate, thrust, height mode
@@ -104,8 +110,7 @@ class SimAirframe:
         self._max_thrust_n: float | None = None
         if mass is not None:
             self._max_thrust_n = 2.0 * mass * 9.80665  # fallback until Motors reports
-        self._last_baro: tuple[float, float] | None = None
-        self._baro_climb_m_s = 0.0
+        self._baro_climb = BaroClimb()
 
     # -- crashes and re-attaching ---------------------------------------------------------
     def reset(self) -> str:
@@ -217,12 +222,7 @@ class SimAirframe:
         status = r.status.latest
         motors = r.motors.latest if ("motors", "motors") in r.sensors else None
         if baro is not None:
-            if self._last_baro is not None and baro.time_s > self._last_baro[0] + 0.05:
-                t0, a0 = self._last_baro
-                self._baro_climb_m_s = (baro.altitude_m - a0) / (baro.time_s - t0)
-                self._last_baro = (baro.time_s, baro.altitude_m)
-            elif self._last_baro is None:
-                self._last_baro = (baro.time_s, baro.altitude_m)
+            self._baro_climb.update(baro.time_s, baro.altitude_m)
         fix = None
         if gps is not None:
             fix = GpsFix(
@@ -249,7 +249,7 @@ class SimAirframe:
             mag_heading_rad=compass.heading_rad if compass else pose.rpy_rad[2],
             baro_pressure_pa=baro.pressure_pa if baro else 101325.0,
             baro_altitude_m=baro.altitude_m if baro else -pose.position_ned_m[2],
-            baro_climb_m_s=self._baro_climb_m_s,
+            baro_climb_m_s=self._baro_climb.climb_m_s,
             gps=fix,
             battery_v=(
                 battery.voltage_v

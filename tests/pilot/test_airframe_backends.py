@@ -193,3 +193,15 @@ def test_a_new_scheme_is_one_registration():
         del airframe_module.BACKENDS["test-only"]
     with pytest.raises(LocalProtocolError):
         register_airframe("Bad://", opener)
+
+
+def test_baro_climb_is_the_altitude_change_over_readings_50_ms_apart():
+    from skeye.pilot.airframe import BaroClimb
+
+    climb = BaroClimb()
+    assert climb.update(10.0, 5.0) == 0.0  # one reading: no rate yet
+    assert climb.update(10.04, 9.0) == 0.0  # under 50 ms later: not used
+    assert climb.update(10.1, 5.2) == pytest.approx(2.0)  # 0.2 m in 0.1 s
+    assert climb.update(10.12, 0.0) == pytest.approx(2.0)  # kept in between
+    assert climb.update(10.3, 4.8) == pytest.approx(-2.0)
+    assert climb.climb_m_s == pytest.approx(-2.0)
