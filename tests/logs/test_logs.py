@@ -111,3 +111,20 @@ def test_the_command_prints_real_and_simulated_side_by_side(
     # the simulated Hummingbird's IMU at the log's rate carries its stated vibration
     assert 0.8 < sim["accel_band_rms"] < 1.3 and 0.05 < sim["gyro_band_rms"] < 0.08
     assert main(["logs", str(tmp_path / "nothing")]) == 2
+
+
+def test_a_log_without_ground_truth_gets_no_tilt_error(
+        flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A real vehicle's log has no truth: its replay has nothing to be judged against (a level
+    # vehicle is the simulated hover's truth, not a flying one's), so its column shows none.
+    import json
+    import shutil
+
+    folder = make_logs.write_euroc(tmp_path / "MH_nt", flight)
+    shutil.rmtree(folder / "mav0" / "state_groundtruth_estimate0")
+    assert main(["logs", str(folder), "--json", str(tmp_path / "f.json")]) == 0
+    out = capsys.readouterr().out
+    assert "| board estimator tilt error, RMS (deg) | - |" in out
+    assert "The log has no ground truth: no tilt error for it." in out
+    result = json.loads((tmp_path / "f.json").read_text())
+    assert "tilt_rms_deg" not in result["real"] and "tilt_rms_deg" in result["simulated"]
