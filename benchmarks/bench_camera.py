@@ -125,12 +125,15 @@ def run_profile(profile: str, args: argparse.Namespace) -> dict[str, float]:
                 # The rate counts the intervals between the first frame and the last (the
                 # pipeline's steady rate); the wait for the first frame, which includes the
                 # renderer's start when nobody was watching before, is printed beside it.
+                if any(len(r) < 2 for r in results):
+                    raise SystemExit(f"bench_camera: a client got fewer than 2 frames "
+                                     f"({[len(r) for r in results]}): no rate to measure")
                 rates = [(len(r) - 1) / (r[-1][2] - r[0][2]) for r in results]
-                first_ms = max(r[0][2] for r in results) - t0
+                first_s = max(r[0][2] for r in results) - t0
                 lat = [x[1] for r in results for x in r]
                 print(f"  {fmt.upper():4s} q85 x{n}: {min(rates):5.1f}-{max(rates):5.1f} "
                       f"frames/s per client, latency p50 {pct(lat, 0.5):5.1f} ms p99 "
-                      f"{pct(lat, 0.99):6.1f} ms, first frame after {first_ms * 1000:.0f} ms, "
+                      f"{pct(lat, 0.99):6.1f} ms, first frame after {first_s * 1000:.0f} ms, "
                       f"sim real-time factor {rtf:.2f}", flush=True)
                 if fmt == args.formats[0] and n == args.clients[0]:
                     summary = {"fps": min(rates), "p50_ms": pct(lat, 0.5)}
