@@ -92,14 +92,27 @@ def test_the_probe_wind_line_is_a_crash_and_reset_brings_the_vehicle_back(tmp_pa
         assert vision._worker is not None and vision._worker.alive
 
         wind.set_wind("none")
+        robot = pilot.airframe.robot  # type: ignore[attr-defined]
         vehicle.reset()
         vehicle.wait_state(NavState.LANDED, timeout_s=60)
+        # Back on the pad (its start pose, Pad1 at the origin), not where the wreck lay: the
+        # simulator's truth, once its first reading after the respawn has arrived.
+        wait_until(lambda: math.hypot(*robot.position()[:2]) < 0.05, 60,
+                   "the truth at the start pose after the reset")
         wait_until(lambda: vehicle.health and vehicle.health.status is HealthStatus.OK, 60,
                    "HEALTH OK after the reset")
         vehicle.take_off(1.0)
         vehicle.wait_state(NavState.HOLDING, timeout_s=120)
+        # It flies again, on its own GPS-aided estimate: its hold is off the pad by as much as
+        # that estimate is, within 3x the accuracy it states (the receiver's 2.5 m CEP
+        # included, docs/physics.md). A fixed 1 m was exceeded with both cores busy (1.24 m
+        # estimate, 1.33 m truth): the more sim time passes on the pad before the take-off,
+        # the further the estimate has followed the receiver's error.
         nav = vehicle.wait_for(PD.NAV_STATUS, timeout_s=60)
-        assert math.hypot(nav.x, nav.y) < 1000  # back over the pad (mm), not where it crashed
+        assert nav.sigma_h > 0, "the vehicle states no accuracy for its estimate"
+        north_m, east_m, up_m = robot.position()
+        assert up_m > 0.5 and math.hypot(north_m, east_m) < 3.0 * nav.sigma_h / 1000.0, \
+            (north_m, east_m, up_m, nav.sigma_h)
 
 
 def test_a_vehicle_upside_down_is_pad_not_seen_not_a_dead_vision(tmp_path) -> None:
