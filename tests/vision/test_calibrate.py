@@ -12,6 +12,7 @@ calibrated end to end in ``tests/validate/test_validate.py``
 from __future__ import annotations
 
 import math
+import time
 import tomllib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -40,6 +41,8 @@ ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 CAMERA_FRD = np.array([0.0, 0.0, 0.035])
 K = intrinsics(W, H, FOV_H_RAD)
 K_WIDE, W_WIDE, H_WIDE, FOV_WIDE = wide_camera(K, W, H, 1.5)
+LEAVE_TIMEOUT_S = 60.0
+"""How long a closed connection's robot may take to leave the world (a loaded machine)."""
 
 
 def _poses() -> list[tuple[float, float, float, float, float, float]]:
@@ -71,8 +74,9 @@ def wide_robot(tmp_path: Path) -> Path:
 
 
 @contextmanager
-def checkerboard_sim(robot_dir: Path) -> Iterator[tuple[int, int]]:
-    """The checkerboard world in lockstep, with its image server: (control port, image port)."""
+def checkerboard_sim(robot_dir: Path) -> Iterator[tuple[Simulation, int, int]]:
+    """The checkerboard world in lockstep, with its image server: (simulation, control port,
+    image port)."""
     sim = Simulation(load_world("checkerboard"), seed=1, robot_dirs=(robot_dir,),
                      offscreen_size=(W_WIDE, H_WIDE))
     buffer = FrameBuffer()
@@ -82,12 +86,19 @@ def checkerboard_sim(robot_dir: Path) -> Iterator[tuple[int, int]]:
         ControlServer(runner, port=0) as control,
         ImageServer(buffer, port=0) as images,
     ):
-        yield control.port, images.port
+        yield sim, control.port, images.port
 
 
-def fetch_frame(control_port: int, image_port: int, name: str,
+def fetch_frame(sim: Simulation, control_port: int, image_port: int, name: str,
                 pose: tuple[float, float, float, float, float, float]) -> np.ndarray:
-    """Spawn a wide-camera robot with its camera at the pose, step once, fetch its frame."""
+    """Spawn a wide-camera robot with its camera at the pose, step once, fetch its frame, and
+    wait until the robot has left the world.
+
+    The robot leaves when the server sees its connection close, on the server's thread. The
+    tilted poses share one place, so a robot still there would stand in the next one's view (on
+    a loaded machine it did: one frame showed the previous robot's body and the calibration
+    read fx 4272 px for 521).
+    """
     height, north, east, roll, pitch, yaw = pose
     rot = frames.quat_to_matrix(frames.euler_to_quat(roll, pitch, yaw))
     off = rot @ CAMERA_FRD
@@ -108,14 +119,18 @@ def fetch_frame(control_port: int, image_port: int, name: str,
             bgr = frame_image(img.get_frame())
     finally:
         c.close()  # the robot leaves the world with its connection
+    deadline = time.monotonic() + LEAVE_TIMEOUT_S
+    while name in sim.robots:
+        assert time.monotonic() < deadline, f"{name} still in the world {LEAVE_TIMEOUT_S} s on"
+        time.sleep(0.01)
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
 
 
 @pytest.fixture(scope="module")
 def ideal_frames(tmp_path_factory: pytest.TempPathFactory) -> list[np.ndarray]:
     robot_dir = wide_robot(tmp_path_factory.mktemp("robots"))
-    with checkerboard_sim(robot_dir) as (control_port, image_port):
-        return [fetch_frame(control_port, image_port, f"C{i}", pose)
+    with checkerboard_sim(robot_dir) as (sim, control_port, image_port):
+        return [fetch_frame(sim, control_port, image_port, f"C{i}", pose)
                 for i, pose in enumerate(_poses())]
 
 
