@@ -271,10 +271,18 @@ def test_the_camera_unplugged_mid_flight_holds_the_pad_mode_still(caplog):
 def test_a_realtime_flight_through_the_ll_board():
     """A real board runs in real time: the pilot's LL cycle is its own 20 Hz worker and the
     snapshot's clock the onboard computer's; take off, hold, land (states and heights from the
-    board's own reports, waits on the vehicle's answers)."""
+    board's own reports, waits on the vehicle's answers).
+
+    The board's serial timeout is 5 s here, not its 0.5 s: in real time a loaded host can hold
+    the pilot's worker (one Python process runs the simulator, the board and the pilot) for
+    longer than the simulator's own allowed lag (0.5 s, then it slips), and with both cores
+    busy the 0.5 s timeout started four emergency procedures in one run (the flight still
+    landed). The timeout and its procedure are tested in lockstep above, where time is the
+    simulator's; this test is the real-time flight."""
     with ExitStack() as stack:
         server = stack.enter_context(running_sim(mode="realtime", seed=8, estimator="truth"))
-        board = start_ll_board(stack, parse_ll_board("R1=pty"), f"127.0.0.1:{server.port}")
+        board = start_ll_board(stack, parse_ll_board("R1=pty,serial_timeout=5"),
+                               f"127.0.0.1:{server.port}")
         airframe = open_airframe(board.line.client_uri(), AirframeOptions())
         stack.callback(airframe.close)
         assert not airframe.lockstep and not airframe.clock_is_sim
