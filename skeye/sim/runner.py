@@ -30,6 +30,10 @@ from skeye.workers import Worker, WorkerFailed
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
+MAX_LAG_S = 0.5
+"""In realtime, how far the sim time may fall behind the wall clock before the clock slips (it
+then resumes 20 ms behind, and ``behind_events`` counts the slip) rather than run a burst."""
+
 
 class SimulationRunner:
     """Owns the engine thread; the only way other threads touch a :class:`Simulation`."""
@@ -151,7 +155,7 @@ class SimulationRunner:
                     break
                 self._run_task(item)
                 continue
-            if due * dt > 0.5:
+            if due * dt > MAX_LAG_S:
                 # Too far behind: slip the clock rather than run a burst.
                 self.behind_events += 1
                 if self.behind_events == 1 or self.behind_events % 100 == 0:

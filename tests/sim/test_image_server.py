@@ -537,8 +537,8 @@ def test_frame_buffer_order_latest_and_wait(buffer: FrameBuffer) -> None:
     remover = threading.Timer(0.1, buffer.remove_camera, args=("R2/Down",))
     remover.start()
     start = time.monotonic()
-    assert buffer.wait_newer("R2/Down", 0, 2.0) is None
-    assert time.monotonic() - start < 1.0  # woken by the removal, not the timeout
+    assert buffer.wait_newer("R2/Down", 0, 30.0) is None
+    assert time.monotonic() - start < 15.0  # woken by the removal, not the 30 s timeout
     remover.join()
     assert buffer.cameras() == ["R1/Down"]
 

@@ -13,6 +13,7 @@ import pytest
 
 from skeye.errors import ConfigError
 from skeye.robots.config import load_robot_config, parse_robot_config
+from skeye.sim.runner import MAX_LAG_S
 from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
 
 BAD_LINES = [
@@ -123,14 +124,36 @@ def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connect
 
 
 def test_realtime_mode_follows_the_wall_clock():
+    """Each of two PINGs 3 s apart: its sim time follows the wall clock since the runner
+    started, never ahead of it, and behind by at most the runner's allowed lag unless its clock
+    slipped (a loaded machine may cause that; the runner counts it and moves its start,
+    ``wall_start``)."""
     with running_sim(mode="realtime") as server:
+        runner = server.runner
         c = LineClient(server.port)
         nfo = c.expect("NFO")
         assert nfo.get("Mode") == "realtime"
-        t0 = float(c.answer("PING {Id a}", "PING").require("Time"))
-        time.sleep(1.0)
-        t1 = float(c.answer("PING {Id b}", "PING").require("Time"))
-        assert 0.8 < t1 - t0 < 1.3
+        dt = runner.sim.dt
+        chunk_s = 0.01 + dt  # the engine steps up to 10 ms at a time
+        times = []
+        for ping in ("a", "b"):
+            slips = runner.behind_events
+            sent = time.monotonic()
+            t = float(c.answer(f"PING {{Id {ping}}}", "PING").require("Time"))
+            answered = time.monotonic()
+            times.append(t)
+            # Never ahead (its start only moves later, on a slip).
+            assert t <= runner.sim_start_s + (answered - runner.wall_start) + dt
+            # Once the engine has stepped twice more, it has checked its lag since the answer
+            # (a starved engine thread counts the slip then).
+            deadline = time.monotonic() + 30.0
+            while runner.sim.time_s < t + 2 * chunk_s:
+                assert time.monotonic() < deadline, "the realtime clock stopped"
+                time.sleep(0.005)
+            if runner.behind_events == slips:
+                assert t >= runner.sim_start_s + (sent - runner.wall_start) - MAX_LAG_S - chunk_s
+            time.sleep(3.0)  # long beside the allowed lag: a clock at 0.8x falls out of bounds
+        assert times[1] > times[0]
         c.close()
 
 
