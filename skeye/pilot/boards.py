@@ -701,12 +701,13 @@ class OnboardBoards:
         """The vehicle below stopped answering (simulator gone): failsafe as on link loss.
 
         In the air that is FAILSAFE (hold, then land after the land timeout: the commands go
-        to an airframe that may refuse them, which the loop tolerates); on the ground, nothing.
-        The health is LOST, with ``reason``.
+        to an airframe that may refuse them, which the loop tolerates), from a landing too: the
+        pilot can no longer see the touchdown that would end it (a landing lost to its LL board
+        stayed LANDING for good); on the ground, nothing. The health is LOST, with ``reason``.
         """
         self._set_health(HealthStatus.LOST, reason or "the vehicle stopped answering")
-        if self.state in _AIRBORNE:
-            self._fire(FlightEvent.LINK_LOST)
+        if self.state in _AIRBORNE or self.state is NavState.LANDING:
+            self._fire(FlightEvent.VEHICLE_LOST)
             self._end_motion()
             self._failsafe_since_s = now_s
 

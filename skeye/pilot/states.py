@@ -41,6 +41,7 @@ class FlightEvent(Enum):
     STICKS = "manual stick input"  # CTRL_INPUT with axis bits while the motors run
     MOTORS_OFF = "motors stopped on the ground"
     LINK_LOST = "ground link lost"
+    VEHICLE_LOST = "the vehicle below stopped answering"  # the pilot can no longer fly it
     LAND_TIMEOUT = "no ground link for the land timeout"
     CRASH = "the vehicle crashed"  # tumbled, a hard impact, removed by the simulator
     RESET = "reset"  # RESET: the vehicle back at home, still
@@ -94,6 +95,12 @@ TRANSITIONS: dict[tuple[NavState, FlightEvent], NavState] = {
     # The sticks take over from every state (the rule in the module docstring).
     **{(state, E.STICKS): S.MANUAL for state in (
         S.LANDED, S.TAKING_OFF, S.FLYING, S.HOLDING, S.LANDING, S.FAILSAFE, S.MANUAL)},
+    # A vehicle lost in the air is in its own failsafe's hands, a landing included: the pilot
+    # can no longer see it touch down (on the ground nothing changes).
+    **{(state, E.VEHICLE_LOST): S.FAILSAFE for state in (
+        S.TAKING_OFF, S.FLYING, S.HOLDING, S.LANDING, S.FAILSAFE, S.MANUAL)},
+    (S.LANDED, E.VEHICLE_LOST): S.LANDED,
+    (S.CRASHED, E.VEHICLE_LOST): S.CRASHED,
     # A crash ends whatever the vehicle was doing; only RESET (or a new vehicle) ends a crash.
     **{(state, E.CRASH): S.CRASHED for state in NavState},
     (S.CRASHED, E.RESET): S.LANDED,

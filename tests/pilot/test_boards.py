@@ -247,6 +247,33 @@ def test_a_packet_during_failsafe_stops_the_land_countdown():
     assert boards.state is NavState.HOLDING
 
 
+@pytest.mark.parametrize("landing", [False, True])
+def test_a_vehicle_lost_in_the_air_is_failsafe_a_landing_too(landing: bool) -> None:
+    """The vehicle below stops answering in the air: FAILSAFE, HEALTH LOST, and the land
+    timeout's attempt after it. Lost during a landing it is FAILSAFE too, not a LANDING that no
+    touchdown will ever end (with an LL board that stopped answering near the ground, the pilot
+    said LANDING at 0 mm for good). A ground link lost during a landing keeps landing."""
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    airborne(boards, air, now_s=0.0)
+    if landing:
+        assert result(send(boards, encode(Land()), now_s=0.5)).code == 0
+        assert boards.state is NavState.LANDING and air.calls[-1][0] == "land"
+    boards.vehicle_lost(1.0, "LL board silent: no answer")
+    assert boards.state is NavState.FAILSAFE
+    assert boards.health.status.name == "LOST" and "LL board silent" in boards.health.reason
+    boards.tick(20.9)
+    assert boards.state is NavState.FAILSAFE
+    boards.tick(21.0)  # the land timeout: the pilot tries to land it
+    assert boards.state is NavState.LANDING and air.calls[-1][0] == "land"
+    assert TRANSITIONS[(NavState.LANDING, FlightEvent.LINK_LOST)] is NavState.LANDING
+
+
+def test_a_vehicle_lost_on_the_ground_stays_landed() -> None:
+    _, boards = make()
+    boards.vehicle_lost(1.0, "simulator lost")
+    assert boards.state is NavState.LANDED and boards.health.status.name == "LOST"
+
+
 def test_no_failsafe_on_the_ground():
     _, boards = make(link_timeout_s=0.5)
     boards.tick(100.0)
