@@ -12,7 +12,6 @@ calibrated end to end in ``tests/validate/test_validate.py``
 from __future__ import annotations
 
 import math
-import time
 import tomllib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -34,6 +33,7 @@ from skeye.sim.server import ControlServer
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.calibration import load_calibration
 from skeye.vision.camera import intrinsics
+from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient
 from tests.vision.helpers import FOV_H_RAD, H, W, distort_image, wide_camera
 
@@ -119,10 +119,8 @@ def fetch_frame(sim: Simulation, control_port: int, image_port: int, name: str,
             bgr = frame_image(img.get_frame())
     finally:
         c.close()  # the robot leaves the world with its connection
-    deadline = time.monotonic() + LEAVE_TIMEOUT_S
-    while name in sim.robots:
-        assert time.monotonic() < deadline, f"{name} still in the world {LEAVE_TIMEOUT_S} s on"
-        time.sleep(0.01)
+    assert wait_for(lambda: name not in sim.robots, LEAVE_TIMEOUT_S), \
+        f"{name} still in the world {LEAVE_TIMEOUT_S} s on"
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
 
 
