@@ -357,8 +357,8 @@ def over_the_pad(page: Any, stack: Stack) -> None:
     long move into a sideways miss of about distance x sin(error); each nudge shrinks it. The
     estimate also follows the GPS receiver's wandering error while a nudge is flown (2.12 m
     sigma, 300 s correlation: about 0.17 m per square-root second, docs/physics.md), which
-    can leave a nudge 0.3-0.4 m off (4 nudges once ended 0.40 m off), so
-    the nudges go on for a span of vehicle time, not a count."""
+    can leave a nudge 0.3-0.4 m off (4 nudges once ended 0.40 m off), so the nudges go on for
+    a span of vehicle time, not a count."""
     start_s = sim_time(page)
     assert start_s is not None
     moves = 0

@@ -7,7 +7,9 @@ ships with skeye): what goes in is known, so each figure has an expected value.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -104,7 +106,6 @@ def test_the_command_prints_real_and_simulated_side_by_side(
     out = capsys.readouterr().out
     assert "| accelerometer vibration above 10 Hz (m/s^2) |" in out
     assert (tmp_path / "f.png").stat().st_size > 10_000
-    import json
 
     result = json.loads((tmp_path / "f.json").read_text())
     sim = result["simulated"]
@@ -117,9 +118,6 @@ def test_a_log_without_ground_truth_gets_no_tilt_error(
         flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # A real vehicle's log has no truth: its replay has nothing to be judged against (a level
     # vehicle is the simulated hover's truth, not a flying one's), so its column shows none.
-    import json
-    import shutil
-
     folder = make_logs.write_euroc(tmp_path / "MH_nt", flight)
     shutil.rmtree(folder / "mav0" / "state_groundtruth_estimate0")
     assert main(["logs", str(folder), "--json", str(tmp_path / "f.json")]) == 0
