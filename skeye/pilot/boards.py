@@ -106,6 +106,7 @@ from skeye.wire.packets import (
     Waypoint,
     WaypointGoto,
     WaypointProps,
+    arrived_intact,
 )
 
 log = logging.getLogger(__name__)
@@ -206,10 +207,16 @@ class OnboardBoards:
 
     # -- packets in ----------------------------------------------------------------------
     def handle(self, event: CommandEvent, now_s: float) -> list[Message]:
-        """Answer one parsed command or decode error."""
-        self._last_packet_s = now_s
-        if self.state is NavState.FAILSAFE:
-            self._failsafe_since_s = None  # ground control is back: stop the land countdown
+        """Answer one parsed command or decode error.
+
+        Only an event whose bytes arrived intact is a packet from ground control for the link
+        timeout (:func:`arrived_intact`): a stream of corrupt frames neither keeps the link up
+        nor stops the failsafe's land countdown.
+        """
+        if arrived_intact(event):
+            self._last_packet_s = now_s
+            if self.state is NavState.FAILSAFE:
+                self._failsafe_since_s = None  # ground control is back: stop the countdown
         if isinstance(event, CommandError):
             self.errors[event.code.name.lower()] += 1
             return [event.result()]

@@ -68,10 +68,10 @@ from skeye.pilot.outbox import Outbox
 from skeye.pilot.video_server import VideoServer
 from skeye.wire.packets import (
     CommandStreamParser,
-    FrameError,
     Message,
     Result,
     ResultCode,
+    arrived_intact,
     encode,
 )
 from skeye.workers import Worker
@@ -454,7 +454,7 @@ class PilotServer:
                     now = self.clock()
                     if not session.claimed and not self._claim(session):
                         return  # its first packet (or error) found another station served
-                    if not isinstance(event, FrameError):
+                    if arrived_intact(event):
                         session.packets += 1
                         session.last_packet_s = now
                     with self._lock:

@@ -154,6 +154,7 @@ __all__ = [
     "Waypoint",
     "WaypointGoto",
     "WaypointProps",
+    "arrived_intact",
     "encode",
 ]
 
@@ -201,6 +202,22 @@ class CommandError:
 
 VehicleEvent = Message | FrameError
 CommandEvent = Message | CommandError | FrameError
+
+
+def arrived_intact(event: CommandEvent) -> bool:
+    """Did this event's bytes pass their CRC or checksum (or have none to fail)?
+
+    Only such an event shows that a ground station is on the line: a frame whose CRC or
+    command checksum failed, and bytes too broken to name a command, may be line noise, so the
+    vehicle's link timeout does not count them as packets (docs/protocols/packets.md, "Flight
+    states"). A rejected command whose bytes arrived intact (a wrong length, a value out of
+    range, an unknown skeye PD) was sent by a station and counts.
+    """
+    if isinstance(event, FrameError):
+        return False
+    if isinstance(event, CommandError):
+        return event.code is not ResultCode.BAD_CHECKSUM
+    return True
 
 
 # --- encoding -------------------------------------------------------------------------------

@@ -247,6 +247,46 @@ def test_a_packet_during_failsafe_stops_the_land_countdown():
     assert boards.state is NavState.HOLDING
 
 
+def corrupt_frames() -> list[bytes]:
+    """What a broken radio delivers: a skeye HOLD with a wrong CRC, sticks with a wrong command
+    checksum, and bytes too broken to name a command."""
+    sticks = bytearray(encode(CtrlInput(0, 0, 0, 0, 0x0F)))
+    sticks[-2] ^= 0xFF  # the command checksum
+    return [skeye_frame(PD.HOLD, b"", crc=0xBEEF), bytes(sticks), b">*>zz"]
+
+
+def test_corrupt_frames_neither_keep_the_link_nor_stop_the_land_countdown():
+    """Only bytes that pass their CRC or checksum show a ground station is there: a radio that
+    delivers nothing but corrupt frames is a lost link (each still gets its error answer)."""
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    airborne(boards, air, now_s=0.0)
+    for i in range(20):
+        for data in corrupt_frames():
+            send(boards, data, now_s=0.1 * i)
+    assert boards.errors["bad_checksum"] == 40
+    boards.tick(2.0)
+    assert boards.state is NavState.FAILSAFE
+    for i in range(200):
+        for data in corrupt_frames():
+            send(boards, data, now_s=2.0 + 0.1 * i)
+    boards.tick(22.0)
+    assert boards.state is NavState.LANDING and air.calls[-1][0] == "land"
+
+
+def test_a_refused_command_that_arrived_intact_keeps_the_link():
+    """A frame that passed its CRC was sent by a station, even when its command is refused (a
+    value out of range, an unknown skeye PD): the link is up."""
+    air, boards = make(link_timeout_s=2.0)
+    airborne(boards, air, now_s=0.0)
+    assert result(send(boards, skeye_frame(0x8F, b""), now_s=1.5)).code is ResultCode.BAD_VALUE
+    bad_mode = skeye_frame(PD.PAD_MODE, bytes([7, 0, 0, 0, 0]))
+    assert result(send(boards, bad_mode, now_s=3.0)).code is ResultCode.BAD_VALUE
+    boards.tick(4.9)
+    assert boards.state is NavState.HOLDING
+    boards.tick(5.0)
+    assert boards.state is NavState.FAILSAFE
+
+
 @pytest.mark.parametrize("landing", [False, True])
 def test_a_vehicle_lost_in_the_air_is_failsafe_a_landing_too(landing: bool) -> None:
     """The vehicle below stops answering in the air: FAILSAFE, HEALTH LOST, and the land

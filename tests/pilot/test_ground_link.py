@@ -5,6 +5,7 @@ one client slot for good; the failsafe still applies to a flying vehicle."""
 from __future__ import annotations
 
 import socket
+import time
 from contextlib import ExitStack
 
 from skeye.control.connection import connect
@@ -15,7 +16,17 @@ from skeye.pilot.boards import BoardSettings
 from skeye.pilot.outbox import Outbox
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
-from skeye.wire.packets import PD, NavState, PollMask, SkeyeMask, Stream, TakeOff, encode
+from skeye.wire.packets import (
+    PD,
+    Hold,
+    NavState,
+    Poll,
+    PollMask,
+    SkeyeMask,
+    Stream,
+    TakeOff,
+    encode,
+)
 from tests.ground.conftest import wait_until
 from tests.pilot.fake_airframe import FakeAirframe
 from tests.sim.conftest import running_sim
@@ -152,3 +163,28 @@ def test_a_silent_station_is_replaced_by_the_next_one() -> None:
             with Vehicle.open(pilot.address) as station:
                 assert PD.LL_STATUS in station.poll(int(PollMask.LL_STATUS))
             assert pilot.replaced_silent == 1 and first_session.link.closed
+
+
+def test_a_station_sending_only_corrupt_frames_is_replaced_by_the_next_one() -> None:
+    """Frames that fail their CRC or checksum may be line noise: a station that polled once and
+    then sent nothing intact is silent for the link timeout, however many it sends, and a new
+    station takes the slot (each corrupt frame still gets its RESULT)."""
+    air = FakeAirframe()
+    hold = bytearray(encode(Hold()))
+    hold[-5] ^= 0xFF  # the CRC's low byte
+    with PilotServer(air, port=0, settings=BoardSettings(link_timeout_s=1.0)) as pilot:
+        with _raw_client(pilot.port) as noisy:
+            noisy.sendall(encode(Poll(int(PollMask.LL_STATUS))))
+            wait_until(lambda: pilot.session is not None and pilot.session.packets == 1, 30,
+                       "the first station served")
+            session = pilot.session
+            assert session is not None
+            deadline = time.monotonic() + 30.0
+            while not pilot._silent(session):
+                assert time.monotonic() < deadline, "corrupt frames kept the station's slot"
+                noisy.sendall(bytes(hold))
+                time.sleep(0.05)
+            assert session.packets == 1 and pilot.boards.errors["bad_checksum"] >= 1
+            with Vehicle.open(pilot.address) as station:
+                assert PD.LL_STATUS in station.poll(int(PollMask.LL_STATUS))
+            assert pilot.replaced_silent == 1
