@@ -150,17 +150,27 @@ def json_depth_exceeds(text: str | bytes, limit: int = MAX_JSON_DEPTH) -> bool:
 
 
 def parse_json_limited(text: str | bytes) -> Any:
-    """``json.loads`` that first refuses nesting deeper than ``MAX_JSON_DEPTH``.
+    """``json.loads`` that first refuses nesting deeper than ``MAX_JSON_DEPTH``, and then a
+    string holding a lone UTF-16 surrogate (``"\\ud800"``: JSON text can spell one, but it is no
+    Unicode character, so no answer echoing it could be encoded as UTF-8).
 
     Raises:
-        ValueError: not JSON, or nested too deeply (the message says which).
+        ValueError: not JSON, nested too deeply, or a lone surrogate (the message says which).
     """
     if json_depth_exceeds(text):
         raise InvalidArgument(f"is JSON nested deeper than {MAX_JSON_DEPTH} levels")
     try:
-        return json.loads(text)
+        value = json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InvalidArgument(f"is not valid JSON: {exc}") from None
+    try:
+        json.dumps(value, ensure_ascii=False).encode("utf-8")
+    except UnicodeEncodeError as exc:
+        lone = exc.object[exc.start : exc.end]
+        raise InvalidArgument(
+            f"holds a lone UTF-16 surrogate ({lone!a}), which is not a character"
+        ) from None
+    return value
 
 
 class CommandRate:

@@ -239,6 +239,34 @@ def test_websocket_binary_oversized_and_deep_messages_close_cleanly(
     assert not errors, [r.getMessage() for r in errors]
 
 
+def test_a_lone_surrogate_in_json_gets_a_clear_error(
+    ground: Ground, caplog: pytest.LogCaptureFixture
+) -> None:
+    """JSON text can spell a lone UTF-16 surrogate (\\ud800), which is no character: echoed in
+    an answer (an id, an unknown argument's name) it made the answer unencodable, a 500 for a
+    POST and, on the WebSocket, a task dying with an unlogged answer. It is refused as the
+    input's fault, naming it, and the page is served on."""
+    caplog.set_level(logging.WARNING)
+    headers = {**ground.web.auth, "Content-Type": "application/json"}
+    r = _post(ground, "take_off", b'{"height_m\\ud800": 1}', headers)
+    assert r.status_code == 400 and "lone UTF-16 surrogate ('\\ud800')" in r.json()["error"]
+    assert ground.commands_reached() == 0
+    with ws_connect(f"{ground.ws_url}?token={ground.web.token}", open_timeout=10) as ws:
+        assert json.loads(ws.recv(10))["type"] == "hello"
+        ws.send('{"type": "command", "id": "\\udfff", "name": "hold", "args": {}}')
+        ws.send('{"type": "command", "id": 8, "name": "hold", "args": {}}')
+        results = []
+        while len(results) < 2:
+            msg = json.loads(ws.recv(10))
+            if msg["type"] == "result":
+                results.append(msg)
+    assert results[0]["status"] == 400 and "lone UTF-16 surrogate" in results[0]["error"]
+    assert results[1]["id"] == 8 and results[1]["status"] == 503  # no vehicle: served on
+    assert ground.commands_reached() == 1  # the second only
+    errors = [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info]
+    assert not errors, [r.getMessage() for r in errors]
+
+
 class SlowAirframe(FakeAirframe):
     """Each move takes the pilot 20 ms to start, as a busy vehicle might."""
 
