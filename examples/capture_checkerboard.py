@@ -21,8 +21,10 @@ from skeye.validate.calibration import capture_board
 sim_address = os.environ.get("SKEYE_SIM", "127.0.0.1:3000")
 images = os.environ.get("SKEYE_IMAGES", "127.0.0.1:5003")
 out = Path(os.environ.get("SKEYE_BOARD_DIR", "."))
+out.mkdir(parents=True, exist_ok=True)
 
 for i, bgr in enumerate(capture_board(sim_address, images)):
     path = out / f"board{i:02d}.png"
-    cv2.imwrite(str(path), bgr)
+    if not cv2.imwrite(str(path), bgr):  # OpenCV says False, never raises, when it cannot write
+        raise SystemExit(f"capture_checkerboard: could not write {path}")
     print(f"saved {path}")
