@@ -21,7 +21,7 @@ start_height_m and pad_tolerance_m.
 
 from __future__ import annotations
 
-import math
+from collections.abc import Mapping
 from typing import Any, SupportsFloat
 
 import gymnasium
@@ -30,6 +30,7 @@ from gymnasium import spaces
 
 from skeye.errors import ConfigError
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
+from skeye.gym.options import number, numbers
 from skeye.gym.tasks import PAD_TOLERANCE_M, Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
@@ -86,7 +87,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         if render_mode is not None and (render_mode != "rgb_array" or self.settings.camera is None):
             raise ConfigError(f"render_mode {render_mode!r}: only 'rgb_array', with a camera")
         if episode_s is not None:
-            if not (math.isfinite(episode_s) and episode_s > 0):
+            if not number("episode_s", episode_s) > 0:
                 raise ConfigError(f"episode_s must be > 0, got {episode_s!r}")
             task.episode_s = float(episode_s)
         self.task = task
@@ -112,7 +113,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         super().reset(seed=seed)
         self._close_flight()
         episode = self.task.start(self.np_random, self.origin)
-        override_start(episode, options)
+        override_start(episode, options, target_fixed=self.task.target_fixed)
         flight = Flight(self.setup, int(self.np_random.integers(2**31)))
         try:
             vehicle = flight.spawn("R1", episode.start_ned_m, episode.yaw_rad)
@@ -169,22 +170,24 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         self.flight = self.vehicle = self.episode = None
 
 
-def override_start(episode: Episode, options: dict[str, Any] | None) -> None:
-    """``reset(options=...)``: a fixed start, heading or target instead of the drawn ones."""
-    if not options:
+def override_start(episode: Episode, options: Any, target_fixed: bool = False) -> None:
+    """``reset(options=...)``: a fixed start, heading or target instead of the drawn ones
+    (``target_fixed``: the task's target is not an option, as PadLanding's pad)."""
+    if options is None:
         return
-    unknown = sorted(set(options) - {"start_ned_m", "yaw_rad", "target_ned_m"})
+    if not isinstance(options, Mapping):
+        raise ConfigError(f"reset options must be a dict, got {options!r}")
+    known = ("start_ned_m", "yaw_rad") if target_fixed else (
+        "start_ned_m", "yaw_rad", "target_ned_m")
+    unknown = sorted(set(options) - set(known), key=str)
     if unknown:
-        raise ConfigError(f"unknown reset option(s) {unknown}; known: start_ned_m, yaw_rad, "
-                          "target_ned_m")
+        raise ConfigError(f"unknown reset option(s) {unknown}; known: {', '.join(known)}")
     for key in ("start_ned_m", "target_ned_m"):
         if key in options:
-            value = tuple(float(v) for v in options[key])
-            if len(value) != 3 or not all(math.isfinite(v) for v in value):
-                raise ConfigError(f"{key} must be three finite numbers (north, east, down m)")
+            value = numbers(key, options[key], 3, "three finite numbers (north, east, down m)")
             setattr(episode, key, value)
     if "yaw_rad" in options:
-        episode.yaw_rad = float(options["yaw_rad"])
+        episode.yaw_rad = number("yaw_rad", options["yaw_rad"])
 
 
 class HoverEnv(SkeyeEnv):
@@ -212,6 +215,6 @@ class PadLandingEnv(SkeyeEnv):
                  pad_tolerance_m: float = PAD_TOLERANCE_M,
                  **kwargs: Any) -> None:
         kwargs.setdefault("wind", "random_force")
-        task = PadLanding(observation, tuple(image_size), start_offset_m,  # type: ignore[arg-type]
-                          tuple(start_height_m), pad_tolerance_m)  # type: ignore[arg-type]
+        task = PadLanding(observation, image_size, start_offset_m, start_height_m,
+                          pad_tolerance_m)
         super().__init__(task, **kwargs)

@@ -22,13 +22,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 import numpy as np
 
 from skeye.errors import ConfigError
 from skeye.gym.board import BoardView, InProcessAirframe, InProcessCamera, VisionRobot, wrap_pi
+from skeye.gym.options import is_number, text
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad_track import Pose
 from skeye.pilot.policy import DetectOnlyVision, ObservedPad
@@ -36,8 +37,9 @@ from skeye.pilot.video_server import CameraFrame
 from skeye.pilot.vision import MAX_VISION_LATENCY_S
 from skeye.robots.camera_model import PROFILES
 from skeye.robots.config import CAMERA_TYPE, RobotConfig, load_robot_config, mount_camera_model
+from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim.cameras import CameraSystem
-from skeye.sim.engine import Simulation
+from skeye.sim.engine import TIMESTEP_RANGE_S, Simulation
 from skeye.sim.image_server import FrameBuffer
 from skeye.sim.sensors import SENSOR_CLASSES
 from skeye.sim.state import BodyState
@@ -71,10 +73,29 @@ class FlightSettings:
     timestep_s: float = 0.001  # the physics step (skeye sim --timestep)
 
     def __post_init__(self) -> None:
+        for name in ("robot", "world", "wind", "camera_name"):
+            text(name, getattr(self, name))
+        for name in ("estimator", "camera", "calibration"):
+            value = getattr(self, name)
+            if value is not None:
+                text(name, value)
+        if not all(isinstance(d, Path) for d in self.robot_dir):
+            raise ConfigError(f"robot_dir must be folders (paths), got {self.robot_dir!r}")
+        if self.estimator is not None and self.estimator not in ESTIMATOR_KINDS:
+            raise ConfigError(f"estimator must be one of {list(ESTIMATOR_KINDS)}, "
+                              f"got {self.estimator!r}")
+        if not isinstance(self.wind_params, Mapping) or not all(
+                isinstance(k, str) and is_number(v) for k, v in self.wind_params.items()):
+            raise ConfigError(f"wind_params must map parameter names to numbers (or be "
+                              f"\"k=v,k=v\"), got {self.wind_params!r}")
         for name in ("sensor_noise", "control_rate_hz", "vision_latency_s", "timestep_s"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
+            if not is_number(value):
                 raise ConfigError(f"{name} must be a number, got {value!r}")
+        low, high = TIMESTEP_RANGE_S
+        if not (math.isfinite(self.timestep_s) and low <= self.timestep_s <= high):
+            raise ConfigError(f"timestep_s must be in [{low:g}, {high:g}] s, "
+                              f"got {self.timestep_s!r}")
         if not (math.isfinite(self.sensor_noise) and 0.0 <= self.sensor_noise <= 100.0):
             raise ConfigError(f"sensor_noise must be a factor 0..100, got {self.sensor_noise!r}")
         if not (math.isfinite(self.control_rate_hz) and 0.5 <= self.control_rate_hz <= 1000.0):
@@ -102,14 +123,25 @@ class FlightSettings:
         if isinstance(kwargs.get("wind_params"), str):
             kwargs["wind_params"] = parse_params(kwargs["wind_params"])
         if "robot_dir" in kwargs:
-            dirs = kwargs["robot_dir"]
-            dirs = [dirs] if isinstance(dirs, str | Path) else list(dirs or ())
-            kwargs["robot_dir"] = tuple(Path(d) for d in dirs)
+            kwargs["robot_dir"] = folders(kwargs["robot_dir"])
+        if isinstance(kwargs.get("calibration"), PurePath):
+            kwargs["calibration"] = str(kwargs["calibration"])
         return cls(**kwargs)
 
     @property
     def period_steps(self) -> int:
         return round(1.0 / (self.control_rate_hz * self.timestep_s))
+
+
+def folders(value: Any) -> tuple[Path, ...]:
+    """``robot_dir``: one folder or several (strings or paths), none for None."""
+    if value is None:
+        return ()
+    items = [value] if isinstance(value, str | PurePath) else value
+    if not isinstance(items, list | tuple) or not all(isinstance(d, str | PurePath)
+                                                       for d in items):
+        raise ConfigError(f"robot_dir must be a folder or a list of folders, got {value!r}")
+    return tuple(Path(d) for d in items)
 
 
 def scale_noise(config: RobotConfig, factor: float) -> RobotConfig:

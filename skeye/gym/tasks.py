@@ -35,6 +35,7 @@ from gymnasium import spaces
 
 from skeye.errors import ConfigError
 from skeye.gym.flight import Vehicle
+from skeye.gym.options import number, numbers
 from skeye.pilot.airframe import Snapshot
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
@@ -86,12 +87,13 @@ def tilt_rad(truth: BodyState) -> float:
 
 class Task:
     """The base: see the module docstring. ``area_m``: farthest from the target before the
-    episode ends as a crash."""
+    episode ends as a crash; ``target_fixed``: the target is not a reset option (the pad)."""
 
     name = ""
     episode_s = 10.0
     area_m = 3.0
     needs_camera = False
+    target_fixed = False
 
     def observation_space(self) -> spaces.Space[Any]:
         return _box((STATE_LOW, STATE_HIGH), (-TARGET_HIGH, TARGET_HIGH))
@@ -186,6 +188,7 @@ class PadLanding(Task):
     episode_s = 30.0
     area_m = 3.0
     needs_camera = True
+    target_fixed = True
 
     def __init__(self, observation: str = "pad", image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
                  start_offset_m: float = 0.4, start_height_m: tuple[float, float] = (1.5, 2.5),
@@ -193,23 +196,25 @@ class PadLanding(Task):
         if observation not in OBSERVATIONS:
             raise ConfigError(f"observation must be one of {list(OBSERVATIONS)}, "
                               f"got {observation!r}")
-        w, h = image_size
-        if not (8 <= int(w) <= 2048 and 8 <= int(h) <= 2048):
-            raise ConfigError(f"image_size must be (width, height), 8..2048 each, "
-                              f"got {image_size!r}")
-        low, high = start_height_m
+        size_rule = "(width, height), whole numbers 8..2048 each"
+        w, h = numbers("image_size", image_size, 2, size_rule)
+        if not (w.is_integer() and h.is_integer() and 8 <= w <= 2048 and 8 <= h <= 2048):
+            raise ConfigError(f"image_size must be {size_rule}, got {image_size!r}")
+        height_rule = "(low, high) within 0.5..10 m"
+        low, high = numbers("start_height_m", start_height_m, 2, height_rule)
         if not (0.5 <= low <= high <= 10.0):
-            raise ConfigError(f"start_height_m must be (low, high) within 0.5..10 m, "
-                              f"got {start_height_m!r}")
+            raise ConfigError(f"start_height_m must be {height_rule}, got {start_height_m!r}")
+        checked = {}
         for name, value, top in (("start_offset_m", start_offset_m, 2.0),
                                  ("pad_tolerance_m", pad_tolerance_m, 1.0)):
-            if not (math.isfinite(value) and 0.0 <= value <= top):
+            checked[name] = number(name, value)
+            if not 0.0 <= checked[name] <= top:
                 raise ConfigError(f"{name} must be 0..{top:g} m, got {value!r}")
         self.observation = observation
         self.image_size = (int(w), int(h))
-        self.start_offset_m = start_offset_m
+        self.start_offset_m = checked["start_offset_m"]
         self.start_height_m = (low, high)
-        self.pad_tolerance_m = pad_tolerance_m
+        self.pad_tolerance_m = checked["pad_tolerance_m"]
 
     def observation_space(self) -> spaces.Space[Any]:
         state = _box((STATE_LOW, STATE_HIGH), (PAD_LOW, PAD_HIGH))

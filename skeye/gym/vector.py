@@ -30,6 +30,7 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 from skeye.errors import ConfigError
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
+from skeye.gym.options import number
 from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
 
 DEFAULT_SPACING_M = 10.0
@@ -55,7 +56,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                  episode_s: float | None = None, **settings: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
             raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
-        if not (math.isfinite(spacing_m) and spacing_m >= 2.0):
+        if not (number("spacing_m", spacing_m) >= 2.0):
             raise ConfigError(f"spacing_m must be >= 2 m, got {spacing_m!r}")
         if action not in ACTIONS:
             raise ConfigError(f"action must be one of {list(ACTIONS)}, got {action!r}")
@@ -66,7 +67,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
             if action != "velocity":
                 raise ConfigError(f"{task.name} flies velocity set-points only")
         if episode_s is not None:
-            if not (math.isfinite(episode_s) and episode_s > 0):
+            if not number("episode_s", episode_s) > 0:
                 raise ConfigError(f"episode_s must be > 0, got {episode_s!r}")
             for t in self.tasks:
                 t.episode_s = float(episode_s)
@@ -209,8 +210,7 @@ class PadLandingVectorEnv(SkeyeVectorEnv):
         kwargs.setdefault("wind", "random_force")
 
         def task() -> Task:
-            return PadLanding(observation, (int(image_size[0]), int(image_size[1])),
-                              start_offset_m, (float(start_height_m[0]), float(start_height_m[1])),
+            return PadLanding(observation, image_size, start_offset_m, start_height_m,
                               pad_tolerance_m)
 
         super().__init__(task, num_envs, **kwargs)

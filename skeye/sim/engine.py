@@ -48,6 +48,9 @@ from skeye.sim.world import start_pose_list as world_start_poses
 
 log = logging.getLogger(__name__)
 
+TIMESTEP_RANGE_S = (1e-5, 0.01)
+"""The physics step a simulation takes (``skeye sim --timestep``), seconds, both ends in."""
+
 
 @dataclass
 class _Slot:
@@ -105,8 +108,10 @@ class Simulation:
                 f"estimator must be one of {list(ESTIMATOR_KINDS)}, got {estimator!r}"
             )
         self.estimator = estimator
-        if not (math.isfinite(timestep_s) and 1e-5 <= timestep_s <= 0.01):
-            raise LocalProtocolError(f"physics step must be in [1e-5, 0.01] s, got {timestep_s}")
+        low, high = TIMESTEP_RANGE_S
+        if not (math.isfinite(timestep_s) and low <= timestep_s <= high):
+            raise LocalProtocolError(
+                f"physics step must be in [{low:g}, {high:g}] s, got {timestep_s}")
         self.world = world
         self.seed = seed
         self.dt = timestep_s

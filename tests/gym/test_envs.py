@@ -178,6 +178,62 @@ def test_bad_options_are_refused_with_their_name(kwargs: dict, message: str) -> 
         gymnasium.make("skeye/Hover-v0", **kwargs)
 
 
+@pytest.mark.parametrize("kwargs,message", [
+    ({"estimator": "bogus"}, "estimator must be one of"),
+    ({"estimator": 5}, "estimator must be a string"),
+    ({"world": 3}, "world must be a string"),
+    ({"wind": 3}, "wind must be a string"),
+    ({"wind_params": {"f_max_n": "x"}}, "wind_params must map"),
+    ({"wind_params": 5}, "wind_params must map"),
+    ({"robot_dir": 5}, "robot_dir must be"),
+    ({"camera_name": 3}, "camera_name must be a string"),
+    ({"calibration": 3}, "calibration must be a string"),
+    ({"timestep_s": 0}, "timestep_s must be in"),
+    ({"timestep_s": 1.0}, "timestep_s must be in"),
+    ({"episode_s": "x"}, "episode_s must be a finite number"),
+    ({"image_size": 3}, "image_size must be"),
+    ({"image_size": ("a", "b")}, "image_size must be"),
+    ({"image_size": (80.5, 60)}, "image_size must be"),
+    ({"start_height_m": 3}, "start_height_m must be"),
+    ({"start_height_m": ("a", "b")}, "start_height_m must be"),
+    ({"start_height_m": (1, 2, 3)}, "start_height_m must be"),
+    ({"start_offset_m": "x"}, "start_offset_m must be a finite number"),
+    ({"pad_tolerance_m": None}, "pad_tolerance_m must be a finite number"),
+])
+def test_bad_pad_landing_options_of_any_type_are_config_errors_naming_them(
+        kwargs: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        gymnasium.make("skeye/PadLanding-v0", **kwargs)
+
+
+@pytest.mark.parametrize("env_id,options,message", [
+    ("skeye/PadLanding-v0", {"yaw_rad": "abc"}, "yaw_rad must be a finite number"),
+    ("skeye/PadLanding-v0", {"yaw_rad": float("nan")}, "yaw_rad must be a finite number"),
+    ("skeye/PadLanding-v0", {"start_ned_m": (0, 0, "x")}, "start_ned_m must be three"),
+    ("skeye/PadLanding-v0", {"start_ned_m": 5}, "start_ned_m must be three"),
+    ("skeye/PadLanding-v0", {"target_ned_m": (0, 0, -1)}, "unknown reset option"),
+    ("skeye/PadLanding-v0", 5, "reset options must be a dict"),
+    ("skeye/GoTo-v0", {"target_ned_m": (1, 2, "x")}, "target_ned_m must be three"),
+])
+def test_bad_reset_options_are_config_errors_naming_them(env_id: str, options: object,
+                                                          message: str) -> None:
+    env = gymnasium.make(env_id)
+    try:
+        with pytest.raises(ConfigError, match=message):
+            env.reset(seed=0, options=options)  # type: ignore[arg-type]
+    finally:
+        env.close()
+
+
+def test_the_batched_environment_refuses_bad_options_as_config_errors() -> None:
+    with pytest.raises(ConfigError, match="start_height_m must be"):
+        gymnasium.make_vec("skeye/PadLanding-v0", num_envs=2,
+                           vectorization_mode="vector_entry_point", start_height_m=3)
+    with pytest.raises(ConfigError, match="spacing_m must be a finite number"):
+        gymnasium.make_vec("skeye/Hover-v0", num_envs=2,
+                           vectorization_mode="vector_entry_point", spacing_m="x")
+
+
 def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
     from skeye.gym.flight import scale_noise
     from skeye.robots.config import load_robot_config
