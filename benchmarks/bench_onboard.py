@@ -150,8 +150,8 @@ def flight(kind: str, seed: int) -> Iterator[tuple[Vehicle, PilotServer, list, l
     from skeye.sim.image_server import FrameBuffer, ImageServer
     from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
-    from skeye.sim.wind import make_settings
     from skeye.sim.world import load_world
+    from skeye.wire.wind import make_settings
 
     with ExitStack() as stack:
         sim = Simulation(load_world("pad"), seed=seed,

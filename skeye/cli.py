@@ -77,8 +77,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from skeye.sim.engine import Simulation
     from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
-    from skeye.sim.wind import make_settings, parse_params
     from skeye.sim.world import load_world
+    from skeye.wire.wind import make_settings, parse_params
 
     image_format, image_quality = image_defaults(args)  # before anything starts
     ports = [("the simulator's control protocol", args.host, args.port, "--port")]

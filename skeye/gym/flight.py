@@ -43,10 +43,10 @@ from skeye.sim.engine import TIMESTEP_RANGE_S, Simulation
 from skeye.sim.image_server import FrameBuffer
 from skeye.sim.sensors import SENSOR_CLASSES
 from skeye.sim.state import BodyState
-from skeye.sim.wind import make_settings, parse_params
 from skeye.sim.world import WorldDescription, load_world
 from skeye.sim.world_model import PadPlacement
 from skeye.vision.calibration import CameraCalibration, load_calibration
+from skeye.wire.wind import make_settings, parse_params
 
 NOISE_SUFFIXES = ("sigma", "noise", "walk")
 """``sensor_noise`` scales every sensor parameter whose name ends so (NoiseSigma, BiasWalk...),

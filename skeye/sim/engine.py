@@ -42,9 +42,10 @@ from skeye.sim.readings import Event, ReadingSink, RobotCrashed, RobotStopped, S
 from skeye.sim.robot import Robot, ScheduledSensor, check_state
 from skeye.sim.state import BodyState
 from skeye.sim.surface_contrast import geom_contrasts
-from skeye.sim.wind import WindModel, WindSettings, make_settings
+from skeye.sim.wind import WindModel
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
+from skeye.wire.wind import WindSettings, make_settings
 
 log = logging.getLogger(__name__)
 

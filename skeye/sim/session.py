@@ -38,7 +38,6 @@ from skeye.sim.readings import Event, RobotStopped
 from skeye.sim.robot import Robot
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.stream import text_sink
-from skeye.sim.wind import make_settings, parse_params
 from skeye.wire.sim import (
     DriveLimits,
     decode,
@@ -65,6 +64,7 @@ from skeye.wire.sim_messages import (
     StartPoses,
     Step,
 )
+from skeye.wire.wind import make_settings, parse_params
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)

@@ -21,14 +21,13 @@ from pathlib import Path
 from typing import Any
 
 import skeye
-from skeye.errors import LocalProtocolError
-from skeye.validate.experiments import CAMERAS, ESTIMATORS, WORLDS, RunSettings
+from skeye.errors import ConfigError, LocalProtocolError
+from skeye.validate.experiments import RunSettings, check_setting
 
 EXPERIMENTS = ("E1", "E2")
 SETTINGS_FIELDS = {f.name: str(f.type) for f in dataclasses.fields(RunSettings)
                    if f.name not in ("seed", "quick")}
 """Parameters E1 and E2 take (fields of :class:`RunSettings`)."""
-SETTINGS_CHOICES = {"camera": CAMERAS, "estimator": ESTIMATORS, "world": WORLDS}
 _SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
               "resources", "name"}
 
@@ -108,6 +107,17 @@ def _check_value(name: str, value: Any, where: str) -> None:
                                  f"boolean, got {value!r}")
 
 
+def _check_setting(name: str, value: Any, where: str) -> None:
+    """A value of a RunSettings field, by the rule the trial applies
+    (:func:`skeye.validate.experiments.check_setting`); other names are a script's own."""
+    if name not in SETTINGS_FIELDS:
+        return
+    try:
+        check_setting(name, value)
+    except ConfigError as exc:
+        raise LocalProtocolError(f"{where}: {exc}") from None  # exc names it and its value
+
+
 def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) -> SweepSpec:
     """Expand a spec (already parsed TOML) into trials; ``quick`` overrides the spec's."""
     unknown = set(data) - _SPEC_KEYS
@@ -137,11 +147,13 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
             raise LocalProtocolError(f"[grid] {name} must be a non-empty list of values")
         for v in values:
             _check_value(name, v, "[grid]")
+            _check_setting(name, v, "[grid]")
     for i, entry in enumerate(listed):
         if not isinstance(entry, dict):
             raise LocalProtocolError(f"[[trials]] entry {i + 1} must be a table")
         for name, v in entry.items():
             _check_value(name, v, f"[[trials]] entry {i + 1}")
+            _check_setting(name, v, f"[[trials]] entry {i + 1}")
     names = sorted(set(grid) | {k for entry in listed for k in entry})
     if "seed" in names:
         raise LocalProtocolError("seeds are set with seeds = N or [..], not as a parameter")
@@ -165,19 +177,13 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     resources = data.get("resources", {})
     if not isinstance(resources, dict) or set(resources) - {"cpus", "gpus"}:
         raise LocalProtocolError("[resources] takes cpus and gpus")
-    for params in sets:
-        for name, v in params.items():
-            kind = SETTINGS_FIELDS.get(name)
-            if kind == "float" and (isinstance(v, bool) or not isinstance(v, int | float)):
-                raise LocalProtocolError(f"parameter {name} must be a number, got {v!r}")
-            if kind == "str" and not isinstance(v, str):
-                raise LocalProtocolError(f"parameter {name} must be a string, got {v!r}")
-            choices = SETTINGS_CHOICES.get(name)
-            if choices is not None and v not in choices:
-                raise LocalProtocolError(f"parameter {name} must be one of "
-                                         f"{', '.join(choices)}, got {v!r}")
     trials = [Trial(experiment, params, seed, is_quick, script, timeout_s)
               for params in sets for seed in seeds]
+    for params in sets:  # each set as a whole (a wind mode with its wind_params), as a trial
+        try:
+            Trial(experiment, params, seeds[0], is_quick, script, timeout_s).settings()
+        except ConfigError as exc:
+            raise LocalProtocolError(f"parameter set {params}: {exc}") from None
     return SweepSpec(experiment, trials, names, float(resources.get("cpus", 1.0)),
                      float(resources.get("gpus", 0.0)), str(data.get("name", "sweep")))
 

@@ -38,19 +38,21 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from skeye.errors import SkeyeError
+from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.link.vehicle import Vehicle
 from skeye.processes import scaled_s, start_skeye, stop_process
 from skeye.recording.records import RecordingReader
 from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
-from skeye.wire.packet_units import nav_status_to_si, pad_report_to_si
-from skeye.wire.packets import NavState, PadReport, SkeyeMask
+from skeye.wire.packet_units import PadModeSi, nav_status_to_si, pad_mode_from_si, pad_report_to_si
+from skeye.wire.packets import NavState, PadAction, PadReport, SkeyeMask
 from skeye.wire.sim import decode_line
 from skeye.wire.sim_messages import SenGroundTruth
+from skeye.wire.wind import PARAM_RANGES, WIND_MODES, make_settings, parse_params
 
 CAMERAS = ("ideal", "webcam")  # RunSettings.camera: skeye sim --camera-profile
 ESTIMATORS = ("onboard", "truth")  # RunSettings.estimator: skeye sim --estimator
 WORLDS = ("pad", "indoor")  # RunSettings.world: built-in worlds with the pad at the origin
+PAD_SOURCES = ("vision", "truth")  # RunSettings.pad_source: skeye pilot --pad-source
 CAMERA_BELOW_CENTRE_M = 0.035  # the Hummingbird's downward camera mount (robot file)
 F_MAX_N = 0.3
 
@@ -80,6 +82,20 @@ class RunSettings:
     world: str = "pad"  # the built-in world (skeye sim --world): pad (GPS) or indoor (none)
     calibration: str = ""  # a `skeye calibrate` file for the pilot's detector ("" = none)
 
+    def __post_init__(self) -> None:
+        """Every setting checked as the trial's processes check it (:func:`check_setting`),
+        then the disturbance as a whole (``wind`` with ``wind_params`` and ``f_max_n``, as
+        ``skeye sim`` gets them); a bad one is a ConfigError naming it."""
+        for name in SETTING_NAMES:
+            check_setting(name, getattr(self, name))
+        args = self.wind_args()
+        if args:
+            try:
+                make_settings(args[1], parse_params(args[3]) if len(args) > 3 else {})
+            except ConfigError as exc:
+                raise ConfigError(f"wind {self.wind!r} with wind_params {self.wind_params!r} "
+                                  f"and f_max_n {self.f_max_n!r}: {exc}") from None
+
     @property
     def e2_seconds(self) -> float:
         """E2's hold: ``e2_duration_s``, at most 20 s in a quick run."""
@@ -104,6 +120,80 @@ class RunSettings:
                 "constant": "a steady wind"}.get(self.wind, self.wind)
         given = args[3] if len(args) > 3 else "the simulator's defaults, docs/physics.md"
         return f"{what} (skeye sim --wind {self.wind}: {given})"
+
+
+SETTING_NAMES = ("f_max_n", "e2_duration_s", "wind", "wind_params", "vision_latency",
+                 "pad_source", "deadband_m", "max_speed_m_s", "camera", "estimator", "world",
+                 "calibration")
+"""The fields of :class:`RunSettings` a trial takes as parameters (all but seed and quick)."""
+
+
+def _number(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{name} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ConfigError(f"{name} must be finite, got {value!r}")
+    return float(value)
+
+
+def _string(name: str, value: object) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(f"{name} must be a string, got {value!r}")
+    return value
+
+
+def check_setting(name: str, value: object) -> None:
+    """One setting of a run alone, by the rule of the process it goes to (``skeye sim``'s wind
+    ranges, ``skeye pilot``'s vision latency and calibration file, PAD_MODE's field ranges).
+    ``skeye sweep`` calls it for every value of a spec before any trial starts, and every
+    :class:`RunSettings` for each of its fields, so the two cannot disagree.
+
+    Raises:
+        ConfigError: naming the setting, the value and what is wrong with it.
+    """
+    choices = {"camera": CAMERAS, "estimator": ESTIMATORS, "world": WORLDS,
+               "pad_source": PAD_SOURCES, "wind": WIND_MODES}.get(name)
+    if choices is not None:
+        if value not in choices:
+            raise ConfigError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
+    elif name == "f_max_n":
+        low, high = PARAM_RANGES["f_max_n"]
+        if not low <= _number(name, value) <= high:
+            raise ConfigError(f"f_max_n must be in [{low:g}, {high:g}] N (skeye sim's random "
+                              f"force), got {value!r}")
+    elif name == "e2_duration_s":
+        if not _number(name, value) >= STEP_S:
+            raise ConfigError(f"e2_duration_s must be at least one pilot tick ({STEP_S:g} s), "
+                              f"got {value!r}")
+    elif name == "wind_params":
+        try:
+            parse_params(_string(name, value))
+        except ConfigError as exc:
+            raise ConfigError(f"wind_params {value!r}: {exc}") from None
+    elif name == "vision_latency":
+        from skeye.pilot.cli import vision_latency_s
+
+        try:
+            vision_latency_s(_string(name, value))
+        except ConfigError:
+            raise ConfigError(f"vision_latency must be 'measured' or a number of ms 0..10000 "
+                              f"(skeye pilot --vision-latency-ms), got {value!r}") from None
+    elif name in ("deadband_m", "max_speed_m_s"):
+        pad = {"deadband_m": 0.0, "max_speed_m_s": 0.0, name: _number(name, value)}
+        try:
+            pad_mode_from_si(PadModeSi(PadAction.HOLD, **pad))
+        except LocalProtocolError as exc:
+            raise ConfigError(f"{name} {value!r} does not fit PAD_MODE: {exc}") from None
+    elif name == "calibration":
+        if _string(name, value):
+            from skeye.vision.calibration import load_calibration
+
+            try:
+                load_calibration(str(value))
+            except ConfigError as exc:
+                raise ConfigError(f"calibration: {exc}") from None  # exc names the file
+    else:
+        raise ConfigError(f"no run setting {name!r}; settings: {', '.join(SETTING_NAMES)}")
 
 
 @dataclass
@@ -265,7 +355,6 @@ def run_e1(settings: RunSettings, workdir: Path, name: str = "e1") -> E1Series:
 
 
 E2_WINDS = ("dryden", "random_force", "none")
-PAD_SOURCES = ("vision", "truth")  # RunSettings.pad_source: skeye pilot --pad-source
 """E2's disturbances (``skeye validate --wind``): the default gust model, the paper's force."""
 
 

@@ -43,9 +43,9 @@ from skeye.sim.engine import Simulation
 from skeye.sim.image_server import FrameBuffer, ImageServer
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
-from skeye.sim.wind import make_settings
 from skeye.sim.world import load_world
 from skeye.wire.packets import NavState, SkeyeMask
+from skeye.wire.wind import make_settings
 from tests.sim.test_cameras import small_camera_robot
 
 RATIO = 1.5

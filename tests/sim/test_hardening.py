@@ -23,9 +23,9 @@ from skeye.errors import ConfigError
 from skeye.processes import die_with_parent
 from skeye.sim.image_server import FrameBuffer, ImageServer
 from skeye.sim.server import ControlServer
-from skeye.sim.wind import PARAM_RANGES
 from skeye.wire.images import FrameDecoder, RemoteError
 from skeye.wire.sim_lines import Message
+from skeye.wire.wind import PARAM_RANGES
 from tests.sim.conftest import LineClient, running_sim
 
 ENGINE_ERR_WAIT_S = 10.0  # "at once": far below the 30 s call timeout a client used to wait

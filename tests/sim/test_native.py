@@ -25,7 +25,7 @@ import hashlib, sys
 from skeye import native
 from skeye.sim.engine import Simulation
 from skeye.sim.stream import text_sink
-from skeye.sim.wind import make_settings
+from skeye.wire.wind import make_settings
 from skeye.sim.world import load_world
 
 print(native.status().describe())

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from skeye.errors import ConfigError
-from skeye.sim.wind import FT, WindModel, dryden_profile, make_settings
+from skeye.sim.wind import FT, WindModel, dryden_profile
+from skeye.wire.wind import make_settings
 
 
 def test_the_specifications_low_altitude_figures() -> None:

@@ -236,6 +236,23 @@ def test_failed_trials_are_rows_with_their_error(tmp_path: Path,
         ('experiment = "script"\nscript = "nope.py"', "does not exist"),
         ('experiment = "E2"\n[grid\n', "not valid TOML"),
         ('experiment = "E2"\ntimeout_s = -1', "timeout_s must be > 0"),
+        # Out-of-range values, by the rule the trial's processes apply (refused before any runs)
+        ('experiment = "E2"\n[grid]\nf_max_n = [0.1, -0.1]',
+         r"\[grid\]: f_max_n must be in \[0, 50\] N .*got -0\.1"),
+        ('experiment = "E2"\n[grid]\nwind = ["bogus"]', r"wind must be one of .*got 'bogus'"),
+        ('experiment = "E2"\n[grid]\nvision_latency = ["abc"]',
+         r"vision_latency must be 'measured' or a number of ms .*got 'abc'"),
+        ('experiment = "E1"\n[grid]\ncalibration = ["/nonexistent.toml"]',
+         "calibration: /nonexistent.toml: cannot read calibration file"),
+        ('experiment = "E2"\n[grid]\ne2_duration_s = [-1.0]',
+         r"e2_duration_s must be at least one pilot tick .*got -1\.0"),
+        ('experiment = "E2"\n[grid]\ndeadband_m = [-0.05]', "deadband_m -0.05 does not fit"),
+        ('experiment = "E2"\n[grid]\npad_source = ["oracle"]', "pad_source must be one of"),
+        ('experiment = "E2"\n[grid]\nwind_params = ["gusty"]', "wind_params 'gusty'"),
+        ('experiment = "E2"\n[[trials]]\nwind = "dryden"\nwind_params = "f_max_n=1"',
+         r"parameter set .*unknown parameter 'f_max_n' for mode 'dryden'"),
+        ('experiment = "script"\nscript = "flight.py"\n[grid]\nf_max_n = [-1.0]',
+         r"f_max_n must be in \[0, 50\]"),
     ],
 )
 def test_bad_specs_are_refused_with_the_reason(tmp_path: Path, text: str, match: str):
@@ -243,8 +260,12 @@ def test_bad_specs_are_refused_with_the_reason(tmp_path: Path, text: str, match:
 
     spec = tmp_path / "bad.toml"
     spec.write_text(text)
+    if "flight.py" in text:
+        (tmp_path / "flight.py").write_text(FAILING)
     with pytest.raises(LocalProtocolError, match=match):
         sweep(spec, tmp_path / "out", "local", show_progress=False)
+    assert not (tmp_path / "out" / "trials").exists() or not any(
+        (tmp_path / "out" / "trials").iterdir())  # nothing ran
 
 
 def test_bad_command_lines_are_refused(tmp_path: Path):
