@@ -29,6 +29,7 @@ from typing import Any
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.processes import wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
+from skeye.wire.sim import encode, unknown_command
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 
 log = logging.getLogger(__name__)
@@ -231,6 +232,9 @@ class _Playback:
             return format_message(
                 "RES", ("Command", "PING"), ("Id", msg.get("Id", "") or ""), ("Time", sim_s)
             )
+        refused = unknown_command(msg.type)  # no command at all: the simulator's own answer
+        if refused is not None:
+            return encode(refused)
         if msg.type in READ_ONLY:
             return format_error(msg.type, "replay is read-only: the recording cannot be changed")
         return format_error(msg.type, f"{msg.type} is not available in a replay")

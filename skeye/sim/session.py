@@ -44,6 +44,7 @@ from skeye.wire.sim import (
     drive_in_si,
     encode,
     parse_value,
+    unknown_command,
     usarsim_notes,
 )
 from skeye.wire.sim_lines import LineDecoder, LineError, Message
@@ -376,10 +377,11 @@ class ClientSession:
         self.sock.close()
 
     def _handle(self, msg: Message) -> None:
-        handler = _HANDLERS.get(msg.type)
-        if handler is None:
-            self.send(encode(Err(msg.type, reason=f"unknown command {msg.type}")))
+        refused = unknown_command(msg.type)
+        if refused is not None:
+            self.send(encode(refused))
             return
+        handler = _HANDLERS[msg.type]  # one for each of COMMAND_WORDS (tests/sim/test_server.py)
         self._take_stop()
         try:
             refusal = self.states.refusal(msg.type, self.robot_name, self.stopped_reason)

@@ -74,6 +74,7 @@ from skeye.wire.sim_messages import (
 __all__ = [
     "CODECS",
     "COMMANDS",
+    "COMMAND_WORDS",
     "SEN_CODECS",
     "Codec",
     "DriveLimits",
@@ -89,6 +90,7 @@ __all__ = [
     "res_time_s",
     "sen_layout",
     "sen_line_format",
+    "unknown_command",
     "usarsim_drive",
     "usarsim_notes",
 ]
@@ -152,6 +154,18 @@ COMMANDS: tuple[type, ...] = (
     Init, Drive, Step, Set, Ping, GetConf, GetGeo, GetStartPoses, Reset
 )
 """The commands a client sends."""
+
+COMMAND_WORDS: frozenset[str] = frozenset(cls.WORD for cls in COMMANDS)  # type: ignore[attr-defined]
+"""The type words of :data:`COMMANDS`: a client's line with any other is no command."""
+
+
+def unknown_command(word: str) -> Err | None:
+    """The simulator's answer to a client's line whose type word is not a command (``ERR
+    {Command X} {Reason unknown command X}``); None for a command. The simulator and ``skeye
+    replay`` both answer with it."""
+    if word in COMMAND_WORDS:
+        return None
+    return Err(word, reason=f"unknown command {word}")
 
 CODECS: dict[str, Codec] = {
     c.word: c for c in (_codec(cls) for cls in (*COMMANDS, Sta, Res, Err, Nfo))

@@ -212,6 +212,37 @@ def test_replay_plays_the_stream_paced_and_read_only(recording: tuple[Path, byte
         ReplayServer(path, port=0, robot="R9")
 
 
+def _errors(client: LineClient, lines: tuple[str, ...]) -> list:
+    """The ERR each line gets, one line at a time."""
+    out = []
+    for line in lines:
+        client.send(line)
+        out.append(client.read_until(lambda m: m.type == "ERR")[1])
+    return out
+
+
+def test_replay_answers_a_line_that_is_no_command_as_the_simulator_does(
+        recording: tuple[Path, bytes]) -> None:
+    """docs/recording.md: bad lines get the simulator's ERRs; a simulator command a replay
+    cannot do keeps "not available in a replay"."""
+    path, _ = recording
+    lines = ("garbage", "FLY {Speed 3}", "NOPE {x", "{Name x}")
+    with running_sim(mode="realtime") as server:
+        sim = LineClient(server.port)
+        sim.expect("NFO")
+        from_sim = _errors(sim, lines)
+        sim.close()
+    with ReplayServer(path, port=0) as replay:
+        client = LineClient(replay.port)
+        client.expect("NFO")
+        from_replay = _errors(client, lines)
+        assert client.answer("GETGEO {Type Robot}", "GETGEO").get("Reason") == (
+            "GETGEO is not available in a replay")
+        client.close()
+    assert [m.fields for m in from_replay] == [m.fields for m in from_sim]
+    assert from_replay[0].get("Reason") == "unknown command GARBAGE"
+
+
 def test_sim_killed_loses_at_most_the_last_second(tmp_path: Path) -> None:
     """SIGKILL the simulator while it streams: every line the client had received a second
     before the kill is in the recording (the recorder fsyncs at least every 0.5 s).

@@ -37,6 +37,18 @@ BAD_LINES = [
 ]
 
 
+def test_the_server_handles_exactly_the_protocols_commands():
+    """Session._handle answers a word outside COMMAND_WORDS with wire.sim.unknown_command, as
+    skeye replay does, and looks every other up in _HANDLERS."""
+    from skeye.sim.session import _HANDLERS
+    from skeye.wire.sim import COMMAND_WORDS, unknown_command
+
+    assert set(_HANDLERS) == COMMAND_WORDS
+    assert unknown_command("PING") is None
+    err = unknown_command("FLY")
+    assert err is not None and err.reason == "unknown command FLY"
+
+
 def test_every_bad_line_gets_err_and_the_connection_stays_usable():
     with running_sim(mode="realtime") as server:
         c = LineClient(server.port)
