@@ -24,7 +24,8 @@ from skeye.errors import LocalProtocolError
 from skeye.sweep.worker import base_row, run_trial_process
 
 Row = dict[str, Any]
-OnStart = Callable[[int], None]  # called with the number of trials running now
+OnStart = Callable[[int], None]  # the number of trials running now: before each wait, and
+# after it, before the finished trials' rows are yielded
 
 
 class Backend(Protocol):
@@ -73,6 +74,8 @@ class LocalBackend(_Closing):
                 if on_running:
                     on_running(len(pending))
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                if on_running:
+                    on_running(len(pending))  # the finished ones are no longer running
                 for fut in done:
                     yield fut.result()
 
@@ -114,6 +117,8 @@ class RayBackend(_Closing):
                 on_running(min(len(refs), self.workers))
             done, _ = ray.wait(list(refs), num_returns=1)
             trial = refs.pop(done[0])
+            if on_running:
+                on_running(min(len(refs), self.workers))  # the finished one no longer runs
             try:
                 yield ray.get(done[0])
             except ray.exceptions.RayError as exc:  # retries used up, node lost for good

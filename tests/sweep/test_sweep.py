@@ -329,3 +329,31 @@ def test_sweep_off_a_terminal_logs_lines_and_sigterm_leaves_nothing_behind(tmp_p
     assert not Path(f"/proc/{hang_pid}").exists() or \
         Path(f"/proc/{hang_pid}/stat").read_text().split(")")[1].split()[0] == "Z"
     assert len(list((tmp_path / "out" / "trials").glob("*.json"))) == 1  # the ok row kept
+
+
+def test_the_progress_line_counts_a_finished_trial_as_done_not_running(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]):
+    """The line after a trial finishes counts only the trials still in flight as running: the
+    last one says 0 running (it said 1 when the last trial was counted as still running)."""
+    from skeye.sweep import backends
+    from skeye.sweep.cli import run_trials
+    from skeye.sweep.spec import SweepSpec, Trial
+    from skeye.sweep.worker import base_row
+
+    def fake_trial(trial: dict, **_: object) -> dict:
+        return {**base_row(Trial.from_json(trial)), "wall_s": 0.0, "error": ""}
+
+    monkeypatch.setattr(backends, "run_trial_process", fake_trial)
+    (tmp_path / "none.py").write_text("")  # never run: the trial process is faked
+    trials = [Trial("script", {"mode": m}, 1, script=str(tmp_path / "none.py"))
+              for m in ("a", "b", "c")]
+    result = run_trials(SweepSpec("script", trials, ["mode"]), tmp_path / "out",
+                        backends.LocalBackend(2), "test")
+    assert result.ran == 3
+    lines = [line for line in capsys.readouterr().err.splitlines() if " trial " in line]
+    assert len(lines) == 3, lines
+    for line in lines:
+        done = int(line.split(": ", 1)[1].split("/", 1)[0])
+        running = int(line.split(" failed, ", 1)[1].split(" running", 1)[0])
+        assert done + running <= 3, line  # a finished trial is not also running
+    assert "0 failed, 0 running" in lines[-1], lines
