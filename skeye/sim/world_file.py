@@ -200,6 +200,10 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
         if pose_name in start_poses:
             table.fail(f"duplicate start pose name {pose_name!r}", "name")
         _check_on_ground(table, "position_ned_m", pose.position_ned_m, ground)
+        if pose.position_ned_m[2] > 0.0:
+            table.fail(f"start pose {pose_name!r} is {pose.position_ned_m[2]:g} m below the "
+                       "ground (NED: down is positive, the ground is down = 0)",
+                       "position_ned_m")
         start_poses[pose_name] = pose
 
     return WorldDescription(

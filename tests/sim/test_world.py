@@ -263,6 +263,8 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [-30.0, 0.0, 0.0]',
          "position_ned_m", "outside the ground"),
         ('name = "house"\n', "", "name", "missing required key"),
+        ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [-3.0, 0.0, 5.0]',
+         "position_ned_m", "start pose 'Field1' is 5 m below the ground"),
     ],
 )
 def test_validation_errors_name_file_and_key(
