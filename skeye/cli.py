@@ -13,7 +13,7 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
-from skeye import __version__
+from skeye import __version__, cliargs
 from skeye.errors import SkeyeError
 from skeye.processes import wait_for_signal
 
@@ -199,10 +199,13 @@ def _add_sim(sub: Any) -> None:
     p.add_argument("--world", default="pad",
                    help="built-in world (pad, yard, indoor, checkerboard) or a .toml")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=3000, help="control protocol port (0 = any free)")
+    p.add_argument("--port", type=cliargs.port, default=3000,
+                   help="control protocol port (0 = any free)")
     p.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random source")
-    p.add_argument("--timestep", type=float, default=0.001, help="physics step in seconds")
+    p.add_argument("--seed", type=cliargs.seed, default=0,
+                   help="seed of every random source (a whole number >= 0)")
+    p.add_argument("--timestep", type=cliargs.positive_float, default=0.001,
+                   help="physics step in seconds")
     p.add_argument(
         "--estimator",
         choices=("onboard", "truth"),
@@ -230,7 +233,7 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument(
         "--image-port",
-        type=int,
+        type=cliargs.port,
         default=None,
         help="serve camera images on this port (5003 by convention; 0 = any free)",
     )
@@ -258,7 +261,7 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument(
         "--max-clients-per-peer",
-        type=int,
+        type=cliargs.positive_int,
         default=None,
         metavar="N",
         help="connections one peer address may hold on each server "
@@ -266,14 +269,14 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument(
         "--handshake-timeout",
-        type=float,
+        type=cliargs.positive_float,
         default=10.0,
         metavar="S",
         help="close a connection that sends no command within S seconds (default 10)",
     )
     p.add_argument(
         "--idle-timeout",
-        type=float,
+        type=cliargs.positive_float,
         default=120.0,
         metavar="S",
         help="close a connection without a robot (control) or without a stream (images) that "
@@ -288,7 +291,7 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument(
         "--record-max-mb",
-        type=float,
+        type=cliargs.positive_float,
         default=1024.0,
         metavar="MB",
         help="the recording stops (or, with --record-rotate, goes on in FILE.2, FILE.3, ...) "
@@ -297,7 +300,7 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument("--record-rotate", action="store_true",
                    help="at --record-max-mb, go on in a new part instead of stopping")
-    p.add_argument("--record-parts", type=int, default=10, metavar="N",
+    p.add_argument("--record-parts", type=cliargs.positive_int, default=10, metavar="N",
                    help="the most parts --record-rotate writes before it stops (default 10)")
     p.add_argument(
         "--ll-board",

@@ -26,6 +26,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.processes import wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
@@ -268,7 +269,8 @@ def register(sub: Any) -> None:
     p = sub.add_parser("replay", help="play a flight recording to clients (control protocol)")
     p.add_argument("file", type=Path, help="a recording made with skeye sim --record")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=3000, help="port (0 = any free)")
-    p.add_argument("--speed", type=float, default=1.0, help="playback rate (1.0 = as recorded)")
+    p.add_argument("--port", type=cliargs.port, default=3000, help="port (0 = any free)")
+    p.add_argument("--speed", type=cliargs.positive_float, default=1.0,
+                   help="playback rate (1.0 = as recorded)")
     p.add_argument("--robot", default=None, help="recorded robot to play (default: the first)")
     p.set_defaults(func=cmd_replay)

@@ -9,6 +9,7 @@ from typing import Any
 
 import cv2
 
+from skeye import cliargs
 from skeye.control.connection import parse_address
 from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
@@ -62,5 +63,6 @@ def register(sub: Any) -> None:
     p.add_argument("--camera", default=None, help="robot/camera, e.g. R1/Down (default: first)")
     p.add_argument("--out", required=True, help="output file (.png, .jpg or .jpeg)")
     p.add_argument("--quality", type=int, default=95, help="JPEG quality 1-100")
-    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for a frame")
+    p.add_argument("--timeout", type=cliargs.positive_float, default=10.0,
+                   help="seconds to wait for a frame")
     p.set_defaults(func=cmd_snapshot)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from skeye import cliargs
 from skeye.sweep.backends import Backend, make_backend
 from skeye.sweep.results import ResultStore, write_report, write_tables
 from skeye.sweep.spec import SweepSpec, load_spec
@@ -152,7 +153,7 @@ def register(sub: Any) -> None:
     p.add_argument("--backend", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None,
                    help="Ray cluster to join (auto, or HOST:PORT); none starts a local one")
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=cliargs.positive_int, default=None,
                    help="trials at a time (local), CPUs of the local Ray cluster")
     p.add_argument("--quick", action="store_true", help="shortened runs, whatever the spec says")
     p.set_defaults(func=cmd_sweep)

@@ -11,6 +11,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from skeye import cliargs
 from skeye.errors import LocalProtocolError, SkeyeError
 from skeye.pilot.cli import vision_latency_s
 from skeye.processes import scaled_s
@@ -146,11 +147,14 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     p = sub.add_parser("validate", help="reproduce the paper's experiments and report them")
     p.add_argument("experiment", nargs="?", default="all", help="E1, E2 or all")
-    p.add_argument("--seeds", type=int, default=1, help="number of seeds (run in parallel)")
-    p.add_argument("--first-seed", type=int, default=1)
+    p.add_argument("--seeds", type=cliargs.positive_int, default=1,
+                   help="number of seeds (run in parallel)")
+    p.add_argument("--first-seed", type=cliargs.seed, default=1,
+                   help="the first seed (a whole number >= 0; default 1)")
     p.add_argument("--out", default="validation", help="output folder")
     p.add_argument("--quick", action="store_true", help="shortened runs (CI)")
-    p.add_argument("--workers", type=int, default=None, help="worker processes")
+    p.add_argument("--workers", type=cliargs.positive_int, default=None,
+                   help="worker processes (>= 1)")
     p.add_argument("--keep-recordings", action="store_true",
                    help="keep the simulator recordings in the output folder")
     p.add_argument("--camera", choices=CAMERAS, default="ideal",

@@ -270,7 +270,7 @@ def test_bad_specs_are_refused_with_the_reason(tmp_path: Path, text: str, match:
 
 def test_bad_command_lines_are_refused(tmp_path: Path):
     spec = _spec(tmp_path)
-    for args, match in ((["--workers", "0"], "--workers must be >= 1"),
+    for args, match in ((["--workers", "0"], "argument --workers: must be a whole number >= 1"),
                         (["--address", "auto"], "--address is for --backend ray")):
         run = subprocess.run([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
                               str(tmp_path / "o"), *args], capture_output=True, text=True,

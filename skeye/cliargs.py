@@ -1,0 +1,80 @@
+"""Shared argparse ``type=`` validators for every ``skeye`` sub-command.
+
+A bad value is refused while the command line is parsed: argparse prints one line naming the
+option (``skeye sim: error: argument --port: must be a port 0..65535, got '-1'``) and exits
+with status 2, before anything starts. Each validator raises
+:class:`argparse.ArgumentTypeError` with what the option takes and what it got; none of them
+imports anything beyond the standard library, so the parser stays cheap to build.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+MAX_PORT = 65535
+
+
+def _int(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+
+
+def _float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def port(text: str) -> int:
+    """A TCP/UDP port 0..65535 (0: any free one, where the option's help says so)."""
+    value = _int(text)
+    if not 0 <= value <= MAX_PORT:
+        raise argparse.ArgumentTypeError(f"must be a port 0..{MAX_PORT}, got {text!r}")
+    return value
+
+
+def fixed_port(text: str) -> int:
+    """A port 1..65535: one that others are told to connect to, so not 0 ("any free")."""
+    value = _int(text)
+    if not 1 <= value <= MAX_PORT:
+        raise argparse.ArgumentTypeError(f"must be a port 1..{MAX_PORT}, got {text!r}")
+    return value
+
+
+def seed(text: str) -> int:
+    """A random seed: a non-negative whole number."""
+    value = _int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative whole number, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1 (a count of workers, seeds, clients, a baud rate)."""
+    value = _int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0 (a timeout or period in seconds, a rate in Hz)."""
+    value = _float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text!r}")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number >= 0 (0 has a meaning the option's help gives)."""
+    value = _float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
