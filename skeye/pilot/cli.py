@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import signal
 import threading
 from contextlib import ExitStack, nullcontext
@@ -37,6 +38,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from skeye import cliargs
 from skeye.errors import ConfigError, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.pilot.airframe import (
     AirframeOptions,
@@ -183,6 +185,10 @@ def run(args: argparse.Namespace) -> int:
             ports.append(("the pilot's video", args.host, args.video_port, "--video-port"))
         if ports:  # before the vehicle is opened: a taken port leaves nothing behind
             check_ports_free(ports)
+        problem = serial_problem(args.serial)
+        if problem:
+            print(f"skeye pilot: {problem}", flush=True)
+            return 2
         try:
             airframe = open_airframe(airframe_uri, options)
         except (ConfigError, LocalProtocolError) as exc:  # a URI its backend refused
@@ -270,9 +276,8 @@ def run(args: argparse.Namespace) -> int:
             rtp = open_rtp_video(server, video, args)
             airframe_check = getattr(airframe, "check", None)
             with server, mavlink or nullcontext(), rtp or nullcontext():
-                mode = f"lockstep x{args.lockstep_rate:g}" if lockstep else "realtime"
                 print(
-                    f"skeye pilot: {airframe.describe()} ({mode}); "
+                    f"skeye pilot: {describe_airframe(airframe.describe(), lockstep, args)}; "
                     f"ground control on {server.address}; flight envelope: "
                     f"{envelope.describe()} ({envelope_source})"
                     f"{'; video on ' + video.address if video is not None else ''}"
@@ -300,6 +305,30 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
+
+
+def serial_problem(device: str | None) -> str:
+    """What is wrong with ``--serial DEVICE`` ('' when nothing or no ``--serial``): a device
+    that is not there or cannot be opened for reading and writing is a bad option, found
+    before the vehicle is opened."""
+    if device is None:
+        return ""
+    if not os.path.exists(device):
+        return f"--serial {device}: no such device"
+    if not os.access(device, os.R_OK | os.W_OK):
+        return f"--serial {device}: no permission to read and write it"
+    return ""
+
+
+def describe_airframe(described: str, lockstep: bool, args: argparse.Namespace) -> str:
+    """The start-up line's airframe: its own description with the clock mode said once (a
+    simulated robot says ``(realtime)`` or ``(lockstep)`` itself; the pace is added to it)."""
+    if lockstep:
+        pace = f"lockstep x{args.lockstep_rate:g}"
+        if "(lockstep)" in described:
+            return described.replace("(lockstep)", f"({pace})")
+        return f"{described} ({pace})" if "lockstep" not in described else described
+    return described if "realtime" in described else f"{described} (realtime)"
 
 
 def open_mavlink(server: PilotServer, args: argparse.Namespace, pad_vision: bool = False) -> Any:
@@ -495,8 +524,6 @@ def video_options_problem(args: argparse.Namespace) -> str:
         return f"--video-fps must be in [0.01, 1000] frames/s, got {args.video_fps:g}"
     if args.video_clients < 1:
         return f"--video-clients must be at least 1, got {args.video_clients}"
-    if not 0 <= args.video_port <= 65535:
-        return f"--video-port must be a TCP port 0..65535, got {args.video_port}"
     return ""
 
 
@@ -591,7 +618,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--video-port",
-        type=int,
+        type=cliargs.port,
         default=None,
         help=f"serve the camera frames with the pilot's pad detection on this TCP port "
         f"(skeye up: {DEFAULT_VIDEO_PORT}; 0 = any free; needs --images)",
@@ -648,12 +675,13 @@ def register(subparsers: Any) -> None:
         help="also send the camera with the pad detection drawn on it as H.264 over RTP "
         "(QGroundControl's UDP video on udp://127.0.0.1:5600; needs --images and PyAV)",
     )
-    p.add_argument("--rtp-fps", type=float, default=10.0,
+    p.add_argument("--rtp-fps", type=cliargs.positive_float, default=10.0,
                    help="most frames per second of the RTP video (default 10)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--port", type=int, default=DEFAULT_PORT, help="TCP port (0 = any free)")
+    where.add_argument("--port", type=cliargs.port, default=DEFAULT_PORT,
+                       help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")
-    p.add_argument("--baud", type=int, default=57600, help="serial baud rate")
+    p.add_argument("--baud", type=cliargs.positive_int, default=57600, help="serial baud rate")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--robot", default="hummingbird", help="robot class to spawn")
     p.add_argument(
@@ -677,11 +705,13 @@ def register(subparsers: Any) -> None:
     p.add_argument("--name", default="R1", help="robot name")
     p.add_argument("--start", default="Pad1", help="start pose")
     p.add_argument("--location", default=None, help="spawn at north,east,down (m) instead")
-    p.add_argument("--link-timeout", type=float, default=2.0, help="s without packets -> hold")
-    p.add_argument("--land-timeout", type=float, default=20.0, help="s more -> land")
+    p.add_argument("--link-timeout", type=cliargs.positive_float, default=2.0,
+                   help="s without packets -> hold")
+    p.add_argument("--land-timeout", type=cliargs.positive_float, default=20.0,
+                   help="s more -> land")
     p.add_argument(
         "--lockstep-rate",
-        type=float,
+        type=cliargs.non_negative_float,
         default=1.0,
         help="lockstep sim: sim seconds per wall second (0 = unpaced)",
     )
@@ -690,11 +720,13 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="lockstep sim: advance only up to the sim time the ground grants (CLOCK packets)",
     )
-    p.add_argument("--tick", type=float, default=0.01, help="loop period in realtime (s)")
-    p.add_argument("--timeout", type=float, default=10.0, help="simulator answer deadline (s)")
+    p.add_argument("--tick", type=cliargs.positive_float, default=0.01,
+                   help="loop period in realtime (s)")
+    p.add_argument("--timeout", type=cliargs.positive_float, default=10.0,
+                   help="simulator answer deadline (s)")
     p.add_argument(
         "--sim-frozen-timeout",
-        type=float,
+        type=cliargs.positive_float,
         default=5.0,
         metavar="S",
         help="realtime: sim time standing still for S wall seconds means the simulator froze "
