@@ -44,7 +44,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from skeye.errors import ConfigError
+from skeye import cliargs
+from skeye.errors import ConfigError, LocalProtocolError
 from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent
 
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
@@ -80,6 +81,12 @@ def run_ground(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(f"{exc} (from ${TOKEN_ENV} or --allow-host)") from None
 
+    from skeye.link.transport import parse_uri
+
+    try:
+        parse_uri(args.vehicle)  # a bad URI stops us here, not in the bridge's thread
+    except LocalProtocolError as exc:
+        raise ConfigError(f"--vehicle: {exc}") from None
     video_at = parse_video_uri(args.video) if args.video else None
     sock = socket.create_server((args.host, args.port))
     port = sock.getsockname()[1]
@@ -144,9 +151,9 @@ def _add_ground(sub: Any) -> None:
     )
     p.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
                    help="a folder of robot files where --robot is looked up (as skeye sim's)")
-    p.add_argument("--video-fps", type=float, default=8.0,
+    p.add_argument("--video-fps", type=cliargs.positive_float, default=8.0,
                    help="the most camera frames per second asked of the vehicle (default 8)")
-    p.add_argument("--port", type=int, default=8080, help="HTTP port (0 = any free)")
+    p.add_argument("--port", type=cliargs.port, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--header-timeout", type=float, default=HEADER_TIMEOUT_S, metavar="S",
                    help="close a connection whose request head is not complete within S "
@@ -486,13 +493,15 @@ def _add_up(sub: Any) -> None:
     )
     p.add_argument("--world", default="pad", help="world for the simulator (default pad)")
     p.add_argument("--robot", default="hummingbird", help="robot class the pilot flies")
-    p.add_argument("--seed", type=int, default=0, help="simulator seed")
-    p.add_argument("--sim-port", type=int, default=3000)
-    p.add_argument("--image-port", type=int, default=5003)
-    p.add_argument("--pilot-port", type=int, default=7000)
-    p.add_argument("--video-port", type=int, default=7001,
+    p.add_argument("--seed", type=cliargs.seed, default=0,
+                   help="simulator seed (a whole number >= 0)")
+    # Fixed ports 1..65535: skeye up hands each one to the next child, so none may be 0.
+    p.add_argument("--sim-port", type=cliargs.fixed_port, default=3000)
+    p.add_argument("--image-port", type=cliargs.fixed_port, default=5003)
+    p.add_argument("--pilot-port", type=cliargs.fixed_port, default=7000)
+    p.add_argument("--video-port", type=cliargs.fixed_port, default=7001,
                    help="the pilot's video port (camera frames with its pad detection)")
-    p.add_argument("--ground-port", type=int, default=8080)
+    p.add_argument("--ground-port", type=cliargs.fixed_port, default=8080)
     mav = p.add_mutually_exclusive_group()
     mav.add_argument("--mavlink", action="append", default=None, metavar="URI",
                      help="the pilot's MAVLink links (repeatable; default: "
