@@ -4,12 +4,14 @@ For scripts and for checking a real vehicle: every command prints the vehicle's 
 RESULT or ack) and exits 0 when it was accepted, 3 when the vehicle refused it (the RESULT's
 code is printed), 2 on a bad argument or URI and 1 when the link failed or timed out.
 Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
+Output closed early (``skeye link ... stream 60 | head``) ends the command quietly, status 0.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import threading
 import time
@@ -17,6 +19,7 @@ from dataclasses import fields
 from enum import IntEnum
 from typing import Any, TextIO
 
+from skeye import cliargs
 from skeye.errors import CommandRejected, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.link.vehicle import Vehicle
 from skeye.wire.packets import Ack, Message, PollMask, Result, SkeyeMask
@@ -66,6 +69,9 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     try:
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
             return _run(vehicle, args, out)
+    except BrokenPipeError:  # the reader went away (| head): stop quietly
+        _silence(out)
+        return EXIT_OK
     except CommandRejected as exc:
         print(f"rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
         return EXIT_REJECTED
@@ -78,6 +84,20 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     except SkeyeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_LINK
+
+
+def _silence(out: TextIO) -> None:
+    """After a broken pipe: point the output's descriptor at /dev/null, so that Python's own
+    flush at exit does not fail on it again (the idiom of the Python docs, "Note on SIGPIPE")."""
+    try:
+        fd = out.fileno()
+    except (AttributeError, OSError, ValueError):
+        return  # not a file (a StringIO in tests): nothing will flush it at exit
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
 
 
 def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
@@ -118,13 +138,17 @@ def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
 def _stream(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
     lock = threading.Lock()
     count = [0]
+    closed = threading.Event()  # the output was closed (a broken pipe): stop streaming
 
     def show(msg: Message) -> None:
-        if isinstance(msg, Result):
+        if isinstance(msg, Result) or closed.is_set():
             return
         with lock:
             count[0] += 1
-            print(format_message(msg), file=out, flush=True)
+            try:
+                print(format_message(msg), file=out, flush=True)
+            except BrokenPipeError:
+                closed.set()  # said once, in the main thread; not raised in the link's thread
 
     vehicle.add_callback(show)
     answer = vehicle.stream(
@@ -132,10 +156,12 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
     )
     _answer(answer, out)
     deadline = time.monotonic() + args.seconds
-    while time.monotonic() < deadline and vehicle.connected:
+    while time.monotonic() < deadline and vehicle.connected and not closed.is_set():
         time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
     vehicle.remove_callback(show)
     vehicle.stream(0, 0, 0.0)
+    if closed.is_set():
+        raise BrokenPipeError("the output was closed")
     print(f"# {count[0]} frames in {args.seconds:g} s", file=out)
     return EXIT_OK
 
@@ -149,7 +175,8 @@ def register(subparsers: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("uri", help="tcp://host:port or serial:///dev/ttyUSB0?baud=57600")
-    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for an answer")
+    p.add_argument("--timeout", type=cliargs.positive_float, default=5.0,
+                   help="seconds to wait for an answer")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     c = sub.add_parser("take-off", help="start motors and climb")
     c.add_argument("height", type=float, help="metres above the take-off point")
@@ -186,8 +213,9 @@ def register(subparsers: Any) -> None:
         help="0x... or names: ll_status,imu_calcdata,... all",
     )
     c = sub.add_parser("stream", help="stream telemetry for N seconds and print it")
-    c.add_argument("seconds", type=float)
-    c.add_argument("--period", type=float, default=0.1, help="seconds between pushes")
+    c.add_argument("seconds", type=cliargs.positive_float, help="how long to stream (s, > 0)")
+    c.add_argument("--period", type=cliargs.positive_float, default=0.1,
+                   help="seconds between pushes")
     c.add_argument("--poll-mask", default="0", help="structures (0x... or names)")
     c.add_argument("--skeye-mask", default="nav_status", help="nav_status,pad,truth (or 0x...)")
     p.set_defaults(func=run)
