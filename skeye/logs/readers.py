@@ -162,6 +162,9 @@ def read_rosbag(path: Path, imu_topic: str | None = None,
                                   + (f" {imu_topic!r}" if imu_topic else " (sensor_msgs/Imu)"))
             gt_conn = [c for c in conns if (c.topic == truth_topic if truth_topic
                                             else c.msgtype in truth_types)][:1]
+            if truth_topic and not gt_conn:  # named, so wanted: refused as --imu-topic is
+                raise ConfigError(f"{path}: no ground-truth topic {truth_topic!r} "
+                                  "(--truth-topic)")
             for conn, _t, raw in reader.messages(connections=imu_conn + gt_conn):
                 msg: Any = reader.deserialize(raw, conn.msgtype)
                 stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import RemoteProtocolError
+from skeye.errors import ConfigError, RemoteProtocolError
 from skeye.recording.records import (
     CONNECTED,
     NOTE,
@@ -241,7 +241,20 @@ def plot_recording(path: str | Path, out: str | Path) -> RecordingSummary:
     return summary
 
 
+def check_out(out: Path) -> None:
+    """``--out``: a file whose extension matplotlib writes (none: PNG); ConfigError names the
+    formats it does write."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    kind = out.suffix[1:].lower()
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if kind and kind not in formats:
+        raise ConfigError(f"--out {out}: cannot write .{kind} files; the formats are "
+                          f"{', '.join('.' + f for f in sorted(formats))}")
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
+    check_out(args.out)  # before the recording is read
     summary = plot_recording(args.file, args.out)
     print(summary.text())
     print(f"skeye plot: wrote {args.out}")

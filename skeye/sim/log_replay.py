@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from skeye import cliargs
 from skeye.errors import ConfigError
 from skeye.logs.analysis import imu_figures, spectrum
 from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
@@ -46,6 +47,7 @@ multirotor in hover, content above 10 Hz, per axis (m/s^2, rad/s): the range mea
 hover segments (docs/physics.md, "In-flight vibration")."""
 
 REST_S = 1.0  # the log's first second: at rest, for the power-up calibration
+MIN_HOVER_S = REST_S + 1.0  # skeye logs --seconds: the rest, then a second of hover to measure
 
 
 def _quat_rows(q: np.ndarray) -> np.ndarray:
@@ -250,6 +252,9 @@ def cmd_logs(args: argparse.Namespace) -> int:
         rate = args.rate
         if not (math.isfinite(rate) and 10.0 <= rate <= 10000.0):
             raise ConfigError(f"--rate must be 10..10000 Hz, got {rate}")
+        if args.seconds < MIN_HOVER_S:
+            raise ConfigError(f"--seconds must be at least {MIN_HOVER_S:g} s (the first "
+                              f"{REST_S:g} s at rest, then the hover), got {args.seconds:g}")
         sim = simulated_imu(rate, args.seconds, args.robot)
         result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": args.seconds,
                   "real": {}, "has_truth": False,
@@ -284,8 +289,9 @@ def register(sub: Any) -> None:
     p.add_argument("--robot", default="hummingbird", help="the robot whose IMU is simulated")
     p.add_argument("--rate", type=float, default=200.0,
                    help="without a log: the simulated IMU's rate (Hz; EuRoC's is 200)")
-    p.add_argument("--seconds", type=float, default=60.0,
-                   help="without a log: how long the simulated hover is")
+    p.add_argument("--seconds", type=cliargs.positive_float, default=60.0,
+                   help=f"without a log: how long the simulated hover is (at least "
+                   f"{MIN_HOVER_S:g} s; default 60)")
     p.add_argument("--plot", default=None, metavar="PNG", help="write the spectra here")
     p.add_argument("--json", default=None, metavar="FILE", help="write the figures here")
     p.set_defaults(func=cmd_logs)

@@ -126,3 +126,13 @@ def test_a_log_without_ground_truth_gets_no_tilt_error(
     assert "The log has no ground truth: no tilt error for it." in out
     result = json.loads((tmp_path / "f.json").read_text())
     assert "tilt_rms_deg" not in result["real"] and "tilt_rms_deg" in result["simulated"]
+
+
+def test_a_named_truth_topic_missing_from_the_bag_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # As --imu-topic is: a topic the user named is wanted, so its absence is a bad option,
+    # not "the log has no ground truth".
+    bag = make_logs.write_rosbag(tmp_path / "flight.bag", synthetic(5.0))
+    assert main(["logs", str(bag), "--truth-topic", "/nosuch"]) == 2
+    err = capsys.readouterr().err
+    assert "--truth-topic" in err and "'/nosuch'" in err and "Traceback" not in err
