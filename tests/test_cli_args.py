@@ -1,0 +1,115 @@
+"""Bad command-line values: every sub-command refuses them with one line naming the option and
+exit status 2, never a traceback (the shared validators of :mod:`skeye.cliargs`, and the checks
+made at start-up). Each case is built to end quickly even where the check is missing."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from skeye import cliargs
+from skeye.cli import main
+from skeye.pilot.cli import describe_airframe
+from skeye.pilot.server import PilotServer
+from tests.pilot.fake_airframe import FakeAirframe
+
+ROOT = Path(__file__).resolve().parents[1]
+PILOT = ["pilot", "--sim", "127.0.0.1:1"]  # nothing listens there: a pilot past its checks exits 4
+NO_SIM = "127.0.0.1:1"
+
+CASES = [
+    (["sim", "--port", "-1"], "--port"),
+    (["sim", "--port", "70000"], "--port"),
+    (["sim", "--port", "0", "--image-port", "-3"], "--image-port"),
+    (["sim", "--port", "0", "--seed", "-1"], "--seed"),
+    ([*PILOT, "--port", "-5"], "--port"),
+    ([*PILOT, "--port", "0", "--link-timeout", "-1"], "--link-timeout"),
+    ([*PILOT, "--port", "0", "--tick", "-1"], "--tick"),
+    ([*PILOT, "--port", "0", "--lockstep-rate", "-1"], "--lockstep-rate"),
+    ([*PILOT, "--serial", "/dev/null", "--baud", "-1"], "--baud"),
+    ([*PILOT, "--serial", "/dev/nonexistent-skeye"], "--serial"),
+    # the up cases give a calibration file that is not there: without the option's check, up
+    # stops on that (status 1) before anything starts
+    (["up", "--sim-port", "-1", "--calibration", "/nonexistent"], "--sim-port"),
+    (["up", "--ground-port", "70000", "--calibration", "/nonexistent"], "--ground-port"),
+    (["up", "--seed", "-1", "--calibration", "/nonexistent"], "--seed"),
+    # the ground cases bind an address that cannot be: without the check, that stops them
+    (["ground", "--vehicle", "tcp://127.0.0.1:7000", "--port", "-1"], "--port"),
+    (["ground", "--video-fps", "-1", "--host", "256.0.0.1"], "--video-fps"),
+    (["ground", "--vehicle", "foo://x:1", "--host", "256.0.0.1"], "--vehicle"),
+    (["replay", "flight.rec", "--port", "-1"], "--port"),
+    # --seeds 0 after the bad option ends a run the option's check would not stop
+    (["validate", "E1", "--quick", "--first-seed", "-3", "--seeds", "0"], "--first-seed"),
+    (["validate", "--workers", "0", "--seeds", "0"], "--workers"),
+    (["sweep", "spec.toml", "--out", "o", "--workers", "0"], "--workers"),
+    (["snapshot", "--images", NO_SIM, "--timeout", "-1", "--out", "x.png"], "--timeout"),
+    (["plot", "flight.rec", "--out", "x.txt"], "--out"),
+    (["logs", "--rate", "200", "--seconds", "-5"], "--seconds"),
+    (["logs", "--rate", "200", "--seconds", "0"], "--seconds"),
+    (["logs", "--rate", "200", "--seconds", "1"], "--seconds"),
+    (["link", "tcp://" + NO_SIM, "stream", "-1"], "seconds"),
+    (["link", "tcp://" + NO_SIM, "stream", "1", "--period", "0"], "--period"),
+    (["link", "tcp://" + NO_SIM, "--timeout", "-1", "poll", "all"], "--timeout"),
+]
+
+
+@pytest.mark.parametrize(("argv", "option"), CASES, ids=[" ".join(a) for a, _ in CASES])
+def test_a_bad_value_is_refused_naming_its_option(argv: list[str], option: str,
+                                                  capsys: pytest.CaptureFixture[str],
+                                                  tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)  # flight.rec, spec.toml, x.png: not there
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's refusal
+        code = exc.code
+    captured = capsys.readouterr()
+    text = captured.out + captured.err
+    assert code == 2, text
+    assert option in text and "Traceback" not in text
+
+
+def test_the_shared_validators_take_their_ranges_whole() -> None:
+    assert cliargs.port("0") == 0 and cliargs.port("65535") == 65535
+    assert cliargs.fixed_port("1") == 1 and cliargs.seed("0") == 0
+    assert cliargs.positive_float("0.5") == 0.5 and cliargs.non_negative_float("0") == 0.0
+    for check, text in ((cliargs.fixed_port, "0"), (cliargs.port, "x"), (cliargs.seed, "1.5"),
+                        (cliargs.positive_float, "nan"), (cliargs.positive_float, "inf"),
+                        (cliargs.positive_int, "0"), (cliargs.non_negative_float, "-0.1")):
+        with pytest.raises(Exception, match="must be"):
+            check(text)
+
+
+def test_the_pilot_start_up_line_says_the_clock_mode_once() -> None:
+    class Args:
+        lockstep_rate = 2.0
+
+    sim = "R1 in pad at sim://127.0.0.1:3000"
+    assert describe_airframe(f"{sim} (realtime)", False, Args()) == f"{sim} (realtime)"
+    assert describe_airframe(f"{sim} (lockstep)", True, Args()) == f"{sim} (lockstep x2)"
+    board = "AscTec LL board on tcp://h:1"
+    assert describe_airframe(f"{board} (realtime, 100 Hz)", False, Args()).count("realtime") == 1
+    assert describe_airframe("a MAVLink flight controller", False, Args()).endswith("(realtime)")
+
+
+def test_a_closed_output_ends_a_stream_quietly() -> None:
+    """``skeye link ... stream 5 | head -1``: the first line read, the pipe closed; the command
+    ends soon, with no BrokenPipeError on stderr."""
+    with PilotServer(FakeAirframe(), port=0) as pilot:
+        child = subprocess.Popen(
+            [sys.executable, "-m", "skeye.cli", "link", pilot.address, "stream", "5",
+             "--period", "0.02"],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        assert child.stdout is not None and child.stderr is not None
+        first = child.stdout.readline()
+        child.stdout.close()  # as head does after its line
+        start = time.monotonic()
+        err = child.stderr.read().decode()
+        code = child.wait(30)
+    assert first and code == 0, err
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+    assert time.monotonic() - start < 4.0  # stopped at the closed pipe, not after 5 s
