@@ -241,23 +241,27 @@ def plot_recording(path: str | Path, out: str | Path) -> RecordingSummary:
     return summary
 
 
-def check_out(out: Path) -> None:
-    """``--out``: a file whose extension matplotlib writes (none: PNG); ConfigError names the
-    formats it does write."""
+def out_path(out: Path) -> Path:
+    """``--out`` as the file to write: one whose extension matplotlib writes, or none (then
+    ``.png`` is added, as matplotlib does, so the path said is the path written). ConfigError
+    names the formats it writes, or says the path is a directory."""
     from matplotlib.backend_bases import FigureCanvasBase
 
+    if out.is_dir():
+        raise ConfigError(f"--out {out} is a directory: give a file name (plot.png)")
     kind = out.suffix[1:].lower()
     formats = FigureCanvasBase.get_supported_filetypes()
     if kind and kind not in formats:
         raise ConfigError(f"--out {out}: cannot write .{kind} files; the formats are "
                           f"{', '.join('.' + f for f in sorted(formats))}")
+    return out if kind else out.with_name(out.name + ".png")
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    check_out(args.out)  # before the recording is read
-    summary = plot_recording(args.file, args.out)
+    out = out_path(args.out)  # before the recording is read
+    summary = plot_recording(args.file, out)
     print(summary.text())
-    print(f"skeye plot: wrote {args.out}")
+    print(f"skeye plot: wrote {out}")
     return 0
 
 
@@ -265,5 +269,6 @@ def register(sub: Any) -> None:
     """Add ``skeye plot`` to the command line."""
     p = sub.add_parser("plot", help="draw a flight recording (trajectory, altitude, battery)")
     p.add_argument("file", type=Path, help="a recording made with skeye sim --record")
-    p.add_argument("--out", type=Path, default=Path("plot.png"), help="PNG to write")
+    p.add_argument("--out", type=Path, default=Path("plot.png"),
+                   help="image to write (its extension picks the format; none: .png)")
     p.set_defaults(func=cmd_plot)

@@ -134,7 +134,28 @@ def parse_header(text: str) -> dict[str, Any]:
         raise RemoteProtocolError(f"recording header is not JSON: {exc}") from None
     if not isinstance(meta, dict):
         raise RemoteProtocolError("recording header must hold a JSON object")
+    for key, kind, check in _HEADER_FIELDS:
+        if key in meta and not check(meta[key]):
+            raise RemoteProtocolError(
+                f"recording header: {key} must be {kind}, got {meta[key]!r}")
     return meta
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+_HEADER_FIELDS: tuple[tuple[str, str, Callable[[Any], bool]], ...] = (
+    ("timestep_s", "a number of seconds > 0", lambda v: _number(v) and v > 0),
+    ("world", "a string", lambda v: isinstance(v, str)),
+    ("mode", "a string", lambda v: isinstance(v, str)),
+    ("wind", "a string", lambda v: isinstance(v, str)),
+    ("seed", "a whole number", lambda v: isinstance(v, int) and not isinstance(v, bool)),
+    ("started_unix_s", "a number", _number),
+)
+"""The settings a header may hold that readers use, and what each must be (the rest are kept
+as they are): a header that breaks one is refused when the file is opened, not when a reader
+first uses it."""
 
 
 def split_lines(data: bytes) -> list[bytes]:
@@ -153,6 +174,8 @@ class RecordingReader:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
+        if self.path.is_dir():
+            raise ConfigError(f"{self.path} is a directory, not a recording file")
         if not self.path.is_file():
             raise ConfigError(f"recording not found: {self.path}")
         with self.path.open("rb") as f:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import signal
 import socket
 import threading
@@ -75,6 +76,46 @@ def test_record_rejects_line_breaks_and_unknown_directions() -> None:
     with pytest.raises(RemoteProtocolError, match="not a skeye recording"):
         parse_header("hello")
     assert parse_header(format_header({"world": "pad"}).decode()) == {"world": "pad"}
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"timestep_s": "fast"}, "timestep_s must be a number of seconds > 0, got 'fast'"),
+        ({"timestep_s": -0.001}, "timestep_s must be a number of seconds > 0"),
+        ({"world": 5}, "world must be a string, got 5"),
+        ({"seed": 1.5}, "seed must be a whole number"),
+    ],
+)
+def test_a_header_setting_of_the_wrong_kind_is_refused_when_the_file_opens(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], settings: dict, message: str
+) -> None:
+    """Not when a reader first uses it: a replay started, then failed every client with a
+    ValueError on a header's "timestep_s": "fast"."""
+    path = tmp_path / "bad.rec"
+    path.write_bytes(format_header(settings) + format_record(Record(1.0, 0.1, 1, SENT, "PING")))
+    with pytest.raises(RemoteProtocolError, match=re.escape(message)):
+        RecordingReader(path)
+    for command in (["replay", str(path), "--port", "0"], ["plot", str(path), "--out",
+                                                            str(tmp_path / "p.png")]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err
+
+
+def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_written(
+    recording: tuple[Path, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "flight.rec"
+    folder.mkdir()
+    for command in (["replay", str(folder), "--port", "0"], ["plot", str(folder)]):
+        assert main(command) == 2
+        assert f"{folder} is a directory, not a recording file" in capsys.readouterr().err
+    assert main(["plot", str(recording[0]), "--out", str(tmp_path)]) == 2
+    assert f"--out {tmp_path} is a directory" in capsys.readouterr().err
+    assert main(["plot", str(recording[0]), "--out", str(tmp_path / "noext")]) == 0
+    assert f"wrote {tmp_path / 'noext.png'}" in capsys.readouterr().out
+    assert (tmp_path / "noext.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_reader_skips_a_cut_off_last_line_and_bad_lines(tmp_path: Path) -> None:
