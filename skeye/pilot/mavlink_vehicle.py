@@ -378,19 +378,32 @@ class MavlinkVehicle:
         self._board(MoveBy(delta[0], delta[1], delta[2], 0, MoveFrame.WORLD_NED,
                            round((speed or 0.0) * 1e3)))
 
-    def _global_to_ned(self, lat_e7: int, lon_e7: int, alt_m: float,
-                       frame: int | None) -> tuple[float, float, float]:
-        """A global target (COMMAND_INT x/y or MISSION_ITEM_INT) in the estimate's NED frame."""
+    def _global_to_ned(self, lat_e7: int, lon_e7: int, alt_m: float, frame: int | None,
+                       names: tuple[str, str, str] = ("x", "y", "z"),
+                       ) -> tuple[float, float, float]:
+        """A global target (COMMAND_INT x/y or MISSION_ITEM_INT) in the estimate's NED frame;
+        ``names`` are the message's fields for latitude, longitude and altitude, which a
+        refusal names (DENIED: out of range or not a number)."""
+        for value, lo, hi, what, name in ((lat_e7, -90, 90, "latitude", names[0]),
+                                          (lon_e7, -180, 180, "longitude", names[1])):
+            if not lo * 10**7 <= value <= hi * 10**7:
+                raise Refused(mav.MAV_RESULT_DENIED,
+                              f"{what} ({name}) {value / 1e7:g} deg is out of range {lo}..{hi}")
         origin = self.origin()
         if origin is None:
             raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                           "no GPS position yet: global targets cannot be placed")
         n, e, _ = origin.to_ned(lat_e7 / 1e7, lon_e7 / 1e7, origin.altitude_m)
-        return n, e, self._down_of(alt_m, frame, origin)
+        return n, e, self._down_of(alt_m, frame, origin, names[2])
 
-    def _down_of(self, alt_m: float, frame: int | None, origin: GeoOrigin) -> float:
+    def _down_of(self, alt_m: float, frame: int | None, origin: GeoOrigin,
+                 name: str = "z") -> float:
         """The NED down coordinate of an altitude: above home in the relative frames, above
-        mean sea level in the others."""
+        mean sea level in the others; one that is not a finite number is refused (DENIED)
+        naming the field ``name``."""
+        if not math.isfinite(alt_m):
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"altitude ({name}) {alt_m:g} m is not a finite number")
         if frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
             return self.boards.home_ned_m[2] - alt_m
         return origin.altitude_m - alt_m
@@ -638,7 +651,7 @@ class MavlinkVehicle:
     def _setpoint_position(self, msg: MavMessage, snap: Any) -> tuple[float, float, float]:
         if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
             return self._global_to_ned(int(msg.lat_int), int(msg.lon_int), float(msg.alt),
-                                       int(msg.coordinate_frame))
+                                       int(msg.coordinate_frame), ("lat_int", "lon_int", "alt"))
         x, y, z = float(msg.x), float(msg.y), float(msg.z)
         if not all(map(math.isfinite, (x, y, z))):
             raise Refused(mav.MAV_RESULT_DENIED, "position setpoint is not a number")
