@@ -108,11 +108,16 @@ class MavCodec:
 
 
 def statustext(codec: MavCodec, severity: int, text: str) -> list[MavMessage]:
-    """STATUSTEXT message(s): text over 50 bytes goes in chunks with one id (MAVLink 2)."""
+    """STATUSTEXT message(s): text over 50 bytes goes in chunks with one id (MAVLink 2).
+
+    A receiver knows the last chunk by the NUL in it (a text shorter than 50 bytes); a text
+    that is a whole number of chunks long gets an empty chunk after it to say so."""
     data = text.encode("utf-8", "replace")
     if len(data) <= MAX_STATUSTEXT:
         return [codec.mav.statustext_encode(severity, data)]
     chunks = [data[i:i + MAX_STATUSTEXT] for i in range(0, len(data), MAX_STATUSTEXT)][:8]
+    if len(chunks[-1]) == MAX_STATUSTEXT:
+        chunks = [*chunks[:7], b""] if len(chunks) == 8 else [*chunks, b""]
     ident = (zlib.crc32(data) & 0xFFFE) + 1
     return [codec.mav.statustext_encode(severity, chunk, ident, n)
             for n, chunk in enumerate(chunks)]

@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mav
 
 from skeye.errors import LocalProtocolError
-from skeye.mavlink.codec import MavCodec, MavParser
+from skeye.mavlink.codec import MavCodec, MavParser, statustext
 from skeye.mavlink.mission import MissionProtocol
 from skeye.mavlink.modes import MODE_TABLE, Program, Px4Mode
 from skeye.mavlink.params import ParamSpec, ParamTable
@@ -23,6 +23,19 @@ def _roundtrip(msg):
     """A message as the vehicle receives it (packed by one side, parsed by the other)."""
     (out,) = MavParser().feed(GCS.encode(msg))
     return out
+
+
+def test_a_long_statustext_ends_with_a_chunk_shorter_than_50_bytes():
+    """MAVLink marks a long STATUSTEXT's last chunk by a NUL in its text: a text of exactly 100
+    bytes once went out as two full chunks, and a reader waited for a third forever."""
+    for size in (51, 99, 100, 150, 400):
+        text = "".join(chr(ord("a") + i % 26) for i in range(size))
+        chunks = [_roundtrip(m) for m in statustext(GCS, mav.MAV_SEVERITY_WARNING, text)]
+        assert len({c.id for c in chunks}) == 1 and chunks[0].id != 0
+        assert [c.chunk_seq for c in chunks] == list(range(len(chunks)))
+        assert len(chunks[-1].text.encode()) < 50
+        assert all(len(c.text.encode()) == 50 for c in chunks[:-1])
+        assert "".join(c.text for c in chunks) == text[:350]
 
 
 def test_every_flight_state_and_program_has_a_mode():
