@@ -368,13 +368,26 @@ class MavlinkVehicle:
         return self.boards.state not in (NavState.LANDED,) and self.boards.state.name != "CRASHED"
 
     def _fly_to(self, target_ned_m: tuple[float, float, float], speed_m_s: float | None) -> None:
-        """MOVE_BY (world frame) from where the vehicle is to a NED target; HOLD if there."""
+        """MOVE_BY (world frame) from where the vehicle is to a NED target; HOLD if there.
+
+        The speed limit and the flight envelope are checked here first (DENIED, with the
+        boards' own reasons), so that a refusal gives the user's value and not the range of a
+        MOVE_BY field it would overflow (a speed of 100 m/s, a target thousands of km away)."""
+        if not all(map(math.isfinite, target_ned_m)):  # callers name the field first
+            raise Refused(mav.MAV_RESULT_DENIED, "target is not a finite position")
         n, e, d = self._snap().pos_ned_m
         delta = [round((t - c) * 1e3) for t, c in zip(target_ned_m, (n, e, d), strict=True)]
         if delta == [0, 0, 0]:
             self._board(Hold())
             return
         speed = speed_m_s if speed_m_s is not None else self.cruise_m_s
+        limit = self.boards.settings.max_speed_m_s
+        if speed is not None and speed > limit + 1e-9:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"speed {speed:g} m/s is over this vehicle's limit of {limit:g} m/s")
+        reason = self.boards.settings.envelope.check_target(self.boards.home_ned_m, target_ned_m)
+        if reason is not None:
+            raise Refused(mav.MAV_RESULT_DENIED, reason)
         self._board(MoveBy(delta[0], delta[1], delta[2], 0, MoveFrame.WORLD_NED,
                            round((speed or 0.0) * 1e3)))
 
@@ -477,6 +490,11 @@ class MavlinkVehicle:
                              mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"frame {cmd.frame}: give GLOBAL_INT or GLOBAL_RELATIVE_ALT_INT")
+        speed = cmd.p(1)  # NaN (unset, as MAVSDK's goto_location sends) or <= 0: cruise
+        if math.isinf(speed):
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"ground speed (p1) {speed:g} m/s is not a finite speed: give m/s, or "
+                          "-1 for the cruise speed")
         snap = self._snap()
         n, e, d = snap.pos_ned_m
         if not (cmd.x == 0 and cmd.y == 0):  # 0/0: here
@@ -487,9 +505,8 @@ class MavlinkVehicle:
         elif not math.isnan(cmd.p(7)):
             raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                           "no GPS position yet: global targets cannot be placed")
-        speed = cmd.p(1) if math.isfinite(cmd.p(1)) and cmd.p(1) > 0 else None
         self._start(Program.NONE)
-        self._fly_to((n, e, d), speed)
+        self._fly_to((n, e, d), speed if speed > 0 else None)
 
     def _change_speed(self, cmd: Command) -> None:
         speed = cmd.p(2)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -22,12 +23,13 @@ from typing import Any
 from pymavlink import mavutil
 
 from skeye.control.connection import connect
-from skeye.pilot.boards import BoardSettings
+from skeye.pilot.boards import BoardSettings, OnboardBoards
 from skeye.pilot.mavlink_server import MavlinkServer
 from skeye.pilot.mavlink_vehicle import Settings
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from tests.control.conftest import sim_running
+from tests.pilot.fake_airframe import FakeAirframe
 
 GCS = (255, 190)  # QGroundControl's system and component ids
 SMALL_CAMERA_ROBOT = "mavtest"
@@ -101,6 +103,15 @@ def mav_vehicle(*, rate: float = 4.0, images: bool = False, robot_dir: Path | No
             pilot.boards, pilot.lock, uris or [f"udpout://127.0.0.1:{port}"],
             settings=Settings(pad_vision=images)))
         yield MavVehicle(port, pilot, robot, server, sim)
+
+
+@contextmanager
+def scripted_endpoint(uri: str) -> Iterator[MavlinkServer]:
+    """The MAVLink endpoint on the boards over a scripted airframe (``FakeAirframe``: landed,
+    a GPS fix at 49 N 8 E): no simulator, for what needs only the endpoint's answers."""
+    boards = OnboardBoards(FakeAirframe())
+    with MavlinkServer(boards, threading.Lock(), [uri]) as server:
+        yield server
 
 
 def wait_for(conn: Any, kinds: str | list[str], pred: Callable[[Any], bool] = lambda m: True,

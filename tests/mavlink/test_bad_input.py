@@ -18,6 +18,7 @@ from tests.mavlink.conftest import (
     command,
     free_udp_port,
     mav_vehicle,
+    scripted_endpoint,
     statustext,
     wait_for,
 )
@@ -118,6 +119,56 @@ def test_commands_out_of_range_are_refused_with_their_reason(flying):
     assert "no parameter 'NO_SUCH_PARAM'" in statustext(conn)
     assert v.mavlink.vehicle.acks.get(M.MAV_RESULT_ACCEPTED, 0) >= 2
     _still_hovering(v, conn, where)
+
+
+def _reposition(conn, speed: float, lat_e7: int, lon_e7: int, alt_m: float,
+                reason: bool = True) -> tuple[int, str]:
+    """DO_REPOSITION (COMMAND_INT, GLOBAL_INT) as QGroundControl sends it; its COMMAND_ACK's
+    result and (``reason``) the STATUSTEXT that follows a refusal (the same reason again
+    within 2 s gets none)."""
+    conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_DO_REPOSITION, 0, 0,
+                              speed, 1, 0, math.nan, lat_e7, lon_e7, alt_m)
+    ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+    return int(ack.result), "" if ack.result == 0 or not reason else statustext(conn)
+
+
+def test_a_reposition_with_bad_values_is_refused_naming_the_value():
+    """Each bad DO_REPOSITION gets DENIED and a STATUSTEXT naming the field and why, never an
+    encoding message of the boards' packets, and no exception in the endpoint: an infinite
+    altitude once raised OverflowError (no ACK at all), an infinite speed was flown at cruise,
+    100 m/s and latitude 95 came back as "MoveBy.speed=100000 outside 0..65535" and
+    "MoveBy.dx=... outside ...". The vehicle is the scripted one (landed, GPS at 49 N 8 E):
+    these checks come before the boards' own (which would say "landed")."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
+                                          source_component=GCS[1])
+        try:
+            pos = wait_for(conn, "GLOBAL_POSITION_INT")
+            lat, lon = pos.lat, pos.lon
+            cases = [
+                ((-1.0, lat, lon, math.inf), ["altitude (z) inf"]),
+                ((-1.0, lat, lon, -math.inf), ["altitude (z) -inf"]),
+                ((math.inf, lat, lon, math.nan), ["ground speed (p1) inf"]),
+                ((-math.inf, lat, lon, math.nan), ["ground speed (p1) -inf"]),
+                ((100.0, lat + 100, lon, math.nan),
+                 ["speed 100 m/s is over this vehicle's limit of 3 m/s"]),
+                ((-1.0, 950_000_000, lon, math.nan), ["latitude (x) 95", "-90..90"]),
+                ((-1.0, lat, 2_000_000_000, math.nan), ["longitude (y) 200", "-180..180"]),
+                ((-1.0, lat + 4_500_000, lon, math.nan), ["outside the flight envelope"]),
+            ]
+            for (speed, x, y, z), words in cases:
+                result, text = _reposition(conn, speed, x, y, z)
+                assert result == M.MAV_RESULT_DENIED, (speed, x, y, z, result, text)
+                assert "MoveBy" not in text and all(w in text for w in words), (words, text)
+            # Cruise (-1, any speed <= 0, NaN as MAVSDK's goto_location sends) still reaches
+            # the boards, which refuse a landed vehicle for that reason.
+            for speed in (-1.0, 0.0, math.nan):
+                result, _ = _reposition(conn, speed, lat + 100, lon, math.nan, reason=False)
+                assert result == M.MAV_RESULT_TEMPORARILY_REJECTED, speed
+            assert server.errors == 0
+        finally:
+            conn.close()
 
 
 def _mission_ack(conn, item: dict, count: int = 1) -> tuple[int, str]:

@@ -3,26 +3,13 @@ server, with pymavlink on the other end; the vehicle is the boards on a scripted
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
-
 from pymavlink import mavutil
 
 from skeye.link.transport import pty_null_modem
-from skeye.pilot.boards import OnboardBoards
-from skeye.pilot.mavlink_server import MavlinkServer
+from tests.mavlink.conftest import scripted_endpoint as endpoint
 from tests.mavlink.conftest import wait_for
-from tests.pilot.fake_airframe import FakeAirframe
 
 M = mavutil.mavlink
-
-
-@contextmanager
-def endpoint(uri: str) -> Iterator[MavlinkServer]:
-    boards = OnboardBoards(FakeAirframe())
-    with MavlinkServer(boards, threading.Lock(), [uri]) as server:
-        yield server
 
 
 def _params(conn) -> set[str]:
