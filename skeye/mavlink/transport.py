@@ -6,7 +6,10 @@ frame to a peer (``None``: to every peer it knows). A peer is whatever identifie
 (a UDP address, a TCP connection, the serial line). The URIs (:func:`open_transport`):
 
 - ``udp://HOST:PORT`` (or ``udpin://``): bind HOST:PORT and serve whoever sends to it (each
-  sender's address becomes a peer; a vehicle endpoint answers every ground station).
+  sender's address becomes a peer; a vehicle endpoint answers every ground station). UDP has
+  no connection to close, so a sender silent for ``PEER_TIMEOUT_S`` is no longer a peer: it
+  gets nothing more, and its place goes to the next new sender (every restart of a ground
+  station comes from a new source port).
 - ``udpout://HOST:PORT``: send to HOST:PORT from a local port on 127.0.0.1 (``?bind=ADDR`` to
   choose), as PX4 SITL sends to QGroundControl's 14550 and MAVSDK's 14540; replies come back
   to that local port.
@@ -21,7 +24,8 @@ the URI names another address. ``close`` is idempotent.
 from __future__ import annotations
 
 import socket
-from collections.abc import Hashable
+import time
+from collections.abc import Callable, Hashable
 from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
@@ -30,6 +34,12 @@ from skeye.errors import ConfigError, LinkClosed
 Peer = Hashable
 MAX_DATAGRAM = 65535
 MAX_PEERS = 8  # ground stations one listening link serves; others are told and ignored
+# A listening UDP link's peer silent this long is dropped: ten of the 1 Hz heartbeats that
+# QGroundControl and MAVSDK send, and time for a script to pause between commands. (Not the
+# pilot's link-loss timeout, COM_DL_LOSS_T, 2 s by default: a flight failsafe setting, too short
+# for a script that sends no heartbeat to keep its telemetry.) The vehicle forgets a ground
+# station after the same time (GCS_TIMEOUT_S).
+PEER_TIMEOUT_S = 10.0
 TCP_CLIENTS = 4
 
 
@@ -50,10 +60,12 @@ class MavTransport(Protocol):
 
 
 class UdpTransport:
-    """A UDP socket: listening (peers are who sent) or sending to one remote address."""
+    """A UDP socket: listening (peers are who sent within ``peer_timeout_s`` of ``clock``) or
+    sending to one remote address (its one peer, never dropped)."""
 
     def __init__(self, host: str, port: int, *, remote: tuple[str, int] | None = None,
-                 max_peers: int = MAX_PEERS) -> None:
+                 max_peers: int = MAX_PEERS, peer_timeout_s: float = PEER_TIMEOUT_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.bind((host, port))
@@ -64,7 +76,11 @@ class UdpTransport:
         self.remote = remote
         self.max_peers = max_peers
         self._peers: list[Peer] = [remote] if remote is not None else []
+        self._heard: dict[Peer, float] = {}  # a listening link's peers: when each last sent
+        self.peer_timeout_s = peer_timeout_s
+        self.clock = clock
         self.refused_peers = 0
+        self.expired_peers = 0
         self.datagram = True
         self.port = self.sock.getsockname()[1]
         self.name = (f"udpout://{remote[0]}:{remote[1]}" if remote is not None
@@ -75,7 +91,18 @@ class UdpTransport:
 
     @property
     def peers(self) -> list[Peer]:
+        self._expire()
         return list(self._peers)
+
+    def _expire(self) -> None:
+        """Drop the listening link's peers silent for ``peer_timeout_s``."""
+        if self.remote is not None:
+            return
+        now = self.clock()
+        for peer in [p for p, t in self._heard.items() if now - t > self.peer_timeout_s]:
+            del self._heard[peer]
+            self._peers.remove(peer)
+            self.expired_peers += 1
 
     def poll(self) -> list[tuple[bytes, Peer]]:
         out: list[tuple[bytes, Peer]] = []
@@ -87,14 +114,19 @@ class UdpTransport:
             except OSError:  # ICMP port unreachable from a peer that went away
                 return out
             if addr not in self._peers:
+                self._expire()
                 if len(self._peers) >= self.max_peers:
                     self.refused_peers += 1
                     out.append((data, ("refused", addr)))
                     continue
                 self._peers.append(addr)
+            if self.remote is None:
+                self._heard[addr] = self.clock()
             out.append((data, addr))
 
     def send(self, data: bytes, peer: Peer | None = None) -> None:
+        if peer is None:
+            self._expire()
         targets = self._peers if peer is None else [peer]
         for target in targets:
             addr = target[1] if isinstance(target, tuple) and target[:1] == ("refused",) else target

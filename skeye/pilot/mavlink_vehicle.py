@@ -38,6 +38,7 @@ from skeye.mavlink.mission import MissionItem, MissionProtocol
 from skeye.mavlink.modes import MODE_TABLE, REQUESTS, Program, Px4Mode, Request
 from skeye.mavlink.params import ParamSpec, ParamTable
 from skeye.mavlink.streams import MessageScheduler
+from skeye.mavlink.transport import PEER_TIMEOUT_S
 from skeye.pilot import mavlink_telemetry as telem
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.envelope import FlightEnvelope
@@ -71,7 +72,8 @@ from skeye.wire.packets import (
 
 log = logging.getLogger(__name__)
 
-GCS_TIMEOUT_S = 10.0  # a ground station silent this long is forgotten
+GCS_TIMEOUT_S = PEER_TIMEOUT_S  # a ground station silent this long is forgotten (10 s; a
+# listening UDP link stops sending to it after the same time)
 NOTICE_EVERY_S = 2.0  # the same refusal or bad-input notice at most this often per peer
 DUPLICATE_WINDOW_S = 1.0  # a command repeated within this is acked again, not re-run
 ARRIVED_RADIUS_M = 0.5

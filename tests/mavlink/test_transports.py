@@ -48,3 +48,37 @@ def test_the_vehicle_serves_tcp_clients():
         finally:
             for conn in conns:
                 conn.close()
+
+
+def test_a_listening_udp_link_frees_the_place_of_a_ground_station_gone_silent():
+    """Eight ground stations that each sent a HEARTBEAT and went away (a QGroundControl or
+    pymavlink restart comes from a new source port) fill the link: a ninth is told "too many
+    ground stations". Once the eight have been silent for PEER_TIMEOUT_S the link drops them
+    and serves the ninth. (The link once kept every sender for good: after eight, no new
+    ground station was ever served.) Waits are on what arrives, with stuck guards only."""
+    with endpoint("udp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        link = server.transports[0]
+
+        def station(n: int):
+            return mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=200 + n,
+                                              source_component=190)
+
+        for n in range(8):
+            gone = station(n)
+            try:
+                wait_for(gone, "HEARTBEAT")  # served: the vehicle's telemetry reaches it
+            finally:
+                gone.close()
+        assert len(link.peers) == 8
+        ninth = station(8)
+        try:
+            note = wait_for(ninth, "STATUSTEXT", timeout_s=30.0)
+            assert "too many ground stations" in note.text
+            # wait_for keeps sending the ninth's heartbeat: served once the first of the eight
+            # expires, and the only peer once all have.
+            wait_for(ninth, "HEARTBEAT", timeout_s=120.0)
+            wait_for(ninth, "HEARTBEAT", lambda m: len(link.peers) == 1, timeout_s=120.0)
+            assert link.expired_peers == 8 and link.refused_peers >= 1
+        finally:
+            ninth.close()
