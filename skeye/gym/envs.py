@@ -104,6 +104,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         self.vehicle: Vehicle | None = None
         self.episode: Episode | None = None
         self._started_s = 0.0
+        self._ended = ""  # why the episode ended ("terminated", "truncated"), "" while it runs
 
     # -- gymnasium ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -124,18 +125,23 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
             raise
         self.flight, self.vehicle, self.episode = flight, vehicle, episode
         self._started_s = flight.time_s
+        self._ended = ""
         return self._observe(), self._info()
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         flight, vehicle, episode = self.flight, self.vehicle, self.episode
         if flight is None or vehicle is None or episode is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
+        if self._ended:  # a crashed vehicle would fly on, its episode judged afresh
+            raise gymnasium.error.ResetNeeded(
+                f"the episode is over ({self._ended}): call reset() before step()")
         if vehicle.alive:
             apply_action(vehicle, self.action_kind, action, self.limits)
         flight.step()
         reward, terminated = self.task.judge(vehicle, episode)
         truncated = not terminated and flight.time_s - self._started_s >= (
             self.task.episode_s - 1e-9)
+        self._ended = "terminated" if terminated else "truncated" if truncated else ""
         return self._observe(), float(reward), terminated, truncated, self._info()
 
     def render(self) -> np.ndarray | None:

@@ -252,3 +252,32 @@ def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
     finally:
         env.close()
     assert abs(obs[STATE_FIELDS.index("roll_rate_rad_s")]) < 0.01
+
+
+def test_a_step_after_the_episode_ended_needs_a_reset() -> None:
+    """Flown into the ground (terminated), the episode is over: stepping on would fly a crashed
+    vehicle whose episode is judged afresh (terminated False, reward 0, info still naming the
+    crash). Gymnasium's contract is reset() first; so after a truncation."""
+    env = gymnasium.make("skeye/Hover-v0")
+    try:
+        env.reset(seed=2)
+        for _ in range(400):
+            _, _, terminated, truncated, info = env.step(np.array([0, 0, -1, 0], np.float32))
+            if terminated or truncated:
+                break
+        assert terminated and info["crash"], info
+        with pytest.raises(gymnasium.error.ResetNeeded, match=r"episode is over \(terminated\)"):
+            env.step(np.zeros(4, np.float32))
+        env.reset(seed=3)
+        assert env.step(np.zeros(4, np.float32))[2] is False  # flies again after the reset
+    finally:
+        env.close()
+    env = gymnasium.make("skeye/Hover-v0", episode_s=0.2)  # four steps of 50 ms
+    try:
+        env.reset(seed=4)
+        results = [env.step(np.zeros(4, np.float32))[2:4] for _ in range(4)]
+        assert results[-1] == (False, True) and (False, True) not in results[:-1]
+        with pytest.raises(gymnasium.error.ResetNeeded, match=r"episode is over \(truncated\)"):
+            env.step(np.zeros(4, np.float32))
+    finally:
+        env.close()
