@@ -266,6 +266,11 @@ class CameraSystem:
         self.renderer_description: str | None = None  # the OpenGL renderer, once probed
         self._described = threading.Event()
         self._next_id = 1
+        for robot in sim.robots.values():  # robots there before the cameras: not being spawned
+            for cam in robot.cameras:
+                if not cam.camera_id:
+                    cam.camera_id = self._next_id
+                    self._next_id += 1
         self._known: dict[str, int] = {}
         self._queue: queue.Queue[_Shot | None] = queue.Queue()
         self._lock = threading.Condition()
@@ -333,6 +338,14 @@ class CameraSystem:
         return "\n".join(cam.mjcf(robot.name) for cam in robot.cameras)
 
     def _on_rebuild(self, sim: Any) -> None:
+        """Register the robots' cameras with the image server after the world was rebuilt.
+
+        Raises:
+            ConfigError: a camera of a robot being spawned cannot be rendered (larger than the
+                offscreen buffer): the engine takes the robot out again, and its INIT is refused
+                with this reason; the other robots and their cameras go on.
+        """
+        spawned = {id(c) for r in sim.robots.values() for c in r.cameras if not c.camera_id}
         current = {}
         for robot in sim.robots.values():
             for cam in robot.cameras:
@@ -379,12 +392,15 @@ class CameraSystem:
             # for (frames are rendered only for someone).
             for robot in sim.robots.values():
                 for cam in robot.cameras:
-                    if self.error is None and (cam.width > glob.offwidth
-                                               or cam.height > glob.offheight):
-                        self.error = (
-                            f"camera {robot.name}/{cam.name}: a {cam.width}x{cam.height} image "
-                            f"does not fit the offscreen buffer (framebuffer width "
-                            f"{glob.offwidth}, height {glob.offheight}); use a smaller camera")
+                    if cam.width <= glob.offwidth and cam.height <= glob.offheight:
+                        continue
+                    why = (f"camera {robot.name}/{cam.name}: a {cam.width}x{cam.height} image "
+                           f"does not fit the offscreen buffer (framebuffer width "
+                           f"{glob.offwidth}, height {glob.offheight}); use a smaller camera")
+                    if id(cam) in spawned:
+                        raise ConfigError(why)  # the robot being spawned: refused alone
+                    if self.error is None:  # there before the cameras were (in-process use)
+                        self.error = why
                         log.error("%s", self.error)
 
     def _next_event_step(self, sim: Any) -> int:

@@ -56,10 +56,13 @@ def test_a_failing_callback_is_logged_not_raised() -> None:
 
 
 def test_realtime_render_failure_reaches_the_robot_client(tmp_path: Path) -> None:
-    """A camera larger than the offscreen buffer cannot be rendered: in realtime mode the
-    client used to get nothing at all; now it gets ERR {Command CAMERA} with the reason."""
+    """A camera that cannot be rendered: in realtime mode the client used to get nothing at
+    all; now it gets ERR {Command CAMERA} with the reason. (The camera larger than the
+    offscreen buffer was spawned in-process before the cameras were attached: over the
+    protocol such a robot is refused at INIT, the next test.)"""
     robots = small_camera_robot(tmp_path, width=1600, height=1200)  # offscreen is 800x600
     sim = Simulation(load_world("pad"), seed=3, robot_dirs=(robots,))
+    sim.spawn("smallcam", name="R0", sink=lambda events: None, location_ned_m=(3.0, 0.0, 0.0))
     with (
         SimulationRunner(sim, mode="realtime") as runner,
         CameraSystem(sim, FrameBuffer(), synchronous=False) as cameras,
@@ -67,10 +70,41 @@ def test_realtime_render_failure_reaches_the_robot_client(tmp_path: Path) -> Non
     ):
         c = LineClient(control.port)
         c.expect("NFO")
-        assert c.answer("INIT {ClassName smallcam} {Name R1} {Start Pad1}", "INIT").type == "RES"
+        assert c.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}", "INIT").type == "RES"
         err = c.read_until(lambda m: m.type == "ERR" and m.get("Command") == "CAMERA",
                            timeout_s=120)[1]
-        assert "framebuffer width 800" in (err.get("Reason") or ""), err
+        assert "camera R0/Down: a 1600x1200 image does not fit the offscreen buffer" in (
+            err.get("Reason") or ""), err
         assert cameras.error is not None
         assert runner.alive  # the physics goes on; only the camera is out
         c.close()
+
+
+def test_a_camera_too_large_is_refused_at_init_and_the_others_fly_on(tmp_path: Path) -> None:
+    """One client's robot file with a camera larger than the offscreen buffer stopped every
+    other client's camera robot (the camera system's error was one for all) and its own INIT
+    was answered OK. Its INIT is refused naming the buffer; the others are not told anything
+    and go on."""
+    robots = small_camera_robot(tmp_path, width=1600, height=1200)  # offscreen is 800x600
+    sim = Simulation(load_world("pad"), seed=3, robot_dirs=(robots,))
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        CameraSystem(sim, FrameBuffer(), synchronous=True) as cameras,
+        ControlServer(runner, port=0) as control,
+    ):
+        a, b = LineClient(control.port), LineClient(control.port)
+        a.expect("NFO")
+        b.expect("NFO")
+        assert a.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}", "INIT").type == "RES"
+        refused = b.answer("INIT {ClassName smallcam} {Name R2} {Location 3,0,0}", "INIT")
+        assert refused.type == "ERR", refused
+        assert "R2/Down: a 1600x1200 image does not fit the offscreen buffer" in (
+            refused.get("Reason") or ""), refused
+        assert b.answer("INIT {ClassName hummingbird} {Name R2} {Location 3,0,0}",
+                        "INIT").type == "RES"  # the same client, a camera that fits
+        answer = a.answer("STEP {Count 200}", "STEP")
+        assert answer.type == "RES", answer
+        assert a.answer("PING {Id 1}", "PING").type == "RES"
+        assert cameras.error is None and runner.alive
+        a.close()
+        b.close()
