@@ -30,7 +30,6 @@ from gymnasium import spaces
 
 from skeye.errors import ConfigError
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
-from skeye.gym.options import number, numbers
 from skeye.gym.tasks import PAD_TOLERANCE_M, Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
@@ -39,6 +38,7 @@ from skeye.pilot.policy import (
     velocity_setpoint,
 )
 from skeye.robots.config import RobotConfig
+from skeye.values import number, numbers
 
 ACTIONS = ("velocity", "attitude")
 

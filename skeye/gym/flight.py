@@ -19,7 +19,6 @@ checked once, and a bad one is a :class:`~skeye.errors.ConfigError` naming it.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
@@ -29,7 +28,6 @@ import numpy as np
 
 from skeye.errors import ConfigError
 from skeye.gym.board import BoardView, InProcessAirframe, InProcessCamera, VisionRobot, wrap_pi
-from skeye.gym.options import is_number, text
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad_track import Pose
 from skeye.pilot.policy import DetectOnlyVision, ObservedPad
@@ -45,6 +43,7 @@ from skeye.sim.sensors import SENSOR_CLASSES
 from skeye.sim.state import BodyState
 from skeye.sim.world import WorldDescription, load_world
 from skeye.sim.world_model import PadPlacement
+from skeye.values import is_number, text
 from skeye.vision.calibration import CameraCalibration, load_calibration
 from skeye.wire.wind import make_settings, parse_params
 
@@ -92,16 +91,16 @@ class FlightSettings:
             value = getattr(self, name)
             if not is_number(value):
                 raise ConfigError(f"{name} must be a number, got {value!r}")
+        # The ranges below are finite, so each refuses NaN and the infinities as well.
         low, high = TIMESTEP_RANGE_S
-        if not (math.isfinite(self.timestep_s) and low <= self.timestep_s <= high):
+        if not low <= self.timestep_s <= high:
             raise ConfigError(f"timestep_s must be in [{low:g}, {high:g}] s, "
                               f"got {self.timestep_s!r}")
-        if not (math.isfinite(self.sensor_noise) and 0.0 <= self.sensor_noise <= 100.0):
+        if not 0.0 <= self.sensor_noise <= 100.0:
             raise ConfigError(f"sensor_noise must be a factor 0..100, got {self.sensor_noise!r}")
-        if not (math.isfinite(self.control_rate_hz) and 0.5 <= self.control_rate_hz <= 1000.0):
+        if not 0.5 <= self.control_rate_hz <= 1000.0:
             raise ConfigError(f"control_rate_hz must be 0.5..1000, got {self.control_rate_hz!r}")
-        if not (math.isfinite(self.vision_latency_s)
-                and 0.0 <= self.vision_latency_s < MAX_VISION_LATENCY_S):
+        if not 0.0 <= self.vision_latency_s < MAX_VISION_LATENCY_S:
             raise ConfigError(f"vision_latency_s must be in [0, {MAX_VISION_LATENCY_S:g}) s "
                               f"(the pilot refuses later detections), got "
                               f"{self.vision_latency_s!r}")

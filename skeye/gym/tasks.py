@@ -35,7 +35,6 @@ from gymnasium import spaces
 
 from skeye.errors import ConfigError
 from skeye.gym.flight import Vehicle
-from skeye.gym.options import number, numbers
 from skeye.pilot.airframe import Snapshot
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
@@ -48,6 +47,7 @@ from skeye.pilot.policy import (
     state_vector,
 )
 from skeye.sim.state import BodyState
+from skeye.values import number, numbers
 
 Vec3 = tuple[float, float, float]
 CRASH_REWARD = -10.0

@@ -30,8 +30,8 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 from skeye.errors import ConfigError
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
-from skeye.gym.options import number
 from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
+from skeye.values import number
 
 DEFAULT_SPACING_M = 10.0
 """Between vehicles' cells: PadLanding's area is 3 m and the webcam sees about 1.5 m around

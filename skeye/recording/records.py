@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.values import is_finite_number
 from skeye.wire.sim_lines import format_message
 from skeye.workers import Worker
 
@@ -141,17 +142,13 @@ def parse_header(text: str) -> dict[str, Any]:
     return meta
 
 
-def _number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
 _HEADER_FIELDS: tuple[tuple[str, str, Callable[[Any], bool]], ...] = (
-    ("timestep_s", "a number of seconds > 0", lambda v: _number(v) and v > 0),
+    ("timestep_s", "a number of seconds > 0", lambda v: is_finite_number(v) and v > 0),
     ("world", "a string", lambda v: isinstance(v, str)),
     ("mode", "a string", lambda v: isinstance(v, str)),
     ("wind", "a string", lambda v: isinstance(v, str)),
     ("seed", "a whole number", lambda v: isinstance(v, int) and not isinstance(v, bool)),
-    ("started_unix_s", "a number", _number),
+    ("started_unix_s", "a number", is_finite_number),
 )
 """The settings a header may hold that readers use, and what each must be (the rest are kept
 as they are): a header that breaks one is refused when the file is opened, not when a reader

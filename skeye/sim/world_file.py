@@ -33,6 +33,7 @@ from skeye.sim.world_model import (
     Visual,
     WorldDescription,
 )
+from skeye.values import is_finite_number
 from skeye.vision.pad import get_pad
 
 # ----------------------------------------------------------------------------------------------
@@ -76,7 +77,7 @@ class _Table:
         rule: str = "",
     ) -> float:
         value = self._get(key, default)
-        if not _is_number(value) or not math.isfinite(value):
+        if not is_finite_number(value):
             self.fail(f"must be a finite number, got {value!r}", key)
         if check is not None and not check(float(value)):
             self.fail(f"must be {rule}, got {value!r}", key)
@@ -95,7 +96,7 @@ class _Table:
         if (
             not isinstance(value, list)
             or len(value) != 3
-            or not all(_is_number(v) and math.isfinite(v) for v in value)
+            or not all(is_finite_number(v) for v in value)
         ):
             self.fail(f"must be a list of 3 finite numbers, got {value!r}", key)
         if check is not None and not all(check(float(v)) for v in value):
@@ -137,10 +138,6 @@ class _Table:
         if not isinstance(value, list):
             self.fail(f"must be an array of tables ([[{key}]]), got {type(value).__name__}", key)
         return [_Table(self.source, f"[[{key}]] #{i}", item) for i, item in enumerate(value, 1)]
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _positive(v: float) -> bool:

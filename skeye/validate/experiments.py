@@ -42,6 +42,7 @@ from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.link.vehicle import Vehicle
 from skeye.processes import scaled_s, start_skeye, stop_process
 from skeye.recording.records import RecordingReader
+from skeye.values import is_finite_number, is_number, number, text
 from skeye.vision.pad import PAD_SURFACE_HEIGHT_M
 from skeye.wire.packet_units import PadModeSi, nav_status_to_si, pad_mode_from_si, pad_report_to_si
 from skeye.wire.packets import NavState, PadAction, PadReport, SkeyeMask
@@ -129,17 +130,11 @@ SETTING_NAMES = ("f_max_n", "e2_duration_s", "wind", "wind_params", "vision_late
 
 
 def _number(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if not is_number(value):
         raise ConfigError(f"{name} must be a number, got {value!r}")
-    if not math.isfinite(value):
+    if not is_finite_number(value):
         raise ConfigError(f"{name} must be finite, got {value!r}")
-    return float(value)
-
-
-def _string(name: str, value: object) -> str:
-    if not isinstance(value, str):
-        raise ConfigError(f"{name} must be a string, got {value!r}")
-    return value
+    return number(name, value)
 
 
 def check_setting(name: str, value: object) -> None:
@@ -167,14 +162,14 @@ def check_setting(name: str, value: object) -> None:
                               f"got {value!r}")
     elif name == "wind_params":
         try:
-            parse_params(_string(name, value))
+            parse_params(text(name, value))
         except ConfigError as exc:
             raise ConfigError(f"wind_params {value!r}: {exc}") from None
     elif name == "vision_latency":
         from skeye.pilot.cli import vision_latency_s
 
         try:
-            vision_latency_s(_string(name, value))
+            vision_latency_s(text(name, value))
         except ConfigError:
             raise ConfigError(f"vision_latency must be 'measured' or a number of ms 0..10000 "
                               f"(skeye pilot --vision-latency-ms), got {value!r}") from None
@@ -185,7 +180,7 @@ def check_setting(name: str, value: object) -> None:
         except LocalProtocolError as exc:
             raise ConfigError(f"{name} {value!r} does not fit PAD_MODE: {exc}") from None
     elif name == "calibration":
-        if _string(name, value):
+        if text(name, value):
             from skeye.vision.calibration import load_calibration
 
             try:

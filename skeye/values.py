@@ -1,31 +1,35 @@
-"""Checks for the environments' keywords and reset options, each naming the option it checks.
+"""Checks for plain values read from outside: numbers, finite numbers, vectors and strings.
 
-How this works: every ``gymnasium.make`` keyword and ``reset(options=...)`` value passes through
-one of these before it is used, so a value of the wrong type or out of its range is a
-:class:`~skeye.errors.ConfigError` naming the option, never a ``TypeError`` or ``ValueError``
-from deeper down (docs/gym.md, "Options").
+How this works: one set of predicates and checkers shared by every package that reads settings
+from a file, a header, a keyword or a spec (world files, recordings, run settings, the
+Gymnasium options), so they agree on what a number is. A number is a real number (``int``,
+``float`` or another :class:`numbers.Real`, numpy's scalars included) that is not a bool; the
+checkers raise :class:`~skeye.errors.ConfigError` naming the value. This module imports only the
+standard library and :mod:`skeye.errors`, so any package may use it.
 """
 
 from __future__ import annotations
 
 import math
+import numbers as _numbers
 from typing import Any
-
-import numpy as np
 
 from skeye.errors import ConfigError
 
 
 def is_number(value: Any) -> bool:
     """A real number (int or float, numpy's included), not a bool."""
-    if isinstance(value, bool | np.bool_):
-        return False
-    return isinstance(value, int | float | np.integer | np.floating)
+    return isinstance(value, _numbers.Real) and not isinstance(value, bool)
+
+
+def is_finite_number(value: Any) -> bool:
+    """A real number (as :func:`is_number`) that is neither infinite nor NaN."""
+    return is_number(value) and math.isfinite(value)
 
 
 def number(name: str, value: Any) -> float:
     """``value`` as a finite float, or a ConfigError naming ``name``."""
-    if not is_number(value) or not math.isfinite(float(value)):
+    if not is_finite_number(value):
         raise ConfigError(f"{name} must be a finite number, got {value!r}")
     return float(value)
 
@@ -36,7 +40,7 @@ def numbers(name: str, value: Any, count: int, what: str) -> tuple[float, ...]:
     if isinstance(value, str | bytes) or not hasattr(value, "__iter__"):
         raise ConfigError(f"{name} must be {what}, got {value!r}")
     items = list(value)
-    if len(items) != count or not all(is_number(v) and math.isfinite(float(v)) for v in items):
+    if len(items) != count or not all(is_finite_number(v) for v in items):
         raise ConfigError(f"{name} must be {what}, got {value!r}")
     return tuple(float(v) for v in items)
 
