@@ -12,8 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
-from skeye.errors import LocalProtocolError, SkeyeError
-from skeye.pilot.cli import vision_latency_s
+from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.processes import scaled_s
 from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
@@ -26,14 +25,25 @@ from skeye.validate.experiments import (
     E2_WINDS,
     ESTIMATORS,
     PAD_SOURCES,
+    SETTING_CHOICES,
     WORLDS,
     E1Series,
     E2Series,
     RunSettings,
+    check_setting,
     e2_key,
 )
 from skeye.validate.report import PAPER, median_summary, write_e1, write_e2, write_report
-from skeye.vision.calibration import CalibrationResult, load_calibration
+from skeye.vision.calibration import CalibrationResult
+
+
+def _choice(name: str, value: str, what: str) -> None:
+    """A setting that names one of a list (:func:`check_setting`), refused in the CLI's words."""
+    try:
+        check_setting(name, value)
+    except ConfigError:
+        raise LocalProtocolError(f"unknown {what} {value!r}: "
+                                 f"{', '.join(SETTING_CHOICES[name])}") from None
 
 
 def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1,
@@ -56,19 +66,15 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         raise LocalProtocolError(f"unknown experiment {which!r}: E1, E2 or all")
     if seeds < 1:
         raise LocalProtocolError(f"--seeds must be >= 1, got {seeds}")
-    if camera not in CAMERAS:
-        raise LocalProtocolError(f"unknown camera profile {camera!r}: {', '.join(CAMERAS)}")
-    if estimator not in ESTIMATORS:
-        raise LocalProtocolError(f"unknown estimator {estimator!r}: {', '.join(ESTIMATORS)}")
-    if world not in WORLDS:
-        raise LocalProtocolError(f"unknown world {world!r}: {', '.join(WORLDS)}")
+    for name, value, what in (("camera", camera, "camera profile"),
+                              ("estimator", estimator, "estimator"), ("world", world, "world")):
+        _choice(name, value, what)
     if wind not in E2_WINDS:
         raise LocalProtocolError(f"unknown E2 disturbance {wind!r}: {', '.join(E2_WINDS)}")
-    vision_latency_s(vision_latency)  # refused here, not in every trial
-    if pad_source not in PAD_SOURCES:
-        raise LocalProtocolError(f"unknown pad source {pad_source!r}: {', '.join(PAD_SOURCES)}")
-    if calibration is not None:
-        load_calibration(calibration)  # a bad file is named here, not in every trial
+    check_setting("vision_latency", vision_latency)  # refused here, not in every trial
+    _choice("pad_source", pad_source, "pad source")
+    if calibration is not None:  # a bad file is named here, not in every trial
+        check_setting("calibration", str(calibration))
     experiments = ("E1", "E2") if which == "ALL" else (which,)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"paper": PAPER}

@@ -129,6 +129,12 @@ SETTING_NAMES = ("f_max_n", "e2_duration_s", "wind", "wind_params", "vision_late
 """The fields of :class:`RunSettings` a trial takes as parameters (all but seed and quick)."""
 
 
+SETTING_CHOICES: dict[str, tuple[str, ...]] = {
+    "camera": CAMERAS, "estimator": ESTIMATORS, "world": WORLDS, "pad_source": PAD_SOURCES,
+    "wind": WIND_MODES}
+"""The settings that take one of a list of names, and those names."""
+
+
 def _number(name: str, value: object) -> float:
     if not is_number(value):
         raise ConfigError(f"{name} must be a number, got {value!r}")
@@ -146,8 +152,7 @@ def check_setting(name: str, value: object) -> None:
     Raises:
         ConfigError: naming the setting, the value and what is wrong with it.
     """
-    choices = {"camera": CAMERAS, "estimator": ESTIMATORS, "world": WORLDS,
-               "pad_source": PAD_SOURCES, "wind": WIND_MODES}.get(name)
+    choices = SETTING_CHOICES.get(name)
     if choices is not None:
         if value not in choices:
             raise ConfigError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
