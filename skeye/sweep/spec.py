@@ -22,12 +22,10 @@ from typing import Any
 
 import skeye
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.validate.experiments import RunSettings, check_setting
+from skeye.validate.experiments import SETTING_NAMES, RunSettings, check_disturbance, check_setting
 
 EXPERIMENTS = ("E1", "E2")
-SETTINGS_FIELDS = {f.name: str(f.type) for f in dataclasses.fields(RunSettings)
-                   if f.name not in ("seed", "quick")}
-"""Parameters E1 and E2 take (fields of :class:`RunSettings`)."""
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(RunSettings)}
 _SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
               "resources", "name"}
 
@@ -65,7 +63,7 @@ class Trial:
         return hashlib.sha256(blob).hexdigest()[:16]
 
     def settings(self) -> RunSettings:
-        known = {k: v for k, v in self.params.items() if k in SETTINGS_FIELDS}
+        known = {k: v for k, v in self.params.items() if k in SETTING_NAMES}
         return RunSettings(seed=self.seed, quick=self.quick, **known)
 
     def to_json(self) -> dict[str, Any]:
@@ -110,7 +108,7 @@ def _check_value(name: str, value: Any, where: str) -> None:
 def _check_setting(name: str, value: Any, where: str) -> None:
     """A value of a RunSettings field, by the rule the trial applies
     (:func:`skeye.validate.experiments.check_setting`); other names are a script's own."""
-    if name not in SETTINGS_FIELDS:
+    if name not in SETTING_NAMES:
         return
     try:
         check_setting(name, value)
@@ -158,10 +156,10 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     if "seed" in names:
         raise LocalProtocolError("seeds are set with seeds = N or [..], not as a parameter")
     if experiment != "script":
-        bad = [n for n in names if n not in SETTINGS_FIELDS]
+        bad = [n for n in names if n not in SETTING_NAMES]
         if bad:
             raise LocalProtocolError(f"{experiment} has no parameter {bad}; it takes "
-                                     f"{sorted(SETTINGS_FIELDS)} (a flight script takes any)")
+                                     f"{sorted(SETTING_NAMES)} (a flight script takes any)")
     sets: list[dict[str, Any]] = []
     if grid:
         keys = sorted(grid)
@@ -179,9 +177,10 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
         raise LocalProtocolError("[resources] takes cpus and gpus")
     trials = [Trial(experiment, params, seed, is_quick, script, timeout_s)
               for params in sets for seed in seeds]
-    for params in sets:  # each set as a whole (a wind mode with its wind_params), as a trial
+    for params in sets:  # each set's disturbance as a whole (each value is checked above)
+        given = {**_DEFAULTS, **params}
         try:
-            Trial(experiment, params, seeds[0], is_quick, script, timeout_s).settings()
+            check_disturbance(given["wind"], given["wind_params"], given["f_max_n"])
         except ConfigError as exc:
             raise LocalProtocolError(f"parameter set {params}: {exc}") from None
     return SweepSpec(experiment, trials, names, float(resources.get("cpus", 1.0)),

@@ -35,7 +35,7 @@ import tempfile
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
@@ -89,13 +89,7 @@ class RunSettings:
         ``skeye sim`` gets them); a bad one is a ConfigError naming it."""
         for name in SETTING_NAMES:
             check_setting(name, getattr(self, name))
-        args = self.wind_args()
-        if args:
-            try:
-                make_settings(args[1], parse_params(args[3]) if len(args) > 3 else {})
-            except ConfigError as exc:
-                raise ConfigError(f"wind {self.wind!r} with wind_params {self.wind_params!r} "
-                                  f"and f_max_n {self.f_max_n!r}: {exc}") from None
+        check_disturbance(self.wind, self.wind_params, self.f_max_n)
 
     @property
     def e2_seconds(self) -> float:
@@ -103,12 +97,7 @@ class RunSettings:
         return min(20.0, self.e2_duration_s) if self.quick else self.e2_duration_s
 
     def wind_args(self) -> list[str]:
-        if self.wind == "none":
-            return []
-        params = [p for p in self.wind_params.split(",") if p]
-        if self.wind == "random_force" and not any(p.startswith("f_max_n=") for p in params):
-            params.append(f"f_max_n={self.f_max_n}")
-        return ["--wind", self.wind] + (["--wind-params", ",".join(params)] if params else [])
+        return _wind_args(self.wind, self.wind_params, self.f_max_n)
 
     def describe_wind(self) -> str:
         """E2's disturbance in words, with the parameters given (else the simulator's)."""
@@ -123,9 +112,7 @@ class RunSettings:
         return f"{what} (skeye sim --wind {self.wind}: {given})"
 
 
-SETTING_NAMES = ("f_max_n", "e2_duration_s", "wind", "wind_params", "vision_latency",
-                 "pad_source", "deadband_m", "max_speed_m_s", "camera", "estimator", "world",
-                 "calibration")
+SETTING_NAMES = tuple(f.name for f in fields(RunSettings) if f.name not in ("seed", "quick"))
 """The fields of :class:`RunSettings` a trial takes as parameters (all but seed and quick)."""
 
 
@@ -133,6 +120,32 @@ SETTING_CHOICES: dict[str, tuple[str, ...]] = {
     "camera": CAMERAS, "estimator": ESTIMATORS, "world": WORLDS, "pad_source": PAD_SOURCES,
     "wind": WIND_MODES}
 """The settings that take one of a list of names, and those names."""
+
+
+def _wind_args(wind: str, wind_params: str, f_max_n: float) -> list[str]:
+    """``skeye sim``'s wind arguments for these settings (none in still air)."""
+    if wind == "none":
+        return []
+    params = [p for p in wind_params.split(",") if p]
+    if wind == "random_force" and not any(p.startswith("f_max_n=") for p in params):
+        params.append(f"f_max_n={f_max_n}")
+    return ["--wind", wind] + (["--wind-params", ",".join(params)] if params else [])
+
+
+def check_disturbance(wind: str, wind_params: str, f_max_n: float) -> None:
+    """The disturbance as a whole (``wind`` with ``wind_params`` and ``f_max_n``, as ``skeye
+    sim`` gets them), each already checked alone by :func:`check_setting`.
+
+    Raises:
+        ConfigError: naming the three and what ``skeye sim`` would refuse.
+    """
+    args = _wind_args(wind, wind_params, f_max_n)
+    if args:
+        try:
+            make_settings(args[1], parse_params(args[3]) if len(args) > 3 else {})
+        except ConfigError as exc:
+            raise ConfigError(f"wind {wind!r} with wind_params {wind_params!r} "
+                              f"and f_max_n {f_max_n!r}: {exc}") from None
 
 
 def _number(name: str, value: object) -> float:
