@@ -275,7 +275,15 @@ def run(args: argparse.Namespace) -> int:
             mavlink = open_mavlink(server, args, pad_vision=vision is not None)
             rtp = open_rtp_video(server, video, args)
             airframe_check = getattr(airframe, "check", None)
-            with server, mavlink or nullcontext(), rtp or nullcontext():
+            try:
+                stack.enter_context(server)  # closed before the video and the airframe
+            except LinkClosed as exc:
+                if args.serial is None:
+                    raise
+                # busy, a directory, not a terminal: a bad option, not a lost simulator
+                print(f"skeye pilot: --serial: {exc}", flush=True)
+                return 2
+            with mavlink or nullcontext(), rtp or nullcontext():
                 print(
                     f"skeye pilot: {describe_airframe(airframe.describe(), lockstep, args)}; "
                     f"ground control on {server.address}; flight envelope: "

@@ -222,17 +222,21 @@ class PilotServer:
 
     # -- lifecycle -----------------------------------------------------------------------
     def start(self) -> PilotServer:
-        """Start the loop and the accept thread (or open the serial port); returns self."""
+        """Start the loop and the accept thread (or open the serial port); returns self.
+
+        Raises:
+            LinkClosed: the serial port cannot be opened (nothing is started then).
+        """
+        serial = None if self.serial_uri is None else open_link(self.serial_uri)
         if self.video is not None:
             self.video.start()
         self._spawn(self._loop, "pilot-loop")
         if hasattr(self.airframe, "attach_new"):
             self._spawn(self._reattach_loop, "pilot-reattach")
-        if self._listener is not None:
-            self._spawn(self._accept_loop, "pilot-accept")
+        if serial is not None:
+            self._serve(serial)
         else:
-            assert self.serial_uri is not None
-            self._serve(open_link(self.serial_uri))
+            self._spawn(self._accept_loop, "pilot-accept")
         return self
 
     def _spawn(self, target: Callable[..., None], name: str, *args: object) -> None:

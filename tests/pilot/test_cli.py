@@ -150,3 +150,27 @@ def test_pilot_vision_latency_option_is_checked_before_anything_starts(capsys):
         args = parser().parse_args([*base, "--vision-latency-ms", bad])
         assert pilot_cli.run(args) == 2
         assert "--vision-latency-ms must be" in capsys.readouterr().out
+
+
+def test_a_serial_device_that_cannot_be_opened_is_a_bad_option(capsys, monkeypatch, tmp_path):
+    # A directory exists and is readable and writable, so only opening it finds it is no serial
+    # port: that is --serial's fault (status 2), not a lost simulator (status 4).
+    from skeye.pilot.airframe import VehicleLimits
+    from tests.pilot.fake_airframe import FakeAirframe
+
+    class Backend(FakeAirframe):  # what run() asks of an opened airframe besides the Airframe
+        limits = VehicleLimits()
+        lockstep = False
+        closed = False
+
+        def close(self) -> None:
+            self.closed = True
+
+    opened: list[Backend] = []
+    monkeypatch.setattr(pilot_cli, "open_airframe",
+                        lambda uri, options: opened.append(Backend()) or opened[-1])
+    args = parser().parse_args(["pilot", "--sim", "127.0.0.1:1", "--serial", str(tmp_path)])
+    assert pilot_cli.run(args) == 2
+    out = capsys.readouterr().out
+    assert "--serial" in out and str(tmp_path) in out
+    assert opened and opened[0].closed
