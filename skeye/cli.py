@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import select
 import sys
 import threading
 import time
@@ -431,9 +432,37 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SkeyeError as exc:
         print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError as exc:
+        if not _stdout_closed():  # a socket's broken pipe: an error as any other OSError
+            print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+        _silence_stdout()  # the reader went away (| head): stop quietly
+        return 0
     except OSError as exc:
         print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
         return 2
+
+
+def _stdout_closed() -> bool:
+    """Whether standard output is a pipe whose reader has gone (poll says POLLERR)."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False  # not a file (a StringIO in tests)
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
+def _silence_stdout() -> None:
+    """After a broken pipe: point standard output's descriptor at /dev/null, so that Python's
+    own flush at exit does not fail on it again (the idiom of the Python docs, "Note on
+    SIGPIPE")."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    finally:
+        os.close(devnull)
 
 
 if __name__ == "__main__":

@@ -113,3 +113,16 @@ def test_a_closed_output_ends_a_stream_quietly() -> None:
     assert first and code == 0, err
     assert "Traceback" not in err and "BrokenPipe" not in err, err
     assert time.monotonic() - start < 4.0  # stopped at the closed pipe, not after 5 s
+
+
+def test_a_broken_pipe_that_is_not_the_output_is_an_error(monkeypatch, capsys) -> None:
+    """Only a closed standard output ends a command quietly: a socket's broken pipe (stdout
+    still open) is an error like any other OSError."""
+    from skeye.link import cli as link_cli
+
+    def broken(*_: object) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(link_cli, "run", broken)
+    assert main(["link", "tcp://" + NO_SIM, "poll", "all"]) == 2
+    assert "error: [Errno 32] Broken pipe" in capsys.readouterr().err

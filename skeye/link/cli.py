@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import threading
 import time
@@ -69,9 +68,6 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     try:
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
             return _run(vehicle, args, out)
-    except BrokenPipeError:  # the reader went away (| head): stop quietly
-        _silence(out)
-        return EXIT_OK
     except CommandRejected as exc:
         print(f"rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
         return EXIT_REJECTED
@@ -84,20 +80,6 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     except SkeyeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_LINK
-
-
-def _silence(out: TextIO) -> None:
-    """After a broken pipe: point the output's descriptor at /dev/null, so that Python's own
-    flush at exit does not fail on it again (the idiom of the Python docs, "Note on SIGPIPE")."""
-    try:
-        fd = out.fileno()
-    except (AttributeError, OSError, ValueError):
-        return  # not a file (a StringIO in tests): nothing will flush it at exit
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, fd)
-    finally:
-        os.close(devnull)
 
 
 def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
@@ -160,7 +142,7 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
         time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
     vehicle.remove_callback(show)
     vehicle.stream(0, 0, 0.0)
-    if closed.is_set():
+    if closed.is_set():  # skeye's main() ends the command quietly
         raise BrokenPipeError("the output was closed")
     print(f"# {count[0]} frames in {args.seconds:g} s", file=out)
     return EXIT_OK
