@@ -97,11 +97,11 @@ def test_the_pilot_start_up_line_says_the_clock_mode_once() -> None:
 
 
 def test_a_closed_output_ends_a_stream_quietly() -> None:
-    """``skeye link ... stream 5 | head -1``: the first line read, the pipe closed; the command
+    """``skeye link ... stream 60 | head -1``: the first line read, the pipe closed; the command
     ends soon, with no BrokenPipeError on stderr."""
     with PilotServer(FakeAirframe(), port=0) as pilot:
         child = subprocess.Popen(
-            [sys.executable, "-m", "skeye.cli", "link", pilot.address, "stream", "5",
+            [sys.executable, "-m", "skeye.cli", "link", pilot.address, "stream", "60",
              "--period", "0.02"],
             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         assert child.stdout is not None and child.stderr is not None
@@ -112,7 +112,7 @@ def test_a_closed_output_ends_a_stream_quietly() -> None:
         code = child.wait(30)
     assert first and code == 0, err
     assert "Traceback" not in err and "BrokenPipe" not in err, err
-    assert time.monotonic() - start < 4.0  # stopped at the closed pipe, not after 5 s
+    assert time.monotonic() - start < 30.0  # stopped at the closed pipe, not after 60 s
 
 
 def test_a_broken_pipe_that_is_not_the_output_is_an_error(monkeypatch, capsys) -> None:
