@@ -32,20 +32,21 @@ def _float(text: str) -> float:
     return value
 
 
+def _port(text: str, lowest: int) -> int:
+    value = _int(text)
+    if not lowest <= value <= MAX_PORT:
+        raise argparse.ArgumentTypeError(f"must be a port {lowest}..{MAX_PORT}, got {text!r}")
+    return value
+
+
 def port(text: str) -> int:
     """A TCP/UDP port 0..65535 (0: any free one, where the option's help says so)."""
-    value = _int(text)
-    if not 0 <= value <= MAX_PORT:
-        raise argparse.ArgumentTypeError(f"must be a port 0..{MAX_PORT}, got {text!r}")
-    return value
+    return _port(text, 0)
 
 
 def fixed_port(text: str) -> int:
     """A port 1..65535: one that others are told to connect to, so not 0 ("any free")."""
-    value = _int(text)
-    if not 1 <= value <= MAX_PORT:
-        raise argparse.ArgumentTypeError(f"must be a port 1..{MAX_PORT}, got {text!r}")
-    return value
+    return _port(text, 1)
 
 
 def seed(text: str) -> int:
@@ -64,17 +65,19 @@ def positive_int(text: str) -> int:
     return value
 
 
+def _float_from(text: str, bound: float, inclusive: bool) -> float:
+    value = _float(text)
+    if value < bound or (value == bound and not inclusive):
+        raise argparse.ArgumentTypeError(
+            f"must be a number {'>=' if inclusive else '>'} {bound:g}, got {text!r}")
+    return value
+
+
 def positive_float(text: str) -> float:
     """A finite number > 0 (a timeout or period in seconds, a rate in Hz)."""
-    value = _float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text!r}")
-    return value
+    return _float_from(text, 0.0, inclusive=False)
 
 
 def non_negative_float(text: str) -> float:
     """A finite number >= 0 (0 has a meaning the option's help gives)."""
-    value = _float(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
-    return value
+    return _float_from(text, 0.0, inclusive=True)
