@@ -67,11 +67,13 @@ class LocalBackend(_Closing):
             pending: set[Future[Row]] = set()
             queue = list(trials)
             while queue or pending:
+                submitted = False
                 while queue and len(pending) < self.workers:
                     t = queue.pop(0)
                     extra = self.keep(t) if self.keep else {}
                     pending.add(pool.submit(run_trial_process, t, **extra))
-                if on_running:
+                    submitted = True
+                if on_running and submitted:  # else the count is the one said after the wait
                     on_running(len(pending))
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 if on_running:
@@ -112,9 +114,9 @@ class RayBackend(_Closing):
             ) -> Iterator[Row]:
         ray = self.ray
         refs = {self._remote.remote(t): t for t in trials}
+        if on_running and refs:
+            on_running(min(len(refs), self.workers))
         while refs:
-            if on_running:
-                on_running(min(len(refs), self.workers))
             done, _ = ray.wait(list(refs), num_returns=1)
             trial = refs.pop(done[0])
             if on_running:
