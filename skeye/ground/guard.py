@@ -163,6 +163,8 @@ def parse_json_limited(text: str | bytes) -> Any:
         value = json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InvalidArgument(f"is not valid JSON: {exc}") from None
+    if not _may_hold_lone_surrogate(text):
+        return value
     try:
         json.dumps(value, ensure_ascii=False).encode("utf-8")
     except UnicodeEncodeError as exc:
@@ -171,6 +173,16 @@ def parse_json_limited(text: str | bytes) -> Any:
             f"holds a lone UTF-16 surrogate ({lone!a}), which is not a character"
         ) from None
     return value
+
+
+def _may_hold_lone_surrogate(text: str | bytes) -> bool:
+    """Whether parsed ``text`` may hold a lone surrogate, so its value must be re-encoded to
+    find out. ASCII text can spell one only as an escape (``\\ud800``); other text may hold
+    one as it is: ``json.loads`` decodes bytes with ``surrogatepass`` (an encoded surrogate,
+    ``b'"\\xed\\xa0\\x80"'``, is read, not refused), and a string may hold one already."""
+    if isinstance(text, bytes):
+        return not text.isascii() or b"\\u" in text or b"\\U" in text
+    return not text.isascii() or "\\u" in text or "\\U" in text
 
 
 class CommandRate:

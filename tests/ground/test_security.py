@@ -245,10 +245,14 @@ def test_a_lone_surrogate_in_json_gets_a_clear_error(
     """JSON text can spell a lone UTF-16 surrogate (\\ud800), which is no character: echoed in
     an answer (an id, an unknown argument's name) it made the answer unencodable, a 500 for a
     POST and, on the WebSocket, a task dying with an unlogged answer. It is refused as the
-    input's fault, naming it, and the page is served on."""
+    input's fault, naming it, and the page is served on. (Only input that is not ASCII or
+    holds a \\u escape is re-encoded to look for one.)"""
     caplog.set_level(logging.WARNING)
     headers = {**ground.web.auth, "Content-Type": "application/json"}
     r = _post(ground, "take_off", b'{"height_m\\ud800": 1}', headers)
+    assert r.status_code == 400 and "lone UTF-16 surrogate ('\\ud800')" in r.json()["error"]
+    # not only as an escape: json.loads reads an encoded surrogate in bytes (surrogatepass)
+    r = _post(ground, "take_off", b'{"height_m\xed\xa0\x80": 1}', headers)
     assert r.status_code == 400 and "lone UTF-16 surrogate ('\\ud800')" in r.json()["error"]
     assert ground.commands_reached() == 0
     with ws_connect(f"{ground.ws_url}?token={ground.web.token}", open_timeout=10) as ws:
