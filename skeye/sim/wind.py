@@ -29,8 +29,8 @@ acts against and an extra force on the centre of mass (NED, N). Modes:
 Parameters come from ``SET {Type Wind} {Mode m} {Params k=v,k=v}`` or the command line, as a
 :class:`skeye.wire.wind.WindSettings`; bad keys or values raise ConfigError naming them. Every
 parameter has a physical range (``skeye.wire.wind.PARAM_RANGES``), checked before a setting is
-accepted: a value outside it (a 1e-320 s
-redraw period, a 1e6 m/s wind) would overflow the model or blow every vehicle out of the world.
+accepted: a value outside it (a 1e-320 s redraw period, a 1e6 m/s wind) would overflow the model
+or blow every vehicle out of the world.
 """
 
 from __future__ import annotations
