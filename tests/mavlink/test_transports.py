@@ -6,6 +6,7 @@ from __future__ import annotations
 from pymavlink import mavutil
 
 from skeye.link.transport import pty_null_modem
+from skeye.mavlink.transport import PEER_TIMEOUT_S
 from tests.mavlink.conftest import scripted_endpoint as endpoint
 from tests.mavlink.conftest import wait_for
 
@@ -55,10 +56,14 @@ def test_a_listening_udp_link_frees_the_place_of_a_ground_station_gone_silent():
     pymavlink restart comes from a new source port) fill the link: a ninth is told "too many
     ground stations". Once the eight have been silent for PEER_TIMEOUT_S the link drops them
     and serves the ninth. (The link once kept every sender for good: after eight, no new
-    ground station was ever served.) Waits are on what arrives, with stuck guards only."""
+    ground station was ever served.) The link's expiry runs on a clock the test advances, so
+    no station expires before the test says (however slow the machine) and none waits ten
+    real seconds; waits are on what arrives, with stuck guards only."""
+    clock = _FakeClock()
     with endpoint("udp://127.0.0.1:0") as server:
         port = int(server.addresses[0].rsplit(":", 1)[1])
         link = server.transports[0]
+        link.clock = clock
 
         def station(n: int):
             return mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=200 + n,
@@ -75,10 +80,21 @@ def test_a_listening_udp_link_frees_the_place_of_a_ground_station_gone_silent():
         try:
             note = wait_for(ninth, "STATUSTEXT", timeout_s=30.0)
             assert "too many ground stations" in note.text
-            # wait_for keeps sending the ninth's heartbeat: served once the first of the eight
-            # expires, and the only peer once all have.
-            wait_for(ninth, "HEARTBEAT", timeout_s=120.0)
-            wait_for(ninth, "HEARTBEAT", lambda m: len(link.peers) == 1, timeout_s=120.0)
+            assert len(link.peers) == 8 and link.expired_peers == 0
+            clock.now_s += PEER_TIMEOUT_S + 1.0  # the eight have been silent that long
+            # wait_for keeps sending the ninth's heartbeat: the eight expire and it is served
+            # as the only peer.
+            wait_for(ninth, "HEARTBEAT", lambda m: len(link.peers) == 1, timeout_s=30.0)
             assert link.expired_peers == 8 and link.refused_peers >= 1
         finally:
             ninth.close()
+
+
+class _FakeClock:
+    """A monotonic clock the test moves by hand (read from the endpoint's thread)."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
