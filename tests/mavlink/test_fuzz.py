@@ -93,6 +93,20 @@ def test_arbitrary_bytes_give_messages_or_bad_frames(data):
             vehicle.codec.encode(out.msg)
 
 
+def _answers_with_one_ack(vehicle: MavlinkVehicle, client: MavCodec, parser: MavParser,
+                          msg: object) -> list:
+    """Send ``msg`` to the vehicle; assert that the answers hold exactly one COMMAND_ACK, for
+    the message's command, and that every answer packs."""
+    answers = []
+    for decoded in parser.feed(client.encode(msg), datagram=True):
+        answers += vehicle.handle(0, ("127.0.0.1", 1), decoded, 1.0)
+    acks = [a.msg for a in answers if a.msg.get_type() == "COMMAND_ACK"]
+    assert [a.command for a in acks] == [msg.command], (msg, answers)
+    for out in answers:
+        vehicle.codec.encode(out.msg)
+    return answers
+
+
 def test_every_command_with_non_finite_params_gets_its_ack() -> None:
     """Every MAV_CMD of the dialect, as COMMAND_LONG with all seven params NaN, then +inf, then
     -inf: each is answered with its COMMAND_ACK (accepted or not), never an exception. (The
@@ -103,13 +117,7 @@ def test_every_command_with_non_finite_params_gets_its_ack() -> None:
         parser = MavParser()
         for command in COMMANDS:
             msg = dialect.MAVLink_command_long_message(1, 1, command, 0, *([bad] * 7))
-            answers = []
-            for decoded in parser.feed(client.encode(msg), datagram=True):
-                answers += vehicle.handle(0, ("127.0.0.1", 1), decoded, 1.0)
-            acks = [a.msg for a in answers if a.msg.get_type() == "COMMAND_ACK"]
-            assert [a.command for a in acks] == [command], (command, bad, answers)
-            for out in answers:
-                vehicle.codec.encode(out.msg)
+            _answers_with_one_ack(vehicle, client, parser, msg)
 
 
 GLOBAL_FRAMES = [dialect.MAV_FRAME_GLOBAL_INT, dialect.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -118,11 +126,14 @@ GLOBAL_FRAMES = [dialect.MAV_FRAME_GLOBAL_INT, dialect.MAV_FRAME_GLOBAL_RELATIVE
 
 def test_every_command_int_with_non_finite_params_and_z_gets_its_ack() -> None:
     """The same as COMMAND_INT, in every global frame, with a GPS position (one tick first: the
-    altitude anchor) and x/y at the vehicle and at 0/0 ("here"). The test above sends only
-    COMMAND_LONG, where DO_REPOSITION is refused as not a COMMAND_INT before any field is read,
-    and never ticks, so no global target could be placed; the Hypothesis fuzz draws
-    COMMAND_INT, DO_REPOSITION, a global frame and an infinite z together too rarely to find
-    what a probe found: z = inf reached ``round()`` in ``_fly_to`` (OverflowError, no ACK)."""
+    altitude anchor) and x/y at the vehicle and at 0/0 ("here"): once with p1-p4 and z all
+    the bad value, once with p1-p4 valid (-1: the cruise speed; 0; 0; NaN: keep the yaw) and
+    only z bad, since a command may refuse a bad p1 before it reads z (DO_REPOSITION does).
+    The test above sends only COMMAND_LONG, where DO_REPOSITION is refused as not a
+    COMMAND_INT before any field is read, and never ticks, so no global target could be
+    placed; the Hypothesis fuzz draws COMMAND_INT, DO_REPOSITION, a global frame and an
+    infinite z together too rarely to find what a probe found: z = inf reached ``round()``
+    in ``_fly_to`` (OverflowError, no ACK)."""
     for bad in (math.nan, math.inf, -math.inf):
         for frame in GLOBAL_FRAMES:
             vehicle, client = _vehicle()
@@ -130,13 +141,8 @@ def test_every_command_int_with_non_finite_params_and_z_gets_its_ack() -> None:
             assert vehicle.origin() is not None
             parser = MavParser()
             for command in COMMANDS:
-                for x, y in ((490_000_000, 80_000_000), (0, 0)):
-                    msg = dialect.MAVLink_command_int_message(1, 1, frame, command, 0, 0,
-                                                              bad, bad, bad, bad, x, y, bad)
-                    answers = []
-                    for decoded in parser.feed(client.encode(msg), datagram=True):
-                        answers += vehicle.handle(0, ("127.0.0.1", 1), decoded, 1.0)
-                    acks = [a.msg for a in answers if a.msg.get_type() == "COMMAND_ACK"]
-                    assert [a.command for a in acks] == [command], (command, frame, bad)
-                    for out in answers:
-                        vehicle.codec.encode(out.msg)
+                for params in ((bad, bad, bad, bad), (-1.0, 0.0, 0.0, math.nan)):
+                    for x, y in ((490_000_000, 80_000_000), (0, 0)):
+                        msg = dialect.MAVLink_command_int_message(1, 1, frame, command, 0, 0,
+                                                                  *params, x, y, bad)
+                        _answers_with_one_ack(vehicle, client, parser, msg)
