@@ -309,9 +309,24 @@ class OnboardBoards:
         self._velocity_until_s = None
         self._waypoint_target = None
 
+    def check_move(self, target_ned_m: tuple[float, float, float] | None = None,
+                   speed_m_s: float | None = None,
+                   home_ned_m: tuple[float, float, float] | None = None) -> str | None:
+        """Why a move at ``speed_m_s`` to ``target_ned_m`` is refused, or None: a speed over
+        the vehicle's limit (refused, never silently capped), then a target outside the flight
+        envelope around ``home_ned_m`` (default: this flight's home). ``None`` skips a check.
+        The boards' own commands and the MAVLink endpoint ask this one rule."""
+        limit = self.settings.max_speed_m_s
+        if speed_m_s is not None and speed_m_s > limit + 1e-9:
+            return f"speed {speed_m_s:g} m/s is over this vehicle's limit of {limit:g} m/s"
+        if target_ned_m is not None:
+            home = self.home_ned_m if home_ned_m is None else home_ned_m
+            return self.settings.envelope.check_target(home, target_ned_m)
+        return None
+
     def _check_envelope(self, home_ned_m: tuple[float, float, float],
                         target_ned_m: tuple[float, float, float]) -> None:
-        reason = self.settings.envelope.check_target(home_ned_m, target_ned_m)
+        reason = self.check_move(target_ned_m, home_ned_m=home_ned_m)
         if reason is not None:
             raise _Refused(ResultCode.BAD_VALUE, reason)
 
@@ -358,12 +373,9 @@ class OnboardBoards:
         """A command's speed (0: the default); over the vehicle's limit it is refused, never
         silently capped."""
         speed = speed_m_s if speed_m_s > 0 else self.settings.default_speed_m_s
-        limit = self.settings.max_speed_m_s
-        if speed > limit + 1e-9:
-            raise _Refused(
-                ResultCode.BAD_VALUE,
-                f"speed {speed:g} m/s is over this vehicle's limit of {limit:g} m/s",
-            )
+        reason = self.check_move(speed_m_s=speed)
+        if reason is not None:
+            raise _Refused(ResultCode.BAD_VALUE, reason)
         return speed
 
     def _pad_mode(self, msg: PadMode) -> None:

@@ -41,7 +41,6 @@ from skeye.mavlink.streams import MessageScheduler
 from skeye.mavlink.transport import PEER_TIMEOUT_S
 from skeye.pilot import mavlink_telemetry as telem
 from skeye.pilot.boards import OnboardBoards
-from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.mavlink_types import (
     FORCE_MAGIC,
     RESULT_OF_CODE,
@@ -372,9 +371,10 @@ class MavlinkVehicle:
     def _fly_to(self, target_ned_m: tuple[float, float, float], speed_m_s: float | None) -> None:
         """MOVE_BY (world frame) from where the vehicle is to a NED target; HOLD if there.
 
-        The speed limit and the flight envelope are checked here first (DENIED, with the
-        boards' own reasons), so that a refusal gives the user's value and not the range of a
-        MOVE_BY field it would overflow (a speed of 100 m/s, a target thousands of km away)."""
+        The speed limit and the flight envelope are checked here first (DENIED, by the
+        boards' own rule, ``OnboardBoards.check_move``), so that a refusal gives the user's
+        value and not the range of a MOVE_BY field it would overflow (a speed of 100 m/s, a
+        target thousands of km away)."""
         if not all(map(math.isfinite, target_ned_m)):  # callers name the field first
             raise Refused(mav.MAV_RESULT_DENIED, "target is not a finite position")
         n, e, d = self._snap().pos_ned_m
@@ -383,11 +383,7 @@ class MavlinkVehicle:
             self._board(Hold())
             return
         speed = speed_m_s if speed_m_s is not None else self.cruise_m_s
-        limit = self.boards.settings.max_speed_m_s
-        if speed is not None and speed > limit + 1e-9:
-            raise Refused(mav.MAV_RESULT_DENIED,
-                          f"speed {speed:g} m/s is over this vehicle's limit of {limit:g} m/s")
-        reason = self.boards.settings.envelope.check_target(self.boards.home_ned_m, target_ned_m)
+        reason = self.boards.check_move(target_ned_m, speed)
         if reason is not None:
             raise Refused(mav.MAV_RESULT_DENIED, reason)
         self._board(MoveBy(delta[0], delta[1], delta[2], 0, MoveFrame.WORLD_NED,
@@ -732,11 +728,10 @@ class MavlinkVehicle:
         """The vehicle's checks on a mission item: a position inside the flight envelope."""
         if item.command not in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF,
                                 mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LAND):
-            if item.command == mav.MAV_CMD_DO_CHANGE_SPEED and item.param2 > \
-                    self.boards.settings.max_speed_m_s + 1e-9:
-                return (mav.MAV_MISSION_INVALID_PARAM2,
-                        f"item {item.seq}: speed {item.param2:g} m/s is over this vehicle's "
-                        f"limit of {self.boards.settings.max_speed_m_s:g} m/s")
+            if item.command == mav.MAV_CMD_DO_CHANGE_SPEED:
+                reason = self.boards.check_move(speed_m_s=item.param2)
+                if reason is not None:
+                    return mav.MAV_MISSION_INVALID_PARAM2, f"item {item.seq}: {reason}"
             return None
         if item.x == 0 and item.y == 0:
             return None  # "here": PX4 flies the item where the vehicle is
@@ -744,8 +739,7 @@ class MavlinkVehicle:
             target = self._global_to_ned(item.x, item.y, item.z, item.frame)
         except Refused as exc:
             return mav.MAV_MISSION_ERROR, f"item {item.seq}: {exc}"
-        envelope: FlightEnvelope = self.boards.settings.envelope
-        reason = envelope.check_target(self.boards.home_ned_m, target)
+        reason = self.boards.check_move(target)
         if reason is not None:
             code = (mav.MAV_MISSION_INVALID_PARAM7 if "above" in reason or "below" in reason
                     else mav.MAV_MISSION_INVALID_PARAM5_X)

@@ -391,6 +391,26 @@ def test_speeds_are_flown_as_asked_up_to_the_limit_and_refused_above_it():
     assert len(air.calls) == calls  # refused: nothing flown
 
 
+def test_check_move_is_the_rule_the_boards_refuse_moves_by():
+    """``check_move`` (which the MAVLink endpoint asks too) gives the reason a MOVE_BY gets:
+    the speed limit first, then the envelope around home; None inside both."""
+    air = FakeAirframe()
+    boards = OnboardBoards(air, BoardSettings(envelope=FlightEnvelope(max_radius_m=20.0)))
+    airborne(boards, air)
+    n, e, d = air.snapshot().pos_ned_m
+    assert boards.check_move((n + 4.0, e, d), 2.5) is None
+    assert boards.check_move(speed_m_s=3.0) is None  # the limit itself is allowed
+    for move, target, speed in ((MoveBy(4000, 0, 0, 0, MoveFrame.WORLD_NED, 3500), 4.0, 3.5),
+                                (MoveBy(30000, 0, 0, 0, MoveFrame.WORLD_NED, 3500), 30.0, 3.5),
+                                (MoveBy(30000, 0, 0, 0, MoveFrame.WORLD_NED, 2000), 30.0, 2.0)):
+        reason = boards.check_move((n + target, e, d), speed)
+        r = result(send(boards, encode(move)))
+        assert r.code is ResultCode.BAD_VALUE and r.reason == reason, (reason, r.reason)
+    assert boards.check_move(speed_m_s=3.5) == "speed 3.5 m/s is over this vehicle's limit of 3 m/s"
+    assert boards.check_move((n + 30.0, e, d)).startswith("outside the flight envelope: 30")
+    assert boards.check_move((n + 30.0, e, d), home_ned_m=(n + 20.0, e, d)) is None
+
+
 def test_a_pad_landing_ends_pad_mode_at_touchdown_and_hold_stays():
     air, boards = make()
     airborne(boards, air)
