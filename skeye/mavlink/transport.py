@@ -75,10 +75,11 @@ class UdpTransport:
         self.sock.setblocking(False)
         self.remote = remote
         self.max_peers = max_peers
-        self._peers: list[Peer] = [remote] if remote is not None else []
-        self._heard: dict[Peer, float] = {}  # a listening link's peers: when each last sent
         self.peer_timeout_s = peer_timeout_s
         self.clock = clock
+        # The peers, in the order first heard, with when each last sent; a sending link starts
+        # with its remote, and nothing on it expires.
+        self._heard: dict[Peer, float] = {remote: clock()} if remote is not None else {}
         self.refused_peers = 0
         self.expired_peers = 0
         self.datagram = True
@@ -92,7 +93,7 @@ class UdpTransport:
     @property
     def peers(self) -> list[Peer]:
         self._expire()
-        return list(self._peers)
+        return list(self._heard)
 
     def _expire(self) -> None:
         """Drop the listening link's peers silent for ``peer_timeout_s``."""
@@ -101,7 +102,6 @@ class UdpTransport:
         now = self.clock()
         for peer in [p for p, t in self._heard.items() if now - t > self.peer_timeout_s]:
             del self._heard[peer]
-            self._peers.remove(peer)
             self.expired_peers += 1
 
     def poll(self) -> list[tuple[bytes, Peer]]:
@@ -113,21 +113,19 @@ class UdpTransport:
                 return out
             except OSError:  # ICMP port unreachable from a peer that went away
                 return out
-            if addr not in self._peers:
+            if addr not in self._heard:
                 self._expire()
-                if len(self._peers) >= self.max_peers:
+                if len(self._heard) >= self.max_peers:
                     self.refused_peers += 1
                     out.append((data, ("refused", addr)))
                     continue
-                self._peers.append(addr)
-            if self.remote is None:
-                self._heard[addr] = self.clock()
+            self._heard[addr] = self.clock()
             out.append((data, addr))
 
     def send(self, data: bytes, peer: Peer | None = None) -> None:
         if peer is None:
             self._expire()
-        targets = self._peers if peer is None else [peer]
+        targets = list(self._heard) if peer is None else [peer]
         for target in targets:
             addr = target[1] if isinstance(target, tuple) and target[:1] == ("refused",) else target
             try:

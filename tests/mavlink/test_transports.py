@@ -3,10 +3,15 @@ server, with pymavlink on the other end; the vehicle is the boards on a scripted
 
 from __future__ import annotations
 
+import contextlib
+import select
+import socket
+import time
+
 from pymavlink import mavutil
 
 from skeye.link.transport import pty_null_modem
-from skeye.mavlink.transport import PEER_TIMEOUT_S
+from skeye.mavlink.transport import PEER_TIMEOUT_S, UdpTransport
 from tests.mavlink.conftest import scripted_endpoint as endpoint
 from tests.mavlink.conftest import wait_for
 
@@ -98,3 +103,46 @@ class _FakeClock:
 
     def __call__(self) -> float:
         return self.now_s
+
+
+def _poll_one(link: UdpTransport) -> tuple[bytes, object]:
+    """The next datagram the link reads (stuck guard 5 s)."""
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        select.select(link.fileobjs(), [], [], 0.1)
+        got = link.poll()
+        if got:
+            assert len(got) == 1
+            return got[0]
+    raise AssertionError("no datagram within 5 s")
+
+
+def test_a_listening_udp_link_s_peers_are_those_heard_within_the_timeout():
+    """Unit level, on a fake clock: peers in the order first heard, a sender over
+    ``max_peers`` refused, silent ones dropped after ``peer_timeout_s`` (one that keeps sending
+    stays); a sending link's remote is never dropped."""
+    clock = _FakeClock()
+    senders = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(3)]
+    with contextlib.ExitStack() as stack:
+        for s in senders:
+            stack.enter_context(s)
+            s.bind(("127.0.0.1", 0))
+        a, b, c = (s.getsockname() for s in senders)
+        link = UdpTransport("127.0.0.1", 0, max_peers=2, peer_timeout_s=10.0, clock=clock)
+        stack.callback(link.close)
+        for s in senders:
+            s.sendto(b"x", ("127.0.0.1", link.port))
+            _poll_one(link)
+        assert link.peers == [a, b] and link.refused_peers == 1
+        clock.now_s = 6.0
+        senders[1].sendto(b"x", ("127.0.0.1", link.port))
+        assert _poll_one(link)[1] == b
+        clock.now_s = 10.5  # a silent for 10.5 s, b for 4.5 s
+        assert link.peers == [b] and link.expired_peers == 1
+        senders[2].sendto(b"x", ("127.0.0.1", link.port))
+        assert _poll_one(link)[1] == c
+        assert link.peers == [b, c]
+        out = UdpTransport("127.0.0.1", 0, remote=a, clock=clock)
+        stack.callback(out.close)
+        clock.now_s = 1e6
+        assert out.peers == [a] and out.expired_peers == 0
