@@ -23,6 +23,7 @@ MavMessage = Any  # a pymavlink MAVLink_message (the dialect's classes are not t
 
 GCS_COMPONENTS = range(190, 200)  # MAV_COMP_ID_MISSIONPLANNER .. (QGC 190, MAVSDK 190)
 MAX_STATUSTEXT = 50  # STATUSTEXT's text field, bytes
+MAX_STATUSTEXT_CHUNKS = 8  # the most chunks one long STATUSTEXT is sent in
 
 
 @dataclass(frozen=True)
@@ -111,13 +112,18 @@ def statustext(codec: MavCodec, severity: int, text: str) -> list[MavMessage]:
     """STATUSTEXT message(s): text over 50 bytes goes in chunks with one id (MAVLink 2).
 
     A receiver knows the last chunk by the NUL in it (a text shorter than 50 bytes); a text
-    that is a whole number of chunks long gets an empty chunk after it to say so."""
+    that is a whole number of chunks long gets an empty chunk after it to say so. At most
+    ``MAX_STATUSTEXT_CHUNKS`` chunks go, so a longer text is cut first (at a character) to
+    the most they carry with the last one short: 7 * 50 + 49 = 399 bytes."""
     data = text.encode("utf-8", "replace")
     if len(data) <= MAX_STATUSTEXT:
         return [codec.mav.statustext_encode(severity, data)]
-    chunks = [data[i:i + MAX_STATUSTEXT] for i in range(0, len(data), MAX_STATUSTEXT)][:8]
-    if len(chunks[-1]) == MAX_STATUSTEXT:
-        chunks = [*chunks[:7], b""] if len(chunks) == 8 else [*chunks, b""]
     ident = (zlib.crc32(data) & 0xFFFE) + 1
+    most = MAX_STATUSTEXT_CHUNKS * MAX_STATUSTEXT - 1
+    if len(data) > most:  # a character cut in two is left out whole
+        data = data[:most].decode("utf-8", "ignore").encode("utf-8")
+    chunks = [data[i:i + MAX_STATUSTEXT] for i in range(0, len(data), MAX_STATUSTEXT)]
+    if len(data) % MAX_STATUSTEXT == 0:
+        chunks.append(b"")  # at most 7 full chunks here: the empty one is the 8th at most
     return [codec.mav.statustext_encode(severity, chunk, ident, n)
             for n, chunk in enumerate(chunks)]

@@ -28,14 +28,33 @@ def _roundtrip(msg):
 def test_a_long_statustext_ends_with_a_chunk_shorter_than_50_bytes():
     """MAVLink marks a long STATUSTEXT's last chunk by a NUL in its text: a text of exactly 100
     bytes once went out as two full chunks, and a reader waited for a third forever."""
-    for size in (51, 99, 100, 150, 400):
+    for size in (51, 99, 100, 150, 350, 399, 400, 1000):
         text = "".join(chr(ord("a") + i % 26) for i in range(size))
         chunks = [_roundtrip(m) for m in statustext(GCS, mav.MAV_SEVERITY_WARNING, text)]
         assert len({c.id for c in chunks}) == 1 and chunks[0].id != 0
         assert [c.chunk_seq for c in chunks] == list(range(len(chunks)))
         assert len(chunks[-1].text.encode()) < 50
         assert all(len(c.text.encode()) == 50 for c in chunks[:-1])
-        assert "".join(c.text for c in chunks) == text[:350]
+        assert "".join(c.text for c in chunks) == text[:399]
+
+
+def test_a_statustext_too_long_for_eight_chunks_is_cut_to_399_bytes():
+    """Eight chunks carry at most 7 * 50 + 49 bytes (the last one short, to end the text): a
+    longer text is cut to that, a character cut in two left out whole. (Eight full chunks once
+    had their 8th replaced by an empty one: 400 bytes or more sent only 350.)"""
+    sizes = {350: 8, 399: 8, 400: 8, 1000: 8, 300: 7, 349: 7}
+    for size, count in sizes.items():
+        text = "x" * size
+        chunks = [_roundtrip(m) for m in statustext(GCS, mav.MAV_SEVERITY_WARNING, text)]
+        assert len(chunks) == count, size
+        assert "".join(c.text for c in chunks) == text[:399]
+    text = "\u00e9" * 300  # two bytes each: byte 399 is half a character
+    msgs = statustext(GCS, mav.MAV_SEVERITY_WARNING, text)
+    for m in msgs:
+        GCS.encode(m)
+    # The bytes on the wire (pymavlink decodes a char field as ASCII): severity, then text.
+    sent = b"".join(m.get_payload()[1:51].rstrip(b"\0") for m in msgs)
+    assert len(msgs) == 8 and sent == ("\u00e9" * 199).encode()
 
 
 def test_every_flight_state_and_program_has_a_mode():
