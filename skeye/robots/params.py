@@ -103,6 +103,8 @@ class AirframeParams:
                 raise ConfigError(f"{owner}: {name} must be >= 0, got {value!r}")
         for i, v in enumerate(self.inertia_kg_m2):
             _check_positive(owner, f"inertia_kg_m2[{i}]", v)
+        for i, v in enumerate(self.body_size_m):
+            _check_positive(owner, f"body_size_m[{i}]", v)
         if self.max_thrust_n <= self.mass_kg * GRAVITY_M_S2:
             raise ConfigError(
                 f"{owner}: the rotors cannot lift the vehicle (max thrust "
@@ -136,6 +138,9 @@ class BatteryParams:
             _check_positive("battery", name, getattr(self, name))
         if self.efficiency > 1.0:
             raise ConfigError(f"battery: efficiency must be <= 1, got {self.efficiency}")
+        power = self.avionics_power_w
+        if not (isinstance(power, int | float) and math.isfinite(power) and power >= 0):
+            raise ConfigError(f"battery: avionics_power_w must be a number >= 0, got {power!r}")
 
 
 @dataclass(frozen=True)
