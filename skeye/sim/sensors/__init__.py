@@ -26,6 +26,7 @@ from skeye.sim.sensors.base import (
     Sensor,
     Vec3,
     WorldQuery,
+    parse_params,
 )
 from skeye.sim.sensors.inertial import (
     Accelerometer,
@@ -120,4 +121,5 @@ __all__ = [
     "build_sensor",
     "isa_altitude_m",
     "isa_pressure_pa",
+    "parse_params",
 ]

@@ -163,6 +163,64 @@ def _norm_key(key: str) -> str:
     return key.replace("_", "").lower()
 
 
+_ALIASES: Final[dict[str, str]] = {"ratehz": "rate"}
+"""Parameter keys (normalised) that name another: ``rate_hz`` is ``Rate``."""
+
+
+def param_error(name: str, type_name: str, key: str, text: str) -> ConfigError:
+    """The error of a bad sensor parameter, naming the sensor and the key."""
+    return ConfigError(f"sensor {name!r} ({type_name}): {key} {text}")
+
+
+def parse_params(
+    name: str, type_name: str, specs: Sequence[Param], given: Mapping[str, object]
+) -> dict[str, float]:
+    """The parameters of sensor ``name`` of Type ``type_name`` from a robot file's mapping:
+    each :class:`Param` of ``specs`` at its default unless given. Keys match case-insensitively
+    and ignoring underscores; every unknown key, non-number, non-finite or out-of-range value
+    raises ConfigError naming the sensor, the key and the value."""
+    by_key = {_norm_key(p.key): p for p in specs}
+    values: dict[str, float] = {p.key: p.default for p in by_key.values()}
+    seen: dict[str, str] = {}
+    for raw_key, value in given.items():
+        if not isinstance(raw_key, str):
+            raise param_error(name, type_name, repr(raw_key), "is not a parameter name")
+        norm = _ALIASES.get(_norm_key(raw_key), _norm_key(raw_key))
+        spec = by_key.get(norm)
+        if spec is None:
+            known = ", ".join(p.key for p in by_key.values())
+            raise param_error(
+                name, type_name, raw_key, f"is not a parameter of {type_name}; known: {known}"
+            )
+        if norm in seen:
+            raise param_error(name, type_name, raw_key, f"is given twice (also as {seen[norm]!r})")
+        seen[norm] = raw_key
+        values[spec.key] = _coerce(name, type_name, spec, value)
+    return values
+
+
+def _coerce(name: str, type_name: str, spec: Param, value: object) -> float:
+    def error(text: str) -> ConfigError:
+        return param_error(name, type_name, spec.key, text)
+
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise error(f"must be a number, got {value!r}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise error(f"must be finite, got {value!r}")
+    if spec.integer:
+        if not number.is_integer():
+            raise error(f"must be an integer, got {value!r}")
+        number = float(int(number))
+    if spec.exclusive and not number > spec.minimum:
+        raise error(f"must be > {spec.minimum:g}, got {value!r}")
+    if not spec.exclusive and not number >= spec.minimum:
+        raise error(f"must be >= {spec.minimum:g}, got {value!r}")
+    if not number <= spec.maximum:
+        raise error(f"must be <= {spec.maximum:g}, got {value!r}")
+    return number
+
+
 class Sensor(Generic[R]):
     """Base of all simulated sensors.
 
@@ -172,7 +230,6 @@ class Sensor(Generic[R]):
 
     type_name: ClassVar[str] = ""
     PARAMS: ClassVar[tuple[Param, ...]] = ()
-    _ALIASES: ClassVar[dict[str, str]] = {"ratehz": "rate"}
 
     def __init__(
         self, name: str, mount: Mount, params: Mapping[str, object], rng: np.random.Generator
@@ -210,45 +267,10 @@ class Sensor(Generic[R]):
         return (rate, *cls.PARAMS)
 
     def _error(self, key: str, text: str) -> ConfigError:
-        return ConfigError(f"sensor {self.name!r} ({self.type_name}): {key} {text}")
+        return param_error(self.name, self.type_name, key, text)
 
     def _parse(self, given: Mapping[str, object]) -> dict[str, float]:
-        specs = {_norm_key(p.key): p for p in self.all_params()}
-        values: dict[str, float] = {p.key: p.default for p in specs.values()}
-        seen: dict[str, str] = {}
-        for raw_key, value in given.items():
-            if not isinstance(raw_key, str):
-                raise self._error(repr(raw_key), "is not a parameter name")
-            norm = self._ALIASES.get(_norm_key(raw_key), _norm_key(raw_key))
-            spec = specs.get(norm)
-            if spec is None:
-                known = ", ".join(p.key for p in specs.values())
-                raise self._error(
-                    raw_key, f"is not a parameter of {self.type_name}; known: {known}"
-                )
-            if norm in seen:
-                raise self._error(raw_key, f"is given twice (also as {seen[norm]!r})")
-            seen[norm] = raw_key
-            values[spec.key] = self._coerce(spec, value)
-        return values
-
-    def _coerce(self, spec: Param, value: object) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-            raise self._error(spec.key, f"must be a number, got {value!r}")
-        number = float(value)
-        if not math.isfinite(number):
-            raise self._error(spec.key, f"must be finite, got {value!r}")
-        if spec.integer:
-            if not number.is_integer():
-                raise self._error(spec.key, f"must be an integer, got {value!r}")
-            number = float(int(number))
-        if spec.exclusive and not number > spec.minimum:
-            raise self._error(spec.key, f"must be > {spec.minimum:g}, got {value!r}")
-        if not spec.exclusive and not number >= spec.minimum:
-            raise self._error(spec.key, f"must be >= {spec.minimum:g}, got {value!r}")
-        if not number <= spec.maximum:
-            raise self._error(spec.key, f"must be <= {spec.maximum:g}, got {value!r}")
-        return number
+        return parse_params(self.name, self.type_name, self.all_params(), given)
 
     def _check(self) -> None:
         """Cross-parameter checks (e.g. MinRange < MaxRange); raise ``self._error``."""
