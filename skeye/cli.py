@@ -11,6 +11,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +77,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from skeye.processes import check_ports_free
     from skeye.robots.config import validate_robot_dirs
     from skeye.sim.engine import Simulation
+    from skeye.sim.robot import check_robot_config
     from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
     from skeye.sim.world import load_world
@@ -89,7 +91,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     check_ports_free(ports)  # named, with the option that moves it, before MuJoCo loads
     ll_boards = ll_board_specs(args)
     world = load_world(args.world)
-    validate_robot_dirs(tuple(args.robot_dir))  # a robot file with a typo stops us here
+    # A robot file with a typo, or one INIT would refuse, stops us here.
+    validate_robot_dirs(tuple(args.robot_dir),
+                        partial(check_robot_config, physics_step_s=args.timestep))
     wind = make_settings(args.wind, parse_params(args.wind_params))
     sim = Simulation(
         world, seed=args.seed, timestep_s=args.timestep, wind=wind,

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -99,8 +100,12 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
     rates = {}
     for key, default in (("board_rate_hz", 1000.0), ("status_rate_hz", 10.0)):
         value = data.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
-            raise ConfigError(f"{source}: {key} must be a positive number, got {value!r}")
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not (math.isfinite(value) and value > 0)
+        ):
+            raise ConfigError(f"{source}: {key} must be a positive finite number, got {value!r}")
         rates[key] = float(value)
     tables = {}
     for key in ("airframe", "battery", "controller", "envelope", "estimator"):
@@ -219,9 +224,16 @@ def _class_file(folder: Path, name: str) -> Path | None:
     return found[0] if found else None
 
 
-def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
+def validate_robot_dirs(
+    search_dirs: tuple[Path, ...], check: Callable[[RobotConfig], None] | None = None
+) -> list[RobotConfig]:
     """Load every ``*.toml`` in each ``--robot-dir`` folder, so a typo stops ``skeye sim`` at
     start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
+
+    ``check`` runs on each loaded class the checks building its robot runs (``skeye sim``
+    passes :func:`skeye.sim.robot.check_robot_config` at its physics step: the sensors'
+    parameters and rates, the cameras, the board rate; this package may not import the
+    simulator). Without it only the file and its camera models are checked.
 
     Raises:
         ConfigError: a folder that is missing or not a folder, or a robot file that does not
@@ -242,6 +254,8 @@ def validate_robot_dirs(search_dirs: tuple[Path, ...]) -> list[RobotConfig]:
             for mount in config.sensors:  # a bad camera model stops us here too
                 if mount.type_name.lower() == CAMERA_TYPE:
                     mount_camera_model(config, mount)
+            if check is not None:
+                check(config)
             configs.append(config)
     return configs
 

@@ -32,7 +32,16 @@ from skeye.sim.controller import Command, LowLevelController
 from skeye.sim.crash import CrashDetector
 from skeye.sim.estimator import BoardEstimator, from_sensor_figures
 from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
-from skeye.sim.sensors import INS, Mount, Reading, Sensor, WorldQuery, build_sensor
+from skeye.sim.sensors import (
+    INS,
+    Mount,
+    Param,
+    Reading,
+    Sensor,
+    WorldQuery,
+    build_sensor,
+    parse_params,
+)
 from skeye.sim.state import BodyState
 from skeye.sim.vehicle import Battery, RotorModel, ground_effect_factor
 from skeye.wire.sim import sen_layout
@@ -135,6 +144,92 @@ class MotorsSensor:
         return [("Location", (0.0, 0.0, 0.0)), ("Orientation", (0.0, 0.0, 0.0))]
 
 
+MOTORS_PARAMS: Final = (Param("Rate", 100.0, "sample rate, Hz", exclusive=True),)
+"""The parameters of the Motors sensor (``rate_hz`` or ``Rate``), parsed as every sensor's."""
+
+
+def period_steps(rate_hz: float, physics_step_s: float, what: str) -> int:
+    """The period of a rate in physics steps (at least 1).
+
+    Raises:
+        ConfigError: a rate so low that its period is no finite number of steps (``what``
+            names the file and the key).
+    """
+    steps = 1.0 / (rate_hz * physics_step_s)
+    if not math.isfinite(steps):
+        raise ConfigError(
+            f"{what} {rate_hz!r} Hz is too low: its period is no finite number of "
+            f"{physics_step_s:g} s physics steps"
+        )
+    return max(1, round(steps))
+
+
+def board_decimation(config: RobotConfig, physics_step_s: float) -> int:
+    """The board period in physics steps.
+
+    Raises:
+        ConfigError: ``board_rate_hz`` is not an integer fraction of the physics rate.
+    """
+    steps = 1.0 / (config.board_rate_hz * physics_step_s)
+    decimation = round(steps) if math.isfinite(steps) else 0
+    if decimation < 1 or abs(decimation * physics_step_s * config.board_rate_hz - 1.0) > 1e-6:
+        raise ConfigError(
+            f"{config.source}: board_rate_hz {config.board_rate_hz!r}: the board rate is not an "
+            f"integer fraction of the physics rate {1.0 / physics_step_s:g} Hz"
+        )
+    return decimation
+
+
+def mount_sensors(
+    config: RobotConfig, physics_step_s: float, rotors: RotorModel, rng: np.random.Generator
+) -> tuple[list[ScheduledSensor], list[CameraSpec]]:
+    """Build a robot file's sensors (scheduled) and cameras, in the file's order; each sensor
+    other than Motors takes a Generator seeded from ``rng``, one draw each, in that order.
+
+    Raises:
+        ConfigError: a bad sensor or camera entry, named with the file, the key and the value.
+    """
+    sensors: list[ScheduledSensor] = []
+    cameras: list[CameraSpec] = []
+    for i, mount in enumerate(config.sensors):
+        type_key = mount.type_name.lower()
+        params = dict(mount.params)
+        if type_key == CAMERA_TYPE:
+            cameras.append(CameraSpec.from_mount(mount, config.source))  # names the file
+            continue
+        where = f"{config.source} sensors[{i}]"
+        try:
+            if type_key == MOTORS_TYPE:
+                rate = parse_params(mount.name, "Motors", MOTORS_PARAMS, params)["Rate"]
+                sensor: Any = MotorsSensor(mount.name, rotors, rate)
+            else:
+                sensor = build_sensor(
+                    mount.type_name,
+                    mount.name,
+                    Mount(mount.position_m, mount.direction_rad),
+                    params,
+                    np.random.default_rng(rng.integers(0, 2**63)),
+                )
+            period = period_steps(sensor.rate_hz, physics_step_s, "rate_hz")
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        sensors.append(ScheduledSensor(sensor, period, mount))
+    return sensors, cameras
+
+
+def check_robot_config(config: RobotConfig, physics_step_s: float) -> None:
+    """Run every check building a :class:`Robot` of this class runs, without a simulation
+    (``skeye sim --robot-dir`` runs it at start-up, so a file INIT would refuse stops it).
+
+    Raises:
+        ConfigError: what INIT would answer, naming the file, the key and the value.
+    """
+    decimation = board_decimation(config, physics_step_s)
+    period_steps(config.status_rate_hz, physics_step_s, f"{config.source}: status_rate_hz")
+    rotors = RotorModel(config.airframe, decimation * physics_step_s)
+    mount_sensors(config, physics_step_s, rotors, np.random.default_rng(0))
+
+
 @dataclass
 class FlightState:
     armed: bool = False
@@ -169,12 +264,7 @@ class Robot:
         self.sink = sink
         self.spawn_pos_ned_m = spawn_pos_ned_m
         self.spawn_rpy_rad = spawn_rpy_rad
-        decimation = round(1.0 / (config.board_rate_hz * physics_step_s))
-        if decimation < 1 or abs(decimation * physics_step_s * config.board_rate_hz - 1.0) > 1e-6:
-            raise LocalProtocolError(
-                f"robot class {config.class_name}: board rate {config.board_rate_hz} Hz is not an "
-                f"integer fraction of the physics rate {1.0 / physics_step_s:g} Hz"
-            )
+        decimation = board_decimation(config, physics_step_s)
         self.board_decimation = decimation
         self.tick_s = decimation * physics_step_s
         self.rotors = RotorModel(config.airframe, self.tick_s)
@@ -186,35 +276,21 @@ class Robot:
         self.crash_news: str | None = None
         """A crash's cause, set on the tick it happened; the engine reports and clears it."""
         self.spawn_airborne = airborne
-        self.status_period_steps = max(1, round(1.0 / (config.status_rate_hz * physics_step_s)))
+        self.status_period_steps = period_steps(
+            config.status_rate_hz, physics_step_s, f"{config.source}: status_rate_hz"
+        )
         # The engine's schedule: the periods (steps) of the sensors and the status, and the next
         # step at which one of them falls due (skeye.sim.engine keeps them).
         self.sensing_periods: list[int] = []
         self.next_sensing_step = 0
-        self.sensors: list[ScheduledSensor] = []
-        self.cameras: list[CameraSpec] = []
+        self.sensors: list[ScheduledSensor]
+        self.cameras: list[CameraSpec]
+        self.sensors, self.cameras = mount_sensors(config, physics_step_s, self.rotors, rng)
         ins: INS | None = None
-        for mount in config.sensors:
-            type_key = mount.type_name.lower()
-            params = dict(mount.params)
-            if type_key == CAMERA_TYPE:
-                self.cameras.append(CameraSpec.from_mount(mount, config.source))
-                continue
-            if type_key == MOTORS_TYPE:
-                rate = float(params.get("rate_hz", 100.0))
-                sensor: Any = MotorsSensor(mount.name, self.rotors, rate)
-            else:
-                sensor = build_sensor(
-                    mount.type_name,
-                    mount.name,
-                    Mount(mount.position_m, mount.direction_rad),
-                    params,
-                    np.random.default_rng(rng.integers(0, 2**63)),
-                )
-            period = max(1, round(1.0 / (sensor.rate_hz * physics_step_s)))
-            self.sensors.append(ScheduledSensor(sensor, period, mount))
-            if isinstance(sensor, INS) and ins is None:
-                ins = sensor
+        for sched in self.sensors:
+            if isinstance(sched.sensor, INS):
+                ins = sched.sensor
+                break
         if ins is None:
             # The board always has an estimator, even when no INS is streamed to the client.
             built = build_sensor(

@@ -1,0 +1,152 @@
+"""Robot files INIT would refuse are refused the same way everywhere: by building the robot (what
+INIT does), by ``validate_robot_dirs`` with the robot's own checks (what ``skeye sim --robot-dir``
+runs at start-up) and over the control port, each time as a ConfigError naming the file, the
+key and the value; never a Python exception from deeper down, never silently accepted."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from functools import partial
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skeye.errors import ConfigError
+from skeye.robots.config import load_robot_config, validate_robot_dirs
+from skeye.sim.robot import Robot, check_robot_config
+
+from .conftest import LineClient, running_sim
+
+PHYSICS_STEP_S = 0.001  # skeye sim's default --timestep
+
+# (id, TOML after `name = "bad"`, key the message names, value as the message gives it)
+CASES = [
+    ("body-negative", "[airframe]\nbody_size_m = [0.12, -0.1, 0.06]", "body_size_m[1]", "-0.1"),
+    ("body-zero", "[airframe]\nbody_size_m = [0.12, 0.12, 0.0]", "body_size_m[2]", "0.0"),
+    ("body-nan", "[airframe]\nbody_size_m = [nan, 0.12, 0.06]", "body_size_m[0]", "nan"),
+    ("avionics-negative", "[battery]\navionics_power_w = -5", "avionics_power_w", "-5.0"),
+    ("avionics-nan", "[battery]\navionics_power_w = nan", "avionics_power_w", "nan"),
+    ("avionics-inf", "[battery]\navionics_power_w = inf", "avionics_power_w", "inf"),
+    ("status-tiny", "status_rate_hz = 1e-310", "status_rate_hz", "1e-310"),
+    ("board-tiny", "board_rate_hz = 1e-310", "board_rate_hz", "1e-310"),
+    ("board-inf", "board_rate_hz = inf", "board_rate_hz", "inf"),
+    ("board-not-a-fraction", "board_rate_hz = 3", "board_rate_hz", "3"),
+    ("motors-zero", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = 0', "Rate", "0"),
+    ("motors-text", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = "fast"', "Rate",
+     "'fast'"),
+    ("motors-nan", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = nan', "Rate", "nan"),
+    ("motors-negative", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = -25', "Rate",
+     "-25"),
+    ("motors-inf", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = inf', "Rate", "inf"),
+    ("motors-tiny", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = 1e-310', "rate_hz",
+     "1e-310"),
+    ("motors-unknown-key", '[[sensors]]\ntype = "Motors"\nname = "M"\nspin = 1', "spin",
+     "Motors"),
+    ("sensor-unknown-type", '[[sensors]]\ntype = "Lidar"\nname = "L"', "Lidar", "'Lidar'"),
+    ("sensor-rate-zero", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = 0', "Rate", "0"),
+    ("sensor-rate-negative", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = -1', "Rate",
+     "-1"),
+    ("sensor-rate-nan", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = nan', "Rate", "nan"),
+    ("sensor-rate-text", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = "5"', "Rate",
+     "'5'"),
+    ("sensor-rate-tiny", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = 1e-310', "rate_hz",
+     "1e-310"),
+    ("camera-rate-zero", '[[sensors]]\ntype = "Camera"\nname = "C"\nrate_hz = 0', "rate_hz",
+     "0"),
+    ("camera-rate-nan", '[[sensors]]\ntype = "Camera"\nname = "C"\nrate_hz = nan', "rate_hz",
+     "nan"),
+    ("camera-rate-text", '[[sensors]]\ntype = "Camera"\nname = "C"\nrate_hz = "30"',
+     "rate_hz", "'30'"),
+    ("camera-unknown-key", '[[sensors]]\ntype = "Camera"\nname = "C"\nzoom = 2', "zoom",
+     "unknown key"),
+]
+
+
+def _write(folder: Path, body: str) -> Path:
+    path = folder / "bad.toml"
+    path.write_text(f'name = "bad"\n{body}\n', encoding="utf-8")
+    return path
+
+
+def _assert_names(exc: ConfigError, path: Path, key: str, value: str) -> None:
+    text = str(exc)
+    assert str(path) in text and key in text and value in text, text
+
+
+def _build_robot(path: Path) -> Robot:
+    """What INIT does with the file, short of adding the robot to MuJoCo."""
+    return Robot("R", load_robot_config(path), physics_step_s=PHYSICS_STEP_S,
+                 rng=np.random.default_rng(0), sink=lambda events: None,
+                 spawn_pos_ned_m=(0.0, 0.0, -1.0), spawn_rpy_rad=(0.0, 0.0, 0.0), airborne=True)
+
+
+@pytest.mark.parametrize(("body", "key", "value"), [c[1:] for c in CASES],
+                         ids=[c[0] for c in CASES])
+def test_building_the_robot_raises_config_error_naming_file_key_value(
+    tmp_path: Path, body: str, key: str, value: str
+) -> None:
+    path = _write(tmp_path, body)
+    with pytest.raises(ConfigError) as info:
+        _build_robot(path)
+    _assert_names(info.value, path, key, value)
+    with pytest.raises(ConfigError) as checked:  # the same check, without building the robot
+        check_robot_config(load_robot_config(path), PHYSICS_STEP_S)
+    assert str(checked.value) == str(info.value)
+
+
+@pytest.mark.parametrize(("body", "key", "value"), [c[1:] for c in CASES],
+                         ids=[c[0] for c in CASES])
+def test_start_up_validation_refuses_what_init_refuses(
+    tmp_path: Path, body: str, key: str, value: str
+) -> None:
+    path = _write(tmp_path, body)
+    with pytest.raises(ConfigError) as init:
+        _build_robot(path)
+    with pytest.raises(ConfigError) as info:
+        validate_robot_dirs((tmp_path,), partial(check_robot_config,
+                                                 physics_step_s=PHYSICS_STEP_S))
+    _assert_names(info.value, path, key, value)
+    assert str(info.value) == str(init.value)  # the message INIT would give
+
+
+def test_good_robot_files_pass_start_up_validation(tmp_path: Path) -> None:
+    for name in ("hummingbird", "airrobot"):
+        text = resources.files("skeye.robots").joinpath(f"{name}.toml").read_text("utf-8")
+        (tmp_path / f"my{name}.toml").write_text(
+            text.replace(f'name = "{name}"', f'name = "my{name}"'), encoding="utf-8")
+    check = partial(check_robot_config, physics_step_s=PHYSICS_STEP_S)
+    assert len(validate_robot_dirs((tmp_path,), check)) == 2
+    _write(tmp_path, '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = 50')
+    assert len(validate_robot_dirs((tmp_path,), check)) == 3
+
+
+def test_sim_refuses_to_start_with_a_file_init_would_refuse(tmp_path: Path) -> None:
+    path = _write(tmp_path, "board_rate_hz = 3")
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--port", "0",
+                           "--robot-dir", str(tmp_path)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2, done
+    assert f"{path}: board_rate_hz 3" in done.stderr
+    assert "control protocol on" not in done.stdout
+
+
+def test_a_bad_init_gets_a_clear_err_and_the_server_goes_on(tmp_path: Path) -> None:
+    path = _write(tmp_path, '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = 0')
+    with running_sim(robot_dirs=(tmp_path,)) as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        err = c.answer("INIT {ClassName bad} {Name B} {Location 0,0,-1}", "INIT")
+        reason = err.get("Reason") or ""
+        assert err.type == "ERR" and str(path) in reason and "Rate must be > 0" in reason, err
+        assert "failed:" not in reason  # not a Python exception from deeper down
+        d = LineClient(server.port)
+        d.expect("NFO")
+        assert d.answer("INIT {ClassName hummingbird} {Name G} {Location 0,0,-1}",
+                        "INIT").type == "RES"
+        assert c.answer("INIT {ClassName hummingbird} {Name H} {Location 3,0,-1}",
+                        "INIT").type == "RES"
+        c.close()
+        d.close()
