@@ -13,7 +13,7 @@ import tomllib
 from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Final, NoReturn
 
 from skeye.errors import ConfigError
 from skeye.geo import GeoOrigin
@@ -41,6 +41,13 @@ from skeye.vision.pad import get_pad
 
 
 _REQUIRED = object()
+
+# The barometer (skeye/sim/sensors/inertial.py, isa_pressure_pa) uses the ISA troposphere
+# formula of ISO 2533:1975 / US Standard Atmosphere 1976, which holds up to the tropopause at
+# 11 000 m (above it the formula is wrong, and above ~44.3 km it has no real value). The lower
+# bound is the lowest dry land, the Dead Sea shore, about 430 m below sea level.
+ORIGIN_ALTITUDE_MIN_M: Final = -430.0
+ORIGIN_ALTITUDE_MAX_M: Final = 11000.0
 
 
 class _Table:
@@ -234,7 +241,13 @@ def _parse_geo_origin(table: _Table | None) -> GeoOrigin | None:
     lon = table.number(
         "longitude_deg", check=lambda v: -180.0 <= v <= 180.0, rule="in [-180, 180]"
     )
-    alt = table.number("altitude_m", 0.0)
+    alt = table.number(
+        "altitude_m",
+        0.0,
+        lambda v: ORIGIN_ALTITUDE_MIN_M <= v <= ORIGIN_ALTITUDE_MAX_M,
+        f"in [{ORIGIN_ALTITUDE_MIN_M:g}, {ORIGIN_ALTITUDE_MAX_M:g}] m, the range of the "
+        "barometer's ISA troposphere model (see docs/worlds.md)",
+    )
     return GeoOrigin(latitude_deg=lat, longitude_deg=lon, altitude_m=alt)
 
 
