@@ -41,6 +41,7 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.link.transport import Link, open_link, tcp_uri
+from skeye.values import is_finite_number
 from skeye.wire.sim import decode, encode, fields_of, res_time_s
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
 from skeye.wire.sim_messages import GetConf, GetStartPoses, Init, Ping, Set, Step
@@ -73,6 +74,9 @@ def parse_address(address: str, default_port: int = DEFAULT_PORT) -> tuple[str, 
         LocalProtocolError: an empty host, a port that is not a number in 1..65535, or a
             scheme other than tcp.
     """
+    if not isinstance(address, str):
+        raise LocalProtocolError(
+            f"simulator address must be a string 'host:port', got {address!r}")
     text = address.strip()
     if "://" in text:
         scheme, text = text.split("://", 1)
@@ -91,6 +95,13 @@ def parse_address(address: str, default_port: int = DEFAULT_PORT) -> tuple[str, 
     if not port_text.isdigit() or not 0 < int(port_text) < 65536:
         raise LocalProtocolError(f"simulator address {address!r}: bad port {port_text!r}")
     return host, int(port_text)
+
+
+def _check_timeout(timeout_s: Any) -> float:
+    """``timeout_s`` as a float, or LocalProtocolError: a wait must be finite and > 0."""
+    if not (is_finite_number(timeout_s) and timeout_s > 0):
+        raise LocalProtocolError(f"timeout_s must be a finite number > 0, got {timeout_s!r}")
+    return float(timeout_s)
 
 
 class _Pending:
@@ -147,8 +158,7 @@ class Connection:
         queue_size: int = 256,
         motion: MotionConfig | None = None,
     ) -> None:
-        if not timeout_s > 0:
-            raise LocalProtocolError(f"timeout_s must be > 0, got {timeout_s}")
+        _check_timeout(timeout_s)
         if queue_size < 1:
             raise LocalProtocolError(f"queue_size must be >= 1, got {queue_size}")
         self.host, self.port = parse_address(address)
@@ -256,7 +266,7 @@ class Connection:
 
     def _put(self, line: bytes, timeout_s: float | None) -> None:
         self.check()
-        wait_s = self.timeout_s if timeout_s is None else timeout_s
+        wait_s = self.timeout_s if timeout_s is None else _check_timeout(timeout_s)
         try:
             self._outbox.put(line, timeout=wait_s)
         except queue.Full:
@@ -273,9 +283,11 @@ class Connection:
 
         Raises:
             CommandRejected: the simulator answered ``ERR``; ``reason`` says why.
+            LocalProtocolError: ``timeout_s`` is not a finite number > 0.
             LinkTimeout: no answer within ``timeout_s`` (default: the connection's).
             LinkClosed: the link died while waiting.
         """
+        wait_s = self.timeout_s if timeout_s is None else _check_timeout(timeout_s)
         command = type_word.upper()
         ident = None
         if command == "PING":
@@ -285,7 +297,6 @@ class Connection:
         with self._lock:
             self.check()
             self._pending.append(pending)
-        wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
             self._put(line, wait_s)
             if not pending.event.wait(wait_s):
@@ -476,8 +487,9 @@ class Connection:
 
     def run_for(self, seconds: float) -> float:
         """Let ``seconds`` of sim time pass (lockstep: step; realtime: wait); the sim time."""
-        if not seconds >= 0:
-            raise LocalProtocolError(f"run_for needs seconds >= 0, got {seconds}")
+        if not (is_finite_number(seconds) and seconds >= 0):
+            raise LocalProtocolError(f"run_for: seconds must be a finite number >= 0, got "
+                                     f"{seconds!r}")
         self.clock.advance(seconds)
         return self.time_s
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.values import is_finite_number
 from skeye.wire.sim_messages import Drive
 
 from .sensors import Vec3, wrap_pi
@@ -264,8 +265,10 @@ class GoTo(Motion):
             if not (math.isfinite(value) and value > 0):
                 raise LocalProtocolError(f"{name}: {label} must be a positive number, got {value}")
         for v in target.position_ned_m:
-            if not math.isfinite(v):
+            if not is_finite_number(v):
                 raise LocalProtocolError(f"{name}: target {target.position_ned_m} is not finite")
+        if target.yaw_rad is not None and not is_finite_number(target.yaw_rad):
+            raise LocalProtocolError(f"{name}: yaw_rad {target.yaw_rad!r} is not finite")
         self.linear = PIController(config.linear)
         self.lateral = PIController(config.lateral)
         self.vertical = PIController(config.vertical)

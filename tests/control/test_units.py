@@ -191,3 +191,31 @@ def test_camera_frame_from_the_image_server() -> None:
             assert image.frame >= reading.frame >= 1
             assert image.time_s == pytest.approx(reading.time_s, abs=0.1)
             assert image.bgr.std() > 5  # a rendered scene, not a blank buffer
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, "north"])
+def test_goto_refuses_a_yaw_that_is_not_finite(bad: object) -> None:
+    with pytest.raises(LocalProtocolError, match=r"yaw_rad .* is not finite"):
+        GoTo(Target((0.0, 0.0, -1.0), bad), MotionConfig())  # type: ignore[arg-type]
+
+
+def test_connect_refuses_an_address_that_is_not_a_string() -> None:
+    with pytest.raises(LocalProtocolError, match="address must be a string"):
+        skeye.connect(3000)  # type: ignore[arg-type]
+
+
+def test_bad_waits_are_refused_at_the_call() -> None:
+    """A wait that is not a finite positive number, and run_for(inf), name the argument."""
+    for bad in (-1, 0, math.nan, math.inf, "1"):
+        with pytest.raises(LocalProtocolError, match="timeout_s must be a finite number > 0"):
+            skeye.connect("127.0.0.1:1", timeout_s=bad)  # type: ignore[arg-type]
+    with sim_running() as handle, skeye.connect(handle.address) as sim:
+        for bad in (-1, 0, math.nan, math.inf):
+            with pytest.raises(LocalProtocolError, match="timeout_s must be a finite number"):
+                sim.request("PING", timeout_s=bad)
+            with pytest.raises(LocalProtocolError, match="timeout_s must be a finite number"):
+                sim.send("PING", timeout_s=bad)
+        for bad in (math.inf, math.nan, -1.0, "1"):
+            with pytest.raises(LocalProtocolError, match="run_for: seconds must be a finite"):
+                sim.run_for(bad)  # type: ignore[arg-type]
+        sim.request("PING")  # the connection is still good
