@@ -24,6 +24,7 @@ one at a time), so "the oldest pending request this message answers" is the righ
 from __future__ import annotations
 
 import logging
+import numbers
 import queue
 import threading
 from collections.abc import Callable
@@ -479,8 +480,8 @@ class Connection:
         """Lockstep: advance ``count`` physics steps (motion control keeps running); sim time."""
         if self.mode != "lockstep":
             raise LocalProtocolError("step() needs a simulator in lockstep mode")
-        if count < 1:
-            raise LocalProtocolError(f"step count must be >= 1, got {count}")
+        if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
+            raise LocalProtocolError(f"step count must be an integer >= 1, got {count!r}")
         assert isinstance(self.clock, LockstepClock)
         self.clock.advance_steps(count)
         return self.time_s

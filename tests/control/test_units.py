@@ -218,4 +218,7 @@ def test_bad_waits_are_refused_at_the_call() -> None:
         for bad in (math.inf, math.nan, -1.0, "1"):
             with pytest.raises(LocalProtocolError, match="run_for: seconds must be a finite"):
                 sim.run_for(bad)  # type: ignore[arg-type]
+        for bad in (0, -1, 1.5, "a", True):
+            with pytest.raises(LocalProtocolError, match="step count must be an integer >= 1"):
+                sim.step(bad)  # type: ignore[arg-type]
         sim.request("PING")  # the connection is still good
