@@ -127,8 +127,10 @@ class PtyLine(BoardLine):
                 return b""
             raise LinkClosed(f"{self._path}: {exc}") from None
         if data and not self._plugged:
-            self._plugged = True
-            self.ever_plugged = True
+            with self._lock:  # not after close() (an unplug racing this read): it stays out
+                if not self._closed:
+                    self._plugged = True
+                    self.ever_plugged = True
         return data
 
     def send(self, data: bytes) -> None:
