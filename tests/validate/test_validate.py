@@ -90,8 +90,12 @@ def test_webcam_validation_calibrates_first_and_shows_the_uncalibrated_bias(tmp_
     assert len(boards) == 14
     assert main(["calibrate", *boards, "--out", str(tmp_path / "again.toml")]) == 0
     again = load_calibration(tmp_path / "again.toml")
-    assert again.fx == pytest.approx(cal["found"]["fx"], rel=1e-9)
-    assert again.dist[0] == pytest.approx(cal["found"]["k1"], rel=1e-9)
+    # The same frames, the same fit, but not the same bits: OpenCV's solver runs on threads,
+    # so its sums' order varies. Four `skeye calibrate` runs on one set of these frames gave k1
+    # within 1e-14 of each other, and one suite run (2026-11-26) gave 2e-8 between validate's
+    # fit and this one; 1e-6 is still 10 000 times tighter than the calibration's 1 % above.
+    assert again.fx == pytest.approx(cal["found"]["fx"], rel=1e-6)
+    assert again.dist[0] == pytest.approx(cal["found"]["k1"], rel=1e-6)
     assert summary["setup"]["calibration"] == str((out / "calibration/camera.toml").resolve())
 
     # E1 through the lens with the calibration; and without it, the bias it leaves.
