@@ -125,4 +125,4 @@ def test_a_broken_pipe_that_is_not_the_output_is_an_error(monkeypatch, capsys) -
 
     monkeypatch.setattr(link_cli, "run", broken)
     assert main(["link", "tcp://" + NO_SIM, "poll", "all"]) == 2
-    assert "error: [Errno 32] Broken pipe" in capsys.readouterr().err
+    assert "skeye link: error: [Errno 32] Broken pipe" in capsys.readouterr().err

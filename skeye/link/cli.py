@@ -69,21 +69,21 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
             return _run(vehicle, args, out)
     except CommandRejected as exc:
-        print(f"rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
+        print(f"skeye link: rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
         return EXIT_REJECTED
     except LocalProtocolError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"skeye link: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except (LinkClosed, LinkTimeout) as exc:
-        print(f"link error: {exc}", file=sys.stderr)
+        print(f"skeye link: link error: {exc}", file=sys.stderr)
         return EXIT_LINK
     except SkeyeError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"skeye link: error: {exc}", file=sys.stderr)
         return EXIT_LINK
 
 
 def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
-    cmd = args.command
+    cmd = args.link_command
     if cmd == "poll":
         for msg in vehicle.poll(_mask(args.mask, PollMask)).values():
             print(format_message(msg), file=out)
@@ -159,7 +159,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("uri", help="tcp://host:port or serial:///dev/ttyUSB0?baud=57600")
     p.add_argument("--timeout", type=cliargs.positive_float, default=5.0,
                    help="seconds to wait for an answer")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = p.add_subparsers(dest="link_command", required=True, metavar="COMMAND")
     c = sub.add_parser("take-off", help="start motors and climb")
     c.add_argument("height", type=float, help="metres above the take-off point")
     sub.add_parser("land", help="descend and stop motors")

@@ -174,3 +174,11 @@ def test_a_serial_device_that_cannot_be_opened_is_a_bad_option(capsys, monkeypat
     out = capsys.readouterr().out
     assert "--serial" in out and str(tmp_path) in out
     assert opened and opened[0].closed
+
+
+def test_link_errors_name_the_command(capsys):
+    """Every message ``skeye link`` prints names it (the main parser's command, never the
+    link's sub-command)."""
+    code, _ = run("link", "udp://x:1", "land")
+    assert code == link_cli.EXIT_USAGE
+    assert capsys.readouterr().err.startswith("skeye link: error: link URI 'udp://x:1'")
