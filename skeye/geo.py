@@ -15,6 +15,9 @@ from skeye.errors import InvalidArgument
 
 WGS84_A_M = 6378137.0
 WGS84_E2 = 6.69437999014e-3
+LOWEST_LAND_AMSL_M = -430.0
+"""The lowest dry land on Earth, the Dead Sea shore, about 430 m below sea level: no world's
+origin and no flight target lies below it."""
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mav
 
 from skeye.errors import LocalProtocolError
-from skeye.geo import GeoOrigin
+from skeye.geo import LOWEST_LAND_AMSL_M, GeoOrigin
 from skeye.mavlink.codec import BadFrame, MavCodec, MavMessage, statustext
 from skeye.mavlink.mission import MissionItem, MissionProtocol
 from skeye.mavlink.modes import MODE_TABLE, REQUESTS, Program, Px4Mode, Request
@@ -411,13 +411,21 @@ class MavlinkVehicle:
                  name: str = "z") -> float:
         """The NED down coordinate of an altitude: above home in the relative frames, above
         mean sea level in the others; one that is not a finite number is refused (DENIED)
-        naming the field ``name``."""
+        naming the field ``name``, and so is one below the lowest dry land on Earth (the
+        envelope has a ceiling and no floor: the ground is the floor)."""
         if not math.isfinite(alt_m):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"altitude ({name}) {alt_m:g} m is not a finite number")
         if frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
-            return self.boards.home_ned_m[2] - alt_m
-        return origin.altitude_m - alt_m
+            down = self.boards.home_ned_m[2] - alt_m
+        else:
+            down = origin.altitude_m - alt_m
+        amsl = origin.altitude_m - down
+        if amsl < LOWEST_LAND_AMSL_M:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"altitude ({name}) {alt_m:g} m puts the target {amsl:g} m above mean "
+                          f"sea level, below the lowest land on Earth ({LOWEST_LAND_AMSL_M:g} m)")
+        return down
 
     def _arm(self, cmd: Command) -> None:
         if cmd.p(1) == 1.0:
@@ -738,7 +746,9 @@ class MavlinkVehicle:
         try:
             target = self._global_to_ned(item.x, item.y, item.z, item.frame)
         except Refused as exc:
-            return mav.MAV_MISSION_ERROR, f"item {item.seq}: {exc}"
+            code = (mav.MAV_MISSION_INVALID_PARAM7 if str(exc).startswith("altitude")
+                    else mav.MAV_MISSION_ERROR)
+            return code, f"item {item.seq}: {exc}"
         reason = self.boards.check_move(target)
         if reason is not None:
             code = (mav.MAV_MISSION_INVALID_PARAM7 if "above" in reason or "below" in reason

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Final, NoReturn
 
 from skeye.errors import ConfigError
-from skeye.geo import GeoOrigin
+from skeye.geo import LOWEST_LAND_AMSL_M, GeoOrigin
 from skeye.sim.world_model import (
     BUILTIN_WORLDS,
     DEFAULT_MAGNETIC_FIELD_NED_UT,
@@ -46,7 +46,7 @@ _REQUIRED = object()
 # formula of ISO 2533:1975 / US Standard Atmosphere 1976, which holds up to the tropopause at
 # 11 000 m (above it the formula is wrong, and above ~44.3 km it has no real value). The lower
 # bound is the lowest dry land, the Dead Sea shore, about 430 m below sea level.
-ORIGIN_ALTITUDE_MIN_M: Final = -430.0
+ORIGIN_ALTITUDE_MIN_M: Final = LOWEST_LAND_AMSL_M
 ORIGIN_ALTITUDE_MAX_M: Final = 11000.0
 
 

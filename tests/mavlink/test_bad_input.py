@@ -156,6 +156,9 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
                 ((-1.0, 950_000_000, lon, math.nan), ["latitude (x) 95", "-90..90"]),
                 ((-1.0, lat, 2_000_000_000, math.nan), ["longitude (y) 200", "-180..180"]),
                 ((-1.0, lat + 4_500_000, lon, math.nan), ["outside the flight envelope"]),
+                # The envelope has no floor: 10 000 km down gave "MoveBy.dz=... outside".
+                ((-1.0, lat, lon, -1e7), ["altitude (z) -1e+07 m", "below the lowest land"]),
+                ((-1.0, lat, lon, -430.5), ["-430.5 m above mean sea level"]),
             ]
             for (speed, x, y, z), words in cases:
                 result, text = _reposition(conn, speed, x, y, z)
@@ -166,6 +169,9 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
             for speed in (-1.0, 0.0, math.nan):
                 result, _ = _reposition(conn, speed, lat + 100, lon, math.nan, reason=False)
                 assert result == M.MAV_RESULT_TEMPORARILY_REJECTED, speed
+            # Just above the lowest land, the target passes to the boards too.
+            result, _ = _reposition(conn, -1.0, lat, lon, -429.5, reason=False)
+            assert result == M.MAV_RESULT_TEMPORARILY_REJECTED
             assert server.errors == 0
         finally:
             conn.close()
@@ -195,6 +201,7 @@ def test_a_mission_with_absurd_items_is_refused_and_the_old_one_kept(flying):
         (dict(x=pos.lat, y=pos.lon, z=math.nan), M.MAV_MISSION_INVALID_PARAM7, "not a number"),
         (dict(x=2_000_000_000, y=pos.lon), M.MAV_MISSION_INVALID_PARAM5_X, "latitude"),
         (dict(x=pos.lat, y=pos.lon, z=5000.0), M.MAV_MISSION_INVALID_PARAM7, "ceiling"),
+        (dict(x=pos.lat, y=pos.lon, z=-1e7), M.MAV_MISSION_INVALID_PARAM7, "lowest land"),
         (dict(x=pos.lat + 90_000, y=pos.lon), M.MAV_MISSION_INVALID_PARAM5_X, "radius"),
         (dict(command=M.MAV_CMD_DO_SET_SERVO), M.MAV_MISSION_UNSUPPORTED, "not supported"),
         (dict(frame=M.MAV_FRAME_LOCAL_NED, x=1, y=1), M.MAV_MISSION_UNSUPPORTED_FRAME, "frame"),
