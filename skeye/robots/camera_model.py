@@ -31,6 +31,10 @@ from skeye.errors import ConfigError
 
 PROFILES = ("ideal", "webcam")
 DEFAULT_PROFILE = "ideal"
+DISTORTION_LIMIT = 10.0
+"""The largest magnitude of a distortion coefficient (k1, k2, p1, p2, k3) a camera may have,
+here and in a calibration file (skeye.vision.calibration): OpenCV fits of real lenses, wide
+ones included, stay within a few units."""
 
 
 @dataclass(frozen=True)
@@ -245,8 +249,9 @@ def _check(key: str, value: Any, where: str) -> Any:
         raise ConfigError(f"{where}: {key} must be positive, got {value!r}")
     if key not in _SIGNED_FIELDS and key not in _POSITIVE_FIELDS and value < 0:
         raise ConfigError(f"{where}: {key} must be >= 0, got {value!r}")
-    if key in _SIGNED_FIELDS and abs(value) > 10:
-        raise ConfigError(f"{where}: {key} must be within -10..10, got {value!r}")
+    if key in _SIGNED_FIELDS and abs(value) > DISTORTION_LIMIT:
+        raise ConfigError(f"{where}: {key} must be within -{DISTORTION_LIMIT:g}.."
+                          f"{DISTORTION_LIMIT:g}, got {value!r}")
     return float(value)
 
 

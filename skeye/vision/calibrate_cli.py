@@ -18,8 +18,8 @@ from typing import Any
 
 import cv2
 
-from skeye.errors import InvalidArgument, LocalProtocolError
-from skeye.vision.calibration import DIST_NAMES, Board, calibrate, parse_board
+from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
+from skeye.vision.calibration import DIST_NAMES, Board, calibrate, check_lens, parse_board
 
 EXIT_BAD_INPUT = 2
 RMS_WARNING_PX = 1.0  # a good calibration reprojects to a fraction of a pixel
@@ -54,6 +54,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         return _fail(str(exc))
     cal = result.calibration
+    try:
+        check_lens(cal, "the fitted [camera]")
+    except ConfigError as exc:  # what the pilot would refuse to load is not written
+        return _fail(f"{exc}; not written: take more frames, with the board in every part of "
+                     "the image (docs/calibration.md, \"What is refused\")")
     try:
         cal.save(args.out)
     except OSError as exc:

@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
+from skeye.robots.camera_model import DISTORTION_LIMIT
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 FORMAT_VERSION = 1
@@ -237,7 +238,7 @@ def load_calibration(path: str | Path) -> CameraCalibration:
             board = Board(cols, rows, _number(cal, "square_mm", cwhere) / 1000.0)
         if "images" in cal:
             images = _integer(cal, "images", cwhere)
-        return CameraCalibration(
+        calibration = CameraCalibration(
             _integer(cam, "width_px", where), _integer(cam, "height_px", where),
             _number(cam, "fx_px", where), _number(cam, "fy_px", where),
             _number(cam, "cx_px", where), _number(cam, "cy_px", where),
@@ -245,6 +246,32 @@ def load_calibration(path: str | Path) -> CameraCalibration:
         )
     except InvalidArgument as exc:
         raise ConfigError(f"{p}: {exc}") from None
+    check_lens(calibration, where)
+    return calibration
+
+
+def check_lens(c: CameraCalibration, where: str) -> None:
+    """Refuse (ConfigError naming ``where`` and the key) a camera no lens makes: a focal
+    length whose field of view is not strictly inside (0, pi) (a pinhole camera's cannot
+    reach pi), a principal point outside the image, a distortion coefficient beyond
+    +-:data:`~skeye.robots.camera_model.DISTORTION_LIMIT` (the simulator's camera model's
+    range). A fit that folds over outside the region the board covered is a real OpenCV
+    result and is accepted (docs/calibration.md, "What is refused")."""
+    for key, size, f, axis in (("fx_px", c.width_px, c.fx, "horizontal"),
+                               ("fy_px", c.height_px, c.fy, "vertical")):
+        fov = 2.0 * math.atan(size / 2.0 / f)
+        if not 0.0 < fov < math.pi:
+            raise ConfigError(f"{where}.{key}: {f!r} px gives a {axis} field of view of "
+                              f"{fov!r} rad; a lens's is strictly between 0 and pi")
+    for key, size, value in (("cx_px", c.width_px, c.cx), ("cy_px", c.height_px, c.cy)):
+        if not -0.5 <= value <= size - 0.5:
+            raise ConfigError(f"{where}.{key}: the principal point must lie in the image, "
+                              f"-0.5..{size - 0.5:g} px, got {value!r}")
+    for key, value in zip(DIST_NAMES, c.dist, strict=True):
+        if abs(value) > DISTORTION_LIMIT:
+            raise ConfigError(f"{where}.{key}: a distortion coefficient must be within "
+                              f"-{DISTORTION_LIMIT:g}..{DISTORTION_LIMIT:g} (the simulator's "
+                              f"camera model's range), got {value!r}")
 
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)

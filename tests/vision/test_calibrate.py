@@ -185,3 +185,19 @@ def test_calibrate_refuses_bad_input(ideal_frames: list[np.ndarray], tmp_path: P
     assert run(str(tmp_path / "notes.txt"), "--board", "9x6") == 2
     assert "cannot read image" in capsys.readouterr().err
     assert not Path(out).exists()
+
+
+def test_calibrate_does_not_write_a_lens_the_loader_refuses(
+        ideal_frames: list[np.ndarray], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Level views alone pin nothing down (OpenCV cannot tell the focal length from the
+    distance without tilted ones): the first six ideal frames, all level, fit with fx about
+    4e5 px and k1 about 160, reprojecting to 0.04 px (measured 2026-11-26; five to nine level
+    frames give k1 or k2 from -43 to 5e5). Such a fit used to be written, and the pilot then
+    found nothing with it; it is now refused naming the key, and no file is written."""
+    out = tmp_path / "camera.toml"
+    status = main(["calibrate", *_write(tmp_path, ideal_frames[:6]), "--board", "9x6",
+                   "--square-mm", "25", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2 and "a distortion coefficient must be within -10..10" in err, err
+    assert "not written" in err and not out.exists()

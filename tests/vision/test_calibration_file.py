@@ -37,6 +37,14 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ('board = "9x6"', 'board = "nine"', "COLSxROWS"),
         ("format = 1", "format = 7", "format must be 1"),
         ("[camera]", "[lens]", "unknown key(s) ['lens']"),
+        # A camera no lens makes (fx 1e-300 used to be blamed on vision detect's --fov, the
+        # others to load and find nothing).
+        ("fx_px = 521.3", "fx_px = 1e-300", "[camera].fx_px: 1e-300 px gives a horizontal"),
+        ("fy_px = 520.9", "fy_px = 1e-300", "[camera].fy_px: 1e-300 px gives a vertical"),
+        ("cx_px = 401.2", "cx_px = -1e12", "[camera].cx_px: the principal point must lie in"),
+        ("cy_px = 298.7", "cy_px = 600.0", "[camera].cy_px: the principal point must lie in"),
+        ("k1 = -0.21", "k1 = 1e10", "[camera].k1: a distortion coefficient must be within"),
+        ("p2 = -0.0004", "p2 = -10.5", "[camera].p2: a distortion coefficient must be within"),
     ],
 )
 def test_bad_files_name_the_key(tmp_path: Path, old: str, new: str, problem: str) -> None:
@@ -47,6 +55,17 @@ def test_bad_files_name_the_key(tmp_path: Path, old: str, new: str, problem: str
     with pytest.raises(ConfigError) as err:
         load_calibration(path)
     assert str(path) in str(err.value) and problem in str(err.value), err.value
+
+
+def test_a_fit_that_folds_over_outside_the_board_is_accepted(tmp_path: Path) -> None:
+    """k1 -0.2 alone at a 75 degree view folds over before the image corners (docs/
+    calibration.md's accuracy lens): a real OpenCV fit, read as written."""
+    f = 400.0 / np.tan(np.radians(37.5))
+    folded = CameraCalibration(800, 600, f, f, 399.5, 299.5, (-0.2, 0.0, 0.0, 0.0, 0.0))
+    r = folded.max_radius()  # the distorted radius stops growing there, short of the corner's
+    assert r * (1.0 - 0.2 * r * r) < np.hypot(400.0, 300.0) / f
+    folded.save(tmp_path / "camera.toml")
+    assert load_calibration(tmp_path / "camera.toml") == folded
 
 
 def test_unreadable_and_non_toml_files(tmp_path: Path) -> None:
