@@ -187,12 +187,12 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
     pads: list[PadPlacement] = []
     for i, table in enumerate(top.array_of_tables("pads"), 1):
         pads.append(_parse_pad(table, i))
-        _check_on_ground(table, "position_ned_m", pads[-1].position_ned_m, ground)
+        _check_on_ground(table, "position_ned_m", pads[-1].position_ned_m, ground, "pad")
     boxes = tuple(_parse_box(t) for t in top.array_of_tables("boxes"))
     boards = []
     for i, table in enumerate(top.array_of_tables("checkerboards"), 1):
         boards.append(_parse_checkerboard(table, i))
-        _check_on_ground(table, "position_ned_m", boards[-1].position_ned_m, ground)
+        _check_on_ground(table, "position_ned_m", boards[-1].position_ned_m, ground, "board")
     _check_unique(top, "checkerboards", [b.name for b in boards])
     lights = tuple(_parse_light(t, i) for i, t in enumerate(top.array_of_tables("lights"), 1))
     _check_unique(top, "pads", [p.name for p in pads])
@@ -371,12 +371,18 @@ def _check_unique(top: _Table, key: str, names: list[str]) -> None:
         seen.add(name)
 
 
-def _check_on_ground(table: _Table, key: str, position: Vec3, ground: Ground) -> None:
+def _check_on_ground(table: _Table, key: str, position: Vec3, ground: Ground,
+                     what: str | None = None) -> None:
+    """North/east within the ground; with ``what`` (a thing lying on a surface: a pad, a
+    board) also not below the ground, where no camera sees it."""
     if max(abs(position[0]), abs(position[1])) > ground.size_m:
         table.fail(
             f"north/east {position[:2]} lies outside the ground (half-extent {ground.size_m} m)",
             key,
         )
+    if what is not None and position[2] > 0.0:
+        table.fail(f"the {what} is {position[2]:g} m below the ground, where no camera sees it "
+                   "(NED: down is positive, the ground is down = 0)", key)
 
 
 def load_world(name_or_path: str | Path) -> WorldDescription:

@@ -268,6 +268,8 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         ('name = "house"\n', "", "name", "missing required key"),
         ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [-3.0, 0.0, 5.0]',
          "position_ned_m", "start pose 'Field1' is 5 m below the ground"),
+        ('position_ned_m = [1.0, 2.0, 0.0]', 'position_ned_m = [1.0, 2.0, 0.5]',
+         "position_ned_m", "the pad is 0.5 m below the ground"),
     ],
 )
 def test_validation_errors_name_file_and_key(
@@ -298,10 +300,14 @@ def test_checkerboard_world_holds_the_calibration_board() -> None:
         ("inner_corners = [9, 6]\nsquare_m = 0", "square_m"),
         ("inner_corners = [9, 6]", "missing required key"),
         ("inner_corners = [9, 6]\nsquare_m = 0.025\nsquares = 3", "unknown key"),
+        ("inner_corners = [9, 6]\nsquare_m = 0.025\nposition_ned_m = [0.0, 0.0, 2.0]",
+         "the board is 2 m below the ground"),
     ],
 )
 def test_checkerboard_errors_name_the_key(tmp_path: Path, board: str, problem: str) -> None:
-    text = BASE_TOML + f"\n[[checkerboards]]\n{board}\nposition_ned_m = [0.0, 0.0, 0.0]\n"
+    if "position_ned_m" not in board:
+        board += "\nposition_ned_m = [0.0, 0.0, 0.0]"
+    text = BASE_TOML + f"\n[[checkerboards]]\n{board}\n"
     path = write(tmp_path, text)
     with pytest.raises(ConfigError) as err:
         load_world(path)
