@@ -231,9 +231,10 @@ def validate_robot_dirs(
     start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
 
     ``check`` runs on each loaded class the checks building its robot runs (``skeye sim``
-    passes :func:`skeye.sim.robot.check_robot_config` at its physics step: the sensors'
-    parameters and rates, the cameras, the board rate; this package may not import the
-    simulator). Without it only the file and its camera models are checked.
+    passes :func:`skeye.sim.robot.check_robot_config` at its physics step, which builds the
+    robot as INIT does: the sensors' parameters and rates, the cameras, the board rate, the
+    board's estimator; this package may not import the simulator). Without it only the file
+    and its camera models are checked.
 
     Raises:
         ConfigError: a folder that is missing or not a folder, or a robot file that does not

@@ -31,7 +31,7 @@ from skeye.sim.cameras import CameraSpec
 from skeye.sim.controller import Command, LowLevelController
 from skeye.sim.crash import CrashDetector
 from skeye.sim.estimator import BoardEstimator, from_sensor_figures
-from skeye.sim.readings import ReadingSink, SensorSample, StatusReading
+from skeye.sim.readings import Event, ReadingSink, SensorSample, StatusReading
 from skeye.sim.sensors import (
     INS,
     Mount,
@@ -224,10 +224,18 @@ def check_robot_config(config: RobotConfig, physics_step_s: float) -> None:
     Raises:
         ConfigError: what INIT would answer, naming the file, the key and the value.
     """
-    decimation = board_decimation(config, physics_step_s)
-    period_steps(config.status_rate_hz, physics_step_s, f"{config.source}: status_rate_hz")
-    rotors = RotorModel(config.airframe, decimation * physics_step_s)
-    mount_sensors(config, physics_step_s, rotors, np.random.default_rng(0))
+    try:  # a robot of this class, as INIT builds one (its board's estimator too), off the ground
+        Robot("check", config, physics_step_s=physics_step_s, rng=np.random.default_rng(0),
+              sink=_no_readings, spawn_pos_ned_m=(0.0, 0.0, -1.0),
+              spawn_rpy_rad=(0.0, 0.0, 0.0), airborne=False)
+    except ConfigError as exc:
+        text = str(exc)
+        raise ConfigError(text if text.startswith(config.source)
+                          else f"{config.source}: {text}") from None
+
+
+def _no_readings(events: list[Event]) -> None:
+    """The sink of the robot :func:`check_robot_config` builds: it never steps."""
 
 
 @dataclass

@@ -62,6 +62,12 @@ CASES = [
      "rate_hz", "'30'"),
     ("camera-unknown-key", '[[sensors]]\ntype = "Camera"\nname = "C"\nzoom = 2', "zoom",
      "unknown key"),
+    # Passed the start-up check (which built no board estimator), then INIT raised
+    # OverflowError (the vibration's RMS) or refused the estimator's infinite noise.
+    ("vibration-overflow", '[[sensors]]\ntype = "Accelerometer"\nname = "A"\n'
+     'vibration_broadband = 1e300', "VibrationBroadband", "1e+300 is too large"),
+    ("gyro-vibration-overflow", '[[sensors]]\ntype = "Gyro"\nname = "G"\n'
+     'vibration_rotor = 1e200', "VibrationRotor", "1e+200 is too large"),
 ]
 
 

@@ -23,7 +23,7 @@ from skeye.sim.sensors.base import (
     Vec3,
     WorldQuery,
 )
-from skeye.sim.sensors.vibration import RotorVibration, clip3
+from skeye.sim.sensors.vibration import MAX_ROTORS, RotorVibration, clip3
 from skeye.sim.state import BodyState, Mat3, cross, mat_t_vec, mat_vec
 from skeye.sim.vehicle import ground_effect_factor
 from skeye.wire.sim import sen_layout
@@ -80,7 +80,14 @@ def _vibration_params(
 
 
 def _vibration(sensor: Sensor[Any]) -> RotorVibration:
+    """The sensor's vibration model; amplitudes whose combined power over the most rotors a
+    vehicle may have is not a finite number are refused (they overflowed in the RMS)."""
     p = sensor.params
+    rotor, blade, broad = p["VibrationRotor"], p["VibrationBladePass"], p["VibrationBroadband"]
+    if not math.isfinite(MAX_ROTORS * (rotor * rotor + blade * blade) / 2.0 + broad * broad):
+        key = max(("VibrationRotor", "VibrationBladePass", "VibrationBroadband"), key=p.__getitem__)
+        raise sensor._error(key, f"{p[key]:g} is too large: the vibration's RMS over "
+                                 f"{MAX_ROTORS} rotors is not a finite number")
     return RotorVibration(sensor.rng, p["VibrationRotor"], p["VibrationBladePass"],
                           p["VibrationBroadband"], p["VibrationSpeed"], int(p["Blades"]),
                           p["Bandwidth"], sensor.normals)
