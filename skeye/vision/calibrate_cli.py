@@ -58,7 +58,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         check_lens(cal, "the fitted [camera]")
     except ConfigError as exc:  # what the pilot would refuse to load is not written
         return _fail(f"{exc}; not written: take more frames, with the board in every part of "
-                     "the image (docs/calibration.md, \"What is refused\")")
+                     "the image and tilted 20-40 degrees in different directions (level views "
+                     "alone cannot tell the focal length from the distance; docs/"
+                     "calibration.md, \"What is refused\")")
     try:
         cal.save(args.out)
     except OSError as exc:
