@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import errno
 import os
 import re
 import signal
@@ -175,17 +176,32 @@ def stop_process(proc: subprocess.Popen[str], timeout_s: float = 15.0) -> None:
     stop_processes([proc], timeout_s)
 
 
-def port_in_use(host: str, port: int) -> bool:
-    """Whether something already listens on ``host:port`` (a test bind; TIME_WAIT is free)."""
-    if port == 0:
-        return False
+def port_in_use(host: str, port: int, what: str = "") -> bool:
+    """Whether something already listens on ``host:port`` (a test bind; TIME_WAIT is free).
+
+    Raises:
+        ConfigError: ``host`` is not an address of this machine (or a name that does not
+            resolve), or the port cannot be bound for another reason than being taken (one
+            below 1024 without the privilege): "in use" would send the user the wrong way.
+    """
+    where = f"{host} for {what}" if what else host
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     with socket.socket(family, socket.SOCK_STREAM) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            probe.bind((host, port))
-        except OSError:
-            return True
+            probe.bind((host, port))  # port 0 too: it checks the host
+        except socket.gaierror as exc:
+            raise ConfigError(f"cannot listen on {where}: {host!r} is not an address or a name "
+                              f"this machine resolves ({exc.strerror})") from None
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return True
+            if exc.errno == errno.EADDRNOTAVAIL:
+                raise ConfigError(f"cannot listen on {where}: {host} is not an address of "
+                                  "this machine (give one of its own: 127.0.0.1, or 0.0.0.0 "
+                                  "for all)") from None
+            raise ConfigError(f"cannot listen on {where}, port {port}: "
+                              f"{exc.strerror or exc}") from None
     return False
 
 
@@ -195,6 +211,7 @@ def check_ports_free(ports: Sequence[tuple[str, str, int, str]]) -> None:
     Raises:
         ConfigError: two of them share a port, or one is taken; the message names the port,
             what wanted it and the option that moves it.
+        ConfigError: a host that is not this machine's (see :func:`port_in_use`).
     """
     seen: dict[int, str] = {}
     for what, _, port, option in ports:
@@ -204,7 +221,7 @@ def check_ports_free(ports: Sequence[tuple[str, str, int, str]]) -> None:
             )
         seen[port] = f"{what} ({option})"
     for what, host, port, option in ports:
-        if port_in_use(host, port):
+        if port_in_use(host, port, what):
             raise ConfigError(
                 f"port {port} on {host} (for {what}) is already in use - another skeye up or "
                 f"server running? Stop it, or move {what} with {option} PORT"

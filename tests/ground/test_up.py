@@ -158,6 +158,28 @@ def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None
     assert done.returncode == 1 and "--image-port" in done.stderr and f"port {sim}" in done.stderr
 
 
+def test_a_host_that_is_not_this_machines_is_named_not_called_a_taken_port() -> None:
+    import pytest
+
+    from skeye.errors import ConfigError
+    from skeye.processes import check_ports_free
+
+    # 203.0.113.77 (TEST-NET-3, RFC 5737) is no machine's own address: binding it fails with
+    # EADDRNOTAVAIL, which used to read "port ... is already in use".
+    not_here = r"203\.0\.113\.77 is not an address of this machine"
+    for port in (0, 8080):  # port 0 (any free) too: the host is checked all the same
+        with pytest.raises(ConfigError, match=not_here) as info:
+            check_ports_free([("ground control", "203.0.113.77", port, "--ground-port")])
+        assert "already in use" not in str(info.value) and "for ground control" in str(info.value)
+    sim, img, pilot, ground, video = _free_ports(5)
+    done = _run_up("--host", "203.0.113.77", "--calibration", "none", "--no-mavlink",
+                   "--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
+                   "--ground-port", str(ground), "--video-port", str(video), timeout_s=120)
+    assert done.returncode == 1, done
+    assert "203.0.113.77 is not an address of this machine" in done.stderr, done.stderr
+    assert "already in use" not in done.stderr and "open http" not in done.stdout
+
+
 def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
     from tests.sim.conftest import running_sim
 
