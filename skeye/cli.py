@@ -88,8 +88,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.image_port is not None:
         ports.append(("the simulator's image server", args.host, args.image_port,
                       "--image-port"))
-    check_ports_free(ports)  # named, with the option that moves it, before MuJoCo loads
     ll_boards = ll_board_specs(args)
+    ports += [(f"LL board {spec.name}'s line", args.host, spec.port,
+               f"--ll-board {spec.name}=tcp:PORT") for spec in ll_boards if spec.line == "tcp"]
+    check_ports_free(ports)  # named, with the option that moves it, before MuJoCo loads
     world = load_world(args.world)
     # A robot file with a typo, or one INIT would refuse, stops us here.
     validate_robot_dirs(tuple(args.robot_dir),

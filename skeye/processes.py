@@ -212,6 +212,9 @@ def check_ports_free(ports: Sequence[tuple[str, str, int, str]]) -> None:
         ConfigError: two of them share a port, or one is taken; the message names the port,
             what wanted it and the option that moves it.
         ConfigError: a host that is not this machine's (see :func:`port_in_use`).
+
+    ``option`` is the option that moves the port (``--port``: "move it with --port PORT"), or
+    its whole form when the port sits inside a value (``--ll-board R1=tcp:PORT``).
     """
     seen: dict[int, str] = {}
     for what, _, port, option in ports:
@@ -221,10 +224,11 @@ def check_ports_free(ports: Sequence[tuple[str, str, int, str]]) -> None:
             )
         seen[port] = f"{what} ({option})"
     for what, host, port, option in ports:
+        move = option if "PORT" in option else f"{option} PORT"
         if port_in_use(host, port, what):
             raise ConfigError(
                 f"port {port} on {host} (for {what}) is already in use - another skeye up or "
-                f"server running? Stop it, or move {what} with {option} PORT"
+                f"server running? Stop it, or move {what} with {move}"
             )
 
 

@@ -159,3 +159,27 @@ def test_hold_is_not_an_ll_command():
     board = LLBoard(FakeAirframe())
     (reply,) = send(board, encode(Hold()), 0.0)
     assert isinstance(reply, Result) and reply.command_pd == PD.HOLD
+
+
+def test_ll_board_tcp_ports_are_checked_with_the_simulators_before_anything_starts(capsys):
+    import socket
+
+    from skeye.cli import main
+
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        for argv, words in (
+            (["--ll-board", "R1=tcp:7100", "--ll-board", "R2=tcp:7100"],
+             "port 7100 is given to both LL board R1's line (--ll-board R1=tcp:PORT) and LL "
+             "board R2's line; move one with --ll-board R2=tcp:PORT"),
+            (["--port", str(port + 1), "--ll-board", f"R1=tcp:{port + 1}"],
+             f"port {port + 1} is given to both the simulator's control protocol"),
+            (["--ll-board", f"R1=tcp:{port}"],
+             f"port {port} on 127.0.0.1 (for LL board R1's line) is already in use - another "
+             "skeye up or server running? Stop it, or move LL board R1's line with "
+             "--ll-board R1=tcp:PORT"),
+        ):
+            assert main(["sim", "--port", "0", *argv]) == 2
+            err = capsys.readouterr()
+            assert f"skeye sim: error: {words}" in err.err, err.err
+            assert "control protocol on" not in err.out and "Errno" not in err.err
