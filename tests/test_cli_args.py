@@ -41,6 +41,10 @@ CASES = [
     (["ground", "--vehicle", "tcp://127.0.0.1:7000", "--port", "-1"], "--port"),
     (["ground", "--video-fps", "-1", "--host", "256.0.0.1"], "--video-fps"),
     (["ground", "--vehicle", "foo://x:1", "--host", "256.0.0.1"], "--vehicle"),
+    # a port that is no number, and a bracket left open: urllib's ValueError used to escape
+    (["ground", "--vehicle", "tcp://127.0.0.1:abc", "--host", "256.0.0.1"], "--vehicle"),
+    (["ground", "--vehicle", "tcp://[::1:7000", "--host", "256.0.0.1"], "--vehicle"),
+    (["link", "tcp://127.0.0.1:99999", "poll", "all"], "tcp://127.0.0.1:99999"),
     (["replay", "flight.rec", "--port", "-1"], "--port"),
     # --seeds 0 after the bad option ends a run the option's check would not stop
     (["validate", "E1", "--quick", "--first-seed", "-3", "--seeds", "0"], "--first-seed"),

@@ -266,12 +266,18 @@ def memory_pair(name: str = "memory") -> tuple[MemoryLink, MemoryLink]:
 
 def parse_uri(uri: str) -> tuple[str, str, int]:
     """Split a link URI into (scheme, host-or-device, port-or-baud); raises on a bad URI."""
-    parts = urlsplit(uri)
+    try:
+        parts = urlsplit(uri)
+        port = parts.port if parts.scheme.lower() == "tcp" else None
+    except ValueError as exc:  # a bracket left open, a port that is no number or too big
+        raise LocalProtocolError(f"link URI {uri!r}: {exc} (expected tcp://host:port, "
+                                 "port 1..65535, an IPv6 address in brackets)") from None
     scheme = parts.scheme.lower()
     if scheme == "tcp":
-        if not parts.hostname or parts.port is None:
-            raise LocalProtocolError(f"link URI {uri!r}: expected tcp://host:port")
-        return scheme, parts.hostname, parts.port
+        if not parts.hostname or port is None or port == 0:
+            raise LocalProtocolError(f"link URI {uri!r}: expected tcp://host:port (port "
+                                     "1..65535)")
+        return scheme, parts.hostname, port
     if scheme == "serial":
         device = parts.netloc + parts.path
         if not device:

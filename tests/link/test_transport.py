@@ -137,6 +137,7 @@ def test_connect_refused_and_missing_serial_port_raise_link_closed():
     [
         ("tcp://127.0.0.1:7000", ("tcp", "127.0.0.1", 7000)),
         ("TCP://localhost:1", ("tcp", "localhost", 1)),
+        ("tcp://[::1]:7000", ("tcp", "::1", 7000)),
         ("serial:///dev/ttyUSB0?baud=57600", ("serial", "/dev/ttyUSB0", 57600)),
         ("serial:///dev/ttyS1", ("serial", "/dev/ttyS1", 57600)),
     ],
@@ -150,6 +151,10 @@ def test_parse_uri(uri, expected):
     [
         ("udp://1.2.3.4:5", "scheme"),
         ("tcp://host", "host:port"),
+        ("tcp://host:0", "port 1..65535"),
+        ("tcp://127.0.0.1:abc", "Port could not be cast"),  # used to escape as ValueError
+        ("tcp://127.0.0.1:99999", "Port out of range"),
+        ("tcp://[::1:7000", "Invalid IPv6 URL"),
         ("serial://", "serial"),
         ("serial:///dev/x?baud=fast", "not a number"),
         ("serial:///dev/x?baud=0", "positive"),
