@@ -303,7 +303,11 @@ def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
     Raises:
         ConfigError: an unknown scheme, a missing or bad port.
     """
-    parts = urlsplit(uri)
+    try:
+        parts = urlsplit(uri)
+    except ValueError as exc:  # an IPv6 address whose bracket is left open
+        raise ConfigError(f"{uri}: {exc}; give HOST:PORT, an IPv6 address in brackets "
+                          "([::1]:14540)") from None
     scheme = parts.scheme.lower()
     query = {k: v[-1] for k, v in parse_qs(parts.query).items()}
     if scheme == "serial":
