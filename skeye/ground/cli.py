@@ -183,8 +183,19 @@ def _child_argv(*args: str) -> list[str]:
     return [sys.executable, "-m", "skeye.cli", *args]
 
 
+def reach_host(host: str) -> str:
+    """Where a client on this machine reaches a server bound to ``host``: the loopback for a
+    wildcard (``0.0.0.0``, ``::``), else ``host`` itself (a server bound to one address of this
+    machine, ``::1`` or a LAN address, is not on 127.0.0.1)."""
+    if host in ("", "0.0.0.0"):
+        return "127.0.0.1"
+    if host == "::":
+        return "::1"
+    return host
+
+
 def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float,
-                    stop: threading.Event | None = None) -> None:
+                    stop: threading.Event | None = None, host: str = "127.0.0.1") -> None:
     end = time.monotonic() + deadline_s
     while time.monotonic() < end:
         if child.poll() is not None:
@@ -194,7 +205,7 @@ def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadli
         if stop is not None and stop.is_set():
             raise ConfigError(f"stopped while {what} was starting")
         try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            with socket.create_connection((host, port), timeout=0.5):
                 return
         except OSError:
             time.sleep(0.2)
@@ -357,7 +368,9 @@ def run_up(args: argparse.Namespace) -> int:
         else:
             children.append((what, child))
         for port in ports:
-            _wait_listening(port, child, what, START_DEADLINE_S, stop)
+            # ground control listens on --host; the others on 127.0.0.1
+            host = reach_host(args.host) if port == args.ground_port else "127.0.0.1"
+            _wait_listening(port, child, what, START_DEADLINE_S, stop, host)
 
     def restart_dead() -> bool:
         """Start again every child that was killed (True), unless one failed or restarted too
@@ -426,8 +439,10 @@ def run_up(args: argparse.Namespace) -> int:
             ),
             args.ground_port,
         )
+        shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host  # as ground's
+        shown = f"[{shown}]" if ":" in shown else shown
         print(
-            f"skeye up: open http://127.0.0.1:{args.ground_port}/?token={token}  "
+            f"skeye up: open http://{shown}:{args.ground_port}/?token={token}  "
             f"(simulator {args.sim_port}, "
             f"images {args.image_port}, pilot {args.pilot_port}, video {args.video_port}"
             f"{'; MAVLink ' + ', '.join(mavlink) if mavlink else ''}); "

@@ -180,6 +180,25 @@ def test_a_host_that_is_not_this_machines_is_named_not_called_a_taken_port() -> 
     assert "already in use" not in done.stderr and "open http" not in done.stdout
 
 
+def test_up_waits_for_ground_control_where_its_host_puts_it() -> None:
+    from skeye.ground.cli import _wait_listening, reach_host
+
+    # ground control bound to one address of this machine (127.0.0.2, as a LAN address or ::1
+    # would be): skeye up used to look for it on 127.0.0.1 only, and gave up after 180 s
+    assert reach_host("0.0.0.0") == "127.0.0.1" and reach_host("::") == "::1"
+    assert reach_host("127.0.0.2") == "127.0.0.2"
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    try:
+        with socket.create_server(("127.0.0.2", 0)) as ground:
+            port = ground.getsockname()[1]
+            start = time.monotonic()
+            _wait_listening(port, child, "ground control", 60.0, host=reach_host("127.0.0.2"))
+            assert time.monotonic() - start < 30.0
+    finally:
+        child.kill()
+        child.wait(30)
+
+
 def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
     from tests.sim.conftest import running_sim
 
