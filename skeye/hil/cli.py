@@ -21,7 +21,7 @@ import math
 from contextlib import ExitStack
 from dataclasses import dataclass
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, SkeyeError
 from skeye.hil.line import open_line
 from skeye.hil.ll_board import SERIAL_TIMEOUT_S, LLSettings
 from skeye.hil.ll_server import REALTIME_TICK_S, LLBoardServer
@@ -116,15 +116,21 @@ def start_ll_board(stack: ExitStack, spec: LLBoardSpec, control_address: str, *,
     closes with ``stack``.
 
     Raises:
-        SkeyeError: the simulator refused the robot, or the line cannot be opened.
+        ConfigError: naming the board: the simulator refused its robot (an unknown class or
+            start pose), or its line cannot be opened.
+        SkeyeError: the simulator cannot be reached.
     """
     from skeye.control.connection import connect
     from skeye.pilot.sim_airframe import SimAirframe
 
     sim = stack.enter_context(connect(control_address, timeout_s=timeout_s))
-    robot = sim.spawn(spec.robot, start=spec.start, name=spec.name)
-    airframe = SimAirframe(sim, robot)
-    line = open_line(spec.line, host=host, port=spec.port, device=spec.device, baud=spec.baud)
+    try:
+        robot = sim.spawn(spec.robot, start=spec.start, name=spec.name)
+        airframe = SimAirframe(sim, robot)
+        line = open_line(spec.line, host=host, port=spec.port, device=spec.device,
+                         baud=spec.baud)
+    except (SkeyeError, OSError) as exc:  # which board of several: the message says
+        raise ConfigError(f"--ll-board {spec.name}: {exc}") from exc
     lockstep = sim.mode == "lockstep"
     limits = airframe.limits
     settings = LLSettings(serial_timeout_s=spec.serial_timeout_s,
@@ -142,7 +148,6 @@ def start_ll_board(stack: ExitStack, spec: LLBoardSpec, control_address: str, *,
 
 def _camera(sim: object, robot: str) -> tuple[str, float] | None:
     """The robot's downward camera: (name, horizontal FOV in rad, as the simulator has it)."""
-    from skeye.errors import SkeyeError
     from skeye.robots.config import load_robot_config
 
     try:

@@ -183,3 +183,19 @@ def test_ll_board_tcp_ports_are_checked_with_the_simulators_before_anything_star
             err = capsys.readouterr()
             assert f"skeye sim: error: {words}" in err.err, err.err
             assert "control protocol on" not in err.out and "Errno" not in err.err
+
+
+def test_a_board_the_simulator_cannot_make_is_named(tmp_path):
+    from contextlib import ExitStack
+
+    from skeye.hil.cli import start_ll_board
+    from tests.sim.conftest import running_sim
+
+    with running_sim() as server:
+        for text, words in (
+            ("R7=pty,robot=nosuch", "--ll-board R7: .*unknown robot class 'nosuch'"),
+            ("R8=pty,start=Nowhere", "--ll-board R8: no start pose 'Nowhere'"),
+            (f"R9=serial:{tmp_path}/no-such-tty", f"--ll-board R9: .*{tmp_path}/no-such-tty"),
+        ):
+            with ExitStack() as stack, pytest.raises(ConfigError, match=words):
+                start_ll_board(stack, parse_ll_board(text), f"127.0.0.1:{server.port}")
