@@ -70,7 +70,7 @@ FIRST_POLL = int(EVERY_CYCLE | PollMask.GPS_DATA_ADVANCED | SLOW)
 # silent: a board just powered up, or one emulated on a loaded host, may miss the first; in
 # flight a missed answer is counted towards silent_after instead.
 FIRST_CONTACT_TRIES = 3
-SIM_TIME = re.compile(r"sim time (-?[0-9.]+) s")
+SIM_TIME = re.compile(r"sim time (-?[0-9]+(?:\.[0-9]*)?) s")
 REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
 
 

@@ -205,3 +205,24 @@ def test_baro_climb_is_the_altitude_change_over_readings_50_ms_apart():
     assert climb.update(10.12, 0.0) == pytest.approx(2.0)  # kept in between
     assert climb.update(10.3, 4.8) == pytest.approx(-2.0)
     assert climb.climb_m_s == pytest.approx(-2.0)
+
+
+@pytest.mark.parametrize("reason", ["sim time 1.2.3 s", "sim time . s", "sim time - s", "busy"])
+def test_a_clock_answer_without_a_readable_sim_time_is_named(reason):
+    from types import SimpleNamespace
+
+    from skeye.errors import CommandRejected
+    from skeye.pilot.asctec_ll import AscTecLLAirframe, LLLinkSettings
+    from skeye.wire.packets import PD, Result, ResultCode
+
+    class Board:  # answers every CLOCK grant OK, with a reason a skeye board never gives
+        def send_raw(self, data: bytes) -> None:
+            pass
+
+        def wait_result(self, pd: int, timeout_s: float) -> Result:
+            return Result(int(PD.CLOCK), ResultCode.OK, reason)
+
+    air = SimpleNamespace(vehicle=Board(), settings=LLLinkSettings("tcp://127.0.0.1:1"))
+    # "1.2.3" used to reach float() and raise ValueError, which no caller of a cycle expects
+    with pytest.raises(CommandRejected, match="did not say its sim time"):
+        AscTecLLAirframe._grant(air, 1.0)  # type: ignore[arg-type]
