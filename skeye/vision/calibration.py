@@ -36,6 +36,7 @@ from skeye.robots.camera_model import DISTORTION_LIMIT
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 FORMAT_VERSION = 1
+MAX_BOARD_CORNERS = 1000  # inner corners a side: far beyond any printed board
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,9 @@ class Board:
         if self.cols < 2 or self.rows < 2:
             raise InvalidArgument(f"a board needs at least 2x2 inner corners, got "
                                   f"{self.cols}x{self.rows}")
+        if self.cols > MAX_BOARD_CORNERS or self.rows > MAX_BOARD_CORNERS:
+            raise InvalidArgument(f"a board has at most {MAX_BOARD_CORNERS} inner corners a "
+                                  f"side, got {self.cols}x{self.rows}")
         if not (math.isfinite(self.square_m) and self.square_m > 0):
             raise InvalidArgument(f"square size must be positive, got {self.square_m} m")
 
@@ -67,7 +71,8 @@ class Board:
 def parse_board(text: str) -> tuple[int, int]:
     """``"9x6"`` -> (9, 6): inner corners per row and per column."""
     parts = text.lower().split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+    # isascii: str.isdigit() also accepts digits int() refuses (superscripts such as "²")
+    if len(parts) != 2 or not all(p.strip().isascii() and p.strip().isdigit() for p in parts):
         raise InvalidArgument(f"board must be COLSxROWS inner corners, e.g. 9x6, got {text!r}")
     return int(parts[0]), int(parts[1])
 

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from skeye.cli import main
 from skeye.errors import ConfigError, InvalidArgument
 from skeye.vision.calibration import Board, CameraCalibration, load_calibration, parse_board
 from skeye.vision.level_view import LevelView
@@ -83,6 +84,29 @@ def test_board_parsing() -> None:
             parse_board(bad)
     with pytest.raises(InvalidArgument):
         Board(1, 6, 0.025)
+
+
+def test_board_with_odd_digits_or_too_many_corners_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """"²x6" passed str.isdigit() and then made int() raise ValueError (a traceback from
+    skeye calibrate); a 100000x100000 board asked numpy for 112 GiB of object points."""
+    for bad in ("²x6", "9x٦"):
+        with pytest.raises(InvalidArgument, match="COLSxROWS"):
+            parse_board(bad)
+    with pytest.raises(InvalidArgument, match="at most 1000 inner corners"):
+        Board(100_000, 100_000, 0.025)
+    image = tmp_path / "board.png"
+    cv2.imwrite(str(image), np.full((480, 640), 128, np.uint8))
+    out = tmp_path / "camera.toml"
+    for board in ("²x6", "100000x100000"):
+        assert main(["calibrate", str(image), "--board", board, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("skeye calibrate: error: ") and "Traceback" not in err, err
+    assert not out.exists()
+    (tmp_path / "huge.toml").write_text(
+        CAL.to_toml().replace('board = "9x6"', 'board = "100000x100000"'))
+    with pytest.raises(ConfigError, match="at most 1000 inner corners"):
+        load_calibration(tmp_path / "huge.toml")
 
 
 def test_forward_model_is_opencvs() -> None:
