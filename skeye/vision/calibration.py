@@ -37,6 +37,7 @@ from skeye.robots.camera_model import DISTORTION_LIMIT
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 FORMAT_VERSION = 1
 MAX_BOARD_CORNERS = 1000  # inner corners a side: far beyond any printed board
+MIN_IMAGE_PX = 16  # a side: a camera's smallest (OpenCV's corner finder fails below it)
 
 
 @dataclass(frozen=True)
@@ -93,8 +94,8 @@ class CameraCalibration:
     images: int | None = None  # images the board was found in (and used)
 
     def __post_init__(self) -> None:
-        if self.width_px < 16 or self.height_px < 16:
-            raise InvalidArgument(f"image size must be at least 16x16, got "
+        if self.width_px < MIN_IMAGE_PX or self.height_px < MIN_IMAGE_PX:
+            raise InvalidArgument(f"image size must be at least {MIN_IMAGE_PX}x{MIN_IMAGE_PX}, got "
                                   f"{self.width_px}x{self.height_px}")
         values = (self.fx, self.fy, self.cx, self.cy, *self.dist)
         if len(self.dist) != 5 or not all(math.isfinite(v) for v in values):
@@ -332,12 +333,16 @@ def calibrate(
     """Calibrate from (name, greyscale uint8 image) pairs, all of one size.
 
     Raises:
-        LocalProtocolError: mixed image sizes, or fewer than ``min_images`` images with the
-            whole board found.
+        LocalProtocolError: mixed image sizes, an image under 16 px a side, or fewer than
+            ``min_images`` images with the whole board found.
     """
     if not images:
         raise LocalProtocolError("no images given")
     size = images[0][1].shape[:2]
+    if min(size) < MIN_IMAGE_PX:  # findChessboardCorners fails an assertion on them
+        raise LocalProtocolError(
+            f"{images[0][0]} is {size[1]}x{size[0]}: a calibration image must be at least "
+            f"{MIN_IMAGE_PX}x{MIN_IMAGE_PX} px")
     obj = board.object_points()
     object_points, image_points, used, skipped = [], [], [], []
     for name, grey in images:

@@ -142,3 +142,22 @@ def test_calibrate_refuses_mixed_sizes_and_too_few_boards() -> None:
         calibrate([("a.png", blank), ("b.png", blank)], board)
     with pytest.raises(LocalProtocolError, match="no images"):
         calibrate([], board)
+
+
+@pytest.mark.parametrize("sizes", [((1, 1),), ((2, 2), (2, 2)), ((15, 640), (15, 640)),
+                                   ((480, 640), (1, 1))])
+def test_calibrate_refuses_tiny_images(sizes: tuple[tuple[int, int], ...], tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A 1x1 or 2x2 image made OpenCV's corner finder fail an assertion (cv2.error, a
+    traceback from skeye calibrate); such images are refused naming the image and its size."""
+    names = []
+    for i, (h, w) in enumerate(sizes):
+        names.append(str(tmp_path / f"img{i}.png"))
+        cv2.imwrite(names[-1], np.full((h, w), 128, np.uint8))
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", *names, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("skeye calibrate: error: ") and "Traceback" not in err, err
+    h, w = sizes[0] if min(sizes[0]) < 16 else sizes[1]
+    assert f"is {w}x{h}" in err, err
+    assert not out.exists()
