@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import threading
 from pathlib import Path
-from urllib.parse import parse_qs, unquote, urlsplit
+from urllib.parse import parse_qs, unquote
 
 import cv2
 import numpy as np
@@ -31,6 +31,7 @@ from skeye.pilot.camera import (
     FrameInfo,
     check_size,
     fov_option,
+    split_camera_uri,
 )
 
 
@@ -40,7 +41,7 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     Raises:
         LocalProtocolError: naming what is wrong.
     """
-    parts = urlsplit(uri)
+    parts = split_camera_uri(uri, "file://PATH")
     if parts.scheme.lower() != "file":
         raise LocalProtocolError(f"camera {uri!r}: expected file://PATH")
     path = unquote(parts.netloc + parts.path)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from skeye.control.image_client import ImageClient
 from skeye.errors import LocalProtocolError, SkeyeError
@@ -35,6 +35,7 @@ from skeye.pilot.camera import (
     FrameInfo,
     check_size,
     fov_option,
+    split_camera_uri,
 )
 from skeye.pixels import frame_image
 
@@ -47,10 +48,14 @@ def parse_sim_camera(uri: str, robot: str = "R1") -> tuple[str, int, str, float 
     Raises:
         LocalProtocolError: naming what is wrong.
     """
-    parts = urlsplit(uri)
-    if parts.scheme.lower() != "sim" or not parts.hostname or parts.port is None:
+    parts = split_camera_uri(uri, "sim://HOST:PORT/ROBOT/CAMERA")
+    try:
+        port = parts.port
+    except ValueError:  # not a number, or over 65535
+        port = None
+    if parts.scheme.lower() != "sim" or not parts.hostname or port is None:
         raise LocalProtocolError(f"camera {uri!r}: expected sim://HOST:PORT/ROBOT/CAMERA "
-                                 "(the image server's address)")
+                                 "(the image server's address, PORT 0..65535)")
     name = parts.path.strip("/")
     if not name or name.count("/") > 1:
         raise LocalProtocolError(f"camera {uri!r}: expected sim://HOST:PORT/ROBOT/CAMERA or "
@@ -62,7 +67,7 @@ def parse_sim_camera(uri: str, robot: str = "R1") -> tuple[str, int, str, float 
     if unknown:
         raise LocalProtocolError(f"camera {uri!r}: unknown option(s) {unknown} (fov_deg, "
                                  "fov_rad)")
-    return parts.hostname, parts.port, name, fov_option(uri, query)
+    return parts.hostname, port, name, fov_option(uri, query)
 
 
 class SimCamera:

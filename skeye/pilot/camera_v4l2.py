@@ -30,7 +30,7 @@ import threading
 import time
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import parse_qs, unquote, urlsplit
+from urllib.parse import parse_qs, unquote
 
 import cv2
 import numpy as np
@@ -43,6 +43,7 @@ from skeye.pilot.camera import (
     FrameInfo,
     check_size,
     fov_option,
+    split_camera_uri,
 )
 from skeye.workers import Worker
 
@@ -73,7 +74,7 @@ def parse_v4l2_uri(uri: str) -> V4l2Settings:
     Raises:
         LocalProtocolError: naming the key and value that are wrong.
     """
-    parts = urlsplit(uri)
+    parts = split_camera_uri(uri, "v4l2:///dev/videoN")
     if parts.scheme.lower() != "v4l2":
         raise LocalProtocolError(f"camera {uri!r}: expected v4l2:///dev/videoN")
     device = unquote(parts.netloc + parts.path)
@@ -94,7 +95,8 @@ def parse_v4l2_uri(uri: str) -> V4l2Settings:
         text = value(key)
         if text is None:
             return None
-        if not text.isdigit() or not low <= int(text) <= high:
+        # isascii: str.isdigit() also accepts digits int() refuses (superscripts such as "²")
+        if not (text.isascii() and text.isdigit()) or not low <= int(text) <= high:
             raise LocalProtocolError(f"camera {uri!r}: {key}={text} is not a whole number "
                                      f"{low}..{high}")
         return int(text)

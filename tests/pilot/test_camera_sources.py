@@ -241,6 +241,23 @@ def test_sim_and_file_uris():
         open_camera("rtsp://cam/1")
 
 
+@pytest.mark.parametrize(("uri", "words"), [
+    ("sim://h:abc/R1/Down", "PORT 0..65535"),
+    ("sim://h:99999/R1/Down", "PORT 0..65535"),
+    ("sim://h:-1/R1/Down", "PORT 0..65535"),
+    ("sim://[::1/R1/Down", "Invalid IPv6 URL; expected sim://"),
+    ("v4l2://[::1/dev/video0", "Invalid IPv6 URL; expected v4l2://"),
+    ("file://[::1/x.mp4", "Invalid IPv6 URL; expected file://"),
+    ("v4l2:///dev/video0?width=²", "width=² is not a whole number"),
+    ("v4l2:///dev/video0?exposure=٣", "exposure=٣ is not a whole number"),
+])
+def test_malformed_uris_are_named_not_a_value_error(uri, words):
+    """A bad port, an unclosed IPv6 bracket or a digit int() refuses made urllib or int()
+    raise ValueError, a traceback from skeye pilot after its airframe was opened."""
+    with pytest.raises(LocalProtocolError, match=words):
+        open_camera(uri, CameraOptions(clock=FakeClock()))
+
+
 def test_a_real_v4l2_camera_where_there_is_one():
     devices = sorted(glob.glob("/dev/video*"))
     if not devices:
