@@ -43,8 +43,9 @@ class PadDefinition:
     rings: tuple[Ring, ...]
 
     def __post_init__(self) -> None:
-        if self.side_m <= 0:
-            raise InvalidArgument(f"pad {self.name!r}: side must be positive, got {self.side_m}")
+        if not (math.isfinite(self.side_m) and self.side_m > 0):  # nan, inf: no page, no texture
+            raise InvalidArgument(f"pad {self.name!r}: side_m must be a positive finite number, "
+                                  f"got {self.side_m}")
         if not self.rings:
             raise InvalidArgument(f"pad {self.name!r}: needs at least one ring")
         previous_inner = self.side_m / 2

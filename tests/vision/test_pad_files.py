@@ -72,6 +72,12 @@ def test_load_pad_from_toml(tmp_path):
             "unique",
         ),
         ("name = = 'x'", "not valid TOML"),
+        # inf passed (skeye pad then raised ValueError from matplotlib's figure size); nan was
+        # refused, but by the first ring's check ("outer <= nan"), not naming side_m
+        ("name = 'x'\nside_m = inf\nrings = [{outer_m = 0.2, inner_m = 0.1}]",
+         "side_m must be a positive finite number, got inf"),
+        ("name = 'x'\nside_m = nan\nrings = [{outer_m = 0.2, inner_m = 0.1}]",
+         "side_m must be a positive finite number, got nan"),
     ],
 )
 def test_bad_pad_files_name_the_file_and_key(tmp_path, text, match):
