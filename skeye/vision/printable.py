@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 METRES_PER_INCH = 0.0254
 DEFAULT_MARGIN_M = 0.02
 DEFAULT_DPI = 300
+MAX_PNG_SIDE_PX = 32768  # 4 GiB of RGBA while drawing; skeye-4's page at 1200 dpi is 30236
 PAPERS_M: dict[str, tuple[float, float]] = {  # portrait width, height
     "a4": (0.210, 0.297),
     "letter": (0.2159, 0.2794),
@@ -234,6 +235,15 @@ def write_printable(
         raise LocalProtocolError(f"margin must be within 0..1 m, got {margin_m}")
     if ext == ".png" and not 10 <= dpi <= 1200:
         raise LocalProtocolError(f"dpi must be within 10..1200, got {dpi}")
+    if ext == ".png" and paper is None:
+        side = page_size_m(pad, margin_m)
+        side_px = side / METRES_PER_INCH * dpi
+        if side_px > MAX_PNG_SIDE_PX:  # matplotlib would raise, or exhaust the memory
+            most = math.floor(MAX_PNG_SIDE_PX * METRES_PER_INCH / side)
+            fix = f": give --dpi {most} or less, or" if most >= 10 else " even at 10 dpi:"
+            raise LocalProtocolError(
+                f"a {side:g} m page at {dpi} dpi is {side_px:.0f} px a side, over the "
+                f"{MAX_PNG_SIDE_PX} px a PNG may have{fix} write a .pdf (vector, any size)")
     if paper is not None:
         if ext != ".pdf":
             raise LocalProtocolError(f"--paper writes a PDF of sheets; name it .pdf, not {ext}")

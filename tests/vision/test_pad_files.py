@@ -147,6 +147,30 @@ def test_printable_png_carries_its_dpi(tmp_path, dpi):
         assert grey[c, c + round(0.29 * px_per_m)] < 30
 
 
+@pytest.mark.parametrize(("side_m", "dpi", "words"), [
+    (20.0, 300, "20.04 m page at 300 dpi is 236693 px a side, over the 32768 px a PNG may "
+                "have: give --dpi 41 or less, or write a .pdf"),
+    (1e9, 10, "even at 10 dpi: write a .pdf"),
+])
+def test_a_png_too_large_to_draw_is_refused(tmp_path, capsys, side_m, dpi, words):
+    """A 20 m pad at 300 dpi made matplotlib fail to allocate the canvas (MemoryError, or
+    a ValueError over 2^16 px); a 1e9 m one at 10 dpi a TypeError (a size past C's int).
+    Both tracebacks from skeye pad; now refused before drawing, saying the dpi that fits."""
+    from skeye.cli import main
+
+    pad = PadDefinition("big", side_m, (Ring(0.45 * side_m, 0.38 * side_m),))
+    out = tmp_path / "pad.png"
+    with pytest.raises(LocalProtocolError, match=re.escape(words)):
+        write_printable(pad, out, dpi=dpi)
+    pad_file = tmp_path / "big.toml"
+    pad_file.write_text(f"name = 'big'\nside_m = {side_m!r}\n"
+                        f"rings = [{{outer_m = {0.45 * side_m!r}, inner_m = {0.38 * side_m!r}}}]")
+    assert main(["pad", "--out", str(out), "--pad", str(pad_file), "--dpi", str(dpi)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err, err
+    assert not out.exists()
+
+
 def test_printable_rejects_other_extensions(tmp_path):
     with pytest.raises(LocalProtocolError, match=r"\.pdf or \.png"):
         write_printable(SKEYE_4, tmp_path / "pad.svg")
