@@ -9,6 +9,8 @@ image protocol that needs an image codec, so it lives outside the sans-IO :mod:`
 
 from __future__ import annotations
 
+import struct
+
 import cv2
 import numpy as np
 
@@ -25,6 +27,46 @@ from skeye.wire.images import (
     jpeg_type_for_quality,
     raw_row_bytes,
 )
+
+MAX_DECODED_PIXELS = 8192 * 8192
+"""The most pixels a received JPEG or PNG may declare: the simulator's largest camera (8192 px a
+side, skeye/sim/cameras.py). A few hundred KiB of PNG can declare 30000x30000 px, 2.7 GB of
+BGR; the size is read from the file's header and checked before anything is decoded."""
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+# JPEG start-of-frame markers (SOF0-SOF15 but DHT 0xC4, JPG 0xC8, DAC 0xCC): height, width.
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def declared_size(frame_type: FrameType, data: bytes) -> tuple[int, int] | None:
+    """(width, height) a PNG's IHDR or a JPEG's start-of-frame header declares, read without
+    decoding; None when ``data`` is not a file of the frame's type or has no such header."""
+    if frame_type is FrameType.PNG:
+        if len(data) >= 24 and data[:8] == _PNG_SIGNATURE and data[12:16] == b"IHDR":
+            width, height = struct.unpack_from(">II", data, 16)
+            return int(width), int(height)
+        return None
+    if data[:2] != b"\xff\xd8":  # JPEG: SOI, then marker segments up to the frame header
+        return None
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # a fill byte
+            i += 1
+        elif marker == 0x01 or 0xD0 <= marker <= 0xD7:  # TEM, RSTn: no length
+            i += 2
+        elif marker in (0xD9, 0xDA):  # EOI or SOS before any frame header
+            return None
+        elif marker in _JPEG_SOF:
+            if i + 9 > len(data):
+                return None
+            height, width = struct.unpack_from(">HH", data, i + 5)
+            return int(width), int(height)
+        else:
+            i += 2 + int.from_bytes(data[i + 2 : i + 4], "big")
+    return None
 
 
 def _check_rgb(rgb: np.ndarray) -> None:
@@ -110,6 +152,16 @@ def frame_image(frame: DecodedFrame) -> np.ndarray:
     else:
         if not frame.data:  # OpenCV raises its own error on an empty buffer
             raise RemoteProtocolError(f"{frame.frame_type.name} frame with no image data")
+        base = FrameType.PNG if frame.frame_type is FrameType.PNG else FrameType.JPEG_SUPER
+        size = declared_size(base, frame.data)
+        kind = "PNG" if base is FrameType.PNG else "JPEG"
+        if size is None:
+            raise RemoteProtocolError(f"{frame.frame_type.name} frame of {len(frame.data)} "
+                                      f"bytes does not decode: no {kind} header")
+        if size[0] * size[1] > MAX_DECODED_PIXELS:
+            raise RemoteProtocolError(
+                f"{frame.frame_type.name} frame declares {size[0]}x{size[1]} px, over the "
+                f"{MAX_DECODED_PIXELS} px (8192x8192) an image may have: not decoded")
         img_or_none = cv2.imdecode(np.frombuffer(frame.data, np.uint8), cv2.IMREAD_COLOR)
         if img_or_none is None:
             raise RemoteProtocolError(

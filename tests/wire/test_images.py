@@ -425,6 +425,36 @@ def test_undecodable_image_data_raises_remote_protocol_error() -> None:
         frame_image(event)
 
 
+@pytest.mark.parametrize("ext", [".png", ".jpg"])
+def test_an_image_declaring_too_many_pixels_is_not_decoded(ext: str) -> None:
+    """A PNG of 9000x8000 black pixels is 73 KB on the wire and 216 MB of BGR; one of
+    30000x30000 (900 KB) made skeye snapshot take 5.3 GB. The size in the file's header is
+    checked before decoding: over 8192x8192 (the simulator's largest camera) is refused."""
+    import cv2
+
+    ok, buf = cv2.imencode(ext, np.zeros((8000, 9000), np.uint8))
+    assert ok
+    base = FrameType.PNG if ext == ".png" else FrameType.JPEG_SUPER
+    (event,) = FrameDecoder().feed(encode_frame(base, buf.tobytes()))
+    assert isinstance(event, DecodedFrame)
+    with pytest.raises(RemoteProtocolError, match=r"declares 9000x8000 px, over the 67108864"):
+        frame_image(event)
+
+
+def test_an_image_frame_must_hold_its_own_format() -> None:
+    """A PNG frame holding a JPEG (or a BMP, a TIFF...) was decoded by whatever OpenCV
+    recognised, a way around the size check; it is refused naming the format expected."""
+    jpeg = jpeg_payload(_smooth(8, 8, (1, 2, 3)), 80)
+    (event,) = FrameDecoder().feed(encode_frame(FrameType.PNG, jpeg))
+    assert isinstance(event, DecodedFrame)
+    with pytest.raises(RemoteProtocolError, match="does not decode: no PNG header"):
+        frame_image(event)
+    (event,) = FrameDecoder().feed(encode_frame(FrameType.JPEG_BAD, png_payload(_image(8, 8, 3))))
+    assert isinstance(event, DecodedFrame)
+    with pytest.raises(RemoteProtocolError, match="does not decode: no JPEG header"):
+        frame_image(event)
+
+
 def test_jpeg_payload_is_a_jpeg_file() -> None:
     data = jpeg_payload(_smooth(8, 8, (10, 20, 30)), 80)
     assert data[:2] == b"\xff\xd8" and data[-2:] == b"\xff\xd9"
