@@ -42,6 +42,7 @@ PAPERS_M: dict[str, tuple[float, float]] = {  # portrait width, height
 PAPER_MARGIN_M = 0.010  # what most home printers cannot print, on every side
 TILE_OVERLAP_M = 0.010
 SCALE_BAR_M = 0.100
+MAX_SHEETS = 500  # a 4.8 m page on A4 (486 sheets); each sheet takes a second or more to draw
 
 
 def page_size_m(pad: PadDefinition, margin_m: float = DEFAULT_MARGIN_M) -> float:
@@ -123,12 +124,16 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
     if paper not in PAPERS_M:
         raise LocalProtocolError(f"paper must be one of {', '.join(PAPERS_M)}, got {paper!r}")
     best: TilePlan | None = None
+    fewest = math.inf
     for landscape in (False, True):
         w, h = PAPERS_M[paper]
         sheet_w, sheet_h = (h, w) if landscape else (w, h)
         usable_w, usable_h = sheet_w - 2 * PAPER_MARGIN_M, sheet_h - 2 * PAPER_MARGIN_M
         cols = _count(page_side_m, usable_w)
         rows = _count(page_side_m, usable_h)
+        fewest = min(fewest, rows * cols)
+        if rows * cols > MAX_SHEETS:  # not listed: a 1e9 m page has 1e19 of them
+            continue
         xs = _starts(page_side_m, usable_w, cols)  # left edges, left to right
         ys = _starts(page_side_m, usable_h, rows)[::-1]  # bottom edges, row 1 at the top
         tiles = tuple(Tile(r + 1, c + 1, xs[c], ys[r], usable_w, usable_h)
@@ -138,7 +143,11 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
                         usable_h - (ys[0] - ys[1]) if rows > 1 else 0.0)
         if best is None or len(plan.tiles) < len(best.tiles):
             best = plan
-    assert best is not None
+    if best is None:
+        raise LocalProtocolError(
+            f"a {page_side_m:g} m page needs {fewest:.0f} {paper} sheets, over the "
+            f"{MAX_SHEETS} --paper writes: write it without --paper (one true-scale PDF page) "
+            "for a print shop")
     return best
 
 

@@ -171,6 +171,24 @@ def test_a_png_too_large_to_draw_is_refused(tmp_path, capsys, side_m, dpi, words
     assert not out.exists()
 
 
+def test_a_page_needing_too_many_sheets_is_refused(tmp_path, capsys):
+    """--paper a4 on a 1e9 m pad listed 1e19 tiles (MemoryError after 34 s and 5.4 GB); on a
+    20 m pad it drew 8512 sheets, hours of work. Over 500 sheets is refused before drawing."""
+    from skeye.cli import main
+    from skeye.vision.printable import plan_tiles
+
+    with pytest.raises(LocalProtocolError, match="needs 8512 a4 sheets, over the 500"):
+        plan_tiles(20.04, "a4")
+    assert len(plan_tiles(4.8, "a4").tiles) == 486
+    pad_file = tmp_path / "big.toml"
+    pad_file.write_text("name = 'big'\nside_m = 1e9\nrings = [{outer_m = 4e8, inner_m = 3e8}]")
+    out = tmp_path / "pad.pdf"
+    assert main(["pad", "--out", str(out), "--pad", str(pad_file), "--paper", "a4"]) == 2
+    err = capsys.readouterr().err
+    assert "without --paper" in err and "Traceback" not in err, err
+    assert not out.exists()
+
+
 def test_printable_rejects_other_extensions(tmp_path):
     with pytest.raises(LocalProtocolError, match=r"\.pdf or \.png"):
         write_printable(SKEYE_4, tmp_path / "pad.svg")
