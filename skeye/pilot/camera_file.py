@@ -89,6 +89,10 @@ class FileCamera:
         self.frame_count = int(count) if count and count > 0 else None
         self.width_px = int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH))
         self.height_px = int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        if self.width_px <= 0 or self.height_px <= 0:  # OpenCV "opened" it, but has no frames
+            self._cap.release()
+            raise CameraError(f"camera {uri}: cannot open {path} as a video (not a video: no "
+                              "frame size)")
         check_size(uri, options.size_px, self.width_px, self.height_px)
         self._lock = threading.Lock()
         self._start_s: float | None = None

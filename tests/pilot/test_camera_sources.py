@@ -203,6 +203,15 @@ def test_a_missing_camera_is_named():
         source.close()
 
 
+def test_a_file_that_is_no_video_is_refused_when_opened(tmp_path):
+    """A text file named .png was "opened" by OpenCV's image-sequence reader as a 0x0 video:
+    the pilot started on it and then said only "the video ended after 0 frames"."""
+    fake = tmp_path / "frames.png"
+    fake.write_text("hello, not an image\n")
+    with pytest.raises(CameraError, match="not a video"):
+        open_camera(f"file://{fake}", CameraOptions(clock=FakeClock()))
+
+
 def test_v4l2_settings_from_the_uri():
     s = parse_v4l2_uri("v4l2:///dev/video0?width=800&height=600&fps=30&fourcc=mjpg&exposure=80"
                        "&gain=10&buffers=2&fov_deg=75")
