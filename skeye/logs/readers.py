@@ -124,6 +124,8 @@ def read_ulog(path: Path) -> ImuLog:
     imu = topics.get("sensor_combined")
     if imu is None:
         raise ConfigError(f"{path}: no sensor_combined topic (the IMU)")
+    _ulog_fields(path, "sensor_combined", imu, ["timestamp"]
+                 + [f"{v}[{i}]" for v in ("gyro_rad", "accelerometer_m_s2") for i in range(3)])
     t = np.asarray(imu["timestamp"], dtype=float)
     gyro = np.column_stack([imu[f"gyro_rad[{i}]"] for i in range(3)])
     accel = np.column_stack([imu[f"accelerometer_m_s2[{i}]"] for i in range(3)])
@@ -131,11 +133,22 @@ def read_ulog(path: Path) -> ImuLog:
     pos, att = topics.get("vehicle_local_position_groundtruth"), topics.get(
         "vehicle_attitude_groundtruth")
     if pos is not None and att is not None:
+        _ulog_fields(path, "vehicle_local_position_groundtruth", pos, ["timestamp", "x", "y", "z"])
+        _ulog_fields(path, "vehicle_attitude_groundtruth", att,
+                     ["timestamp"] + [f"q[{i}]" for i in range(4)])
         tp = np.asarray(pos["timestamp"], dtype=float)
         quat = np.column_stack([np.interp(tp, att["timestamp"], att[f"q[{i}]"])
                                 for i in range(4)])
         truth = TruthTrack(tp, np.column_stack([pos["x"], pos["y"], pos["z"]]), quat, "down")
     return _checked(str(path), t, gyro, accel, 1e-6, truth)
+
+
+def _ulog_fields(path: Path, topic: str, data: dict[str, Any], names: list[str]) -> None:
+    """A topic's fields that the reader uses; ConfigError names the ones it lacks."""
+    missing = [n for n in names if n not in data]
+    if missing:
+        raise ConfigError(f"{path}: the {topic} topic has no field {', '.join(missing)} "
+                          "(a PX4 log's has)")
 
 
 def read_rosbag(path: Path, imu_topic: str | None = None,

@@ -133,16 +133,19 @@ def _from_rows(m: np.ndarray) -> np.ndarray:
     return q
 
 
-def write_ulog(path: Path, s: Synthetic) -> Path:
+def write_ulog(path: Path, s: Synthetic,
+               imu_fields: str = "uint64_t timestamp;float[3] gyro_rad;"
+                                 "float[3] accelerometer_m_s2") -> Path:
     """A minimal ULog (the format PX4 documents: file header, format and subscription
-    messages, data): sensor_combined and the ground-truth topics of a PX4 simulation."""
+    messages, data): sensor_combined and the ground-truth topics of a PX4 simulation.
+    ``imu_fields`` renames sensor_combined's fields (the data keep their layout)."""
     def msg(kind: bytes, payload: bytes) -> bytes:
         return struct.pack("<HB", len(payload), kind[0]) + payload
 
     out = bytearray(b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0))
     out += msg(b"B", bytes(40))
     formats = {
-        "sensor_combined": "uint64_t timestamp;float[3] gyro_rad;float[3] accelerometer_m_s2",
+        "sensor_combined": imu_fields,
         "vehicle_local_position_groundtruth": "uint64_t timestamp;float x;float y;float z",
         "vehicle_attitude_groundtruth": "uint64_t timestamp;float[4] q",
     }

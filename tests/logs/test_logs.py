@@ -136,3 +136,15 @@ def test_a_named_truth_topic_missing_from_the_bag_is_refused(
     assert main(["logs", str(bag), "--truth-topic", "/nosuch"]) == 2
     err = capsys.readouterr().err
     assert "--truth-topic" in err and "'/nosuch'" in err and "Traceback" not in err
+
+
+def test_a_ulog_imu_topic_without_its_fields_is_refused_naming_them(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # sensor_combined with other field names (gyro, not gyro_rad) raised KeyError 'gyro_rad[0]'
+    path = make_logs.write_ulog(tmp_path / "renamed.ulg", synthetic(3.0),
+                                "uint64_t timestamp;float[3] gyro;float[3] accelerometer_m_s2")
+    with pytest.raises(ConfigError, match=r"renamed\.ulg: the sensor_combined topic has no "
+                       r"field gyro_rad\[0\], gyro_rad\[1\], gyro_rad\[2\]"):
+        read_log(path)
+    assert main(["logs", str(path)]) == 2
+    assert "Traceback" not in capsys.readouterr().err
