@@ -178,6 +178,12 @@ def read_rosbag(path: Path, imu_topic: str | None = None,
             if truth_topic and not gt_conn:  # named, so wanted: refused as --imu-topic is
                 raise ConfigError(f"{path}: no ground-truth topic {truth_topic!r} "
                                   "(--truth-topic)")
+            if imu_conn[0].msgtype != "sensor_msgs/msg/Imu":
+                raise ConfigError(f"{path}: --imu-topic {imu_topic!r} holds "
+                                  f"{imu_conn[0].msgtype}, not sensor_msgs/msg/Imu")
+            if gt_conn and gt_conn[0].msgtype not in truth_types:
+                raise ConfigError(f"{path}: --truth-topic {truth_topic!r} holds "
+                                  f"{gt_conn[0].msgtype}, not {', '.join(truth_types)}")
             for conn, _t, raw in reader.messages(connections=imu_conn + gt_conn):
                 msg: Any = reader.deserialize(raw, conn.msgtype)
                 stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec

@@ -148,3 +148,18 @@ def test_a_ulog_imu_topic_without_its_fields_is_refused_naming_them(
         read_log(path)
     assert main(["logs", str(path)]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("option", "topic", "holds"), [
+    ("--imu-topic", "/vicon", "geometry_msgs/msg/TransformStamped"),
+    ("--truth-topic", "/imu0", "sensor_msgs/msg/Imu"),
+])
+def test_a_named_topic_of_the_wrong_message_type_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, topic: str,
+        holds: str) -> None:
+    # --imu-topic /vicon read as "not a readable ROS bag: ... no attribute 'angular_velocity'";
+    # --truth-topic /imu0 read every IMU message twice: "IMU times do not increase"
+    bag = make_logs.write_rosbag(tmp_path / "flight.bag", synthetic(3.0))
+    assert main(["logs", str(bag), option, topic]) == 2
+    err = capsys.readouterr().err
+    assert f"{option} {topic!r} holds {holds}, not " in err and "Traceback" not in err
