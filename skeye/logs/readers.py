@@ -10,7 +10,8 @@ reader from the path (a folder: EuRoC; ``.ulg``: ULog; ``.bag`` or a rosbag2 fol
 
 Invariants: times are seconds from the log's first IMU sample; arrays are float64, one row per
 sample; a log without IMU samples, or with times that go backwards, is refused (ConfigError
-naming the file).
+naming the file), and so is a ground truth that is not numbers, has a zero-length quaternion or
+times that go backwards (the replay would judge against NaN or the wrong instant).
 """
 
 from __future__ import annotations
@@ -73,9 +74,21 @@ def _checked(name: str, t_ns_or_s: np.ndarray, gyro: np.ndarray, accel: np.ndarr
     if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
         raise ConfigError(f"{name}: IMU samples that are not numbers")
     if truth is not None:
+        _check_truth(name, truth)
         t0 = t_ns_or_s[0]
         truth = TruthTrack((truth.t_s - t0) * scale, truth.pos_m, truth.quat_wxyz, truth.world_z)
     return ImuLog(name, t, gyro.astype(float), accel.astype(float), truth)
+
+
+def _check_truth(name: str, truth: TruthTrack) -> None:
+    """A ground truth the replay can judge against: numbers, rotations, times in order."""
+    if not (np.all(np.isfinite(truth.t_s)) and np.all(np.isfinite(truth.pos_m))
+            and np.all(np.isfinite(truth.quat_wxyz))):
+        raise ConfigError(f"{name}: ground truth that is not numbers")
+    if np.any(np.linalg.norm(truth.quat_wxyz, axis=1) < 1e-6):
+        raise ConfigError(f"{name}: ground-truth quaternions of zero length (no attitude)")
+    if np.any(np.diff(truth.t_s) < 0.0):
+        raise ConfigError(f"{name}: ground-truth times go backwards")
 
 
 def _csv_rows(path: Path) -> np.ndarray:
@@ -102,7 +115,9 @@ def read_euroc(folder: Path) -> ImuLog:
     gt_csv = root / "state_groundtruth_estimate0" / "data.csv"
     if gt_csv.is_file():
         gt = _csv_rows(gt_csv)
-        if gt.ndim == 2 and gt.shape[1] >= 8:
+        if gt.size and (gt.ndim != 2 or gt.shape[1] < 8):
+            raise ConfigError(f"{gt_csv}: expected 8 columns (timestamp, p xyz, q wxyz)")
+        if gt.size:
             truth = TruthTrack(gt[:, 0], gt[:, 1:4], gt[:, 4:8], "up")
     return _checked(str(folder), imu[:, 0], imu[:, 1:4], imu[:, 4:7], 1e-9, truth)
 
@@ -137,6 +152,9 @@ def read_ulog(path: Path) -> ImuLog:
         _ulog_fields(path, "vehicle_attitude_groundtruth", att,
                      ["timestamp"] + [f"q[{i}]" for i in range(4)])
         tp = np.asarray(pos["timestamp"], dtype=float)
+        if np.any(np.diff(np.asarray(att["timestamp"], dtype=float)) < 0.0):
+            raise ConfigError(f"{path}: ground-truth times go backwards "
+                              "(vehicle_attitude_groundtruth)")
         quat = np.column_stack([np.interp(tp, att["timestamp"], att[f"q[{i}]"])
                                 for i in range(4)])
         truth = TruthTrack(tp, np.column_stack([pos["x"], pos["y"], pos["z"]]), quat, "down")

@@ -163,3 +163,34 @@ def test_a_named_topic_of_the_wrong_message_type_is_refused(
     assert main(["logs", str(bag), option, topic]) == 2
     err = capsys.readouterr().err
     assert f"{option} {topic!r} holds {holds}, not " in err and "Traceback" not in err
+
+
+def _bad_truth(rows: list[str], how: str) -> list[str]:
+    head, body = rows[:1], rows[1:]
+    if how == "zero quaternion":
+        cells = body[100].split(",")
+        body[100] = ",".join([*cells[:4], "0", "0", "0", "0"])
+    elif how == "not a number":
+        body[100] = body[100].replace(body[100].split(",")[2], "nan", 1)
+    elif how == "backwards":
+        body[100], body[300] = body[300], body[100]
+    else:  # a column short
+        body = [",".join(r.split(",")[:7]) for r in body]
+    return head + body
+
+
+@pytest.mark.parametrize(("how", "message"), [
+    ("zero quaternion", "ground-truth quaternions of zero length"),
+    ("not a number", "ground truth that is not numbers"),
+    ("backwards", "ground-truth times go backwards"),
+    ("a column short", r"data\.csv: expected 8 columns"),
+])
+def test_ground_truth_the_replay_cannot_judge_by_is_refused(
+        tmp_path: Path, how: str, message: str) -> None:
+    # A zero quaternion or a NaN printed a tilt error of "nan"; times out of order matched the
+    # wrong instants; a truth file a column short was dropped: "the log has no ground truth".
+    folder = make_logs.write_euroc(tmp_path / "MH_bt", synthetic(4.0))
+    gt = folder / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    gt.write_text("\n".join(_bad_truth(gt.read_text().splitlines(), how)) + "\n")
+    with pytest.raises(ConfigError, match=message):
+        read_log(folder)
