@@ -245,6 +245,12 @@ def cmd_logs(args: argparse.Namespace) -> int:
         log = read_log(Path(args.log), args.format, imu_topic=args.imu_topic,
                        truth_topic=args.truth_topic)
         log = log.span(args.start, args.end)
+        length = float(log.t_s[-1] - log.t_s[0])
+        if length < MIN_HOVER_S:  # the rest second, then a second of flight to measure
+            window = "" if args.start is None and args.end is None else " from --start to --end"
+            raise ConfigError(f"{log.name}: {length:g} s of IMU samples{window}; skeye logs "
+                              f"needs at least {MIN_HOVER_S:g} s (the first {REST_S:g} s at "
+                              "rest, then the flight)")
         result = compare(log, args.robot)
         logs.append(log)
         rate = log.rate_hz

@@ -194,3 +194,13 @@ def test_ground_truth_the_replay_cannot_judge_by_is_refused(
     gt.write_text("\n".join(_bad_truth(gt.read_text().splitlines(), how)) + "\n")
     with pytest.raises(ConfigError, match=message):
         read_log(folder)
+
+
+@pytest.mark.parametrize("end", ["1.0", "1.02", "1.9"])
+def test_a_log_window_shorter_than_the_rest_and_a_second_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], end: str) -> None:
+    # 1.0 s read "no IMU samples between 1 and 1 s"; 1.02 s gave "figures" from four samples
+    folder = make_logs.write_euroc(tmp_path / "MH_sh", synthetic(4.0))
+    assert main(["logs", str(folder), "--start", "0", "--end", end]) == 2
+    err = capsys.readouterr().err
+    assert "s of IMU samples from --start to --end; skeye logs needs at least 2 s" in err
