@@ -78,7 +78,13 @@ def replay_tilt(t_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
     rest = t_s < t_s[0] + REST_S
     if int(rest.sum()) < 2:
         raise ConfigError("the log's first second has too few IMU samples to calibrate on")
-    rot = _align(accel[rest].mean(axis=0))
+    at_rest = accel[rest].mean(axis=0)
+    if not float(np.linalg.norm(at_rest)) >= 0.5 * GRAVITY_M_S2:
+        raise ConfigError(f"the log's first second reads a specific force of "
+                          f"{float(np.linalg.norm(at_rest)):.3g} m/s^2, not gravity's "
+                          f"{GRAVITY_M_S2:g}: the log must start at rest, its accelerometer in "
+                          "m/s^2")
+    rot = _align(at_rest)
     gyro_b = gyro @ rot.T
     accel_b = accel @ rot.T
     est = BoardEstimator(EstimatorParams(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 163.0)
@@ -161,8 +167,11 @@ def compare(log: ImuLog, robot: str = "hummingbird") -> dict[str, Any]:
     sim_flight = sim.span(REST_S, None)
     # A log without ground truth gets no tilt error: replay_tilt would judge it against a level
     # vehicle, which only the simulated hover is.
-    real_tilt = ({} if log.truth is None
-                 else replay_tilt(log.t_s, log.gyro_rad_s, log.accel_m_s2, log.truth))
+    try:
+        real_tilt = ({} if log.truth is None
+                     else replay_tilt(log.t_s, log.gyro_rad_s, log.accel_m_s2, log.truth))
+    except ConfigError as exc:  # the replay's refusal, named by the log it is about
+        raise ConfigError(f"{log.name}: {exc}") from None
     return {
         "log": log.name, "rate_hz": rate, "seconds": float(log.t_s[-1] - log.t_s[0]),
         "real": {**imu_figures(flight.gyro_rad_s, flight.accel_m_s2, rate), **real_tilt},

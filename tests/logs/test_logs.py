@@ -204,3 +204,12 @@ def test_a_log_window_shorter_than_the_rest_and_a_second_is_refused(
     assert main(["logs", str(folder), "--start", "0", "--end", end]) == 2
     err = capsys.readouterr().err
     assert "s of IMU samples from --start to --end; skeye logs needs at least 2 s" in err
+
+
+def test_a_log_whose_first_second_reads_no_gravity_is_refused(
+        flight: make_logs.Synthetic) -> None:
+    # an accelerometer reading zero at rest turned into a tilt error of "nan"
+    accel = flight.accel.copy()
+    accel[:] = 0.0
+    with pytest.raises(ConfigError, match="reads a specific force of 0 m/s\\^2, not gravity"):
+        replay_tilt(flight.t_s, flight.gyro, accel, None)
