@@ -103,6 +103,7 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
     first_sim = last_sim = first_wall = last_wall = math.nan
     notes: list[str] = []
     records = 0
+    bad_values = 0
     for rec in reader.records():
         records += 1
         if records == 1:
@@ -126,7 +127,9 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
             continue
         try:
             msg = parse_line(rec.line)
+            _values(msg)
         except RemoteProtocolError:
+            bad_values += 1  # a line whose values are not numbers: counted with the bad lines
             continue
         if rec.direction == TRUTH:
             truth_name = msg.get("Name") or "?"
@@ -155,7 +158,7 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
         elif msg.type == "SEN":
             pos = _vector(msg, "Location")
             if pos is not None:
-                track.time_s.append(float(msg.get("Time") or rec.sim_s))
+                track.time_s.append(msg.get_float("Time") if msg.get("Time") else rec.sim_s)
                 track.pos_ned_m.append(pos)
     tracks: dict[str, RobotTrack] = {}
     for name in dict.fromkeys([*truth, *sensed, *conn_robot.values()]):
@@ -173,10 +176,18 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
         lines_sent=counts[SENT],
         lines_received=counts[RECEIVED],
         notes=notes,
-        bad_lines=reader.bad_lines,
+        bad_lines=reader.bad_lines + bad_values,
         truncated=reader.truncated,
     )
     return tracks, summary
+
+
+def _values(msg: Any) -> None:
+    """The numbers a track takes from ``msg`` are numbers (RemoteProtocolError names one that
+    is not), so a bad line is counted and skipped instead of ending the plot."""
+    for key in ("Battery", "Time"):
+        if msg.get(key):
+            msg.get_float(key)
 
 
 def _landed(msg: Any) -> bool:

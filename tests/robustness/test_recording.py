@@ -411,3 +411,26 @@ def test_a_recording_stops_or_rotates_at_its_size_limit(tmp_path: Path, rotate: 
         assert first[-1] == "recording continues in flight.rec.2 (size limit 0.0625 MiB)"
         assert json.loads(parts[1].read_text().splitlines()[0].split(" ", 2)[2])["continues"] \
             == "flight.rec"
+
+
+def test_plot_counts_a_line_whose_values_are_not_numbers_and_draws_the_rest(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A TRUTH {Battery abc} ended the plot ("Battery: 'abc' is not a number", naming no file);
+    a SEN {Time abc} raised ValueError. Each is a bad line: counted, skipped."""
+    init = Record(1.0, 0.0, 1, SENT, "RES {Command INIT} {Name R1} {Status OK}")
+    lines = [init]
+    for i, (battery, time_s) in enumerate([("100", "0.0"), ("abc", "0.05"), ("99", "abc"),
+                                           ("98", "0.15")]):
+        t = 0.05 * i
+        lines.append(Record(1.0 + t, t, 0, TRUTH, f"TRUTH {{Name R1}} {{Time {t}}} "
+                            f"{{Location 0,0,-1}} {{Battery {battery}}} {{Landed false}}"))
+        lines.append(Record(1.0 + t, t, 1, SENT, f"SEN {{Time {time_s}}} {{Type GroundTruth}} "
+                            "{Location 0,0,-1}"))
+    path = tmp_path / "bad_values.rec"
+    path.write_bytes(format_header({}) + b"".join(format_record(r) for r in lines))
+    tracks, summary = load_tracks(path)
+    assert summary.bad_lines == 2
+    assert tracks["R1"].battery_s == [100.0, 99.0, 98.0]
+    assert main(["plot", str(path), "--out", str(tmp_path / "p.png")]) == 0
+    assert "bad 2" in capsys.readouterr().out
