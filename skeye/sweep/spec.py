@@ -23,6 +23,7 @@ from typing import Any
 import skeye
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.validate.experiments import SETTING_NAMES, RunSettings, check_disturbance, check_setting
+from skeye.values import is_finite_number
 
 EXPERIMENTS = ("E1", "E2")
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(RunSettings)}
@@ -95,8 +96,17 @@ def _seeds(value: Any) -> list[int]:
             isinstance(s, int) and not isinstance(s, bool) for s in value):
         if len(set(value)) != len(value):
             raise LocalProtocolError(f"seeds repeat: {value}")
+        if min(value) < 0:  # skeye sim --seed takes none: every trial would fail
+            raise LocalProtocolError(f"seeds must be >= 0, got {min(value)}")
         return list(value)
     raise LocalProtocolError(f"seeds must be a count or a list of integers, got {value!r}")
+
+
+def _number(name: str, value: Any) -> float:
+    """A finite number (TOML integer or float), or LocalProtocolError naming ``name``."""
+    if not is_finite_number(value):
+        raise LocalProtocolError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
 
 
 def _check_value(name: str, value: Any, where: str) -> None:
@@ -168,13 +178,18 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     sets += [dict(entry) for entry in listed]
     if not sets:
         sets = [{}]
+    if not isinstance(data.get("quick", False), bool):
+        raise LocalProtocolError(f"quick must be true or false, got {data['quick']!r}")
     is_quick = bool(data.get("quick", False)) if quick is None else quick
-    timeout_s = float(data.get("timeout_s", 900.0 if is_quick else 3600.0))
+    timeout_s = _number("timeout_s", data.get("timeout_s", 900.0 if is_quick else 3600.0))
     if not timeout_s > 0:
         raise LocalProtocolError(f"timeout_s must be > 0, got {timeout_s}")
     resources = data.get("resources", {})
     if not isinstance(resources, dict) or set(resources) - {"cpus", "gpus"}:
         raise LocalProtocolError("[resources] takes cpus and gpus")
+    for key, value in resources.items():
+        if _number(f"[resources] {key}", value) < 0:
+            raise LocalProtocolError(f"[resources] {key} must be >= 0, got {value!r}")
     trials = [Trial(experiment, params, seed, is_quick, script, timeout_s)
               for params in sets for seed in seeds]
     for params in sets:  # each set's disturbance as a whole (each value is checked above)
@@ -195,4 +210,6 @@ def load_spec(path: Path, quick: bool | None = None) -> SweepSpec:
         raise LocalProtocolError(f"sweep spec {path} does not exist") from None
     except tomllib.TOMLDecodeError as exc:
         raise LocalProtocolError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise LocalProtocolError(f"{path}: not valid TOML (not UTF-8 text): {exc}") from None
     return parse_spec(data, path.parent, quick)

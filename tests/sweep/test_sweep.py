@@ -236,6 +236,16 @@ def test_failed_trials_are_rows_with_their_error(tmp_path: Path,
         ('experiment = "script"\nscript = "nope.py"', "does not exist"),
         ('experiment = "E2"\n[grid\n', "not valid TOML"),
         ('experiment = "E2"\ntimeout_s = -1', "timeout_s must be > 0"),
+        # Settings of the wrong kind: ValueError/TypeError tracebacks, or quick = "false" ran
+        # shortened trials (bool("false")); a negative seed failed every trial in skeye sim
+        ('experiment = "E2"\ntimeout_s = "abc"', "timeout_s must be a finite number, got 'abc'"),
+        ('experiment = "E2"\ntimeout_s = [1]', r"timeout_s must be a finite number, got \[1\]"),
+        ('experiment = "E2"\ntimeout_s = inf', "timeout_s must be a finite number, got inf"),
+        ('experiment = "E2"\nquick = "false"', "quick must be true or false, got 'false'"),
+        ('experiment = "E2"\n[resources]\ncpus = "abc"',
+         r"\[resources\] cpus must be a finite number, got 'abc'"),
+        ('experiment = "E2"\n[resources]\ngpus = -1', r"\[resources\] gpus must be >= 0"),
+        ('experiment = "E2"\nseeds = [3, -1]', "seeds must be >= 0, got -1"),
         # Out-of-range values, by the rule the trial's processes apply (refused before any runs)
         ('experiment = "E2"\n[grid]\nf_max_n = [0.1, -0.1]',
          r"\[grid\]: f_max_n must be in \[0, 50\] N .*got -0\.1"),
@@ -266,6 +276,15 @@ def test_bad_specs_are_refused_with_the_reason(tmp_path: Path, text: str, match:
         sweep(spec, tmp_path / "out", "local", show_progress=False)
     assert not (tmp_path / "out" / "trials").exists() or not any(
         (tmp_path / "out" / "trials").iterdir())  # nothing ran
+
+
+def test_a_spec_that_is_not_utf8_is_refused(tmp_path: Path):
+    from skeye.errors import LocalProtocolError
+
+    spec = tmp_path / "bad.toml"
+    spec.write_bytes(b"\xff\xfeexperiment = 'E2'")  # raised UnicodeDecodeError
+    with pytest.raises(LocalProtocolError, match=r"bad\.toml: not valid TOML \(not UTF-8"):
+        sweep(spec, tmp_path / "out", "local", show_progress=False)
 
 
 def test_bad_command_lines_are_refused(tmp_path: Path):
