@@ -21,9 +21,9 @@ import threading
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
-from urllib.parse import urlsplit
 
 from skeye.errors import LinkTimeout, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.uris import port_of, split_uri
 from skeye.wire.video import (
     Error,
     Frame,
@@ -80,11 +80,9 @@ def parse_video_uri(uri: str) -> tuple[str, int]:
     Raises:
         LocalProtocolError: anything else, naming what is expected.
     """
-    parts = urlsplit(uri if "://" in uri else f"tcp://{uri}")
-    try:
-        port = parts.port
-    except ValueError:
-        port = None
+    parts = split_uri(uri if "://" in uri else f"tcp://{uri}", "video source",
+                      "tcp://host:port (the pilot's --video-port)")
+    port = port_of(parts)
     if parts.scheme != "tcp" or not parts.hostname or port is None:
         raise LocalProtocolError(
             f"video source {uri!r}: expected tcp://host:port (the pilot's --video-port)"

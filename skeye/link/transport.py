@@ -35,9 +35,10 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import TracebackType
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError, PeerClosed
+from skeye.uris import port_of, split_uri
 
 DEFAULT_BAUD = 57600
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
@@ -266,14 +267,11 @@ def memory_pair(name: str = "memory") -> tuple[MemoryLink, MemoryLink]:
 
 def parse_uri(uri: str) -> tuple[str, str, int]:
     """Split a link URI into (scheme, host-or-device, port-or-baud); raises on a bad URI."""
-    try:
-        parts = urlsplit(uri)
-        port = parts.port if parts.scheme.lower() == "tcp" else None
-    except ValueError as exc:  # a bracket left open, a port that is no number or too big
-        raise LocalProtocolError(f"link URI {uri!r}: {exc} (expected tcp://host:port, "
-                                 "port 1..65535, an IPv6 address in brackets)") from None
+    parts = split_uri(uri, "link URI", "tcp://host:port (an IPv6 address in brackets) or "
+                      "serial:///dev/ttyX")
     scheme = parts.scheme.lower()
     if scheme == "tcp":
+        port = port_of(parts)
         if not parts.hostname or port is None or port == 0:
             raise LocalProtocolError(f"link URI {uri!r}: expected tcp://host:port (port "
                                      "1..65535)")

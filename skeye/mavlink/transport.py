@@ -27,9 +27,10 @@ import socket
 import time
 from collections.abc import Callable, Hashable
 from typing import Any, Protocol
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from skeye.errors import ConfigError, LinkClosed
+from skeye.uris import port_of, split_uri
 
 Peer = Hashable
 MAX_DATAGRAM = 65535
@@ -303,11 +304,8 @@ def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
     Raises:
         ConfigError: an unknown scheme, a missing or bad port.
     """
-    try:
-        parts = urlsplit(uri)
-    except ValueError as exc:  # an IPv6 address whose bracket is left open
-        raise ConfigError(f"{uri}: {exc}; give HOST:PORT, an IPv6 address in brackets "
-                          "([::1]:14540)") from None
+    parts = split_uri(uri, "MAVLink link", "HOST:PORT, an IPv6 address in brackets "
+                      "([::1]:14540)", ConfigError)
     scheme = parts.scheme.lower()
     query = {k: v[-1] for k, v in parse_qs(parts.query).items()}
     if scheme == "serial":
@@ -318,10 +316,7 @@ def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
     if scheme not in ("udp", "udpin", "udpout", "tcp", "tcpout"):
         raise ConfigError(f"{uri}: MAVLink links are udp://, udpout://, tcp://, tcpout:// or "
                           "serial:// URIs")
-    try:
-        port = parts.port
-    except ValueError:
-        port = None
+    port = port_of(parts)
     if port is None or not parts.hostname:
         raise ConfigError(f"{uri}: give HOST:PORT, e.g. {scheme}://127.0.0.1:14540")
     return ("udp" if scheme == "udpin" else scheme), parts.hostname, port, query

@@ -40,7 +40,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
 from skeye.errors import (
     CommandRejected,
@@ -55,6 +55,7 @@ from skeye.link.transport import DEFAULT_BAUD, open_link
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits
 from skeye.pilot.ll_control import LLEstimate, StickPilot, Sticks, Velocity, nav_state
+from skeye.uris import split_uri
 from skeye.wire.packet_units import s_to_ms
 from skeye.wire.packets import PD, Clock, CtrlInput, PollMask, ResultCode, encode
 from skeye.workers import Worker
@@ -92,7 +93,8 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
     Raises:
         LocalProtocolError: naming what is wrong.
     """
-    parts = urlsplit(uri)
+    parts = split_uri(uri, "airframe", "asctec-ll://serial/DEVICE?baud=N or "
+                      "asctec-ll://tcp/HOST:PORT")
     if parts.scheme.lower() != "asctec-ll":
         raise LocalProtocolError(f"airframe {uri!r}: expected asctec-ll://...")
     query = parse_qs(parts.query, keep_blank_values=True)

@@ -28,7 +28,6 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
-from urllib.parse import SplitResult, urlsplit
 
 import numpy as np
 
@@ -141,15 +140,6 @@ def open_camera(uri: str, options: CameraOptions | None = None) -> CameraSource:
     opener: Callable[[str, CameraOptions], CameraSource] = getattr(
         importlib.import_module(module), name)
     return opener(uri, options or CameraOptions())
-
-
-def split_camera_uri(uri: str, expected: str) -> SplitResult:
-    """``urlsplit(uri)``; a URI it refuses (``sim://[::1/Down``: an unclosed IPv6 bracket) is a
-    LocalProtocolError naming it and ``expected`` (the form its scheme wants)."""
-    try:
-        return urlsplit(uri)
-    except ValueError as exc:
-        raise LocalProtocolError(f"camera {uri!r}: {exc}; expected {expected}") from None
 
 
 def fov_option(uri: str, query: Mapping[str, list[str]]) -> float | None:

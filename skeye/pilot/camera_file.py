@@ -31,8 +31,8 @@ from skeye.pilot.camera import (
     FrameInfo,
     check_size,
     fov_option,
-    split_camera_uri,
 )
+from skeye.uris import split_uri
 
 
 def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]:
@@ -41,7 +41,7 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     Raises:
         LocalProtocolError: naming what is wrong.
     """
-    parts = split_camera_uri(uri, "file://PATH")
+    parts = split_uri(uri, "camera", "file://PATH")
     if parts.scheme.lower() != "file":
         raise LocalProtocolError(f"camera {uri!r}: expected file://PATH")
     path = unquote(parts.netloc + parts.path)

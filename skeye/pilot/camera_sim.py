@@ -35,9 +35,9 @@ from skeye.pilot.camera import (
     FrameInfo,
     check_size,
     fov_option,
-    split_camera_uri,
 )
 from skeye.pixels import frame_image
+from skeye.uris import port_of, split_uri
 
 OFFSET_WINDOW = 50
 
@@ -48,11 +48,8 @@ def parse_sim_camera(uri: str, robot: str = "R1") -> tuple[str, int, str, float 
     Raises:
         LocalProtocolError: naming what is wrong.
     """
-    parts = split_camera_uri(uri, "sim://HOST:PORT/ROBOT/CAMERA")
-    try:
-        port = parts.port
-    except ValueError:  # not a number, or over 65535
-        port = None
+    parts = split_uri(uri, "camera", "sim://HOST:PORT/ROBOT/CAMERA")
+    port = port_of(parts)
     if parts.scheme.lower() != "sim" or not parts.hostname or port is None:
         raise LocalProtocolError(f"camera {uri!r}: expected sim://HOST:PORT/ROBOT/CAMERA "
                                  "(the image server's address, PORT 0..65535)")

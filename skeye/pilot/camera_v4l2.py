@@ -43,8 +43,8 @@ from skeye.pilot.camera import (
     FrameInfo,
     check_size,
     fov_option,
-    split_camera_uri,
 )
+from skeye.uris import split_uri
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -74,7 +74,7 @@ def parse_v4l2_uri(uri: str) -> V4l2Settings:
     Raises:
         LocalProtocolError: naming the key and value that are wrong.
     """
-    parts = split_camera_uri(uri, "v4l2:///dev/videoN")
+    parts = split_uri(uri, "camera", "v4l2:///dev/videoN")
     if parts.scheme.lower() != "v4l2":
         raise LocalProtocolError(f"camera {uri!r}: expected v4l2:///dev/videoN")
     device = unquote(parts.netloc + parts.path)

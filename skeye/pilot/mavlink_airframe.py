@@ -33,7 +33,6 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import urlsplit
 
 from pymavlink.dialects.v20 import common as mav
 
@@ -43,6 +42,7 @@ from skeye.mavlink.modes import Px4Mode
 from skeye.mavlink.transport import MavTransport, open_transport
 from skeye.pilot.airframe import AirframeOptions, GpsFix, Snapshot, VehicleLimits
 from skeye.pilot.pad import PadObservation
+from skeye.uris import split_uri
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -489,7 +489,8 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
         ConfigError: a URI that is not one of these.
         LinkClosed: no flight controller answered within ``wait_s``.
     """
-    parts = urlsplit(uri)
+    parts = split_uri(uri, "airframe", "mavlink://udp/HOST:PORT (or udpout, tcp, serial)",
+                      ConfigError)
     if parts.scheme != "mavlink" or not parts.netloc:
         raise ConfigError(f"{uri}: a MAVLink airframe is mavlink://udp/HOST:PORT, "
                           "mavlink://udpout/HOST:PORT, mavlink://tcp/HOST:PORT or "

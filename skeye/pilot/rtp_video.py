@@ -21,13 +21,13 @@ import threading
 import time
 from fractions import Fraction
 from typing import Any
-from urllib.parse import urlsplit
 
 import cv2
 import numpy as np
 
 from skeye.errors import ConfigError
 from skeye.pilot.video_server import CameraFrame
+from skeye.uris import port_of, split_uri
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -45,11 +45,8 @@ def parse_rtp_uri(uri: str) -> tuple[str, int]:
     Raises:
         ConfigError: another scheme, or no port.
     """
-    parts = urlsplit(uri)
-    try:
-        port = parts.port
-    except ValueError:
-        port = None
+    parts = split_uri(uri, "video stream", "rtp://HOST:PORT", ConfigError)
+    port = port_of(parts)
     if parts.scheme != "udp" or not parts.hostname or port is None:
         raise ConfigError(f"{uri}: the RTP video goes to udp://HOST:PORT, e.g. "
                           "udp://127.0.0.1:5600")

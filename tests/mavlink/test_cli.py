@@ -24,7 +24,7 @@ def test_skeye_up_refuses_a_bad_or_taken_mavlink_link_before_starting_anything()
     assert "open http" not in bad.stdout
     bracket = _skeye("up", "--mavlink", "udpin://[::1:14540")  # urllib's ValueError escaped
     assert bracket.returncode == 1, bracket
-    assert "udpin://[::1:14540: Invalid IPv6 URL" in bracket.stderr, bracket.stderr
+    assert "'udpin://[::1:14540': Invalid IPv6 URL" in bracket.stderr, bracket.stderr
     assert "Traceback" not in bracket.stderr and "open http" not in bracket.stdout
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
