@@ -32,6 +32,10 @@ CASES = [
     ([*PILOT, "--port", "0", "--lockstep-rate", "-1"], "--lockstep-rate"),
     ([*PILOT, "--serial", "/dev/null", "--baud", "-1"], "--baud"),
     ([*PILOT, "--serial", "/dev/nonexistent-skeye"], "--serial"),
+    # a camera URI is parsed whole before the airframe opens (only its scheme was)
+    ([*PILOT, "--port", "0", "--camera", "v4l2:///dev/video0?width=abc"], "--camera"),
+    ([*PILOT, "--port", "0", "--camera", "sim://h:abc/R1/Down"], "--camera"),
+    ([*PILOT, "--port", "0", "--camera", "file://clip.mp4?fps=-3"], "--camera"),
     # the up cases give a calibration file that is not there: without the option's check, up
     # stops on that (status 1) before anything starts
     (["up", "--sim-port", "-1", "--calibration", "/nonexistent"], "--sim-port"),

@@ -27,7 +27,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Protocol, cast, runtime_checkable
 
 import numpy as np
 
@@ -110,6 +110,14 @@ BACKENDS: dict[str, str] = {
 }
 """Scheme -> ``"module:function"`` opening a source of that scheme."""
 
+URI_CHECKS: dict[str, str] = {
+    "sim": "skeye.pilot.camera_sim:parse_sim_camera",
+    "v4l2": "skeye.pilot.camera_v4l2:parse_v4l2_uri",
+    "file": "skeye.pilot.camera_file:parse_file_camera",
+}
+"""Scheme -> ``"module:function"`` parsing a URI of that scheme without opening anything (what
+:func:`check_camera_uri` runs, so ``skeye pilot`` refuses a bad ``--camera`` at start)."""
+
 
 def camera_scheme(uri: str) -> str:
     """The scheme of a camera URI, checked against the registry.
@@ -129,6 +137,21 @@ def camera_scheme(uri: str) -> str:
     return scheme
 
 
+def _entry(table: dict[str, str], scheme: str) -> Callable[..., object]:
+    module, _, name = table[scheme].partition(":")
+    function: Callable[..., object] = getattr(importlib.import_module(module), name)
+    return function
+
+
+def check_camera_uri(uri: str) -> None:
+    """Parse a camera URI, scheme, options and all, without opening the camera.
+
+    Raises:
+        LocalProtocolError: naming what is wrong.
+    """
+    _entry(URI_CHECKS, camera_scheme(uri))(uri)
+
+
 def open_camera(uri: str, options: CameraOptions | None = None) -> CameraSource:
     """Open the camera a URI names.
 
@@ -136,10 +159,7 @@ def open_camera(uri: str, options: CameraOptions | None = None) -> CameraSource:
         LocalProtocolError: a malformed URI or option.
         CameraError: the camera cannot be opened (no such device or file).
     """
-    module, _, name = BACKENDS[camera_scheme(uri)].partition(":")
-    opener: Callable[[str, CameraOptions], CameraSource] = getattr(
-        importlib.import_module(module), name)
-    return opener(uri, options or CameraOptions())
+    return cast(CameraSource, _entry(BACKENDS, camera_scheme(uri))(uri, options or CameraOptions()))
 
 
 def fov_option(uri: str, query: Mapping[str, list[str]]) -> float | None:

@@ -46,7 +46,7 @@ from skeye.pilot.airframe import (
     open_airframe,
 )
 from skeye.pilot.boards import BoardSettings
-from skeye.pilot.camera import camera_scheme
+from skeye.pilot.camera import check_camera_uri
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
 from skeye.pilot.video_server import (
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     camera_uri = args.camera if "://" in args.camera else None
     if camera_uri is not None:
         try:
-            camera_scheme(camera_uri)
+            check_camera_uri(camera_uri)  # the whole URI, before the airframe opens
         except LocalProtocolError as exc:
             print(f"skeye pilot: --camera: {exc}", flush=True)
             return 2
