@@ -171,7 +171,13 @@ class ActionLimits:
 
 
 def _unit(action: Any, count: int) -> list[float]:
-    values = np.asarray(action, dtype=np.float64).reshape(-1)
+    try:
+        given = np.asarray(action)
+        if given.dtype.kind not in "biufO":  # text, complex: not what an action holds
+            raise TypeError(given.dtype)
+        values = given.astype(np.float64).reshape(-1)  # an object array: each one a number
+    except (TypeError, ValueError):
+        raise InvalidArgument(f"an action is {count} real numbers, got {action!r:.80}") from None
     if values.shape != (count,):
         raise InvalidArgument(f"an action has {count} numbers, got shape {np.shape(action)}")
     if not np.all(np.isfinite(values)):

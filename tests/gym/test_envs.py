@@ -281,3 +281,22 @@ def test_a_step_after_the_episode_ended_needs_a_reset() -> None:
             env.step(np.zeros(4, np.float32))
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("action", [
+    ["a", "b", "c", "d"], "abcd", {"a": 1}, np.array(["1", "2", "3", "4"]),
+    np.ones(4, dtype=np.complex128) * 1j, [[0, 0], [0]],
+])
+def test_an_action_that_is_not_four_real_numbers_is_an_invalid_argument(action: object) -> None:
+    """Text, a dict, complex or ragged numbers raised ValueError/TypeError from numpy's
+    conversion (or, complex, lost their imaginary part with a warning and flew)."""
+    from skeye.errors import InvalidArgument
+
+    env = gymnasium.make("skeye/Hover-v0")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(InvalidArgument, match="an action is 4 real numbers"):
+            env.unwrapped.step(action)
+        env.step(np.zeros(4, np.float32))  # the environment flies on
+    finally:
+        env.close()
