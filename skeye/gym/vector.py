@@ -27,10 +27,11 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, InvalidArgument
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
 from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
+from skeye.pilot.policy import action_values
 from skeye.values import number
 
 DEFAULT_SPACING_M = 10.0
@@ -129,7 +130,15 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
         flight = self.flight
         if flight is None:
             raise ConfigError("call reset() before step()")
-        actions = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 4)
+        try:
+            shape: Any = np.shape(actions)
+        except ValueError:  # ragged rows
+            shape = "ragged"
+        if shape != (self.num_envs, 4):  # (no silent reshaping of a flat batch)
+            raise InvalidArgument(f"the actions are one row of 4 per vehicle, shape "
+                                  f"({self.num_envs}, 4), got {shape}")
+        for row in actions:  # every row checked before any vehicle is touched
+            action_values(row)
         restarted = self._autoreset.copy()
         for i in range(self.num_envs):
             if restarted[i]:

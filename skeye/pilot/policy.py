@@ -170,7 +170,9 @@ class ActionLimits:
                 raise InvalidArgument(f"action limit {name} must be > 0, got {value!r}")
 
 
-def _unit(action: Any, count: int) -> list[float]:
+def action_values(action: Any, count: int = 4) -> list[float]:
+    """An action as ``count`` finite floats clipped to [-1, 1]; InvalidArgument naming it if it
+    is not ``count`` real numbers."""
     try:
         given = np.asarray(action)
         if given.dtype.kind not in "biufO":  # text, complex: not what an action holds
@@ -187,7 +189,7 @@ def _unit(action: Any, count: int) -> list[float]:
 
 def velocity_setpoint(action: Any, limits: ActionLimits) -> tuple[float, float, float, float]:
     """(forward m/s, right m/s, up m/s, yaw rate rad/s) of a velocity action in [-1, 1]^4."""
-    f, r, u, y = _unit(action, 4)
+    f, r, u, y = action_values(action, 4)
     return (f * limits.max_speed_m_s, r * limits.max_speed_m_s, u * limits.max_climb_m_s,
             y * limits.max_yaw_rate_rad_s)
 
@@ -195,7 +197,7 @@ def velocity_setpoint(action: Any, limits: ActionLimits) -> tuple[float, float, 
 def attitude_setpoint(action: Any, limits: ActionLimits) -> tuple[float, float, float, float]:
     """(roll rad, pitch rad, yaw rate rad/s, thrust 0..1) of an attitude action in [-1, 1]^4
     (thrust -1..1 maps onto 0..1 of the maximum thrust)."""
-    r, p, y, t = _unit(action, 4)
+    r, p, y, t = action_values(action, 4)
     return (r * limits.max_tilt_rad, p * limits.max_tilt_rad, y * limits.max_yaw_rate_rad_s,
             (t + 1.0) / 2.0)
 

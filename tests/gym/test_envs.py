@@ -300,3 +300,29 @@ def test_an_action_that_is_not_four_real_numbers_is_an_invalid_argument(action: 
         env.step(np.zeros(4, np.float32))  # the environment flies on
     finally:
         env.close()
+
+
+def test_the_batched_environment_refuses_actions_of_another_shape_touching_no_vehicle(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """(3, 4), (2, 3) or None raised numpy's reshape ValueError; a flat (8,) was silently
+    taken as (2, 4); a bad row after a good one left the good one's set-point flown."""
+    from skeye.errors import InvalidArgument
+
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2,
+                              vectorization_mode="vector_entry_point")
+    try:
+        envs.reset(seed=0)
+        for actions in (np.zeros((3, 4)), np.zeros((2, 3)), np.zeros(8), None, [[0] * 4, [0]]):
+            with pytest.raises(InvalidArgument, match=r"shape \(2, 4\), got"):
+                envs.step(actions)
+        flown: list = []
+        monkeypatch.setattr("skeye.gym.vector.apply_action", lambda *a: flown.append(a))
+        flight = envs.unwrapped.flight
+        time_s = flight.time_s
+        with pytest.raises(InvalidArgument, match="must be finite"):
+            envs.step([[1, 0, 0, 0], [np.nan] * 4])
+        assert flight.time_s == time_s and flown == []
+        monkeypatch.undo()
+        envs.step(np.zeros((2, 4), np.float32))  # flies on
+    finally:
+        envs.close()
