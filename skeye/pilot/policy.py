@@ -40,12 +40,12 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, NoReturn
 
 import cv2
 import numpy as np
 
-from skeye.errors import ConfigError, InvalidArgument
+from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
 from skeye.pilot.airframe import Snapshot
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad import PadController, PadObservation
@@ -294,6 +294,8 @@ class PolicyPilot:
             raise InvalidArgument("PolicyPilot needs the boards' pad controller to be an "
                                   "ObservedPad (policy_factory sets it)")
         self.calls = 0  # policy calls made
+        self.failures = 0  # of them, calls that raised or gave no action (the vehicle held)
+        self.failures_in_a_row = 0
         self.engaged = False
         self._next_s = -math.inf
         self._image: np.ndarray | None = None
@@ -346,6 +348,7 @@ class PolicyPilot:
             if not self.engaged:
                 self.engaged = True
                 self._next_s = snap.time_s
+                self.failures_in_a_row = 0
                 reset_policy(self.policy)
                 log.info("policy engaged (PAD_MODE %s)", mode.name)
             if snap.time_s < self._next_s - 1e-9:
@@ -356,9 +359,33 @@ class PolicyPilot:
             assert self.pad is not None
             obs = policy_observation(self.observation, snap, boards.home_ned_m, self.pad.latest,
                                      image, self.image_size)
-            forward, right, up, yaw_rate = velocity_setpoint(self.policy(obs), self.limits)
             self.calls += 1
+            try:
+                action = self.policy(obs)
+            except Exception as exc:
+                self._failed(LocalProtocolError(
+                    f"the policy raised {type(exc).__name__}: {exc}; the vehicle holds still"), exc)
+            try:
+                forward, right, up, yaw_rate = velocity_setpoint(action, self.limits)
+            except InvalidArgument as exc:
+                self._failed(InvalidArgument(
+                    f"the policy's action: {exc}; the vehicle holds still"), exc)
+            if self.failures_in_a_row:
+                log.warning("the policy flies again after %d failed call(s)",
+                            self.failures_in_a_row)
+                self.failures_in_a_row = 0
             boards.airframe.set_velocity(forward, right, up, yaw_rate, None)
+
+    def _failed(self, error: Exception, cause: Exception) -> NoReturn:
+        """A policy call that raised or gave no action: the vehicle holds still (its last
+        set-point is not flown on), said at the first failure of a run of them, and the error
+        goes to the pilot's loop (counted in its ``loop_faults``)."""
+        self.failures += 1
+        self.failures_in_a_row += 1
+        if self.failures_in_a_row == 1:
+            self.boards.airframe.hover()
+            log.warning("%s", error)
+        raise error from cause
 
 
 def policy_factory(

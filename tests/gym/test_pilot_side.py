@@ -146,3 +146,75 @@ def test_the_pilot_flies_the_policy_that_solves_the_environment(policy_flight) -
     # median over 20 episodes, docs/gym.md; one run here touched down at 12.6 cm)
     assert math.hypot(north, east) <= PAD_TOLERANCE_M, (north, east)
     assert pilot.vision.calls > 20 and pilot.vision.vision.stats.detections > 20
+
+
+def test_a_policy_that_fails_leaves_the_vehicle_holding_still_and_says_so() -> None:
+    """A policy that raised, or returned NaN, the wrong shape or text, left the vehicle flying
+    its last set-point (1 m/s forward here) for as long as it failed; the loop's fault said
+    only an InvalidArgument or RuntimeError from the vision's step."""
+    import threading
+    from types import SimpleNamespace
+
+    from skeye.errors import InvalidArgument, LocalProtocolError
+    from skeye.pilot.pad import PadModeSi
+    from skeye.pilot.policy import ObservedPad
+    from skeye.wire.packets import PadAction
+
+    class Airframe:
+        def __init__(self) -> None:
+            self.commands: list[tuple] = []
+            self.time_s = 0.0
+
+        def snapshot(self) -> SimpleNamespace:
+            return SimpleNamespace(
+                time_s=self.time_s, pos_ned_m=(0.0, 0.0, -1.0), rpy_rad=(0.0, 0.0, 0.0),
+                vel_ned_m_s=(0.0, 0.0, 0.0), rates_frd_rad_s=(0.0, 0.0, 0.0),
+                specific_force_frd_m_s2=(0.0, 0.0, -9.8), landed=False)
+
+        def set_velocity(self, *args: object) -> None:
+            self.commands.append(("velocity", *args))
+
+        def hover(self) -> None:
+            self.commands.append(("hover",))
+
+    class Vision:
+        lock = threading.Lock()
+
+        def attach_video(self, sink: object) -> None:
+            pass
+
+        def step(self) -> None:
+            pass
+
+    def boom(obs: object) -> object:
+        raise RuntimeError("boom")
+
+    answers = iter([np.array([1.0, 0, 0, 0]), np.full(4, np.nan), np.zeros(3), "abcd", boom,
+                    np.zeros(4)])
+
+    def policy(obs: object) -> object:
+        answer = next(answers)
+        return answer(obs) if callable(answer) else answer
+
+    pad = ObservedPad()
+    pad._settings = PadModeSi(PadAction.HOLD, 0.05, 0.3)
+    airframe = Airframe()
+    boards = SimpleNamespace(pad=pad, state=NavState.HOLDING, airframe=airframe,
+                             home_ned_m=(0.0, 0.0, 0.0))
+    pilot = PolicyPilot(boards, Vision(), policy, observation="pad",  # type: ignore[arg-type]
+                        limits=ActionLimits(1.0, 1.0, 1.0), period_s=0.05)
+    pilot.step()
+    assert airframe.commands == [("velocity", 1.0, 0.0, 0.0, 0.0, None)]
+    for error, message in ((InvalidArgument, "the policy's action: an action must be finite"),
+                           (InvalidArgument, "the policy's action: an action has 4 numbers"),
+                           (InvalidArgument, "the policy's action: an action is 4 real"),
+                           (LocalProtocolError, "the policy raised RuntimeError: boom")):
+        airframe.time_s += 0.05
+        with pytest.raises(error, match=message):
+            pilot.step()
+        assert airframe.commands[-1] == ("hover",)  # not the last set-point flown on
+    assert airframe.commands.count(("hover",)) == 1 and pilot.failures == 4
+    airframe.time_s += 0.05
+    pilot.step()  # flies again
+    assert airframe.commands[-1] == ("velocity", 0.0, 0.0, 0.0, 0.0, None)
+    assert pilot.failures_in_a_row == 0 and pilot.calls == 6
