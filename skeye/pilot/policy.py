@@ -210,8 +210,9 @@ def load_policy(spec: str) -> Policy:
     instances are the policy, e.g. one that keeps state between calls).
 
     Raises:
-        ConfigError: a malformed spec, a module that does not import, a missing name, or an
-            object that is not callable (the message says which).
+        ConfigError: a malformed spec, a module that does not import (or exits on import), a
+            missing name, a class that cannot be made, or an object that is not callable (the
+            message says which).
     """
     module_name, sep, attr = spec.partition(":")
     if not sep or not module_name or not attr:
@@ -219,6 +220,9 @@ def load_policy(spec: str) -> Policy:
                           f"got {spec!r}")
     try:
         module = importlib.import_module(module_name)
+    except SystemExit as exc:  # a script's top level (argparse on the pilot's own arguments)
+        raise ConfigError(f"--policy {spec}: importing {module_name} called sys.exit({exc.code!r})"
+                          f" (a script that runs on import?)") from None
     except Exception as exc:
         raise ConfigError(f"--policy {spec}: cannot import {module_name}: "
                           f"{type(exc).__name__}: {exc}") from None
@@ -230,7 +234,7 @@ def load_policy(spec: str) -> Policy:
     if isinstance(obj, type):
         try:
             obj = obj()
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:
             raise ConfigError(f"--policy {spec}: {attr}() failed: {type(exc).__name__}: "
                               f"{exc}") from None
     if not callable(obj):

@@ -99,6 +99,22 @@ def test_load_policy_names_what_is_wrong(monkeypatch: pytest.MonkeyPatch) -> Non
             load_policy(spec)
 
 
+def test_a_policy_module_that_exits_on_import_is_a_config_error(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A script with argparse at its top level parsed the pilot's own arguments and ended
+    `skeye pilot` with its usage and exit 2; sys.exit(3) ended it with 3 and no word."""
+    from skeye.errors import ConfigError
+
+    (tmp_path / "exits_on_import.py").write_text("import sys\nsys.exit(3)\n")
+    (tmp_path / "exits_when_made.py").write_text(
+        "import sys\nclass P:\n    def __init__(self):\n        sys.exit(4)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ConfigError, match=r"importing exits_on_import called sys.exit\(3\)"):
+        load_policy("exits_on_import:f")
+    with pytest.raises(ConfigError, match=r"P\(\) failed: SystemExit: 4"):
+        load_policy("exits_when_made:P")
+
+
 def test_skeye_pilot_refuses_a_policy_without_images_or_that_does_not_load() -> None:
     from skeye.cli import main
 
