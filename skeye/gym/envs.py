@@ -41,6 +41,9 @@ from skeye.robots.config import RobotConfig
 from skeye.values import number, numbers
 
 ACTIONS = ("velocity", "attitude")
+MAX_POSITION_M = 1.0e5
+"""The simulator's runaway limit on each position coordinate (skeye.sim.robot.check_state): a
+start or target beyond it is refused as an option, not met as a diverged simulation."""
 
 
 def action_limits(config: RobotConfig) -> ActionLimits:
@@ -191,6 +194,9 @@ def override_start(episode: Episode, options: Any, target_fixed: bool = False) -
     for key in ("start_ned_m", "target_ned_m"):
         if key in options:
             value = numbers(key, options[key], 3, "three finite numbers (north, east, down m)")
+            if max(abs(v) for v in value) > MAX_POSITION_M:
+                raise ConfigError(f"{key} must be within {MAX_POSITION_M:g} m of the origin "
+                                  f"(the simulator's limit), got {options[key]!r}")
             setattr(episode, key, value)
     if "yaw_rad" in options:
         episode.yaw_rad = number("yaw_rad", options["yaw_rad"])

@@ -28,7 +28,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
 from skeye.errors import ConfigError, InvalidArgument
-from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
+from skeye.gym.envs import (
+    ACTIONS,
+    MAX_POSITION_M,
+    action_limits,
+    apply_action,
+    override_start,
+)
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
 from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import action_values
@@ -37,6 +43,9 @@ from skeye.values import number
 DEFAULT_SPACING_M = 10.0
 """Between vehicles' cells: PadLanding's area is 3 m and the webcam sees about 1.5 m around
 itself from 2.5 m up, so 10 m keeps every neighbour out of every view."""
+CELL_REACH_M = 100.0
+"""How far from its cell's centre an episode may take a vehicle (each task's area, target and
+ceiling are well within): the farthest cell stays this far inside the simulator's limit."""
 
 
 def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
@@ -74,6 +83,11 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                 t.episode_s = float(episode_s)
         self.settings = FlightSettings.from_kwargs(**settings)
         cells = grid(num_envs, spacing_m)
+        farthest = max(max(abs(n), abs(e)) for n, e in cells)
+        if farthest > MAX_POSITION_M - CELL_REACH_M:
+            raise ConfigError(f"spacing_m {spacing_m:g} puts {num_envs} vehicles up to "
+                              f"{farthest:g} m from the origin: the simulator's limit is "
+                              f"{MAX_POSITION_M:g} m")
         self.setup = prepare(self.settings, tuple(cells) if task.needs_camera else None)
         if task.needs_camera:
             pads = self.setup.world.pads

@@ -214,6 +214,8 @@ def test_bad_pad_landing_options_of_any_type_are_config_errors_naming_them(
     ("skeye/PadLanding-v0", {"target_ned_m": (0, 0, -1)}, "unknown reset option"),
     ("skeye/PadLanding-v0", 5, "reset options must be a dict"),
     ("skeye/GoTo-v0", {"target_ned_m": (1, 2, "x")}, "target_ned_m must be three"),
+    ("skeye/Hover-v0", {"start_ned_m": (1e6, 0, -1)}, "start_ned_m must be within 100000 m"),
+    ("skeye/GoTo-v0", {"target_ned_m": (0, 0, -1e30)}, "target_ned_m must be within"),
 ])
 def test_bad_reset_options_are_config_errors_naming_them(env_id: str, options: object,
                                                           message: str) -> None:
@@ -232,6 +234,9 @@ def test_the_batched_environment_refuses_bad_options_as_config_errors() -> None:
     with pytest.raises(ConfigError, match="spacing_m must be a finite number"):
         gymnasium.make_vec("skeye/Hover-v0", num_envs=2,
                            vectorization_mode="vector_entry_point", spacing_m="x")
+    with pytest.raises(ConfigError, match="spacing_m 1e\\+09 puts 2 vehicles"):
+        gymnasium.make_vec("skeye/Hover-v0", num_envs=2,  # raised PhysicsError at reset()
+                           vectorization_mode="vector_entry_point", spacing_m=1e9)
 
 
 def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
