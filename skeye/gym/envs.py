@@ -38,12 +38,10 @@ from skeye.pilot.policy import (
     velocity_setpoint,
 )
 from skeye.robots.config import RobotConfig
+from skeye.sim.robot import MAX_POSITION_M
 from skeye.values import number, numbers
 
 ACTIONS = ("velocity", "attitude")
-MAX_POSITION_M = 1.0e5
-"""The simulator's runaway limit on each position coordinate (skeye.sim.robot.check_state): a
-start or target beyond it is refused as an option, not met as a diverged simulation."""
 
 
 def action_limits(config: RobotConfig) -> ActionLimits:

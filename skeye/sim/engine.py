@@ -39,7 +39,14 @@ from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim import frames
 from skeye.sim.raycast import ROBOT_GEOM_GROUP, RayCaster
 from skeye.sim.readings import Event, ReadingSink, RobotCrashed, RobotStopped, SensorSample
-from skeye.sim.robot import Robot, ScheduledSensor, check_state
+from skeye.sim.robot import (
+    MAX_POSITION_M,
+    MAX_RATE_RAD_S,
+    MAX_SPEED_M_S,
+    Robot,
+    ScheduledSensor,
+    check_state,
+)
 from skeye.sim.state import BodyState
 from skeye.sim.surface_contrast import geom_contrasts
 from skeye.sim.wind import WindModel
@@ -538,9 +545,9 @@ class Simulation:
             vx, vy, vz = qvel[b], qvel[b + 1], qvel[b + 2]
             wx, wy, wz = qvel[b + 3], qvel[b + 4], qvel[b + 5]
             total = px + py + pz + vx + vy + vz + wx + wy + wz
-            if (math.isfinite(total) and max(max(abs(px), abs(py)), abs(pz)) <= 1.0e5
-                    and vx * vx + vy * vy + vz * vz <= 150.0**2
-                    and wx * wx + wy * wy + wz * wz <= 200.0**2):
+            if (math.isfinite(total) and max(max(abs(px), abs(py)), abs(pz)) <= MAX_POSITION_M
+                    and vx * vx + vy * vy + vz * vz <= MAX_SPEED_M_S**2
+                    and wx * wx + wy * wy + wz * wz <= MAX_RATE_RAD_S**2):
                 continue
             try:
                 check_state(name, self.body_state(name))

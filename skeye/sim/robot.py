@@ -595,6 +595,14 @@ class Robot:
         ]
 
 
+MAX_POSITION_M: Final = 1.0e5
+"""The runaway limits :func:`check_state` stops a robot at: a position coordinate beyond
+100 km from the world's origin, a speed over 150 m/s (540 km/h), a rotation rate over 200 rad/s
+(32 turns a second); no small UAV's flight comes near them, a diverged simulation passes them."""
+MAX_SPEED_M_S: Final = 150.0
+MAX_RATE_RAD_S: Final = 200.0
+
+
 def check_state(name: str, state: BodyState) -> None:
     """Raise PhysicsError if the state is non-finite or runaway (plain floats: hot path)."""
     px, py, pz = state.pos_ned_m
@@ -603,7 +611,8 @@ def check_state(name: str, state: BodyState) -> None:
     total = px + py + pz + vx + vy + vz + wx + wy + wz
     if math.isnan(total - total):  # inf or NaN (math.isnan compiles to C; isfinite does not)
         raise PhysicsError(f"robot {name}: NaN in the simulated state")
-    if max(max(abs(px), abs(py)), abs(pz)) > 1.0e5 or vx * vx + vy * vy + vz * vz > 150.0**2:
+    if (max(max(abs(px), abs(py)), abs(pz)) > MAX_POSITION_M
+            or vx * vx + vy * vy + vz * vz > MAX_SPEED_M_S**2):
         raise PhysicsError(f"robot {name}: the simulation diverged (runaway position or speed)")
-    if wx * wx + wy * wy + wz * wz > 200.0**2:
+    if wx * wx + wy * wy + wz * wz > MAX_RATE_RAD_S**2:
         raise PhysicsError(f"robot {name}: the simulation diverged (runaway rotation rate)")
