@@ -38,6 +38,7 @@ import importlib
 import logging
 import math
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Final, NoReturn
@@ -300,6 +301,7 @@ class PolicyPilot:
         self.calls = 0  # policy calls made
         self.failures = 0  # of them, calls that raised or gave no action (the vehicle held)
         self.failures_in_a_row = 0
+        self.slow_calls = 0  # of them, calls that took longer than period_s of wall time
         self.engaged = False
         self._next_s = -math.inf
         self._image: np.ndarray | None = None
@@ -364,11 +366,14 @@ class PolicyPilot:
             obs = policy_observation(self.observation, snap, boards.home_ned_m, self.pad.latest,
                                      image, self.image_size)
             self.calls += 1
+            started = time.monotonic()
             try:
                 action = self.policy(obs)
             except Exception as exc:
+                self._timed(time.monotonic() - started)
                 self._failed(LocalProtocolError(
                     f"the policy raised {type(exc).__name__}: {exc}; the vehicle holds still"), exc)
+            self._timed(time.monotonic() - started)
             try:
                 forward, right, up, yaw_rate = velocity_setpoint(action, self.limits)
             except InvalidArgument as exc:
@@ -379,6 +384,17 @@ class PolicyPilot:
                             self.failures_in_a_row)
                 self.failures_in_a_row = 0
             boards.airframe.set_velocity(forward, right, up, yaw_rate, None)
+
+    def _timed(self, took_s: float) -> None:
+        """A call slower than its period held up the pilot's loop (the boards' tick, their
+        link-loss watch): counted, and said at the first and then every 100th."""
+        if took_s <= self.period_s:
+            return
+        self.slow_calls += 1
+        if self.slow_calls % 100 == 1:
+            log.warning("the policy took %.3f s of wall time, over its %.3f s period: the "
+                        "pilot's loop waited for it (%d slow call(s) so far)", took_s,
+                        self.period_s, self.slow_calls)
 
     def _failed(self, error: Exception, cause: Exception) -> NoReturn:
         """A policy call that raised or gave no action: the vehicle holds still (its last
