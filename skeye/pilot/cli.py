@@ -155,10 +155,10 @@ def run(args: argparse.Namespace) -> int:
               flush=True)
         return 2
     if args.rtp_video is not None:
-        from skeye.pilot.rtp_video import parse_rtp_uri
+        from skeye.pilot.rtp_video import check_rtp_destination
 
         try:
-            parse_rtp_uri(args.rtp_video)
+            check_rtp_destination(args.rtp_video)  # resolves, and a route exists
             import av  # noqa: F401  (the `mavlink` extra)
         except ImportError:
             print("skeye pilot: --rtp-video needs PyAV: pip install 'skeye[mavlink]'", flush=True)

@@ -15,8 +15,10 @@ encoder opens on the first frame (the camera's size). ``close`` is idempotent.
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
+import socket
 import threading
 import time
 from fractions import Fraction
@@ -47,10 +49,41 @@ def parse_rtp_uri(uri: str) -> tuple[str, int]:
     """
     parts = split_uri(uri, "video stream", "rtp://HOST:PORT", ConfigError)
     port = port_of(parts)
-    if parts.scheme != "udp" or not parts.hostname or port is None:
-        raise ConfigError(f"{uri}: the RTP video goes to udp://HOST:PORT, e.g. "
+    if parts.scheme != "udp" or not parts.hostname or not port:
+        raise ConfigError(f"{uri}: the RTP video goes to udp://HOST:PORT (port 1-65535), e.g. "
                           "udp://127.0.0.1:5600")
     return parts.hostname, port
+
+
+def check_rtp_destination(uri: str) -> tuple[str, int]:
+    """:func:`parse_rtp_uri`, and whether this machine can send UDP there now: the host
+    resolves and a UDP socket can be pointed at it (a route exists; not a broadcast address).
+    FFmpeg would find the same only on the first frame, in the worker, as a bare ``Input/output
+    error``.
+
+    Raises:
+        ConfigError: naming the URI and what is wrong with it.
+    """
+    host, port = parse_rtp_uri(uri)
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+    except (OSError, UnicodeError) as exc:
+        raise ConfigError(f"{uri}: cannot resolve the host {host!r} ({exc})") from None
+    family, kind, proto, _, address = infos[0]
+    try:
+        with socket.socket(family, kind, proto) as probe:
+            probe.connect(address)  # UDP: nothing is sent; the kernel checks the route
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        if exc.errno == errno.EACCES:
+            reason += " (a broadcast address: the RTP video goes to one host or a multicast group)"
+        raise ConfigError(f"{uri}: cannot send UDP to {address[0]} port {port}: {reason}") from None
+    return host, port
+
+
+def _url_host(host: str) -> str:
+    """``host`` as it goes in a URL (an IPv6 address in brackets)."""
+    return f"[{host}]" if ":" in host else host
 
 
 def overlay(frame: CameraFrame) -> np.ndarray:
@@ -82,8 +115,8 @@ class RtpVideo:
             raise ConfigError("PyAV has no libx264 encoder here: no H.264 RTP video")
         if not 0.1 <= max_fps <= 60:
             raise ConfigError(f"RTP video frame rate must be 0.1..60 frames/s, got {max_fps:g}")
-        self.host, self.port = parse_rtp_uri(uri)
-        self.address = f"udp://{self.host}:{self.port}"
+        self.host, self.port = check_rtp_destination(uri)
+        self.address = f"udp://{_url_host(self.host)}:{self.port}"
         self.max_fps = max_fps
         self.bitrate = bitrate
         self.frames_sent = 0
@@ -124,16 +157,20 @@ class RtpVideo:
 
     def sdp(self) -> str:
         """The session description a player needs for this stream (QGroundControl does not)."""
-        return (f"v=0\r\no=- 0 0 IN IP4 {self.host}\r\ns=skeye pilot camera\r\n"
-                f"c=IN IP4 {self.host}\r\nt=0 0\r\nm=video {self.port} RTP/AVP {PAYLOAD_TYPE}\r\n"
+        ip = "IP6" if ":" in self.host else "IP4"
+        return (f"v=0\r\no=- 0 0 IN {ip} {self.host}\r\ns=skeye pilot camera\r\n"
+                f"c=IN {ip} {self.host}\r\nt=0 0\r\nm=video {self.port} RTP/AVP {PAYLOAD_TYPE}\r\n"
                 f"a=rtpmap:{PAYLOAD_TYPE} H264/90000\r\n"
                 f"a=fmtp:{PAYLOAD_TYPE} packetization-mode=1\r\n")
 
     def _open(self, width: int, height: int) -> tuple[Any, Any]:
         import av
 
-        container = av.open(f"rtp://{self.host}:{self.port}?pkt_size=1200", mode="w",
-                            format="rtp")
+        url = f"rtp://{_url_host(self.host)}:{self.port}?pkt_size=1200"
+        try:
+            container = av.open(url, mode="w", format="rtp")
+        except (av.error.FFmpegError, OSError) as exc:  # checked at start: the network changed
+            raise ConfigError(f"RTP video to {self.address}: FFmpeg: {exc}") from None
         stream = container.add_stream("libx264", rate=Fraction(round(self.max_fps * 1000), 1000))
         stream.width, stream.height = width, height
         stream.pix_fmt = "yuv420p"
@@ -174,9 +211,12 @@ class RtpVideo:
                 picture = av.VideoFrame.from_ndarray(img[:height, :width], format="bgr24")
                 picture.pts = round((last_s - start_s) * 90_000)
                 picture.time_base = Fraction(1, 90_000)
-                for packet in stream.encode(picture):
-                    container.mux(packet)
-                    self.packets_sent += 1
+                try:
+                    for packet in stream.encode(picture):
+                        container.mux(packet)  # the first one opens the UDP socket
+                        self.packets_sent += 1
+                except (av.error.FFmpegError, OSError) as exc:
+                    raise ConfigError(f"RTP video to {self.address}: FFmpeg: {exc}") from None
                 self.frames_sent += 1
         finally:
             if container is not None:

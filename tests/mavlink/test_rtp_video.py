@@ -3,6 +3,7 @@ third-party decoder (FFmpeg, through PyAV) from the session description the modu
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 from pathlib import Path
@@ -57,3 +58,42 @@ def test_ffmpeg_decodes_the_stream_with_the_detection_drawn(tmp_path: Path):
 def test_only_udp_uris_are_taken():
     with pytest.raises(ConfigError, match="udp://HOST:PORT"):
         RtpVideo("tcp://127.0.0.1:5600")
+
+
+def test_a_destination_it_cannot_send_to_is_named_at_start(monkeypatch: pytest.MonkeyPatch):
+    # FFmpeg opened the destination only on the first frame, in the worker: the pilot flew on
+    # and then stopped on "pilot-rtp-video failed: OSError: [Errno 5] Input/output error".
+    with pytest.raises(ConfigError, match="port 1-65535"):
+        RtpVideo("udp://127.0.0.1:0")
+    with pytest.raises(ConfigError, match=r"255\.255\.255\.255 port 5600: .*broadcast"):
+        RtpVideo("udp://255.255.255.255:5600")
+
+    def no_such_host(*args: object, **kwargs: object) -> None:
+        raise socket.gaierror(socket.EAI_NONAME, "Name or service not known")
+
+    monkeypatch.setattr(socket, "getaddrinfo", no_such_host)
+    with pytest.raises(ConfigError, match=r"cannot resolve the host 'groundstation\.invalid'"):
+        RtpVideo("udp://groundstation.invalid:5600")
+
+
+def test_an_ipv6_destination_is_streamed():
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6 here")
+    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as receiver:
+        try:
+            receiver.bind(("::1", 0))
+        except OSError:
+            pytest.skip("no ::1 here")
+        receiver.settimeout(60)
+        port = receiver.getsockname()[1]
+        video = RtpVideo(f"udp://[::1]:{port}", max_fps=10.0).start()
+        try:
+            assert video.address == f"udp://[::1]:{port}"
+            assert "c=IN IP6 ::1" in video.sdp()
+            grey = np.full((240, 320, 3), 90, np.uint8)
+            video.publish(CameraFrame(0, 0.0, grey, Detection(False), 3.0))
+            packet = receiver.recv(2048)  # the first RTP packet (was: the worker died)
+            assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96  # RTP version 2, type 96
+            video.check()
+        finally:
+            video.close()
