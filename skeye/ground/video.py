@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import socket
 import threading
+import time
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -97,7 +98,8 @@ class VideoRelay:
         host, port: the vehicle's video port (``skeye pilot --video-port``).
         fps: the most frames per second asked of the vehicle.
         retry_s: wait before reconnecting after a failure.
-        timeout_s: connecting, and the longest wait for the next message.
+        timeout_s: connecting, and the longest wait for the next whole message (bytes that
+            trickle in without completing one do not extend it).
     """
 
     def __init__(
@@ -215,16 +217,28 @@ class VideoRelay:
         conn = VideoConnection(Role.CLIENT)
         sock.sendall(conn.send(self.subscribe))
         self.state = "subscribed"
+        # The wait is for whole messages, not bytes: a vehicle that trickles a byte now and
+        # then (a stalled encoder, a peer that is not really one) must not hold the relay.
+        deadline = time.monotonic() + self.timeout_s
         while not self._stop.is_set():
+            left = deadline - time.monotonic()
             try:
+                if left <= 0:
+                    raise TimeoutError
+                sock.settimeout(left)
                 data = sock.recv(256 * 1024)
             except TimeoutError:
                 raise LinkTimeout(
                     f"no video from {self.address} for {self.timeout_s:g} s"
+                    + (f" ({conn.buffered} bytes of an unfinished message)"
+                       if conn.buffered else "")
                 ) from None
             if not data:
                 raise RemoteProtocolError(f"the vehicle closed the video connection {self.address}")
-            for msg in conn.receive_data(data):
+            messages = conn.receive_data(data)
+            if messages:
+                deadline = time.monotonic() + self.timeout_s
+            for msg in messages:
                 if isinstance(msg, Hello):
                     self.hello = msg
                     self.state = "waiting for frames"

@@ -493,6 +493,11 @@ class VideoConnection:
             raise error(f"{mtype.name} is not allowed in state {self.state.value}")
         self.state = nxt
 
+    @property
+    def buffered(self) -> int:
+        """Bytes received of a message not complete yet."""
+        return self._decoder.buffered
+
     def receive_data(self, data: bytes) -> list[Message]:
         """The peer's messages in ``data``, each checked against the state."""
         if self.state is State.CLOSED:

@@ -120,3 +120,42 @@ def test_the_relay_names_a_bad_video_source_and_keeps_trying() -> None:
                 assert "not a skeye video stream" in relay.last_error
             assert relay.latest() is None and relay.frames == 0
             relay.check()  # its worker is alive and well
+
+
+def test_a_vehicle_that_trickles_bytes_without_a_whole_message_is_timed_out() -> None:
+    """A stalled or misbehaving vehicle that sends HELLO, then a frame one byte at a time, each
+    byte well within the timeout: the relay waited for it for ever ("waiting for frames", no
+    error); now the timeout is for whole messages, and it says what it was waiting for."""
+    import socket
+
+    from skeye.ground.video import VideoRelay
+    from skeye.wire.video import MAGIC, PREFIX, VERSION, Hello, MsgType, encode
+
+    done = threading.Event()
+    with socket.create_server(("127.0.0.1", 0)) as fake:
+        port = fake.getsockname()[1]
+        with VideoRelay("127.0.0.1", port, retry_s=0.1, timeout_s=1.0) as relay:
+            conn, _ = fake.accept()
+            conn.settimeout(30)
+            assert conn.recv(64).startswith(b"SV")  # its SUBSCRIBE
+            conn.sendall(encode(Hello("R1/Down", 1.0, 80, 10.0)))
+            conn.sendall(PREFIX.pack(MAGIC, VERSION, MsgType.FRAME, 100, 100_000))
+
+            def trickle() -> None:
+                try:
+                    while not done.wait(0.1):
+                        conn.sendall(b" ")
+                except OSError:
+                    pass  # the relay gave up and closed
+
+            sender = threading.Thread(target=trickle, daemon=True)
+            sender.start()
+            try:
+                wait_until(lambda: relay.failures >= 1, 60, "the relay to time the vehicle out")
+                assert "bytes of an unfinished message" in relay.last_error, relay.last_error
+                assert relay.frames == 0
+                relay.check()
+            finally:
+                done.set()
+                sender.join(30)
+                conn.close()
