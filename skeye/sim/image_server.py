@@ -17,8 +17,10 @@ How this works:
   made no progress longest among those not streaming (it gets an error frame saying so); only
   when all of them stream is the new one refused. A connection that sends no complete request
   within ``handshake_timeout_s`` of connecting, or that makes no progress (no request received,
-  no byte sent to it) for ``idle_timeout_s``, gets an error frame naming the reason and is
-  closed: idle or stalled clients cannot hold the slots. The accept thread never waits on a
+  no byte sent to it) for ``idle_timeout_s``, gets an error frame naming the reason (after the
+  frame under way, if any, so the stream stays whole) and is closed; one that takes none of it
+  for another ``idle_timeout_s`` is closed without it: idle or stalled clients cannot hold the
+  slots. The accept thread never waits on a
   client, and a shortage of file descriptors is logged and waited out.
 * ``close()`` wakes every thread through its socket pair and joins them all within a deadline.
 """
@@ -107,6 +109,7 @@ class _ClientHandler:
         self._queue: deque[Request] = deque()
         self._out: list[memoryview] = []
         self._out_is_error = False
+        self._frame_before_error = False  # _out holds a frame and then an error frame
         self._stop = False
         self._eof = False
         self._want_wake = False
@@ -229,6 +232,10 @@ class _ClientHandler:
         """Close a connection that sent no request in time, made no progress for long, or was
         replaced."""
         if self.closed_reason is not None:
+            if now >= self._idle_deadline_s():  # its error frame had a whole idle period
+                log.info("image client %s: took no byte of its error frame in %g s; closed "
+                         "without it", self.address, self._server.idle_timeout_s)
+                self._stop = True
             return
         if self.replaced is None and now < self._idle_deadline_s():
             return
@@ -244,7 +251,14 @@ class _ClientHandler:
         self._eof = True
         self._queue.clear()
         self._stream_period_s = None
-        self._send_error(reason)
+        if self._out and not self._out_is_error:
+            # A frame is under way (a stalled client): the error frame goes after it, so the
+            # stream stays whole; the frame counts as sent if it gets out.
+            self._out.append(memoryview(encode_error_frame(reason)))
+            self._out_is_error = True
+            self._frame_before_error = True
+        else:
+            self._send_error(reason)
         self._active_s = now  # the error frame gets one more idle period to go out
         self._got_request = True
 
@@ -291,6 +305,8 @@ class _ClientHandler:
         if not self._out:
             if self._out_is_error:
                 self.errors_sent += 1
+                self.frames_sent += self._frame_before_error
+                self._frame_before_error = False
             else:
                 self.frames_sent += 1
 

@@ -587,3 +587,54 @@ def test_client_argument_checks(server: ImageServer) -> None:
             client.select_camera("has space")
     with pytest.raises(LocalProtocolError, match="closed"):
         client.get_frame()
+
+
+def _raw_stalled_mid_frame(port: int) -> RawConn:
+    """A client that asks for many RAW frames and reads none: the server's send stalls in the
+    middle of a 1.4 MB frame."""
+    conn = RawConn(port, rcvbuf=4096)
+    conn.send(b"OK" * 50)
+    return conn
+
+
+def test_a_client_stalled_mid_frame_gets_the_frame_then_its_error_frame(
+    buffer: FrameBuffer, publisher: Publisher, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The idle timeout's error frame used to replace the frame under way: a client that read
+    on got the frame's first bytes, then the error frame's, as one corrupt frame."""
+    caplog.set_level(logging.INFO, logger="skeye.sim.image_server")
+    with ImageServer(buffer, port=0, idle_timeout_s=5.0) as srv:
+        conn = _raw_stalled_mid_frame(srv.port)
+        try:
+            deadline = time.monotonic() + 60
+            while not any("idle for 5 s" in r.getMessage() for r in caplog.records):
+                assert time.monotonic() < deadline, "the idle timeout never came"
+                time.sleep(0.05)
+            conn.sock.settimeout(30)
+            events = []
+            while data := conn.sock.recv(1 << 20):  # read on: to the end of the stream
+                events += conn.decoder.feed(data)
+            *frames, error = events  # the frames the buffers held, the one under way, the error
+            assert frames and all(isinstance(f, DecodedFrame) for f in frames), events
+            for frame in frames:
+                assert frame.frame_type == FrameType.RAW
+                assert frame_image_rgb(frame).shape == (HEIGHT, WIDTH, 3)
+            assert isinstance(error, RemoteError) and "idle for 5 s" in error.reason, events
+        finally:
+            conn.close()
+
+
+def test_a_client_that_never_takes_its_error_frame_is_closed(
+    buffer: FrameBuffer, publisher: Publisher
+) -> None:
+    """The error frame gets one more idle period to go out; a client that takes none of it
+    was kept, with its thread and its slot, for ever."""
+    with ImageServer(buffer, port=0, idle_timeout_s=1.0) as srv:
+        conn = _raw_stalled_mid_frame(srv.port)
+        try:
+            deadline = time.monotonic() + 60
+            while srv.client_count():
+                assert time.monotonic() < deadline, "the stalled client was never closed"
+                time.sleep(0.05)
+        finally:
+            conn.close()
