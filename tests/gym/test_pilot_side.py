@@ -7,9 +7,12 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import threading
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -164,43 +167,57 @@ def test_the_pilot_flies_the_policy_that_solves_the_environment(policy_flight) -
     assert pilot.vision.calls > 20 and pilot.vision.vision.stats.detections > 20
 
 
-def test_a_policy_that_fails_leaves_the_vehicle_holding_still_and_says_so() -> None:
-    """A policy that raised, or returned NaN, the wrong shape or text, left the vehicle flying
-    its last set-point (1 m/s forward here) for as long as it failed; the loop's fault said
-    only an InvalidArgument or RuntimeError from the vision's step."""
-    import threading
-    from types import SimpleNamespace
+class _Airframe:
+    """Records what a PolicyPilot commands; its clock is set by the test."""
 
-    from skeye.errors import InvalidArgument, LocalProtocolError
+    def __init__(self) -> None:
+        self.commands: list[tuple] = []
+        self.time_s = 0.0
+
+    def snapshot(self) -> SimpleNamespace:
+        return SimpleNamespace(
+            time_s=self.time_s, pos_ned_m=(0.0, 0.0, -1.0), rpy_rad=(0.0, 0.0, 0.0),
+            vel_ned_m_s=(0.0, 0.0, 0.0), rates_frd_rad_s=(0.0, 0.0, 0.0),
+            specific_force_frd_m_s2=(0.0, 0.0, -9.8), landed=False)
+
+    def set_velocity(self, *args: object) -> None:
+        self.commands.append(("velocity", *args))
+
+    def hover(self) -> None:
+        self.commands.append(("hover",))
+
+
+class _Vision:
+    lock = threading.Lock()
+
+    def attach_video(self, sink: object) -> None:
+        pass
+
+    def step(self) -> None:
+        pass
+
+
+def _holding_pilot(policy: object) -> tuple[PolicyPilot, _Airframe]:
+    """A PolicyPilot engaged (PAD_MODE HOLD, HOLDING) on a recording airframe, 20 Hz."""
     from skeye.pilot.pad import PadModeSi
     from skeye.pilot.policy import ObservedPad
     from skeye.wire.packets import PadAction
 
-    class Airframe:
-        def __init__(self) -> None:
-            self.commands: list[tuple] = []
-            self.time_s = 0.0
+    pad = ObservedPad()
+    pad._settings = PadModeSi(PadAction.HOLD, 0.05, 0.3)
+    airframe = _Airframe()
+    boards = SimpleNamespace(pad=pad, state=NavState.HOLDING, airframe=airframe,
+                             home_ned_m=(0.0, 0.0, 0.0))
+    pilot = PolicyPilot(boards, _Vision(), policy, observation="pad",  # type: ignore[arg-type]
+                        limits=ActionLimits(1.0, 1.0, 1.0), period_s=0.05)
+    return pilot, airframe
 
-        def snapshot(self) -> SimpleNamespace:
-            return SimpleNamespace(
-                time_s=self.time_s, pos_ned_m=(0.0, 0.0, -1.0), rpy_rad=(0.0, 0.0, 0.0),
-                vel_ned_m_s=(0.0, 0.0, 0.0), rates_frd_rad_s=(0.0, 0.0, 0.0),
-                specific_force_frd_m_s2=(0.0, 0.0, -9.8), landed=False)
 
-        def set_velocity(self, *args: object) -> None:
-            self.commands.append(("velocity", *args))
-
-        def hover(self) -> None:
-            self.commands.append(("hover",))
-
-    class Vision:
-        lock = threading.Lock()
-
-        def attach_video(self, sink: object) -> None:
-            pass
-
-        def step(self) -> None:
-            pass
+def test_a_policy_that_fails_leaves_the_vehicle_holding_still_and_says_so() -> None:
+    """A policy that raised, or returned NaN, the wrong shape or text, left the vehicle flying
+    its last set-point (1 m/s forward here) for as long as it failed; the loop's fault said
+    only an InvalidArgument or RuntimeError from the vision's step."""
+    from skeye.errors import InvalidArgument, LocalProtocolError
 
     def boom(obs: object) -> object:
         raise RuntimeError("boom")
@@ -212,13 +229,7 @@ def test_a_policy_that_fails_leaves_the_vehicle_holding_still_and_says_so() -> N
         answer = next(answers)
         return answer(obs) if callable(answer) else answer
 
-    pad = ObservedPad()
-    pad._settings = PadModeSi(PadAction.HOLD, 0.05, 0.3)
-    airframe = Airframe()
-    boards = SimpleNamespace(pad=pad, state=NavState.HOLDING, airframe=airframe,
-                             home_ned_m=(0.0, 0.0, 0.0))
-    pilot = PolicyPilot(boards, Vision(), policy, observation="pad",  # type: ignore[arg-type]
-                        limits=ActionLimits(1.0, 1.0, 1.0), period_s=0.05)
+    pilot, airframe = _holding_pilot(policy)
     pilot.step()
     assert airframe.commands == [("velocity", 1.0, 0.0, 0.0, 0.0, None)]
     for error, message in ((InvalidArgument, "the policy's action: an action must be finite"),
@@ -234,3 +245,24 @@ def test_a_policy_that_fails_leaves_the_vehicle_holding_still_and_says_so() -> N
     pilot.step()  # flies again
     assert airframe.commands[-1] == ("velocity", 0.0, 0.0, 0.0, 0.0, None)
     assert pilot.failures_in_a_row == 0 and pilot.calls == 6
+
+
+def test_a_policy_slower_than_its_period_is_counted_and_said(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """The policy runs on the pilot's loop: a call longer than its period (here 0.2 s of wall
+    time against 0.05 s) held up the boards' tick with no word. It is counted and said (the
+    first; a loaded machine may make the fast ones after it slow too)."""
+    delays = iter([0.2, 0.0, 0.0])
+
+    def policy(obs: object) -> object:
+        time.sleep(next(delays))
+        return np.zeros(4)
+
+    pilot, airframe = _holding_pilot(policy)
+    with caplog.at_level("WARNING", logger="skeye.pilot.policy"):
+        for _ in range(3):
+            pilot.step()
+            airframe.time_s += 0.05
+    assert pilot.calls == 3 and pilot.slow_calls >= 1
+    assert "the policy took 0.2" in caplog.text and "over its 0.050 s period" in caplog.text
+    assert airframe.commands[-1] == ("velocity", 0.0, 0.0, 0.0, 0.0, None)  # still flies
