@@ -14,6 +14,7 @@ import dataclasses
 import hashlib
 import itertools
 import json
+import math
 import tomllib
 from dataclasses import dataclass, field
 from functools import cache
@@ -26,6 +27,10 @@ from skeye.validate.experiments import SETTING_NAMES, RunSettings, check_disturb
 from skeye.values import is_finite_number
 
 EXPERIMENTS = ("E1", "E2")
+MAX_TRIALS = 100_000
+"""The most trials one spec may make (parameter sets x seeds): each is a flight in processes of
+its own, seconds to minutes of a core, so more is a mistake (or a sweep to split); checked
+before any list is built (seeds = 1e11 used to end in MemoryError)."""
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(RunSettings)}
 _SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
               "resources", "name"}
@@ -91,6 +96,9 @@ def _seeds(value: Any) -> list[int]:
     if isinstance(value, int):
         if value < 1:
             raise LocalProtocolError(f"seeds must be >= 1, got {value}")
+        if value > MAX_TRIALS:
+            raise LocalProtocolError(f"seeds = {value}: a sweep makes at most {MAX_TRIALS} "
+                                     "trials")
         return list(range(1, value + 1))
     if isinstance(value, list) and value and all(
             isinstance(s, int) and not isinstance(s, bool) for s in value):
@@ -170,6 +178,11 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
         if bad:
             raise LocalProtocolError(f"{experiment} has no parameter {bad}; it takes "
                                      f"{sorted(SETTING_NAMES)} (a flight script takes any)")
+    count = max(1, (math.prod(len(v) for v in grid.values()) if grid else 0) + len(listed))
+    if count * len(seeds) > MAX_TRIALS:  # before the grid's product is built
+        raise LocalProtocolError(f"{count} parameter set(s) x {len(seeds)} seed(s) make "
+                                 f"{count * len(seeds)} trials; a sweep makes at most "
+                                 f"{MAX_TRIALS}: split it")
     sets: list[dict[str, Any]] = []
     if grid:
         keys = sorted(grid)

@@ -246,6 +246,12 @@ def test_failed_trials_are_rows_with_their_error(tmp_path: Path,
          r"\[resources\] cpus must be a finite number, got 'abc'"),
         ('experiment = "E2"\n[resources]\ngpus = -1', r"\[resources\] gpus must be >= 0"),
         ('experiment = "E2"\nseeds = [3, -1]', "seeds must be >= 0, got -1"),
+        # a count or a grid too big for memory (seeds = 1e11 ended in MemoryError)
+        ('experiment = "E2"\nseeds = 100000000000', "a sweep makes at most 100000 trials"),
+        ('experiment = "E2"\nseeds = 2\n[grid]\n' + "\n".join(
+            f"{name} = [{', '.join(['0.1'] * 100)}]" for name in ("f_max_n", "e2_duration_s",
+                                                                   "deadband_m")),
+         "make 2000000 trials; a sweep makes at most 100000"),
         # Out-of-range values, by the rule the trial's processes apply (refused before any runs)
         ('experiment = "E2"\n[grid]\nf_max_n = [0.1, -0.1]',
          r"\[grid\]: f_max_n must be in \[0, 50\] N .*got -0\.1"),
