@@ -278,6 +278,20 @@ class ParentWatch:
         return None
 
 
+def sleep_until(stop: threading.Event, seconds: float) -> bool:
+    """``stop.wait(seconds)`` for the main thread when a signal handler sets ``stop``: it polls
+    ``stop.is_set()`` (no lock) and never holds the Event's lock. A handler runs between the main
+    thread's bytecodes, maybe while that thread holds the lock inside ``Event.wait``; its
+    ``set()`` then waits for that lock for ever (a SIGTERM hung ``skeye sim`` so)."""
+    end = time.monotonic() + seconds
+    while not stop.is_set():
+        left = end - time.monotonic()
+        if left <= 0.0:
+            return False
+        time.sleep(min(left, 0.05))
+    return True
+
+
 def wait_for_signal(stop: threading.Event, failed: threading.Event | None = None) -> None:
     """Wait for SIGTERM/SIGINT (or ``failed`` to be set)."""
     def handler(signum: int, frame: Any) -> None:
@@ -285,6 +299,6 @@ def wait_for_signal(stop: threading.Event, failed: threading.Event | None = None
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
-    while not stop.wait(0.2):
+    while not sleep_until(stop, 0.2):
         if failed is not None and failed.is_set():
             return

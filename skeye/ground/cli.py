@@ -46,7 +46,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent
+from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent, sleep_until
 
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
@@ -449,7 +449,7 @@ def run_up(args: argparse.Namespace) -> int:
             "Ctrl-C stops everything",
             flush=True,
         )
-        while not stop.wait(0.5):
+        while not sleep_until(stop, 0.5):  # not stop.wait: see sleep_until
             going = parent.stopping()  # `make run` got Ctrl-C or a signal (see ParentWatch)
             if going is not None:
                 print(f"skeye up: {going}; stopping", flush=True)

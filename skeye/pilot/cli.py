@@ -55,7 +55,7 @@ from skeye.pilot.video_server import (
     DEFAULT_VIDEO_PORT,
     VideoServer,
 )
-from skeye.processes import EXIT_LOST_SIMULATOR
+from skeye.processes import EXIT_LOST_SIMULATOR, sleep_until
 from skeye.wire.video import DEFAULT_JPEG_QUALITY
 
 log = logging.getLogger(__name__)
@@ -293,7 +293,7 @@ def run(args: argparse.Namespace) -> int:
                     f"{'; H.264 RTP video to ' + rtp.address if rtp else ''}",
                     flush=True,
                 )
-                while not stop.wait(0.2):
+                while not sleep_until(stop, 0.2):  # not stop.wait: see sleep_until
                     if server.loop_error is not None:
                         raise server.loop_error
                     if airframe_check is not None:
