@@ -111,8 +111,7 @@ def run_ground(args: argparse.Namespace) -> int:
                                            max_per_peer=args.max_connections_per_peer)
             server = uvicorn.Server(uvicorn_config(app, limits=connections))
             limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
-            shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
-            shown = f"[{shown}]" if ":" in shown else shown
+            shown = page_host(args.host)
             # one write (print writes the text and its newline apart): the bridge's thread
             # prints the vehicle it reached, and a line of its must never land inside this one
             sys.stdout.write(
@@ -181,6 +180,13 @@ def _add_allow_host(p: Any) -> None:
 def _child_argv(*args: str) -> list[str]:
     """A skeye sub-command in a child interpreter (the same venv as this one)."""
     return [sys.executable, "-m", "skeye.cli", *args]
+
+
+def page_host(host: str) -> str:
+    """The host of the page's URL that ``skeye ground`` and ``skeye up`` print for a server
+    bound to ``host``: 127.0.0.1 for a wildcard, an IPv6 address in brackets."""
+    shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+    return f"[{shown}]" if ":" in shown else shown
 
 
 def reach_host(host: str) -> str:
@@ -439,8 +445,7 @@ def run_up(args: argparse.Namespace) -> int:
             ),
             args.ground_port,
         )
-        shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host  # as ground's
-        shown = f"[{shown}]" if ":" in shown else shown
+        shown = page_host(args.host)  # the URL skeye ground prints
         print(
             f"skeye up: open http://{shown}:{args.ground_port}/?token={token}  "
             f"(simulator {args.sim_port}, "
