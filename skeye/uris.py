@@ -24,6 +24,11 @@ def split_uri(uri: str, what: str, expected: str,
         raise error(f"{what} {uri!r}: {exc}; expected {expected}") from None
 
 
+def url_host(host: str) -> str:
+    """``host`` as it goes in a URL: an IPv6 address in brackets."""
+    return f"[{host}]" if ":" in host else host
+
+
 def port_of(parts: SplitResult) -> int | None:
     """The URI's port; None when it has none, or one that is no number or over 65535."""
     try:

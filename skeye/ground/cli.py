@@ -47,6 +47,7 @@ from typing import Any
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent, sleep_until
+from skeye.uris import url_host
 
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
@@ -185,8 +186,7 @@ def _child_argv(*args: str) -> list[str]:
 def page_host(host: str) -> str:
     """The host of the page's URL that ``skeye ground`` and ``skeye up`` print for a server
     bound to ``host``: 127.0.0.1 for a wildcard, an IPv6 address in brackets."""
-    shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-    return f"[{shown}]" if ":" in shown else shown
+    return url_host("127.0.0.1" if host in ("0.0.0.0", "::") else host)
 
 
 def reach_host(host: str) -> str:

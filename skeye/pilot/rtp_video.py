@@ -29,7 +29,7 @@ import numpy as np
 
 from skeye.errors import ConfigError
 from skeye.pilot.video_server import CameraFrame
-from skeye.uris import port_of, split_uri
+from skeye.uris import port_of, split_uri, url_host
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -81,11 +81,6 @@ def check_rtp_destination(uri: str) -> tuple[str, int]:
     return host, port
 
 
-def _url_host(host: str) -> str:
-    """``host`` as it goes in a URL (an IPv6 address in brackets)."""
-    return f"[{host}]" if ":" in host else host
-
-
 def overlay(frame: CameraFrame) -> np.ndarray:
     """The frame with its detection drawn on it (a copy)."""
     img = np.ascontiguousarray(frame.bgr).copy()
@@ -116,7 +111,7 @@ class RtpVideo:
         if not 0.1 <= max_fps <= 60:
             raise ConfigError(f"RTP video frame rate must be 0.1..60 frames/s, got {max_fps:g}")
         self.host, self.port = check_rtp_destination(uri)
-        self.address = f"udp://{_url_host(self.host)}:{self.port}"
+        self.address = f"udp://{url_host(self.host)}:{self.port}"
         self.max_fps = max_fps
         self.bitrate = bitrate
         self.frames_sent = 0
@@ -166,7 +161,7 @@ class RtpVideo:
     def _open(self, width: int, height: int) -> tuple[Any, Any]:
         import av
 
-        url = f"rtp://{_url_host(self.host)}:{self.port}?pkt_size=1200"
+        url = f"rtp://{url_host(self.host)}:{self.port}?pkt_size=1200"
         try:
             container = av.open(url, mode="w", format="rtp")
         except (av.error.FFmpegError, OSError) as exc:  # checked at start: the network changed
