@@ -53,7 +53,9 @@ class Link(ABC):
 
     def __init__(self) -> None:
         self._send_lock = threading.Lock()
-        self._closed = threading.Event()
+        self._closed = threading.Event()  # set by close(), or when the peer goes away
+        self._released = False  # the socket or port itself closed (once, by close())
+        self._release_lock = threading.Lock()
 
     @property
     def closed(self) -> bool:
@@ -74,10 +76,13 @@ class Link(ABC):
         return self._recv(max(0.0, timeout_s))
 
     def close(self) -> None:
-        """Close the link (idempotent)."""
-        if self._closed.is_set():
-            return
+        """Close the link and free its socket or port (idempotent). A link whose peer went away
+        is already ``closed`` to its users, but its descriptor is freed only here."""
         self._closed.set()
+        with self._release_lock:
+            if self._released:
+                return
+            self._released = True
         self._close()
 
     @abstractmethod

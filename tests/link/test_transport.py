@@ -102,6 +102,24 @@ def test_close_is_idempotent_and_ends_the_peer():
         b.close()
 
 
+def test_a_link_whose_peer_hung_up_frees_its_socket_when_closed():
+    """The peer's hang-up makes the link ``closed`` to its users; ``close()`` must still free
+    the descriptor (it used to return early, leaving it to the garbage collector)."""
+    server = socket.create_server(("127.0.0.1", 0))
+    peer = socket.create_connection(server.getsockname())
+    sock, _ = server.accept()
+    server.close()
+    link = TcpLink(sock)
+    peer.close()
+    with pytest.raises(LinkClosed):
+        for _ in range(50):
+            link.recv(0.1)
+    assert link.closed and sock.fileno() != -1
+    link.close()
+    assert sock.fileno() == -1
+    link.close()  # still idempotent
+
+
 def test_close_from_another_thread_wakes_a_blocked_recv():
     a, b = tcp_pair()
     errors: list[BaseException] = []
