@@ -232,6 +232,10 @@ class ClientSession:
         self._queued_bytes = 0
         self._queued_lock = threading.Lock()
         self._closed = threading.Event()
+        # The socket is closed by whichever of the two threads ends last (a client that hangs
+        # up ends both): its descriptor must not wait for the garbage collector.
+        self._threads_running = 2
+        self._threads_lock = threading.Lock()
         self._reader = Worker(self._read_loop, f"sim-read-{peer}", on_error=self._on_error)
         self._writer = Worker(self._write_loop, f"sim-write-{peer}", on_error=self._on_error)
 
@@ -292,6 +296,7 @@ class ClientSession:
                 self.sock.shutdown(socket.SHUT_RDWR)
             except OSError:
                 pass
+            self._thread_done()
 
     # -- input ---------------------------------------------------------------------------
     def _read_loop(self) -> None:
@@ -323,8 +328,19 @@ class ClientSession:
                     if not self._feed(decoder, data):
                         return
         finally:
-            self.states.close()
-            self._finish()
+            try:
+                self.states.close()
+                self._finish()
+            finally:
+                self._thread_done()
+
+    def _thread_done(self) -> None:
+        """One of the session's two threads ended; the last one closes the socket."""
+        with self._threads_lock:
+            self._threads_running -= 1
+            last = self._threads_running == 0
+        if last:
+            self.sock.close()
 
     def _feed(self, decoder: LineDecoder, data: bytes) -> bool:
         """Handle the lines in ``data``; False when the connection must close."""

@@ -105,6 +105,23 @@ def test_control_client_that_never_reads(
     assert wait_for(lambda: control.client_count == 0 and _robots(control) == [], timeout_s=10)
 
 
+def test_a_client_that_hangs_up_has_its_socket_closed_at_once(control: ControlServer) -> None:
+    """With the collector off: the server closes a session's socket when its threads end, not
+    when a reference cycle happens to be collected (it used to hold every one until then)."""
+    gc.collect()
+    fds = open_fds()
+    gc.disable()
+    try:
+        for _ in range(20):
+            sock = socket.create_connection(("127.0.0.1", control.port))
+            assert sock.recv(4096).startswith(b"NFO")
+            sock.close()
+        assert wait_for(lambda: control.client_count == 0 and open_fds() <= fds,
+                        timeout_s=10), f"{open_fds() - fds} descriptors still open"
+    finally:
+        gc.enable()
+
+
 def test_1000_connect_disconnect_cycles_leak_nothing(control: ControlServer) -> None:
     def cycle(n: int) -> None:
         for _ in range(n):
