@@ -32,7 +32,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import IO, Any
 
 from skeye.errors import ConfigError, SkeyeError
 
@@ -157,6 +157,7 @@ def start_skeye(
             if not line or time.monotonic() > deadline:
                 proc.kill()
                 proc.wait(5)
+                proc.stdout.close()
                 late = f" within {timeout_s:g} s" if time.monotonic() > deadline else ""
                 raise SkeyeError(f"{what} did not start{late}: "
                                  f"{''.join(seen[-5:]) or 'no output'}")
@@ -166,9 +167,16 @@ def start_skeye(
                 found.append(m)
     finally:
         killer.cancel()
-    stdout = proc.stdout
-    threading.Thread(target=stdout.read, name=f"drain-{what}", daemon=True).start()
+    threading.Thread(target=_drain, args=(proc.stdout,), name=f"drain-{what}",
+                     daemon=True).start()
     return proc, found
+
+
+def _drain(stream: IO[str]) -> None:
+    """Read a child's output to its end (it never blocks on a full pipe), then close the pipe:
+    its descriptor must not wait for the garbage collector."""
+    with stream:
+        stream.read()
 
 
 def stop_process(proc: subprocess.Popen[str], timeout_s: float = 15.0) -> None:
