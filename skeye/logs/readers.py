@@ -131,8 +131,13 @@ def read_ulog(path: Path) -> ImuLog:
     except ImportError:
         raise ConfigError("reading ULog files needs pyulog: pip install 'skeye[logs]'") from None
     try:
-        ulog = ULog(str(path), ["sensor_combined", "vehicle_local_position_groundtruth",
-                                "vehicle_attitude_groundtruth"])
+        # The file is opened here, not by pyulog: given a name, it leaves the file open when
+        # the parse fails.
+        with open(path, "rb") as f:
+            ulog = ULog(f, ["sensor_combined", "vehicle_local_position_groundtruth",
+                            "vehicle_attitude_groundtruth"])
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # pyulog raises bare exceptions on a damaged file
         raise ConfigError(f"{path}: not a readable ULog file: {exc}") from None
     topics = {d.name: d.data for d in ulog.data_list}

@@ -7,9 +7,11 @@ ships with skeye): what goes in is known, so each figure has an expected value.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +85,18 @@ def test_the_replay_is_judged_against_the_log_truth(flight: make_logs.Synthetic,
     wrong = dataclasses.replace(log.truth, quat_wxyz=quat)
     replay = replay_tilt(log.t_s, log.gyro_rad_s, log.accel_m_s2, wrong)
     assert replay["tilt_rms_deg"] == pytest.approx(10.0, abs=1.5)
+
+
+def test_a_damaged_ulog_leaves_no_file_open(tmp_path: Path) -> None:
+    """pyulog, given a file name, does not close the file when its parse fails (Python closes
+    it later, warning "unclosed file"); the reader opens and closes the file itself."""
+    (tmp_path / "junk.ulg").write_bytes(b"not a ulog at all")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ResourceWarning)
+        with pytest.raises(ConfigError, match=r"junk\.ulg"):
+            read_log(tmp_path / "junk.ulg")
+        gc.collect()
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)], caught
 
 
 def test_bad_logs_are_named(tmp_path: Path) -> None:
