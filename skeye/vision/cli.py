@@ -25,10 +25,13 @@ from skeye.vision.pad import SKEYE_4, resolve_pad
 from skeye.vision.printable import DEFAULT_DPI, write_printable
 
 EXIT_BAD_INPUT = 2
+PAD = "skeye pad"
+DETECT = "skeye vision detect"
 
 
-def _fail(message: str) -> int:
-    print(f"skeye: error: {message}", file=sys.stderr)
+def _fail(command: str, message: str) -> int:
+    """Say ``message`` as ``command``'s error on stderr (as every sub-command does)."""
+    print(f"{command}: error: {message}", file=sys.stderr)
     return EXIT_BAD_INPUT
 
 
@@ -38,9 +41,9 @@ def cmd_pad(args: argparse.Namespace) -> int:
         pad = resolve_pad(args.pad)
         out = write_printable(pad, args.out, dpi=args.dpi, paper=args.paper)
     except (ConfigError, LocalProtocolError) as exc:
-        return _fail(str(exc))
+        return _fail(PAD, str(exc))
     except OSError as exc:
-        return _fail(f"cannot write {args.out}: {exc.strerror or exc}")
+        return _fail(PAD, f"cannot write {args.out}: {exc.strerror or exc}")
     if args.paper is None:
         print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
     else:
@@ -63,7 +66,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
         try:
             calibration = load_calibration(args.calibration)
         except ConfigError as exc:
-            return _fail(str(exc))
+            return _fail(DETECT, str(exc))
         if args.fov is None:  # not used for the geometry: the calibration's matrix is
             args.fov = calibration.fov_h_rad
     if args.fov is None:  # the camera the frame most likely came from: the robot file's
@@ -72,31 +75,31 @@ def cmd_detect(args: argparse.Namespace) -> int:
         try:
             model = camera_model(args.robot, args.camera)
         except ConfigError as exc:
-            return _fail(f"{exc}; give --fov")
+            return _fail(DETECT, f"{exc}; give --fov")
         args.fov = model.fov_h_rad
         lens = (f"; its lens distorts (k1 {model.k1:g}): give --calibration for exact figures"
                 if model.distorted else "")
-        print(f"skeye vision detect: --fov not given: using {args.fov:g} rad, the horizontal "
+        print(f"{DETECT}: --fov not given: using {args.fov:g} rad, the horizontal "
               f"field of view of robot {args.robot}'s camera ({model.profile} profile){lens}",
               file=sys.stderr)
     if not math.isfinite(args.fov) or not 0.0 < args.fov < math.pi:
-        return _fail(f"--fov must be in (0, pi) radians, got {args.fov}")
+        return _fail(DETECT, f"--fov must be in (0, pi) radians, got {args.fov}")
     if (args.roll is None) != (args.pitch is None):
-        return _fail("give both --roll and --pitch, or neither")
+        return _fail(DETECT, "give both --roll and --pitch, or neither")
     try:
         pad = resolve_pad(args.pad)
     except ConfigError as exc:
-        return _fail(str(exc))
+        return _fail(DETECT, str(exc))
     if not os.path.isfile(args.image):
-        return _fail(f"no such image file: {args.image}")
+        return _fail(DETECT, f"no such image file: {args.image}")
     image = cv2.imread(args.image, cv2.IMREAD_GRAYSCALE)
     if image is None:
-        return _fail(f"cannot read image (not a supported image format?): {args.image}")
+        return _fail(DETECT, f"cannot read image (not a supported image format?): {args.image}")
     try:
         est = detect(image, args.fov, pad=pad, roll_rad=args.roll, pitch_rad=args.pitch,
                      calibration=calibration)
     except LocalProtocolError as exc:
-        return _fail(str(exc))
+        return _fail(DETECT, str(exc))
     out: dict[str, Any] = est.to_json_dict()
     print(json.dumps(out))
     return 0

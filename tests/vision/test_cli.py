@@ -172,3 +172,29 @@ def test_detect_takes_a_calibration_file(tmp_path, capsys):
     (tmp_path / "bad.toml").write_text("[camera]\nfx_px = 3\n")
     assert run(["vision", "detect", str(path), "--calibration", str(tmp_path / "bad.toml")]) == 2
     assert "missing required key" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv,command,match",
+    [
+        (["pad", "--out", "pad.jpg"], "skeye pad", ".pdf or .png"),
+        (["pad", "--out", "pad.pdf", "--pad", "nope"], "skeye pad", "unknown pad"),
+        (["vision", "detect", "{png}", "--fov", "4.0"], "skeye vision detect",
+         "--fov must be in (0, pi) radians, got 4.0"),
+        (["vision", "detect", "{png}", "--fov", "1.3", "--roll", "0.1"], "skeye vision detect",
+         "give both --roll and --pitch"),
+        (["vision", "detect", "none.png", "--fov", "1.3"], "skeye vision detect",
+         "no such image file: none.png"),
+    ],
+)
+def test_errors_name_the_sub_command(pad_png, tmp_path, monkeypatch, capsys, argv, command,
+                                     match):
+    """`skeye pad` and `skeye vision detect` said `skeye: error: ...`, naming no command, where
+    every other sub-command says `skeye COMMAND: error: ...`."""
+    from skeye.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main([a.format(png=pad_png) for a in argv]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith(f"{command}: error: ") and match in captured.err
