@@ -10,7 +10,8 @@ ended (``lost``; the pad modes hold still), unless ``loop=1`` starts it again.
 URI: ``file://video.mp4`` (relative to the working directory), ``file:///abs/video.mkv``;
 options ``fps=`` (when the file's own rate is missing or wrong), ``loop=1``, ``fov_deg=`` /
 ``fov_rad=``. A lossless recording (FFV1 in MKV or AVI) gives the detector the very pixels
-that were recorded; a lossy one (MP4) close ones.
+that were recorded; a lossy one (MP4) close ones. A photo (JPEG, PNG) plays as a one-frame
+video; one cut short is refused when the camera opens (:mod:`skeye.image_files`).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import LocalProtocolError
+from skeye.image_files import file_damage
 from skeye.pilot.camera import (
     CameraError,
     CameraImage,
@@ -76,6 +78,12 @@ class FileCamera:
         self.options = options
         self.loop = loop
         self.fov_h_rad = fov_h_rad if fov_h_rad is not None else options.fov_h_rad
+        try:  # a photo plays as a one-frame video; OpenCV would half decode a cut-off one
+            problem = file_damage(path)
+        except OSError:
+            problem = None  # VideoCapture says what is wrong with the file
+        if problem is not None:
+            raise CameraError(f"camera {uri}: {path} is truncated or corrupt: {problem}")
         self._cap = cv2.VideoCapture(str(path))
         if not self._cap.isOpened():
             raise CameraError(f"camera {uri}: cannot open {path} as a video "

@@ -26,6 +26,7 @@ import numpy as np
 
 from skeye.control.motion import MotionConfig
 from skeye.errors import SkeyeError
+from skeye.image_files import read_image_file
 from skeye.processes import scaled_s, start_skeye, stop_process
 from skeye.vision.calibration import Board, CalibrationResult, calibrate
 
@@ -158,9 +159,7 @@ def calibrate_simulated_camera(workdir: Path, camera_profile: str, seed: int = 1
         path = workdir / f"board{i:02d}.png"
         cv2.imwrite(str(path), bgr)
         # read back as `skeye calibrate` reads it, so both give the same calibration
-        grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if grey is None:
-            raise SkeyeError(f"cannot read back {path}")
+        grey = read_image_file(path, cv2.IMREAD_GRAYSCALE)
         images.append((str(path), grey))
     result = calibrate(images, BOARD)
     out = workdir / "camera.toml"

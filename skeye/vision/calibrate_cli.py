@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from typing import Any
 
 import cv2
 
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
+from skeye.image_files import read_image_file
 from skeye.vision.calibration import DIST_NAMES, Board, calibrate, check_lens, parse_board
 
 EXIT_BAD_INPUT = 2
@@ -43,11 +43,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return _fail(f"--out must name a .toml file, got {args.out}")
     images = []
     for name in args.images:
-        if not os.path.isfile(name):
-            return _fail(f"no such image file: {name}")
-        grey = cv2.imread(name, cv2.IMREAD_GRAYSCALE)
-        if grey is None:
-            return _fail(f"cannot read image (not a supported image format?): {name}")
+        try:
+            grey = read_image_file(name, cv2.IMREAD_GRAYSCALE)
+        except ConfigError as exc:
+            return _fail(str(exc))
         images.append((name, grey))
     try:
         result = calibrate(images, board)

@@ -13,13 +13,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from typing import Any
 
 import cv2
 
 from skeye.errors import ConfigError, LocalProtocolError
+from skeye.image_files import read_image_file
 from skeye.vision.detector import detect
 from skeye.vision.pad import SKEYE_4, resolve_pad
 from skeye.vision.printable import DEFAULT_DPI, write_printable
@@ -90,15 +90,11 @@ def cmd_detect(args: argparse.Namespace) -> int:
         pad = resolve_pad(args.pad)
     except ConfigError as exc:
         return _fail(DETECT, str(exc))
-    if not os.path.isfile(args.image):
-        return _fail(DETECT, f"no such image file: {args.image}")
-    image = cv2.imread(args.image, cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        return _fail(DETECT, f"cannot read image (not a supported image format?): {args.image}")
     try:
+        image = read_image_file(args.image, cv2.IMREAD_GRAYSCALE)
         est = detect(image, args.fov, pad=pad, roll_rad=args.roll, pitch_rad=args.pitch,
                      calibration=calibration)
-    except LocalProtocolError as exc:
+    except (ConfigError, LocalProtocolError) as exc:
         return _fail(DETECT, str(exc))
     out: dict[str, Any] = est.to_json_dict()
     print(json.dumps(out))

@@ -212,6 +212,27 @@ def test_a_file_that_is_no_video_is_refused_when_opened(tmp_path):
         open_camera(f"file://{fake}", CameraOptions(clock=FakeClock()))
 
 
+def test_a_photo_plays_as_one_frame_and_a_truncated_one_is_refused(tmp_path):
+    """A photo given as the file camera plays as a one-frame video; the first 60 % of a JPEG
+    played too (FFmpeg decodes what is there and paints the rest grey)."""
+    picture = np.zeros((48, 64, 3), np.uint8)
+    picture[:, 32:] = 200
+    for ext in (".jpg", ".png"):
+        whole = cv2.imencode(ext, picture)[1].tobytes()
+        padded = tmp_path / f"padded{ext}"  # some cameras pad after the image's end
+        padded.write_bytes(whole + b"\x00" * 64)
+        source = open_camera(f"file://{padded}?fps=10", CameraOptions(clock=FakeClock()))
+        try:
+            assert source.image().bgr.shape == picture.shape
+        finally:
+            source.close()
+        cut = tmp_path / f"cut{ext}"
+        cut.write_bytes(whole[: len(whole) * 6 // 10])
+        with pytest.raises(CameraError, match=rf"^camera file://{cut}: {cut} is truncated or "
+                           "corrupt: the (JPEG|PNG) data ends before"):
+            open_camera(f"file://{cut}", CameraOptions(clock=FakeClock()))
+
+
 def test_v4l2_settings_from_the_uri():
     s = parse_v4l2_uri("v4l2:///dev/video0?width=800&height=600&fps=30&fourcc=mjpg&exposure=80"
                        "&gain=10&buffers=2&fov_deg=75")

@@ -187,6 +187,23 @@ def test_calibrate_refuses_bad_input(ideal_frames: list[np.ndarray], tmp_path: P
     assert not Path(out).exists()
 
 
+def test_calibrate_refuses_a_truncated_image_naming_it(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A JPEG cut short decoded (libjpeg only warned, painting the rest grey) and was searched
+    for the board as a whole frame; it is refused, naming the file, and nothing is written."""
+    rng = np.random.default_rng(3)
+    whole = cv2.imencode(".jpg", rng.integers(0, 256, (120, 160), dtype=np.uint8))[1].tobytes()
+    good, cut = tmp_path / "good.jpg", tmp_path / "cut.jpg"
+    good.write_bytes(whole + b"\xff" * 16)  # padded after its end: whole
+    cut.write_bytes(whole[: len(whole) * 6 // 10])
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", str(good), str(cut), "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        f"skeye calibrate: error: image {cut} is truncated or corrupt: the JPEG data ends "
+        "before its end-of-image marker (FF D9)\n")
+    assert not out.exists()
+
+
 def test_calibrate_does_not_write_a_lens_the_loader_refuses(
         ideal_frames: list[np.ndarray], tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -198,3 +198,27 @@ def test_errors_name_the_sub_command(pad_png, tmp_path, monkeypatch, capsys, arg
     captured = capsys.readouterr()
     assert captured.out == ""
     assert captured.err.startswith(f"{command}: error: ") and match in captured.err
+
+
+def test_detect_refuses_a_truncated_jpeg_and_takes_a_padded_one(pad_png, tmp_path, capsys):
+    """The first 60 % of a JPEG decoded (libjpeg only warned on stderr, painting the rest
+    grey), and the pad was searched for in it as in a whole frame."""
+    whole = cv2.imencode(".jpg", cv2.imread(str(pad_png)))[1].tobytes()
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(whole[: len(whole) * 6 // 10])
+    assert run(["vision", "detect", str(cut), "--fov", "1.309"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == (f"skeye vision detect: error: image {cut} is truncated or corrupt: "
+                            "the JPEG data ends before its end-of-image marker (FF D9)\n")
+    padded = tmp_path / "padded.jpg"  # some cameras pad after the end-of-image marker
+    padded.write_bytes(whole + b"\x00" * 256)
+    assert run(["vision", "detect", str(padded), "--fov", "1.309", "--roll", "0.1",
+                "--pitch", "-0.12"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["found"] is True and out["height_m"] == pytest.approx(1.2, rel=0.01)
+    png = pad_png.read_bytes()
+    cut.write_bytes(png[: len(png) * 6 // 10])
+    assert run(["vision", "detect", str(cut), "--fov", "1.309"]) == 2
+    assert ("truncated or corrupt: the PNG data ends before its IEND chunk"
+            in capsys.readouterr().err)

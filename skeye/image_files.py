@@ -1,0 +1,136 @@
+"""Still images read from files, with a JPEG or PNG cut short refused instead of half decoded.
+
+How this works: OpenCV decodes a truncated JPEG without failing: libjpeg warns "Premature end
+of JPEG file" on stderr and fills the missing rows with grey, so a half-copied frame would be
+calibrated on or searched for the pad as if it were whole. :func:`read_image_file` therefore
+first walks the file's structure (:func:`damage`): a JPEG's marker segments and entropy-coded
+scans up to its end-of-image marker (FF D9), a PNG's chunks up to IEND. Bytes after that end
+are allowed (some cameras pad their files). A file of another format goes to OpenCV as it is.
+Every command and tool that reads a still image from a file (``skeye vision detect``, ``skeye
+calibrate``, the ``file://`` camera given a photo) goes through here, so they agree.
+"""
+
+from __future__ import annotations
+
+import mmap
+import struct
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from skeye.errors import ConfigError
+
+JPEG_SOI = b"\xff\xd8"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_CHUNK = struct.Struct(">I4s")  # length, type; then the data and a 4-byte CRC
+_Bytes = bytes | mmap.mmap  # a file's bytes, or the file mapped into memory
+
+
+def _jpeg_damage(data: _Bytes) -> str | None:
+    """What is wrong with a JPEG (which starts with SOI), or None when it reaches its EOI."""
+    n = len(data)
+    cut = "the JPEG data ends before its end-of-image marker (FF D9)"
+    i = len(JPEG_SOI)
+    while True:
+        if i >= n:
+            return cut
+        if data[i] != 0xFF:
+            return f"the JPEG data has no marker where one belongs (byte {i})"
+        while i < n and data[i] == 0xFF:  # fill bytes before a marker
+            i += 1
+        if i >= n:
+            return cut
+        marker = data[i]
+        i += 1
+        if marker == 0xD9:  # EOI: whole; anything after it is padding
+            return None
+        if marker == 0x01 or 0xD0 <= marker <= 0xD7:  # TEM, RSTn: no length
+            continue
+        if i + 2 > n:
+            return cut
+        length = (data[i] << 8) | data[i + 1]
+        if length < 2:
+            return f"the JPEG data has a segment of impossible length {length} (byte {i})"
+        i += length
+        if i > n:
+            return cut
+        if marker != 0xDA:  # not SOS: the next marker follows the segment
+            continue
+        while True:  # the entropy-coded scan: up to the first FF that is not data or RSTn
+            j = data.find(b"\xff", i)
+            if j < 0 or j + 1 >= n:
+                return cut
+            following = data[j + 1]
+            if following == 0x00 or 0xD0 <= following <= 0xD7:
+                i = j + 2
+            elif following == 0xFF:
+                i = j + 1
+            else:
+                i = j
+                break
+
+
+def _png_damage(data: _Bytes) -> str | None:
+    """What is wrong with a PNG (which starts with its signature), or None when it reaches
+    its IEND chunk."""
+    n = len(data)
+    i = len(PNG_SIGNATURE)
+    while True:
+        if i + _PNG_CHUNK.size > n:
+            return "the PNG data ends before its IEND chunk"
+        length, kind = _PNG_CHUNK.unpack(data[i : i + _PNG_CHUNK.size])
+        i += _PNG_CHUNK.size + length + 4
+        if i > n:
+            return "the PNG data ends before its IEND chunk"
+        if kind == b"IEND":
+            return None
+
+
+def damage(data: _Bytes) -> str | None:
+    """Why a JPEG or PNG file's bytes are cut short or malformed, or None when they are whole
+    (or of another format, which this does not judge). Bytes after the image's end are
+    allowed."""
+    if data[: len(JPEG_SOI)] == JPEG_SOI:
+        return _jpeg_damage(data)
+    if data[: len(PNG_SIGNATURE)] == PNG_SIGNATURE:
+        return _png_damage(data)
+    return None
+
+
+def file_damage(path: str | Path) -> str | None:
+    """:func:`damage` of a file, read through a memory map (a long MJPEG stream is walked only
+    up to its first frame's end); None for what is not a regular file. OSError if the file
+    cannot be opened."""
+    if not Path(path).is_file():  # a FIFO or a device: not read here (opening may block)
+        return None
+    with open(path, "rb") as f:
+        if f.seek(0, 2) == 0:
+            return None
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as view:
+            return damage(view)
+
+
+def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarray:
+    """The pixels of an image file (any format OpenCV reads), decoded with ``flags``
+    (``cv2.IMREAD_GRAYSCALE``: one channel).
+
+    Raises:
+        ConfigError: naming the file: missing, unreadable, truncated or corrupt, or not an image.
+    """
+    if not Path(path).is_file():  # missing, a directory, or a FIFO (reading it may block)
+        raise ConfigError(f"no such image file: {path}")
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"cannot read image file {path}: {exc.strerror or exc}") from None
+    problem = damage(data)
+    if problem is not None:
+        raise ConfigError(f"image {path} is truncated or corrupt: {problem}")
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    if image is None:
+        if data.startswith((JPEG_SOI, PNG_SIGNATURE)):
+            kind = "JPEG" if data.startswith(JPEG_SOI) else "PNG"
+            raise ConfigError(f"image {path} is corrupt: its {kind} data does not decode")
+        raise ConfigError(f"cannot read image (not a supported image format?): {path}")
+    return image

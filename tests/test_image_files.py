@@ -1,0 +1,101 @@
+"""Still image files (skeye.image_files): a JPEG or PNG cut short is refused, naming the file;
+a whole one, with or without bytes after its end, decodes as OpenCV's own reader decodes it.
+
+OpenCV decodes the first 60 % of a JPEG without failing (libjpeg only warns "Premature end of
+JPEG file" on stderr and paints the rest grey), so ``skeye vision detect`` and ``skeye
+calibrate`` used to work on such a frame as if it were whole.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from skeye.errors import ConfigError
+from skeye.image_files import damage, file_damage, read_image_file
+
+
+def _picture() -> np.ndarray:
+    """A 240x320 colour picture with detail everywhere (so every part of the file matters)."""
+    rng = np.random.default_rng(7)
+    y, x = np.mgrid[0:240, 0:320]
+    base = np.stack([x * 255 // 319, y * 255 // 239, (x + y) % 256], axis=-1)
+    return np.clip(base + rng.integers(-40, 40, base.shape), 0, 255).astype(np.uint8)
+
+
+ENCODINGS = {
+    "baseline.jpg": (".jpg", []),
+    "progressive.jpg": (".jpg", [cv2.IMWRITE_JPEG_PROGRESSIVE, 1]),
+    "restart.jpg": (".jpg", [cv2.IMWRITE_JPEG_RST_INTERVAL, 2]),
+    "best.jpg": (".jpg", [cv2.IMWRITE_JPEG_QUALITY, 100]),
+    "picture.png": (".png", []),
+}
+PADDING = [b"\x00" * 512, b"\xff" * 7, b"trailing camera data\n"]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
+    picture = _picture()
+    return {name: cv2.imencode(ext, picture, params)[1].tobytes()
+            for name, (ext, params) in ENCODINGS.items()}
+
+
+@pytest.mark.parametrize("name", ENCODINGS)
+@pytest.mark.parametrize("keep", [0.6, 0.05, 0.95, -1, -2])
+def test_a_file_cut_short_is_refused_naming_it(files: dict[str, bytes], tmp_path: Path,
+                                               name: str, keep: float) -> None:
+    data = files[name]
+    cut = data[: int(len(data) * keep)] if keep > 0 else data[:keep]
+    path = tmp_path / name
+    path.write_bytes(cut)
+    kind = "JPEG" if name.endswith(".jpg") else "PNG"
+    with pytest.raises(ConfigError, match=rf"^image {path} is truncated or corrupt: the {kind} "
+                       "data ends before its (end-of-image marker|IEND chunk)"):
+        read_image_file(path, cv2.IMREAD_GRAYSCALE)
+    assert file_damage(path) == damage(cut) is not None
+
+
+@pytest.mark.parametrize("name", ENCODINGS)
+@pytest.mark.parametrize("padding", [b"", *PADDING])
+def test_a_whole_file_decodes_as_opencv_reads_it_padding_or_not(
+        files: dict[str, bytes], tmp_path: Path, name: str, padding: bytes) -> None:
+    """Some cameras pad their JPEGs after the end-of-image marker: those are whole."""
+    whole = tmp_path / f"whole-{name}"
+    whole.write_bytes(files[name])
+    padded = tmp_path / name
+    padded.write_bytes(files[name] + padding)
+    assert damage(files[name] + padding) is None and file_damage(padded) is None
+    for flags in (cv2.IMREAD_COLOR, cv2.IMREAD_GRAYSCALE):
+        assert np.array_equal(read_image_file(padded, flags), cv2.imread(str(whole), flags))
+
+
+def test_what_is_not_a_whole_image_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=f"^no such image file: {tmp_path / 'none.png'}$"):
+        read_image_file(tmp_path / "none.png")
+    with pytest.raises(ConfigError, match=f"^no such image file: {tmp_path}$"):
+        read_image_file(tmp_path)  # a directory
+    for name, data in [("empty.png", b""), ("notes.png", b"not an image\n")]:
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ConfigError, match=r"cannot read image \(not a supported image "
+                           rf"format\?\): {tmp_path / name}$"):
+            read_image_file(tmp_path / name)
+        assert file_damage(tmp_path / name) is None  # another format: OpenCV's to judge
+    # Whole in structure, but its scan data is no JPEG: OpenCV's decoder says no.
+    bad = tmp_path / "bad.jpg"
+    bad.write_bytes(b"\xff\xd8\xff\xda\x00\x02\x00\x00\xff\xd9")
+    with pytest.raises(ConfigError, match=f"^image {bad} is corrupt: its JPEG data does not"):
+        read_image_file(bad)
+
+
+def test_a_long_stream_of_jpegs_is_judged_by_its_first(files: dict[str, bytes],
+                                                       tmp_path: Path) -> None:
+    """A raw MJPEG stream (JPEGs end to end) is read through a memory map up to its first
+    frame's end: the file camera's check does not read a whole video."""
+    stream = tmp_path / "stream.mjpeg"
+    stream.write_bytes(files["baseline.jpg"] * 3 + files["baseline.jpg"][:100])
+    assert file_damage(stream) is None
+    stream.write_bytes(files["baseline.jpg"][:-10])
+    assert file_damage(stream) is not None
