@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 from skeye.errors import InvalidArgument
 
@@ -18,6 +19,10 @@ WGS84_E2 = 6.69437999014e-3
 LOWEST_LAND_AMSL_M = -430.0
 """The lowest dry land on Earth, the Dead Sea shore, about 430 m below sea level: no world's
 origin and no flight target lies below it."""
+MAX_POSITION_M: Final = 1.0e5
+"""The farthest a position coordinate (north, east or down) lies from a world's origin: 100 km.
+The simulator stops a robot beyond it as diverged (:func:`skeye.sim.robot.check_state`), so
+no recording of its holds one; no small UAV's flight comes near it."""
 
 
 @dataclass(frozen=True)

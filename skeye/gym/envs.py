@@ -29,6 +29,7 @@ import numpy as np
 from gymnasium import spaces
 
 from skeye.errors import ConfigError
+from skeye.geo import MAX_POSITION_M
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
 from skeye.gym.tasks import PAD_TOLERANCE_M, Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import (
@@ -38,7 +39,6 @@ from skeye.pilot.policy import (
     velocity_setpoint,
 )
 from skeye.robots.config import RobotConfig
-from skeye.sim.robot import MAX_POSITION_M
 from skeye.values import number, numbers
 
 ACTIONS = ("velocity", "attitude")

@@ -28,11 +28,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
 from skeye.errors import ConfigError, InvalidArgument
+from skeye.geo import MAX_POSITION_M
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
 from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import action_values
-from skeye.sim.robot import MAX_POSITION_M
 from skeye.values import number
 
 DEFAULT_SPACING_M = 10.0

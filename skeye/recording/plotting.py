@@ -7,6 +7,11 @@ the tracks into figures; :func:`plot_recording` draws three panels with matplotl
 (no display needed): the trajectory seen from above (north up, east right), altitude above the
 world origin over sim time, and battery time left over sim time while flying (on the ground the
 estimate, charge over the idle current, reaches hours: those samples are left out).
+
+A line whose numbers are not numbers, or whose ``Location`` lies beyond the simulator's limit
+(:data:`skeye.geo.MAX_POSITION_M`, 100 km from the origin: the simulator stops a robot there,
+so no recording of it holds one), is counted with the bad lines and skipped; the summary says
+how many were too far. Every figure and axis is then finite.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from skeye.errors import ConfigError, RemoteProtocolError
+from skeye.geo import MAX_POSITION_M
 from skeye.recording.records import (
     CONNECTED,
     NOTE,
@@ -66,13 +72,15 @@ class RecordingSummary:
     bad_lines: int
     truncated: bool
     robots: dict[str, dict[str, float | int | str]]
+    far_positions: int = 0  # of the bad lines: a Location beyond MAX_POSITION_M
 
     def text(self) -> str:
         lines = [
             f"{self.path}: {self.records} records, {self.connections} connection(s), "
             f"sim {self.sim_duration_s:.2f} s over wall {self.wall_duration_s:.2f} s",
             f"  lines sent {self.lines_sent}, received {self.lines_received}, "
-            f"bad {self.bad_lines}{', last line cut off' if self.truncated else ''}",
+            f"bad {self.bad_lines}{self._far_text()}"
+            f"{', last line cut off' if self.truncated else ''}",
         ]
         for name, r in self.robots.items():
             lines.append(
@@ -82,6 +90,12 @@ class RecordingSummary:
             )
         lines.extend(f"  note: {n}" for n in self.notes)
         return "\n".join(lines)
+
+    def _far_text(self) -> str:
+        if not self.far_positions:
+            return ""
+        return (f" ({self.far_positions} with a Location beyond {MAX_POSITION_M:g} m of the "
+                "origin, the simulator's limit: skipped)")
 
 
 def _vector(msg: Any, key: str) -> tuple[float, float, float] | None:
@@ -104,6 +118,7 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
     notes: list[str] = []
     records = 0
     bad_values = 0
+    far_positions = 0
     for rec in reader.records():
         records += 1
         if records == 1:
@@ -130,6 +145,9 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
             _values(msg)
         except RemoteProtocolError:
             bad_values += 1  # a line whose values are not numbers: counted with the bad lines
+            continue
+        if _beyond_limit(msg):  # never recorded by the simulator: a bad line, said as such
+            far_positions += 1
             continue
         if rec.direction == TRUTH:
             truth_name = msg.get("Name") or "?"
@@ -176,18 +194,29 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
         lines_sent=counts[SENT],
         lines_received=counts[RECEIVED],
         notes=notes,
-        bad_lines=reader.bad_lines + bad_values,
+        bad_lines=reader.bad_lines + bad_values + far_positions,
         truncated=reader.truncated,
+        far_positions=far_positions,
     )
     return tracks, summary
 
 
 def _values(msg: Any) -> None:
     """The numbers a track takes from ``msg`` are numbers (RemoteProtocolError names one that
-    is not), so a bad line is counted and skipped instead of ending the plot."""
+    is not; a Location must be three), so a bad line is counted and skipped instead of ending
+    the plot."""
     for key in ("Battery", "Time"):
         if msg.get(key):
             msg.get_float(key)
+    if msg.get("Location"):
+        msg.get_vector("Location", 3)
+
+
+def _beyond_limit(msg: Any) -> bool:
+    """Whether ``msg``'s Location (checked by :func:`_values`) lies beyond the simulator's
+    limit: near 1e308 m its distances summed to inf and matplotlib's ticks raised OverflowError."""
+    location = msg.get("Location")
+    return bool(location) and max(map(abs, msg.get_vector("Location", 3))) > MAX_POSITION_M
 
 
 def _landed(msg: Any) -> bool:

@@ -34,13 +34,13 @@ import mujoco
 import numpy as np
 
 from skeye.errors import LocalProtocolError, PhysicsError
+from skeye.geo import MAX_POSITION_M
 from skeye.robots.config import RobotConfig, load_robot_config
 from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim import frames
 from skeye.sim.raycast import ROBOT_GEOM_GROUP, RayCaster
 from skeye.sim.readings import Event, ReadingSink, RobotCrashed, RobotStopped, SensorSample
 from skeye.sim.robot import (
-    MAX_POSITION_M,
     MAX_RATE_RAD_S,
     MAX_SPEED_M_S,
     Robot,

@@ -25,6 +25,7 @@ from typing import Any, Final
 import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, PhysicsError
+from skeye.geo import MAX_POSITION_M
 from skeye.robots.config import CAMERA_TYPE, MOTORS_TYPE, RobotConfig, SensorMount
 from skeye.robots.params import ESTIMATOR_KINDS, AirframeParams
 from skeye.sim.cameras import CameraSpec
@@ -595,11 +596,11 @@ class Robot:
         ]
 
 
-MAX_POSITION_M: Final = 1.0e5
-"""The runaway limits :func:`check_state` stops a robot at: a position coordinate beyond
-100 km from the world's origin, a speed over 150 m/s (540 km/h), a rotation rate over 200 rad/s
-(32 turns a second); no small UAV's flight comes near them, a diverged simulation passes them."""
 MAX_SPEED_M_S: Final = 150.0
+"""The runaway limits :func:`check_state` stops a robot at: a position coordinate beyond
+:data:`skeye.geo.MAX_POSITION_M` (100 km) from the world's origin, a speed over 150 m/s
+(540 km/h), a rotation rate over 200 rad/s (32 turns a second); no small UAV's flight comes
+near them, a diverged simulation passes them."""
 MAX_RATE_RAD_S: Final = 200.0
 
 

@@ -434,3 +434,32 @@ def test_plot_counts_a_line_whose_values_are_not_numbers_and_draws_the_rest(
     assert tracks["R1"].battery_s == [100.0, 99.0, 98.0]
     assert main(["plot", str(path), "--out", str(tmp_path / "p.png")]) == 0
     assert "bad 2" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("far", ["1e308,1e308,-1", "1e308,0,-1", "0,0,-1e308", "100000.5,0,-1"])
+def test_plot_skips_a_location_beyond_the_simulators_limit_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], far: str
+) -> None:
+    """A Location near 1e308 m summed to "inf m flown", and with two large coordinates
+    matplotlib's tick locator raised OverflowError (a traceback). The simulator stops a robot
+    beyond MAX_POSITION_M (100 km), so such a line is counted with the bad lines, skipped, and
+    the summary says why; the coordinate is checked in each track (TRUTH and SEN)."""
+    init = Record(1.0, 0.0, 1, SENT, "RES {Command INIT} {Name R1} {Status OK}")
+    lines = [init]
+    for i, location in enumerate(["0,0,-1", far, "3,4,-1"]):
+        t = 0.05 * i
+        lines.append(Record(1.0 + t, t, 0, TRUTH, f"TRUTH {{Name R1}} {{Time {t}}} "
+                            f"{{Location {location}}} {{Battery 100}} {{Landed false}}"))
+        lines.append(Record(1.0 + t, t, 1, SENT, f"SEN {{Time {t}}} {{Type GroundTruth}} "
+                            f"{{Location {location}}}"))
+    path = tmp_path / "far.rec"
+    path.write_bytes(format_header({}) + b"".join(format_record(r) for r in lines))
+    tracks, summary = load_tracks(path)
+    assert summary.bad_lines == summary.far_positions == 2
+    assert tracks["R1"].pos_ned_m == [(0.0, 0.0, -1.0), (3.0, 4.0, -1.0)]
+    assert summary.robots["R1"]["distance_m"] == 5.0
+    assert main(["plot", str(path), "--out", str(tmp_path / "p.png")]) == 0
+    out = capsys.readouterr().out
+    assert ("bad 2 (2 with a Location beyond 100000 m of the origin, the simulator's limit: "
+            "skipped)") in out
+    assert "R1: 2 samples, 5.00 m flown, altitude 1.00..1.00 m" in out
