@@ -22,7 +22,7 @@ origin and no flight target lies below it."""
 MAX_POSITION_M: Final = 1.0e5
 """The farthest a position coordinate (north, east or down) lies from a world's origin: 100 km.
 The simulator stops a robot beyond it as diverged (:func:`skeye.sim.robot.check_state`), so
-no recording of its holds one; no small UAV's flight comes near it."""
+no recording of it holds one; no small UAV's flight comes near it."""
 
 
 @dataclass(frozen=True)

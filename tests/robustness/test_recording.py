@@ -463,3 +463,14 @@ def test_plot_skips_a_location_beyond_the_simulators_limit_and_says_so(
     assert ("bad 2 (2 with a Location beyond 100000 m of the origin, the simulator's limit: "
             "skipped)") in out
     assert "R1: 2 samples, 5.00 m flown, altitude 1.00..1.00 m" in out
+
+
+def test_plot_counts_a_location_that_is_not_three_numbers(tmp_path: Path) -> None:
+    """Such a sample was dropped without a word; it is a bad line as a Battery abc is."""
+    lines = [Record(1.0 + 0.05 * i, 0.05 * i, 0, TRUTH, f"TRUTH {{Name R1}} {{Location {loc}}}")
+             for i, loc in enumerate(["0,0,-1", "1,2", "0,abc,-1", "0,0,-2"])]
+    path = tmp_path / "odd.rec"
+    path.write_bytes(format_header({}) + b"".join(format_record(r) for r in lines))
+    tracks, summary = load_tracks(path)
+    assert (summary.bad_lines, summary.far_positions) == (2, 0)
+    assert tracks["R1"].pos_ned_m == [(0.0, 0.0, -1.0), (0.0, 0.0, -2.0)]
