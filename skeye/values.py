@@ -23,8 +23,14 @@ def is_number(value: Any) -> bool:
 
 
 def is_finite_number(value: Any) -> bool:
-    """A real number (as :func:`is_number`) that is neither infinite nor NaN."""
-    return is_number(value) and math.isfinite(value)
+    """A real number (as :func:`is_number`) that is neither infinite nor NaN, and that a float
+    holds (an int beyond float's range, 10**400, is not: ``float()`` of it overflows)."""
+    if not is_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def number(name: str, value: Any) -> float:

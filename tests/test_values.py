@@ -21,8 +21,10 @@ def test_bools_strings_and_others_are_not(value: object) -> None:
     assert not is_number(value)
 
 
-@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan, np.float64("nan"), True])
-def test_finite_number_refuses_infinities_nan_and_bools(value: object) -> None:
+@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan, np.float64("nan"), True,
+                                   pytest.param(10**400, id="10**400"),
+                                   pytest.param(-(10**400), id="-10**400")])
+def test_finite_number_refuses_infinities_nan_bools_and_ints_beyond_floats(value: object) -> None:
     assert not is_finite_number(value)
     with pytest.raises(ConfigError, match=r"^x must be a finite number, got "):
         number("x", value)
