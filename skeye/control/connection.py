@@ -34,6 +34,7 @@ from typing import Any
 from skeye.control.image_client import ImageClient
 from skeye.errors import (
     CommandRejected,
+    InvalidArgument,
     LinkClosed,
     LinkTimeout,
     LocalProtocolError,
@@ -58,6 +59,10 @@ DEFAULT_PORT = 3000
 DEFAULT_IMAGE_PORT = 5003
 _STOP = b""
 _RECV_WAIT_S = 1.0  # the reader's longest wait in one recv (a closed link wakes it at once)
+MAX_RUN_FOR_S = 86_400.0
+"""The most sim time one ``run_for`` lets pass: a day, far beyond what the robot files'
+batteries (2100 and 4000 mAh) fly; a longer run is several calls. Without a bound a finite
+but huge value (1e300 s) would step for ever."""
 
 
 @dataclass(frozen=True)
@@ -487,10 +492,15 @@ class Connection:
         return self.time_s
 
     def run_for(self, seconds: float) -> float:
-        """Let ``seconds`` of sim time pass (lockstep: step; realtime: wait); the sim time."""
-        if not (is_finite_number(seconds) and seconds >= 0):
-            raise LocalProtocolError(f"run_for: seconds must be a finite number >= 0, got "
-                                     f"{seconds!r}")
+        """Let ``seconds`` of sim time pass (lockstep: step; realtime: wait); the sim time.
+
+        Raises:
+            InvalidArgument: ``seconds`` is not a finite number 0..``MAX_RUN_FOR_S`` (a day).
+        """
+        if not (is_finite_number(seconds) and 0 <= seconds <= MAX_RUN_FOR_S):
+            raise InvalidArgument(f"run_for: seconds must be a finite number 0..{MAX_RUN_FOR_S:g} "
+                                  f"(a day of sim time at most; make several calls for more), "
+                                  f"got {seconds!r}")
         self.clock.advance(seconds)
         return self.time_s
 

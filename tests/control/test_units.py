@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import skeye
 from skeye.control import FlightState, PIController, PIGains
-from skeye.control.connection import parse_address
+from skeye.control.connection import MAX_RUN_FOR_S, parse_address
 from skeye.control.motion import GoTo, MotionConfig, NavState, Target, world_to_body
 from skeye.control.robots import TRANSITIONS, transition
 from skeye.control.sensors import (
@@ -21,7 +21,7 @@ from skeye.control.sensors import (
     SonarSensor,
     wrap_pi,
 )
-from skeye.errors import ConfigError, LocalProtocolError
+from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
 from skeye.geo import to_degrees_minutes
 from skeye.wire.sim_lines import LineDecoder, Message, format_message
 from tests.control.conftest import sim_running
@@ -222,3 +222,16 @@ def test_bad_waits_are_refused_at_the_call() -> None:
             with pytest.raises(LocalProtocolError, match="step count must be an integer >= 1"):
                 sim.step(bad)  # type: ignore[arg-type]
         sim.request("PING")  # the connection is still good
+
+
+@pytest.mark.timeout(60)  # before the bound, run_for(1e300) stepped for ever
+def test_run_for_refuses_a_finite_but_absurd_duration_naming_the_limit() -> None:
+    with sim_running() as handle, skeye.connect(handle.address) as sim:
+        assert sim.mode == "lockstep"
+        before = sim.ping()
+        for bad in (1e300, MAX_RUN_FOR_S + 0.001, 10**400):
+            with pytest.raises(InvalidArgument,
+                               match=r"run_for: seconds must be a finite number 0\.\.86400 "):
+                sim.run_for(bad)  # type: ignore[arg-type]
+        assert sim.ping() == before  # refused before a single step
+        assert sim.run_for(0.1) == pytest.approx(before + 0.1)  # the connection is still good
