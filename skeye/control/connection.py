@@ -482,11 +482,18 @@ class Connection:
         return t
 
     def step(self, count: int = 1) -> float:
-        """Lockstep: advance ``count`` physics steps (motion control keeps running); sim time."""
+        """Lockstep: advance ``count`` physics steps (motion control keeps running); sim time.
+
+        Raises:
+            InvalidArgument: ``count`` is not a whole number from 1 to a day of sim time.
+        """
         if self.mode != "lockstep":
             raise LocalProtocolError("step() needs a simulator in lockstep mode")
-        if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
-            raise LocalProtocolError(f"step count must be an integer >= 1, got {count!r}")
+        most = round(MAX_RUN_FOR_S / self.time_step_s)  # run_for's bound, in steps
+        if (isinstance(count, bool) or not isinstance(count, numbers.Integral)
+                or not 1 <= count <= most):
+            raise InvalidArgument(f"step count must be an integer 1..{most} (a day of sim "
+                                  f"time), got {count!r}")
         assert isinstance(self.clock, LockstepClock)
         self.clock.advance_steps(count)
         return self.time_s
