@@ -15,8 +15,10 @@ Keywords of ``gymnasium.make`` (docs/gym.md, "Options"): the :class:`FlightSetti
 (robot, robot_dir, world, estimator, wind, wind_params, sensor_noise, control_rate_hz, camera,
 camera_name, vision_latency_s, calibration, timestep_s), ``action`` (Hover, GoTo: "velocity"
 or "attitude"), ``episode_s``, ``render_mode`` ("rgb_array": the downward camera's newest
-frame, where the task renders it), and PadLanding's observation, image_size, start_offset_m,
-start_height_m and pad_tolerance_m.
+frame, where there is a camera), and PadLanding's observation, image_size, start_offset_m,
+start_height_m and pad_tolerance_m. A camera or vision setting the environment would ignore
+(Hover and GoTo observe no pad detection, and have a camera only to render it) is refused,
+as is a render mode it does not offer (:mod:`skeye.gym.options`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from gymnasium import spaces
 from skeye.errors import ConfigError
 from skeye.geo import MAX_POSITION_M
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
+from skeye.gym.options import RENDER_MODE, check_render_mode, check_settings
 from skeye.gym.tasks import PAD_TOLERANCE_M, Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
@@ -72,7 +75,10 @@ def task_origin(task: Task, flight_world: Any) -> tuple[float, float, float]:
 class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
     """One vehicle flying one task (see the module docstring)."""
 
-    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 20}  # noqa: RUF012
+    # The class's render modes are the most any instance offers: Gymnasium's make reads them
+    # before building it (and asks for "rgb_array" when given "human"); each instance's own say
+    # whether its camera makes them real (skeye.gym.options).
+    metadata: dict[str, Any] = {"render_modes": [RENDER_MODE], "render_fps": 20}  # noqa: RUF012
 
     def __init__(self, task: Task, *, action: str = "velocity", episode_s: float | None = None,
                  render_mode: str | None = None, **settings: Any) -> None:
@@ -82,11 +88,12 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
             raise ConfigError(f"{task.name} flies velocity set-points only")
         if task.needs_camera:
             settings.setdefault("camera", "webcam")
+        # A bad value is named as such first; then a good one that would do nothing here.
         self.settings = FlightSettings.from_kwargs(**settings)
+        check_settings(task, settings, renders=render_mode is not None)
         if task.needs_camera and self.settings.camera is None:
             raise ConfigError(f"{task.name} needs the camera: camera must be webcam or ideal")
-        if render_mode is not None and (render_mode != "rgb_array" or self.settings.camera is None):
-            raise ConfigError(f"render_mode {render_mode!r}: only 'rgb_array', with a camera")
+        check_render_mode(task, render_mode, self.settings.camera is not None)
         if episode_s is not None:
             if not number("episode_s", episode_s) > 0:
                 raise ConfigError(f"episode_s must be > 0, got {episode_s!r}")
@@ -95,7 +102,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         self.action_kind = action
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.settings.control_rate_hz,
-                         "render_modes": ["rgb_array"] if self.settings.camera else []}
+                         "render_modes": [RENDER_MODE] if self.settings.camera else []}
         self.setup = prepare(self.settings)  # the robot, world and camera, checked now
         self.limits = action_limits(self.setup.config)
         self.origin = task_origin(task, self.setup.world)
@@ -146,7 +153,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         return self._observe(), float(reward), terminated, truncated, self._info()
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode != "rgb_array" or self.flight is None:
+        if self.render_mode != RENDER_MODE or self.flight is None:
             return None
         cameras = self.flight.cameras
         if cameras is None:

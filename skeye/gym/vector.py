@@ -13,7 +13,8 @@ others fly on undisturbed, their state carried across the world's rebuild exactl
 
 ``reset(seed=s)`` makes a new world seeded from ``s``: the same seed and actions give the same
 batch of episodes, bit for bit. The keywords are the single environment's
-(:mod:`skeye.gym.envs`) plus ``spacing_m``.
+(:mod:`skeye.gym.envs`) plus ``spacing_m``; it renders nothing, so it offers no render mode and
+Hover and GoTo take no camera (:mod:`skeye.gym.options`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from skeye.errors import ConfigError, InvalidArgument
 from skeye.geo import MAX_POSITION_M
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
+from skeye.gym.options import check_render_mode, check_settings
 from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
 from skeye.pilot.policy import action_values
 from skeye.values import number
@@ -58,7 +60,8 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
 
     def __init__(self, task_factory: Callable[[], Task], num_envs: int, *,
                  spacing_m: float = DEFAULT_SPACING_M, action: str = "velocity",
-                 episode_s: float | None = None, **settings: Any) -> None:
+                 episode_s: float | None = None, render_mode: Any = None,
+                 **settings: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
             raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
         if not (number("spacing_m", spacing_m) >= 2.0):
@@ -77,6 +80,8 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
             for t in self.tasks:
                 t.episode_s = float(episode_s)
         self.settings = FlightSettings.from_kwargs(**settings)
+        check_settings(task, settings, renders=False, vector=True)
+        check_render_mode(task, render_mode, False, vector=True)
         cells = grid(num_envs, spacing_m)
         farthest = max(max(abs(n), abs(e)) for n, e in cells)
         if farthest > MAX_POSITION_M - CELL_REACH_M:
