@@ -80,6 +80,10 @@ class FlightSettings:
                 text(name, value)
         if not all(isinstance(d, Path) for d in self.robot_dir):
             raise ConfigError(f"robot_dir must be folders (paths), got {self.robot_dir!r}")
+        for folder in self.robot_dir:  # as skeye sim --robot-dir: a typo stops it at once
+            if not folder.is_dir():
+                raise ConfigError(f"robot_dir {str(folder)!r}: "
+                                  f"{'not a folder' if folder.exists() else 'no such folder'}")
         if self.estimator is not None and self.estimator not in ESTIMATOR_KINDS:
             raise ConfigError(f"estimator must be one of {list(ESTIMATOR_KINDS)}, "
                               f"got {self.estimator!r}")

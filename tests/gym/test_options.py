@@ -3,6 +3,9 @@ environment would ignore, or a render mode it does not offer, is a ConfigError n
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import gymnasium
 import numpy as np
 import pytest
@@ -110,3 +113,16 @@ def test_the_defaults_of_the_ignored_options_may_be_given() -> None:
                          calibration="model", camera_name="Down")
     env.close()
 
+
+def test_a_robot_dir_that_is_not_a_folder_is_refused_naming_it(tmp_path: Path) -> None:
+    """robot_dir="/nonexistent" was taken, and the robot came from the built-ins."""
+    missing = tmp_path / "nonexistent"
+    with pytest.raises(ConfigError, match=rf"^robot_dir '{re.escape(str(missing))}': no such "
+                                          r"folder$"):
+        gymnasium.make("skeye/Hover-v0", robot_dir=str(missing))
+    a_file = tmp_path / "robot.toml"
+    a_file.write_text("")
+    with pytest.raises(ConfigError, match=rf"^robot_dir '{re.escape(str(a_file))}': not a "
+                                          r"folder$"):
+        gymnasium.make("skeye/Hover-v0", robot_dir=[tmp_path, a_file])
+    gymnasium.make("skeye/Hover-v0", robot_dir=tmp_path).close()
