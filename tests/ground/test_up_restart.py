@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -144,7 +145,7 @@ def test_crash_reset_and_a_simulator_restart_on_skeye_up(up: Up) -> None:
 
     # 2. The simulator killed under skeye up: started again, the pilot flies again.
     sims = [p for p in _children(up.proc.pid)
-            if " sim " in open(f"/proc/{p}/cmdline").read().replace("\0", " ")]
+            if " sim " in Path(f"/proc/{p}/cmdline").read_text().replace("\0", " ")]
     assert len(sims) == 1
     statuses: set[str] = set()
     os.kill(sims[0], signal.SIGKILL)

@@ -68,7 +68,8 @@ def test_local_sweep_writes_one_row_per_trial_and_a_report(local_run):
         assert 0 < row["mean_m"] <= row["max_m"] < 0.5
     # Different seeds (and forces) fly differently.
     assert rows[0.1, 1]["mean_m"] != rows[0.1, 2]["mean_m"] != rows[0.4, 2]["mean_m"]
-    table = list(csv.DictReader(open(out / "results.csv")))
+    with open(out / "results.csv") as f:
+        table = list(csv.DictReader(f))
     assert len(table) == 4 and {"f_max_n", "seed", "mean_m", "wall_s", "host", "error"} <= set(
         table[0])
     for t in table:
@@ -171,7 +172,8 @@ def test_ray_cluster_gives_the_same_figures_and_retries_a_killed_worker(local_ru
             proc.wait()
     assert proc.returncode == 0, output
     assert killed is not None and restarted, "the killed trial was not run again"
-    table = list(csv.DictReader(open(out / "results.csv")))
+    with open(out / "results.csv") as f:
+        table = list(csv.DictReader(f))
     assert len(table) == 2
     for t in table:
         assert t["error"] == ""
