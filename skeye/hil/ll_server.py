@@ -13,7 +13,10 @@ client of the simulator). Two workers:
   ticking the board after each, and is then answered RESULT code 0 with the sim time reached
   in its reason (``sim time 12.350000 s``); a grant already passed is answered at once, so a
   client learns the time by granting 0, and the same grant sent again before it is reached is
-  answered at once with the time so far (the board is alive, only busy). If the client leaves
+  answered at once with the time so far (the board is alive, only busy). Grants not yet
+  reached are held in :class:`Grants` (a heap: each grant costs O(log n), so a client flooding
+  the line with them does not slow the board's answers), at most ``MAX_GRANTS``; one beyond
+  is refused RESULT code 5 (BUSY) naming the limit. If the client leaves
   the line (a pseudo-terminal closed, a TCP connection gone) the board's clock runs on by
   itself at real time: a vehicle does not freeze because its onboard computer went away, and
   the serial timeout's emergency procedure plays out. It goes back to granted time when a
@@ -27,6 +30,7 @@ failed) is logged and the server stops answering; ``error`` says why.
 
 from __future__ import annotations
 
+import heapq
 import logging
 import math
 import threading
@@ -37,6 +41,7 @@ from skeye.errors import SkeyeError
 from skeye.hil.line import BoardLine
 from skeye.hil.ll_board import LLBoard, LLSettings
 from skeye.pilot.airframe import Airframe
+from skeye.pilot.asctec_ll import CLOCK_TIMEOUT_S, RATE_HZ_MAX
 from skeye.wire.packets import (
     PD,
     Clock,
@@ -52,6 +57,50 @@ log = logging.getLogger(__name__)
 
 REALTIME_TICK_S = 0.01
 REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
+MAX_GRANTS = math.ceil(RATE_HZ_MAX * CLOCK_TIMEOUT_S)
+"""CLOCK grants not yet reached that a client may hold (12 000): one per control cycle at the
+fastest cycle ``asctec-ll://`` allows (200 Hz) for as long as a client waits for a grant (60 s).
+The pilot holds one at a time (it waits for each answer)."""
+
+
+class Grants:
+    """The CLOCK grants not yet reached (s of sim time), sans-IO: a min-heap gives the next
+    one due and a set tells a grant sent again, each in O(log n); ``latest`` is the highest
+    (the clock's target). Grants leave from the low end only, so ``latest`` is kept until the
+    last one is reached."""
+
+    def __init__(self, limit: int = MAX_GRANTS) -> None:
+        self.limit = limit
+        self.latest: float | None = None
+        self._heap: list[float] = []
+        self._held: set[float] = set()
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def __contains__(self, until_s: float) -> bool:
+        return until_s in self._held
+
+    @property
+    def full(self) -> bool:
+        return len(self._heap) >= self.limit
+
+    def add(self, until_s: float) -> None:
+        """Hold a new grant (the caller checked it is neither held nor beyond the limit)."""
+        heapq.heappush(self._heap, until_s)
+        self._held.add(until_s)
+        if self.latest is None or until_s > self.latest:
+            self.latest = until_s
+
+    def reached(self, now_s: float) -> int:
+        """Drop every grant at or before ``now_s``; how many."""
+        count = 0
+        while self._heap and self._heap[0] <= now_s:
+            self._held.discard(heapq.heappop(self._heap))
+            count += 1
+        if not self._heap:
+            self.latest = None
+        return count
 
 
 class LLBoardServer:
@@ -98,7 +147,7 @@ class LLBoardServer:
         self.free_running = False
         self.camera: tuple[str, float] | None = None  # the robot's camera: name, FOV (rad)
         self._lock = threading.Lock()  # every call into the board
-        self._grants: list[float] = []
+        self.grants = Grants()
         self._granted = threading.Condition()
         self._stop = threading.Event()
         self._workers: list[Worker] = []
@@ -164,24 +213,30 @@ class LLBoardServer:
             self.line.send(b"".join(encode(m) for m in replies))
 
     def _grant(self, until_s: float) -> None:
+        now = self.sim_time()
         with self._granted:
-            again = until_s in self._grants
-            if not again:
-                self._grants.append(until_s)
+            # Passed: answered at once, never held. Asked again while the simulator steps:
+            # say where it is (it is alive).
+            at_once = until_s <= now + self.time_step_s / 2 or until_s in self.grants
+            refused = not at_once and self.grants.full
+            if not at_once and not refused:
+                self.grants.add(until_s)
             self._granted.notify_all()
-        if again:  # asked again while the simulator steps: say where it is (it is alive)
-            self._send([Result(int(PD.CLOCK), ResultCode.OK,
-                               f"sim time {self.sim_time():.6f} s")])
+        if at_once:
+            self._send([Result(int(PD.CLOCK), ResultCode.OK, f"sim time {now:.6f} s")])
+        elif refused:
+            self._send([Result(int(PD.CLOCK), ResultCode.BUSY,
+                               f"grant of {until_s:.3f} s refused: {self.grants.limit} grants "
+                               "not yet reached are held, the most the board keeps; grant "
+                               "again once some are answered")])
 
     def _answer_grants(self) -> None:
         """Answer every grant the sim time has reached."""
         now = self.sim_time()
         with self._granted:
-            slack = self.time_step_s / 2
-            due = [g for g in self._grants if g <= now + slack]
-            self._grants = [g for g in self._grants if g > now + slack]
-        for _ in due:
-            self._send([Result(int(PD.CLOCK), ResultCode.OK, f"sim time {now:.6f} s")])
+            due = self.grants.reached(now + self.time_step_s / 2)
+        if due:
+            self._send([Result(int(PD.CLOCK), ResultCode.OK, f"sim time {now:.6f} s")] * due)
 
     # -- the clock -----------------------------------------------------------------------
     def _tick(self) -> None:
@@ -209,9 +264,9 @@ class LLBoardServer:
                     self._stop.wait(max(0.0, delay))
                     continue
                 with self._granted:
-                    self._granted.wait_for(lambda: bool(self._grants) or self._stop.is_set(),
+                    self._granted.wait_for(lambda: bool(self.grants) or self._stop.is_set(),
                                            0.1)
-                    target = max(self._grants, default=None)
+                    target = self.grants.latest
                 if target is not None:
                     if self.free_running:
                         log.info("LL board %s: a client grants the clock again", self.name)
@@ -222,6 +277,7 @@ class LLBoardServer:
                             break
                         self._advance(min(self.tick_s, steps * self.time_step_s))
                         self._tick()
+                        self._answer_grants()  # the lower ones, as they are reached
                     self._answer_grants()
                 elif self.rate is not None:  # the board's own clock, paced
                     self._advance(self.tick_s)

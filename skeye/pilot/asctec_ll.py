@@ -73,6 +73,8 @@ FIRST_POLL = int(EVERY_CYCLE | PollMask.GPS_DATA_ADVANCED | SLOW)
 FIRST_CONTACT_TRIES = 3
 SIM_TIME = re.compile(r"sim time (-?[0-9]+(?:\.[0-9]*)?) s")
 REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
+RATE_HZ_MAX = 200.0  # the fastest control cycle ``rate_hz`` allows
+CLOCK_TIMEOUT_S = 60.0  # how long a CLOCK grant waits for the simulator
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,7 @@ class LLLinkSettings:
     lockstep: bool = False
     rate_hz: float = 20.0
     timeout_s: float = 0.5
-    clock_timeout_s: float = 60.0
+    clock_timeout_s: float = CLOCK_TIMEOUT_S
     silent_after: int = 3  # cycles in a row without an answer
 
 
@@ -138,7 +140,7 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
     return LLLinkSettings(
         link_uri=link,
         lockstep=lockstep_text in ("1", "true", "yes"),
-        rate_hz=number("rate_hz", 20.0, 1.0, 200.0),
+        rate_hz=number("rate_hz", 20.0, 1.0, RATE_HZ_MAX),
         timeout_s=number("timeout_s", 0.5, 0.01, 60.0),
     )
 

@@ -1,0 +1,129 @@
+"""The simulator's LL board on its line (skeye.hil.ll_server): its CLOCK grants, held in
+``Grants`` and bounded by ``MAX_GRANTS``, over a real loopback line."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+
+from skeye.hil.cli import parse_ll_board, start_ll_board
+from skeye.hil.ll_server import MAX_GRANTS, Grants, LLBoardServer
+from skeye.wire.packets import (
+    PD,
+    Clock,
+    LlStatus,
+    Message,
+    Poll,
+    PollMask,
+    Result,
+    ResultCode,
+    VehicleStreamParser,
+    encode,
+)
+from tests.sim.conftest import running_sim
+
+FAR_MS = 3_000_000_000  # ms of sim time no test reaches
+
+
+def test_grants_leave_lowest_first_and_a_grant_sent_again_is_known():
+    grants = Grants(limit=3)
+    for until_s in (2.0, 1.0, 3.0):
+        grants.add(until_s)
+    assert grants.full and len(grants) == 3 and grants.latest == 3.0
+    assert 1.0 in grants and 1.5 not in grants
+    assert grants.reached(1.5) == 1 and 1.0 not in grants and grants.latest == 3.0
+    assert not grants.full
+    assert grants.reached(3.0) == 2 and len(grants) == 0 and grants.latest is None
+
+
+class LineClient:
+    """A raw client of the board's TCP line: frames out, the board's messages back."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=60.0)
+        self.parser = VehicleStreamParser()
+        self.pending: list[object] = []
+
+    def _events(self) -> Iterator[object]:
+        """The board's messages, in order, reading the line as needed (the socket's timeout
+        bounds each wait)."""
+        while True:
+            while self.pending:
+                yield self.pending.pop(0)
+            chunk = self.sock.recv(1 << 16)
+            assert chunk, "the board closed the line"
+            self.pending += self.parser.feed(chunk)
+
+    def next_clock_result(self) -> Result:
+        """The next CLOCK answer (the socket's timeout bounds the wait)."""
+        for event in self._events():
+            if isinstance(event, Result) and event.command_pd == PD.CLOCK:
+                return event
+        raise AssertionError("unreachable")
+
+    def exchange(self, data: bytes) -> tuple[list[Result], LlStatus]:
+        """Send ``data`` and an LL_STATUS poll; the CLOCK answers before the poll's, and it."""
+        self.sock.sendall(data + encode(Poll(int(PollMask.LL_STATUS))))
+        results: list[Result] = []
+        for event in self._events():
+            if isinstance(event, LlStatus):
+                return results, event
+            if isinstance(event, Result) and event.command_pd == PD.CLOCK:
+                results.append(event)
+            else:
+                assert isinstance(event, Message), event
+        raise AssertionError("unreachable")
+
+
+def sim_time(answer: Result) -> float:
+    """The sim time a CLOCK answer says (``sim time 12.350000 s``)."""
+    words = answer.reason.split()
+    assert words[:2] == ["sim", "time"] and words[3] == "s", answer
+    return float(words[2])
+
+
+@contextmanager
+def board_line() -> Iterator[tuple[LLBoardServer, LineClient]]:
+    """A lockstep simulator's board on a TCP line (the client grants time), and a client."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=6, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=tcp:0"), f"127.0.0.1:{server.port}")
+        client = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        stack.callback(client.sock.close)
+        yield board, client
+
+
+def test_a_flood_of_grants_is_bounded_and_refused_by_name_and_the_line_still_answers():
+    with board_line() as (board, client):
+        extra = 5
+        flood = b"".join(encode(Clock(FAR_MS - i)) for i in range(MAX_GRANTS + extra))
+        results, status = client.exchange(flood)
+        assert isinstance(status, LlStatus)
+        assert len(results) == extra, results
+        for refusal in results:
+            assert refusal.code is ResultCode.BUSY
+            assert f"{MAX_GRANTS} grants not yet reached are held" in refusal.reason
+        assert len(board.grants) == MAX_GRANTS
+        # At the limit, a grant already held (sent again) and one already passed are still
+        # answered at once with the time so far; only a new one is refused.
+        results, _ = client.exchange(encode(Clock(FAR_MS)) + encode(Clock(0))
+                                     + encode(Clock(FAR_MS + 1)))
+        assert [r.code for r in results] == [ResultCode.OK, ResultCode.OK, ResultCode.BUSY]
+        assert all(r.reason.startswith("sim time ") for r in results[:2])
+        board.check()
+
+
+def test_grants_below_the_latest_are_answered_as_the_simulator_reaches_them():
+    with board_line() as (board, client):
+        results, _ = client.exchange(encode(Clock(0)))  # passed: the time now
+        assert [r.code for r in results] == [ResultCode.OK]
+        start_s = sim_time(results[0])
+        near_ms = round(start_s * 1000) + 200
+        results, _ = client.exchange(encode(Clock(FAR_MS)) + encode(Clock(near_ms)))
+        # The near grant is answered on the way to the far one, not once that is reached.
+        answer = results[0] if results else client.next_clock_result()
+        assert answer.code is ResultCode.OK
+        reached = sim_time(answer)
+        assert near_ms / 1000 <= reached < near_ms / 1000 + 2 * board.tick_s
+        assert board.grants.latest == FAR_MS / 1000.0
