@@ -3,7 +3,17 @@
 How this works: latitude and longitude follow from north/east offsets with the WGS-84 meridian
 and prime-vertical radii of curvature at the origin (the equirectangular approximation PX4 and
 AirSim use for local frames); altitude is the origin's altitude minus the NED down coordinate.
-Good to a few millimetres over the few hundred metres a small UAV flies.
+Good to a few millimetres over the few hundred metres a small UAV flies, away from the poles.
+
+At a pole longitude is degenerate (every longitude is the same point) and the east radius is
+zero, so an origin exactly at a pole uses the polar azimuthal equidistant form instead: the
+distance from the pole along the meridian, in the direction of the longitude, with north along
+the origin's meridian (the tangent plane's own north there, as from the ECEF rotation at
+latitude +-90). A point at a pole is the same point at any longitude: it takes the origin's. A
+position past a pole (latitude beyond +-90) continues on the far side (the longitude + 180).
+Within some kilometres of a pole, short of it, the equirectangular east scale errs by the
+tangent of the latitude times the north offset (27 % over 300 m at 89.99 deg): positions there
+are approximate.
 """
 
 from __future__ import annotations
@@ -34,10 +44,15 @@ class GeoOrigin:
     altitude_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if not -90.0 < self.latitude_deg < 90.0:
-            raise InvalidArgument(f"latitude {self.latitude_deg} deg is outside (-90, 90)")
+        if not -90.0 <= self.latitude_deg <= 90.0:
+            raise InvalidArgument(f"latitude {self.latitude_deg} deg is outside [-90, 90]")
         if not -180.0 <= self.longitude_deg <= 180.0:
             raise InvalidArgument(f"longitude {self.longitude_deg} deg is outside [-180, 180]")
+
+    @property
+    def pole(self) -> int:
+        """+1 at the north pole, -1 at the south pole, 0 elsewhere."""
+        return 1 if self.latitude_deg == 90.0 else -1 if self.latitude_deg == -90.0 else 0
 
     def _radii_m(self) -> tuple[float, float]:
         lat = math.radians(self.latitude_deg)
@@ -51,8 +66,20 @@ class GeoOrigin:
     ) -> tuple[float, float, float]:
         """NED offset (m) -> (latitude deg, longitude deg, altitude m)."""
         r_north, r_east = self._radii_m()
-        lat = self.latitude_deg + math.degrees(north_m / r_north)
-        lon = self.longitude_deg + math.degrees(east_m / r_east)
+        if self.pole:
+            # Polar: the distance from the pole, and the bearing from the origin's meridian.
+            distance_m = math.hypot(north_m, east_m)
+            lat = self.pole * (90.0 - math.degrees(distance_m / r_north))
+            bearing = math.atan2(east_m, -self.pole * north_m) if distance_m else 0.0
+            lon = self.longitude_deg + math.degrees(bearing)
+        else:
+            lat = self.latitude_deg + math.degrees(north_m / r_north)
+            lon = self.longitude_deg + math.degrees(east_m / r_east)
+        if abs(lat) > 90.0:  # past a pole: on the far side of it
+            lat = math.copysign(180.0, lat) - lat
+            lon += 180.0
+        if not -180.0 <= lon <= 180.0:
+            lon = math.remainder(lon, 360.0)
         return lat, lon, self.altitude_m - down_m
 
     def to_ned(
@@ -60,8 +87,16 @@ class GeoOrigin:
     ) -> tuple[float, float, float]:
         """(latitude deg, longitude deg, altitude m) -> NED offset (m)."""
         r_north, r_east = self._radii_m()
-        north = math.radians(latitude_deg - self.latitude_deg) * r_north
-        east = math.radians(longitude_deg - self.longitude_deg) * r_east
+        if abs(latitude_deg) == 90.0:  # a pole is one point: its longitude is the origin's
+            longitude_deg = self.longitude_deg
+        if self.pole:
+            distance_m = math.radians(90.0 - self.pole * latitude_deg) * r_north
+            bearing = math.radians(longitude_deg - self.longitude_deg)
+            north = -self.pole * distance_m * math.cos(bearing)
+            east = distance_m * math.sin(bearing)
+        else:
+            north = math.radians(latitude_deg - self.latitude_deg) * r_north
+            east = math.radians(longitude_deg - self.longitude_deg) * r_east
         return north, east, self.altitude_m - altitude_m
 
 

@@ -335,7 +335,7 @@ class OnboardBoards:
         """A GPS target in NED through the latest fix (None without a fix: the airframe
         refuses the move itself then)."""
         g = snap.gps
-        if g is None or not g.fix or not -90.0 < g.latitude_deg < 90.0:
+        if g is None or not g.fix:
             return None
         dn, de, _ = GeoOrigin(g.latitude_deg, g.longitude_deg).to_ned(lat_deg, lon_deg, 0.0)
         return (snap.pos_ned_m[0] + dn, snap.pos_ned_m[1] + de, -altitude_m)

@@ -36,7 +36,7 @@ from skeye.pilot import cli as pilot_cli
 from skeye.pilot.airframe import AirframeOptions, open_airframe
 from skeye.pilot.cli import camera_vision_factory, open_camera_for
 from skeye.pilot.server import PilotServer
-from skeye.wire.packets import NavState, SkeyeMask
+from skeye.wire.packets import PD, NavState, SkeyeMask
 from skeye.workers import Worker
 from tests.sim.conftest import running_sim
 from tests.sim.test_cameras import sim_with_images
@@ -297,3 +297,39 @@ def test_a_realtime_flight_through_the_ll_board():
         vehicle.wait_state(NavState.LANDED, timeout_s=60)
         assert airframe.cycles > 40  # the worker's cycles flew it (20 Hz: 2 s)
         assert pilot.vehicle_lost is None and board.board.emergencies == 0
+
+
+def test_a_fix_at_the_pole_keeps_the_vehicle():
+    """A board at the north pole reports latitude 90 deg exactly (its longitude is whatever the
+    receiver says): a valid fix. The pilot flies on: its estimate's origin is the pole, and
+    ground control reads the fix and the best estimate there (skeye.geo's polar form)."""
+    from dataclasses import replace
+
+    from skeye.hil.line import open_line
+    from skeye.pilot.airframe import GpsFix
+    from skeye.wire.packet_units import gps_data_advanced_to_si
+    from skeye.wire.packets import GpsDataAdvanced, PollMask
+    from tests.pilot.fake_airframe import FakeAirframe
+
+    with ExitStack() as stack:
+        air = FakeAirframe()  # the robot under the board: at rest at the pole
+        air.snap = replace(air.snap, gps=GpsFix(True, 9, 90.0, 135.0, 2835.0, (0.0, 0.0, 0.0)))
+        board = stack.enter_context(LLBoardServer(air, open_line("tcp"), time.monotonic))
+        airframe = open_airframe(board.line.client_uri(), AirframeOptions())
+        stack.callback(airframe.close)
+        pilot = stack.enter_context(PilotServer(airframe, port=0))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+
+        def fix() -> GpsDataAdvanced:
+            msg = vehicle.poll(int(PollMask.GPS_DATA_ADVANCED))[PD.GPS_DATA_ADVANCED]
+            assert isinstance(msg, GpsDataAdvanced)
+            return msg
+
+        wait_until(lambda: fix().status == 3, 10, "the pilot reads the board's fix")
+        raw, best = gps_data_advanced_to_si(fix())
+        assert raw.latitude_deg == 90.0 and best.latitude_deg == 90.0
+        assert airframe.estimate.origin is not None  # type: ignore[attr-defined]
+        assert airframe.estimate.origin.pole == 1  # type: ignore[attr-defined]
+        assert pilot.vehicle_lost is None and pilot.loop_error is None
+        assert board.error is None
+        board.check()

@@ -521,3 +521,23 @@ def test_the_envelope_stops_stick_flight_beyond_it_and_the_sticks_take_over_agai
     assert boards.envelope_stops == 1
     send(boards, encode(CtrlInput(600, 0, 0, 2500, 0x0F)), now_s=0.2)  # back in: the sticks win
     assert boards.state is NavState.MANUAL
+
+
+def test_at_the_pole_a_gps_target_is_placed_and_the_envelope_applies_to_it():
+    """A fix at latitude 90 deg is valid (longitude degenerate there): a GOTO_GPS target is
+    measured from the pole like any other, so the envelope around home refuses a far one."""
+    from dataclasses import replace
+
+    from skeye.pilot.airframe import GpsFix
+    from skeye.wire.packet_units import GotoGpsSi, goto_gps_from_si
+
+    air = FakeAirframe()
+    air.snap = replace(air.snap, gps=GpsFix(True, 9, 90.0, 0.0, 2835.0, (0.0, 0.0, 0.0)))
+    boards = OnboardBoards(air, BoardSettings(envelope=FlightEnvelope(max_radius_m=20.0)))
+    airborne(boards, air)
+    near = 90.0 - 10.0 / 111_694.0  # 10 m from the pole (any longitude)
+    far = 90.0 - 100.0 / 111_694.0
+    r = result(send(boards, encode(goto_gps_from_si(GotoGpsSi(far, 120.0, 1.0, 1.0)))))
+    assert r.code is ResultCode.BAD_VALUE and "outside the flight envelope: 100" in r.reason
+    r = result(send(boards, encode(goto_gps_from_si(GotoGpsSi(near, 120.0, 1.0, 1.0)))))
+    assert r.code is ResultCode.OK and air.names()[-1] == "fly_to_gps"
