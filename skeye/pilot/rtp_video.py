@@ -37,6 +37,9 @@ log = logging.getLogger(__name__)
 PAYLOAD_TYPE = 96
 DEFAULT_RTP_FPS = 10.0
 DEFAULT_BITRATE = 1_000_000  # bit/s
+RESOLVE_TIMEOUT_S = 5.0
+"""How long the start check waits for the system resolver (glibc's own: 5 s a try, 2 tries
+per name server, so an unreachable DNS server holds a lookup for tens of seconds)."""
 GREEN = (0, 200, 0)
 RED = (0, 0, 230)
 
@@ -55,20 +58,42 @@ def parse_rtp_uri(uri: str) -> tuple[str, int]:
     return parts.hostname, port
 
 
-def check_rtp_destination(uri: str) -> tuple[str, int]:
+def _resolve(uri: str, host: str, port: int, timeout_s: float) -> list[Any]:
+    """``socket.getaddrinfo`` for UDP, waited for at most ``timeout_s``: the system resolver
+    takes no timeout, so it runs on a daemon thread, left behind if it does not answer."""
+    answer: list[Any] = []
+    done = threading.Event()
+
+    def lookup() -> None:
+        try:
+            answer.append(socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM))
+        except (OSError, UnicodeError) as exc:
+            answer.append(exc)
+        finally:
+            done.set()
+
+    Worker(lookup, f"resolve-{host}").start()
+    if not done.wait(timeout_s):
+        raise ConfigError(f"{uri}: the host {host!r} did not resolve within {timeout_s:g} s "
+                          "(is a DNS server reachable? an IP address needs none)")
+    if not answer:  # a bug in the resolver: the worker logged it
+        raise ConfigError(f"{uri}: resolving the host {host!r} failed (see the log)")
+    if isinstance(answer[0], Exception):
+        raise ConfigError(f"{uri}: cannot resolve the host {host!r} ({answer[0]})")
+    return list(answer[0])
+
+
+def check_rtp_destination(uri: str, timeout_s: float | None = None) -> tuple[str, int]:
     """:func:`parse_rtp_uri`, and whether this machine can send UDP there now: the host
-    resolves and a UDP socket can be pointed at it (a route exists; not a broadcast address).
-    FFmpeg would find the same only on the first frame, in the worker, as a bare ``Input/output
-    error``.
+    resolves within ``timeout_s`` (``RESOLVE_TIMEOUT_S``) and a UDP socket can be pointed at
+    it (a route exists; not a broadcast address). FFmpeg would find the same only on the first
+    frame, in the worker, as a bare ``Input/output error``.
 
     Raises:
         ConfigError: naming the URI and what is wrong with it.
     """
     host, port = parse_rtp_uri(uri)
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
-    except (OSError, UnicodeError) as exc:
-        raise ConfigError(f"{uri}: cannot resolve the host {host!r} ({exc})") from None
+    infos = _resolve(uri, host, port, RESOLVE_TIMEOUT_S if timeout_s is None else timeout_s)
     family, kind, proto, _, address = infos[0]
     try:
         with socket.socket(family, kind, proto) as probe:

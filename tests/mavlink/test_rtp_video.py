@@ -14,7 +14,7 @@ import pytest
 av = pytest.importorskip("av")
 
 from skeye.errors import ConfigError  # noqa: E402
-from skeye.pilot.rtp_video import RtpVideo  # noqa: E402
+from skeye.pilot.rtp_video import RtpVideo, check_rtp_destination  # noqa: E402
 from skeye.pilot.video_server import CameraFrame  # noqa: E402
 from skeye.wire.video import Detection  # noqa: E402
 from tests.mavlink.conftest import free_udp_port  # noqa: E402
@@ -74,6 +74,44 @@ def test_a_destination_it_cannot_send_to_is_named_at_start(monkeypatch: pytest.M
     monkeypatch.setattr(socket, "getaddrinfo", no_such_host)
     with pytest.raises(ConfigError, match=r"cannot resolve the host 'groundstation\.invalid'"):
         RtpVideo("udp://groundstation.invalid:5600")
+
+
+def test_the_host_is_resolved_within_a_bounded_wait(monkeypatch: pytest.MonkeyPatch,
+                                                   capsys: pytest.CaptureFixture[str]):
+    """The system resolver takes no timeout (with a DNS server unreachable it can take minutes):
+    the start check waits at most ``RESOLVE_TIMEOUT_S`` and names the host and the wait."""
+    import argparse
+
+    from skeye.pilot import cli as pilot_cli
+    from skeye.pilot import rtp_video
+
+    assert check_rtp_destination("udp://localhost:5600", timeout_s=5.0) == ("localhost", 5600)
+    released = threading.Event()
+    resolver = socket.getaddrinfo
+
+    def unreachable_dns(host: str, *args: object, **kwargs: object) -> object:
+        if host != "gcs.example":
+            return resolver(host, *args, **kwargs)  # type: ignore[arg-type]
+        released.wait(30)  # the OS resolver retrying a DNS server that does not answer
+        raise socket.gaierror(socket.EAI_AGAIN, "Temporary failure in name resolution")
+
+    monkeypatch.setattr(socket, "getaddrinfo", unreachable_dns)
+    try:
+        with pytest.raises(ConfigError, match=r"udp://gcs\.example:5600: the host 'gcs\.example' "
+                           r"did not resolve within 0\.2 s"):
+            check_rtp_destination("udp://gcs.example:5600", timeout_s=0.2)
+        # The pilot's start check: exit status 2, the line names the host and the wait.
+        monkeypatch.setattr(rtp_video, "RESOLVE_TIMEOUT_S", 0.2)
+        parser = argparse.ArgumentParser(prog="skeye")
+        pilot_cli.register(parser.add_subparsers(dest="cmd", required=True))
+        args = parser.parse_args(["pilot", "--sim", "127.0.0.1:1", "--images", "127.0.0.1:1",
+                                  "--rtp-video", "udp://gcs.example:5600"])
+        assert pilot_cli.run(args) == 2
+        out = capsys.readouterr().out
+        assert ("skeye pilot: --rtp-video: udp://gcs.example:5600: the host 'gcs.example' did "
+                "not resolve within 0.2 s") in out, out
+    finally:
+        released.set()  # the resolver threads left behind end
 
 
 def test_an_ipv6_destination_is_streamed():
