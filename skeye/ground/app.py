@@ -21,7 +21,9 @@ and hand validated commands to ``bridge.execute`` in a worker thread.
 - ``WS /ws/video``: for every new frame, a JSON ``frame`` message (size, detection: ring
   ellipses and centre in pixels) and then the JPEG as a binary message.
 
-Every browser tab gets its own WebSocket tasks; a slow tab only slows itself. A tab's commands
+Every browser tab gets its own WebSocket tasks; a slow tab only slows itself (``/ws/video`` sends
+it the newest frame once the previous one has gone), and one that takes nothing for 5 s is cut
+(:class:`skeye.ground.limits.LimitedWebSocketProtocol`). A tab's commands
 are limited (``MAX_IN_FLIGHT`` waiting for the vehicle, ``COMMAND_RATE_HZ`` on average): the
 excess is answered at once with status 429, so one tab cannot queue work in front of another's.
 A binary frame closes ``/ws`` with code 1003, a message over ``MAX_WS_MESSAGE_BYTES`` with 1009,

@@ -19,6 +19,15 @@ protocol with two additions uvicorn lacks:
   peer's oldest connection still waiting for its request head; when none is waiting, the new
   one is answered 503 and closed. No peer can hold the descriptors the others need.
 
+and its ``ws`` setting, :class:`LimitedWebSocketProtocol`, uvicorn's WebSocket protocol (over
+``websockets``' sans-IO core) with **a send timeout**: a page that takes no byte of what was
+sent to it for ``send_timeout_s`` (the send has waited that long for room in the connection's
+buffer, which is full: the kernel's, then asyncio's 64 KiB) is cut, its connection aborted (a
+close frame could not get through the full buffer, and a plain close would wait for it to
+drain for ever). The pilot's video port does the same to a viewer after the same 5 s. Until
+then a stream only waits: ``/ws/video`` sends the newest frame when the previous one has gone,
+so a slow page gets fewer frames, never old ones, and holds one frame of memory.
+
 :class:`RepeatFilter` is a ``logging.Filter`` for the process's handlers: a message (logger,
 level, format string) is written at most ``burst`` times per ``window_s``; the rest are counted
 and summed up in one line when the window ends ("... N more like this in the last 10 s"), so a
@@ -36,6 +45,7 @@ from typing import Any
 
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from skeye.peers import peer_key
 
@@ -51,6 +61,9 @@ MAX_PER_PEER = 32
 """Connections one peer may hold: a browser opens about 6 per host plus 2 WebSockets per tab."""
 CONCURRENCY = 256
 """Connections and requests at once before uvicorn answers 503."""
+SEND_TIMEOUT_S = 5.0
+"""A WebSocket page that takes no byte of what is sent to it this long is cut (the pilot's
+video port's ``SEND_TIMEOUT_S`` for its viewers)."""
 MAX_HEAD_BYTES = 16 * 1024
 """The largest request head (request line and headers) h11 reads before refusing it."""
 
@@ -72,10 +85,12 @@ class ConnectionLimits:
 
     header_timeout_s: float = HEADER_TIMEOUT_S
     max_per_peer: int = MAX_PER_PEER
+    send_timeout_s: float = SEND_TIMEOUT_S
     by_peer: dict[str, list[LimitedH11Protocol]] = field(default_factory=dict)
     timed_out: int = 0  # connections closed for an incomplete request head
     replaced: int = 0  # waiting connections closed for a newer one of the same peer
     refused: int = 0  # connections refused: their peer's connections were all busy
+    slow_cut: int = 0  # WebSockets cut: their page took nothing for send_timeout_s
 
     def admit(self, proto: LimitedH11Protocol) -> bool:
         """Count a new connection under its peer; False when it must be refused."""
@@ -183,6 +198,27 @@ class LimitedH11Protocol(H11Protocol):
         super().connection_lost(exc)
 
 
+class LimitedWebSocketProtocol(WebSocketsSansIOProtocol):
+    """uvicorn's WebSocket protocol with a send timeout (see the module)."""
+
+    def __init__(self, config: uvicorn.Config, *args: Any, **kwargs: Any) -> None:
+        super().__init__(config, *args, **kwargs)
+        limits = getattr(config, "connection_limits", None)
+        self.limits: ConnectionLimits = limits if limits is not None else ConnectionLimits()
+
+    async def send(self, message: Any) -> None:
+        if not self.writable.is_set():  # the buffer is full: the page has not taken it yet
+            try:
+                await asyncio.wait_for(self.writable.wait(), self.limits.send_timeout_s)
+            except TimeoutError:
+                if not self.transport.is_closing():
+                    self.limits.slow_cut += 1
+                    log.info("cutting a WebSocket of %s: it took nothing of what was sent to "
+                             "it for %g s", self.client, self.limits.send_timeout_s)
+                    self.transport.abort()  # the send below ends as a disconnect
+        await super().send(message)
+
+
 def server_config(app: Any, log_level: str = "warning", *,
                   limits: ConnectionLimits | None = None, **settings: Any) -> LimitedConfig:
     """The uvicorn settings of a ground server, with its connection limits (see the module);
@@ -192,6 +228,7 @@ def server_config(app: Any, log_level: str = "warning", *,
         limits=limits or ConnectionLimits(),
         log_level=log_level,
         http=LimitedH11Protocol,
+        ws=LimitedWebSocketProtocol,
         timeout_keep_alive=KEEP_ALIVE_S,
         limit_concurrency=CONCURRENCY,
         h11_max_incomplete_event_size=MAX_HEAD_BYTES,

@@ -21,6 +21,7 @@ import time
 from collections import Counter
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 
 import httpx
 import pytest
@@ -228,3 +229,59 @@ def test_a_trickled_second_request_on_a_kept_alive_connection_is_closed_too(grou
     sock.close()
     assert b"HTTP/1.1 408" in answer or b"HTTP/1.1 200" not in answer, answer[-300:]
     assert limits.timed_out == 1
+
+
+def test_a_video_page_that_never_reads_is_cut_and_another_is_served() -> None:
+    """``/ws/video`` to a page that takes nothing: the send waited for room for ever (the
+    connection held, ESTABLISHED, 2.8 MB queued in the kernel). Now the page is cut after
+    ``send_timeout_s`` without a byte taken, as the pilot's video port cuts its viewers; a page
+    that reads is served meanwhile and after."""
+    import numpy as np
+    from websockets.exceptions import ConnectionClosed
+
+    from skeye.ground.video import VideoRelay
+    from skeye.pilot.video_server import CameraFrame, VideoServer
+    from skeye.wire.video import Detection
+
+    rng = np.random.default_rng(3)
+    stop = threading.Event()
+    security = GroundSecurity()
+    limits = ConnectionLimits(send_timeout_s=1.0)
+    with ExitStack() as stack:
+        vehicle_video = stack.enter_context(VideoServer(port=0, fov_h_rad=1.0))
+
+        def camera() -> None:  # noise: every JPEG about 200 kB, so buffers fill in seconds
+            k = 0
+            while not stop.wait(0.1):
+                image = rng.integers(0, 255, (480, 640, 3), dtype=np.uint8)
+                vehicle_video.publish(CameraFrame(k, 0.1 * k, image, Detection(False), 1.0))
+                k += 1
+
+        feeder = threading.Thread(target=camera, daemon=True)
+        feeder.start()
+        stack.callback(feeder.join, 10)
+        stack.callback(stop.set)
+        relay = stack.enter_context(VideoRelay("127.0.0.1", vehicle_video.port, fps=10.0))
+        bridge = stack.enter_context(VehicleBridge(f"tcp://127.0.0.1:{_free_port()}",
+                                                   retry_s=0.2))
+        web = UvicornThread(create_app(bridge, relay, security=security), security.token,
+                            limits=limits)
+        stack.callback(web.close)
+        url = f"ws://127.0.0.1:{web.port}/ws/video?token={web.token}"
+        wait_until(lambda: relay.latest() is not None, 60, "the first frame relayed")
+
+        stalled = socket.socket()
+        stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        stalled.connect(("127.0.0.1", web.port))
+        # The client library stops reading the socket once one message waits unread.
+        page = stack.enter_context(ws_connect(url, sock=stalled, max_queue=1,
+                                              ping_interval=None, open_timeout=10))
+        reader = stack.enter_context(ws_connect(url, ping_interval=None, open_timeout=10))
+        wait_until(lambda: limits.slow_cut == 1, 120, "the stalled page to be cut")
+        for _ in range(4):  # the reading page streams on: a frame's JSON, then its JPEG
+            meta = json.loads(reader.recv(30))
+            assert meta["type"] == "frame" and len(reader.recv(30)) == meta["bytes"]
+        with pytest.raises(ConnectionClosed):  # what was queued, then the end
+            while True:
+                page.recv(30)
+        assert limits.slow_cut == 1
