@@ -199,12 +199,28 @@ class LimitedH11Protocol(H11Protocol):
 
 
 class LimitedWebSocketProtocol(WebSocketsSansIOProtocol):
-    """uvicorn's WebSocket protocol with a send timeout (see the module)."""
+    """uvicorn's WebSocket protocol with a send timeout (see the module).
+
+    It keeps its own flow control: ``writable`` follows the transport's buffer (cleared over
+    its high-water mark, set below its low one) and is set when the connection is lost, so a
+    waiting send ends; some uvicorn releases' sans-IO protocol did neither (it never paused,
+    and buffered a page that never reads without bound).
+    """
 
     def __init__(self, config: uvicorn.Config, *args: Any, **kwargs: Any) -> None:
         super().__init__(config, *args, **kwargs)
         limits = getattr(config, "connection_limits", None)
         self.limits: ConnectionLimits = limits if limits is not None else ConnectionLimits()
+
+    def pause_writing(self) -> None:
+        self.writable.clear()
+
+    def resume_writing(self) -> None:
+        self.writable.set()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        super().connection_lost(exc)
+        self.writable.set()
 
     async def send(self, message: Any) -> None:
         if not self.writable.is_set():  # the buffer is full: the page has not taken it yet
