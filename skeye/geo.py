@@ -96,7 +96,9 @@ class GeoOrigin:
             east = distance_m * math.sin(bearing)
         else:
             north = math.radians(latitude_deg - self.latitude_deg) * r_north
-            east = math.radians(longitude_deg - self.longitude_deg) * r_east
+            # The shorter way round: across the antimeridian (179.9999 to -179.9999 deg) the
+            # plain difference is almost a whole turn. Exact for differences within 180 deg.
+            east = math.radians(math.remainder(longitude_deg - self.longitude_deg, 360.0)) * r_east
         return north, east, self.altitude_m - altitude_m
 
 

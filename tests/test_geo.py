@@ -72,3 +72,15 @@ def test_away_from_the_poles_the_equirectangular_form_is_unchanged():
 def test_latitudes_beyond_the_poles_are_refused_by_name(lat):
     with pytest.raises(InvalidArgument, match=r"is outside \[-90, 90\]"):
         GeoOrigin(lat, 0.0)
+
+
+@pytest.mark.parametrize("origin_lon", [179.9995, -179.9995])
+def test_a_fix_across_the_antimeridian_is_the_short_way_east_or_west(origin_lon):
+    """An origin by the antimeridian (Fiji, Chukotka): a fix 100 m east of it has a longitude of
+    the other sign; its offset is 100 m, not most of the way round the Earth."""
+    origin = GeoOrigin(-17.0, origin_lon, 10.0)
+    for east_m in (100.0, -100.0):
+        lat, lon, alt = origin.to_geodetic(0.0, east_m, 0.0)
+        north, east, _ = origin.to_ned(lat, lon, alt)
+        assert north == pytest.approx(0.0, abs=1e-6)
+        assert east == pytest.approx(east_m, abs=1e-6)
