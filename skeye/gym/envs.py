@@ -34,7 +34,16 @@ from skeye.errors import ConfigError
 from skeye.geo import MAX_POSITION_M
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
 from skeye.gym.options import RENDER_MODE, check_render_mode, check_settings
-from skeye.gym.tasks import PAD_TOLERANCE_M, Episode, GoTo, Hover, PadLanding, Task
+from skeye.gym.tasks import (
+    PAD_START_HEIGHT_M,
+    PAD_START_OFFSET_M,
+    PAD_TOLERANCE_M,
+    Episode,
+    GoTo,
+    Hover,
+    PadLanding,
+    Task,
+)
 from skeye.pilot.policy import (
     DEFAULT_IMAGE_SIZE,
     ActionLimits,
@@ -227,8 +236,9 @@ class PadLandingEnv(SkeyeEnv):
     unless told otherwise."""
 
     def __init__(self, *, observation: str = "pad",
-                 image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE, start_offset_m: float = 0.4,
-                 start_height_m: tuple[float, float] = (1.5, 2.5),
+                 image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
+                 start_offset_m: float = PAD_START_OFFSET_M,
+                 start_height_m: tuple[float, float] = PAD_START_HEIGHT_M,
                  pad_tolerance_m: float = PAD_TOLERANCE_M,
                  **kwargs: Any) -> None:
         kwargs.setdefault("wind", "random_force")

@@ -90,6 +90,7 @@ def _is_default(name: str, value: Any) -> bool:
     default = _DEFAULTS[name]
     if default is None:
         return value is None
-    if isinstance(default, str):
-        return isinstance(value, str) and value == default
+    if isinstance(default, str):  # the camera's name is looked up ignoring case
+        return isinstance(value, str) and (
+            value.lower() == default.lower() if name == "camera_name" else value == default)
     return is_number(value) and value == default

@@ -53,6 +53,8 @@ Vec3 = tuple[float, float, float]
 CRASH_REWARD = -10.0
 SUCCESS_REWARD = 10.0
 PAD_TOLERANCE_M = 0.15  # PadLanding's success: touchdown this close to the pad centre
+PAD_START_OFFSET_M = 0.4  # PadLanding's start: at most this far from above the pad centre
+PAD_START_HEIGHT_M = (1.5, 2.5)  # PadLanding's start: this high above the pad (from, to)
 MAX_TILT_RAD = math.radians(60.0)
 CEILING_M = 10.0
 TARGET_FIELDS = ("target_north_m", "target_east_m", "target_down_m")
@@ -191,7 +193,8 @@ class PadLanding(Task):
     target_fixed = True
 
     def __init__(self, observation: str = "pad", image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
-                 start_offset_m: float = 0.4, start_height_m: tuple[float, float] = (1.5, 2.5),
+                 start_offset_m: float = PAD_START_OFFSET_M,
+                 start_height_m: tuple[float, float] = PAD_START_HEIGHT_M,
                  pad_tolerance_m: float = PAD_TOLERANCE_M) -> None:
         if observation not in OBSERVATIONS:
             raise ConfigError(f"observation must be one of {list(OBSERVATIONS)}, "

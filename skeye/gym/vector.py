@@ -33,8 +33,17 @@ from skeye.geo import MAX_POSITION_M
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
 from skeye.gym.options import check_render_mode, check_settings
-from skeye.gym.tasks import Episode, GoTo, Hover, PadLanding, Task
-from skeye.pilot.policy import action_values
+from skeye.gym.tasks import (
+    PAD_START_HEIGHT_M,
+    PAD_START_OFFSET_M,
+    PAD_TOLERANCE_M,
+    Episode,
+    GoTo,
+    Hover,
+    PadLanding,
+    Task,
+)
+from skeye.pilot.policy import DEFAULT_IMAGE_SIZE, action_values
 from skeye.values import number
 
 DEFAULT_SPACING_M = 10.0
@@ -227,9 +236,10 @@ class PadLandingVectorEnv(SkeyeVectorEnv):
     """``skeye/PadLanding-v0`` batched: one pad per vehicle."""
 
     def __init__(self, num_envs: int = 1, *, observation: str = "pad",
-                 image_size: tuple[int, int] = (80, 60), start_offset_m: float = 0.4,
-                 start_height_m: tuple[float, float] = (1.5, 2.5),
-                 pad_tolerance_m: float = 0.15, **kwargs: Any) -> None:
+                 image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
+                 start_offset_m: float = PAD_START_OFFSET_M,
+                 start_height_m: tuple[float, float] = PAD_START_HEIGHT_M,
+                 pad_tolerance_m: float = PAD_TOLERANCE_M, **kwargs: Any) -> None:
         kwargs.setdefault("wind", "random_force")
 
         def task() -> Task:

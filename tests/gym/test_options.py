@@ -109,6 +109,8 @@ def test_the_defaults_of_the_ignored_options_may_be_given() -> None:
     env = gymnasium.make("skeye/GoTo-v0", camera=None, camera_name="Down", vision_latency_s=0,
                          calibration=None)
     env.close()
+    env = gymnasium.make("skeye/Hover-v0", camera_name="down")  # the mount's name, any case
+    env.close()
     env = gymnasium.make("skeye/PadLanding-v0", camera="ideal", vision_latency_s=0.05,
                          calibration="model", camera_name="Down")
     env.close()
