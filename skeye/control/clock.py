@@ -24,6 +24,12 @@ from collections.abc import Callable
 from skeye.errors import ConfigError, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.workers import Worker
 
+MAX_RUN_FOR_S = 86_400.0
+"""The most sim time one call lets pass or holds a command for (``run_for``, ``step``,
+``set_velocity``'s ``duration_s``): a day, far beyond what the robot files' batteries (2100 and
+4000 mAh) fly; a longer run is several calls. Without a bound a finite but huge value (1e300 s)
+would step for ever."""
+
 log = logging.getLogger(__name__)
 
 Tick = Callable[[], None]

@@ -49,7 +49,7 @@ from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
 from skeye.wire.sim_messages import GetConf, GetStartPoses, Init, Ping, Set, Step
 from skeye.workers import Worker
 
-from .clock import Clock, LockstepClock, RealtimeClock, period_steps
+from .clock import MAX_RUN_FOR_S, Clock, LockstepClock, RealtimeClock, period_steps
 from .motion import MotionConfig
 from .robots import Robot, robot_class
 
@@ -59,10 +59,6 @@ DEFAULT_PORT = 3000
 DEFAULT_IMAGE_PORT = 5003
 _STOP = b""
 _RECV_WAIT_S = 1.0  # the reader's longest wait in one recv (a closed link wakes it at once)
-MAX_RUN_FOR_S = 86_400.0
-"""The most sim time one ``run_for`` lets pass: a day, far beyond what the robot files'
-batteries (2100 and 4000 mAh) fly; a longer run is several calls. Without a bound a finite
-but huge value (1e300 s) would step for ever."""
 
 
 @dataclass(frozen=True)

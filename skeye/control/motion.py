@@ -31,10 +31,11 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Final
 
-from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError, SkeyeError
 from skeye.values import is_finite_number
 from skeye.wire.sim_messages import Drive
 
+from .clock import MAX_RUN_FOR_S
 from .sensors import Vec3, wrap_pi
 
 
@@ -358,8 +359,11 @@ class Velocity(Motion):
 
     def __init__(self, command: DriveCommand, duration_s: float | None) -> None:
         super().__init__()
-        if duration_s is not None and not (math.isfinite(duration_s) and duration_s >= 0):
-            raise LocalProtocolError(f"set_velocity: duration_s must be >= 0, got {duration_s}")
+        if duration_s is not None and not (is_finite_number(duration_s)
+                                           and 0 <= duration_s <= MAX_RUN_FOR_S):
+            raise InvalidArgument(f"set_velocity: duration_s must be a finite number "
+                                  f"0..{MAX_RUN_FOR_S:g} s (a day of sim time at most), got "
+                                  f"{duration_s!r}")
         self.command = command
         self.duration_s = duration_s
         if duration_s is not None:

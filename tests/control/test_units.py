@@ -237,3 +237,9 @@ def test_run_for_and_step_refuse_a_finite_but_absurd_duration_naming_the_limit()
             sim.step(10**300)  # stepped for ever too
         assert sim.ping() == before  # refused before a single step
         assert sim.run_for(0.1) == pytest.approx(before + 0.1)  # the connection is still good
+        copter = sim.spawn("hummingbird", start="Pad1")
+        for bad in (1e300, MAX_RUN_FOR_S + 0.001, 10**400):  # 10**400: an OverflowError before
+            with pytest.raises(InvalidArgument, match=r"set_velocity: duration_s must be a "
+                                                      r"finite number 0\.\.86400 s"):
+                copter.set_velocity(1.0, duration_s=bad)  # type: ignore[arg-type]
+        copter.set_velocity(0.0, up_m_s=0.5, duration_s=0.2)  # and a sensible one flies
