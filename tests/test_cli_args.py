@@ -117,6 +117,7 @@ def test_a_closed_output_ends_a_stream_quietly() -> None:
         child.stdout.close()  # as head does after its line
         start = time.monotonic()
         err = child.stderr.read().decode()
+        child.stderr.close()
         code = child.wait(30)
     assert first and code == 0, err
     assert "Traceback" not in err and "BrokenPipe" not in err, err

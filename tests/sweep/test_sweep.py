@@ -350,6 +350,7 @@ def test_sweep_off_a_terminal_logs_lines_and_sigterm_leaves_nothing_behind(tmp_p
         assert proc.wait(60) == 130
     finally:
         proc.kill()
+        proc.stderr.close()
     assert "2 trials to run" in lines[0] and "ok in" in lines[-1], lines
     assert "stopped by signal SIGTERM" in rest and "rerun to resume" in rest, rest
     assert not list(tmp.glob("skeye-trial-*")), list(tmp.iterdir())
