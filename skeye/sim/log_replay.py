@@ -205,7 +205,7 @@ def report_table(result: dict[str, Any]) -> str:
             f"| {label} ({unit}) | {'-' if real is None else f'{real:.4g}'} | "
             f"{'-' if sim is None else f'{sim:.4g}'} | "
             f"{'-' if ref is None else f'{ref[0]:g}-{ref[1]:g}'} |")
-    if not result["has_truth"]:
+    if result["real"] and not result["has_truth"]:  # simulated only: there is no log
         lines += ["", "The log has no ground truth: no tilt error for it."]
     return "\n".join(lines)
 

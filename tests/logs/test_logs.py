@@ -142,6 +142,16 @@ def test_a_log_without_ground_truth_gets_no_tilt_error(
     assert "tilt_rms_deg" not in result["real"] and "tilt_rms_deg" in result["simulated"]
 
 
+def test_the_simulated_only_table_speaks_of_no_log(capsys: pytest.CaptureFixture[str]) -> None:
+    # docs/logs.md's `skeye logs --rate 200 --seconds 60`: without a log there is no log to
+    # lack ground truth, so the note about one must not be printed.
+    assert main(["logs", "--rate", "200", "--seconds", "3"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("Log: none (simulated only)")
+    assert "| board estimator tilt error, RMS (deg) | - |" in out
+    assert "ground truth" not in out
+
+
 def test_a_named_truth_topic_missing_from_the_bag_is_refused(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # As --imu-topic is: a topic the user named is wanted, so its absence is a bad option,
