@@ -278,8 +278,11 @@ def camera_model(
         if camera is not None and mount.name.lower() != camera.lower():
             continue
         return mount_camera_model(config, mount, profile)
-    which = f"camera named {camera!r}" if camera else "camera"
-    raise ConfigError(f"robot class {config.class_name!r} has no {which}")
+    names = [m.name for m in config.sensors if m.type_name.lower() == CAMERA_TYPE]
+    if camera and names:
+        raise ConfigError(f"robot class {config.class_name!r} has no camera named {camera!r} "
+                          f"(its cameras: {', '.join(names)})")
+    raise ConfigError(f"robot class {config.class_name!r} has no camera")
 
 
 def mount_camera_model(

@@ -138,7 +138,8 @@ def test_detect_takes_the_fov_from_the_robot_file_and_says_so(pad_png, capsys):
     assert "--fov not given" not in captured.err
     assert json.loads(captured.out)["height_m"] == pytest.approx(1.2, rel=0.01)
     assert run(["vision", "detect", str(pad_png), "--camera", "Front"]) == 2
-    assert "has no camera named 'Front'; give --fov" in capsys.readouterr().err
+    assert ("has no camera named 'Front' (its cameras: Down); give --fov"
+            in capsys.readouterr().err)
 
 
 def test_pad_command_tiles_over_paper(tmp_path, capsys):
