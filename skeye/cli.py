@@ -21,7 +21,7 @@ from skeye.processes import wait_for_signal
 
 ENGINE_FAILED_STATUS = 3
 EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
-            "uvicorn": "ground"}
+            "uvicorn": "ground", "pymavlink": "mavlink", "av": "mavlink"}
 """A dependency that lives in an extra (pyproject.toml) -> the extra's name."""
 FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
 """Fault injection for tests (docs/reliability.md): the engine raises once sim time passes this."""
@@ -428,10 +428,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except ModuleNotFoundError as exc:
-        extra = EXTRA_OF.get((exc.name or "").split(".")[0])
+        top = (exc.name or "").split(".")[0]
+        extra = EXTRA_OF.get(top)
         if extra is None:
             raise
-        print(f"skeye {args.command}: error: {exc.name} is not installed: this command needs "
+        print(f"skeye {args.command}: error: {top} is not installed: this command needs "
               f"skeye's {extra} extra (pip install 'skeye[{extra}]'; the base install is the "
               "onboard pilot's, docs/onboard.md)", file=sys.stderr)
         return 2

@@ -135,3 +135,37 @@ def test_a_broken_pipe_that_is_not_the_output_is_an_error(monkeypatch, capsys) -
     monkeypatch.setattr(link_cli, "run", broken)
     assert main(["link", "tcp://" + NO_SIM, "poll", "all"]) == 2
     assert "skeye link: error: [Errno 32] Broken pipe" in capsys.readouterr().err
+
+
+WITHOUT_PYMAVLINK = """
+import sys
+
+
+class NotInstalled:  # as on the onboard install, which has no `mavlink` extra
+    @staticmethod
+    def find_spec(name, path=None, target=None):
+        if name.split(".")[0] in ("pymavlink", "av"):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+
+
+sys.meta_path.insert(0, NotInstalled)
+from skeye.cli import main
+
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("argv", [
+    ["pilot", "--airframe", "mavlink://udp/127.0.0.1:0", "--port", "0"],
+    [*PILOT, "--port", "0", "--mavlink", "udp://127.0.0.1:0"],
+])
+def test_a_mavlink_pilot_without_pymavlink_names_the_extra(argv: list[str]) -> None:
+    """README and docs/onboard.md: on ``pip install 'skeye[onboard]'`` a command that needs an
+    extra says which; the MAVLink airframe and links need the ``mavlink`` extra."""
+    done = subprocess.run([sys.executable, "-c", WITHOUT_PYMAVLINK, *argv], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr, done.stderr
+    assert ("skeye pilot: error: pymavlink is not installed: this command needs skeye's "
+            "mavlink extra (pip install 'skeye[mavlink]'") in done.stderr

@@ -170,6 +170,8 @@ def run(args: argparse.Namespace) -> int:
             print("skeye pilot: --rtp-video sends the camera: it needs --images or --camera URI",
                   flush=True)
             return 2
+    if args.mavlink:  # needs pymavlink (the `mavlink` extra): say so before the robot is spawned
+        import skeye.pilot.mavlink_server  # noqa: F401
     try:
         for uri in args.mavlink or ():
             from skeye.mavlink.transport import check_free
