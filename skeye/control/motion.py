@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError, SkeyeError
-from skeye.values import is_finite_number
+from skeye.values import is_finite_number, is_number
 from skeye.wire.sim_messages import Drive
 
 from .clock import MAX_RUN_FOR_S
@@ -59,10 +59,14 @@ class PIGains:
     """Integrate only while ``|e|`` is below this: no wind-up during a long approach."""
 
     def __post_init__(self) -> None:
-        for name in ("kp", "ki", "integral_limit", "integral_zone"):
+        for name in ("kp", "ki", "integral_limit"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
+            if not (is_finite_number(value) and value >= 0):
                 raise ConfigError(f"PI gains: {name} must be a finite number >= 0, got {value!r}")
+        zone = self.integral_zone  # inf, the default: integrate at any error
+        if not (is_number(zone) and zone == zone and zone >= 0):  # zone == zone: not NaN
+            raise ConfigError(f"PI gains: integral_zone must be a number >= 0 (inf: any error), "
+                              f"got {zone!r}")
 
 
 @dataclass(frozen=True)
@@ -108,7 +112,7 @@ class MotionConfig:
             "timeout_margin_s",
         ):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
+            if not (is_finite_number(value) and value > 0):
                 raise ConfigError(f"MotionConfig.{name} must be a positive number, got {value!r}")
 
 
@@ -263,11 +267,12 @@ class GoTo(Motion):
             ("max_climb_m_s", self.max_climb_m_s),
             ("tolerance_m", self.tolerance_m),
         ):
-            if not (math.isfinite(value) and value > 0):
+            if not (is_finite_number(value) and value > 0):
                 raise LocalProtocolError(f"{name}: {label} must be a positive number, got {value}")
         for v in target.position_ned_m:
             if not is_finite_number(v):
-                raise LocalProtocolError(f"{name}: target {target.position_ned_m} is not finite")
+                raise LocalProtocolError(f"{name}: target position (north, east, down) "
+                                         f"{target.position_ned_m} m is not finite")
         if target.yaw_rad is not None and not is_finite_number(target.yaw_rad):
             raise LocalProtocolError(f"{name}: yaw_rad {target.yaw_rad!r} is not finite")
         self.linear = PIController(config.linear)

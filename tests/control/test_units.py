@@ -199,6 +199,24 @@ def test_goto_refuses_a_yaw_that_is_not_finite(bad: object) -> None:
         GoTo(Target((0.0, 0.0, -1.0), bad), MotionConfig())  # type: ignore[arg-type]
 
 
+def test_goto_names_a_target_that_is_not_finite_in_its_frame_and_a_speed_beyond_floats() -> None:
+    with pytest.raises(LocalProtocolError, match=r"target position \(north, east, down\) "
+                                                 r"\(nan, 0\.0, -1\.0\) m is not finite"):
+        GoTo(Target((math.nan, 0.0, -1.0), None), MotionConfig())
+    with pytest.raises(LocalProtocolError, match=r"max_speed_m_s must be a positive number"):
+        GoTo(Target((0.0, 0.0, -1.0), None), MotionConfig(), max_speed_m_s=10**400)
+
+
+def test_pi_gains_take_their_default_integral_zone_and_refuse_bad_values() -> None:
+    """The default integral zone, inf (integrate at any error), was refused as not finite."""
+    assert PIGains(1.0, 0.1, 0.5).integral_zone == math.inf
+    for bad in (math.nan, -1.0, "wide"):
+        with pytest.raises(ConfigError, match=r"integral_zone must be a number >= 0"):
+            PIGains(1.0, 0.1, 0.5, bad)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"kp must be a finite number >= 0"):
+        PIGains(math.inf, 0.1, 0.5)
+
+
 def test_connect_refuses_an_address_that_is_not_a_string() -> None:
     with pytest.raises(LocalProtocolError, match="address must be a string"):
         skeye.connect(3000)  # type: ignore[arg-type]
