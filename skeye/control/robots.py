@@ -34,6 +34,7 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.geo import GeoOrigin
+from skeye.values import is_finite_number
 from skeye.wire.sim_lines import Message
 from skeye.wire.sim_messages import Reset, RobotConf
 
@@ -413,8 +414,9 @@ class Robot(RobotSensors):
         max_climb_m_s: float | None = None,
     ) -> None:
         """Climb to ``altitude_m`` above the spawn point's height, holding position after."""
-        if not (math.isfinite(altitude_m) and altitude_m > 0):
-            raise LocalProtocolError(f"take_off: altitude_m must be > 0, got {altitude_m}")
+        if not (is_finite_number(altitude_m) and altitude_m > 0):
+            raise LocalProtocolError(f"take_off: altitude_m must be a finite number > 0, got "
+                                     f"{altitude_m!r}")
         state = self._nav_state(self._check_feedback(feedback or self.feedback))
         n, e, _ = state.position_ned_m
         target = Target((n, e, self.home_ned_m[2] - altitude_m), state.yaw_rad)
@@ -546,7 +548,10 @@ class Robot(RobotSensors):
             ("up_m_s", up_m_s, cfg.max_climb_m_s),
             ("yaw_rate_rad_s", yaw_rate_rad_s, cfg.max_yaw_rate_rad_s),
         ):
-            if not (math.isfinite(value) and abs(value) <= limit + 1e-9):
+            if not is_finite_number(value):
+                raise LocalProtocolError(f"set_velocity: {label} must be a finite number, got "
+                                         f"{value!r}")
+            if abs(value) > limit + 1e-9:
                 raise LocalProtocolError(f"set_velocity: {label}={value} exceeds the limit {limit}")
         motion = Velocity(DriveCommand(forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s,
                                        board_mode), duration_s)

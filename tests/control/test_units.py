@@ -261,3 +261,10 @@ def test_run_for_and_step_refuse_a_finite_but_absurd_duration_naming_the_limit()
                                                       r"finite number 0\.\.86400 s"):
                 copter.set_velocity(1.0, duration_s=bad)  # type: ignore[arg-type]
         copter.set_velocity(0.0, up_m_s=0.5, duration_s=0.2)  # and a sensible one flies
+        for bad in (10**400, "fast", math.nan):  # TypeError or OverflowError before
+            with pytest.raises(LocalProtocolError,
+                               match=r"set_velocity: forward_m_s must be a finite number"):
+                copter.set_velocity(bad)  # type: ignore[arg-type]
+            with pytest.raises(LocalProtocolError,
+                               match=r"take_off: altitude_m must be a finite number > 0"):
+                copter.take_off(bad)  # type: ignore[arg-type]
