@@ -32,6 +32,7 @@ import logging
 import math
 import os
 import signal
+import sys
 import threading
 from contextlib import ExitStack, nullcontext
 from dataclasses import replace
@@ -116,44 +117,36 @@ def run(args: argparse.Namespace) -> int:
         airframe_scheme(airframe_uri)
         options = airframe_options(args)
     except (ConfigError, LocalProtocolError) as exc:
-        print(f"skeye pilot: {exc}", flush=True)
-        return 2
+        return _error(str(exc))
     if args.video_port is not None:
         problem = video_options_problem(args)
         if problem:
-            print(f"skeye pilot: {problem}", flush=True)
-            return 2
+            return _error(problem)
     camera_uri = args.camera if "://" in args.camera else None
     if camera_uri is not None:
         try:
             check_camera_uri(camera_uri)  # the whole URI, before the airframe opens
         except LocalProtocolError as exc:
-            print(f"skeye pilot: --camera: {exc}", flush=True)
-            return 2
+            return _error(f"--camera: {exc}")
     has_camera = args.images is not None or camera_uri is not None
     calibration = None
     if args.calibration is not None:
         from skeye.vision.calibration import load_calibration
 
         if not has_camera:
-            print("skeye pilot: --calibration is for the pad vision: it needs --images or "
-                  "--camera URI", flush=True)
-            return 2
+            return _error("--calibration is for the pad vision: it needs --images or "
+                          "--camera URI")
         try:
             calibration = load_calibration(args.calibration)
         except ConfigError as exc:
-            print(f"skeye pilot: --calibration: {exc}", flush=True)
-            return 2
+            return _error(f"--calibration: {exc}")
     try:
         latency_s = vision_latency_s(args.vision_latency_ms)
         check_policy_options(args)
     except ConfigError as exc:
-        print(f"skeye pilot: {exc}", flush=True)
-        return 2
+        return _error(str(exc))
     if not (math.isfinite(args.frame_jitter_ms) and 0.0 <= args.frame_jitter_ms <= 1000.0):
-        print(f"skeye pilot: --frame-jitter-ms must be 0..1000 ms, got {args.frame_jitter_ms}",
-              flush=True)
-        return 2
+        return _error(f"--frame-jitter-ms must be 0..1000 ms, got {args.frame_jitter_ms}")
     if args.rtp_video is not None:
         from skeye.pilot.rtp_video import check_rtp_destination
 
@@ -161,15 +154,11 @@ def run(args: argparse.Namespace) -> int:
             check_rtp_destination(args.rtp_video)  # resolves, and a route exists
             import av  # noqa: F401  (the `mavlink` extra)
         except ImportError:
-            print("skeye pilot: --rtp-video needs PyAV: pip install 'skeye[mavlink]'", flush=True)
-            return 2
+            return _error("--rtp-video needs PyAV: pip install 'skeye[mavlink]'")
         except ConfigError as exc:
-            print(f"skeye pilot: --rtp-video: {exc}", flush=True)
-            return 2
+            return _error(f"--rtp-video: {exc}")
         if not has_camera:
-            print("skeye pilot: --rtp-video sends the camera: it needs --images or --camera URI",
-                  flush=True)
-            return 2
+            return _error("--rtp-video sends the camera: it needs --images or --camera URI")
     if args.mavlink:  # needs pymavlink (the `mavlink` extra): say so before the robot is spawned
         import skeye.pilot.mavlink_server  # noqa: F401
     try:
@@ -178,8 +167,7 @@ def run(args: argparse.Namespace) -> int:
 
             check_free(uri)  # a bad URI or a taken port stops us before the robot is spawned
     except ConfigError as exc:
-        print(f"skeye pilot: --mavlink: {exc}", flush=True)
-        return 2
+        return _error(f"--mavlink: {exc}")
     airframe: Any = None
     try:
         ports = [] if args.serial else [("the pilot", args.host, args.port, "--port")]
@@ -189,13 +177,11 @@ def run(args: argparse.Namespace) -> int:
             check_ports_free(ports)
         problem = serial_problem(args.serial)
         if problem:
-            print(f"skeye pilot: {problem}", flush=True)
-            return 2
+            return _error(problem)
         try:
             airframe = open_airframe(airframe_uri, options)
         except (ConfigError, LocalProtocolError) as exc:  # a URI its backend refused
-            print(f"skeye pilot: --airframe: {exc}", flush=True)
-            return 2
+            return _error(f"--airframe: {exc}")
         with ExitStack() as stack:
             stack.callback(airframe.close)
             limits = airframe.limits
@@ -215,13 +201,11 @@ def run(args: argparse.Namespace) -> int:
                 stack.callback(source.close)
                 fov_h_rad = source.fov_h_rad
                 if calibration is None and fov_h_rad is None:
-                    print(f"skeye pilot: --camera {camera_uri}: its field of view is not known: "
-                          "add fov_deg= to the URI, or give --calibration camera.toml (skeye "
-                          "calibrate)", flush=True)
-                    return 2
-                if source.lost:
-                    print(f"skeye pilot: {source.lost}; the pad modes hold still until it "
-                          "gives frames", flush=True)
+                    return _error(f"--camera {camera_uri}: its field of view is not known: "
+                                  "add fov_deg= to the URI, or give --calibration camera.toml "
+                                  "(skeye calibrate)")
+                if source.lost:  # the pilot runs on: a warning, as skeye calibrate's
+                    _warn(f"{source.lost}; the pad modes hold still until it gives frames")
                 camera_name = camera_uri
                 vision = camera_vision_factory(source, fov_h_rad, calibration,
                                                lockstep=airframe.lockstep, latency_s=latency_s,
@@ -229,9 +213,8 @@ def run(args: argparse.Namespace) -> int:
             elif args.images is not None:
                 sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
                 if sim is None or robot is None:
-                    print(f"skeye pilot: --images reads the camera of a robot the pilot spawned "
-                          f"(sim://); {airframe_uri} has none: give --camera URI", flush=True)
-                    return 2
+                    return _error(f"--images reads the camera of a robot the pilot spawned "
+                                  f"(sim://); {airframe_uri} has none: give --camera URI")
                 fov_h_rad = camera_fov_rad(sim, args.camera)
                 camera_name = f"{args.name}/{args.camera}"
                 if args.policy is not None:
@@ -283,8 +266,7 @@ def run(args: argparse.Namespace) -> int:
                 if args.serial is None:
                     raise
                 # busy, a directory, not a terminal: a bad option, not a lost simulator
-                print(f"skeye pilot: --serial: {exc}", flush=True)
-                return 2
+                return _error(f"--serial: {exc}")
             with mavlink or nullcontext(), rtp or nullcontext():
                 print(
                     f"skeye pilot: {describe_airframe(airframe.describe(), lockstep, args)}; "
@@ -308,13 +290,26 @@ def run(args: argparse.Namespace) -> int:
                         video.check()
             print("skeye pilot: stopping", flush=True)
     except SkeyeError as exc:
-        print(f"skeye pilot: {exc}", flush=True)
+        _error(str(exc))
         if airframe is None and isinstance(exc, (LinkClosed, LinkTimeout)):
             return EXIT_LOST_SIMULATOR  # the vehicle (or simulator) cannot be reached
         if getattr(airframe, "link_failed", None) is not None or isinstance(exc, LinkClosed):
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
+
+
+def _error(message: str) -> int:
+    """Say ``message`` on stderr as the pilot's error, the way every sub-command does
+    (``skeye pilot: error: ...``); returns 2, a bad option's exit code."""
+    print(f"skeye pilot: error: {message}", file=sys.stderr, flush=True)
+    return 2
+
+
+def _warn(message: str) -> None:
+    """Say ``message`` on stderr as a warning: the pilot runs on (``skeye pilot: warning:``,
+    as ``skeye calibrate`` warns)."""
+    print(f"skeye pilot: warning: {message}", file=sys.stderr, flush=True)
 
 
 def serial_problem(device: str | None) -> str:

@@ -208,7 +208,7 @@ def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
             [sys.executable, "-m", "skeye.cli", "pilot", "--sim", "127.0.0.1:1",
              "--port", str(port)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1
-    assert f"port {port}" in done.stdout and "--port" in done.stdout, done.stdout
+    assert f"port {port}" in done.stderr and "--port" in done.stderr, done.stderr
     with running_sim(mode="realtime") as server:
         from skeye.control.connection import connect
 
@@ -219,7 +219,7 @@ def test_pilot_names_a_taken_port_and_a_taken_robot_name(tmp_path) -> None:
                  f"127.0.0.1:{server.port}", "--port", "0", "--name", "R1"],
                 capture_output=True, text=True, timeout=60)
     assert done.returncode == 1
-    assert "already exists" in done.stdout and "--name" in done.stdout, done.stdout
+    assert "already exists" in done.stderr and "--name" in done.stderr, done.stderr
 
 
 def _make_run(tmp_path, ports: list[int]) -> subprocess.Popen[str]:

@@ -39,7 +39,7 @@ def test_skeye_pilot_refuses_a_taken_mavlink_port_before_reaching_the_simulator(
     with socket.create_server(("127.0.0.1", 0)) as taken:
         port = taken.getsockname()[1]
         done = _skeye("pilot", "--sim", "127.0.0.1:1", "--mavlink", f"tcp://127.0.0.1:{port}")
-    assert done.returncode == 2 and f"TCP port {port}" in done.stdout, done
-    assert "--rtp-video" not in done.stdout
+    assert done.returncode == 2 and f"TCP port {port}" in done.stderr, done
+    assert "--rtp-video" not in done.stderr
     rtp = _skeye("pilot", "--sim", "127.0.0.1:1", "--rtp-video", "udp://127.0.0.1:5600")
-    assert rtp.returncode == 2 and "needs --images" in rtp.stdout
+    assert rtp.returncode == 2 and "needs --images" in rtp.stderr

@@ -98,8 +98,8 @@ def _pilot(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_skeye_pilot_airframe_refuses_bad_uris_and_silent_controllers():
     bad = _pilot("--airframe", "mavlink://bogus/1.2.3.4:5")
-    assert bad.returncode == 2 and "unknown MAVLink link kind 'bogus'" in bad.stdout
+    assert bad.returncode == 2 and "unknown MAVLink link kind 'bogus'" in bad.stderr
     port = free_udp_port()
     silent = _pilot("--airframe", f"mavlink://udp/127.0.0.1:{port}", "--timeout", "1",
                     "--port", "0")
-    assert silent.returncode == 4 and "no flight controller on udp://127.0.0.1" in silent.stdout
+    assert silent.returncode == 4 and "no flight controller on udp://127.0.0.1" in silent.stderr

@@ -107,9 +107,9 @@ def test_the_host_is_resolved_within_a_bounded_wait(monkeypatch: pytest.MonkeyPa
         args = parser.parse_args(["pilot", "--sim", "127.0.0.1:1", "--images", "127.0.0.1:1",
                                   "--rtp-video", "udp://gcs.example:5600"])
         assert pilot_cli.run(args) == 2
-        out = capsys.readouterr().out
-        assert ("skeye pilot: --rtp-video: udp://gcs.example:5600: the host 'gcs.example' did "
-                "not resolve within 0.2 s") in out, out
+        err = capsys.readouterr().err
+        assert ("skeye pilot: error: --rtp-video: udp://gcs.example:5600: the host "
+                "'gcs.example' did not resolve within 0.2 s") in err, err
     finally:
         released.set()  # the resolver threads left behind end
 

@@ -216,7 +216,7 @@ def test_a_line_nobody_answers_stops_the_pilot_at_start(capsys):
         args = pilot_cli_parser().parse_args(
             ["pilot", "--airframe", f"asctec-ll://serial{path}?timeout_s=0.3", "--port", "0"])
         assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR
-        assert "LL board silent" in capsys.readouterr().out
+        assert "LL board silent" in capsys.readouterr().err
     finally:
         os.close(master)
         os.close(slave)

@@ -84,7 +84,7 @@ def test_a_pilot_that_cannot_reach_its_simulator_exits_with_status_4(capsys):
         port = s.getsockname()[1]
         args = parser().parse_args(["pilot", "--sim", f"127.0.0.1:{port}", "--port", "0"])
         assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR == 4
-    assert "cannot connect to the simulator" in capsys.readouterr().out
+    assert "cannot connect to the simulator" in capsys.readouterr().err
 
 
 def test_pilot_video_options_are_checked_before_anything_starts(capsys):
@@ -100,7 +100,7 @@ def test_pilot_video_options_are_checked_before_anything_starts(capsys):
     ):
         args = parser().parse_args(base + extra)
         assert pilot_cli.run(args) == 2
-        assert words in capsys.readouterr().out
+        assert words in capsys.readouterr().err
 
 
 def test_pilot_names_a_taken_video_port(capsys):
@@ -111,21 +111,21 @@ def test_pilot_names_a_taken_video_port(capsys):
         args = parser().parse_args(["pilot", "--sim", "127.0.0.1:1", "--images", "127.0.0.1:1",
                                     "--port", "0", "--video-port", str(port)])
         assert pilot_cli.run(args) == 1
-    out = capsys.readouterr().out
-    assert f"port {port}" in out and "--video-port" in out and "video" in out
+    err = capsys.readouterr().err
+    assert f"port {port}" in err and "--video-port" in err and "video" in err
 
 
 def test_pilot_calibration_is_checked_before_anything_starts(capsys, tmp_path):
     base = ["pilot", "--sim", "127.0.0.1:1", "--port", "0"]
     args = parser().parse_args([*base, "--calibration", str(tmp_path / "camera.toml")])
     assert pilot_cli.run(args) == 2
-    assert "--calibration is for the pad vision: it needs --images" in capsys.readouterr().out
+    assert "--calibration is for the pad vision: it needs --images" in capsys.readouterr().err
     (tmp_path / "camera.toml").write_text("[camera]\nwidth_px = 800\n")
     args = parser().parse_args([*base, "--images", "127.0.0.1:1",
                                 "--calibration", str(tmp_path / "camera.toml")])
     assert pilot_cli.run(args) == 2
-    out = capsys.readouterr().out
-    assert "--calibration" in out and "missing required key" in out
+    err = capsys.readouterr().err
+    assert "--calibration" in err and "missing required key" in err
 
 
 def test_pilot_hands_the_calibration_to_the_detector():
@@ -149,7 +149,7 @@ def test_pilot_vision_latency_option_is_checked_before_anything_starts(capsys):
     for bad in ("-5", "fast", "nan"):
         args = parser().parse_args([*base, "--vision-latency-ms", bad])
         assert pilot_cli.run(args) == 2
-        assert "--vision-latency-ms must be" in capsys.readouterr().out
+        assert "--vision-latency-ms must be" in capsys.readouterr().err
 
 
 def test_a_serial_device_that_cannot_be_opened_is_a_bad_option(capsys, monkeypatch, tmp_path):
@@ -171,8 +171,8 @@ def test_a_serial_device_that_cannot_be_opened_is_a_bad_option(capsys, monkeypat
                         lambda uri, options: opened.append(Backend()) or opened[-1])
     args = parser().parse_args(["pilot", "--sim", "127.0.0.1:1", "--serial", str(tmp_path)])
     assert pilot_cli.run(args) == 2
-    out = capsys.readouterr().out
-    assert "--serial" in out and str(tmp_path) in out
+    err = capsys.readouterr().err
+    assert "--serial" in err and str(tmp_path) in err
     assert opened and opened[0].closed
 
 
@@ -182,3 +182,55 @@ def test_link_errors_name_the_command(capsys):
     code, _ = run("link", "udp://x:1", "land")
     assert code == link_cli.EXIT_USAGE
     assert capsys.readouterr().err.startswith("skeye link: error: link URI 'udp://x:1'")
+
+
+def _unused_port() -> int:
+    import socket
+
+    with socket.socket() as s:  # bound, never listening: a connection there is refused
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize(("extra", "status", "words"), [
+    (["--frame-jitter-ms", "2000"], 2, "--frame-jitter-ms must be 0..1000 ms, got 2000.0"),
+    (["--rtp-video", "udp://127.0.0.1:5600"], 2,
+     "--rtp-video sends the camera: it needs --images or --camera URI"),
+    (["--port", "0"], pilot_cli.EXIT_LOST_SIMULATOR, "cannot connect to the simulator at"),
+], ids=["bad option", "option needs another", "simulator not there"])
+def test_pilot_errors_go_to_stderr_naming_the_command(capsys, extra, status, words):
+    """As every sub-command: ``skeye pilot: error: ...`` on stderr, nothing on stdout (which
+    carries the start-up line and ``stopping``), and the exit status says which error."""
+    from skeye.cli import main
+
+    assert main(["pilot", "--sim", f"127.0.0.1:{_unused_port()}", *extra]) == status
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith(f"skeye pilot: error: {words}"), captured.err
+    assert captured.err.count("\n") == 1, captured.err
+
+
+def test_a_camera_lost_at_start_is_a_warning_on_stderr(capsys, monkeypatch, tmp_path):
+    """The pilot runs on without its camera (the pad modes hold still): a warning, not an
+    error. The --serial directory then stops it, as a bad option."""
+    from skeye.pilot.airframe import VehicleLimits
+
+    class Backend(FakeAirframe):
+        limits = VehicleLimits()
+        lockstep = False
+        clock_is_sim = False
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(pilot_cli, "open_airframe", lambda uri, options: Backend())
+    camera = "v4l2:///dev/skeye-test-no-camera?fov_deg=60"  # not plugged in
+    args = parser().parse_args(["pilot", "--sim", "127.0.0.1:1", "--camera", camera,
+                                "--serial", str(tmp_path)])
+    assert pilot_cli.run(args) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    warning, error = captured.err.splitlines()
+    assert warning.startswith(f"skeye pilot: warning: camera {camera}: cannot open "), warning
+    assert warning.endswith("; the pad modes hold still until it gives frames"), warning
+    assert error.startswith("skeye pilot: error: --serial: "), error
