@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -62,11 +62,16 @@ class MavVehicle:
     robot: Any
     mavlink: MavlinkServer
     sim: Any
+    clients: list[Any] = field(default_factory=list)  # closed with the vehicle
 
     def client(self, source: tuple[int, int] = GCS) -> Any:
-        """A pymavlink connection on the port the vehicle sends to."""
-        conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
-                                          source_system=source[0], source_component=source[1])
+        """A pymavlink connection on the port the vehicle sends to (closed with the vehicle)."""
+        return self.keep(mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{self.port}", source_system=source[0], source_component=source[1]))
+
+    def keep(self, conn: Any) -> Any:
+        """Close ``conn`` (a pymavlink connection) when the vehicle goes."""
+        self.clients.append(conn)
         return conn
 
     def truth(self) -> tuple[float, float, float]:
@@ -102,7 +107,12 @@ def mav_vehicle(*, rate: float = 4.0, images: bool = False, robot_dir: Path | No
         server = stack.enter_context(MavlinkServer(
             pilot.boards, pilot.lock, uris or [f"udpout://127.0.0.1:{port}"],
             settings=Settings(pad_vision=images)))
-        yield MavVehicle(port, pilot, robot, server, sim)
+        vehicle = MavVehicle(port, pilot, robot, server, sim)
+        try:
+            yield vehicle
+        finally:
+            for conn in vehicle.clients:
+                conn.close()
 
 
 @contextmanager

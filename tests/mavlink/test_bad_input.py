@@ -223,11 +223,11 @@ def test_a_mission_with_absurd_items_is_refused_and_the_old_one_kept(flying):
 def test_a_second_ground_station_is_served_and_both_are_told():
     port = free_udp_port()
     with mav_vehicle(uris=[f"udp://127.0.0.1:{port}"]) as v:
-        first = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
-                                           source_system=GCS[0], source_component=GCS[1])
+        first = v.keep(mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                                  source_system=GCS[0], source_component=GCS[1]))
         wait_for(first, "HEARTBEAT")
-        second = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=254,
-                                            source_component=190)
+        second = v.keep(mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                                   source_system=254, source_component=190))
         second.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         for conn in (first, second):
             note = wait_for(conn, "STATUSTEXT", lambda m: "joined" in m.text)

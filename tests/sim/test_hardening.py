@@ -203,6 +203,7 @@ def test_skeye_sim_process_exits_nonzero_when_its_engine_dies() -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait(10)
+        proc.stdout.close()
 
 
 # -- point 9: idle and handshake-less connections, slots per peer -------------------------------
