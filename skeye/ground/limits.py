@@ -227,11 +227,12 @@ class LimitedWebSocketProtocol(WebSocketsSansIOProtocol):
             try:
                 await asyncio.wait_for(self.writable.wait(), self.limits.send_timeout_s)
             except TimeoutError:
-                if not self.transport.is_closing():
-                    self.limits.slow_cut += 1
-                    log.info("cutting a WebSocket of %s: it took nothing of what was sent to "
-                             "it for %g s", self.client, self.limits.send_timeout_s)
-                    self.transport.abort()  # the send below ends as a disconnect
+                # Also when the transport is already closing (the server shutting down, a
+                # close frame sent): close() waits for the full buffer to drain, for ever.
+                self.limits.slow_cut += 1
+                log.info("cutting a WebSocket of %s: it took nothing of what was sent to "
+                         "it for %g s", self.client, self.limits.send_timeout_s)
+                self.transport.abort()  # the send below ends as a disconnect
         await super().send(message)
 
 

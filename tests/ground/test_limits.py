@@ -285,3 +285,52 @@ def test_a_video_page_that_never_reads_is_cut_and_another_is_served() -> None:
             while True:
                 page.recv(30)
         assert limits.slow_cut == 1
+
+
+def test_a_page_that_never_reads_does_not_hold_the_server_shutdown() -> None:
+    """Shutting down closes each WebSocket (a close frame, then ``transport.close()``, which
+    waits for the full buffer to drain, for ever when the page never reads). The send waiting
+    for room must still cut the connection after ``send_timeout_s``; it used to skip the cut on
+    a transport already closing and wait on, so the server never finished shutting down."""
+    import uvicorn
+    from starlette.applications import Starlette
+    from starlette.routing import WebSocketRoute
+    from starlette.websockets import WebSocket
+
+    from skeye.ground.limits import LimitedWebSocketProtocol, server_config
+
+    blob = os.urandom(1 << 20)
+
+    async def stream(ws: WebSocket) -> None:
+        await ws.accept()
+        try:
+            while True:
+                await ws.send_bytes(blob)
+        except Exception:  # the page is gone, or cut
+            pass
+
+    limits = ConnectionLimits(send_timeout_s=3.0)
+    server = uvicorn.Server(server_config(Starlette(routes=[WebSocketRoute("/s", stream)]),
+                                          limits=limits, ws_ping_interval=None))
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [listener]}, daemon=True)
+    thread.start()
+    with ExitStack() as stack:
+        stack.callback(listener.close)
+        stack.callback(setattr, server, "force_exit", True)  # a hung shutdown ends anyway
+        wait_until(lambda: server.started, 60, "uvicorn to start")
+        page = stack.enter_context(socket.create_connection(("127.0.0.1", port)))
+        page.sendall(f"GET /s HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                     "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                     "Sec-WebSocket-Version: 13\r\n\r\n".encode())  # and never reads
+
+        def buffer_full() -> bool:
+            return any(isinstance(c, LimitedWebSocketProtocol) and not c.writable.is_set()
+                       for c in list(server.server_state.connections))
+
+        wait_until(buffer_full, 60, "the page's buffer to fill")
+        server.should_exit = True  # within send_timeout_s of the send starting to wait
+        thread.join(limits.send_timeout_s + 30)
+        assert not thread.is_alive(), "the server's shutdown waits for a page that never reads"
+        assert limits.slow_cut == 1
