@@ -119,7 +119,10 @@ def test_grants_below_the_latest_are_answered_as_the_simulator_reaches_them():
         results, _ = client.exchange(encode(Clock(0)))  # passed: the time now
         assert [r.code for r in results] == [ResultCode.OK]
         start_s = sim_time(results[0])
-        near_ms = round(start_s * 1000) + 200
+        # 30 s ahead: the clock thread, already stepping towards the far grant, must not pass
+        # the near one before the reader has taken it from the same write (on a busy machine
+        # the reader may wait a while between two packets; stepping 30 s takes far longer).
+        near_ms = round(start_s * 1000) + 30_000
         results, _ = client.exchange(encode(Clock(FAR_MS)) + encode(Clock(near_ms)))
         # The near grant is answered on the way to the far one, not once that is reached.
         answer = results[0] if results else client.next_clock_result()
