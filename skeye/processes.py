@@ -137,7 +137,7 @@ def start_skeye(
     child_env.setdefault("MUJOCO_GL", "egl")
     child_env.update(env or {})
     proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=child_env,
+                            stderr=subprocess.STDOUT, text=True, errors="replace", env=child_env,
                             preexec_fn=die_with_parent())
     with _children_lock:
         _children[:] = [p for p in _children if p.poll() is None]

@@ -1,20 +1,13 @@
 """skeye.processes.start_skeye: the child's output pipe is closed once it has been read to its
-end, not left for the garbage collector."""
+end, not left for the garbage collector; output that is not UTF-8 is read all the same."""
 
 from __future__ import annotations
 
-import time
+import pytest
 
+from skeye.errors import SkeyeError
 from skeye.processes import start_skeye, stop_process
-
-
-def _wait(predicate, timeout_s: float = 30.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
+from tests.robustness.helpers import wait_for
 
 
 def test_the_output_pipe_of_a_started_child_is_closed_after_its_end() -> None:
@@ -22,8 +15,17 @@ def test_the_output_pipe_of_a_started_child_is_closed_after_its_end() -> None:
     try:
         assert found[0].group(0) == "usage: skeye"
         assert proc.wait(60) == 0
-        assert proc.stdout is not None
-        assert _wait(lambda: proc.stdout.closed), "the drained pipe was left open"
+        stdout = proc.stdout
+        assert stdout is not None
+        assert wait_for(lambda: stdout.closed, timeout_s=30), "the drained pipe was left open"
     finally:
         stop_process(proc)
 
+
+def test_output_that_is_not_utf8_is_quoted_not_a_decoding_error() -> None:
+    """A child writing another encoding (here latin-1: 'wörld' as one byte 0xF6) is quoted with
+    a replacement character; a strict decoder raised UnicodeDecodeError in the reader (or killed
+    the drain thread)."""
+    with pytest.raises(SkeyeError, match=r"did not start: .*unknown world 'w\ufffdrld'"):
+        start_skeye(["sim", "--world", "wörld", "--port", "0"], [r"control protocol on"],
+                    "skeye sim", timeout_s=120, env={"PYTHONIOENCODING": "latin-1"})
