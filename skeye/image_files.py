@@ -35,8 +35,10 @@ def _jpeg_damage(data: _Bytes) -> str | None:
     while True:
         if i >= n:
             return cut
-        if data[i] != 0xFF:
-            return f"the JPEG data has no marker where one belongs (byte {i})"
+        if data[i] != 0xFF:  # bytes between segments: libjpeg skips them with a warning
+            i = data.find(b"\xff", i)
+            if i < 0:
+                return cut
         while i < n and data[i] == 0xFF:  # fill bytes before a marker
             i += 1
         if i >= n:

@@ -99,3 +99,21 @@ def test_a_long_stream_of_jpegs_is_judged_by_its_first(files: dict[str, bytes],
     assert file_damage(stream) is None
     stream.write_bytes(files["baseline.jpg"][:-10])
     assert file_damage(stream) is not None
+
+
+def test_stray_bytes_between_segments_are_skipped_as_libjpeg_does(files: dict[str, bytes],
+                                                                  tmp_path: Path) -> None:
+    """Bytes between two marker segments (libjpeg: "extraneous bytes before marker", a warning)
+    decode as the file without them: such a photo is whole, not refused."""
+    data = files["baseline.jpg"]
+    app0_end = 4 + int.from_bytes(data[4:6], "big")  # SOI, then the APP0 segment
+    assert data[app0_end] == 0xFF
+    stray = tmp_path / "stray.jpg"
+    stray.write_bytes(data[:app0_end] + b"camera junk" + data[app0_end:])
+    assert damage(stray.read_bytes()) is None
+    assert np.array_equal(read_image_file(stray), cv2.imdecode(np.frombuffer(data, np.uint8),
+                                                               cv2.IMREAD_COLOR))
+    # Cut short after the stray bytes: still refused.
+    with pytest.raises(ConfigError, match="truncated or corrupt"):
+        stray.write_bytes(data[:app0_end] + b"camera junk" + data[app0_end:-300])
+        read_image_file(stray)
