@@ -11,9 +11,12 @@ distance from the pole along the meridian, in the direction of the longitude, wi
 the origin's meridian (the tangent plane's own north there, as from the ECEF rotation at
 latitude +-90). A point at a pole is the same point at any longitude: it takes the origin's. A
 position past a pole (latitude beyond +-90) continues on the far side (the longitude + 180).
-Within some kilometres of a pole, short of it, the equirectangular east scale errs by the
-tangent of the latitude times the north offset (27 % over 300 m at 89.99 deg): positions there
-are approximate.
+Within some kilometres of a pole, short of it, the equirectangular form does not hold: its east
+scale errs by the tangent of the latitude times the north offset (27 % over 300 m at
+89.99 deg), and within a few hundred metres of the pole an east offset spans more than 180 deg
+of longitude, which wraps (at 89.9999 deg, 40 m east comes back from latitude and longitude as
+about 30 m west). Positions there are wrong by up to hundreds of metres; world files refuse an
+origin at the poles, and no flight of a small UAV in this model should start near one.
 """
 
 from __future__ import annotations
