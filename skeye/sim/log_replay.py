@@ -159,12 +159,27 @@ class _NoWorld:
     sea_level_pressure_pa = 101325.0
 
 
+def in_flight(log: ImuLog) -> ImuLog:
+    """The log after its first ``REST_S`` seconds at rest (from its first sample, which is
+    ``--start``'s when given): what the table's figures and the plotted spectra measure."""
+    return log.span(log.t_s[0] + REST_S, None)
+
+
+def axis_mean_spectrum(log: ImuLog, attr: str) -> tuple[np.ndarray, np.ndarray]:
+    """The power spectral density of ``attr`` (``accel_m_s2`` or ``gyro_rad_s``) in flight,
+    the mean over the three axes: (frequencies Hz, units^2/Hz)."""
+    data = getattr(in_flight(log), attr)
+    freqs = spectrum(data[:, 0], log.rate_hz)[0]
+    power = np.mean([spectrum(data[:, i], log.rate_hz)[1] ** 2 for i in range(3)], axis=0)
+    return freqs, power
+
+
 def compare(log: ImuLog, robot: str = "hummingbird") -> dict[str, Any]:
     """The log's figures, the simulated IMU's at the log's rate, and both replays."""
     rate = log.rate_hz
-    flight = log.span(log.t_s[0] + REST_S, None)
+    flight = in_flight(log)
     sim = simulated_imu(rate, min(120.0, float(log.t_s[-1] - log.t_s[0])), robot)
-    sim_flight = sim.span(REST_S, None)
+    sim_flight = in_flight(sim)
     # A log without ground truth gets no tilt error: replay_tilt would judge it against a level
     # vehicle, which only the simulated hover is.
     try:
@@ -222,9 +237,7 @@ def plot(result_logs: list[ImuLog], path: Path) -> None:
         top = fig.add_subplot(2, 2, col + 1)
         bottom = fig.add_subplot(2, 2, col + 3)
         for log in result_logs:
-            data = getattr(log.span(REST_S, None), attr)
-            freqs = spectrum(data[:, 0], log.rate_hz)[0]
-            power = sum(spectrum(data[:, i], log.rate_hz)[1] ** 2 for i in range(3)) / 3.0
+            freqs, power = axis_mean_spectrum(log, attr)  # the window the table measures
             top.semilogy(freqs, np.sqrt(power), linewidth=1, label=log.name)
             df = freqs[1] - freqs[0]
             above = np.sqrt(np.cumsum((power * df)[::-1])[::-1])
@@ -273,8 +286,8 @@ def cmd_logs(args: argparse.Namespace) -> int:
         sim = simulated_imu(rate, args.seconds, args.robot)
         result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": args.seconds,
                   "real": {}, "has_truth": False,
-                  "simulated": {**imu_figures(sim.span(REST_S, None).gyro_rad_s,
-                                              sim.span(REST_S, None).accel_m_s2, rate),
+                  "simulated": {**imu_figures(in_flight(sim).gyro_rad_s,
+                                              in_flight(sim).accel_m_s2, rate),
                                 **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)}}
     logs.append(simulated_imu(rate, min(120.0, result["seconds"]), args.robot))
     print(report_table(result))

@@ -20,8 +20,8 @@ import pytest
 from skeye.cli import main
 from skeye.errors import ConfigError
 from skeye.logs.analysis import adev_at, band_rms, imu_figures
-from skeye.logs.readers import read_log
-from skeye.sim.log_replay import replay_tilt
+from skeye.logs.readers import ImuLog, read_log
+from skeye.sim.log_replay import REST_S, axis_mean_spectrum, replay_tilt
 from tests.logs import make_logs
 from tests.logs.make_logs import RATE_HZ, synthetic
 
@@ -97,6 +97,20 @@ def test_a_damaged_ulog_leaves_no_file_open(tmp_path: Path) -> None:
             read_log(tmp_path / "junk.ulg")
         gc.collect()
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)], caught
+
+
+def test_the_plotted_spectra_leave_out_the_windows_rest_second_as_the_table_does() -> None:
+    """With --start the table measures from a second after the window's start; the plot used to
+    leave out the first second of the log's own clock instead (so nothing, after a --start)."""
+    rate = 200.0
+    t = np.arange(0.0, 12.0, 1.0 / rate)
+    accel = np.tile([0.0, 0.0, -9.81], (len(t), 1))
+    start_s = 5.0
+    rest = (t >= start_s) & (t < start_s + REST_S)  # the window's rest second: a 40 Hz buzz
+    accel[rest, 0] += 3.0 * np.sin(2 * np.pi * 40.0 * t[rest])
+    log = ImuLog("buzz", t, np.zeros((len(t), 3)), accel).span(start_s, None)
+    freqs, power = axis_mean_spectrum(log, "accel_m_s2")
+    assert float(power[np.argmin(abs(freqs - 40.0))]) < 1e-12
 
 
 def test_bad_logs_are_named(tmp_path: Path) -> None:
