@@ -36,6 +36,7 @@ def relay(port: int) -> Iterator[tuple[int, bytearray]]:
     listener = socket.create_server(("127.0.0.1", 0))
     captured = bytearray()
     threads: list[threading.Thread] = []
+    sockets: list[socket.socket] = []
 
     def pump(src: socket.socket, dst: socket.socket, record: bool) -> None:
         try:
@@ -55,6 +56,7 @@ def relay(port: int) -> Iterator[tuple[int, bytearray]]:
     def accept() -> None:
         client, _ = listener.accept()
         upstream = socket.create_connection(("127.0.0.1", port))
+        sockets.extend((client, upstream))
         for args in ((client, upstream, True), (upstream, client, False)):
             t = threading.Thread(target=pump, args=args, daemon=True)
             t.start()
@@ -69,6 +71,8 @@ def relay(port: int) -> Iterator[tuple[int, bytearray]]:
         listener.close()
         for t in threads:
             t.join(5)
+        for s in sockets:
+            s.close()
 
 
 def test_eight_producers_never_interleave_bytes(lockstep_sim: SimHandle) -> None:

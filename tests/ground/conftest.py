@@ -183,9 +183,15 @@ def _start_sim(robot_dir: Path) -> tuple[subprocess.Popen[str], int, int]:
             ports["control"] = int(m.group(1))
         if m := re.search(r"image server on [\d.]+:(\d+)", line):
             ports["images"] = int(m.group(1))
-    out = sim.stdout
-    threading.Thread(target=lambda: [None for _ in out], daemon=True).start()
+    threading.Thread(target=_drain, args=(sim.stdout,), daemon=True).start()
     return sim, ports["control"], ports["images"]
+
+
+def _drain(out: Any) -> None:
+    """Read the child's output to its end (it never blocks on a full pipe), then close it."""
+    with out:
+        for _ in out:
+            pass
 
 
 @pytest.fixture(scope="package")

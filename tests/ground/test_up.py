@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+from pathlib import Path
 
 from tests.ground.conftest import wait_until
 
@@ -59,7 +60,7 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
             for step in ("starting a lockstep simulator", "view 1 photographed",
                          "view 14 of 14 photographed", "solving for the lens"):
                 assert f"]: {step}" in said, (step, said)
-        pilot_argv = [open(f"/proc/{pid}/cmdline").read().split("\0") for pid in children]
+        pilot_argv = [Path(f"/proc/{pid}/cmdline").read_text().split("\0") for pid in children]
         pilot_argv = [a for a in pilot_argv if "pilot" in a]
         assert len(pilot_argv) == 1 and "--calibration" in pilot_argv[0], pilot_argv
         calibration = pilot_argv[0][pilot_argv[0].index("--calibration") + 1]

@@ -105,6 +105,10 @@ def test_the_ground_bridge_takes_every_structure_at_its_extremes() -> None:
 
     def vehicle() -> None:  # answers the bridge's STREAM and polls, then floods extremes
         conn, _ = listener.accept()
+        with conn:
+            serve(conn)
+
+    def serve(conn: socket.socket) -> None:
         conn.settimeout(0.2)
         parser = CommandStreamParser()
         while not stop.is_set():
@@ -140,6 +144,7 @@ def test_the_ground_bridge_takes_every_structure_at_its_extremes() -> None:
             stop.set()
             web.close()
             listener.close()
+            thread.join(10)
 
 
 def test_the_extreme_frames_cover_every_vehicle_structure() -> None:

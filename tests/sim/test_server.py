@@ -98,6 +98,7 @@ def test_overlong_line_gets_err_then_close():
         assert "long" in (err.get("Reason") or "").lower()
         with pytest.raises(ConnectionError):
             c.read_until(lambda m: False, timeout_s=5)
+        c.close()
         # The server still serves new clients.
         d = LineClient(server.port)
         d.expect("NFO")
