@@ -5,9 +5,9 @@ has the same setting, ``SKY_`` where it is skeye's own), its range and unit, and
 and write it on the vehicle (``get``/``set`` callables, bound by the endpoint to the boards'
 settings: envelope, speeds, failsafe timeouts). :class:`ParamTable` answers PARAM_REQUEST_LIST,
 PARAM_REQUEST_READ and PARAM_SET with PARAM_VALUE messages (every value a REAL32, so PX4's
-byte-wise and ArduPilot's C-cast encodings agree), and a PARAM_SET outside the range, non-finite
-or of an unknown name is refused: the current value comes back unchanged with a STATUSTEXT
-naming the problem, as PX4 does.
+byte-wise and ArduPilot's C-cast encodings agree), and a PARAM_SET outside the range,
+non-finite, of an integer type or of an unknown name is refused: the current value comes back
+unchanged with a STATUSTEXT naming the problem, as PX4 does.
 """
 
 from __future__ import annotations
@@ -98,7 +98,7 @@ class ParamTable:
             index = found
             spec = self.specs[index]
             value = float(msg.param_value)
-            problem = spec.check(value)
+            problem = _type_problem(spec.name, int(msg.param_type)) or spec.check(value)
             if problem is None:
                 try:
                     spec.set(value)
@@ -110,6 +110,21 @@ class ParamTable:
                         *statustext(self.codec, mav.MAV_SEVERITY_WARNING, problem)]
             return [self._value_msg(index)]
         return []
+
+
+def _type_problem(name: str, param_type: int) -> str | None:
+    """Why a PARAM_SET of ``param_type`` cannot set ``name`` (every value here is a REAL32).
+
+    An integer type's value comes byte-wise encoded (PX4's way, which MAVSDK's
+    ``set_param_int`` uses): 30 arrives as the float 4.2e-44, which read as a float would
+    pass a range like 0..600 and set the parameter to almost 0; so it is refused, as PX4
+    refuses a type that is not the parameter's. 0 (no type given) is read as a REAL32."""
+    if param_type in (0, mav.MAV_PARAM_TYPE_REAL32):
+        return None
+    entry = mav.enums["MAV_PARAM_TYPE"].get(param_type)
+    kind = entry.name.removeprefix("MAV_PARAM_TYPE_") if entry else f"type {param_type}"
+    return (f"{name} is a REAL32 (float) parameter, not {kind}: set it as a float "
+            "(MAVSDK: set_param_float)")
 
 
 def _name(raw: object) -> str:
