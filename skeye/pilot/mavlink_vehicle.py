@@ -489,7 +489,7 @@ class MavlinkVehicle:
             raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED, "landed: nothing to return from")
         self._start(Program.RTL)
 
-    def _reposition(self, cmd: Command) -> None:
+    def _reposition(self, cmd: Command) -> list[MavMessage]:
         if cmd.frame is None:
             raise Refused(mav.MAV_RESULT_DENIED, "DO_REPOSITION is a COMMAND_INT")
         if cmd.frame not in (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -513,6 +513,12 @@ class MavlinkVehicle:
                           "no GPS position yet: global targets cannot be placed")
         self._start(Program.NONE)
         self._fly_to((n, e, d), speed if speed > 0 else None)
+        yaw = cmd.p(4)  # MAVSDK's goto_location always sends one (0 for north, NaN for none)
+        if math.isnan(yaw):
+            return []
+        return self._notice("reposition-yaw", "yaw", mav.MAV_SEVERITY_NOTICE,
+                            f"DO_REPOSITION: yaw (p4) {yaw:g} deg is not flown: the heading "
+                            "is kept (give NaN for no yaw)")
 
     def _change_speed(self, cmd: Command) -> None:
         speed = cmd.p(2)
