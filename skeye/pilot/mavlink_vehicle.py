@@ -115,6 +115,7 @@ class MavlinkVehicle:
         self._recent: dict[tuple[Hashable, Command], tuple[float, int]] = {}
         self._armed_at_s: float | None = None
         self._setpoint: tuple[MavMessage, float] | None = None
+        self._attitude_target_s: float | None = None  # the last SET_ATTITUDE_TARGET (not flown)
         self._applied_target: tuple[float, float, float] | None = None
         self._targets: deque[PadObservation] = deque(maxlen=64)
         self.landing_targets = 0
@@ -258,6 +259,10 @@ class MavlinkVehicle:
                 self._setpoint = (msg, now_s)
                 if self.program is Program.OFFBOARD:
                     out += reply(self._apply_setpoint(msg))
+            return out
+        if kind == "SET_ATTITUDE_TARGET":
+            if self._for_us(msg):
+                self._attitude_target_s = now_s  # not flown; the Offboard request says so
             return out
         if kind == "MANUAL_CONTROL":
             if int(msg.target) in (0, self.codec.system_id) and self.program is Program.MANUAL:
@@ -562,6 +567,12 @@ class MavlinkVehicle:
         elif request is Request.OFFBOARD:
             sp = self._setpoint
             if sp is None or self._now_s - sp[1] > self.settings.offboard_loss_s:
+                att = self._attitude_target_s
+                if att is not None and self._now_s - att <= self.settings.offboard_loss_s:
+                    raise Refused(mav.MAV_RESULT_DENIED,
+                                  "attitude setpoints (SET_ATTITUDE_TARGET) are not flown by "
+                                  "this vehicle: send SET_POSITION_TARGET_LOCAL_NED or "
+                                  "_GLOBAL_INT (a position or a velocity)")
                 raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                               "offboard needs setpoints first (none within COM_OF_LOSS_T)")
             if not self._airborne():
