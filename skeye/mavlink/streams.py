@@ -31,6 +31,7 @@ DEFAULT_INTERVALS_S: dict[int, float | None] = {
     mav.MAVLINK_MSG_ID_ALTITUDE: 0.1,
     mav.MAVLINK_MSG_ID_VFR_HUD: 0.25,
     mav.MAVLINK_MSG_ID_HOME_POSITION: 2.0,
+    mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: None,  # on request, and when it moves (the vehicle)
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
     mav.MAVLINK_MSG_ID_HIGHRES_IMU: None,  # on request (the companion airframe asks for it)
     mav.MAVLINK_MSG_ID_SCALED_PRESSURE: None,

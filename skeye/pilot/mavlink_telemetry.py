@@ -7,8 +7,9 @@ are here, named). Positions: LOCAL_POSITION_NED is the onboard estimate in the w
 (the simulator's origin); GLOBAL_POSITION_INT is that estimate anchored to GPS as the AscTec
 link's GPS_DATA_ADVANCED "best estimate" (``skeye.pilot.telemetry.GeoAnchor``), with altitudes
 above mean sea level from the mean offset between the GPS fixes' and the estimate's altitudes;
-GPS_RAW_INT is the receiver's own fix. Times (``time_boot_ms``) are vehicle time: sim time on the
-simulator, as NAV_STATUS's.
+GPS_RAW_INT is the receiver's own fix; GPS_GLOBAL_ORIGIN is the geodetic position of
+LOCAL_POSITION_NED's origin as GLOBAL_POSITION_INT anchors it, so that origin + local = global.
+Times (``time_boot_ms``) are vehicle time: sim time on the simulator, as NAV_STATUS's;
 """
 
 from __future__ import annotations
@@ -229,6 +230,16 @@ def home_position(c: MavCodec, v: VehicleView) -> MavMessage | None:
                                       int(v.snap.time_s * 1e6))
 
 
+def gps_global_origin(c: MavCodec, v: VehicleView) -> MavMessage | None:
+    """The geodetic position of LOCAL_POSITION_NED's origin (the one GLOBAL_POSITION_INT is
+    computed from); ``time_usec`` the vehicle time of the estimate it belongs to."""
+    if v.origin is None:
+        return None
+    o = v.origin
+    return c.mav.gps_global_origin_encode(_deg_e7(o.latitude_deg), _deg_e7(o.longitude_deg),
+                                          round(o.altitude_m * 1e3), int(v.snap.time_s * 1e6))
+
+
 def mission_current(c: MavCodec, v: VehicleView) -> MavMessage:
     return c.mav.mission_current_encode(v.mission_seq, v.mission_total, v.mission_state,
                                         1 if v.mission_active else 2)
@@ -269,6 +280,7 @@ BUILDERS = {
     mav.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
     mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
     mav.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
     mav.MAVLINK_MSG_ID_HIGHRES_IMU: highres_imu,
     mav.MAVLINK_MSG_ID_SCALED_PRESSURE: scaled_pressure,

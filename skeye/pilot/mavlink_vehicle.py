@@ -7,6 +7,13 @@ one decoded message and returns :class:`Out` items (a message and where it goes)
 offboard-loss and auto-disarm timers, mission transfer retries). The caller holds the boards'
 lock around both, and gives the wall clock as the boards get it.
 
+GPS_GLOBAL_ORIGIN: the geodetic position of the local NED origin, as GLOBAL_POSITION_INT
+anchors the estimate to GPS. That anchor is the mean over every fix, so the origin moves a
+little with each fix (PX4's EKF origin is set once); it is sent when first known and again
+whenever it has moved by PX4's own re-send thresholds (1e-7 deg, 1 mm), checked every
+``ORIGIN_CHECK_S``, so a client that keeps the last one converts local to global within a few
+centimetres.
+
 One vehicle, two links: every motion a MAVLink command asks for is made of the boards' own
 commands (TAKE_OFF, LAND, HOLD, MOVE_BY in the world frame, VELOCITY, CTRL_INPUT, PAD_MODE)
 handed to ``boards.handle``, so the flight-state table, the flight envelope, the speed limits
@@ -76,6 +83,9 @@ GCS_TIMEOUT_S = PEER_TIMEOUT_S  # a ground station silent this long is forgotten
 NOTICE_EVERY_S = 2.0  # the same refusal or bad-input notice at most this often per peer
 DUPLICATE_WINDOW_S = 1.0  # a command repeated within this is acked again, not re-run
 ARRIVED_RADIUS_M = 0.5
+ORIGIN_CHECK_S = 1.0  # how often a moved GPS_GLOBAL_ORIGIN is looked for
+ORIGIN_MIN_DEG = 1e-7  # PX4's GPS_GLOBAL_ORIGIN re-send thresholds (about 1.1 cm; 1 mm)
+ORIGIN_MIN_ALT_M = 1e-3
 MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                | CtrlBits.GPS_POSITION_CONTROL)
 
@@ -122,6 +132,8 @@ class MavlinkVehicle:
         self.landing_targets_in = 0
         self._status: tuple[Px4Mode, bool, NavState] | None = None  # the last one told
         self._now_s = now_s
+        self._origin_told: GeoOrigin | None = None  # the last GPS_GLOBAL_ORIGIN sent unasked
+        self._origin_check_s = -math.inf
 
     # -- links ---------------------------------------------------------------------------
     def add_link(self, now_s: float) -> int:
@@ -984,10 +996,30 @@ class MavlinkVehicle:
                 msg = telem.BUILDERS[msg_id](self.codec, view)
                 if msg is not None:
                     out.append(Out(msg, i))
+        out += self._origin_news(now_s, view)
         for src, seen in list(self.gcs.items()):
             if now_s - seen > GCS_TIMEOUT_S:
                 del self.gcs[src]
         return out
+
+    def _origin_news(self, now_s: float, view: telem.VehicleView | None) -> list[Out]:
+        """GPS_GLOBAL_ORIGIN on every link when the origin is first known or has moved (as
+        PX4's stream sends it)."""
+        if now_s < self._origin_check_s:
+            return []
+        self._origin_check_s = now_s + ORIGIN_CHECK_S
+        view = view or self.view()
+        new, old = view.origin, self._origin_told
+        if new is None or (old is not None
+                           and abs(new.latitude_deg - old.latitude_deg) <= ORIGIN_MIN_DEG
+                           and abs(new.longitude_deg - old.longitude_deg) <= ORIGIN_MIN_DEG
+                           and abs(new.altitude_m - old.altitude_m) <= ORIGIN_MIN_ALT_M):
+            return []
+        msg = telem.gps_global_origin(self.codec, view)
+        if msg is None:
+            return []
+        self._origin_told = new
+        return [Out(msg)]
 
 
 COMMANDS: dict[int, Callable[[MavlinkVehicle, Command], list[MavMessage] | None]] = {

@@ -83,13 +83,14 @@ class MavVehicle:
 @contextmanager
 def mav_vehicle(*, rate: float = 4.0, images: bool = False, robot_dir: Path | None = None,
                 estimator: str | None = None, uris: list[str] | None = None,
-                ) -> Iterator[MavVehicle]:
-    """A lockstep simulator, the pilot on it and its MAVLink endpoint (udpout to a free port)."""
+                start: str = "Pad1") -> Iterator[MavVehicle]:
+    """A lockstep simulator, the pilot on it and its MAVLink endpoint (udpout to a free port);
+    the robot at the pad world's start pose ``start``."""
     with ExitStack() as stack:
         handle = stack.enter_context(sim_running(
             images=images, robot_dirs=(robot_dir,) if robot_dir else (), estimator=estimator))
         sim = stack.enter_context(connect(handle.address, images=handle.images))
-        robot = sim.spawn(SMALL_CAMERA_ROBOT if robot_dir else "hummingbird", start="Pad1")
+        robot = sim.spawn(SMALL_CAMERA_ROBOT if robot_dir else "hummingbird", start=start)
         airframe = SimAirframe(sim, robot)
         mc = robot.motion_config
         settings = BoardSettings(max_speed_m_s=mc.max_speed_m_s,
