@@ -46,12 +46,14 @@ class MavlinkServer:
         settings: Settings | None = None,
         tick_s: float = DEFAULT_TICK_S,
         clock: Callable[[], float] = time.monotonic,
+        wall_clock: Callable[[], float] = time.time,
     ) -> None:
         self.lock = lock
         self.clock = clock
         self.tick_s = tick_s
         with lock:
-            self.vehicle = MavlinkVehicle(boards, settings=settings, now_s=clock())
+            self.vehicle = MavlinkVehicle(boards, settings=settings, now_s=clock(),
+                                          wall_clock=wall_clock)
         self.transports: list[MavTransport] = []
         try:
             for uri in uris:

@@ -10,6 +10,8 @@ above mean sea level from the mean offset between the GPS fixes' and the estimat
 GPS_RAW_INT is the receiver's own fix; GPS_GLOBAL_ORIGIN is the geodetic position of
 LOCAL_POSITION_NED's origin as GLOBAL_POSITION_INT anchors it, so that origin + local = global.
 Times (``time_boot_ms``) are vehicle time: sim time on the simulator, as NAV_STATUS's;
+SYSTEM_TIME's ``time_unix_usec`` is the host's wall clock (``VehicleView.unix_time_s``), as PX4
+SITL reports its host's real-time clock while its boot time runs in lockstep.
 """
 
 from __future__ import annotations
@@ -88,6 +90,7 @@ class VehicleView:
     mission_total: int = 0
     mission_state: int = mav.MISSION_STATE_NO_MISSION
     mission_active: bool = False
+    unix_time_s: float = 0.0  # the host's wall clock (0: not known)
 
     @property
     def time_ms(self) -> int:
@@ -240,6 +243,12 @@ def gps_global_origin(c: MavCodec, v: VehicleView) -> MavMessage | None:
                                           round(o.altitude_m * 1e3), int(v.snap.time_s * 1e6))
 
 
+def system_time(c: MavCodec, v: VehicleView) -> MavMessage:
+    """The host's wall clock and the vehicle's boot time (the other messages' ``time_boot_ms``)."""
+    unix_us = round(v.unix_time_s * 1e6) if math.isfinite(v.unix_time_s) else 0
+    return c.mav.system_time_encode(max(0, unix_us), v.time_ms)
+
+
 def mission_current(c: MavCodec, v: VehicleView) -> MavMessage:
     return c.mav.mission_current_encode(v.mission_seq, v.mission_total, v.mission_state,
                                         1 if v.mission_active else 2)
@@ -281,6 +290,7 @@ BUILDERS = {
     mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
     mav.MAVLINK_MSG_ID_HOME_POSITION: home_position,
     mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
+    mav.MAVLINK_MSG_ID_SYSTEM_TIME: system_time,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
     mav.MAVLINK_MSG_ID_HIGHRES_IMU: highres_imu,
     mav.MAVLINK_MSG_ID_SCALED_PRESSURE: scaled_pressure,

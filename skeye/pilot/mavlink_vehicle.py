@@ -5,7 +5,8 @@ the same :class:`~skeye.pilot.boards.OnboardBoards`. ``handle(link, peer, msg, n
 one decoded message and returns :class:`Out` items (a message and where it goes);
 ``tick(now_s)`` runs what depends on time (the streams, the mission and return programs, the
 offboard-loss and auto-disarm timers, mission transfer retries). The caller holds the boards'
-lock around both, and gives the wall clock as the boards get it.
+lock around both, and gives the wall clock as the boards get it. SYSTEM_TIME's Unix time comes
+from ``wall_clock`` (``time.time`` unless a test gives another).
 
 GPS_GLOBAL_ORIGIN: the geodetic position of the local NED origin, as GLOBAL_POSITION_INT
 anchors the estimate to GPS. That anchor is the mean over every fix, so the origin moves a
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections import deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field, replace
@@ -102,8 +104,9 @@ class MavlinkVehicle:
 
     def __init__(self, boards: OnboardBoards, *, settings: Settings | None = None,
                  max_speed_m_s: float | None = None, system_id: int = 1,
-                 now_s: float = 0.0) -> None:
+                 now_s: float = 0.0, wall_clock: Callable[[], float] = time.time) -> None:
         self.boards = boards
+        self.wall_clock = wall_clock
         self.settings = settings or Settings()
         self.codec = MavCodec(system_id, 1)
         self.max_speed_limit_m_s = max_speed_m_s or boards.settings.max_speed_m_s
@@ -219,7 +222,7 @@ class MavlinkVehicle:
             bad_frames=self.bad_frames,
             mission_seq=min(self.mission_current, max(0, total - 1)), mission_total=total,
             mission_state=self.mission_state if total else mav.MISSION_STATE_NO_MISSION,
-            mission_active=self.program is Program.MISSION)
+            mission_active=self.program is Program.MISSION, unix_time_s=self.wall_clock())
 
     # -- messages in ---------------------------------------------------------------------
     def handle(self, link: int, peer: Hashable, msg: MavMessage | BadFrame,

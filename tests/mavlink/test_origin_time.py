@@ -1,12 +1,14 @@
-"""GPS_GLOBAL_ORIGIN, as PX4 sends it.
+"""GPS_GLOBAL_ORIGIN and SYSTEM_TIME, as PX4 sends them.
 
 GPS_GLOBAL_ORIGIN is the geodetic position of LOCAL_POSITION_NED's origin: sent when first known
 and when it moves, and on MAV_CMD_REQUEST_MESSAGE; the origin plus a LOCAL_POSITION_NED is that
-moment's GLOBAL_POSITION_INT."""
+moment's GLOBAL_POSITION_INT. SYSTEM_TIME's ``time_boot_ms`` is the other messages' clock (sim
+time); its ``time_unix_usec`` is the host's wall clock, also in lockstep where the two differ."""
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 from typing import Any
 
@@ -94,3 +96,19 @@ def test_origin_plus_local_position_is_the_global_position():
                     *(seen[k].pop(ms) for k in seen))
                 assert horizontal_m < 0.02 and vertical_m < 0.002, (horizontal_m, vertical_m)
                 matched += 1
+
+
+def test_system_time_is_boot_time_and_the_host_wall_clock_in_lockstep():
+    with mav_vehicle(rate=4.0) as v:  # sim time runs 4 times as fast as the wall clock
+        conn = v.client()
+        first = wait_for(conn, "SYSTEM_TIME")
+        first_wall = time.time()
+        attitude = wait_for(conn, "ATTITUDE")
+        assert 0 <= attitude.time_boot_ms - first.time_boot_ms < 200  # one clock (sim time)
+        assert abs(first.time_unix_usec / 1e6 - first_wall) < 0.5
+        later = wait_for(conn, "SYSTEM_TIME", lambda m: m.time_boot_ms >= first.time_boot_ms
+                         + 8000)
+        later_wall = time.time()
+        assert abs(later.time_unix_usec / 1e6 - later_wall) < 0.5
+        unix_s = (later.time_unix_usec - first.time_unix_usec) / 1e6
+        assert abs(unix_s - (later_wall - first_wall)) < 0.5  # not the 8 s of sim time
