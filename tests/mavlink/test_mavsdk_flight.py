@@ -8,30 +8,19 @@ from __future__ import annotations
 
 import math
 import subprocess
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import pytest
 
 mavsdk = pytest.importorskip("mavsdk")
 
-from mavsdk import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.plugins.action import Action  # noqa: E402
 from mavsdk.plugins.mission import Mission, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode, LandedState, Telemetry  # noqa: E402
 
 from skeye.processes import start_skeye, stop_processes  # noqa: E402
 from tests.mavlink.conftest import free_udp_port  # noqa: E402
-
-METRES_PER_DEG_LAT = 111_320.0
-
-
-def until(pred: Callable[[], bool], what: str, timeout_s: float = 120.0) -> None:
-    """Wait for a condition of the vehicle's telemetry; the timeout is a stuck guard only."""
-    deadline = time.monotonic() + timeout_s
-    while not pred():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.05)
+from tests.mavlink.mavsdk_client import METRES_PER_DEG_LAT, ground_station, until  # noqa: E402
 
 
 @pytest.fixture
@@ -54,11 +43,7 @@ def skeye_vehicle() -> Iterator[int]:
 
 
 def test_mavsdk_flies_a_skeye_vehicle(skeye_vehicle):
-    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
-    with Mavsdk(config) as sdk:
-        sdk.add_any_connection(f"udpin://127.0.0.1:{skeye_vehicle}")
-        system = sdk.first_autopilot(60.0)
-        assert system is not None, "no autopilot heard"
+    with ground_station(skeye_vehicle) as system:
         telemetry, action, mission = Telemetry(system), Action(system), Mission(system)
         until(lambda: (h := telemetry.health()).is_global_position_ok
               and h.is_home_position_ok, "a position")
