@@ -135,6 +135,7 @@ class MavlinkVehicle:
         self.landing_targets_in = 0
         self._status: tuple[Px4Mode, bool, NavState] | None = None  # the last one told
         self._now_s = now_s
+        self._command_peer: Hashable = None  # who sent the command being run (its notices)
         self._origin_told: GeoOrigin | None = None  # the last GPS_GLOBAL_ORIGIN sent unasked
         self._origin_check_s = -math.inf
 
@@ -344,6 +345,7 @@ class MavlinkVehicle:
         if seen is not None and self._now_s - seen[0] < DUPLICATE_WINDOW_S:
             return [self._ack(cmd.command, seen[1], src)]  # a retransmission: same answer
         extra: list[MavMessage] = []
+        self._command_peer = peer
         try:
             handler = COMMANDS.get(cmd.command)
             if handler is None:
@@ -536,7 +538,7 @@ class MavlinkVehicle:
         yaw = cmd.p(4)  # MAVSDK's goto_location always sends one (0 for north, NaN for none)
         if math.isnan(yaw):
             return []
-        return self._notice("reposition-yaw", "yaw", mav.MAV_SEVERITY_NOTICE,
+        return self._notice(self._command_peer, "reposition-yaw", mav.MAV_SEVERITY_NOTICE,
                             f"DO_REPOSITION: yaw (p4) {yaw:g} deg is not flown: the heading "
                             "is kept (give NaN for no yaw)")
 

@@ -241,6 +241,32 @@ def test_a_second_ground_station_is_served_and_both_are_told():
         assert len(v.mavlink.transports[0].peers) == 2
 
 
+def test_each_ground_station_is_told_its_reposition_yaw_is_not_flown():
+    """The notice is limited per ground station (one every 2 s), not for all: a second station
+    repositioning with a yaw right after the first is told too (it once heard nothing)."""
+    port = free_udp_port()
+    with mav_vehicle(uris=[f"udp://127.0.0.1:{port}"]) as v:
+        first = v.keep(mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                                  source_system=GCS[0], source_component=GCS[1]))
+        second = v.keep(mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                                   source_system=254, source_component=190))
+        for conn in (first, second):
+            conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            wait_for(conn, "HEARTBEAT")
+        pos = wait_for(first, "GLOBAL_POSITION_INT")
+        assert command(first, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
+        assert command(first, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
+        wait_for(first, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
+                 and m.system_status == M.MAV_STATE_ACTIVE)
+        for conn in (first, second):  # back to back: well within the 2 s
+            conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_DO_REPOSITION,
+                                      0, 0, -1, 1, 0, 90.0, pos.lat + 50, pos.lon, math.nan)
+            ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+            assert ack.result == M.MAV_RESULT_ACCEPTED
+            wait_for(conn, "STATUSTEXT", lambda m: "yaw (p4) 90 deg is not flown" in m.text,
+                     timeout_s=10.0)
+
+
 def test_a_flood_of_10000_messages_leaves_the_vehicle_flying(flying):
     v, conn = flying
     where = _where(conn)
