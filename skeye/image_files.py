@@ -45,6 +45,8 @@ def _jpeg_damage(data: _Bytes) -> str | None:
             return cut
         marker = data[i]
         i += 1
+        if marker == 0x00:  # FF 00 is no marker: libjpeg skips it with the stray bytes
+            continue
         if marker == 0xD9:  # EOI: whole; anything after it is padding
             return None
         if marker == 0x01 or 0xD0 <= marker <= 0xD7:  # TEM, RSTn: no length

@@ -113,6 +113,11 @@ def test_stray_bytes_between_segments_are_skipped_as_libjpeg_does(files: dict[st
     assert damage(stray.read_bytes()) is None
     assert np.array_equal(read_image_file(stray), cv2.imdecode(np.frombuffer(data, np.uint8),
                                                                cv2.IMREAD_COLOR))
+    # An FF 00 among them is no marker (libjpeg skips it too), not a segment of length 1.
+    with_ff00 = data[:app0_end] + b"\xff\x00\x00\x01" + data[app0_end:]
+    assert damage(with_ff00) is None
+    assert np.array_equal(cv2.imdecode(np.frombuffer(with_ff00, np.uint8), cv2.IMREAD_COLOR),
+                          cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR))
     # Cut short after the stray bytes: still refused.
     with pytest.raises(ConfigError, match="truncated or corrupt"):
         stray.write_bytes(data[:app0_end] + b"camera junk" + data[app0_end:-300])
