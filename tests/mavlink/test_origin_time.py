@@ -86,7 +86,9 @@ def test_origin_plus_local_position_is_the_global_position():
         seen: dict[str, dict[int, Any]] = {"GPS_GLOBAL_ORIGIN": {}, "LOCAL_POSITION_NED": {},
                                            "GLOBAL_POSITION_INT": {}}
         matched = 0
+        deadline = time.monotonic() + 120.0  # a stuck guard: five instants come in a second
         while matched < 5:
+            assert time.monotonic() < deadline, f"{matched} of 5 instants with all three"
             msg = wait_for(conn, list(seen))
             ms = (msg.time_usec // 1000 if msg.get_type() == "GPS_GLOBAL_ORIGIN"
                   else msg.time_boot_ms)
