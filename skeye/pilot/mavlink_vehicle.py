@@ -274,7 +274,7 @@ class MavlinkVehicle:
             if self._for_us(msg):
                 self._setpoint = (msg, now_s)
                 if self.program is Program.OFFBOARD:
-                    out += reply(self._apply_setpoint(msg))
+                    out += reply(self._apply_setpoint(msg, peer))
             return out
         if kind == "SET_ATTITUDE_TARGET":
             if self._for_us(msg):
@@ -282,7 +282,7 @@ class MavlinkVehicle:
             return out
         if kind == "MANUAL_CONTROL":
             if int(msg.target) in (0, self.codec.system_id) and self.program is Program.MANUAL:
-                out += reply(self._manual(msg, now_s))
+                out += reply(self._manual(msg, peer))
             return out
         if kind == "LANDING_TARGET":
             self.landing_targets_in += 1  # a companion's detections (this vehicle's own
@@ -597,7 +597,7 @@ class MavlinkVehicle:
                               "take off first: offboard flies a vehicle in the air")
             self._start(Program.OFFBOARD)
             self._applied_target = None
-            self._apply_setpoint(sp[0])
+            self._apply_setpoint(sp[0], self._command_peer)
         elif request is Request.MANUAL:
             self._start(Program.MANUAL)
             if self._airborne():
@@ -662,7 +662,7 @@ class MavlinkVehicle:
         return [telem.autopilot_version(self.codec)]
 
     # -- offboard and sticks -------------------------------------------------------------
-    def _apply_setpoint(self, msg: MavMessage) -> list[MavMessage]:
+    def _apply_setpoint(self, msg: MavMessage, peer: Hashable) -> list[MavMessage]:
         """Fly one offboard setpoint: a position (MOVE_BY to it, once per target) or a
         velocity (VELOCITY lasting COM_OF_LOSS_T, so lost setpoints end in a hover)."""
         mask = int(msg.type_mask)
@@ -700,7 +700,7 @@ class MavlinkVehicle:
             else:
                 return []
         except (Refused, LocalProtocolError) as exc:
-            return self._notice("offboard", str(exc), mav.MAV_SEVERITY_WARNING,
+            return self._notice(peer, f"offboard:{exc}", mav.MAV_SEVERITY_WARNING,
                                 f"offboard setpoint refused: {exc}")
         self._mine()
         return []
@@ -722,7 +722,7 @@ class MavlinkVehicle:
             return n + x, e + y, d + z
         return x, y, z
 
-    def _manual(self, msg: MavMessage, now_s: float) -> list[MavMessage]:
+    def _manual(self, msg: MavMessage, peer: Hashable) -> list[MavMessage]:
         """MANUAL_CONTROL as the AscTec link's sticks in GPS mode (velocities)."""
         scale = lambda v: max(-2047, min(2047, round(float(v) * 2047 / 1000)))  # noqa: E731
         thrust = max(0, min(4095, round(max(0.0, float(msg.z)) * 4095 / 1000)))
@@ -730,7 +730,7 @@ class MavlinkVehicle:
             self._board(CtrlInput(-scale(msg.x), scale(msg.y), scale(msg.r), thrust,
                                   int(MANUAL_CTRL)))
         except Refused as exc:
-            return self._notice("manual", str(exc), mav.MAV_SEVERITY_WARNING,
+            return self._notice(peer, f"manual:{exc}", mav.MAV_SEVERITY_WARNING,
                                 f"sticks refused: {exc}")
         self._mine()
         return []

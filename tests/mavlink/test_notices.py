@@ -1,0 +1,71 @@
+"""The vehicle's refusal notices (STATUSTEXT) are limited per ground station, not for all: with
+two stations, each is told why its own message was refused, even when the other's was refused
+for the same reason a moment before (the offboard setpoint's notice was once limited for all
+stations together, so the second heard nothing for 2 s)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable
+from typing import Any
+
+from pymavlink import mavutil
+
+from skeye.mavlink.codec import MavCodec, MavParser
+from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.mavlink_vehicle import MavlinkVehicle
+from tests.pilot.fake_airframe import FakeAirframe
+
+M = mavutil.mavlink
+A: Hashable = ("127.0.0.1", 1)
+B: Hashable = ("127.0.0.1", 2)
+
+
+class Stations:
+    """Two ground stations (255/190 and 254/190) on one link of a vehicle core."""
+
+    def __init__(self, vehicle: MavlinkVehicle) -> None:
+        self.vehicle = vehicle
+        self.codecs = {A: MavCodec(255, 190), B: MavCodec(254, 190)}
+        self.parsers = {A: MavParser(), B: MavParser()}
+
+    def send(self, peer: Hashable, msg: Any, now_s: float) -> list[Any]:
+        out = []
+        for decoded in self.parsers[peer].feed(self.codecs[peer].encode(msg), datagram=True):
+            out += self.vehicle.handle(0, peer, decoded, now_s)
+        return out
+
+    def command(self, peer: Hashable, command: int, *params: float, now_s: float) -> int:
+        msg = self.codecs[peer].mav.command_long_encode(1, 1, command, 0,
+                                                        *(list(params) + [0.0] * 7)[:7])
+        acks = [o.msg.result for o in self.send(peer, msg, now_s)
+                if o.msg.get_type() == "COMMAND_ACK"]
+        assert len(acks) == 1, acks
+        return acks[0]
+
+    def setpoint(self, peer: Hashable, north_m: float, now_s: float) -> list[Any]:
+        msg = self.codecs[peer].mav.set_position_target_local_ned_encode(
+            0, 1, 1, M.MAV_FRAME_LOCAL_NED, 0b110111111000, north_m, 0.0, -2.0,
+            0, 0, 0, 0, 0, 0, 0, 0)
+        return self.send(peer, msg, now_s)
+
+
+def test_each_station_is_told_its_offboard_setpoint_is_refused():
+    airframe = FakeAirframe()
+    boards = OnboardBoards(airframe)
+    vehicle = MavlinkVehicle(boards)
+    vehicle.add_link(0.0)
+    gcs = Stations(vehicle)
+    assert gcs.command(A, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, now_s=1.0) == M.MAV_RESULT_ACCEPTED
+    assert gcs.command(A, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan,
+                       now_s=1.0) == M.MAV_RESULT_ACCEPTED
+    airframe.finish(landed=False, pos_ned_m=(0.0, 0.0, -2.0))
+    boards.tick(1.5)
+    vehicle.tick(1.5)
+    gcs.setpoint(A, 0.0, 2.0)
+    assert gcs.command(A, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6,
+                       now_s=2.1) == M.MAV_RESULT_ACCEPTED  # PX4's OFFBOARD
+    for peer, now_s in ((A, 2.5), (B, 2.6)):  # the same refusal, 0.1 s apart
+        told = [o for o in gcs.setpoint(peer, math.nan, now_s) if o.msg.get_type() == "STATUSTEXT"]
+        assert told and all(o.peer == peer for o in told), (peer, told)
+        assert told[0].msg.text.startswith("offboard setpoint refused: position setpoint")
