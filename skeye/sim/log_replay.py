@@ -284,10 +284,11 @@ def cmd_logs(args: argparse.Namespace) -> int:
             raise ConfigError(f"--seconds must be at least {MIN_HOVER_S:g} s (the first "
                               f"{REST_S:g} s at rest, then the hover), got {args.seconds:g}")
         sim = simulated_imu(rate, args.seconds, args.robot)
+        sim_flight = in_flight(sim)
         result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": args.seconds,
                   "real": {}, "has_truth": False,
-                  "simulated": {**imu_figures(in_flight(sim).gyro_rad_s,
-                                              in_flight(sim).accel_m_s2, rate),
+                  "simulated": {**imu_figures(sim_flight.gyro_rad_s, sim_flight.accel_m_s2,
+                                              rate),
                                 **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)}}
     logs.append(simulated_imu(rate, min(120.0, result["seconds"]), args.robot))
     print(report_table(result))
