@@ -200,6 +200,7 @@ class Connection:
             if not self._nfo.wait(timeout_s):
                 raise LinkTimeout(f"simulator {self.peer}: no NFO greeting in {timeout_s:g} s")
             self.check()
+            self.ping()  # the sim time now: a late joiner does not read 0 until a reading comes
             steps = period_steps(self.motion_config.control_rate_hz, self.time_step_s)
             if self.mode == "lockstep":
                 self.clock = LockstepClock(self._tick, self._get_error, self._step,

@@ -103,8 +103,8 @@ def test_eight_producers_never_interleave_bytes(lockstep_sim: SimHandle) -> None
     events = LineDecoder().feed(bytes(captured))
     assert not [e for e in events if isinstance(e, LineError)]
     pings = [e for e in events if isinstance(e, Message) and e.type == "PING"]
-    assert len(pings) == 8 * per_thread + 1
-    assert all(m.get("Pad") == padding for m in pings[:-1])
+    assert len(pings) == 1 + 8 * per_thread + 1  # connect()'s, the producers', the last
+    assert all(m.get("Pad") == padding for m in pings[1:-1])
     for i in range(8):  # each producer's commands arrive whole and in its order
         ids = [m.get("Id") for m in pings if (m.get("Id") or "").startswith(f"t{i}-")]
         assert ids == [f"t{i}-{k}" for k in range(per_thread)]
@@ -120,7 +120,15 @@ def test_full_queue_blocks_then_raises_link_timeout() -> None:
         conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         conn.sendall(format_message("NFO", ("Gametype", "skeye"), ("TimeStep", 0.001),
                                     ("Mode", "realtime")))
-        accepted.append(conn)  # ... and never read
+        accepted.append(conn)
+        greeting = b""  # connect() asks the sim time: answered, ...
+        while not greeting.endswith(b"\n"):
+            greeting += conn.recv(1)
+        (ping,) = LineDecoder().feed(greeting)
+        assert isinstance(ping, Message) and ping.type == "PING"
+        conn.sendall(format_message("RES", ("Command", "PING"), ("Id", ping.get("Id")),
+                                    ("Time", 0.0)))
+        # ... and then never read
 
     server = threading.Thread(target=serve, daemon=True)
     server.start()
@@ -218,3 +226,13 @@ def test_nothing_listening_is_a_clear_error() -> None:
     probe.close()
     with pytest.raises(LinkClosed, match="cannot connect"):
         skeye.connect(f"127.0.0.1:{port}", timeout_s=1.0)
+
+
+def test_a_connection_knows_the_sim_time_from_the_start(lockstep_sim: SimHandle) -> None:
+    """A second client joining a simulator that has run reads its time at once, not 0 until
+    the first reading arrives."""
+    with skeye.connect(lockstep_sim.address) as first:
+        t = first.step(250)
+        assert t == pytest.approx(250 * first.time_step_s)
+        with skeye.connect(lockstep_sim.address) as late:
+            assert late.time_s == t  # lockstep: no step since, so exactly the first's time
