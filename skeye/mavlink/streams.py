@@ -2,9 +2,10 @@
 
 How this works: every streamed message has a default interval (``DEFAULT_INTERVALS_S``);
 MAV_CMD_SET_MESSAGE_INTERVAL changes one (``set_interval``: seconds, ``None`` = stop, ``0`` = back
-to the default) and ``due(now_s)`` returns the message ids whose time has come, each at most once
-per call, never in bursts to catch up. Time is an argument. The fastest interval is
-``MIN_INTERVAL_S``: faster requests are refused, not silently slowed.
+to the default; a stopped one is in ``stopped``, which also ends what is sent on change) and
+``due(now_s)`` returns the message ids whose time has come, each at most once per call, never in
+bursts to catch up. Time is an argument. The fastest interval is ``MIN_INTERVAL_S``: faster
+requests are refused, not silently slowed.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ class MessageScheduler:
 
     def __init__(self, now_s: float = 0.0) -> None:
         self.intervals_s: dict[int, float | None] = dict(DEFAULT_INTERVALS_S)
+        self.stopped: set[int] = set()  # set to None (-1): not even sent when it changes
         self._next_s: dict[int, float] = {m: now_s for m in self.intervals_s}
 
     def streamable(self, msg_id: int) -> bool:
@@ -60,6 +62,7 @@ class MessageScheduler:
         """
         if msg_id not in self.intervals_s:
             raise LocalProtocolError(f"message {msg_id} is not streamed by this vehicle")
+        stop = interval_s is None  # (the default of one sent only on request is None too)
         if interval_s is not None and interval_s == 0:
             interval_s = DEFAULT_INTERVALS_S[msg_id]
         elif interval_s is not None and not (
@@ -69,6 +72,10 @@ class MessageScheduler:
                 f"interval {interval_s:g} s out of range ({MIN_INTERVAL_S:g}..{MAX_INTERVAL_S:g})")
         self.intervals_s[msg_id] = interval_s
         self._next_s[msg_id] = now_s
+        if stop:
+            self.stopped.add(msg_id)
+        else:
+            self.stopped.discard(msg_id)
 
     def interval_s(self, msg_id: int) -> float | None:
         return self.intervals_s.get(msg_id)

@@ -1009,7 +1009,7 @@ class MavlinkVehicle:
 
     def _origin_news(self, now_s: float, view: telem.VehicleView | None) -> list[Out]:
         """GPS_GLOBAL_ORIGIN on every link when the origin is first known or has moved (as
-        PX4's stream sends it)."""
+        PX4's stream sends it), but a link where SET_MESSAGE_INTERVAL -1 stopped it."""
         if now_s < self._origin_check_s:
             return []
         self._origin_check_s = now_s + ORIGIN_CHECK_S
@@ -1024,7 +1024,8 @@ class MavlinkVehicle:
         if msg is None:
             return []
         self._origin_told = new
-        return [Out(msg)]
+        return [Out(msg, i) for i, link in enumerate(self.links)
+                if mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN not in link.scheduler.stopped]
 
 
 COMMANDS: dict[int, Callable[[MavlinkVehicle, Command], list[MavMessage] | None]] = {

@@ -15,6 +15,7 @@ from typing import Any
 from pymavlink import mavutil
 
 from skeye.geo import GeoOrigin
+from skeye.mavlink.codec import MavCodec, MavParser
 from skeye.pilot.airframe import GpsFix
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.mavlink_vehicle import MavlinkVehicle
@@ -124,3 +125,36 @@ def test_system_time_is_boot_time_and_the_host_wall_clock_in_lockstep():
         assert abs(later.time_unix_usec / 1e6 - later_wall) < 1.0
         unix_s = (later.time_unix_usec - first.time_unix_usec) / 1e6
         assert abs(unix_s - (later_wall - first_wall)) < 1.0  # not the 8 s of sim time
+
+
+def test_an_interval_of_minus_one_stops_the_origin_sent_on_change():
+    """SET_MESSAGE_INTERVAL -1 stops GPS_GLOBAL_ORIGIN on that link also when it moves (as
+    PX4 takes the stream away); 0 (the default) brings the on-change sending back."""
+    airframe = FakeAirframe()
+    boards = OnboardBoards(airframe)
+    vehicle = MavlinkVehicle(boards)
+    vehicle.add_link(0.0)
+    assert len(_origins(vehicle, 0.0)) == 1
+
+    gcs, parser = MavCodec(255, 190), MavParser()
+
+    def set_interval(interval_us: float, now_s: float) -> None:
+        msg = gcs.mav.command_long_encode(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                          M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, interval_us,
+                                          0, 0, 0, 0, 0)
+        (decoded,) = parser.feed(gcs.encode(msg), datagram=True)
+        acks = [o.msg.result for o in vehicle.handle(0, ("127.0.0.1", 1), decoded, now_s)
+                if o.msg.get_type() == "COMMAND_ACK"]
+        assert acks == [M.MAV_RESULT_ACCEPTED]
+
+    set_interval(-1, 1.0)
+    fix = airframe.snap.gps
+    for k, now_s in enumerate((2.0, 4.0), start=1):
+        moved = replace(fix, latitude_deg=49.0 + k * 1e-5)
+        airframe.snap = replace(airframe.snap, gps=moved, time_s=now_s)
+        boards.tick(now_s)
+        assert _origins(vehicle, now_s) == []  # moved, but stopped
+    set_interval(0, 5.0)
+    airframe.snap = replace(airframe.snap, gps=replace(fix, latitude_deg=49.0001), time_s=6.0)
+    boards.tick(6.0)
+    assert len(_origins(vehicle, 6.0)) == 1
