@@ -48,32 +48,6 @@ CAPABILITIES = (mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mav.MAV_PROTOCOL_CAPAB
                 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
 
 
-class AltitudeAnchor:
-    """Altitude above mean sea level of the world's origin: the mean, over every GPS fix, of
-    the fix's altitude plus the estimate's down coordinate at that time (as ``GeoAnchor``
-    anchors latitude and longitude)."""
-
-    def __init__(self) -> None:
-        self._sum = 0.0
-        self.fixes = 0
-        self._last: tuple[float, float, float] | None = None
-
-    def add(self, snap: Snapshot) -> None:
-        g = snap.gps
-        if g is None or not g.fix:
-            return
-        key = (g.latitude_deg, g.longitude_deg, g.altitude_m)
-        if key == self._last:
-            return
-        self._last = key
-        self._sum += g.altitude_m + snap.pos_ned_m[2]
-        self.fixes += 1
-
-    @property
-    def origin_amsl_m(self) -> float | None:
-        return self._sum / self.fixes if self.fixes else None
-
-
 @dataclass(frozen=True)
 class VehicleView:
     """One consistent look at the vehicle for the telemetry builders."""

@@ -117,7 +117,6 @@ class MavlinkVehicle:
         self.mission_state = mav.MISSION_STATE_NO_MISSION
         self.cruise_m_s: float | None = None  # DO_CHANGE_SPEED
         self.params = ParamTable(self._param_specs(), self.codec)
-        self.altitude = telem.AltitudeAnchor()
         self.links: list[_Link] = []
         self.gcs: dict[tuple[int, int], float] = {}
         self.bad_frames = 0
@@ -207,14 +206,13 @@ class MavlinkVehicle:
     def origin(self) -> GeoOrigin | None:
         """The geodetic position of the estimate's NED origin (None before a GPS fix)."""
         latlon = self.boards.geo.estimate((0.0, 0.0, 0.0))
-        alt = self.altitude.origin_amsl_m
+        alt = self.boards.geo.origin_amsl_m
         if latlon is None or alt is None:
             return None
         return GeoOrigin(latlon[0], latlon[1], alt)
 
     def view(self) -> telem.VehicleView:
         snap = self.boards.airframe.snapshot()
-        self.altitude.add(snap)
         total = len(self.mission.items)
         return telem.VehicleView(
             snap=snap, state=self.boards.state, mode=self.mode, armed=self.armed,

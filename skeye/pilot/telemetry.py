@@ -110,25 +110,33 @@ class GeoAnchor:
     drifting slowly) anchored to the GPS by the mean offset between every fix and
     the INS position at that time. A single fix wanders metres (multipath, 300 s correlation);
     the mean of many is steadier, and the estimate moves only as the INS says the vehicle moved.
-    This is what GPS_DATA_ADVANCED reports as its "best estimate"."""
+    This is what GPS_DATA_ADVANCED reports as its "best estimate". The altitude above mean sea
+    level of the NED origin is anchored the same way (the mean of each fix's altitude plus the
+    INS down coordinate), so one anchor, reset with the telemetry when the vehicle is reset or
+    respawned, places the whole local frame on the globe."""
 
     def __init__(self) -> None:
         self.origin: GeoOrigin | None = None  # the first fix: where offsets are measured from
         self.fixes = 0
         self._sum_n = 0.0
         self._sum_e = 0.0
-        self._last: tuple[float, float] | None = None
+        self._sum_alt = 0.0
+        self._last: tuple[float, float, float] | None = None
 
     def add(self, fix: GpsFix | None, pos_ned_m: tuple[float, float, float]) -> None:
         """Take the snapshot's fix if it is a new one."""
-        if fix is None or not fix.fix or (fix.latitude_deg, fix.longitude_deg) == self._last:
+        if fix is None or not fix.fix:
             return
-        self._last = (fix.latitude_deg, fix.longitude_deg)
+        key = (fix.latitude_deg, fix.longitude_deg, fix.altitude_m)
+        if key == self._last:
+            return
+        self._last = key
         if self.origin is None:
             self.origin = GeoOrigin(fix.latitude_deg, fix.longitude_deg, 0.0)
         n, e, _ = self.origin.to_ned(fix.latitude_deg, fix.longitude_deg, 0.0)
         self._sum_n += n - pos_ned_m[0]
         self._sum_e += e - pos_ned_m[1]
+        self._sum_alt += fix.altitude_m + pos_ned_m[2]
         self.fixes += 1
 
     def estimate(self, pos_ned_m: tuple[float, float, float]) -> tuple[float, float] | None:
@@ -139,6 +147,11 @@ class GeoAnchor:
         e = pos_ned_m[1] + self._sum_e / self.fixes
         lat, lon, _ = self.origin.to_geodetic(n, e, 0.0)
         return lat, lon
+
+    @property
+    def origin_amsl_m(self) -> float | None:
+        """Altitude above mean sea level of the NED origin (None before the first fix)."""
+        return self._sum_alt / self.fixes if self.fixes else None
 
 
 # RC_DATA channel[4] and [5] (sdk.h): the serial interface is what commands the simulated

@@ -158,3 +158,18 @@ def test_an_interval_of_minus_one_stops_the_origin_sent_on_change():
     airframe.snap = replace(airframe.snap, gps=replace(fix, latitude_deg=49.0001), time_s=6.0)
     boards.tick(6.0)
     assert len(_origins(vehicle, 6.0)) == 1
+
+
+def test_a_respawned_vehicle_places_its_origin_anew_altitude_included():
+    """After a respawn (here onto a world elsewhere on the globe) the origin is the new fixes'
+    alone: latitude, longitude and altitude alike (the altitude once kept the old mean)."""
+    airframe = FakeAirframe()
+    boards = OnboardBoards(airframe)
+    vehicle = MavlinkVehicle(boards)
+    vehicle.add_link(0.0)
+    assert _origins(vehicle, 0.0) == [(490_000_000, 80_000_000, 100_000)]
+    elsewhere = replace(airframe.snap.gps, latitude_deg=50.0, longitude_deg=9.0, altitude_m=300.0)
+    airframe.snap = replace(airframe.snap, gps=elsewhere, time_s=1.0)
+    boards.respawned("a new world")
+    boards.tick(1.0)
+    assert _origins(vehicle, 1.0) == [(500_000_000, 90_000_000, 300_000)]
