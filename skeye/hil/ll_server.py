@@ -17,9 +17,10 @@ client of the simulator). Two workers:
   reached are held in :class:`Grants` (a heap: each grant costs O(log n), so a client flooding
   the line with them does not slow the board's answers), at most ``MAX_GRANTS``; one beyond
   is refused RESULT code 5 (BUSY) naming the limit. If the client leaves
-  the line (a pseudo-terminal closed, a TCP connection gone) the board's clock runs on by
-  itself at real time: a vehicle does not freeze because its onboard computer went away, and
-  the serial timeout's emergency procedure plays out. It goes back to granted time when a
+  the line (a pseudo-terminal closed, a TCP connection gone) its grants not yet reached are
+  dropped (stepping on to them would race sim time ahead for no one) and the board's clock
+  runs on by itself at real time: a vehicle does not freeze because its onboard computer went
+  away, and the serial timeout's emergency procedure plays out. It goes back to granted time when a
   client grants again. Before any client has been on the line, lockstep time does not move.
   With ``rate`` (for AscTec programs, which grant no time) the board drives the lockstep clock
   itself at that pace.
@@ -100,6 +101,14 @@ class Grants:
             count += 1
         if not self._heap:
             self.latest = None
+        return count
+
+    def clear(self) -> int:
+        """Drop every grant (their client left: no one to answer); how many."""
+        count = len(self._heap)
+        self._heap.clear()
+        self._held.clear()
+        self.latest = None
         return count
 
 
@@ -249,6 +258,10 @@ class LLBoardServer:
         if lost:
             raise SkeyeError(lost)
 
+    def _client_left(self) -> bool:
+        """A client was on the line and is known to have gone (a serial port cannot tell)."""
+        return self.line.plugged is False and self.line.ever_plugged
+
     def _clock_loop(self) -> None:
         next_s = time.monotonic()
         while not self._stop.is_set() and self.error is None:
@@ -266,12 +279,17 @@ class LLBoardServer:
                 with self._granted:
                     self._granted.wait_for(lambda: bool(self.grants) or self._stop.is_set(),
                                            0.1)
+                    if self._client_left():
+                        dropped = self.grants.clear()
+                        if dropped:
+                            log.info("LL board %s: the client left the line: its %d grants "
+                                     "not yet reached are dropped", self.name, dropped)
                     target = self.grants.latest
                 if target is not None:
                     if self.free_running:
                         log.info("LL board %s: a client grants the clock again", self.name)
                         self.free_running = False
-                    while not self._stop.is_set():
+                    while not self._stop.is_set() and not self._client_left():
                         steps = math.floor((target - self.sim_time()) / self.time_step_s + 0.5)
                         if steps < 1:
                             break
@@ -287,7 +305,7 @@ class LLBoardServer:
                     if delay < -1.0:
                         next_s = time.monotonic()
                     self._stop.wait(max(0.0, delay))
-                elif self.line.plugged is False and self.line.ever_plugged:
+                elif self._client_left():
                     if not self.free_running:
                         log.warning("LL board %s: the client left the line: the board's clock "
                                     "runs on at real time", self.name)

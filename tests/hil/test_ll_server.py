@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import socket
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 
@@ -130,3 +131,18 @@ def test_grants_below_the_latest_are_answered_as_the_simulator_reaches_them():
         reached = sim_time(answer)
         assert near_ms / 1000 <= reached < near_ms / 1000 + 2 * board.tick_s
         assert board.grants.latest == FAR_MS / 1000.0
+
+
+def test_a_client_that_leaves_takes_its_grants_with_it():
+    """Grants held for a client that left are dropped: the board's clock runs on at real time
+    (free running) instead of racing sim time to the far grant for no one."""
+    with board_line() as (board, client):
+        client.exchange(encode(Clock(FAR_MS)))
+        assert board.grants.latest == FAR_MS / 1000.0
+        client.sock.close()
+        deadline = time.monotonic() + 30.0  # a stuck guard: the line notices within a read
+        while not board.free_running:
+            assert time.monotonic() < deadline, "the board never noticed the client left"
+            time.sleep(0.05)
+        assert len(board.grants) == 0 and board.grants.latest is None
+        board.check()
