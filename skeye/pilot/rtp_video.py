@@ -83,11 +83,12 @@ def _resolve(uri: str, host: str, port: int, timeout_s: float) -> list[Any]:
     return list(answer[0])
 
 
-def check_rtp_destination(uri: str, timeout_s: float | None = None) -> tuple[str, int]:
+def check_rtp_destination(uri: str, timeout_s: float | None = None) -> tuple[str, int, str]:
     """:func:`parse_rtp_uri`, and whether this machine can send UDP there now: the host
     resolves within ``timeout_s`` (``RESOLVE_TIMEOUT_S``) and a UDP socket can be pointed at
     it (a route exists; not a broadcast address). FFmpeg would find the same only on the first
-    frame, in the worker, as a bare ``Input/output error``.
+    frame, in the worker, as a bare ``Input/output error``. Returns the host, the port and the
+    address it resolved to (the stream goes there: FFmpeg does not resolve the name again).
 
     Raises:
         ConfigError: naming the URI and what is wrong with it.
@@ -103,7 +104,7 @@ def check_rtp_destination(uri: str, timeout_s: float | None = None) -> tuple[str
         if exc.errno == errno.EACCES:
             reason += " (a broadcast address: the RTP video goes to one host or a multicast group)"
         raise ConfigError(f"{uri}: cannot send UDP to {address[0]} port {port}: {reason}") from None
-    return host, port
+    return host, port, str(address[0])
 
 
 def overlay(frame: CameraFrame) -> np.ndarray:
@@ -135,7 +136,7 @@ class RtpVideo:
             raise ConfigError("PyAV has no libx264 encoder here: no H.264 RTP video")
         if not 0.1 <= max_fps <= 60:
             raise ConfigError(f"RTP video frame rate must be 0.1..60 frames/s, got {max_fps:g}")
-        self.host, self.port = check_rtp_destination(uri)
+        self.host, self.port, self.ip = check_rtp_destination(uri)
         self.address = f"udp://{url_host(self.host)}:{self.port}"
         self.max_fps = max_fps
         self.bitrate = bitrate
@@ -177,16 +178,16 @@ class RtpVideo:
 
     def sdp(self) -> str:
         """The session description a player needs for this stream (QGroundControl does not)."""
-        ip = "IP6" if ":" in self.host else "IP4"
-        return (f"v=0\r\no=- 0 0 IN {ip} {self.host}\r\ns=skeye pilot camera\r\n"
-                f"c=IN {ip} {self.host}\r\nt=0 0\r\nm=video {self.port} RTP/AVP {PAYLOAD_TYPE}\r\n"
+        ip = "IP6" if ":" in self.ip else "IP4"
+        return (f"v=0\r\no=- 0 0 IN {ip} {self.ip}\r\ns=skeye pilot camera\r\n"
+                f"c=IN {ip} {self.ip}\r\nt=0 0\r\nm=video {self.port} RTP/AVP {PAYLOAD_TYPE}\r\n"
                 f"a=rtpmap:{PAYLOAD_TYPE} H264/90000\r\n"
                 f"a=fmtp:{PAYLOAD_TYPE} packetization-mode=1\r\n")
 
     def _open(self, width: int, height: int) -> tuple[Any, Any]:
         import av
 
-        url = f"rtp://{url_host(self.host)}:{self.port}?pkt_size=1200"
+        url = f"rtp://{url_host(self.ip)}:{self.port}?pkt_size=1200"  # resolved at start
         try:
             container = av.open(url, mode="w", format="rtp")
         except (av.error.FFmpegError, OSError) as exc:  # checked at start: the network changed

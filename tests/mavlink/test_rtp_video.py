@@ -85,7 +85,8 @@ def test_the_host_is_resolved_within_a_bounded_wait(monkeypatch: pytest.MonkeyPa
     from skeye.pilot import cli as pilot_cli
     from skeye.pilot import rtp_video
 
-    assert check_rtp_destination("udp://localhost:5600", timeout_s=5.0) == ("localhost", 5600)
+    host, port, ip = check_rtp_destination("udp://localhost:5600", timeout_s=5.0)
+    assert (host, port) == ("localhost", 5600) and ip in ("127.0.0.1", "::1")
     released = threading.Event()
     resolver = socket.getaddrinfo
 
@@ -131,6 +132,33 @@ def test_an_ipv6_destination_is_streamed():
             grey = np.full((240, 320, 3), 90, np.uint8)
             video.publish(CameraFrame(0, 0.0, grey, Detection(False), 3.0))
             packet = receiver.recv(2048)  # the first RTP packet (was: the worker died)
+            assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96  # RTP version 2, type 96
+            video.check()
+        finally:
+            video.close()
+
+
+def test_the_stream_goes_to_the_address_resolved_at_start(monkeypatch: pytest.MonkeyPatch):
+    """The name is resolved once, at start, within the bounded wait: FFmpeg is given the
+    address, not the name (it resolved it again, unbounded, on the first frame, through its
+    own resolver: here one that does not know the name, so no packet ever went out)."""
+    resolver = socket.getaddrinfo
+
+    def gcs_is_loopback(host: str, *args: object, **kwargs: object) -> object:
+        return resolver("127.0.0.1" if host == "gcs.invalid" else host, *args, **kwargs)
+
+    monkeypatch.setattr(socket, "getaddrinfo", gcs_is_loopback)  # Python's resolver only
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(60)
+        port = receiver.getsockname()[1]
+        video = RtpVideo(f"udp://gcs.invalid:{port}", max_fps=10.0).start()
+        try:
+            assert video.address == f"udp://gcs.invalid:{port}"
+            assert "c=IN IP4 127.0.0.1" in video.sdp()
+            grey = np.full((240, 320, 3), 90, np.uint8)
+            video.publish(CameraFrame(0, 0.0, grey, Detection(False), 3.0))
+            packet = receiver.recv(2048)
             assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96  # RTP version 2, type 96
             video.check()
         finally:
