@@ -133,6 +133,9 @@ def parse_header(text: str) -> dict[str, Any]:
         meta = json.loads(parts[2])
     except json.JSONDecodeError as exc:
         raise RemoteProtocolError(f"recording header is not JSON: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # a number of over 4300 digits, deep nesting
+        raise RemoteProtocolError(f"recording header holds JSON this program cannot read: "
+                                  f"{exc}") from None
     if not isinstance(meta, dict):
         raise RemoteProtocolError("recording header must hold a JSON object")
     for key, kind, check in _HEADER_FIELDS:
@@ -179,7 +182,10 @@ class RecordingReader:
             first = f.readline()
         if not first.endswith(b"\n"):
             raise RemoteProtocolError(f"{self.path}: no complete header line")
-        self.header = parse_header(first.decode("utf-8", "replace"))
+        try:
+            self.header = parse_header(first.decode("utf-8", "replace"))
+        except RemoteProtocolError as exc:  # said of the file, as every other refusal is
+            raise RemoteProtocolError(f"{self.path}: {exc}") from None
         self.bad_lines = 0
         self.truncated = False
 

@@ -103,6 +103,33 @@ def test_a_header_setting_of_the_wrong_kind_is_refused_when_the_file_opens(
         assert message in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize(
+    ("header", "message"),
+    [
+        (b'{"seed": ' + b"9" * 5000 + b"}", "JSON this program cannot read: Exceeds the limit"),
+        (b"[" * 100_000 + b"]" * 100_000, "JSON this program cannot read: maximum recursion"),
+        (b"{nope", "recording header is not JSON"),
+    ],
+)
+def test_a_header_json_cannot_take_is_refused_naming_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], header: bytes, message: str
+) -> None:
+    """A 5000-digit seed or deeply nested JSON raised ValueError and RecursionError from the
+    json module: a traceback from skeye replay and skeye plot. Header refusals did not name
+    the file either, as the others do."""
+    path = tmp_path / "bad.rec"
+    path.write_bytes(b"#skeye-recording 1 " + header + b"\n"
+                     + format_record(Record(1.0, 0.1, 1, SENT, "PING")))
+    with pytest.raises(RemoteProtocolError, match=f"^{re.escape(str(path))}: .*{message}"):
+        RecordingReader(path)
+    for command in (["replay", str(path), "--port", "0"], ["plot", str(path), "--out",
+                                                            str(tmp_path / "p.png")]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert f"error: {path}: recording header" in err and "Traceback" not in err
+    assert not (tmp_path / "p.png").exists()
+
+
 def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_written(
     recording: tuple[Path, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
