@@ -145,6 +145,21 @@ def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_writte
     assert (tmp_path / "noext.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_plot_never_writes_over_the_recording_it_draws(
+    recording: tuple[Path, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`skeye plot flight.png --out flight.png` read the recording, then wrote the plot over
+    it: the flight was lost. So did `--out flight`, which writes flight.png."""
+    path = tmp_path / "flight.png"
+    data = recording[0].read_bytes()
+    path.write_bytes(data)
+    for out in (path, tmp_path / "flight", tmp_path / "." / "flight.png"):
+        assert main(["plot", str(path), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"is the recording {path} itself" in err and "Traceback" not in err
+    assert path.read_bytes() == data
+
+
 def test_reader_skips_a_cut_off_last_line_and_bad_lines(tmp_path: Path) -> None:
     path = tmp_path / "cut.rec"
     good = [Record(1.0, 0.1, 1, SENT, "SEN {Time 0.1}"), Record(2.0, 0.2, 1, RECEIVED, "PING")]
