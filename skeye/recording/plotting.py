@@ -25,8 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import ConfigError, RemoteProtocolError
+from skeye.errors import RemoteProtocolError
 from skeye.geo import MAX_POSITION_M
+from skeye.outputs import figure_file
 from skeye.recording.records import (
     CONNECTED,
     NOTE,
@@ -281,36 +282,8 @@ def plot_recording(path: str | Path, out: str | Path) -> RecordingSummary:
     return summary
 
 
-def out_path(out: Path, recording: Path | None = None) -> Path:
-    """``--out`` as the file to write: one whose extension matplotlib writes, or none (then
-    ``.png`` is added, as matplotlib does, so the path said is the path written). ConfigError
-    names the formats it writes, or says the path is a directory or the ``recording`` itself
-    (which the plot would overwrite once read)."""
-    from matplotlib.backend_bases import FigureCanvasBase
-
-    if out.is_dir():
-        raise ConfigError(f"--out {out} is a directory: give a file name (plot.png)")
-    kind = out.suffix[1:].lower()
-    formats = FigureCanvasBase.get_supported_filetypes()
-    if kind and kind not in formats:
-        raise ConfigError(f"--out {out}: cannot write .{kind} files; the formats are "
-                          f"{', '.join('.' + f for f in sorted(formats))}")
-    path = out if kind else out.with_name(out.name + ".png")
-    if recording is not None and _same_file(path, recording):
-        raise ConfigError(f"--out {path} is the recording {recording} itself: the plot would "
-                          "overwrite it; give another file name")
-    return path
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.samefile(b)
-    except OSError:  # one of them does not exist (or cannot be looked at): not the same
-        return False
-
-
 def cmd_plot(args: argparse.Namespace) -> int:
-    out = out_path(args.out, args.file)  # before the recording is read
+    out = figure_file(args.out, "--out", args.file, "recording")  # before it is read
     summary = plot_recording(args.file, out)
     print(summary.text())
     print(f"skeye plot: wrote {out}")

@@ -31,6 +31,7 @@ from skeye import cliargs
 from skeye.errors import ConfigError
 from skeye.logs.analysis import imu_figures, spectrum
 from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
+from skeye.outputs import figure_file, output_file
 from skeye.robots.config import load_robot_config
 from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
 from skeye.sim.estimator import BoardEstimator
@@ -263,6 +264,13 @@ def plot(result_logs: list[ImuLog], path: Path) -> None:
 
 def cmd_logs(args: argparse.Namespace) -> int:
     logs: list[ImuLog] = []
+    source = None if args.log is None else Path(args.log)
+    # Checked before the log is read: a name that cannot be written costs no work, and the log
+    # itself is never written over.
+    json_out = None if args.json is None else output_file(Path(args.json), "--json", source,
+                                                          "log")
+    plot_out = None if args.plot is None else figure_file(Path(args.plot), "--plot", source,
+                                                          "log")
     if args.log is not None:
         log = read_log(Path(args.log), args.format, imu_topic=args.imu_topic,
                        truth_topic=args.truth_topic)
@@ -292,11 +300,11 @@ def cmd_logs(args: argparse.Namespace) -> int:
                                 **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)}}
     logs.append(simulated_imu(rate, min(120.0, result["seconds"]), args.robot))
     print(report_table(result))
-    if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=2))
-    if args.plot:
-        plot(logs, Path(args.plot))
-        print(f"\nspectra: {args.plot}")
+    if json_out is not None:
+        json_out.write_text(json.dumps(result, indent=2))
+    if plot_out is not None:
+        plot(logs, plot_out)
+        print(f"\nspectra: {plot_out}")
     return 0
 
 

@@ -251,3 +251,26 @@ def test_a_log_whose_first_second_reads_no_gravity_is_refused(
     accel[:] = 0.0
     with pytest.raises(ConfigError, match="reads a specific force of 0 m/s\\^2, not gravity"):
         replay_tilt(flight.t_s, flight.gyro, accel, None)
+
+
+def test_the_files_written_are_checked_before_the_log_is_read(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # --plot spectra.txt ended in matplotlib's ValueError traceback once the work was done (the
+    # --json file already written); --plot spectra wrote spectra.png and said "spectra:
+    # spectra"; --json flight.ulg wrote the figures over the log. skeye plot's --out is checked
+    # the same way.
+    log = make_logs.write_ulog(tmp_path / "flight.ulg", synthetic(3.0))
+    data = log.read_bytes()
+    figures = tmp_path / "f.json"
+    for option, value, message in (
+            ("--plot", tmp_path / "spectra.txt", "cannot write .txt files; the formats are"),
+            ("--plot", tmp_path, "is a directory"),
+            ("--json", log, f"is the log {log} itself")):
+        assert main(["logs", str(log), "--json", str(figures), option, str(value)]) == 2
+        err = capsys.readouterr().err
+        assert f"skeye logs: error: {option} {value}" in err and message in err
+        assert "Traceback" not in err and not figures.exists()
+    assert log.read_bytes() == data
+    assert main(["logs", "--seconds", "3", "--plot", str(tmp_path / "spectra")]) == 0
+    assert capsys.readouterr().out.endswith(f"spectra: {tmp_path / 'spectra.png'}\n")
+    assert (tmp_path / "spectra.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -1,0 +1,51 @@
+"""Files a command writes, checked before the command does its work.
+
+How this works: a command that reads an input (a recording, a flight log) and writes a figure or
+a JSON file checks the names it will write first, so that a name it cannot write costs no work
+and the input it reads is never written over. :func:`output_file` refuses a directory and the
+input itself; :func:`figure_file` also wants an extension matplotlib writes, or none (then
+``.png`` is added, as matplotlib adds it, so the path the command says is the path written).
+Each refusal is a ConfigError naming the option and the path.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from skeye.errors import ConfigError
+
+
+def output_file(path: Path, option: str, source: Path | None = None,
+                source_kind: str = "input") -> Path:
+    """``path`` if a command may write it: not a directory, not ``source`` (what the command
+    reads, its ``source_kind`` said in the refusal: "recording", "log")."""
+    if path.is_dir():
+        raise ConfigError(f"{option} {path} is a directory: give a file name")
+    if source is not None and _same_file(path, source):
+        raise ConfigError(f"{option} {path} is the {source_kind} {source} itself: writing it "
+                          "would overwrite what is read; give another file name")
+    return path
+
+
+def figure_file(path: Path, option: str, source: Path | None = None,
+                source_kind: str = "input") -> Path:
+    """``path`` as the figure file to write (see :func:`output_file`): its extension picks a
+    format matplotlib writes (ConfigError lists them); none gives ``.png``."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    if path.is_dir():
+        raise ConfigError(f"{option} {path} is a directory: give a file name (plot.png)")
+    kind = path.suffix[1:].lower()
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if kind and kind not in formats:
+        raise ConfigError(f"{option} {path}: cannot write .{kind} files; the formats are "
+                          f"{', '.join('.' + f for f in sorted(formats))}")
+    return output_file(path if kind else path.with_name(path.name + ".png"), option, source,
+                       source_kind)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.samefile(b)
+    except OSError:  # one of them does not exist (or cannot be looked at): not the same
+        return False
