@@ -4,12 +4,14 @@ How this works: a command that reads an input (a recording, a flight log) and wr
 a JSON file checks the names it will write first, so that a name it cannot write costs no work
 and the input it reads is never written over. :func:`output_file` refuses a directory and the
 input itself; :func:`figure_file` also wants an extension matplotlib writes, or none (then
-``.png`` is added, as matplotlib adds it, so the path the command says is the path written).
+``.png`` is added, as matplotlib adds it, so the path the command says is the path written);
+a ``.pgf`` figure also wants the TeX program matplotlib runs for it.
 Each refusal is a ConfigError naming the option and the path.
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 from skeye.errors import ConfigError
@@ -40,6 +42,13 @@ def figure_file(path: Path, option: str, source: Path | None = None,
     if kind and kind not in formats:
         raise ConfigError(f"{option} {path}: cannot write .{kind} files; the formats are "
                           f"{', '.join('.' + f for f in sorted(formats))}")
+    if kind == "pgf":  # matplotlib runs TeX to set the text: a traceback when it is missing
+        import matplotlib
+
+        tex = matplotlib.rcParams["pgf.texsystem"]
+        if shutil.which(tex) is None:
+            raise ConfigError(f"{option} {path}: .pgf files need {tex} (matplotlib's "
+                              "pgf.texsystem), which is not installed; choose another format")
     return output_file(path if kind else path.with_name(path.name + ".png"), option, source,
                        source_kind)
 

@@ -160,6 +160,21 @@ def test_plot_never_writes_over_the_recording_it_draws(
     assert path.read_bytes() == data
 
 
+def test_a_pgf_plot_without_tex_is_refused_before_the_recording_is_read(
+    recording: tuple[Path, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """`--out plot.pgf` is a format matplotlib lists, but it runs xelatex to write it: without
+    one, skeye plot (and skeye logs --plot, the same check) ended in a RuntimeError traceback.
+    PATH names an empty folder here, so no TeX is found whatever the machine has."""
+    monkeypatch.setenv("PATH", str(tmp_path))
+    out = tmp_path / "plot.pgf"
+    assert main(["plot", str(recording[0]), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"skeye plot: error: --out {out}: .pgf files need xelatex" in err
+    assert "Traceback" not in err and not out.exists()
+
+
 def test_reader_skips_a_cut_off_last_line_and_bad_lines(tmp_path: Path) -> None:
     path = tmp_path / "cut.rec"
     good = [Record(1.0, 0.1, 1, SENT, "SEN {Time 0.1}"), Record(2.0, 0.2, 1, RECEIVED, "PING")]
