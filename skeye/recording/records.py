@@ -64,6 +64,9 @@ DEFAULT_MAX_BYTES = 1024 * 1024 * 1024
 DEFAULT_MIN_FREE_BYTES = 256 * 1024 * 1024
 """Recording stops when the disk has less than this left (256 MiB): the rest is the system's."""
 DEFAULT_MAX_PARTS = 10
+MAX_HEADER_BYTES = 64 * 1024
+"""The longest header line, terminator excluded: readers read no more of a first line (a
+file whose first line is longer is no recording), and the recorder writes none longer."""
 _DISK_CHECK_S = 1.0  # how often the free space is looked at
 
 
@@ -116,8 +119,16 @@ def parse_record(text: str) -> Record:
 
 
 def format_header(meta: dict[str, Any]) -> bytes:
-    """The first line of a recording: format name, version and a JSON object of run settings."""
-    return f"{HEADER_PREFIX} {FORMAT_VERSION} {json.dumps(meta, sort_keys=True)}\n".encode()
+    """The first line of a recording: format name, version and a JSON object of run settings.
+
+    Raises:
+        LocalProtocolError: the line would be longer than :data:`MAX_HEADER_BYTES`.
+    """
+    line = f"{HEADER_PREFIX} {FORMAT_VERSION} {json.dumps(meta, sort_keys=True)}\n".encode()
+    if len(line) - 1 > MAX_HEADER_BYTES:
+        raise LocalProtocolError(f"recording header of {len(line) - 1} bytes: the most is "
+                                 f"{MAX_HEADER_BYTES // 1024} KiB")
+    return line
 
 
 def parse_header(text: str) -> dict[str, Any]:
@@ -179,8 +190,12 @@ class RecordingReader:
         if not self.path.is_file():
             raise ConfigError(f"recording not found: {self.path}")
         with self.path.open("rb") as f:
-            first = f.readline()
+            first = f.readline(MAX_HEADER_BYTES + 1)
         if not first.endswith(b"\n"):
+            if len(first) > MAX_HEADER_BYTES:  # not read on: it could run to the file's end
+                raise RemoteProtocolError(
+                    f"{self.path}: not a skeye recording (a first line longer than "
+                    f"{MAX_HEADER_BYTES // 1024} KiB, the longest header)")
             raise RemoteProtocolError(f"{self.path}: no complete header line")
         try:
             self.header = parse_header(first.decode("utf-8", "replace"))
@@ -194,7 +209,7 @@ class RecordingReader:
         self.bad_lines = 0
         self.truncated = False
         with self.path.open("rb") as f:
-            f.readline()
+            f.readline(MAX_HEADER_BYTES + 1)
             for raw in f:
                 if not raw.endswith(b"\n"):
                     self.truncated = True
@@ -255,6 +270,7 @@ class Recorder:
         self.parts = [self.path]  # every file written, in order
         self.stopped: str | None = None  # why recording stopped early (size, disk), if it did
         self._meta = dict(meta or {})
+        header = format_header({"started_unix_s": wall_clock(), **self._meta})  # before the file
         self._file: IO[bytes] = self._create(self.path)
         self._clock = wall_clock
         self._sim_time: Callable[[], float] = lambda: 0.0
@@ -267,8 +283,7 @@ class Recorder:
         self._closed = False
         self._lock = threading.Lock()
         self._detach: list[Callable[[], None]] = []
-        self._bytes = self._file.write(format_header({"started_unix_s": wall_clock(),
-                                                      **self._meta}))
+        self._bytes = self._file.write(header)
         self._file.flush()
         self._disk_checked_s = -math.inf
         self.failure: BaseException | None = None

@@ -20,6 +20,7 @@ from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
 from skeye.recording.plotting import load_tracks, plot_recording
 from skeye.recording.records import (
     DIRECTIONS,
+    MAX_HEADER_BYTES,
     NOTE,
     RECEIVED,
     SENT,
@@ -107,7 +108,7 @@ def test_a_header_setting_of_the_wrong_kind_is_refused_when_the_file_opens(
     ("header", "message"),
     [
         (b'{"seed": ' + b"9" * 5000 + b"}", "JSON this program cannot read: Exceeds the limit"),
-        (b"[" * 100_000 + b"]" * 100_000, "JSON this program cannot read: maximum recursion"),
+        (b"[" * 20_000 + b"]" * 20_000, "JSON this program cannot read: maximum recursion"),
         (b"{nope", "recording header is not JSON"),
     ],
 )
@@ -128,6 +129,31 @@ def test_a_header_json_cannot_take_is_refused_naming_the_file(
         err = capsys.readouterr().err
         assert f"error: {path}: recording header" in err and "Traceback" not in err
     assert not (tmp_path / "p.png").exists()
+
+
+@pytest.mark.parametrize("newline", [b"\n", b""])
+def test_a_first_line_longer_than_any_header_is_refused_unread(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], newline: bytes
+) -> None:
+    """A 200 MB "world" was read whole (skeye plot held 900 MB), kept by skeye replay and read
+    again before each client's first line; a file of 300 MB without a line break was read
+    whole before "no complete header line". No header is longer than 64 KiB: the recorder
+    writes none, and readers read no further."""
+    path = tmp_path / "huge.rec"
+    huge = {"world": "x" * (MAX_HEADER_BYTES + 1)}
+    path.write_bytes(format_header({})[:-1].replace(b"{}", json.dumps(huge).encode()) + newline
+                     + format_record(Record(1.0, 0.1, 1, SENT, "PING")))
+    with pytest.raises(RemoteProtocolError, match=re.escape(
+            f"{path}: not a skeye recording (a first line longer than 64 KiB")):
+        RecordingReader(path)
+    assert main(["plot", str(path), "--out", str(tmp_path / "p.png")]) == 2
+    assert "a first line longer than 64 KiB" in capsys.readouterr().err
+    with pytest.raises(LocalProtocolError, match="the most is 64 KiB"):
+        Recorder(tmp_path / "new.rec", huge)
+    assert not (tmp_path / "new.rec").exists()
+    (tmp_path / "edge.rec").write_bytes(b"#skeye-recording 1 {}" + b" " * (MAX_HEADER_BYTES - 21)
+                                        + b"\n" + format_record(Record(1.0, 0.1, 1, SENT, "PING")))
+    assert [r.line for r in RecordingReader(tmp_path / "edge.rec").records()] == ["PING"]
 
 
 def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_written(
