@@ -175,11 +175,18 @@ def axis_mean_spectrum(log: ImuLog, attr: str) -> tuple[np.ndarray, np.ndarray]:
     return freqs, power
 
 
-def compare(log: ImuLog, robot: str = "hummingbird") -> dict[str, Any]:
-    """The log's figures, the simulated IMU's at the log's rate, and both replays."""
+def reference_imu(log: ImuLog, robot: str = "hummingbird") -> ImuLog:
+    """The simulated IMU a log is compared with: at the log's rate, as long (120 s at most)."""
+    return simulated_imu(log.rate_hz, min(120.0, float(log.t_s[-1] - log.t_s[0])), robot)
+
+
+def compare(log: ImuLog, robot: str = "hummingbird", sim: ImuLog | None = None
+            ) -> dict[str, Any]:
+    """The log's figures, the simulated IMU's at the log's rate (``sim``, else
+    :func:`reference_imu`), and both replays."""
     rate = log.rate_hz
     flight = in_flight(log)
-    sim = simulated_imu(rate, min(120.0, float(log.t_s[-1] - log.t_s[0])), robot)
+    sim = reference_imu(log, robot) if sim is None else sim
     sim_flight = in_flight(sim)
     # A log without ground truth gets no tilt error: replay_tilt would judge it against a level
     # vehicle, which only the simulated hover is.
@@ -281,9 +288,9 @@ def cmd_logs(args: argparse.Namespace) -> int:
             raise ConfigError(f"{log.name}: {length:g} s of IMU samples{window}; skeye logs "
                               f"needs at least {MIN_HOVER_S:g} s (the first {REST_S:g} s at "
                               "rest, then the flight)")
-        result = compare(log, args.robot)
+        sim = reference_imu(log, args.robot)
+        result = compare(log, args.robot, sim)
         logs.append(log)
-        rate = log.rate_hz
     else:
         rate = args.rate
         if not (math.isfinite(rate) and 10.0 <= rate <= 10000.0):
@@ -298,7 +305,7 @@ def cmd_logs(args: argparse.Namespace) -> int:
                   "simulated": {**imu_figures(sim_flight.gyro_rad_s, sim_flight.accel_m_s2,
                                               rate),
                                 **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)}}
-    logs.append(simulated_imu(rate, min(120.0, result["seconds"]), args.robot))
+    logs.append(sim)  # the simulated IMU the table measured (it is simulated once)
     print(report_table(result))
     if json_out is not None:
         json_out.write_text(json.dumps(result, indent=2))

@@ -274,3 +274,27 @@ def test_the_files_written_are_checked_before_the_log_is_read(
     assert main(["logs", "--seconds", "3", "--plot", str(tmp_path / "spectra")]) == 0
     assert capsys.readouterr().out.endswith(f"spectra: {tmp_path / 'spectra.png'}\n")
     assert (tmp_path / "spectra.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("with_log", [True, False])
+def test_the_simulated_imu_is_simulated_once(
+        with_log: bool, flight: make_logs.Synthetic, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The table and the plotted spectra measure one simulated IMU (it was simulated again for
+    the plot, and also when no plot was asked for)."""
+    from skeye.sim import log_replay
+
+    made: list[ImuLog] = []
+    simulate = log_replay.simulated_imu
+
+    def counted(*args: object, **kwargs: object) -> ImuLog:
+        made.append(simulate(*args, **kwargs))  # type: ignore[arg-type]
+        return made[-1]
+
+    monkeypatch.setattr(log_replay, "simulated_imu", counted)
+    source = ([str(make_logs.write_euroc(tmp_path / "MH_once", flight))] if with_log
+              else ["--rate", "200", "--seconds", "3"])
+    assert main(["logs", *source]) == 0
+    assert main(["logs", *source, "--plot", str(tmp_path / "s.png")]) == 0
+    assert len(made) == 2  # one per command
+    capsys.readouterr()
