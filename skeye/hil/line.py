@@ -46,6 +46,7 @@ class BoardLine:
     def __init__(self) -> None:
         self.dropped_bytes = 0  # replies written while nobody was on the line
         self.ever_plugged = False
+        self.client_number = 0  # clients that have come on the line: the current one's number
         self._unplugged = threading.Event()
 
     @property
@@ -131,6 +132,7 @@ class PtyLine(BoardLine):
                 if not self._closed:
                     self._plugged = True
                     self.ever_plugged = True
+                    self.client_number += 1
         return data
 
     def send(self, data: bytes) -> None:
@@ -202,6 +204,7 @@ class TcpLine(BoardLine):
             with self._lock:
                 old, self._client = self._client, link
                 self.ever_plugged = True
+                self.client_number += 1
             if old is not None:
                 log.info("LL board line %s: %s replaces %s", self.address, link.name, old.name)
                 old.close()

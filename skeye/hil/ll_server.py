@@ -16,12 +16,13 @@ client of the simulator). Two workers:
   answered at once with the time so far (the board is alive, only busy). Grants not yet
   reached are held in :class:`Grants` (a heap: each grant costs O(log n), so a client flooding
   the line with them does not slow the board's answers), at most ``MAX_GRANTS``; one beyond
-  is refused RESULT code 5 (BUSY) naming the limit. If the client leaves
-  the line (a pseudo-terminal closed, a TCP connection gone) its grants not yet reached are
-  dropped (stepping on to them would race sim time ahead for no one) and the board's clock
-  runs on by itself at real time: a vehicle does not freeze because its onboard computer went
-  away, and the serial timeout's emergency procedure plays out. It goes back to granted time when a
-  client grants again. Before any client has been on the line, lockstep time does not move.
+  is refused RESULT code 5 (BUSY) naming the limit. If the client leaves the line (a
+  pseudo-terminal closed, a TCP connection gone or replaced by a newer one) its grants not yet
+  reached are dropped (stepping on to them would race sim time ahead for no one, or answer a
+  new client grants it never sent); with no client left the board's clock runs on by itself at
+  real time: a vehicle does not freeze because its onboard computer went away, and the serial
+  timeout's emergency procedure plays out. It goes back to granted time when a client grants
+  again. Before any client has been on the line, lockstep time does not move.
   With ``rate`` (for AscTec programs, which grant no time) the board drives the lockstep clock
   itself at that pace.
 
@@ -157,6 +158,7 @@ class LLBoardServer:
         self.camera: tuple[str, float] | None = None  # the robot's camera: name, FOV (rad)
         self._lock = threading.Lock()  # every call into the board
         self.grants = Grants()
+        self._grants_client = 0  # the line's client_number whose grants are held
         self._granted = threading.Condition()
         self._stop = threading.Event()
         self._workers: list[Worker] = []
@@ -224,6 +226,7 @@ class LLBoardServer:
     def _grant(self, until_s: float) -> None:
         now = self.sim_time()
         with self._granted:
+            self._drop_stale_grants()
             # Passed: answered at once, never held. Asked again while the simulator steps:
             # say where it is (it is alive).
             at_once = until_s <= now + self.time_step_s / 2 or until_s in self.grants
@@ -262,6 +265,21 @@ class LLBoardServer:
         """A client was on the line and is known to have gone (a serial port cannot tell)."""
         return self.line.plugged is False and self.line.ever_plugged
 
+    def _stale(self) -> bool:
+        """The grants held are a client's that left or was replaced by another."""
+        return self._client_left() or self.line.client_number != self._grants_client
+
+    def _drop_stale_grants(self) -> None:
+        """Drop the grants of a client that left or was replaced (with ``_granted`` held):
+        no one is waiting for their answers, and stepping on to them would race sim time
+        ahead (or answer the new client grants it never sent)."""
+        if self._stale() and self.grants:
+            dropped = self.grants.clear()
+            log.info("LL board %s: the client that granted time left the line: its %d grants "
+                     "not yet reached are dropped", self.name, dropped)
+        if not self._client_left():
+            self._grants_client = self.line.client_number
+
     def _clock_loop(self) -> None:
         next_s = time.monotonic()
         while not self._stop.is_set() and self.error is None:
@@ -279,17 +297,16 @@ class LLBoardServer:
                 with self._granted:
                     self._granted.wait_for(lambda: bool(self.grants) or self._stop.is_set(),
                                            0.1)
-                    if self._client_left():
-                        dropped = self.grants.clear()
-                        if dropped:
-                            log.info("LL board %s: the client left the line: its %d grants "
-                                     "not yet reached are dropped", self.name, dropped)
+                    self._drop_stale_grants()
                     target = self.grants.latest
                 if target is not None:
                     if self.free_running:
                         log.info("LL board %s: a client grants the clock again", self.name)
                         self.free_running = False
-                    while not self._stop.is_set() and not self._client_left():
+                    while not self._stop.is_set() and not self._stale():
+                        target = self.grants.latest  # (a new client's, once the old ones go)
+                        if target is None:
+                            break
                         steps = math.floor((target - self.sim_time()) / self.time_step_s + 0.5)
                         if steps < 1:
                             break

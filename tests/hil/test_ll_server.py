@@ -146,3 +146,26 @@ def test_a_client_that_leaves_takes_its_grants_with_it():
             time.sleep(0.05)
         assert len(board.grants) == 0 and board.grants.latest is None
         board.check()
+
+
+def test_a_client_replaced_by_a_newer_one_takes_its_grants_with_it():
+    """A second TCP client takes the line over while the first still has it open: the first's
+    grants go (the board does not step on to them, nor answer the newcomer for them), and the
+    newcomer's grants are served."""
+    with board_line() as (board, first):
+        first.exchange(encode(Clock(FAR_MS)))
+        assert board.grants.latest == FAR_MS / 1000.0
+        second = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        try:
+            results, _ = second.exchange(encode(Clock(0)))  # the time now, on the new client
+            now_ms = round(sim_time(results[0]) * 1000)
+            assert FAR_MS / 1000.0 not in board.grants
+            results, _ = second.exchange(encode(Clock(now_ms + 500)))
+            answer = results[0] if results else second.next_clock_result()
+            assert answer.code is ResultCode.OK
+            reached = sim_time(answer)
+            assert now_ms / 1000 + 0.5 <= reached < now_ms / 1000 + 0.5 + 2 * board.tick_s
+            assert len(board.grants) == 0 and not board.free_running
+            board.check()
+        finally:
+            second.sock.close()
