@@ -2,8 +2,9 @@
 
 How this works: a command that reads an input (a recording, a flight log) and writes a figure or
 a JSON file checks the names it will write first, so that a name it cannot write costs no work
-and the input it reads is never written over. :func:`output_file` refuses a directory and the
-input itself; :func:`figure_file` also wants an extension matplotlib writes, or none (then
+and the input it reads is never written over. :func:`output_file` refuses a directory, a path
+in no folder, and the input itself or a file inside it; :func:`different_files` two options
+naming one file; :func:`figure_file` also wants an extension matplotlib writes, or none (then
 ``.png`` is added, as matplotlib adds it, so the path the command says is the path written);
 a ``.pgf`` figure also wants the TeX program matplotlib runs for it.
 Each refusal is a ConfigError naming the option and the path.
@@ -19,14 +20,27 @@ from skeye.errors import ConfigError
 
 def output_file(path: Path, option: str, source: Path | None = None,
                 source_kind: str = "input") -> Path:
-    """``path`` if a command may write it: not a directory, not ``source`` (what the command
-    reads, its ``source_kind`` said in the refusal: "recording", "log")."""
+    """``path`` if a command may write it: not a directory, in a folder that exists, not
+    ``source`` (what the command reads, its ``source_kind`` said in the refusal: "recording",
+    "log") nor, when that is a folder (a EuRoC or ROS 2 log), a file in it."""
     if path.is_dir():
         raise ConfigError(f"{option} {path} is a directory: give a file name")
+    if not path.parent.is_dir():
+        raise ConfigError(f"{option} {path}: no folder {path.parent} to write it in")
     if source is not None and _same_file(path, source):
         raise ConfigError(f"{option} {path} is the {source_kind} {source} itself: writing it "
                           "would overwrite what is read; give another file name")
+    if source is not None and source.is_dir() and _inside(path, source):
+        raise ConfigError(f"{option} {path} is inside the {source_kind} {source}: writing it "
+                          "could overwrite what is read; write it elsewhere")
     return path
+
+
+def different_files(first: tuple[str, Path | None], second: tuple[str, Path | None]) -> None:
+    """Refuse two options naming one file (the second written would replace the first)."""
+    (a_opt, a), (b_opt, b) = first, second
+    if a is not None and b is not None and a.resolve() == b.resolve():
+        raise ConfigError(f"{a_opt} and {b_opt} both name {a}: give each its own file")
 
 
 def figure_file(path: Path, option: str, source: Path | None = None,
@@ -51,6 +65,10 @@ def figure_file(path: Path, option: str, source: Path | None = None,
                               "pgf.texsystem), which is not installed; choose another format")
     return output_file(path if kind else path.with_name(path.name + ".png"), option, source,
                        source_kind)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path.resolve().is_relative_to(folder.resolve())
 
 
 def _same_file(a: Path, b: Path) -> bool:

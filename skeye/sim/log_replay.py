@@ -31,7 +31,7 @@ from skeye import cliargs
 from skeye.errors import ConfigError
 from skeye.logs.analysis import imu_figures, spectrum
 from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
-from skeye.outputs import figure_file, output_file
+from skeye.outputs import different_files, figure_file, output_file
 from skeye.robots.config import load_robot_config
 from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
 from skeye.sim.estimator import BoardEstimator
@@ -278,6 +278,7 @@ def cmd_logs(args: argparse.Namespace) -> int:
                                                           "log")
     plot_out = None if args.plot is None else figure_file(Path(args.plot), "--plot", source,
                                                           "log")
+    different_files(("--json", json_out), ("--plot", plot_out))
     if args.log is not None:
         log = read_log(Path(args.log), args.format, imu_topic=args.imu_topic,
                        truth_topic=args.truth_topic)

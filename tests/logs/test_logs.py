@@ -271,6 +271,22 @@ def test_the_files_written_are_checked_before_the_log_is_read(
         assert f"skeye logs: error: {option} {value}" in err and message in err
         assert "Traceback" not in err and not figures.exists()
     assert log.read_bytes() == data
+    # A file inside a log that is a folder (EuRoC, ROS 2), a folder that does not exist, and
+    # --json and --plot naming one file: each refused before the work.
+    euroc = make_logs.write_euroc(tmp_path / "MH_out", synthetic(3.0))
+    imu_csv = euroc / "mav0" / "imu0" / "data.csv"
+    kept = imu_csv.read_bytes()
+    nowhere = tmp_path / "no-such-folder" / "f.json"
+    for args, message in (
+            ([str(euroc), "--json", str(imu_csv)], f"is inside the log {euroc}"),
+            (["--seconds", "3", "--json", str(nowhere)],
+             f"--json {nowhere}: no folder {nowhere.parent} to write it in"),
+            (["--seconds", "3", "--json", str(tmp_path / "x.png"), "--plot",
+              str(tmp_path / "x.png")], "--json and --plot both name")):
+        assert main(["logs", *args]) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, err
+    assert imu_csv.read_bytes() == kept
     assert main(["logs", "--seconds", "3", "--plot", str(tmp_path / "spectra")]) == 0
     assert capsys.readouterr().out.endswith(f"spectra: {tmp_path / 'spectra.png'}\n")
     assert (tmp_path / "spectra.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
