@@ -935,13 +935,13 @@ class MavlinkVehicle:
         out = self._reached(st.index)
         self.step = Step(index=st.index + 1, mark=st.mark)
         self.mission_current = min(st.index + 1, max(0, len(self.mission.items) - 1))
-        out += [Out(telem.mission_current(self.codec, self.view()))]
+        out += self._on_change(telem.mission_current(self.codec, self.view()))
         return out
 
     def _mission_complete(self) -> list[Out]:
         self.program = Program.NONE
         self.mission_state = mav.MISSION_STATE_COMPLETE
-        return [Out(telem.mission_current(self.codec, self.view())),
+        return [*self._on_change(telem.mission_current(self.codec, self.view())),
                 *[Out(m) for m in statustext(self.codec, mav.MAV_SEVERITY_INFO,
                                              "mission complete")]]
 
@@ -1007,7 +1007,7 @@ class MavlinkVehicle:
 
     def _origin_news(self, now_s: float, view: telem.VehicleView | None) -> list[Out]:
         """GPS_GLOBAL_ORIGIN on every link when the origin is first known or has moved (as
-        PX4's stream sends it), but a link where SET_MESSAGE_INTERVAL -1 stopped it."""
+        PX4's stream sends it), but where SET_MESSAGE_INTERVAL -1 stopped it."""
         if now_s < self._origin_check_s:
             return []
         self._origin_check_s = now_s + ORIGIN_CHECK_S
@@ -1022,8 +1022,14 @@ class MavlinkVehicle:
         if msg is None:
             return []
         self._origin_told = new
+        return self._on_change(msg)
+
+    def _on_change(self, msg: MavMessage) -> list[Out]:
+        """A streamed message sent because its content changed: on every link but those where
+        SET_MESSAGE_INTERVAL -1 stopped it."""
+        msg_id = msg.get_msgId()
         return [Out(msg, i) for i, link in enumerate(self.links)
-                if mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN not in link.scheduler.stopped]
+                if msg_id not in link.scheduler.stopped]
 
 
 COMMANDS: dict[int, Callable[[MavlinkVehicle, Command], list[MavMessage] | None]] = {
