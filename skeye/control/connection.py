@@ -200,7 +200,11 @@ class Connection:
             if not self._nfo.wait(timeout_s):
                 raise LinkTimeout(f"simulator {self.peer}: no NFO greeting in {timeout_s:g} s")
             self.check()
-            self.ping()  # the sim time now: a late joiner does not read 0 until a reading comes
+            try:  # the sim time now: a late joiner does not read 0 until a reading comes
+                self.ping()
+            except LinkTimeout:
+                raise LinkTimeout(f"simulator {self.peer}: no answer in {timeout_s:g} s to the "
+                                  "PING connect() sends to learn the sim time") from None
             steps = period_steps(self.motion_config.control_rate_hz, self.time_step_s)
             if self.mode == "lockstep":
                 self.clock = LockstepClock(self._tick, self._get_error, self._step,

@@ -126,7 +126,8 @@ def format_header(meta: dict[str, Any]) -> bytes:
     """
     line = f"{HEADER_PREFIX} {FORMAT_VERSION} {json.dumps(meta, sort_keys=True)}\n".encode()
     if len(line) - 1 > MAX_HEADER_BYTES:
-        raise LocalProtocolError(f"recording header of {len(line) - 1} bytes: the most is "
+        raise LocalProtocolError(f"recording header of {len(line) - 1} bytes (the run's "
+                                 f"settings, {', '.join(sorted(meta))}): the most is "
                                  f"{MAX_HEADER_BYTES // 1024} KiB")
     return line
 
@@ -271,6 +272,9 @@ class Recorder:
         self.stopped: str | None = None  # why recording stopped early (size, disk), if it did
         self._meta = dict(meta or {})
         header = format_header({"started_unix_s": wall_clock(), **self._meta})  # before the file
+        if rotate:  # a later part's header also names its part and the one it continues
+            format_header({"started_unix_s": wall_clock(), **self._meta, "part": max_parts,
+                           "continues": f"{self.path.name}.{max_parts}"})
         self._file: IO[bytes] = self._create(self.path)
         self._clock = wall_clock
         self._sim_time: Callable[[], float] = lambda: 0.0

@@ -19,6 +19,7 @@ from skeye.cli import main
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
 from skeye.recording.plotting import load_tracks, plot_recording
 from skeye.recording.records import (
+    DEFAULT_MAX_PARTS,
     DIRECTIONS,
     MAX_HEADER_BYTES,
     NOTE,
@@ -154,6 +155,17 @@ def test_a_first_line_longer_than_any_header_is_refused_unread(
     (tmp_path / "edge.rec").write_bytes(b"#skeye-recording 1 {}" + b" " * (MAX_HEADER_BYTES - 21)
                                         + b"\n" + format_record(Record(1.0, 0.1, 1, SENT, "PING")))
     assert [r.line for r in RecordingReader(tmp_path / "edge.rec").records()] == ["PING"]
+    # Settings whose header fits, but not once a later part names itself and the one it
+    # continues: refused at the start when parts are to be written (it was refused in the
+    # writer thread at the first rotation).
+    clock = lambda: 1718000000.5  # noqa: E731
+    rotated = {"started_unix_s": clock(), "world": "", "part": DEFAULT_MAX_PARTS,
+               "continues": f"near.rec.{DEFAULT_MAX_PARTS}"}
+    near = {"world": "x" * (MAX_HEADER_BYTES + 1 - len(format_header(rotated)) + 1)}
+    with Recorder(tmp_path / "near.rec", near, wall_clock=clock):
+        pass  # one part: it fits
+    with pytest.raises(LocalProtocolError, match="the most is 64 KiB"):
+        Recorder(tmp_path / "near2.rec", near, wall_clock=clock, rotate=True)
 
 
 def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_written(
