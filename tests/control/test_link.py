@@ -236,3 +236,29 @@ def test_a_connection_knows_the_sim_time_from_the_start(lockstep_sim: SimHandle)
         assert t == pytest.approx(250 * first.time_step_s)
         with skeye.connect(lockstep_sim.address) as late:
             assert late.time_s == t  # lockstep: no step since, so exactly the first's time
+
+
+def test_a_server_that_greets_but_never_answers_is_named_at_connect() -> None:
+    """connect() asks the sim time (one PING): a server that sends NFO and then answers nothing
+    is refused naming that PING (the user sent none), and nothing is left running."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    accepted: list[socket.socket] = []
+
+    def serve() -> None:
+        conn, _ = listener.accept()
+        conn.sendall(format_message("NFO", ("Gametype", "skeye"), ("TimeStep", 0.001),
+                                    ("Mode", "realtime")))
+        accepted.append(conn)
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    try:
+        with pytest.raises(LinkTimeout, match=r"no answer in 0\.5 s to the PING connect\(\) "
+                                              r"sends to learn the sim time"):
+            skeye.connect(f"127.0.0.1:{listener.getsockname()[1]}", timeout_s=0.5)
+        assert not _control_threads()
+    finally:
+        server.join(5)
+        for c in accepted:
+            c.close()
+        listener.close()
