@@ -46,7 +46,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.processes import EXIT_LOST_SIMULATOR, die_with_parent, sleep_until
+from skeye.processes import EXIT_LOST_SIMULATOR, check_ports_free, die_with_parent, sleep_until
 from skeye.uris import url_host
 
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
@@ -89,6 +89,8 @@ def run_ground(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         raise ConfigError(f"--vehicle: {exc}") from None
     video_at = parse_video_uri(args.video) if args.video else None
+    # a taken port or a host that is not this machine's, named with the option that moves it
+    check_ports_free([("ground control", args.host, args.port, "--port")])
     sock = socket.create_server((args.host, args.port))
     port = sock.getsockname()[1]
     def reached(info: VehicleInfo) -> None:

@@ -28,7 +28,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
-from skeye.processes import wait_for_signal
+from skeye.processes import check_ports_free, wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
 from skeye.wire.sim import encode, unknown_command
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
@@ -243,6 +243,8 @@ class _Playback:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Serve a recording until stopped."""
+    # before the recording is read: a taken port (the simulator's 3000) is named with --port
+    check_ports_free([("the replay", args.host, args.port, "--port")])
     with ReplayServer(
         args.file, host=args.host, port=args.port, speed=args.speed, robot=args.robot
     ) as server:

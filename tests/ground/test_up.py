@@ -159,6 +159,26 @@ def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None
     assert done.returncode == 1 and "--image-port" in done.stderr and f"port {sim}" in done.stderr
 
 
+def test_ground_alone_names_a_taken_port_or_a_foreign_host_with_its_option(capsys) -> None:
+    """``skeye ground`` checks its port as ``skeye up`` does: 8080 is a common port, and the
+    error was uvicorn's ``[Errno 98] Address already in use (while attempting to bind on
+    address ('127.0.0.1', 8080))``, which named no option."""
+    from skeye.cli import main
+
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        assert main(["ground", "--vehicle", "tcp://127.0.0.1:1", "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert (f"skeye ground: error: port {port} on 127.0.0.1 (for ground control) is already "
+            "in use") in err, err
+    assert "move ground control with --port PORT" in err and "Errno" not in err, err
+    assert main(["ground", "--vehicle", "tcp://127.0.0.1:1", "--port", "0",
+                 "--host", "203.0.113.77"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot listen on 203.0.113.77 for ground control: 203.0.113.77 is not an address " \
+        "of this machine" in err and "Errno" not in err, err
+
+
 def test_a_host_that_is_not_this_machines_is_named_not_called_a_taken_port() -> None:
     import pytest
 

@@ -168,6 +168,20 @@ def test_a_first_line_longer_than_any_header_is_refused_unread(
         Recorder(tmp_path / "near2.rec", near, wall_clock=clock, rotate=True)
 
 
+def test_a_replay_on_a_taken_port_names_it_and_the_option_that_moves_it(
+    recording: tuple[Path, bytes], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """3000 is the simulator's port too: with a simulator running, the replay said only
+    ``[Errno 98] Address already in use (while attempting to bind on address (...))``."""
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        assert main(["replay", str(recording[0]), "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert (f"skeye replay: error: port {port} on 127.0.0.1 (for the replay) is already in "
+            "use") in err, err
+    assert "move the replay with --port PORT" in err and "Errno" not in err, err
+
+
 def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_written(
     recording: tuple[Path, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
