@@ -199,7 +199,12 @@ def load_robot_config(
                 f"unknown robot class {candidate!r}; known classes: {', '.join(known)}"
             )
         source = str(path)
-        text = path.read_text(encoding="utf-8")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{source}: not valid TOML (not UTF-8 text): {exc}") from None
+        except OSError as exc:
+            raise ConfigError(f"{source}: cannot read robot file: {exc.strerror or exc}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

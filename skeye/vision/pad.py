@@ -179,6 +179,8 @@ def load_pad(path: str | os.PathLike[str]) -> PadDefinition:
         raise ConfigError(f"{path}: cannot read pad file: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:  # tomllib decodes the bytes itself
+        raise ConfigError(f"{path}: not valid TOML (not UTF-8 text): {exc}") from None
     return pad_from_dict(data, source=str(path))
 
 

@@ -40,6 +40,17 @@ def test_sim_refuses_to_start_with_a_robot_file_that_has_a_typo(tmp_path: Path) 
     assert done.returncode == 2 and "not a folder" in done.stderr
 
 
+def test_sim_names_a_robot_file_that_is_not_utf8(tmp_path: Path) -> None:
+    """A robot file saved as UTF-16 (Windows Notepad's "Unicode"): a UnicodeDecodeError
+    traceback at start-up, where a TOML typo is named."""
+    (tmp_path / "quad.toml").write_bytes('name = "quad"\n'.encode("utf-16"))
+    done = _skeye("sim", "--port", "0", "--robot-dir", str(tmp_path))
+    assert done.returncode == 2, done
+    assert (f"skeye sim: error: {tmp_path / 'quad.toml'}: not valid TOML (not UTF-8 text): "
+            in done.stderr) and "Traceback" not in done.stderr, done.stderr
+    assert "control protocol on" not in done.stdout
+
+
 @pytest.mark.parametrize("which", ["--port", "--image-port"])
 def test_sim_on_a_taken_port_names_it_and_the_option_that_moves_it(which: str) -> None:
     with socket.create_server(("127.0.0.1", 0)) as taken:

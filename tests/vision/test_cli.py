@@ -120,6 +120,21 @@ def test_pad_command_writes_files(tmp_path, capsys):
     assert "p.toml" in capsys.readouterr().err
 
 
+def test_a_pad_or_robot_file_that_is_not_utf8_is_named(pad_png, tmp_path, capsys):
+    """A TOML saved as UTF-16 or Latin-1 (or a binary given by mistake): tomllib's
+    UnicodeDecodeError escaped as a traceback from `skeye pad --pad` and `--robot FILE.toml`."""
+    from skeye.cli import main
+
+    latin1 = tmp_path / "latin1.toml"
+    latin1.write_bytes("name = 'caf\u00e9'\n".encode("latin-1"))
+    assert main(["pad", "--out", str(tmp_path / "pad.png"), "--pad", str(latin1)]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"skeye pad: error: {latin1}: not valid TOML (not UTF-8 text): ")
+    assert main(["vision", "detect", str(pad_png), "--robot", str(latin1)]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"skeye vision detect: error: {latin1}: not valid TOML (not UTF-8 text): ")
+
+
 def test_detect_takes_the_fov_from_the_robot_file_and_says_so(pad_png, capsys):
     """Without --fov: the robot's camera under its profile (the Hummingbird's webcam, 0.952 rad;
     the synthetic frame is a tilted 1.309 rad pinhole's, so the height comes out scaled by about
