@@ -36,6 +36,12 @@ CASES = [
     ([*PILOT, "--port", "0", "--camera", "v4l2:///dev/video0?width=abc"], "--camera"),
     ([*PILOT, "--port", "0", "--camera", "sim://h:abc/R1/Down"], "--camera"),
     ([*PILOT, "--port", "0", "--camera", "file://clip.mp4?fps=-3"], "--camera"),
+    # an image server or simulator address with a bad port was blamed on --airframe (given or
+    # not) as "simulator address"
+    ([*PILOT, "--port", "0", "--images", "127.0.0.1:0"], "--images: image server address"),
+    (["pilot", "--sim", "127.0.0.1:70000", "--port", "0"], "--sim: simulator address"),
+    (["snapshot", "--images", "127.0.0.1:5OO3", "--out", "x.png"],
+     "--images: image server address"),
     # the up cases give a calibration file that is not there: without the option's check, up
     # stops on that (status 1) before anything starts
     (["up", "--sim-port", "-1", "--calibration", "/nonexistent"], "--sim-port"),

@@ -69,21 +69,23 @@ class Pose:
     rpy_rad: tuple[float, float, float]
 
 
-def parse_address(address: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
+def parse_address(address: str, default_port: int = DEFAULT_PORT,
+                  what: str = "simulator address") -> tuple[str, int]:
     """``host:port``, ``tcp://host:port`` or ``host`` -> (host, port).
+
+    ``what`` names the address in the error (``"image server address"`` for ``images=``).
 
     Raises:
         LocalProtocolError: an empty host, a port that is not a number in 1..65535, or a
             scheme other than tcp.
     """
     if not isinstance(address, str):
-        raise LocalProtocolError(
-            f"simulator address must be a string 'host:port', got {address!r}")
+        raise LocalProtocolError(f"{what} must be a string 'host:port', got {address!r}")
     text = address.strip()
     if "://" in text:
         scheme, text = text.split("://", 1)
         if scheme.lower() != "tcp":
-            raise LocalProtocolError(f"simulator address {address!r}: only tcp:// is supported")
+            raise LocalProtocolError(f"{what} {address!r}: only tcp:// is supported")
     text = text.rstrip("/")
     if text.startswith("["):  # [::1]:3000
         host, _, rest = text[1:].partition("]")
@@ -93,9 +95,9 @@ def parse_address(address: str, default_port: int = DEFAULT_PORT) -> tuple[str, 
     else:
         host, port_text = text, str(default_port)
     if not host:
-        raise LocalProtocolError(f"simulator address {address!r} has no host")
+        raise LocalProtocolError(f"{what} {address!r} has no host")
     if not port_text.isdigit() or not 0 < int(port_text) < 65536:
-        raise LocalProtocolError(f"simulator address {address!r}: bad port {port_text!r}")
+        raise LocalProtocolError(f"{what} {address!r}: bad port {port_text!r} (1..65535)")
     return host, int(port_text)
 
 
@@ -165,7 +167,8 @@ class Connection:
             raise LocalProtocolError(f"queue_size must be >= 1, got {queue_size}")
         self.host, self.port = parse_address(address)
         self.images_address = (
-            None if images is None else parse_address(images, DEFAULT_IMAGE_PORT)
+            None if images is None
+            else parse_address(images, DEFAULT_IMAGE_PORT, "image server address")
         )
         self.timeout_s = timeout_s
         self.motion_config = motion or MotionConfig()

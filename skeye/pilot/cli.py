@@ -88,6 +88,19 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     return envelope, source
 
 
+def sim_airframe_uri(sim: str) -> str:
+    """``--sim`` (``host:port``, ``tcp://host:port`` or ``host``, as the simulator connection
+    takes it) as the ``sim://`` airframe URI; ConfigError names ``--sim`` (not ``--airframe``,
+    which was not given)."""
+    from skeye.control.connection import parse_address
+
+    try:
+        host, port = parse_address(sim)
+    except LocalProtocolError as exc:
+        raise ConfigError(f"--sim: {exc}") from None
+    return f"sim://[{host}]:{port}" if ":" in host else f"sim://{host}:{port}"
+
+
 def airframe_options(args: argparse.Namespace) -> AirframeOptions:
     """The pilot's options as every airframe backend takes them."""
     location = None
@@ -98,6 +111,13 @@ def airframe_options(args: argparse.Namespace) -> AirframeOptions:
             raise ConfigError(f"--location must be north,east,down in m, got "
                               f"{args.location!r}") from None
         location = (north, east, down)
+    if args.images is not None:  # named here, not later as the simulator's address
+        from skeye.control.connection import DEFAULT_IMAGE_PORT, parse_address
+
+        try:
+            parse_address(args.images, DEFAULT_IMAGE_PORT, "image server address")
+        except LocalProtocolError as exc:
+            raise ConfigError(f"--images: {exc}") from None
     return AirframeOptions(
         robot=args.robot, name=args.name, start=args.start, location_ned_m=location,
         images=args.images, timeout_s=args.timeout, frozen_timeout_s=args.sim_frozen_timeout,
@@ -111,8 +131,8 @@ def run(args: argparse.Namespace) -> int:
     controller) could not be reached, or its link failed)."""
     from skeye.processes import check_ports_free
 
-    airframe_uri = args.airframe or f"sim://{args.sim}"
     try:
+        airframe_uri = args.airframe or sim_airframe_uri(args.sim)
         envelope, envelope_source = flight_envelope(args)
         airframe_scheme(airframe_uri)
         options = airframe_options(args)

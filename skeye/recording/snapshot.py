@@ -10,7 +10,7 @@ from typing import Any
 import cv2
 
 from skeye import cliargs
-from skeye.control.connection import parse_address
+from skeye.control.connection import DEFAULT_IMAGE_PORT, parse_address
 from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
 from skeye.pixels import frame_image
@@ -24,7 +24,10 @@ def save_snapshot(address: str, out: Path, camera: str | None = None, quality: i
         raise LocalProtocolError(f"{out}: the file name must end in .png, .jpg or .jpeg")
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
-    host, port = parse_address(address, 5003)
+    try:
+        host, port = parse_address(address, DEFAULT_IMAGE_PORT, "image server address")
+    except LocalProtocolError as exc:
+        raise LocalProtocolError(f"--images: {exc}") from None
     try:
         client = ImageClient(host, port, timeout_s=timeout_s)
     except LinkClosed as exc:
