@@ -15,6 +15,7 @@ machine it runs on), so the two give the same figures for the same trial.
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from types import TracebackType
@@ -82,6 +83,37 @@ class LocalBackend(_Closing):
                     yield fut.result()
 
 
+RAY_CONNECT_TIMEOUT_S = 5.0
+"""How long ``--address HOST:PORT`` may take to accept a TCP connection."""
+
+
+def check_ray_address(address: str) -> None:
+    """``--address`` is ``auto`` (Ray finds the cluster), a Ray Client ``ray://`` URI (Ray
+    checks it), or ``HOST:PORT`` where something listens: Ray's own client retries an
+    unreachable address for minutes (``--address 127.0.0.1:1`` hung past 5 minutes), and a
+    malformed one was a ValueError traceback.
+
+    Raises:
+        LocalProtocolError: naming the address, and what to give instead.
+    """
+    if address == "auto" or address.startswith("ray://"):
+        return
+    host, sep, port_text = address.rpartition(":")
+    host = host.removeprefix("[").removesuffix("]")
+    if not sep or not host or not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
+        raise LocalProtocolError(
+            f"--address must be auto or HOST:PORT (a Ray cluster's head, as `ray start --head "
+            f"--port 6379` makes it), got {address!r}")
+    try:
+        with socket.create_connection((host, int(port_text)), timeout=RAY_CONNECT_TIMEOUT_S):
+            pass
+    except OSError as exc:
+        raise LocalProtocolError(
+            f"--address {address}: no Ray cluster answers there ({exc.strerror or exc}); start "
+            f"one with `ray start --head --port {port_text}` on {host}, or give --address auto "
+            "on a machine of a running cluster") from None
+
+
 def _ray_trial(trial: dict[str, Any]) -> Row:
     return run_trial_process(trial)
 
@@ -101,7 +133,11 @@ class RayBackend(_Closing):
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # nothing leaves this machine
         # Trials see their node's environment (MUJOCO_GL, SKEYE_PURE_PYTHON, ...).
         if address:
-            ray.init(address=address, log_to_driver=False)
+            check_ray_address(address)
+            try:
+                ray.init(address=address, log_to_driver=False)
+            except (ValueError, ConnectionError) as exc:  # Ray's words for a bad address
+                raise LocalProtocolError(f"--address {address}: {exc}") from None
         else:
             ray.init(num_cpus=workers or max(1, (os.cpu_count() or 2) // 2), num_gpus=0,
                      include_dashboard=False, _node_ip_address="127.0.0.1",

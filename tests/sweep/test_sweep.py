@@ -305,6 +305,31 @@ def test_bad_command_lines_are_refused(tmp_path: Path):
         assert run.returncode != 0 and match in run.stderr + run.stdout
 
 
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize(("address", "said"), [
+    ("headnode", "--address must be auto or HOST:PORT"),  # a ValueError traceback
+    ("127.0.0.1:{free}", "--address 127.0.0.1:{free}: no Ray cluster answers there"),  # hung
+])
+def test_a_ray_address_that_is_no_cluster_is_refused_at_once(tmp_path: Path, address: str,
+                                                             said: str):
+    """Ray's own client retried an address where nothing listens for minutes (past 5 with
+    --address 127.0.0.1:1), and refused one without a port with a ValueError traceback."""
+    pytest.importorskip("ray")
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as probe:
+        free = probe.getsockname()[1]  # nothing listens there once closed
+    spec = _spec(tmp_path)
+    start = time.monotonic()
+    run = subprocess.run([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
+                          str(tmp_path / "o"), "--backend", "ray",
+                          "--address", address.format(free=free)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith(f"skeye sweep: error: {said.format(free=free)}"), run.stderr
+    assert "Traceback" not in run.stderr and time.monotonic() - start < 60
+
+
 SLOW = """
 import os
 import time
