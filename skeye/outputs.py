@@ -4,9 +4,10 @@ How this works: a command that reads an input (a recording, a flight log) and wr
 a JSON file checks the names it will write first, so that a name it cannot write costs no work
 and the input it reads is never written over. :func:`output_file` refuses a directory, a path
 in no folder, and the input itself or a file inside it; :func:`different_files` two options
-naming one file; :func:`figure_file` also wants an extension matplotlib writes, or none (then
-``.png`` is added, as matplotlib adds it, so the path the command says is the path written);
-a ``.pgf`` figure also wants the TeX program matplotlib runs for it.
+naming one file; :func:`output_folder` makes an output folder, or names why it cannot;
+:func:`figure_file` also wants an extension matplotlib writes, or none (then ``.png`` is
+added, as matplotlib adds it, so the path the command says is the path written); a ``.pgf``
+figure also wants the TeX program matplotlib runs for it.
 Each refusal is a ConfigError naming the option and the path.
 """
 
@@ -33,6 +34,19 @@ def output_file(path: Path, option: str, source: Path | None = None,
     if source is not None and source.is_dir() and _inside(path, source):
         raise ConfigError(f"{option} {path} is inside the {source_kind} {source}: writing it "
                           "could overwrite what is read; write it elsewhere")
+    return path
+
+
+def output_folder(path: Path, option: str = "--out") -> Path:
+    """``path`` made (with its parents) as the folder a command writes into; a file there, or
+    a folder that cannot be made, is refused naming ``option``."""
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{option} {path} is a file: give a folder (it is made if missing)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"{option} {path}: cannot make the folder: "
+                          f"{exc.strerror or exc}") from None
     return path
 
 

@@ -59,6 +59,7 @@ CASES = [
     # --seeds 0 after the bad option ends a run the option's check would not stop
     (["validate", "E1", "--quick", "--first-seed", "-3", "--seeds", "0"], "--first-seed"),
     (["validate", "--workers", "0", "--seeds", "0"], "--workers"),
+    (["validate", "E1", "--quick", "--seeds", "99999999999999"], "--seeds"),  # MemoryError
     (["sweep", "spec.toml", "--out", "o", "--workers", "0"], "--workers"),
     (["snapshot", "--images", NO_SIM, "--timeout", "-1", "--out", "x.png"], "--timeout"),
     (["plot", "flight.rec", "--out", "x.txt"], "--out"),
@@ -175,3 +176,19 @@ def test_a_mavlink_pilot_without_pymavlink_names_the_extra(argv: list[str]) -> N
     assert "Traceback" not in done.stderr, done.stderr
     assert ("skeye pilot: error: pymavlink is not installed: this command needs skeye's "
             "mavlink extra (pip install 'skeye[mavlink]'") in done.stderr
+
+
+def test_an_output_folder_that_is_a_file_is_refused_naming_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """skeye validate --out and skeye sweep --out are folders: a file there was
+    ``[Errno 17] File exists`` (validate) naming neither the option nor what to give."""
+    taken = tmp_path / "results.txt"
+    taken.write_text("kept")
+    (tmp_path / "spec.toml").write_text('name = "x"\nexperiment = "E2"\nquick = true\n'
+                                        'seeds = [1]\n[grid]\ne2_duration_s = [1.0]\n')
+    for argv in (["validate", "E1", "--quick", "--out", str(taken)],
+                 ["sweep", str(tmp_path / "spec.toml"), "--out", str(taken)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert f"--out {taken} is a file: give a folder" in err and "Traceback" not in err, err
+    assert taken.read_text() == "kept"

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
+from skeye.outputs import output_folder
 from skeye.sweep.backends import Backend, make_backend
 from skeye.sweep.results import ResultStore, write_report, write_tables
 from skeye.sweep.spec import SweepSpec, load_spec
@@ -96,7 +97,7 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
           ) -> SweepResult:
     """Run a sweep spec and write results.csv/.parquet and report.md into ``out``."""
     spec = load_spec(spec_path, quick)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     start = time.monotonic()
     backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
     try:

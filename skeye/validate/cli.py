@@ -13,11 +13,12 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
+from skeye.outputs import output_folder
 from skeye.processes import scaled_s
 from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
 from skeye.sweep.cli import run_trials
-from skeye.sweep.spec import SweepSpec, Trial
+from skeye.sweep.spec import MAX_TRIALS, SweepSpec, Trial
 from skeye.validate.calibration import calibrate_simulated_camera
 from skeye.validate.experiments import (
     CAMERAS,
@@ -64,8 +65,10 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     which = which.upper()
     if which not in ("E1", "E2", "ALL"):
         raise LocalProtocolError(f"unknown experiment {which!r}: E1, E2 or all")
-    if seeds < 1:
-        raise LocalProtocolError(f"--seeds must be >= 1, got {seeds}")
+    experiments = ("E1", "E2") if which == "ALL" else (which,)
+    if not 1 <= seeds <= MAX_TRIALS // len(experiments):  # one sweep trial per run
+        raise LocalProtocolError(f"--seeds must be 1..{MAX_TRIALS // len(experiments)} (a sweep "
+                                 f"makes at most {MAX_TRIALS} trials), got {seeds}")
     for name, value, what in (("camera", camera, "camera profile"),
                               ("estimator", estimator, "estimator"), ("world", world, "world")):
         _choice(name, value, what)
@@ -75,8 +78,7 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     _choice("pad_source", pad_source, "pad source")
     if calibration is not None:  # a bad file is named here, not in every trial
         check_setting("calibration", str(calibration))
-    experiments = ("E1", "E2") if which == "ALL" else (which,)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     summary: dict[str, Any] = {"paper": PAPER}
     if calibration is None and camera != "ideal":
         calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
