@@ -56,6 +56,8 @@ CASES = [
     (["ground", "--vehicle", "tcp://[::1:7000", "--host", "256.0.0.1"], "--vehicle"),
     (["link", "tcp://127.0.0.1:99999", "poll", "all"], "tcp://127.0.0.1:99999"),
     (["replay", "flight.rec", "--port", "-1"], "--port"),
+    ([*PILOT, "--robot-dir", "no-such-folder"], "--robot-dir"),  # was ignored
+    (["ground", "--robot-dir", "no-such-folder", "--host", "256.0.0.1"], "--robot-dir"),
     # --seeds 0 after the bad option ends a run the option's check would not stop
     (["validate", "E1", "--quick", "--first-seed", "-3", "--seeds", "0"], "--first-seed"),
     (["validate", "--workers", "0", "--seeds", "0"], "--workers"),

@@ -69,6 +69,7 @@ def run_ground(args: argparse.Namespace) -> int:
     from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
     from skeye.ground.limits import ConnectionLimits, limit_repeats
     from skeye.ground.video import VideoRelay, parse_video_uri
+    from skeye.robots.config import robot_folders
     from skeye.wire.packets import VehicleInfo
 
     if not (args.header_timeout > 0 and args.max_connections_per_peer >= 1):
@@ -89,6 +90,7 @@ def run_ground(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         raise ConfigError(f"--vehicle: {exc}") from None
     video_at = parse_video_uri(args.video) if args.video else None
+    robot_dirs = robot_folders(args.robot_dir)  # a typo is named now, not ignored
     # a taken port or a host that is not this machine's, named with the option that moves it
     check_ports_free([("ground control", args.host, args.port, "--port")])
     sock = socket.create_server((args.host, args.port))
@@ -108,7 +110,7 @@ def run_ground(args: argparse.Namespace) -> int:
         try:
             app = create_app(
                 bridge, video, security=security,
-                limits=VehicleLimits.for_robot(args.robot, tuple(Path(d) for d in args.robot_dir)),
+                limits=VehicleLimits.for_robot(args.robot, robot_dirs),
             )
             connections = ConnectionLimits(header_timeout_s=args.header_timeout,
                                            max_per_peer=args.max_connections_per_peer)

@@ -36,7 +36,6 @@ import sys
 import threading
 from contextlib import ExitStack, nullcontext
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
@@ -68,9 +67,9 @@ def flight_envelope(args: argparse.Namespace) -> tuple[FlightEnvelope, str]:
     Raises:
         ConfigError: a bad robot file or value, or a class missing from ``--robot-dir``.
     """
-    from skeye.robots.config import BUILTIN_ROBOTS, load_robot_config
+    from skeye.robots.config import BUILTIN_ROBOTS, load_robot_config, robot_folders
 
-    dirs = (Path(args.robot_dir),) if args.robot_dir else ()
+    dirs = robot_folders((args.robot_dir,)) if args.robot_dir else ()
     short = args.robot.split(".", 1)[1] if args.robot.lower().startswith("usarbot.") else args.robot
     if dirs or short.lower() in BUILTIN_ROBOTS:
         config = load_robot_config(args.robot, dirs, allow_paths=False)

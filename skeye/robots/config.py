@@ -229,6 +229,19 @@ def _class_file(folder: Path, name: str) -> Path | None:
     return found[0] if found else None
 
 
+def robot_folders(search_dirs: tuple[str | Path, ...]) -> tuple[Path, ...]:
+    """``--robot-dir`` values as folders.
+
+    Raises:
+        ConfigError: one is missing or not a folder (named with the option).
+    """
+    folders = tuple(Path(d) for d in search_dirs)
+    for folder in folders:
+        if not folder.is_dir():
+            raise ConfigError(f"--robot-dir {folder}: not a folder")
+    return folders
+
+
 def validate_robot_dirs(
     search_dirs: tuple[Path, ...], check: Callable[[RobotConfig], None] | None = None
 ) -> list[RobotConfig]:
@@ -246,10 +259,7 @@ def validate_robot_dirs(
             load (the message names the file and the problem).
     """
     configs = []
-    for folder in search_dirs:
-        folder = Path(folder)
-        if not folder.is_dir():
-            raise ConfigError(f"--robot-dir {folder}: not a folder")
+    for folder in robot_folders(search_dirs):
         paths = sorted(folder.glob("*.toml"))
         stems = [p.stem.casefold() for p in paths]
         for path in paths:
