@@ -261,6 +261,10 @@ class FrameDecoder:
 
     def _check_header(self, frame_type: int, size: int) -> str | None:
         if not is_valid_frame_type(frame_type):
+            if 0x41 <= frame_type <= 0x5A:  # "NFO {...": an uppercase word of a text protocol
+                return (f"unknown frame type {frame_type} ({chr(frame_type)!r}: text, as the "
+                        "simulator's control port sends; the image server has a port of its "
+                        "own, skeye sim --image-port, 5003 by default)")
             return f"unknown frame type {frame_type}"
         if size > self._max_frame_bytes:
             return f"frame of {size} bytes exceeds the {self._max_frame_bytes}-byte limit"

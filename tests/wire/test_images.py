@@ -386,6 +386,7 @@ def test_frames_decode_one_byte_at_a_time() -> None:
     ("wire", "reason_part"),
     [
         (b"\x07\0\0\0\0", "unknown frame type"),
+        (b"NFO {Gametype skeye}", "'N': text, as the simulator's control port sends"),
         (b"\x00\x04\x00\x00\x01", "exceeds"),  # 64 MiB + 1
         (b"\x00\0\0\0\x02ab", "shorter than its 4-byte prefix"),
         (b"\x00\0\0\0\x05" + struct.pack(">HH", 1, 1) + b"x", "needs 8 bytes"),
