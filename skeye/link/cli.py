@@ -2,7 +2,9 @@
 
 For scripts and for checking a real vehicle: every command prints the vehicle's answer (the
 RESULT or ack) and exits 0 when it was accepted, 3 when the vehicle refused it (the RESULT's
-code is printed), 2 on a bad argument or URI and 1 when the link failed or timed out.
+code is printed), 2 on a bad argument or URI and 1 when the link failed or timed out. The
+command's packet (and a poll or stream mask) is built before the link is opened, so a value it
+cannot carry is said in SI units with the range it can (exit 2), vehicle or none.
 Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
 Output closed early (``skeye link ... stream 60 | head``) ends the command quietly, status 0.
 """
@@ -20,8 +22,15 @@ from typing import Any, TextIO
 
 from skeye import cliargs
 from skeye.errors import CommandRejected, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
-from skeye.link.vehicle import Vehicle
-from skeye.wire.packets import Ack, Message, PollMask, Result, SkeyeMask
+from skeye.link.vehicle import (
+    Vehicle,
+    goto_gps_command,
+    move_by_command,
+    pad_mode_command,
+    velocity_command,
+)
+from skeye.wire.packet_units import take_off_from_si
+from skeye.wire.packets import Ack, Hold, Land, Message, PollMask, Reset, Result, SkeyeMask
 
 EXIT_OK, EXIT_LINK, EXIT_USAGE, EXIT_REJECTED = 0, 1, 2, 3
 
@@ -63,11 +72,43 @@ def _answer(answer: Result | Ack, out: TextIO) -> None:
     print(format_message(answer), file=out)
 
 
+def command_message(args: argparse.Namespace) -> Message | None:
+    """The command packet of a ``skeye link`` command (None for poll and stream), built before
+    the link is opened, so that a value the packet cannot carry is said (in SI, exit 2) without
+    a vehicle.
+
+    Raises:
+        LocalProtocolError: a value the packet cannot carry.
+    """
+    cmd = args.link_command
+    if cmd == "take-off":
+        return take_off_from_si(args.height)
+    if cmd in ("land", "hold", "reset"):
+        return {"land": Land, "hold": Hold, "reset": Reset}[cmd]()
+    if cmd == "velocity":
+        return velocity_command(args.forward, args.right, args.up,
+                                math.radians(args.yaw_rate_deg_s), args.duration)
+    if cmd == "move-by":
+        return move_by_command(args.forward, args.right, args.up, math.radians(args.yaw_deg),
+                               args.frame, args.speed)
+    if cmd == "goto-gps":
+        return goto_gps_command(args.latitude, args.longitude, args.height, args.speed)
+    if cmd == "pad-mode":
+        return pad_mode_command(args.mode, args.deadband, args.max_speed)
+    return None
+
+
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Execute the parsed ``skeye link`` command; returns the exit code."""
     try:
+        if args.link_command == "poll":
+            _mask(args.mask, PollMask)  # a bad mask is named before the link is opened
+        elif args.link_command == "stream":
+            _mask(args.poll_mask, PollMask)
+            _mask(args.skeye_mask, SkeyeMask)
+        msg = command_message(args)
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
-            return _run(vehicle, args, out)
+            return _run(vehicle, args, msg, out)
     except CommandRejected as exc:
         print(f"skeye link: rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
         return EXIT_REJECTED
@@ -82,38 +123,17 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         return EXIT_LINK
 
 
-def _run(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
+def _run(vehicle: Vehicle, args: argparse.Namespace, msg: Message | None, out: TextIO) -> int:
     cmd = args.link_command
     if cmd == "poll":
-        for msg in vehicle.poll(_mask(args.mask, PollMask)).values():
-            print(format_message(msg), file=out)
+        for polled in vehicle.poll(_mask(args.mask, PollMask)).values():
+            print(format_message(polled), file=out)
         return EXIT_OK
     if cmd == "stream":
         return _stream(vehicle, args, out)
-    answer: Result | Ack
-    if cmd == "take-off":
-        answer = vehicle.take_off(args.height)
-    elif cmd == "land":
-        answer = vehicle.land()
-    elif cmd == "hold":
-        answer = vehicle.hold()
-    elif cmd == "reset":
-        answer = vehicle.reset()
-    elif cmd == "velocity":
-        answer = vehicle.set_velocity(
-            args.forward, args.right, args.up, math.radians(args.yaw_rate_deg_s), args.duration
-        )
-    elif cmd == "move-by":
-        answer = vehicle.move_by(
-            args.forward, args.right, args.up, math.radians(args.yaw_deg), args.frame, args.speed
-        )
-    elif cmd == "goto-gps":
-        answer = vehicle.goto_gps(args.latitude, args.longitude, args.height, args.speed)
-    elif cmd == "pad-mode":
-        answer = vehicle.pad_mode(args.mode, args.deadband, args.max_speed)
-    else:  # argparse only lets known commands through
+    if msg is None:  # argparse only lets known commands through
         raise LocalProtocolError(f"unknown command {cmd!r}")
-    _answer(answer, out)
+    _answer(vehicle.command(msg), out)
     return EXIT_OK
 
 

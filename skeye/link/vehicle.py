@@ -45,15 +45,18 @@ from skeye.wire.packets import (
     ComeHome,
     EndFlight,
     FrameError,
+    GotoGps,
     Health,
     Hold,
     Land,
     Launch,
     Message,
+    MoveBy,
     MoveFrame,
     NavState,
     NavStatus,
     PadAction,
+    PadMode,
     Poll,
     PollMask,
     Reset,
@@ -62,6 +65,7 @@ from skeye.wire.packets import (
     SkeyeMask,
     Stream,
     VehicleStreamParser,
+    Velocity,
     Waypoint,
     WaypointGoto,
     encode,
@@ -74,6 +78,34 @@ DEFAULT_TIMEOUT_S = 2.0
 TelemetryCallback = Callable[[Message], None]
 
 NO_COMMAND_PD = 0x00  # RESULT.command_pd of an answer to no command (a refused connection)
+
+
+def velocity_command(forward_m_s: float = 0.0, right_m_s: float = 0.0, up_m_s: float = 0.0,
+                     yaw_rate_rad_s: float = 0.0, duration_s: float = 0.0) -> Velocity:
+    """VELOCITY (see :meth:`Vehicle.set_velocity`), built and checked without a link."""
+    return velocity_from_si((forward_m_s, right_m_s, -up_m_s), yaw_rate_rad_s, duration_s)
+
+
+def move_by_command(forward_m: float = 0.0, right_m: float = 0.0, up_m: float = 0.0,
+                    yaw_rad: float = 0.0, frame: str = "body", speed_m_s: float = 1.0) -> MoveBy:
+    """MOVE_BY (see :meth:`Vehicle.move_by`), built and checked without a link."""
+    frames = {"body": MoveFrame.BODY_FRD, "world": MoveFrame.WORLD_NED}
+    if frame not in frames:
+        raise LocalProtocolError(f"move_by frame {frame!r}: expected 'body' or 'world'")
+    return move_by_from_si(MoveBySi((forward_m, right_m, -up_m), yaw_rad, frames[frame],
+                                    speed_m_s))
+
+
+def goto_gps_command(latitude_deg: float, longitude_deg: float, height_m: float,
+                     speed_m_s: float = 1.0) -> GotoGps:
+    """GOTO_GPS (see :meth:`Vehicle.goto_gps`), built and checked without a link."""
+    return goto_gps_from_si(GotoGpsSi(latitude_deg, longitude_deg, height_m, speed_m_s))
+
+
+def pad_mode_command(mode: PadAction | str | int, deadband_m: float = 0.1,
+                     max_speed_m_s: float = 0.5) -> PadMode:
+    """PAD_MODE (see :meth:`Vehicle.pad_mode`), built and checked without a link."""
+    return pad_mode_from_si(PadModeSi(_pad_action(mode), deadband_m, max_speed_m_s))
 
 
 def _pad_action(mode: PadAction | str | int) -> PadAction:
@@ -377,8 +409,7 @@ class Vehicle:
     ) -> Result | Ack:
         """Fly at body-frame velocities for ``duration_s`` (0 = until replaced)."""
         return self.command(
-            velocity_from_si((forward_m_s, right_m_s, -up_m_s), yaw_rate_rad_s, duration_s)
-        )
+            velocity_command(forward_m_s, right_m_s, up_m_s, yaw_rate_rad_s, duration_s))
 
     def move_by(
         self,
@@ -391,27 +422,20 @@ class Vehicle:
     ) -> Result | Ack:
         """Move relative to the current position; ``frame="world"`` reads forward as north
         and right as east."""
-        frames = {"body": MoveFrame.BODY_FRD, "world": MoveFrame.WORLD_NED}
-        if frame not in frames:
-            raise LocalProtocolError(f"move_by frame {frame!r}: expected 'body' or 'world'")
-        si = MoveBySi((forward_m, right_m, -up_m), yaw_rad, frames[frame], speed_m_s)
-        return self.command(move_by_from_si(si))
+        return self.command(move_by_command(forward_m, right_m, up_m, yaw_rad, frame,
+                                            speed_m_s))
 
     def goto_gps(
         self, latitude_deg: float, longitude_deg: float, height_m: float, speed_m_s: float = 1.0
     ) -> Result | Ack:
         """Fly to GPS coordinates at ``height_m`` above home."""
-        return self.command(
-            goto_gps_from_si(GotoGpsSi(latitude_deg, longitude_deg, height_m, speed_m_s))
-        )
+        return self.command(goto_gps_command(latitude_deg, longitude_deg, height_m, speed_m_s))
 
     def pad_mode(
         self, mode: PadAction | str | int, deadband_m: float = 0.1, max_speed_m_s: float = 0.5
     ) -> Result | Ack:
         """Set landing-pad mode: off, hold over the pad, or land on it."""
-        return self.command(
-            pad_mode_from_si(PadModeSi(_pad_action(mode), deadband_m, max_speed_m_s))
-        )
+        return self.command(pad_mode_command(mode, deadband_m, max_speed_m_s))
 
     def run_until(self, time_s: float, timeout_s: float | None = None) -> NavStatus:
         """Grant the vehicle sim time up to ``time_s`` (CLOCK; a pilot run with

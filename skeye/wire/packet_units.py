@@ -141,7 +141,15 @@ def wire_value(
     if scale is None:
         return value
     counts = scale.to_wire(value, what or f"{cls.__name__}.{name} in {scale.unit}")
-    return clamp(counts, *f.limits) if f.saturate else counts
+    if f.saturate:
+        return clamp(counts, *f.limits)
+    lo, hi = f.limits
+    if not lo <= counts <= hi:  # said in the caller's SI units (the message says it on the wire)
+        a, b = sorted((scale.to_si(lo), scale.to_si(hi)))
+        raise LocalProtocolError(f"{what or f'{cls.__name__}.{name}'} {value:g} {scale.unit} is "
+                                 f"outside {a:g}..{b:g} {scale.unit}, what {cls.__name__} "
+                                 "carries")
+    return counts
 
 
 def si_value(msg: Message, name: str, scale: Scale | None = None) -> Any:
