@@ -4,8 +4,9 @@ How this works: :class:`SkeyeEnv` is a :class:`gymnasium.Env` over a
 :class:`~skeye.gym.tasks.Task` and a :class:`~skeye.gym.flight.Flight`. ``reset`` makes a new
 flight (a new :class:`~skeye.sim.engine.Simulation` seeded from the environment's generator,
 so ``reset(seed=s)`` repeats an episode bit for bit), spawns the vehicle hovering at the task's
-start, and lets one control period pass with it holding still, so the first observation
-carries real readings. ``step`` hands the action to the vehicle's board as the pilot would
+start, and lets one control period pass with it holding still (more, until its first pose
+reading, where a period is shorter than its INS's), so the first observation carries real
+readings. ``step`` hands the action to the vehicle's board as the pilot would
 (:func:`skeye.pilot.policy.velocity_setpoint` or :func:`~skeye.pilot.policy.attitude_setpoint`
 through the pilot's airframe interface), steps one control period (``1 / control_rate_hz``
 of sim time, in lockstep: the camera frames of that period are rendered, and the pilot's
@@ -136,7 +137,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         try:
             vehicle = flight.spawn("R1", episode.start_ned_m, episode.yaw_rad)
             vehicle.airframe.hover()
-            flight.step()
+            flight.step_until_reporting(vehicle)
         except BaseException:
             flight.close()
             raise

@@ -39,7 +39,7 @@ from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim.cameras import CameraSystem
 from skeye.sim.engine import TIMESTEP_RANGE_S, Simulation
 from skeye.sim.image_server import FrameBuffer
-from skeye.sim.sensors import SENSOR_CLASSES
+from skeye.sim.sensors import SENSOR_CLASSES, Mount, build_sensor
 from skeye.sim.state import BodyState
 from skeye.sim.world import WorldDescription, load_world
 from skeye.sim.world_model import PadPlacement
@@ -51,6 +51,12 @@ NOISE_SUFFIXES = ("sigma", "noise", "walk")
 """``sensor_noise`` scales every sensor parameter whose name ends so (NoiseSigma, BiasWalk...),
 and the rotor-driven vibration's amplitudes (VIBRATION_KEYS)."""
 VIBRATION_KEYS = ("vibrationrotor", "vibrationbladepass", "vibrationbroadband")
+POSE_TYPES = ("INS", "GroundTruth")
+"""The readings an observation's pose comes from (:meth:`BoardView.snapshot`: INS, else
+GroundTruth); a vehicle is observed from its first one on."""
+FIRST_READING_LIMIT_S = 1.0
+"""How long a spawned vehicle may go without its first pose reading before the robot is
+refused (the slowest default sensor reports at 5 Hz)."""
 
 
 @dataclass(frozen=True)
@@ -243,6 +249,11 @@ class Vehicle:
     def alive(self) -> bool:
         return self.name in self.flight.sim.robots
 
+    @property
+    def reporting(self) -> bool:
+        """Whether its first pose reading has come (its snapshot, its vision, can start)."""
+        return any(t in self.view.latest for t in POSE_TYPES)
+
 
 @dataclass(frozen=True)
 class Setup:
@@ -325,14 +336,34 @@ class Flight:
         self.sim.remove(name)
 
     def step(self) -> None:
-        """One control period of sim time, then each vehicle's vision takes its frame."""
+        """One control period of sim time, then each vehicle's vision takes its frame (its
+        vision starts with its first pose reading)."""
         self.sim.step(self.settings.period_steps)
         for vehicle in self.vehicles.values():
             if self.cameras is not None and vehicle.alive:
-                if vehicle.vision is None:
+                if vehicle.vision is None and vehicle.reporting:
                     vehicle.start_vision()
-                assert vehicle.vision is not None
-                vehicle.vision.step()
+                if vehicle.vision is not None:
+                    vehicle.vision.step()
+
+    def step_until_reporting(self, vehicle: Vehicle) -> None:
+        """Control periods, as :meth:`step`, until ``vehicle`` has its first pose reading, as the
+        pilot's spawn waits for the first readings: one period, unless a period is shorter than
+        its INS's (sensors report on the simulation's clock).
+
+        Raises:
+            ConfigError: none came within :data:`FIRST_READING_LIMIT_S` (the robot mounts no
+                INS nor GroundTruth).
+        """
+        started_s = self.time_s
+        self.step()
+        while not vehicle.reporting:
+            if self.time_s - started_s >= FIRST_READING_LIMIT_S:
+                raise ConfigError(
+                    f"robot {self.config.class_name} gave no {' or '.join(POSE_TYPES)} reading "
+                    f"within {FIRST_READING_LIMIT_S:g} s of its spawn: the observation's pose "
+                    f"comes from one")
+            self.step()
 
     @property
     def time_s(self) -> float:
@@ -343,6 +374,22 @@ class Flight:
             vehicle.close()
         if self.cameras is not None:
             self.cameras.close()
+
+
+def pose_period_steps(setup: Setup) -> int | None:
+    """The physics steps between the pose readings of a vehicle (:data:`POSE_TYPES`, the
+    mounts :class:`BoardView` reads: the faster one), None if it mounts neither. Sensors report
+    on the simulation's clock, so any stretch of this many steps after a spawn holds one."""
+    names = BoardView(setup.config).names
+    periods = []
+    for mount in setup.config.sensors:
+        type_name = next((t for t in POSE_TYPES if t.lower() == mount.type_name.lower()), None)
+        if type_name is None or names.get(type_name) != mount.name:
+            continue
+        sensor = build_sensor(mount.type_name, mount.name, Mount(), dict(mount.params),
+                              np.random.default_rng(0))
+        periods.append(max(1, round(1.0 / (sensor.rate_hz * setup.settings.timestep_s))))
+    return min(periods, default=None)
 
 
 def with_pads(world: WorldDescription,

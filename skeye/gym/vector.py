@@ -31,7 +31,14 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 from skeye.errors import ConfigError, InvalidArgument
 from skeye.geo import MAX_POSITION_M
 from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
-from skeye.gym.flight import Flight, FlightSettings, Vehicle, prepare
+from skeye.gym.flight import (
+    Flight,
+    FlightSettings,
+    Setup,
+    Vehicle,
+    pose_period_steps,
+    prepare,
+)
 from skeye.gym.options import check_render_mode, check_settings
 from skeye.gym.tasks import (
     PAD_START_HEIGHT_M,
@@ -59,6 +66,21 @@ def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
     side = math.ceil(math.sqrt(num))
     half = (side - 1) / 2.0
     return [((i // side - half) * spacing_m, (i % side - half) * spacing_m) for i in range(num)]
+
+
+def check_period(setup: Setup) -> None:
+    """A respawned vehicle is observed one control period after its spawn: refuse a period
+    that may pass without its first pose reading (shorter than its INS's)."""
+    needed = pose_period_steps(setup)
+    settings = setup.settings
+    if needed is not None and settings.period_steps < needed:
+        fastest_hz = 1.0 / (needed * settings.timestep_s)
+        raise ConfigError(
+            f"control_rate_hz {settings.control_rate_hz:g} is faster than robot "
+            f"{setup.config.class_name}'s INS ({fastest_hz:g} Hz): the batched environment "
+            f"observes a respawned vehicle one control period after its spawn, which may be "
+            f"before its first reading; use control_rate_hz <= {fastest_hz:g}, or "
+            f"vectorization_mode='sync' or 'async'")
 
 
 class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
@@ -98,6 +120,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                               f"{farthest:g} m from the origin: the simulator's limit is "
                               f"{MAX_POSITION_M:g} m")
         self.setup = prepare(self.settings, tuple(cells) if task.needs_camera else None)
+        check_period(self.setup)
         if task.needs_camera:
             pads = self.setup.world.pads
             self.origins = [(p.position_ned_m[0], p.position_ned_m[1], p.surface_down_m)

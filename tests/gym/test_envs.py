@@ -331,3 +331,32 @@ def test_the_batched_environment_refuses_actions_of_another_shape_touching_no_ve
         envs.step(np.zeros((2, 4), np.float32))  # flies on
     finally:
         envs.close()
+
+
+@pytest.mark.parametrize("env_id,kwargs", [
+    ("skeye/Hover-v0", {}),
+    ("skeye/PadLanding-v0", {"camera": "ideal"}),
+])
+def test_a_control_rate_faster_than_the_ins_starts_on_its_first_reading(env_id: str,
+                                                                       kwargs: dict) -> None:
+    """control_rate_hz 100..1000 (in the documented 0.5..1000) made reset() raise SkeyeError
+    'no INS or GroundTruth reading yet': it observed one period (10 ms at 100 Hz) after the
+    spawn, before the first reading of the 50 Hz INS. It waits for it, as the pilot's spawn
+    does; the episode then runs its steps from there."""
+    env = gymnasium.make(env_id, control_rate_hz=200, episode_s=0.1, **kwargs)
+    try:
+        obs, info = env.reset(seed=0)
+        assert env.observation_space.contains(obs) and info["sim_time_s"] == 0.0
+        ends = [env.step(np.zeros(4, np.float32))[2:4] for _ in range(20)]
+        assert ends[-1] == (False, True) and (False, True) not in ends[:-1]
+    finally:
+        env.close()
+
+
+def test_the_batched_environment_refuses_a_control_rate_faster_than_the_ins() -> None:
+    """It observes a respawned vehicle one control period after its spawn: at 100 Hz that may
+    come before the INS's first reading (it raised SkeyeError at reset)."""
+    with pytest.raises(ConfigError, match=r"control_rate_hz 100 is faster than robot "
+                                          r"hummingbird's INS \(50 Hz\)"):
+        gymnasium.make_vec("skeye/Hover-v0", num_envs=2, control_rate_hz=100,
+                           vectorization_mode="vector_entry_point")
