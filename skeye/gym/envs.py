@@ -34,7 +34,7 @@ from gymnasium import spaces
 from skeye.errors import ConfigError
 from skeye.geo import MAX_POSITION_M
 from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
-from skeye.gym.options import RENDER_MODE, check_render_mode, check_settings
+from skeye.gym.options import RENDER_MODE, check_render_mode, check_settings, env_id
 from skeye.gym.tasks import (
     PAD_START_HEIGHT_M,
     PAD_START_OFFSET_M,
@@ -55,6 +55,9 @@ from skeye.robots.config import RobotConfig
 from skeye.values import number, numbers
 
 ACTIONS = ("velocity", "attitude")
+ENV_KEYWORDS = ("action", "episode_s", "render_mode")
+"""Every environment's own keywords of ``gymnasium.make`` (beside FlightSettings' and its
+task's)."""
 
 
 def action_limits(config: RobotConfig) -> ActionLimits:
@@ -99,7 +102,8 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         if task.needs_camera:
             settings.setdefault("camera", "webcam")
         # A bad value is named as such first; then a good one that would do nothing here.
-        self.settings = FlightSettings.from_kwargs(**settings)
+        self.settings = FlightSettings.from_kwargs(
+            settings, where=env_id(task), also=(*ENV_KEYWORDS, *task.keywords))
         check_settings(task, settings, renders=render_mode is not None)
         if task.needs_camera and self.settings.camera is None:
             raise ConfigError(f"{task.name} needs the camera: camera must be webcam or ideal")

@@ -19,7 +19,7 @@ checked once, and a bad one is a :class:`~skeye.errors.ConfigError` naming it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
 from typing import Any
@@ -123,12 +123,17 @@ class FlightSettings:
                               f"of physics steps of {self.timestep_s:g} s")
 
     @classmethod
-    def from_kwargs(cls, **kwargs: Any) -> FlightSettings:
-        """Settings from ``gymnasium.make`` keywords (wind_params also as ``"k=v,k=v"``)."""
-        unknown = sorted(set(kwargs) - set(cls.__dataclass_fields__))
+    def from_kwargs(cls, given: Mapping[str, Any], *, where: str,
+                    also: Iterable[str] = ()) -> FlightSettings:
+        """Settings from ``gymnasium.make`` keywords (wind_params also as ``"k=v,k=v"``);
+        ``also``: the environment's own keywords (``where``), named with these when another
+        one is refused."""
+        unknown = sorted(set(given) - set(cls.__dataclass_fields__), key=str)
         if unknown:
-            raise ConfigError(f"unknown option(s) {unknown}; known: "
-                              f"{sorted(cls.__dataclass_fields__)}")
+            known = sorted({*cls.__dataclass_fields__, *also})
+            raise ConfigError(f"unknown option(s) {unknown} for {where}; known: "
+                              f"{', '.join(known)}")
+        kwargs = dict(given)
         if isinstance(kwargs.get("wind_params"), str):
             kwargs["wind_params"] = parse_params(kwargs["wind_params"])
         if "robot_dir" in kwargs:

@@ -96,6 +96,7 @@ class Task:
     area_m = 3.0
     needs_camera = False
     target_fixed = False
+    keywords: tuple[str, ...] = ()  # its own keywords of gymnasium.make (PadLanding's)
 
     def observation_space(self) -> spaces.Space[Any]:
         return _box((STATE_LOW, STATE_HIGH), (-TARGET_HIGH, TARGET_HIGH))
@@ -191,6 +192,8 @@ class PadLanding(Task):
     area_m = 3.0
     needs_camera = True
     target_fixed = True
+    keywords = ("observation", "image_size", "start_offset_m", "start_height_m",
+                "pad_tolerance_m")
 
     def __init__(self, observation: str = "pad", image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
                  start_offset_m: float = PAD_START_OFFSET_M,

@@ -30,7 +30,7 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
 from skeye.errors import ConfigError, InvalidArgument
 from skeye.geo import MAX_POSITION_M
-from skeye.gym.envs import ACTIONS, action_limits, apply_action, override_start
+from skeye.gym.envs import ACTIONS, ENV_KEYWORDS, action_limits, apply_action, override_start
 from skeye.gym.flight import (
     Flight,
     FlightSettings,
@@ -39,7 +39,7 @@ from skeye.gym.flight import (
     pose_period_steps,
     prepare,
 )
-from skeye.gym.options import check_render_mode, check_settings
+from skeye.gym.options import check_render_mode, check_settings, env_id
 from skeye.gym.tasks import (
     PAD_START_HEIGHT_M,
     PAD_START_OFFSET_M,
@@ -110,7 +110,9 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                 raise ConfigError(f"episode_s must be > 0, got {episode_s!r}")
             for t in self.tasks:
                 t.episode_s = float(episode_s)
-        self.settings = FlightSettings.from_kwargs(**settings)
+        self.settings = FlightSettings.from_kwargs(
+            settings, where=env_id(task, vector=True),
+            also=(*ENV_KEYWORDS, *task.keywords, "num_envs", "spacing_m"))
         check_settings(task, settings, renders=False, vector=True)
         check_render_mode(task, render_mode, False, vector=True)
         cells = grid(num_envs, spacing_m)

@@ -360,3 +360,23 @@ def test_the_batched_environment_refuses_a_control_rate_faster_than_the_ins() ->
                                           r"hummingbird's INS \(50 Hz\)"):
         gymnasium.make_vec("skeye/Hover-v0", num_envs=2, control_rate_hz=100,
                            vectorization_mode="vector_entry_point")
+
+
+@pytest.mark.parametrize("make,own", [
+    (lambda **kw: gymnasium.make("skeye/Hover-v0", **kw), ("action", "episode_s", "render_mode")),
+    (lambda **kw: gymnasium.make("skeye/PadLanding-v0", **kw),
+     ("episode_s", "observation", "image_size", "start_offset_m", "start_height_m",
+      "pad_tolerance_m")),
+    (lambda **kw: gymnasium.make_vec("skeye/PadLanding-v0", num_envs=2,
+                                     vectorization_mode="vector_entry_point", **kw),
+     ("episode_s", "image_size", "num_envs", "spacing_m")),
+])
+def test_an_unknown_option_is_refused_naming_every_option_the_environment_knows(
+        make: object, own: tuple[str, ...]) -> None:
+    """A misspelt keyword (episodes_s) was answered with a 'known' list of the simulation's
+    settings only: episode_s, action, observation, image_size, spacing_m... were missing from
+    it, as if they were not options either."""
+    with pytest.raises(ConfigError, match=r"unknown option\(s\) \['episodes_s'\] for ") as err:
+        make(episodes_s=5)  # type: ignore[operator]
+    known = str(err.value).split("known: ")[1].split(", ")
+    assert set(own) <= set(known) and {"control_rate_hz", "world"} <= set(known)
