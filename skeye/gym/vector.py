@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
@@ -176,8 +177,8 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
         flight = self.flight
-        if flight is None:
-            raise ConfigError("call reset() before step()")
+        if flight is None:  # as the single environment, and Gymnasium's own vector ones
+            raise ResetNeeded("call reset() before step() (after close() too)")
         try:
             shape: Any = np.shape(actions)
         except ValueError:  # ragged rows

@@ -380,3 +380,19 @@ def test_an_unknown_option_is_refused_naming_every_option_the_environment_knows(
         make(episodes_s=5)  # type: ignore[operator]
     known = str(err.value).split("known: ")[1].split(", ")
     assert set(own) <= set(known) and {"control_rate_hz", "world"} <= set(known)
+
+
+@pytest.mark.parametrize("mode", ["sync", "vector_entry_point"])
+def test_a_vector_step_before_reset_or_after_close_needs_a_reset(mode: str) -> None:
+    """The batched environment raised ConfigError (a bad option's error) where the single one
+    and Gymnasium's SyncVectorEnv raise Gymnasium's ResetNeeded."""
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode)
+    try:
+        with pytest.raises(gymnasium.error.ResetNeeded):
+            envs.step(np.zeros((2, 4), np.float32))
+        envs.reset(seed=0)
+        envs.step(np.zeros((2, 4), np.float32))
+    finally:
+        envs.close()
+    with pytest.raises(gymnasium.error.ResetNeeded):
+        envs.step(np.zeros((2, 4), np.float32))
