@@ -13,8 +13,10 @@ others fly on undisturbed, their state carried across the world's rebuild exactl
 
 ``reset(seed=s)`` makes a new world seeded from ``s``: the same seed and actions give the same
 batch of episodes, bit for bit. The keywords are the single environment's
-(:mod:`skeye.gym.envs`) plus ``spacing_m``; it renders nothing, so it offers no render mode and
-Hover and GoTo take no camera (:mod:`skeye.gym.options`).
+(:mod:`skeye.gym.envs`) plus ``spacing_m`` and ``max_episode_steps`` (which
+``gymnasium.make`` turns into a ``TimeLimit`` wrapper, and ``make_vec`` hands to a vector entry
+point: each vehicle's episode is truncated after that many steps); it renders nothing, so it
+offers no render mode and Hover and GoTo take no camera (:mod:`skeye.gym.options`).
 """
 
 from __future__ import annotations
@@ -93,9 +95,14 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
     def __init__(self, task_factory: Callable[[], Task], num_envs: int, *,
                  spacing_m: float = DEFAULT_SPACING_M, action: str = "velocity",
                  episode_s: float | None = None, render_mode: Any = None,
-                 **settings: Any) -> None:
+                 max_episode_steps: int | None = None, **settings: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
             raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
+        if max_episode_steps is not None and (
+                isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, int)
+                or max_episode_steps < 1):
+            raise ConfigError(f"max_episode_steps must be a whole number >= 1 (or None), "
+                              f"got {max_episode_steps!r}")
         if not (number("spacing_m", spacing_m) >= 2.0):
             raise ConfigError(f"spacing_m must be >= 2 m, got {spacing_m!r}")
         if action not in ACTIONS:
@@ -113,7 +120,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                 t.episode_s = float(episode_s)
         self.settings = FlightSettings.from_kwargs(
             settings, where=env_id(task, vector=True),
-            also=(*ENV_KEYWORDS, *task.keywords, "num_envs", "spacing_m"))
+            also=(*ENV_KEYWORDS, *task.keywords, "num_envs", "spacing_m", "max_episode_steps"))
         check_settings(task, settings, renders=False, vector=True)
         check_render_mode(task, render_mode, False, vector=True)
         cells = grid(num_envs, spacing_m)
@@ -131,6 +138,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
         else:
             self.origins = [(n, e, 0.0) for n, e in cells]
         self.num_envs = num_envs
+        self.max_episode_steps = max_episode_steps
         self.action_kind = action
         self.limits = action_limits(self.setup.config)
         self.single_observation_space = task.observation_space()
@@ -141,6 +149,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
         self.vehicles: list[Vehicle | None] = [None] * num_envs
         self.episodes: list[Episode | None] = [None] * num_envs
         self._started_s = np.zeros(num_envs)
+        self._steps = np.zeros(num_envs, dtype=np.int64)  # each vehicle's steps this episode
         self._autoreset = np.zeros(num_envs, dtype=bool)
 
     def _name(self, i: int) -> str:
@@ -168,6 +177,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
             self._start(i)
         self.flight.step()
         self._started_s[:] = self.flight.time_s
+        self._steps[:] = 0
         self._autoreset[:] = False
         infos: dict[str, Any] = {}
         for i in range(self.num_envs):
@@ -207,11 +217,15 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
             assert vehicle is not None and episode is not None
             if restarted[i]:
                 self._started_s[i] = flight.time_s
+                self._steps[i] = 0
             else:
                 reward, term = self.tasks[i].judge(vehicle, episode)
                 rewards[i], terminated[i] = reward, term
+                self._steps[i] += 1
                 truncated[i] = not term and flight.time_s - self._started_s[i] >= (
                     self.tasks[i].episode_s - 1e-9)
+                if self.max_episode_steps is not None:  # as gymnasium.make's TimeLimit
+                    truncated[i] |= self._steps[i] >= self.max_episode_steps
             infos = self._add_info(infos, self._info(i), i)
         self._autoreset = terminated | truncated
         return self._observations(), rewards, terminated, truncated, infos

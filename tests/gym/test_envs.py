@@ -396,3 +396,23 @@ def test_a_vector_step_before_reset_or_after_close_needs_a_reset(mode: str) -> N
         envs.close()
     with pytest.raises(gymnasium.error.ResetNeeded):
         envs.step(np.zeros((2, 4), np.float32))
+
+
+@pytest.mark.parametrize("mode", ["sync", "vector_entry_point"])
+def test_max_episode_steps_truncates_each_vehicle_in_every_vectorization_mode(mode: str) -> None:
+    """gymnasium.make_vec hands max_episode_steps (its keyword, or the spec's) to a vector entry
+    point; the batched environment refused it as an unknown option, where sync and async wrap
+    each environment in TimeLimit. It truncates each vehicle's episode as TimeLimit does."""
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode,
+                              max_episode_steps=3)
+    try:
+        envs.reset(seed=0)
+        ends = [envs.step(np.zeros((2, 4), np.float32))[3].tolist() for _ in range(8)]
+    finally:
+        envs.close()
+    # the 3rd step truncates, the 4th restarts (next-step autoreset), the 7th truncates again
+    assert ends == [[True] * 2 if k in (2, 6) else [False] * 2 for k in range(8)]
+    if mode == "vector_entry_point":
+        with pytest.raises(ConfigError, match="max_episode_steps must be a whole number"):
+            gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode,
+                               max_episode_steps=0)
