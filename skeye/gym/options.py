@@ -82,7 +82,8 @@ def check_render_mode(task: Task, render_mode: Any, has_camera: bool, *,
                   f"{' or '.join(map(repr, PROFILES))} it offers {RENDER_MODE!r})")
     note = ""
     if render_mode == RENDER_MODE and not vector:
-        note = f" (gymnasium.make asks for {RENDER_MODE!r} when given 'human')"
+        note = (f" (gymnasium.make asks for {RENDER_MODE!r} when given 'human' or "
+                f"'{RENDER_MODE}_list')")
     raise ConfigError(f"{where} {offers}; got render_mode={render_mode!r}{note}")
 
 

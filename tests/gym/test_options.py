@@ -22,10 +22,14 @@ def test_a_render_mode_not_offered_is_refused_naming_the_offered_ones_and_the_gi
         ) -> None:
     """The message was "render_mode 'rgb_array': only 'rgb_array', with a camera" for a
     'human' given to gymnasium.make (which asks for 'rgb_array' in its place)."""
-    with pytest.raises(ConfigError, match=NO_CAMERA + r"'rgb_array' \(gymnasium\.make asks "
-                                          r"for 'rgb_array' when given 'human'\)$"), \
+    given_note = r"'rgb_array' \(gymnasium\.make asks for 'rgb_array' when given 'human' or " \
+                 r"'rgb_array_list'\)$"
+    with pytest.raises(ConfigError, match=NO_CAMERA + given_note), \
             pytest.warns(UserWarning, match="HumanRendering wrapper is being applied"):
         gymnasium.make("skeye/Hover-v0", render_mode="human")
+    # (the note said 'human' only, to someone who had given 'rgb_array_list')
+    with pytest.raises(ConfigError, match=NO_CAMERA + given_note):
+        gymnasium.make("skeye/Hover-v0", render_mode="rgb_array_list")
     with pytest.raises(ConfigError, match=NO_CAMERA + "'human'$"):
         HoverEnv(render_mode="human")
     with pytest.raises(ConfigError, match=NO_CAMERA + "3$"):
