@@ -56,7 +56,7 @@ POSE_TYPES = ("INS", "GroundTruth")
 GroundTruth); a vehicle is observed from its first one on."""
 FIRST_READING_LIMIT_S = 1.0
 """How long a spawned vehicle may go without its first pose reading before the robot is
-refused (the slowest default sensor reports at 5 Hz)."""
+refused as giving none (an INS at 1 Hz or faster gives one within it)."""
 
 
 @dataclass(frozen=True)

@@ -76,7 +76,10 @@ def check_period(setup: Setup) -> None:
     that may pass without its first pose reading (shorter than its INS's)."""
     needed = pose_period_steps(setup)
     settings = setup.settings
-    if needed is not None and settings.period_steps < needed:
+    if needed is None:
+        raise ConfigError(f"robot {setup.config.class_name} mounts no INS nor GroundTruth: the "
+                          f"observation's pose comes from one")
+    if settings.period_steps < needed:
         fastest_hz = 1.0 / (needed * settings.timestep_s)
         raise ConfigError(
             f"control_rate_hz {settings.control_rate_hz:g} is faster than robot "

@@ -416,3 +416,27 @@ def test_max_episode_steps_truncates_each_vehicle_in_every_vectorization_mode(mo
         with pytest.raises(ConfigError, match="max_episode_steps must be a whole number"):
             gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode,
                                max_episode_steps=0)
+
+
+def test_a_robot_without_an_ins_or_ground_truth_is_refused_naming_that(tmp_path) -> None:
+    """The observation's pose is the INS's (else GroundTruth's): with neither, reset() raised
+    SkeyeError 'no INS or GroundTruth reading yet: step the simulation first'."""
+    import re
+    from pathlib import Path
+
+    import skeye.robots
+
+    source = (Path(skeye.robots.__file__).parent / "hummingbird.toml").read_text()
+    head, *sensors = source.split("[[sensors]]")
+    kept = [s for s in sensors if not re.search(r'type = "(INS|GroundTruth)"', s)]
+    (tmp_path / "blind.toml").write_text("[[sensors]]".join([head, *kept]))
+    options = {"robot": "blind", "robot_dir": tmp_path}
+    env = gymnasium.make("skeye/Hover-v0", **options)
+    try:
+        with pytest.raises(ConfigError, match="gave no INS or GroundTruth reading within 1 s"):
+            env.reset(seed=0)
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match="mounts no INS nor GroundTruth"):
+        gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                           **options)
