@@ -6,13 +6,17 @@ examples/ and benchmarks/ is searched for references to documents that live outs
 repository (the old specification folder and its file names). Every markdown link in README.md
 and docs/**/*.md is resolved: a relative target must be a file or folder inside the repository,
 and a ``#anchor`` into a markdown file must name one of its headings (GitHub's slug rules).
-The checkers are plain functions, tested here on small files too, so the test can fail.
+Every import of skeye in a ``python`` code block of those files must name a module and names
+that exist (resolved in a child process, so this one loads no simulator). The checkers are
+plain functions, tested here on small files too, so the test can fail.
 """
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -46,6 +50,9 @@ _REF_DEF = re.compile(r"^\s{0,3}\[[^\]]+\]:\s*<?(\S+?)>?(?:\s+\"[^\"]*\")?\s*$")
 _HEADING = re.compile(r"^\s{0,3}(#{1,6})\s+(.*?)\s*#*\s*$")
 _HTML_ANCHOR = re.compile(r"<a\s+(?:id|name)=\"([^\"]+)\"", re.IGNORECASE)
 _SCHEME = re.compile(r"^[a-zA-Z][a-zA-Z0-9+.-]*:")
+_CODE_FENCE = re.compile(r"^\s*(?:```|~~~)\s*([\w+-]*)")
+_SKEYE_IMPORT = re.compile(
+    r"^\s*(?:from\s+(skeye(?:\.\w+)*)\s+import\s+(.+)|import\s+(skeye(?:\.\w+)*)\b)")
 
 
 def repo_files(root: Path = ROOT) -> list[Path]:
@@ -160,6 +167,56 @@ def broken_links(path: Path, root: Path = ROOT) -> list[str]:
     return problems
 
 
+def python_imports(text: str) -> list[tuple[int, str, tuple[str, ...]]]:
+    """(line number, module, names taken) of every import of skeye in a python code block."""
+    found: list[tuple[int, str, tuple[str, ...]]] = []
+    language: str | None = None  # the open block's language; None outside code
+    for number, line in enumerate(text.splitlines(), start=1):
+        fence = _CODE_FENCE.match(line)
+        if fence:
+            language = fence.group(1).lower() if language is None else None
+            continue
+        match = _SKEYE_IMPORT.match(line) if language in ("python", "py") else None
+        if match is None:
+            continue
+        if match.group(3):
+            found.append((number, match.group(3), ()))
+            continue
+        names = match.group(2).split("#")[0].strip().strip("()")
+        found.append((number, match.group(1), tuple(
+            part.split(" as ")[0].strip() for part in names.split(",") if part.strip())))
+    return found
+
+
+_RESOLVE = """
+import importlib, json, sys
+problems = []
+for where, module, names in json.loads(sys.stdin.read()):
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as exc:
+        problems.append(f"{where}: cannot import {module}: {exc}")
+        continue
+    for name in names:
+        if hasattr(mod, name):
+            continue
+        try:
+            importlib.import_module(f"{module}.{name}")
+        except ImportError:
+            problems.append(f"{where}: {module} has no {name}")
+print(json.dumps(problems))
+"""
+
+
+def unresolved_imports(imports: list[tuple[str, str, tuple[str, ...]]],
+                       root: Path = ROOT) -> list[str]:
+    """What is wrong with (where, module, names) imports, resolved in a child process."""
+    done = subprocess.run([sys.executable, "-c", _RESOLVE], input=json.dumps(imports),
+                          capture_output=True, text=True, cwd=root, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
 def markdown_docs(root: Path = ROOT) -> list[Path]:
     return [p for p in repo_files(root)
             if p.suffix == ".md" and (p == root / "README.md" or p.is_relative_to(root / "docs"))]
@@ -191,6 +248,15 @@ def test_markdown_links_resolve():
     assert ROOT / "README.md" in docs and ROOT / "docs" / "README.md" in docs
     problems = [problem for path in docs for problem in broken_links(path)]
     assert not problems, "broken links:\n" + "\n".join(problems)
+
+
+def test_python_examples_import_what_exists():
+    imports = [(f"{path.relative_to(ROOT)}:{number}", module, names)
+               for path in markdown_docs()
+               for number, module, names in python_imports(path.read_text(encoding="utf-8"))]
+    assert any(module == "skeye.vision.calibration" for _, module, _ in imports)
+    problems = unresolved_imports(imports)
+    assert not problems, "examples importing what skeye does not have:\n" + "\n".join(problems)
 
 
 @pytest.mark.parametrize(
@@ -260,3 +326,34 @@ def test_slugs_follow_github():
     assert slug(e1, seen) == "e1-height-from-the-pad-paper-fig-6"
     assert slug("RESULT codes", seen) == "result-codes"
     assert slug("RESULT codes", seen) == "result-codes-1"
+
+
+def test_checker_finds_the_imports_of_python_blocks():
+    text = ("from skeye.a import b  # not in code\n"
+            "```python\n"
+            "import skeye.gym  # registers\n"
+            "from skeye.vision.detector import detect, PadEstimate as Est\n"
+            "import cv2\n"
+            "```\n"
+            "```sh\n"
+            "from skeye.c import d\n"
+            "```\n"
+            "~~~py\n"
+            "from skeye.e import (f, g)\n"
+            "~~~\n")
+    assert python_imports(text) == [
+        (3, "skeye.gym", ()),
+        (4, "skeye.vision.detector", ("detect", "PadEstimate")),
+        (11, "skeye.e", ("f", "g")),
+    ]
+
+
+def test_checker_reports_what_does_not_resolve():
+    problems = unresolved_imports([
+        ("a.md:1", "skeye.vision.calibration", ("load_calibration", "detect")),
+        ("a.md:2", "skeye.no_such_module", ()),
+        ("a.md:3", "skeye.vision", ("detector",)),
+    ])
+    assert problems == ["a.md:1: skeye.vision.calibration has no detect",
+                        "a.md:2: cannot import skeye.no_such_module: No module named "
+                        "'skeye.no_such_module'"]
