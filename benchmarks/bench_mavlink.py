@@ -50,7 +50,7 @@ from pymavlink import mavutil
 from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
-from skeye.pilot.cli import camera_fov_rad
+from skeye.pilot.cli import camera_fov_rad, camera_vision_factory, open_camera_for
 from skeye.pilot.mavlink_airframe import open_mavlink_airframe
 from skeye.pilot.mavlink_server import MavlinkServer
 from skeye.pilot.server import PilotServer
@@ -272,6 +272,11 @@ def pad_flight(kind: str, airframe_kind: str) -> tuple[float, float]:
         settings = settings_of(robot)
         airframe: Any = SimAirframe(conn_sim, robot)
         fov = camera_fov_rad(conn_sim)
+
+        def robot_vision(boards: Any, lock: Any) -> Any:  # the robot's own camera, sim time
+            return PadVision(boards, robot, lock, fov_h_rad=fov)
+
+        vision: Any = robot_vision
         if airframe_kind == "mavlink":
             controller = stack.enter_context(PilotServer(airframe, port=0, settings=settings))
             port = free_udp_port()
@@ -279,9 +284,15 @@ def pad_flight(kind: str, airframe_kind: str) -> tuple[float, float]:
                                               [f"udp://127.0.0.1:{port}"]))
             airframe = open_mavlink_airframe(f"mavlink://udpout/127.0.0.1:{port}")
             stack.callback(airframe.close)
-        pilot = stack.enter_context(PilotServer(
-            airframe, port=0, settings=settings,
-            vision=lambda boards, lock: PadVision(boards, robot, lock, fov_h_rad=fov)))
+            # The companion's camera as `skeye pilot --camera sim://...` opens it: frames on
+            # the companion's clock, as a real camera's would be.
+            host, image_port = conn_sim.images_address
+            camera = open_camera_for(f"sim://{host}:{image_port}/{robot.name}/Down"
+                                     f"?fov_rad={fov!r}", airframe, "companion", None, 5.0)
+            stack.callback(camera.close)
+            vision = camera_vision_factory(camera, camera.fov_h_rad)
+        pilot = stack.enter_context(PilotServer(airframe, port=0, settings=settings,
+                                                vision=vision))
         vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
         height, offset = (1.5, 0.6) if kind == "hold" else (2.0, 0.5)

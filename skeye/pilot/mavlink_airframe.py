@@ -6,10 +6,14 @@ How this works: :class:`MavlinkAirframe` owns one MAVLink link to the flight con
 writes it. The thread keeps the newest of each telemetry message (HEARTBEAT, ATTITUDE,
 LOCAL_POSITION_NED, HIGHRES_IMU, GPS_RAW_INT, SYS_STATUS, EXTENDED_SYS_STATE, VFR_HUD), from
 which :meth:`snapshot` builds the boards' ``Snapshot`` (positions in the controller's local NED
-frame, times in its boot time); it sends this computer's HEARTBEAT every second, the offboard
-setpoint every ``setpoint_period_s`` (PX4 drops out of offboard below 2 Hz), and commands one at
-a time, each resent until its COMMAND_ACK (at most ``retries`` times). The boards' calls never
-wait on the link: they set the setpoint or queue commands and return.
+frame; times on this computer's monotonic clock, the clock a camera source stamps its frames
+with: the controller's boot time plus the smallest offset between the two seen over the last
+``OFFSET_WINDOW`` ATTITUDE messages, the one least delayed by the link, as the ``sim://`` camera
+maps the simulator's time; LANDING_TARGET goes back in the controller's boot time); it sends
+this computer's HEARTBEAT every second, the offboard setpoint every ``setpoint_period_s`` (PX4
+drops out of offboard below 2 Hz), and commands one at a time, each resent until its
+COMMAND_ACK (at most ``retries`` times). The boards' calls never wait on the link: they set the
+setpoint or queue commands and return.
 
 Flying: ``take_off`` arms and sends NAV_TAKEOFF (altitude above mean sea level, from the
 controller's own GLOBAL_POSITION_INT); once the controller holds at the height, every motion is
@@ -30,8 +34,9 @@ import math
 import selectors
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mav
@@ -50,6 +55,7 @@ log = logging.getLogger(__name__)
 ONBOARD_COMPUTER = mav.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
 POSITION_ONLY = 0b0000_1101_1111_1000  # SET_POSITION_TARGET type_mask: x, y, z (yaw ignored)
 VELOCITY_ONLY = 0b0000_0101_1100_0111  # vx, vy, vz and yaw rate
+OFFSET_WINDOW = 50  # ATTITUDE messages whose clock offsets count: 1 s at the 50 Hz asked for
 STREAMS_HZ = {  # asked of the controller with SET_MESSAGE_INTERVAL
     mav.MAVLINK_MSG_ID_ATTITUDE: 50.0,
     mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
@@ -107,6 +113,7 @@ class MavlinkAirframe:
         self._lock = threading.Lock()
         self._latest: dict[str, Any] = {}
         self._heard_s: float | None = None
+        self._offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)  # clock() - boot time, s
         self._parser = MavParser()
         self._commands: list[_Pending] = []
         self._raw: list[Any] = []  # messages to send once (PARAM_SET)
@@ -215,10 +222,12 @@ class MavlinkAirframe:
                     out += self._due_mode(now)
                     targets, self._targets = self._targets, []
                     yaw = self._latest["ATTITUDE"].yaw if "ATTITUDE" in self._latest else 0.0
+                    offset = self._offset_s()
                 for obs in targets:
                     from skeye.pilot.mavlink_types import landing_target
 
-                    out.append(landing_target(self.codec, obs, yaw))
+                    boot = replace(obs, frame_time_s=max(0.0, obs.frame_time_s - offset))
+                    out.append(landing_target(self.codec, boot, yaw))
                     self.landing_targets += 1
                 for msg in out:
                     self.transport.send(self.codec.encode(msg))
@@ -231,6 +240,11 @@ class MavlinkAirframe:
         kind = msg.get_type()
         with self._lock:
             self._heard_s = self.clock()
+            if kind == "ATTITUDE":
+                previous = self._latest.get("ATTITUDE")
+                if previous is not None and msg.time_boot_ms + 1000 < previous.time_boot_ms:
+                    self._offsets.clear()  # the controller rebooted: its clock starts again
+                self._offsets.append(self._heard_s - msg.time_boot_ms / 1e3)
             self._latest[kind] = msg
             if kind == "COMMAND_ACK":
                 for p in self._commands[:1]:
@@ -295,9 +309,14 @@ class MavlinkAirframe:
         return (f"flight controller silent for {self.clock() - heard:.1f} s on "
                 f"{self.transport.name}")
 
+    def _offset_s(self) -> float:
+        """This computer's clock minus the controller's boot time (call with the lock held)."""
+        return min(self._offsets) if self._offsets else 0.0
+
     def snapshot(self) -> Snapshot:
         with self._lock:
             m = dict(self._latest)
+            offset = self._offset_s()
         att, pos = m.get("ATTITUDE"), m.get("LOCAL_POSITION_NED")
         if att is None or pos is None:
             raise SkeyeError(f"no attitude and position from the flight controller on "
@@ -316,7 +335,7 @@ class MavlinkAirframe:
                          gps.alt / 1e3, vel)
         landed = ext.landed_state == mav.MAV_LANDED_STATE_ON_GROUND if ext else True
         return Snapshot(
-            time_s=att.time_boot_ms / 1e3,
+            time_s=att.time_boot_ms / 1e3 + offset,
             pos_ned_m=(pos.x, pos.y, pos.z),
             rpy_rad=(att.roll, att.pitch, att.yaw),
             vel_ned_m_s=(pos.vx, pos.vy, pos.vz),

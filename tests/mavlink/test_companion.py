@@ -1,14 +1,17 @@
 """The pilot as the companion computer of a MAVLink flight controller (``--airframe mavlink://``):
 the flight controller is skeye's own MAVLink vehicle (a pilot on the simulated robot with
 ``--mavlink udp://``), the companion a second pilot whose airframe is ``MavlinkAirframe``, with the
-pad vision on the robot's camera. Ground control talks to the companion over its packet port,
-exactly as to any pilot. Real time: the flight controller keeps its own clock."""
+pad vision on a camera source by URI (the simulator's image server, ``sim://``), opened as
+``skeye pilot --airframe mavlink://... --camera URI`` opens it. Ground control talks to the
+companion over its packet port, exactly as to any pilot. Real time: the flight controller keeps
+its own clock, and the companion puts it on its own, the clock its camera's frames carry."""
 
 from __future__ import annotations
 
 import math
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -20,12 +23,11 @@ import pytest
 from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
-from skeye.pilot.cli import camera_fov_rad
+from skeye.pilot.cli import camera_fov_rad, camera_vision_factory, open_camera_for
 from skeye.pilot.mavlink_airframe import MavlinkAirframe, open_mavlink_airframe
 from skeye.pilot.mavlink_server import MavlinkServer
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
-from skeye.pilot.vision import PadVision
 from skeye.wire.packets import NavState, PadAction, SkeyeMask
 from tests.control.conftest import sim_running
 from tests.mavlink.conftest import SMALL_CAMERA_ROBOT, free_udp_port, small_camera_robot
@@ -37,6 +39,7 @@ class Companion:
     controller: PilotServer  # the flight controller: skeye's MAVLink vehicle
     endpoint: MavlinkServer
     airframe: MavlinkAirframe
+    camera: Any  # the companion's camera source (sim://, on the airframe's clock)
     companion: PilotServer
 
 
@@ -60,11 +63,14 @@ def companion(tmp_path: Path) -> Iterator[Companion]:
         mavlink_airframe = open_mavlink_airframe(f"mavlink://udpout/127.0.0.1:{port}")
         stack.callback(mavlink_airframe.close)
         fov = camera_fov_rad(sim)
+        camera = open_camera_for(f"sim://{handle.images}/{robot.name}/Down?fov_rad={fov!r}",
+                                 mavlink_airframe, "companion", None, 5.0)
+        stack.callback(camera.close)
         pilot = stack.enter_context(PilotServer(
             mavlink_airframe, port=0, settings=settings,
-            vision=lambda boards, lock: PadVision(boards, robot, lock, fov_h_rad=fov)))
+            vision=camera_vision_factory(camera, camera.fov_h_rad)))
         pilot.boards.pad.add_listener(mavlink_airframe.landing_target)
-        yield Companion(robot, controller, endpoint, mavlink_airframe, pilot)
+        yield Companion(robot, controller, endpoint, mavlink_airframe, camera, pilot)
 
 
 def test_the_pilot_lands_on_the_pad_through_a_mavlink_flight_controller(companion):
@@ -89,6 +95,21 @@ def test_the_pilot_lands_on_the_pad_through_a_mavlink_flight_controller(companio
     assert c.airframe.landing_targets > 10
     assert c.endpoint.vehicle.landing_targets_in == c.airframe.landing_targets
     assert c.airframe.refusals == [] and c.endpoint.errors == 0
+
+
+def test_snapshots_and_camera_frames_are_on_the_companions_clock(companion):
+    """The controller's boot time is put on this computer's monotonic clock (the airframe's
+    clock is not the simulator's), the clock a camera source stamps its frames with: a frame
+    and a snapshot of one moment carry one time, so each detection becomes due."""
+    c = companion
+    deadline = time.monotonic() + 10.0
+    while c.camera.latest is None and time.monotonic() < deadline:
+        c.airframe.check()
+        time.sleep(0.05)
+    frame, snap = c.camera.latest, c.airframe.snapshot()
+    assert frame is not None, "no frame from the image server"
+    assert abs(snap.time_s - time.monotonic()) < 0.5, snap.time_s
+    assert abs(frame.time_s - snap.time_s) < 0.5, (frame.time_s, snap.time_s)
 
 
 def _pilot(*args: str) -> subprocess.CompletedProcess[str]:
