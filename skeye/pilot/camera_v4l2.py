@@ -19,13 +19,15 @@ Capture time: the driver's buffer timestamp (``CAP_PROP_POS_MSEC``, the kernel's
 clock at the end of exposure) where it has one, else the moment the read returned; it is put
 on the vehicle's clock as "that long before now". A read that fails (the camera unplugged) is
 reported (``lost``) and the device is reopened every second; the pad modes hold still
-meanwhile.
+meanwhile. While its device node is not there OpenCV is not asked (it would print a warning on
+stderr at every try).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -183,6 +185,9 @@ class V4l2Camera:
         self._grabber = Worker(self._grab_loop, "pilot-v4l2").start()
 
     def _open(self) -> bool:
+        if not os.path.exists(self.settings.device):  # unplugged: OpenCV would warn at each try
+            self._lost = f"camera {self.uri}: cannot open {self.settings.device} (no such device)"
+            return False
         cap = cv2.VideoCapture(self.settings.device, cv2.CAP_V4L2)
         if not cap.isOpened():
             cap.release()

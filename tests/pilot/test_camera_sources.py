@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import glob
 import math
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -201,6 +203,21 @@ def test_a_missing_camera_is_named():
             source.image()
     finally:
         source.close()
+
+
+def test_a_missing_v4l2_device_is_looked_for_without_opencv_warnings():
+    """An unplugged camera is reopened every second (docs/onboard.md, failures): the pilot says
+    "camera lost" once; OpenCV, asked to open a device node that is not there, printed its own
+    "VIDEOIO(V4L2): ... can't be used to capture by name" on stderr at every try."""
+    code = ("from skeye.pilot.camera import CameraOptions, open_camera\n"
+            "source = open_camera('v4l2:///dev/video-nonexistent-99', CameraOptions())\n"
+            "print(source.lost)\n"
+            "source.close()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[2])
+    assert done.returncode == 0, done.stderr
+    assert "cannot open /dev/video-nonexistent-99" in done.stdout
+    assert "VIDEOIO" not in done.stderr and "WARN" not in done.stderr, done.stderr
 
 
 def test_a_file_that_is_no_video_is_refused_when_opened(tmp_path):
