@@ -111,15 +111,21 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
 
 @contextmanager
 def stop_cleanly_on_signals() -> Iterator[None]:
-    """SIGTERM and SIGHUP end the run as Ctrl-C does (KeyboardInterrupt through the ``finally``
-    blocks), after killing the running trials, so none outlives the sweep and every temporary
-    folder is removed. Only in the main thread (where Python delivers signals)."""
+    """Ctrl-C (SIGINT), SIGTERM and SIGHUP end the run with a KeyboardInterrupt through the
+    ``finally`` blocks, after killing the running trials, so none outlives the sweep and every
+    temporary folder is removed. SIGINT too: Python's own KeyboardInterrupt left the trials
+    running (each in a process group of its own, out of the terminal's reach), and the pool's
+    shutdown waited for them to end by themselves. A signal the sweep was started ignoring stays
+    ignored (``nohup`` ignores SIGHUP; a shell's background job, SIGINT). Only in the main
+    thread (where Python delivers signals)."""
 
     def stop(signum: int, frame: Any) -> None:
         stop_running_trials()
         raise KeyboardInterrupt(f"stopped by signal {signal.Signals(signum).name}")
 
-    before = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    before = {sig: signal.signal(sig, stop)
+              for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+              if signal.getsignal(sig) is not signal.SIG_IGN}
     try:
         yield
     except KeyboardInterrupt:
@@ -136,7 +142,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             result = sweep(Path(args.spec), Path(args.out), args.backend, args.address,
                            args.workers, True if args.quick else None)
     except KeyboardInterrupt as exc:
-        print(f"skeye sweep: {exc or 'interrupted'}; the finished trials are kept in "
+        print(f"skeye sweep: {str(exc) or 'interrupted'}; the finished trials are kept in "
               f"{args.out}/trials (rerun to resume)", file=sys.stderr)
         return 130
     print(f"{len(result.rows)} trials: {result.ran} run now, {result.skipped} from earlier runs, "

@@ -343,9 +343,14 @@ def trial(settings, params, workdir):
 """
 
 
-def test_sweep_off_a_terminal_logs_lines_and_sigterm_leaves_nothing_behind(tmp_path: Path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_sweep_off_a_terminal_logs_lines_and_a_stop_signal_leaves_nothing_behind(
+        tmp_path: Path, sig: signal.Signals):
     """Issue 34 item 6: with stderr not a terminal, each finished trial is a plain line; a
-    SIGTERM kills the running trials, removes their temporary folders and keeps the rows."""
+    SIGTERM kills the running trials, removes their temporary folders and keeps the rows. So
+    does SIGINT, Ctrl-C (docs/sweeps.md): it waited for the running trials to end by
+    themselves (a trial runs in a process group of its own, out of the terminal's reach), and
+    then said "skeye sweep: ; the finished trials ..." with no reason."""
     (tmp_path / "flight.py").write_text(SLOW)
     spec = tmp_path / "s.toml"
     spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [1]\n'
@@ -370,18 +375,33 @@ def test_sweep_off_a_terminal_logs_lines_and_sigterm_leaves_nothing_behind(tmp_p
             time.sleep(0.05)
         hang_pid = int(pidfile.read_text())
         assert list(tmp.glob("skeye-trial-*")), "the running trial has its folder"
-        proc.send_signal(signal.SIGTERM)
-        rest = proc.stderr.read()
+        proc.send_signal(sig)
         assert proc.wait(60) == 130
+        rest = proc.stderr.read()
     finally:
         proc.kill()
         proc.stderr.close()
     assert "2 trials to run" in lines[0] and "ok in" in lines[-1], lines
-    assert "stopped by signal SIGTERM" in rest and "rerun to resume" in rest, rest
+    assert f"stopped by signal {sig.name}" in rest and "rerun to resume" in rest, rest
     assert not list(tmp.glob("skeye-trial-*")), list(tmp.iterdir())
     assert not Path(f"/proc/{hang_pid}").exists() or \
         Path(f"/proc/{hang_pid}/stat").read_text().split(")")[1].split()[0] == "Z"
     assert len(list((tmp_path / "out" / "trials").glob("*.json"))) == 1  # the ok row kept
+
+
+def test_a_signal_ignored_at_start_stays_ignored():
+    """``nohup skeye sweep ...`` keeps running when its terminal hangs up: the stop handlers
+    leave a signal the sweep was started ignoring alone, and put every handler back after."""
+    from skeye.sweep.cli import stop_cleanly_on_signals
+
+    before = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        with stop_cleanly_on_signals():
+            assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) not in (signal.SIG_IGN, signal.SIG_DFL)
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, before)
 
 
 def test_the_progress_line_counts_a_finished_trial_as_done_not_running(
