@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,7 @@ from skeye.outputs import output_folder
 from skeye.processes import scaled_s
 from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
-from skeye.sweep.cli import run_trials
+from skeye.sweep.cli import run_trials, stop_cleanly_on_signals
 from skeye.sweep.spec import MAX_TRIALS, SweepSpec, Trial
 from skeye.validate.calibration import calibrate_simulated_camera
 from skeye.validate.experiments import (
@@ -141,14 +142,19 @@ def calibration_figures(result: CalibrationResult, camera: str) -> dict[str, Any
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    summary = validate(args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
-                       args.workers, args.keep_recordings, camera=args.camera,
-                       estimator=args.estimator, world=args.world,
-                       calibration=Path(args.calibration) if args.calibration else None,
-                       wind=args.wind, vision_latency=args.vision_latency_ms,
-                       pad_source=args.pad_source)
+    try:  # Ctrl-C, SIGTERM, SIGHUP: the running trials are killed, as skeye sweep's are
+        with stop_cleanly_on_signals():
+            validate(args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
+                     args.workers, args.keep_recordings, camera=args.camera,
+                     estimator=args.estimator, world=args.world,
+                     calibration=Path(args.calibration) if args.calibration else None,
+                     wind=args.wind, vision_latency=args.vision_latency_ms,
+                     pad_source=args.pad_source)
+    except KeyboardInterrupt as exc:
+        print(f"skeye validate: {str(exc) or 'interrupted'}; no report written",
+              file=sys.stderr)
+        return 130
     print((Path(args.out) / "report.md").read_text())
-    del summary
     return 0
 
 

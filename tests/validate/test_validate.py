@@ -131,3 +131,36 @@ def test_bad_arguments_are_refused(tmp_path: Path):
         validate("E1", seeds=1, out=tmp_path, quick=True, world="moon")
     with pytest.raises(SkeyeError, match=r"no-such\.toml"):
         validate("E1", seeds=1, out=tmp_path, quick=True, calibration=tmp_path / "no-such.toml")
+
+
+def test_ctrl_c_stops_validate_and_its_running_trials(tmp_path: Path) -> None:
+    """Ctrl-C (SIGINT) stops skeye validate as it stops skeye sweep: the running trial is
+    killed and its temporary folder removed, exit 130 with the signal named (Python's own
+    KeyboardInterrupt left the trial, in a process group of its own, to end by itself)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "validate", "E2", "--quick", "--workers", "1",
+         "--out", str(tmp_path / "out")],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, TMPDIR=str(tmp)))
+    assert proc.stderr is not None
+    try:
+        deadline = time.monotonic() + 300  # a stuck guard: the trial's folder appears
+        while not list(tmp.glob("skeye-trial-*")):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(60) == 130
+        err = proc.stderr.read()
+    finally:
+        proc.kill()
+        proc.stderr.close()
+    assert "skeye validate: stopped by signal SIGINT" in err and "Traceback" not in err, err
+    assert not list(tmp.glob("skeye-trial-*")), list(tmp.iterdir())
