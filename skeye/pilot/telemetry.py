@@ -379,7 +379,7 @@ class Telemetry:
             status=int(status.motion_pending),
             dummy2=0,
             navigation_status=nav_status,
-            distance_to_wp=min(0xFFFF, wire_value(CurrentWay, "distance_to_wp", distance_m)),
+            distance_to_wp=wire_value(CurrentWay, "distance_to_wp", distance_m),  # saturates
         )
 
     def nav_status(self, snap: Snapshot, status: BoardStatus) -> Message:

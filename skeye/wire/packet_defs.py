@@ -834,7 +834,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("nr_of_wp", _H),
         *_plain(_B, "current_wp", "current_wp_memlocation", "status", "dummy2"),
         Field("navigation_status", _H),
-        Field("distance_to_wp", _H, scale=DM),
+        Field("distance_to_wp", _H, scale=DM, saturate=True),  # 6553.5 m: "that far or more"
     ),
     Poll: Layout(None, FrameKind.ASCTEC, (Field("mask", _H),), prefix=b">*>p"),
     CtrlInput: Layout(

@@ -9,9 +9,10 @@ is written once, in the table. Unscaled fields (states, modes, counts) pass thro
 Building from SI rounds to the nearest count and refuses NaN, infinity and non-numbers with
 ``LocalProtocolError`` naming the view's field; only the stick, thrust and quality units clamp,
 because the protocol defines their range and full stick is a legitimate request. Fields the
-table marks ``saturate`` (int16 accelerations, NAV_STATUS velocities, battery voltage) saturate
-at their wire limits, as a real sensor saturates, so a hard landing cannot crash the telemetry;
-anything else out of range is refused by the message itself.
+table marks ``saturate`` (int16 accelerations, NAV_STATUS velocities, battery voltage, the
+distance to the waypoint) saturate at their wire limits, as a real sensor saturates, so a hard
+landing cannot crash the telemetry; anything else out of range is refused (LocalProtocolError
+naming the view's field, its value and the range the message carries, in SI units).
 
 Frames: AscTec's IMU body frame is x forward, y right, z down (FRD), the same as the simulator
 protocol's; "nick" is pitch. Earth-frame vectors (IMU_CALCDATA acc_x/y/z and speed_x/y/z,

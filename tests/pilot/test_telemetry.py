@@ -74,3 +74,17 @@ def test_imu_rawdata_saturates_like_a_sensor() -> None:
     (raw,) = Telemetry(snap).poll(0x0002, snap, IDLE)
     assert isinstance(raw, ImuRawData)
     assert (raw.gyro_x, raw.gyro_y, raw.acc_z) == (32767, -32768, -32768)
+
+
+def test_a_waypoint_beyond_the_fields_range_reads_as_that_far_or_more() -> None:
+    # CURRENT_WAY's distance_to_wp (dm, uint16) holds 6553.5 m: a waypoint farther (an
+    # envelope widened past 3.3 km) reads as the field's top, the structure is still sent
+    snap = FakeAirframe().snapshot()
+    n, e, d = snap.pos_ned_m
+    status = replace(IDLE, waypoint_target=(n + 7000.0, e, d))
+    telemetry = Telemetry(snap)
+    (way,) = telemetry.poll(0x0100, snap, status)
+    assert isinstance(way, CurrentWay) and way.distance_to_wp == 0xFFFF
+    near = replace(IDLE, waypoint_target=(n + 6000.0, e, d))
+    (way,) = telemetry.poll(0x0100, snap, near)
+    assert way.distance_to_wp == 60000
