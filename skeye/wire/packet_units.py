@@ -147,9 +147,9 @@ def wire_value(
     lo, hi = f.limits
     if not lo <= counts <= hi:  # said in the caller's SI units (the message says it on the wire)
         a, b = sorted((scale.to_si(lo), scale.to_si(hi)))
-        raise LocalProtocolError(f"{what or f'{cls.__name__}.{name}'} {value:g} {scale.unit} is "
-                                 f"outside {a:g}..{b:g} {scale.unit}, what {cls.__name__} "
-                                 "carries")
+        said = what or f"{cls.__name__}.{name}"
+        raise LocalProtocolError(f"{said} {float(value):g} {scale.unit} is outside "
+                                 f"{a:g}..{b:g} {scale.unit}, what {cls.__name__} carries")
     return counts
 
 
