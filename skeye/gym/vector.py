@@ -101,11 +101,13 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                  max_episode_steps: int | None = None, **settings: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
             raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
+        if max_episode_steps == -1 and not isinstance(max_episode_steps, bool):
+            max_episode_steps = None  # gymnasium.make's "no TimeLimit"
         if max_episode_steps is not None and (
                 isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, int)
                 or max_episode_steps < 1):
-            raise ConfigError(f"max_episode_steps must be a whole number >= 1 (or None), "
-                              f"got {max_episode_steps!r}")
+            raise ConfigError(f"max_episode_steps must be a whole number >= 1 (or None or -1: "
+                              f"no limit), got {max_episode_steps!r}")
         if not (number("spacing_m", spacing_m) >= 2.0):
             raise ConfigError(f"spacing_m must be >= 2 m, got {spacing_m!r}")
         if action not in ACTIONS:

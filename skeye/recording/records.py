@@ -272,9 +272,10 @@ class Recorder:
         self.stopped: str | None = None  # why recording stopped early (size, disk), if it did
         self._meta = dict(meta or {})
         header = format_header({"started_unix_s": wall_clock(), **self._meta})  # before the file
-        if rotate:  # a later part's header also names its part and the one it continues
-            format_header({"started_unix_s": wall_clock(), **self._meta, "part": max_parts,
-                           "continues": f"{self.path.name}.{max_parts}"})
+        if rotate:  # a later part's header also names its part and the one it continues,
+            # and its start time may print longer (the longest repr of a float: 24 characters)
+            format_header({"started_unix_s": -2.2250738585072014e-308, **self._meta,
+                           "part": max_parts, "continues": f"{self.path.name}.{max_parts}"})
         self._file: IO[bytes] = self._create(self.path)
         self._clock = wall_clock
         self._sim_time: Callable[[], float] = lambda: 0.0

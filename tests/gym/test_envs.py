@@ -416,6 +416,14 @@ def test_max_episode_steps_truncates_each_vehicle_in_every_vectorization_mode(mo
         with pytest.raises(ConfigError, match="max_episode_steps must be a whole number"):
             gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode,
                                max_episode_steps=0)
+    # -1: gymnasium.make's "no TimeLimit", taken in every mode
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode,
+                              max_episode_steps=-1)
+    try:
+        envs.reset(seed=0)
+        assert not any(envs.step(np.zeros((2, 4), np.float32))[3].any() for _ in range(4))
+    finally:
+        envs.close()
 
 
 def test_a_robot_without_an_ins_or_ground_truth_is_refused_naming_that(tmp_path) -> None:
