@@ -47,6 +47,7 @@ class BoardLine:
         self.dropped_bytes = 0  # replies written while nobody was on the line
         self.ever_plugged = False
         self.client_number = 0  # clients that have come on the line: the current one's number
+        self.received_from = 0  # the number of the client the last recv() read from
         self._unplugged = threading.Event()
 
     @property
@@ -133,6 +134,7 @@ class PtyLine(BoardLine):
                     self._plugged = True
                     self.ever_plugged = True
                     self.client_number += 1
+        self.received_from = self.client_number  # (this thread alone changes it)
         return data
 
     def send(self, data: bytes) -> None:
@@ -212,12 +214,15 @@ class TcpLine(BoardLine):
     def recv(self, timeout_s: float) -> bytes:
         if self._closed:
             raise LinkClosed(f"{self.address}: the line is closed")
-        client = self._client
+        with self._lock:  # the client and its number together (a newer one may replace it)
+            client, number = self._client, self.client_number
         if client is None or client.closed:
             time.sleep(min(timeout_s, 0.05))
             return b""
         try:
-            return client.recv(timeout_s)
+            data = client.recv(timeout_s)
+            self.received_from = number
+            return data
         except LinkClosed:
             log.warning("LL board line %s: the client went away", self.address)
             return b""

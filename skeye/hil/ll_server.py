@@ -204,7 +204,7 @@ class LLBoardServer:
                 continue
             for event in self.parser.feed(data):
                 if isinstance(event, Clock):
-                    self._grant(event.until / 1000.0)
+                    self._grant(event.until / 1000.0, self.line.received_from)
                 with self._lock:
                     replies = self.board.handle(event, self.sim_time())
                 self._send(replies)
@@ -223,10 +223,13 @@ class LLBoardServer:
         if replies:
             self.line.send(b"".join(encode(m) for m in replies))
 
-    def _grant(self, until_s: float) -> None:
+    def _grant(self, until_s: float, client: int) -> None:
+        """A CLOCK grant read from the line's client number ``client``."""
         now = self.sim_time()
         with self._granted:
             self._drop_stale_grants()
+            if client != self.line.client_number:  # read just before a newer client came:
+                return  # no one waits for it (an answer would go to the newcomer)
             # Passed: answered at once, never held. Asked again while the simulator steps:
             # say where it is (it is alive).
             at_once = until_s <= now + self.time_step_s / 2 or until_s in self.grants
