@@ -33,7 +33,14 @@ from gymnasium import spaces
 
 from skeye.errors import ConfigError
 from skeye.geo import MAX_POSITION_M
-from skeye.gym.flight import Flight, FlightSettings, Vehicle, pad_centre, prepare
+from skeye.gym.flight import (
+    Flight,
+    FlightSettings,
+    Vehicle,
+    check_pose_source,
+    pad_centre,
+    prepare,
+)
 from skeye.gym.options import RENDER_MODE, check_render_mode, check_settings, env_id
 from skeye.gym.tasks import (
     PAD_START_HEIGHT_M,
@@ -118,6 +125,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         self.metadata = {**self.metadata, "render_fps": self.settings.control_rate_hz,
                          "render_modes": [RENDER_MODE] if self.settings.camera else []}
         self.setup = prepare(self.settings)  # the robot, world and camera, checked now
+        check_pose_source(self.setup)  # the observation's pose comes from its INS or GroundTruth
         self.limits = action_limits(self.setup.config)
         self.origin = task_origin(task, self.setup.world)
         self.observation_space = task.observation_space()

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, SkeyeError
 from skeye.gym.board import BoardView, InProcessAirframe, InProcessCamera, VisionRobot, wrap_pi
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.pad_track import Pose
@@ -54,9 +54,6 @@ VIBRATION_KEYS = ("vibrationrotor", "vibrationbladepass", "vibrationbroadband")
 POSE_TYPES = ("INS", "GroundTruth")
 """The readings an observation's pose comes from (:meth:`BoardView.snapshot`: INS, else
 GroundTruth); a vehicle is observed from its first one on."""
-FIRST_READING_LIMIT_S = 1.0
-"""How long a spawned vehicle may go without its first pose reading before the robot is
-refused as giving none (an INS at 1 Hz or faster gives one within it)."""
 
 
 @dataclass(frozen=True)
@@ -354,20 +351,17 @@ class Flight:
     def step_until_reporting(self, vehicle: Vehicle) -> None:
         """Control periods, as :meth:`step`, until ``vehicle`` has its first pose reading, as the
         pilot's spawn waits for the first readings: one period, unless a period is shorter than
-        its INS's (sensors report on the simulation's clock).
-
-        Raises:
-            ConfigError: none came within :data:`FIRST_READING_LIMIT_S` (the robot mounts no
-                INS nor GroundTruth).
+        its pose sensor's (sensors report on the simulation's clock, so one comes within a
+        period of that sensor; the robot was checked to mount one, :func:`pose_period_steps`).
         """
-        started_s = self.time_s
+        pose_steps = pose_period_steps(self.setup)
+        assert pose_steps is not None, "checked when the environment was made"
+        last_step = self.sim.steps + pose_steps + self.settings.period_steps
         self.step()
         while not vehicle.reporting:
-            if self.time_s - started_s >= FIRST_READING_LIMIT_S:
-                raise ConfigError(
-                    f"robot {self.config.class_name} gave no {' or '.join(POSE_TYPES)} reading "
-                    f"within {FIRST_READING_LIMIT_S:g} s of its spawn: the observation's pose "
-                    f"comes from one")
+            if self.sim.steps > last_step:  # a bug: the schedule promises a reading by now
+                raise SkeyeError(f"no {' or '.join(POSE_TYPES)} reading from "
+                                 f"{vehicle.name} {pose_steps} steps after its spawn")
             self.step()
 
     @property
@@ -379,6 +373,19 @@ class Flight:
             vehicle.close()
         if self.cameras is not None:
             self.cameras.close()
+
+
+def check_pose_source(setup: Setup) -> int:
+    """The physics steps between the pose readings of the vehicle (:func:`pose_period_steps`).
+
+    Raises:
+        ConfigError: the robot mounts neither an INS nor GroundTruth.
+    """
+    steps = pose_period_steps(setup)
+    if steps is None:
+        raise ConfigError(f"robot {setup.config.class_name} mounts no INS nor GroundTruth: the "
+                          f"observation's pose comes from one")
+    return steps
 
 
 def pose_period_steps(setup: Setup) -> int | None:

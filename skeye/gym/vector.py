@@ -39,7 +39,7 @@ from skeye.gym.flight import (
     FlightSettings,
     Setup,
     Vehicle,
-    pose_period_steps,
+    check_pose_source,
     prepare,
 )
 from skeye.gym.options import check_render_mode, check_settings, env_id
@@ -74,11 +74,8 @@ def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
 def check_period(setup: Setup) -> None:
     """A respawned vehicle is observed one control period after its spawn: refuse a period
     that may pass without its first pose reading (shorter than its INS's)."""
-    needed = pose_period_steps(setup)
+    needed = check_pose_source(setup)
     settings = setup.settings
-    if needed is None:
-        raise ConfigError(f"robot {setup.config.class_name} mounts no INS nor GroundTruth: the "
-                          f"observation's pose comes from one")
     if settings.period_steps < needed:
         fastest_hz = 1.0 / (needed * settings.timestep_s)
         raise ConfigError(

@@ -439,12 +439,22 @@ def test_a_robot_without_an_ins_or_ground_truth_is_refused_naming_that(tmp_path)
     kept = [s for s in sensors if not re.search(r'type = "(INS|GroundTruth)"', s)]
     (tmp_path / "blind.toml").write_text("[[sensors]]".join([head, *kept]))
     options = {"robot": "blind", "robot_dir": tmp_path}
-    env = gymnasium.make("skeye/Hover-v0", **options)
-    try:
-        with pytest.raises(ConfigError, match="gave no INS or GroundTruth reading within 1 s"):
-            env.reset(seed=0)
-    finally:
-        env.close()
+    with pytest.raises(ConfigError, match="mounts no INS nor GroundTruth"):
+        gymnasium.make("skeye/Hover-v0", **options)
     with pytest.raises(ConfigError, match="mounts no INS nor GroundTruth"):
         gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode="vector_entry_point",
                            **options)
+    # An INS slower than 1 Hz and no GroundTruth: the first reading comes within its period
+    # (it was refused as giving none "within 1 s", a review found)
+    slow = source.replace('type = "INS"\nname = "INS"\nrate_hz = 50',
+                          'type = "INS"\nname = "INS"\nrate_hz = 0.8')
+    assert "rate_hz = 0.8" in slow
+    head, *sensors = slow.split("[[sensors]]")
+    kept = [s for s in sensors if 'type = "GroundTruth"' not in s]
+    (tmp_path / "slowins.toml").write_text("[[sensors]]".join([head, *kept]))
+    env = gymnasium.make("skeye/Hover-v0", robot="slowins", robot_dir=tmp_path)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert np.all(np.isfinite(obs))
+    finally:
+        env.close()
