@@ -24,6 +24,7 @@ from skeye.errors import LocalProtocolError
 from skeye.wire.scales import (
     ACC,
     ANGVEL,
+    CLOCK_MS,
     CONTROLLER_THRUST,
     CS,
     DEG_E7,
@@ -929,7 +930,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("yaw", _I, scale=HEADING_MDEG),
         *_plain(_h, "vx", "vy", "vz", scale=MM_S, saturate=True),
         Field("battery", _H, scale=MV),
-        Field("time", "I", scale=MS),
+        Field("time", "I", scale=CLOCK_MS),
         *_plain(_H, "sigma_h", "sigma_v", scale=MM, saturate=True),
     ),
     PadReport: _v(
@@ -938,7 +939,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         Field("rings", _B),
         *_plain(_I, "dx", "dy", "height", scale=MM),
         Field("quality", _H, 0, 1000, scale=QUALITY),
-        Field("frame_time", "I", scale=MS),
+        Field("frame_time", "I", scale=CLOCK_MS),
         Field("vision", _B, 0, 1),
     ),
     Result: Layout(
@@ -963,7 +964,7 @@ LAYOUTS: dict[type[Message], Layout] = {
         PD.TRUTH,
         *_plain(_I, "x", "y", "z", scale=MM),
         Field("yaw", _I, scale=HEADING_MDEG),
-        Field("time", "I", scale=MS),
+        Field("time", "I", scale=CLOCK_MS),
     ),
     Ack: Layout(None, FrameKind.ACK, (Field("pd", _B, enum=PD),)),
 }

@@ -61,6 +61,7 @@ class Scale:
     degrees: bool = False  # the wire counts (fractions of) degrees; SI is radians
     clamp: tuple[int, int] | None = None  # the protocol's range: to_wire saturates at it
     wrap: bool = False  # a heading: 0..359999 on the wire, [-pi, pi) in SI
+    modulus: int | None = None  # a counter that wraps on the wire (a clock: 2**32 ms)
 
     def to_si(self, counts: int) -> float:
         """Wire counts -> SI value."""
@@ -82,6 +83,8 @@ class Scale:
         counts = round(value * self.den / self.num)
         if self.wrap:
             counts %= YAW_FULL_MDEG
+        if self.modulus is not None:
+            counts %= self.modulus
         return counts if self.clamp is None else clamp(counts, *self.clamp)
 
 
@@ -96,6 +99,10 @@ DM = Scale("m", "_m", 1, 10)
 MM_S = Scale("m/s", "_m_s", 1, 1000)
 DEG_E7 = Scale("deg", "_deg", 1, 10_000_000)  # latitude, longitude
 MS = Scale("s", "_s", 1, 1000)
+CLOCK_MS = Scale("s", "_s", 1, 1000, modulus=2**32)
+"""A time stamp in ms in a uint32 that wraps, as MAVLink's ``time_boot_ms`` (every 49.7 days):
+on a real airframe the vehicle's clock is the host's monotonic clock, its uptime, which a
+machine left running passes."""
 CS = Scale("s", "_s", 1, 100)
 MV = Scale("V", "_v", 1, 1000)
 QUALITY = Scale("1", "", 1, QUALITY_MAX, clamp=(0, QUALITY_MAX))  # 0..1

@@ -88,3 +88,16 @@ def test_a_waypoint_beyond_the_fields_range_reads_as_that_far_or_more() -> None:
     near = replace(IDLE, waypoint_target=(n + 6000.0, e, d))
     (way,) = telemetry.poll(0x0100, snap, near)
     assert way.distance_to_wp == 60000
+
+
+def test_the_vehicle_clock_wraps_in_its_fields_as_a_uint32_of_ms() -> None:
+    # On a real airframe (asctec-ll://, mavlink:// in real time) the vehicle's clock is the
+    # host's monotonic clock, its uptime: past 49.7 days NAV_STATUS's time (uint32 ms) was out
+    # of range, and NAV_STATUS was left out of the telemetry for good. It wraps, as MAVLink's
+    # time_boot_ms does.
+    uptime_s = 58 * 86400.0
+    snap = replace(FakeAirframe().snapshot(), time_s=uptime_s)
+    nav = Telemetry(snap).nav_status(snap, IDLE)
+    assert isinstance(nav, NavStatus)
+    assert nav.time == round(uptime_s * 1000) % 2**32
+    encode(nav)  # and it goes on the wire
