@@ -359,9 +359,12 @@ def test_sweep_off_a_terminal_logs_lines_and_a_stop_signal_leaves_nothing_behind
     tmp.mkdir()
     pidfile = tmp_path / "hang.pid"
     env = dict(os.environ, TMPDIR=str(tmp), SWEEP_TEST_PIDFILE=str(pidfile))
+    # as from a terminal: SIGINT not ignored (a background job of a non-interactive shell, as
+    # `./.ci/run &`, starts with it ignored, and the sweep then leaves it so, as it should)
     proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
                              str(tmp_path / "out"), "--workers", "2"],
-                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
+                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stderr is not None
     lines = []
     try:

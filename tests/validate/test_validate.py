@@ -149,7 +149,10 @@ def test_ctrl_c_stops_validate_and_its_running_trials(tmp_path: Path) -> None:
         [sys.executable, "-m", "skeye.cli", "validate", "E2", "--quick", "--workers", "1",
          "--out", str(tmp_path / "out")],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-        env=dict(os.environ, TMPDIR=str(tmp)))
+        env=dict(os.environ, TMPDIR=str(tmp)),
+        # as from a terminal: SIGINT not ignored (a background job of a non-interactive shell
+        # starts with it ignored, and a program then leaves it so)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stderr is not None
     try:
         deadline = time.monotonic() + 300  # a stuck guard: the trial's folder appears
