@@ -55,3 +55,20 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
         cal = load_calibration(tmp_path / "camera.toml")
         lens = camera_model("hummingbird")  # the webcam's
         assert abs(cal.fx / lens.fx_px - 1) < 0.01 and abs(cal.dist[0] - lens.k1) < 0.02, cal
+
+
+def test_the_training_example_says_what_it_needs() -> None:
+    """examples/gym/train_hover_sb3.py: ``--help`` works without Stable-Baselines3 (not a
+    skeye dependency; it ended in a traceback), and a run without it names what to install."""
+    import importlib.util
+
+    script = ROOT / "examples" / "gym" / "train_hover_sb3.py"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(script), "--help"], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and "--steps" in done.stdout, done.stderr
+    if importlib.util.find_spec("stable_baselines3") is None:
+        done = subprocess.run([sys.executable, str(script), "--steps", "1"], env=env,
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 1 and "Traceback" not in done.stderr
+        assert "needs Stable-Baselines3" in done.stderr, done.stderr

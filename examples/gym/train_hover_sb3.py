@@ -55,16 +55,20 @@ def load(path: str):  # type: ignore[no-untyped-def]
 
 
 def main() -> None:
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import SubprocVecEnv
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=200_000)
     parser.add_argument("--envs", type=int, default=4)
     parser.add_argument("--out", default="hover_ppo")
     parser.add_argument("--episodes", type=int, default=5, help="evaluation episodes")
-    args = parser.parse_args()
+    args = parser.parse_args()  # --help works without Stable-Baselines3
+    try:
+        from stable_baselines3 import PPO
+        from stable_baselines3.common.env_util import make_vec_env
+        from stable_baselines3.common.vec_env import SubprocVecEnv
+    except ImportError:
+        raise SystemExit("train_hover_sb3.py needs Stable-Baselines3, not a skeye dependency: "
+                         "install PyTorch's CPU-only build, then "
+                         "pip install 'stable-baselines3>=2.4' (docs/gym.md)") from None
     envs = make_vec_env(make_hover, n_envs=args.envs, seed=0,
                         vec_env_cls=SubprocVecEnv if args.envs > 1 else None)
     model = PPO("MlpPolicy", envs, n_steps=512, batch_size=256, device="cpu", seed=0,
