@@ -115,6 +115,15 @@ def test_the_host_is_resolved_within_a_bounded_wait(monkeypatch: pytest.MonkeyPa
         released.set()  # the resolver threads left behind end
 
 
+def _sends_rtp(video: RtpVideo, receiver: socket.socket) -> None:
+    """A frame published reaches ``receiver`` as RTP (version 2, payload type 96)."""
+    grey = np.full((240, 320, 3), 90, np.uint8)
+    video.publish(CameraFrame(0, 0.0, grey, Detection(False), 3.0))
+    packet = receiver.recv(2048)  # the first RTP packet
+    assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96
+    video.check()
+
+
 def test_an_ipv6_destination_is_streamed():
     if not socket.has_ipv6:
         pytest.skip("no IPv6 here")
@@ -129,11 +138,7 @@ def test_an_ipv6_destination_is_streamed():
         try:
             assert video.address == f"udp://[::1]:{port}"
             assert "c=IN IP6 ::1" in video.sdp()
-            grey = np.full((240, 320, 3), 90, np.uint8)
-            video.publish(CameraFrame(0, 0.0, grey, Detection(False), 3.0))
-            packet = receiver.recv(2048)  # the first RTP packet (was: the worker died)
-            assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96  # RTP version 2, type 96
-            video.check()
+            _sends_rtp(video, receiver)  # (was: the worker died)
         finally:
             video.close()
 
@@ -156,10 +161,6 @@ def test_the_stream_goes_to_the_address_resolved_at_start(monkeypatch: pytest.Mo
         try:
             assert video.address == f"udp://gcs.invalid:{port}"
             assert "c=IN IP4 127.0.0.1" in video.sdp()
-            grey = np.full((240, 320, 3), 90, np.uint8)
-            video.publish(CameraFrame(0, 0.0, grey, Detection(False), 3.0))
-            packet = receiver.recv(2048)
-            assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96  # RTP version 2, type 96
-            video.check()
+            _sends_rtp(video, receiver)
         finally:
             video.close()
