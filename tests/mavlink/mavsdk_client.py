@@ -48,13 +48,17 @@ class StatusTexts:
             self.texts.append(status.text)
             self._changed.notify_all()
 
-    def wait_for(self, part: str, timeout_s: float = 10.0) -> str:
-        """The first text holding ``part``, waited for up to ``timeout_s`` (a stuck guard)."""
+    def seen(self, part: str, timeout_s: float) -> str | None:
+        """The first text holding ``part``, waited for up to ``timeout_s``; None if none."""
         def found() -> str | None:
             return next((t for t in self.texts if part in t), None)
 
         with self._changed:
             self._changed.wait_for(lambda: found() is not None, timeout_s)
-            text = found()
+            return found()
+
+    def wait_for(self, part: str, timeout_s: float = 10.0) -> str:
+        """The first text holding ``part``, waited for up to ``timeout_s`` (a stuck guard)."""
+        text = self.seen(part, timeout_s)
         assert text is not None, f"no STATUSTEXT with {part!r}; got {self.texts}"
         return text

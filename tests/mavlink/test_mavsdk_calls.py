@@ -57,9 +57,19 @@ def test_offboard_with_attitude_setpoints_is_refused_naming_what_is_flown():
         offboard = Offboard(system)
         texts = StatusTexts(Telemetry(system))
         offboard.set_attitude(Attitude(0.0, 0.0, 0.0, 0.5))
-        with pytest.raises(OffboardError, match="COMMAND_DENIED"):
-            offboard.start()
-        texts.wait_for("attitude setpoints (SET_ATTITUDE_TARGET) are not flown")
+        # The refusal's STATUSTEXT comes with its COMMAND_ACK. One busy suite run (load 5-6)
+        # got no text at all from MAVSDK in 10 s, the ack's DENIED having come; the cause was
+        # not established (MAVSDK's subscription set up after the text came is one guess). So
+        # the request is made again, past the vehicle's 2 s limit on a repeated notice to one
+        # station, until the text is seen (5 tries: a vehicle that never says it still fails).
+        text = None
+        for _ in range(5):
+            with pytest.raises(OffboardError, match="COMMAND_DENIED"):
+                offboard.start()
+            text = texts.seen("attitude setpoints (SET_ATTITUDE_TARGET) are not flown", 3.0)
+            if text is not None:
+                break
+        assert text is not None, texts.texts
 
 
 def test_goto_location_with_a_yaw_flies_there_and_says_the_yaw_is_not_flown():
