@@ -125,7 +125,8 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         self.metadata = {**self.metadata, "render_fps": self.settings.control_rate_hz,
                          "render_modes": [RENDER_MODE] if self.settings.camera else []}
         self.setup = prepare(self.settings)  # the robot, world and camera, checked now
-        check_pose_source(self.setup)  # the observation's pose comes from its INS or GroundTruth
+        # the observation's pose comes from its INS or GroundTruth: one is refused without
+        self._pose_steps = check_pose_source(self.setup)
         self.limits = action_limits(self.setup.config)
         self.origin = task_origin(task, self.setup.world)
         self.observation_space = task.observation_space()
@@ -149,7 +150,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         try:
             vehicle = flight.spawn("R1", episode.start_ned_m, episode.yaw_rad)
             vehicle.airframe.hover()
-            flight.step_until_reporting(vehicle)
+            flight.step_until_reporting(vehicle, self._pose_steps)
         except BaseException:
             flight.close()
             raise

@@ -348,14 +348,12 @@ class Flight:
                 if vehicle.vision is not None:
                     vehicle.vision.step()
 
-    def step_until_reporting(self, vehicle: Vehicle) -> None:
+    def step_until_reporting(self, vehicle: Vehicle, pose_steps: int) -> None:
         """Control periods, as :meth:`step`, until ``vehicle`` has its first pose reading, as the
         pilot's spawn waits for the first readings: one period, unless a period is shorter than
-        its pose sensor's (sensors report on the simulation's clock, so one comes within a
-        period of that sensor; the robot was checked to mount one, :func:`pose_period_steps`).
+        its pose sensor's (sensors report on the simulation's clock, so one comes within
+        ``pose_steps``, that sensor's period: :func:`check_pose_source`).
         """
-        pose_steps = pose_period_steps(self.setup)
-        assert pose_steps is not None, "checked when the environment was made"
         last_step = self.sim.steps + pose_steps + self.settings.period_steps
         self.step()
         while not vehicle.reporting:
