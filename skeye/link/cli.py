@@ -101,14 +101,14 @@ def command_message(args: argparse.Namespace) -> Message | None:
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Execute the parsed ``skeye link`` command; returns the exit code."""
     try:
+        masks: tuple[int, ...] = ()  # a bad mask is named before the link is opened
         if args.link_command == "poll":
-            _mask(args.mask, PollMask)  # a bad mask is named before the link is opened
+            masks = (_mask(args.mask, PollMask),)
         elif args.link_command == "stream":
-            _mask(args.poll_mask, PollMask)
-            _mask(args.skeye_mask, SkeyeMask)
+            masks = (_mask(args.poll_mask, PollMask), _mask(args.skeye_mask, SkeyeMask))
         msg = command_message(args)
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
-            return _run(vehicle, args, msg, out)
+            return _run(vehicle, args, msg, masks, out)
     except CommandRejected as exc:
         print(f"skeye link: rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
         return EXIT_REJECTED
@@ -123,21 +123,23 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         return EXIT_LINK
 
 
-def _run(vehicle: Vehicle, args: argparse.Namespace, msg: Message | None, out: TextIO) -> int:
+def _run(vehicle: Vehicle, args: argparse.Namespace, msg: Message | None,
+         masks: tuple[int, ...], out: TextIO) -> int:
     cmd = args.link_command
     if cmd == "poll":
-        for polled in vehicle.poll(_mask(args.mask, PollMask)).values():
+        for polled in vehicle.poll(masks[0]).values():
             print(format_message(polled), file=out)
         return EXIT_OK
     if cmd == "stream":
-        return _stream(vehicle, args, out)
+        return _stream(vehicle, args, masks[0], masks[1], out)
     if msg is None:  # argparse only lets known commands through
         raise LocalProtocolError(f"unknown command {cmd!r}")
     _answer(vehicle.command(msg), out)
     return EXIT_OK
 
 
-def _stream(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
+def _stream(vehicle: Vehicle, args: argparse.Namespace, poll_mask: int, skeye_mask: int,
+            out: TextIO) -> int:
     lock = threading.Lock()
     count = [0]
     closed = threading.Event()  # the output was closed (a broken pipe): stop streaming
@@ -153,9 +155,7 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, out: TextIO) -> int:
                 closed.set()  # said once, in the main thread; not raised in the link's thread
 
     vehicle.add_callback(show)
-    answer = vehicle.stream(
-        _mask(args.poll_mask, PollMask), _mask(args.skeye_mask, SkeyeMask), args.period
-    )
+    answer = vehicle.stream(poll_mask, skeye_mask, args.period)
     _answer(answer, out)
     deadline = time.monotonic() + args.seconds
     while time.monotonic() < deadline and vehicle.connected and not closed.is_set():
