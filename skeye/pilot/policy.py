@@ -178,11 +178,12 @@ def action_values(action: Any, count: int = 4) -> list[float]:
         given = np.asarray(action)
         if given.dtype.kind not in "biufO":  # text, complex: not what an action holds
             raise TypeError(given.dtype)
-        values = given.astype(np.float64).reshape(-1)  # an object array: each one a number
+        values = given.astype(np.float64)  # an object array: each one a number
     except (TypeError, ValueError):
         raise InvalidArgument(f"an action is {count} real numbers, got {action!r:.80}") from None
-    if values.shape != (count,):
-        raise InvalidArgument(f"an action has {count} numbers, got shape {np.shape(action)}")
+    if values.shape != (count,):  # no silent flattening of a (2, 2) or a (1, 4)
+        raise InvalidArgument(f"an action has {count} numbers, shape ({count},), got shape "
+                              f"{values.shape}")
     if not np.all(np.isfinite(values)):
         raise InvalidArgument(f"an action must be finite, got {values.tolist()}")
     return [float(v) for v in np.clip(values, -1.0, 1.0)]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import socket
 import warnings
 
@@ -301,6 +302,24 @@ def test_an_action_that_is_not_four_real_numbers_is_an_invalid_argument(action: 
     try:
         env.reset(seed=0)
         with pytest.raises(InvalidArgument, match="an action is 4 real numbers"):
+            env.unwrapped.step(action)
+        env.step(np.zeros(4, np.float32))  # the environment flies on
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("action", [np.zeros((2, 2)), np.zeros((1, 4)), np.zeros((4, 1))])
+def test_an_action_of_four_numbers_in_another_shape_is_refused_not_flattened(
+        action: np.ndarray) -> None:
+    """A (2, 2), (1, 4) or (4, 1) action was flattened to four numbers and flown: the action
+    space is (4,), and a batched array handed to a single environment is a mistake to name."""
+    from skeye.errors import InvalidArgument
+
+    env = gymnasium.make("skeye/Hover-v0")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(InvalidArgument,
+                           match=re.escape(f"shape (4,), got shape {action.shape}")):
             env.unwrapped.step(action)
         env.step(np.zeros(4, np.float32))  # the environment flies on
     finally:
