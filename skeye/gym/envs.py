@@ -149,6 +149,13 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
         flight = Flight(self.setup, int(self.np_random.integers(2**31)))
         try:
             vehicle = flight.spawn("R1", episode.start_ned_m, episode.yaw_rad)
+            if not vehicle.robot.spawn_airborne:  # it would stand there: a crash at once
+                n, e, d = episode.start_ned_m
+                raise ConfigError(
+                    f"the start ({n:g}, {e:g}, {d:g}) m NED is not in the air: it is at or "
+                    f"below the ground or an object there (down is positive), where the "
+                    f"vehicle stands on its gear; an episode starts flying, so start_ned_m "
+                    f"must be above what is below it")
             vehicle.airframe.hover()
             flight.step_until_reporting(vehicle, self._pose_steps)
         except BaseException:

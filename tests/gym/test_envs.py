@@ -228,6 +228,26 @@ def test_bad_reset_options_are_config_errors_naming_them(env_id: str, options: o
         env.close()
 
 
+@pytest.mark.parametrize("env_id,start", [
+    ("skeye/Hover-v0", (0.0, 0.0, 5.0)),  # 5 m underground
+    ("skeye/Hover-v0", (0.0, 0.0, 0.0)),  # on the ground
+    ("skeye/PadLanding-v0", (0.0, 0.0, -0.05)),  # on the pad, which stands on the ground
+])
+def test_a_start_that_is_not_in_the_air_is_refused(env_id: str, start: tuple) -> None:
+    """A start at or below what is under it stood the vehicle there (the simulator's spawn rule)
+    and the episode ended at its first step as a crash, 'touched the ground'."""
+    env = gymnasium.make(env_id)
+    try:
+        env.reset(seed=0)
+        with pytest.raises(ConfigError, match=r"is not in the air.*start_ned_m must be above"):
+            env.reset(seed=0, options={"start_ned_m": start})
+        env.reset(seed=0)
+        _, _, terminated, _, _ = env.step(np.zeros(4, np.float32))  # flies on
+        assert not terminated
+    finally:
+        env.close()
+
+
 def test_the_batched_environment_refuses_bad_options_as_config_errors() -> None:
     with pytest.raises(ConfigError, match="start_height_m must be"):
         gymnasium.make_vec("skeye/PadLanding-v0", num_envs=2,
