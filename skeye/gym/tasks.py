@@ -238,6 +238,8 @@ class PadLanding(Task):
                  origin[2] - height)
         episode = Episode(start, float(rng.uniform(-math.pi, math.pi)), origin)
         episode.last_distance_m = self._potential(start, episode)
+        # in every info, so an episode truncated (here or by Gymnasium's TimeLimit) says so
+        episode.info["success"] = False
         return episode
 
     def _potential(self, pos: Vec3, episode: Episode) -> float:

@@ -126,6 +126,23 @@ def test_pad_landing_ends_at_touchdown_and_judges_it_on_the_truth() -> None:
     assert info["touchdown_error_m"] == pytest.approx(0.5, abs=0.1)
 
 
+@pytest.mark.parametrize("limit", [{"episode_s": 0.2}, {"max_episode_steps": 4}])
+def test_a_truncated_pad_landing_episode_reads_no_success(limit: dict) -> None:
+    """Truncated by its length or by Gymnasium's TimeLimit, the episode's info had no
+    ``success`` key at all (only a touchdown or a crash set it)."""
+    env = gymnasium.make("skeye/PadLanding-v0", camera="ideal", wind="none", **limit)
+    try:
+        _, info = env.reset(seed=0)
+        assert info["success"] is False
+        for _ in range(10):
+            _, _, terminated, truncated, info = env.step(np.zeros(4, np.float32))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert truncated and not terminated and info["success"] is False
+
+
 @pytest.mark.parametrize("mode", ["sync", "async", "vector_entry_point"])
 def test_vector_environments_step_and_reset_their_vehicles(mode: str) -> None:
     envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=3, vectorization_mode=mode,
