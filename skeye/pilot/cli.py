@@ -200,7 +200,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             airframe = open_airframe(airframe_uri, options)
         except (ConfigError, LocalProtocolError) as exc:  # a URI its backend refused
-            return _error(f"--airframe: {exc}")
+            # the vehicle's URI, not the option: it may come from --sim, and the backend's
+            # message names the option at fault (--start, --name)
+            return _error(f"{airframe_uri}: {exc}")
         with ExitStack() as stack:
             stack.callback(airframe.close)
             limits = airframe.limits

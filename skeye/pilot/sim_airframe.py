@@ -386,7 +386,8 @@ def open_sim_airframe(uri: str, options: AirframeOptions) -> SimAirframe:
     Raises:
         LocalProtocolError: a bad URI.
         LinkClosed / LinkTimeout: the simulator cannot be reached.
-        SkeyeError: the spawn was refused (a name already taken: the hint says ``--name``).
+        SkeyeError: the spawn was refused (a name already taken: the hint says ``--name``;
+            a start pose the world lacks: ``--start``).
     """
     address = sim_address(uri)
 
@@ -408,6 +409,9 @@ def open_sim_airframe(uri: str, options: AirframeOptions) -> SimAirframe:
                     f"{exc}; another pilot or client flies it - give this one another "
                     "name with --name"
                 ) from None
+            if isinstance(exc, LocalProtocolError) and "no start pose" in str(exc):
+                raise LocalProtocolError(
+                    f"{exc}; give --start one of them, or --location") from None
             raise
         except BaseException:
             sim.close()

@@ -210,6 +210,21 @@ def test_pilot_errors_go_to_stderr_naming_the_command(capsys, extra, status, wor
     assert captured.err.count("\n") == 1, captured.err
 
 
+def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
+    """The message said ``--airframe: no start pose ...``: an option the user had not given
+    (the airframe came from --sim) and not the one at fault."""
+    from skeye.cli import main
+
+    with running_sim() as server:
+        status = main(["pilot", "--sim", f"127.0.0.1:{server.port}", "--port", "0",
+                       "--start", "Nowhere"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.startswith(f"skeye pilot: error: sim://127.0.0.1:{server.port}: no start pose "
+                          "'Nowhere'; the world has: Pad1"), err
+    assert "give --start one of them" in err and "--airframe" not in err, err
+
+
 def test_a_camera_lost_at_start_is_a_warning_on_stderr(capsys, monkeypatch, tmp_path):
     """The pilot runs on without its camera (the pad modes hold still): a warning, not an
     error. The --serial directory then stops it, as a bad option."""
