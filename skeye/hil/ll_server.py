@@ -6,7 +6,8 @@ client of the simulator). Two workers:
 
 - ``ll-read-NAME`` alone reads the line, feeds a ``CommandStreamParser`` and writes each
   answer at once (a poll's answer never waits for the clock). A CLOCK is queued for the clock
-  worker.
+  worker. A new client's bytes start afresh: a frame the previous one left unfinished is
+  dropped (counted as garbage), not completed with the newcomer's packets.
 - ``ll-clock-NAME`` ticks the board. In realtime it does so every ``tick_s`` of wall time. In
   lockstep the simulator's time moves only as the client on the line grants it: CLOCK
   ``until`` (ms of sim time) advances the simulator to it, in steps of one control period,
@@ -195,6 +196,7 @@ class LLBoardServer:
 
     # -- the line ------------------------------------------------------------------------
     def _read_loop(self) -> None:
+        reading_from = 0  # the line's client whose bytes the parser holds
         while not self._stop.is_set():
             try:
                 data = self.line.recv(0.1)
@@ -202,6 +204,13 @@ class LLBoardServer:
                 return  # the line was closed
             if not data or self.error is not None:
                 continue
+            if self.line.received_from != reading_from:
+                # A new client: a frame the previous one left unfinished has no rest to come,
+                # and the newcomer's bytes must not be read as that rest.
+                reading_from = self.line.received_from
+                if self.parser.buffered:
+                    log.info("LL board %s: %d bytes of a frame the previous client left "
+                             "unfinished are dropped", self.name, self.parser.discard())
             for event in self.parser.feed(data):
                 if isinstance(event, Clock):
                     self._grant(event.until / 1000.0, self.line.received_from)

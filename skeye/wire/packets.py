@@ -19,6 +19,7 @@ commands and skeye frames). Invariants:
   1024, bad command checksum, unknown command letters) it resumes at the byte after the bad
   start marker, so a real frame hidden behind a corrupt length or a dropped byte is still found.
 - The buffer never holds more than one maximal frame (1035 bytes) plus the unparsed chunk.
+  ``discard()`` drops an unfinished frame whose sender is gone (a new connection on the line).
 
 Error events: ground side gets ``FrameError(reason, kind)``. The vehicle side gets
 ``CommandError(pd, code, reason)`` whenever it can name the command, so it can answer a RESULT
@@ -378,6 +379,14 @@ class _StreamParser:
     def buffered(self) -> int:
         """Bytes held while waiting for the rest of a frame."""
         return len(self._buf)
+
+    def discard(self) -> int:
+        """Drop the bytes held for an unfinished frame (its sender is gone: a new one's bytes
+        are not its rest); they count as garbage. How many."""
+        dropped = len(self._buf)
+        self._buf.clear()
+        self.garbage_bytes += dropped
+        return dropped
 
     def feed(self, data: bytes) -> list[Any]:
         """Add received bytes; return every message or error event now complete, in order.

@@ -174,3 +174,27 @@ def test_a_client_replaced_by_a_newer_one_takes_its_grants_with_it():
             board.check()
         finally:
             second.sock.close()
+
+
+def test_a_frame_left_unfinished_by_a_client_that_left_does_not_swallow_the_next_ones():
+    """A client that leaves mid-frame: the next client's packets are its own. The board kept
+    the unfinished frame's bytes and read the newcomer's as its rest: a skeye frame header
+    claiming 1000 bytes made the board deaf to a pilot's first polls (it gave up: "LL board
+    silent")."""
+    with board_line() as (board, first):
+        first.exchange(b"")  # on the line
+        first.sock.sendall(b">*>s" + (1000).to_bytes(2, "little"))  # and gone, mid-frame
+        first.sock.close()
+        deadline = time.monotonic() + 30.0  # a stuck guard: the line notices within a read
+        while board.line.plugged:
+            assert time.monotonic() < deadline, "the board never noticed the client left"
+            time.sleep(0.05)
+        second = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        try:
+            second.sock.settimeout(5.0)  # the board answers a poll at once
+            _, status = second.exchange(b"")
+            assert isinstance(status, LlStatus)
+            assert board.parser.buffered == 0
+            board.check()
+        finally:
+            second.sock.close()
