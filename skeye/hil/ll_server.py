@@ -27,6 +27,9 @@ client of the simulator). Two workers:
   With ``rate`` (for AscTec programs, which grant no time) the board drives the lockstep clock
   itself at that pace.
 
+A line that fails (a serial device gone) is logged as an error and kept in ``line_failed``;
+the board hears nothing more, so its serial timeout's procedure plays out.
+
 The board's time is the simulator's. A simulator that goes away (the control connection
 failed) is logged and the server stops answering; ``error`` says why.
 """
@@ -155,6 +158,7 @@ class LLBoardServer:
         self.board = LLBoard(airframe, settings, now_s=sim_time())
         self.parser = CommandStreamParser()
         self.error: str | None = None
+        self.line_failed: str | None = None  # why the line stopped reading (a device gone)
         self.free_running = False
         self.camera: tuple[str, float] | None = None  # the robot's camera: name, FOV (rad)
         self._lock = threading.Lock()  # every call into the board
@@ -200,8 +204,13 @@ class LLBoardServer:
         while not self._stop.is_set():
             try:
                 data = self.line.recv(0.1)
-            except SkeyeError:
-                return  # the line was closed
+            except SkeyeError as exc:
+                if not self._stop.is_set():  # not our close(): the line failed
+                    self.line_failed = str(exc)
+                    log.error("LL board %s: its line %s failed (%s): the board hears nothing "
+                              "more; its serial timeout's procedure follows", self.name,
+                              self.line.address, exc)
+                return
             if not data or self.error is not None:
                 continue
             if self.line.received_from != reading_from:
@@ -274,8 +283,10 @@ class LLBoardServer:
             raise SkeyeError(lost)
 
     def _client_left(self) -> bool:
-        """A client was on the line and is known to have gone (a serial port cannot tell)."""
-        return self.line.plugged is False and self.line.ever_plugged
+        """A client was on the line and is known to have gone (a serial port cannot tell,
+        unless the port itself failed)."""
+        return ((self.line.plugged is False and self.line.ever_plugged)
+                or self.line_failed is not None)
 
     def _stale(self) -> bool:
         """The grants held are a client's that left or was replaced by another."""

@@ -3,8 +3,11 @@
 
 from __future__ import annotations
 
+import os
+import select
 import socket
 import time
+import tty
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 
@@ -198,3 +201,48 @@ def test_a_frame_left_unfinished_by_a_client_that_left_does_not_swallow_the_next
             board.check()
         finally:
             second.sock.close()
+
+
+def test_a_serial_line_that_fails_is_said_not_left_silently(caplog):
+    """The board on a serial device whose other end hangs up (a USB adapter pulled): its
+    reader stopped without a word, the board never answered again, and in lockstep its clock
+    stood still (so its serial timeout never played out). Now the failure is logged naming
+    the line and what happened, and the clock runs on as after a client that left."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    os.close(slave)
+    try:
+        with ExitStack() as stack:
+            server = stack.enter_context(running_sim(mode="lockstep", seed=6,
+                                                     estimator="truth"))
+            board = start_ll_board(stack, parse_ll_board(f"R1=serial:{path}"),
+                                   f"127.0.0.1:{server.port}")
+            os.write(master, encode(Poll(int(PollMask.LL_STATUS))))
+            parser, answers = VehicleStreamParser(), []
+            deadline = time.monotonic() + 30.0  # a stuck guard: a poll is answered at once
+            while not any(isinstance(a, LlStatus) for a in answers):
+                assert time.monotonic() < deadline, "the board never answered"
+                if select.select([master], [], [], 0.1)[0]:
+                    answers += parser.feed(os.read(master, 4096))
+            os.close(master)
+            master = -1
+            said = f"LL board R1: its line {path} failed"
+
+            def errors() -> list[str]:
+                return [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+
+            deadline = time.monotonic() + 30.0  # the reader sees the hang-up within a read
+            while not any(said in e for e in errors()):
+                assert time.monotonic() < deadline, f"the failure was never said: {errors()}"
+                time.sleep(0.05)
+            assert board.line_failed is not None and path in board.line_failed
+            # No client will grant time again: the board's clock runs on by itself (lockstep),
+            # so its serial timeout's procedure plays out, as after a client that left.
+            while not board.free_running:
+                assert time.monotonic() < deadline, "the board's clock did not run on"
+                time.sleep(0.05)
+            board.check()
+    finally:
+        if master >= 0:
+            os.close(master)
