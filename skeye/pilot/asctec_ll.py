@@ -22,7 +22,8 @@ hearing nothing more, its own serial timeout):
 
 - the line closed or hung up: ``LL board lost: ...``;
 - no answer (or only garbage, which is counted and skipped) for ``silent_after`` cycles in a
-  row: ``LL board silent: ...``;
+  row: ``LL board silent: ...``, which says how much unreadable data came meanwhile (a line
+  that carries bytes but no frame: a wrong baud rate, or noise);
 - the R/C's serial-interface switch (RC_DATA channel[4]) off while flying: ``R/C took over:
   ...`` (the safety pilot has the vehicle; commands are refused while it is off on the ground).
 
@@ -161,6 +162,21 @@ def vehicle_limits(robot: str, robot_dirs: tuple[str, ...] = ()) -> VehicleLimit
     return VehicleLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s)
 
 
+def line_errors(vehicle: Vehicle) -> tuple[int, int]:
+    """(garbage bytes skipped, bad frames) read on ``vehicle``'s line so far."""
+    return vehicle.parser.garbage_bytes, vehicle.frame_errors
+
+
+def unreadable(vehicle: Vehicle, since: tuple[int, int] = (0, 0)) -> str:
+    """What a silent board's message adds when bytes did come, only none readable (since
+    ``since``, a ``line_errors`` reading): "" when nothing came."""
+    garbage, bad = (now - then for now, then in zip(line_errors(vehicle), since, strict=True))
+    if not garbage and not bad:
+        return ""
+    return (f"; the line carried {garbage} bytes of garbage and {bad} bad frames instead: "
+            "a wrong baud rate, or a noisy line?")
+
+
 class AscTecLLAirframe:
     """An AscTec LL board, flown through its serial protocol (see the module docstring)."""
 
@@ -190,6 +206,7 @@ class AscTecLLAirframe:
         self._lost: str | None = None
         self._silent = 0
         self._reported: tuple[int, int] = (0, 0)
+        self._errors_at_answer: tuple[int, int] = (0, 0)  # line_errors() at the last answer
         self._reported_at = -REPORT_EVERY_S
         self._granted_s = 0.0
         self._stop = threading.Event()
@@ -206,6 +223,7 @@ class AscTecLLAirframe:
                 log.info("the LL board did not answer the first poll within %g s: asking "
                          "again (%d of %d)", self.settings.timeout_s, attempt + 1,
                          FIRST_CONTACT_TRIES)
+        self._errors_at_answer = self.line_errors()
         if self.estimate.serial_switch is False:
             log.warning("the R/C's serial switch is off: the LL board ignores the pilot's "
                         "sticks until the safety pilot switches it on")
@@ -275,12 +293,14 @@ class AscTecLLAirframe:
                 self._poll(mask, time_s)
                 self.cycles += 1
                 self._silent = 0
+                self._errors_at_answer = self.line_errors()
                 self._report_line()
             except LinkTimeout as exc:
                 self._silent += 1
                 if self._silent >= self.settings.silent_after:
                     self._lose(f"LL board silent: no answer on {self.vehicle.link.name} in "
-                               f"{self._silent} cycles in a row ({exc})")
+                               f"{self._silent} cycles in a row ({exc})"
+                               f"{unreadable(self.vehicle, self._errors_at_answer)}")
                 return
             except LinkClosed as exc:
                 self.link_failed = exc
@@ -301,8 +321,7 @@ class AscTecLLAirframe:
 
     def line_errors(self) -> tuple[int, int]:
         """(garbage bytes skipped, bad frames) read from the board so far."""
-        parser = self.vehicle.parser
-        return parser.garbage_bytes, self.vehicle.frame_errors
+        return line_errors(self.vehicle)
 
     def _report_line(self) -> None:
         """Say (at most every ``REPORT_EVERY_S``) that the line carries garbage."""
@@ -454,7 +473,8 @@ def open_asctec_ll(uri: str, options: AirframeOptions) -> AscTecLLAirframe:
         return AscTecLLAirframe(vehicle, settings, limits, uri=uri)
     except LinkTimeout as exc:
         vehicle.close()
-        raise LinkTimeout(f"LL board silent: {link.name} answered no poll ({exc})") from None
+        raise LinkTimeout(f"LL board silent: {link.name} answered no poll ({exc})"
+                          f"{unreadable(vehicle)}") from None
     except BaseException:
         vehicle.close()
         raise

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import os
 import random
+import select
 import socket
 import threading
 import time
@@ -218,6 +219,37 @@ def test_a_line_nobody_answers_stops_the_pilot_at_start(capsys):
         assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR
         assert "LL board silent" in capsys.readouterr().err
     finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_line_that_carries_only_garbage_is_said_so_not_only_silent():
+    """A board at another baud rate answers every poll with bytes the pilot cannot read: the
+    pilot said only "LL board silent: ... answered no poll", as if nothing had come."""
+    master, slave = os.openpty()
+    stop = threading.Event()
+
+    def garbled_board() -> None:  # each request answered with as many unreadable bytes
+        rng = random.Random(3)
+        while not stop.is_set():
+            try:
+                data = os.read(master, 4096) if select.select([master], [], [], 0.1)[0] else b""
+            except OSError:  # the pilot closed the device: EIO until it opens it again
+                stop.wait(0.05)
+                continue
+            if data:
+                os.write(master, bytes(rng.randrange(256) for _ in range(8 * len(data))))
+
+    board = Worker(garbled_board, "test-garbled-board").start()
+    try:
+        path = os.ttyname(slave)
+        with pytest.raises(LinkTimeout, match=r"LL board silent: .* answered no poll .*; the "
+                           r"line carried [1-9][0-9]* bytes of garbage and [0-9]+ bad frames "
+                           r"instead: a wrong baud rate"):
+            open_airframe(f"asctec-ll://serial{path}?timeout_s=0.3", AirframeOptions())
+    finally:
+        stop.set()
+        board.join(2.0)
         os.close(master)
         os.close(slave)
 
