@@ -19,15 +19,21 @@ Capture time: the driver's buffer timestamp (``CAP_PROP_POS_MSEC``, the kernel's
 clock at the end of exposure) where it has one, else the moment the read returned; it is put
 on the vehicle's clock as "that long before now". A read that fails (the camera unplugged) is
 reported (``lost``) and the device is reopened every second; the pad modes hold still
-meanwhile. While its device node is not there OpenCV is not asked (it would print a warning on
-stderr at every try).
+meanwhile. While its device node is not there, or is no V4L2 video capture device (asked with
+``VIDIOC_QUERYCAP``: a UVC camera's second node, which carries metadata, or no V4L2 device at
+all), OpenCV is not asked (it would print a warning on stderr at every try, and say no more
+than that it could not open it); the reason is said instead.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import logging
 import math
 import os
+import stat
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -52,6 +58,13 @@ from skeye.workers import Worker
 log = logging.getLogger(__name__)
 
 REOPEN_EVERY_S = 1.0
+# linux/videodev2.h: VIDIOC_QUERYCAP = _IOR('V', 0, struct v4l2_capability), 104 bytes:
+# driver[16], card[32], bus_info[32], version, capabilities, device_caps (u32), reserved[3].
+VIDIOC_QUERYCAP = 0x80685600
+_CAPABILITY = struct.Struct("=16s32s32sIII12x")
+V4L2_CAP_VIDEO_CAPTURE = 0x00000001
+V4L2_CAP_VIDEO_CAPTURE_MPLANE = 0x00001000
+V4L2_CAP_DEVICE_CAPS = 0x80000000  # device_caps is filled in: this node's own capabilities
 MAX_TIMESTAMP_AGE_S = 2.0  # a driver timestamp older than this is not the monotonic clock's
 
 
@@ -137,6 +150,34 @@ def parse_v4l2_uri(uri: str) -> V4l2Settings:
     )
 
 
+def capture_problem(device: str) -> str | None:
+    """Why ``device`` is no V4L2 video capture node, or None when it is one (the kernel's
+    ``VIDIOC_QUERYCAP`` answer, read as OpenCV's V4L2 capture would need it)."""
+    try:
+        if not stat.S_ISCHR(os.stat(device).st_mode):
+            return "not a device"
+        fd = os.open(device, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    try:
+        answer = bytearray(_CAPABILITY.size)
+        fcntl.ioctl(fd, VIDIOC_QUERYCAP, answer)
+    except OSError as exc:
+        if exc.errno in (errno.ENOTTY, errno.EINVAL):
+            return "not a V4L2 device"
+        return exc.strerror or str(exc)
+    finally:
+        os.close(fd)
+    _, card, _, _, caps, device_caps = _CAPABILITY.unpack(answer)
+    if caps & V4L2_CAP_DEVICE_CAPS:
+        caps = device_caps
+    if caps & (V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_VIDEO_CAPTURE_MPLANE):
+        return None
+    name = card.split(b"\0", 1)[0].decode("utf-8", "replace")
+    return (f"{name or 'a V4L2 device'} has no video capture on this node (a UVC camera's "
+            "second node carries metadata: its first is the camera)")
+
+
 def apply_settings(cap: Any, s: V4l2Settings) -> dict[str, float]:
     """Set a capture's properties from ``s`` (format first: it decides the sizes a driver
     offers); returns what the driver reports back."""
@@ -187,6 +228,10 @@ class V4l2Camera:
     def _open(self) -> bool:
         if not os.path.exists(self.settings.device):  # unplugged: OpenCV would warn at each try
             self._lost = f"camera {self.uri}: cannot open {self.settings.device} (no such device)"
+            return False
+        problem = capture_problem(self.settings.device)  # OpenCV would warn, and say less
+        if problem is not None:
+            self._lost = f"camera {self.uri}: cannot open {self.settings.device} ({problem})"
             return False
         cap = cv2.VideoCapture(self.settings.device, cv2.CAP_V4L2)
         if not cap.isOpened():

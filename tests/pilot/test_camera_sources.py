@@ -220,6 +220,22 @@ def test_a_missing_v4l2_device_is_looked_for_without_opencv_warnings():
     assert "VIDEOIO" not in done.stderr and "WARN" not in done.stderr, done.stderr
 
 
+def test_a_device_that_is_no_v4l2_camera_is_named_without_opencv_warnings():
+    """A node that is there but is no camera (/dev/null here; on a vehicle, a UVC camera's
+    metadata node /dev/video1): the pilot said only "cannot open /dev/null", and OpenCV
+    printed "VIDEOIO(V4L2): ... can't be used to capture by name" on stderr at every try,
+    once a second."""
+    code = ("from skeye.pilot.camera import CameraOptions, open_camera\n"
+            "source = open_camera('v4l2:///dev/null', CameraOptions())\n"
+            "print(source.lost)\n"
+            "source.close()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[2])
+    assert done.returncode == 0, done.stderr
+    assert "cannot open /dev/null (not a V4L2 device)" in done.stdout
+    assert "VIDEOIO" not in done.stderr and "WARN" not in done.stderr, done.stderr
+
+
 def test_a_file_that_is_no_video_is_refused_when_opened(tmp_path):
     """A text file named .png was "opened" by OpenCV's image-sequence reader as a 0x0 video:
     the pilot started on it and then said only "the video ended after 0 frames"."""
