@@ -68,6 +68,20 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     return Path(path), fps, loop_text == "1", fov_option(uri, query)
 
 
+def _why_not(path: Path) -> str:
+    """Why OpenCV could not open ``path`` as a video, as far as the file system tells."""
+    try:
+        if path.is_dir():
+            return "a directory"
+        if not path.exists():
+            return "no such file"
+        if path.is_file() and path.stat().st_size == 0:
+            return "an empty file"
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return "not a video, or one cut short or damaged"
+
+
 class FileCamera:
     """A video file, paced at its frame rate on the vehicle's clock."""
 
@@ -86,8 +100,7 @@ class FileCamera:
             raise CameraError(f"camera {uri}: {path} is truncated or corrupt: {problem}")
         self._cap = cv2.VideoCapture(str(path))
         if not self._cap.isOpened():
-            raise CameraError(f"camera {uri}: cannot open {path} as a video "
-                              f"({'no such file' if not path.exists() else 'not a video'})")
+            raise CameraError(f"camera {uri}: cannot open {path} as a video ({_why_not(path)})")
         file_fps = self._cap.get(cv2.CAP_PROP_FPS)
         self.fps = fps or (file_fps if file_fps and math.isfinite(file_fps) else 0.0)
         if not self.fps > 0:

@@ -245,6 +245,18 @@ def test_a_file_that_is_no_video_is_refused_when_opened(tmp_path):
         open_camera(f"file://{fake}", CameraOptions(clock=FakeClock()))
 
 
+def test_a_directory_or_an_empty_file_is_named_as_such(tmp_path):
+    """Both were refused as "not a video", which sends a user looking at the codec of a
+    folder of frames, or of a copy that never got its bytes."""
+    (tmp_path / "frames").mkdir()
+    (tmp_path / "empty.mp4").write_bytes(b"")
+    for name, words in (("frames", "a directory"), ("empty.mp4", "an empty file")):
+        uri = f"file://{tmp_path / name}"
+        with pytest.raises(CameraError, match=rf"^camera {uri}: cannot open .*{name} as a "
+                           rf"video \({words}\)$"):
+            open_camera(uri, CameraOptions(clock=FakeClock()))
+
+
 def test_a_photo_plays_as_one_frame_and_a_truncated_one_is_refused(tmp_path):
     """A photo given as the file camera plays as a one-frame video; the first 60 % of a JPEG
     played too (FFmpeg decodes what is there and paints the rest grey)."""
