@@ -9,7 +9,8 @@ does on its line:
 
 - AscTec commands and polls only. Every intact command is acknowledged (``>a PD a<``), also
   when the board's state makes it ignore it (sticks before the motors run, a waypoint while
-  landing): the real board acknowledges what it received, and LL_STATUS tells what it did. The
+  landing) or a field is out of its range (a stick beyond +-2047: its checksum holds, it is
+  not flown): the real board acknowledges what it received, and LL_STATUS tells what it did. The
   skeye RESULT the pilot would answer instead is counted in ``ignored`` (with the reason).
 - A command with a bad checksum and an unreadable frame are counted (LL_STATUS
   ``chksum_error``), never answered; so are unknown ``>*>`` letters.
@@ -139,6 +140,14 @@ class LLBoard:
     def handle(self, event: CommandEvent, now_s: float) -> list[Message]:
         """The board's answer to one parsed command or decode error (a CLOCK is answered by
         the I/O side once the time is reached: here it gives nothing)."""
+        if (isinstance(event, CommandError) and event.code is ResultCode.BAD_VALUE
+                and event.pd in ACK_PD.values()):
+            # An AscTec command whose checksum holds, a field out of its range (a pitch of
+            # 3000 counts): intact, so acknowledged as every intact command; not acted on.
+            self.boards.handle(Poll(0), now_s)  # a valid packet: the line is alive
+            self.ignored["a field out of range"] += 1
+            log.info("LL board: command acknowledged, not acted on: %s", event.reason)
+            return [Ack(PD(event.pd))]
         if isinstance(event, (CommandError, FrameError)):
             self.boards.handle(event, now_s)  # counted (LL_STATUS chksum_error), not answered
             return []

@@ -63,6 +63,26 @@ def test_every_intact_command_is_acknowledged_even_when_the_board_ignores_it():
     assert isinstance(status, LlStatus) and status.motors_on == 0
 
 
+def test_an_intact_command_with_a_field_out_of_range_is_acknowledged_not_flown():
+    """A CTRL_INPUT whose checksum holds but whose pitch is 3000 (the range is +-2047) was
+    counted as a checksum error and never acknowledged, though every intact command is."""
+    from skeye.wire.crc import command_checksum
+    from skeye.wire.packets import LAYOUTS
+
+    air = FakeAirframe()
+    board = LLBoard(air)
+    t = flying(board, air)
+    flown = len(air.calls)
+    layout = LAYOUTS[CtrlInput]
+    fields = (3000, 0, 0, 3000, GPS_STICKS)
+    packet = layout.prefix + layout.packer.pack(*fields, command_checksum(*fields))
+    assert send(board, packet, t) == [Ack(PD.CTRL_INPUT)]
+    assert len(air.calls) == flown  # not flown
+    assert board.ignored["a field out of range"] == 1
+    (status,) = send(board, encode(Poll(int(PollMask.LL_STATUS))), t)
+    assert status.chksum_error == 0
+
+
 def test_bad_checksums_garbage_and_unknown_letters_are_counted_never_answered():
     board = LLBoard(FakeAirframe())
     bad = bytearray(encode(CtrlInput(1, 2, 3, 4, 0x0F)))
