@@ -17,6 +17,7 @@ Units: the typed methods take SI in named arguments (``up_m_s`` positive up, lik
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import defaultdict, deque
@@ -78,6 +79,7 @@ DEFAULT_TIMEOUT_S = 2.0
 TelemetryCallback = Callable[[Message], None]
 
 NO_COMMAND_PD = 0x00  # RESULT.command_pd of an answer to no command (a refused connection)
+BAD_FRAME_LOG_EVERY_S = 5.0  # a bad frame is logged as a warning at most this often
 
 
 def velocity_command(forward_m_s: float = 0.0, right_m_s: float = 0.0, up_m_s: float = 0.0,
@@ -144,6 +146,8 @@ class Vehicle:
         self.parser = VehicleStreamParser()
         self.latest: dict[PD, Message] = {}
         self.frame_errors = 0
+        self._frame_errors_logged = 0  # frame_errors at the last warning about them
+        self._frame_error_logged_s = -math.inf  # when that warning was (monotonic)
         self.turned_away: Result | None = None  # the RESULT code 5 that refused this client
         self._cond = threading.Condition()
         self._counts: dict[PD, int] = defaultdict(int)
@@ -218,7 +222,13 @@ class Vehicle:
     def _dispatch(self, event: Message | FrameError) -> None:
         if isinstance(event, FrameError):
             self.frame_errors += 1
-            log.warning("bad frame from the vehicle: %s", event.reason)
+            now = time.monotonic()
+            if now - self._frame_error_logged_s >= BAD_FRAME_LOG_EVERY_S:  # a noisy line
+                # would otherwise log a warning per frame
+                log.warning("bad frame from the vehicle: %s (%d bad frames since the last "
+                            "such warning)", event.reason,
+                            self.frame_errors - self._frame_errors_logged)
+                self._frame_error_logged_s, self._frame_errors_logged = now, self.frame_errors
             return
         with self._cond:
             if isinstance(event, Ack):

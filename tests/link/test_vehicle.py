@@ -36,3 +36,22 @@ def test_bad_arguments_are_local_protocol_errors_sent_nowhere(call, match: str) 
         with pytest.raises(LocalProtocolError, match=match):
             call(vehicle)
         assert vehicle_side.recv(0.05) == b""  # nothing reached the vehicle
+
+
+def test_a_noisy_line_logs_a_bad_frame_warning_at_most_every_five_seconds(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Every bad frame was a warning of its own: a line with a fifth of its frames corrupted
+    logged more than one a second, where docs/onboard.md promises one at most every 5 s."""
+    import logging
+    import time
+
+    ground, vehicle_side = memory_pair()
+    with caplog.at_level(logging.WARNING, logger="skeye.link.vehicle"), \
+            Vehicle(ground, keepalive_s=None) as vehicle:
+        vehicle_side.send(b">a\x17zz" * 20)  # acks whose stop bytes are wrong
+        deadline = time.monotonic() + 10.0
+        while vehicle.frame_errors < 20 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert vehicle.frame_errors == 20
+    warnings = [r.getMessage() for r in caplog.records if "bad frame" in r.getMessage()]
+    assert len(warnings) == 1 and "(1 bad frames since the last such warning)" in warnings[0]
