@@ -46,7 +46,10 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     parts = split_uri(uri, "camera", "file://PATH")
     if parts.scheme.lower() != "file":
         raise LocalProtocolError(f"camera {uri!r}: expected file://PATH")
-    path = unquote(parts.netloc + parts.path)
+    # file:///abs and file://localhost/abs (RFC 8089: the local host) are absolute paths;
+    # file://name.mp4 and file://dir/name.mp4 are relative ones
+    netloc = "" if parts.netloc.lower() == "localhost" and parts.path else parts.netloc
+    path = unquote(netloc + parts.path)
     if not path:
         raise LocalProtocolError(f"camera {uri!r}: expected file://PATH (a video file)")
     query = parse_qs(parts.query, keep_blank_values=True)

@@ -305,6 +305,9 @@ def test_sim_and_file_uris():
                                                                 None)
     assert parse_sim_camera("sim://h:1/Down", robot="R2")[2] == "R2/Down"
     assert parse_file_camera("file://video.mp4") == (Path("video.mp4"), None, False, None)
+    # RFC 8089's local host: an absolute path (it was read as the folder "localhost")
+    assert parse_file_camera("file://localhost/v/pad.mkv")[0] == Path("/v/pad.mkv")
+    assert parse_file_camera("file://localhost")[0] == Path("localhost")  # a file of that name
     assert parse_file_camera("file:///v/pad.mkv?fps=30&loop=1")[:3] == (Path("/v/pad.mkv"),
                                                                         30.0, True)
     for uri, words in (("sim://h/Down", "HOST:PORT"), ("sim://h:1/a/b/c", "ROBOT/CAMERA"),
