@@ -41,6 +41,10 @@ class StatusTexts:
     def __init__(self, telemetry: Telemetry) -> None:
         self.texts: list[str] = []
         self._changed = threading.Condition()
+        # Kept: a plugin collected by the garbage collector ends its subscriptions, and callers
+        # write StatusTexts(Telemetry(system)) (the texts stopped coming whenever a collection
+        # ran after the constructor, depending on what else the process allocated).
+        self.telemetry = telemetry
         telemetry.subscribe_status_text(self._on_text)
 
     def _on_text(self, status: Any, _user_data: Any) -> None:
