@@ -264,10 +264,15 @@ class MavlinkVehicle:
                 return out
             if kind == "MISSION_SET_CURRENT":
                 return out + reply(self._set_current(int(msg.seq)))
+            version = self.mission.version
             answer = self.mission.handle(msg, now_s)
             if kind == "MISSION_COUNT" or kind.startswith("MISSION_ITEM"):
                 answer += self._mission_notice(answer)
-            return out + reply(answer)
+            out += reply(answer)
+            if self.mission.version != version:
+                out += self._mission_changed("cleared" if kind == "MISSION_CLEAR_ALL"
+                                             else "replaced")
+            return out
         if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
             if self._for_us(msg):
                 self._setpoint = (msg, now_s)
@@ -327,12 +332,24 @@ class MavlinkVehicle:
                 reason = self.mission.rejections[-1] if self.mission.rejections else "refused"
                 return statustext(self.codec, mav.MAV_SEVERITY_WARNING,
                                   f"mission refused: {reason}")
-            if m.get_type() == "MISSION_ACK":
-                self.mission_current = 0
-                self.mission_state = mav.MISSION_STATE_NOT_STARTED
-                if self.program is Program.MISSION:
-                    self._stop_program("the mission was replaced")
         return []
+
+    def _mission_changed(self, how: str) -> list[Out]:
+        """The stored mission was replaced or cleared: it starts again from its first item,
+        and a mission under way stops (the vehicle holds where it is), with a STATUSTEXT to
+        every link; its items are gone, so it cannot go on."""
+        self.mission_current = 0
+        self.mission_state = mav.MISSION_STATE_NOT_STARTED
+        if self.program is not Program.MISSION:
+            return []
+        out = self._stop_program(f"the mission was {how}")
+        self.mission_state = mav.MISSION_STATE_NOT_STARTED
+        if self.boards.state in (NavState.FLYING, NavState.HOLDING):
+            try:  # (a take-off ends in a hover and a landing lands, as their modes say)
+                self._board(Hold())
+            except Refused:
+                pass
+        return out
 
     # -- commands ------------------------------------------------------------------------
     def _command(self, peer: Hashable, msg: MavMessage) -> list[MavMessage]:
@@ -617,8 +634,9 @@ class MavlinkVehicle:
         if not 0 <= seq < len(self.mission.items):
             return statustext(self.codec, mav.MAV_SEVERITY_WARNING, f"no mission item {seq}")
         self.mission_current = seq
-        if self.program is Program.MISSION:
-            self.step = Step(index=seq)
+        if self.program is Program.MISSION:  # the mission goes on from that item (its
+            # motion is still this endpoint's: the next tick flies the new item)
+            self.step = Step(index=seq, mark=self.step.mark)
         return [telem.mission_current(self.codec, self.view())]
 
     def _message_interval(self, cmd: Command) -> None:

@@ -1,0 +1,98 @@
+"""A mission changed while it runs, as a pymavlink script or QGroundControl does it (a
+probe of 2026-11-27 found each one wrong):
+
+- MISSION_CLEAR_ALL during a mission raised IndexError in the endpoint's tick, which stopped its
+  thread: no telemetry and no answers any more; now the mission stops, the vehicle holds and
+  every link is told;
+- DO_SET_MISSION_CURRENT during a mission stopped it ("another command took over") instead of
+  going on from the item asked for, as PX4 does.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pymavlink import mavutil
+
+from skeye.wire.packets import NavState
+from tests.mavlink.conftest import (
+    MavVehicle,
+    command,
+    mav_vehicle,
+    statustext,
+    wait_for,
+)
+
+M = mavutil.mavlink
+NORTH_E7 = 900  # 1e-4 deg: about 10 m north
+
+
+def _upload(conn, items: list[tuple[int, int, float]]) -> int:
+    """Waypoints (lat, lon in degE7; altitude above home) by the mission protocol; the
+    MISSION_ACK's type."""
+    conn.mav.mission_count_send(1, 1, len(items), M.MAV_MISSION_TYPE_MISSION)
+    while True:
+        msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"])
+        if msg.get_type() == "MISSION_ACK":
+            return int(msg.type)
+        lat, lon, alt = items[msg.seq]
+        conn.mav.mission_item_int_send(
+            1, 1, msg.seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT,
+            int(msg.seq == 0), 1, 0, 0.5, 0, math.nan, lat, lon, alt, M.MAV_MISSION_TYPE_MISSION)
+
+
+def _on_the_first_leg(v: MavVehicle):
+    """In the air, a 3-waypoint mission started (10 m north, 10 m north and 5 m east, back
+    where it took off), flying its first leg; the client and the start's GLOBAL_POSITION_INT."""
+    conn = v.client()
+    wait_for(conn, "GLOBAL_POSITION_INT")
+    assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
+    assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
+    wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
+             and m.system_status == M.MAV_STATE_ACTIVE)
+    start = wait_for(conn, "GLOBAL_POSITION_INT")
+    items = [(start.lat + NORTH_E7, start.lon, 2.5), (start.lat + NORTH_E7, start.lon + 700, 2.5),
+             (start.lat, start.lon, 2.5)]
+    assert _upload(conn, items) == M.MAV_MISSION_ACCEPTED
+    assert command(conn, M.MAV_CMD_MISSION_START, 0, 0)[0] == 0
+    wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "MISSION"
+             and v.pilot.boards.state is NavState.FLYING)
+    return conn, start
+
+
+def _mission_end(conn) -> tuple[str, list[int]]:
+    """The STATUSTEXT that ends the mission ("mission complete" or "mission stopped: ...") and
+    the items reached before it."""
+    reached = []
+    while True:
+        msg = wait_for(conn, ["STATUSTEXT", "MISSION_ITEM_REACHED"])
+        if msg.get_type() == "MISSION_ITEM_REACHED":
+            reached.append(int(msg.seq))
+        elif msg.text.startswith("mission"):
+            return str(msg.text), reached
+
+
+def test_clearing_the_mission_in_flight_stops_it_and_the_vehicle_holds():
+    with mav_vehicle() as v:
+        conn, _ = _on_the_first_leg(v)
+        conn.mav.mission_clear_all_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
+        assert wait_for(conn, "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert statustext(conn) == "mission stopped: the mission was cleared"
+        wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER")
+        # It holds short of the first waypoint (10 m north), not flying on to it.
+        still = wait_for(conn, "LOCAL_POSITION_NED",
+                         lambda m: math.hypot(m.vx, m.vy) < 0.05
+                         and v.pilot.boards.state is NavState.HOLDING)
+        assert still.x < 6.0
+        assert wait_for(conn, "MISSION_CURRENT").mission_state == M.MISSION_STATE_NO_MISSION
+        assert command(conn, M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION)[0] == 0
+        v.mavlink.check()  # the endpoint's thread is alive
+        assert v.mavlink.errors == 0
+
+
+def test_setting_the_current_item_in_flight_goes_on_from_that_item():
+    with mav_vehicle() as v:
+        conn, _ = _on_the_first_leg(v)
+        assert command(conn, M.MAV_CMD_DO_SET_MISSION_CURRENT, 2)[0] == 0
+        # Straight back to item 2 (where it took off: a short way), items 0 and 1 skipped.
+        assert _mission_end(conn) == ("mission complete", [2])
