@@ -499,16 +499,16 @@ class MavlinkVehicle:
         if not (math.isfinite(height) and height >= 0.1):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"take-off altitude {alt:g} m AMSL is not above the vehicle")
-        self._start(Program.NONE)
         self._board(TakeOff(round(height * 1e3)))
+        self._start(Program.NONE)  # after the boards took it: a refusal changes nothing
 
     def _land(self, cmd: Command) -> None:
         precision = cmd.p(2)
         if precision in (1.0, 2.0) and (self.settings.pad_vision or precision == 2.0):
             self._precland()
             return
-        self._start(Program.NONE)
         self._board(Land())
+        self._start(Program.NONE)
 
     def _precland(self) -> None:
         if not self.settings.pad_vision:
@@ -548,8 +548,8 @@ class MavlinkVehicle:
         elif not math.isnan(cmd.p(7)):
             raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                           "no GPS position yet: global targets cannot be placed")
-        self._start(Program.NONE)
         self._fly_to((n, e, d), speed if speed > 0 else None)
+        self._start(Program.NONE)  # after the boards took it: a refusal changes nothing
         yaw = cmd.p(4)  # MAVSDK's goto_location always sends one (0 for north, NaN for none)
         if math.isnan(yaw):
             return []
@@ -584,16 +584,16 @@ class MavlinkVehicle:
                 and self.boards.state is not NavState.FAILSAFE:
             return  # already so (in the failsafe, Hold is the way out: it is sent)
         if request is Request.HOLD:
-            self._start(Program.NONE)
             if self._airborne():
                 self._board(Hold())
+            self._start(Program.NONE)
         elif request is Request.MISSION:
             self._start_mission(self.mission_current)
         elif request is Request.RTL:
             self._rtl()
         elif request is Request.LAND:
-            self._start(Program.NONE)
             self._board(Land())
+            self._start(Program.NONE)
         elif request is Request.TAKEOFF:
             self._takeoff(Command(mav.MAV_CMD_NAV_TAKEOFF, (0,) * 6 + (math.nan,), None))
         elif request is Request.OFFBOARD:
@@ -614,9 +614,9 @@ class MavlinkVehicle:
             self._applied_target = None
             self._apply_setpoint(sp[0], self._command_peer)
         elif request is Request.MANUAL:
-            self._start(Program.MANUAL)
             if self._airborne():
                 self._board(Hold())
+            self._start(Program.MANUAL)
         elif request is Request.PRECLAND:
             self._precland()
 

@@ -5,7 +5,10 @@ probe of 2026-11-27 found each one wrong):
   thread: no telemetry and no answers any more; now the mission stops, the vehicle holds and
   every link is told;
 - DO_SET_MISSION_CURRENT during a mission stopped it ("another command took over") instead of
-  going on from the item asked for, as PX4 does.
+  going on from the item asked for, as PX4 does;
+- a command refused during a mission (a reposition too fast, a take-off in the air) stopped the
+  mission silently (the mode went to Hold while the vehicle flew on to its waypoint); a refused
+  command changes nothing.
 """
 
 from __future__ import annotations
@@ -96,3 +99,17 @@ def test_setting_the_current_item_in_flight_goes_on_from_that_item():
         assert command(conn, M.MAV_CMD_DO_SET_MISSION_CURRENT, 2)[0] == 0
         # Straight back to item 2 (where it took off: a short way), items 0 and 1 skipped.
         assert _mission_end(conn) == ("mission complete", [2])
+
+
+def test_a_command_refused_during_a_mission_leaves_the_mission_running():
+    with mav_vehicle() as v:
+        conn, start = _on_the_first_leg(v)
+        conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_DO_REPOSITION, 0, 0,
+                                  100.0, 1, 0, math.nan, start.lat, start.lon, math.nan)
+        ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+        assert ack.result == M.MAV_RESULT_DENIED
+        result, text = command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)
+        assert result == M.MAV_RESULT_TEMPORARILY_REJECTED, text
+        hb = wait_for(conn, "HEARTBEAT")
+        assert mavutil.mode_string_v10(hb) == "MISSION"
+        assert _mission_end(conn) == ("mission complete", [0, 1, 2])
