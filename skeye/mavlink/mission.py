@@ -2,10 +2,12 @@
 
 How this works: :class:`MissionProtocol` takes MISSION_* messages and the time and returns the
 messages to send. An upload (MISSION_COUNT) is pulled item by item with MISSION_REQUEST_INT,
-re-requested after ``item_timeout_s`` (``tick``), given up after ``retries``; each item is
-checked as it arrives (:func:`basic_problem`, then the vehicle's own ``check``: envelope,
-supported commands) and the first bad one ends the upload with MISSION_ACK naming the error
-class (and ``rejections`` says why); the stored mission changes only when every item was good.
+re-requested after ``item_timeout_s`` (``tick``), given up after ``retries``. One upload at a
+time: another peer's MISSION_COUNT meanwhile is refused (MAV_MISSION_ERROR, as PX4 answers
+"busy"); the same peer's starts it again. Each item is checked as it arrives
+(:func:`basic_problem`, then the vehicle's own ``check``: envelope, supported commands) and the
+first bad one ends the upload with MISSION_ACK naming the error class (and ``rejections`` says
+why); the stored mission changes only when every item was good.
 A download (MISSION_REQUEST_LIST) answers MISSION_COUNT and each MISSION_REQUEST_INT (or
 MISSION_REQUEST). Fence and rally lists are empty and cannot be uploaded (MAV_MISSION_UNSUPPORTED).
 """
@@ -165,6 +167,11 @@ class MissionProtocol:
             if mission_type != mav.MAV_MISSION_TYPE_MISSION:
                 self._refuse(f"mission type {mission_type} (fence, rally) is not supported")
                 return [self._ack(peer, mav.MAV_MISSION_UNSUPPORTED, mission_type)]
+            busy = self._upload
+            if busy is not None and busy.peer != peer:
+                self._refuse(f"an upload from {busy.peer[0]}/{busy.peer[1]} is under way (item "
+                             f"{len(busy.items)} of {busy.count}): try again when it ends")
+                return [self._ack(peer, mav.MAV_MISSION_ERROR)]
             count = int(msg.count)
             if count > self.max_items:
                 self._refuse(f"{count} items: this vehicle stores at most {self.max_items}")

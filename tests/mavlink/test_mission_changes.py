@@ -1,5 +1,5 @@
-"""A mission changed while it runs, as a pymavlink script or QGroundControl does it (a
-probe of 2026-11-27 found each one wrong):
+"""A mission changed while it runs, and a second ground station uploading at the same time, as a
+pymavlink script or QGroundControl does it (a probe of 2026-11-27 found each one wrong):
 
 - MISSION_CLEAR_ALL during a mission raised IndexError in the endpoint's tick, which stopped its
   thread: no telemetry and no answers any more; now the mission stops, the vehicle holds and
@@ -8,7 +8,10 @@ probe of 2026-11-27 found each one wrong):
   going on from the item asked for, as PX4 does;
 - a command refused during a mission (a reposition too fast, a take-off in the air) stopped the
   mission silently (the mode went to Hold while the vehicle flew on to its waypoint); a refused
-  command changes nothing.
+  command changes nothing;
+- a second ground station's MISSION_COUNT during an upload took the upload over silently: the
+  first one's items were ignored and it got no MISSION_ACK; now the second is refused
+  (MAV_MISSION_ERROR with a STATUSTEXT), as PX4 refuses it ("busy").
 """
 
 from __future__ import annotations
@@ -19,9 +22,11 @@ from pymavlink import mavutil
 
 from skeye.wire.packets import NavState
 from tests.mavlink.conftest import (
+    GCS,
     MavVehicle,
     command,
     mav_vehicle,
+    scripted_endpoint,
     statustext,
     wait_for,
 )
@@ -113,3 +118,37 @@ def test_a_command_refused_during_a_mission_leaves_the_mission_running():
         hb = wait_for(conn, "HEARTBEAT")
         assert mavutil.mode_string_v10(hb) == "MISSION"
         assert _mission_end(conn) == ("mission complete", [0, 1, 2])
+
+
+def test_a_second_upload_during_an_upload_is_refused_and_the_first_completes():
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        first, second = (mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                                    source_system=src[0],
+                                                    source_component=src[1])
+                         for src in (GCS, (254, 190)))
+        try:
+            first.mav.mission_count_send(1, 1, 2, M.MAV_MISSION_TYPE_MISSION)
+            assert wait_for(first, "MISSION_REQUEST_INT").seq == 0
+            second.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+            answer = wait_for(second, ["MISSION_REQUEST_INT", "MISSION_ACK"],
+                              lambda m: m.target_system == 254)
+            assert answer.get_type() == "MISSION_ACK", answer  # (was: the upload taken over)
+            assert answer.type == M.MAV_MISSION_ERROR
+            assert "an upload from 255/190 is under way" in statustext(second)
+            for seq in (0, 1):  # items "here" (0/0), 2 m up
+                first.mav.mission_item_int_send(
+                    1, 1, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0,
+                    1, 0, 0.5, 0, math.nan, 0, 0, 2.0, M.MAV_MISSION_TYPE_MISSION)
+                answer = wait_for(first, ["MISSION_REQUEST_INT", "MISSION_ACK"],
+                                  lambda m: m.target_system == GCS[0])
+            assert (answer.get_type(), answer.type) == ("MISSION_ACK", M.MAV_MISSION_ACCEPTED)
+            assert len(server.vehicle.mission.items) == 2
+            # Once it is over, the second station's upload is served.
+            second.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+            assert wait_for(second, ["MISSION_REQUEST_INT", "MISSION_ACK"],
+                            lambda m: m.target_system == 254).get_type() == "MISSION_REQUEST_INT"
+            assert server.errors == 0
+        finally:
+            first.close()
+            second.close()
