@@ -62,6 +62,13 @@ class Command:
         return cls(int(msg.command), (msg.param1, msg.param2, msg.param3, msg.param4,
                                       msg.param5, msg.param6, msg.param7), None)
 
+    def key(self) -> tuple[object, ...]:
+        """What makes two transmissions the same command: every field, a NaN parameter
+        equal to a NaN (MAVSDK sends NaN for each one it leaves unset; NaN != NaN would make
+        every retransmission of such a command look new)."""
+        params = tuple("nan" if math.isnan(p) else p for p in map(float, self.params))
+        return (self.command, params, self.frame, self.x, self.y)
+
     def p(self, n: int) -> float:
         return float(self.params[n - 1])
 

@@ -124,7 +124,7 @@ class MavlinkVehicle:
         self.refusals = 0
         self.acks: dict[int, int] = {}  # MAV_RESULT -> count
         self._notices: dict[tuple[Hashable, str], float] = {}
-        self._recent: dict[tuple[Hashable, Command], tuple[float, int]] = {}
+        self._recent: dict[tuple[Hashable, tuple[object, ...]], tuple[float, int]] = {}
         self._armed_at_s: float | None = None
         self._setpoint: tuple[MavMessage, float] | None = None
         self._attitude_target_s: float | None = None  # the last SET_ATTITUDE_TARGET (not flown)
@@ -355,9 +355,10 @@ class MavlinkVehicle:
     def _command(self, peer: Hashable, msg: MavMessage) -> list[MavMessage]:
         cmd = Command.of(msg)
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        key = (peer, cmd)
+        key = (peer, cmd.key())
         seen = self._recent.get(key)
-        if seen is not None and self._now_s - seen[0] < DUPLICATE_WINDOW_S:
+        if (seen is not None and self._now_s - seen[0] < DUPLICATE_WINDOW_S
+                and cmd.command not in QUERIES):
             return [self._ack(cmd.command, seen[1], src)]  # a retransmission: same answer
         extra: list[MavMessage] = []
         self._command_peer = peer
@@ -1049,6 +1050,11 @@ class MavlinkVehicle:
         return [Out(msg, i) for i, link in enumerate(self.links)
                 if msg_id not in link.scheduler.stopped]
 
+
+QUERIES = (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_GET_MESSAGE_INTERVAL,
+           mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
+"""Commands that change nothing and whose answer is a message: run again when repeated within
+``DUPLICATE_WINDOW_S`` (a repeat is a client that did not get the message, or wants it again)."""
 
 COMMANDS: dict[int, Callable[[MavlinkVehicle, Command], list[MavMessage] | None]] = {
     mav.MAV_CMD_COMPONENT_ARM_DISARM: MavlinkVehicle._arm,
