@@ -7,7 +7,9 @@ settings: envelope, speeds, failsafe timeouts). :class:`ParamTable` answers PARA
 PARAM_REQUEST_READ and PARAM_SET with PARAM_VALUE messages (every value a REAL32, so PX4's
 byte-wise and ArduPilot's C-cast encodings agree), and a PARAM_SET outside the range,
 non-finite, of an integer type or of an unknown name is refused: the current value comes back
-unchanged with a STATUSTEXT naming the problem, as PX4 does.
+unchanged with a STATUSTEXT naming the problem, as PX4 does. A value set is counted
+(``changed``): its PARAM_VALUE is for every ground station, as PX4 sends a changed parameter on
+all its links, so that one showing the parameters does not keep a stale value.
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ class ParamTable:
         self._by_name = {s.name: i for i, s in enumerate(self.specs)}
         self.codec = codec
         self.refused = 0
+        self.changed = 0  # PARAM_SETs that set a value (the caller tells every ground station)
 
     def value(self, name: str) -> float:
         return float(self.specs[self._by_name[name]].get())
@@ -108,6 +111,7 @@ class ParamTable:
                 self.refused += 1
                 return [self._value_msg(index),
                         *statustext(self.codec, mav.MAV_SEVERITY_WARNING, problem)]
+            self.changed += 1
             return [self._value_msg(index)]
         return []
 

@@ -258,7 +258,11 @@ class MavlinkVehicle:
                 return out
             if kind != "PARAM_REQUEST_LIST" and not self._for_us(msg):
                 return out
-            return out + reply(self.params.handle(msg))
+            changed = self.params.changed
+            answer = self.params.handle(msg)
+            if self.params.changed != changed:  # a new value: every ground station hears it
+                return out + [Out(m) for m in answer]
+            return out + reply(answer)
         if kind.startswith("MISSION_"):
             if not self._for_us(msg):
                 return out
