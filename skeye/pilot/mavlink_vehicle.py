@@ -692,7 +692,7 @@ class MavlinkVehicle:
         snap = self._snap()
         try:
             if not pos_ignored:
-                target = self._setpoint_position(msg, snap)
+                target = self._setpoint_position(msg, snap, mask & 0b111)
                 if (self._applied_target is not None
                         and max(abs(a - b) for a, b in zip(target, self._applied_target,
                                                            strict=True)) < 0.02
@@ -726,22 +726,37 @@ class MavlinkVehicle:
         self._mine()
         return []
 
-    def _setpoint_position(self, msg: MavMessage, snap: Any) -> tuple[float, float, float]:
+    def _setpoint_position(self, msg: MavMessage, snap: Any, ignored: int = 0
+                           ) -> tuple[float, float, float]:
+        """The NED target of a position setpoint. ``ignored``: its type_mask's position bits
+        (x/latitude 1, y/longitude 2, z/altitude 4); an axis ignored is not commanded: the
+        target keeps the vehicle's own coordinate there (an offset of 0), whatever the field
+        holds (a client's 0 for an unused z is not the ground)."""
+        n, e, d = snap.pos_ned_m
         if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
-            return self._global_to_ned(int(msg.lat_int), int(msg.lon_int), float(msg.alt),
-                                       int(msg.coordinate_frame), ("lat_int", "lon_int", "alt"))
-        x, y, z = float(msg.x), float(msg.y), float(msg.z)
+            frame = int(msg.coordinate_frame)
+            lat, lon, alt = int(msg.lat_int), int(msg.lon_int), float(msg.alt)
+            if ignored & 0b011:  # a valid stand-in, replaced by the vehicle's own below
+                lat, lon = (0 if ignored & 1 else lat), (0 if ignored & 2 else lon)
+            if ignored & 0b100:
+                alt = self.boards.home_ned_m[2] - d if frame in (
+                    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT) else 0.0
+            target = self._global_to_ned(lat, lon, alt, frame, ("lat_int", "lon_int", "alt"))
+            return (n if ignored & 1 else target[0], e if ignored & 2 else target[1],
+                    d if ignored & 4 else target[2])
+        x, y, z = ((0.0 if ignored & bit else float(v))
+                   for bit, v in ((1, msg.x), (2, msg.y), (4, msg.z)))
         if not all(map(math.isfinite, (x, y, z))):
             raise Refused(mav.MAV_RESULT_DENIED, "position setpoint is not a number")
         frame = int(msg.coordinate_frame)
-        n, e, d = snap.pos_ned_m
         if frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD):
             yaw = snap.rpy_rad[2]
             return (n + math.cos(yaw) * x - math.sin(yaw) * y,
                     e + math.sin(yaw) * x + math.cos(yaw) * y, d + z)
         if frame == mav.MAV_FRAME_LOCAL_OFFSET_NED:
             return n + x, e + y, d + z
-        return x, y, z
+        return (n if ignored & 1 else x, e if ignored & 2 else y, d if ignored & 4 else z)
 
     def _manual(self, msg: MavMessage, peer: Hashable) -> list[MavMessage]:
         """MANUAL_CONTROL as the AscTec link's sticks in GPS mode (velocities)."""

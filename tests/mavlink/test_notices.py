@@ -69,3 +69,37 @@ def test_each_station_is_told_its_offboard_setpoint_is_refused():
         told = [o for o in gcs.setpoint(peer, math.nan, now_s) if o.msg.get_type() == "STATUSTEXT"]
         assert told and all(o.peer == peer for o in told), (peer, told)
         assert told[0].msg.text.startswith("offboard setpoint refused: position setpoint")
+
+
+def _offboard(peer: Hashable = A) -> tuple[FakeAirframe, Stations]:
+    """A vehicle core flying 2 m up at (1, 2) north/east, in Offboard."""
+    airframe = FakeAirframe()
+    boards = OnboardBoards(airframe)
+    vehicle = MavlinkVehicle(boards)
+    vehicle.add_link(0.0)
+    gcs = Stations(vehicle)
+    assert gcs.command(peer, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, now_s=1.0) == 0
+    assert gcs.command(peer, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan, now_s=1.0) == 0
+    airframe.finish(landed=False, pos_ned_m=(1.0, 2.0, -2.0))
+    boards.tick(1.5)
+    vehicle.tick(1.5)
+    gcs.setpoint(peer, 1.0, 2.0)
+    assert gcs.command(peer, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6,
+                       now_s=2.1) == M.MAV_RESULT_ACCEPTED  # PX4's OFFBOARD
+    return airframe, gcs
+
+
+def test_a_position_axis_ignored_in_the_type_mask_keeps_the_vehicles_own():
+    """x and y given, z ignored (its field 0, as a client that does not use it sends it): the
+    target was z = 0, the ground, so the vehicle descended into it; now it keeps its height.
+    So with y ignored in an offset frame (no sideways step)."""
+    airframe, gcs = _offboard()
+    xy_only = 0b110111111100  # velocity, acceleration, yaw and z ignored
+    for frame, x, y, expected in ((M.MAV_FRAME_LOCAL_NED, 5.0, 3.0, (5.0, 3.0, 2.0)),
+                                  (M.MAV_FRAME_LOCAL_OFFSET_NED, 1.0, 0.0, (2.0, 2.0, 2.0))):
+        mask = xy_only | (0b010 if frame == M.MAV_FRAME_LOCAL_OFFSET_NED else 0)
+        msg = gcs.codecs[A].mav.set_position_target_local_ned_encode(
+            0, 1, 1, frame, mask, x, 99.0 if mask & 0b010 else y, 0.0, 0, 0, 0, 0, 0, 0, 0, 0)
+        gcs.send(A, msg, 2.5)
+        name, args = airframe.calls[-1]
+        assert name == "fly_to" and args[:3] == expected, airframe.calls[-3:]
