@@ -811,10 +811,12 @@ class MavlinkVehicle:
                 if reason is not None:
                     return mav.MAV_MISSION_INVALID_PARAM2, f"item {item.seq}: {reason}"
             return None
-        if item.x == 0 and item.y == 0:
-            return None  # "here": PX4 flies the item where the vehicle is
         try:
-            target = self._global_to_ned(item.x, item.y, item.z, item.frame)
+            if item.x == 0 and item.y == 0:  # "here": where the vehicle will be, at its z;
+                # the envelope's ceiling is checked above home
+                target = (*self.boards.home_ned_m[:2], self._item_down(item))
+            else:
+                target = self._global_to_ned(item.x, item.y, item.z, item.frame)
         except Refused as exc:
             code = (mav.MAV_MISSION_INVALID_PARAM7 if str(exc).startswith("altitude")
                     else mav.MAV_MISSION_ERROR)
@@ -825,6 +827,17 @@ class MavlinkVehicle:
                     else mav.MAV_MISSION_INVALID_PARAM5_X)
             return code, f"item {item.seq}: {reason}"
         return None
+
+    def _item_down(self, item: MissionItem) -> float:
+        """The NED down of a mission item's altitude (z in its frame): above home needs no GPS
+        position (only its check against the lowest land does), above mean sea level does."""
+        origin = self.origin()
+        if origin is not None:
+            return self._down_of(item.z, item.frame, origin)
+        if item.relative_alt and math.isfinite(item.z):
+            return self.boards.home_ned_m[2] - item.z
+        raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
+                      "no GPS position yet: global targets cannot be placed")
 
     def _interrupted(self) -> bool:
         return self.boards.motion_changes != self.step.mark
@@ -958,7 +971,7 @@ class MavlinkVehicle:
             return []
         if st.phase == "to-land":
             return []
-        target = (snap.pos_ned_m if here else
+        target = ((snap.pos_ned_m[0], snap.pos_ned_m[1], self._item_down(item)) if here else
                   self._global_to_ned(item.x, item.y, item.z, item.frame))
         self._fly_to(target, None)
         self._mine()

@@ -103,3 +103,23 @@ def test_a_position_axis_ignored_in_the_type_mask_keeps_the_vehicles_own():
         gcs.send(A, msg, 2.5)
         name, args = airframe.calls[-1]
         assert name == "fly_to" and args[:3] == expected, airframe.calls[-3:]
+
+
+def test_a_waypoint_here_flies_to_its_altitude():
+    """A NAV_WAYPOINT at 0/0 ("here") flew to where the vehicle was, its altitude ignored (and
+    the envelope's ceiling was not checked for it): now it climbs to its z, above home."""
+    airframe, gcs = _offboard()
+    vehicle = gcs.vehicle
+    mav = gcs.codecs[A].mav
+    for z_m, accepted in ((5.0, True), (1e4, False)):  # 10 km: over the envelope's ceiling
+        out = gcs.send(A, mav.mission_count_encode(1, 1, 1, M.MAV_MISSION_TYPE_MISSION), 3.0)
+        assert [o.msg.get_type() for o in out] == ["MISSION_REQUEST_INT"], out
+        item = mav.mission_item_int_encode(
+            1, 1, 0, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0, 1,
+            0, 0.5, 0, math.nan, 0, 0, z_m, M.MAV_MISSION_TYPE_MISSION)
+        ack = next(o.msg for o in gcs.send(A, item, 3.1) if o.msg.get_type() == "MISSION_ACK")
+        assert (ack.type == M.MAV_MISSION_ACCEPTED) == accepted, ack
+    assert gcs.command(A, M.MAV_CMD_MISSION_START, 0, 0, now_s=3.2) == 0
+    vehicle.tick(3.3)
+    name, args = airframe.calls[-1]
+    assert name == "fly_to" and args[:3] == (1.0, 2.0, 5.0), airframe.calls[-3:]
