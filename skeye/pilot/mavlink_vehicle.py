@@ -647,8 +647,9 @@ class MavlinkVehicle:
     def _message_interval(self, cmd: Command) -> None:
         msg_id, interval_us = cmd.whole(1, "message id"), cmd.p(2)
         interval = None if interval_us == -1 else max(0.0, interval_us) / 1e6
-        if not math.isfinite(interval_us) or interval_us < -1:
-            raise Refused(mav.MAV_RESULT_DENIED, f"interval {interval_us:g} us")
+        if not math.isfinite(interval_us) or (interval_us < 0 and interval_us != -1):
+            raise Refused(mav.MAV_RESULT_DENIED, f"interval {interval_us:g} us: give -1 (stop), "
+                          "0 (the default rate) or an interval > 0")
         try:
             for link in self._links_of_command():
                 link.scheduler.set_interval(msg_id, interval, self._now_s)

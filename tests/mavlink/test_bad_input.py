@@ -93,6 +93,9 @@ def test_commands_out_of_range_are_refused_with_their_reason(flying):
     result, text = command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL,
                            M.MAVLINK_MSG_ID_ATTITUDE, 10)  # 100 kHz
     assert result == M.MAV_RESULT_DENIED and "out of range" in text
+    result, text = command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL,
+                           M.MAVLINK_MSG_ID_ATTITUDE, -0.5)  # was taken as 0: the default
+    assert result == M.MAV_RESULT_DENIED and "give -1 (stop), 0 (the default rate)" in text
     result, text = command(conn, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 5)
     assert result == M.MAV_RESULT_DENIED and "ACRO" in text
     result, text = command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)
