@@ -201,6 +201,7 @@ class PilotServer:
         self._client_changed = threading.Condition(self._client_lock)
         self._stop = threading.Event()
         self._threads: list[Worker] = []
+        self._threads_lock = threading.Lock()
         self._listener: socket.socket | None = None
         self.host = host
         self.port: int | None = None
@@ -240,7 +241,17 @@ class PilotServer:
         return self
 
     def _spawn(self, target: Callable[..., None], name: str, *args: object) -> None:
-        self._threads.append(Worker(target, name, args=args).start())
+        with self._threads_lock:
+            # A reader ends with its connection: forget the ended ones (each held its session,
+            # link and outbox), so connections that come and go cost nothing that lasts.
+            self._threads[:] = [t for t in self._threads if t.alive]
+            self._threads.append(Worker(target, name, args=args).start())
+
+    @property
+    def threads(self) -> int:
+        """Worker threads held (loop, accept, re-attach and one reader per connection)."""
+        with self._threads_lock:
+            return len(self._threads)
 
     def serve_forever(self) -> None:
         """Run until ``close()`` (or Ctrl-C in the caller); re-raises a loop failure."""
@@ -265,7 +276,9 @@ class PilotServer:
             session.outbox.close()
         for waiting in pending:
             waiting.link.close()
-        for t in self._threads:
+        with self._threads_lock:
+            workers = list(self._threads)
+        for t in workers:
             t.join(timeout_s)  # returns at once for the calling thread's own worker
         close_vision = getattr(self.vision, "close", None)
         if close_vision is not None:

@@ -69,6 +69,23 @@ def test_a_station_that_reconnects_at_once_is_served_not_turned_away():
         assert pilot.turned_away == 0
 
 
+def test_connections_that_come_and_go_leave_no_thread_behind():
+    """Every connection gets a reader thread; one that has ended is forgotten at the next
+    connection. The server kept every reader it ever started (its session, link and outbox
+    with it): 1000 connections held about 5 MB for good."""
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot:
+        for _ in range(60):
+            with Vehicle.open(pilot.address, timeout_s=30.0) as v:  # an event wait
+                assert PD.LL_STATUS in v.poll(int(PollMask.LL_STATUS))
+        for _ in range(60):
+            socket.create_connection(("127.0.0.1", pilot.port), timeout=5.0).close()
+        with Vehicle.open(pilot.address, timeout_s=30.0) as v:  # the last one is served
+            assert PD.LL_STATUS in v.poll(int(PollMask.LL_STATUS))
+            # the loop, the accept thread, this reader, and readers still ending
+            assert pilot.threads < 20, pilot.threads
+
+
 def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
     air = FakeAirframe()
     settings = BoardSettings(link_timeout_s=1.0, land_timeout_s=1.0)  # >> a busy host's stalls
