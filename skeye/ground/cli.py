@@ -61,13 +61,11 @@ START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to imp
 
 def run_ground(args: argparse.Namespace) -> int:
     """Serve the ground-control page until SIGINT/SIGTERM."""
-    import uvicorn
-
     from skeye.ground.app import create_app, uvicorn_config
     from skeye.ground.bridge import VehicleBridge
     from skeye.ground.commands import VehicleLimits
     from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
-    from skeye.ground.limits import ConnectionLimits, limit_repeats
+    from skeye.ground.limits import ConnectionLimits, GroundServer, limit_repeats
     from skeye.ground.video import VideoRelay, parse_video_uri
     from skeye.robots.config import robot_folders
     from skeye.wire.packets import VehicleInfo
@@ -114,7 +112,7 @@ def run_ground(args: argparse.Namespace) -> int:
             )
             connections = ConnectionLimits(header_timeout_s=args.header_timeout,
                                            max_per_peer=args.max_connections_per_peer)
-            server = uvicorn.Server(uvicorn_config(app, limits=connections))
+            server = GroundServer(uvicorn_config(app, limits=connections))
             limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
             shown = page_host(args.host)
             # one write (print writes the text and its newline apart): the bridge's thread

@@ -37,9 +37,12 @@ flood of the same error (an attack, a descriptor shortage) never fills the log o
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -251,6 +254,31 @@ def server_config(app: Any, log_level: str = "warning", *,
         h11_max_incomplete_event_size=MAX_HEAD_BYTES,
         **settings,
     )
+
+
+class GroundServer(uvicorn.Server):
+    """``uvicorn.Server`` stopped by SIGINT and SIGTERM as skeye's other servers are: it shuts
+    down, and ``run`` returns.
+
+    uvicorn's own handling raises the signal again once the server has shut down, with the
+    handlers it found restored: Ctrl-C then ended ``skeye ground`` with a KeyboardInterrupt
+    traceback (status 130), and SIGTERM killed it (143) before it closed its vehicle link and
+    video relay or said it stopped. A second Ctrl-C still ends the shutdown at once (uvicorn's
+    ``force_exit``).
+    """
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():
+            yield  # only the main thread may set handlers (a test's server in a thread)
+            return
+        stopping = (signal.SIGINT, signal.SIGTERM)
+        original = {sig: signal.signal(sig, self.handle_exit) for sig in stopping}
+        try:
+            yield
+        finally:
+            for sig, handler in original.items():
+                signal.signal(sig, handler)
 
 
 class RepeatFilter(logging.Filter):

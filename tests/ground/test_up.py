@@ -12,6 +12,8 @@ import time
 import urllib.request
 from pathlib import Path
 
+import pytest
+
 from tests.ground.conftest import wait_until
 
 
@@ -177,6 +179,34 @@ def test_ground_alone_names_a_taken_port_or_a_foreign_host_with_its_option(capsy
     err = capsys.readouterr().err
     assert "cannot listen on 203.0.113.77 for ground control: 203.0.113.77 is not an address " \
         "of this machine" in err and "Errno" not in err, err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_ground_alone_stops_on_ctrl_c_and_sigterm_saying_so(tmp_path: Path, sig: int) -> None:
+    """Ctrl-C (SIGINT at its default, as in a terminal) and SIGTERM stop ``skeye ground``
+    with status 0 and its "stopped" line, after closing its vehicle link. uvicorn raised the
+    signal again once it had shut down: Ctrl-C gave a KeyboardInterrupt traceback (130) and
+    SIGTERM killed the process (143) before it said anything."""
+    out, err = tmp_path / "out", tmp_path / "err"
+    with out.open("w") as stdout, err.open("w") as stderr:
+        child = subprocess.Popen(
+            [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+             "--port", "0"],
+            stdout=stdout, stderr=stderr, stdin=subprocess.DEVNULL,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        try:
+            wait_until(lambda: "?token=" in out.read_text() or child.poll() is not None, 120,
+                       "skeye ground to print its URL")
+            assert child.poll() is None, (out.read_text(), err.read_text())
+            child.send_signal(sig)
+            status = child.wait(60)
+        finally:
+            if child.poll() is None:
+                child.kill()
+                child.wait(10)
+    said, complained = out.read_text(), err.read_text()
+    assert status == 0 and said.endswith("skeye ground: stopped\n"), (status, said, complained)
+    assert "Traceback" not in complained, complained
 
 
 def test_a_host_that_is_not_this_machines_is_named_not_called_a_taken_port() -> None:
