@@ -448,6 +448,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         print(f"skeye {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Ctrl-C where the command keeps no handler of its own (skeye link ... stream 60, a
+        # command still importing): said in one line, 130 as a shell reports SIGINT
+        print(f"skeye {args.command}: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
 
 
 def _stdout_closed() -> bool:

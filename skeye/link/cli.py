@@ -6,7 +6,8 @@ code is printed), 2 on a bad argument or URI and 1 when the link failed or timed
 command's packet (and a poll or stream mask) is built before the link is opened, so a value it
 cannot carry is said in SI units with the range it can (exit 2), vehicle or none.
 Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
-Output closed early (``skeye link ... stream 60 | head``) ends the command quietly, status 0.
+Output closed early (``skeye link ... stream 60 | head``) ends the command quietly, status 0;
+Ctrl-C ends it with ``skeye link: interrupted (Ctrl-C)`` and status 130.
 """
 
 from __future__ import annotations

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import argparse
 import io
+import signal
+import subprocess
+import sys
 import threading
+import time
 
 import pytest
 
@@ -52,6 +56,30 @@ def test_link_commands_print_answers_and_exit_codes():
         assert code == link_cli.EXIT_USAGE
     code, _ = run("link", "udp://x:1", "land")
     assert code == link_cli.EXIT_USAGE
+
+
+def test_ctrl_c_ends_a_link_stream_in_one_line_not_a_traceback(tmp_path):
+    """``skeye link URI stream 60`` is stopped with Ctrl-C: it said so in a KeyboardInterrupt
+    traceback; now one line and status 130 (a shell's SIGINT status)."""
+    out, err = tmp_path / "out", tmp_path / "err"
+    with PilotServer(FakeAirframe(), port=0) as pilot, out.open("w") as o, err.open("w") as e:
+        child = subprocess.Popen(
+            [sys.executable, "-m", "skeye.cli", "link", pilot.address, "stream", "60"],
+            stdout=o, stderr=e, stdin=subprocess.DEVNULL,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal
+        try:
+            deadline = time.monotonic() + 60
+            while "NavStatus" not in out.read_text() and child.poll() is None:
+                assert time.monotonic() < deadline, "no telemetry streamed within 60 s"
+                time.sleep(0.05)
+            child.send_signal(signal.SIGINT)
+            status = child.wait(30)
+        finally:
+            if child.poll() is None:
+                child.kill()
+                child.wait(10)
+    said = err.read_text()
+    assert status == 130 and said == "skeye link: interrupted (Ctrl-C)\n", (status, said)
 
 
 def test_pilot_arguments():
