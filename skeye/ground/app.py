@@ -58,6 +58,7 @@ from skeye.ground.commands import (
     parse_command,
 )
 from skeye.ground.guard import (
+    BODY_TIMEOUT_S,
     MAX_JSON_DEPTH,
     MAX_WS_MESSAGE_BYTES,
     CommandRate,
@@ -139,19 +140,22 @@ def create_app(
     telemetry_hz: float = 10.0,
     security: GroundSecurity | None = None,
     limits: VehicleLimits | None = None,
+    body_timeout_s: float = BODY_TIMEOUT_S,
 ) -> FastAPI:
     """The ground-control app; the caller owns (starts and closes) ``bridge`` and ``video``.
 
     ``security`` holds the token and the extra host names (a fresh random token when None:
     then nobody can use the API, which only suits tests of the refusals). ``limits``: the
-    vehicle's speed limits (default: the hummingbird robot file's).
+    vehicle's speed limits (default: the hummingbird robot file's). ``body_timeout_s``: how
+    long a POST body may take after its request head (then 408).
     """
     if limits is None:
         limits = VehicleLimits.for_robot("hummingbird")
     app = FastAPI(
         title="skeye ground control", docs_url=None, redoc_url=None, openapi_url=None
     )
-    app.add_middleware(Guard, security=security or GroundSecurity())
+    app.add_middleware(Guard, security=security or GroundSecurity(),
+                       body_timeout_s=body_timeout_s)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     period_s = 1.0 / telemetry_hz
 

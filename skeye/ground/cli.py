@@ -109,6 +109,7 @@ def run_ground(args: argparse.Namespace) -> int:
             app = create_app(
                 bridge, video, security=security,
                 limits=VehicleLimits.for_robot(args.robot, robot_dirs),
+                body_timeout_s=args.header_timeout,
             )
             connections = ConnectionLimits(header_timeout_s=args.header_timeout,
                                            max_per_peer=args.max_connections_per_peer)
@@ -159,7 +160,8 @@ def _add_ground(sub: Any) -> None:
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--header-timeout", type=float, default=HEADER_TIMEOUT_S, metavar="S",
                    help="close a connection whose request head is not complete within S "
-                   f"seconds of connecting (408; default {HEADER_TIMEOUT_S:g})")
+                   "seconds of connecting, or whose POST body is not complete within S "
+                   f"seconds of its head (408; default {HEADER_TIMEOUT_S:g})")
     p.add_argument("--max-connections-per-peer", type=int, default=MAX_PER_PEER, metavar="N",
                    help="connections one local user (however many loopback addresses it "
                    f"binds) or remote address may hold (default {MAX_PER_PEER})")

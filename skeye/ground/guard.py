@@ -18,7 +18,8 @@ the problem:
    (the page's own code and style).
 4. **POST bodies**: ``Content-Type: application/json`` (415; this is what a browser cannot send
    cross-origin without a CORS preflight, which this server never grants), at most
-   ``MAX_BODY_BYTES`` (413), read here in full before the app runs.
+   ``MAX_BODY_BYTES`` (413), read here in full before the app runs, within ``body_timeout_s``
+   of the request head (408 and closed: a stalled body must not hold its connection).
 5. **POST rate** (429, ``Retry-After: 1``): ``POST_RATE_HZ`` per client on average, bursts of
    ``POST_BURST``, so a loop of POSTs cannot monopolise the vehicle bridge. A client is a peer
    of :func:`skeye.peers.peer_key`: a local user however many loopback addresses it binds, or a
@@ -32,6 +33,7 @@ gate per client (peer) for POSTs.
 
 from __future__ import annotations
 
+import asyncio
 import functools
 import ipaddress
 import json
@@ -234,6 +236,9 @@ POST_RATE_HZ = 10.0
 WebSocket; a script with ``curl`` needs a few per second), so a loop of POSTs from one machine
 cannot monopolise the vehicle bridge or the event loop."""
 POST_BURST = 20
+BODY_TIMEOUT_S = 10.0
+"""A POST body must be complete this long after its request head (``skeye ground`` gives it
+``--header-timeout``): else 408 and the connection is closed."""
 MAX_TRACKED_CLIENTS = 1024  # clients with a POST bucket; the oldest is forgotten
 
 
@@ -249,8 +254,13 @@ class Guard:
     module doc)."""
 
     def __init__(self, app: ASGIApp, security: GroundSecurity, *,
-                 post_rate_hz: float = POST_RATE_HZ, post_burst: int = POST_BURST) -> None:
+                 post_rate_hz: float = POST_RATE_HZ, post_burst: int = POST_BURST,
+                 body_timeout_s: float = BODY_TIMEOUT_S) -> None:
         CommandRate(post_rate_hz, post_burst, 0.0)  # refuses a bad rate or burst here
+        if not body_timeout_s > 0:
+            raise InvalidArgument(f"body_timeout_s must be > 0, got {body_timeout_s!r}")
+        self.body_timeout_s = body_timeout_s
+        self.timed_out = 0  # POSTs answered 408: their body was not complete in time
         self.app = app
         self.security = security
         self.refused = 0
@@ -415,19 +425,34 @@ class Guard:
             return
         chunks: list[bytes] = []
         size = 0
-        while True:
-            message = await receive()
-            if message["type"] == "http.disconnect":
-                return
-            chunk = bytes(message.get("body", b""))
-            size += len(chunk)
-            if size > MAX_BODY_BYTES:
-                self.refused += 1
-                await _respond(send, 413, _json_body(413, _too_large()))
-                return
-            chunks.append(chunk)
-            if not message.get("more_body", False):
-                break
+        try:
+            # A body that stalls (or trickles) held its connection for good: the header
+            # timeout ends with the head, and 32 such POSTs locked their user out.
+            async with asyncio.timeout(self.body_timeout_s):
+                while True:
+                    message = await receive()
+                    if message["type"] == "http.disconnect":
+                        return
+                    chunk = bytes(message.get("body", b""))
+                    size += len(chunk)
+                    if size > MAX_BODY_BYTES:
+                        self.refused += 1
+                        await _respond(send, 413, _json_body(413, _too_large()))
+                        return
+                    chunks.append(chunk)
+                    if not message.get("more_body", False):
+                        break
+        except TimeoutError:
+            self.timed_out += 1
+            log.info("closing a POST to %s: body not complete within %g s (%d bytes came)",
+                     scope.get("path"), self.body_timeout_s, size)
+            await _respond(
+                send, 408,
+                _json_body(408, f"request body not complete within {self.body_timeout_s:g} s "
+                           f"of the request head ({size} bytes came)"),
+                b"application/json", [(b"connection", b"close")],
+            )
+            return
         body = b"".join(chunks)
         replayed = False
 

@@ -47,8 +47,8 @@ def ground() -> Iterator[tuple[UvicornThread, ConnectionLimits]]:
     security = GroundSecurity()
     limits = ConnectionLimits(header_timeout_s=1.0, max_per_peer=8)
     with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
-        web = UvicornThread(create_app(bridge, security=security), security.token,
-                            limits=limits)
+        web = UvicornThread(create_app(bridge, security=security, body_timeout_s=1.0),
+                            security.token, limits=limits)
         try:
             yield web, limits
         finally:
@@ -78,6 +78,33 @@ def test_a_trickled_request_head_is_answered_408_and_closed(ground) -> None:
     assert limits.timed_out == 1
     # A prompt client is served as ever.
     assert httpx.get(f"{web.url}/api/state", headers=web.auth, timeout=30).status_code == 200
+
+
+def test_a_stalled_post_body_is_answered_408_and_its_user_is_served_again(ground) -> None:
+    """A POST whose head is complete and whose body never comes: the header timeout had ended
+    with the head, so it held its connection for good, and the user's cap (here 8) of them
+    locked that user out (503 to the page) until the client gave up."""
+    web, limits = ground
+    head = (f"POST /api/command/hold HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Skeye-Token: "
+            f"{web.token}\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{{"
+            ).encode()
+    socks = []
+    try:
+        for _ in range(limits.max_per_peer):  # the user's whole cap
+            s = socket.create_connection(("127.0.0.1", web.port), timeout=30)
+            s.sendall(head)
+            socks.append(s)
+        for s in socks:
+            answer = b""
+            while chunk := s.recv(4096):  # the server closes it: an event, bounded by 30 s
+                answer += chunk
+            assert answer.startswith(b"HTTP/1.1 408"), answer
+            assert b"request body not complete within 1 s of the request head" in answer
+        r = httpx.get(f"{web.url}/api/state", headers=web.auth, timeout=30)
+        assert r.status_code == 200, r.text
+    finally:
+        for s in socks:
+            s.close()
 
 
 def test_one_user_holds_its_cap_however_many_addresses_and_a_real_client_is_served(
