@@ -46,6 +46,7 @@ from typing import Any
 from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException
 from starlette.websockets import WebSocketDisconnected
 
 from skeye.errors import LocalProtocolError, SkeyeError
@@ -158,6 +159,21 @@ def create_app(
                        body_timeout_s=body_timeout_s)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     period_s = 1.0 / telemetry_hz
+
+    @app.exception_handler(HTTPException)
+    async def http_error(request: Request, exc: HTTPException) -> Response:
+        # The API's own error shape ({"error", "status"}), naming what was asked for
+        where = f"{request.method} {request.url.path}"
+        if exc.status_code == 404:
+            message = f"no such endpoint: {where} (the API: docs/ground.md#api)"
+        elif exc.status_code == 405:
+            allowed = next((v for k, v in (exc.headers or {}).items() if k.lower() == "allow"),
+                           "")
+            message = f"{where}: method not allowed here (allowed: {allowed or 'none'})"
+        else:
+            message = f"{where}: {exc.detail}"
+        return JSONResponse({"error": message, "status": exc.status_code},
+                            status_code=exc.status_code, headers=exc.headers)
 
     def video_status() -> dict[str, Any] | None:
         return None if video is None else video.status_json()

@@ -7,13 +7,14 @@ import socket
 from collections.abc import Iterator
 from contextlib import ExitStack
 
+import httpx
 import pytest
 from fastapi.testclient import TestClient
 
 from skeye.ground.app import create_app
 from skeye.ground.bridge import VehicleBridge
 from skeye.ground.guard import GroundSecurity
-from tests.ground.conftest import Stack, wait_until
+from tests.ground.conftest import Stack, UvicornThread, wait_until
 
 
 def _free_port() -> int:
@@ -57,6 +58,27 @@ def test_bad_requests_get_clear_errors(
     r = offline.post(path, content=body)
     assert r.status_code == status
     assert message in r.json()["error"] and r.json()["status"] == status
+
+
+def test_unknown_paths_and_methods_get_the_apis_error_naming_them() -> None:
+    """A path or method the API lacks was answered in FastAPI's shape, ``{"detail": "Not
+    Found"}``, naming neither; every other error is ``{"error", "status"}``."""
+    security = GroundSecurity()
+    with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
+        web = UvicornThread(create_app(bridge, security=security), security.token)
+        try:
+            r = httpx.get(f"{web.url}/api/nope", headers=web.auth, timeout=30)
+            assert r.status_code == 404 and r.json() == {
+                "error": "no such endpoint: GET /api/nope (the API: docs/ground.md#api)",
+                "status": 404}, r.text
+            r = httpx.delete(f"{web.url}/api/state", headers=web.auth, timeout=30)
+            assert r.status_code == 405 and r.headers["allow"] == "GET", r.headers
+            assert r.json() == {"error": "DELETE /api/state: method not allowed here "
+                                "(allowed: GET)", "status": 405}, r.text
+            r = httpx.get(f"{web.url}/static/nope.js", timeout=30)  # public, no token
+            assert r.status_code == 404 and "GET /static/nope.js" in r.json()["error"]
+        finally:
+            web.close()
 
 
 def test_state_and_video_without_a_vehicle(offline: TestClient) -> None:
