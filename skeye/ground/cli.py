@@ -261,7 +261,9 @@ def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> boo
     dead = [(w, c) for w, c in children if c.poll() is not None]
     for what, child in dead:
         meaning = _exit_meaning(what, child.returncode)
-        print(f"skeye up: {what} exited ({child.returncode}"
+        code = child.returncode or 0
+        status = str(code) if code >= 0 else _signal_name(code)
+        print(f"skeye up: {what} exited ({status}"
               f"{': ' + meaning if meaning else ''}); stopping", flush=True)
     return bool(dead)
 
@@ -391,7 +393,12 @@ def run_up(args: argparse.Namespace) -> int:
         now = time.monotonic()
         for what, child in dead:
             recent = [t for t in restarts.get(what, []) if now - t < RESTART_WINDOW_S]
-            if stop.is_set() or not restartable(child.returncode) or len(recent) >= RESTART_BURST:
+            if stop.is_set() or not restartable(child.returncode):
+                return False
+            if len(recent) >= RESTART_BURST:
+                print(f"skeye up: {what} exited ({_signal_name(child.returncode or 0)}) after "
+                      f"{len(recent)} restarts in {RESTART_WINDOW_S:g} s: not starting it "
+                      "again", flush=True)
                 return False
             restarts[what] = [*recent, now]
             print(f"skeye up: {what} exited ({_signal_name(child.returncode or 0)}); starting "

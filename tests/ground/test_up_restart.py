@@ -170,3 +170,29 @@ def test_crash_reset_and_a_simulator_restart_on_skeye_up(up: Up) -> None:
     assert again_s < 10.0, again_s
     assert any("starting it again" in line for line in up.lines), up.lines[-10:]
     assert up.proc.poll() is None  # skeye up still running
+
+
+def test_a_child_killed_once_too_often_is_named_with_the_restart_limit(up: Up) -> None:
+    """Killed a sixth time within the window, ground control is not started again: skeye up
+    says why (the restarts so far) and names the signal. It said only "ground control exited
+    (-9); stopping", as if the signal had not been restartable at all."""
+    from skeye.ground.cli import RESTART_BURST, RESTART_WINDOW_S
+
+    def ground_pid() -> int | None:
+        kids = [p for p in _children(up.proc.pid)
+                if b"ground" in Path(f"/proc/{p}/cmdline").read_bytes().split(b"\0")]
+        return kids[0] if kids else None
+
+    for n in range(1, RESTART_BURST + 2):
+        pid = wait_until(ground_pid, 300, "ground control running")
+        os.kill(pid, signal.SIGKILL)
+        if n <= RESTART_BURST:
+            wait_until(lambda n=n: sum("ground control is back" in line
+                                       for line in up.lines) >= n,
+                       300, f"ground control back after kill {n}")
+    up.proc.wait(120)
+    text = "".join(up.lines)
+    assert (f"skeye up: ground control exited (SIGKILL) after {RESTART_BURST} restarts in "
+            f"{RESTART_WINDOW_S:g} s: not starting it again") in text, text
+    assert "skeye up: ground control exited (SIGKILL); stopping" in text, text
+    assert up.proc.returncode == 1
