@@ -101,6 +101,7 @@ def command_message(args: argparse.Namespace) -> Message | None:
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Execute the parsed ``skeye link`` command; returns the exit code."""
+    opened: list[Vehicle] = []  # the vehicle, once its link is open (for what a failure says)
     try:
         masks: tuple[int, ...] = ()  # a bad mask is named before the link is opened
         if args.link_command == "poll":
@@ -109,6 +110,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             masks = (_mask(args.poll_mask, PollMask), _mask(args.skeye_mask, SkeyeMask))
         msg = command_message(args)
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
+            opened.append(vehicle)
             return _run(vehicle, args, msg, masks, out)
     except CommandRejected as exc:
         print(f"skeye link: rejected: {exc.reason} (code {exc.code})", file=sys.stderr)
@@ -117,7 +119,11 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         print(f"skeye link: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except (LinkClosed, LinkTimeout) as exc:
-        print(f"skeye link: link error: {exc}", file=sys.stderr)
+        unheard = opened[0].unheard if opened else None
+        hint = (f"; {unheard}: is {args.uri} a skeye pilot's link (skeye pilot --port)? "
+                "A simulator's or ground control's port speaks another protocol"
+                ) if unheard else ""
+        print(f"skeye link: link error: {exc}{hint}", file=sys.stderr)
         return EXIT_LINK
     except SkeyeError as exc:
         print(f"skeye link: error: {exc}", file=sys.stderr)

@@ -146,6 +146,7 @@ class Vehicle:
         self.parser = VehicleStreamParser()
         self.latest: dict[PD, Message] = {}
         self.frame_errors = 0
+        self.frames_received = 0  # frames read whole: acks, results and structures
         self._frame_errors_logged = 0  # frame_errors at the last warning about them
         self._frame_error_logged_s = -math.inf  # when that warning was (monotonic)
         self.turned_away: Result | None = None  # the RESULT code 5 that refused this client
@@ -195,6 +196,17 @@ class Vehicle:
         self.close()
 
     @property
+    def unheard(self) -> str | None:
+        """What came on a link that never carried one whole frame (the far end speaks
+        another protocol: a simulator's or a web port), or None once a frame came."""
+        if self.frames_received:
+            return None
+        said = "nothing a vehicle sends came on this link"
+        garbage, bad = self.parser.garbage_bytes, self.frame_errors
+        return f"{said} ({garbage} unreadable bytes, {bad} bad frames)" if garbage or bad \
+            else said
+
+    @property
     def connected(self) -> bool:
         """False once the link closed (by us, the vehicle, or an error)."""
         return not self.link.closed and self._reader.is_alive()
@@ -230,6 +242,7 @@ class Vehicle:
                             self.frame_errors - self._frame_errors_logged)
                 self._frame_error_logged_s, self._frame_errors_logged = now, self.frame_errors
             return
+        self.frames_received += 1
         with self._cond:
             if isinstance(event, Ack):
                 self._acks[event.pd] += 1

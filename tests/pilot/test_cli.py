@@ -277,3 +277,17 @@ def test_a_camera_lost_at_start_is_a_warning_on_stderr(capsys, monkeypatch, tmp_
     assert warning.startswith(f"skeye pilot: warning: camera {camera}: cannot open "), warning
     assert warning.endswith("; the pad modes hold still until it gives frames"), warning
     assert error.startswith("skeye pilot: error: --serial: "), error
+
+
+def test_link_to_a_port_that_is_no_pilot_says_so(capsys):
+    """``skeye link`` at a simulator's control port timed out with 'no poll answer', which did
+    not say that nothing a vehicle sends had come; now it asks whether that is a pilot's link."""
+    from skeye.cli import main
+
+    with running_sim() as server:
+        uri = f"tcp://127.0.0.1:{server.port}"
+        status = main(["link", "--timeout", "1", uri, "poll"])
+    err = capsys.readouterr().err
+    assert status == link_cli.EXIT_LINK, err
+    assert "nothing a vehicle sends came on this link" in err, err
+    assert f"is {uri} a skeye pilot's link (skeye pilot --port)?" in err, err
