@@ -309,6 +309,12 @@ def create_app(
                     await send({"type": "result", "id": None, "status": 400,
                                 "error": 'expected {"type": "command", "name": ..., "args": {}}'})
                     continue
+                if not isinstance(msg.get("name"), str):  # (was: "unknown command 'None'")
+                    await send({"type": "result", "id": msg.get("id"), "status": 400,
+                                "error": "a command needs its name, text: "
+                                f"\"name\": one of {', '.join(COMMANDS)}; got "
+                                f"{msg.get('name')!r:.40}"})
+                    continue
                 ident = msg.get("id")
                 if len(tasks) >= MAX_IN_FLIGHT or not rate.allow(loop.time()):
                     why = (

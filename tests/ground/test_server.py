@@ -102,6 +102,12 @@ def test_websocket_rejects_malformed_messages(offline: TestClient) -> None:
             pass
         assert msg["id"] == 7 and msg["status"] == 422
         assert "'height_m' must be within" in msg["error"]
+        # no name: it was "unknown command 'None'" (404), as if None were a command's name
+        ws.send_text(json.dumps({"type": "command", "id": 8, "args": {}}))
+        while (msg := ws.receive_json())["type"] != "result":
+            pass
+        assert msg["id"] == 8 and msg["status"] == 400
+        assert msg["error"].startswith('a command needs its name, text: "name": one of'), msg
 
 
 def test_several_tabs_at_once(stack: Stack) -> None:
