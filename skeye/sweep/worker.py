@@ -86,7 +86,31 @@ def run_experiment(trial: Trial, workdir: Path) -> tuple[dict[str, float], dict[
             for k, v in figures.items()):
         raise SkeyeError(f"{trial.script}: trial() must return a dict of figure name -> number, "
                          f"got {figures!r}")
+    _check_script_figures(trial, figures)
     return _figures_only(figures), {}
+
+
+INT64_MAX = 2**63 - 1  # the tables' integer columns (parquet's int64)
+
+
+def _check_script_figures(trial: Trial, figures: dict[str, int | float]) -> None:
+    """A script's figures may not take the name of a column its row already has (the trial's
+    key, a parameter, the run's host...: the figure replaced it, and a figure named ``key``
+    stored the row under another trial's name), and an integer figure must fit the tables'
+    64 bits (a larger one ended the sweep, after every trial, in a traceback)."""
+    from skeye.sweep.results import FIXED, TAIL
+
+    own = [c for c in dict.fromkeys([*FIXED, *trial.params, *TAIL]) if c != "seed"]
+    taken = [k for k in figures if k in own]  # a seed is dropped, as E1's and E2's is
+    if taken:
+        raise SkeyeError(
+            f"{trial.script}: trial() returned figures named {', '.join(taken)}, which name "
+            f"columns the row has already (the trial's {', '.join(own)}): "
+            "rename them")
+    big = [k for k, v in figures.items() if isinstance(v, int) and abs(v) > INT64_MAX]
+    if big:
+        raise SkeyeError(f"{trial.script}: trial() returned integer figures beyond 64 bits "
+                         f"({', '.join(big)}): return them as floats, or smaller")
 
 
 def base_row(trial: Trial) -> dict[str, Any]:

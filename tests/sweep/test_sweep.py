@@ -222,6 +222,44 @@ def test_failed_trials_are_rows_with_their_error(tmp_path: Path,
     assert (again.ran, again.skipped) == (3, 1)
 
 
+CLOBBERING = """
+def trial(settings, params, workdir):
+    if params["mode"] == "key":
+        return {"key": 1.0, "height_m": 1.0}
+    if params["mode"] == "param":
+        return {"mode": 5.0, "wall_s": 0.0, "height_m": 2.0}
+    if params["mode"] == "big":
+        return {"count": 10**400}
+    return {"height_m": 3.0, "seed": settings.seed}
+"""
+
+
+def test_script_figures_that_would_overwrite_the_row_or_not_fit_it_are_the_trials_error(
+        tmp_path: Path):
+    """A figure named like one of the row's own columns replaced it: ``key`` stored the row as
+    ``trials/1.0.json`` (the summary said "3 trials: 4 run now", one trial missing from
+    results.csv, run again on every resume), ``mode`` rewrote the trial's parameter. An integer
+    beyond 64 bits ended the sweep in pyarrow's OverflowError traceback. Each is the trial's
+    error now, naming the figures; the other trials run and are stored under their keys."""
+    (tmp_path / "flight.py").write_text(CLOBBERING)
+    spec = tmp_path / "s.toml"
+    spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [1]\ntimeout_s = 60\n'
+                    '[grid]\nmode = ["ok", "key", "param", "big"]\n')
+    out = tmp_path / "out"
+    result = sweep(spec, out, "local", workers=2, show_progress=False)
+    assert (len(result.rows), result.ran, result.failed) == (4, 4, 3)
+    rows = {r["mode"]: r for r in result.rows}
+    assert set(rows) == {"ok", "key", "param", "big"}
+    assert rows["ok"]["error"] == "" and rows["ok"]["height_m"] == 3.0  # a seed is dropped
+    assert "figures named key, which name columns the row has already" in rows["key"]["error"]
+    assert "figures named mode, wall_s," in rows["param"]["error"]
+    assert "integer figures beyond 64 bits (count)" in rows["big"]["error"]
+    assert sorted(p.stem for p in (out / "trials").glob("*.json")) == sorted(
+        r["key"] for r in result.rows)
+    with open(out / "results.csv") as f:
+        assert sorted(r["mode"] for r in csv.DictReader(f)) == ["big", "key", "ok", "param"]
+
+
 @pytest.mark.parametrize(
     ("text", "match"),
     [
