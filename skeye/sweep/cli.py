@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
+from skeye.errors import ConfigError
 from skeye.outputs import output_folder
 from skeye.sweep.backends import Backend, make_backend
 from skeye.sweep.results import ResultStore, write_report, write_tables
@@ -76,7 +77,14 @@ def run_trials(spec: SweepSpec, out: Path, backend: Backend, label: str = "sweep
             progress.update(task, running=n)
 
         for row in backend.run([t.to_json() for t in todo], on_running):
-            store.put(row)
+            try:
+                store.put(row)
+            except ConfigError as exc:  # a full disk: the running trials' rows would be lost
+                # too, so they are not waited for (an hour each, maybe)
+                stopped = stop_running_trials()
+                raise ConfigError(f"{exc}; the sweep stops ({stopped} running trial(s) "
+                                  f"killed); the rows stored before are kept in {store.dir} "
+                                  "(rerun to resume)") from None
             result.ran += 1
             if row.get("error"):
                 counts["failed"] += 1

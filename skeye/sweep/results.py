@@ -18,6 +18,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
+from skeye.errors import ConfigError
 from skeye.sweep.spec import SweepSpec
 
 FIXED = ["key", "experiment", "seed", "quick"]
@@ -48,9 +49,25 @@ class ResultStore:
         return row is not None and not row.get("error")
 
     def put(self, row: dict[str, Any]) -> None:
-        tmp = self.path(row["key"]).with_suffix(".tmp")
-        tmp.write_text(json.dumps(row, indent=1))
-        tmp.replace(self.path(row["key"]))
+        """Store ``row`` (whole or not at all).
+
+        Raises:
+            ConfigError: it could not be written (a full disk...), naming the file and the
+                row, so that its figures are not lost with it.
+        """
+        path = self.path(row["key"])
+        tmp = path.with_suffix(".tmp")
+        text = json.dumps(row, indent=1)
+        try:
+            tmp.write_text(text)
+            tmp.replace(path)
+        except OSError as exc:
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+            raise ConfigError(f"cannot store trial {row['key']}'s row in {path}: "
+                              f"{exc.strerror or exc}; its row: {json.dumps(row)}") from None
 
 
 def columns(rows: list[dict[str, Any]], params: list[str]) -> list[str]:

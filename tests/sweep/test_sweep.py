@@ -430,6 +430,55 @@ def test_sweep_off_a_terminal_logs_lines_and_a_stop_signal_leaves_nothing_behind
     assert len(list((tmp_path / "out" / "trials").glob("*.json"))) == 1  # the ok row kept
 
 
+STORE_BLOCKED = """
+import os
+import time
+from pathlib import Path
+
+def trial(settings, params, workdir):
+    pidfile = Path(os.environ["SWEEP_TEST_PIDFILE"])
+    if params["mode"] == "hang":
+        pidfile.write_text(str(os.getpid()))
+        time.sleep(600)
+    deadline = time.monotonic() + 120  # ends once the other trial runs: one is then running
+    while not pidfile.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return {"height_m": 1.0}
+"""
+
+
+def test_a_row_that_cannot_be_stored_stops_the_sweep_naming_it_and_keeps_its_figures(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A trial's row that cannot be written (a full disk: ENOSPC; here its temporary name is
+    taken by a folder) ended the sweep with the bare OSError ("[Errno 28] No space left on
+    device": no file, the row's figures lost) only after every running trial had run to its
+    end or its timeout, their rows lost as well. Now the error names the file and holds the
+    row, and the running trials are killed at once."""
+    from skeye.errors import ConfigError
+    from skeye.sweep.spec import load_spec
+
+    (tmp_path / "flight.py").write_text(STORE_BLOCKED)
+    spec = tmp_path / "s.toml"
+    spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [1]\ntimeout_s = 90\n'
+                    '[grid]\nmode = ["ok", "hang"]\n')
+    pidfile = tmp_path / "hang.pid"
+    monkeypatch.setenv("SWEEP_TEST_PIDFILE", str(pidfile))
+    ok = next(t for t in load_spec(spec).trials if t.params["mode"] == "ok")
+    trials = tmp_path / "out" / "trials"
+    (trials / f"{ok.key}.tmp").mkdir(parents=True)
+    start = time.monotonic()
+    with pytest.raises(ConfigError) as err:
+        sweep(spec, tmp_path / "out", "local", workers=2, show_progress=False)
+    assert time.monotonic() - start < 60, "the hanging trial was waited for"
+    text = str(err.value)
+    assert f"cannot store trial {ok.key}'s row in {trials / ok.key}.json: Is a directory" in text
+    assert '"height_m": 1.0' in text and '"mode": "ok"' in text, text  # the figures, kept
+    assert "1 running trial(s) killed" in text and "rerun to resume" in text, text
+    hang_pid = int(pidfile.read_text())
+    assert not Path(f"/proc/{hang_pid}").exists() or \
+        Path(f"/proc/{hang_pid}/stat").read_text().split(")")[1].split()[0] == "Z"
+
+
 def test_a_signal_ignored_at_start_stays_ignored():
     """``nohup skeye sweep ...`` keeps running when its terminal hangs up: the stop handlers
     leave a signal the sweep was started ignoring alone, and put every handler back after."""
