@@ -7,13 +7,18 @@ in no folder, and the input itself or a file inside it; :func:`different_files` 
 naming one file; :func:`output_folder` makes an output folder, or names why it cannot;
 :func:`figure_file` also wants an extension matplotlib writes, or none (then ``.png`` is
 added, as matplotlib adds it, so the path the command says is the path written); a ``.pgf``
-figure also wants the TeX program matplotlib runs for it.
+figure also wants the TeX program matplotlib runs for it. :func:`folder_lock` holds an output
+folder for one run of a command at a time.
 Each refusal is a ConfigError naming the option and the path.
 """
 
 from __future__ import annotations
 
+import fcntl
+import os
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from skeye.errors import ConfigError
@@ -48,6 +53,39 @@ def output_folder(path: Path, option: str = "--out") -> Path:
         raise ConfigError(f"{option} {path}: cannot make the folder: "
                           f"{exc.strerror or exc}") from None
     return path
+
+
+LOCK_NAME = ".skeye.lock"
+
+
+@contextmanager
+def folder_lock(folder: Path, command: str, option: str = "--out") -> Iterator[None]:
+    """Hold ``folder`` (made already) while ``command`` writes into it; a second run given the
+    same folder meanwhile is refused naming the process that holds it. The lock is the kernel's
+    (``flock`` on ``folder/.skeye.lock``): it ends with the process however that ends.
+
+    Raises:
+        ConfigError: another process holds the folder, or the lock file cannot be made.
+    """
+    path = folder / LOCK_NAME
+    try:
+        f = open(path, "a+")  # held open until the run ends
+    except OSError as exc:
+        raise ConfigError(f"{option} {folder}: cannot write in the folder: "
+                          f"{exc.strerror or exc}") from None
+    with f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            f.seek(0)
+            holder = f.read().strip() or "a running process"
+            raise ConfigError(f"{option} {folder} is in use by another {command} ({holder}): "
+                              f"wait for it to end, or give another {option}") from None
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()}")
+        f.flush()
+        yield
 
 
 def different_files(first: tuple[str, Path | None], second: tuple[str, Path | None]) -> None:

@@ -23,7 +23,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError
-from skeye.outputs import output_folder
+from skeye.outputs import folder_lock, output_folder
 from skeye.sweep.backends import Backend, make_backend
 from skeye.sweep.results import ResultStore, write_report, write_tables
 from skeye.sweep.spec import SweepSpec, load_spec
@@ -106,14 +106,15 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
     """Run a sweep spec and write results.csv/.parquet and report.md into ``out``."""
     spec = load_spec(spec_path, quick)
     output_folder(out)
-    start = time.monotonic()
-    backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
-    try:
-        result = run_trials(spec, out, backend, spec.name, show_progress)
-    finally:
-        backend.close()
-    write_tables(out, result.rows, spec.param_names)
-    write_report(out, spec, result.rows, backend_name, time.monotonic() - start)
+    with folder_lock(out, "skeye sweep"):  # two there ran every trial twice, racing on rows
+        start = time.monotonic()
+        backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
+        try:
+            result = run_trials(spec, out, backend, spec.name, show_progress)
+        finally:
+            backend.close()
+        write_tables(out, result.rows, spec.param_names)
+        write_report(out, spec, result.rows, backend_name, time.monotonic() - start)
     return result
 
 

@@ -479,6 +479,37 @@ def test_a_row_that_cannot_be_stored_stops_the_sweep_naming_it_and_keeps_its_fig
         Path(f"/proc/{hang_pid}/stat").read_text().split(")")[1].split()[0] == "Z"
 
 
+def test_a_second_sweep_into_a_folder_in_use_is_refused_naming_the_first(tmp_path: Path):
+    """Two sweeps given one --out both ran every trial (twice the work) and raced on each row's
+    temporary file (the two finish a trial together: the second rename found none). The
+    second is refused at once now, naming the process that holds the folder."""
+    from skeye.errors import ConfigError
+    from skeye.outputs import folder_lock
+
+    (tmp_path / "flight.py").write_text(SLOW)
+    spec = tmp_path / "s.toml"
+    spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [1]\n'
+                    'timeout_s = 60\n[grid]\nmode = ["hang"]\n')
+    out = tmp_path / "out"
+    pidfile = tmp_path / "hang.pid"
+    first = subprocess.Popen([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
+                              str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                             text=True, env=dict(os.environ, SWEEP_TEST_PIDFILE=str(pidfile)))
+    try:
+        deadline = time.monotonic() + 120  # a stuck guard: the first sweep's trial runs
+        while not pidfile.exists() or not pidfile.read_text():
+            assert first.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        with pytest.raises(ConfigError, match=rf"--out {out} is in use by another skeye sweep "
+                                              rf"\(pid {first.pid}\): wait for it to end"):
+            sweep(spec, out, "local", show_progress=False)
+    finally:
+        first.terminate()
+        first.communicate(timeout=60)
+    with folder_lock(out, "skeye sweep"):  # free again once the first has ended
+        pass
+
+
 def test_a_signal_ignored_at_start_stays_ignored():
     """``nohup skeye sweep ...`` keeps running when its terminal hangs up: the stop handlers
     leave a signal the sweep was started ignoring alone, and put every handler back after."""
