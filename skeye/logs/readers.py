@@ -92,11 +92,22 @@ def _check_truth(name: str, truth: TruthTrack) -> None:
 
 
 def _csv_rows(path: Path) -> np.ndarray:
+    """The data rows of a EuRoC CSV file, as numbers; a row with another number of fields than
+    the first (a file cut short mid-line) is named by its line number."""
     try:
         with open(path, newline="") as f:
-            rows = [r for r in csv.reader(f) if r and not r[0].lstrip().startswith("#")]
-        return np.array(rows, dtype=float)
+            reader = csv.reader(f)
+            numbered = [(reader.line_num, r) for r in reader
+                        if r and not r[0].lstrip().startswith("#")]
     except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: not a readable EuRoC CSV file: {exc}") from None
+    for line, row in numbered:
+        if len(row) != len(numbered[0][1]):
+            raise ConfigError(f"{path}: line {line} has {len(row)} fields where line "
+                              f"{numbered[0][0]} has {len(numbered[0][1])} (a file cut short?)")
+    try:
+        return np.array([r for _, r in numbered], dtype=float)
+    except ValueError as exc:
         raise ConfigError(f"{path}: not a readable EuRoC CSV file: {exc}") from None
 
 
@@ -109,6 +120,8 @@ def read_euroc(folder: Path) -> ImuLog:
     if not imu_csv.is_file():
         raise ConfigError(f"{folder}: no imu0/data.csv (an EuRoC-style folder has mav0/imu0/)")
     imu = _csv_rows(imu_csv)
+    if not imu.size:
+        raise ConfigError(f"{imu_csv}: no IMU samples (no line but comments)")
     if imu.ndim != 2 or imu.shape[1] < 7:
         raise ConfigError(f"{imu_csv}: expected 7 columns (timestamp, w xyz, a xyz)")
     truth = None

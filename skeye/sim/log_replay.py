@@ -49,6 +49,7 @@ hover segments (docs/physics.md, "In-flight vibration")."""
 
 REST_S = 1.0  # the log's first second: at rest, for the power-up calibration
 MIN_HOVER_S = REST_S + 1.0  # skeye logs --seconds: the rest, then a second of hover to measure
+TRUTH_GAP_S = 0.1  # ground truth further than this from an instant is not used for it
 
 
 def _quat_rows(q: np.ndarray) -> np.ndarray:
@@ -110,7 +111,7 @@ def replay_tilt(t_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
         else:
             while j + 1 < len(truth.t_s) and truth.t_s[j + 1] <= t:
                 j += 1
-            if abs(truth.t_s[j] - t) > 0.1:
+            if abs(truth.t_s[j] - t) > TRUTH_GAP_S:
                 continue  # no truth near this instant
             world_down = np.array([0.0, 0.0, 1.0 if truth.world_z == "down" else -1.0])
             down_true = rot @ (_quat_rows(truth.quat_wxyz[j]).T @ world_down)
@@ -195,13 +196,21 @@ def compare(log: ImuLog, robot: str = "hummingbird", sim: ImuLog | None = None
                      else replay_tilt(log.t_s, log.gyro_rad_s, log.accel_m_s2, log.truth))
     except ConfigError as exc:  # the replay's refusal, named by the log it is about
         raise ConfigError(f"{log.name}: {exc}") from None
-    return {
+    result = {
         "log": log.name, "rate_hz": rate, "seconds": float(log.t_s[-1] - log.t_s[0]),
         "real": {**imu_figures(flight.gyro_rad_s, flight.accel_m_s2, rate), **real_tilt},
         "simulated": {**imu_figures(sim_flight.gyro_rad_s, sim_flight.accel_m_s2, rate),
                       **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)},
         "has_truth": log.truth is not None,
     }
+    if log.truth is not None and not real_tilt:  # its cells read "-": the table says why
+        gt = log.truth.t_s
+        result["truth_unused"] = (
+            f"The log's ground truth ({len(gt)} poses, {gt[0]:.3f}..{gt[-1]:.3f} s from the "
+            f"first IMU sample) is within {TRUTH_GAP_S:g} s of none of the instants the replay "
+            f"judges ({float(log.t_s[0]) + REST_S:.3f}..{float(log.t_s[-1]):.3f} s): no tilt "
+            "error for it.")
+    return result
 
 
 ROWS = (
@@ -230,6 +239,8 @@ def report_table(result: dict[str, Any]) -> str:
             f"{'-' if ref is None else f'{ref[0]:g}-{ref[1]:g}'} |")
     if result["real"] and not result["has_truth"]:  # simulated only: there is no log
         lines += ["", "The log has no ground truth: no tilt error for it."]
+    if result.get("truth_unused"):
+        lines += ["", result["truth_unused"]]
     return "\n".join(lines)
 
 

@@ -156,6 +156,45 @@ def test_a_log_without_ground_truth_gets_no_tilt_error(
     assert "tilt_rms_deg" not in result["real"] and "tilt_rms_deg" in result["simulated"]
 
 
+@pytest.mark.parametrize("how", ["later", "one instant"])
+def test_a_ground_truth_that_meets_none_of_the_replays_instants_is_said_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], how: str) -> None:
+    # A truth stamped on another clock (1000 s later) or whose stamps all repeat one instant
+    # left the tilt-error cells "-" without a word: the table read as if the replay had run.
+    folder = make_logs.write_euroc(tmp_path / "MH_off", synthetic(4.0))
+    gt = folder / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    head, *rows = gt.read_text().splitlines()
+    first = int(rows[0].split(",")[0])
+    stamp = (lambda t: t + 1000 * 10**9) if how == "later" else (lambda t: first)
+    gt.write_text("\n".join([head] + [f"{stamp(int(r.split(',')[0]))},{r.split(',', 1)[1]}"
+                                      for r in rows]) + "\n")
+    assert main(["logs", str(folder), "--json", str(tmp_path / "f.json")]) == 0
+    out = capsys.readouterr().out
+    assert "| board estimator tilt error, RMS (deg) | - |" in out
+    span = "1000.000..1003.990" if how == "later" else "0.000..0.000"
+    note = (f"The log's ground truth (400 poses, {span} s from the first IMU sample) is within "
+            "0.1 s of none of the instants the replay judges (1.000..3.995 s): no tilt error "
+            "for it.")
+    assert note in out, out
+    assert json.loads((tmp_path / "f.json").read_text())["truth_unused"] == note
+
+
+def test_a_euroc_file_cut_mid_line_is_refused_naming_the_line(tmp_path: Path) -> None:
+    # A copy cut short: numpy's "setting an array element with a sequence. The requested array
+    # has an inhomogeneous shape after 1 dimensions..." named neither line nor cause; a file
+    # of comments only was "expected 7 columns".
+    folder = make_logs.write_euroc(tmp_path / "MH_cut", synthetic(4.0))
+    imu = folder / "mav0" / "imu0" / "data.csv"
+    text = imu.read_text()
+    imu.write_text(text[:-30])
+    with pytest.raises(ConfigError, match=r"imu0/data\.csv: line 801 has [1-6] fields where "
+                                          r"line 2 has 7 \(a file cut short\?\)"):
+        read_log(folder)
+    imu.write_text(text.splitlines()[0] + "\n")
+    with pytest.raises(ConfigError, match=r"imu0/data\.csv: no IMU samples"):
+        read_log(folder)
+
+
 def test_the_simulated_only_table_speaks_of_no_log(capsys: pytest.CaptureFixture[str]) -> None:
     # docs/logs.md's `skeye logs --rate 200 --seconds 60`: without a log there is no log to
     # lack ground truth, so the note about one must not be printed.
