@@ -78,12 +78,12 @@ def folder_lock(folder: Path, command: str, option: str = "--out") -> Iterator[N
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             f.seek(0)
-            holder = f.read().strip() or "a running process"
-            raise ConfigError(f"{option} {folder} is in use by another {command} ({holder}): "
-                              f"wait for it to end, or give another {option}") from None
+            holder = f.read().strip() or "another process"
+            raise ConfigError(f"{option} {folder} is in use by {holder}: wait for it to end, "
+                              f"or give another {option}") from None
         f.seek(0)
         f.truncate()
-        f.write(f"pid {os.getpid()}")
+        f.write(f"another {command} (pid {os.getpid()})")
         f.flush()
         yield
 
