@@ -82,9 +82,8 @@ def run_trials(spec: SweepSpec, out: Path, backend: Backend, label: str = "sweep
             except ConfigError as exc:  # a full disk: the running trials' rows would be lost
                 # too, so they are not waited for (an hour each, maybe)
                 stopped = stop_running_trials()
-                raise ConfigError(f"{exc}; the sweep stops ({stopped} running trial(s) "
-                                  f"killed); the rows stored before are kept in {store.dir} "
-                                  "(rerun to resume)") from None
+                raise ConfigError(f"{exc}; stopped ({stopped} running trial(s) killed)"
+                                  ) from None
             result.ran += 1
             if row.get("error"):
                 counts["failed"] += 1
@@ -111,6 +110,9 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
         backend = make_backend(backend_name, address, workers, spec.cpus, spec.gpus)
         try:
             result = run_trials(spec, out, backend, spec.name, show_progress)
+        except ConfigError as exc:  # a row could not be stored: the others are
+            raise ConfigError(f"{exc}; the rows stored before are kept in {out / 'trials'} "
+                              "(rerun to resume)") from None
         finally:
             backend.close()
         write_tables(out, result.rows, spec.param_names)

@@ -473,7 +473,8 @@ def test_a_row_that_cannot_be_stored_stops_the_sweep_naming_it_and_keeps_its_fig
     text = str(err.value)
     assert f"cannot store trial {ok.key}'s row in {trials / ok.key}.json: Is a directory" in text
     assert '"height_m": 1.0' in text and '"mode": "ok"' in text, text  # the figures, kept
-    assert "1 running trial(s) killed" in text and "rerun to resume" in text, text
+    assert "stopped (1 running trial(s) killed); the rows stored before are kept in " \
+        f"{trials} (rerun to resume)" in text, text
     hang_pid = int(pidfile.read_text())
     assert not Path(f"/proc/{hang_pid}").exists() or \
         Path(f"/proc/{hang_pid}/stat").read_text().split(")")[1].split()[0] == "Z"
