@@ -5,7 +5,9 @@ error) from ``CommandStreamParser`` and returns the packets to send back; ``tick
 advances everything that depends on time (flight-state progress from the airframe, the
 stick gesture, the link-loss failsafe, streamed telemetry) and returns packets to push. The
 time is an argument (wall-clock seconds, monotonic), so tests drive it; the boards own no
-socket, thread or clock. The caller serialises calls (one lock in the server).
+socket, thread or clock. The caller serialises calls (one lock in the server). What the vehicle
+does runs on the vehicle's clock (the airframe snapshot's time: sim time on the simulator): a
+VELOCITY's duration ends there, not on the wall clock, which runs apart in lockstep.
 
 Answers: every skeye command gets a RESULT (0 ok, or the code of what is wrong); AscTec
 commands get their ack, or a RESULT naming the command's PD when refused; a poll gets one frame
@@ -172,7 +174,9 @@ class OnboardBoards:
         self.motors_on = snap.armed
         self._last_packet_s = now_s
         self._failsafe_since_s: float | None = None
-        self._velocity_until_s: float | None = None  # wall time a timed VELOCITY ends
+        # Vehicle time (the snapshot's: sim time on the simulator) a timed VELOCITY ends: the
+        # duration is the vehicle's motion, which in lockstep runs at its own pace.
+        self._velocity_until_s: float | None = None
         self._motion_pending = False  # an autonomous motion whose end is airframe.busy
         self._sticks = CtrlInput(0, 0, 0, 0, 0)
         self._sticks_sim_s = -math.inf  # sim time of the last stick command flown
@@ -284,7 +288,7 @@ class OnboardBoards:
             self._fire(FlightEvent.HOLD)
             self._end_motion()
         elif isinstance(msg, Velocity):
-            self._velocity(msg, now_s)
+            self._velocity(msg)
         elif isinstance(msg, MoveBy):
             self._move_by(msg)
         elif isinstance(msg, GotoGps):
@@ -411,13 +415,13 @@ class OnboardBoards:
             self.health = Health(status, reason)
             self._health_news = True
 
-    def _velocity(self, msg: Velocity, now_s: float) -> None:
+    def _velocity(self, msg: Velocity) -> None:
         self.flight.check(FlightEvent.MOVE)
         si = velocity_to_si(msg)
         fwd, right, down = si.vel_frd_m_s
         duration_s = si.duration_s if msg.duration else None
+        snap = self.airframe.snapshot()
         if duration_s is not None:  # where it ends; open-ended ones are stopped at the edge
-            snap = self.airframe.snapshot()
             vn, ve = _frd_to_ned((fwd, right, 0.0), snap.rpy_rad[2])
             n, e, d = snap.pos_ned_m
             end = (n + vn * duration_s, e + ve * duration_s, d + down * duration_s)
@@ -425,7 +429,7 @@ class OnboardBoards:
         self.airframe.set_velocity(fwd, right, -down, si.yaw_rate_rad_s, duration_s)
         self._fire(FlightEvent.MOVE)
         self._end_motion()
-        self._velocity_until_s = None if duration_s is None else now_s + duration_s
+        self._velocity_until_s = None if duration_s is None else snap.time_s + duration_s
 
     def _move_by(self, msg: MoveBy) -> None:
         self.flight.check(FlightEvent.MOVE)
@@ -606,7 +610,7 @@ class OnboardBoards:
         """Advance time-dependent behaviour; returns packets to push (streamed telemetry, and
         HEALTH when it changed)."""
         self._check_gesture(now_s)
-        self._progress(now_s)
+        self._progress()
         self._envelope_guard()
         self._failsafe(now_s)
         out: list[Message] = []
@@ -659,7 +663,7 @@ class OnboardBoards:
         else:
             self._motors_seen_s = None
 
-    def _progress(self, now_s: float) -> None:
+    def _progress(self) -> None:
         state = self.state
         snap = self.airframe.snapshot()
         if snap.crashed and state is not NavState.CRASHED:
@@ -671,7 +675,7 @@ class OnboardBoards:
         if state is NavState.TAKING_OFF and not self.airframe.busy:
             self._fire(FlightEvent.CLIMBED)
         elif state is NavState.FLYING:
-            if self._velocity_until_s is not None and now_s >= self._velocity_until_s:
+            if self._velocity_until_s is not None and snap.time_s >= self._velocity_until_s:
                 self._velocity_until_s = None
                 self.airframe.hover()
                 self._fire(FlightEvent.ARRIVED)

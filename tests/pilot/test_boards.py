@@ -126,14 +126,21 @@ def test_move_by_body_frame_turns_with_heading():
     assert boards.state is NavState.HOLDING
 
 
-def test_timed_velocity_ends_in_hold():
-    air, boards = make()
+def test_timed_velocity_ends_in_hold_after_its_duration_of_vehicle_time():
+    """The duration is the vehicle's (the snapshot's time: sim time on the simulator), not
+    the wall clock's: in lockstep the two run apart (a ground station holding the clock, an
+    unpaced simulator). It ended on the wall clock: HOLDING (and a hover) after 0.3 s of wall
+    time whatever the vehicle had flown."""
+    air, boards = make(link_timeout_s=100.0)
     airborne(boards, air)
+    air.finish(time_s=10.0)
     send(boards, encode(Velocity(500, 0, -200, 100, 300)), now_s=1.0)
     assert air.calls[-1] == ("set_velocity", (0.5, 0.0, 0.2, 0.1, 0.3))
-    boards.tick(1.2)
-    assert boards.state is NavState.FLYING
-    boards.tick(1.31)
+    air.finish(time_s=10.2)
+    boards.tick(50.0)  # long after on the wall clock, 0.2 s on the vehicle's
+    assert boards.state is NavState.FLYING and air.calls[-1][0] == "set_velocity"
+    air.finish(time_s=10.31)
+    boards.tick(50.1)
     assert boards.state is NavState.HOLDING and air.calls[-1][0] == "hover"
 
 

@@ -13,6 +13,7 @@ detector running, a link-loss failsafe) the ground station sends one CTRL_INPUT,
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -81,7 +82,10 @@ def stack() -> Iterator[ExitStack]:
 
 
 def _fly(stack: ExitStack, control_port: int, images_port: int | None = None,
-         robot_class: str = "hummingbird", settings: BoardSettings | None = None) -> Flight:
+         robot_class: str = "hummingbird", settings: BoardSettings | None = None,
+         clock: Callable[[], float] = time.monotonic) -> Flight:
+    """A pilot on a lockstep simulator with the clock in the test's hands (``ground_clock``);
+    ``clock`` is the pilot's wall clock (the link timeouts')."""
     images = None if images_port is None else f"127.0.0.1:{images_port}"
     sim = stack.enter_context(connect(f"127.0.0.1:{control_port}", images=images,
                                       timeout_s=30.0))
@@ -89,7 +93,7 @@ def _fly(stack: ExitStack, control_port: int, images_port: int | None = None,
     vision = pad_vision_factory(sim, robot) if images is not None else None
     pilot = stack.enter_context(PilotServer(
         SimAirframe(sim, robot), port=0, lockstep=True, ground_clock=True, tick_s=0.05,
-        settings=settings, vision=vision))
+        settings=settings, vision=vision, clock=clock))
     vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=30.0))
     mask = SkeyeMask.NAV_STATUS | (SkeyeMask.PAD if images is not None else 0)
     vehicle.stream(0, int(mask), 0.02)
