@@ -24,7 +24,8 @@ pushed when it changes, and streamed with NAV_STATUS once a second.
 
 Link loss: while airborne, no packet for ``link_timeout_s`` -> FAILSAFE (hover), then after
 ``land_timeout_s`` more -> LANDING. A packet arriving in FAILSAFE stops the land countdown; the
-vehicle keeps holding until ground control commands it.
+vehicle keeps holding until ground control commands it, and if the link is lost again first
+(no packet for ``link_timeout_s`` once more) the countdown starts again.
 
 Sticks: CTRL_INPUT with its axis bits set, the motors running, takes over from whatever flies
 the vehicle (take-off, a move, a pad mode, a landing, a failsafe) and the state says MANUAL
@@ -714,8 +715,14 @@ class OnboardBoards:
                 self._end_motion()
                 self.airframe.hover()
                 self._failsafe_since_s = now_s
-        elif state is NavState.FAILSAFE and self._failsafe_since_s is not None:
-            if now_s - self._failsafe_since_s >= self.settings.land_timeout_s:
+        elif state is NavState.FAILSAFE:
+            if self._failsafe_since_s is None and silent_s >= self.settings.link_timeout_s:
+                # Ground control came back (its packet stopped the countdown) and was lost
+                # again before commanding anything: the countdown starts again, or a vehicle
+                # that heard one packet in FAILSAFE hovered for good.
+                self._failsafe_since_s = now_s
+            since = self._failsafe_since_s
+            if since is not None and now_s - since >= self.settings.land_timeout_s:
                 self._fire(FlightEvent.LAND_TIMEOUT)
                 self.airframe.land()
                 self._failsafe_since_s = None

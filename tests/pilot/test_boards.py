@@ -254,6 +254,25 @@ def test_a_packet_during_failsafe_stops_the_land_countdown():
     assert boards.state is NavState.HOLDING
 
 
+def test_a_link_lost_again_after_a_packet_in_failsafe_starts_the_land_countdown_again():
+    """One packet in FAILSAFE stops the countdown; if the link is then lost again before
+    ground control commands anything, the vehicle must still land after the land timeout. It
+    hovered in FAILSAFE for good: a station heard once (a reconnect, a single poll) switched
+    the failsafe's landing off."""
+    air, boards = make(link_timeout_s=1.0, land_timeout_s=2.0)
+    airborne(boards, air)
+    boards.tick(1.0)
+    assert boards.state is NavState.FAILSAFE
+    send(boards, encode(Poll(1)), now_s=1.5)
+    boards.tick(2.0)
+    assert boards.state is NavState.FAILSAFE and boards.tick(2.4) == []
+    boards.tick(2.5)  # silent for the link timeout again: lost again, the countdown restarts
+    boards.tick(4.4)
+    assert boards.state is NavState.FAILSAFE
+    boards.tick(4.5)
+    assert boards.state is NavState.LANDING and air.calls[-1][0] == "land"
+
+
 def corrupt_frames() -> list[bytes]:
     """What a broken radio delivers: a skeye HOLD with a wrong CRC, sticks with a wrong command
     checksum, and bytes too broken to name a command."""

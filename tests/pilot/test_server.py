@@ -113,6 +113,24 @@ def test_link_loss_over_tcp_holds_then_lands_and_the_pilot_serves_again():
             assert pilot.boards.state is NavState.LANDED
 
 
+def test_a_station_heard_once_in_failsafe_then_lost_again_still_gets_the_landing():
+    """The ground station goes quiet: FAILSAFE; it sends one poll (the countdown stops) and goes
+    quiet again: the vehicle lands after the land timeout. It hovered in FAILSAFE for good."""
+    air = FakeAirframe()
+    settings = BoardSettings(link_timeout_s=1.0, land_timeout_s=2.0)  # >> a busy host's stalls
+    with PilotServer(air, port=0, settings=settings) as pilot:
+        with Vehicle.open(pilot.address, keepalive_s=None) as v:  # goes quiet after take-off
+            v.take_off(1.0)
+            air.finish(landed=False, armed=True)
+            v.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+            v.wait_state(NavState.HOLDING, timeout_s=30)
+            v.wait_state(NavState.FAILSAFE, timeout_s=30)
+            assert PD.LL_STATUS in v.poll(int(PollMask.LL_STATUS))  # heard once, then quiet
+            assert pilot.boards.state is NavState.FAILSAFE
+            v.wait_state(NavState.LANDING, timeout_s=30)
+            assert air.names()[-1] == "land"
+
+
 def test_garbage_over_tcp_is_counted_and_serving_goes_on():
     air = FakeAirframe()
     with PilotServer(air, port=0) as pilot, Vehicle.open(pilot.address) as v:
