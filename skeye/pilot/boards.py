@@ -175,6 +175,7 @@ class OnboardBoards:
         self.motors_on = snap.armed
         self._last_packet_s = now_s
         self._failsafe_since_s: float | None = None
+        self._vehicle_lost = False  # the vehicle below stopped answering (until it is back)
         # Vehicle time (the snapshot's: sim time on the simulator) a timed VELOCITY ends: the
         # duration is the vehicle's motion, which in lockstep runs at its own pace.
         self._velocity_until_s: float | None = None
@@ -220,8 +221,10 @@ class OnboardBoards:
         """
         if arrived_intact(event):
             self._last_packet_s = now_s
-            if self.state is NavState.FAILSAFE:
-                self._failsafe_since_s = None  # ground control is back: stop the countdown
+            if self.state is NavState.FAILSAFE and not self._vehicle_lost:
+                # Ground control is back: stop the countdown. Not for a vehicle lost below:
+                # the ground being there does not bring it back.
+                self._failsafe_since_s = None
         if isinstance(event, CommandError):
             self.errors[event.code.name.lower()] += 1
             return [event.result()]
@@ -404,6 +407,7 @@ class OnboardBoards:
         self._end_motion()
         self.motors_on = False
         self._failsafe_since_s = None
+        self._vehicle_lost = False
         self.pad.landing_finished()
         snap = self.airframe.snapshot()
         self.home_ned_m = snap.pos_ned_m
@@ -724,8 +728,14 @@ class OnboardBoards:
             since = self._failsafe_since_s
             if since is not None and now_s - since >= self.settings.land_timeout_s:
                 self._fire(FlightEvent.LAND_TIMEOUT)
-                self.airframe.land()
                 self._failsafe_since_s = None
+                try:
+                    self.airframe.land()
+                except SkeyeError as exc:
+                    if not self._vehicle_lost:
+                        raise
+                    log.warning("failsafe: the land timeout's landing did not reach the lost "
+                                "vehicle: %s", exc)
 
     def vehicle_lost(self, now_s: float, reason: str = "") -> None:
         """The vehicle below stopped answering (simulator gone): failsafe as on link loss.
@@ -734,8 +744,12 @@ class OnboardBoards:
         to an airframe that may refuse them, which the loop tolerates), from a landing too: the
         pilot can no longer see the touchdown that would end it (a landing lost to its LL board
         stayed LANDING for good); on the ground, nothing. The health is LOST, with ``reason``.
+        Ground control's packets do not stop this countdown as they stop a lost link's: the
+        ground being heard does not bring the vehicle back (they did, and with a station
+        connected the pilot never tried to land a vehicle it had lost).
         """
         self._set_health(HealthStatus.LOST, reason or "the vehicle stopped answering")
+        self._vehicle_lost = True
         if self.state in _AIRBORNE or self.state is NavState.LANDING:
             self._fire(FlightEvent.VEHICLE_LOST)
             self._end_motion()

@@ -334,6 +334,21 @@ def test_a_vehicle_lost_in_the_air_is_failsafe_a_landing_too(landing: bool) -> N
     assert TRANSITIONS[(NavState.LANDING, FlightEvent.LINK_LOST)] is NavState.LANDING
 
 
+def test_ground_control_heard_does_not_stop_a_lost_vehicles_land_countdown() -> None:
+    """A packet stops a lost link's countdown, not a lost vehicle's: the ground being there
+    does not bring the vehicle back. With a station connected (its heartbeat polls) the pilot
+    never tried to land a vehicle it had lost."""
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    airborne(boards, air, now_s=0.0)
+    boards.vehicle_lost(1.0, "LL board silent: no answer")
+    for i in range(40):  # the heartbeat, every 0.5 s
+        send(boards, encode(Poll(1)), now_s=1.0 + 0.5 * i)
+        boards.tick(1.0 + 0.5 * i)
+    assert boards.state is NavState.FAILSAFE
+    boards.tick(21.0)
+    assert boards.state is NavState.LANDING and air.calls[-1][0] == "land"
+
+
 def test_a_vehicle_lost_on_the_ground_stays_landed() -> None:
     _, boards = make()
     boards.vehicle_lost(1.0, "simulator lost")

@@ -46,6 +46,31 @@ def test_simulator_killed_under_the_pilot():
         assert PD.LL_STATUS in vehicle.poll(int(PollMask.LL_STATUS))
 
 
+def test_a_lost_vehicle_is_landed_after_the_land_timeout_with_the_ground_station_connected():
+    """The heartbeat of a connected ground station stopped the land countdown of a vehicle
+    lost below: FAILSAFE for good, the land timeout never came. Now LANDING after it, and the
+    landing that cannot reach the dead simulator is a warning, not a fault of the loop."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=4))
+        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=5.0))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        pilot = stack.enter_context(
+            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
+                        tick_s=0.05, settings=BoardSettings(land_timeout_s=1.0))
+        )
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=5.0))  # heartbeat
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+        vehicle.take_off(1.0)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=30)
+
+        server.close()  # the simulator goes away (its engine too)
+        server.runner.close()
+
+        vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        vehicle.wait_state(NavState.LANDING, timeout_s=30)
+        assert pilot.loop_faults == 0 and pilot.loop_error is None
+
+
 def test_the_pilot_reattaches_when_its_simulator_comes_back():
     """Recovery (issue 31): the simulator at the same address again, the pilot spawns its robot
     there and says so; the vehicle is LANDED and flies. Before, a pilot that lost its
