@@ -39,7 +39,8 @@ Flight envelope (``skeye.pilot.envelope``, like PX4's geofence): every command w
 is checked against a ceiling above home and a radius around it and refused with RESULT code 3
 and a reason when outside; stick and open-ended velocity input is limited at the envelope's
 edge, not refused (a full-thrust stick in height mode means the maximum climb rate, and holds
-height at the ceiling); a vehicle beyond a limit that still moves outward is stopped (HOLDING).
+height at the ceiling), and so are the pad modes' and a policy's (``fly_velocity``); a vehicle
+beyond a limit that still moves outward is stopped (HOLDING).
 
 Telemetry: ``poll`` and the stream hand a snapshot of the airframe and the boards' status
 (``BoardStatus``) to ``skeye.pilot.telemetry``, which builds the structures; this module only
@@ -572,6 +573,19 @@ class OnboardBoards:
         thrust = msg.thrust / THRUST_MAX
         self.airframe.attitude(roll, pitch, yaw, thrust)
         return thrust > 0.0
+
+    def fly_velocity(self, forward_m_s: float, right_m_s: float, up_m_s: float,
+                     yaw_rate_rad_s: float = 0.0) -> None:
+        """An open-ended velocity set-point of the onboard computer's own (the pad hold and
+        landing, a ``--policy``), heading frame, up positive: at the flight envelope's edge its
+        outward part is removed, as the sticks' is (the envelope guard acts only on FLYING and
+        MANUAL, and these fly while HOLDING: a pad search climbed to its 8 m over a 3 m
+        ceiling)."""
+        snap = self.airframe.snapshot()
+        fwd, right, up = self.settings.envelope.limit_body_velocity(
+            self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], forward_m_s, right_m_s, up_m_s
+        )
+        self.airframe.set_velocity(fwd, right, up, yaw_rate_rad_s, None)
 
     def _envelope_guard(self) -> None:
         """Stop a flying vehicle that is beyond the envelope and still moving out (flown by a

@@ -10,7 +10,8 @@ NED metres, no clock):
   (bad value) and a reason naming the limit (``check_target``);
 - stick and open-ended velocity input is limited, not refused: at the ceiling a full-thrust
   stick holds height, at the radius the outward part of the velocity is removed
-  (``limit_velocity``);
+  (``limit_velocity``); so are the onboard computer's own velocities (the pad modes, a
+  ``--policy``: ``OnboardBoards.fly_velocity``);
 - every tick: a vehicle beyond a limit and still moving outward (an open-ended VELOCITY, a gust)
   is stopped and holds (``breach``), as PX4's geofence "hold" action does. Moving back inside is
   always allowed; COME_HOME (``>*>wh``) is never refused.

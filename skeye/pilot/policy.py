@@ -384,7 +384,7 @@ class PolicyPilot:
                 log.warning("the policy flies again after %d failed call(s)",
                             self.failures_in_a_row)
                 self.failures_in_a_row = 0
-            boards.airframe.set_velocity(forward, right, up, yaw_rate, None)
+            boards.fly_velocity(forward, right, up, yaw_rate)  # inside the flight envelope
 
     def _timed(self, took_s: float) -> None:
         """A call slower than its period held up the pilot's loop (the boards' tick, their

@@ -44,7 +44,9 @@ the pad centre within the deadband at up to the speed limit; LAND (2) descends o
 hands over to the vehicle's own landing straight down. Pad navigation acts only while the
 vehicle is HOLDING (after take-off, HOLD, or when a commanded motion has finished): a ground
 command (velocity, move, goto) suspends it until that motion ends, and PAD_MODE 0 gives the
-vehicle back with a hover. Nothing here reads the simulator's ground truth.
+vehicle back with a hover. Its set-points are limited at the flight envelope's edge
+(``OnboardBoards.fly_velocity``): a search does not climb through the ceiling. Nothing here
+reads the simulator's ground truth.
 
 With a video sink attached (:meth:`PadVision.attach_video`: the pilot's video port,
 :mod:`skeye.pilot.video_server`), every frame the worker looked at goes there too, with the
@@ -664,4 +666,4 @@ class PadVision:
         if sp.touchdown:
             boards.land()  # the final descent is the vehicle's own landing, straight down
             return
-        boards.airframe.set_velocity(sp.forward_m_s, sp.right_m_s, sp.up_m_s, 0.0, None)
+        boards.fly_velocity(sp.forward_m_s, sp.right_m_s, sp.up_m_s)  # inside the envelope

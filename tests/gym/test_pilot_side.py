@@ -208,6 +208,9 @@ def _holding_pilot(policy: object) -> tuple[PolicyPilot, _Airframe]:
     airframe = _Airframe()
     boards = SimpleNamespace(pad=pad, state=NavState.HOLDING, airframe=airframe,
                              home_ned_m=(0.0, 0.0, 0.0))
+    # OnboardBoards.fly_velocity, far inside the flight envelope (nothing to limit)
+    boards.fly_velocity = lambda fwd, right, up, yaw_rate=0.0: airframe.set_velocity(
+        fwd, right, up, yaw_rate, None)
     pilot = PolicyPilot(boards, _Vision(), policy, observation="pad",  # type: ignore[arg-type]
                         limits=ActionLimits(1.0, 1.0, 1.0), period_s=0.05)
     return pilot, airframe

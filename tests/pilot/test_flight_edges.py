@@ -9,13 +9,16 @@ import math
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack
+from pathlib import Path
 
 import pytest
 
 from skeye.pilot.boards import BoardSettings
-from skeye.wire.packets import NavState
+from skeye.pilot.envelope import FlightEnvelope
+from skeye.wire.packets import NavState, PadAction
 from tests.pilot.test_takeover import _fly, _hold_at
 from tests.sim.conftest import running_sim
+from tests.sim.test_cameras import sim_with_images, small_camera_robot
 
 
 class JumpClock:
@@ -56,3 +59,27 @@ def test_a_timed_velocity_lasts_its_duration_of_sim_time_while_the_ground_holds_
     assert ns.state is NavState.HOLDING, ns
     n, e, _ = flight.robot.ground_truth.latest.position_ned_m  # type: ignore[attr-defined]
     assert math.hypot(n - n0, e - e0) > 0.5
+
+
+def test_a_pad_search_climbs_no_higher_than_the_flight_envelope_allows(
+    stack: ExitStack, tmp_path: Path,
+) -> None:
+    """PAD_MODE HOLD 10 m from the pad, which the camera cannot see: the vehicle searches,
+    climbing to widen its view, but not above a 3 m ceiling. The pad modes fly while HOLDING,
+    where the envelope guard does not act, and their velocities were not limited: the search
+    climbed to its own 8 m ceiling, 5 m above the envelope's."""
+    control, images, _cameras = stack.enter_context(sim_with_images(
+        robot_dirs=(small_camera_robot(tmp_path),), estimator="truth"))
+    ceiling_m = 3.0
+    flight = _fly(stack, control.port, images.port, robot_class="smallcam",
+                  settings=BoardSettings(envelope=FlightEnvelope(ceiling_m=ceiling_m)))
+    _hold_at(flight, 2.0)
+    flight.vehicle.move_by(right_m=10.0, speed_m_s=3.0)
+    flight.run_until(lambda ns: ns.state is NavState.HOLDING, 30.0, step_s=0.5)
+    flight.vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
+    highest = 0.0
+    for _ in range(30):  # 15 s of sim time: the search reached 5.3 m in 10 s
+        ns = flight.run_for(0.5)
+        assert ns.state is NavState.HOLDING and ns.pad_mode is PadAction.HOLD, ns
+        highest = max(highest, -ns.z / 1000.0)
+    assert ceiling_m - 0.5 < highest < ceiling_m + 0.3, highest  # searched up to the ceiling
