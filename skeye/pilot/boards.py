@@ -582,9 +582,11 @@ class OnboardBoards:
         MANUAL, and these fly while HOLDING: a pad search climbed to its 8 m over a 3 m
         ceiling)."""
         snap = self.airframe.snapshot()
-        fwd, right, up = self.settings.envelope.limit_body_velocity(
-            self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], forward_m_s, right_m_s, up_m_s
-        )
+        envelope, fwd, right, up = self.settings.envelope, forward_m_s, right_m_s, up_m_s
+        if envelope.at_limit(self.home_ned_m, snap.pos_ned_m):  # (inside, the numbers go on
+            # untouched: the heading-frame round trip would change their last bits)
+            fwd, right, up = envelope.limit_body_velocity(
+                self.home_ned_m, snap.pos_ned_m, snap.rpy_rad[2], fwd, right, up)
         self.airframe.set_velocity(fwd, right, up, yaw_rate_rad_s, None)
 
     def _envelope_guard(self) -> None:

@@ -88,6 +88,13 @@ class FlightEnvelope:
                 north_m_s, east_m_s = north_m_s - outward * rn, east_m_s - outward * re
         return north_m_s, east_m_s, up_m_s
 
+    def at_limit(self, home_ned_m: Vec3, pos_ned_m: Vec3) -> bool:
+        """At or beyond the ceiling or the radius: where ``limit_velocity`` may change a
+        velocity (elsewhere it leaves it as it is)."""
+        dn, de = pos_ned_m[0] - home_ned_m[0], pos_ned_m[1] - home_ned_m[1]
+        return (home_ned_m[2] - pos_ned_m[2] >= self.ceiling_m
+                or math.hypot(dn, de) >= self.max_radius_m)
+
     def limit_body_velocity(
         self, home_ned_m: Vec3, pos_ned_m: Vec3, yaw_rad: float, fwd: float, right: float,
         up: float
