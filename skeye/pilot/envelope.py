@@ -8,10 +8,10 @@ NED metres, no clock):
 - every command with a target (TAKE_OFF, LAUNCH, MOVE_BY, GOTO_GPS, waypoint goto, a VELOCITY
   with a duration: its end point) before it starts: outside, it is refused with RESULT code 3
   (bad value) and a reason naming the limit (``check_target``);
-- stick and open-ended velocity input is limited, not refused: at the ceiling a full-thrust
-  stick holds height, at the radius the outward part of the velocity is removed
-  (``limit_velocity``); so are the onboard computer's own velocities (the pad modes, a
-  ``--policy``: ``OnboardBoards.fly_velocity``);
+- stick input is limited, not refused: at the ceiling a full-thrust stick holds height, at the
+  radius the outward part of the velocity is removed (``limit_velocity``); so are the onboard
+  computer's own velocities (the pad modes, a ``--policy``: ``OnboardBoards.fly_velocity``).
+  An open-ended VELOCITY is neither refused nor limited: the stop below acts on it;
 - every tick: a vehicle beyond a limit and still moving outward (an open-ended VELOCITY, a gust)
   is stopped and holds (``breach``), as PX4's geofence "hold" action does. Moving back inside is
   always allowed; COME_HOME (``>*>wh``) is never refused.
