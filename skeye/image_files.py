@@ -6,6 +6,10 @@ calibrated on or searched for the pad as if it were whole. :func:`read_image_fil
 first walks the file's structure (:func:`damage`): a JPEG's marker segments and entropy-coded
 scans up to its end-of-image marker (FF D9), a PNG's chunks up to IEND. Bytes after that end
 are allowed (some cameras pad their files). A file of another format goes to OpenCV as it is.
+Pixels are decoded as the sensor recorded them: an EXIF orientation tag (phones, some cameras)
+is not applied, as the ``file://`` camera's video reader does not apply it either, since a field
+of view and a calibration describe the sensor's rows and columns (rotated, a 4:3 frame's
+horizontal field of view would be taken across its short side).
 Every command and tool that reads a still image from a file (``skeye vision detect``, ``skeye
 calibrate``, the ``file://`` camera given a photo) goes through here, so they agree.
 """
@@ -117,7 +121,8 @@ def file_damage(path: str | Path) -> str | None:
 
 def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarray:
     """The pixels of an image file (any format OpenCV reads), decoded with ``flags``
-    (``cv2.IMREAD_GRAYSCALE``: one channel).
+    (``cv2.IMREAD_GRAYSCALE``: one channel), in the sensor's orientation (an EXIF orientation
+    tag is ignored).
 
     Raises:
         ConfigError: naming the file: missing, unreadable, truncated or corrupt, or not an image.
@@ -131,7 +136,8 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
     problem = damage(data)
     if problem is not None:
         raise ConfigError(f"image {path} is truncated or corrupt: {problem}")
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
+    image = (cv2.imdecode(np.frombuffer(data, np.uint8), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+             if data else None)
     if image is None:
         if data.startswith((JPEG_SOI, PNG_SIGNATURE)):
             kind = "JPEG" if data.startswith(JPEG_SOI) else "PNG"

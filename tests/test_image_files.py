@@ -122,3 +122,30 @@ def test_stray_bytes_between_segments_are_skipped_as_libjpeg_does(files: dict[st
     with pytest.raises(ConfigError, match="truncated or corrupt"):
         stray.write_bytes(data[:app0_end] + b"camera junk" + data[app0_end:-300])
         read_image_file(stray)
+
+
+def with_exif_orientation(jpeg: bytes, orientation: int) -> bytes:
+    """A JPEG with an EXIF APP1 segment holding one tag, Orientation (0x0112), after SOI."""
+    tiff = (b"II*\x00" + (8).to_bytes(4, "little") + (1).to_bytes(2, "little")
+            + (0x0112).to_bytes(2, "little") + (3).to_bytes(2, "little")
+            + (1).to_bytes(4, "little") + orientation.to_bytes(2, "little") + b"\x00\x00"
+            + (0).to_bytes(4, "little"))
+    body = b"Exif\x00\x00" + tiff
+    return jpeg[:2] + b"\xff\xe1" + (len(body) + 2).to_bytes(2, "big") + body + jpeg[2:]
+
+
+def test_an_exif_orientation_tag_is_not_applied(files: dict[str, bytes], tmp_path: Path) -> None:
+    """A photo tagged "rotate 90" (phones, some cameras) came out 240 wide and 320 high, so
+    ``skeye vision detect`` took the horizontal field of view across the sensor's short side
+    (a pad at 2.0 m measured 1.5 m, quality 0.92), a calibration refused it for its size, and
+    the ``file://`` camera (OpenCV's video reader: the sensor's rows) saw another frame."""
+    tagged = tmp_path / "tagged.jpg"
+    tagged.write_bytes(with_exif_orientation(files["baseline.jpg"], 6))
+    assert cv2.imread(str(tagged)).shape == (320, 240, 3)  # OpenCV's own reader rotates it
+    plain = cv2.imdecode(np.frombuffer(files["baseline.jpg"], np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert np.array_equal(read_image_file(tagged, cv2.IMREAD_GRAYSCALE), plain)
+    capture = cv2.VideoCapture(str(tagged))
+    ok, frame = capture.read()
+    capture.release()
+    assert ok and frame.shape == read_image_file(tagged).shape == (240, 320, 3)
+

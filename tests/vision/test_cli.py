@@ -238,3 +238,24 @@ def test_detect_refuses_a_truncated_jpeg_and_takes_a_padded_one(pad_png, tmp_pat
     assert run(["vision", "detect", str(cut), "--fov", "1.309"]) == 2
     assert ("truncated or corrupt: the PNG data ends before its IEND chunk"
             in capsys.readouterr().err)
+
+
+def test_detect_reads_a_tagged_photo_in_the_sensors_orientation(tmp_path, capsys):
+    """An EXIF orientation tag ("rotate 90") turned the 800x600 frame into 600x800 before the
+    detector saw it: the pad at 2.0 m measured 1.5 m (the horizontal field of view taken
+    across the short side), quality 0.92, and a calibration refused the frame for its size."""
+    from skeye.vision.calibration import CameraCalibration
+
+    from ..test_image_files import with_exif_orientation
+
+    frame = render_pad_view(SKEYE_4, W, H, FOV_H_RAD, 2.0)
+    photo = tmp_path / "photo.jpg"
+    photo.write_bytes(with_exif_orientation(cv2.imencode(".jpg", frame)[1].tobytes(), 6))
+    cal = tmp_path / "camera.toml"
+    CameraCalibration.pinhole(W, H, FOV_H_RAD).save(cal)
+    for extra in (["--fov", "1.309"], ["--calibration", str(cal)]):
+        assert run(["vision", "detect", str(photo), *extra]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["found"] is True and out["height_m"] == pytest.approx(2.0, rel=0.005)
+        assert out["center_px"] == pytest.approx([(W - 1) / 2, (H - 1) / 2], abs=0.5)
+
