@@ -9,7 +9,8 @@ are allowed (some cameras pad their files). A file of another format goes to Ope
 Pixels are decoded as the sensor recorded them: an EXIF orientation tag (phones, some cameras)
 is not applied, as the ``file://`` camera's video reader does not apply it either, since a field
 of view and a calibration describe the sensor's rows and columns (rotated, a 4:3 frame's
-horizontal field of view would be taken across its short side).
+horizontal field of view would be taken across its short side). A file declaring more pixels
+than OpenCV decodes is refused with its size, not OpenCV's assertion.
 Every command and tool that reads a still image from a file (``skeye vision detect``, ``skeye
 calibrate``, the ``file://`` camera given a photo) goes through here, so they agree.
 """
@@ -17,6 +18,7 @@ calibrate``, the ``file://`` camera given a photo) goes through here, so they ag
 from __future__ import annotations
 
 import mmap
+import os
 import struct
 from pathlib import Path
 
@@ -24,6 +26,8 @@ import cv2
 import numpy as np
 
 from skeye.errors import ConfigError
+from skeye.pixels import declared_size
+from skeye.wire.images import FrameType
 
 JPEG_SOI = b"\xff\xd8"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -136,11 +140,37 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
     problem = damage(data)
     if problem is not None:
         raise ConfigError(f"image {path} is truncated or corrupt: {problem}")
-    image = (cv2.imdecode(np.frombuffer(data, np.uint8), flags | cv2.IMREAD_IGNORE_ORIENTATION)
-             if data else None)
+    try:
+        image = (cv2.imdecode(np.frombuffer(data, np.uint8), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+                 if data else None)
+    except cv2.error as exc:  # OpenCV refuses, with an assertion, what it will not decode
+        raise ConfigError(f"image {path} does not decode: {_too_large(data) or _reason(exc)}"
+                          ) from None
     if image is None:
         if data.startswith((JPEG_SOI, PNG_SIGNATURE)):
             kind = "JPEG" if data.startswith(JPEG_SOI) else "PNG"
             raise ConfigError(f"image {path} is corrupt: its {kind} data does not decode")
         raise ConfigError(f"cannot read image (not a supported image format?): {path}")
     return image
+
+
+def _too_large(data: bytes) -> str | None:
+    """Why OpenCV will not decode a JPEG or PNG whose header declares more pixels than it
+    decodes (``OPENCV_IO_MAX_IMAGE_PIXELS``, 2^30 by default); None otherwise."""
+    kind = FrameType.PNG if data.startswith(PNG_SIGNATURE) else FrameType.JPEG_SUPER
+    size = declared_size(kind, data)
+    try:
+        limit = int(os.environ.get("OPENCV_IO_MAX_IMAGE_PIXELS", 1 << 30))
+    except ValueError:
+        limit = 1 << 30
+    if size is None or size[0] * size[1] <= limit:
+        return None
+    width, height = size
+    return (f"it declares {width}x{height} px ({width * height} pixels), more than the "
+            f"{limit} OpenCV decodes (OPENCV_IO_MAX_IMAGE_PIXELS)")
+
+
+def _reason(exc: cv2.error) -> str:
+    """OpenCV's one-line reason, without its source location."""
+    lines = str(exc).strip().splitlines()
+    return lines[-1].split(" error: ", 1)[-1] if lines else "OpenCV refused it"

@@ -149,3 +149,29 @@ def test_an_exif_orientation_tag_is_not_applied(files: dict[str, bytes], tmp_pat
     capture.release()
     assert ok and frame.shape == read_image_file(tagged).shape == (240, 320, 3)
 
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A whole PNG (grey, 8 bit) whose header declares ``width`` x ``height`` and whose data
+    holds a few rows: small on disk, more pixels than OpenCV decodes."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    rows = zlib.compress(b"\x00" * (width + 1) * 4)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", rows)
+            + chunk(b"IEND", b""))
+
+
+def test_a_file_declaring_more_pixels_than_opencv_decodes_is_named(tmp_path: Path) -> None:
+    """OpenCV refuses it with an assertion (cv2.error), which went up through ``skeye vision
+    detect`` and ``skeye calibrate`` as a traceback (exit status 1)."""
+    big = tmp_path / "big.png"
+    big.write_bytes(_png_declaring(60000, 60000))
+    with pytest.raises(ConfigError, match=rf"^image {big} does not decode: it declares "
+                       r"60000x60000 px \(3600000000 pixels\), more than the 1073741824 "
+                       "OpenCV decodes"):
+        read_image_file(big, cv2.IMREAD_GRAYSCALE)

@@ -259,3 +259,22 @@ def test_detect_reads_a_tagged_photo_in_the_sensors_orientation(tmp_path, capsys
         assert out["found"] is True and out["height_m"] == pytest.approx(2.0, rel=0.005)
         assert out["center_px"] == pytest.approx([(W - 1) / 2, (H - 1) / 2], abs=0.5)
 
+
+def test_detect_and_calibrate_name_an_image_too_large_to_decode(tmp_path, capsys):
+    """A 12 KB PNG declaring 60000x60000 px: OpenCV's assertion (cv2.error) came out of both
+    commands as a traceback, exit status 1."""
+    from skeye.cli import main
+
+    from ..test_image_files import _png_declaring
+
+    big = tmp_path / "big.png"
+    big.write_bytes(_png_declaring(60000, 60000))
+    for argv, command in ((["vision", "detect", str(big), "--fov", "1.3"], "skeye vision detect"),
+                          (["calibrate", str(big), "--out", str(tmp_path / "c.toml")],
+                           "skeye calibrate")):
+        assert main(argv) == 2
+        captured = capsys.readouterr()
+        assert captured.out == ""
+        assert captured.err == (f"{command}: error: image {big} does not decode: it declares "
+                                "60000x60000 px (3600000000 pixels), more than the 1073741824 "
+                                "OpenCV decodes (OPENCV_IO_MAX_IMAGE_PIXELS)\n")
