@@ -33,6 +33,7 @@ only approximation is the pixel-area integral by ``supersample``^2 samples.
 from __future__ import annotations
 
 import math
+import numbers
 
 import cv2
 import numpy as np
@@ -50,19 +51,28 @@ DOWNWARD_CAMERA_TO_BODY = np.array(
 )
 
 
-def _check_fov(fov_h_rad: float) -> None:
-    if not (isinstance(fov_h_rad, (int, float)) and 0.0 < fov_h_rad < math.pi):
+def _check_fov(fov_h_rad: float) -> float:
+    """The field of view as a float; any real number (numpy's included), not a bool."""
+    if (isinstance(fov_h_rad, bool) or not isinstance(fov_h_rad, numbers.Real)
+            or not 0.0 < fov_h_rad < math.pi):
         raise LocalProtocolError(
             f"horizontal field of view must be in (0, pi) rad, got {fov_h_rad}"
         )
+    return float(fov_h_rad)
 
 
 def focal_length_px(width_px: int, fov_h_rad: float) -> float:
     """Focal length in pixels: ``(width / 2) / tan(fov_h / 2)``, never rounded."""
-    _check_fov(fov_h_rad)
+    fov = _check_fov(fov_h_rad)
     if width_px <= 0:
         raise LocalProtocolError(f"image width must be positive, got {width_px}")
-    return (width_px / 2.0) / math.tan(fov_h_rad / 2.0)
+    half_tan = math.tan(fov / 2.0)
+    f = (width_px / 2.0) / half_tan if half_tan > 0.0 else math.inf
+    if not math.isfinite(f):  # heights and offsets would come out inf and nan
+        raise LocalProtocolError(
+            f"horizontal field of view {fov_h_rad} rad is too small: the focal length of a "
+            f"{width_px} px wide image overflows")
+    return f
 
 
 def fov_v_rad(width_px: int, height_px: int, fov_h_rad: float) -> float:

@@ -52,6 +52,23 @@ def test_bad_fov_rejected(bad):
         focal_length_px(800, bad)
 
 
+def test_a_numpy_fov_is_a_fov():
+    """A float32 field of view (a value read from an array) was refused, with a message that
+    contradicted itself: "must be in (0, pi) rad, got 1.309000015258789"."""
+    assert focal_length_px(800, np.float32(1.309)) == focal_length_px(800, float(np.float32(1.309)))
+    with pytest.raises(LocalProtocolError, match="field of view"):
+        focal_length_px(800, True)
+
+
+@pytest.mark.parametrize("tiny", [1e-308, 5e-324])
+def test_a_fov_too_small_for_a_finite_focal_length_is_refused(tiny):
+    """In (0, pi), so taken: 5e-324 rad divided by zero (a ZeroDivisionError traceback from
+    `skeye vision detect --fov 5e-324`) and 1e-308 rad printed a height of Infinity and offsets
+    of NaN, which is no JSON."""
+    with pytest.raises(LocalProtocolError, match=f"field of view {tiny} rad is too small"):
+        focal_length_px(800, tiny)
+
+
 def test_downward_mount_axes():
     # Image right = body right, image down = body backward, optical axis = body down.
     assert DOWNWARD_CAMERA_TO_BODY @ np.array([1, 0, 0]) == pytest.approx([0, 1, 0])

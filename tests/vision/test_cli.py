@@ -81,6 +81,10 @@ def test_detect_not_found_exits_zero_with_nulls(tmp_path, capsys):
         (["--fov", "nan"], "--fov"),
         (["--fov", "1.3", "--roll", "0.1"], "--roll and --pitch"),
         (["--fov", "1.3", "--pad", "nope"], "unknown pad"),
+        # in (0, pi), but no focal length: a ZeroDivisionError traceback, and Infinity and NaN
+        # (no JSON) printed for the height and offsets
+        (["--fov", "5e-324"], "too small"),
+        (["--fov", "1e-308"], "too small"),
     ],
 )
 def test_detect_bad_values(pad_png, capsys, extra, match):
