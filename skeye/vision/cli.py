@@ -86,6 +86,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
         return _fail(DETECT, f"--fov must be in (0, pi) radians, got {args.fov}")
     if (args.roll is None) != (args.pitch is None):
         return _fail(DETECT, "give both --roll and --pitch, or neither")
+    for flag, value in (("--roll", args.roll), ("--pitch", args.pitch)):
+        if value is not None and not (math.isfinite(value) and abs(value) < math.pi / 2):
+            return _fail(DETECT, f"{flag} must be finite and within (-pi/2, pi/2) rad, got {value}")
     try:
         pad = resolve_pad(args.pad)
     except ConfigError as exc:

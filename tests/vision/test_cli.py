@@ -85,6 +85,11 @@ def test_detect_not_found_exits_zero_with_nulls(tmp_path, capsys):
         # (no JSON) printed for the height and offsets
         (["--fov", "5e-324"], "too small"),
         (["--fov", "1e-308"], "too small"),
+        # said as detect()'s "roll_rad must be ...", a name the command line does not have
+        (["--fov", "1.3", "--roll", "2", "--pitch", "0"],
+         "error: --roll must be finite and within (-pi/2, pi/2) rad, got 2.0"),
+        (["--fov", "1.3", "--roll", "0", "--pitch", "nan"],
+         "error: --pitch must be finite and within (-pi/2, pi/2) rad, got nan"),
     ],
 )
 def test_detect_bad_values(pad_png, capsys, extra, match):
