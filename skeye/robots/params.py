@@ -105,6 +105,24 @@ class AirframeParams:
             _check_positive(owner, f"inertia_kg_m2[{i}]", v)
         for i, v in enumerate(self.body_size_m):
             _check_positive(owner, f"body_size_m[{i}]", v)
+        # Principal moments of a real body obey the triangle inequality (each is a sum of two
+        # of the mass's second moments); MuJoCo refuses to compile a body that breaks it.
+        for i in range(3):
+            ia = self.inertia_kg_m2[i]
+            others = self.inertia_kg_m2[(i + 1) % 3] + self.inertia_kg_m2[(i + 2) % 3]
+            if ia > others * (1.0 + 1e-9):
+                raise ConfigError(
+                    f"{owner}: inertia_kg_m2 {list(self.inertia_kg_m2)} is no rigid body's: "
+                    f"inertia_kg_m2[{i}] = {ia!r} exceeds the sum of the other two ({others!r}); "
+                    "each principal moment must be at most the sum of the other two"
+                )
+        half_height = self.body_size_m[2] / 2.0
+        if self.gear_height_m < half_height:
+            raise ConfigError(
+                f"{owner}: gear_height_m {self.gear_height_m!r} is less than half the hull's "
+                f"height (body_size_m[2] / 2 = {half_height!r}): standing on its gear the hull "
+                "would reach into the ground; gear_height_m must be at least body_size_m[2] / 2"
+            )
         if self.max_thrust_n <= self.mass_kg * GRAVITY_M_S2:
             raise ConfigError(
                 f"{owner}: the rotors cannot lift the vehicle (max thrust "

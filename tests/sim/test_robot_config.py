@@ -27,6 +27,12 @@ CASES = [
     ("body-negative", "[airframe]\nbody_size_m = [0.12, -0.1, 0.06]", "body_size_m[1]", "-0.1"),
     ("body-zero", "[airframe]\nbody_size_m = [0.12, 0.12, 0.0]", "body_size_m[2]", "0.0"),
     ("body-nan", "[airframe]\nbody_size_m = [nan, 0.12, 0.06]", "body_size_m[0]", "nan"),
+    # MuJoCo refused to compile these at INIT (a ValueError naming no file), after the
+    # start-up check had passed them.
+    ("inertia-triangle", "[airframe]\ninertia_kg_m2 = [0.001, 0.001, 0.012]", "inertia_kg_m2[2]",
+     "0.012"),
+    # The hull reached 12 cm into the ground on the gear: the vehicle jumped at its spawn.
+    ("gear-below-hull", "[airframe]\nbody_size_m = [0.12, 0.12, 0.4]", "gear_height_m", "0.08"),
     ("avionics-negative", "[battery]\navionics_power_w = -5", "avionics_power_w", "-5.0"),
     ("avionics-nan", "[battery]\navionics_power_w = nan", "avionics_power_w", "nan"),
     ("avionics-inf", "[battery]\navionics_power_w = inf", "avionics_power_w", "inf"),
