@@ -153,9 +153,11 @@ def period_steps(rate_hz: float, physics_step_s: float, what: str) -> int:
     """The period of a rate in physics steps (at least 1).
 
     Raises:
-        ConfigError: a rate so low that its period is no finite number of steps (``what``
-            names the file and the key).
+        ConfigError: a rate so low that its period is no finite number of steps, or above the
+            physics rate, which no sampling once per step can give (``what`` names the file
+            and the key).
     """
+    check_rate(rate_hz, physics_step_s, what)
     steps = 1.0 / (rate_hz * physics_step_s)
     if not math.isfinite(steps):
         raise ConfigError(
@@ -163,6 +165,23 @@ def period_steps(rate_hz: float, physics_step_s: float, what: str) -> int:
             f"{physics_step_s:g} s physics steps"
         )
     return max(1, round(steps))
+
+
+def check_rate(rate_hz: float, physics_step_s: float, what: str) -> None:
+    """Refuse a rate above the physics rate: a sensor (a camera, the status) is sampled at
+    most once per physics step, so it would run at the physics rate while its CONF and the
+    board's estimator took the file's rate.
+
+    Raises:
+        ConfigError: the rate is above ``1 / physics_step_s`` (``what`` names the file and
+            the key).
+    """
+    if rate_hz * physics_step_s > 1.0 + 1e-9:
+        raise ConfigError(
+            f"{what} {rate_hz!r} Hz is above the physics rate {1.0 / physics_step_s:g} Hz "
+            f"(--timestep {physics_step_s:g} s): nothing is sampled more than once per "
+            "physics step"
+        )
 
 
 def board_decimation(config: RobotConfig, physics_step_s: float) -> int:
@@ -196,7 +215,10 @@ def mount_sensors(
         type_key = mount.type_name.lower()
         params = dict(mount.params)
         if type_key == CAMERA_TYPE:
-            cameras.append(CameraSpec.from_mount(mount, config.source))  # names the file
+            camera = CameraSpec.from_mount(mount, config.source)  # names the file
+            check_rate(camera.rate_hz, physics_step_s,
+                       f"{config.source} camera {mount.name!r}: rate_hz")
+            cameras.append(camera)
             continue
         where = f"{config.source} sensors[{i}]"
         try:

@@ -68,6 +68,16 @@ CASES = [
      "rate_hz", "'30'"),
     ("camera-unknown-key", '[[sensors]]\ntype = "Camera"\nname = "C"\nzoom = 2', "zoom",
      "unknown key"),
+    # Sampled once per physics step (1 kHz) while CONF and the board's estimator took the
+    # file's rate: a rate above the physics rate is refused.
+    ("sensor-rate-above-physics", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = 5000',
+     "rate_hz 5000.0 Hz", "above the physics rate 1000 Hz"),
+    ("motors-rate-above-physics", '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = 1500',
+     "rate_hz 1500.0 Hz", "above the physics rate 1000 Hz"),
+    ("camera-rate-above-physics", '[[sensors]]\ntype = "Camera"\nname = "C"\nrate_hz = 2000',
+     "camera 'C': rate_hz 2000.0 Hz", "above the physics rate 1000 Hz"),
+    ("status-rate-above-physics", "status_rate_hz = 1001", "status_rate_hz 1001.0 Hz",
+     "above the physics rate 1000 Hz"),
     # Passed the start-up check (which built no board estimator), then INIT raised
     # OverflowError (the vibration's RMS) or refused the estimator's infinite noise.
     ("vibration-overflow", '[[sensors]]\ntype = "Accelerometer"\nname = "A"\n'
@@ -133,6 +143,14 @@ def test_good_robot_files_pass_start_up_validation(tmp_path: Path) -> None:
     assert len(validate_robot_dirs((tmp_path,), check)) == 2
     _write(tmp_path, '[[sensors]]\ntype = "Motors"\nname = "M"\nrate_hz = 50')
     assert len(validate_robot_dirs((tmp_path,), check)) == 3
+
+
+def test_a_rate_at_the_physics_rate_is_sampled_every_step(tmp_path: Path) -> None:
+    path = _write(tmp_path, '[[sensors]]\ntype = "Gyro"\nname = "G"\nrate_hz = 1000\n'
+                  '[[sensors]]\ntype = "Camera"\nname = "C"\nrate_hz = 1000')
+    robot = _build_robot(path)
+    assert [s.period_steps for s in robot.sensors] == [1]
+    assert robot.cameras[0].rate_hz == 1000.0
 
 
 def test_sim_refuses_to_start_with_a_file_init_would_refuse(tmp_path: Path) -> None:
