@@ -201,8 +201,10 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
     start_poses: dict[str, StartPose] = {}
     for table in top.array_of_tables("start_poses"):
         pose_name, pose = _parse_start_pose(table)
-        if pose_name in start_poses:
-            table.fail(f"duplicate start pose name {pose_name!r}", "name")
+        same = [n for n in start_poses if n.casefold() == pose_name.casefold()]
+        if same:  # INIT {Start name} ignores case: one would shadow the other
+            table.fail(f"duplicate start pose name {pose_name!r} (as {same[0]!r}: start pose "
+                       "names ignore case)", "name")
         _check_on_ground(table, "position_ned_m", pose.position_ned_m, ground)
         if pose.position_ned_m[2] > 0.0:
             table.fail(f"start pose {pose_name!r} is {pose.position_ned_m[2]:g} m below the "

@@ -257,6 +257,9 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         ('pad = "skeye-4"', 'pad = "skeye-9"', "pad", "skeye-4"),
         ('name = "Field1"', 'name = "Pad1"', "name", "duplicate start pose name 'Pad1'"),
         ('name = "Field1"', 'name = "Field 1"', "name", "letters, digits"),
+        # INIT's {Start name} ignores case: {Start Pad1} stood the vehicle on PAD1.
+        ('name = "Field1"', 'name = "PAD1"', "name",
+         "duplicate start pose name 'PAD1' (as 'Pad1'"),
         ('texture = "checker"', 'texture = "lava"', "texture", "grass"),
         ('latitude_deg = 50.0', 'latitude_deg = 95.0', "latitude_deg", "(-90, 90)"),
         ('altitude_m = 250.0', 'altitude_m = 50000', "altitude_m", "[-430, 11000]"),
