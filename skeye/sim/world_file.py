@@ -210,6 +210,12 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
             table.fail(f"start pose {pose_name!r} is {pose.position_ned_m[2]:g} m below the "
                        "ground (NED: down is positive, the ground is down = 0)",
                        "position_ned_m")
+        for box in boxes:
+            if _stands_in_box(pose.position_ned_m, box):
+                top_down = box.center_ned_m[2] - box.size_m[2] / 2.0
+                table.fail(f"start pose {pose_name!r} lies inside box {box.name!r}: a vehicle "
+                           "standing there would stand in the box; put it on the box's top "
+                           f"(down = {top_down:g}) or outside its footprint", "position_ned_m")
         start_poses[pose_name] = pose
 
     return WorldDescription(
@@ -363,6 +369,26 @@ def _parse_start_pose(table: _Table) -> tuple[str, StartPose]:
         position_ned_m=table.vector("position_ned_m"),
         rpy_rad=table.vector("rpy_rad", (0.0, 0.0, 0.0)),
     )
+
+
+# How far (m) a start pose may reach into a box's side or top and still stand beside or on it.
+_BOX_TOLERANCE_M: Final = 0.001
+
+
+def _stands_in_box(position_ned_m: Vec3, box: Box) -> bool:
+    """Whether a vehicle standing at this point (the point its gear touches, the vehicle above
+    it) would be inside the box: the point within the box's footprint, below its top and not
+    below its bottom (a point on the bottom face is a box standing on the ground there; a box
+    wholly above the point is a ceiling or an overhang)."""
+    dn = position_ned_m[0] - box.center_ned_m[0]
+    de = position_ned_m[1] - box.center_ned_m[1]
+    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+    along, across = c * dn + s * de, -s * dn + c * de  # in the box's own axes
+    half_n, half_e, half_d = (v / 2.0 for v in box.size_m)
+    down = position_ned_m[2] - box.center_ned_m[2]
+    tol = _BOX_TOLERANCE_M
+    return (abs(along) < half_n - tol and abs(across) < half_e - tol
+            and -half_d + tol < down <= half_d + tol)
 
 
 def _check_unique(top: _Table, key: str, names: list[str]) -> None:

@@ -67,7 +67,7 @@ yaw_rad = 0.3
 
 [[boxes]]
 name = "house"
-center_ned_m = [3.0, 2.0, -1.0]
+center_ned_m = [6.0, 2.0, -1.0]
 size_m = [4.0, 2.0, 2.0]
 yaw_rad = 0.5
 rgb = [0.5, 0.4, 0.3]
@@ -197,8 +197,8 @@ def test_box_pose_converts_from_ned_to_mujoco(tmp_path: Path) -> None:
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "box:house")
-    # NED (3, 2, -1) is 3 m north, 2 m east, 1 m up: MuJoCo NWU (3, -2, 1).
-    np.testing.assert_allclose(data.geom_xpos[gid], (3.0, -2.0, 1.0), atol=1e-12)
+    # NED (6, 2, -1) is 6 m north, 2 m east, 1 m up: MuJoCo NWU (6, -2, 1).
+    np.testing.assert_allclose(data.geom_xpos[gid], (6.0, -2.0, 1.0), atol=1e-12)
     np.testing.assert_allclose(model.geom_size[gid], (2.0, 1.0, 1.0))
     # Yaw 0.5 rad about down turns the box's long (north) axis towards east, i.e. towards -y.
     axis = data.geom_xmat[gid].reshape(3, 3)[:, 0]
@@ -260,6 +260,12 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         # INIT's {Start name} ignores case: {Start Pad1} stood the vehicle on PAD1.
         ('name = "Field1"', 'name = "PAD1"', "name",
          "duplicate start pose name 'PAD1' (as 'Pad1'"),
+        # Under the house (its bottom on the ground), and in its walls: the vehicle was spawned
+        # inside the box, and MuJoCo threw it out at up to 20 m/s.
+        ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [6.0, 2.0, 0.0]',
+         "position_ned_m", "start pose 'Field1' lies inside box 'house'"),
+        ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [7.5, 2.5, -1.0]',
+         "position_ned_m", "start pose 'Field1' lies inside box 'house'"),
         ('texture = "checker"', 'texture = "lava"', "texture", "grass"),
         ('latitude_deg = 50.0', 'latitude_deg = 95.0', "latitude_deg", "(-90, 90)"),
         ('altitude_m = 250.0', 'altitude_m = 50000', "altitude_m", "[-430, 11000]"),
@@ -284,6 +290,26 @@ def test_validation_errors_name_file_and_key(
         load_world(path)
     message = str(err.value)
     assert str(path) in message and key in message and problem in message, message
+
+
+def test_start_poses_on_beside_and_under_boxes_are_accepted(tmp_path: Path) -> None:
+    along = (6.0 + 2.05 * math.cos(0.5), 2.0 + 2.05 * math.sin(0.5))  # past the house's end
+    text = BASE_TOML + f"""
+[[boxes]]
+name = "roof"
+center_ned_m = [-3.0, 0.0, -3.0]
+size_m = [2.0, 2.0, 0.2]
+
+[[start_poses]]
+name = "HouseTop"
+position_ned_m = [6.0, 2.0, -2.0]
+
+[[start_poses]]
+name = "HouseEnd"
+position_ned_m = [{along[0]!r}, {along[1]!r}, 0.0]
+"""
+    world = load_world(write(tmp_path, text))  # Field1 stands under the roof
+    assert list(world.start_poses) == ["Pad1", "Field1", "HouseTop", "HouseEnd"]
 
 
 def test_checkerboard_world_holds_the_calibration_board() -> None:
