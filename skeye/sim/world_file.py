@@ -35,6 +35,7 @@ from skeye.sim.world_model import (
 )
 from skeye.values import is_finite_number
 from skeye.vision.pad import get_pad
+from skeye.wire.sim import MAX_LOCATION_M
 
 # ----------------------------------------------------------------------------------------------
 # Validation
@@ -210,6 +211,10 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
             table.fail(f"start pose {pose_name!r} is {pose.position_ned_m[2]:g} m below the "
                        "ground (NED: down is positive, the ground is down = 0)",
                        "position_ned_m")
+        if max(abs(v) for v in pose.position_ned_m) > MAX_LOCATION_M:
+            table.fail(f"start pose {pose_name!r} lies more than {MAX_LOCATION_M:g} m from the "
+                       "origin along an axis, the bound INIT's Location has (beyond it the "
+                       "barometer's atmosphere model fails)", "position_ned_m")
         for box in boxes:
             if _stands_in_box(pose.position_ned_m, box):
                 top_down = box.center_ned_m[2] - box.size_m[2] / 2.0

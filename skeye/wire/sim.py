@@ -75,6 +75,7 @@ __all__ = [
     "CODECS",
     "COMMANDS",
     "COMMAND_WORDS",
+    "MAX_LOCATION_M",
     "SEN_CODECS",
     "Codec",
     "DriveLimits",
@@ -96,6 +97,10 @@ __all__ = [
 ]
 
 _SEN_HEADER = ("Time", "Name")
+MAX_LOCATION_M = 1.0e4
+"""The farthest a place to spawn a robot lies from the world's origin along each axis (INIT's
+and RESET's Location; a world file's start poses too): 10 km, so a spawned vehicle's
+barometer stays within its atmosphere model whatever the world's origin altitude."""
 T = TypeVar("T")
 
 
@@ -236,7 +241,8 @@ def _check_init(init: Init | Reset) -> None:
         )
     if isinstance(init, Init) and init.start is None and init.location_ned_m is None:
         raise RemoteProtocolError("INIT needs {Location x,y,z} or {Start name}")
-    if init.location_ned_m is not None and any(abs(v) > 1.0e4 for v in init.location_ned_m):
+    if init.location_ned_m is not None and any(abs(v) > MAX_LOCATION_M
+                                               for v in init.location_ned_m):
         raise RemoteProtocolError(
             f"Location {init.location_ned_m} is outside the world (|x| > 10 km)"
         )

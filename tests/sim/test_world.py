@@ -277,6 +277,10 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         ('name = "house"\n', "", "name", "missing required key"),
         ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [-3.0, 0.0, 5.0]',
          "position_ned_m", "start pose 'Field1' is 5 m below the ground"),
+        # 50 km up: the barometer's pressure went complex and the engine died formatting it,
+        # taking every client down (INIT's own Location stops at 10 km).
+        ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [-3.0, 0.0, -50000.0]',
+         "position_ned_m", "start pose 'Field1' lies more than 10000 m from the origin"),
         ('position_ned_m = [1.0, 2.0, 0.0]', 'position_ned_m = [1.0, 2.0, 0.5]',
          "position_ned_m", "the pad is 0.5 m below the ground"),
     ],
