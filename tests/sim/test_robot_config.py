@@ -68,6 +68,13 @@ CASES = [
      "rate_hz", "'30'"),
     ("camera-unknown-key", '[[sensors]]\ntype = "Camera"\nname = "C"\nzoom = 2', "zoom",
      "unknown key"),
+    # Loaded, then its first SEN line killed the engine for every client ("Name value 'Down
+    # Range' contains a brace or whitespace"); a ',' or ':' garbles CONF {Sensors Type:Name,...}.
+    ("sensor-name-blank", '[[sensors]]\ntype = "Sonar"\nname = "Down Range"', "'name'",
+     "'Down Range'"),
+    ("sensor-name-brace", '[[sensors]]\ntype = "GPS"\nname = "{G}"', "'name'", "'{G}'"),
+    ("sensor-name-comma", '[[sensors]]\ntype = "GPS"\nname = "G,2"', "'name'", "'G,2'"),
+    ("sensor-name-colon", '[[sensors]]\ntype = "GPS"\nname = "G:2"', "'name'", "'G:2'"),
     # Sampled once per physics step (1 kHz) while CONF and the board's estimator took the
     # file's rate: a rate above the physics rate is refused.
     ("sensor-rate-above-physics", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = 5000',
