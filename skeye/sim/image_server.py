@@ -120,7 +120,10 @@ class _ClientHandler:
         self._stream_period_s: float | None = None
         self._next_stream_s = 0.0
         self._stream_starved = False  # a stream frame is due but no newer frame exists yet
-        self._last_sent_number = 0
+        # The newest frame sent: (camera id, frame number). A camera that went and came back
+        # under the same name (its robot spawned again) has a new id and counts from 1 again.
+        self._last_sent: tuple[int, int] = (0, 0)
+        self._said_gone = False  # the stream's camera went and the client was told so
         self._wait_deadline_s: float | None = None
         self._got_request = False
         self._active_s = time.monotonic()  # last request received or byte sent
@@ -342,10 +345,13 @@ class _ClientHandler:
                 self._want_wake = True  # before looking, so a publish in between is not missed
                 camera = self._camera_name()
                 frame = None if camera is None else self._buffer.latest(camera)
-                if frame is None or frame.number <= self._last_sent_number:
+                if frame is None and self._stream_camera_gone():
+                    return  # its error frame is under way; the stream goes on if it comes back
+                if frame is None or self._sent_already(frame):
                     self._stream_starved = True  # the publisher's listener will wake us
                     return
                 self._want_wake = False
+                self._said_gone = False
                 self._send_frame(frame, None)
                 # A token bucket of one frame: the long-run rate never exceeds the requested
                 # one, yet a frame arriving a little before its slot (camera and stream at the
@@ -361,7 +367,7 @@ class _ClientHandler:
             case SelectCamera(name=name):
                 if name in self._buffer.cameras():
                     if name != self.camera:
-                        self._last_sent_number = 0
+                        self._said_gone = False
                     self.camera = name
                     self._buffer.rewatch(self._watch, name)
                 else:
@@ -376,6 +382,21 @@ class _ClientHandler:
                 self._next_stream_s = now
             case RequestError(reason=reason):
                 self._send_error(reason)
+        return True
+
+    def _sent_already(self, frame: Frame) -> bool:
+        """True if ``frame`` is no newer than the last frame sent of its camera."""
+        camera_id, number = self._last_sent
+        return frame.camera_id == camera_id and frame.number <= number
+
+    def _stream_camera_gone(self) -> bool:
+        """A stream whose selected camera went (its robot left): the client is told once, with
+        an error frame (True then); frames follow again if a camera of that name comes back."""
+        camera = self.camera
+        if self._said_gone or camera is None or self._buffer.camera_id(camera) is not None:
+            return False
+        self._said_gone = True
+        self._send_error(f"camera {camera!r} is gone; the stream goes on if it comes back")
         return True
 
     def _camera_name(self) -> str | None:
@@ -428,7 +449,8 @@ class _ClientHandler:
             return
         finally:
             if rect is None and (self.camera is None or frame.camera == self.camera):
-                self._last_sent_number = max(self._last_sent_number, frame.number)
+                if not self._sent_already(frame):
+                    self._last_sent = (frame.camera_id, frame.number)
         if self._meta:
             head = meta_header(frame.number, frame.sim_time_s, frame.camera_id, width, height)
             parts = [

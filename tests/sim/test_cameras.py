@@ -20,7 +20,9 @@ from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.pad import SKEYE_4
+from skeye.wire.images import DecodedFrame, RemoteError
 from tests.sim.conftest import LineClient
+from tests.sim.test_image_server import RawConn
 
 ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 
@@ -248,6 +250,49 @@ def test_lockstep_images_serve_robots_spawned_one_after_another(profile):
                 assert time.monotonic() < deadline, "robot R1 was not removed"
                 time.sleep(0.01)
     assert len(set(ids)) == 3, ids
+
+
+def test_a_stream_says_its_camera_went_and_goes_on_when_its_robot_spawns_again(tmp_path):
+    """The same workflow with one image client streaming R1/Down throughout: when R1 leaves it
+    gets the error frame ``camera 'R1/Down' is gone``, and when R1 is spawned again its new
+    camera's frames (numbered from 1 again) stream to it. The stream compared frame numbers
+    only: the new camera's frames, numbered below the last one sent, were never sent."""
+    robots = small_camera_robot(tmp_path, 64, 48)
+    with sim_with_images(robot_dirs=(robots,)) as (control, images, _cameras):
+        first = LineClient(control.port)
+        first.expect("NFO")
+        first.answer("INIT {ClassName smallcam} {Name R1} {Location 0,0,-1}", "INIT")
+        first.step(1)
+        conn = RawConn(images.port)
+        try:
+            conn.send(b"SKEYE CAMERA R1/Down\nSKEYE META on\nSKEYE STREAM 1000\n")
+            old = conn.next_event()
+            while not (isinstance(old, DecodedFrame) and old.meta is not None
+                       and old.meta.frame_number >= 6):
+                first.step(34)
+                old = conn.next_event()
+            first.close()  # R1 goes with its client
+            event = conn.next_event()
+            while isinstance(event, DecodedFrame):  # frames already out before it went
+                assert event.meta is not None and event.meta.camera_id == old.meta.camera_id
+                event = conn.next_event()
+            assert isinstance(event, RemoteError), event
+            assert "camera 'R1/Down' is gone" in event.reason
+            second = LineClient(control.port)
+            second.expect("NFO")
+            second.answer("INIT {ClassName smallcam} {Name R1} {Location 0,0,-1}", "INIT")
+            second.step(34)
+            new = conn.next_event()
+            assert isinstance(new, DecodedFrame) and new.meta is not None, new
+            assert new.meta.camera_id != old.meta.camera_id
+            assert new.meta.frame_number < old.meta.frame_number
+            second.step(34)
+            newer = conn.next_event()
+            assert isinstance(newer, DecodedFrame) and newer.meta is not None
+            assert newer.meta.frame_number > new.meta.frame_number
+            second.close()
+        finally:
+            conn.close()
 
 
 def test_snapshot_saves_png_and_jpeg(tmp_path):
