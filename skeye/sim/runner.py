@@ -106,7 +106,26 @@ class SimulationRunner:
 
     def call(self, fn: Callable[[Simulation], T], timeout_s: float = 30.0, *,
              fatal: bool = False) -> T:
-        return self.submit(fn, fatal=fatal).result(timeout_s)
+        """Run ``fn(sim)`` on the engine thread and return its result.
+
+        Raises:
+            TimeoutError: the engine did not take the task up within ``timeout_s`` (busy: in
+                lockstep, another client's long STEP): it is withdrawn and never runs, so the
+                caller's error is the whole truth; or, once begun, it took ``timeout_s`` more.
+        """
+        fut = self.submit(fn, fatal=fatal)
+        try:
+            return fut.result(timeout_s)
+        except TimeoutError:
+            if fut.cancel():
+                raise TimeoutError(
+                    f"the simulator did not take it up within {timeout_s:g} s (busy: another "
+                    "client's long STEP?); not done") from None
+        try:
+            return fut.result(timeout_s)  # it had begun: it runs between steps, so it ends
+        except TimeoutError:
+            raise TimeoutError(
+                f"the simulator is still at it after {2 * timeout_s:g} s") from None
 
     def _run_task(self, item: tuple[Callable[[Simulation], Any], Future[Any], bool]) -> None:
         fn, fut, fatal = item

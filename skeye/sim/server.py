@@ -17,6 +17,10 @@ CONNECT}`` saying so); only when all of them drive robots is the new one refused
 thread never waits on a client: a refusal is one non-blocking send, and running out of file
 descriptors (``EMFILE``) is logged (once a second at most) and waited out, never the end of it.
 
+A command waits for the engine thread at most ``command_timeout_s`` (in lockstep another
+client's long STEP holds it); one not taken up by then is withdrawn, never done, and answered
+with an ``ERR`` saying so (:meth:`SimulationRunner.call`).
+
 If the engine thread dies (:attr:`SimulationRunner.error`), every client gets
 ``ERR {Command ENGINE} {Reason ...}`` naming the failure at once and is closed, and so is every
 later connection; ``skeye sim`` then exits with status 3.
@@ -55,6 +59,7 @@ __all__ = ["OUTBOX_BYTES", "ClientSession", "ControlServer", "LineObserver"]
 log = logging.getLogger(__name__)
 
 HANDSHAKE_TIMEOUT_S = 10.0  # a new connection must send its first line within this
+COMMAND_TIMEOUT_S = 30.0  # a command the engine has not taken up by then is withdrawn
 IDLE_TIMEOUT_S = 120.0  # a connection without a robot must send a line at least this often
 MAX_CLIENTS_PER_PEER = 64  # connections of one peer, a user or address (half the 128 slots)
 
@@ -81,15 +86,18 @@ class ControlServer:
         max_clients_per_peer: int = MAX_CLIENTS_PER_PEER,
         handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
         idle_timeout_s: float = IDLE_TIMEOUT_S,
+        command_timeout_s: float = COMMAND_TIMEOUT_S,
     ) -> None:
         check_server_limits("control server", max_clients=max_clients,
                             max_clients_per_peer=max_clients_per_peer,
-                            handshake_timeout_s=handshake_timeout_s, idle_timeout_s=idle_timeout_s)
+                            handshake_timeout_s=handshake_timeout_s, idle_timeout_s=idle_timeout_s,
+                            command_timeout_s=command_timeout_s)
         self.runner = runner
         self.max_clients = max_clients
         self.max_clients_per_peer = max_clients_per_peer
         self.handshake_timeout_s = handshake_timeout_s
         self.idle_timeout_s = idle_timeout_s
+        self.command_timeout_s = command_timeout_s
         self.set_handlers: dict[str, Callable[[ClientSession, Set], None]] = {
             "wind": set_wind,
             "camera": set_camera,

@@ -193,6 +193,7 @@ class SessionHost(Protocol):
     observers: list[LineObserver]
     handshake_timeout_s: float
     idle_timeout_s: float
+    command_timeout_s: float
     set_handlers: dict[str, Callable[[ClientSession, Set], None]]
 
     def notify(self, conn_id: int, direction: str, data: bytes) -> None: ...
@@ -406,8 +407,9 @@ class ClientSession:
             handler(self, msg, decode(msg))
         except (RemoteProtocolError, LocalProtocolError, ConfigError) as exc:
             self.send(encode(Err(msg.type, reason=str(exc))))
-        except TimeoutError:
-            self.send(encode(Err(msg.type, reason="the simulator did not answer in time")))
+        except TimeoutError as exc:
+            self.send(encode(Err(msg.type, reason=str(exc) or "the simulator did not answer in "
+                                 "time")))
         except SkeyeError as exc:
             self.send(encode(Err(msg.type, reason=str(exc))))
         except Exception as exc:  # a bug (or a failure that killed the engine): say so, go on
@@ -423,6 +425,11 @@ class ClientSession:
             self.states.unbind()
 
     # -- commands ------------------------------------------------------------------------
+    def _call(self, fn: Callable[[Simulation], Any]) -> Any:
+        """Run ``fn`` on the engine thread; TimeoutError (and ``fn`` never runs) if the engine
+        does not take it up within the server's ``command_timeout_s``."""
+        return self.server.runner.call(fn, timeout_s=self.server.command_timeout_s)
+
     def _robot(self, command: str) -> str:
         if self.robot_name is None:  # _handle has taken any stop the engine reported
             raise RemoteProtocolError(needs_robot(command, self.stopped_reason))
@@ -461,7 +468,7 @@ class ClientSession:
             self.send(encode(Res("INIT", name=robot.name, status="OK", note=said)))
             return robot.name, robot.config
 
-        self.robot_name, self.robot_config = self.server.runner.call(spawn)
+        self.robot_name, self.robot_config = self._call(spawn)
         self.stopped_reason = None
         self.states.bind()
 
@@ -477,7 +484,7 @@ class ClientSession:
                             rotation_rpy_rad=reset.rotation_rpy_rad or (0.0, 0.0, 0.0))
             self.send(encode(Res("RESET", name=name, status="OK", note=note)))
 
-        self.server.runner.call(respawn)
+        self._call(respawn)
         log.info("client %s reset robot %s", self.peer, name)
 
     def cmd_drive(self, msg: Message, drive: Drive) -> None:
@@ -509,7 +516,7 @@ class ClientSession:
                 raise RemoteProtocolError(f"robot {name} no longer exists")
             robot.drive(**changes)
 
-        self.server.runner.call(apply)
+        self._call(apply)
         # A value that was not plain, or an angle the same line's velocity overrode: say how
         # it was read (USARSim answers DRIVE with nothing; a RES is ignored by its clients).
         notes = usarsim_notes(msg)
@@ -532,7 +539,7 @@ class ClientSession:
             robot = sim.robots[name]
             return robot.find_sensors(type_name, sensor_name)
 
-        found = self.server.runner.call(find)
+        found = self._call(find)
         if not found:
             raise RemoteProtocolError(
                 f"robot {name} has no sensor of type {type_name}"
@@ -639,7 +646,7 @@ def _require(value: str | None, key: str) -> str:
 def set_wind(session: ClientSession, command: Set) -> None:
     """``SET {Type Wind} {Mode m} {Params k=v,...}``."""
     settings = make_settings(_require(command.mode, "Mode"), parse_params(command.params or ""))
-    session.server.runner.call(lambda sim: sim.set_wind(settings))
+    session._call(lambda sim: sim.set_wind(settings))
 
 
 def set_camera(session: ClientSession, command: Set) -> None:
@@ -651,4 +658,4 @@ def set_camera(session: ClientSession, command: Set) -> None:
         raise RemoteProtocolError(f"SET Camera: unknown Opcode {opcode!r}; known: FOV")
     fov = parse_value("Params", _require(command.params, "Params"), "float",
                       min_value=0.01, max_value=math.pi - 0.01)
-    session.server.runner.call(lambda sim: set_camera_fov(sim, name, camera, fov))
+    session._call(lambda sim: set_camera_fov(sim, name, camera, fov))
