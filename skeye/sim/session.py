@@ -9,7 +9,9 @@ their lines without ever blocking: when a client does not read, its queue fills 
 stream lines are dropped and counted, so a slow client never slows the physics or other
 clients. Answers (RES, ERR, GEO, CONF, NFO) go through the same queue, so their order relative
 to the stream is kept. Every bad line gets an ``ERR`` with a reason and the connection stays
-usable; only an over-long line closes it, and so does an HTTP request line or header.
+usable; only an over-long line closes it, and so does an HTTP request line or header. A
+session that ends gives its writer ``CLOSE_LINGER_S`` to send what is queued, then shuts the
+socket: a client that reads nothing cannot keep a thread and a socket after its slot is freed.
 
 The connection's states are a transition table (:data:`TRANSITIONS`, :class:`ConnectionStates`,
 sans-IO): a new connection awaits its first line (``AWAITING``), then has no robot
@@ -71,6 +73,7 @@ from skeye.workers import Worker
 log = logging.getLogger(__name__)
 
 OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
+CLOSE_LINGER_S = 5.0  # an ended session's writer has this long to send what is queued
 # An HTTP request line or header: a web page POSTing to this port (a cross-protocol request, whose
 # text/plain body would otherwise be read as protocol lines). The connection is closed at once.
 _HTTP_LINE = re.compile(
@@ -373,6 +376,15 @@ class ClientSession:
                 pass
         self.outbox.put_nowait(_CLOSE)  # the writer sends what is queued, then stops
         self.server.forget(self)
+        if not self._writer.join(CLOSE_LINGER_S):
+            # A client that reads nothing holds the writer in sendall for good (TCP keepalive
+            # sees a live peer): its thread, socket and queue would outlive the freed slot.
+            log.info("client %s took nothing of its last %d bytes in %g s; closing without "
+                     "them", self.peer, self._queued_bytes, CLOSE_LINGER_S)
+            try:
+                self.sock.shutdown(socket.SHUT_RDWR)  # sendall fails at once
+            except OSError:
+                pass
 
     def end(self) -> None:
         """Close after what is queued has gone out (safe from any thread, never blocks)."""

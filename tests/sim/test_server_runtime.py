@@ -3,11 +3,15 @@ reading. Waits are on events and answers with deadlines, never on how fast a mac
 
 from __future__ import annotations
 
+import contextlib
+import socket
 import threading
+import time
 
 from skeye.sim.engine import Simulation
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
+from skeye.sim.session import CLOSE_LINGER_S
 from skeye.sim.world import load_world
 from tests.sim.conftest import LineClient
 
@@ -49,3 +53,50 @@ def test_a_command_the_busy_engine_never_took_up_is_refused_and_never_done() -> 
         finally:
             gate.set()
             client.close()
+
+
+def _writer_of(client: socket.socket) -> list[threading.Thread]:
+    host, port = client.getsockname()[:2]
+    return [t for t in threading.enumerate() if t.name == f"sim-write-{host}:{port}"]
+
+
+def test_a_client_that_reads_nothing_is_closed_for_good_when_its_session_ends() -> None:
+    """A client without a robot floods commands and never reads its answers, then falls
+    silent: the idle timeout ends its session and frees its slot, and within the close linger
+    its writer thread ends and its socket is closed. The writer stayed blocked in sendall for
+    as long as the client lived (keepalive sees a live peer), with the socket and up to 8 MiB
+    of answers: every such connection outlived its freed slot."""
+    sim = Simulation(load_world("pad"), seed=1)
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0, idle_timeout_s=3.0) as server,
+    ):
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.connect(("127.0.0.1", server.port))
+        try:
+            sock.sendall(b"GETSTARTPOSES\r\n")
+            got = b""
+            while got.count(b"\n") < 2:  # NFO and the first answer
+                got += sock.recv(1 << 16)
+            answer_bytes = len(got.split(b"\n")[1]) + 1
+            lines = 80_000  # about 20 MB of answers: more than the outbox and kernel buffers
+            sock.sendall(b"GETSTARTPOSES\r\n" * lines)
+            deadline = time.monotonic() + 60
+            while server.client_count:
+                assert time.monotonic() < deadline, "the idle session was not ended"
+                time.sleep(0.05)
+            deadline = time.monotonic() + CLOSE_LINGER_S + 30
+            while _writer_of(sock):
+                assert time.monotonic() < deadline, "its writer thread is still blocked"
+                time.sleep(0.05)
+            # The server's end is closed: the client reads what had got out, then the end.
+            sock.settimeout(30)
+            received = 0
+            with contextlib.suppress(ConnectionResetError):
+                while data := sock.recv(1 << 20):
+                    received += len(data)
+            # Answers were dropped: the writer had been held by the client, not done.
+            assert received < lines * answer_bytes
+        finally:
+            sock.close()
