@@ -326,11 +326,14 @@ class ClientSession:
                         break
                     if not data:
                         break
-                    if b"\n" in data:
+                    lines = b"\n" in data
+                    if lines:
                         self.states.line()
                         last_s = self.last_line_s = time.monotonic()
                     if not self._feed(decoder, data):
                         return
+                    if lines:  # the time its commands took (a long STEP) is not its silence
+                        last_s = time.monotonic()
         finally:
             try:
                 self.states.close()

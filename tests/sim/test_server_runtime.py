@@ -100,3 +100,30 @@ def test_a_client_that_reads_nothing_is_closed_for_good_when_its_session_ends() 
             assert received < lines * answer_bytes
         finally:
             sock.close()
+
+
+def test_a_connection_waiting_on_its_own_long_step_is_not_closed_as_idle() -> None:
+    """A lockstep clock driver without a robot sends one STEP that takes longer than the idle
+    timeout (the engine busy, as with a STEP {Count 10000000}); it gets its RES STEP and the
+    connection stays open: the time the server spent on its command is not the client's
+    silence. It was closed right after the RES with 'idle for ... without a robot'."""
+    sim = Simulation(load_world("pad"), seed=1)
+    gate = threading.Event()
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0, idle_timeout_s=1.0) as server,
+    ):
+        client = LineClient(server.port)
+        try:
+            client.expect("NFO")
+            busy = runner.submit(lambda sim: gate.wait(60))
+            client.send("STEP {Count 1}")
+            assert not gate.wait(2.5)  # the STEP waits behind the busy engine, past 1 s
+            gate.set()
+            busy.result(10)
+            client.read_until(lambda m: m.type == "RES" and m.get("Command") == "STEP")
+            answer = client.answer("PING {Id after}", "PING")
+            assert answer.type == "RES", answer
+        finally:
+            gate.set()
+            client.close()
