@@ -551,7 +551,9 @@ class ClientSession:
         sensor_name = query.name
 
         def find(sim: Simulation) -> list[Any]:
-            robot = sim.robots[name]
+            robot = sim.robots.get(name)
+            if robot is None:  # a STEP stopped it after this command was read
+                raise RemoteProtocolError(needs_robot(command, f"robot {name} is gone"))
             return robot.find_sensors(type_name, sensor_name)
 
         found = self._call(find)

@@ -127,3 +127,41 @@ def test_a_connection_waiting_on_its_own_long_step_is_not_closed_as_idle() -> No
         finally:
             gate.set()
             client.close()
+
+
+def test_a_sensor_query_for_a_robot_stopped_meanwhile_says_it_is_gone() -> None:
+    """GETCONF for a sensor, read while the connection drives U, reaches the engine after a STEP
+    (another client's) that stopped U: the answer says U is gone and to send INIT. It was
+    'failed: KeyError: 'U'' with a traceback in the simulator's log."""
+    sim = Simulation(load_world("pad"), seed=1)
+    gate = threading.Event()
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0) as server,
+    ):
+        client = LineClient(server.port)
+        try:
+            client.expect("NFO")
+            client.answer("INIT {ClassName hummingbird} {Name U} {Location 0,0,-3}", "INIT")
+
+            def poison(sim: Simulation) -> None:
+                sim.data.qvel[sim._slots["U"].qvel_adr + 3] = float("nan")
+
+            runner.call(poison)
+            busy = runner.submit(lambda sim: gate.wait(60))
+            stepped = runner.submit(lambda sim: sim.step(50))  # another client's STEP
+            client.send("GETCONF {Type Sonar}")
+            deadline = time.monotonic() + 30
+            while runner._tasks.qsize() < 2:  # the STEP, then the GETCONF's lookup
+                assert time.monotonic() < deadline, "the GETCONF never reached the engine"
+                time.sleep(0.01)
+            gate.set()
+            busy.result(10)
+            stepped.result(30)
+            _, err = client.read_until(
+                lambda m: m.type in ("CONF", "ERR") and m.get("Command") != "PHYSICS")
+            assert err.type == "ERR" and err.get("Command") == "GETCONF", err
+            assert "robot U is gone; send INIT" in err.require("Reason"), err
+        finally:
+            gate.set()
+            client.close()
