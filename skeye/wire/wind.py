@@ -10,6 +10,7 @@ ConfigError naming them; every parameter has a physical range (:data:`PARAM_RANG
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Final
@@ -30,6 +31,11 @@ _DEFAULTS: Final[dict[str, dict[str, float]]] = {
 # UAV's operating envelope (Beaufort 12 starts at 32.7 m/s); a disturbance above 50 N is many
 # times the weight of the vehicles simulated here; redraw periods run from one physics step at
 # the coarsest (1 ms) up to an hour.
+# Plain decimal text, as the wire's numbers; nan and inf are read so that the range check names
+# them with the parameter's range.
+_NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*\Z",
+                     re.ASCII | re.IGNORECASE)
+
 PARAM_RANGES: Final[dict[str, tuple[float, float]]] = {
     "speed_m_s": (0.0, 40.0),
     "from_deg": (-360.0, 360.0),
@@ -56,23 +62,30 @@ class WindSettings:
 
 
 def parse_params(text: str) -> dict[str, float]:
-    """``"speed_m_s=3,from_deg=90"`` -> dict. A lone number sets the mode's first parameter."""
+    """``"speed_m_s=3,from_deg=90"`` -> dict. A lone number sets the mode's first parameter.
+
+    Numbers are plain decimal text, as everywhere in the protocol (not ``1_0`` nor ``0x1``;
+    ``nan`` and ``inf`` are left to the range check, which names them); a key given twice, or
+    two lone numbers, is refused rather than the last one silently kept.
+    """
     text = text.strip()
     if not text:
         return {}
     out: dict[str, float] = {}
     for part in text.split(","):
         if "=" not in part:
-            try:
-                out["_"] = float(part)
-            except ValueError:
-                raise ConfigError(f"wind params: expected key=value, got {part!r}") from None
-            continue
-        key, _, value = part.partition("=")
-        try:
-            out[key.strip()] = float(value)
-        except ValueError:
-            raise ConfigError(f"wind params: {key.strip()} is not a number: {value!r}") from None
+            if not _NUMBER.match(part):
+                raise ConfigError(f"wind params: expected key=value, got {part!r}")
+            key, value = "_", part
+        else:
+            key, _, value = part.partition("=")
+            key = key.strip()
+            if not _NUMBER.match(value):
+                raise ConfigError(f"wind params: {key} is not a number: {value!r}")
+        if key in out:
+            what = "a lone number (the mode's first parameter)" if key == "_" else key
+            raise ConfigError(f"wind params: {what} given twice in {text!r}")
+        out[key] = float(value)
     return out
 
 
@@ -86,7 +99,11 @@ def make_settings(mode: str, params: Mapping[str, float] | None = None) -> WindS
     if "_" in given:
         if not values:
             raise ConfigError(f"wind: mode {mode!r} takes no parameters")
-        values[next(iter(values))] = given.pop("_")
+        first = next(iter(values))
+        if first in given:
+            raise ConfigError(f"wind: {first} given twice (a lone number is the mode's first "
+                              f"parameter, {first})")
+        values[first] = given.pop("_")
     for key, value in given.items():
         if key not in values:
             raise ConfigError(

@@ -8,12 +8,14 @@ import socket
 import threading
 import time
 
+import pytest
+
 from skeye.sim.engine import Simulation
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.session import CLOSE_LINGER_S
 from skeye.sim.world import load_world
-from tests.sim.conftest import LineClient
+from tests.sim.conftest import LineClient, running_sim
 
 
 def test_a_command_the_busy_engine_never_took_up_is_refused_and_never_done() -> None:
@@ -164,4 +166,31 @@ def test_a_sensor_query_for_a_robot_stopped_meanwhile_says_it_is_gone() -> None:
             assert "robot U is gone; send INIT" in err.require("Reason"), err
         finally:
             gate.set()
+            client.close()
+
+
+@pytest.mark.parametrize(("params", "named"), [
+    ("speed_m_s=1_0", "speed_m_s is not a number: '1_0'"),  # was read as 10 m/s
+    ("speed_m_s=3,speed_m_s=25", "speed_m_s given twice"),  # the last one was kept
+    ("3,25", "a lone number (the mode's first parameter) given twice"),
+    ("3,speed_m_s=25", "speed_m_s given twice"),
+])
+def test_odd_wind_params_in_flight_are_refused_naming_them(params: str, named: str) -> None:
+    """SET {Type Wind} with parameters that are not plain numbers, or give one twice, while a
+    robot flies: refused with the reason, the wind as it was, the robot flying on."""
+    with running_sim() as server:
+        client = LineClient(server.port)
+        try:
+            client.expect("NFO")
+            client.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-2}", "INIT")
+            assert client.answer("SET {Type Wind} {Mode constant} {Params speed_m_s=1}",
+                                 "SET").type == "RES"
+            client.step(200)
+            before = server.runner.call(lambda sim: sim.wind.settings)
+            err = client.answer(f"SET {{Type Wind}} {{Mode constant}} {{Params {params}}}", "SET")
+            assert err.type == "ERR" and named in err.require("Reason"), err
+            assert server.runner.call(lambda sim: sim.wind.settings) == before
+            seen = client.step(200)
+            assert not [m for m in seen if m.type == "ERR"], seen
+        finally:
             client.close()
