@@ -138,6 +138,9 @@ class AirframeParams:
         return math.sqrt(self.mass_kg * GRAVITY_M_S2 / (4.0 * self.kf))
 
 
+FULL_CELL_V = 4.2  # a full LiPo cell at rest (skeye.sim.vehicle's discharge curve starts there)
+
+
 @dataclass(frozen=True)
 class BatteryParams:
     """3-cell LiPo. Endurance follows from the power drawn; see docs/physics.md."""
@@ -147,7 +150,7 @@ class BatteryParams:
     internal_resistance_ohm: float = 0.03
     efficiency: float = 0.70  # rotor shaft power / electrical power (motors, ESCs)
     avionics_power_w: float = 3.0
-    cutoff_cell_v: float = 3.3
+    cutoff_cell_v: float = 3.3  # resting cell voltage at which it counts as empty (3.3: 0 %)
 
     def __post_init__(self) -> None:
         if not isinstance(self.cells, int) or not 1 <= self.cells <= 12:
@@ -156,6 +159,10 @@ class BatteryParams:
             _check_positive("battery", name, getattr(self, name))
         if self.efficiency > 1.0:
             raise ConfigError(f"battery: efficiency must be <= 1, got {self.efficiency}")
+        if self.cutoff_cell_v >= FULL_CELL_V:
+            raise ConfigError(f"battery: cutoff_cell_v must be below a full cell's "
+                              f"{FULL_CELL_V:g} V (else the battery is empty from the start), "
+                              f"got {self.cutoff_cell_v}")
         power = self.avionics_power_w
         if not (isinstance(power, int | float) and math.isfinite(power) and power >= 0):
             raise ConfigError(f"battery: avionics_power_w must be a number >= 0, got {power!r}")

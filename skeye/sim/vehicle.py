@@ -34,6 +34,19 @@ _OCV_SOC: tuple[float, ...] = (0.0, 0.05, 0.10, 0.20, 0.40, 0.60, 0.80, 0.90, 1.
 _OCV_V: tuple[float, ...] = (3.30, 3.55, 3.65, 3.73, 3.80, 3.87, 3.98, 4.08, 4.20)
 
 
+def cutoff_state_of_charge(cell_v: float) -> float:
+    """The state of charge at which a cell rests at ``cell_v`` (the discharge curve inverted;
+    0 at or below its 0 % voltage, 3.30 V)."""
+    knots, volts = _OCV_SOC, _OCV_V
+    if cell_v <= volts[0]:
+        return 0.0
+    i = 1
+    while i < len(volts) - 1 and volts[i] < cell_v:
+        i += 1
+    v0, v1 = volts[i - 1], volts[i]
+    return knots[i - 1] + (knots[i] - knots[i - 1]) * (cell_v - v0) / (v1 - v0)
+
+
 def cell_open_circuit_v(soc: float) -> float:
     """Resting voltage of one LiPo cell at a state of charge in [0, 1]."""
     soc = min(1.0, max(0.0, soc))
@@ -69,6 +82,9 @@ class Battery:
         self.params = params
         self.capacity_c = params.capacity_mah * 3.6  # coulombs
         self.charge_c = self.capacity_c
+        # The charge at which it counts as empty: where the resting cell voltage reaches
+        # cutoff_cell_v (0 for the default 3.3 V, the curve's 0 %); the motors stop there.
+        self.cutoff_c = self.capacity_c * cutoff_state_of_charge(params.cutoff_cell_v)
         self.current_a = 0.0
         self.voltage_v = params.cells * cell_open_circuit_v(1.0)
         self.hover_current_a = self._current_for(
@@ -92,7 +108,7 @@ class Battery:
 
     @property
     def empty(self) -> bool:
-        return self.charge_c <= 0.0
+        return self.charge_c <= self.cutoff_c
 
     def draw(self, shaft_power_w: float, dt_s: float) -> None:
         """Draw the electrical power that this shaft power needs for dt seconds."""
@@ -118,7 +134,7 @@ class Battery:
             return 0.0
         current = max(max(self._avg_current_a, self.hover_current_a),
                       self.params.avionics_power_w / max(self.voltage_v, 1.0))
-        return self.charge_c / current
+        return (self.charge_c - self.cutoff_c) / current
 
     @property
     def remaining_s(self) -> float:

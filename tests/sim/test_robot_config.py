@@ -36,6 +36,7 @@ CASES = [
     ("avionics-negative", "[battery]\navionics_power_w = -5", "avionics_power_w", "-5.0"),
     ("avionics-nan", "[battery]\navionics_power_w = nan", "avionics_power_w", "nan"),
     ("avionics-inf", "[battery]\navionics_power_w = inf", "avionics_power_w", "inf"),
+    ("cutoff-full", "[battery]\ncutoff_cell_v = 4.2", "cutoff_cell_v", "4.2"),
     ("status-tiny", "status_rate_hz = 1e-310", "status_rate_hz", "1e-310"),
     ("board-tiny", "board_rate_hz = 1e-310", "board_rate_hz", "1e-310"),
     ("board-inf", "board_rate_hz = inf", "board_rate_hz", "inf"),
