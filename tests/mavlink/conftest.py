@@ -9,6 +9,7 @@ where the client listens, as ``skeye up`` sends to QGroundControl's 14550 and MA
 
 from __future__ import annotations
 
+import math
 import re
 import socket
 import threading
@@ -167,3 +168,28 @@ def command(conn: Any, cmd: int, *params: float, timeout_s: float = 20.0) -> tup
     if ack.result != mavutil.mavlink.MAV_RESULT_ACCEPTED:
         text = statustext(conn, timeout_s)
     return int(ack.result), text
+
+
+def take_off(conn: Any) -> None:
+    """Arm and take off (to MIS_TAKEOFF_ALT); returns once the vehicle hovers in Hold (PX4's
+    LOITER, system status ACTIVE)."""
+    m = mavutil.mavlink
+    assert command(conn, m.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == m.MAV_RESULT_ACCEPTED
+    assert command(conn, m.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
+    wait_for(conn, "HEARTBEAT", lambda h: mavutil.mode_string_v10(h) == "LOITER"
+             and h.system_status == m.MAV_STATE_ACTIVE)
+
+
+def upload_mission(conn: Any, items: list[tuple[int, int, float]]) -> int:
+    """Waypoints (latitude, longitude in degE7; altitude above home in m) by the mission
+    protocol, from the ground station's side; returns the MISSION_ACK's type."""
+    m = mavutil.mavlink
+    conn.mav.mission_count_send(1, 1, len(items), m.MAV_MISSION_TYPE_MISSION)
+    while True:
+        msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"])
+        if msg.get_type() == "MISSION_ACK":
+            return int(msg.type)
+        lat, lon, alt = items[msg.seq]
+        conn.mav.mission_item_int_send(
+            1, 1, msg.seq, m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, m.MAV_CMD_NAV_WAYPOINT,
+            int(msg.seq == 0), 1, 0, 0.5, 0, math.nan, lat, lon, alt, m.MAV_MISSION_TYPE_MISSION)

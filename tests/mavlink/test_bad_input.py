@@ -20,6 +20,7 @@ from tests.mavlink.conftest import (
     mav_vehicle,
     scripted_endpoint,
     statustext,
+    take_off,
     wait_for,
 )
 
@@ -29,10 +30,7 @@ M = mavutil.mavlink
 def _airborne(v: MavVehicle):
     conn = v.client()
     wait_for(conn, "GLOBAL_POSITION_INT")
-    assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
-    assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
-    wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
-             and m.system_status == M.MAV_STATE_ACTIVE)
+    take_off(conn)
     return conn
 
 

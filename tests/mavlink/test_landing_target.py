@@ -9,7 +9,7 @@ from pathlib import Path
 
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import command, mav_vehicle, small_camera_robot, wait_for
+from tests.mavlink.conftest import command, mav_vehicle, small_camera_robot, take_off, wait_for
 
 M = mavutil.mavlink
 CAMERA_DOWN_M = 0.035  # the camera's mount below the body origin (hummingbird.toml)
@@ -23,10 +23,7 @@ def test_landing_targets_come_at_the_detection_rate_with_the_true_bearing(tmp_pa
         wait_for(conn, "GLOBAL_POSITION_INT")
         conn.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", 1.5, M.MAV_PARAM_TYPE_REAL32)
         wait_for(conn, "PARAM_VALUE", lambda m: m.param_id == "MIS_TAKEOFF_ALT")
-        assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
-        assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
-        wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
-                 and m.system_status == M.MAV_STATE_ACTIVE)
+        take_off(conn)
         # Off the pad's centre (0.4 m north, 0.3 m east), so the bearing is not straight down.
         pos = wait_for(conn, "GLOBAL_POSITION_INT")
         lat = pos.lat + round(0.4 / 111_320 * 1e7)

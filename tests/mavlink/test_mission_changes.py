@@ -28,6 +28,8 @@ from tests.mavlink.conftest import (
     mav_vehicle,
     scripted_endpoint,
     statustext,
+    take_off,
+    upload_mission,
     wait_for,
 )
 
@@ -35,33 +37,16 @@ M = mavutil.mavlink
 NORTH_E7 = 900  # 1e-4 deg: about 10 m north
 
 
-def _upload(conn, items: list[tuple[int, int, float]]) -> int:
-    """Waypoints (lat, lon in degE7; altitude above home) by the mission protocol; the
-    MISSION_ACK's type."""
-    conn.mav.mission_count_send(1, 1, len(items), M.MAV_MISSION_TYPE_MISSION)
-    while True:
-        msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"])
-        if msg.get_type() == "MISSION_ACK":
-            return int(msg.type)
-        lat, lon, alt = items[msg.seq]
-        conn.mav.mission_item_int_send(
-            1, 1, msg.seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT,
-            int(msg.seq == 0), 1, 0, 0.5, 0, math.nan, lat, lon, alt, M.MAV_MISSION_TYPE_MISSION)
-
-
 def _on_the_first_leg(v: MavVehicle):
     """In the air, a 3-waypoint mission started (10 m north, 10 m north and 5 m east, back
     where it took off), flying its first leg; the client and the start's GLOBAL_POSITION_INT."""
     conn = v.client()
     wait_for(conn, "GLOBAL_POSITION_INT")
-    assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
-    assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
-    wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
-             and m.system_status == M.MAV_STATE_ACTIVE)
+    take_off(conn)
     start = wait_for(conn, "GLOBAL_POSITION_INT")
     items = [(start.lat + NORTH_E7, start.lon, 2.5), (start.lat + NORTH_E7, start.lon + 700, 2.5),
              (start.lat, start.lon, 2.5)]
-    assert _upload(conn, items) == M.MAV_MISSION_ACCEPTED
+    assert upload_mission(conn, items) == M.MAV_MISSION_ACCEPTED
     assert command(conn, M.MAV_CMD_MISSION_START, 0, 0)[0] == 0
     wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "MISSION"
              and v.pilot.boards.state is NavState.FLYING)

@@ -9,7 +9,7 @@ import math
 from pymavlink import mavutil
 
 from skeye.pilot.mavlink_vehicle import ARRIVED_RADIUS_M
-from tests.mavlink.conftest import command, mav_vehicle, wait_for
+from tests.mavlink.conftest import command, mav_vehicle, upload_mission, wait_for
 
 M = mavutil.mavlink
 METRES_PER_DEG_LAT = 111_320.0  # close enough over a few metres (tolerances of 0.3 m and more)
@@ -19,20 +19,6 @@ def _metres(a_lat: float, a_lon: float, b_lat: float, b_lon: float) -> float:
     north = (b_lat - a_lat) * METRES_PER_DEG_LAT
     east = (b_lon - a_lon) * METRES_PER_DEG_LAT * math.cos(math.radians(a_lat))
     return math.hypot(north, east)
-
-
-def _upload(conn, items: list[tuple[float, float, float]]) -> int:
-    """The mission protocol from the ground station's side; returns MISSION_ACK's type."""
-    conn.mav.mission_count_send(1, 1, len(items), M.MAV_MISSION_TYPE_MISSION)
-    while True:
-        msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"])
-        if msg.get_type() == "MISSION_ACK":
-            return int(msg.type)
-        lat, lon, alt = items[msg.seq]
-        conn.mav.mission_item_int_send(
-            1, 1, msg.seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT,
-            int(msg.seq == 0), 1, 0, 0.5, 0, math.nan, round(lat * 1e7), round(lon * 1e7), alt,
-            M.MAV_MISSION_TYPE_MISSION)
 
 
 def test_a_pymavlink_script_flies_the_whole_flight():
@@ -72,10 +58,11 @@ def test_a_pymavlink_script_flies_the_whole_flight():
         assert abs(there.relative_alt / 1e3 - 2.0) < 0.3
 
         # Three waypoints 2 m apart, then the mission mode.
-        items = [(lat + 2.0 * k / METRES_PER_DEG_LAT,
-                  lon + 2.0 * (k % 2) / (METRES_PER_DEG_LAT * math.cos(math.radians(lat))), 2.5)
+        items = [(round((lat + 2.0 * k / METRES_PER_DEG_LAT) * 1e7),
+                  round((lon + 2.0 * (k % 2) / (METRES_PER_DEG_LAT
+                                                * math.cos(math.radians(lat)))) * 1e7), 2.5)
                  for k in (1, 2, 3)]
-        assert _upload(conn, items) == M.MAV_MISSION_ACCEPTED
+        assert upload_mission(conn, items) == M.MAV_MISSION_ACCEPTED
         mission = conn.mode_mapping()["MISSION"]
         assert command(conn, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                        *mission[1:]) == (0, "")
@@ -88,7 +75,8 @@ def test_a_pymavlink_script_flies_the_whole_flight():
             else:
                 reached.add(msg.seq)
                 assert here is not None
-                assert _metres(here.lat / 1e7, here.lon / 1e7, *items[msg.seq][:2]) < 0.5
+                lat_e7, lon_e7, _ = items[msg.seq]
+                assert _metres(here.lat / 1e7, here.lon / 1e7, lat_e7 / 1e7, lon_e7 / 1e7) < 0.5
         wait_for(conn, "MISSION_CURRENT", lambda m: m.mission_state == M.MISSION_STATE_COMPLETE)
 
         assert command(conn, M.MAV_CMD_NAV_RETURN_TO_LAUNCH) == (0, "")

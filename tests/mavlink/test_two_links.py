@@ -9,7 +9,7 @@ from pymavlink import mavutil
 
 from skeye.link.vehicle import Vehicle
 from skeye.wire.packets import NavState
-from tests.mavlink.conftest import command, mav_vehicle, statustext, wait_for
+from tests.mavlink.conftest import command, mav_vehicle, statustext, take_off, wait_for
 
 M = mavutil.mavlink
 
@@ -18,10 +18,7 @@ def test_an_asctec_hold_stops_a_mavlink_mission():
     with mav_vehicle(rate=2.0) as v, Vehicle.open(v.pilot.address, timeout_s=10.0) as asctec:
         conn = v.client()
         wait_for(conn, "GLOBAL_POSITION_INT")
-        assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == 0
-        assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, math.nan)[0] == 0
-        wait_for(conn, "HEARTBEAT", lambda m: mavutil.mode_string_v10(m) == "LOITER"
-                 and m.system_status == M.MAV_STATE_ACTIVE)
+        take_off(conn)
         pos = wait_for(conn, "GLOBAL_POSITION_INT")
         conn.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
         wait_for(conn, "MISSION_REQUEST_INT")
