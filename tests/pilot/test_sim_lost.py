@@ -18,24 +18,29 @@ from tests.ground.conftest import wait_until
 from tests.sim.conftest import running_sim
 
 
+def _lost_in_the_air(stack: ExitStack, land_timeout_s: float) -> tuple[PilotServer, Vehicle]:
+    """A pilot hovering on a lockstep simulator with a ground station connected (streaming
+    NAV_STATUS); then the simulator goes away (its engine too), and the pilot is in FAILSAFE."""
+    server = stack.enter_context(running_sim(mode="lockstep", seed=4))
+    sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=5.0))
+    robot = sim.spawn("hummingbird", start="Pad1")
+    pilot = stack.enter_context(
+        PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
+                    tick_s=0.05, settings=BoardSettings(land_timeout_s=land_timeout_s))
+    )
+    vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=5.0))
+    vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
+    vehicle.take_off(1.0)
+    vehicle.wait_state(NavState.HOLDING, timeout_s=30)
+    server.close()
+    server.runner.close()
+    vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+    return pilot, vehicle
+
+
 def test_simulator_killed_under_the_pilot():
     with ExitStack() as stack:
-        server = stack.enter_context(running_sim(mode="lockstep", seed=4))
-        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=5.0))
-        robot = sim.spawn("hummingbird", start="Pad1")
-        pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
-                        tick_s=0.05, settings=BoardSettings(land_timeout_s=60.0))
-        )
-        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=5.0))
-        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
-        vehicle.take_off(1.0)
-        vehicle.wait_state(NavState.HOLDING, timeout_s=30)
-
-        server.close()  # the simulator goes away (its engine too)
-        server.runner.close()
-
-        vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        pilot, vehicle = _lost_in_the_air(stack, land_timeout_s=60.0)
         assert pilot.vehicle_lost is not None and "simulator" in pilot.vehicle_lost
         assert pilot.loop_error is None
         # The ground link is kept: polls are answered, commands refused with the reason.
@@ -51,22 +56,7 @@ def test_a_lost_vehicle_is_landed_after_the_land_timeout_with_the_ground_station
     lost below: FAILSAFE for good, the land timeout never came. Now LANDING after it, and the
     landing that cannot reach the dead simulator is a warning, not a fault of the loop."""
     with ExitStack() as stack:
-        server = stack.enter_context(running_sim(mode="lockstep", seed=4))
-        sim = stack.enter_context(connect(f"127.0.0.1:{server.port}", timeout_s=5.0))
-        robot = sim.spawn("hummingbird", start="Pad1")
-        pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
-                        tick_s=0.05, settings=BoardSettings(land_timeout_s=1.0))
-        )
-        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=5.0))  # heartbeat
-        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.02)
-        vehicle.take_off(1.0)
-        vehicle.wait_state(NavState.HOLDING, timeout_s=30)
-
-        server.close()  # the simulator goes away (its engine too)
-        server.runner.close()
-
-        vehicle.wait_state(NavState.FAILSAFE, timeout_s=10)
+        pilot, vehicle = _lost_in_the_air(stack, land_timeout_s=1.0)  # (its heartbeat polls)
         vehicle.wait_state(NavState.LANDING, timeout_s=30)
         assert pilot.loop_faults == 0 and pilot.loop_error is None
 
