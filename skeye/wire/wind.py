@@ -27,15 +27,15 @@ _DEFAULTS: Final[dict[str, dict[str, float]]] = {
     "random_force": {"f_max_n": 0.3, "tick_s": 1.0 / 30.0},
 }
 
-# Physical ranges, inclusive (name: (low, high, why)). Winds above 40 m/s are beyond any small
-# UAV's operating envelope (Beaufort 12 starts at 32.7 m/s); a disturbance above 50 N is many
-# times the weight of the vehicles simulated here; redraw periods run from one physics step at
-# the coarsest (1 ms) up to an hour.
 # Plain decimal text, as the wire's numbers; nan and inf are read so that the range check names
 # them with the parameter's range.
 _NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*\Z",
                      re.ASCII | re.IGNORECASE)
 
+# Physical ranges, inclusive (name: (low, high, why)). Winds above 40 m/s are beyond any small
+# UAV's operating envelope (Beaufort 12 starts at 32.7 m/s); a disturbance above 50 N is many
+# times the weight of the vehicles simulated here; redraw periods run from one physics step at
+# the coarsest (1 ms) up to an hour.
 PARAM_RANGES: Final[dict[str, tuple[float, float]]] = {
     "speed_m_s": (0.0, 40.0),
     "from_deg": (-360.0, 360.0),
