@@ -14,7 +14,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
-from skeye.outputs import output_folder
+from skeye.outputs import folder_lock, output_folder
 from skeye.processes import scaled_s
 from skeye.robots.config import camera_model
 from skeye.sweep.backends import LocalBackend
@@ -80,53 +80,54 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     if calibration is not None:  # a bad file is named here, not in every trial
         check_setting("calibration", str(calibration))
     output_folder(out)
-    summary: dict[str, Any] = {"paper": PAPER}
-    if calibration is None and camera != "ideal":
-        calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
-        summary["calibration"] = calibration_figures(found, camera)
-    cal_path = str(calibration.resolve()) if calibration is not None else ""
-    params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path,
-              "wind": wind, "vision_latency": vision_latency, "pad_source": pad_source}
-    summary["setup"] = dict(params)
-    seed_list = list(range(first_seed, first_seed + seeds))
-    settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
-                               world=world, calibration=cal_path, wind=wind,
-                               vision_latency=vision_latency, pad_source=pad_source)
-                for s in seed_list}
-    limit_s = scaled_s(900.0 if quick else 7200.0)  # a guard; the runs wait on sim time
-    trials = [Trial(e, dict(params), s, quick, timeout_s=limit_s)
-              for s in seed_list for e in experiments]
-    spec = SweepSpec(which, trials, [])
-    with tempfile.TemporaryDirectory(prefix="skeye-validate-") as tmp:
+    with folder_lock(out, "skeye validate"):  # two runs there would mix their files
+        summary: dict[str, Any] = {"paper": PAPER}
+        if calibration is None and camera != "ideal":
+            calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
+            summary["calibration"] = calibration_figures(found, camera)
+        cal_path = str(calibration.resolve()) if calibration is not None else ""
+        params = {"camera": camera, "estimator": estimator, "world": world, "calibration": cal_path,
+                  "wind": wind, "vision_latency": vision_latency, "pad_source": pad_source}
+        summary["setup"] = dict(params)
+        seed_list = list(range(first_seed, first_seed + seeds))
+        settings = {s: RunSettings(seed=s, quick=quick, camera=camera, estimator=estimator,
+                                   world=world, calibration=cal_path, wind=wind,
+                                   vision_latency=vision_latency, pad_source=pad_source)
+                    for s in seed_list}
+        limit_s = scaled_s(900.0 if quick else 7200.0)  # a guard; the runs wait on sim time
+        trials = [Trial(e, dict(params), s, quick, timeout_s=limit_s)
+                  for s in seed_list for e in experiments]
+        spec = SweepSpec(which, trials, [])
+        with tempfile.TemporaryDirectory(prefix="skeye-validate-") as tmp:
 
-        def keep(trial: dict[str, Any]) -> dict[str, str]:
-            t = Trial.from_json(trial)
-            extra = {"series_file": str(Path(tmp) / f"{t.key}.series.json")}
-            if keep_recordings:
-                extra["workdir"] = str(out / f"recordings_seed{t.seed}")
-            return extra
+            def keep(trial: dict[str, Any]) -> dict[str, str]:
+                t = Trial.from_json(trial)
+                extra = {"series_file": str(Path(tmp) / f"{t.key}.series.json")}
+                if keep_recordings:
+                    extra["workdir"] = str(out / f"recordings_seed{t.seed}")
+                return extra
 
-        backend = LocalBackend(workers or max(1, min(len(trials), (os.cpu_count() or 2) // 2)),
-                               keep)
-        result = run_trials(spec, Path(tmp), backend,
-                            f"validate {'/'.join(experiments)} x {seeds} seed(s)")
-        failed = [r for r in result.rows if r.get("error")]
-        if failed:
-            raise SkeyeError("; ".join(f"{r['experiment']} seed {r['seed']}: {r['error']}"
-                                       for r in failed))
-        series = {(t.experiment, t.seed): json.loads(
-            (Path(tmp) / f"{t.key}.series.json").read_text()) for t in trials}
-    if "E1" in experiments:
-        e1 = {s: E1Series(**series["E1", s]["E1"]) for s in seed_list}
-        raw = ({s: E1Series(**series["E1", s]["E1_uncalibrated"]) for s in seed_list}
-               if cal_path else None)
-        summary["E1"] = median_summary(write_e1(out, e1, raw))
-    if "E2" in experiments:
-        e2 = {s: {run: E2Series(**series["E2", s][e2_key(run)]) for run in E2_RUNS}
-              for s in seed_list}
-        summary["E2"] = median_summary(write_e2(out, e2, settings))
-    write_report(out, summary, quick, seed_list)
-    return summary
+            backend = LocalBackend(workers or max(1, min(len(trials), (os.cpu_count() or 2) // 2)),
+                                   keep)
+            result = run_trials(spec, Path(tmp), backend,
+                                f"validate {'/'.join(experiments)} x {seeds} seed(s)")
+            failed = [r for r in result.rows if r.get("error")]
+            if failed:
+                raise SkeyeError("; ".join(f"{r['experiment']} seed {r['seed']}: {r['error']}"
+                                           for r in failed))
+            series = {(t.experiment, t.seed): json.loads(
+                (Path(tmp) / f"{t.key}.series.json").read_text()) for t in trials}
+        if "E1" in experiments:
+            e1 = {s: E1Series(**series["E1", s]["E1"]) for s in seed_list}
+            raw = ({s: E1Series(**series["E1", s]["E1_uncalibrated"]) for s in seed_list}
+                   if cal_path else None)
+            summary["E1"] = median_summary(write_e1(out, e1, raw))
+        if "E2" in experiments:
+            e2 = {s: {run: E2Series(**series["E2", s][e2_key(run)]) for run in E2_RUNS}
+                  for s in seed_list}
+            summary["E2"] = median_summary(write_e2(out, e2, settings))
+        write_report(out, summary, quick, seed_list)
+        return summary
 
 
 def calibration_figures(result: CalibrationResult, camera: str) -> dict[str, Any]:

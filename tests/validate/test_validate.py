@@ -133,6 +133,19 @@ def test_bad_arguments_are_refused(tmp_path: Path):
         validate("E1", seeds=1, out=tmp_path, quick=True, calibration=tmp_path / "no-such.toml")
 
 
+def test_a_second_validate_into_a_folder_in_use_is_refused_naming_the_first(
+        tmp_path: Path) -> None:
+    """Two runs into one --out mixed their files (series, figures, report); a second one is now
+    refused at once, before it calibrates or flies anything (as skeye sweep's)."""
+    from skeye.errors import ConfigError
+    from skeye.outputs import folder_lock
+
+    with folder_lock(tmp_path, "skeye validate"):  # the first run, still writing there
+        with pytest.raises(ConfigError, match=r"is in use by another skeye validate \(pid "):
+            validate("E1", seeds=1, out=tmp_path, quick=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".skeye.lock"]  # nothing written
+
+
 def test_ctrl_c_stops_validate_and_its_running_trials(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT) stops skeye validate as it stops skeye sweep: the running trial is
     killed and its temporary folder removed, exit 130 with the signal named (Python's own
