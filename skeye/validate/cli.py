@@ -81,6 +81,13 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         check_setting("calibration", str(calibration))
     output_folder(out)
     with folder_lock(out, "skeye validate"):  # two runs there would mix their files
+        if keep_recordings:  # each trial would refuse to write over one, after the calibration
+            kept = [out / f"recordings_seed{s}" for s in range(first_seed, first_seed + seeds)]
+            full = [str(d) for d in kept if d.is_dir() and any(d.iterdir())]
+            if full:
+                raise ConfigError(f"--keep-recordings: {', '.join(full)} already hold(s) "
+                                  "recordings of an earlier run: give another --out, or remove "
+                                  "them")
         summary: dict[str, Any] = {"paper": PAPER}
         if calibration is None and camera != "ideal":
             calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)

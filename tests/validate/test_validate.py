@@ -146,6 +146,20 @@ def test_a_second_validate_into_a_folder_in_use_is_refused_naming_the_first(
     assert sorted(p.name for p in tmp_path.iterdir()) == [".skeye.lock"]  # nothing written
 
 
+def test_keep_recordings_into_a_folder_that_holds_some_is_refused_before_anything_runs(
+        tmp_path: Path) -> None:
+    """A rerun with --keep-recordings into the same --out failed every trial at its start
+    ('recording ... already exists'), after the calibration; now refused before anything."""
+    from skeye.errors import ConfigError
+
+    old = tmp_path / "recordings_seed1"
+    old.mkdir()
+    (old / "E1.skrec").write_text("an earlier run's\n")
+    with pytest.raises(ConfigError, match=r"recordings_seed1 already hold\(s\) recordings"):
+        validate("E1", seeds=1, out=tmp_path, quick=True, keep_recordings=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".skeye.lock", "recordings_seed1"]
+
+
 def test_ctrl_c_stops_validate_and_its_running_trials(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT) stops skeye validate as it stops skeye sweep: the running trial is
     killed and its temporary folder removed, exit 130 with the signal named (Python's own
