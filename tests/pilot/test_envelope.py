@@ -181,3 +181,16 @@ def _pilot_args(*argv: str) -> argparse.Namespace:
     sub = p.add_subparsers()
     pilot_cli.register(sub)
     return p.parse_args(["pilot", *argv])
+
+
+def test_the_onboard_computers_velocities_pass_inside_the_envelope_untouched() -> None:
+    """Inside the envelope, the pad modes' and a policy's set-points reach the airframe as they
+    were computed: the limit's heading-frame round trip changed their last bits (0.3 forward at
+    yaw 0.3 rad came out 0.29999999999999993), and with them every pad flight's figures."""
+    from skeye.pilot.boards import OnboardBoards
+
+    air = FakeAirframe()
+    air.finish(landed=False, armed=True, pos_ned_m=(1.0, 1.0, -1.0), rpy_rad=(0.0, 0.0, 0.3))
+    boards = OnboardBoards(air, BoardSettings())
+    boards.fly_velocity(0.3, -0.7, 0.1)
+    assert air.calls[-1] == ("set_velocity", (0.3, -0.7, 0.1, 0.0))
