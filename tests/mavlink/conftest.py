@@ -193,3 +193,18 @@ def upload_mission(conn: Any, items: list[tuple[int, int, float]]) -> int:
         conn.mav.mission_item_int_send(
             1, 1, msg.seq, m.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, m.MAV_CMD_NAV_WAYPOINT,
             int(msg.seq == 0), 1, 0, 0.5, 0, math.nan, lat, lon, alt, m.MAV_MISSION_TYPE_MISSION)
+
+
+@contextmanager
+def two_ground_stations(server: MavlinkServer) -> Iterator[tuple[Any, Any]]:
+    """Two pymavlink ground stations (255/190 and 254/190) on a scripted endpoint's UDP link,
+    closed after."""
+    port = int(server.addresses[0].rsplit(":", 1)[1])
+    first, second = (mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
+                                                source_system=src[0], source_component=src[1])
+                     for src in (GCS, (254, 190)))
+    try:
+        yield first, second
+    finally:
+        first.close()
+        second.close()

@@ -7,19 +7,14 @@ from __future__ import annotations
 
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import GCS, scripted_endpoint, statustext, wait_for
+from tests.mavlink.conftest import scripted_endpoint, statustext, two_ground_stations, wait_for
 
 M = mavutil.mavlink
 
 
 def test_a_parameter_set_by_one_ground_station_is_sent_to_the_others():
     with scripted_endpoint("udp://127.0.0.1:0") as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        first, second = (mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
-                                                    source_system=src[0],
-                                                    source_component=src[1])
-                         for src in (GCS, (254, 190)))
-        try:
+        with two_ground_stations(server) as (first, second):
             for conn in (first, second):
                 wait_for(conn, "HEARTBEAT")  # (its own heartbeat makes it a ground station)
             first.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", 4.0, M.MAV_PARAM_TYPE_REAL32)
@@ -33,6 +28,3 @@ def test_a_parameter_set_by_one_ground_station_is_sent_to_the_others():
             second.mav.param_request_read_send(1, 1, b"COM_OF_LOSS_T", -1)
             assert wait_for(second, "PARAM_VALUE", timeout_s=10).param_id == "COM_OF_LOSS_T"
             assert server.errors == 0
-        finally:
-            first.close()
-            second.close()

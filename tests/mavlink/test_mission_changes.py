@@ -29,6 +29,7 @@ from tests.mavlink.conftest import (
     scripted_endpoint,
     statustext,
     take_off,
+    two_ground_stations,
     upload_mission,
     wait_for,
 )
@@ -107,12 +108,7 @@ def test_a_command_refused_during_a_mission_leaves_the_mission_running():
 
 def test_a_second_upload_during_an_upload_is_refused_and_the_first_completes():
     with scripted_endpoint("udp://127.0.0.1:0") as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        first, second = (mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}",
-                                                    source_system=src[0],
-                                                    source_component=src[1])
-                         for src in (GCS, (254, 190)))
-        try:
+        with two_ground_stations(server) as (first, second):
             first.mav.mission_count_send(1, 1, 2, M.MAV_MISSION_TYPE_MISSION)
             assert wait_for(first, "MISSION_REQUEST_INT").seq == 0
             second.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
@@ -134,6 +130,3 @@ def test_a_second_upload_during_an_upload_is_refused_and_the_first_completes():
             assert wait_for(second, ["MISSION_REQUEST_INT", "MISSION_ACK"],
                             lambda m: m.target_system == 254).get_type() == "MISSION_REQUEST_INT"
             assert server.errors == 0
-        finally:
-            first.close()
-            second.close()
