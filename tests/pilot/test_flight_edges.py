@@ -78,7 +78,7 @@ def test_a_pad_search_climbs_no_higher_than_the_flight_envelope_allows(
     flight.run_until(lambda ns: ns.state is NavState.HOLDING, 30.0, step_s=0.5)
     flight.vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)
     highest = 0.0
-    for _ in range(30):  # 15 s of sim time: the search reached 5.3 m in 10 s
+    for _ in range(16):  # 8 s of sim time: unlimited, the search reached 4.3 m in them
         ns = flight.run_for(0.5)
         assert ns.state is NavState.HOLDING and ns.pad_mode is PadAction.HOLD, ns
         highest = max(highest, -ns.z / 1000.0)
