@@ -196,13 +196,18 @@ class Vehicle:
         self.close()
 
     @property
+    def line_errors(self) -> tuple[int, int]:
+        """(garbage bytes skipped, bad frames) read on this link so far."""
+        return self.parser.garbage_bytes, self.frame_errors
+
+    @property
     def unheard(self) -> str | None:
         """What came on a link that never carried one whole frame (the far end speaks
         another protocol: a simulator's or a web port), or None once a frame came."""
         if self.frames_received:
             return None
         said = "nothing a vehicle sends came on this link"
-        garbage, bad = self.parser.garbage_bytes, self.frame_errors
+        garbage, bad = self.line_errors
         return f"{said} ({garbage} unreadable bytes, {bad} bad frames)" if garbage or bad \
             else said
 

@@ -162,15 +162,10 @@ def vehicle_limits(robot: str, robot_dirs: tuple[str, ...] = ()) -> VehicleLimit
     return VehicleLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s)
 
 
-def line_errors(vehicle: Vehicle) -> tuple[int, int]:
-    """(garbage bytes skipped, bad frames) read on ``vehicle``'s line so far."""
-    return vehicle.parser.garbage_bytes, vehicle.frame_errors
-
-
 def unreadable(vehicle: Vehicle, since: tuple[int, int] = (0, 0)) -> str:
     """What a silent board's message adds when bytes did come, only none readable (since
-    ``since``, a ``line_errors`` reading): "" when nothing came."""
-    garbage, bad = (now - then for now, then in zip(line_errors(vehicle), since, strict=True))
+    ``since``, a ``Vehicle.line_errors`` reading): "" when nothing came."""
+    garbage, bad = (now - then for now, then in zip(vehicle.line_errors, since, strict=True))
     if not garbage and not bad:
         return ""
     return (f"; the line carried {garbage} bytes of garbage and {bad} bad frames instead: "
@@ -321,7 +316,7 @@ class AscTecLLAirframe:
 
     def line_errors(self) -> tuple[int, int]:
         """(garbage bytes skipped, bad frames) read from the board so far."""
-        return line_errors(self.vehicle)
+        return self.vehicle.line_errors
 
     def _report_line(self) -> None:
         """Say (at most every ``REPORT_EVERY_S``) that the line carries garbage."""
