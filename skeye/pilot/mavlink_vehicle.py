@@ -737,12 +737,9 @@ class MavlinkVehicle:
         if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
             frame = int(msg.coordinate_frame)
             lat, lon, alt = int(msg.lat_int), int(msg.lon_int), float(msg.alt)
-            if ignored & 0b011:  # a valid stand-in, replaced by the vehicle's own below
-                lat, lon = (0 if ignored & 1 else lat), (0 if ignored & 2 else lon)
-            if ignored & 0b100:
-                alt = self.boards.home_ned_m[2] - d if frame in (
-                    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-                    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT) else 0.0
+            # an ignored field: a valid stand-in (0), replaced by the vehicle's own below
+            lat, lon = (0 if ignored & 1 else lat), (0 if ignored & 2 else lon)
+            alt = 0.0 if ignored & 4 else alt
             target = self._global_to_ned(lat, lon, alt, frame, ("lat_int", "lon_int", "alt"))
             return (n if ignored & 1 else target[0], e if ignored & 2 else target[1],
                     d if ignored & 4 else target[2])

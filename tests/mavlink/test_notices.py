@@ -123,3 +123,19 @@ def test_a_waypoint_here_flies_to_its_altitude():
     vehicle.tick(3.3)
     name, args = airframe.calls[-1]
     assert name == "fly_to" and args[:3] == (1.0, 2.0, 5.0), airframe.calls[-3:]
+
+
+def test_a_global_setpoint_with_its_altitude_ignored_keeps_the_vehicles_height() -> None:
+    """SET_POSITION_TARGET_GLOBAL_INT with alt ignored (its field 0, mean sea level) flies to
+    the latitude and longitude at the vehicle's own height."""
+    airframe, gcs = _offboard()
+    origin = gcs.vehicle.origin()
+    assert origin is not None  # the scripted airframe has a GPS fix
+    for frame in (M.MAV_FRAME_GLOBAL_INT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+        msg = gcs.codecs[A].mav.set_position_target_global_int_encode(
+            0, 1, 1, frame, 0b110111111000 | 0b100, round(origin.latitude_deg * 1e7),
+            round(origin.longitude_deg * 1e7), 0.0, 0, 0, 0, 0, 0, 0, 0, 0)
+        gcs.send(A, msg, 2.5)
+        name, args = airframe.calls[-1]
+        assert name == "fly_to" and args[2] == 2.0, airframe.calls[-3:]  # 2 m up, as it was
+        assert abs(args[0]) < 0.02 and abs(args[1]) < 0.02  # the origin, to the degE7 rounding
