@@ -55,6 +55,10 @@ log = logging.getLogger(__name__)
 ONBOARD_COMPUTER = mav.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
 POSITION_ONLY = 0b0000_1101_1111_1000  # SET_POSITION_TARGET type_mask: x, y, z (yaw ignored)
 VELOCITY_ONLY = 0b0000_0101_1100_0111  # vx, vy, vz and yaw rate
+# What start() waits for: the snapshot's attitude, position and battery (SYS_STATUS: PX4 and
+# ArduPilot send it on every link by default). HIGHRES_IMU is asked for but not waited on.
+READY_MESSAGES = ("HEARTBEAT", "ATTITUDE", "LOCAL_POSITION_NED", "SYS_STATUS")
+UINT16_MAX = 65535
 OFFSET_WINDOW = 50  # ATTITUDE messages whose clock offsets count: 1 s at the 50 Hz asked for
 STREAMS_HZ = {  # asked of the controller with SET_MESSAGE_INTERVAL
     mav.MAVLINK_MSG_ID_ATTITUDE: 50.0,
@@ -132,23 +136,26 @@ class MavlinkAirframe:
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self, wait_s: float = 30.0) -> MavlinkAirframe:
-        """Start the link thread and wait for the controller's position (raises
-        ``LinkClosed`` naming the link if none comes within ``wait_s``)."""
+        """Start the link thread and wait for the controller's attitude, position and status
+        (raises ``LinkClosed`` naming the link and what is missing if they do not all come
+        within ``wait_s``): a snapshot is whole from the start, its battery voltage included."""
         if self._worker is None:
             self._worker = Worker(self._run, "airframe-mavlink").start()
         deadline = self.clock() + wait_s
         while not self._ready():
             self.check()
             if self.clock() > deadline:
+                with self._lock:
+                    missing = [k for k in READY_MESSAGES if k not in self._latest]
                 raise LinkClosed(f"no flight controller on {self.transport.name} within "
-                                 f"{wait_s:g} s (HEARTBEAT, ATTITUDE, LOCAL_POSITION_NED)")
+                                 f"{wait_s:g} s (waited for {', '.join(READY_MESSAGES)}; "
+                                 f"missing {', '.join(missing)})")
             time.sleep(0.02)
         return self
 
     def _ready(self) -> bool:
         with self._lock:
-            return all(k in self._latest for k in ("HEARTBEAT", "ATTITUDE",
-                                                     "LOCAL_POSITION_NED"))
+            return all(k in self._latest for k in READY_MESSAGES)
 
     def check(self) -> None:
         if self._worker is not None:
@@ -349,7 +356,9 @@ class MavlinkAirframe:
             baro_altitude_m=imu.pressure_alt if imu else -pos.z,
             baro_climb_m_s=-pos.vz,
             gps=fix,
-            battery_v=status.voltage_battery / 1e3 if status else 0.0,
+            # UINT16_MAX: the controller measures no voltage (0 V: unknown, as before any status)
+            battery_v=(status.voltage_battery / 1e3
+                       if status and status.voltage_battery != UINT16_MAX else 0.0),
             armed=bool(hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED) if hb else False,
             landed=landed,
             thrust_fraction=hud.throttle / 100.0 if hud else 0.0,

@@ -1,0 +1,70 @@
+"""``MavlinkAirframe.start``: the companion takes a flight controller as heard only when a
+snapshot can be whole. The controller here is a pymavlink script on UDP, sending the messages
+a test chooses (a flight controller that measures no battery voltage is one real case)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mav
+
+from skeye.errors import LinkClosed
+from skeye.pilot.mavlink_airframe import open_mavlink_airframe
+from tests.mavlink.conftest import free_udp_port
+
+
+@contextmanager
+def scripted_controller(port: int, *, status_mv: int | None) -> Iterator[None]:
+    """HEARTBEAT, ATTITUDE and LOCAL_POSITION_NED at 20 Hz to the companion's UDP port, and
+    SYS_STATUS with ``status_mv`` unless it is None."""
+    link = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1,
+                                      source_component=1)
+    stop = threading.Event()
+
+    def send() -> None:
+        boot_ms = 0
+        while not stop.wait(0.05):
+            boot_ms += 50
+            m = link.mav
+            m.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 0, 0,
+                             mav.MAV_STATE_STANDBY)
+            m.attitude_send(boot_ms, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
+            m.local_position_ned_send(boot_ms, 1.0, 2.0, -0.1, 0.0, 0.0, 0.0)
+            if status_mv is not None:
+                m.sys_status_send(0, 0, 0, 0, status_mv, -1, -1, 0, 0, 0, 0, 0, 0)
+
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(5.0)
+        link.close()
+
+
+def test_a_controller_that_sends_no_status_is_not_taken_and_the_error_says_what_is_missing():
+    """The first snapshot said 0.0 V whenever SYS_STATUS had not come yet (a loaded run of the
+    backend conformance test saw it)."""
+    port = free_udp_port()
+    with scripted_controller(port, status_mv=None), \
+            pytest.raises(LinkClosed, match="missing SYS_STATUS"):
+        open_mavlink_airframe(f"mavlink://udp/127.0.0.1:{port}", wait_s=1.5)
+
+
+@pytest.mark.parametrize(("status_mv", "battery_v"), [(11_800, 11.8), (65_535, 0.0)])
+def test_the_battery_is_the_controllers_and_unknown_when_it_measures_none(status_mv, battery_v):
+    """UINT16_MAX is MAVLink's "no voltage measured": it was read as 65.535 V."""
+    port = free_udp_port()
+    with scripted_controller(port, status_mv=status_mv):
+        airframe = open_mavlink_airframe(f"mavlink://udp/127.0.0.1:{port}", wait_s=30.0)
+        try:
+            snap = airframe.snapshot()
+        finally:
+            airframe.close()
+    assert snap.battery_v == pytest.approx(battery_v)
+    assert snap.pos_ned_m == pytest.approx((1.0, 2.0, -0.1)) and snap.rpy_rad[2] == 0.5
