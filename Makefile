@@ -3,8 +3,10 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 UP_ARGS ?=   # more `skeye up` options for `make run`, e.g. UP_ARGS="--ground-port 8081"
-# pytest-xdist workers for `make test` (auto: one per core); a test file stays on one worker.
-TEST_WORKERS ?= auto
+# pytest-xdist workers for `make test`: one per core and one more, since many tests wait on
+# wall-clock time (real-time flights, timeouts, restarts) and leave a core idle meanwhile
+# (docs/performance.md, "The test suite"); a test file stays on one worker.
+TEST_WORKERS ?= $(shell $(PYTHON) -c "import os; print(len(os.sched_getaffinity(0)) + 1)")
 
 .PHONY: run test lint bench clean chromium
 

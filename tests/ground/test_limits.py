@@ -151,8 +151,10 @@ def test_a_reply_to_a_page_that_has_gone_is_no_traceback(ground, caplog) -> None
     web, _ = ground
     caplog.set_level(logging.WARNING)
     for _ in range(5):
+        # The page reads none of its replies: this client's incoming queue fills, so its
+        # close handshake can only wait out close_timeout (10 s by default, the test's time).
         with ws_connect(f"ws://127.0.0.1:{web.port}/ws?token={web.token}",
-                        open_timeout=10) as ws:
+                        open_timeout=10, close_timeout=1.0) as ws:
             for i in range(40):  # over the rate and in-flight limits: 429s, then gone
                 ws.send(json.dumps({"type": "command", "id": i, "name": "hold", "args": {}}))
     time.sleep(1.0)  # replies to the closed sockets happen now, if they do
