@@ -293,6 +293,7 @@ class OnboardBoards:
             self.airframe.hover()
             self._fire(FlightEvent.HOLD)
             self._end_motion()
+            self.pad.stop()  # "stop and hover here": a pad hold or landing ends too
         elif isinstance(msg, Velocity):
             self._velocity(msg)
         elif isinstance(msg, MoveBy):

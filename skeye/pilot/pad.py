@@ -72,8 +72,8 @@ class PadController:
                 self._settings = replace(self._settings, mode=PadAction.OFF)
 
     def stop(self) -> None:
-        """The sticks took over (any pad mode is an automatic mode they end): mode OFF, as
-        PX4's precision landing ends when the sticks override it."""
+        """HOLD, or the sticks took over (any pad mode is an automatic mode they end): mode
+        OFF, as PX4's precision landing ends when the sticks override it or Hold is chosen."""
         with self._lock:
             self._settings = replace(self._settings, mode=PadAction.OFF)
 

@@ -83,3 +83,24 @@ def test_a_pad_search_climbs_no_higher_than_the_flight_envelope_allows(
         assert ns.state is NavState.HOLDING and ns.pad_mode is PadAction.HOLD, ns
         highest = max(highest, -ns.z / 1000.0)
     assert ceiling_m - 0.5 < highest < ceiling_m + 0.3, highest  # searched up to the ceiling
+
+
+def test_hold_during_a_pad_landing_stops_it_where_it_is(
+    stack: ExitStack, tmp_path: Path,
+) -> None:
+    """HOLD ("stop and hover here", the page's Hold button) in the middle of a pad landing:
+    the pad mode ends and the vehicle hovers at its height. The landing went on to the pad:
+    only PAD_MODE 0 or the sticks stopped it."""
+    control, images, _cameras = stack.enter_context(sim_with_images(
+        robot_dirs=(small_camera_robot(tmp_path),), estimator="truth"))
+    flight = _fly(stack, control.port, images.port, robot_class="smallcam")
+    _hold_at(flight, 1.2)
+    flight.vehicle.pad_mode(2, deadband_m=0.05, max_speed_m_s=0.3)  # land on the pad
+    flight.run_until(lambda ns: flight.height() < 1.05, 20.0)  # descending onto it
+    ns = flight.vehicle.nav_status()
+    assert ns is not None and ns.state is NavState.HOLDING and ns.pad_mode is PadAction.LAND
+    flight.vehicle.hold()
+    held_m = flight.height()
+    ns = flight.run_for(2.0)  # the landing, still on, would have come down 0.4 m or more
+    assert ns.state is NavState.HOLDING and ns.pad_mode is PadAction.OFF, ns
+    assert abs(flight.height() - held_m) < 0.1, (held_m, flight.height())
