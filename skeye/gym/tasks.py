@@ -117,12 +117,17 @@ class Task:
         return math.dist(p, t)
 
     def crashed(self, vehicle: Vehicle, truth: BodyState | None, episode: Episode) -> str:
-        """Why the episode ends as a crash ('' when it does not)."""
+        """Why the episode ends as a crash ('' when it does not). Records the step's
+        ``distance_m`` in the episode's info first (a crash's info gives the distance of the
+        step that ended it, not of the step before; none where the physics stopped the
+        vehicle, whose position is then unknown)."""
         if truth is None:
+            episode.info.pop("distance_m", None)
             return f"stopped: {vehicle.view.stopped or 'removed'}"
+        distance = episode.info["distance_m"] = self.distance_m(truth, episode)
         if tilt_rad(truth) > MAX_TILT_RAD:
             return "tilted beyond 60 degrees"
-        if self.distance_m(truth, episode) > self.area_m:
+        if distance > self.area_m:
             return f"left the area ({self.area_m:g} m)"
         if truth.pos_ned_m[2] < episode.target_ned_m[2] - CEILING_M:
             return f"climbed {CEILING_M:g} m above the target"

@@ -514,3 +514,21 @@ def test_a_robot_without_an_ins_or_ground_truth_is_refused_naming_that(tmp_path)
         assert np.all(np.isfinite(obs))
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("env_id", ["skeye/Hover-v0", "skeye/PadLanding-v0"])
+def test_the_info_of_a_crash_out_of_the_area_gives_the_distance_that_ended_it(env_id: str) -> None:
+    """Flown out of its 3 m area, the last step's info said ``distance_m`` of the step before
+    (inside the area): the crash was judged before the step's distance was recorded."""
+    kwargs = {"camera": "ideal", "wind": "none"} if "Pad" in env_id else {}
+    env = gymnasium.make(env_id, **kwargs)
+    try:
+        env.reset(seed=1, options={"start_ned_m": (2.5, 0.0, -1.5), "yaw_rad": 0.0})
+        for _ in range(100):  # full speed north, away from the point (or pad) at the origin
+            _, _, terminated, truncated, info = env.step(np.array((1, 0, 0, 0), np.float32))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert terminated and info["crash"] == "left the area (3 m)", info
+    assert info["distance_m"] > 3.0, info
