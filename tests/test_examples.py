@@ -72,3 +72,21 @@ def test_the_training_example_says_what_it_needs() -> None:
                               capture_output=True, text=True, timeout=120)
         assert done.returncode == 1 and "Traceback" not in done.stderr
         assert "needs Stable-Baselines3" in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("script, args", [
+    ("pad_landing_scripted.py", ["--episodes", "0"]),
+    ("pad_landing_scripted.py", ["--episodes", "-1"]),
+    ("train_hover_sb3.py", ["--episodes", "0"]),
+    ("train_hover_sb3.py", ["--envs", "0"]),
+    ("train_hover_sb3.py", ["--steps", "-5"]),
+])
+def test_the_gym_examples_refuse_a_count_below_one_naming_it(script: str, args: list) -> None:
+    """``pad_landing_scripted.py --episodes 0`` flew nothing and ended in a ZeroDivisionError
+    traceback (the landing rate of no episodes); the training script divided by zero too, after
+    its training. Each count is now refused by its option, before anything is flown."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(ROOT / "examples" / "gym" / script), *args],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert f"argument {args[0]}" in done.stderr and ">= 1" in done.stderr, done.stderr
