@@ -19,9 +19,10 @@ does). docs/gym.md tabulates every space, reward and ending.
   towards the pad; at touchdown +10 within ``pad_tolerance_m`` of the pad centre (success),
   else -10.
 
-Every task ends (terminated) with -10 on a crash: the vehicle stopped by the physics, tilted
-beyond 60 degrees, left its area, or (Hover, GoTo) touched the ground; and is truncated at its
-``episode_s``.
+Every task ends (terminated) with -10 on a crash: the vehicle stopped by the physics, found
+crashed by the simulator (:mod:`skeye.sim.crash`: a hard impact; its motors stop and its
+set-points are refused), tilted beyond 60 degrees, left its area, or (Hover, GoTo) touched
+the ground; and is truncated at its ``episode_s``.
 """
 
 from __future__ import annotations
@@ -125,6 +126,8 @@ class Task:
             episode.info.pop("distance_m", None)
             return f"stopped: {vehicle.view.stopped or 'removed'}"
         distance = episode.info["distance_m"] = self.distance_m(truth, episode)
+        if vehicle.robot.flight.crashed:  # the simulator's detector: motors off, DRIVE refused
+            return f"crashed: {vehicle.robot.flight.crashed}"
         if tilt_rad(truth) > MAX_TILT_RAD:
             return "tilted beyond 60 degrees"
         if distance > self.area_m:

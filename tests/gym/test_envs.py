@@ -532,3 +532,40 @@ def test_the_info_of_a_crash_out_of_the_area_gives_the_distance_that_ended_it(en
         env.close()
     assert terminated and info["crash"] == "left the area (3 m)", info
     assert info["distance_m"] > 3.0, info
+
+
+@pytest.mark.parametrize("mode", ["single", "vector_entry_point"])
+def test_a_vehicle_the_simulator_finds_crashed_ends_its_episode(mode: str) -> None:
+    """Dropped with its motors at zero thrust, the vehicle hit the ground at about 5 m/s: the
+    simulator's crash detector (a hard impact) stopped its motors and refuses its set-points,
+    but the task did not see the crash: the episode went on (it bounced, so neither landed nor
+    out of its area) and the next step raised the simulator's LocalProtocolError from inside
+    step(), the whole batch's in the native vector environment."""
+    drop = np.array((0, 0, 0, -1), np.float32)  # attitude: level, no thrust
+    if mode == "single":
+        env = gymnasium.make("skeye/Hover-v0", action="attitude")
+        try:
+            env.reset(seed=2)
+            for _ in range(60):  # 1.2-1.8 m of free fall takes about 0.6 s: 12 steps
+                _, reward, terminated, truncated, info = env.step(drop)
+                if terminated or truncated:
+                    break
+        finally:
+            env.close()
+        assert terminated and reward == -10.0, info
+        assert "hard impact" in info["crash"], info
+        return
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, action="attitude",
+                              vectorization_mode="vector_entry_point")
+    try:
+        envs.reset(seed=2)
+        hover = np.array((0, 0, 0, 0.0), np.float32)  # about half thrust: stays up a while
+        ended = np.zeros(2, dtype=bool)
+        for _ in range(30):
+            _, rewards, terminated, _, infos = envs.step(np.stack((drop, hover)))
+            if terminated[0]:
+                ended = terminated
+                break
+    finally:
+        envs.close()
+    assert ended[0] and rewards[0] == -10.0 and "hard impact" in infos["crash"][0], infos
