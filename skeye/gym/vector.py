@@ -170,9 +170,17 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[Any, dict[str, Any]]:
-        super().reset(seed=seed)
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+            raise ConfigError(
+                f"the batched vector environment's vehicles fly in one world, seeded by one "
+                f"number: seed must be a whole number or None, got {seed!r} (a seed per "
+                f"environment: vectorization_mode='sync' or 'async')")
         if options:
-            raise ConfigError("the batched vector environment takes no reset options")
+            raise ConfigError(
+                f"the batched vector environment takes no reset options (each vehicle starts "
+                f"in its own cell, spacing_m apart), got {options!r}; to fix the starts, use "
+                f"vectorization_mode='sync' or 'async'")
+        super().reset(seed=seed)
         self._close_flight()
         self.flight = Flight(self.setup, int(self.np_random.integers(2**31)))
         for i in range(self.num_envs):

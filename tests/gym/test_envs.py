@@ -569,3 +569,20 @@ def test_a_vehicle_the_simulator_finds_crashed_ends_its_episode(mode: str) -> No
     finally:
         envs.close()
     assert ended[0] and rewards[0] == -10.0 and "hard impact" in infos["crash"][0], infos
+
+
+def test_the_batched_environment_refuses_reset_options_and_seed_lists_saying_why() -> None:
+    """docs/gym.md offered reset options without saying that the native vector environment
+    refuses them; a list of seeds (one per environment, as SyncVectorEnv takes) failed in
+    Gymnasium's seeding with 'Seed must be a python integer', not saying why."""
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2,
+                              vectorization_mode="vector_entry_point")
+    try:
+        with pytest.raises(ConfigError, match=r"takes no reset options.*own cell.*'sync'"):
+            envs.reset(seed=0, options={"yaw_rad": 0.0})
+        with pytest.raises(ConfigError, match=r"one world.*got \[1, 2\].*'sync'"):
+            envs.reset(seed=[1, 2])
+        obs, _ = envs.reset(seed=3)  # one number: fine
+        assert obs.shape == (2, 19)
+    finally:
+        envs.close()
