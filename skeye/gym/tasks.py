@@ -8,11 +8,12 @@ the same numbers ``skeye pilot --policy`` gives a policy), and judges each step 
 truth (the reward and the end may use what the vehicle cannot know; the observation never
 does). docs/gym.md tabulates every space, reward and ending.
 
-- :class:`Hover` (``skeye/Hover-v0``): hold a point 1.5 m above the origin from a start within
-  0.5 m of it. Reward per step ``1 - min(|e|, 1 m)/1 m`` (e: true distance to the point).
+- :class:`Hover` (``skeye/Hover-v0``): hold a point 1.5 m above the origin from a start up to
+  0.5 m from it north and east each (0.3 m vertically). Reward per step
+  ``1 - min(|e|, 1 m)/1 m`` (e: true distance to the point).
 - :class:`GoTo` (``skeye/GoTo-v0``): fly from 1.5 m above the origin to a target up to 4 m away
-  horizontally and 1-3 m high. Reward per step: the progress ``d_prev - d`` (m) plus 0.1 within
-  0.2 m of the target.
+  north and east each (5.7 m horizontally) and 1-3 m high. Reward per step: the progress
+  ``d_prev - d`` (m) plus 0.1 within 0.2 m of the target.
 - :class:`PadLanding` (``skeye/PadLanding-v0``): from 1.5-2.5 m above a point within
   ``start_offset_m`` of the pad, land on it; the observation has the pilot's pad detection (or
   the camera image). Reward per step: the progress of ``horizontal distance + 0.5 height``

@@ -586,3 +586,28 @@ def test_the_batched_environment_refuses_reset_options_and_seed_lists_saying_why
         assert obs.shape == (2, 19)
     finally:
         envs.close()
+
+
+def test_the_environments_table_gives_the_starts_and_targets_the_tasks_draw() -> None:
+    """docs/gym.md said Hover starts 'within 0.5 m' of its point and GoTo's target is 'up to 4 m
+    away horizontally': the tasks draw each of north and east alone within those figures (a
+    square), so a Hover start lay up to 0.71 m from the point horizontally and a GoTo target up
+    to 5.7 m away. The table now says what is drawn; the draws fill what it says."""
+    from pathlib import Path
+
+    from skeye.gym.tasks import GoTo, Hover
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "gym.md").read_text()
+    assert "starting up to 0.5 m north or south and east or west of it and 0.3 m above or " \
+           "below it" in text
+    assert "to a target up to 4 m north or south and east or west (so up to 5.7 m away " \
+           "horizontally), 1-3 m high" in text
+    rng = np.random.default_rng(0)
+    hover = np.array([Hover().start(rng, (0.0, 0.0, 0.0)).start_ned_m for _ in range(4000)])
+    offset = hover - (0.0, 0.0, -1.5)
+    assert np.all(np.abs(offset) <= (0.5, 0.5, 0.3))
+    assert np.hypot(offset[:, 0], offset[:, 1]).max() > 0.65  # the square's corners
+    targets = np.array([GoTo().start(rng, (0.0, 0.0, 0.0)).target_ned_m for _ in range(4000)])
+    assert np.all(np.abs(targets[:, :2]) <= 4.0)
+    assert np.all((-3.0 <= targets[:, 2]) & (targets[:, 2] <= -1.0))
+    assert 5.4 < np.hypot(targets[:, 0], targets[:, 1]).max() <= np.hypot(4.0, 4.0)
