@@ -299,11 +299,12 @@ class PolicyPilot:
         if self.pad is None:
             raise InvalidArgument("PolicyPilot needs the boards' pad controller to be an "
                                   "ObservedPad (policy_factory sets it)")
-        self.calls = 0  # policy calls made
+        self.calls = 0  # policy calls made (and reset() tries that raised)
         self.failures = 0  # of them, calls that raised or gave no action (the vehicle held)
         self.failures_in_a_row = 0
         self.slow_calls = 0  # of them, calls that took longer than period_s of wall time
         self.engaged = False
+        self._needs_reset = False  # engaged, its reset() not yet done (it raised)
         self._next_s = -math.inf
         self._image: np.ndarray | None = None
         self._video: Callable[[CameraFrame], None] | None = None
@@ -356,11 +357,20 @@ class PolicyPilot:
                 self.engaged = True
                 self._next_s = snap.time_s
                 self.failures_in_a_row = 0
-                reset_policy(self.policy)
+                self._needs_reset = True
                 log.info("policy engaged (PAD_MODE %s)", mode.name)
             if snap.time_s < self._next_s - 1e-9:
                 return
             self._next_s = max(self._next_s + self.period_s, snap.time_s)
+            if self._needs_reset:  # its reset, tried once a period until it succeeds
+                try:
+                    reset_policy(self.policy)
+                except Exception as exc:
+                    self.calls += 1
+                    self._failed(LocalProtocolError(
+                        f"the policy's reset raised {type(exc).__name__}: {exc}; the vehicle "
+                        f"holds still"), exc)
+                self._needs_reset = False
             with self._image_lock:
                 image = self._image
             assert self.pad is not None

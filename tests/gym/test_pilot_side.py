@@ -269,3 +269,42 @@ def test_a_policy_slower_than_its_period_is_counted_and_said(
     assert pilot.calls == 3 and pilot.slow_calls >= 1
     assert "the policy took 0.2" in caplog.text and "over its 0.050 s period" in caplog.text
     assert airframe.commands[-1] == ("velocity", 0.0, 0.0, 0.0, 0.0, None)  # still flies
+
+
+def test_a_policy_whose_reset_fails_holds_the_vehicle_until_a_reset_succeeds(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A policy's reset() that raised on taking over escaped as a bare error to the pilot's
+    loop, uncounted and unsaid as the policy's, and the policy was then flown without its
+    reset (on the state of its last engagement). It is now a failure as a call's is: the vehicle
+    holds still, it is counted and said, and the reset is tried again each period until it
+    succeeds; only then is the policy flown."""
+    from skeye.errors import LocalProtocolError
+
+    class Policy:
+        def __init__(self) -> None:
+            self.resets_to_fail = 2
+            self.resets = 0
+
+        def reset(self) -> None:
+            if self.resets_to_fail:
+                self.resets_to_fail -= 1
+                raise RuntimeError("no model loaded")
+            self.resets += 1
+
+        def __call__(self, obs: object) -> object:
+            assert self.resets == 1, "flown before its reset succeeded"
+            return np.array([1.0, 0, 0, 0])
+
+    policy = Policy()
+    pilot, airframe = _holding_pilot(policy)
+    with caplog.at_level("WARNING", logger="skeye.pilot.policy"):
+        for _ in range(2):
+            with pytest.raises(LocalProtocolError,
+                               match="the policy's reset raised RuntimeError: no model loaded"):
+                pilot.step()
+            airframe.time_s += 0.05
+    assert airframe.commands == [("hover",)] and pilot.failures == 2
+    assert caplog.text.count("no model loaded") == 1  # said at the first of the run
+    pilot.step()
+    assert policy.resets == 1 and airframe.commands[-1] == ("velocity", 1.0, 0.0, 0.0, 0.0, None)
+    assert pilot.failures_in_a_row == 0
