@@ -24,6 +24,7 @@ import gymnasium
 import numpy as np
 
 import skeye.gym  # noqa: F401  (registers the environments)
+from skeye.cliargs import positive_int
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
 from skeye.pilot.pad_track import PadFix, Pose, PoseHistory, locate_pad, offset_now
 
@@ -120,20 +121,10 @@ def fly(episodes: int, seed: int, **env_kwargs: object) -> list[dict[str, object
     return results
 
 
-def at_least_one(value: str) -> int:
-    """An argparse count: a whole number >= 1."""
-    try:
-        count = int(value)
-    except ValueError:
-        count = 0
-    if count < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {value}")
-    return count
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=at_least_one, default=20)
+    parser.add_argument("--episodes", type=positive_int, default=20)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--camera", default="webcam", choices=("webcam", "ideal"))
     parser.add_argument("--estimator", default="onboard", choices=("onboard", "truth"))

@@ -21,6 +21,7 @@ import gymnasium
 import numpy as np
 
 import skeye.gym  # noqa: F401  (registers the environments)
+from skeye.cliargs import positive_int
 
 
 def make_hover() -> gymnasium.Env:  # type: ignore[type-arg]
@@ -54,23 +55,13 @@ def load(path: str):  # type: ignore[no-untyped-def]
     return lambda obs: model.predict(obs, deterministic=True)[0]
 
 
-def at_least_one(value: str) -> int:
-    """An argparse count: a whole number >= 1."""
-    try:
-        count = int(value)
-    except ValueError:
-        count = 0
-    if count < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {value}")
-    return count
-
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=at_least_one, default=200_000)
-    parser.add_argument("--envs", type=at_least_one, default=4)
+    parser.add_argument("--steps", type=positive_int, default=200_000)
+    parser.add_argument("--envs", type=positive_int, default=4)
     parser.add_argument("--out", default="hover_ppo")
-    parser.add_argument("--episodes", type=at_least_one, default=5, help="evaluation episodes")
+    parser.add_argument("--episodes", type=positive_int, default=5, help="evaluation episodes")
     args = parser.parse_args()  # --help works without Stable-Baselines3
     try:
         from stable_baselines3 import PPO

@@ -16,7 +16,7 @@ import pytest
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.wire.packets import NavState, PadAction
-from tests.pilot.test_takeover import _fly, _hold_at
+from tests.pilot.test_takeover import _fly, _hold_at, pad_landing_under_way
 from tests.sim.conftest import running_sim
 from tests.sim.test_cameras import sim_with_images, small_camera_robot
 
@@ -91,14 +91,7 @@ def test_hold_during_a_pad_landing_stops_it_where_it_is(
     """HOLD ("stop and hover here", the page's Hold button) in the middle of a pad landing:
     the pad mode ends and the vehicle hovers at its height. The landing went on to the pad:
     only PAD_MODE 0 or the sticks stopped it."""
-    control, images, _cameras = stack.enter_context(sim_with_images(
-        robot_dirs=(small_camera_robot(tmp_path),), estimator="truth"))
-    flight = _fly(stack, control.port, images.port, robot_class="smallcam")
-    _hold_at(flight, 1.2)
-    flight.vehicle.pad_mode(2, deadband_m=0.05, max_speed_m_s=0.3)  # land on the pad
-    flight.run_until(lambda ns: flight.height() < 1.05, 20.0)  # descending onto it
-    ns = flight.vehicle.nav_status()
-    assert ns is not None and ns.state is NavState.HOLDING and ns.pad_mode is PadAction.LAND
+    flight = pad_landing_under_way(stack, tmp_path)
     flight.vehicle.hold()
     held_m = flight.height()
     ns = flight.run_for(2.0)  # the landing, still on, would have come down 0.4 m or more

@@ -152,7 +152,8 @@ def test_sticks_take_over_a_goto(stack: ExitStack) -> None:
     assert ns.vx < 1500 and ns.vy > 500  # coasting north, slowing; leaning right: going east
 
 
-def test_sticks_take_over_a_pad_landing(stack: ExitStack, tmp_path: Path) -> None:
+def pad_landing_under_way(stack: ExitStack, tmp_path: Path) -> Flight:
+    """The small-camera robot in a pad landing from 1.2 m, descending through 1.05 m."""
     control, images, _cameras = stack.enter_context(sim_with_images(
         robot_dirs=(small_camera_robot(tmp_path),), estimator="truth"))
     flight = _fly(stack, control.port, images.port, robot_class="smallcam")
@@ -161,6 +162,11 @@ def test_sticks_take_over_a_pad_landing(stack: ExitStack, tmp_path: Path) -> Non
     flight.run_until(lambda ns: flight.height() < 1.05, 20.0)  # descending onto it
     ns = flight.vehicle.nav_status()
     assert ns is not None and ns.state is NavState.HOLDING and ns.pad_mode is PadAction.LAND
+    return flight
+
+
+def test_sticks_take_over_a_pad_landing(stack: ExitStack, tmp_path: Path) -> None:
+    flight = pad_landing_under_way(stack, tmp_path)
     _take_over(flight, NavState.HOLDING)
     ns = flight.run_for(1.0)
     assert ns.pad_mode is PadAction.OFF  # the sticks ended the pad landing
