@@ -357,3 +357,65 @@ def test_checker_reports_what_does_not_resolve():
     assert problems == ["a.md:1: skeye.vision.calibration has no detect",
                         "a.md:2: cannot import skeye.no_such_module: No module named "
                         "'skeye.no_such_module'"]
+
+
+# --- documented defaults against the code -------------------------------------------------
+
+_PARAM_VALUE = re.compile(r"`(\w+)`\s+(-?\d+(?:\.\d+)?(?:e-?\d+)?)")
+
+
+def sensor_parameter_table(text: str) -> dict[str, dict[str, float]]:
+    """Type -> {key: default} of the table under the "Sensor parameters" heading (its rows
+    after the header): each parameter is written `` `Key` value unit``; a row of ``-`` has
+    none."""
+    table: dict[str, dict[str, float]] = {}
+    in_section = in_body = False
+    for line in text.splitlines():
+        heading = _HEADING.match(line)
+        if heading:
+            in_section = heading.group(2).strip().lower() == "sensor parameters"
+            in_body = False
+            continue
+        if in_section and line.startswith("| ---"):
+            in_body = True
+            continue
+        if not in_body or not line.startswith("| `"):
+            continue
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        table[cells[0].strip("`")] = {key: float(value)
+                                      for key, value in _PARAM_VALUE.findall(cells[1])}
+    return table
+
+
+def test_sensor_parameter_defaults_are_the_codes():
+    from skeye.sim.sensors import SENSOR_CLASSES
+
+    page = (ROOT / "docs" / "protocols" / "simulator.md").read_text(encoding="utf-8")
+    table = sensor_parameter_table(page)
+    code = {cls.type_name: {p.key: float(p.default) for p in cls.PARAMS}
+            for cls in SENSOR_CLASSES.values()}
+    problems = [f"{kind}: the code has no such sensor type" for kind in table.keys() - code]
+    problems += [f"{kind}: not in the table" for kind in code.keys() - table.keys()]
+    for kind in code.keys() & table.keys():
+        documented, actual = table[kind], code[kind]
+        problems += [f"{kind}: {key} is not documented (default {actual[key]:g})"
+                     for key in actual.keys() - documented.keys()]
+        problems += [f"{kind}: {key} is no parameter of the code"
+                     for key in documented.keys() - actual.keys()]
+        problems += [f"{kind}: {key} documented {documented[key]:g}, the code's {actual[key]:g}"
+                     for key in documented.keys() & actual.keys()
+                     if documented[key] != actual[key]]
+    assert not problems, ("docs/protocols/simulator.md, Sensor parameters:\n"
+                          + "\n".join(sorted(problems)))
+
+
+def test_checker_reads_the_sensor_parameter_table():
+    text = ("## Other\n| `Sonar` | `MaxRange` 1 m |\n"
+            "#### Sensor parameters\n\n| `Type` | parameters (default) |\n| --- | --- |\n"
+            "| `GroundTruth` | - |\n"
+            "| `Barometer` | `NoiseSigma` 1.5 Pa, `RotorThrustCoefficient` 0 N s^2 (the file: "
+            "8.5e-6), `Tiny` 1e-6 |\n\nAfter the table `Sonar` 3.\n## Next\n| `Gyro` | `A` 2 |\n")
+    assert sensor_parameter_table(text) == {
+        "GroundTruth": {},
+        "Barometer": {"NoiseSigma": 1.5, "RotorThrustCoefficient": 0.0, "Tiny": 1e-6},
+    }
