@@ -39,7 +39,14 @@ from dataclasses import replace
 from typing import Any
 
 from skeye import cliargs
-from skeye.errors import ConfigError, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.errors import (
+    CommandRejected,
+    ConfigError,
+    LinkClosed,
+    LinkTimeout,
+    LocalProtocolError,
+    SkeyeError,
+)
 from skeye.pilot.airframe import (
     AirframeOptions,
     airframe_scheme,
@@ -236,7 +243,10 @@ def run(args: argparse.Namespace) -> int:
                 if sim is None or robot is None:
                     return _error(f"--images reads the camera of a robot the pilot spawned "
                                   f"(sim://); {airframe_uri} has none: give --camera URI")
-                fov_h_rad = camera_fov_rad(sim, args.camera)
+                try:
+                    fov_h_rad = camera_fov_rad(sim, args.camera)
+                except CommandRejected as exc:  # no such camera on the robot
+                    return _error(f"--camera {args.camera}: {exc}")
                 camera_name = f"{args.name}/{args.camera}"
                 if args.policy is not None:
                     vision = policy_vision_factory(sim, robot, args, calibration, latency_s)

@@ -253,6 +253,21 @@ def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
     assert "give --start one of them" in err and "--airframe" not in err, err
 
 
+def test_a_camera_name_the_robot_lacks_is_a_bad_camera_option(capsys):
+    """``--images`` with ``--camera Nope`` ended with status 1 and ``GETCONF: robot R1 has no
+    sensor ...``, naming neither the option nor the status of a bad option (docs/pilot.md)."""
+    from skeye.cli import main
+
+    with running_sim() as server:
+        status = main(["pilot", "--sim", f"127.0.0.1:{server.port}", "--port", "0",
+                       "--images", f"127.0.0.1:{_unused_port()}", "--camera", "Nope"])
+    captured = capsys.readouterr()
+    assert status == 2, captured.err
+    assert captured.out == ""
+    assert captured.err.startswith("skeye pilot: error: --camera Nope: "), captured.err
+    assert "no sensor of type Camera named Nope" in captured.err, captured.err
+
+
 def test_a_camera_lost_at_start_is_a_warning_on_stderr(capsys, monkeypatch, tmp_path):
     """The pilot runs on without its camera (the pad modes hold still): a warning, not an
     error. The --serial directory then stops it, as a bad option."""
