@@ -103,7 +103,7 @@ class CameraModel:
         return self.system_gain_dn_per_e > 0.0
 
 
-# The webcam profile's figures (sources: docs/camera.md, "The webcam profile").
+# The webcam profile's figures (sources: docs/camera.md, "Parameters").
 _WEBCAM: dict[str, Any] = {
     # Radial distortion of a Logitech HD Pro Webcam C920 at 800x600: the published calibration
     # by R. Atkinson (2018-05-30, 3DF Zephyr, OpenCV's model) in FIRST-Tech-Challenge's

@@ -1,4 +1,5 @@
-"""Crash detection: when a simulated vehicle has crashed, and why (docs/physics.md, Crashes).
+"""Crash detection: when a simulated vehicle has crashed, and why (docs/protocols/simulator.md,
+"Crashes").
 
 How this works: every board tick the robot hands its ground-truth attitude, velocity and
 ground contact to its :class:`CrashDetector`, which answers None or the crash's cause, once.

@@ -88,7 +88,7 @@ class Scale:
         return counts if self.clamp is None else clamp(counts, *self.clamp)
 
 
-# The protocol's units (docs/protocols/packets.md, "Units").
+# The protocol's units (docs/protocols/packets.md, "Conventions" and each structure's table).
 MDEG = Scale("rad", "_rad", 1, 1000, degrees=True)  # 1/1000 degree
 HEADING_MDEG = Scale("rad", "_rad", 1, 1000, degrees=True, wrap=True)  # 0..360000, clockwise
 ANGVEL = Scale("rad/s", "_rad_s", 1, ANGVEL_COUNTS_PER_DEG_S, degrees=True)  # 64.8 = 1 deg/s
