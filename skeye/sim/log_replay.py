@@ -329,7 +329,7 @@ def cmd_logs(args: argparse.Namespace) -> int:
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
-        "logs", help="a real flight log's IMU against the simulated one (docs/physics.md)",
+        "logs", help="a real flight log's IMU against the simulated one (docs/logs.md)",
         description="Read a real flight log (EuRoC-style CSV folder, PX4 ULog, ROS bag), "
         "measure its IMU (vibration above 10 Hz, Allan deviation), replay it through the "
         "board estimator against the log's ground truth, and print the simulated IMU's "
