@@ -382,3 +382,28 @@ def test_a_jpeg_client_gets_the_webcams_own_mjpeg():
         decoded = frame_image(same)[:, :, ::-1]
         assert np.array_equal(decoded, newest.rgb)
         c.close()
+
+
+def test_calibration_pages_single_frame_recipe_gives_the_spawn_state_frame(tmp_path):
+    """docs/calibration.md's "single frames by hand", its lines as the page gives them, under
+    the default webcam profile: the frame ``skeye snapshot`` then saves is the vehicle's first
+    (its spawn state). The page said ``STEP {Count 1}``, after which the webcam's 60 +- 10 ms
+    capture latency had published no frame yet: the snapshot failed ("no frame available")."""
+    import re
+
+    from skeye.recording.snapshot import save_snapshot
+
+    page = (Path(__file__).parents[2] / "docs" / "calibration.md").read_text(encoding="utf-8")
+    recipe = page[page.index("For single frames by hand"):].split("\n\n")[0].replace("\n", " ")
+    init, step = (re.search(rf"`({word} [^`]*)`", recipe) for word in ("INIT", "STEP"))
+    camera = re.search(r"skeye snapshot --camera (\S+)", recipe)
+    assert init and step and camera, recipe
+    with sim_with_images(profile="webcam") as (control, images, _cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer(init.group(1), "INIT")
+        c.answer(step.group(1), "STEP")
+        _w, _h, number = save_snapshot(f"127.0.0.1:{images.port}", tmp_path / "board.png",
+                                       camera.group(1))
+        assert number == 1
+        c.close()
