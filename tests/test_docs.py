@@ -359,6 +359,43 @@ def test_checker_reports_what_does_not_resolve():
                         "'skeye.no_such_module'"]
 
 
+_REPO_PATH = re.compile(
+    r"`((?:skeye|tests|benchmarks|examples|tools|docs)/[\w./-]*(?:\.\w+|/))(?:::\w+|:\d+)?`")
+NOT_OURS = {"examples/motor_on_off.c"}  # the AscTec AutoPilot SDK's example, compatibility.md
+"""Paths in the pages that name another project's files."""
+
+
+def repository_paths(text: str) -> list[tuple[int, str]]:
+    """(line number, path) of every file or folder of the repository the text names in inline
+    code (`` `skeye/pilot/cli.py` ``, `` `tests/x.py::test_y` ``, `` `docs/img/` ``): a name
+    with an extension, or ending in ``/``, under one of the repository's top folders."""
+    found: list[tuple[int, str]] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        found.extend((number, path) for path in _REPO_PATH.findall(line)
+                     if path not in NOT_OURS)
+    return found
+
+
+def test_files_the_pages_name_exist():
+    problems: list[str] = []
+    checked = 0
+    for path in markdown_docs():
+        for number, named in repository_paths(path.read_text(encoding="utf-8")):
+            checked += 1
+            if not (ROOT / named).exists():
+                problems.append(f"{path.relative_to(ROOT)}:{number}: {named}: no such file")
+    assert checked > 100, "the pages name hardly any file: the pattern is wrong"
+    assert not problems, "the pages name files the repository lacks:\n" + "\n".join(problems)
+
+
+def test_checker_finds_the_files_a_page_names():
+    text = ("see `skeye/pilot/cli.py` and `tests/a.py::test_b`, `docs/img/`\n"
+            "not `skeye/Hover-v0`, `skeye.gym`, `x/skeye/y.py`, nor `examples/motor_on_off.c`\n"
+            "`benchmarks/bench_sim.py:12` `skeye pilot --help`\n")
+    assert repository_paths(text) == [(1, "skeye/pilot/cli.py"), (1, "tests/a.py"),
+                                      (1, "docs/img/"), (3, "benchmarks/bench_sim.py")]
+
+
 # --- documented defaults against the code -------------------------------------------------
 
 _PARAM_VALUE = re.compile(r"`(\w+)`\s+(-?\d+(?:\.\d+)?(?:e-?\d+)?)")
