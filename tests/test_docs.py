@@ -396,6 +396,62 @@ def test_checker_finds_the_files_a_page_names():
                                       (1, "docs/img/"), (3, "benchmarks/bench_sim.py")]
 
 
+_DOTTED = re.compile(r"`(skeye(?:\.\w+)+)(?:\(\))?`")
+
+_RESOLVE_DOTTED = """
+import importlib, json, sys
+problems = []
+for where, name in json.loads(sys.stdin.read()):
+    parts = name.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:cut]))
+            break
+        except ImportError:
+            continue
+    for i, attr in enumerate(parts[cut:], start=cut):
+        if not hasattr(obj, attr):
+            problems.append(f"{where}: {name}: {'.'.join(parts[:i])} has no {attr}")
+            break
+        obj = getattr(obj, attr)
+print(json.dumps(problems))
+"""
+
+
+def dotted_names(text: str) -> list[tuple[int, str]]:
+    """(line number, name) of every ``skeye.a.b`` (or ``skeye.a.f()``) in inline code."""
+    return [(number, name) for number, line in enumerate(text.splitlines(), start=1)
+            for name in _DOTTED.findall(line)]
+
+
+def unresolved_names(names: list[tuple[str, str]], root: Path = ROOT) -> list[str]:
+    """What is wrong with (where, dotted name) pairs: each must be a module or an attribute of
+    one; resolved in a child process, as the imports are."""
+    done = subprocess.run([sys.executable, "-c", _RESOLVE_DOTTED], input=json.dumps(names),
+                          capture_output=True, text=True, cwd=root, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_the_names_the_pages_give_exist():
+    names = [(f"{path.relative_to(ROOT)}:{number}", name)
+             for path in markdown_docs()
+             for number, name in dotted_names(path.read_text(encoding="utf-8"))]
+    assert len(names) > 50, "the pages name hardly any module: the pattern is wrong"
+    problems = unresolved_names(names)
+    assert not problems, "names in the pages that skeye does not have:\n" + "\n".join(problems)
+
+
+def test_checker_resolves_dotted_names():
+    assert dotted_names("`skeye.gym` and `skeye.pixels.frame_image()`, not skeye.x or `a.b`") \
+        == [(1, "skeye.gym"), (1, "skeye.pixels.frame_image")]
+    assert unresolved_names([("a.md:1", "skeye.wire.sim_lines.LineDecoder"),
+                             ("a.md:2", "skeye.link.Nothing"),
+                             ("a.md:3", "skeye.vision.detector.detect.nope")]) == [
+        "a.md:2: skeye.link.Nothing: skeye.link has no Nothing",
+        "a.md:3: skeye.vision.detector.detect.nope: skeye.vision.detector.detect has no nope"]
+
+
 # --- documented defaults against the code -------------------------------------------------
 
 _PARAM_VALUE = re.compile(r"`(\w+)`\s+(-?\d+(?:\.\d+)?(?:e-?\d+)?)")
