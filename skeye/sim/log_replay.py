@@ -280,6 +280,30 @@ def plot(result_logs: list[ImuLog], path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
+DEFAULT_RATE_HZ = 200.0  # skeye logs without a log: EuRoC's IMU rate
+DEFAULT_SECONDS = 60.0  # skeye logs without a log: the simulated hover's length
+
+
+def unused_options(args: argparse.Namespace) -> None:
+    """Refuse the options that would do nothing: ``--start``, ``--end``, the topics and
+    ``--format`` read a log, ``--rate`` and ``--seconds`` shape the simulated hover without
+    one (with a log the simulated IMU takes the log's rate and length)."""
+    if args.log is None:
+        given = [option for option, value in (
+            ("--start", args.start), ("--end", args.end), ("--imu-topic", args.imu_topic),
+            ("--truth-topic", args.truth_topic),
+            ("--format", None if args.format == "auto" else args.format)) if value is not None]
+        if given:
+            raise ConfigError(f"{', '.join(given)} read a log, and none was given (without one "
+                              "skeye logs measures the simulated IMU alone: --rate, --seconds)")
+        return
+    given = [option for option, value in (("--rate", args.rate), ("--seconds", args.seconds))
+             if value is not None]
+    if given:
+        raise ConfigError(f"{', '.join(given)} shape the simulated hover without a log; with "
+                          f"one the simulated IMU takes the log's rate and length")
+
+
 def cmd_logs(args: argparse.Namespace) -> int:
     logs: list[ImuLog] = []
     source = None if args.log is None else Path(args.log)
@@ -290,6 +314,7 @@ def cmd_logs(args: argparse.Namespace) -> int:
     plot_out = None if args.plot is None else figure_file(Path(args.plot), "--plot", source,
                                                           "log")
     different_files(("--json", json_out), ("--plot", plot_out))
+    unused_options(args)
     if args.log is not None:
         log = read_log(Path(args.log), args.format, imu_topic=args.imu_topic,
                        truth_topic=args.truth_topic)
@@ -304,15 +329,16 @@ def cmd_logs(args: argparse.Namespace) -> int:
         result = compare(log, args.robot, sim)
         logs.append(log)
     else:
-        rate = args.rate
+        rate = DEFAULT_RATE_HZ if args.rate is None else args.rate
+        seconds = DEFAULT_SECONDS if args.seconds is None else args.seconds
         if not (math.isfinite(rate) and 10.0 <= rate <= 10000.0):
             raise ConfigError(f"--rate must be 10..10000 Hz, got {rate}")
-        if args.seconds < MIN_HOVER_S:
+        if seconds < MIN_HOVER_S:
             raise ConfigError(f"--seconds must be at least {MIN_HOVER_S:g} s (the first "
-                              f"{REST_S:g} s at rest, then the hover), got {args.seconds:g}")
-        sim = simulated_imu(rate, args.seconds, args.robot)
+                              f"{REST_S:g} s at rest, then the hover), got {seconds:g}")
+        sim = simulated_imu(rate, seconds, args.robot)
         sim_flight = in_flight(sim)
-        result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": args.seconds,
+        result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": seconds,
                   "real": {}, "has_truth": False,
                   "simulated": {**imu_figures(sim_flight.gyro_rad_s, sim_flight.accel_m_s2,
                                               rate),
@@ -343,11 +369,12 @@ def register(sub: Any) -> None:
                    "first IMU sample; the default: all)")
     p.add_argument("--end", type=float, default=None, help="last second used")
     p.add_argument("--robot", default="hummingbird", help="the robot whose IMU is simulated")
-    p.add_argument("--rate", type=float, default=200.0,
-                   help="without a log: the simulated IMU's rate (Hz; EuRoC's is 200)")
-    p.add_argument("--seconds", type=cliargs.positive_float, default=60.0,
+    p.add_argument("--rate", type=float, default=None,
+                   help=f"without a log: the simulated IMU's rate (Hz; default "
+                   f"{DEFAULT_RATE_HZ:g}, EuRoC's)")
+    p.add_argument("--seconds", type=cliargs.positive_float, default=None,
                    help=f"without a log: how long the simulated hover is (at least "
-                   f"{MIN_HOVER_S:g} s; default 60)")
+                   f"{MIN_HOVER_S:g} s; default {DEFAULT_SECONDS:g})")
     p.add_argument("--plot", default=None, metavar="PNG", help="write the spectra here")
     p.add_argument("--json", default=None, metavar="FILE", help="write the figures here")
     p.set_defaults(func=cmd_logs)

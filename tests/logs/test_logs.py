@@ -353,3 +353,22 @@ def test_the_simulated_imu_is_simulated_once(
     assert main(["logs", *source, "--plot", str(tmp_path / "s.png")]) == 0
     assert len(made) == 2  # one per command
     capsys.readouterr()
+
+
+def test_options_that_would_do_nothing_are_refused(
+        flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--start``, ``--end``, the topics and ``--format`` read a log, ``--rate`` and
+    ``--seconds`` shape the simulated hover without one: given where they do nothing, they
+    were accepted and ignored (``skeye logs --start 60 --end 180`` measured the whole simulated
+    hover, as if windowed); each is now refused before the work, naming itself."""
+    euroc = str(make_logs.write_euroc(tmp_path / "MH_opts", flight))
+    for args, named in (
+            (["--start", "10"], "--start"),
+            (["--end", "5", "--imu-topic", "/imu0"], "--end, --imu-topic"),
+            (["--truth-topic", "/pose", "--format", "euroc"], "--truth-topic, --format"),
+            ([euroc, "--rate", "100"], "--rate"),
+            ([euroc, "--seconds", "30", "--rate", "200"], "--rate, --seconds")):
+        assert main(["logs", *args]) == 2, args
+        err = capsys.readouterr().err
+        assert err.startswith(f"skeye logs: error: {named} "), err
+        assert err.count("\n") == 1, err
