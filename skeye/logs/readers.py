@@ -265,6 +265,11 @@ def read_log(path: Path, fmt: str = "auto", *, imu_topic: str | None = None,
         else:
             raise ConfigError(f"{path}: cannot tell the log format (.ulg, .bag, a rosbag2 or "
                               "EuRoC folder); name it with --format")
+    topics = [option for option, topic in (("--imu-topic", imu_topic),
+                                           ("--truth-topic", truth_topic)) if topic is not None]
+    if topics and fmt != "rosbag":  # it would be ignored: only a bag has topics
+        raise ConfigError(f"{', '.join(topics)} name(s) a ROS bag's topic; {path} is a {fmt} "
+                          "log, which has none")
     if fmt == "euroc":
         return read_euroc(path)
     if fmt == "ulog":

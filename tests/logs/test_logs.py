@@ -367,7 +367,8 @@ def test_options_that_would_do_nothing_are_refused(
             (["--end", "5", "--imu-topic", "/imu0"], "--end, --imu-topic"),
             (["--truth-topic", "/pose", "--format", "euroc"], "--truth-topic, --format"),
             ([euroc, "--rate", "100"], "--rate"),
-            ([euroc, "--seconds", "30", "--rate", "200"], "--rate, --seconds")):
+            ([euroc, "--seconds", "30", "--rate", "200"], "--rate, --seconds"),
+            ([euroc, "--imu-topic", "/imu0"], "--imu-topic")):
         assert main(["logs", *args]) == 2, args
         err = capsys.readouterr().err
         assert err.startswith(f"skeye logs: error: {named} "), err
