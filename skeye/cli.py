@@ -71,6 +71,31 @@ def image_defaults(args: argparse.Namespace) -> tuple[Any, int | None]:
     return kind, quality
 
 
+DEFAULT_RECORD_MAX_MB = 1024.0  # skeye sim --record without --record-max-mb
+DEFAULT_RECORD_PARTS = 10  # skeye sim --record-rotate without --record-parts
+
+
+def record_limits(args: argparse.Namespace) -> tuple[float, int]:
+    """``--record-max-mb`` and ``--record-parts`` (defaults filled in), refused where they
+    would do nothing: the ``--record-*`` options without ``--record``, ``--record-parts``
+    without ``--record-rotate``."""
+    from skeye.errors import ConfigError
+
+    given = [option for option, value in (
+        ("--record-max-mb", args.record_max_mb), ("--record-rotate", args.record_rotate or None),
+        ("--record-parts", args.record_parts)) if value is not None]
+    if args.record is None and given:
+        verb = "needs" if len(given) == 1 else "need"
+        raise ConfigError(f"{', '.join(given)} {verb} --record FILE (without it nothing is "
+                          "recorded)")
+    if args.record_parts is not None and not args.record_rotate:
+        raise ConfigError("--record-parts counts --record-rotate's parts: give --record-rotate "
+                          "too (without it the recording stops at --record-max-mb)")
+    max_mb = DEFAULT_RECORD_MAX_MB if args.record_max_mb is None else args.record_max_mb
+    parts = DEFAULT_RECORD_PARTS if args.record_parts is None else args.record_parts
+    return max_mb, parts
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
@@ -84,6 +109,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from skeye.wire.wind import make_settings, parse_params
 
     image_format, image_quality = image_defaults(args)  # before anything starts
+    record_max_mb, record_parts = record_limits(args)
     ports = [("the simulator's control protocol", args.host, args.port, "--port")]
     if args.image_port is not None:
         ports.append(("the simulator's image server", args.host, args.image_port,
@@ -127,8 +153,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
             }
             # Entered before the server, so it closes after it and keeps the last lines.
             recorder = stack.enter_context(Recorder(
-                args.record, meta, max_bytes=round(args.record_max_mb * 2**20),
-                rotate=args.record_rotate, max_parts=args.record_parts))
+                args.record, meta, max_bytes=round(record_max_mb * 2**20),
+                rotate=args.record_rotate, max_parts=record_parts))
         limits: dict[str, Any] = {
             "handshake_timeout_s": args.handshake_timeout,
             "idle_timeout_s": args.idle_timeout,
@@ -299,7 +325,7 @@ def _add_sim(sub: Any) -> None:
     p.add_argument(
         "--record-max-mb",
         type=cliargs.positive_float,
-        default=1024.0,
+        default=None,
         metavar="MB",
         help="the recording stops (or, with --record-rotate, goes on in FILE.2, FILE.3, ...) "
         "when it reaches MB MiB, and stops when the disk has less than 256 MiB left "
@@ -307,7 +333,7 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument("--record-rotate", action="store_true",
                    help="at --record-max-mb, go on in a new part instead of stopping")
-    p.add_argument("--record-parts", type=cliargs.positive_int, default=10, metavar="N",
+    p.add_argument("--record-parts", type=cliargs.positive_int, default=None, metavar="N",
                    help="the most parts --record-rotate writes before it stops (default 10)")
     p.add_argument(
         "--ll-board",

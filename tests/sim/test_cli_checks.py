@@ -153,3 +153,33 @@ def test_estimator_option_reaches_the_simulator() -> None:
         stop_process(sim)
     done = _skeye("sim", "--port", "0", "--estimator", "oracle")
     assert done.returncode == 2 and "--estimator" in done.stderr
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--record-rotate"], "--record-rotate needs --record FILE"),
+    (["--record-max-mb", "5", "--record-parts", "3"],
+     "--record-max-mb, --record-parts need --record FILE"),
+    (["--record", "x.rec", "--record-parts", "3"], "--record-parts counts --record-rotate's"),
+], ids=["rotate alone", "size and parts alone", "parts without rotate"])
+def test_sim_refuses_recording_options_that_would_do_nothing(extra: list[str], message: str,
+                                                             tmp_path: Path) -> None:
+    """The --record-* options shape the --record file: without it (or --record-parts without
+    --record-rotate) the simulator started and recorded nothing, as if asked to."""
+    proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", "sim", "--port", "0", *extra],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # the start-up line, or nothing when it refuses
+        assert "control protocol on" not in first, f"it started: {first}"
+        assert proc.wait(60) == 2
+        err = proc.stderr.read() if proc.stderr else ""
+        assert err.startswith(f"skeye sim: error: {message}"), err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
+    assert not (tmp_path / "x.rec").exists()
