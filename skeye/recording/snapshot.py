@@ -15,13 +15,21 @@ from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
 from skeye.pixels import frame_image
 
+DEFAULT_QUALITY = 95  # skeye snapshot --out FILE.jpg without --quality
 
-def save_snapshot(address: str, out: Path, camera: str | None = None, quality: int = 95,
+
+def save_snapshot(address: str, out: Path, camera: str | None = None,
+                  quality: int | None = None,
                   timeout_s: float = 10.0) -> tuple[int, int, int | None]:
-    """Fetch the newest frame and write it; returns (width, height, frame number)."""
+    """Fetch the newest frame and write it; returns (width, height, frame number).
+    ``quality`` is a JPEG file's (default 95); a PNG file, lossless, refuses one."""
     suffix = out.suffix.lower()
     if suffix not in (".png", ".jpg", ".jpeg"):
         raise LocalProtocolError(f"{out}: the file name must end in .png, .jpg or .jpeg")
+    if quality is not None and suffix == ".png":
+        raise LocalProtocolError(f"--quality applies to a .jpg or .jpeg file, not {out.name} "
+                                 "(PNG is lossless)")
+    quality = DEFAULT_QUALITY if quality is None else quality
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
     try:
@@ -65,7 +73,8 @@ def register(sub: Any) -> None:
     p.add_argument("--images", default="127.0.0.1:5003", help="image server host:port")
     p.add_argument("--camera", default=None, help="robot/camera, e.g. R1/Down (default: first)")
     p.add_argument("--out", required=True, help="output file (.png, .jpg or .jpeg)")
-    p.add_argument("--quality", type=int, default=95, help="JPEG quality 1-100")
+    p.add_argument("--quality", type=int, default=None,
+                   help=f"JPEG quality 1-100 of a .jpg or .jpeg --out (default {DEFAULT_QUALITY})")
     p.add_argument("--timeout", type=cliargs.positive_float, default=10.0,
                    help="seconds to wait for a frame")
     p.set_defaults(func=cmd_snapshot)

@@ -72,6 +72,19 @@ def test_snapshot_without_an_image_server_names_the_address_and_the_option() -> 
     assert f"--image-port {port}" in done.stderr and "--images" in done.stderr
 
 
+def test_snapshot_refuses_a_jpeg_quality_for_a_png_file() -> None:
+    """``--quality`` is JPEG's: with a .png file it was accepted and ignored (a lossless PNG
+    was written); it is refused before the image server is asked, as ``skeye sim`` refuses
+    --image-quality for a format other than jpeg."""
+    with socket.create_server(("127.0.0.1", 0)) as probe:
+        port = probe.getsockname()[1]  # nothing listens: the refusal comes first
+    done = _skeye("snapshot", "--images", f"127.0.0.1:{port}", "--out", "x.png",
+                  "--quality", "50")
+    assert done.returncode == 2, done
+    assert done.stderr.startswith("skeye snapshot: error: --quality applies to a .jpg or .jpeg "
+                                  "file, not x.png"), done.stderr
+
+
 def test_image_format_option_sets_what_a_new_image_client_gets() -> None:
     """``skeye sim --image-format jpeg --image-quality 60``: a client that asks for a frame
     without SKEYE FORMAT gets JPEG of that quality's UPIS type (as USARSim's operator-chosen
