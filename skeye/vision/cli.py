@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from typing import Any
 
@@ -37,9 +38,14 @@ def _fail(command: str, message: str) -> int:
 
 def cmd_pad(args: argparse.Namespace) -> int:
     """Write the printable pad."""
+    name = os.path.basename(args.out)
+    if args.dpi is not None and name.lower().endswith(".pdf"):  # it would do nothing
+        return _fail(PAD, f"--dpi sets a PNG's resolution; {name} is a PDF (vector: it has "
+                     "none to set)")
     try:
         pad = resolve_pad(args.pad)
-        out = write_printable(pad, args.out, dpi=args.dpi, paper=args.paper)
+        out = write_printable(pad, args.out, dpi=DEFAULT_DPI if args.dpi is None else args.dpi,
+                              paper=args.paper)
     except (ConfigError, LocalProtocolError) as exc:
         return _fail(PAD, str(exc))
     except OSError as exc:
@@ -109,7 +115,8 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("pad", help="write the landing pad as a printable PDF or PNG")
     p.add_argument("--out", required=True, help="output file, .pdf or .png")
     p.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
-    p.add_argument("--dpi", type=int, default=DEFAULT_DPI, help="PNG resolution (dots per inch)")
+    p.add_argument("--dpi", type=int, default=None,
+                   help=f"PNG resolution (dots per inch; default {DEFAULT_DPI})")
     p.add_argument(
         "--paper",
         choices=("a4", "letter"),

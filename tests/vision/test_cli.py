@@ -114,6 +114,18 @@ def test_detect_without_fov_needs_a_robot_with_a_camera(pad_png, capsys):
     assert "unknown robot class 'no_such_robot'" in capsys.readouterr().err
 
 
+def test_pad_refuses_a_dpi_for_a_pdf(tmp_path, capsys):
+    """--dpi is a PNG's resolution: with a .pdf (or --paper) it was accepted and ignored, the
+    vector PDF written as if it had one; it is refused before anything is written."""
+    for extra in ([], ["--paper", "a4"]):
+        pdf = tmp_path / "pad.pdf"
+        assert run(["pad", "--out", str(pdf), "--dpi", "600", *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("skeye pad: error: --dpi sets a PNG's resolution; pad.pdf is a "
+                              "PDF"), err
+        assert not pdf.exists()
+
+
 def test_pad_command_writes_files(tmp_path, capsys):
     pdf = tmp_path / "pad.pdf"
     assert run(["pad", "--out", str(pdf)]) == 0
