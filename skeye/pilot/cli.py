@@ -34,6 +34,7 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from contextlib import ExitStack, nullcontext
 from dataclasses import replace
 from typing import Any
@@ -173,6 +174,9 @@ def run(args: argparse.Namespace) -> int:
         return _error(str(exc))
     if not (math.isfinite(args.frame_jitter_ms) and 0.0 <= args.frame_jitter_ms <= 1000.0):
         return _error(f"--frame-jitter-ms must be 0..1000 ms, got {args.frame_jitter_ms}")
+    problem = unused_option_problem(args)  # a bad value is named as such first
+    if problem:
+        return _error(problem)
     if args.rtp_video is not None:
         from skeye.pilot.rtp_video import check_rtp_destination
 
@@ -501,6 +505,41 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
                    pad_source=pad_source)
 
     return make
+
+
+# option, its dest, what it tunes, the option(s) that turn that on, and whether they are given
+_TUNES: tuple[tuple[str, str, str, str, Callable[[argparse.Namespace], bool]], ...] = (
+    ("--baud", "baud", "the --serial line", "--serial", lambda a: a.serial is not None),
+    *((option, dest, "the video port", "--video-port", lambda a: a.video_port is not None)
+      for option, dest in (("--video-fps", "video_fps"), ("--video-quality", "video_quality"),
+                           ("--video-clients", "video_clients"))),
+    ("--rtp-fps", "rtp_fps", "the RTP video", "--rtp-video", lambda a: a.rtp_video is not None),
+    *((option, dest, "the policy", "--policy", lambda a: a.policy is not None)
+      for option, dest in (("--policy-observation", "policy_observation"),
+                           ("--policy-rate", "policy_rate"),
+                           ("--policy-image-size", "policy_image_size"))),
+    *((option, dest, "the simulator's camera frames", "--images",
+       lambda a: a.images is not None)
+      for option, dest in (("--frame-time", "frame_time"), ("--pad-source", "pad_source"),
+                           ("--frame-jitter-ms", "frame_jitter_ms"))),
+    *((option, dest, "the pad vision", "--images or --camera URI",
+       lambda a: a.images is not None or "://" in a.camera)
+      for option, dest in (("--vision-latency-ms", "vision_latency_ms"),
+                           ("--no-vision-prediction", "no_vision_prediction"))),
+)
+
+
+def unused_option_problem(args: argparse.Namespace) -> str:
+    """What is wrong ('' when nothing) with an option given a value other than its default
+    where it would do nothing: one that tunes something not turned on (``--baud`` without
+    ``--serial``, ``--video-quality`` without ``--video-port``, ...)."""
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    defaults = parser.parse_args(["pilot"])
+    for option, dest, what, needs, given in _TUNES:
+        if getattr(args, dest) != getattr(defaults, dest) and not given(args):
+            return f"{option} applies to {what}: it needs {needs}"
+    return ""
 
 
 def check_policy_options(args: argparse.Namespace) -> None:

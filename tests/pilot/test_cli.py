@@ -238,6 +238,32 @@ def test_pilot_errors_go_to_stderr_naming_the_command(capsys, extra, status, wor
     assert captured.err.count("\n") == 1, captured.err
 
 
+@pytest.mark.parametrize(("extra", "words"), [
+    (["--baud", "9600"], "--baud applies to the --serial line: it needs --serial"),
+    (["--video-quality", "50"], "--video-quality applies to the video port: it needs "
+                                "--video-port"),
+    (["--rtp-fps", "5"], "--rtp-fps applies to the RTP video: it needs --rtp-video"),
+    (["--policy-rate", "10"], "--policy-rate applies to the policy: it needs --policy"),
+    (["--frame-time", "capture"], "--frame-time applies to the simulator's camera frames: it "
+                                  "needs --images"),
+    (["--vision-latency-ms", "40"], "--vision-latency-ms applies to the pad vision: it needs "
+                                    "--images or --camera URI"),
+    (["--no-vision-prediction"], "--no-vision-prediction applies to the pad vision: it needs "
+                                 "--images or --camera URI"),
+], ids=lambda v: v[0] if isinstance(v, list) else "")
+def test_options_that_would_do_nothing_are_refused(capsys, extra, words):
+    """A tuning option without the option it tunes (--baud without --serial, --video-quality
+    without --video-port, ...) was accepted and ignored, the pilot starting as if it had been
+    obeyed; as --calibration without a camera already was, it is refused before anything
+    starts (exit 2)."""
+    from skeye.cli import main
+
+    assert main(["pilot", "--sim", f"127.0.0.1:{_unused_port()}", "--port", "0",
+                 *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"skeye pilot: error: {words}"), err
+
+
 def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
     """The message said ``--airframe: no start pose ...``: an option the user had not given
     (the airframe came from --sim) and not the one at fault."""
