@@ -50,6 +50,8 @@ CASES = [
     # the ground cases bind an address that cannot be: without the check, that stops them
     (["ground", "--vehicle", "tcp://127.0.0.1:7000", "--port", "-1"], "--port"),
     (["ground", "--video-fps", "-1", "--host", "256.0.0.1"], "--video-fps"),
+    # a frame rate for a video it has none of (--video not given): was accepted, unused
+    (["ground", "--video-fps", "5", "--host", "256.0.0.1"], "--video-fps"),
     (["ground", "--vehicle", "foo://x:1", "--host", "256.0.0.1"], "--vehicle"),
     # a port that is no number, and a bracket left open: urllib's ValueError used to escape
     (["ground", "--vehicle", "tcp://127.0.0.1:abc", "--host", "256.0.0.1"], "--vehicle"),

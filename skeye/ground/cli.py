@@ -51,6 +51,7 @@ from skeye.uris import url_host
 
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
+DEFAULT_VIDEO_FPS = 8.0  # skeye ground --video-fps: frames/s asked of the vehicle's video port
 STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
 RESTART_BURST = 5
 """Restarts of one child within ``RESTART_WINDOW_S`` before skeye up gives up (systemd's default
@@ -88,6 +89,8 @@ def run_ground(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         raise ConfigError(f"--vehicle: {exc}") from None
     video_at = parse_video_uri(args.video) if args.video else None
+    if video_at is None and args.video_fps != DEFAULT_VIDEO_FPS:  # it would do nothing
+        raise ConfigError("--video-fps applies to the vehicle's video: it needs --video")
     robot_dirs = robot_folders(args.robot_dir)  # a typo is named now, not ignored
     # a taken port or a host that is not this machine's, named with the option that moves it
     check_ports_free([("ground control", args.host, args.port, "--port")])
@@ -154,8 +157,9 @@ def _add_ground(sub: Any) -> None:
     )
     p.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
                    help="a folder of robot files where --robot is looked up (as skeye sim's)")
-    p.add_argument("--video-fps", type=cliargs.positive_float, default=8.0,
-                   help="the most camera frames per second asked of the vehicle (default 8)")
+    p.add_argument("--video-fps", type=cliargs.positive_float, default=DEFAULT_VIDEO_FPS,
+                   help="the most camera frames per second asked of the vehicle's --video "
+                   f"(default {DEFAULT_VIDEO_FPS:g})")
     p.add_argument("--port", type=cliargs.port, default=8080, help="HTTP port (0 = any free)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--header-timeout", type=float, default=HEADER_TIMEOUT_S, metavar="S",
