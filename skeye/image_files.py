@@ -132,6 +132,12 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
         ConfigError: naming the file: missing, unreadable, truncated or corrupt, or not an image.
     """
     if not Path(path).is_file():  # missing, a directory, or a FIFO (reading it may block)
+        if Path(path).is_dir():
+            raise ConfigError(f"{path} is a folder, not an image file (give its images, "
+                              f"e.g. {Path(path) / '*.png'})")
+        if Path(path).exists():
+            raise ConfigError(f"{path} is not a regular file (a pipe or a device): give an "
+                              "image file")
         raise ConfigError(f"no such image file: {path}")
     try:
         data = Path(path).read_bytes()

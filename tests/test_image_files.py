@@ -8,6 +8,7 @@ calibrate`` used to work on such a frame as if it were whole.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import cv2
@@ -75,8 +76,12 @@ def test_a_whole_file_decodes_as_opencv_reads_it_padding_or_not(
 def test_what_is_not_a_whole_image_is_named(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=f"^no such image file: {tmp_path / 'none.png'}$"):
         read_image_file(tmp_path / "none.png")
-    with pytest.raises(ConfigError, match=f"^no such image file: {tmp_path}$"):
-        read_image_file(tmp_path)  # a directory
+    # A folder and a pipe exist: "no such image file" sent the user looking for a typo.
+    with pytest.raises(ConfigError, match=f"^{tmp_path} is a folder, not an image file"):
+        read_image_file(tmp_path)
+    os.mkfifo(tmp_path / "pipe.png")
+    with pytest.raises(ConfigError, match=r"pipe\.png is not a regular file"):
+        read_image_file(tmp_path / "pipe.png")  # never opened: reading a FIFO may block
     for name, data in [("empty.png", b""), ("notes.png", b"not an image\n")]:
         (tmp_path / name).write_bytes(data)
         with pytest.raises(ConfigError, match=r"cannot read image \(not a supported image "
