@@ -6,7 +6,8 @@ UP_ARGS ?=   # more `skeye up` options for `make run`, e.g. UP_ARGS="--ground-po
 # pytest-xdist workers for `make test`: one per core and one more, since many tests wait on
 # wall-clock time (real-time flights, timeouts, restarts) and leave a core idle meanwhile
 # (docs/performance.md, "The test suite"); a test file stays on one worker.
-TEST_WORKERS ?= $(shell $(PYTHON) -c "import os; print(len(os.sched_getaffinity(0)) + 1)")
+TEST_WORKERS ?= $(shell $(PYTHON) -c "import os; print(len(os.sched_getaffinity(0)) + 1 \
+	if hasattr(os, 'sched_getaffinity') else (os.cpu_count() or 1) + 1)")
 
 .PHONY: run test lint bench clean chromium
 
