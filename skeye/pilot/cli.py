@@ -507,25 +507,19 @@ def pad_vision_factory(sim: Any, robot: Any, camera: str = "Down",
     return make
 
 
-# option, its dest, what it tunes, the option(s) that turn that on, and whether they are given
-_TUNES: tuple[tuple[str, str, str, str, Callable[[argparse.Namespace], bool]], ...] = (
-    ("--baud", "baud", "the --serial line", "--serial", lambda a: a.serial is not None),
-    *((option, dest, "the video port", "--video-port", lambda a: a.video_port is not None)
-      for option, dest in (("--video-fps", "video_fps"), ("--video-quality", "video_quality"),
-                           ("--video-clients", "video_clients"))),
-    ("--rtp-fps", "rtp_fps", "the RTP video", "--rtp-video", lambda a: a.rtp_video is not None),
-    *((option, dest, "the policy", "--policy", lambda a: a.policy is not None)
-      for option, dest in (("--policy-observation", "policy_observation"),
-                           ("--policy-rate", "policy_rate"),
-                           ("--policy-image-size", "policy_image_size"))),
-    *((option, dest, "the simulator's camera frames", "--images",
-       lambda a: a.images is not None)
-      for option, dest in (("--frame-time", "frame_time"), ("--pad-source", "pad_source"),
-                           ("--frame-jitter-ms", "frame_jitter_ms"))),
-    *((option, dest, "the pad vision", "--images or --camera URI",
+# option, what it tunes, the option(s) that turn that on, and whether they are given
+_TUNES: tuple[tuple[str, str, str, Callable[[argparse.Namespace], bool]], ...] = (
+    ("--baud", "the --serial line", "--serial", lambda a: a.serial is not None),
+    *((option, "the video port", "--video-port", lambda a: a.video_port is not None)
+      for option in ("--video-fps", "--video-quality", "--video-clients")),
+    ("--rtp-fps", "the RTP video", "--rtp-video", lambda a: a.rtp_video is not None),
+    *((option, "the policy", "--policy", lambda a: a.policy is not None)
+      for option in ("--policy-observation", "--policy-rate", "--policy-image-size")),
+    *((option, "the simulator's camera frames", "--images", lambda a: a.images is not None)
+      for option in ("--frame-time", "--pad-source", "--frame-jitter-ms")),
+    *((option, "the pad vision", "--images or --camera URI",
        lambda a: a.images is not None or "://" in a.camera)
-      for option, dest in (("--vision-latency-ms", "vision_latency_ms"),
-                           ("--no-vision-prediction", "no_vision_prediction"))),
+      for option in ("--vision-latency-ms", "--no-vision-prediction")),
 )
 
 
@@ -536,7 +530,8 @@ def unused_option_problem(args: argparse.Namespace) -> str:
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())
     defaults = parser.parse_args(["pilot"])
-    for option, dest, what, needs, given in _TUNES:
+    for option, what, needs, given in _TUNES:
+        dest = option.removeprefix("--").replace("-", "_")  # argparse's own dest
         if getattr(args, dest) != getattr(defaults, dest) and not given(args):
             return f"{option} applies to {what}: it needs {needs}"
     return ""
