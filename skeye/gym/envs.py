@@ -206,7 +206,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
 
     def _info(self) -> dict[str, Any]:
         assert self.flight is not None and self.episode is not None
-        return {"sim_time_s": self.flight.time_s - self._started_s, **self.episode.info}
+        return {"sim_time_s": self.flight.seconds_since(self._started_s), **self.episode.info}
 
     def _close_flight(self) -> None:
         if self.flight is not None:

@@ -366,6 +366,13 @@ class Flight:
     def time_s(self) -> float:
         return self.sim.time_s
 
+    def seconds_since(self, start_s: float) -> float:
+        """Sim time since ``start_s`` (an earlier :attr:`time_s`), rounded to the nanosecond:
+        both are whole physics steps times ``dt``, so their difference is a whole number of
+        steps, and the rounding drops the float noise of that product (150 steps of 1 ms read
+        0.15, not 0.15000000000000002)."""
+        return round(self.sim.time_s - start_s, 9)
+
     def close(self) -> None:
         for vehicle in self.vehicles.values():
             vehicle.close()

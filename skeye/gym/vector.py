@@ -257,7 +257,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
         assert self.flight is not None
         episode = self.episodes[i]
         assert episode is not None
-        return {"sim_time_s": self.flight.time_s - self._started_s[i], **episode.info}
+        return {"sim_time_s": self.flight.seconds_since(self._started_s[i]), **episode.info}
 
     def _close_flight(self) -> None:
         if self.flight is not None:

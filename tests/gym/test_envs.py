@@ -611,3 +611,17 @@ def test_the_environments_table_gives_the_starts_and_targets_the_tasks_draw() ->
     assert np.all(np.abs(targets[:, :2]) <= 4.0)
     assert np.all((-3.0 <= targets[:, 2]) & (targets[:, 2] <= -1.0))
     assert 5.4 < np.hypot(targets[:, 0], targets[:, 1]).max() <= np.hypot(4.0, 4.0)
+
+
+def test_sim_time_in_info_is_whole_steps_without_float_noise() -> None:
+    """info["sim_time_s"] was the difference of two products steps x dt, and read
+    0.15000000000000002 after three 50 ms steps; it is now that many milliseconds exactly,
+    as a user comparing it with k * 0.05 written out (0.15) expects."""
+    env = gymnasium.make("skeye/Hover-v0", episode_s=1.0)
+    try:
+        env.reset(seed=0)
+        for k in range(1, 9):
+            info = env.step(np.zeros(4, np.float32))[4]
+            assert info["sim_time_s"] == k * 50 / 1000, (k, info["sim_time_s"])
+    finally:
+        env.close()
