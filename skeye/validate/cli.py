@@ -57,6 +57,11 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
 
     Each (experiment, seed) is one trial of :mod:`skeye.sweep` (its own processes, in parallel
     up to ``workers``); the series come back from the trials and the report is built here.
+    A trial that failed (its error in its row, as in a sweep) leaves the others' series in the
+    report, which lists it with its error (``failed`` in the summary, as ``skeye sweep``'s report
+    lists its failed trials); when every trial failed there is nothing to report and a
+    :class:`SkeyeError` names each one, and no report, series or figure is written (a
+    calibration made first stays in ``out/calibration/``).
     ``camera`` is the camera profile every run renders through, ``estimator`` the boards'
     state estimator and ``world`` the built-in world flown in. A camera other than the ideal
     pinhole is calibrated first, as a user would (the checkerboard world, ``skeye
@@ -118,22 +123,28 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
                                    keep)
             result = run_trials(spec, Path(tmp), backend,
                                 f"validate {'/'.join(experiments)} x {seeds} seed(s)")
-            failed = [r for r in result.rows if r.get("error")]
-            if failed:
-                raise SkeyeError("; ".join(f"{r['experiment']} seed {r['seed']}: {r['error']}"
-                                           for r in failed))
+            failed = [{"experiment": r["experiment"], "seed": r["seed"], "error": r["error"]}
+                      for r in result.rows if r.get("error")]
+            if len(failed) == len(trials):  # nothing flown: nothing to report
+                raise SkeyeError("every trial failed, no report written: " + "; ".join(
+                    f"{f['experiment']} seed {f['seed']}: {f['error']}" for f in failed))
+            gone = {(f["experiment"], f["seed"]) for f in failed}
             series = {(t.experiment, t.seed): json.loads(
-                (Path(tmp) / f"{t.key}.series.json").read_text()) for t in trials}
-        if "E1" in experiments:
-            e1 = {s: E1Series(**series["E1", s]["E1"]) for s in seed_list}
-            raw = ({s: E1Series(**series["E1", s]["E1_uncalibrated"]) for s in seed_list}
+                (Path(tmp) / f"{t.key}.series.json").read_text())
+                for t in trials if (t.experiment, t.seed) not in gone}
+        flown = {e: [s for s in seed_list if (e, s) in series] for e in experiments}
+        if flown.get("E1"):
+            e1 = {s: E1Series(**series["E1", s]["E1"]) for s in flown["E1"]}
+            raw = ({s: E1Series(**series["E1", s]["E1_uncalibrated"]) for s in flown["E1"]}
                    if cal_path else None)
             summary["E1"] = median_summary(write_e1(out, e1, raw))
-        if "E2" in experiments:
+        if flown.get("E2"):
             e2 = {s: {run: E2Series(**series["E2", s][e2_key(run)]) for run in E2_RUNS}
-                  for s in seed_list}
+                  for s in flown["E2"]}
             summary["E2"] = median_summary(write_e2(out, e2, settings))
-        write_report(out, summary, quick, seed_list)
+        if failed:
+            summary["failed"] = failed
+        write_report(out, summary, quick, seed_list, flown)
         return summary
 
 
@@ -152,17 +163,26 @@ def calibration_figures(result: CalibrationResult, camera: str) -> dict[str, Any
 def cmd_validate(args: argparse.Namespace) -> int:
     try:  # Ctrl-C, SIGTERM, SIGHUP: the running trials are killed, as skeye sweep's are
         with stop_cleanly_on_signals():
-            validate(args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
-                     args.workers, args.keep_recordings, camera=args.camera,
-                     estimator=args.estimator, world=args.world,
-                     calibration=Path(args.calibration) if args.calibration else None,
-                     wind=args.wind, vision_latency=args.vision_latency_ms,
-                     pad_source=args.pad_source)
+            summary = validate(
+                args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
+                args.workers, args.keep_recordings, camera=args.camera,
+                estimator=args.estimator, world=args.world,
+                calibration=Path(args.calibration) if args.calibration else None,
+                wind=args.wind, vision_latency=args.vision_latency_ms,
+                pad_source=args.pad_source)
     except KeyboardInterrupt as exc:
         print(f"skeye validate: {str(exc) or 'interrupted'}; no report written",
               file=sys.stderr)
         return 130
     print((Path(args.out) / "report.md").read_text())
+    failed = summary.get("failed", [])
+    if failed:  # as skeye sweep: 1 when a trial failed, the report written for the others
+        trials = args.seeds * (2 if args.experiment.upper() == "ALL" else 1)
+        named = ", ".join(f"{f['experiment']} seed {f['seed']}" for f in failed)
+        print(f"skeye validate: {len(failed)} of {trials} trials failed ({named}); the report "
+              f"covers the others, the errors are in {Path(args.out) / 'report.md'}",
+              file=sys.stderr)
+        return 1
     return 0
 
 

@@ -213,12 +213,46 @@ def _truth_note(setup: dict[str, Any]) -> str:
     return ""
 
 
-def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[int]) -> None:
+def _seeds_words(seeds: list[int], flown: dict[str, list[int]] | None,
+                 failed: list[dict[str, Any]]) -> str:
+    """The seeds the figures come from; with failed trials, beside the seeds asked for."""
+    if not failed or flown is None:
+        return f"{seeds}"
+    reported = sorted({s for flew in flown.values() for s in flew})
+    trials = len(seeds) * len(flown)
+    return (f"{reported} (seeds {', '.join(map(str, seeds))} asked for; {len(failed)} of "
+            f"{trials} trials failed, listed under \"Failed trials\")")
+
+
+def _failed_lines(failed: list[dict[str, Any]]) -> list[str]:
+    lines = ["## Failed trials", "",
+             "Their series are not in the figures above; each trial's error, as its run gave it:",
+             "", "| experiment | seed | error |", "| --- | --- | --- |"]
+    lines += [f"| {f['experiment']} | {f['seed']} | "  # one table row: no '|', no line break
+              f"{' '.join(str(f['error']).replace('|', '/').split())} |" for f in failed]
+    return [*lines, ""]
+
+
+def _missing_note(name: str, flown: dict[str, list[int]] | None, seeds: list[int]) -> list[str]:
+    """A line under an experiment's heading naming its seeds that failed, when some did."""
+    if flown is None or len(flown.get(name, [])) == len(seeds):
+        return []
+    gone = [s for s in seeds if s not in flown.get(name, [])]
+    return [f"Over seed(s) {flown[name]} only: seed(s) {gone} failed (\"Failed trials\").", ""]
+
+
+def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[int],
+                 flown: dict[str, list[int]] | None = None) -> None:
+    """report.md and summary.json. ``seeds`` are the seeds asked for, ``flown`` each
+    experiment's seeds whose trial came back (all of them when None); ``summary["failed"]``
+    lists the others' errors."""
     setup = summary.get("setup", {})
+    failed = summary.get("failed", [])
     lines = [
         "# skeye validation report",
         "",
-        f"Seeds: {seeds}; mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
+        f"Seeds: {_seeds_words(seeds, flown, failed)}; "
+        f"mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
         f"{setup.get('estimator', 'truth')}; world: {setup.get('world', 'pad')}; calibration: "
         f"{_shown_path(setup.get('calibration', ''), out)}; E2 disturbance: "
@@ -251,6 +285,7 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         lines += [
             "## E1: height from the pad (paper Fig. 6)",
             "",
+            *_missing_note("E1", flown, seeds),
             "| figure | skeye | paper | target |",
             "| --- | --- | --- | --- |",
             f"| max absolute error | {e1['max_abs_error_m'] * 100:.2f} cm | ~2 cm | <= 1 cm |",
@@ -283,6 +318,7 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         lines += [
             "## E2: position hold over the pad under wind (paper Fig. 7)",
             "",
+            *_missing_note("E2", flown, seeds),
             f"Disturbance: {e2.get('disturbance', 'random force')}; "
             f"{e2['duration_s']:.0f} s of sim time per run, the same seed and disturbance for "
             "the three runs; the vision run's pad detections are used "
@@ -310,5 +346,10 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
             "Plot: `e2_distance.png`; series: `e2_series.csv`.",
             "",
         ]
+    if failed:
+        lost = [name for name, flew in (flown or {}).items() if not flew]
+        lines += [f"{name}: every trial failed, no figures." for name in lost]
+        lines += [""] if lost else []
+        lines += _failed_lines(failed)
     (out / "report.md").write_text("\n".join(lines))
     (out / "summary.json").write_text(json.dumps(summary, indent=2))

@@ -20,11 +20,30 @@ from skeye.vision.calibration import load_calibration
 # Simulation-bound (two lockstep flights through real processes): 325 s with the host's load
 # average near 20, past the suite's 300 s default, which is what made it fail on a busy machine.
 @pytest.mark.timeout(1800)
-def test_quick_validation_reports_every_figure_from_its_series(tmp_path: Path):
+def test_quick_validation_reports_every_figure_from_its_series(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Seeds 1 and 2, seed 2's trials made to fail for real (its --keep-recordings folder is a
+    file, so its trial processes cannot make their working folder; they fail at once, so the
+    test costs what one seed's flights cost). One failed trial raised and threw every other
+    seed's series away, no report; now the report covers seed 1, names seed 2's trials with
+    their errors (report.md and summary.json's ``failed``), and the exit status is 1, as
+    skeye sweep's when a trial failed."""
     out = tmp_path / "val"
-    validate("all", seeds=1, out=out, quick=True)
+    out.mkdir()
+    (out / "recordings_seed2").write_text("a file where seed 2's recordings would go\n")
+    assert main(["validate", "all", "--quick", "--seeds", "2", "--keep-recordings",
+                 "--out", str(out)]) == 1
+    printed = capsys.readouterr()
     summary = json.loads((out / "summary.json").read_text())
     report = (out / "report.md").read_text()
+    assert printed.out.strip() == report.strip()  # the report is printed, failures and all
+    assert "skeye validate: 2 of 4 trials failed (E1 seed 2, E2 seed 2)" in printed.err
+    assert [(f["experiment"], f["seed"]) for f in summary["failed"]] == [("E1", 2), ("E2", 2)]
+    for f in summary["failed"]:
+        assert "recordings_seed2" in f["error"], f  # the worker's own words: the file named
+        assert f"| {f['experiment']} | 2 | " in report
+    assert "## Failed trials" in report and "Seeds: [1]" in report
+    assert "seeds 1, 2 asked for; 2 of 4 trials failed" in report
     for name in ("e1_series.csv", "e2_series.csv", "e1_height.png", "e2_distance.png"):
         assert (out / name).stat().st_size > 0
 
@@ -116,6 +135,20 @@ def test_webcam_validation_calibrates_first_and_shows_the_uncalibrated_bias(tmp_
     for needle in ("Camera calibration", "camera profile: webcam", "no calibration",
                    "calibration: `calibration/camera.toml` (made by this run)"):
         assert needle in report
+
+
+def test_validate_with_every_trial_failed_writes_no_report_and_names_each(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """With no trial flown there is nothing to report: exit 2 (an error, as for any refused
+    run), every failed trial named with its error, and no report, series or figures written."""
+    out = tmp_path / "val"
+    out.mkdir()
+    (out / "recordings_seed1").write_text("a file where seed 1's recordings would go\n")
+    assert main(["validate", "E1", "--quick", "--keep-recordings", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "skeye validate: error: every trial failed, no report written: E1 seed 1: " in err
+    assert "recordings_seed1" in err, err
+    assert sorted(p.name for p in out.iterdir()) == [".skeye.lock", "recordings_seed1"]
 
 
 def test_bad_arguments_are_refused(tmp_path: Path):
