@@ -175,11 +175,11 @@ def main(argv: list[str]) -> int:
     trial_file, result_file, workdir, series_file = argv
     threading.Thread(target=_die_with_parent, name="parent-watch", daemon=True).start()
     trial = Trial.from_json(json.loads(Path(trial_file).read_text()))
-    Path(workdir).mkdir(parents=True, exist_ok=True)
     figures: dict[str, float] = {}
     error = ""
     series: dict[str, Any] = {}
-    try:
+    try:  # a working folder that cannot be made (a file in its place) is the trial's error too
+        Path(workdir).mkdir(parents=True, exist_ok=True)
         figures, series = run_experiment(trial, Path(workdir))
     except Exception as exc:  # a failed flight is a row with its error, not a crash
         error = f"{type(exc).__name__}: {exc}"

@@ -40,7 +40,10 @@ def test_quick_validation_reports_every_figure_from_its_series(
     assert "skeye validate: 2 of 4 trials failed (E1 seed 2, E2 seed 2)" in printed.err
     assert [(f["experiment"], f["seed"]) for f in summary["failed"]] == [("E1", 2), ("E2", 2)]
     for f in summary["failed"]:
-        assert "recordings_seed2" in f["error"], f  # the worker's own words: the file named
+        # the worker's own words, the file named, and nothing else (it had been a traceback
+        # and a "Fatal Python error" of its watcher thread, the process dying on SIGABRT)
+        assert f["error"].startswith("FileExistsError: ") and "recordings_seed2" in f["error"]
+        assert "Traceback" not in f["error"] and "Fatal" not in f["error"], f
         assert f"| {f['experiment']} | 2 | " in report
     assert "## Failed trials" in report and "Seeds: [1]" in report
     assert "seeds 1, 2 asked for; 2 of 4 trials failed" in report
