@@ -2,7 +2,10 @@
 
 How this works: :class:`MissionProtocol` takes MISSION_* messages and the time and returns the
 messages to send. An upload (MISSION_COUNT) is pulled item by item with MISSION_REQUEST_INT,
-re-requested after ``item_timeout_s`` (``tick``), given up after ``retries``. One upload at a
+re-requested after ``item_timeout_s`` (``tick``), given up after ``retries``; the re-requests
+and the cancellation are for the uploading station alone (``upload_route``: where its
+MISSION_COUNT came from, as the caller gave it), as PX4 and ArduPilot address the partner of a
+transfer. One upload at a
 time: another peer's MISSION_COUNT meanwhile is refused (MAV_MISSION_ERROR, as PX4 answers
 "busy"); the same peer's starts it again. Each item is checked as it arrives
 (:func:`basic_problem`, then the vehicle's own ``check``: envelope, supported commands) and the
@@ -15,7 +18,7 @@ MISSION_REQUEST). Fence and rally lists are empty and cannot be uploaded (MAV_MI
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mav
@@ -124,6 +127,7 @@ class _Upload:
     items: list[MissionItem]
     requested_s: float
     retries_left: int
+    route: Hashable  # where the uploading station is (the caller's link and address)
 
 
 class MissionProtocol:
@@ -158,8 +162,16 @@ class MissionProtocol:
     def _refuse(self, reason: str) -> None:
         self.rejections = [*self.rejections[-19:], reason]
 
-    def handle(self, msg: MavMessage, now_s: float) -> list[MavMessage]:
-        """Answer one MISSION_* message from ``(msg.get_srcSystem(), msg.get_srcComponent())``."""
+    @property
+    def upload_route(self) -> Hashable:
+        """Where the station doing an upload is (``route`` of its MISSION_COUNT), or None when
+        no upload is under way: ``tick``'s messages are for it alone."""
+        return None if self._upload is None else self._upload.route
+
+    def handle(self, msg: MavMessage, now_s: float, route: Hashable = None) -> list[MavMessage]:
+        """Answer one MISSION_* message from ``(msg.get_srcSystem(), msg.get_srcComponent())``,
+        which came by ``route`` (the caller's link and address: kept for an upload's
+        re-requests)."""
         kind = msg.get_type()
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
         mission_type = int(getattr(msg, "mission_type", 0))
@@ -180,7 +192,7 @@ class MissionProtocol:
                 self._store([])
                 self._upload = None
                 return [self._ack(peer, mav.MAV_MISSION_ACCEPTED)]
-            self._upload = _Upload(peer, count, [], now_s, self.retries)
+            self._upload = _Upload(peer, count, [], now_s, self.retries, route)
             return [self._request(self._upload)]
         if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
             up = self._upload
@@ -225,7 +237,8 @@ class MissionProtocol:
         self.version += 1
 
     def tick(self, now_s: float) -> list[MavMessage]:
-        """Re-request an item that has not come; give up after the retries."""
+        """Re-request an item that has not come; give up after the retries (both for the
+        uploading station alone: ``upload_route`` before this call says where it is)."""
         up = self._upload
         if up is None or now_s - up.requested_s < self.item_timeout_s:
             return []

@@ -269,7 +269,7 @@ class MavlinkVehicle:
             if kind == "MISSION_SET_CURRENT":
                 return out + reply(self._set_current(int(msg.seq)))
             version = self.mission.version
-            answer = self.mission.handle(msg, now_s)
+            answer = self.mission.handle(msg, now_s, (link, peer))
             if kind == "MISSION_COUNT" or kind.startswith("MISSION_ITEM"):
                 answer += self._mission_notice(answer)
             out += reply(answer)
@@ -1030,7 +1030,9 @@ class MavlinkVehicle:
                 and state is not NavState.LANDING:
             out += self._stop_program("the pad landing mode was changed")
         out += self._run_program(now_s)
-        out += [Out(m) for m in self.mission.tick(now_s)]
+        route = self.mission.upload_route  # an upload's re-requests are its station's alone
+        link_of, peer_of = route if isinstance(route, tuple) else (None, None)
+        out += [Out(m, link_of, peer_of) for m in self.mission.tick(now_s)]
         out += self._landing_targets()
         view = None
         status = (self.mode, self.armed, self.boards.state)

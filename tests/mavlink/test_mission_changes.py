@@ -130,3 +130,26 @@ def test_a_second_upload_during_an_upload_is_refused_and_the_first_completes():
             assert wait_for(second, ["MISSION_REQUEST_INT", "MISSION_ACK"],
                             lambda m: m.target_system == 254).get_type() == "MISSION_REQUEST_INT"
             assert server.errors == 0
+
+
+def test_a_re_requested_mission_item_goes_only_to_the_uploading_station():
+    """An item not sent within 1 s is asked for again: of the station doing the upload only,
+    as PX4 and ArduPilot address the partner of a transfer. (Until 2026-11-27 the re-request
+    went to every ground station on every link.)"""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        with two_ground_stations(server) as (first, second):
+            for conn in (first, second):
+                wait_for(conn, "HEARTBEAT")  # (its own heartbeat makes it a ground station)
+            first.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+            assert wait_for(first, "MISSION_REQUEST_INT").seq == 0
+            again = wait_for(first, "MISSION_REQUEST_INT", timeout_s=10)  # (no item: asked again)
+            assert (again.seq, again.target_system) == (0, GCS[0])
+            # What the vehicle sent the second station before the re-request is in its socket
+            # once an answer sent after it has come.
+            second.mav.param_request_read_send(1, 1, b"COM_OF_LOSS_T", -1)
+            seen: list[str] = []
+            wait_for(second, ["MISSION_REQUEST_INT", "PARAM_VALUE"],
+                     lambda m: seen.append(m.get_type()) or m.get_type() == "PARAM_VALUE",
+                     timeout_s=10)
+            assert seen == ["PARAM_VALUE"]
+            assert server.errors == 0
