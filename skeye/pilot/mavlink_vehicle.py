@@ -13,7 +13,13 @@ anchors the estimate to GPS. That anchor is the mean over every fix, so the orig
 little with each fix (PX4's EKF origin is set once); it is sent when first known and again
 whenever it has moved by PX4's own re-send thresholds (1e-7 deg, 1 mm), checked every
 ``ORIGIN_CHECK_S``, so a client that keeps the last one converts local to global within a few
-centimetres.
+centimetres. Without a GPS fix (indoors) the origin is the one a ground station gave with
+SET_GPS_GLOBAL_ORIGIN, if any; it is taken only then (where GPS anchors the frame it is refused,
+as ArduPilot's EKF refuses it while it uses GPS: skeye's local frame is the world's, it cannot be
+moved under the GPS as PX4's EKF moves its own), with PX4's checks on the values (latitude,
+longitude in range; the altitude on Earth: not below the lowest land, ``ORIGIN_MAX_ALT_M`` at
+most); a refusal is a STATUSTEXT and the GPS_GLOBAL_ORIGIN in force. Once fixes come, they place
+the frame and the origin moves to theirs (sent as any move is).
 
 One vehicle, two links: every motion a MAVLink command asks for is made of the boards' own
 commands (TAKE_OFF, LAND, HOLD, MOVE_BY in the world frame, VELOCITY, CTRL_INPUT, PAD_MODE)
@@ -88,6 +94,8 @@ ARRIVED_RADIUS_M = 0.5
 ORIGIN_CHECK_S = 1.0  # how often a moved GPS_GLOBAL_ORIGIN is looked for
 ORIGIN_MIN_DEG = 1e-7  # PX4's GPS_GLOBAL_ORIGIN re-send thresholds (about 1.1 cm; 1 mm)
 ORIGIN_MIN_ALT_M = 1e-3
+ORIGIN_MAX_ALT_M = 100_000.0  # PX4's highest origin taken ("the edge of space"); its lowest,
+# -12 km (the Mariana Trench), is under water: skeye's is the lowest land, LOWEST_LAND_AMSL_M
 MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                | CtrlBits.GPS_POSITION_CONTROL)
 
@@ -136,6 +144,7 @@ class MavlinkVehicle:
         self._now_s = now_s
         self._command_peer: Hashable = None  # who sent the command being run (its notices)
         self._origin_told: GeoOrigin | None = None  # the last GPS_GLOBAL_ORIGIN sent unasked
+        self._origin_given: GeoOrigin | None = None  # SET_GPS_GLOBAL_ORIGIN's (no GPS fix)
         self._origin_check_s = -math.inf
 
     # -- links ---------------------------------------------------------------------------
@@ -204,7 +213,11 @@ class MavlinkVehicle:
         return MODE_TABLE[(self.boards.state, self.program)]
 
     def origin(self) -> GeoOrigin | None:
-        """The geodetic position of the estimate's NED origin (None before a GPS fix)."""
+        """The geodetic position of the estimate's NED origin: the GPS fixes' anchor, or before
+        the first fix the origin a ground station gave (SET_GPS_GLOBAL_ORIGIN); else None."""
+        return self._gps_origin() or self._origin_given
+
+    def _gps_origin(self) -> GeoOrigin | None:
         latlon = self.boards.geo.estimate((0.0, 0.0, 0.0))
         alt = self.boards.geo.origin_amsl_m
         if latlon is None or alt is None:
@@ -291,6 +304,10 @@ class MavlinkVehicle:
             if int(msg.target) in (0, self.codec.system_id) and self.program is Program.MANUAL:
                 out += reply(self._manual(msg, peer))
             return out
+        if kind == "SET_GPS_GLOBAL_ORIGIN":
+            if int(msg.target_system) in (0, self.codec.system_id):
+                out += self._set_origin(link, peer, msg)
+            return out
         if kind == "LANDING_TARGET":
             self.landing_targets_in += 1  # a companion's detections (this vehicle's own
             return out  # precision landing flies on its own pad vision)
@@ -310,6 +327,38 @@ class MavlinkVehicle:
         ts = int(getattr(msg, "target_system", 0))
         tc = int(getattr(msg, "target_component", 0))
         return ts in (0, self.codec.system_id) and tc in (0, self.codec.component_id)
+
+    def _set_origin(self, link: int, peer: Hashable, msg: MavMessage) -> list[Out]:
+        """SET_GPS_GLOBAL_ORIGIN: taken without a GPS fix and sent back on every link as
+        GPS_GLOBAL_ORIGIN; refused with a STATUSTEXT to the sender, who gets the origin in force
+        (none: nothing more), as the message's definition asks the vehicle to answer either way."""
+        lat, lon, alt = msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3
+        why = None
+        if not -90.0 <= lat <= 90.0:
+            why = f"latitude {lat:g} deg is out of range -90..90"
+        elif not -180.0 <= lon <= 180.0:
+            why = f"longitude {lon:g} deg is out of range -180..180"
+        elif not LOWEST_LAND_AMSL_M <= alt <= ORIGIN_MAX_ALT_M:
+            why = (f"altitude {alt:g} m above mean sea level is outside "
+                   f"{LOWEST_LAND_AMSL_M:g}..{ORIGIN_MAX_ALT_M:g} m (the lowest land on Earth "
+                   "to 100 km)")
+        elif self._gps_origin() is not None:
+            why = ("the GPS places this vehicle's local frame (the mean of its fixes): an "
+                   "origin is taken only without a GPS fix")
+        if why is not None:
+            self.refusals += 1
+            answer = self._notice(peer, f"origin:{why}", mav.MAV_SEVERITY_WARNING,
+                                  f"SET_GPS_GLOBAL_ORIGIN refused: {why}")
+            now = telem.gps_global_origin(self.codec, self.view())
+            return [Out(m, link, peer) for m in [*answer, *([now] if now is not None else [])]]
+        self._origin_given = GeoOrigin(lat, lon, alt)
+        view = self.view()
+        told = telem.gps_global_origin(self.codec, view)  # (an origin is known now)
+        self._origin_told = view.origin
+        out = self._on_change(told) if told is not None else []
+        if told is not None and not any(o.link == link for o in out):  # stopped there (-1):
+            out.append(Out(told, link, peer))  # the sender still hears its answer
+        return out
 
     def _new_station(self, src: tuple[int, int], link: int, peer: Hashable,
                      now_s: float) -> list[Out]:
