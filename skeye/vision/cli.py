@@ -4,8 +4,8 @@ How this works: :func:`register` adds the subcommands to the lead's argparse sub
 sets ``func(args) -> int``. ``vision detect`` runs the same :func:`detect` the pilot calls and
 prints one JSON object; without ``--fov`` it takes the field of view of the ``--robot`` file's
 camera and says so on stderr; ``--calibration camera.toml`` (``skeye calibrate``) gives the
-camera matrix and lens distortion instead. It exits 0 whether or not a pad was found and 2 for bad
-input, with a message on stderr.
+camera matrix and lens distortion instead (refused beside ``--fov``, which it replaces). It
+exits 0 whether or not a pad was found and 2 for bad input, with a message on stderr.
 """
 
 from __future__ import annotations
@@ -66,6 +66,9 @@ def cmd_pad(args: argparse.Namespace) -> int:
 def cmd_detect(args: argparse.Namespace) -> int:
     """Detect the pad in one image file and print the estimate as JSON."""
     calibration = None
+    if args.calibration is not None and args.fov is not None:  # one would do nothing
+        return _fail(DETECT, "give --fov or --calibration, not both: the calibration's camera "
+                     "matrix gives the geometry, --fov would be ignored")
     if args.calibration is not None:
         from skeye.vision.calibration import load_calibration
 
@@ -73,8 +76,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
             calibration = load_calibration(args.calibration)
         except ConfigError as exc:
             return _fail(DETECT, str(exc))
-        if args.fov is None:  # not used for the geometry: the calibration's matrix is
-            args.fov = calibration.fov_h_rad
+        args.fov = calibration.fov_h_rad  # not used for the geometry: the matrix is
     if args.fov is None:  # the camera the frame most likely came from: the robot file's
         from skeye.robots.config import camera_model
 
@@ -143,6 +145,6 @@ def register(subparsers: Any) -> None:
     d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
     d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
     d.add_argument("--calibration", default=None, metavar="CAMERA_TOML",
-                   help="the camera's calibration from `skeye calibrate` (replaces --fov; the "
-                   "lens distortion is corrected)")
+                   help="the camera's calibration from `skeye calibrate` (replaces --fov: not "
+                   "with it; the lens distortion is corrected)")
     d.set_defaults(func=cmd_detect)

@@ -299,3 +299,18 @@ def test_detect_and_calibrate_name_an_image_too_large_to_decode(tmp_path, capsys
         assert captured.err == (f"{command}: error: image {big} does not decode: it declares "
                                 "60000x60000 px (3600000000 pixels), more than the 1073741824 "
                                 "OpenCV decodes (OPENCV_IO_MAX_IMAGE_PIXELS)\n")
+
+
+def test_detect_refuses_fov_beside_a_calibration(pad_png, tmp_path, capsys):
+    """--calibration replaces --fov (its camera matrix gives the geometry): both given, one
+    would do nothing, so the command is refused (status 2) naming both, before any image is
+    read, as skeye sim, pilot and logs refuse options that would do nothing."""
+    from skeye.vision.calibration import CameraCalibration
+
+    cal = tmp_path / "camera.toml"
+    CameraCalibration.pinhole(W, H, FOV_H_RAD).save(cal)
+    rc = run(["vision", "detect", str(pad_png), "--fov", "0.5", "--calibration", str(cal)])
+    captured = capsys.readouterr()
+    assert rc == 2 and captured.out == ""
+    assert captured.err.startswith("skeye vision detect: error: ")
+    assert "--fov" in captured.err and "--calibration" in captured.err
