@@ -15,11 +15,12 @@ a failed request drops its connection, a late frame never answers a later reques
 kills the worker: an attitude the camera cannot look at the ground through (roll or pitch not
 finite, or at or beyond 90 deg: a tumbling vehicle) is "pad not seen" without running the
 detector, and any other failure on one frame is counted in :class:`VisionStats` (``errors``,
-``last_error``), logged once per kind, and that frame is "pad not seen"; the worker goes on
-with the next. When the pilot re-attaches to a new robot, :meth:`PadVision.rebind` points the
-vision at it. In lockstep the loop waits (at most ``lockstep_wait_s``) for the frame of the
-step it just made, so a run stays reproducible; the simulator is paused meanwhile, so nothing
-flies unwatched.
+``last_error``), logged once per kind (one line for skeye's own errors, which name their
+cause; with a traceback for any other exception, a bug), and that frame is "pad not seen"; the
+worker goes on with the next. When the pilot re-attaches to a new robot,
+:meth:`PadVision.rebind` points the vision at it. In lockstep the loop waits (at most
+``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible;
+the simulator is paused meanwhile, so nothing flies unwatched.
 
 Frame times (docs/pilot.md, "Frame times"): by default a frame's time is when it reached the
 pilot, as a host sees a USB webcam's frames: the control loop notes the sim time at which each
@@ -541,15 +542,18 @@ class PadVision:
         return max(arrived, capture_s)
 
     def _failed(self, frame: int, time_s: float, exc: Exception) -> PadObservation:
-        """A frame the worker could not handle: counted and said (once per kind of failure),
-        and the pad is not seen in it."""
+        """A frame the worker could not handle: counted and said (once per kind of failure:
+        one line for skeye's own errors, which name their cause, such as a calibration for
+        another image size; with the traceback for any other exception), and the pad is not
+        seen in it."""
         stats = self.stats
         stats.errors += 1
         first = not stats.last_error.startswith(type(exc).__name__)
         stats.last_error = f"{type(exc).__name__}: {exc}"
-        if first:
+        if first:  # skeye's own error names its cause; another exception is a bug: traced
             log.warning("vision: frame %d failed (pad not seen; said once per kind of "
-                        "failure): %s", frame, stats.last_error, exc_info=exc)
+                        "failure): %s", frame, stats.last_error,
+                        exc_info=None if isinstance(exc, SkeyeError) else exc)
         self._last_frame = max(self._last_frame, frame)
         return PadObservation(time_s, False)
 

@@ -141,3 +141,34 @@ def test_the_camera_reconnects_after_the_server_idled_it_out() -> None:
             assert camera.image().frame == 2  # a fresh connection, no error to the caller
         finally:
             camera.close()
+
+
+def test_a_known_detector_error_is_one_line_without_a_traceback(caplog) -> None:
+    """A calibration made at another image size is a documented failure of the detector
+    (docs/landing-pad.md: "the image must have the size the calibration was made at"; a
+    PadVision built in Python, not through skeye pilot, which refuses it at the start): every
+    frame is "pad not seen", said once in one line naming the cause, with no traceback (one is
+    kept for exceptions skeye does not raise itself: a bug's)."""
+    from skeye.vision.calibration import CameraCalibration
+
+    with ExitStack() as stack, _realtime_sim() as (control, buffer):
+        images = stack.enter_context(ImageServer(buffer, port=0))
+        sim = stack.enter_context(connect(f"127.0.0.1:{control.port}",
+                                          images=f"127.0.0.1:{images.port}", timeout_s=10.0))
+        robot = sim.spawn("hummingbird", start="Pad1")
+        wrong = CameraCalibration.pinhole(320, 240, 1.0)  # the camera sends 800x600
+        pilot = stack.enter_context(
+            PilotServer(SimAirframe(sim, robot, frozen_timeout_s=600.0), port=0,
+                        settings=BoardSettings(link_timeout_s=600.0),
+                        vision=lambda boards, lock: PadVision(
+                            boards, robot, lock, fov_h_rad=1.0, calibration=wrong)))
+        vision = pilot.vision
+        assert isinstance(vision, PadVision)
+        with caplog.at_level("WARNING", logger="skeye.pilot.vision"):
+            wait_until(lambda: vision.stats.errors >= 2, 120, "frames refused by the detector")
+        said = [r for r in caplog.records if r.name == "skeye.pilot.vision"]
+        failed = [r for r in said if "failed" in r.getMessage()]
+        assert len(failed) == 1, [r.getMessage() for r in said]
+        assert "the calibration is for 320x240 images" in failed[0].getMessage()
+        assert all(r.exc_info is None for r in said)
+        assert pilot.loop_error is None and pilot.vehicle_lost is None
