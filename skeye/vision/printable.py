@@ -42,6 +42,11 @@ PAPERS_M: dict[str, tuple[float, float]] = {  # portrait width, height
 PAPER_MARGIN_M = 0.010  # what most home printers cannot print, on every side
 TILE_OVERLAP_M = 0.010
 SCALE_BAR_M = 0.100
+# The largest PDF page viewers accept: 14 400 x 14 400 units of default user space (1/72 in),
+# 200 in = 5.08 m a side (ISO 32000-1:2008, PDF 1.7, Annex C.2, Table C.1 "Architectural
+# limits": page size; Adobe Acrobat and Reader refuse or crop a larger MediaBox). PDF 1.6's
+# UserUnit could scale the unit, but matplotlib does not write it and many viewers ignore it.
+MAX_PDF_SIDE_M = 14400 / 72 * METRES_PER_INCH
 MAX_SHEETS = 500  # a 4.8 m page on A4 (486 sheets); each sheet takes a second or more to draw
 
 
@@ -146,8 +151,10 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
     if best is None:
         raise LocalProtocolError(
             f"a {page_side_m:g} m page needs {fewest:.0f} {paper} sheets, over the "
-            f"{MAX_SHEETS} --paper writes: write it without --paper (one true-scale PDF page) "
-            "for a print shop")
+            f"{MAX_SHEETS} --paper writes: write it without --paper (one true-scale page) "
+            "for a print shop" + ("" if page_side_m <= MAX_PDF_SIDE_M * (1 + 1e-12) else
+                                  f", as a .png (over {MAX_PDF_SIDE_M:g} m a side, more than a "
+                                  "PDF page may have)"))
     return best
 
 
@@ -244,15 +251,29 @@ def write_printable(
         raise LocalProtocolError(f"margin must be within 0..1 m, got {margin_m}")
     if ext == ".png" and not 10 <= dpi <= 1200:
         raise LocalProtocolError(f"dpi must be within 10..1200, got {dpi}")
+    side = page_size_m(pad, margin_m)
+    pdf_fits = side <= MAX_PDF_SIDE_M * (1 + 1e-12)
     if ext == ".png" and paper is None:
-        side = page_size_m(pad, margin_m)
         side_px = side / METRES_PER_INCH * dpi
         if side_px > MAX_PNG_SIDE_PX:  # matplotlib would raise, or exhaust the memory
             most = math.floor(MAX_PNG_SIDE_PX * METRES_PER_INCH / side)
-            fix = f": give --dpi {most} or less, or" if most >= 10 else " even at 10 dpi:"
+            fix = [f"give --dpi {most} or less"] if most >= 10 else []
+            if pdf_fits:
+                fix.append("write a .pdf (vector)")
+            said = (f": {', or '.join(fix)}" if fix else " even at 10 dpi") + (
+                "" if pdf_fits else f" (the page is over the {MAX_PDF_SIDE_M:g} m a PDF page "
+                "may have)")
             raise LocalProtocolError(
                 f"a {side:g} m page at {dpi} dpi is {side_px:.0f} px a side, over the "
-                f"{MAX_PNG_SIDE_PX} px a PNG may have{fix} write a .pdf (vector, any size)")
+                f"{MAX_PNG_SIDE_PX} px a PNG may have{said}")
+    if ext == ".pdf" and paper is None and not pdf_fits:
+        most = math.floor(MAX_PNG_SIDE_PX * METRES_PER_INCH / side)
+        png = (f": write a .png (--dpi {most} or less)" if most >= 10 else
+               ", and too large for a PNG even at 10 dpi")
+        raise LocalProtocolError(
+            f"a {side:g} m page is over the {MAX_PDF_SIDE_M:g} m a side a PDF page may have "
+            f"(14400 units of 1/72 in, 200 in: PDF's page-size limit, ISO 32000-1 Annex C; "
+            f"viewers refuse or crop a larger page){png}")
     if paper is not None:
         if ext != ".pdf":
             raise LocalProtocolError(f"--paper writes a PDF of sheets; name it .pdf, not {ext}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -149,8 +150,10 @@ def test_printable_png_carries_its_dpi(tmp_path, dpi):
 
 @pytest.mark.parametrize(("side_m", "dpi", "words"), [
     (20.0, 300, "20.04 m page at 300 dpi is 236693 px a side, over the 32768 px a PNG may "
-                "have: give --dpi 41 or less, or write a .pdf"),
-    (1e9, 10, "even at 10 dpi: write a .pdf"),
+                "have: give --dpi 41 or less (the page is over the 5.08 m a PDF page may have)"),
+    (1.0, 1200, "1.04 m page at 1200 dpi is 49134 px a side, over the 32768 px a PNG may "
+                "have: give --dpi 800 or less, or write a .pdf (vector)"),
+    (1e9, 10, "even at 10 dpi (the page is over the 5.08 m a PDF page may have)"),
 ])
 def test_a_png_too_large_to_draw_is_refused(tmp_path, capsys, side_m, dpi, words):
     """A 20 m pad at 300 dpi made matplotlib fail to allocate the canvas (MemoryError, or
@@ -269,3 +272,30 @@ def test_render_pad_equals_sub_sampling_every_pixel(pixels: int, supersample: in
     for pad in (SKEYE_4, odd):
         assert np.array_equal(render_pad(pad, pixels, supersample),
                               _render_pad_reference(pad, pixels, supersample))
+
+
+def test_a_pdf_page_over_the_pdf_size_limit_is_refused(tmp_path, capsys):
+    """PDF viewers take a page of at most 14 400 x 14 400 units of 1/72 in, 200 in = 5.08 m a
+    side (ISO 32000-1 Annex C); skeye pad wrote a 5.09 m page (MediaBox 14 428 units) that
+    Acrobat refuses or crops. The page at the limit is written, with its MediaBox within it;
+    one 10 mm more is refused, naming the limit and the PNG that can carry it."""
+    from skeye.cli import main
+
+    def pad_file(side_m: float) -> Path:
+        path = tmp_path / f"big-{side_m}.toml"
+        path.write_text(f"name = 'big'\nside_m = {side_m!r}\n"
+                        f"rings = [{{outer_m = {0.45 * side_m!r}, inner_m = {0.38 * side_m!r}}}]")
+        return path
+
+    at_limit = tmp_path / "limit.pdf"  # 5.04 m pad + 2 x 20 mm margin = 5.08 m
+    assert main(["pad", "--out", str(at_limit), "--pad", str(pad_file(5.04))]) == 0
+    box = re.search(rb"/MediaBox \[ *0 +0 +([0-9.]+) +([0-9.]+) *\]", at_limit.read_bytes())
+    assert box is not None and max(float(v) for v in box.groups()) <= 14400.0
+    capsys.readouterr()
+    over = tmp_path / "over.pdf"  # a 5.09 m page
+    assert main(["pad", "--out", str(over), "--pad", str(pad_file(5.05))]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("skeye pad: error: a 5.09 m page is over the 5.08 m a side a PDF page "
+                          "may have (14400 units of 1/72 in, 200 in"), err
+    assert "write a .png (--dpi 163 or less)" in err and "Traceback" not in err
+    assert not over.exists()
