@@ -76,7 +76,7 @@ CASES = [
     # values a packet cannot carry: said in SI before the link is opened (they were said in
     # wire units, and only by a vehicle that answered: exit 1 without one)
     (["link", "tcp://" + NO_SIM, "velocity", "1", "0", "0", "--duration", "70"],
-     "duration_s 70 s is outside 0..65.535 s"),
+     "--duration 70 s is outside 0..65.535 s"),
     (["link", "tcp://" + NO_SIM, "velocity", "40", "0", "0"], "40 m/s is outside"),
     (["link", "tcp://" + NO_SIM, "take-off", "1e300"], "is outside"),
     (["link", "tcp://" + NO_SIM, "poll", "no_such_bit"], "unknown mask bit"),

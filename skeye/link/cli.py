@@ -4,7 +4,9 @@ For scripts and for checking a real vehicle: every command prints the vehicle's 
 RESULT or ack) and exits 0 when it was accepted, 3 when the vehicle refused it (the RESULT's
 code is printed), 2 on a bad argument or URI and 1 when the link failed or timed out. The
 command's packet (and a poll or stream mask) is built before the link is opened, so a value it
-cannot carry is said in SI units with the range it can (exit 2), vehicle or none.
+cannot carry is said as typed: the argument or option, in its unit, with the range the
+packet carries (``skeye link: error: --yaw-rate-deg-s 5000 deg/s is outside
+-1877.47..1877.41 deg/s, what a VELOCITY packet carries``; exit 2), vehicle or none.
 Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
 Output closed early (``skeye link ... stream 60 | head``) ends the command quietly, status 0;
 Ctrl-C ends it with ``skeye link: interrupted (Ctrl-C)`` and status 130.
@@ -14,9 +16,11 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import fields
 from enum import IntEnum
 from typing import Any, TextIO
@@ -30,8 +34,22 @@ from skeye.link.vehicle import (
     pad_mode_command,
     velocity_command,
 )
-from skeye.wire.packet_units import take_off_from_si
-from skeye.wire.packets import Ack, Hold, Land, Message, PollMask, Reset, Result, SkeyeMask
+from skeye.wire.packet_units import si_range, take_off_from_si, wire_value
+from skeye.wire.packets import (
+    Ack,
+    GotoGps,
+    Hold,
+    Land,
+    Message,
+    MoveBy,
+    PadMode,
+    PollMask,
+    Reset,
+    Result,
+    SkeyeMask,
+    TakeOff,
+    Velocity,
+)
 
 EXIT_OK, EXIT_LINK, EXIT_USAGE, EXIT_REJECTED = 0, 1, 2, 3
 
@@ -73,6 +91,69 @@ def _answer(answer: Result | Ack, out: TextIO) -> None:
     print(format_message(answer), file=out)
 
 
+def _same(value: float) -> float:
+    return value
+
+
+def _negated(value: float) -> float:  # up on the command line, down (FRD, NED) on the wire
+    return -value
+
+
+# The values each command puts in its packet, as the user types them: the argument or option,
+# its attribute, its unit, the packet and its wire field, and the user's unit -> the field's SI
+# unit (its own inverse: a sign, or degrees <-> radians paired below).
+_ValueSpec = tuple[str, str, str, type[Message], str, Callable[[float], float]]
+_M, _M_S = "m", "m/s"
+_VALUES: dict[str, tuple[_ValueSpec, ...]] = {
+    "take-off": (("height", "height", _M, TakeOff, "height", _same),),
+    "velocity": (("forward", "forward", _M_S, Velocity, "vx", _same),
+                 ("right", "right", _M_S, Velocity, "vy", _same),
+                 ("up", "up", _M_S, Velocity, "vz", _negated),
+                 ("--yaw-rate-deg-s", "yaw_rate_deg_s", "deg/s", Velocity, "yaw_rate",
+                  math.radians),
+                 ("--duration", "duration", "s", Velocity, "duration", _same)),
+    "move-by": (("forward", "forward", _M, MoveBy, "dx", _same),
+                ("right", "right", _M, MoveBy, "dy", _same),
+                ("up", "up", _M, MoveBy, "dz", _negated),
+                ("--yaw-deg", "yaw_deg", "deg", MoveBy, "dyaw", math.radians),
+                ("--speed", "speed", _M_S, MoveBy, "speed", _same)),
+    "goto-gps": (("latitude", "latitude", "deg", GotoGps, "latitude", _same),
+                 ("longitude", "longitude", "deg", GotoGps, "longitude", _same),
+                 ("height", "height", _M, GotoGps, "height", _same),
+                 ("--speed", "speed", _M_S, GotoGps, "speed", _same)),
+    "pad-mode": (("--deadband", "deadband", _M, PadMode, "deadband", _same),
+                 ("--max-speed", "max_speed", _M_S, PadMode, "max_speed", _same)),
+}
+_INVERSE: dict[Callable[[float], float], Callable[[float], float]] = {
+    _same: _same, _negated: _negated, math.radians: math.degrees}
+
+
+def _packet_name(cls: type[Message]) -> str:
+    """The packet's name as the protocol's page writes it (``MoveBy`` -> ``MOVE_BY``)."""
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", cls.__name__).upper()
+
+
+def check_values(args: argparse.Namespace) -> None:
+    """Refuse a command's value that its packet cannot carry, named as the user typed it (the
+    argument or option, its value and unit, the range in that unit): not the packet's own
+    field names, and ``up`` not as the down velocity the packet carries.
+
+    Raises:
+        LocalProtocolError: a value not finite or outside what the packet carries.
+    """
+    for label, dest, unit, cls, name, to_si in _VALUES.get(args.link_command, ()):
+        value = getattr(args, dest)
+        if not math.isfinite(value):
+            raise LocalProtocolError(f"{label} must be a finite number ({unit}), got {value}")
+        try:
+            wire_value(cls, name, to_si(value))
+        except LocalProtocolError:
+            a, b = sorted(_INVERSE[to_si](v) for v in si_range(cls, name))
+            raise LocalProtocolError(
+                f"{label} {value:g} {unit} is outside {a:g}..{b:g} {unit}, what a "
+                f"{_packet_name(cls)} packet carries") from None
+
+
 def command_message(args: argparse.Namespace) -> Message | None:
     """The command packet of a ``skeye link`` command (None for poll and stream), built before
     the link is opened, so that a value the packet cannot carry is said (in SI, exit 2) without
@@ -81,6 +162,7 @@ def command_message(args: argparse.Namespace) -> Message | None:
     Raises:
         LocalProtocolError: a value the packet cannot carry.
     """
+    check_values(args)
     cmd = args.link_command
     if cmd == "take-off":
         return take_off_from_si(args.height)

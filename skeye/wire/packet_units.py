@@ -153,6 +153,16 @@ def wire_value(
     return counts
 
 
+def si_range(cls: type[Message], name: str) -> tuple[float, float]:
+    """The SI values (low, high) that ``cls``'s scaled field ``name`` carries."""
+    f = _field(cls, name)
+    if f.scale is None:
+        raise LocalProtocolError(f"{cls.__name__}.{name} has no SI scale")
+    lo, hi = f.limits
+    a, b = sorted((f.scale.to_si(lo), f.scale.to_si(hi)))
+    return a, b
+
+
 def si_value(msg: Message, name: str, scale: Scale | None = None) -> Any:
     """Field ``name`` of ``msg`` in SI (through its scale, or ``scale``; unscaled: as is)."""
     raw = getattr(msg, name)

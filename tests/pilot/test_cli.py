@@ -332,3 +332,32 @@ def test_link_to_a_port_that_is_no_pilot_says_so(capsys):
     assert status == link_cli.EXIT_LINK, err
     assert "nothing a vehicle sends came on this link" in err, err
     assert f"is {uri} a skeye pilot's link (skeye pilot --port)?" in err, err
+
+
+@pytest.mark.parametrize(("argv", "said"), [
+    (["velocity", "100", "0", "0"], "forward 100 m/s is outside -32.768..32.767 m/s, what a "
+                                    "VELOCITY packet carries"),
+    (["velocity", "0", "0", "40"], "up 40 m/s is outside -32.767..32.768 m/s"),
+    (["velocity", "0", "0", "0", "--yaw-rate-deg-s", "5000"],
+     "--yaw-rate-deg-s 5000 deg/s is outside -1877.47..1877.41 deg/s"),
+    (["velocity", "0", "0", "0", "--duration", "100"], "--duration 100 s is outside 0..65.535 s"),
+    (["velocity", "nan", "0", "0"], "forward must be a finite number (m/s), got nan"),
+    (["move-by", "0", "0", "0", "--speed", "1e6"], "--speed 1e+06 m/s is outside 0..65.535 m/s, "
+                                                   "what a MOVE_BY packet carries"),
+    (["goto-gps", "100", "0", "1"], "latitude 100 deg is outside -90..90 deg, what a GOTO_GPS "
+                                    "packet carries"),
+    (["take-off", "1e9"], "height 1e+09 m is outside 0.001..2.14748e+06 m, what a TAKE_OFF "
+                          "packet carries"),
+    (["pad-mode", "hold", "--deadband", "1e9"], "--deadband 1e+09 m is outside 0..65.535 m"),
+])
+def test_link_values_the_packet_cannot_carry_are_said_in_the_users_terms(argv, said, capsys):
+    """A value a command's packet cannot carry was said with skeye's internal field names
+    (``VelocitySi.vel_frd_m_s[0] 100 m/s ...``, ``up`` as a down velocity); it is said with the
+    argument or option the user typed, in its unit (deg/s for --yaw-rate-deg-s), as the
+    command's own error (status 2), before the link is opened."""
+    from skeye.cli import main
+
+    assert main(["link", "tcp://127.0.0.1:1", *argv]) == link_cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.startswith(f"skeye link: error: {said}"), err
+    assert "Si." not in err and "_m_s" not in err and "link error" not in err
