@@ -8,10 +8,12 @@ port (``skeye pilot --video-port``): the page shows the frames and detections th
 ``skeye up`` starts ``skeye sim`` (with its image server), ``skeye pilot`` and ``skeye ground``
 as child processes on this machine, waits until each one listens, prints the URL, and on Ctrl-C
 or SIGTERM (or when one of them fails, or when the ``make`` that started it is signalled) stops
-them all: SIGTERM in reverse order, then SIGKILL for any that has not exited after a few
-seconds. A child that was killed (by a signal, or stopped with status 0 by one it caught) is
-started again on the same ports, as systemd's ``Restart=on-abnormal`` does, at most
-``RESTART_BURST`` times in ``RESTART_WINDOW_S``: the pilot re-attaches to a restarted
+them all in the reverse of their start order, clients before the servers they use: ground
+control, then the pilot, then the simulator, each sent SIGTERM only once the one before has
+exited (SIGKILL for one that has not within ``STOP_TIMEOUT_S``), so a normal stop logs no lost
+camera, simulator or link. A child that was killed (by a signal, or stopped with status 0 by
+one it caught) is started again on the same ports, as systemd's ``Restart=on-abnormal`` does,
+at most ``RESTART_BURST`` times in ``RESTART_WINDOW_S``: the pilot re-attaches to a restarted
 simulator, ground control reconnects to a restarted pilot. A child that exits with an error
 status (the simulator's engine failed: 3; a bad option: 2; ...) stops everything, saying why.
 The pilot serves its camera on ``--video-port`` (default 7001) and ground control shows
@@ -52,7 +54,7 @@ from skeye.uris import url_host
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
 DEFAULT_VIDEO_FPS = 8.0  # skeye ground --video-fps: frames/s asked of the vehicle's video port
-STOP_DEADLINE_S = 10.0  # all children together, after SIGTERM, before SIGKILL
+STOP_TIMEOUT_S = 10.0  # each child, after its SIGTERM, before SIGKILL
 RESTART_BURST = 5
 """Restarts of one child within ``RESTART_WINDOW_S`` before skeye up gives up (systemd's default
 ``StartLimitBurst`` is 5)."""
@@ -226,12 +228,17 @@ def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadli
     raise ConfigError(f"{what} did not listen on port {port} within {deadline_s:g} s")
 
 
-def _stop_all(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> None:
-    """SIGTERM to every child at once, one shared deadline, then SIGKILL (see
-    :func:`skeye.processes.stop_processes`)."""
+def _stop_all(children: Sequence[tuple[str, subprocess.Popen[Any]]]) -> None:
+    """Stop the children in the reverse of their start order, each a client of the ones
+    started before it (ground control of the pilot, the pilot of the simulator and its image
+    server): SIGTERM to one, wait up to ``STOP_TIMEOUT_S`` for it to exit (SIGKILL after), and
+    only then the next, so that no client sees a server go away at a normal stop and logs it as
+    a loss (the pilot's "camera lost", "vehicle lost"), as systemd stops units in the reverse
+    of their ``After=`` order."""
     from skeye.processes import stop_processes
 
-    stop_processes([child for _, child in reversed(children)], STOP_DEADLINE_S)
+    for _, child in reversed(children):
+        stop_processes([child], STOP_TIMEOUT_S)
 
 
 _EXIT_MEANING = {

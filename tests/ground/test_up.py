@@ -98,6 +98,13 @@ def test_up_starts_everything_and_sigterm_stops_everything() -> None:
         assert proc.wait(120) == 0
         rest = proc.stdout.read()
         assert "skeye up: stopped" in rest
+        # A normal stop is no failure: the clients stop before the servers they use, so none
+        # of them says it lost one (the pilot's "camera lost", "vehicle lost", ground
+        # control's lost link), and nothing logs an error or a traceback.
+        said_at_stop = [line for line in rest.splitlines()
+                        if " ERROR " in line or " CRITICAL " in line or " lost" in line
+                        or "Traceback" in line]
+        assert not said_at_stop, rest
         for pid in children:
             gone = not os.path.exists(f"/proc/{pid}")
             assert gone or open(f"/proc/{pid}/stat").read().split()[2] == "Z"
@@ -330,3 +337,56 @@ def test_signals_to_make_run_stop_every_server(tmp_path) -> None:
             if make.poll() is None:
                 os.killpg(make.pid, signal.SIGKILL)
                 make.wait(10)
+
+
+_STOP_WITNESS = r"""
+import os, signal, sys
+name, pids_file, log_file = sys.argv[1:]
+name = name.replace(" ", "_")
+def stopped(signum, frame):
+    # who else of skeye up's children is still running when this one is told to stop
+    others = [line.split() for line in open(pids_file).read().splitlines()]
+    alive = []
+    for other, pid in others:
+        try:
+            state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue  # exited and reaped
+        if other != name and state != "Z":
+            alive.append(other)
+    with open(log_file, "a") as f:
+        f.write(f"{name}:{','.join(sorted(alive))}\n")
+    sys.exit(0)
+signal.signal(signal.SIGTERM, stopped)
+print("ready", flush=True)
+signal.pause()
+"""
+
+
+def test_up_stops_the_clients_before_the_servers_they_use(tmp_path: Path) -> None:
+    """SIGTERM went to ground control, the pilot and the simulator at once, so the pilot could
+    see its simulator and image server go before it stopped, and log "camera lost" or
+    "vehicle lost" at a normal stop. Each child now stops (and is waited for) before the one it
+    depends on is told to: ground control, then the pilot, then the simulator. Each child here
+    records which of the others still ran when it was told to stop."""
+    from skeye.ground.cli import _stop_all
+
+    pids_file, log_file = tmp_path / "pids", tmp_path / "stopped"
+    names = ("simulator", "pilot", "ground control")  # the order skeye up starts them
+    children = []
+    try:
+        for name in names:
+            child = subprocess.Popen([sys.executable, "-c", _STOP_WITNESS, name, str(pids_file),
+                                      str(log_file)], stdout=subprocess.PIPE, text=True)
+            children.append((name, child))
+            assert child.stdout is not None and child.stdout.readline() == "ready\n"
+        pids_file.write_text("".join(f"{n.replace(' ', '_')} {c.pid}\n" for n, c in children))
+        _stop_all(children)
+        assert all(c.returncode == 0 for _, c in children)
+        said = log_file.read_text().splitlines()
+        assert said == ["ground_control:pilot,simulator", "pilot:simulator", "simulator:"], said
+    finally:
+        for _, child in children:
+            if child.poll() is None:
+                child.kill()
+                child.wait(10)
