@@ -20,6 +20,7 @@ steps it and paces the clock.
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from collections.abc import Callable
@@ -299,6 +300,7 @@ class Simulation:
         self._queries[name] = RobotWorldQuery(self, name)
         try:
             self._rebuild()
+            self._refuse_occupied(name, pos, self.data)
         except Exception:
             del self.robots[name]
             del self._queries[name]
@@ -340,6 +342,60 @@ class Simulation:
             return (ln, le, ld + below - gear), (rr, rp, ry), False
         return (ln, le, ld), (rr, rp, ry), True
 
+    def _refuse_occupied(self, name: str, pos: tuple[float, float, float], data: Any) -> None:
+        """Refuse to put robot ``name`` at ``pos`` (NED) where another robot stands: where a
+        part of it would be inside a part of another robot, the two would be spawned inside
+        each other. USARSim's spawn fails there too (Unreal's ``Spawn`` returns None where
+        the new actor's collision meets another's). ``data``: MuJoCo's data with the robot at
+        ``pos``, its kinematics computed.
+
+        The robots' bounding spheres (:class:`~skeye.sim.raycast.RayCaster`'s: the body
+        position and the farthest reach of its geoms, the rotor tips for a quadrotor) find the
+        robots that may be in the way; of those, every pair of geoms (hull, arms, rotor disks,
+        landing gear) is asked MuJoCo's signed distance (``mj_geomDistance``): one below 0 is
+        two parts inside each other. Robots merely near (stacked 0.4 m apart, rotor disks
+        side by side) are no obstacle: their spheres overlap, their parts do not.
+
+        Raises:
+            LocalProtocolError: naming the nearest robot in the way, its distance (centre to
+                centre) and the two parts found inside each other.
+        """
+        rays, model = self._rays, self.model
+        body = self._slots[name].body_id
+        radius = rays.bounding_radius(body)
+        px, py, pz = (float(v) for v in data.xpos[body])
+        roots = model.geom_bodyid.tolist()
+        root_of = model.body_rootid.tolist()
+        mine = [g for g in range(model.ngeom) if root_of[roots[g]] == body]
+        found: tuple[float, str, int, int] | None = None
+        for other, slot in self._slots.items():
+            if other == name:
+                continue
+            ox, oy, oz = (float(v) for v in data.xpos[slot.body_id])
+            dist = math.sqrt((ox - px) ** 2 + (oy - py) ** 2 + (oz - pz) ** 2)
+            if not dist < radius + rays.bounding_radius(slot.body_id):
+                continue  # too far for any part to meet (an unbounded sphere: checked)
+            if found is not None and dist >= found[0]:
+                continue
+            theirs = [g for g in range(model.ngeom) if root_of[roots[g]] == slot.body_id]
+            clash = next(((g1, g2) for g1 in mine for g2 in theirs
+                          if mujoco.mj_geomDistance(model, data, g1, g2, 0.0, None) < 0.0),
+                         None)
+            if clash is not None:
+                found = (dist, other, clash[0], clash[1])
+        if found is not None:
+            dist, other, g1, g2 = found
+            n, e, d = pos
+
+            def part(geom: int) -> str:
+                return (mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, geom) or
+                        f"geom {geom}").rpartition(":")[2]
+
+            raise LocalProtocolError(
+                f"{n:g},{e:g},{d:g} is taken: robot {other} is {dist:.2f} m away there "
+                f"(centre to centre), and this robot's {part(g1)} would be inside its "
+                f"{part(g2)}; choose a place clear of it")
+
     def _start_robot(self, name: str, robot: Robot, pos: tuple[float, float, float],
                      airborne: bool) -> None:
         """A robot just placed at its spawn pose: still, its board calibrated, its first tick."""
@@ -380,6 +436,13 @@ class Simulation:
         else:
             pos, rpy, airborne = self._spawn_pose(old.config, start, location_ned_m,
                                                   rotation_rpy_rad, slot.body_id)
+        # Its parts at the new pose, on a copy: a refused RESET leaves the world untouched.
+        there = copy.copy(self.data)
+        a = slot.qpos_adr
+        there.qpos[a : a + 3] = frames.ned_to_mj(pos)
+        there.qpos[a + 3 : a + 7] = frames.quat_ned_to_mj(frames.euler_to_quat(*rpy))
+        mujoco.mj_kinematics(self.model, there)
+        self._refuse_occupied(name, pos, there)
         self._resets += 1
         robot = Robot(
             name,

@@ -121,6 +121,11 @@ class RayCaster:
                 self._alone.add(b)
         self._shortcut = shortcut
 
+    def bounding_radius(self, body: int) -> float:
+        """The bounding sphere's radius of a robot body (m, margin included; ``inf`` for one
+        with moving parts, which no fixed sphere holds), about its body position."""
+        return self._radii[self._bodies.index(body)]
+
     def moved(self) -> None:
         """MuJoCo's kinematics changed: read the robots' positions again at the next cast."""
         self._fresh = False

@@ -136,6 +136,40 @@ def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connect
         b.close()
 
 
+def test_init_onto_another_robot_is_refused_naming_it_and_the_distance():
+    """USARSim's INIT fails where the robot's collision would meet another actor (Unreal's
+    Spawn returns None: BotDeathMatch.SpawnPlayer logs "Failed to spawn player"); skeye refuses
+    an INIT (or a RESET) that would put a part of its robot inside a part of another, with the
+    robot in the way and the distance, and serves every client on. Two Hummingbirds side by
+    side 0.5 m apart have their rotor disks (0.17 m arm, 0.1 m radius) inside each other; at
+    0.6 m, or stacked 0.42 m apart, they are clear."""
+    with running_sim() as server:
+        a, b = LineClient(server.port), LineClient(server.port)
+        a.expect("NFO")
+        b.expect("NFO")
+        assert a.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}",
+                        "INIT").type == "RES"
+        assert a.answer("RESET", "RESET").type == "RES"  # its own place is not in its way
+        for line, distance in (("{Start Pad1}", "0.00 m"),
+                               ("{Location 0.5,0,-0.081}", "0.50 m")):
+            err = b.answer(f"INIT {{ClassName hummingbird}} {{Name R2}} {line}", "INIT")
+            assert err.type == "ERR", err
+            reason = err.get("Reason") or ""
+            assert "robot R1" in reason and f"{distance} away" in reason, reason
+        assert set(server.runner.sim.robots) == {"R1"}
+        # The refused connection stays usable; clear of R1 its robot spawns, both fly on.
+        assert b.answer("INIT {ClassName hummingbird} {Name R2} {Location 0,0,-0.5}",
+                        "INIT").type == "RES"
+        assert b.answer("RESET {Location 0.6,0,-0.081}", "RESET").type == "RES"
+        names = {m.get("Name") for m in a.step(100) + b.step(100) if m.type == "STA"}
+        assert names == {"R1", "R2"}
+        # A RESET onto the other robot is refused the same way.
+        err = b.answer("RESET {Location 0.3,0,-0.081}", "RESET")
+        assert err.type == "ERR" and "robot R1 is 0.30 m away" in (err.get("Reason") or ""), err
+        a.close()
+        b.close()
+
+
 def test_realtime_mode_follows_the_wall_clock():
     """Each of two PINGs 3 s apart: its sim time follows the wall clock since the runner
     started, never ahead of it, and behind by at most the runner's allowed lag unless its clock
