@@ -263,6 +263,25 @@ def test_barometer_exact_without_noise_and_statistics() -> None:
     assert altitudes.std() == pytest.approx(p["NoiseSigma"] * 0.083, rel=0.2)
 
 
+def test_barometer_saturates_at_the_ms5611_range() -> None:
+    """The modelled MS5611 measures 10 to 1200 mbar (its datasheet's operating range): beyond
+    it the reading stays at the end of the range, as a real sensor's does. Above about 44 km
+    the ISA formula's base goes negative, and the reading was a complex number."""
+    baro = make(Barometer, **QUIET)
+    for down_m in (-50_000.0, -30_000.0):
+        f = dict(baro.sample(make_state(pos=(0, 0, down_m)), FlatWorld(geo_origin=None)))
+        assert f["Pressure"] == 1000.0, (down_m, f)
+        assert f["Altitude"] == isa_altitude_m(1000.0, 101325.0), (down_m, f)
+    # Reachable from a world file: the highest sea-level pressure it takes, below sea level.
+    low = FlatWorld(geo_origin=GeoOrigin(31.5, 35.5, -430.0), sea_level_pressure_pa=120000.0)
+    f = dict(baro.sample(make_state(pos=(0, 0, -1.0)), low))
+    assert isa_pressure_pa(429.0, 120000.0) < 120000.0 < isa_pressure_pa(-429.0, 120000.0)
+    assert f["Pressure"] == 120000.0 and f["Altitude"] == 0.0, f
+    # Inside the range the reading is the formula's, untouched.
+    f = dict(baro.sample(make_state(pos=(0, 0, -20_000.0)), FlatWorld(geo_origin=None)))
+    assert f["Pressure"] == isa_pressure_pa(20_000.0, 101325.0) > 1000.0
+
+
 # --- GPS --------------------------------------------------------------------------------------
 
 

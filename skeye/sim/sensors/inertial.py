@@ -384,8 +384,11 @@ class BaroReading(Reading):
 
 
 def isa_pressure_pa(altitude_m: float, sea_level_pa: float) -> float:
-    """ISA barometric formula (troposphere): static pressure at a geometric altitude."""
-    return sea_level_pa * (1.0 - ISA_LAPSE_K_M * altitude_m / ISA_T0_K) ** ISA_EXPONENT
+    """ISA barometric formula (troposphere): static pressure at a geometric altitude. Its
+    base reaches 0 at T0 / L, 44.3 km, where the formula's pressure is 0; above, 0 (the
+    power of a negative base would be a complex number)."""
+    base = 1.0 - ISA_LAPSE_K_M * altitude_m / ISA_T0_K
+    return sea_level_pa * base**ISA_EXPONENT if base > 0.0 else 0.0
 
 
 def isa_altitude_m(pressure_pa: float, sea_level_pa: float) -> float:
@@ -398,12 +401,19 @@ class Barometer(Sensor[BaroReading]):
 
     Model: altitude = world origin altitude (0 without a geodetic origin) minus the sensor's NED
     down; pressure from the ISA barometric formula with the world's sea-level pressure, then
-    BiasedNoise; Altitude is computed back from the noisy pressure, so it carries the noise
-    (about 8.3 cm per Pa near sea level). Defaults, MS5611-class: RMS noise 0.012 mbar at
-    OSR 4096 plus airframe turbulence gives NoiseSigma 1.5 Pa (~12 cm); BiasSigma 10 Pa (the
-    datasheet's absolute accuracy is +-150 Pa, normally removed by a ground reference: 10 Pa is
-    what is left); BiasWalk 0.1 Pa/sqrt(s) (weather and thermal drift, ~7 cm a minute).
-    Default rate 20 Hz.
+    BiasedNoise, then the sensor's range; Altitude is computed back from that pressure, so it
+    carries the noise (about 8.3 cm per Pa near sea level). Defaults, MS5611-class: RMS noise
+    0.012 mbar at OSR 4096 plus airframe turbulence gives NoiseSigma 1.5 Pa (~12 cm);
+    BiasSigma 10 Pa (the datasheet's absolute accuracy is +-150 Pa, normally removed by a
+    ground reference: 10 Pa is what is left); BiasWalk 0.1 Pa/sqrt(s) (weather and thermal
+    drift, ~7 cm a minute). Default rate 20 Hz.
+
+    Range: the MS5611-01BA03's operating range is 10 to 1200 mbar (its datasheet), so
+    MinPressure 1000 Pa and MaxPressure 120000 Pa: a pressure beyond is read as the end of
+    the range (as its 24-bit ADC's reading stays there), and the Altitude is the one that
+    pressure implies (about 26 km by this formula at 1000 Pa; 1200 mbar is reached only
+    below sea level under a high sea-level pressure, as a world file may set). Inside the
+    range the reading is the noisy pressure itself, to the bit.
 
     Rotor wash in ground effect: near the ground the rotors' wake stagnates on it and raises
     the pressure around the vehicle, so the barometer reads low (a known effect: flight
@@ -425,12 +435,20 @@ class Barometer(Sensor[BaroReading]):
         Param("RotorThrustCoefficient", 0.0,
               "airframe's thrust per rotor / (rad/s)^2, N s^2 (0: no rotor wash)"),
         Param("RotorRadius", 0.1, "airframe's rotor radius, m", exclusive=True),
+        Param("MinPressure", 1000.0, "range, low end, Pa: readings clip there "
+              "(MS5611: 10 mbar)"),
+        Param("MaxPressure", 120000.0, "range, high end, Pa: readings clip there "
+              "(MS5611: 1200 mbar)", exclusive=True),
     )
 
     def _setup(self) -> None:
         p = self.params
         self._noise = BiasedNoise(self.rng, 1, p["NoiseSigma"], p["BiasSigma"], p["BiasWalk"],
                                   self.normals)
+        self._min_pa, self._max_pa = p["MinPressure"], p["MaxPressure"]
+        if not self._min_pa < self._max_pa:
+            raise self._error("MinPressure", f"{self._min_pa:g} must be below MaxPressure "
+                              f"{self._max_pa:g}")
 
     def rotor_wash_pa(self, state: BodyState, world: WorldQuery) -> float:
         """The ground-cushion overpressure at the sensor (Pa), 0 without rotors or ground."""
@@ -454,4 +472,8 @@ class Barometer(Sensor[BaroReading]):
         p0 = float(world.sea_level_pressure_pa)
         static = isa_pressure_pa(altitude_m, p0) + self.rotor_wash_pa(state, world)
         pressure = self._noise.corrupt((static,), dt_s)[0]
+        if pressure < self._min_pa:  # beyond the sensor's range: it reads the end of it
+            pressure = self._min_pa
+        elif pressure > self._max_pa:
+            pressure = self._max_pa
         return BaroReading(state.time_s, pressure, isa_altitude_m(pressure, p0))
