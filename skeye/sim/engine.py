@@ -577,17 +577,22 @@ class Simulation:
         return bodies
 
     # -- stepping ------------------------------------------------------------------------
-    def step(self, count: int = 1) -> None:
+    def step(self, count: int = 1, stop: Callable[[], bool] | None = None) -> None:
         """Advance ``count`` physics steps, emitting every message those steps produce.
 
         Steps after which nothing is due but physics (no board tick, no sensor, status or
         camera) run as one ``mj_step(nstep=k)`` call: the same arithmetic, without Python in
         the loop. The lines the steps produce go to each client in one write at the end.
+        ``stop``, asked before each such call, ends the stepping early when it returns True
+        (the control server's: the client that asked for a lockstep STEP went away); the
+        steps taken so far stand, and their lines go out as ever.
         """
         target = self.steps + count
         try:
             self._check_states()
             while self.steps < target:
+                if stop is not None and stop():
+                    break
                 # The quiet steps and the one after which something is due: one MuJoCo call.
                 self._step_to_event(min(self._next_event_step(), target - 1) - self.steps + 1)
         finally:

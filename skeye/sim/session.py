@@ -24,13 +24,16 @@ from __future__ import annotations
 import enum
 import logging
 import math
+import os
 import queue
 import re
+import select
 import selectors
 import socket
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import Any, Protocol
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
@@ -73,6 +76,10 @@ from skeye.workers import Worker
 log = logging.getLogger(__name__)
 
 OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
+STEP_TIMEOUT_S = 3600.0  # a lockstep STEP waits this long to be taken up (then as long to end)
+STEP_WATCH_AFTER_S = 0.05  # a STEP still running after this: its reader watches for the client
+# poll() events of a socket whose peer is gone: it closed (or shut its sending side), or reset.
+_PEER_GONE = select.POLLRDHUP | select.POLLHUP | select.POLLERR
 CLOSE_LINGER_S = 5.0  # an ended session's writer has this long to send what is queued
 # An HTTP request line or header: a web page POSTing to this port (a cross-protocol request, whose
 # text/plain body would otherwise be read as protocol lines). The connection is closed at once.
@@ -612,18 +619,73 @@ class ClientSession:
         self.send(encode(Res("SET", type=command.type, status="OK")))
 
     def cmd_step(self, msg: Message, command: Step) -> None:
+        """Run the steps on the engine thread; the answer goes out from there when they end.
+
+        While they run, this reader watches its socket for the client going away (its end
+        closed or reset: ``POLLRDHUP``, ``POLLHUP``, ``POLLERR``; lines it sent meanwhile stay
+        unread). Then the engine stops this STEP at its next point between steps, so other
+        clients are not kept waiting for steps nobody will read; the reader then finds the
+        connection's end and the session finishes as for any client gone."""
         count = command.count
         runner = self.server.runner
+        gone = threading.Event()
 
         def do(sim: Simulation) -> None:
-            sim.step(count)
-            self.send(encode(Res("STEP", time_s=sim.time_s)))
+            sim.step(count, gone.is_set)
+            if not gone.is_set():
+                self.send(encode(Res("STEP", time_s=sim.time_s)))
 
         if runner.mode != "lockstep":
             raise RemoteProtocolError(
                 "STEP works only when the simulator runs with --mode lockstep"
             )
-        runner.call(do, timeout_s=3600.0, fatal=True)
+        fut = runner.submit(do, fatal=True)
+        try:  # most STEPs are short: no watching
+            fut.result(STEP_WATCH_AFTER_S)
+            return
+        except TimeoutError:
+            pass
+        self._watch_while(fut, gone, STEP_TIMEOUT_S)
+
+    def _watch_while(self, fut: Future[None], gone: threading.Event, timeout_s: float) -> None:
+        """Wait for ``fut`` (a STEP on the engine thread, at most ``timeout_s`` to be taken up
+        and as long again to end, as :meth:`SimulationRunner.call`), setting ``gone`` when the
+        client's end of the connection closes. A pipe written from the future's done callback
+        wakes the wait when the STEP ends."""
+        wake_r, wake_w = os.pipe()
+        try:
+            fut.add_done_callback(lambda _: os.write(wake_w, b"."))
+            poller = select.poll()
+            poller.register(wake_r, select.POLLIN)
+            poller.register(self.sock, _PEER_GONE)
+            deadline = time.monotonic() + timeout_s
+            begun = False
+            while True:
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    if fut.cancel():
+                        raise TimeoutError(
+                            f"the simulator did not take it up within {timeout_s:g} s (busy: "
+                            "another client's long STEP?); not done")
+                    if begun:
+                        raise TimeoutError(
+                            f"the simulator is still at it after {2 * timeout_s:g} s")
+                    begun = True  # it had begun: it has as long again to end
+                    deadline = time.monotonic() + timeout_s
+                    continue
+                events = dict(poller.poll(left * 1000.0))
+                if wake_r in events:
+                    break
+                if events.get(self.sock.fileno(), 0) & _PEER_GONE:
+                    if not gone.is_set():
+                        log.info("client %s went away during its STEP; stopping it", self.peer)
+                        gone.set()
+                    poller.unregister(self.sock)  # reported for good: wait for the engine
+            fut.result()  # done: its exception, if any (an engine failure), goes on
+        finally:
+            if fut.done():  # the callback has written (or the future was cancelled and has)
+                os.close(wake_r)
+                os.close(wake_w)
 
     def cmd_ping(self, msg: Message, ping: Ping) -> None:
         if self.server.runner.error is not None:

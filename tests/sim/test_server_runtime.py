@@ -133,6 +133,40 @@ def test_a_connection_waiting_on_its_own_long_step_is_not_closed_as_idle() -> No
             client.close()
 
 
+def test_a_client_gone_during_its_own_long_step_stops_it_and_the_others_are_served() -> None:
+    """A lockstep client sends a STEP of 10 000 s of sim time and closes its connection. The
+    engine used to step on to the end for nobody, and every other client's command waited the
+    whole of it (then ``ERR ... not done``). Now the STEP stops at the next point between steps
+    after the server sees the connection gone, its robot goes, and another client's INIT is
+    taken up: the sim time then is a sliver of what was asked."""
+    sim = Simulation(load_world("pad"), seed=1)
+    count = 10_000_000  # 10 000 s of sim time at 1 ms: hours of wall time
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0, command_timeout_s=5.0) as server,
+    ):
+        stepper, other = LineClient(server.port), LineClient(server.port)
+        stepper.expect("NFO")
+        other.expect("NFO")
+        assert stepper.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}",
+                              "INIT").type == "RES"
+        stepper.send(f"STEP {{Count {count}}}")
+        # PING is answered without the engine: its time shows the STEP under way.
+        deadline = time.monotonic() + 30
+        started_s = 0.0
+        while started_s <= 0.0:
+            assert time.monotonic() < deadline, "the STEP never started"
+            started_s = float(other.answer("PING {Id 1}", "PING").require("Time"))
+        stepper.close()
+        res = other.answer("INIT {ClassName hummingbird} {Name R2} {Location 5,0,-1}", "INIT")
+        assert res.type == "RES", res  # taken up within the 5 s command timeout
+        stopped_s = float(other.answer("PING {Id 2}", "PING").require("Time"))
+        asked_s = count * sim.dt
+        assert started_s < stopped_s < asked_s / 100, (started_s, stopped_s)
+        assert runner.call(lambda sim: sorted(sim.robots)) == ["R2"]
+        other.close()
+
+
 def test_a_sensor_query_for_a_robot_stopped_meanwhile_says_it_is_gone() -> None:
     """GETCONF for a sensor, read while the connection drives U, reaches the engine after a STEP
     (another client's) that stopped U: the answer says U is gone and to send INIT. It was
