@@ -36,8 +36,9 @@ the thrust, the height held. The motors start with thrust 0 and full negative ya
 AscTec AutoPilot SDK's ``motor_on_off`` example gives them.
 
 Flight envelope (``skeye.pilot.envelope``, like PX4's geofence): every command with a target
-is checked against a ceiling above home and a radius around it and refused with RESULT code 3
-and a reason when outside; stick input is limited at the envelope's edge, not refused (a
+is checked against a ceiling above home, a floor at home's height (its ground: landing is
+LAND's, never a move's) and a radius around it and refused with RESULT code 3 and a reason
+when outside; stick input is limited at the envelope's edge, not refused (a
 full-thrust stick in height mode means the maximum climb rate, and holds height at the
 ceiling), and so are the pad modes' and a policy's (``fly_velocity``); an open-ended VELOCITY
 is not refused nor limited; a vehicle beyond a limit that still moves outward is stopped

@@ -2,12 +2,16 @@
 
 How this works: like PX4's geofence (``GF_MAX_VER_DIST``, ``GF_MAX_HOR_DIST``), the envelope is
 a cylinder around home (the take-off point): at most ``ceiling_m`` above it, at most
-``max_radius_m`` from it horizontally. The boards check it (pure functions here, positions in
+``max_radius_m`` from it horizontally, and no target below it: its floor is the ground the
+vehicle took off from (ArduPilot's minimum-altitude fence, ``FENCE_ALT_MIN``, which its guided
+mode checks every destination against, at home's height; there is no terrain model, so ground
+higher than home elsewhere is not known). The boards check it (pure functions here, positions in
 NED metres, no clock):
 
 - every command with a target (TAKE_OFF, LAUNCH, MOVE_BY, GOTO_GPS, waypoint goto, a VELOCITY
   with a duration: its end point) before it starts: outside, it is refused with RESULT code 3
-  (bad value) and a reason naming the limit (``check_target``);
+  (bad value) and a reason naming the limit (``check_target``); a target below home was flown
+  into the ground at the move's descent rate. Landing is LAND's, never a move's;
 - stick input is limited, not refused: at the ceiling a full-thrust stick holds height, at the
   radius the outward part of the velocity is removed (``limit_velocity``); so are the onboard
   computer's own velocities (the pad modes, a ``--policy``: ``OnboardBoards.fly_velocity``).
@@ -56,7 +60,8 @@ class FlightEnvelope:
         return f"ceiling {self.ceiling_m:g} m above home, radius {self.max_radius_m:g} m"
 
     def check_target(self, home_ned_m: Vec3, target_ned_m: Vec3) -> str | None:
-        """Why a target is outside the envelope, or None when it is inside."""
+        """Why a target is outside the envelope (above the ceiling, below home, beyond the
+        radius), or None when it is inside."""
         height = home_ned_m[2] - target_ned_m[2]
         if not all(math.isfinite(v) for v in target_ned_m):
             return "target is not a finite position"
@@ -64,6 +69,11 @@ class FlightEnvelope:
             return (
                 f"outside the flight envelope: {_fmt(height)} above home, "
                 f"ceiling {self.ceiling_m:g} m"
+            )
+        if height < -1e-6:
+            return (
+                f"outside the flight envelope: {_fmt(-height)} below home, under the ground "
+                "it took off from (the floor; to land, send LAND)"
             )
         dist = math.hypot(target_ned_m[0] - home_ned_m[0], target_ned_m[1] - home_ned_m[1])
         if dist > self.max_radius_m + 1e-6:

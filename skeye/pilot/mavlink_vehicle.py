@@ -502,8 +502,8 @@ class MavlinkVehicle:
                  name: str = "z") -> float:
         """The NED down coordinate of an altitude: above home in the relative frames, above
         mean sea level in the others; one that is not a finite number is refused (DENIED)
-        naming the field ``name``, and so is one below the lowest dry land on Earth (the
-        envelope has a ceiling and no floor: the ground is the floor)."""
+        naming the field ``name``, and so is one below the lowest dry land on Earth (a bound on
+        the number; the flight envelope's floor, home's height, is checked after it)."""
         if not math.isfinite(alt_m):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"altitude ({name}) {alt_m:g} m is not a finite number")

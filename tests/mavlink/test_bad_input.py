@@ -157,7 +157,7 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
                 ((-1.0, 950_000_000, lon, math.nan), ["latitude (x) 95", "-90..90"]),
                 ((-1.0, lat, 2_000_000_000, math.nan), ["longitude (y) 200", "-180..180"]),
                 ((-1.0, lat + 4_500_000, lon, math.nan), ["outside the flight envelope"]),
-                # The envelope has no floor: 10 000 km down gave "MoveBy.dz=... outside".
+                # 10 000 km down gave "MoveBy.dz=... outside": the number is bounded first.
                 ((-1.0, lat, lon, -1e7), ["altitude (z) -1e+07 m", "below the lowest land"]),
                 ((-1.0, lat, lon, -430.5), ["-430.5 m above mean sea level"]),
             ]
@@ -170,8 +170,11 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
             for speed in (-1.0, 0.0, math.nan):
                 result, _ = _reposition(conn, speed, lat + 100, lon, math.nan, reason=False)
                 assert result == M.MAV_RESULT_TEMPORARILY_REJECTED, speed
-            # Just above the lowest land, the target passes to the boards too.
-            result, _ = _reposition(conn, -1.0, lat, lon, -429.5, reason=False)
+            # Just above the lowest land, but below home: the flight envelope's floor.
+            result, text = _reposition(conn, -1.0, lat, lon, -429.5)
+            assert result == M.MAV_RESULT_DENIED and "below home" in text, text
+            # 1 m above home, the target passes to the boards too.
+            result, _ = _reposition(conn, -1.0, lat, lon, pos.alt / 1000.0 + 1.0, reason=False)
             assert result == M.MAV_RESULT_TEMPORARILY_REJECTED
             assert server.errors == 0
         finally:

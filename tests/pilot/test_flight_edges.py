@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from skeye.errors import CommandRejected
 from skeye.pilot.boards import BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.wire.packets import NavState, PadAction
@@ -97,3 +98,30 @@ def test_hold_during_a_pad_landing_stops_it_where_it_is(
     ns = flight.run_for(2.0)  # the landing, still on, would have come down 0.4 m or more
     assert ns.state is NavState.HOLDING and ns.pad_mode is PadAction.OFF, ns
     assert abs(flight.height() - held_m) < 0.1, (held_m, flight.height())
+
+
+def test_a_target_below_the_ground_is_refused_and_landing_still_lands(stack: ExitStack) -> None:
+    """The flight envelope has a floor: home's ground. A MOVE_BY 2 m down from 0.5 m, or a
+    timed VELOCITY that would end below the ground, is refused with RESULT code 3 naming the
+    floor, and the vehicle holds where it was; a move down that stays above the ground is
+    flown, and LAND still lands. The MOVE_BY was flown, into the ground at the descent rate
+    (1.2 m/s at the touchdown, three times the landing's 0.4 m/s)."""
+    server = stack.enter_context(running_sim(mode="lockstep", seed=23))
+    flight = _fly(stack, server.port, settings=BoardSettings(link_timeout_s=60.0))
+    _hold_at(flight, 0.5)
+    held_m = flight.height()
+    for command in (lambda: flight.vehicle.move_by(up_m=-2.0),
+                    lambda: flight.vehicle.set_velocity(up_m_s=-1.0, duration_s=2.0)):
+        with pytest.raises(CommandRejected) as info:
+            command()
+        assert info.value.code == 3 and "below home" in info.value.reason, info.value
+        assert "floor" in info.value.reason and "LAND" in info.value.reason, info.value
+    ns = flight.run_for(0.5)
+    assert ns.state is NavState.HOLDING, ns
+    # The onboard estimate's hover jitters by centimetres (docs/control.md: 4.8 cm median):
+    # it did not come down the 0.4 m to the ground.
+    assert abs(flight.height() - held_m) < 0.1, (held_m, flight.height())
+    flight.vehicle.move_by(up_m=-0.3)  # to 0.2 m above home: inside, flown
+    flight.run_until(lambda ns: ns.state is NavState.HOLDING, 10.0)
+    flight.vehicle.land()
+    flight.run_until(lambda ns: ns.state is NavState.LANDED, 10.0)
