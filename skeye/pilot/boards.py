@@ -129,6 +129,12 @@ AXIS_BITS = CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
 # ignored while the vehicle flew on the first one.
 STICK_ARM_SETTLE_S = 0.5
 HEALTH_PERIOD_S = 1.0  # HEALTH streamed with NAV_STATUS at most this often
+# The lowest TAKE_OFF (m above the take-off point; lower is refused, code 3): twice the motion
+# control's 5 cm arrival tolerance (MotionConfig.tolerance_m; the LL pilot's arrival too), so
+# a take-off ends clear of the gear by the tolerance again, the onboard estimate's hover jitter
+# (docs/control.md). A target within the tolerance was "reached" before the vehicle left the
+# ground. Ground control's take-off field and the MAVLink endpoint have the same minimum.
+MIN_TAKE_OFF_M = 0.1
 
 
 @dataclass(frozen=True)
@@ -353,7 +359,16 @@ class OnboardBoards:
         return (snap.pos_ned_m[0] + dn, snap.pos_ned_m[1] + de, -altitude_m)
 
     def _take_off(self, height_m: float) -> None:
+        """TAKE_OFF, >*>wl: climb ``height_m`` above here, which becomes home. Below
+        ``MIN_TAKE_OFF_M`` it is refused (code 3) naming the minimum, not raised to it as PX4
+        raises a take-off to ``MIS_TAKEOFF_ALT``: a command is flown as asked or refused, as
+        speeds over the limit are."""
         self.flight.check(FlightEvent.TAKE_OFF)
+        if height_m < MIN_TAKE_OFF_M - 0.0005:  # the field's resolution is 1 mm
+            raise _Refused(
+                ResultCode.BAD_VALUE,
+                f"take-off height {height_m:g} m is below this vehicle's minimum of "
+                f"{MIN_TAKE_OFF_M:g} m (a lower target is reached before it leaves the ground)")
         snap = self.airframe.snapshot()
         n, e, d = snap.pos_ned_m
         self._check_envelope(snap.pos_ned_m, (n, e, d - height_m))  # home is here

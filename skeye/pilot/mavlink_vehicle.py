@@ -55,7 +55,7 @@ from skeye.mavlink.params import ParamSpec, ParamTable
 from skeye.mavlink.streams import MessageScheduler
 from skeye.mavlink.transport import PEER_TIMEOUT_S
 from skeye.pilot import mavlink_telemetry as telem
-from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.boards import MIN_TAKE_OFF_M, OnboardBoards
 from skeye.pilot.mavlink_types import (
     FORCE_MAGIC,
     RESULT_OF_CODE,
@@ -550,9 +550,10 @@ class MavlinkVehicle:
                 raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                               "no GPS altitude yet: leave param7 NaN (MIS_TAKEOFF_ALT)")
             height = alt - (origin.altitude_m - self._snap().pos_ned_m[2])
-        if not (math.isfinite(height) and height >= 0.1):
+        if not (math.isfinite(height) and height >= MIN_TAKE_OFF_M):
             raise Refused(mav.MAV_RESULT_DENIED,
-                          f"take-off altitude {alt:g} m AMSL is not above the vehicle")
+                          f"take-off altitude {alt:g} m AMSL is not at least "
+                          f"{MIN_TAKE_OFF_M:g} m above the vehicle (the lowest take-off)")
         self._board(TakeOff(round(height * 1e3)))
         self._start(Program.NONE)  # after the boards took it: a refusal changes nothing
 
@@ -999,7 +1000,7 @@ class MavlinkVehicle:
             else:  # AMSL: above where the vehicle stands
                 height = snap.pos_ned_m[2] - self._global_to_ned(item.x, item.y, item.z,
                                                                  item.frame)[2]
-            self._board(TakeOff(round(max(0.1, height) * 1e3)))
+            self._board(TakeOff(round(max(MIN_TAKE_OFF_M, height) * 1e3)))
             self._mine()
             st.phase = "going"
             return []

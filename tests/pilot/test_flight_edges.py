@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from skeye.errors import CommandRejected
-from skeye.pilot.boards import BoardSettings
+from skeye.pilot.boards import MIN_TAKE_OFF_M, BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.wire.packets import NavState, PadAction
 from tests.pilot.test_takeover import _fly, _hold_at, pad_landing_under_way
@@ -125,3 +125,26 @@ def test_a_target_below_the_ground_is_refused_and_landing_still_lands(stack: Exi
     flight.run_until(lambda ns: ns.state is NavState.HOLDING, 10.0)
     flight.vehicle.land()
     flight.run_until(lambda ns: ns.state is NavState.LANDED, 10.0)
+
+
+def test_a_take_off_below_the_minimum_is_refused_naming_it(stack: ExitStack) -> None:
+    """TAKE_OFF 1 mm is refused with RESULT code 3 naming the minimum take-off height, and the
+    vehicle stays landed with its motors off; a take-off to the minimum flies and hovers clear
+    of the ground. The 1 mm one was accepted: the motion was done before the vehicle left its
+    gear (the target within the 5 cm arrival tolerance), the pilot read the still-landed
+    snapshot as a touchdown and said LANDED with its motors off, while the robot, armed, hopped
+    on its gear up to 3 cm for seconds and then sat there armed."""
+    server = stack.enter_context(running_sim(mode="lockstep", seed=23))
+    flight = _fly(stack, server.port, settings=BoardSettings(link_timeout_s=60.0))
+    with pytest.raises(CommandRejected) as info:
+        flight.vehicle.take_off(0.001)
+    assert info.value.code == 3, info.value
+    assert f"minimum of {MIN_TAKE_OFF_M:g} m" in info.value.reason, info.value
+    ns = flight.run_for(1.0)
+    status = flight.robot.status.latest  # type: ignore[attr-defined]
+    assert ns.state is NavState.LANDED and not status.armed and status.landed, (ns, status)
+    flight.vehicle.take_off(MIN_TAKE_OFF_M)
+    flight.run_until(lambda ns: ns.state is NavState.HOLDING, 10.0)
+    ns = flight.run_for(1.0)
+    status = flight.robot.status.latest  # type: ignore[attr-defined]
+    assert ns.state is NavState.HOLDING and status.armed and not status.landed, (ns, status)
