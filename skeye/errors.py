@@ -36,6 +36,11 @@ class LinkTimeout(SkeyeError):
     """A link or peer did not answer within its deadline."""
 
 
+class AnswerLost(LinkTimeout):
+    """An answer came corrupted (a bad frame in its place), so it will not come: said at once
+    instead of at the deadline, on a line that carries only answers (an AscTec LL board's)."""
+
+
 class LinkClosed(SkeyeError):
     """A link is gone (closed locally, by the peer, or broken); nothing more can be sent or
     received. Raised by every client: the simulator connection, the image client, the vehicle

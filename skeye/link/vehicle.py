@@ -24,7 +24,7 @@ from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 from types import TracebackType
 
-from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError
+from skeye.errors import AnswerLost, CommandRejected, LinkTimeout, LocalProtocolError
 from skeye.link.transport import Link, LinkClosed, open_link
 from skeye.wire.packet_defs import LAYOUTS
 from skeye.wire.packet_units import (
@@ -238,7 +238,9 @@ class Vehicle:
 
     def _dispatch(self, event: Message | FrameError) -> None:
         if isinstance(event, FrameError):
-            self.frame_errors += 1
+            with self._cond:  # a waiter on a line of answers learns its answer is lost
+                self.frame_errors += 1
+                self._cond.notify_all()
             now = time.monotonic()
             if now - self._frame_error_logged_s >= BAD_FRAME_LOG_EVERY_S:  # a noisy line
                 # would otherwise log a warning per frame
@@ -355,11 +357,19 @@ class Vehicle:
         with self._command_lock:
             self._send(data)
 
-    def command(self, msg: Message, timeout_s: float | None = None) -> Result | Ack:
+    def command(self, msg: Message, timeout_s: float | None = None, *,
+                only_answers: bool = False) -> Result | Ack:
         """Send a skeye or AscTec command and wait for its RESULT or ack.
+
+        ``only_answers``: the line carries nothing but answers to this client's requests (an
+        AscTec LL board's; a vehicle streaming telemetry is not such a line), so a bad frame
+        arriving while the answer is due is that answer, corrupted: ``AnswerLost`` at once,
+        not ``LinkTimeout`` at the deadline.
 
         Raises:
             CommandRejected: the vehicle answered a RESULT with a non-zero code.
+            AnswerLost: with ``only_answers``, a bad frame came in the answer's place (whether
+                the vehicle took the command is not known).
             LinkTimeout: no answer within the timeout.
         """
         layout = LAYOUTS.get(type(msg))
@@ -370,12 +380,17 @@ class Vehicle:
         with self._command_lock, self._cond:
             acks0 = self._acks[pd]
             results0 = len(self._results[pd])
+            bad0 = self.frame_errors
             self._send(encode(msg))
             self._wait(
-                lambda: self._acks[pd] > acks0 or len(self._results[pd]) > results0,
+                lambda: (self._acks[pd] > acks0 or len(self._results[pd]) > results0
+                         or (only_answers and self.frame_errors > bad0)),
                 f"answer to {type(msg).__name__}",
                 timeout_s,
             )
+            if self._acks[pd] == acks0 and len(self._results[pd]) == results0:
+                raise AnswerLost(f"{self.link.name}: the answer to {type(msg).__name__} came "
+                                 "corrupted (a bad frame in its place)")
             if len(self._results[pd]) > results0:
                 result = self._results[pd][results0]
                 del self._results[pd][: results0 + 1]
@@ -385,9 +400,17 @@ class Vehicle:
             return Ack(pd)
 
     def poll(
-        self, mask: int = int(PollMask.LL_STATUS), timeout_s: float | None = None
+        self, mask: int = int(PollMask.LL_STATUS), timeout_s: float | None = None, *,
+        only_answers: bool = False,
     ) -> dict[PD, Message]:
-        """Poll structures (``PollMask`` bits) and return one fresh frame of each."""
+        """Poll structures (``PollMask`` bits) and return one fresh frame of each.
+
+        ``only_answers`` (a line of answers alone, as for ``command``): the vehicle sends one
+        frame per structure, so once the frames that came and the bad frames since the request
+        make up the whole answer, the wait ends (at the next good frame after a bad one, or at
+        the bad frame when it was the last due) and the structures that came are returned, the
+        corrupted ones left out. A frame whose start was corrupted is garbage, not a bad frame:
+        its answer still waits out the timeout."""
         request = Poll(mask)
         wanted = request.requested()
         if not wanted:
@@ -395,13 +418,18 @@ class Vehicle:
         self._check_turned_away()
         with self._command_lock, self._cond:
             start = {pd: self._counts[pd] for pd in wanted}
+            bad0 = self.frame_errors
+
+            def came() -> list[PD]:
+                return [pd for pd in wanted if self._counts[pd] > start[pd]]
+
+            def accounted() -> bool:
+                lost = self.frame_errors - bad0 if only_answers else 0
+                return len(came()) + lost >= len(wanted)
+
             self._send(encode(request))
-            self._wait(
-                lambda: all(self._counts[pd] > start[pd] for pd in wanted),
-                f"poll answer (mask 0x{mask:04x})",
-                timeout_s,
-            )
-            return {pd: self.latest[pd] for pd in wanted}
+            self._wait(accounted, f"poll answer (mask 0x{mask:04x})", timeout_s)
+            return {pd: self.latest[pd] for pd in came()}
 
     # -- typed skeye commands --------------------------------------------------------------
     def take_off(self, height_m: float) -> Result | Ack:
@@ -528,10 +556,20 @@ class Vehicle:
         with self._cond:
             return list(self._results[command_pd])
 
-    def wait_result(self, command_pd: int, timeout_s: float | None = None) -> Result:
-        """Wait for an unsolicited RESULT for ``command_pd`` (e.g. after ``send_raw``)."""
+    def wait_result(self, command_pd: int, timeout_s: float | None = None, *,
+                    bad_frames_since: int | None = None) -> Result:
+        """Wait for an unsolicited RESULT for ``command_pd`` (e.g. after ``send_raw``).
+
+        ``bad_frames_since``: ``frame_errors`` when the request went out, on a line of answers
+        alone (see ``command``): a bad frame since then is the RESULT, corrupted, and raises
+        ``AnswerLost`` at once."""
         with self._cond:
             self._wait(
-                lambda: bool(self._results[command_pd]), f"RESULT for 0x{command_pd:02x}", timeout_s
+                lambda: bool(self._results[command_pd]) or (
+                    bad_frames_since is not None and self.frame_errors > bad_frames_since),
+                f"RESULT for 0x{command_pd:02x}", timeout_s,
             )
+            if not self._results[command_pd]:
+                raise AnswerLost(f"{self.link.name}: the RESULT for 0x{command_pd:02x} came "
+                                 "corrupted (a bad frame in its place)")
             return self._results[command_pd].pop(0)

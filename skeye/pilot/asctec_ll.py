@@ -21,6 +21,10 @@ Checks and failures, each named (``lost``; the pilot then applies its failsafe, 
 hearing nothing more, its own serial timeout):
 
 - the line closed or hung up: ``LL board lost: ...``;
+- an answer that comes corrupted (a bad frame: the line carries nothing but answers, one frame
+  per structure asked) is known lost at once (``only_answers``): the cycle goes on at the next
+  good frame (the poll's other structures are used, the lost one is asked next cycle; a CLOCK
+  grant is sent again), instead of waiting out ``timeout_s``;
 - no answer (or only garbage, which is counted and skipped) for ``silent_after`` cycles in a
   row: ``LL board silent: ...``, which says how much unreadable data came meanwhile (a line
   that carries bytes but no frame: a wrong baud rate, or noise);
@@ -44,6 +48,7 @@ from dataclasses import dataclass
 from urllib.parse import parse_qs
 
 from skeye.errors import (
+    AnswerLost,
     CommandRejected,
     ConfigError,
     LinkClosed,
@@ -237,18 +242,22 @@ class AscTecLLAirframe:
         until_ms = max(0, s_to_ms(until_s))
         packet = encode(Clock(until_ms))
         deadline = time.monotonic() + self.settings.clock_timeout_s
+        bad0 = self.vehicle.frame_errors
         self.vehicle.send_raw(packet)
         unanswered = 0
         while True:
             try:
-                reply = self.vehicle.wait_result(int(PD.CLOCK), self.settings.timeout_s)
+                reply = self.vehicle.wait_result(int(PD.CLOCK), self.settings.timeout_s,
+                                                 bad_frames_since=bad0)
             except LinkTimeout:
                 unanswered += 1
                 if unanswered > self.settings.silent_after or time.monotonic() > deadline:
                     raise LinkTimeout(f"the LL board did not reach sim time {until_s:.3f} s "
                                       f"(no answer to {unanswered} grants)") from None
-                # Lost on the line, or the simulator is busy: asking again gets the time so
-                # far from a board that is alive.
+                # Lost on the line (corrupted: at once; else at the deadline), or the
+                # simulator is busy: asking again gets the time so far from a board that is
+                # alive.
+                bad0 = self.vehicle.frame_errors
                 self.vehicle.send_raw(packet)
                 continue
             unanswered = 0
@@ -263,7 +272,9 @@ class AscTecLLAirframe:
                 return reached
 
     def _poll(self, mask: int, time_s: float | None = None) -> None:
-        frames = self.vehicle.poll(mask, timeout_s=self.settings.timeout_s)
+        """Poll ``mask`` and update the estimate with what came: a structure whose frame came
+        corrupted is left out of this cycle (the next asks again), without waiting for it."""
+        frames = self.vehicle.poll(mask, timeout_s=self.settings.timeout_s, only_answers=True)
         with self._lock:
             self.estimate.update(frames, self._clock() if time_s is None else time_s)
 
@@ -276,7 +287,11 @@ class AscTecLLAirframe:
             try:
                 with self._lock:
                     sticks = self._sticks()
-                self.vehicle.command(sticks, timeout_s=self.settings.timeout_s)
+                try:
+                    self.vehicle.command(sticks, timeout_s=self.settings.timeout_s,
+                                         only_answers=True)
+                except AnswerLost:
+                    pass  # the board answered, corrupted: the next cycle's sticks follow
                 time_s = None
                 if grant_s is not None:
                     time_s = self._granted_s = self._grant(grant_s)

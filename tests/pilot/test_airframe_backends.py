@@ -216,10 +216,13 @@ def test_a_clock_answer_without_a_readable_sim_time_is_named(reason):
     from skeye.wire.packets import PD, Result, ResultCode
 
     class Board:  # answers every CLOCK grant OK, with a reason a skeye board never gives
+        frame_errors = 0
+
         def send_raw(self, data: bytes) -> None:
             pass
 
-        def wait_result(self, pd: int, timeout_s: float) -> Result:
+        def wait_result(self, pd: int, timeout_s: float, *,
+                        bad_frames_since: int | None = None) -> Result:
             return Result(int(PD.CLOCK), ResultCode.OK, reason)
 
     air = SimpleNamespace(vehicle=Board(), settings=LLLinkSettings("tcp://127.0.0.1:1"))

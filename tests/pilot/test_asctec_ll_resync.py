@@ -1,0 +1,141 @@
+"""One corrupted answer from an AscTec LL board: the ``asctec-ll://`` airframe resynchronises
+on the next good frame (or on the bad frame itself, when it was the last answer due) instead of
+waiting out its answer deadline (docs/onboard.md, "Failures and the failsafe").
+
+The simulator's emulated LL board (lockstep) answers over TCP through a proxy that corrupts
+one frame of one kind: the ack of the cycle's CTRL_INPUT, the RESULT of its CLOCK grant, the
+first (LL_STATUS) or the last (IMU_CALCDATA, in a cycle that asks nothing after it) frame of its
+poll. Every such cycle waited out
+its ``timeout_s`` (0.5 s by default; 10 s here, so the difference cannot be the host's load)
+and counted towards "LL board silent"; the pilot's control cycle stood still meanwhile.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from contextlib import ExitStack
+
+from skeye.hil.cli import parse_ll_board, start_ll_board
+from skeye.pilot.airframe import AirframeOptions, open_airframe
+from skeye.pilot.asctec_ll import AscTecLLAirframe
+from skeye.wire.packets import PD
+from skeye.workers import Worker
+from tests.sim.conftest import running_sim
+
+ANSWER_TIMEOUT_S = 10.0  # the airframe's answer deadline here (timeout_s in its URI)
+
+
+class CorruptingProxy:
+    """TCP between the airframe and the board's line; ``corrupt(pd)`` spoils the next frame
+    with that descriptor the board sends (a payload byte of a framed structure or RESULT, which
+    fails its CRC; the stop string of an ack), once."""
+
+    def __init__(self, port: int) -> None:
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self.listener.getsockname()[1]
+        self.target = port
+        self.armed: int | None = None
+        self.corrupted = 0
+        self.stop = threading.Event()
+        self.socks: list[socket.socket] = []
+        self.workers = [Worker(self._accept, "test-proxy-accept").start()]
+
+    def corrupt(self, pd: int) -> None:
+        self.armed = pd
+
+    def _accept(self) -> None:
+        self.listener.settimeout(0.1)
+        while not self.stop.is_set():
+            try:
+                a, _ = self.listener.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            b = socket.create_connection(("127.0.0.1", self.target))
+            self.socks += [a, b]
+            self.workers.append(Worker(self._pipe, "test-proxy-up", args=(a, b, False)).start())
+            self.workers.append(Worker(self._pipe, "test-proxy-down", args=(b, a, True)).start())
+
+    def _spoil(self, data: bytes) -> bytes:
+        pd = self.armed
+        if pd is None:
+            return data
+        if pd == PD.CTRL_INPUT:  # the ack: >a PD a<
+            at = data.find(b">a" + bytes([pd]) + b"a<")
+            spoil_at = at + 3
+        else:  # >*> length(2) PD payload CRC(2) <#<
+            at = 0
+            while (at := data.find(b">*>", at)) >= 0 and (
+                at + 6 >= len(data) or data[at + 5] != pd
+            ):
+                at += 1
+            spoil_at = at + 6
+        if at < 0:
+            return data
+        self.armed = None
+        self.corrupted += 1
+        spoiled = bytearray(data)
+        spoiled[spoil_at] ^= 0x5A
+        return bytes(spoiled)
+
+    def _pipe(self, src: socket.socket, dst: socket.socket, from_board: bool) -> None:
+        src.settimeout(0.1)
+        while not self.stop.is_set():
+            try:
+                data = src.recv(4096)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not data:
+                return
+            try:
+                dst.sendall(self._spoil(data) if from_board else data)
+            except OSError:
+                return
+
+    def close(self) -> None:
+        self.stop.set()
+        self.listener.close()
+        for s in self.socks:
+            s.close()
+        for w in self.workers:
+            w.join(2.0)
+
+
+def test_one_corrupted_answer_costs_no_wait_for_the_answer_deadline() -> None:
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=6, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=tcp:0"), f"127.0.0.1:{server.port}")
+        proxy = CorruptingProxy(int(board.line.address.rsplit(":", 1)[1]))
+        stack.callback(proxy.close)
+        airframe = open_airframe(f"asctec-ll://tcp/127.0.0.1:{proxy.port}?lockstep=1"
+                                 f"&timeout_s={ANSWER_TIMEOUT_S:g}", AirframeOptions())
+        stack.callback(airframe.close)
+        assert isinstance(airframe, AscTecLLAirframe)
+        for _ in range(3):  # the line runs
+            airframe.advance(0.05)
+        waited: list[str] = []
+        for pd in (PD.CTRL_INPUT, PD.RESULT, PD.LL_STATUS, PD.IMU_CALCDATA):
+            corrupted = proxy.corrupted
+            proxy.corrupt(pd)
+            for _ in range(5):  # a frame split between two reads is left alone: the next cycle
+                cycles, updates = airframe.cycles, airframe.estimate.updates
+                begun = time.monotonic()
+                airframe.advance(0.05)
+                took_s = time.monotonic() - begun
+                if proxy.corrupted > corrupted:
+                    break
+            assert proxy.corrupted == corrupted + 1, f"{pd!r}: no frame corrupted"
+            assert airframe.line_errors()[1] > 0, "the bad frame was not seen"
+            # The cycle went on at the next good frame: done, its poll taken, nothing silent,
+            # and inside the answer deadline it used to wait out.
+            done = airframe.cycles == cycles + 1 and airframe.estimate.updates == updates + 1
+            if not done or airframe._silent or took_s >= ANSWER_TIMEOUT_S:
+                waited.append(f"{pd.name}: cycle done {done}, silent {airframe._silent}, "
+                              f"took {took_s:.2f} s")
+            assert airframe.lost is None, (pd, airframe.lost)
+        assert not waited, waited
