@@ -47,7 +47,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mav
 
 from skeye.errors import LocalProtocolError
-from skeye.geo import LOWEST_LAND_AMSL_M, GeoOrigin
+from skeye.geo import LOWEST_LAND_AMSL_M, MAX_POSITION_M, GeoOrigin
 from skeye.mavlink.codec import BadFrame, MavCodec, MavMessage, statustext
 from skeye.mavlink.mission import MissionItem, MissionProtocol
 from skeye.mavlink.modes import MODE_TABLE, REQUESTS, Program, Px4Mode, Request
@@ -69,6 +69,7 @@ from skeye.pilot.mavlink_types import (
 )
 from skeye.pilot.pad import PadObservation
 from skeye.wire.packet_defs import NavState, PadAction, ResultCode
+from skeye.wire.packet_units import wire_value
 from skeye.wire.packets import (
     CtrlBits,
     CtrlInput,
@@ -763,11 +764,10 @@ class MavlinkVehicle:
                     fwd = math.cos(yaw) * vn + math.sin(yaw) * ve
                     right = -math.sin(yaw) * vn + math.cos(yaw) * ve
                 yaw_rate = 0.0 if mask & 0b100000000000 else float(msg.yaw_rate)
-                if not all(map(math.isfinite, (fwd, right, vd, yaw_rate))):
-                    raise Refused(mav.MAV_RESULT_DENIED, "velocity setpoint is not a number")
+                self._check_velocity((vn, ve, vd, yaw_rate), fwd, right)
                 self._applied_target = None
                 self._board(Velocity(round(fwd * 1e3), round(right * 1e3), round(vd * 1e3),
-                                     round(yaw_rate * 1e3),
+                                     wire_value(Velocity, "yaw_rate", yaw_rate),
                                      round(self.settings.offboard_loss_s * 1e3)))
             else:
                 return []
@@ -795,16 +795,72 @@ class MavlinkVehicle:
                     d if ignored & 4 else target[2])
         x, y, z = ((0.0 if ignored & bit else float(v))
                    for bit, v in ((1, msg.x), (2, msg.y), (4, msg.z)))
-        if not all(map(math.isfinite, (x, y, z))):
-            raise Refused(mav.MAV_RESULT_DENIED, "position setpoint is not a number")
+        for name, value in (("x", x), ("y", y), ("z", z)):
+            if not math.isfinite(value):
+                raise Refused(mav.MAV_RESULT_DENIED,
+                              f"position setpoint: {name} {value:g} m is not a finite number")
         frame = int(msg.coordinate_frame)
         if frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_FRD):
             yaw = snap.rpy_rad[2]
-            return (n + math.cos(yaw) * x - math.sin(yaw) * y,
-                    e + math.sin(yaw) * x + math.cos(yaw) * y, d + z)
-        if frame == mav.MAV_FRAME_LOCAL_OFFSET_NED:
-            return n + x, e + y, d + z
-        return (n if ignored & 1 else x, e if ignored & 2 else y, d if ignored & 4 else z)
+            target = (n + math.cos(yaw) * x - math.sin(yaw) * y,
+                      e + math.sin(yaw) * x + math.cos(yaw) * y, d + z)
+        elif frame == mav.MAV_FRAME_LOCAL_OFFSET_NED:
+            target = n + x, e + y, d + z
+        else:
+            target = (n if ignored & 1 else x, e if ignored & 2 else y,
+                      d if ignored & 4 else z)
+        self._check_local_down(target[2], z)
+        return target
+
+    def _check_local_down(self, down_m: float, z_m: float) -> None:
+        """Refuse (DENIED, naming the field z) a local target below the ground, as global
+        ones are (``_down_of``): the flight envelope has a ceiling and a radius, no floor. With
+        an origin, below the lowest land on Earth; without one (indoors: the ground's height
+        above the sea is not known), deeper than ``MAX_POSITION_M`` below the local origin,
+        as far as a local position reaches. (Past these, the target is thousands of km away
+        and its MOVE_BY's fields would overflow.)"""
+        origin = self.origin()
+        if origin is not None:
+            amsl = origin.altitude_m - down_m
+            if amsl < LOWEST_LAND_AMSL_M:
+                raise Refused(mav.MAV_RESULT_DENIED,
+                              f"position setpoint: z {z_m:g} m puts the target {amsl:g} m above "
+                              f"mean sea level, below the lowest land on Earth "
+                              f"({LOWEST_LAND_AMSL_M:g} m)")
+        elif down_m > MAX_POSITION_M:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"position setpoint: z {z_m:g} m puts the target {down_m:g} m below the "
+                          f"local origin, beyond the {MAX_POSITION_M / 1e3:g} km a local "
+                          "position reaches")
+
+    def _check_velocity(self, given: tuple[float, float, float, float], fwd: float,
+                        right: float) -> None:
+        """Refuse (DENIED, naming the fields) a velocity setpoint (``given``: vx, vy, vz,
+        yaw_rate as sent) that is not a number or is over the vehicle's limits: forward or
+        right of its heading (``fwd``, ``right``: vx, vy turned into the heading frame, as
+        the VELOCITY flies them) over ``MPC_XY_VEL_MAX`` (the boards' ``max_speed_m_s``, the
+        limit a simulated vehicle puts on each of the two, as a policy's actions do), vz over
+        the climb limit (``max_climb_m_s``, up or down); refused, not capped, as every speed
+        is here. The yaw rate's limit is what a VELOCITY carries (``wire_value`` says it in
+        rad/s)."""
+        vn, ve, vd, yaw_rate = given
+        for name, value, unit in (("vx", vn, "m/s"), ("vy", ve, "m/s"), ("vz", vd, "m/s"),
+                                  ("yaw_rate", yaw_rate, "rad/s")):
+            if not math.isfinite(value):
+                raise Refused(mav.MAV_RESULT_DENIED,
+                              f"velocity setpoint: {name} {value:g} {unit} is not a finite number")
+        limit = self.boards.settings.max_speed_m_s
+        if max(abs(fwd), abs(right)) > limit + 1e-9:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"velocity setpoint: vx {vn:g}, vy {ve:g} m/s is {fwd:.4g} m/s forward "
+                          f"and {right:.4g} m/s right of the heading, over this vehicle's limit "
+                          f"of {limit:g} m/s on each (MPC_XY_VEL_MAX)")
+        climb = self.boards.settings.max_climb_m_s
+        if abs(vd) > climb + 1e-9:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"velocity setpoint: vz {vd:g} m/s is over this vehicle's climb and "
+                          f"descent limit of {climb:g} m/s")
+        wire_value(Velocity, "yaw_rate", yaw_rate, what="velocity setpoint: yaw_rate")
 
     def _manual(self, msg: MavMessage, peer: Hashable) -> list[MavMessage]:
         """MANUAL_CONTROL as the AscTec link's sticks in GPS mode (velocities)."""

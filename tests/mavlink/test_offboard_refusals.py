@@ -1,0 +1,143 @@
+"""Offboard setpoints the vehicle cannot fly are refused in the user's terms: the message's
+field, its value in metres (m/s, rad/s) and the limit it breaks, for every setpoint kind it
+flies (position and velocity; SET_POSITION_TARGET_LOCAL_NED and _GLOBAL_INT). A local target
+10 000 km down was once refused as "MoveBy.dz=10000002500 outside -2147483648..2147483647",
+the overflow of an internal wire field, and a velocity of 40 m/s as "Velocity.vx=40000 outside
+-32768..32767"; local targets were not checked against the ground as global ones are.
+
+Against the endpoint on a scripted airframe (no simulator), a pymavlink ground station on
+loopback UDP."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
+from typing import Any
+
+from pymavlink import mavutil
+
+from skeye.pilot.airframe import GpsFix
+from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.mavlink_server import MavlinkServer
+from tests.mavlink.conftest import GCS, command, statustext, wait_for
+from tests.pilot.fake_airframe import FakeAirframe
+
+M = mavutil.mavlink
+NO_FIX = GpsFix(False, 0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0))  # a receiver indoors
+POSITION_ONLY = 0b110111111000  # velocity, acceleration, yaw, yaw rate ignored
+VELOCITY_ONLY = 0b010111000111  # position, acceleration, yaw ignored; the yaw rate used
+OFFBOARD = (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6)  # PX4's main mode OFFBOARD
+
+
+@contextmanager
+def _flying(gps: bool = True) -> Iterator[tuple[MavlinkServer, Any]]:
+    """The endpoint over a scripted airframe hovering 2 m up at the local origin (with its GPS
+    fix at 49 N 8 E, 100 m, or indoors without one), and a pymavlink ground station."""
+    airframe = FakeAirframe()
+    if not gps:
+        airframe.snap = replace(airframe.snap, gps=NO_FIX)
+    boards = OnboardBoards(airframe)
+    with MavlinkServer(boards, threading.Lock(), ["udp://127.0.0.1:0"]) as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
+                                          source_component=GCS[1])
+        try:
+            wait_for(conn, "HEARTBEAT", timeout_s=10)
+            assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
+            assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6,
+                           math.nan)[0] == M.MAV_RESULT_ACCEPTED
+            with server.lock:
+                airframe.finish(landed=False, pos_ned_m=(0.0, 0.0, -2.0), time_s=1.0)
+                boards.tick(1.0)
+            yield server, conn
+        finally:
+            conn.close()
+
+
+def _local(conn: Any, mask: int, x: float = 0.0, y: float = 0.0, z: float = -2.0,
+           vx: float = 0.0, vy: float = 0.0, vz: float = 0.0, yaw_rate: float = 0.0,
+           frame: int = M.MAV_FRAME_LOCAL_NED) -> None:
+    conn.mav.set_position_target_local_ned_send(0, 1, 1, frame, mask, x, y, z, vx, vy, vz,
+                                                0, 0, 0, 0, yaw_rate)
+
+
+def _offboard(conn: Any) -> None:
+    """Into Offboard on a setpoint that holds where the vehicle is."""
+    _local(conn, POSITION_ONLY)
+    assert command(conn, M.MAV_CMD_DO_SET_MODE, *OFFBOARD)[0] == M.MAV_RESULT_ACCEPTED
+
+
+def _refusal(conn: Any) -> str:
+    """The next "offboard setpoint refused" STATUSTEXT's text."""
+    while True:
+        text = statustext(conn, timeout_s=10)
+        if text.startswith("offboard setpoint refused: "):
+            return text.removeprefix("offboard setpoint refused: ")
+
+
+def test_local_position_setpoints_out_of_reach_are_refused_naming_the_field():
+    with _flying() as (server, conn):
+        _offboard(conn)
+        # 10 000 km down, in LOCAL_NED and as an offset: below the lowest land on Earth
+        # (the ground station's origin at 100 m above mean sea level)
+        for frame, z_m in ((M.MAV_FRAME_LOCAL_NED, 1e7), (M.MAV_FRAME_LOCAL_OFFSET_NED, 2e7)):
+            _local(conn, POSITION_ONLY, z=z_m, frame=frame)
+            text = _refusal(conn)
+            assert text.startswith(f"position setpoint: z {z_m:g} m puts the target "), text
+            assert "below the lowest land on Earth (-430 m)" in text, text
+        _local(conn, POSITION_ONLY, z=math.nan)
+        assert _refusal(conn) == "position setpoint: z nan m is not a finite number"
+        assert server.errors == 0
+
+
+def test_without_an_origin_a_local_target_beyond_the_local_frame_is_refused():
+    """Indoors (no GPS, no origin given) the ground's height above the sea is not known: a
+    target deeper than a local frame reaches (100 km) is refused as that."""
+    with _flying(gps=False) as (server, conn):
+        _offboard(conn)
+        _local(conn, POSITION_ONLY, z=1e7)
+        assert _refusal(conn) == ("position setpoint: z 1e+07 m puts the target 1e+07 m below "
+                                  "the local origin, beyond the 100 km a local position reaches")
+        assert server.errors == 0
+
+
+def test_velocity_setpoints_over_the_vehicles_limits_are_refused_naming_the_field():
+    with _flying() as (server, conn):
+        _offboard(conn)
+        _local(conn, VELOCITY_ONLY, vx=40.0)
+        assert _refusal(conn) == ("velocity setpoint: vx 40, vy 0 m/s is 40 m/s forward and "
+                                  "0 m/s right of the heading, over this vehicle's limit of "
+                                  "3 m/s on each (MPC_XY_VEL_MAX)")
+        # Within the limit on each axis (3.5 m/s diagonally, as a policy's actions may ask):
+        # flown (the refusal after it shows it was taken in turn)
+        _local(conn, VELOCITY_ONLY, vx=2.5, vy=2.5)
+        _local(conn, VELOCITY_ONLY, vz=-40.0)
+        assert _refusal(conn) == ("velocity setpoint: vz -40 m/s is over this vehicle's "
+                                  "climb and descent limit of 1.5 m/s")
+        name, args = server.vehicle.boards.airframe.calls[-1]
+        assert name == "set_velocity" and args[:3] == (2.5, 2.5, 0.0), (name, args)
+        _local(conn, VELOCITY_ONLY, yaw_rate=40.0)
+        assert _refusal(conn) == ("velocity setpoint: yaw_rate 40 rad/s is outside "
+                                  "-32.768..32.767 rad/s, what Velocity carries")
+        conn.mav.set_position_target_global_int_send(
+            0, 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, VELOCITY_ONLY, 0, 0, 0.0,
+            0.0, -50.0, 0.0, 0, 0, 0, 0, 0)
+        assert _refusal(conn) == ("velocity setpoint: vx 0, vy -50 m/s is 0 m/s forward and "
+                                  "-50 m/s right of the heading, over this vehicle's limit of "
+                                  "3 m/s on each (MPC_XY_VEL_MAX)")
+        assert server.errors == 0
+
+
+def test_global_position_setpoints_below_the_ground_are_refused_naming_the_field():
+    with _flying() as (server, conn):
+        _offboard(conn)
+        conn.mav.set_position_target_global_int_send(
+            0, 1, 1, M.MAV_FRAME_GLOBAL_INT, POSITION_ONLY, 490_000_000, 80_000_000, -1e7,
+            0, 0, 0, 0, 0, 0, 0, 0)
+        text = _refusal(conn)
+        assert text.startswith("altitude (alt) -1e+07 m puts the target "), text
+        assert "below the lowest land on Earth (-430 m)" in text, text
+        assert server.errors == 0
