@@ -666,9 +666,18 @@ class MavlinkVehicle:
             if not self._airborne():
                 raise Refused(mav.MAV_RESULT_TEMPORARILY_REJECTED,
                               "take off first: offboard flies a vehicle in the air")
-            self._start(Program.OFFBOARD)
+            # The latest setpoint is flown first: one that cannot be refuses the mode with its
+            # reason (its own result: DENIED for a value, TEMPORARILY_REJECTED for the state),
+            # and the mode and program stay as they were; PX4 too refuses a mode whose
+            # requirements are not met (TEMPORARILY_REJECTED, "Switching to Offboard is
+            # currently not possible").
             self._applied_target = None
-            self._apply_setpoint(sp[0], self._command_peer)
+            try:
+                self._fly_setpoint(sp[0])
+            except (Refused, LocalProtocolError) as exc:
+                result = exc.result if isinstance(exc, Refused) else mav.MAV_RESULT_DENIED
+                raise Refused(result, f"the latest offboard setpoint is refused: {exc}") from None
+            self._start(Program.OFFBOARD)  # after the boards took it (marks their motion ours)
         elif request is Request.MANUAL:
             if self._airborne():
                 self._board(Hold())
@@ -736,46 +745,54 @@ class MavlinkVehicle:
 
     # -- offboard and sticks -------------------------------------------------------------
     def _apply_setpoint(self, msg: MavMessage, peer: Hashable) -> list[MavMessage]:
+        """Fly one offboard setpoint in the Offboard mode (``_fly_setpoint``); a refusal is
+        a STATUSTEXT "offboard setpoint refused: ..." to ``peer``."""
+        try:
+            if self._fly_setpoint(msg):
+                self._mine()
+        except (Refused, LocalProtocolError) as exc:
+            return self._notice(peer, f"offboard:{exc}", mav.MAV_SEVERITY_WARNING,
+                                f"offboard setpoint refused: {exc}")
+        return []
+
+    def _fly_setpoint(self, msg: MavMessage) -> bool:
         """Fly one offboard setpoint: a position (MOVE_BY to it, once per target) or a
-        velocity (VELOCITY lasting COM_OF_LOSS_T, so lost setpoints end in a hover)."""
+        velocity (VELOCITY lasting COM_OF_LOSS_T, so lost setpoints end in a hover); True if
+        a command went to the boards. One that cannot be flown raises ``Refused`` (or
+        ``LocalProtocolError``) naming its field, and nothing is flown."""
         mask = int(msg.type_mask)
         pos_ignored = mask & 0b111 == 0b111
         vel_ignored = mask & 0b111000 == 0b111000
         snap = self._snap()
-        try:
-            if not pos_ignored:
-                target = self._setpoint_position(msg, snap, mask & 0b111)
-                if (self._applied_target is not None
-                        and max(abs(a - b) for a, b in zip(target, self._applied_target,
-                                                           strict=True)) < 0.02
-                        and self.boards.motion_changes == self.step.mark):
-                    return []
-                self._fly_to(target, None)
-                self._applied_target = target
-            elif not vel_ignored:
-                vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
-                if int(msg.get_msgId()) == mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED and \
-                        int(msg.coordinate_frame) in (mav.MAV_FRAME_BODY_NED,
-                                                      mav.MAV_FRAME_BODY_OFFSET_NED,
-                                                      mav.MAV_FRAME_BODY_FRD):
-                    fwd, right = vn, ve
-                else:
-                    yaw = snap.rpy_rad[2]
-                    fwd = math.cos(yaw) * vn + math.sin(yaw) * ve
-                    right = -math.sin(yaw) * vn + math.cos(yaw) * ve
-                yaw_rate = 0.0 if mask & 0b100000000000 else float(msg.yaw_rate)
-                self._check_velocity((vn, ve, vd, yaw_rate), fwd, right)
-                self._applied_target = None
-                self._board(Velocity(round(fwd * 1e3), round(right * 1e3), round(vd * 1e3),
-                                     wire_value(Velocity, "yaw_rate", yaw_rate),
-                                     round(self.settings.offboard_loss_s * 1e3)))
-            else:
-                return []
-        except (Refused, LocalProtocolError) as exc:
-            return self._notice(peer, f"offboard:{exc}", mav.MAV_SEVERITY_WARNING,
-                                f"offboard setpoint refused: {exc}")
-        self._mine()
-        return []
+        if not pos_ignored:
+            target = self._setpoint_position(msg, snap, mask & 0b111)
+            if (self._applied_target is not None
+                    and max(abs(a - b) for a, b in zip(target, self._applied_target,
+                                                       strict=True)) < 0.02
+                    and self.boards.motion_changes == self.step.mark):
+                return False
+            self._fly_to(target, None)
+            self._applied_target = target
+            return True
+        if vel_ignored:
+            return False
+        vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
+        if int(msg.get_msgId()) == mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED and \
+                int(msg.coordinate_frame) in (mav.MAV_FRAME_BODY_NED,
+                                              mav.MAV_FRAME_BODY_OFFSET_NED,
+                                              mav.MAV_FRAME_BODY_FRD):
+            fwd, right = vn, ve
+        else:
+            yaw = snap.rpy_rad[2]
+            fwd = math.cos(yaw) * vn + math.sin(yaw) * ve
+            right = -math.sin(yaw) * vn + math.cos(yaw) * ve
+        yaw_rate = 0.0 if mask & 0b100000000000 else float(msg.yaw_rate)
+        self._check_velocity((vn, ve, vd, yaw_rate), fwd, right)
+        self._applied_target = None
+        self._board(Velocity(round(fwd * 1e3), round(right * 1e3), round(vd * 1e3),
+                             wire_value(Velocity, "yaw_rate", yaw_rate),
+                             round(self.settings.offboard_loss_s * 1e3)))
+        return True
 
     def _setpoint_position(self, msg: MavMessage, snap: Any, ignored: int = 0
                            ) -> tuple[float, float, float]:

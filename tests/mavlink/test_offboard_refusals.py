@@ -141,3 +141,26 @@ def test_global_position_setpoints_below_the_ground_are_refused_naming_the_field
         assert text.startswith("altitude (alt) -1e+07 m puts the target "), text
         assert "below the lowest land on Earth (-430 m)" in text, text
         assert server.errors == 0
+
+
+def test_offboard_is_refused_with_the_reason_when_its_latest_setpoint_is():
+    """DO_SET_MODE Offboard whose latest setpoint cannot be flown was ACCEPTED without a word
+    (the setpoint's refusal was dropped), the mode Offboard with the vehicle holding; now it is
+    refused with the setpoint's reason and the mode stays Hold, as PX4 refuses a mode whose
+    requirements (for Offboard a valid setpoint stream) are not met."""
+    with _flying() as (server, conn):
+        hold = wait_for(conn, "HEARTBEAT", lambda h: mavutil.mode_string_v10(h) == "LOITER")
+        for base_mode, send in (
+                (OFFBOARD[0], lambda: _local(conn, POSITION_ONLY, z=1e7)),
+                (OFFBOARD[0] | M.MAV_MODE_FLAG_SAFETY_ARMED,  # (another command: not a repeat)
+                 lambda: _local(conn, VELOCITY_ONLY, vx=40.0))):
+            send()
+            result, text = command(conn, M.MAV_CMD_DO_SET_MODE, base_mode, OFFBOARD[1])
+            assert result == M.MAV_RESULT_DENIED, (result, text)
+            assert text.startswith("DO_SET_MODE: the latest offboard setpoint is refused: "
+                                   f"{'position' if base_mode == OFFBOARD[0] else 'velocity'} "
+                                   "setpoint: "), text
+            after = wait_for(conn, "HEARTBEAT")
+            assert after.custom_mode == hold.custom_mode, mavutil.mode_string_v10(after)
+        assert server.vehicle.boards.airframe.names()[-1] == "take_off"  # nothing flown
+        assert server.errors == 0
