@@ -831,7 +831,8 @@ class MavlinkVehicle:
 
     def _check_local_down(self, down_m: float, z_m: float) -> None:
         """Refuse (DENIED, naming the field z) a local target below the ground, as global
-        ones are (``_down_of``): the flight envelope has a ceiling and a radius, no floor. With
+        ones are (``_down_of``), before the flight envelope (whose floor is home's ground) names
+        the target in its own terms. With
         an origin, below the lowest land on Earth; without one (indoors: the ground's height
         above the sea is not known), deeper than ``MAX_POSITION_M`` below the local origin,
         as far as a local position reaches. (Past these, the target is thousands of km away
