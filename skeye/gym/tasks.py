@@ -100,6 +100,12 @@ class Task:
     target_fixed = False
     keywords: tuple[str, ...] = ()  # its own keywords of gymnasium.make (PadLanding's)
 
+    @property
+    def reach_m(self) -> float:
+        """The farthest horizontally from its cell's centre that an episode still runs: its
+        area around the target, the target being at the centre (Hover's point, the pad)."""
+        return self.area_m
+
     def observation_space(self) -> spaces.Space[Any]:
         return _box((STATE_LOW, STATE_HIGH), (-TARGET_HIGH, TARGET_HIGH))
 
@@ -175,10 +181,18 @@ class GoTo(Task):
     episode_s = 15.0
     area_m = 8.0
 
+    target_box_m = 4.0  # the target is drawn this far north and east of the centre at most
+
+    @property
+    def reach_m(self) -> float:
+        """The area around a target that can be ``target_box_m`` north and east of the
+        centre: the target's farthest corner is that times sqrt(2) away."""
+        return self.area_m + math.sqrt(2.0) * self.target_box_m
+
     def start(self, rng: np.random.Generator, origin: Vec3) -> Episode:
         jitter = rng.uniform((-0.2, -0.2, -0.2), (0.2, 0.2, 0.2))
         start = (origin[0] + jitter[0], origin[1] + jitter[1], origin[2] - 1.5 + jitter[2])
-        dn, de = rng.uniform(-4.0, 4.0, size=2)
+        dn, de = rng.uniform(-self.target_box_m, self.target_box_m, size=2)
         target = (origin[0] + float(dn), origin[1] + float(de),
                   origin[2] - float(rng.uniform(1.0, 3.0)))
         episode = Episode(start, float(rng.uniform(-math.pi, math.pi)), target)

@@ -57,11 +57,29 @@ from skeye.pilot.policy import DEFAULT_IMAGE_SIZE, action_values
 from skeye.values import number
 
 DEFAULT_SPACING_M = 10.0
-"""Between vehicles' cells: PadLanding's area is 3 m and the webcam sees about 1.5 m around
+"""Between vehicles' cells, at least (a task whose reach needs more gets its minimum,
+:func:`min_spacing_m`): PadLanding's area is 3 m and the webcam sees about 1.5 m around
 itself from 2.5 m up, so 10 m keeps every neighbour out of every view."""
+CELL_CLEARANCE_M = 2.0
+"""Between two vehicles of neighbouring cells, each as far towards the other as its episode
+runs (its task's ``reach_m``): two Hummingbirds side by side need 0.54 m centre to centre
+(the simulator refuses a spawn closer: docs/protocols/simulator.md, INIT), and the rest,
+1.46 m, is for the travel past its reach: a vehicle is judged after every control step and
+taken out at the next, so it is never more than one control period past it; two flying at
+each other have 0.73 m each in that period, 14.6 m/s at the default 20 Hz (the velocity
+action's limit is 3 m/s). At a much slower ``control_rate_hz`` a fast vehicle can go further;
+should one stand where a neighbour respawns, ``step`` raises the simulator's refusal, which
+names both."""
 CELL_REACH_M = 100.0
 """How far from its cell's centre an episode may take a vehicle (each task's area, target and
 ceiling are well within): the farthest cell stays this far inside the simulator's limit."""
+
+
+def min_spacing_m(task: Task) -> float:
+    """The closest two cells may be for ``task``: each vehicle's reach and the clearance
+    between them (``CELL_CLEARANCE_M``), so that no vehicle flies into a neighbour, nor is
+    respawned where one flies (the simulator would refuse the spawn)."""
+    return 2.0 * task.reach_m + CELL_CLEARANCE_M
 
 
 def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
@@ -93,7 +111,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
         "autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, task_factory: Callable[[], Task], num_envs: int, *,
-                 spacing_m: float = DEFAULT_SPACING_M, action: str = "velocity",
+                 spacing_m: float | None = None, action: str = "velocity",
                  episode_s: float | None = None, render_mode: Any = None,
                  max_episode_steps: int | None = None, **settings: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
@@ -105,12 +123,19 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                 or max_episode_steps < 1):
             raise ConfigError(f"max_episode_steps must be a whole number >= 1 (or None or -1: "
                               f"no limit), got {max_episode_steps!r}")
-        if not (number("spacing_m", spacing_m) >= 2.0):
-            raise ConfigError(f"spacing_m must be >= 2 m, got {spacing_m!r}")
         if action not in ACTIONS:
             raise ConfigError(f"action must be one of {list(ACTIONS)}, got {action!r}")
         self.tasks = [task_factory() for _ in range(num_envs)]
         task = self.tasks[0]
+        closest = min_spacing_m(task)
+        if spacing_m is None:
+            spacing_m = max(DEFAULT_SPACING_M, closest)
+        elif not (number("spacing_m", spacing_m) >= closest):
+            raise ConfigError(
+                f"spacing_m must be >= {closest:g} m for {task.name}, got {spacing_m!r}: its "
+                f"episodes run up to {task.reach_m:g} m from their cell's centre, and two "
+                f"vehicles of neighbouring cells need {CELL_CLEARANCE_M:g} m between them")
+        self.spacing_m = float(spacing_m)
         if task.needs_camera:
             settings.setdefault("camera", "webcam")
             if action != "velocity":

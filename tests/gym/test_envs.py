@@ -277,6 +277,22 @@ def test_the_batched_environment_refuses_bad_options_as_config_errors() -> None:
                            vectorization_mode="vector_entry_point", spacing_m=1e9)
 
 
+@pytest.mark.parametrize(("env_id", "closest_m"), [
+    ("skeye/Hover-v0", 8.0), ("skeye/GoTo-v0", 2 * (8 + 4 * 2 ** 0.5) + 2)])
+def test_cells_closer_than_the_task_reach_are_refused(env_id: str, closest_m: float) -> None:
+    """spacing_m took anything from 2 m: four Hover vehicles 2 m apart flown forward ran into
+    the next cell, and a respawn there raised the simulator's 'is taken' refusal from step().
+    Cells now leave twice the task's reach and 2 m between them (docs/gym.md)."""
+    with pytest.raises(ConfigError, match=f"spacing_m must be >= {closest_m:g} m"):
+        gymnasium.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point",
+                           spacing_m=closest_m - 0.01)
+    env = gymnasium.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point")
+    try:
+        assert env.unwrapped.spacing_m == max(10.0, closest_m)  # the default: 10 m or more
+    finally:
+        env.close()
+
+
 def test_sensor_noise_zero_takes_the_noise_out_of_the_readings() -> None:
     from skeye.gym.flight import scale_noise
     from skeye.robots.config import load_robot_config
