@@ -79,7 +79,8 @@ OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs 
 STEP_TIMEOUT_S = 3600.0  # a lockstep STEP waits this long to be taken up (then as long to end)
 STEP_WATCH_AFTER_S = 0.05  # a STEP still running after this: its reader watches for the client
 # poll() events of a socket whose peer is gone: it closed (or shut its sending side), or reset.
-_PEER_GONE = select.POLLRDHUP | select.POLLHUP | select.POLLERR
+# POLLRDHUP (the peer's FIN) is Linux's; elsewhere a reset or hang-up is still seen.
+_PEER_GONE = getattr(select, "POLLRDHUP", 0) | select.POLLHUP | select.POLLERR
 CLOSE_LINGER_S = 5.0  # an ended session's writer has this long to send what is queued
 # An HTTP request line or header: a web page POSTing to this port (a cross-protocol request, whose
 # text/plain body would otherwise be read as protocol lines). The connection is closed at once.
