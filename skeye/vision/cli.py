@@ -4,8 +4,11 @@ How this works: :func:`register` adds the subcommands to the lead's argparse sub
 sets ``func(args) -> int``. ``vision detect`` runs the same :func:`detect` the pilot calls and
 prints one JSON object; without ``--fov`` it takes the field of view of the ``--robot`` file's
 camera and says so on stderr; ``--calibration camera.toml`` (``skeye calibrate``) gives the
-camera matrix and lens distortion instead (refused beside ``--fov``, which it replaces). It
-exits 0 whether or not a pad was found and 2 for bad input, with a message on stderr.
+camera matrix and lens distortion instead (refused beside ``--fov``, which it replaces).
+``--robot`` and ``--camera`` only choose the camera whose field of view stands in for
+``--fov``, so they default to None (the hummingbird's first camera, filled in when used) and
+either beside ``--fov`` or ``--calibration`` is refused: it would do nothing. It exits 0
+whether or not a pad was found and 2 for bad input, with a message on stderr.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from skeye.vision.printable import DEFAULT_DPI, write_printable
 EXIT_BAD_INPUT = 2
 PAD = "skeye pad"
 DETECT = "skeye vision detect"
+DEFAULT_ROBOT = "hummingbird"  # the robot whose camera gives the field of view without --fov
 
 
 def _fail(command: str, message: str) -> int:
@@ -69,6 +73,14 @@ def cmd_detect(args: argparse.Namespace) -> int:
     if args.calibration is not None and args.fov is not None:  # one would do nothing
         return _fail(DETECT, "give --fov or --calibration, not both: the calibration's camera "
                      "matrix gives the geometry, --fov would be ignored")
+    chosen = [flag for flag, value in (("--robot", args.robot), ("--camera", args.camera))
+              if value is not None]
+    if chosen and (args.fov is not None or args.calibration is not None):  # they would do nothing
+        given = "--fov" if args.fov is not None else "--calibration"
+        return _fail(DETECT, f"{' and '.join(chosen)} only choose the camera whose field of view "
+                     f"is used without --fov or --calibration; {given} gives the geometry, so "
+                     f"{'they' if len(chosen) > 1 else 'it'} would be ignored: give one or the "
+                     "other")
     if args.calibration is not None:
         from skeye.vision.calibration import load_calibration
 
@@ -80,6 +92,8 @@ def cmd_detect(args: argparse.Namespace) -> int:
     if args.fov is None:  # the camera the frame most likely came from: the robot file's
         from skeye.robots.config import camera_model
 
+        if args.robot is None:
+            args.robot = DEFAULT_ROBOT
         try:
             model = camera_model(args.robot, args.camera)
         except ConfigError as exc:
@@ -138,9 +152,12 @@ def register(subparsers: Any) -> None:
         help="horizontal field of view, rad (default: the --robot file's camera under its "
              "profile, e.g. 0.952 for the Hummingbird's webcam)",
     )
-    d.add_argument("--robot", default="hummingbird",
-                   help="robot class (or .toml) whose camera took the image, for the default FOV")
-    d.add_argument("--camera", default=None, help="that robot's camera name (default: its first)")
+    d.add_argument("--robot", default=None,
+                   help=f"robot class (or .toml) whose camera took the image, for the default "
+                   f"FOV (default {DEFAULT_ROBOT}; not with --fov or --calibration)")
+    d.add_argument("--camera", default=None,
+                   help="that robot's camera name (default: its first; not with --fov or "
+                   "--calibration)")
     d.add_argument("--roll", type=float, default=None, help="vehicle roll, rad (with --pitch)")
     d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
     d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")

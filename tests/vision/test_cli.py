@@ -314,3 +314,23 @@ def test_detect_refuses_fov_beside_a_calibration(pad_png, tmp_path, capsys):
     assert rc == 2 and captured.out == ""
     assert captured.err.startswith("skeye vision detect: error: ")
     assert "--fov" in captured.err and "--calibration" in captured.err
+
+
+@pytest.mark.parametrize("extra", [["--robot", "airrobot"], ["--camera", "Down"],
+                                   ["--robot", "hummingbird", "--camera", "Down"]])
+def test_detect_refuses_a_robot_or_camera_beside_fov_or_calibration(pad_png, tmp_path, capsys,
+                                                                    extra):
+    """--robot and --camera choose the camera whose field of view stands in for --fov; beside
+    --fov or --calibration they would do nothing (they were ignored, status 0), so the command
+    is refused (status 2) with one line naming the options, before any image is read."""
+    from skeye.vision.calibration import CameraCalibration
+
+    cal = tmp_path / "camera.toml"
+    CameraCalibration.pinhole(W, H, FOV_H_RAD).save(cal)
+    for given in (["--fov", "1.309"], ["--calibration", str(cal)]):
+        assert run(["vision", "detect", str(pad_png), *given, *extra]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1
+        assert captured.err.startswith("skeye vision detect: error: ")
+        for flag in (given[0], *(f for f in extra if f.startswith("--"))):
+            assert flag in captured.err
