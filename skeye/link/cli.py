@@ -6,7 +6,9 @@ code is printed), 2 on a bad argument or URI and 1 when the link failed or timed
 command's packet (and a poll or stream mask) is built before the link is opened, so a value it
 cannot carry is said as typed: the argument or option, in its unit, with the range the
 packet carries (``skeye link: error: --yaw-rate-deg-s 5000 deg/s is outside
--1877.47..1877.41 deg/s, what a VELOCITY packet carries``; exit 2), vehicle or none.
+-1877.47..1877.41 deg/s, what a VELOCITY packet carries``; exit 2), vehicle or none; so is
+a mask that requests nothing (``skeye link: error: mask 0 requests no structure; known:
+...``), which would bring nothing back.
 Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
 Output closed early (``skeye link ... stream 60 | head``) ends the command quietly, status 0;
 Ctrl-C ends it with ``skeye link: interrupted (Ctrl-C)`` and status 130.
@@ -36,6 +38,7 @@ from skeye.link.vehicle import (
 )
 from skeye.wire.packet_units import si_range, take_off_from_si, wire_value
 from skeye.wire.packets import (
+    LAYOUTS,
     Ack,
     GotoGps,
     Hold,
@@ -43,10 +46,12 @@ from skeye.wire.packets import (
     Message,
     MoveBy,
     PadMode,
+    Poll,
     PollMask,
     Reset,
     Result,
     SkeyeMask,
+    Stream,
     TakeOff,
     Velocity,
 )
@@ -65,26 +70,67 @@ def format_message(msg: Message) -> str:
     return f"{type(msg).__name__} {' '.join(parts)}".rstrip()
 
 
-def _mask(text: str, names: type[PollMask] | type[SkeyeMask]) -> int:
-    """A mask from a number (``0x0205``) or names joined by ``,`` (``ll_status,gps_data``)."""
+def _mask(text: str, names: type[PollMask] | type[SkeyeMask], label: str,
+          cls: type[Message], name: str) -> int:
+    """A mask from a number (``0x0205``) or names joined by ``,`` (``ll_status,gps_data``),
+    checked against ``cls``'s wire field ``name`` (its range, and the bits it carries: STREAM
+    carries only known ones, POLL keeps unknown ones) and said as typed, under ``label``.
+
+    Raises:
+        LocalProtocolError: an unknown bit name, or a mask the packet cannot carry.
+    """
+    valid = ", ".join(m.name.lower() for m in names if m.name)
     try:
-        return int(text, 0)
+        total = int(text, 0)
     except ValueError:
-        pass
-    total = 0
-    for word in text.split(","):
-        word = word.strip().upper()
-        if word == "ALL":
-            total |= int(sum(names))
-            continue
-        try:
-            total |= int(names[word])
-        except KeyError:
-            valid = ", ".join(m.name.lower() for m in names if m.name)
-            raise LocalProtocolError(
-                f"unknown mask bit {word.lower()!r}; known: {valid}, all"
-            ) from None
+        total = 0
+        for word in text.split(","):
+            word = word.strip().upper()
+            if word == "ALL":
+                total |= int(sum(names))
+                continue
+            try:
+                total |= int(names[word])
+            except KeyError:
+                raise LocalProtocolError(
+                    f"unknown mask bit {word.lower()!r}; known: {valid}, all"
+                ) from None
+    field = next(f for f in LAYOUTS[cls].fields if f.name == name)
+    lo, hi = field.limits
+    if not lo <= total <= hi:
+        raise LocalProtocolError(f"{label} {text} is outside {lo}..0x{hi:x}, what a "
+                                 f"{_packet_name(cls)} packet carries")
+    if field.bits is not None and total & ~field.bits:
+        raise LocalProtocolError(f"{label} {text} sets bits (0x{total & ~field.bits:04x}) that "
+                                 f"name no structure a {_packet_name(cls)} packet carries; "
+                                 f"known: {valid}, all")
     return total
+
+
+def command_masks(args: argparse.Namespace) -> tuple[int, ...]:
+    """The masks of a ``poll`` (one) or ``stream`` (poll and skeye) command, empty for the
+    others, built before the link is opened as the command packets are: a mask the packet
+    cannot carry, or one that requests nothing, is said as typed (exit 2) without a vehicle.
+
+    Raises:
+        LocalProtocolError: an unknown bit name, a mask the packet cannot carry, or nothing
+            requested.
+    """
+    if args.link_command == "poll":
+        mask = _mask(args.mask, PollMask, "mask", Poll, "mask")
+        if not Poll(mask).requested():  # the vehicle would answer nothing: a timeout
+            known = ", ".join(m.name.lower() for m in PollMask if m.name)
+            raise LocalProtocolError(f"mask {args.mask} requests no structure; known: {known}, "
+                                     "all")
+        return (mask,)
+    if args.link_command == "stream":
+        masks = (_mask(args.poll_mask, PollMask, "--poll-mask", Stream, "poll_mask"),
+                 _mask(args.skeye_mask, SkeyeMask, "--skeye-mask", Stream, "skeye_mask"))
+        if not any(masks):  # only known bits are carried: none set, nothing would come
+            raise LocalProtocolError(f"--poll-mask {args.poll_mask} and --skeye-mask "
+                                     f"{args.skeye_mask} request nothing to stream")
+        return masks
+    return ()
 
 
 def _answer(answer: Result | Ack, out: TextIO) -> None:
@@ -123,6 +169,7 @@ _VALUES: dict[str, tuple[_ValueSpec, ...]] = {
                  ("--speed", "speed", _M_S, GotoGps, "speed", _same)),
     "pad-mode": (("--deadband", "deadband", _M, PadMode, "deadband", _same),
                  ("--max-speed", "max_speed", _M_S, PadMode, "max_speed", _same)),
+    "stream": (("--period", "period", "s", Stream, "period", _same),),
 }
 _INVERSE: dict[Callable[[float], float], Callable[[float], float]] = {
     _same: _same, _negated: _negated, math.radians: math.degrees}
@@ -185,11 +232,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Execute the parsed ``skeye link`` command; returns the exit code."""
     opened: list[Vehicle] = []  # the vehicle, once its link is open (for what a failure says)
     try:
-        masks: tuple[int, ...] = ()  # a bad mask is named before the link is opened
-        if args.link_command == "poll":
-            masks = (_mask(args.mask, PollMask),)
-        elif args.link_command == "stream":
-            masks = (_mask(args.poll_mask, PollMask), _mask(args.skeye_mask, SkeyeMask))
+        masks = command_masks(args)  # a bad mask is named before the link is opened
         msg = command_message(args)
         with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
             opened.append(vehicle)

@@ -361,3 +361,34 @@ def test_link_values_the_packet_cannot_carry_are_said_in_the_users_terms(argv, s
     err = capsys.readouterr().err
     assert err.startswith(f"skeye link: error: {said}"), err
     assert "Si." not in err and "_m_s" not in err and "link error" not in err
+
+
+@pytest.mark.parametrize(("argv", "said"), [
+    (["poll", "0"], "mask 0 requests no structure; known: ll_status, "),
+    (["poll", "0x0020"], "mask 0x0020 requests no structure; known: ll_status, "),
+    (["poll", "0x10000"], "mask 0x10000 is outside 0..0xffff, what a POLL packet carries"),
+    (["stream", "1", "--poll-mask", "0x10000"],
+     "--poll-mask 0x10000 is outside 0..0xffff, what a STREAM packet carries"),
+    (["stream", "1", "--skeye-mask", "0x10000"],
+     "--skeye-mask 0x10000 is outside 0..0xffff, what a STREAM packet carries"),
+    (["stream", "1", "--poll-mask", "0", "--skeye-mask", "0"],
+     "--poll-mask 0 and --skeye-mask 0 request nothing to stream"),
+    (["stream", "1", "--poll-mask", "0x0021"],
+     "--poll-mask 0x0021 sets bits (0x0020) that name no structure a STREAM packet carries; "
+     "known: ll_status, "),
+    (["stream", "1", "--period", "100"],
+     "--period 100 s is outside 0..65.535 s, what a STREAM packet carries"),
+])
+def test_link_masks_that_request_nothing_are_refused_before_the_link_opens(argv, said, capsys):
+    """A poll mask that requests no structure (``poll 0``) was only refused by ``Vehicle.poll``
+    after the link had opened, and one the packet cannot carry (``0x10000``) when it was
+    encoded; with nothing listening (port 1 on loopback) the user read a connect error
+    (status 1) about a command that could never have been sent. Masks are checked as the
+    command packets are, before the link is opened: status 2, in the user's terms (a stream's
+    --period too, which was only found too long for its packet once sent)."""
+    from skeye.cli import main
+
+    assert main(["link", "tcp://127.0.0.1:1", *argv]) == link_cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.startswith(f"skeye link: error: {said}"), err
+    assert err.count("\n") == 1 and "link error" not in err, err
