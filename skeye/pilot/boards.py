@@ -149,6 +149,8 @@ class BoardSettings:
     # GOTO_GPS is refused; full stick in GPS mode; WAYPOINT max_speed 100 %.
     max_speed_m_s: float = 3.0
     max_climb_m_s: float = 1.5  # full thrust stick in height / GPS mode
+    # The robot file's max_yaw_rate_rad_s (MaxYawRate): a VELOCITY turning faster is refused.
+    max_yaw_rate_rad_s: float = 1.745
     envelope: FlightEnvelope = field(default_factory=FlightEnvelope)  # ceiling, radius
 
 
@@ -342,6 +344,29 @@ class OnboardBoards:
             return self.settings.envelope.check_target(home, target_ned_m)
         return None
 
+    def check_velocity(self, forward_m_s: float, right_m_s: float, up_m_s: float,
+                       yaw_rate_rad_s: float) -> str | None:
+        """Why a VELOCITY is refused, or None: forward or right over the vehicle's speed limit
+        (on each, as the simulated vehicle and a policy's actions limit them), up or down over
+        its climb limit, a yaw rate over its own; refused, never silently capped, whatever the
+        backend (the simulator's robot refuses one too, in its own terms; a real vehicle's
+        would fly what it can). Said as the packet means each value, the yaw rate in deg/s
+        (as ``skeye link`` and ground control take it) and rad/s (the packet's SI)."""
+        limit = self.settings.max_speed_m_s
+        for name, value in (("forward", forward_m_s), ("right", right_m_s)):
+            if abs(value) > limit + 1e-9:
+                return f"{name} {value:g} m/s is over this vehicle's limit of {limit:g} m/s"
+        climb = self.settings.max_climb_m_s
+        if abs(up_m_s) > climb + 1e-9:
+            return (f"up {up_m_s:g} m/s is over this vehicle's climb and descent limit of "
+                    f"{climb:g} m/s")
+        turn = self.settings.max_yaw_rate_rad_s
+        if abs(yaw_rate_rad_s) > turn + 1e-9:
+            return (f"yaw rate {math.degrees(yaw_rate_rad_s):.5g} deg/s "
+                    f"({yaw_rate_rad_s:g} rad/s) is over this vehicle's limit of "
+                    f"{math.degrees(turn):.5g} deg/s ({turn:g} rad/s)")
+        return None
+
     def _check_envelope(self, home_ned_m: tuple[float, float, float],
                         target_ned_m: tuple[float, float, float]) -> None:
         reason = self.check_move(target_ned_m, home_ned_m=home_ned_m)
@@ -443,6 +468,9 @@ class OnboardBoards:
         self.flight.check(FlightEvent.MOVE)
         si = velocity_to_si(msg)
         fwd, right, down = si.vel_frd_m_s
+        reason = self.check_velocity(fwd, right, -down, si.yaw_rate_rad_s)
+        if reason is not None:
+            raise _Refused(ResultCode.BAD_VALUE, f"velocity: {reason}")
         duration_s = si.duration_s if msg.duration else None
         snap = self.airframe.snapshot()
         if duration_s is not None:  # where it ends; open-ended ones are stopped at the edge

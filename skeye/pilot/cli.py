@@ -223,6 +223,7 @@ def run(args: argparse.Namespace) -> int:
                 max_speed_m_s=limits.max_speed_m_s,
                 default_speed_m_s=min(1.0, limits.max_speed_m_s),
                 max_climb_m_s=limits.max_climb_m_s,
+                max_yaw_rate_rad_s=limits.max_yaw_rate_rad_s,
                 envelope=envelope,
             )
             vision = None

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 import time
 from collections import deque
 from collections.abc import Callable, Hashable
@@ -100,6 +101,10 @@ ORIGIN_MAX_ALT_M = 100_000.0  # PX4's highest origin taken ("the edge of space")
 MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                | CtrlBits.GPS_POSITION_CONTROL)
 
+
+def _float32(value: float) -> float:
+    """``value`` as a MAVLink float field carries it (IEEE single precision, nearest)."""
+    return float(struct.unpack("<f", struct.pack("<f", value))[0])
 
 
 @dataclass
@@ -858,9 +863,13 @@ class MavlinkVehicle:
         right of its heading (``fwd``, ``right``: vx, vy turned into the heading frame, as
         the VELOCITY flies them) over ``MPC_XY_VEL_MAX`` (the boards' ``max_speed_m_s``, the
         limit a simulated vehicle puts on each of the two, as a policy's actions do), vz over
-        the climb limit (``max_climb_m_s``, up or down); refused, not capped, as every speed
-        is here. The yaw rate's limit is what a VELOCITY carries (``wire_value`` says it in
-        rad/s)."""
+        the climb limit (``max_climb_m_s``, up or down), yaw_rate over the vehicle's
+        (``max_yaw_rate_rad_s``, the robot file's ``MaxYawRate``); refused, not capped, as
+        every speed is here, and said in the message's fields before the boards' (or the
+        simulator's) own words could reach the user. The yaw rate is a float32 field: the
+        limit sent as one (1.745 is 1.7450000048) is at the limit, not over it. What a
+        VELOCITY carries bounds the yaw rate too, should a vehicle's limit be over it
+        (``wire_value`` says it in rad/s)."""
         vn, ve, vd, yaw_rate = given
         for name, value, unit in (("vx", vn, "m/s"), ("vy", ve, "m/s"), ("vz", vd, "m/s"),
                                   ("yaw_rate", yaw_rate, "rad/s")):
@@ -878,6 +887,11 @@ class MavlinkVehicle:
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"velocity setpoint: vz {vd:g} m/s is over this vehicle's climb and "
                           f"descent limit of {climb:g} m/s")
+        turn = self.boards.settings.max_yaw_rate_rad_s
+        if abs(yaw_rate) > max(turn, _float32(turn)) + 1e-9:  # the limit itself, as sent
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"velocity setpoint: yaw_rate {yaw_rate:g} rad/s is over this "
+                          f"vehicle's limit of {turn:g} rad/s")
         wire_value(Velocity, "yaw_rate", yaw_rate, what="velocity setpoint: yaw_rate")
 
     def _manual(self, msg: MavMessage, peer: Hashable) -> list[MavMessage]:

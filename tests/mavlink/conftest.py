@@ -96,7 +96,8 @@ def mav_vehicle(*, rate: float = 4.0, images: bool = False, robot_dir: Path | No
         mc = robot.motion_config
         settings = BoardSettings(max_speed_m_s=mc.max_speed_m_s,
                                  default_speed_m_s=min(1.0, mc.max_speed_m_s),
-                                 max_climb_m_s=mc.max_climb_m_s)
+                                 max_climb_m_s=mc.max_climb_m_s,
+                                 max_yaw_rate_rad_s=mc.max_yaw_rate_rad_s)
         vision = None
         if images:
             from skeye.pilot.cli import pad_vision_factory

@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from dataclasses import replace
 from typing import Any
 
+import pytest
 from pymavlink import mavutil
 
 from skeye.pilot.airframe import GpsFix
@@ -119,9 +120,18 @@ def test_velocity_setpoints_over_the_vehicles_limits_are_refused_naming_the_fiel
                                   "climb and descent limit of 1.5 m/s")
         name, args = server.vehicle.boards.airframe.calls[-1]
         assert name == "set_velocity" and args[:3] == (2.5, 2.5, 0.0), (name, args)
-        _local(conn, VELOCITY_ONLY, yaw_rate=40.0)
-        assert _refusal(conn) == ("velocity setpoint: yaw_rate 40 rad/s is outside "
-                                  "-32.768..32.767 rad/s, what Velocity carries")
+        # Over the vehicle's yaw rate limit (the hummingbird's 1.745 rad/s) but within what a
+        # VELOCITY carries: it reached the simulator, whose refusal was its own ("set_velocity:
+        # yaw_rate_rad_s=3 exceeds the limit 1.745"), and this scripted airframe flew it
+        for yaw_rate in (3.0, -40.0):
+            _local(conn, VELOCITY_ONLY, yaw_rate=yaw_rate)
+            assert _refusal(conn) == (f"velocity setpoint: yaw_rate {yaw_rate:g} rad/s is over "
+                                      "this vehicle's limit of 1.745 rad/s")
+        _local(conn, VELOCITY_ONLY, yaw_rate=-1.745)  # at the limit: flown
+        _local(conn, VELOCITY_ONLY, vz=-41.0)  # a refusal after it: the yaw was taken in turn
+        assert _refusal(conn).startswith("velocity setpoint: vz -41 m/s ")
+        name, args = server.vehicle.boards.airframe.calls[-1]
+        assert name == "set_velocity" and args[3] == pytest.approx(-1.745), (name, args)
         conn.mav.set_position_target_global_int_send(
             0, 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, VELOCITY_ONLY, 0, 0, 0.0,
             0.0, -50.0, 0.0, 0, 0, 0, 0, 0)

@@ -145,16 +145,24 @@ def test_timed_velocity_ends_in_hold_after_its_duration_of_vehicle_time():
 
 
 def test_velocity_beyond_the_vehicle_limit_is_a_bad_value():
+    """The boards check VELOCITY against their settings (the robot file's limits) before the
+    airframe sees it: refused, code 3, naming the value and the limit; nothing is flown. An
+    airframe's own refusal (the simulator's robot) is still a bad value."""
     air, boards = make()
     airborne(boards, air)
+    calls = len(air.calls)
+    r = result(send(boards, encode(Velocity(30000, 0, 0, 0, 0))))
+    assert r.code is ResultCode.BAD_VALUE
+    assert r.reason == "velocity: forward 30 m/s is over this vehicle's limit of 3 m/s"
+    assert boards.state is NavState.HOLDING and len(air.calls) == calls  # nothing flown
 
     def refuse(*args: object) -> None:
         from skeye.errors import LocalProtocolError
 
-        raise LocalProtocolError("set_velocity: forward_m_s=30.0 exceeds the limit 1.0")
+        raise LocalProtocolError("set_velocity: forward_m_s=2.0 exceeds the limit 1.0")
 
     air.set_velocity = refuse
-    r = result(send(boards, encode(Velocity(30000, 0, 0, 0, 0))))
+    r = result(send(boards, encode(Velocity(2000, 0, 0, 0, 0))))
     assert r.code is ResultCode.BAD_VALUE and "exceeds" in r.reason
     assert boards.state is NavState.HOLDING  # the state did not change
 

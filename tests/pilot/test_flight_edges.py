@@ -148,3 +148,40 @@ def test_a_take_off_below_the_minimum_is_refused_naming_it(stack: ExitStack) -> 
     ns = flight.run_for(1.0)
     status = flight.robot.status.latest  # type: ignore[attr-defined]
     assert ns.state is NavState.HOLDING and status.armed and not status.landed, (ns, status)
+
+
+def test_velocities_over_the_robot_files_limits_are_refused_in_the_users_terms(
+    stack: ExitStack, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """VELOCITY beyond the robot file's limits (the hummingbird's 3 m/s forward or right,
+    1.5 m/s up or down, 1.745 rad/s of yaw) is refused by the boards, RESULT code 3, naming the
+    value as the packet means it and the limit, and the vehicle holds. The simulator's robot
+    refused it in its own words, which the user read: ``skeye link ... velocity 0 0 0
+    --yaw-rate-deg-s 200`` said "rejected: set_velocity: yaw_rate_rad_s=3.491 exceeds the limit
+    1.745" (a Python parameter, in rad/s for a value typed in deg/s); now the yaw rate is said in
+    deg/s and rad/s, as the packet carries it (to 1 mrad/s: 200 deg/s is 3.491 rad/s, 200.02
+    deg/s). A yaw rate at the limit (99.98 deg/s is 1.745 rad/s on the wire) is flown."""
+    server = stack.enter_context(running_sim(mode="lockstep", seed=23))
+    flight = _fly(stack, server.port, settings=BoardSettings(link_timeout_s=60.0))
+    _hold_at(flight, MIN_TAKE_OFF_M)
+    for asked, said in (
+        ({"forward_m_s": 5.0}, "forward 5 m/s is over this vehicle's limit of 3 m/s"),
+        ({"right_m_s": -3.5}, "right -3.5 m/s is over this vehicle's limit of 3 m/s"),
+        ({"up_m_s": -2.0}, "up -2 m/s is over this vehicle's climb and descent limit of 1.5 m/s"),
+        ({"yaw_rate_rad_s": -2.0}, "yaw rate -114.59 deg/s (-2 rad/s) is over this vehicle's "
+                                   "limit of 99.981 deg/s (1.745 rad/s)"),
+    ):
+        with pytest.raises(CommandRejected) as info:
+            flight.vehicle.set_velocity(**asked)
+        assert info.value.code == 3 and info.value.reason == f"velocity: {said}", info.value
+    assert flight.run_for(0.2).state is NavState.HOLDING
+    flight.vehicle.close()  # the one ground station goes: `skeye link` is the next
+    from skeye.cli import main
+
+    link = ["link", flight.pilot.address, "velocity", "0", "0", "0", "--yaw-rate-deg-s"]
+    assert main([*link, "200"]) == 3
+    assert capsys.readouterr().err == (
+        "skeye link: rejected: velocity: yaw rate 200.02 deg/s (3.491 rad/s) is over this "
+        "vehicle's limit of 99.981 deg/s (1.745 rad/s) (code 3)\n")
+    assert main([*link, "99.98", "--duration", "0.5"]) == 0, capsys.readouterr().err
+    assert flight.pilot.boards.state is NavState.FLYING
