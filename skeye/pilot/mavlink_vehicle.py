@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import logging
 import math
-import struct
 import time
 from collections import deque
 from collections.abc import Callable, Hashable
@@ -102,9 +101,11 @@ MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                | CtrlBits.GPS_POSITION_CONTROL)
 
 
-def _float32(value: float) -> float:
-    """``value`` as a MAVLink float field carries it (IEEE single precision, nearest)."""
-    return float(struct.unpack("<f", struct.pack("<f", value))[0])
+def _over(value: float, limit: float) -> bool:
+    """``value``, from a MAVLink float field, over ``limit`` by more than single precision's
+    rounding (2**-24 of it, a few times over for a speed turned into the heading's frame): a
+    client sending the limit itself (2.2 m/s arrives as 2.2000000477) is at it, not over it."""
+    return abs(value) > limit * (1.0 + 1e-6)
 
 
 @dataclass
@@ -877,18 +878,18 @@ class MavlinkVehicle:
                 raise Refused(mav.MAV_RESULT_DENIED,
                               f"velocity setpoint: {name} {value:g} {unit} is not a finite number")
         limit = self.boards.settings.max_speed_m_s
-        if max(abs(fwd), abs(right)) > limit + 1e-9:
+        if _over(fwd, limit) or _over(right, limit):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"velocity setpoint: vx {vn:g}, vy {ve:g} m/s is {fwd:.4g} m/s forward "
                           f"and {right:.4g} m/s right of the heading, over this vehicle's limit "
                           f"of {limit:g} m/s on each (MPC_XY_VEL_MAX)")
         climb = self.boards.settings.max_climb_m_s
-        if abs(vd) > climb + 1e-9:
+        if _over(vd, climb):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"velocity setpoint: vz {vd:g} m/s is over this vehicle's climb and "
                           f"descent limit of {climb:g} m/s")
         turn = self.boards.settings.max_yaw_rate_rad_s
-        if abs(yaw_rate) > max(turn, _float32(turn)) + 1e-9:  # the limit itself, as sent
+        if _over(yaw_rate, turn):  # the limit itself, as sent, is at it
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"velocity setpoint: yaw_rate {yaw_rate:g} rad/s is over this "
                           f"vehicle's limit of {turn:g} rad/s")

@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 
@@ -174,3 +175,14 @@ def test_offboard_is_refused_with_the_reason_when_its_latest_setpoint_is():
             assert after.custom_mode == hold.custom_mode, mavutil.mode_string_v10(after)
         assert server.vehicle.boards.airframe.names()[-1] == "take_off"  # nothing flown
         assert server.errors == 0
+
+
+def test_a_limit_sent_as_a_float32_is_at_the_limit_not_over_it() -> None:
+    """vx, vy, vz were compared with the limit + 1e-9: a robot file's MaxSpeed of 2.2 m/s,
+    sent by a client as MAVLink's float32 (2.2000000477), would have been refused."""
+    from skeye.pilot.mavlink_vehicle import _over
+
+    for limit in (2.2, 1.745, 3.0, 0.1):
+        sent = float(np.float32(limit))
+        assert not _over(sent, limit) and not _over(-sent, limit)
+        assert _over(limit * 1.001, limit) and _over(-limit * 1.001, limit)
