@@ -310,12 +310,17 @@ def test_a_realtime_flight_through_the_ll_board():
     longer than the simulator's own allowed lag (0.5 s, then it slips), and with both cores
     busy the 0.5 s timeout started four emergency procedures in one run (the flight still
     landed). The timeout and its procedure are tested in lockstep above, where time is the
-    simulator's; this test is the real-time flight."""
+    simulator's; this test is the real-time flight. For the same reason the pilot's answer
+    deadline is 2 s, not its 0.5 s: in a suite beside two busy loops (load average 10), the
+    process went 1.5 s without the board's answers and the pilot called the board silent
+    (3 cycles), 2026-11-27; the silence and its failsafe are tested in lockstep too."""
     with ExitStack() as stack:
         server = stack.enter_context(running_sim(mode="realtime", seed=8, estimator="truth"))
         board = start_ll_board(stack, parse_ll_board("R1=pty,serial_timeout=5"),
                                f"127.0.0.1:{server.port}")
-        airframe = open_airframe(board.line.client_uri(), AirframeOptions())
+        uri = board.line.client_uri()
+        airframe = open_airframe(f"{uri}{'&' if '?' in uri else '?'}timeout_s=2",
+                                 AirframeOptions())
         stack.callback(airframe.close)
         assert not airframe.lockstep and not airframe.clock_is_sim
         pilot = stack.enter_context(PilotServer(airframe, port=0))
