@@ -20,7 +20,6 @@ import math
 import os
 import random
 import select
-import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -39,6 +38,7 @@ from skeye.pilot.cli import camera_vision_factory, open_camera_for
 from skeye.pilot.server import PilotServer
 from skeye.wire.packets import PD, NavState, SkeyeMask
 from skeye.workers import Worker
+from tests.pilot.ll_proxy import Proxy
 from tests.sim.conftest import running_sim
 from tests.sim.test_cameras import sim_with_images
 
@@ -64,67 +64,6 @@ def wait_sim(board: LLBoardServer, predicate, sim_s: float, what: str) -> None:
         assert board.sim_time() <= start + sim_s, f"{what}: not within {sim_s} s of sim time"
         assert time.monotonic() < deadline, f"{what}: the stack is stuck ({ceiling_s:.0f} s)"
         time.sleep(0.02)
-
-
-class Proxy:
-    """A TCP middleman between the pilot and the board's TCP line: it can add garbage, drop
-    what the board says (a silent board), or be cut."""
-
-    def __init__(self, port: int) -> None:
-        self.listener = socket.create_server(("127.0.0.1", 0))
-        self.port = self.listener.getsockname()[1]
-        self.target = port
-        self.garbage = False
-        self.silent = False
-        self.injected = 0
-        self.rng = random.Random(7)
-        self.socks: list[socket.socket] = []
-        self.stop = threading.Event()
-        self.workers = [Worker(self._accept, "test-proxy-accept").start()]
-
-    def _accept(self) -> None:
-        self.listener.settimeout(0.1)
-        while not self.stop.is_set():
-            try:
-                a, _ = self.listener.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            b = socket.create_connection(("127.0.0.1", self.target))
-            self.socks += [a, b]
-            self.workers.append(Worker(self._pipe, "test-proxy-up", args=(a, b, False)).start())
-            self.workers.append(Worker(self._pipe, "test-proxy-down", args=(b, a, True)).start())
-
-    def _pipe(self, src: socket.socket, dst: socket.socket, from_board: bool) -> None:
-        src.settimeout(0.1)
-        while not self.stop.is_set():
-            try:
-                data = src.recv(4096)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            if not data:
-                return
-            if from_board and self.silent:
-                continue
-            if self.garbage and self.rng.random() < 0.3:
-                junk = bytes(self.rng.randrange(256) for _ in range(self.rng.randrange(1, 40)))
-                self.injected += len(junk)
-                data = junk + data
-            try:
-                dst.sendall(data)
-            except OSError:
-                return
-
-    def close(self) -> None:
-        self.stop.set()
-        self.listener.close()
-        for s in self.socks:
-            s.close()
-        for w in self.workers:
-            w.join(2.0)
 
 
 @dataclass

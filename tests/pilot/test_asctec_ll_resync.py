@@ -12,8 +12,6 @@ and counted towards "LL board silent"; the pilot's control cycle stood still mea
 
 from __future__ import annotations
 
-import socket
-import threading
 import time
 from contextlib import ExitStack
 
@@ -21,45 +19,26 @@ from skeye.hil.cli import parse_ll_board, start_ll_board
 from skeye.pilot.airframe import AirframeOptions, open_airframe
 from skeye.pilot.asctec_ll import AscTecLLAirframe
 from skeye.wire.packets import PD
-from skeye.workers import Worker
+from tests.pilot.ll_proxy import Proxy
 from tests.sim.conftest import running_sim
 
 ANSWER_TIMEOUT_S = 10.0  # the airframe's answer deadline here (timeout_s in its URI)
 
 
-class CorruptingProxy:
+class CorruptingProxy(Proxy):
     """TCP between the airframe and the board's line; ``corrupt(pd)`` spoils the next frame
     with that descriptor the board sends (a payload byte of a framed structure or RESULT, which
     fails its CRC; the stop string of an ack), once."""
 
     def __init__(self, port: int) -> None:
-        self.listener = socket.create_server(("127.0.0.1", 0))
-        self.port = self.listener.getsockname()[1]
-        self.target = port
         self.armed: int | None = None
         self.corrupted = 0
-        self.stop = threading.Event()
-        self.socks: list[socket.socket] = []
-        self.workers = [Worker(self._accept, "test-proxy-accept").start()]
+        super().__init__(port)
 
     def corrupt(self, pd: int) -> None:
         self.armed = pd
 
-    def _accept(self) -> None:
-        self.listener.settimeout(0.1)
-        while not self.stop.is_set():
-            try:
-                a, _ = self.listener.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            b = socket.create_connection(("127.0.0.1", self.target))
-            self.socks += [a, b]
-            self.workers.append(Worker(self._pipe, "test-proxy-up", args=(a, b, False)).start())
-            self.workers.append(Worker(self._pipe, "test-proxy-down", args=(b, a, True)).start())
-
-    def _spoil(self, data: bytes) -> bytes:
+    def from_board(self, data: bytes) -> bytes:
         pd = self.armed
         if pd is None:
             return data
@@ -80,30 +59,6 @@ class CorruptingProxy:
         spoiled = bytearray(data)
         spoiled[spoil_at] ^= 0x5A
         return bytes(spoiled)
-
-    def _pipe(self, src: socket.socket, dst: socket.socket, from_board: bool) -> None:
-        src.settimeout(0.1)
-        while not self.stop.is_set():
-            try:
-                data = src.recv(4096)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            if not data:
-                return
-            try:
-                dst.sendall(self._spoil(data) if from_board else data)
-            except OSError:
-                return
-
-    def close(self) -> None:
-        self.stop.set()
-        self.listener.close()
-        for s in self.socks:
-            s.close()
-        for w in self.workers:
-            w.join(2.0)
 
 
 def test_one_corrupted_answer_costs_no_wait_for_the_answer_deadline() -> None:
