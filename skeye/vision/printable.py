@@ -43,8 +43,9 @@ PAPER_MARGIN_M = 0.010  # what most home printers cannot print, on every side
 TILE_OVERLAP_M = 0.010
 SCALE_BAR_M = 0.100
 # The largest PDF page viewers accept: 14 400 x 14 400 units of default user space (1/72 in),
-# 200 in = 5.08 m a side (ISO 32000-1:2008, PDF 1.7, Annex C.2, Table C.1 "Architectural
-# limits": page size; Adobe Acrobat and Reader refuse or crop a larger MediaBox). PDF 1.6's
+# 200 in = 5.08 m a side (Adobe's PDF Reference, PDF 1.7, Appendix C "Implementation Limits":
+# Acrobat's architectural limits, 3 to 14 400 units a side; Acrobat and Reader refuse or crop
+# a larger MediaBox). PDF 1.6's
 # UserUnit could scale the unit, but matplotlib does not write it and many viewers ignore it.
 MAX_PDF_SIDE_M = 14400 / 72 * METRES_PER_INCH
 MAX_SHEETS = 500  # a 4.8 m page on A4 (486 sheets); each sheet takes a second or more to draw
@@ -272,8 +273,8 @@ def write_printable(
                ", and too large for a PNG even at 10 dpi")
         raise LocalProtocolError(
             f"a {side:g} m page is over the {MAX_PDF_SIDE_M:g} m a side a PDF page may have "
-            f"(14400 units of 1/72 in, 200 in: PDF's page-size limit, ISO 32000-1 Annex C; "
-            f"viewers refuse or crop a larger page){png}")
+            f"(14400 units of 1/72 in, 200 in: Acrobat's page-size limit, PDF Reference "
+            f"Appendix C; viewers refuse or crop a larger page){png}")
     if paper is not None:
         if ext != ".pdf":
             raise LocalProtocolError(f"--paper writes a PDF of sheets; name it .pdf, not {ext}")

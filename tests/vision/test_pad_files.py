@@ -276,9 +276,9 @@ def test_render_pad_equals_sub_sampling_every_pixel(pixels: int, supersample: in
 
 def test_a_pdf_page_over_the_pdf_size_limit_is_refused(tmp_path, capsys):
     """PDF viewers take a page of at most 14 400 x 14 400 units of 1/72 in, 200 in = 5.08 m a
-    side (ISO 32000-1 Annex C); skeye pad wrote a 5.09 m page (MediaBox 14 428 units) that
-    Acrobat refuses or crops. The page at the limit is written, with its MediaBox within it;
-    one 10 mm more is refused, naming the limit and the PNG that can carry it."""
+    side (Adobe's PDF Reference, Appendix C); skeye pad wrote a 5.09 m page (MediaBox 14 428
+    units) that Acrobat refuses or crops. The page at the limit is written, with its MediaBox
+    within it; one 10 mm more is refused, naming the limit and the PNG that can carry it."""
     from skeye.cli import main
 
     def pad_file(side_m: float) -> Path:
