@@ -177,7 +177,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
             apply_action(vehicle, self.action_kind, action, self.limits)
         flight.step()
         reward, terminated = self.task.judge(vehicle, episode)
-        truncated = not terminated and flight.time_s - self._started_s >= (
+        truncated = not terminated and flight.seconds_since(self._started_s) >= (
             self.task.episode_s - 1e-9)
         self._ended = "terminated" if terminated else "truncated" if truncated else ""
         return self._observe(), float(reward), terminated, truncated, self._info()

@@ -257,7 +257,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                 reward, term = self.tasks[i].judge(vehicle, episode)
                 rewards[i], terminated[i] = reward, term
                 self._steps[i] += 1
-                truncated[i] = not term and flight.time_s - self._started_s[i] >= (
+                truncated[i] = not term and flight.seconds_since(self._started_s[i]) >= (
                     self.tasks[i].episode_s - 1e-9)
                 if self.max_episode_steps is not None:  # as gymnasium.make's TimeLimit
                     truncated[i] |= self._steps[i] >= self.max_episode_steps
