@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import os
-import socket
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -24,16 +23,11 @@ from skeye.ground.commands import (
     describe_keyboard,
 )
 from tests.ground.conftest import CHROMIUM, CHROMIUM_ARGS, UvicornThread
+from tests.ports import free_port as _free_port
 
 STATIC = Path(__file__).resolve().parents[2] / "skeye" / "ground" / "static"
 LIMITS = VehicleLimits.for_robot("hummingbird")  # what create_app uses by default
 FIXED = {("pad_mode", "mode")}  # set by the page's buttons, not a field
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")

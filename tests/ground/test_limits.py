@@ -33,13 +33,8 @@ from skeye.ground.bridge import VehicleBridge
 from skeye.ground.guard import POST_BURST, GroundSecurity
 from skeye.ground.limits import HEADER_TIMEOUT_S, MAX_PER_PEER, ConnectionLimits, RepeatFilter
 from tests.ground.conftest import UvicornThread, wait_until
+from tests.ports import free_port as _free_port
 from tests.robustness.test_fair_slots import connect_from
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import logging
-import socket
 import threading
 import time
 from collections import Counter
@@ -33,15 +32,10 @@ from skeye.pilot.server import PilotServer
 from skeye.wire.packets import NavState
 from tests.ground.conftest import UvicornThread, wait_until
 from tests.pilot.fake_airframe import FakeAirframe
+from tests.ports import free_port as _free_port
 
 EVIL = "http://evil.example"
 STATIC = Path(__file__).resolve().parents[2] / "skeye" / "ground" / "static"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

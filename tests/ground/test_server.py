@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import socket
 from collections.abc import Iterator
 from contextlib import ExitStack
 
@@ -15,12 +14,7 @@ from skeye.ground.app import create_app
 from skeye.ground.bridge import VehicleBridge
 from skeye.ground.guard import GroundSecurity
 from tests.ground.conftest import Stack, UvicornThread, wait_until
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from tests.ports import free_port as _free_port
 
 
 @pytest.fixture

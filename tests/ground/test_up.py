@@ -15,14 +15,7 @@ from pathlib import Path
 import pytest
 
 from tests.ground.conftest import wait_until
-
-
-def _free_ports(n: int) -> list[int]:
-    socks = [socket.create_server(("127.0.0.1", 0)) for _ in range(n)]
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
+from tests.ports import free_ports as _free_ports
 
 
 def _children(pid: int) -> list[int]:

@@ -31,15 +31,14 @@ from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from tests.control.conftest import sim_running
 from tests.pilot.fake_airframe import FakeAirframe
+from tests.ports import free_port
 
 GCS = (255, 190)  # QGroundControl's system and component ids
 SMALL_CAMERA_ROBOT = "mavtest"
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_port(socket.SOCK_DGRAM)
 
 
 def small_camera_robot(folder: Path) -> Path:

@@ -213,11 +213,9 @@ def test_link_errors_name_the_command(capsys):
 
 
 def _unused_port() -> int:
-    import socket
+    from tests.ports import free_port
 
-    with socket.socket() as s:  # bound, never listening: a connection there is refused
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_port()  # nothing listens: a connection there is refused
 
 
 @pytest.mark.parametrize(("extra", "status", "words"), [

@@ -14,6 +14,7 @@ import pytest
 from skeye.errors import ConfigError
 from skeye.sim.engine import Simulation
 from skeye.sim.world import load_world
+from tests.ports import free_port
 
 
 def _skeye(*argv: str) -> subprocess.CompletedProcess[str]:
@@ -64,8 +65,7 @@ def test_sim_on_a_taken_port_names_it_and_the_option_that_moves_it(which: str) -
 
 
 def test_snapshot_without_an_image_server_names_the_address_and_the_option() -> None:
-    with socket.create_server(("127.0.0.1", 0)) as probe:
-        port = probe.getsockname()[1]  # free once closed: nothing listens there
+    port = free_port()  # nothing listens there
     done = _skeye("snapshot", "--images", f"127.0.0.1:{port}", "--out", "x.png")
     assert done.returncode == 2
     assert f"no image server at 127.0.0.1:{port}" in done.stderr
@@ -76,8 +76,7 @@ def test_snapshot_refuses_a_jpeg_quality_for_a_png_file() -> None:
     """``--quality`` is JPEG's: with a .png file it was accepted and ignored (a lossless PNG
     was written); it is refused before the image server is asked, as ``skeye sim`` refuses
     --image-quality for a format other than jpeg."""
-    with socket.create_server(("127.0.0.1", 0)) as probe:
-        port = probe.getsockname()[1]  # nothing listens: the refusal comes first
+    port = free_port()  # nothing listens: the refusal comes first
     done = _skeye("snapshot", "--images", f"127.0.0.1:{port}", "--out", "x.png",
                   "--quality", "50")
     assert done.returncode == 2, done

@@ -353,10 +353,9 @@ def test_a_ray_address_that_is_no_cluster_is_refused_at_once(tmp_path: Path, add
     """Ray's own client retried an address where nothing listens for minutes (past 5 with
     --address 127.0.0.1:1), and refused one without a port with a ValueError traceback."""
     pytest.importorskip("ray")
-    import socket
+    from tests.ports import free_port
 
-    with socket.create_server(("127.0.0.1", 0)) as probe:
-        free = probe.getsockname()[1]  # nothing listens there once closed
+    free = free_port()  # nothing listens there
     spec = _spec(tmp_path)
     start = time.monotonic()
     run = subprocess.run([sys.executable, "-m", "skeye.cli", "sweep", str(spec), "--out",
