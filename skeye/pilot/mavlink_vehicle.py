@@ -480,7 +480,7 @@ class MavlinkVehicle:
         if delta == [0, 0, 0]:
             self._board(Hold())
             return
-        speed = speed_m_s if speed_m_s is not None else self.cruise_m_s
+        speed = self._at_most_the_limit(speed_m_s if speed_m_s is not None else self.cruise_m_s)
         reason = self.boards.check_move(target_ned_m, speed)
         if reason is not None:
             raise Refused(mav.MAV_RESULT_DENIED, reason)
@@ -625,10 +625,19 @@ class MavlinkVehicle:
             self.cruise_m_s = None
             return
         limit = self.boards.settings.max_speed_m_s
-        if not (math.isfinite(speed) and 0 < speed <= limit + 1e-9):
+        if not (math.isfinite(speed) and 0 < speed and not _over(speed, limit)):
             raise Refused(mav.MAV_RESULT_DENIED,
                           f"speed {speed:g} m/s: must be above 0 and at most {limit:g} m/s")
-        self.cruise_m_s = speed
+        self.cruise_m_s = self._at_most_the_limit(speed)
+
+    def _at_most_the_limit(self, speed_m_s: float | None) -> float | None:
+        """A speed from a MAVLink float field, the vehicle's limit where it is the limit as a
+        float32 carries it (``_over``: 2.2 m/s arrives as 2.2000000477), else as it came; the
+        boards, which take the limit exactly, then fly the limit instead of refusing it."""
+        limit = self.boards.settings.max_speed_m_s
+        if speed_m_s is not None and limit < speed_m_s and not _over(speed_m_s, limit):
+            return limit
+        return speed_m_s
 
     def _set_mode(self, cmd: Command) -> None:
         if not cmd.whole(1, "base mode") & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
@@ -944,7 +953,7 @@ class MavlinkVehicle:
         if item.command not in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF,
                                 mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LAND):
             if item.command == mav.MAV_CMD_DO_CHANGE_SPEED:
-                reason = self.boards.check_move(speed_m_s=item.param2)
+                reason = self.boards.check_move(speed_m_s=self._at_most_the_limit(item.param2))
                 if reason is not None:
                     return mav.MAV_MISSION_INVALID_PARAM2, f"item {item.seq}: {reason}"
             return None
@@ -1070,7 +1079,7 @@ class MavlinkVehicle:
         self.mission_current = st.index
         cmd = item.command
         if cmd == mav.MAV_CMD_DO_CHANGE_SPEED:
-            self.cruise_m_s = None if item.param2 == -1 else item.param2
+            self.cruise_m_s = None if item.param2 == -1 else self._at_most_the_limit(item.param2)
             return self._item_done()
         if cmd == mav.MAV_CMD_NAV_DELAY:
             st.phase, st.wait_until_s = "wait", snap.time_s + item.param1

@@ -22,7 +22,7 @@ import pytest
 from pymavlink import mavutil
 
 from skeye.pilot.airframe import GpsFix
-from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.boards import BoardSettings, OnboardBoards
 from skeye.pilot.mavlink_server import MavlinkServer
 from tests.mavlink.conftest import GCS, command, statustext, wait_for
 from tests.pilot.fake_airframe import FakeAirframe
@@ -35,13 +35,14 @@ OFFBOARD = (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6)  # PX4's main mode OFFBOARD
 
 
 @contextmanager
-def _flying(gps: bool = True) -> Iterator[tuple[MavlinkServer, Any]]:
+def _flying(gps: bool = True, settings: BoardSettings | None = None,
+            ) -> Iterator[tuple[MavlinkServer, Any]]:
     """The endpoint over a scripted airframe hovering 2 m up at the local origin (with its GPS
     fix at 49 N 8 E, 100 m, or indoors without one), and a pymavlink ground station."""
     airframe = FakeAirframe()
     if not gps:
         airframe.snap = replace(airframe.snap, gps=NO_FIX)
-    boards = OnboardBoards(airframe)
+    boards = OnboardBoards(airframe, settings)
     with MavlinkServer(boards, threading.Lock(), ["udp://127.0.0.1:0"]) as server:
         port = int(server.addresses[0].rsplit(":", 1)[1])
         conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
@@ -186,3 +187,27 @@ def test_a_limit_sent_as_a_float32_is_at_the_limit_not_over_it() -> None:
         sent = float(np.float32(limit))
         assert not _over(sent, limit) and not _over(-sent, limit)
         assert _over(limit * 1.001, limit) and _over(-limit * 1.001, limit)
+
+
+def test_a_speed_limit_sent_as_a_float32_is_flown_at_the_limit() -> None:
+    """DO_CHANGE_SPEED compared its speed with the limit + 1e-9 and DO_REPOSITION's went to the
+    boards as it came: with a robot file's MaxSpeed of 2.2 m/s, the limit itself, as MAVLink's
+    float32 carries it (2.2000000477), was refused by both. Now it is flown at 2.2 m/s."""
+    with _flying(settings=BoardSettings(max_speed_m_s=2.2)) as (server, conn):
+        airframe = server.vehicle.boards.airframe
+        result, text = command(conn, M.MAV_CMD_DO_CHANGE_SPEED, 1, 2.2)
+        assert result == M.MAV_RESULT_ACCEPTED, text
+        assert server.vehicle.cruise_m_s == 2.2
+        result, text = command(conn, M.MAV_CMD_DO_CHANGE_SPEED, 1, 2.21)  # over it: refused
+        assert result == M.MAV_RESULT_DENIED and "at most 2.2 m/s" in text
+        assert server.vehicle.cruise_m_s == 2.2
+        for speed in (-1.0, 2.2):  # the cruise speed, then the limit given to the command
+            conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                      M.MAV_CMD_DO_REPOSITION, 0, 0, speed, 1, 0, math.nan,
+                                      490_000_900, 80_000_000, 2.0)  # 10 m north
+            ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+            assert ack.result == M.MAV_RESULT_ACCEPTED, (speed, ack, statustext(conn))
+            with server.lock:
+                name, args = airframe.calls[-1]
+            assert name == "fly_to" and args[-1] == pytest.approx(2.2, abs=1e-3), (speed, args)
+        assert server.errors == 0
