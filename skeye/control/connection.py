@@ -27,6 +27,7 @@ import logging
 import numbers
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -592,19 +593,39 @@ class Connection:
 
     # -- shutdown -------------------------------------------------------------------------
     def close(self, timeout_s: float = 2.0) -> None:
-        """Stop every thread and close the socket; idempotent. The simulator removes the robot."""
+        """Stop every thread and close the socket; idempotent. The simulator removes the robot:
+        with one, this end is closed first and the simulator's end awaited (up to
+        ``timeout_s``), which it closes after the robot's removal, so that a robot spawned
+        after ``close()`` finds its place free (one a connection, as the camera calibration
+        photographs its views)."""
         if self._closed:
             return
         self._closed = True
         clock = getattr(self, "clock", None)
         if clock is not None:
             clock.close(timeout_s)
+        if self.robot is not None and self._error is None:
+            self._await_the_simulators_end(timeout_s)
         self._fail(LinkClosed(f"the connection to {self.peer} was closed"))
         for t in (self._writer, self._reader):
             t.join(timeout_s)  # returns at once for the calling thread's own worker
         self._link.close()
         if self.robot is not None:
             self.robot.close()
+
+    def _await_the_simulators_end(self, timeout_s: float) -> None:
+        """The queued commands sent, this end closed, and the simulator's end read (the reader
+        stops there), within ``timeout_s``; on a full queue or a stuck send it gives up, and
+        ``close()`` closes the socket as it would have."""
+        deadline = time.monotonic() + timeout_s
+        try:
+            self._outbox.put_nowait(_STOP)  # the writer sends what is queued, then stops
+        except queue.Full:
+            return
+        if not self._writer.join(timeout_s):
+            return
+        self._link.finish_sending()
+        self._reader.join(max(0.0, deadline - time.monotonic()))
 
     def add_close_hook(self, fn: Callable[[SkeyeError], None]) -> None:
         """Call ``fn(error)`` once when the link goes down."""

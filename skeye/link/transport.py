@@ -85,6 +85,11 @@ class Link(ABC):
             self._released = True
         self._close()
 
+    def finish_sending(self) -> None:
+        """Tell the peer that nothing more comes, and go on reading what it still sends
+        (TCP's half-close); a link without one does nothing (its peer learns at close)."""
+        return
+
     @abstractmethod
     def _send(self, data: bytes) -> None: ...
 
@@ -157,6 +162,12 @@ class TcpLink(Link):
             self._closed.set()
             raise PeerClosed(f"{self.name}: peer closed the connection")
         return data
+
+    def finish_sending(self) -> None:
+        try:
+            self._sock.shutdown(socket.SHUT_WR)
+        except OSError:
+            pass  # already gone: close() and the reader say so
 
     def _close(self) -> None:
         try:

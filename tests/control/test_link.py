@@ -262,3 +262,20 @@ def test_a_server_that_greets_but_never_answers_is_named_at_connect() -> None:
         for c in accepted:
             c.close()
         listener.close()
+
+
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_a_closed_connections_robot_is_gone_when_close_returns(mode: str) -> None:
+    """The robot went when the simulator read the closed connection, after ``close()`` had
+    returned: a view of ``skeye up``'s camera calibration, one robot a connection, was refused
+    onto the place its predecessor still took (CI, a busy host). ``close()`` now ends its side,
+    waits for the simulator's, and the simulator ends its side after removing the robot; a
+    spawn after ``close()`` finds the place free, every time."""
+    with sim_running(mode=mode) as handle:
+        for i in range(20):
+            with skeye.connect(handle.address) as sim:
+                sim.spawn("hummingbird", name=f"R{i}", location_ned_m=(0.0, 0.0, 0.0))
+            # The engine thread runs its tasks in order: one queued now runs after a removal
+            # queued before close() returned.
+            robots = handle.runner.call(lambda s: list(s.robots))
+            assert robots == [], (i, robots)
