@@ -36,6 +36,11 @@ def run(cmd: list[str], timeout_s: float = 600, **kwargs) -> subprocess.Complete
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, **kwargs)
 
 
+def pip_in(venv: Path) -> list[str]:
+    """This interpreter's pip, working in ``venv`` (``pip --python``)."""
+    return [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python")]
+
+
 @pytest.fixture(scope="module")
 def onboard_venv(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("onboard")
@@ -51,31 +56,31 @@ def onboard_venv(tmp_path_factory) -> Path:
     shutil.copytree(ROOT / "skeye", src / "skeye",
                     ignore=shutil.ignore_patterns("__pycache__", "*.so", "*.pyc"))
     # The wheel is built in a venv of its own with only setuptools and wheel (pure Python:
-    # the build needs none of mypy and numpy, which an isolated build would fetch).
+    # the build needs none of mypy and numpy, which an isolated build would fetch). The venvs
+    # are made without pip (ensurepip took 4 s of each), and this pip works in them.
     builder = tmp / "build-venv"
-    made = run([sys.executable, "-m", "venv", str(builder)])
+    made = run([sys.executable, "-m", "venv", "--without-pip", str(builder)])
     assert made.returncode == 0, made.stderr
-    tools = run([str(builder / "bin" / "python"), "-m", "pip", "install", "--progress-bar",
-                 "off", "setuptools>=77", "wheel"])
+    tools = run([*pip_in(builder), "install", "--progress-bar", "off", "setuptools>=77",
+                 "wheel"])
     assert tools.returncode == 0, tools.stdout[-2000:] + tools.stderr[-2000:]
     env = {**os.environ, "SKEYE_PURE_PYTHON": "1"}
-    built = run([str(builder / "bin" / "python"), "-m", "pip", "wheel", "--no-deps",
-                 "--no-build-isolation", "--wheel-dir", str(tmp / "dist"), str(src)], env=env)
+    built = run([*pip_in(builder), "wheel", "--no-deps", "--no-build-isolation", "--wheel-dir",
+                 str(tmp / "dist"), str(src)], env=env)
     assert built.returncode == 0, built.stdout[-2000:] + built.stderr[-2000:]
     (wheel,) = (tmp / "dist").glob("skeye-*.whl")
     venv = tmp / "venv"
-    made = run([sys.executable, "-m", "venv", str(venv)])
+    made = run([sys.executable, "-m", "venv", "--without-pip", str(venv)])
     assert made.returncode == 0, made.stderr
     assert "include-system-site-packages = false" in (venv / "pyvenv.cfg").read_text()
-    pip = [str(venv / "bin" / "python"), "-m", "pip"]
-    installed = run([*pip, "install", "--progress-bar", "off", f"{wheel}[onboard]"])
+    installed = run([*pip_in(venv), "install", "--progress-bar", "off", f"{wheel}[onboard]"])
     assert installed.returncode == 0, installed.stdout[-2000:] + installed.stderr[-2000:]
     return venv
 
 
 def test_the_onboard_install_has_no_simulator_and_no_web_stack(onboard_venv):
     python = str(onboard_venv / "bin" / "python")
-    listed = run([python, "-m", "pip", "list", "--format=json"])
+    listed = run([*pip_in(onboard_venv), "list", "--format=json"])
     names = {p["name"].lower() for p in json.loads(listed.stdout)}
     assert {"skeye", "numpy", "opencv-python-headless", "pyserial"} <= names
     assert names.isdisjoint(NOT_ONBOARD), names & NOT_ONBOARD
