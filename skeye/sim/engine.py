@@ -275,14 +275,14 @@ class Simulation:
         never spawned inside the ground, which would launch it. ``sink`` takes the robot's
         readings (:mod:`skeye.sim.readings`) after each :meth:`step` call."""
         config = config or load_robot_config(class_name, self.robot_dirs, allow_paths=False)
-        self._spawned += 1
-        name = name or f"R{self._spawned}"
+        number = self._spawned + 1  # counted once spawned: a refused INIT takes no number
+        name = name or f"R{number}"
         if name in self.robots:
             raise LocalProtocolError(f"a robot named {name!r} already exists")
         if not name.replace("_", "").replace("-", "").isalnum():
             raise LocalProtocolError(f"robot name {name!r} may hold only letters, digits, - and _")
         pos, rpy, airborne = self._spawn_pose(config, start, location_ned_m, rotation_rpy_rad)
-        rng = np.random.default_rng([self.seed, 1000 + self._spawned])
+        rng = np.random.default_rng([self.seed, 1000 + number])
         robot = Robot(
             name,
             config,
@@ -306,6 +306,7 @@ class Simulation:
             del self._queries[name]
             self._rebuild()
             raise
+        self._spawned = number
         self._start_robot(name, robot, pos, airborne)
         return robot
 

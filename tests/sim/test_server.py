@@ -157,9 +157,9 @@ def test_init_onto_another_robot_is_refused_naming_it_and_the_distance():
             reason = err.get("Reason") or ""
             assert "robot R1" in reason and f"{distance} away" in reason, reason
         assert set(server.runner.sim.robots) == {"R1"}
-        # The refused connection stays usable; clear of R1 its robot spawns, both fly on.
-        assert b.answer("INIT {ClassName hummingbird} {Name R2} {Location 0,0,-0.5}",
-                        "INIT").type == "RES"
+        # The refused connection stays usable; clear of R1 its robot spawns, both fly on. A
+        # refused INIT took no robot number: an unnamed robot is R2 (it was R4).
+        assert b.answer("INIT {ClassName hummingbird} {Location 0,0,-0.5}", "INIT").type == "RES"
         assert b.answer("RESET {Location 0.6,0,-0.081}", "RESET").type == "RES"
         names = {m.get("Name") for m in a.step(100) + b.step(100) if m.type == "STA"}
         assert names == {"R1", "R2"}
