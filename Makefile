@@ -39,9 +39,13 @@ $(VENV)/.test-installed: $(VENV)/.installed
 run: $(VENV)/.installed
 	MUJOCO_GL=$${MUJOCO_GL:-egl} exec $(BIN)/skeye up --world pad $(UP_ARGS)
 
+# compileall: the tests start skeye as a process hundreds of times, and where
+# PYTHONDONTWRITEBYTECODE is set (as on our development image) each start compiled every module it
+# imports again (`skeye pilot --help`: 0.7 s, 0.36 s from bytecode). It writes only what changed.
 test: $(VENV)/.test-installed chromium
 	$(BIN)/ruff check .
 	$(BIN)/mypy
+	$(BIN)/python -m compileall -q skeye >/dev/null
 	SKEYE_REQUIRE_COMPILED=1 MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/python -m pytest -q \
 		-n $(TEST_WORKERS) --dist loadfile
 
