@@ -346,8 +346,11 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
 
     try:
         calibrate_simulated_camera(partial, model.profile, robot=robot, progress=progress)
-        if not workdir.exists():
+        try:
             os.replace(partial, workdir)  # whole or not at all
+        except OSError:
+            if not path.is_file():  # not another skeye up's calibration, done meanwhile
+                raise
     except Exception as exc:
         raise ConfigError(f"calibrating the {robot}'s camera failed: {exc} (give "
                           "--calibration FILE or none)") from exc
