@@ -52,9 +52,16 @@ def _running(pid: int) -> bool:
 @pytest.fixture(scope="session", autouse=True)
 def own_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     """What skeye keeps in the user's cache (``skeye up``'s camera calibration) goes to the
-    session's own folder: tests never write in the home directory, and start from nothing."""
+    run's own folder: tests never write in the home directory, and start from nothing. The
+    run's pytest-xdist workers share it, as two ``skeye up`` of one user share theirs: the
+    calibration is made once a run, not once a worker (10 s of CPU each)."""
     before = os.environ.get("XDG_CACHE_HOME")
-    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # the run's folder, above each worker's own
+        shared = tmp_path_factory.getbasetemp().parent / "xdg-cache"
+        shared.mkdir(exist_ok=True)
+        os.environ["XDG_CACHE_HOME"] = str(shared)
+    else:
+        os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
     yield
     if before is None:
         os.environ.pop("XDG_CACHE_HOME", None)
