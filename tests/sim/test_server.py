@@ -170,6 +170,22 @@ def test_init_onto_another_robot_is_refused_naming_it_and_the_distance():
         b.close()
 
 
+def test_an_unnamed_robot_takes_the_next_name_no_robot_has():
+    """A client named its robot R2 (the next default name): an unnamed INIT was refused with "a
+    robot named 'R2' already exists", when the refusal had taken no number every one after it
+    too. It now takes R3."""
+    with running_sim() as server:
+        a, b = LineClient(server.port), LineClient(server.port)
+        a.expect("NFO")
+        b.expect("NFO")
+        assert a.answer("INIT {ClassName hummingbird} {Name R2} {Location 0,0,-1}",
+                        "INIT").type == "RES"
+        assert b.answer("INIT {ClassName hummingbird} {Location 3,0,-1}", "INIT").type == "RES"
+        assert set(server.runner.sim.robots) == {"R2", "R3"}
+        a.close()
+        b.close()
+
+
 def test_realtime_mode_follows_the_wall_clock():
     """Each of two PINGs 3 s apart: its sim time follows the wall clock since the runner
     started, never ahead of it, and behind by at most the runner's allowed lag unless its clock
