@@ -595,17 +595,18 @@ class Connection:
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop every thread and close the socket; idempotent. The simulator removes the robot:
         with one, this end is closed first and the simulator's end awaited (up to
-        ``timeout_s``), which it closes after the robot's removal, so that a robot spawned
-        after ``close()`` finds its place free (one a connection, as the camera calibration
-        photographs its views)."""
+        ``timeout_s`` in all), which it closes once the robot's removal is queued on its engine,
+        so that a robot spawned after ``close()``, queued later, finds its place free (one a
+        connection, as the camera calibration photographs its views)."""
         if self._closed:
             return
         self._closed = True
+        deadline = time.monotonic() + timeout_s
         clock = getattr(self, "clock", None)
         if clock is not None:
             clock.close(timeout_s)
         if self.robot is not None and self._error is None:
-            self._await_the_simulators_end(timeout_s)
+            self._await_the_simulators_end(max(0.0, deadline - time.monotonic()))
         self._fail(LinkClosed(f"the connection to {self.peer} was closed"))
         for t in (self._writer, self._reader):
             t.join(timeout_s)  # returns at once for the calling thread's own worker
@@ -617,6 +618,8 @@ class Connection:
         """The queued commands sent, this end closed, and the simulator's end read (the reader
         stops there), within ``timeout_s``; on a full queue or a stuck send it gives up, and
         ``close()`` closes the socket as it would have."""
+        if timeout_s <= 0.0:
+            return
         deadline = time.monotonic() + timeout_s
         try:
             self._outbox.put_nowait(_STOP)  # the writer sends what is queued, then stops
