@@ -45,7 +45,7 @@ run: $(VENV)/.installed
 test: $(VENV)/.test-installed chromium
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/python -m compileall -q skeye >/dev/null
+	$(BIN)/python -m compileall -q skeye
 	SKEYE_REQUIRE_COMPILED=1 MUJOCO_GL=$${MUJOCO_GL:-egl} $(BIN)/python -m pytest -q \
 		-n $(TEST_WORKERS) --dist loadfile
 
