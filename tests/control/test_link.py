@@ -268,9 +268,9 @@ def test_a_server_that_greets_but_never_answers_is_named_at_connect() -> None:
 def test_a_closed_connections_robot_is_gone_when_close_returns(mode: str) -> None:
     """The robot went when the simulator read the closed connection, after ``close()`` had
     returned: a view of ``skeye up``'s camera calibration, one robot a connection, was refused
-    onto the place its predecessor still took (CI, a busy host). ``close()`` now ends its side,
-    waits for the simulator's, and the simulator ends its side after removing the robot; a
-    spawn after ``close()`` finds the place free, every time."""
+    onto the place its predecessor still took (CI, a busy host). ``close()`` now ends its side
+    and waits for the simulator's, which comes once the removal is queued, ahead of any later
+    command: a spawn after ``close()`` finds the place free, every time."""
     with sim_running(mode=mode) as handle:
         for i in range(20):
             with skeye.connect(handle.address) as sim:
