@@ -4,6 +4,7 @@ precision landing (NAV_LAND, precision required) onto the pad."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -35,18 +36,20 @@ def test_landing_targets_come_at_the_detection_rate_with_the_true_bearing(tmp_pa
         wait_for(conn, "HEARTBEAT", lambda m: v.pilot.boards.state.name == "FLYING")
         wait_for(conn, "HEARTBEAT", lambda m: v.pilot.boards.state.name == "HOLDING")
 
-        vision = v.pilot.vision
-        before = vision.stats.detections
         targets = []
         while len(targets) < 30:
             msg = wait_for(conn, "LANDING_TARGET")
             north, east, down = v.truth()
             targets.append((msg, (north, east, down)))
-        after = vision.stats.detections
         first, last = targets[0][0].time_usec / 1e6, targets[-1][0].time_usec / 1e6
-        # One per frame of the camera (every frame shows the pad), one per detection.
+        # One per frame of the camera (every frame shows the pad), one per detection: their
+        # capture times a frame apart, none twice. (The detections counted between two reads
+        # of the pilot's counter differed from the targets read meanwhile by up to 7 on a busy
+        # host: the targets still queued in the client's socket at the first read.)
         assert round((last - first) * FRAME_RATE_HZ) + 1 == len(targets)
-        assert abs((after - before) - len(targets)) <= 2
+        times = [msg.time_usec for msg, _ in targets]
+        assert all(b > a for a, b in itertools.pairwise(times)), times
+        assert v.pilot.vision.stats.detections >= len(targets)
         worst = 0.0
         for msg, (north, east, down) in targets:
             yaw = v.robot.ground_truth.latest.rpy_rad[2]
