@@ -276,7 +276,7 @@ class Simulation:
         readings (:mod:`skeye.sim.readings`) after each :meth:`step` call."""
         config = config or load_robot_config(class_name, self.robot_dirs, allow_paths=False)
         number = self._spawned + 1  # counted once spawned: a refused INIT takes no number
-        while name is None and f"R{number}" in self.robots:  # a client named its robot so
+        while not name and f"R{number}" in self.robots:  # a client named its robot so
             number += 1
         name = name or f"R{number}"
         if name in self.robots:
