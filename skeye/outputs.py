@@ -8,7 +8,8 @@ naming one file; :func:`output_folder` makes an output folder, or names why it c
 :func:`figure_file` also wants an extension matplotlib writes, or none (then ``.png`` is
 added, as matplotlib adds it, so the path the command says is the path written); a ``.pgf``
 figure also wants the TeX program matplotlib runs for it. :func:`folder_lock` holds an output
-folder for one run of a command at a time.
+folder for one run of a command at a time; :func:`cache_folder` names where skeye keeps what it
+computes once for later runs (``$XDG_CACHE_HOME/skeye/...``, ``~/.cache`` by default).
 Each refusal is a ConfigError naming the option and the path.
 """
 
@@ -53,6 +54,13 @@ def output_folder(path: Path, option: str = "--out") -> Path:
         raise ConfigError(f"{option} {path}: cannot make the folder: "
                           f"{exc.strerror or exc}") from None
     return path
+
+
+def cache_folder(kind: str) -> Path:
+    """Where skeye keeps ``kind`` (a camera calibration, textures) for later runs:
+    ``$XDG_CACHE_HOME/skeye/KIND``, ``~/.cache/skeye/KIND`` without it (XDG's base directory
+    rule). Not made here: a caller that cannot make it works without its cache."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "skeye" / kind
 
 
 LOCK_NAME = ".skeye.lock"

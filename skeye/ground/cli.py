@@ -48,6 +48,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
+from skeye.outputs import cache_folder
 from skeye.processes import EXIT_LOST_SIMULATOR, check_ports_free, die_with_parent, sleep_until
 from skeye.uris import url_host
 
@@ -330,8 +331,7 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     ident = repr((model, BOARD, board_poses(model.width, model.height, model.fx_px),
                   __version__))
     key = hashlib.sha256(ident.encode()).hexdigest()[:12]
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    workdir = cache / "skeye" / "calibration" / f"{Path(robot).stem}-{model.profile}-{key}"
+    workdir = cache_folder("calibration") / f"{Path(robot).stem}-{model.profile}-{key}"
     path = workdir / "camera.toml"
     if path.is_file():
         print(f"skeye up: the pilot uses the camera calibration {path}", flush=True)
