@@ -12,7 +12,8 @@ time: another peer's MISSION_COUNT meanwhile is refused (MAV_MISSION_ERROR, as P
 first bad one ends the upload with MISSION_ACK naming the error class (and ``rejections`` says
 why); the stored mission changes only when every item was good.
 A download (MISSION_REQUEST_LIST) answers MISSION_COUNT and each MISSION_REQUEST_INT (or
-MISSION_REQUEST). Fence and rally lists are empty and cannot be uploaded (MAV_MISSION_UNSUPPORTED).
+MISSION_REQUEST). MISSION_CLEAR_ALL clears the mission for the type MISSION or ALL (every type).
+Fence and rally lists are empty and cannot be uploaded (MAV_MISSION_UNSUPPORTED).
 """
 
 from __future__ import annotations
@@ -227,7 +228,9 @@ class MissionProtocol:
                 it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z,
                 mav.MAV_MISSION_TYPE_MISSION)]
         if kind == "MISSION_CLEAR_ALL":
-            if mission_type == mav.MAV_MISSION_TYPE_MISSION:
+            # ALL (255) clears every type, the mission among them (the fence and rally lists
+            # are always empty here)
+            if mission_type in (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_ALL):
                 self._store([])
             return [self._ack(peer, mav.MAV_MISSION_ACCEPTED, mission_type)]
         return []  # MISSION_ACK from a downloading client: nothing to do

@@ -1,0 +1,65 @@
+"""The mission protocol's corners as ground stations drive them (a probe of 2026-11-27 with
+pymavlink, against the MAVLink mission protocol and PX4's mavlink_mission.cpp, found each one
+wrong):
+
+- MISSION_CLEAR_ALL with mission_type ALL (255, "used to clear all mission types") was
+  acknowledged ACCEPTED and cleared nothing: the mission stayed stored.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from pymavlink import mavutil
+
+from tests.mavlink.conftest import GCS, scripted_endpoint, wait_for
+
+M = mavutil.mavlink
+LAT_E7, LON_E7 = 490_001_000, 80_002_000  # near the scripted fix at 49 N 8 E
+
+
+def _client(server) -> Any:
+    port = int(server.addresses[0].rsplit(":", 1)[1])
+    return mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
+                                      source_component=GCS[1])
+
+
+def _item(conn: Any, seq: int) -> None:
+    conn.mav.mission_item_int_send(
+        1, 1, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0, 1,
+        0, 0.5, 0, math.nan, LAT_E7 + 100 * seq, LON_E7, 5.0 + seq, M.MAV_MISSION_TYPE_MISSION)
+
+
+def _upload(conn: Any, count: int) -> None:
+    """``count`` waypoints, pulled by the vehicle; returns once it acknowledged them."""
+    conn.mav.mission_count_send(1, 1, count, M.MAV_MISSION_TYPE_MISSION)
+    while True:
+        msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"], timeout_s=10)
+        if msg.get_type() == "MISSION_ACK":
+            assert msg.type == M.MAV_MISSION_ACCEPTED
+            return
+        _item(conn, msg.seq)
+
+
+def _count(conn: Any) -> int:
+    conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
+    return int(wait_for(conn, "MISSION_COUNT", timeout_s=10).count)
+
+
+def test_clear_all_of_every_mission_type_clears_the_mission():
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            _upload(conn, 2)
+            assert _count(conn) == 2
+            conn.mav.mission_clear_all_send(1, 1, M.MAV_MISSION_TYPE_ALL)
+            ack = wait_for(conn, "MISSION_ACK", timeout_s=10)
+            assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED,
+                                                    M.MAV_MISSION_TYPE_ALL)
+            assert _count(conn) == 0
+            assert server.errors == 0
+        finally:
+            conn.close()
+
