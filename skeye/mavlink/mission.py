@@ -11,8 +11,10 @@ time: another peer's MISSION_COUNT meanwhile is refused (MAV_MISSION_ERROR, as P
 (:func:`basic_problem`, then the vehicle's own ``check``: envelope, supported commands) and the
 first bad one ends the upload with MISSION_ACK naming the error class (and ``rejections`` says
 why); the stored mission changes only when every item was good.
-A download (MISSION_REQUEST_LIST) answers MISSION_COUNT and each MISSION_REQUEST_INT (or
-MISSION_REQUEST). MISSION_CLEAR_ALL clears the mission for the type MISSION or ALL (every type).
+A download (MISSION_REQUEST_LIST) answers MISSION_COUNT and each MISSION_REQUEST_INT with
+MISSION_ITEM_INT, each deprecated MISSION_REQUEST with the float MISSION_ITEM its definition asks
+for (as PX4 answers). MISSION_CLEAR_ALL clears the mission for the type MISSION or ALL (every
+type).
 Fence and rally lists are empty and cannot be uploaded (MAV_MISSION_UNSUPPORTED).
 """
 
@@ -30,6 +32,9 @@ MAX_ITEMS = 500
 GLOBAL_FRAMES = (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                  mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT)
 RELATIVE_FRAMES = (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+INT_FRAME = {mav.MAV_FRAME_GLOBAL: mav.MAV_FRAME_GLOBAL_INT,
+             mav.MAV_FRAME_GLOBAL_RELATIVE_ALT: mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT}
+FLOAT_FRAME = {i: f for f, i in INT_FRAME.items()}  # a stored item's frame in MISSION_ITEM
 NAV_WITH_POSITION = (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LAND,
                      mav.MAV_CMD_NAV_LOITER_TIME)
 SUPPORTED = (*NAV_WITH_POSITION, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED,
@@ -74,14 +79,18 @@ class MissionItem:
             scale = 1e7 if frame in GLOBAL_FRAMES else 1.0
             x = _int32(float(x) * scale)
             y = _int32(float(y) * scale)
-            frame = {mav.MAV_FRAME_GLOBAL: mav.MAV_FRAME_GLOBAL_INT,
-                     mav.MAV_FRAME_GLOBAL_RELATIVE_ALT:
-                         mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT}.get(frame, frame)
+            frame = INT_FRAME.get(frame, frame)
         else:
             frame = int(msg.frame)
         return cls(int(msg.seq), frame, int(msg.command), int(msg.current),
                    int(msg.autocontinue), float(msg.param1), float(msg.param2),
                    float(msg.param3), float(msg.param4), int(x), int(y), float(msg.z))
+
+    def float_xy(self) -> tuple[float, float]:
+        """x, y as MISSION_ITEM carries them: degrees in a global frame (float32 on the wire:
+        about 4e-6 deg, 0.4 m, at 49 deg), else as stored."""
+        scale = 1e7 if self.frame in GLOBAL_FRAMES else 1.0
+        return self.x / scale, self.y / scale
 
 
 def _int32(value: float) -> int:
@@ -223,6 +232,11 @@ class MissionProtocol:
             if mission_type != mav.MAV_MISSION_TYPE_MISSION or not 0 <= seq < len(self.items):
                 return [self._ack(peer, mav.MAV_MISSION_INVALID_SEQUENCE, mission_type)]
             it = self.items[seq]
+            if kind == "MISSION_REQUEST":  # the deprecated float form asks for MISSION_ITEM
+                return [self.codec.mav.mission_item_encode(
+                    peer[0], peer[1], it.seq, FLOAT_FRAME.get(it.frame, it.frame), it.command,
+                    it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4,
+                    *it.float_xy(), it.z, mav.MAV_MISSION_TYPE_MISSION)]
             return [self.codec.mav.mission_item_int_encode(
                 peer[0], peer[1], it.seq, it.frame, it.command, it.current, it.autocontinue,
                 it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z,

@@ -3,7 +3,9 @@ pymavlink, against the MAVLink mission protocol and PX4's mavlink_mission.cpp, f
 wrong):
 
 - MISSION_CLEAR_ALL with mission_type ALL (255, "used to clear all mission types") was
-  acknowledged ACCEPTED and cleared nothing: the mission stayed stored.
+  acknowledged ACCEPTED and cleared nothing: the mission stayed stored;
+- a download item by item with the deprecated MISSION_REQUEST was answered with
+  MISSION_ITEM_INT; the message's definition asks for MISSION_ITEM, and PX4 answers with it.
 """
 
 from __future__ import annotations
@@ -59,6 +61,35 @@ def test_clear_all_of_every_mission_type_clears_the_mission():
             assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED,
                                                     M.MAV_MISSION_TYPE_ALL)
             assert _count(conn) == 0
+            assert server.errors == 0
+        finally:
+            conn.close()
+
+
+
+def test_a_download_by_mission_request_gets_mission_items():
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            _upload(conn, 2)
+            assert _count(conn) == 2
+            for seq in range(2):
+                conn.mav.mission_request_send(1, 1, seq, M.MAV_MISSION_TYPE_MISSION)
+                item = wait_for(conn, ["MISSION_ITEM", "MISSION_ITEM_INT"], timeout_s=10)
+                assert item.get_type() == "MISSION_ITEM"
+                assert item.seq == seq
+                assert item.frame == M.MAV_FRAME_GLOBAL_RELATIVE_ALT
+                assert item.command == M.MAV_CMD_NAV_WAYPOINT
+                # degrees as float32: 49 deg is held to 2**-18 deg (4e-6), about 0.4 m
+                assert abs(item.x - (LAT_E7 + 100 * seq) / 1e7) <= 2.0**-18
+                assert abs(item.y - LON_E7 / 1e7) <= 2.0**-18
+                assert item.z == 5.0 + seq
+            conn.mav.mission_request_int_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+            item = wait_for(conn, ["MISSION_ITEM", "MISSION_ITEM_INT"], timeout_s=10)
+            assert item.get_type() == "MISSION_ITEM_INT"
+            assert (item.x, item.y) == (LAT_E7 + 100, LON_E7)
+            conn.mav.mission_ack_send(1, 1, M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
             assert server.errors == 0
         finally:
             conn.close()
