@@ -10,7 +10,10 @@ time: another peer's MISSION_COUNT meanwhile is refused (MAV_MISSION_ERROR, as P
 "busy"); the same peer's starts it again. Each item is checked as it arrives
 (:func:`basic_problem`, then the vehicle's own ``check``: envelope, supported commands) and the
 first bad one ends the upload with MISSION_ACK naming the error class (and ``rejections`` says
-why); the stored mission changes only when every item was good.
+why); the stored mission changes only when every item was good. The last item sent again by the
+station that uploaded it, while that mission is still the one stored, gets the MISSION_ACK again
+(its station did not get the first: a lost ACK), as PX4 answers; any other item nobody asked for
+is ignored.
 A download (MISSION_REQUEST_LIST) answers MISSION_COUNT and each MISSION_REQUEST_INT with
 MISSION_ITEM_INT, each deprecated MISSION_REQUEST with the float MISSION_ITEM its definition asks
 for (as PX4 answers). MISSION_CLEAR_ALL clears the mission for the type MISSION or ALL (every
@@ -161,6 +164,8 @@ class MissionProtocol:
         self.version = 0  # bumped by every change of the stored mission
         self.rejections: list[str] = []  # why uploads were refused (newest last)
         self._upload: _Upload | None = None
+        # the last upload done: its station, last item and the mission version it stored
+        self._done: tuple[tuple[int, int], int, int] | None = None
 
     def _ack(self, peer: tuple[int, int], result: int, mission_type: int = 0) -> MavMessage:
         return self.codec.mav.mission_ack_encode(peer[0], peer[1], result, mission_type)
@@ -206,6 +211,10 @@ class MissionProtocol:
             return [self._request(self._upload)]
         if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
             up = self._upload
+            if up is None and mission_type == mav.MAV_MISSION_TYPE_MISSION and self._done == (
+                    peer, int(msg.seq), self.version):
+                # the last item again: the station did not get the MISSION_ACK (PX4 answers so)
+                return [self._ack(peer, mav.MAV_MISSION_ACCEPTED)]
             if up is None or peer != up.peer or mission_type != mav.MAV_MISSION_TYPE_MISSION:
                 return []  # not asked for: ignored (a late duplicate, another station)
             item = MissionItem.from_message(msg)
@@ -223,6 +232,7 @@ class MissionProtocol:
                 return [self._request(up)]
             self._upload = None
             self._store(up.items)
+            self._done = (peer, item.seq, self.version)
             return [self._ack(peer, mav.MAV_MISSION_ACCEPTED)]
         if kind == "MISSION_REQUEST_LIST":
             count = len(self.items) if mission_type == mav.MAV_MISSION_TYPE_MISSION else 0

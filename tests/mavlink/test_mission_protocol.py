@@ -5,7 +5,10 @@ wrong):
 - MISSION_CLEAR_ALL with mission_type ALL (255, "used to clear all mission types") was
   acknowledged ACCEPTED and cleared nothing: the mission stayed stored;
 - a download item by item with the deprecated MISSION_REQUEST was answered with
-  MISSION_ITEM_INT; the message's definition asks for MISSION_ITEM, and PX4 answers with it.
+  MISSION_ITEM_INT; the message's definition asks for MISSION_ITEM, and PX4 answers with it;
+- the last item of an upload sent again (the ground station's answer when the final MISSION_ACK
+  is lost) was ignored, so the station timed out although the vehicle had stored the mission;
+  PX4 sends the MISSION_ACK again.
 """
 
 from __future__ import annotations
@@ -94,3 +97,25 @@ def test_a_download_by_mission_request_gets_mission_items():
         finally:
             conn.close()
 
+
+def test_the_last_item_sent_again_after_a_lost_ack_is_acknowledged_again():
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            _upload(conn, 3)  # (its MISSION_ACK "lost": the station sends item 2 again)
+            _item(conn, 2)
+            ack = wait_for(conn, "MISSION_ACK", timeout_s=5)
+            assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED,
+                                                    M.MAV_MISSION_TYPE_MISSION)
+            assert (ack.target_system, ack.target_component) == GCS
+            assert _count(conn) == 3  # stored once, not changed by the repeat
+            assert server.vehicle.mission.version == 1
+            # an item no upload asked for is still not acknowledged: the next answer is the count
+            _item(conn, 1)
+            conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
+            answer = wait_for(conn, ["MISSION_ACK", "MISSION_COUNT"], timeout_s=10)
+            assert (answer.get_type(), answer.count) == ("MISSION_COUNT", 3)
+            assert server.errors == 0
+        finally:
+            conn.close()
