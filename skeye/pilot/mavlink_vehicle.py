@@ -276,7 +276,7 @@ class MavlinkVehicle:
         if kind.startswith("PARAM_"):
             if kind == "PARAM_VALUE":
                 return out
-            if kind != "PARAM_REQUEST_LIST" and not self._for_us(msg):
+            if not self._for_us(msg):  # (the list too: PX4 answers its own system's only)
                 return out
             changed = self.params.changed
             answer = self.params.handle(msg)
