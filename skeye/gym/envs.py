@@ -20,6 +20,12 @@ frame, where there is a camera), and PadLanding's observation, image_size, start
 start_height_m and pad_tolerance_m. A camera or vision setting the environment would ignore
 (Hover and GoTo observe no pad detection, and have a camera only to render it) is refused,
 as is a render mode it does not offer (:mod:`skeye.gym.options`).
+
+An environment pickles (``pickle``, ``cloudpickle``, ``copy.deepcopy``) as its constructor's
+arguments, as Gymnasium's own MuJoCo environments do (:class:`gymnasium.utils.EzPickle`): a
+flight holds a live simulation (threads' locks, MuJoCo's buffers), so the copy is a new
+environment of the same options, not yet reset; its ``reset(seed=s)`` flies the episode the
+original's would.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from typing import Any, SupportsFloat
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from gymnasium.utils import EzPickle
 
 from skeye.errors import ConfigError
 from skeye.geo import MAX_POSITION_M
@@ -92,8 +99,9 @@ def task_origin(task: Task, flight_world: Any) -> tuple[float, float, float]:
     return (0.0, 0.0, 0.0)
 
 
-class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
-    """One vehicle flying one task (see the module docstring)."""
+class SkeyeEnv(gymnasium.Env[Any, np.ndarray], EzPickle):
+    """One vehicle flying one task (see the module docstring). Each subclass records its own
+    constructor's arguments for pickling (``EzPickle.__init__``) after this one's."""
 
     # The class's render modes are the most any instance offers: Gymnasium's make reads them
     # before building it (and asks for "rgb_array" when given "human"); each instance's own say
@@ -102,6 +110,8 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray]):
 
     def __init__(self, task: Task, *, action: str = "velocity", episode_s: float | None = None,
                  render_mode: str | None = None, **settings: Any) -> None:
+        EzPickle.__init__(self, task, action=action, episode_s=episode_s,
+                          render_mode=render_mode, **settings)
         if action not in ACTIONS:
             raise ConfigError(f"action must be one of {list(ACTIONS)}, got {action!r}")
         if task.needs_camera and action != "velocity":
@@ -242,6 +252,7 @@ class HoverEnv(SkeyeEnv):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(Hover(), **kwargs)
+        EzPickle.__init__(self, **kwargs)
 
 
 class GoToEnv(SkeyeEnv):
@@ -249,6 +260,7 @@ class GoToEnv(SkeyeEnv):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(GoTo(), **kwargs)
+        EzPickle.__init__(self, **kwargs)
 
 
 class PadLandingEnv(SkeyeEnv):
@@ -266,3 +278,6 @@ class PadLandingEnv(SkeyeEnv):
         task = PadLanding(observation, image_size, start_offset_m, start_height_m,
                           pad_tolerance_m)
         super().__init__(task, **kwargs)
+        EzPickle.__init__(self, observation=observation, image_size=image_size,
+                          start_offset_m=start_offset_m, start_height_m=start_height_m,
+                          pad_tolerance_m=pad_tolerance_m, **kwargs)

@@ -16,7 +16,9 @@ batch of episodes, bit for bit. The keywords are the single environment's
 (:mod:`skeye.gym.envs`) plus ``spacing_m`` and ``max_episode_steps`` (which
 ``gymnasium.make`` turns into a ``TimeLimit`` wrapper, and ``make_vec`` hands to a vector entry
 point: each vehicle's episode is truncated after that many steps); it renders nothing, so it
-offers no render mode and Hover and GoTo take no camera (:mod:`skeye.gym.options`).
+offers no render mode and Hover and GoTo take no camera (:mod:`skeye.gym.options`). It
+pickles as its constructor's arguments, as the single environment does (``EzPickle``): a new
+world of the same options, not yet reset.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
+from gymnasium.utils import EzPickle
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
@@ -104,8 +107,9 @@ def check_period(setup: Setup) -> None:
             f"vectorization_mode='sync' or 'async'")
 
 
-class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
-    """N vehicles flying one task in one world (see the module docstring)."""
+class SkeyeVectorEnv(VectorEnv[Any, Any, Any], EzPickle):
+    """N vehicles flying one task in one world (see the module docstring). Each subclass
+    records its own constructor's arguments for pickling after this one's."""
 
     metadata: dict[str, Any] = {  # noqa: RUF012  (Gymnasium's class attribute)
         "autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -114,6 +118,9 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any]):
                  spacing_m: float | None = None, action: str = "velocity",
                  episode_s: float | None = None, render_mode: Any = None,
                  max_episode_steps: int | None = None, **settings: Any) -> None:
+        EzPickle.__init__(self, task_factory, num_envs, spacing_m=spacing_m, action=action,
+                          episode_s=episode_s, render_mode=render_mode,
+                          max_episode_steps=max_episode_steps, **settings)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
             raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
         if max_episode_steps == -1 and not isinstance(max_episode_steps, bool):
@@ -298,6 +305,7 @@ class HoverVectorEnv(SkeyeVectorEnv):
 
     def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
         super().__init__(Hover, num_envs, **kwargs)
+        EzPickle.__init__(self, num_envs, **kwargs)
 
 
 class GoToVectorEnv(SkeyeVectorEnv):
@@ -305,6 +313,7 @@ class GoToVectorEnv(SkeyeVectorEnv):
 
     def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
         super().__init__(GoTo, num_envs, **kwargs)
+        EzPickle.__init__(self, num_envs, **kwargs)
 
 
 class PadLandingVectorEnv(SkeyeVectorEnv):
@@ -322,3 +331,6 @@ class PadLandingVectorEnv(SkeyeVectorEnv):
                               pad_tolerance_m)
 
         super().__init__(task, num_envs, **kwargs)
+        EzPickle.__init__(self, num_envs, observation=observation, image_size=image_size,
+                          start_offset_m=start_offset_m, start_height_m=start_height_m,
+                          pad_tolerance_m=pad_tolerance_m, **kwargs)

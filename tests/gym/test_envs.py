@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
 import re
 import socket
 import warnings
 
+import cloudpickle
 import gymnasium
 import numpy as np
 import pytest
@@ -641,3 +644,66 @@ def test_sim_time_in_info_is_whole_steps_without_float_noise() -> None:
             assert info["sim_time_s"] == k * 50 / 1000, (k, info["sim_time_s"])
     finally:
         env.close()
+
+
+_COPIERS = {
+    "pickle": lambda env: pickle.loads(pickle.dumps(env)),
+    "cloudpickle": lambda env: cloudpickle.loads(cloudpickle.dumps(env)),  # AsyncVectorEnv's
+    "deepcopy": copy.deepcopy,
+}
+
+
+@pytest.mark.parametrize("copier", sorted(_COPIERS))
+def test_an_environment_in_flight_copies_as_its_options_as_gymnasiums_mujoco_ones(
+        copier: str) -> None:
+    """A reset environment (its live simulation: locks, MuJoCo's buffers) could not be
+    pickled, cloudpickled or deep-copied (TypeError: cannot pickle memoryview objects, or
+    '_thread.lock'). As Gymnasium's own MuJoCo environments (EzPickle), it now copies as its
+    constructor's options: a new environment of the same options, not reset (a step needs a
+    reset), whose reset(seed=s) flies the original's episode bit for bit; the original flies
+    on untouched."""
+    env = gymnasium.make("skeye/Hover-v0", episode_s=0.5, sensor_noise=0.5, action="attitude")
+    action = np.array([0.1, -0.1, 0.0, 0.0], dtype=np.float32)
+    try:
+        env.reset(seed=3)
+        env.step(action)
+        clone = _COPIERS[copier](env)
+        try:
+            own, twin = env.unwrapped, clone.unwrapped
+            assert type(twin) is type(own) and twin is not own and twin.flight is None
+            assert twin.settings == own.settings and twin.action_kind == "attitude"
+            assert twin.task.episode_s == 0.5
+            assert env.step(action)[4]["sim_time_s"] == pytest.approx(0.1)  # flies on
+            with pytest.raises(gymnasium.error.ResetNeeded):
+                clone.step(action)
+            assert _same(_episode(env, 8, 3)[0], _episode(clone, 8, 3)[0])
+        finally:
+            clone.close()
+    finally:
+        env.close()
+
+
+def test_pad_landing_and_the_batched_environment_copy_as_their_options() -> None:
+    """PadLanding's own keywords and the batched environment (a reset one: one live world of
+    all its vehicles) copy too, each as its constructor's options."""
+    pad = skeye.gym.PadLandingEnv(observation="image", image_size=(64, 48), camera="ideal",
+                                  start_offset_m=0.2, pad_tolerance_m=0.1, wind="none")
+    twin = pickle.loads(pickle.dumps(pad))
+    assert twin.observation_space == pad.observation_space
+    assert (twin.task.start_offset_m, twin.task.pad_tolerance_m) == (0.2, 0.1)
+    assert twin.settings == pad.settings and twin.settings.camera == "ideal"
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, episode_s=0.5, spacing_m=12.0,
+                              vectorization_mode="vector_entry_point")
+    try:
+        first, _ = envs.reset(seed=4)
+        clone = pickle.loads(pickle.dumps(envs))
+        try:
+            assert clone.flight is None and clone.num_envs == 2 and clone.spacing_m == 12.0
+            assert clone.tasks[1].episode_s == 0.5
+            with pytest.raises(gymnasium.error.ResetNeeded):
+                clone.step(np.zeros((2, 4), np.float32))
+            assert np.array_equal(clone.reset(seed=4)[0], first)
+        finally:
+            clone.close()
+    finally:
+        envs.close()
