@@ -365,7 +365,7 @@ class PolicyPilot:
             if self._needs_reset:  # its reset, tried once a period until it succeeds
                 try:
                     reset_policy(self.policy)
-                except Exception as exc:
+                except (Exception, SystemExit) as exc:  # a policy's sys.exit(): its failure
                     self.calls += 1
                     self._failed(LocalProtocolError(
                         f"the policy's reset raised {type(exc).__name__}: {exc}; the vehicle "
@@ -380,7 +380,7 @@ class PolicyPilot:
             started = time.monotonic()
             try:
                 action = self.policy(obs)
-            except Exception as exc:
+            except (Exception, SystemExit) as exc:  # sys.exit() too: not the pilot's end
                 self._timed(time.monotonic() - started)
                 self._failed(LocalProtocolError(
                     f"the policy raised {type(exc).__name__}: {exc}; the vehicle holds still"), exc)
@@ -407,8 +407,9 @@ class PolicyPilot:
                         "pilot's loop waited for it (%d slow call(s) so far)", took_s,
                         self.period_s, self.slow_calls)
 
-    def _failed(self, error: Exception, cause: Exception) -> NoReturn:
-        """A policy call that raised or gave no action: the vehicle holds still (its last
+    def _failed(self, error: Exception, cause: BaseException) -> NoReturn:
+        """A policy call that raised (``SystemExit`` included: a policy's ``sys.exit()`` would
+        otherwise end the pilot's loop) or gave no action: the vehicle holds still (its last
         set-point is not flown on), said at the first failure of a run of them, and the error
         goes to the pilot's loop (counted in its ``loop_faults``)."""
         self.failures += 1

@@ -308,3 +308,52 @@ def test_a_policy_whose_reset_fails_holds_the_vehicle_until_a_reset_succeeds(
     pilot.step()
     assert policy.resets == 1 and airframe.commands[-1] == ("velocity", 1.0, 0.0, 0.0, 0.0, None)
     assert pilot.failures_in_a_row == 0
+
+
+def test_a_policy_that_calls_sys_exit_is_a_failed_call_not_the_end_of_the_pilot(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A policy call that raised SystemExit (``sys.exit()``, ``exit()`` in a policy script)
+    escaped ``except Exception`` and ended the pilot's whole loop ("pilot loop failed"): no
+    more ticks, no link-loss watch, the vehicle flying its last set-point. It is now a failed
+    call as any other (``load_policy`` already took it so on import and construction): the
+    vehicle holds still, it is counted and said, and the pilot flies the next call."""
+    from tests.sim.test_cameras import small_camera_robot
+
+    calls: list[object] = []
+    flown = threading.Event()
+
+    def policy(obs: object) -> object:
+        calls.append(obs)
+        if len(calls) == 1:
+            sys.exit("the policy gave up")
+        if len(calls) == 3:
+            flown.set()
+        return np.zeros(4)
+
+    robots = small_camera_robot(tmp_path, 160, 120)  # the vision's frames, cheaply
+    with ExitStack() as stack:
+        control, images, _ = stack.enter_context(
+            sim_with_images(mode="lockstep", robot_dirs=(robots,)))
+        sim = stack.enter_context(
+            connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}"))
+        robot = sim.spawn("smallcam", start="Pad1")
+        cfg = robot.motion_config
+        vision = policy_factory(
+            pad_vision_factory(sim, robot, vision_class=DetectOnlyVision), policy,
+            observation="pad",
+            limits=ActionLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s),
+            period_s=0.05)
+        pilot = stack.enter_context(
+            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
+                        tick_s=0.05, vision=vision))
+        vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
+        vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
+        vehicle.take_off(0.5)
+        vehicle.wait_state(NavState.HOLDING, timeout_s=60)
+        with caplog.at_level("WARNING", logger="skeye.pilot.policy"):
+            vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)  # HOLD: the policy flies
+            assert flown.wait(30), f"the pilot's loop stopped: {pilot.loop_error!r}"
+        assert "the policy raised SystemExit: the policy gave up; the vehicle holds" in caplog.text
+        assert pilot.loop_error is None and pilot.vision.failures == 1
+        assert pilot.loop_faults >= 1
+        vehicle.wait_state(NavState.HOLDING, timeout_s=10)  # still holding, still reported
