@@ -173,7 +173,10 @@ class ActionLimits:
 
 def action_values(action: Any, count: int = 4) -> list[float]:
     """An action as ``count`` finite floats clipped to [-1, 1]; InvalidArgument naming it if it
-    is not ``count`` real numbers."""
+    is not ``count`` real numbers. Whatever numpy's conversion raises is that refusal, naming
+    its cause (a Python int beyond a float's range: OverflowError; a PyTorch tensor that
+    requires grad: RuntimeError), so the environments and the pilot's adapter treat every
+    bad action alike."""
     try:
         given = np.asarray(action)
         if given.dtype.kind not in "biufO":  # text, complex: not what an action holds
@@ -181,6 +184,9 @@ def action_values(action: Any, count: int = 4) -> list[float]:
         values = given.astype(np.float64)  # an object array: each one a number
     except (TypeError, ValueError):
         raise InvalidArgument(f"an action is {count} real numbers, got {action!r:.80}") from None
+    except Exception as exc:
+        raise InvalidArgument(f"an action is {count} real numbers, got {action!r:.80} "
+                              f"({type(exc).__name__}: {exc})") from None
     if values.shape != (count,):  # no silent flattening of a (2, 2) or a (1, 4)
         raise InvalidArgument(f"an action has {count} numbers, shape ({count},), got shape "
                               f"{values.shape}")

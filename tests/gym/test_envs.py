@@ -364,6 +364,36 @@ def test_an_action_that_is_not_four_real_numbers_is_an_invalid_argument(action: 
         env.close()
 
 
+class _TensorThatRequiresGrad:
+    """What a PyTorch tensor that requires grad does when numpy converts it."""
+
+    def __array__(self, dtype: object = None, copy: object = None) -> np.ndarray:
+        raise RuntimeError("Can't call numpy() on Tensor that requires grad. Use "
+                           "tensor.detach().numpy() instead.")
+
+
+@pytest.mark.parametrize("action,cause", [
+    ([10**400, 0, 0, 0], "OverflowError: int too large to convert to float"),
+    (_TensorThatRequiresGrad(), "RuntimeError: Can't call numpy"),
+])
+def test_an_action_whose_conversion_fails_otherwise_is_an_invalid_argument_naming_why(
+        action: object, cause: str) -> None:
+    """An action numpy could not convert for another reason than TypeError or ValueError
+    escaped as that bare error (OverflowError, RuntimeError), not the InvalidArgument the
+    environments and the pilot's policy adapter refuse a bad action with."""
+    from skeye.errors import InvalidArgument
+
+    env = gymnasium.make("skeye/Hover-v0")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(InvalidArgument, match="an action is 4 real numbers") as refused:
+            env.unwrapped.step(action)
+        assert cause in str(refused.value)
+        env.step(np.zeros(4, np.float32))  # the environment flies on
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("action", [np.zeros((2, 2)), np.zeros((1, 4)), np.zeros((4, 1))])
 def test_an_action_of_four_numbers_in_another_shape_is_refused_not_flattened(
         action: np.ndarray) -> None:

@@ -10,7 +10,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -310,25 +310,12 @@ def test_a_policy_whose_reset_fails_holds_the_vehicle_until_a_reset_succeeds(
     assert pilot.failures_in_a_row == 0
 
 
-def test_a_policy_that_calls_sys_exit_is_a_failed_call_not_the_end_of_the_pilot(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    """A policy call that raised SystemExit (``sys.exit()``, ``exit()`` in a policy script)
-    escaped ``except Exception`` and ended the pilot's whole loop ("pilot loop failed"): no
-    more ticks, no link-loss watch, the vehicle flying its last set-point. It is now a failed
-    call as any other (``load_policy`` already took it so on import and construction): the
-    vehicle holds still, it is counted and said, and the pilot flies the next call."""
+
+@contextmanager
+def _policy_engaged(tmp_path: Path, policy: object) -> Iterator[PilotServer]:
+    """A real pilot (``skeye pilot --policy``'s PolicyPilot) on the simulator over loopback,
+    its vehicle taken off to 0.5 m and holding, then PAD_MODE HOLD: the policy flies."""
     from tests.sim.test_cameras import small_camera_robot
-
-    calls: list[object] = []
-    flown = threading.Event()
-
-    def policy(obs: object) -> object:
-        calls.append(obs)
-        if len(calls) == 1:
-            sys.exit("the policy gave up")
-        if len(calls) == 3:
-            flown.set()
-        return np.zeros(4)
 
     robots = small_camera_robot(tmp_path, 160, 120)  # the vision's frames, cheaply
     with ExitStack() as stack:
@@ -350,10 +337,56 @@ def test_a_policy_that_calls_sys_exit_is_a_failed_call_not_the_end_of_the_pilot(
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
         vehicle.take_off(0.5)
         vehicle.wait_state(NavState.HOLDING, timeout_s=60)
-        with caplog.at_level("WARNING", logger="skeye.pilot.policy"):
-            vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)  # HOLD: the policy flies
-            assert flown.wait(30), f"the pilot's loop stopped: {pilot.loop_error!r}"
-        assert "the policy raised SystemExit: the policy gave up; the vehicle holds" in caplog.text
+        vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)  # HOLD: the policy flies
+        yield pilot
+        vehicle.wait_state(NavState.HOLDING, timeout_s=10)  # still holding, still reported
+
+
+def test_a_policy_that_calls_sys_exit_is_a_failed_call_not_the_end_of_the_pilot(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A policy call that raised SystemExit (``sys.exit()``, ``exit()`` in a policy script)
+    escaped ``except Exception`` and ended the pilot's whole loop ("pilot loop failed"): no
+    more ticks, no link-loss watch, the vehicle flying its last set-point. It is now a failed
+    call as any other (``load_policy`` already took it so on import and construction): the
+    vehicle holds still, it is counted and said, and the pilot flies the next call."""
+    calls: list[object] = []
+    flown = threading.Event()
+
+    def policy(obs: object) -> object:
+        calls.append(obs)
+        if len(calls) == 1:
+            sys.exit("the policy gave up")
+        if len(calls) == 3:
+            flown.set()
+        return np.zeros(4)
+
+    with caplog.at_level("WARNING", logger="skeye.pilot.policy"), \
+            _policy_engaged(tmp_path, policy) as pilot:
+        assert flown.wait(30), f"the pilot's loop stopped: {pilot.loop_error!r}"
         assert pilot.loop_error is None and pilot.vision.failures == 1
         assert pilot.loop_faults >= 1
-        vehicle.wait_state(NavState.HOLDING, timeout_s=10)  # still holding, still reported
+    assert "the policy raised SystemExit: the policy gave up; the vehicle holds" in caplog.text
+
+
+def test_an_action_numpy_cannot_convert_holds_the_vehicle_and_is_counted(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """An action whose conversion raised anything but TypeError or ValueError (a Python int
+    beyond a float's range: OverflowError; a PyTorch tensor that requires grad: RuntimeError)
+    went past the action's check as that bare error: the pilot's loop reported it as a fault
+    of the vision's step, and the vehicle flew on its last set-point, the failure neither
+    counted nor said as the policy's. It is now the policy's failed action, as a NaN is."""
+    calls: list[object] = []
+    flown = threading.Event()
+
+    def policy(obs: object) -> object:
+        calls.append(obs)
+        if len(calls) == 3:
+            flown.set()
+        return [10**400, 0, 0, 0] if len(calls) == 1 else np.zeros(4)
+
+    with caplog.at_level("WARNING", logger="skeye.pilot.policy"), \
+            _policy_engaged(tmp_path, policy) as pilot:
+        assert flown.wait(30), f"the pilot's loop stopped: {pilot.loop_error!r}"
+        assert pilot.vision.failures == 1 and pilot.vision.failures_in_a_row == 0
+    assert "the policy's action: an action is 4 real numbers" in caplog.text
+    assert "OverflowError" in caplog.text
