@@ -347,7 +347,10 @@ class PolicyPilot:
     def step(self) -> None:
         """Called by the pilot loop after each tick: the vision's step, then the policy's
         set-point once per period while engaged (the server holds no lock here; the boards'
-        lock is the vision's)."""
+        lock is the vision's). The observation is built, and the set-point flown, holding the
+        boards' lock; the policy's own code (its ``reset()`` and its call) runs without it, so
+        ground control's commands (PAD_MODE 0, a land) are handled while it thinks, and an
+        action that comes back after one took the vehicle elsewhere is not flown."""
         self.vision.step()
         boards = self.boards
         with self.vision.lock:
@@ -368,39 +371,50 @@ class PolicyPilot:
             if snap.time_s < self._next_s - 1e-9:
                 return
             self._next_s = max(self._next_s + self.period_s, snap.time_s)
-            if self._needs_reset:  # its reset, tried once a period until it succeeds
-                try:
-                    reset_policy(self.policy)
-                except (Exception, SystemExit) as exc:  # a policy's sys.exit(): its failure
-                    self.calls += 1
-                    self._failed(LocalProtocolError(
-                        f"the policy's reset raised {type(exc).__name__}: {exc}; the vehicle "
-                        f"holds still"), exc)
-                self._needs_reset = False
             with self._image_lock:
                 image = self._image
             assert self.pad is not None
             obs = policy_observation(self.observation, snap, boards.home_ned_m, self.pad.latest,
                                      image, self.image_size)
-            self.calls += 1
-            started = time.monotonic()
+        if self._needs_reset:  # its reset, tried once a period until it succeeds
             try:
-                action = self.policy(obs)
-            except (Exception, SystemExit) as exc:  # sys.exit() too: not the pilot's end
-                self._timed(time.monotonic() - started)
-                self._failed(LocalProtocolError(
-                    f"the policy raised {type(exc).__name__}: {exc}; the vehicle holds still"), exc)
+                reset_policy(self.policy)
+            except (Exception, SystemExit) as exc:  # a policy's sys.exit(): its failure
+                self.calls += 1
+                self._failed(mode, LocalProtocolError(
+                    f"the policy's reset raised {type(exc).__name__}: {exc}; the vehicle "
+                    f"holds still"), exc)
+            self._needs_reset = False
+        self.calls += 1
+        started = time.monotonic()
+        try:
+            action = self.policy(obs)
+        except (Exception, SystemExit) as exc:  # sys.exit() too: not the pilot's end
             self._timed(time.monotonic() - started)
-            try:
-                forward, right, up, yaw_rate = velocity_setpoint(action, self.limits)
-            except InvalidArgument as exc:
-                self._failed(InvalidArgument(
-                    f"the policy's action: {exc}; the vehicle holds still"), exc)
+            self._failed(mode, LocalProtocolError(
+                f"the policy raised {type(exc).__name__}: {exc}; the vehicle holds still"), exc)
+        self._timed(time.monotonic() - started)
+        try:
+            forward, right, up, yaw_rate = velocity_setpoint(action, self.limits)
+        except InvalidArgument as exc:
+            self._failed(mode, InvalidArgument(
+                f"the policy's action: {exc}; the vehicle holds still"), exc)
+        with self.vision.lock:
+            if not self._still_engaged(mode):  # ground control took it meanwhile: its say
+                log.info("the policy's action came after ground control changed PAD_MODE "
+                         "%s or took the vehicle out of HOLDING: not flown", mode.name)
+                return
             if self.failures_in_a_row:
                 log.warning("the policy flies again after %d failed call(s)",
                             self.failures_in_a_row)
                 self.failures_in_a_row = 0
             boards.fly_velocity(forward, right, up, yaw_rate)  # inside the flight envelope
+
+    def _still_engaged(self, mode: PadAction) -> bool:
+        """Whether the engagement a policy call was made in still holds (call it holding the
+        boards' lock): the same PAD_MODE, the vehicle still HOLDING."""
+        return (self.engaged and self.boards.pad.mode is mode
+                and self.boards.state is NavState.HOLDING)
 
     def _timed(self, took_s: float) -> None:
         """A call slower than its period held up the pilot's loop (the boards' tick, their
@@ -413,15 +427,18 @@ class PolicyPilot:
                         "pilot's loop waited for it (%d slow call(s) so far)", took_s,
                         self.period_s, self.slow_calls)
 
-    def _failed(self, error: Exception, cause: BaseException) -> NoReturn:
+    def _failed(self, mode: PadAction, error: Exception, cause: BaseException) -> NoReturn:
         """A policy call that raised (``SystemExit`` included: a policy's ``sys.exit()`` would
         otherwise end the pilot's loop) or gave no action: the vehicle holds still (its last
-        set-point is not flown on), said at the first failure of a run of them, and the error
-        goes to the pilot's loop (counted in its ``loop_faults``)."""
+        set-point is not flown on; unless ground control took it during the call, ``mode``
+        being the call's), said at the first failure of a run of them, and the error goes to
+        the pilot's loop (counted in its ``loop_faults``). Called without the boards' lock."""
         self.failures += 1
         self.failures_in_a_row += 1
         if self.failures_in_a_row == 1:
-            self.boards.airframe.hover()
+            with self.vision.lock:
+                if self._still_engaged(mode):
+                    self.boards.airframe.hover()
             log.warning("%s", error)
         raise error from cause
 

@@ -312,7 +312,7 @@ def test_a_policy_whose_reset_fails_holds_the_vehicle_until_a_reset_succeeds(
 
 
 @contextmanager
-def _policy_engaged(tmp_path: Path, policy: object) -> Iterator[PilotServer]:
+def _policy_engaged(tmp_path: Path, policy: object) -> Iterator[tuple[Vehicle, PilotServer]]:
     """A real pilot (``skeye pilot --policy``'s PolicyPilot) on the simulator over loopback,
     its vehicle taken off to 0.5 m and holding, then PAD_MODE HOLD: the policy flies."""
     from tests.sim.test_cameras import small_camera_robot
@@ -338,7 +338,7 @@ def _policy_engaged(tmp_path: Path, policy: object) -> Iterator[PilotServer]:
         vehicle.take_off(0.5)
         vehicle.wait_state(NavState.HOLDING, timeout_s=60)
         vehicle.pad_mode(1, deadband_m=0.05, max_speed_m_s=0.3)  # HOLD: the policy flies
-        yield pilot
+        yield vehicle, pilot
         vehicle.wait_state(NavState.HOLDING, timeout_s=10)  # still holding, still reported
 
 
@@ -361,7 +361,7 @@ def test_a_policy_that_calls_sys_exit_is_a_failed_call_not_the_end_of_the_pilot(
         return np.zeros(4)
 
     with caplog.at_level("WARNING", logger="skeye.pilot.policy"), \
-            _policy_engaged(tmp_path, policy) as pilot:
+            _policy_engaged(tmp_path, policy) as (_, pilot):
         assert flown.wait(30), f"the pilot's loop stopped: {pilot.loop_error!r}"
         assert pilot.loop_error is None and pilot.vision.failures == 1
         assert pilot.loop_faults >= 1
@@ -385,8 +385,44 @@ def test_an_action_numpy_cannot_convert_holds_the_vehicle_and_is_counted(
         return [10**400, 0, 0, 0] if len(calls) == 1 else np.zeros(4)
 
     with caplog.at_level("WARNING", logger="skeye.pilot.policy"), \
-            _policy_engaged(tmp_path, policy) as pilot:
+            _policy_engaged(tmp_path, policy) as (_, pilot):
         assert flown.wait(30), f"the pilot's loop stopped: {pilot.loop_error!r}"
         assert pilot.vision.failures == 1 and pilot.vision.failures_in_a_row == 0
     assert "the policy's action: an action is 4 real numbers" in caplog.text
     assert "OverflowError" in caplog.text
+
+
+def test_ground_control_takes_the_vehicle_back_while_the_policy_thinks(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """The policy was called holding the boards' lock, which every ground-control command
+    takes too: while a call ran (a slow model, a hung one), ground control could not take the
+    vehicle back (PAD_MODE 0), land it or get any answer, and when the call returned, its
+    action was flown before the command was even read. The call now runs outside that lock:
+    the command is answered at once, while the policy still thinks, and the late action is
+    not flown over it (the vehicle is handed back with a hover)."""
+    from skeye.link.vehicle import pad_mode_command
+    from skeye.wire.packets import PadAction
+
+    thinking, released = threading.Event(), threading.Event()
+    calls: list[object] = []
+
+    def policy(obs: object) -> object:
+        calls.append(obs)
+        if len(calls) == 2:
+            thinking.set()
+            released.wait(30)  # until the test lets it answer
+            return np.array([1.0, 0.0, 0.0, 0.0])
+        return np.zeros(4)
+
+    with caplog.at_level("INFO", logger="skeye.pilot.policy"), \
+            _policy_engaged(tmp_path, policy) as (vehicle, pilot):
+        try:
+            assert thinking.wait(30)
+            vehicle.command(pad_mode_command(PadAction.OFF), timeout_s=5.0)
+            assert not released.is_set()  # answered while the policy still thought
+        finally:
+            released.set()
+        vehicle.wait_state(NavState.HOLDING, timeout_s=10)
+    assert len(calls) == 2 and pilot.vision.failures == 0
+    assert not pilot.vision.engaged
+    assert "the policy's action came after ground control changed PAD_MODE HOLD" in caplog.text
