@@ -25,7 +25,8 @@ An environment pickles (``pickle``, ``cloudpickle``, ``copy.deepcopy``) as its c
 arguments, as Gymnasium's own MuJoCo environments do (:class:`gymnasium.utils.EzPickle`): a
 flight holds a live simulation (threads' locks, MuJoCo's buffers), so the copy is a new
 environment of the same options, not yet reset; its ``reset(seed=s)`` flies the episode the
-original's would.
+original's would. The copy keeps the ``spec`` that ``gymnasium.make`` set
+(:class:`SpecPickle`).
 """
 
 from __future__ import annotations
@@ -99,7 +100,20 @@ def task_origin(task: Task, flight_world: Any) -> tuple[float, float, float]:
     return (0.0, 0.0, 0.0)
 
 
-class SkeyeEnv(gymnasium.Env[Any, np.ndarray], EzPickle):
+class SpecPickle(EzPickle):
+    """:class:`gymnasium.utils.EzPickle` that also keeps the ``spec`` ``gymnasium.make`` (or
+    ``make_vec``) set on the environment after building it: a copy built from the
+    constructor's arguments alone would read None (its id, its ``max_episode_steps``)."""
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**super().__getstate__(), "spec": getattr(self, "spec", None)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        super().__setstate__(state)
+        self.spec = state.get("spec")
+
+
+class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
     """One vehicle flying one task (see the module docstring). Each subclass records its own
     constructor's arguments for pickling (``EzPickle.__init__``) after this one's."""
 

@@ -17,8 +17,8 @@ batch of episodes, bit for bit. The keywords are the single environment's
 ``gymnasium.make`` turns into a ``TimeLimit`` wrapper, and ``make_vec`` hands to a vector entry
 point: each vehicle's episode is truncated after that many steps); it renders nothing, so it
 offers no render mode and Hover and GoTo take no camera (:mod:`skeye.gym.options`). It
-pickles as its constructor's arguments, as the single environment does (``EzPickle``): a new
-world of the same options, not yet reset.
+pickles as its constructor's arguments, as the single environment does (``EzPickle``, keeping
+the ``spec`` ``make_vec`` set): a new world of the same options, not yet reset.
 """
 
 from __future__ import annotations
@@ -36,7 +36,14 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array
 
 from skeye.errors import ConfigError, InvalidArgument
 from skeye.geo import MAX_POSITION_M
-from skeye.gym.envs import ACTIONS, ENV_KEYWORDS, action_limits, apply_action, override_start
+from skeye.gym.envs import (
+    ACTIONS,
+    ENV_KEYWORDS,
+    SpecPickle,
+    action_limits,
+    apply_action,
+    override_start,
+)
 from skeye.gym.flight import (
     Flight,
     FlightSettings,
@@ -107,7 +114,7 @@ def check_period(setup: Setup) -> None:
             f"vectorization_mode='sync' or 'async'")
 
 
-class SkeyeVectorEnv(VectorEnv[Any, Any, Any], EzPickle):
+class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
     """N vehicles flying one task in one world (see the module docstring). Each subclass
     records its own constructor's arguments for pickling after this one's."""
 

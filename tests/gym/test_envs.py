@@ -737,3 +737,21 @@ def test_pad_landing_and_the_batched_environment_copy_as_their_options() -> None
             clone.close()
     finally:
         envs.close()
+
+
+def test_a_copy_of_a_made_environment_keeps_its_registration() -> None:
+    """A copy was built from the constructor's arguments alone and lost what gymnasium.make
+    had set on the environment: its spec (so the copy's spec, its wrappers' and its
+    max_episode_steps read None). The copy keeps it."""
+    env = gymnasium.make("skeye/Hover-v0", episode_s=2.0, max_episode_steps=7)
+    vec = gymnasium.make_vec("skeye/Hover-v0", num_envs=2,
+                             vectorization_mode="vector_entry_point")
+    try:
+        clone = copy.deepcopy(env)
+        assert clone.unwrapped.spec == env.unwrapped.spec
+        assert clone.spec is not None and clone.spec.id == "skeye/Hover-v0"
+        assert clone.spec.max_episode_steps == 7 and clone.spec.kwargs["episode_s"] == 2.0
+        assert pickle.loads(pickle.dumps(vec)).spec == vec.spec is not None
+    finally:
+        env.close()
+        vec.close()
