@@ -315,17 +315,13 @@ def test_stream_zero_stops_pushing(server: ImageServer, publisher: Publisher) ->
     try:
         conn.send(b"SKEYE FORMAT JPEG 50\nSKEYE STREAM 100\n")
         assert isinstance(conn.next_event(), DecodedFrame)
-        conn.send(b"SKEYE STREAM 0\n")
-        time.sleep(0.2)
-        # Drain what was on its way before the stop, until half a second of silence (a loaded
-        # machine can hold a frame that long); after that nothing more may come.
-        conn.sock.settimeout(0.5)
-        try:
-            while conn.sock.recv(1 << 20):
-                pass
-        except TimeoutError:
-            pass
-        conn.sock.settimeout(3.0)
+        # Requests are served in order, each after the frame under way: the error frame that
+        # answers the unknown command after the stop marks the stop's place in the stream.
+        conn.send(b"SKEYE STREAM 0\nSKEYE FLY\n")
+        while isinstance(event := conn.next_event(), DecodedFrame):
+            pass  # frames sent before the stop was served
+        assert isinstance(event, RemoteError) and "FLY" in event.reason
+        # After it nothing more may come (over 30 of the stream's periods).
         conn.assert_silent(0.3)
     finally:
         conn.close()
@@ -503,7 +499,9 @@ def test_close_leaves_no_threads_and_is_idempotent(buffer: FrameBuffer) -> None:
         buffer.register_camera("R5/Empty", 9)
         waiting = RawConn(srv.port)  # waiting for a first frame that never comes
         waiting.send(b"SKEYE CAMERA R5/Empty\nOK")
-        time.sleep(0.2)
+        deadline = time.monotonic() + 10.0  # the accept thread starts each client's thread
+        while len(_image_threads()) < 4 and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert len(_image_threads()) == 4  # accept + three clients
         start = time.monotonic()
         srv.close()
