@@ -1,4 +1,4 @@
-"""Learn skeye/Hover-v0 with Stable-Baselines3's PPO (on the CPU), then fly the policy.
+"""Learn skeye/Hover-v0 with Stable-Baselines3's PPO (on the CPU), then evaluate the policy.
 
 Stable-Baselines3 is a well-kept PyTorch library of the standard algorithms that takes
 Gymnasium environments as they are. It is not a skeye dependency (PyTorch is large): install
@@ -8,8 +8,9 @@ GB), then ``pip install 'stable-baselines3>=2.4'`` (docs/gym.md, "Learning a pol
 Run: ``python examples/gym/train_hover_sb3.py [--steps 200000] [--envs 4] [--out hover_ppo]``.
 It trains on ``--envs`` environments in worker processes, saves the model, and prints the mean
 episode return of the learned policy against holding still (zero velocity) on the same seeds.
-The saved policy flies the pilot as any other: a module with ``policy(obs) -> action`` (see
-:func:`load` below) for ``skeye pilot --policy``.
+:func:`load` gives the saved model back as an ``obs -> action`` function for the environment.
+It does not fly ``skeye pilot --policy``: the pilot builds PadLanding-v0's observations (the
+pad vector or the camera image), not Hover-v0's (docs/gym.md).
 """
 
 from __future__ import annotations
