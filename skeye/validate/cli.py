@@ -86,8 +86,14 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         check_setting("calibration", str(calibration))
     output_folder(out)
     with folder_lock(out, "skeye validate"):  # two runs there would mix their files
-        if keep_recordings:  # each trial would refuse to write over one, after the calibration
+        if keep_recordings:  # each trial would refuse to write over one, or fail to make its
+            # folder where something else is in the way, after the calibration
             kept = [out / f"recordings_seed{s}" for s in range(first_seed, first_seed + seeds)]
+            blocked = [str(d) for d in kept if os.path.lexists(d) and not d.is_dir()]
+            if blocked:  # a file, or a link to none: no trial of that seed could record there
+                raise ConfigError(f"--keep-recordings: {', '.join(blocked)} is not a folder "
+                                  "(each seed's recordings go in a folder of that name): remove "
+                                  "it, or give another --out")
             full = [str(d) for d in kept if d.is_dir() and any(d.iterdir())]
             if full:
                 raise ConfigError(f"--keep-recordings: {', '.join(full)} already hold(s) "
