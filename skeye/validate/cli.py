@@ -115,6 +115,7 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         limit_s = scaled_s(900.0 if quick else 7200.0)  # a guard; the runs wait on sim time
         trials = [Trial(e, dict(params), s, quick, timeout_s=limit_s)
                   for s in seed_list for e in experiments]
+        summary["trials"] = len(trials)  # the count every line that says "k of N" gives
         spec = SweepSpec(which, trials, [])
         with tempfile.TemporaryDirectory(prefix="skeye-validate-") as tmp:
 
@@ -183,10 +184,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
     print((Path(args.out) / "report.md").read_text())
     failed = summary.get("failed", [])
     if failed:  # as skeye sweep: 1 when a trial failed, the report written for the others
-        trials = args.seeds * (2 if args.experiment.upper() == "ALL" else 1)
         named = ", ".join(f"{f['experiment']} seed {f['seed']}" for f in failed)
-        print(f"skeye validate: {len(failed)} of {trials} trials failed ({named}); the report "
-              f"covers the others, the errors are in {Path(args.out) / 'report.md'}",
+        print(f"skeye validate: {len(failed)} of {summary['trials']} trials failed ({named}); "
+              f"the report covers the others, the errors are in {Path(args.out) / 'report.md'}",
               file=sys.stderr)
         return 1
     return 0

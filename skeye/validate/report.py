@@ -214,12 +214,12 @@ def _truth_note(setup: dict[str, Any]) -> str:
 
 
 def _seeds_words(seeds: list[int], flown: dict[str, list[int]] | None,
-                 failed: list[dict[str, Any]]) -> str:
-    """The seeds the figures come from; with failed trials, beside the seeds asked for."""
+                 failed: list[dict[str, Any]], trials: int) -> str:
+    """The seeds the figures come from; with failed trials, beside the seeds asked for and
+    the number of trials that ran (``summary["trials"]``)."""
     if not failed or flown is None:
         return f"{seeds}"
     reported = sorted({s for flew in flown.values() for s in flew})
-    trials = len(seeds) * len(flown)
     return (f"{reported} (seeds {', '.join(map(str, seeds))} asked for; {len(failed)} of "
             f"{trials} trials failed, listed under \"Failed trials\")")
 
@@ -245,13 +245,13 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
                  flown: dict[str, list[int]] | None = None) -> None:
     """report.md and summary.json. ``seeds`` are the seeds asked for, ``flown`` each
     experiment's seeds whose trial came back (all of them when None); ``summary["failed"]``
-    lists the others' errors."""
+    lists the others' errors, out of ``summary["trials"]`` run."""
     setup = summary.get("setup", {})
     failed = summary.get("failed", [])
     lines = [
         "# skeye validation report",
         "",
-        f"Seeds: {_seeds_words(seeds, flown, failed)}; "
+        f"Seeds: {_seeds_words(seeds, flown, failed, summary['trials'])}; "
         f"mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
         f"{setup.get('estimator', 'truth')}; world: {setup.get('world', 'pad')}; calibration: "

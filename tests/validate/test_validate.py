@@ -35,6 +35,7 @@ def test_quick_validation_reports_every_figure_from_its_series(
     assert printed.out.strip() == report.strip()  # the report is printed
     assert "failed" not in summary and "## Failed trials" not in report
     assert "Seeds: [1];" in report
+    assert summary["trials"] == 2  # what ran: E1 and E2 of seed 1, the count the lines give
     assert sorted(p.name for p in (out / "recordings_seed1").iterdir()) == [
         "e1_seed1.rec", "e2_attitude_seed1.rec", "e2_velocity_seed1.rec", "e2_vision_seed1.rec"]
     for name in ("e1_series.csv", "e2_series.csv", "e1_height.png", "e2_distance.png"):
@@ -145,6 +146,24 @@ def test_validate_with_every_trial_failed_writes_no_report_and_names_each(
     assert "; E2 seed 1: " in err and "Traceback" not in err, err
     assert err.count("injected engine fault at sim time") >= 2, err
     assert sorted(p.name for p in out.iterdir()) == [".skeye.lock"]
+
+
+def test_the_report_of_a_run_with_failed_trials_names_them_out_of_the_trials_that_ran(
+        tmp_path: Path) -> None:
+    """The report's side of a partly failed run (no input fails one trial alone through the
+    real processes any more, see above): its header gives k of ``summary["trials"]``, an
+    experiment none of whose trials came back says so, and each failed trial's error is one
+    table row (its '|' and line breaks taken out)."""
+    from skeye.validate.report import PAPER, write_report
+
+    summary = {"paper": PAPER, "setup": {}, "trials": 2,
+               "failed": [{"experiment": "E2", "seed": 1, "error": "SkeyeError: a | b\nc"}]}
+    write_report(tmp_path, summary, True, [1], {"E1": [1], "E2": []})
+    report = (tmp_path / "report.md").read_text()
+    assert "Seeds: [1] (seeds 1 asked for; 1 of 2 trials failed, listed under" in report
+    assert "E2: every trial failed, no figures." in report
+    assert "| E2 | 1 | SkeyeError: a / b c |" in report
+    assert json.loads((tmp_path / "summary.json").read_text())["trials"] == 2
 
 
 def test_bad_arguments_are_refused(tmp_path: Path):
