@@ -425,6 +425,9 @@ def load_world(name_or_path: str | Path) -> WorldDescription:
         resource = resources.files("skeye.sim").joinpath("worlds", f"{text_name}.toml")
         return _load_text(resource.read_text(encoding="utf-8"), str(resource))
     path = Path(name_or_path)
+    if path.is_dir():  # before the name's check: a folder named like a world is still a folder
+        raise ConfigError(f"{path} is a folder, not a world file (give a .toml file, e.g. "
+                          f"{path / 'my_world.toml'})")
     if not path.is_file():
         if path.suffix == "" and len(path.parts) == 1:  # looks like a name, not a path
             raise ConfigError(

@@ -52,6 +52,21 @@ def test_sim_names_a_robot_file_that_is_not_utf8(tmp_path: Path) -> None:
     assert "control protocol on" not in done.stdout
 
 
+@pytest.mark.parametrize("relative", [False, True])
+def test_sim_names_a_folder_given_as_the_world_file(tmp_path: Path, relative: bool) -> None:
+    """``--world worlds`` (the folder of one's world files, not a file in it) was "world file
+    not found", or, for a bare folder name, "unknown world ... and no such file": both
+    false, the folder is there. It is now named as a folder, not a world file."""
+    (tmp_path / "worlds").mkdir()
+    given = "worlds" if relative else str(tmp_path / "worlds")
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--port", "0", "--world",
+                           given], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 2, done
+    assert done.stderr == (f"skeye sim: error: {given} is a folder, not a world file (give a "
+                           f".toml file, e.g. {Path(given) / 'my_world.toml'})\n"), done.stderr
+    assert "control protocol on" not in done.stdout
+
+
 @pytest.mark.parametrize("which", ["--port", "--image-port"])
 def test_sim_on_a_taken_port_names_it_and_the_option_that_moves_it(which: str) -> None:
     with socket.create_server(("127.0.0.1", 0)) as taken:
