@@ -147,6 +147,9 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
         if "script" not in data:
             raise LocalProtocolError("experiment = \"script\" needs script = \"path/to/file.py\"")
         path = (base_dir / str(data["script"])).resolve()
+        if path.is_dir():
+            raise LocalProtocolError(f"flight script {path} is a folder, not a Python file "
+                                     "(give the .py file with trial(settings, params, workdir))")
         if not path.is_file():
             raise LocalProtocolError(f"flight script {path} does not exist")
         script = str(path)
@@ -221,6 +224,9 @@ def load_spec(path: Path, quick: bool | None = None) -> SweepSpec:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise LocalProtocolError(f"sweep spec {path} does not exist") from None
+    except IsADirectoryError:
+        raise LocalProtocolError(f"sweep spec {path} is a folder, not a spec file (give its "
+                                 ".toml file)") from None
     except tomllib.TOMLDecodeError as exc:
         raise LocalProtocolError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError as exc:

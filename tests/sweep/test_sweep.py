@@ -333,6 +333,27 @@ def test_a_spec_that_is_not_utf8_is_refused(tmp_path: Path):
         sweep(spec, tmp_path / "out", "local", show_progress=False)
 
 
+def test_a_folder_where_the_spec_or_its_script_goes_is_named_as_a_folder(tmp_path: Path):
+    """A folder given as the spec was '[Errno 21] Is a directory', and a folder given as a
+    spec's script 'flight script ... does not exist' (it does): each is now named as a
+    folder where a file goes, before anything runs."""
+    from skeye.errors import LocalProtocolError
+
+    (tmp_path / "flights").mkdir()
+    with pytest.raises(LocalProtocolError) as info:
+        sweep(tmp_path / "flights", tmp_path / "out", "local", show_progress=False)
+    assert str(info.value) == (f"sweep spec {tmp_path / 'flights'} is a folder, not a spec "
+                               "file (give its .toml file)")
+    spec = tmp_path / "spec.toml"
+    spec.write_text('experiment = "script"\nscript = "flights"\n')
+    with pytest.raises(LocalProtocolError) as info:
+        sweep(spec, tmp_path / "out", "local", show_progress=False)
+    assert str(info.value) == (f"flight script {tmp_path / 'flights'} is a folder, not a "
+                               "Python file (give the .py file with trial(settings, params, "
+                               "workdir))")
+    assert not (tmp_path / "out").exists()  # nothing ran
+
+
 def test_bad_command_lines_are_refused(tmp_path: Path):
     spec = _spec(tmp_path)
     for args, match in ((["--workers", "0"], "argument --workers: must be a whole number >= 1"),
