@@ -140,7 +140,10 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     if unknown:
         raise LocalProtocolError(f"unknown spec keys {sorted(unknown)}; known: "
                                  f"{sorted(_SPEC_KEYS)}")
-    experiment = str(data.get("experiment", "")).upper()
+    if "experiment" not in data:
+        raise LocalProtocolError('the spec names no experiment: give experiment = "E1", "E2" '
+                                 'or "script"')
+    experiment = str(data["experiment"]).upper()
     script: str | None = None
     if experiment == "SCRIPT":
         experiment = "script"

@@ -264,6 +264,9 @@ def test_script_figures_that_would_overwrite_the_row_or_not_fit_it_are_the_trial
     ("text", "match"),
     [
         ('experiment = "E3"', "experiment must be E1, E2 or script"),
+        # said "experiment must be E1, E2 or script, got None": None is Python's, not the file's
+        ('name = "no experiment"\nseeds = 2',
+         r'^the spec names no experiment: give experiment = "E1", "E2" or "script"$'),
         ('experiment = "E2"\nseeds = 0', "seeds must be >= 1"),
         ('experiment = "E2"\nseeds = [1, 1]', "seeds repeat"),
         ('experiment = "E2"\n[grid]\ngain = [1, 2]', "E2 has no parameter"),
