@@ -38,6 +38,7 @@ DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 FORMAT_VERSION = 1
 MAX_BOARD_CORNERS = 1000  # inner corners a side: far beyond any printed board
 MIN_IMAGE_PX = 16  # a side: a camera's smallest (OpenCV's corner finder fails below it)
+MAX_IMAGE_PX = 0xFFFF  # a side: a JPEG's largest (ITU T.81's 16-bit sizes), a RAW frame's too
 
 
 @dataclass(frozen=True)
@@ -262,7 +263,13 @@ def check_lens(c: CameraCalibration, where: str) -> None:
     reach pi), a principal point outside the image, a distortion coefficient beyond
     +-:data:`~skeye.robots.camera_model.DISTORTION_LIMIT` (the simulator's camera model's
     range). A fit that folds over outside the region the board covered is a real OpenCV
-    result and is accepted (docs/calibration.md, "What is refused")."""
+    result and is accepted (docs/calibration.md, "What is refused"). An image side beyond
+    :data:`MAX_IMAGE_PX` is refused first: no frame has it, and its field of view would
+    round to pi and be blamed on the focal length."""
+    for key, size in (("width_px", c.width_px), ("height_px", c.height_px)):
+        if size > MAX_IMAGE_PX:
+            raise ConfigError(f"{where}.{key}: an image side is at most {MAX_IMAGE_PX} px (a "
+                              f"JPEG's or a RAW frame's), got {size}")
     for key, size, f, axis in (("fx_px", c.width_px, c.fx, "horizontal"),
                                ("fy_px", c.height_px, c.fy, "vertical")):
         fov = 2.0 * math.atan(size / 2.0 / f)

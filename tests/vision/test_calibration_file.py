@@ -34,6 +34,12 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ("fx_px = 521.3", 'fx_px = "wide"', "[camera].fx_px: must be a finite number"),
         ("width_px = 800", "width_px = 800.5", "[camera].width_px: must be an integer"),
         ("width_px = 800\n", "", "missing required key width_px"),
+        # A size no frame has: 10^23 px was blamed on fx_px (its view "of exactly pi")
+        ("width_px = 800", "width_px = 99999999999999999999999",
+         "[camera].width_px: an image side is at most 65535 px (a JPEG's or a RAW frame's), "
+         "got 99999999999999999999999"),
+        ("height_px = 600", "height_px = 65536",
+         "[camera].height_px: an image side is at most 65535 px"),
         ("k1 = -0.21", "kappa = -0.21", "unknown key(s) ['kappa']"),
         ('board = "9x6"', 'board = "nine"', "COLSxROWS"),
         ("format = 1", "format = 7", "format must be 1"),
