@@ -310,12 +310,15 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
         from skeye.vision.calibration import load_calibration
 
         path = Path(choice)
+        if path.is_dir():
+            raise ConfigError(f"--calibration {choice} is a folder, not a calibration file "
+                              "(give its .toml file, or auto or none)")
         if not path.is_file():
             raise ConfigError(f"--calibration {choice}: no such file (or give auto or none)")
         try:
             load_calibration(path)  # a bad file is refused here, before anything starts
-        except Exception as exc:
-            raise ConfigError(f"--calibration {choice}: {exc}") from None
+        except Exception as exc:  # its message names the file already
+            raise ConfigError(f"--calibration: {exc}") from None
         return path
     config = load_robot_config(robot)
     mount = next((m for m in config.sensors if m.type_name.lower() == CAMERA_TYPE), None)

@@ -130,8 +130,15 @@ def test_the_pilots_calibration_choices(tmp_path) -> None:
         pilot_calibration("nope.toml", "hummingbird")
     junk = tmp_path / "junk.toml"
     junk.write_text("this is [not a calibration")
-    with pytest.raises(ConfigError, match=r"--calibration .*junk\.toml: "):
+    with pytest.raises(ConfigError) as info:  # the file named once, not twice
         pilot_calibration(str(junk), "hummingbird")
+    assert str(info.value).startswith(f"--calibration: {junk}: not a TOML file: "), info.value
+    assert str(info.value).count(str(junk)) == 1, info.value
+    # a folder was "no such file" (it exists): the folder of one's calibrations, given whole
+    with pytest.raises(ConfigError) as info:
+        pilot_calibration(str(tmp_path), "hummingbird")
+    assert str(info.value) == (f"--calibration {tmp_path} is a folder, not a calibration file "
+                               "(give its .toml file, or auto or none)")
     with pytest.raises(ConfigError, match="unknown robot class"):
         pilot_calibration("auto", "no-such-robot")
     sim, img, pilot, ground, video = _free_ports(5)
