@@ -70,6 +70,7 @@ def cmd_pad(args: argparse.Namespace) -> int:
 def cmd_detect(args: argparse.Namespace) -> int:
     """Detect the pad in one image file and print the estimate as JSON."""
     calibration = None
+    note = ""  # the field of view taken from the robot file, said on success
     if args.calibration is not None and args.fov is not None:  # one would do nothing
         return _fail(DETECT, "give --fov or --calibration, not both: the calibration's camera "
                      "matrix gives the geometry, --fov would be ignored")
@@ -101,9 +102,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
         args.fov = model.fov_h_rad
         lens = (f"; its lens distorts (k1 {model.k1:g}): give --calibration for exact figures"
                 if model.distorted else "")
-        print(f"{DETECT}: --fov not given: using {args.fov:g} rad, the horizontal "
-              f"field of view of robot {args.robot}'s camera ({model.profile} profile){lens}",
-              file=sys.stderr)
+        # said once the detection has run: a command that fails says its error alone
+        note = (f"{DETECT}: --fov not given: using {args.fov:g} rad, the horizontal field of "
+                f"view of robot {args.robot}'s camera ({model.profile} profile){lens}")
     if not math.isfinite(args.fov) or not 0.0 < args.fov < math.pi:
         return _fail(DETECT, f"--fov must be in (0, pi) radians, got {args.fov}")
     if (args.roll is None) != (args.pitch is None):
@@ -121,6 +122,8 @@ def cmd_detect(args: argparse.Namespace) -> int:
                      calibration=calibration)
     except (ConfigError, LocalProtocolError) as exc:
         return _fail(DETECT, str(exc))
+    if note:
+        print(note, file=sys.stderr)
     out: dict[str, Any] = est.to_json_dict()
     print(json.dumps(out))
     return 0

@@ -176,6 +176,14 @@ def test_detect_takes_the_fov_from_the_robot_file_and_says_so(pad_png, capsys):
     assert run(["vision", "detect", str(pad_png), "--camera", "Front"]) == 2
     assert ("has no camera named 'Front' (its cameras: Down); give --fov"
             in capsys.readouterr().err)
+    # An image that cannot be read: the error alone, one line (the --fov note came first, and
+    # made it two, about a detection that never ran)
+    junk = pad_png.parent / "junk.png"
+    junk.write_bytes(b"\x00\xffnot an image")
+    assert run(["vision", "detect", str(junk)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"skeye vision detect: error: cannot read image (not a supported image "
+                   f"format?): {junk}\n"), err
 
 
 def test_pad_command_tiles_over_paper(tmp_path, capsys):
