@@ -264,8 +264,9 @@ def write_printable(
             said = (f": {', or '.join(fix)}" if fix else " even at 10 dpi") + (
                 "" if pdf_fits else f" (the page is over the {MAX_PDF_SIDE_M:g} m a PDF page "
                 "may have)")
+            count = f"{side_px:.0f}" if side_px < 1e9 else f"{side_px:.3g}"  # not 300 digits
             raise LocalProtocolError(
-                f"a {side:g} m page at {dpi} dpi is {side_px:.0f} px a side, over the "
+                f"a {side:g} m page at {dpi} dpi is {count} px a side, over the "
                 f"{MAX_PNG_SIDE_PX} px a PNG may have{said}")
     if ext == ".pdf" and paper is None and not pdf_fits:
         most = math.floor(MAX_PNG_SIDE_PX * METRES_PER_INCH / side)

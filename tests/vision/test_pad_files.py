@@ -154,6 +154,8 @@ def test_printable_png_carries_its_dpi(tmp_path, dpi):
     (1.0, 1200, "1.04 m page at 1200 dpi is 49134 px a side, over the 32768 px a PNG may "
                 "have: give --dpi 800 or less, or write a .pdf (vector)"),
     (1e9, 10, "even at 10 dpi (the page is over the 5.08 m a PDF page may have)"),
+    # the pixel count of a 1e300 m page was written out in full, 300 digits of it
+    (1e300, 300, "a 1e+300 m page at 300 dpi is 1.18e+304 px a side, over the 32768 px"),
 ])
 def test_a_png_too_large_to_draw_is_refused(tmp_path, capsys, side_m, dpi, words):
     """A 20 m pad at 300 dpi made matplotlib fail to allocate the canvas (MemoryError, or
