@@ -212,8 +212,11 @@ def run(args: argparse.Namespace) -> int:
             airframe = open_airframe(airframe_uri, options)
         except (ConfigError, LocalProtocolError) as exc:  # a URI its backend refused
             # the vehicle's URI, not the option: it may come from --sim, and the backend's
-            # message names the option at fault (--start, --name)
-            return _error(f"{airframe_uri}: {exc}")
+            # message names the option at fault (--start, --name); once, where the backend's
+            # message begins with it already (mavlink://)
+            said = str(exc)
+            return _error(said if said.startswith(f"{airframe_uri}: ")
+                          else f"{airframe_uri}: {said}")
         with ExitStack() as stack:
             stack.callback(airframe.close)
             limits = airframe.limits

@@ -127,6 +127,9 @@ def _pilot(*args: str) -> subprocess.CompletedProcess[str]:
 def test_skeye_pilot_airframe_refuses_bad_uris_and_silent_controllers():
     bad = _pilot("--airframe", "mavlink://bogus/1.2.3.4:5")
     assert bad.returncode == 2 and "unknown MAVLink link kind 'bogus'" in bad.stderr
+    # the URI named once ("mavlink://bogus/1.2.3.4:5: mavlink://bogus/1.2.3.4:5: ..." before)
+    assert bad.stderr == ("skeye pilot: error: mavlink://bogus/1.2.3.4:5: unknown MAVLink link "
+                          "kind 'bogus' (udp, udpout, tcp, serial)\n"), bad.stderr
     port = free_udp_port()
     silent = _pilot("--airframe", f"mavlink://udp/127.0.0.1:{port}", "--timeout", "1",
                     "--port", "0")
