@@ -41,6 +41,11 @@ class AnswerLost(LinkTimeout):
     instead of at the deadline, on a line that carries only answers (an AscTec LL board's)."""
 
 
+class VehicleLost(SkeyeError):
+    """The vehicle below a pilot stopped answering (its HEALTH says LOST: the simulator gone or
+    frozen), so what was waited for cannot come until it is back."""
+
+
 class LinkClosed(SkeyeError):
     """A link is gone (closed locally, by the peer, or broken); nothing more can be sent or
     received. Raised by every client: the simulator connection, the image client, the vehicle

@@ -24,7 +24,13 @@ from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 from types import TracebackType
 
-from skeye.errors import AnswerLost, CommandRejected, LinkTimeout, LocalProtocolError
+from skeye.errors import (
+    AnswerLost,
+    CommandRejected,
+    LinkTimeout,
+    LocalProtocolError,
+    VehicleLost,
+)
 from skeye.link.transport import Link, LinkClosed, open_link
 from skeye.wire.packet_defs import LAYOUTS
 from skeye.wire.packet_units import (
@@ -48,6 +54,7 @@ from skeye.wire.packets import (
     FrameError,
     GotoGps,
     Health,
+    HealthStatus,
     Hold,
     Land,
     Launch,
@@ -499,17 +506,40 @@ class Vehicle:
 
         Returns the NAV_STATUS taken at ``time_s`` (the pilot holds the clock there), so a
         script that decides on it acts at an exact sim time.
+
+        Raises:
+            VehicleLost: the pilot's HEALTH says LOST (its simulator died or froze): sim time
+                stands still until it is back, so the wait ends at once, with the pilot's
+                reason, instead of at the timeout.
+            LinkTimeout: sim time did not reach ``time_s`` within the timeout.
         """
         until_ms = s_to_ms(time_s)
+        limit_s = self.timeout_s if timeout_s is None else timeout_s
+        with self._cond:
+            navs, healths = self._counts[PD.NAV_STATUS], self._counts[PD.HEALTH]
         self.command(Clock(until_ms))
-        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        deadline = time.monotonic() + limit_s
         while True:
-            msg = self.wait_for(PD.NAV_STATUS, max(0.01, deadline - time.monotonic()))
-            if isinstance(msg, NavStatus) and msg.time >= until_ms:
-                return msg
-            if time.monotonic() >= deadline:
-                raise LinkTimeout(f"sim time did not reach {time_s} s within "
-                                  f"{timeout_s or self.timeout_s} s (last: {msg})")
+            health = self.health
+            if health is not None and health.status is HealthStatus.LOST:
+                raise VehicleLost(f"sim time cannot reach {time_s} s: the vehicle is lost "
+                                  f"({health.reason or 'no reason given'})")
+            with self._cond:
+                msg = self.latest.get(PD.NAV_STATUS)
+                if (self._counts[PD.NAV_STATUS] > navs and isinstance(msg, NavStatus)
+                        and msg.time >= until_ms):
+                    return msg
+                navs, healths = self._counts[PD.NAV_STATUS], self._counts[PD.HEALTH]
+
+                def news(navs: int = navs, healths: int = healths) -> bool:
+                    return (self._counts[PD.NAV_STATUS] > navs
+                            or self._counts[PD.HEALTH] > healths)
+
+                try:
+                    self._wait(news, "NAV_STATUS", max(0.01, deadline - time.monotonic()))
+                except LinkTimeout:
+                    raise LinkTimeout(f"sim time did not reach {time_s} s within {limit_s} s "
+                                      f"(last: {msg})") from None
 
     def stream(
         self, poll_mask: int = 0, skeye_mask: int = int(SkeyeMask.NAV_STATUS), period_s: float = 0.1

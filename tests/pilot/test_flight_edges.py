@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from skeye.errors import CommandRejected
+from skeye.errors import CommandRejected, VehicleLost
 from skeye.pilot.boards import MIN_TAKE_OFF_M, BoardSettings
 from skeye.pilot.envelope import FlightEnvelope
-from skeye.wire.packets import NavState, PadAction
+from skeye.wire.packets import HealthStatus, NavState, PadAction
 from tests.pilot.test_takeover import _fly, _hold_at, pad_landing_under_way
 from tests.sim.conftest import running_sim
 from tests.sim.test_cameras import sim_with_images, small_camera_robot
@@ -185,3 +185,22 @@ def test_velocities_over_the_robot_files_limits_are_refused_in_the_users_terms(
         "vehicle's limit of 99.981 deg/s (1.745 rad/s) (code 3)\n")
     assert main([*link, "99.98", "--duration", "0.5"]) == 0, capsys.readouterr().err
     assert flight.pilot.boards.state is NavState.FLYING
+
+
+def test_a_grant_the_vehicle_cannot_reach_ends_when_the_pilot_says_it_is_lost(
+    stack: ExitStack,
+) -> None:
+    """The simulator dies under a ground-clock pilot: sim time stands still for good, and
+    ``run_until`` waited out its whole timeout for a NAV_STATUS that could not come (validate's
+    E2 trials: 800 s and more, so a run with a faulted simulator looked hung). The pilot says
+    HEALTH LOST; ``run_until`` now raises VehicleLost with its reason, and so does every later
+    grant."""
+    server = stack.enter_context(running_sim(mode="lockstep", seed=5))
+    flight = _fly(stack, server.port)
+    flight.run_for(0.2)
+    server.close()  # the simulator is gone; the pilot finds out at its next step
+    for _ in range(2):
+        with pytest.raises(VehicleLost, match="vehicle is lost"):
+            flight.vehicle.run_until(flight.now() + 5.0, timeout_s=300.0)
+    health = flight.vehicle.health
+    assert health is not None and health.status is HealthStatus.LOST, health
