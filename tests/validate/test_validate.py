@@ -23,9 +23,7 @@ from skeye.vision.calibration import load_calibration
 def test_quick_validation_reports_every_figure_from_its_series(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Seed 1's E1 and E2 through the real processes; every figure of the report recomputed
-    from the CSV series it wrote. (Seed 2's trials were made to fail here by a file in place of
-    its --keep-recordings folder; that is now refused before anything runs, and no other input
-    fails one seed's trials alone: see the test of a failed run below.)"""
+    from the CSV series it wrote. (Runs with failed trials: the tests below.)"""
     out = tmp_path / "val"
     assert main(["validate", "all", "--quick", "--seeds", "1", "--keep-recordings",
                  "--out", str(out)]) == 0
@@ -148,12 +146,36 @@ def test_validate_with_every_trial_failed_writes_no_report_and_names_each(
     assert sorted(p.name for p in out.iterdir()) == [".skeye.lock"]
 
 
+@pytest.mark.timeout(900)  # two lockstep flights through real processes, as the test above
+def test_a_run_whose_e2_trial_fails_reports_e1_and_names_the_failure(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A partly failed run through the real processes: every simulator's engine fails at 12 s
+    of sim time, after the quick E1 is flown and during E2's hold. E1's figures are reported,
+    E2's failure is listed with its error, and the exit status is 1 with one line on stderr
+    (as ``skeye sweep``). E2's ground station used to wait out its whole grant timeout here
+    (800 s and more) for sim time the dead simulator could not give; the pilot's HEALTH LOST
+    now ends the wait at once (``Vehicle.run_until``)."""
+    monkeypatch.setenv("SKEYE_SIM_FAULT_AT_S", "12")
+    out = tmp_path / "val"
+    assert main(["validate", "all", "--quick", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "skeye validate: 1 of 2 trials failed (E2 seed 1); the report covers" in err, err
+    assert "Traceback" not in err, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["trials"] == 2 and "E1" in summary and "E2" not in summary, summary
+    (failed,) = summary["failed"]
+    assert failed["experiment"] == "E2" and "VehicleLost" in failed["error"], failed
+    assert "injected engine fault at sim time 12.000 s" in failed["error"], failed
+    report = (out / "report.md").read_text()
+    assert "1 of 2 trials failed" in report and "E2: every trial failed, no figures." in report
+
+
 def test_the_report_of_a_run_with_failed_trials_names_them_out_of_the_trials_that_ran(
         tmp_path: Path) -> None:
-    """The report's side of a partly failed run (no input fails one trial alone through the
-    real processes any more, see above): its header gives k of ``summary["trials"]``, an
-    experiment none of whose trials came back says so, and each failed trial's error is one
-    table row (its '|' and line breaks taken out)."""
+    """The report's side of a partly failed run (through the real processes above): its
+    header gives k of ``summary["trials"]``, an experiment none of whose trials came back says
+    so, and each failed trial's error is one table row (its '|' and line breaks taken out)."""
     from skeye.validate.report import PAPER, write_report
 
     summary = {"paper": PAPER, "setup": {}, "trials": 2,
