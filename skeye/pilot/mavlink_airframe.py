@@ -38,6 +38,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
+from urllib.parse import parse_qs
 
 from pymavlink.dialects.v20 import common as mav
 
@@ -500,13 +501,20 @@ class MavlinkAirframe:
                 self._targets.append(obs)
 
 
+LINK_OPTIONS: dict[str, set[str]] = {"udp": set(), "udpout": {"bind"}, "tcp": set(),
+                                     "serial": {"baud"}}
+"""The options each ``mavlink://`` link kind takes (those of its ``skeye.mavlink.transport``
+link)."""
+
+
 def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
     """A started :class:`MavlinkAirframe` for ``mavlink://KIND/ADDRESS``:
 
     - ``mavlink://udp/HOST:PORT``: listen on HOST:PORT for the controller (it sends there, as
       PX4 sends to 14540 and ``skeye pilot --mavlink udpout://HOST:PORT`` does);
     - ``mavlink://udpout/HOST:PORT``: send to a controller listening there
-      (``skeye pilot --mavlink udp://HOST:PORT``);
+      (``skeye pilot --mavlink udp://HOST:PORT``), from 127.0.0.1 unless ``?bind=ADDR`` names
+      the address to send from (a controller on another machine needs it);
     - ``mavlink://tcp/HOST:PORT``: connect to a controller's TCP port;
     - ``mavlink://serial/dev/ttyACM0?baud=921600``: a serial line (a flight controller's
       TELEM port).
@@ -514,7 +522,8 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
     ``options`` go to :class:`MavlinkAirframe` (``wait_s`` to :meth:`MavlinkAirframe.start`).
 
     Raises:
-        ConfigError: a URI that is not one of these.
+        ConfigError: a URI that is not one of these, or with an option its link does not take
+            (:data:`LINK_OPTIONS`) or anything after HOST:PORT.
         LinkClosed: no flight controller answered within ``wait_s``.
     """
     parts = split_uri(uri, "airframe", "mavlink://udp/HOST:PORT (or udpout, tcp, serial)",
@@ -526,11 +535,21 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
     kind = parts.netloc.lower()
     rest = parts.path.lstrip("/")
     query = f"?{parts.query}" if parts.query else ""
-    links = {"udp": f"udp://{rest}", "udpout": f"udpout://{rest}", "tcp": f"tcpout://{rest}",
-             "serial": f"serial:///{rest}{query}"}
+    links = {"udp": f"udp://{rest}", "udpout": f"udpout://{rest}{query}",
+             "tcp": f"tcpout://{rest}", "serial": f"serial:///{rest}{query}"}
     if kind not in links:
         raise ConfigError(f"{uri}: unknown MAVLink link kind {kind!r} (udp, udpout, tcp, "
                           "serial)")
+    # Each option is the link's or refused: one dropped in silence (udpout's bind, a baud
+    # typed as speed) showed only as no controller answering, after the whole wait.
+    takes = LINK_OPTIONS[kind]
+    unknown = sorted(set(parse_qs(parts.query, keep_blank_values=True)) - takes)
+    if unknown:
+        raise ConfigError(f"{uri}: option(s) {unknown} are not for a {kind} link (it takes "
+                          f"{', '.join(sorted(takes)) or 'none'})")
+    if kind != "serial" and "/" in rest:
+        raise ConfigError(f"{uri}: {kind} is mavlink://{kind}/HOST:PORT, with nothing after "
+                          f"the port ({rest[rest.index('/'):]!r})")
     wait_s = float(options.pop("wait_s", 30.0))
     airframe = MavlinkAirframe(open_transport(links[kind]), **options)
     try:
