@@ -15,6 +15,12 @@ Times: frames carry the simulator's time. When the vehicle's clock is the simula
 ``clock - sim time`` seen when the newest frame arrived, the smallest of the last
 ``OFFSET_WINDOW`` (the smallest is the one least delayed by the line).
 
+A new camera under the URI's name (its robot spawned again, a simulator started again behind
+the port) numbers its frames from 1 again: a connection whose frame number goes back, or whose
+camera id changes, has met it (each connection's answers come in order, so a late answer on
+one never counts). Its frames are announced at once, numbered on after the old camera's (the
+vision takes a frame only if its number is above the last), and their times mapped afresh.
+
 Field of view: ``fov_rad=`` / ``fov_deg=`` in the URI (``skeye sim --ll-board`` prints it),
 else the pilot's (asked of the simulator on a ``sim://`` airframe), else a calibration file.
 """
@@ -38,8 +44,18 @@ from skeye.pilot.camera import (
 )
 from skeye.pixels import frame_image
 from skeye.uris import port_of, split_uri
+from skeye.wire.images import MetaHeader
 
 OFFSET_WINDOW = 50
+
+_Meta = tuple[int, int, float]  # a frame's camera id, number and sim time
+
+
+def _behind(frame: _Meta, last: _Meta | None) -> bool:
+    """True if ``frame`` cannot follow ``last`` from one camera: another camera id, or a
+    number or a sim time that went back (a camera's frames count up in both)."""
+    return last is not None and (frame[0] != last[0] or frame[1] < last[1]
+                                 or frame[2] < last[2])
 
 
 def parse_sim_camera(uri: str, robot: str = "R1") -> tuple[str, int, str, float | None]:
@@ -86,6 +102,13 @@ class SimCamera:
         self._offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)
         self._lost: str | None = None
         self._checked = False
+        # Numbering across the cameras met under the name (see the module docstring): the
+        # frames of camera run k are announced as base + their own number.
+        self._runs_lock = threading.Lock()
+        self._run = 0
+        self._bases = {0: 0}  # run -> base
+        self._newest: _Meta | None = None  # the newest frame of the current run
+        self._seen: dict[str, tuple[int, _Meta]] = {}  # which -> (run, its newest frame)
 
     # -- connections -----------------------------------------------------------------------
     def _client(self, which: str) -> ImageClient:
@@ -115,6 +138,39 @@ class SimCamera:
         self._offsets.append(now - sim_time_s)
         return sim_time_s + min(self._offsets)
 
+    def _frame_info(self, which: str, meta: MetaHeader) -> FrameInfo:
+        """The frame ``meta`` describes as this source announces it (and the newest known),
+        received on connection ``which``; a new camera's first frame starts a new run."""
+        frame = (meta.camera_id, meta.frame_number, meta.sim_time_s)
+        with self._runs_lock:
+            own = self._seen.get(which)
+            if own is None:  # this connection's first frame: after the newest either has
+                new_camera = _behind(frame, self._newest)
+            elif own[0] == self._run:
+                new_camera = _behind(frame, own[1])
+            elif self._newest is not None and meta.camera_id == own[1][0] != self._newest[0]:
+                # the old camera's, answered after the other connection met the new one
+                return FrameInfo(self._bases[own[0]] + meta.frame_number,
+                                 self._vehicle_time(meta.sim_time_s))
+            else:
+                new_camera = False  # the other connection met this camera first
+            if new_camera:
+                self._run += 1
+                self._bases[self._run] = self._latest.frame if self._latest is not None else 0
+                self._offsets.clear()  # its sim time started again
+                self._checked = False
+            self._seen[which] = (self._run, frame)
+            if new_camera or self._newest is None or meta.frame_number > self._newest[1]:
+                self._newest = frame
+            number = self._bases[self._run] + meta.frame_number
+            known = self._latest
+            if known is not None and known.frame == number:
+                return known  # the time it was announced with
+            info = FrameInfo(number, self._vehicle_time(meta.sim_time_s))
+            if known is None or number > known.frame:
+                self._latest = info
+            return info
+
     def _failed(self, which: str, exc: BaseException) -> CameraError:
         self._drop(which)
         self.errors += 1
@@ -136,10 +192,8 @@ class SimCamera:
             except SkeyeError as exc:
                 self._failed("probe", exc)
                 return self._latest
-            meta = frame.meta
-            if meta is not None and (self._latest is None
-                                     or meta.frame_number > self._latest.frame):
-                self._latest = FrameInfo(meta.frame_number, self._vehicle_time(meta.sim_time_s))
+            if frame.meta is not None:
+                self._frame_info("probe", frame.meta)
         return self._latest
 
     def image(self) -> CameraImage:
@@ -151,6 +205,7 @@ class SimCamera:
                 raise self._failed("image", exc) from exc
         if frame.meta is None:
             raise self._failed("image", CameraError("the image server sent no META header"))
+        info = self._frame_info("image", frame.meta)
         if not self._checked:
             try:
                 check_size(self.uri, self.options.size_px, bgr.shape[1], bgr.shape[0])
@@ -159,13 +214,6 @@ class SimCamera:
                 raise
             self._checked = True
         self._lost = None
-        known = self._latest
-        if known is not None and known.frame == frame.meta.frame_number:
-            info = known  # the time it was announced with
-        else:
-            info = FrameInfo(frame.meta.frame_number, self._vehicle_time(frame.meta.sim_time_s))
-        if self._latest is None or info.frame > self._latest.frame:
-            self._latest = info
         return CameraImage(info.frame, info.time_s, bgr)
 
     @property

@@ -31,7 +31,8 @@ from skeye.pilot.camera_file import parse_file_camera
 from skeye.pilot.camera_sim import parse_sim_camera
 from skeye.pilot.camera_v4l2 import V4l2Settings, parse_v4l2_uri
 from skeye.vision.detector import PadEstimate, detect
-from tests.sim.test_cameras import sim_with_images
+from tests.sim.conftest import LineClient
+from tests.sim.test_cameras import sim_with_images, small_camera_robot
 
 
 class FakeClock:
@@ -179,6 +180,55 @@ def test_a_sim_camera_on_another_clock_maps_the_frame_times(live):
         assert image.time_s == pytest.approx(1000.0)  # received now, on the vehicle's clock
     finally:
         source.close()
+
+
+def test_a_sim_camera_whose_robot_spawns_again_gives_the_new_cameras_frames_at_once(tmp_path):
+    """The robot the camera belongs to leaves the simulator and is spawned again under its
+    name (a crashed vehicle put back; a simulator started again behind the same image port):
+    the new camera numbers its frames from 1 again. The source compared frame numbers only, so
+    the new frames stayed unannounced, and the pad vision blind ("camera lost"), until their
+    numbers passed the old camera's (as long as the old one had run); on another clock their
+    times were also mapped with the old camera's offset, the old run's length in the past.
+    Now the first frame of a new camera is announced at once, numbered on after the old ones
+    (the vision takes a frame only if its number is above the last), timed on the new one."""
+    robots = small_camera_robot(tmp_path, 64, 48)
+    clock = FakeClock(1000.0)
+    with sim_with_images(robot_dirs=(robots,)) as (control, images, _cameras):
+        source = open_camera(f"sim://127.0.0.1:{images.port}/R1/Down?fov_deg=60",
+                             CameraOptions(clock=clock, clock_is_sim=False, timeout_s=5.0))
+        try:
+            first = LineClient(control.port)
+            first.expect("NFO")
+            first.answer("INIT {ClassName smallcam} {Name R1} {Location 0,0,-1}", "INIT")
+            old = None
+            while old is None or old.frame < 6:
+                first.step(34)
+                clock.t += 0.034
+                old = source.image()
+            first.close()  # R1 goes with its client, shortly after
+            clock.t += 1.0
+            deadline = time.monotonic() + 10.0
+            with pytest.raises(CameraError, match="R1/Down' is gone"):
+                while time.monotonic() < deadline:
+                    source.image()
+            assert source.lost is not None
+            second = LineClient(control.port)
+            second.expect("NFO")
+            second.answer("INIT {ClassName smallcam} {Name R1} {Location 0,0,-1}", "INIT")
+            second.step(34)
+            clock.t = 2000.0
+            announced = source.latest
+            assert announced is not None and announced.frame > old.frame, (announced, old)
+            new = source.image()
+            assert new.frame > old.frame and source.lost is None, (new, old)
+            assert new.time_s == pytest.approx(2000.0, abs=0.1)  # received now
+            second.step(34)
+            clock.t += 0.034
+            newer = source.image()
+            assert newer.frame > new.frame and newer.time_s > new.time_s
+            second.close()
+        finally:
+            source.close()
 
 
 def test_a_missing_camera_is_named():
