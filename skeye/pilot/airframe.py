@@ -187,6 +187,23 @@ class VehicleLimits:
     max_yaw_rate_rad_s: float = 1.745
 
 
+def vehicle_limits(robot: str, robot_dirs: tuple[str, ...] = ()) -> VehicleLimits:
+    """The speed limits of a robot class's file (``[controller]``), what a real vehicle's
+    backend (``asctec-ll://``, ``mavlink://``) gives the boards: on an LL board also the stick
+    scales (full stick in GPS mode is ``max_speed_m_s``, full thrust ``max_climb_m_s``).
+
+    Raises:
+        ConfigError: the class has no readable file.
+    """
+    from pathlib import Path
+
+    from skeye.robots.config import load_robot_config
+
+    config = load_robot_config(robot, tuple(Path(d) for d in robot_dirs), allow_paths=False)
+    c = config.controller
+    return VehicleLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s)
+
+
 @dataclass(frozen=True)
 class AirframeOptions:
     """What ``skeye pilot`` tells every backend; each uses the fields that apply to it.

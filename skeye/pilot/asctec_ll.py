@@ -59,7 +59,7 @@ from skeye.errors import (
 from skeye.geo import GeoOrigin
 from skeye.link.transport import DEFAULT_BAUD, open_link
 from skeye.link.vehicle import Vehicle
-from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits
+from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits, vehicle_limits
 from skeye.pilot.ll_control import LLEstimate, StickPilot, Sticks, Velocity, nav_state
 from skeye.uris import split_uri
 from skeye.wire.packet_units import s_to_ms
@@ -149,22 +149,6 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
         rate_hz=number("rate_hz", 20.0, 1.0, RATE_HZ_MAX),
         timeout_s=number("timeout_s", 0.5, 0.01, 60.0),
     )
-
-
-def vehicle_limits(robot: str, robot_dirs: tuple[str, ...] = ()) -> VehicleLimits:
-    """The stick scales and speed limits of a robot class's file (``[controller]``): full stick
-    in GPS mode is its ``max_speed_m_s``, full thrust its ``max_climb_m_s``.
-
-    Raises:
-        ConfigError: the class has no readable file.
-    """
-    from pathlib import Path
-
-    from skeye.robots.config import load_robot_config
-
-    config = load_robot_config(robot, tuple(Path(d) for d in robot_dirs), allow_paths=False)
-    c = config.controller
-    return VehicleLimits(c.max_speed_m_s, c.max_climb_m_s, c.max_yaw_rate_rad_s)
 
 
 def unreadable(vehicle: Vehicle, since: tuple[int, int] = (0, 0)) -> str:

@@ -46,7 +46,13 @@ from skeye.errors import ConfigError, LinkClosed, SkeyeError
 from skeye.mavlink.codec import BadFrame, MavCodec, MavParser
 from skeye.mavlink.modes import Px4Mode
 from skeye.mavlink.transport import MavTransport, open_transport
-from skeye.pilot.airframe import AirframeOptions, GpsFix, Snapshot, VehicleLimits
+from skeye.pilot.airframe import (
+    AirframeOptions,
+    GpsFix,
+    Snapshot,
+    VehicleLimits,
+    vehicle_limits,
+)
 from skeye.pilot.pad import PadObservation
 from skeye.uris import split_uri
 from skeye.workers import Worker
@@ -88,8 +94,9 @@ class MavlinkAirframe:
     uri = "mavlink://"
     limits = VehicleLimits()
     """The speed limits the boards check commands against: skeye's defaults (3 m/s, climb
-    1.5 m/s, yaw 100 deg/s), below PX4's own (MPC_XY_VEL_MAX 12 m/s ...), which the
-    controller applies on top (docs/protocols/mavlink.md)."""
+    1.5 m/s, yaw 100 deg/s), the backend's the robot file's (``--robot``; the Hummingbird's are
+    these); below PX4's own (MPC_XY_VEL_MAX 12 m/s ...), which the controller applies on top
+    (docs/protocols/mavlink.md)."""
 
     def __init__(
         self,
@@ -561,7 +568,20 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
 
 def open_mavlink_backend(uri: str, options: AirframeOptions) -> MavlinkAirframe:
     """The ``mavlink://`` airframe backend (``skeye pilot --airframe mavlink://...``): waits
-    up to ``options.timeout_s`` for the controller."""
+    up to ``options.timeout_s`` for the controller. Its speed limits are the robot file's
+    (``--robot``, ``--robot-dir``), as on the other airframes.
+
+    Raises:
+        ConfigError: the robot class has no readable file (before the link opens), or a URI
+            :func:`open_mavlink_airframe` refuses.
+        LinkClosed: no flight controller answered.
+    """
+    try:
+        limits = vehicle_limits(options.robot, options.robot_dirs)
+    except ConfigError as exc:
+        raise ConfigError(f"airframe {uri}: the speed limits come from the robot file "
+                          f"(--robot, --robot-dir): {exc}") from None
     airframe = open_mavlink_airframe(uri, wait_s=options.timeout_s)
     airframe.uri = uri
+    airframe.limits = limits
     return airframe

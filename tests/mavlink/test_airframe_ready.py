@@ -68,3 +68,34 @@ def test_the_battery_is_the_controllers_and_unknown_when_it_measures_none(status
             airframe.close()
     assert snap.battery_v == pytest.approx(battery_v)
     assert snap.pos_ned_m == pytest.approx((1.0, 2.0, -0.1)) and snap.rpy_rad[2] == 0.5
+
+
+def test_the_speed_limits_are_the_robot_files_as_on_the_ll_board():
+    """``skeye pilot --airframe mavlink://... --robot airrobot``: the boards check commands
+    against the vehicle's limits, which the pilot takes from the robot file on every other
+    airframe (the flight envelope too, on this one); the mavlink:// backend kept skeye's
+    defaults whatever --robot said, so an AirRobot (2 m/s, climb 2 m/s) was let fly 3 m/s and
+    refused a climb over 1.5 m/s."""
+    from skeye.pilot.airframe import AirframeOptions, open_airframe
+    from skeye.pilot.asctec_ll import vehicle_limits
+
+    port = free_udp_port()
+    with scripted_controller(port, status_mv=11_800):
+        airframe = open_airframe(f"mavlink://udp/127.0.0.1:{port}",
+                                 AirframeOptions(robot="airrobot", timeout_s=30.0))
+        try:
+            limits = airframe.limits
+        finally:
+            airframe.close()
+    assert limits == vehicle_limits("airrobot")
+    assert (limits.max_speed_m_s, limits.max_climb_m_s) == (2.0, 2.0)
+
+
+def test_a_robot_whose_file_is_not_here_is_refused_before_the_link_opens():
+    from skeye.errors import ConfigError
+    from skeye.pilot.airframe import AirframeOptions, open_airframe
+
+    port = free_udp_port()
+    with pytest.raises(ConfigError, match=r"--robot.*'nosuch'"):  # not LinkClosed after 2 s
+        open_airframe(f"mavlink://udp/127.0.0.1:{port}", AirframeOptions(robot="nosuch",
+                                                                           timeout_s=2.0))
