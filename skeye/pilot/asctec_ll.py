@@ -29,7 +29,12 @@ hearing nothing more, its own serial timeout):
   row: ``LL board silent: ...``, which says how much unreadable data came meanwhile (a line
   that carries bytes but no frame: a wrong baud rate, or noise);
 - the R/C's serial-interface switch (RC_DATA channel[4]) off while flying: ``R/C took over:
-  ...`` (the safety pilot has the vehicle; commands are refused while it is off on the ground).
+  ...`` (the safety pilot has the vehicle; commands are refused while it is off on the ground);
+- a realtime cycle below 80 % of ``rate_hz`` over a second, every answer in (a slow line or
+  radio link, a board answering late within ``timeout_s``): ``LL board cycle at N Hz, not
+  20 Hz: its answers take M ms a cycle``, at most every 5 s, and ``LL board cycle back at
+  20 Hz`` once it keeps its rate again (:attr:`AscTecLLAirframe.slow_cycle` meanwhile). The
+  pilot flies on: the board holds its last sticks between cycles.
 
 URI: ``asctec-ll://serial/dev/ttyS1?baud=57600`` or ``asctec-ll://tcp/HOST:PORT``; options
 ``lockstep=1``, ``rate_hz=20``, ``timeout_s=0.5`` (each answer's deadline; a CLOCK grant waits
@@ -81,6 +86,19 @@ SIM_TIME = re.compile(r"sim time (-?[0-9]+(?:\.[0-9]*)?) s")
 REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
 RATE_HZ_MAX = 200.0  # the fastest control cycle ``rate_hz`` allows
 CLOCK_TIMEOUT_S = 60.0  # how long a CLOCK grant waits for the simulator
+RATE_WINDOW_S = 1.0  # the realtime cycle's rate is measured over this much wall time
+RATE_SLOW = 0.8  # below this fraction of ``rate_hz`` the cycle is said to be slow
+
+
+@dataclass
+class _RateWindow:
+    """The realtime cycles since ``start_s``: how many, the time they took, and whether any
+    went unanswered (``silent`` counts those, and says its own)."""
+
+    start_s: float
+    cycles: int = 0
+    busy_s: float = 0.0
+    unanswered: bool = False
 
 
 @dataclass(frozen=True)
@@ -195,6 +213,8 @@ class AscTecLLAirframe:
         self._granted_s = 0.0
         self._stop = threading.Event()
         self._worker: Worker | None = None
+        self.slow_cycle: float | None = None  # the realtime cycle's rate (Hz) while said slow
+        self._slow_said_at = -REPORT_EVERY_S
         if self.lockstep:
             self._granted_s = self._grant(0.0)  # a grant already passed: answered with the time
         for attempt in range(1, FIRST_CONTACT_TRIES + 1):
@@ -334,15 +354,46 @@ class AscTecLLAirframe:
     def _run(self) -> None:
         period = self.control_period_s
         next_s = time.monotonic()
+        window = _RateWindow(next_s)
         while not self._stop.is_set():
+            started = time.monotonic()
             self._cycle()
             if self._lost is not None and self.link_failed is not None:
                 return  # the line is gone
+            window.busy_s += time.monotonic() - started
+            window.cycles += 1
+            window.unanswered = window.unanswered or self._silent > 0
+            if time.monotonic() - window.start_s >= RATE_WINDOW_S:
+                self._check_rate(window)
+                window = _RateWindow(time.monotonic())
             next_s += period
             delay = next_s - time.monotonic()
             if delay < -1.0:
                 next_s = time.monotonic()
             self._stop.wait(max(0.0, delay))
+
+    def _check_rate(self, window: _RateWindow) -> None:
+        """Say (at most every ``REPORT_EVERY_S``) that the realtime cycle keeps less than
+        ``RATE_SLOW`` of its rate, all its answers in (a silent board says so itself), and
+        once that it is back."""
+        rate_hz = window.cycles / (time.monotonic() - window.start_s)
+        wanted = self.settings.rate_hz
+        if rate_hz >= RATE_SLOW * wanted:
+            if self.slow_cycle is not None:
+                self.slow_cycle = None
+                log.warning("LL board cycle back at %g Hz on %s", wanted, self.vehicle.link.name)
+            return
+        if window.unanswered:
+            return
+        now = time.monotonic()
+        if self.slow_cycle is None or now - self._slow_said_at >= REPORT_EVERY_S:
+            self.slow_cycle = rate_hz
+            self._slow_said_at = now
+            log.warning("LL board cycle at %.1f Hz, not %g Hz: its answers take %.0f ms a "
+                        "cycle on %s (a slow line or radio link, a board answering late, or a "
+                        "busy onboard computer); the pilot's control of the vehicle runs that "
+                        "much slower", rate_hz, wanted, 1e3 * window.busy_s / window.cycles,
+                        self.vehicle.link.name)
 
     # -- the backend -----------------------------------------------------------------------
     @property

@@ -309,3 +309,50 @@ def test_a_fix_at_the_pole_keeps_the_vehicle():
         assert pilot.vehicle_lost is None and pilot.loop_error is None
         assert board.error is None
         board.check()
+
+
+class LateProxy(Proxy):
+    """The fault: every chunk the board sends reaches the pilot ``late_s`` after it was sent
+    (a slow radio link, a board answering late), each still within the answer deadline."""
+
+    late_s = 0.1
+
+    def from_board(self, data: bytes) -> bytes:
+        time.sleep(self.late_s)
+        return data
+
+
+def test_a_board_answering_late_is_said_with_the_rate_the_cycle_keeps(caplog):
+    """A board whose every answer takes 0.2 s (the deadline is 0.5 s) never counts as silent,
+    and the realtime cycle (sticks and their ack, then the poll) then takes 0.4 s or more: at
+    its default 20 Hz it ran at 2.5 Hz without a word (1.5 Hz at 0.3 s, measured), the pilot's
+    control of the vehicle eight times slower than it was tuned for. Now the worker says so,
+    with the rate it keeps and how long its answers take, and again when the rate comes back.
+    The cycle here is 5 Hz (``rate_hz=5``), so that a loaded test host keeps it once the
+    answers are prompt again."""
+    import logging
+    import re
+
+    from skeye.hil.line import open_line
+    from tests.pilot.fake_airframe import FakeAirframe
+
+    caplog.set_level(logging.INFO, logger="skeye.pilot.asctec_ll")
+    with ExitStack() as stack:
+        board = stack.enter_context(LLBoardServer(FakeAirframe(), open_line("tcp"),
+                                                  time.monotonic))
+        proxy = LateProxy(int(board.line.address.rsplit(":", 1)[1]))
+        proxy.late_s = 0.2
+        stack.callback(proxy.close)
+        airframe = open_airframe(f"asctec-ll://tcp/127.0.0.1:{proxy.port}?rate_hz=5",
+                                 AirframeOptions())
+        stack.callback(airframe.close)
+        wait_until(lambda: "LL board cycle at" in caplog.text, 5.0, "the slow cycle said")
+        said = re.search(r"LL board cycle at ([0-9.]+) Hz, not 5 Hz: .* take ([0-9]+) ms",
+                         caplog.text)
+        assert said is not None, caplog.text
+        # below 80 % of the rate; two answers a cycle, each 0.2 s late
+        assert float(said.group(1)) < 0.8 * 5 and int(said.group(2)) >= 400, said.group(0)
+        proxy.late_s = 0.0
+        wait_until(lambda: "LL board cycle back at 5 Hz" in caplog.text, 5.0,
+                   "the rate's return said")
+        assert airframe.lost is None
