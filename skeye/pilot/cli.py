@@ -155,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
             check_camera_uri(camera_uri)  # the whole URI, before the airframe opens
         except LocalProtocolError as exc:
             return _error(f"--camera: {exc}")
+    elif args.images is None and args.camera != DEFAULT_CAMERA:
+        return _error(camera_name_problem(args.camera))
     has_camera = args.images is not None or camera_uri is not None
     calibration = None
     if args.calibration is not None:
@@ -527,6 +529,20 @@ _TUNES: tuple[tuple[str, str, str, Callable[[argparse.Namespace], bool]], ...] =
 )
 
 
+DEFAULT_CAMERA = "Down"  # --camera: the spawned robot's downward camera
+
+
+def camera_name_problem(camera: str) -> str:
+    """Why ``--camera NAME`` (no URI) without ``--images`` is refused: a name is a camera of
+    the robot the pilot spawns, and only ``--images`` reads it; without it the pilot flew with
+    no camera and said nothing. The message names the URIs likely meant (a device path is the
+    ``v4l2://`` one with its scheme forgotten)."""
+    device = f"v4l2://{camera}" if camera.startswith("/dev/") else "v4l2:///dev/video0"
+    return (f"--camera {camera}: a name is a camera of the robot the pilot spawns, read with "
+            f"--images; a camera of this computer or a video is a URI: {device}, "
+            "file://video.mp4, or sim://HOST:PORT/ROBOT/CAMERA (docs/onboard.md)")
+
+
 def unused_option_problem(args: argparse.Namespace) -> str:
     """What is wrong ('' when nothing) with an option given a value other than its default
     where it would do nothing: one that tunes something not turned on (``--baud`` without
@@ -635,7 +651,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--camera",
-        default="Down",
+        default=DEFAULT_CAMERA,
         metavar="NAME|URI",
         help="the downward camera: a camera name of the spawned robot (with --images), or a "
         "URI: sim://HOST:PORT/ROBOT/CAMERA (the simulator's image server), "

@@ -262,6 +262,25 @@ def test_options_that_would_do_nothing_are_refused(capsys, extra, words):
     assert err.startswith(f"skeye pilot: error: {words}"), err
 
 
+@pytest.mark.parametrize("camera", ["/dev/video0", "flight.mp4", "Front"])
+def test_a_camera_name_without_images_is_refused_naming_the_camera_uris(capsys, camera):
+    """``--camera /dev/video0`` (the device, its ``v4l2://`` forgotten) on a real vehicle's
+    airframe: a ``--camera`` that is no URI names a camera of the robot the pilot spawns, which
+    only ``--images`` reads, so without it the pilot started, flew without a camera and said
+    nothing (PAD never found). It is refused before the airframe opens (here a closed port,
+    which would give status 4), naming the URIs that were likely meant."""
+    from skeye.cli import main
+
+    status = main(["pilot", "--airframe", f"asctec-ll://tcp/127.0.0.1:{_unused_port()}",
+                   "--port", "0", "--camera", camera])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.startswith(f"skeye pilot: error: --camera {camera}: "), err
+    assert "--images" in err and "v4l2:///dev/video0" in err and "file://" in err, err
+    if camera.startswith("/dev/"):
+        assert f"v4l2://{camera}" in err, err
+
+
 def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
     """The message said ``--airframe: no start pose ...``: an option the user had not given
     (the airframe came from --sim) and not the one at fault."""
