@@ -177,6 +177,14 @@ class TcpLink(Link):
         self._sock.close()
 
 
+def serial_error(exc: BaseException) -> str:
+    """pyserial's error on opening a port, with the reason said when another program holds
+    it (pyserial: "Could not exclusively lock port")."""
+    if "exclusively lock" in str(exc):
+        return f"in use by another program (a skeye pilot or link already has it open): {exc}"
+    return str(exc)
+
+
 class SerialLink(Link):
     """A serial port through pyserial (8N1, no flow control)."""
 
@@ -186,9 +194,12 @@ class SerialLink(Link):
 
         try:
             # timeout=0: non-blocking reads; recv() waits in select() on the descriptor.
-            self._port = serial.Serial(port, baudrate=baud, timeout=0, write_timeout=10.0)
+            # exclusive: a second program (another pilot) opening the port is refused, not
+            # given a share of the line (an advisory flock, as QGroundControl's serial links).
+            self._port = serial.Serial(port, baudrate=baud, timeout=0, write_timeout=10.0,
+                                       exclusive=True)
         except (serial.SerialException, ValueError) as exc:
-            raise LinkClosed(f"cannot open serial port {port}: {exc}") from None
+            raise LinkClosed(f"cannot open serial port {port}: {serial_error(exc)}") from None
         self._serial_error: type[Exception] = serial.SerialException
         self.baud = baud
         self.name = f"serial://{port}?baud={baud}"

@@ -267,10 +267,14 @@ class SerialTransport:
     def __init__(self, device: str, baud: int) -> None:
         import serial
 
-        try:
-            self.port = serial.Serial(device, baud, timeout=0, write_timeout=0.5)
+        from skeye.link.transport import serial_error
+
+        try:  # exclusive: as the AscTec link's (skeye.link.transport.SerialLink)
+            self.port = serial.Serial(device, baud, timeout=0, write_timeout=0.5,
+                                      exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise ConfigError(f"cannot open serial {device} at {baud} baud: {exc}") from None
+            raise ConfigError(f"cannot open serial {device} at {baud} baud: "
+                              f"{serial_error(exc)}") from None
         self.name = f"serial://{device}?baud={baud}"
         self.datagram = False
 

@@ -356,3 +356,30 @@ def test_a_board_answering_late_is_said_with_the_rate_the_cycle_keeps(caplog):
         wait_until(lambda: "LL board cycle back at 5 Hz" in caplog.text, 5.0,
                    "the rate's return said")
         assert airframe.lost is None
+
+
+def test_a_serial_line_another_pilot_holds_is_refused_naming_it():
+    """A second ``skeye pilot`` (one started by hand beside the vehicle's service) opened the
+    LL board's serial port as well, and the two sent their sticks and polls down one line,
+    each reading the other's answers. The port is now held exclusively (pyserial's
+    ``exclusive``: an advisory ``flock``, as QGroundControl locks its serial links): the second
+    open is refused at once, saying the port is in use, instead of sharing the line. The line
+    is a pseudo-terminal nobody answers on, so without the lock the second pilot would have
+    waited out its first-contact tries and called the board silent."""
+    from skeye.errors import LinkClosed
+    from skeye.link.transport import open_link
+
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    os.close(slave)
+    first = open_link(f"serial://{path}")
+    try:
+        started = time.monotonic()
+        with pytest.raises(LinkClosed, match=f"{path}.*in use by another program"):
+            open_airframe(f"asctec-ll://serial{path}", AirframeOptions())
+        assert time.monotonic() - started < 1.0
+        first.close()
+        open_link(f"serial://{path}").close()  # free again once the first closed it
+    finally:
+        first.close()
+        os.close(master)
