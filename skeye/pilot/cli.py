@@ -54,7 +54,7 @@ from skeye.pilot.airframe import (
     open_airframe,
 )
 from skeye.pilot.boards import BoardSettings
-from skeye.pilot.camera import check_camera_uri
+from skeye.pilot.camera import CameraError, check_camera_uri
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
 from skeye.pilot.video_server import (
@@ -234,8 +234,11 @@ def run(args: argparse.Namespace) -> int:
             vision = None
             camera_name, fov_h_rad = args.camera, None
             if camera_uri is not None:
-                source = open_camera_for(camera_uri, airframe, args.name, calibration,
-                                         args.timeout)
+                try:
+                    source = open_camera_for(camera_uri, airframe, args.name, calibration,
+                                             args.timeout)
+                except CameraError as exc:  # a file that is no video, or the wrong size
+                    return _error(f"--camera: {exc}")
                 stack.callback(source.close)
                 fov_h_rad = source.fov_h_rad
                 if calibration is None and fov_h_rad is None:

@@ -281,6 +281,37 @@ def test_a_camera_name_without_images_is_refused_naming_the_camera_uris(capsys, 
         assert f"v4l2://{camera}" in err, err
 
 
+@pytest.mark.parametrize("what", ["a directory", "the wrong size"])
+def test_a_camera_file_that_cannot_be_flown_on_is_a_bad_camera_option(capsys, tmp_path, what):
+    """``--camera file://...`` naming a directory, or a photo of another size than
+    ``--calibration``'s: the pilot ended with status 1, "other errors", the message naming the
+    camera but not the option, where a bad ``--camera`` (a malformed URI, a camera name the
+    robot lacks) is status 2 naming it (docs/pilot.md). The airframe here is an LL board
+    emulated on a fake vehicle, over TCP (the camera opens once the airframe is there)."""
+    import cv2
+    import numpy as np
+
+    from skeye.cli import main
+    from skeye.hil.line import open_line
+    from skeye.hil.ll_server import LLBoardServer
+
+    if what == "a directory":
+        uri, extra, words = f"file://{tmp_path}", [], "(a directory)"
+    else:
+        cv2.imwrite(str(tmp_path / "pad.png"), np.zeros((48, 64, 3), np.uint8))
+        CameraCalibration.pinhole(320, 240, 1.0).save(tmp_path / "camera.toml")
+        uri = f"file://{tmp_path / 'pad.png'}"
+        extra = ["--calibration", str(tmp_path / "camera.toml")]
+        words = "frames are 64x48, the calibration is for 320x240"
+    with LLBoardServer(FakeAirframe(), open_line("tcp"), time.monotonic) as board:
+        status = main(["pilot", "--airframe", board.line.client_uri(), "--port", "0",
+                       "--camera", uri, *extra])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.startswith(f"skeye pilot: error: --camera: camera {uri}: "), err
+    assert words in err, err
+
+
 def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
     """The message said ``--airframe: no start pose ...``: an option the user had not given
     (the airframe came from --sim) and not the one at fault."""
