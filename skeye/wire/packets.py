@@ -18,6 +18,8 @@ commands and skeye frames). Invariants:
   matched) the parser skips the whole frame; when it is not (bad stop string, length field over
   1024, bad command checksum, unknown command letters) it resumes at the byte after the bad
   start marker, so a real frame hidden behind a corrupt length or a dropped byte is still found.
+  On the ground side a length field that disagrees with its PD's structure is such a bad frame
+  at once (``VehicleStreamParser``): it is not waited for.
 - The buffer never holds more than one maximal frame (1035 bytes) plus the unparsed chunk.
   ``discard()`` drops an unfinished frame whose sender is gone (a new connection on the line).
 
@@ -453,6 +455,9 @@ class VehicleStreamParser(_StreamParser):
             return 1, None  # a lone '>'
         if len(buf) < 3:
             return None
+        wrong = self._wrong_length()
+        if wrong is not None:
+            return wrong
         framed = _split_frame(buf, len(START))
         if framed is None:
             return None
@@ -465,6 +470,28 @@ class VehicleStreamParser(_StreamParser):
             return framed.size, _decode(cls, framed.payload)
         except _Reject as rej:
             return self._error(rej.kind, rej.reason, framed.size)
+
+
+    def _wrong_length(self) -> tuple[int, FrameError] | None:
+        """A bad frame, at once, when the length field disagrees with the structure its PD
+        names (each vehicle structure has a fixed size; RESULT at least its fixed part): a
+        corrupted length would otherwise hold every later byte as the frame's rest, up to
+        1024 bytes, on a line where the answers behind it only come once these are read.
+        The parser resumes at the byte after the start marker."""
+        buf = self._buf
+        if len(buf) < len(START) + 3:
+            return None
+        cls = VEHICLE_BY_PD.get(buf[len(START) + 2])
+        if cls is None:
+            return None  # an unknown PD: its length cannot be checked
+        layout = LAYOUTS[cls]
+        length = buf[len(START)] | buf[len(START) + 1] << 8
+        if length > MAX_PAYLOAD:
+            return None  # too long for any frame: said as such (TOO_LONG), chunks or not
+        if length == layout.size or (layout.tail is not None and layout.size <= length):
+            return None
+        return self._error(ErrorKind.BAD_LENGTH, f"{cls.__name__}: length field {length}, "
+                           f"its structure is {layout.size} bytes", 1)
 
 
 class CommandStreamParser(_StreamParser):

@@ -94,3 +94,58 @@ def test_one_corrupted_answer_costs_no_wait_for_the_answer_deadline() -> None:
                               f"took {took_s:.2f} s")
             assert airframe.lost is None, (pd, airframe.lost)
         assert not waited, waited
+
+
+class LengthProxy(Proxy):
+    """Spoils the length field of the next LL_STATUS frame the board sends, once: 1000 bytes
+    (within the protocol's 1024) where the structure has 21."""
+
+    armed = False
+    corrupted = 0
+
+    def from_board(self, data: bytes) -> bytes:
+        if not self.armed:
+            return data
+        at = data.find(b">*>")
+        while at >= 0 and (at + 5 >= len(data) or data[at + 5] != PD.LL_STATUS):
+            at = data.find(b">*>", at + 1)
+        if at < 0:
+            return data
+        self.armed = False
+        self.corrupted += 1
+        spoiled = bytearray(data)
+        spoiled[at + 3 : at + 5] = (1000).to_bytes(2, "little")
+        return bytes(spoiled)
+
+
+def test_an_answer_whose_length_field_is_corrupted_does_not_lose_the_board() -> None:
+    """The parser took the length field at its word and held every later byte as that frame's
+    rest, waiting for 1000 bytes; the pilot, its answers never parsed, sent nothing more than
+    each cycle's sticks (5 bytes of ack a cycle), and after 3 cycles called the board silent
+    (``vehicle lost``, for good: it stops commanding, and the board starts its emergency
+    procedure), the line's errors reading 0. A structure's length is known from its descriptor:
+    a length field that disagrees is a bad frame at once, and the frames behind it are read.
+    A real-time board over TCP, on a fake vehicle (no simulator)."""
+    from skeye.hil.line import open_line
+    from skeye.hil.ll_server import LLBoardServer
+    from tests.pilot.fake_airframe import FakeAirframe
+
+    with ExitStack() as stack:
+        board = stack.enter_context(LLBoardServer(FakeAirframe(), open_line("tcp"),
+                                                  time.monotonic))
+        proxy = LengthProxy(int(board.line.address.rsplit(":", 1)[1]))
+        stack.callback(proxy.close)
+        airframe = open_airframe(f"asctec-ll://tcp/127.0.0.1:{proxy.port}", AirframeOptions())
+        stack.callback(airframe.close)
+        assert isinstance(airframe, AscTecLLAirframe)
+        proxy.armed = True
+        deadline = time.monotonic() + 5.0
+        while proxy.corrupted == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert proxy.corrupted == 1, "no frame corrupted"
+        cycles = airframe.cycles
+        while airframe.cycles < cycles + 10 and airframe.lost is None:  # 0.5 s at 20 Hz
+            assert time.monotonic() < deadline + 5.0, f"stuck at {airframe.cycles} cycles"
+            time.sleep(0.01)
+        assert airframe.lost is None, airframe.lost
+        assert airframe.line_errors()[1] >= 1, "the bad frame was not counted"

@@ -612,14 +612,28 @@ def test_longest_payload_is_accepted() -> None:
 
 
 def test_corrupt_length_hides_no_later_frame() -> None:
-    """A length field bumped up swallows later bytes until the stop check fails; then rescan."""
+    """A length field bumped up is a bad frame at once (it disagrees with NAV_STATUS's size),
+    and the frames behind it are read as they come: it used to swallow them until 200 bytes
+    more had come and the stop check failed, which on a line of answers never came."""
     first = bytearray(encode(NavStatus(NavState.FLYING, PadAction.OFF, 1, 2, 3, 4, 5, 6, 7, 8, 9)))
     first[3] = 200  # claims 200 bytes
     later = [Ack(PD.LAUNCH), PadReport(1, 3, 10, 20, 30, 500, 40)] * 4
     parser = VehicleStreamParser()
+    events: list[Any] = parser.feed(bytes(first) + b"".join(encode(m) for m in later))
+    assert events[0].kind is ErrorKind.BAD_LENGTH
+    assert events[1:] == later and parser.buffered == 0
+
+
+def test_corrupt_length_of_an_unknown_pd_still_rescans_at_the_stop_check() -> None:
+    """A frame whose PD names no structure has no size to check: its length is waited for,
+    then the stop check fails and the bytes are rescanned (the residual case)."""
+    first = bytearray(raw_vframe(0x45, b"abc"))
+    first[3] = 200
+    later = [PadReport(1, 3, 10, 20, 30, 500, 40)] * 2
+    parser = VehicleStreamParser()
     events: list[Any] = parser.feed(bytes(first) + b"".join(encode(m) for m in later) + bytes(200))
     assert events[0].kind is ErrorKind.BAD_STOP
-    assert events[1:] == later
+    assert [e for e in events[1:] if not isinstance(e, FrameError)] == later
 
 
 def test_vehicle_side_error_kinds() -> None:
