@@ -145,7 +145,13 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
     if kind == "serial":
         if not parts.path or parts.path == "/":
             raise LocalProtocolError(f"airframe {uri!r}: expected asctec-ll://serial/dev/ttyX")
-        baud = int(number("baud", DEFAULT_BAUD, 1, 4_000_000))
+        baud_text = query.get("baud", [str(DEFAULT_BAUD)])[-1]
+        # isascii: str.isdigit() also accepts digits int() refuses (superscripts)
+        if not (baud_text.isascii() and baud_text.isdigit()
+                and 1 <= int(baud_text) <= 4_000_000):
+            raise LocalProtocolError(f"airframe {uri!r}: baud={baud_text} is not a whole "
+                                     "number 1..4000000")
+        baud = int(baud_text)
         link = f"serial://{parts.path}?baud={baud}"
     elif kind == "tcp":
         address = parts.path.lstrip("/")

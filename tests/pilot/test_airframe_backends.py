@@ -159,6 +159,9 @@ def test_backend_conformance(scheme):
     ("asctec-ll://serial/dev/ttyS1?speed=9", "unknown option"),
     ("asctec-ll://tcp/h:1?baud=9600", "baud is for a serial line"),
     ("asctec-ll://serial/dev/ttyS1?lockstep=maybe", "lockstep=maybe"),
+    # a baud rate is a whole number: 57600.5 and 5.76e4 were truncated and flown at 57600
+    ("asctec-ll://serial/dev/ttyS1?baud=57600.5", "baud=57600.5 is not a whole number"),
+    ("asctec-ll://serial/dev/ttyS1?baud=5.76e4", "baud=5.76e4 is not a whole number"),
 ])
 def test_bad_airframe_uris_are_named(uri, words):
     with pytest.raises(LocalProtocolError, match=words):
