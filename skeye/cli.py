@@ -99,9 +99,10 @@ def record_limits(args: argparse.Namespace) -> tuple[float, int]:
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
     from skeye import native
+    from skeye.errors import ConfigError
     from skeye.processes import check_ports_free
     from skeye.robots.config import validate_robot_dirs
-    from skeye.sim.engine import Simulation
+    from skeye.sim.engine import TIMESTEP_RANGE_S, Simulation
     from skeye.sim.robot import check_robot_config
     from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
@@ -110,6 +111,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     image_format, image_quality = image_defaults(args)  # before anything starts
     record_max_mb, record_parts = record_limits(args)
+    low, high = TIMESTEP_RANGE_S  # the engine's range, said in the option's name
+    if not low <= args.timestep <= high:
+        raise ConfigError(f"--timestep must be in [{low:g}, {high:g}] s (the physics step), "
+                          f"got {args.timestep:g}")
     ports = [("the simulator's control protocol", args.host, args.port, "--port")]
     if args.image_port is not None:
         ports.append(("the simulator's image server", args.host, args.image_port,

@@ -294,14 +294,17 @@ def unused_options(args: argparse.Namespace) -> None:
             ("--truth-topic", args.truth_topic),
             ("--format", None if args.format == "auto" else args.format)) if value is not None]
         if given:
-            raise ConfigError(f"{', '.join(given)} read a log, and none was given (without one "
-                              "skeye logs measures the simulated IMU alone: --rate, --seconds)")
+            verb = "read" if len(given) > 1 else "reads"
+            raise ConfigError(f"{', '.join(given)} {verb} a log, and none was given (without "
+                              "one skeye logs measures the simulated IMU alone: --rate, "
+                              "--seconds)")
         return
     given = [option for option, value in (("--rate", args.rate), ("--seconds", args.seconds))
              if value is not None]
     if given:
-        raise ConfigError(f"{', '.join(given)} shape the simulated hover without a log; with "
-                          f"one the simulated IMU takes the log's rate and length")
+        verb = "shape" if len(given) > 1 else "shapes"
+        raise ConfigError(f"{', '.join(given)} {verb} the simulated hover without a log; with "
+                          "one the simulated IMU takes the log's rate and length")
 
 
 def cmd_logs(args: argparse.Namespace) -> int:

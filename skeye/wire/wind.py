@@ -108,7 +108,7 @@ def make_settings(mode: str, params: Mapping[str, float] | None = None) -> WindS
         if key not in values:
             raise ConfigError(
                 f"wind: unknown parameter {key!r} for mode {mode!r}; "
-                f"known: {sorted(values) or 'none'}"
+                f"known: {', '.join(sorted(values)) or 'none'}"
             )
         values[key] = value
     for key, value in values.items():

@@ -363,11 +363,11 @@ def test_options_that_would_do_nothing_are_refused(
     hover, as if windowed); each is now refused before the work, naming itself."""
     euroc = str(make_logs.write_euroc(tmp_path / "MH_opts", flight))
     for args, named in (
-            (["--start", "10"], "--start"),
-            (["--end", "5", "--imu-topic", "/imu0"], "--end, --imu-topic"),
-            (["--truth-topic", "/pose", "--format", "euroc"], "--truth-topic, --format"),
-            ([euroc, "--rate", "100"], "--rate"),
-            ([euroc, "--seconds", "30", "--rate", "200"], "--rate, --seconds"),
+            (["--start", "10"], "--start reads"),
+            (["--end", "5", "--imu-topic", "/imu0"], "--end, --imu-topic read"),
+            (["--truth-topic", "/pose", "--format", "euroc"], "--truth-topic, --format read"),
+            ([euroc, "--rate", "100"], "--rate shapes"),
+            ([euroc, "--seconds", "30", "--rate", "200"], "--rate, --seconds shape"),
             ([euroc, "--imu-topic", "/imu0"], "--imu-topic")):
         assert main(["logs", *args]) == 2, args
         err = capsys.readouterr().err

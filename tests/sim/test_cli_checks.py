@@ -150,10 +150,13 @@ def test_image_format_option_sets_what_a_new_image_client_gets() -> None:
         (["--image-port", "0", "--image-quality", "50"], "--image-format jpeg only"),
         (["--image-port", "0", "--image-format", "jpeg", "--image-quality", "0"], "1-100"),
         (["--image-format", "png"], "need --image-port"),
+        (["--timestep", "1e9"], "--timestep must be in [1e-05, 0.01] s (the physics step), "
+                                "got 1e+09"),
+        (["--wind", "dryden", "--wind-params", "gust=3"],
+         "unknown parameter 'gust' for mode 'dryden'; known: from_deg, height_m, w20_m_s\n"),
     ],
 )
-def test_bad_image_format_options_are_refused_before_anything_starts(argv: list[str],
-                                                                     message: str) -> None:
+def test_bad_options_are_refused_before_anything_starts(argv: list[str], message: str) -> None:
     done = _skeye("sim", "--port", "0", *argv)
     assert done.returncode == 2 and message in done.stderr, done
     assert "control protocol on" not in done.stdout
