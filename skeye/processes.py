@@ -159,8 +159,8 @@ def start_skeye(
                 proc.wait(5)
                 proc.stdout.close()
                 late = f" within {timeout_s:g} s" if time.monotonic() > deadline else ""
-                raise SkeyeError(f"{what} did not start{late}: "
-                                 f"{''.join(seen[-5:]) or 'no output'}")
+                said = " | ".join(text for text in (s.rstrip() for s in seen[-5:]) if text)
+                raise SkeyeError(f"{what} did not start{late}: {said or 'no output'}")
             seen.append(line)
             m = re.search(patterns[len(found)], line)
             if m:
