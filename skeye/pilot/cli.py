@@ -215,10 +215,9 @@ def run(args: argparse.Namespace) -> int:
         except (ConfigError, LocalProtocolError) as exc:  # a URI its backend refused
             # the vehicle's URI, not the option: it may come from --sim, and the backend's
             # message names the option at fault (--start, --name); once, where the backend's
-            # message begins with it already (mavlink://)
+            # message names the URI already (each URI parser's "airframe 'URI': ...")
             said = str(exc)
-            return _error(said if said.startswith(f"{airframe_uri}: ")
-                          else f"{airframe_uri}: {said}")
+            return _error(said if airframe_uri in said else f"{airframe_uri}: {said}")
         with ExitStack() as stack:
             stack.callback(airframe.close)
             limits = airframe.limits

@@ -440,3 +440,17 @@ def test_link_masks_that_request_nothing_are_refused_before_the_link_opens(argv,
     err = capsys.readouterr().err
     assert err.startswith(f"skeye link: error: {said}"), err
     assert err.count("\n") == 1 and "link error" not in err, err
+
+
+@pytest.mark.parametrize("uri", ["asctec-ll://serial/dev/ttyS1?baud=abc",
+                                 "asctec-ll://bogus/x", "sim://127.0.0.1:1/x?zz=1"])
+def test_an_airframe_uri_its_backend_refuses_is_named_once(capsys, uri):
+    """The pilot put the URI before the backend's message, which names it already
+    ("asctec-ll://...: airframe 'asctec-ll://...': ..."): one line, the URI said once."""
+    from skeye.cli import main
+
+    status = main(["pilot", "--airframe", uri, "--port", "0"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.count(uri) == 1 and err.count("\n") == 1, err
+    assert err.startswith(f"skeye pilot: error: airframe '{uri}': "), err
