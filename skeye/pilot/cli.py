@@ -157,6 +157,9 @@ def run(args: argparse.Namespace) -> int:
             return _error(f"--camera: {exc}")
     elif args.images is None and args.camera != DEFAULT_CAMERA:
         return _error(camera_name_problem(args.camera))
+    elif args.images is not None and airframe_scheme(airframe_uri) in REAL_VEHICLES:
+        # said before the vehicle (a real board, a flight controller) is opened
+        return _error(images_problem(airframe_uri))
     has_camera = args.images is not None or camera_uri is not None
     calibration = None
     if args.calibration is not None:
@@ -253,8 +256,7 @@ def run(args: argparse.Namespace) -> int:
             elif args.images is not None:
                 sim, robot = getattr(airframe, "connection", None), getattr(airframe, "robot", None)
                 if sim is None or robot is None:
-                    return _error(f"--images reads the camera of a robot the pilot spawned "
-                                  f"(sim://); {airframe_uri} has none: give --camera URI")
+                    return _error(images_problem(airframe_uri))
                 try:
                     fov_h_rad = camera_fov_rad(sim, args.camera)
                 except CommandRejected as exc:  # no such camera on the robot
@@ -532,6 +534,16 @@ _TUNES: tuple[tuple[str, str, str, Callable[[argparse.Namespace], bool]], ...] =
 
 
 DEFAULT_CAMERA = "Down"  # --camera: the spawned robot's downward camera
+
+
+REAL_VEHICLES = ("asctec-ll", "mavlink")
+"""Airframe schemes of a real vehicle: no robot spawned, so no camera for ``--images``."""
+
+
+def images_problem(airframe_uri: str) -> str:
+    """Why ``--images`` is refused on an airframe without a spawned robot."""
+    return (f"--images reads the camera of a robot the pilot spawned (sim://); {airframe_uri} "
+            "has none: give --camera URI")
 
 
 def camera_name_problem(camera: str) -> str:

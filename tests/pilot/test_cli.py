@@ -454,3 +454,20 @@ def test_an_airframe_uri_its_backend_refuses_is_named_once(capsys, uri):
     assert status == 2, err
     assert err.count(uri) == 1 and err.count("\n") == 1, err
     assert err.startswith(f"skeye pilot: error: airframe '{uri}': "), err
+
+
+@pytest.mark.parametrize("scheme", ["asctec-ll://tcp/127.0.0.1:{port}",
+                                    "mavlink://udpout/127.0.0.1:{port}"])
+def test_images_on_a_real_vehicle_is_refused_before_the_vehicle_is_opened(capsys, scheme):
+    """``--images`` reads the camera of a robot the pilot spawns; a real vehicle's airframe
+    spawns none. The refusal came after the airframe was opened (a real board or flight
+    controller, here a closed port: status 4 after the wait); it now comes first."""
+    from skeye.cli import main
+
+    uri = scheme.format(port=_unused_port())
+    status = main(["pilot", "--airframe", uri, "--port", "0", "--images", "127.0.0.1:5000",
+                   "--timeout", "30"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err == (f"skeye pilot: error: --images reads the camera of a robot the pilot "
+                   f"spawned (sim://); {uri} has none: give --camera URI\n"), err
