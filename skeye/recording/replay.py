@@ -3,13 +3,15 @@
 How this works: :class:`ReplayServer` listens like the simulator (127.0.0.1 unless told
 otherwise). Each client gets its own playback from the start of the recording, on its own
 thread: ``NFO {Gametype skeye} ... {Mode realtime} {Replay true}`` on accept, then the recorded
-stream of one robot (the ``STA``, ``SEN`` and ``ERR {Command PHYSICS}`` lines its connection was
-sent), each line released when ``(sim_s - first_sim_s) / speed`` wall seconds have passed. The
-file is read lazily, so a long recording costs no memory per client. The client's own lines go
-through the same sans-IO decoder as the simulator's: ``PING`` is answered with the playback's
-current sim time; commands that would change the world (``INIT``, ``DRIVE``, ``SET``, ``STEP``)
-get ``ERR ... {Reason replay is read-only}``; the queries (``GETSTARTPOSES``, ``GETGEO``,
-``GETCONF``) get ``ERR`` too, as the recording holds no world to ask. At the end of the
+stream of one robot (the lines the engine sent its connection: ``STA``, ``SEN``, and the ``ERR``
+of a crash, ``{Command CRASH}``, or of a robot the engine stopped, ``{Command PHYSICS}`` or
+``{Command CAMERA}``; not the answers to its client's commands), each line released when
+``(sim_s - first_sim_s) / speed`` wall seconds have passed. The file is read lazily, so a long
+recording costs no memory per client. The client's own lines go through the same sans-IO
+decoder as the simulator's: ``PING`` is answered with the playback's current sim time; commands
+that would change the world (``INIT``, ``DRIVE``, ``SET``, ``STEP``) get ``ERR ... {Reason
+replay is read-only}``; the queries (``GETSTARTPOSES``, ``GETGEO``, ``GETCONF``) get ``ERR``
+too, as the recording holds no world to ask. At the end of the
 recording the connection stays open (PING still answered) and nothing more is sent.
 A client that does not read blocks only its own thread; ``close()`` shuts every socket.
 """
@@ -32,11 +34,13 @@ from skeye.processes import check_ports_free, wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
 from skeye.wire.sim import encode, unknown_command
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
+from skeye.wire.sim_messages import ROBOT_ERRORS
 
 log = logging.getLogger(__name__)
 
 READ_ONLY = frozenset(("INIT", "DRIVE", "SET", "STEP"))
-_STREAM_PREFIXES = ("STA ", "SEN ", "ERR {Command PHYSICS}")
+_STREAM_PREFIXES = ("STA ", "SEN ", *(f"ERR {{Command {c}}}" for c in ROBOT_ERRORS))
+"""The engine's lines (skeye.sim.stream), as opposed to the answers to the client's commands."""
 _MAX_BATCH_LINES = 512
 
 

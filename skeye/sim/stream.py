@@ -24,13 +24,9 @@ from skeye.sim.readings import (
 )
 from skeye.wire import sim as wire
 from skeye.wire.sim_format import Layout, LineFormat
-from skeye.wire.sim_messages import Err, SenCamera, Sta
+from skeye.wire.sim_messages import CRASH_COMMAND, Err, SenCamera, Sta
 
-__all__ = ["CRASH_COMMAND", "StreamEncoder", "text_sink"]
-
-CRASH_COMMAND = "CRASH"
-"""``ERR {Command CRASH} {Name robot} {Reason crashed: cause}``: the robot crashed
-(docs/protocols/simulator.md)."""
+__all__ = ["CRASH_COMMAND", "StreamEncoder", "text_sink"]  # CRASH_COMMAND: skeye.wire's
 
 
 class StreamEncoder:

@@ -385,6 +385,13 @@ class Res:
     """How the simulator read an ambiguous value (a USARSim-style vector), for the client's log."""
 
 
+CRASH_COMMAND = "CRASH"
+"""``ERR {Command CRASH}``: the robot crashed (skeye's crash rules, docs/protocols/simulator.md)."""
+ROBOT_ERRORS = (CRASH_COMMAND, "PHYSICS", "CAMERA")
+"""The ``ERR`` commands the engine sends a robot's connection of its own accord, in its stream
+(a crash, a robot stopped by its physics or its camera), not as an answer to a command."""
+
+
 @dataclass(frozen=True)
 class Err:
     """``ERR``: a command failed, or (``PHYSICS``, ``CAMERA``, ``ENGINE``, ``CONNECT``) the

@@ -585,3 +585,41 @@ def test_plot_counts_a_location_that_is_not_three_numbers(tmp_path: Path) -> Non
     tracks, summary = load_tracks(path)
     assert (summary.bad_lines, summary.far_positions) == (2, 0)
     assert tracks["R1"].pos_ned_m == [(0.0, 0.0, -1.0), (0.0, 0.0, -2.0)]
+
+
+def test_replay_plays_the_crash_the_client_was_told_of(tmp_path: Path) -> None:
+    """A replay left out ``ERR {Command CRASH}``: its stream lines were those of before the
+    crash report existed (STA, SEN, ERR PHYSICS), so a client watching a crashed flight saw
+    the readings go on and never the crash. Now the replay sends every engine line its client
+    was sent, in order: the crash with its cause among them."""
+    path = tmp_path / "crash.rec"
+    with running_sim() as server, Recorder(path, {"world": "pad"}) as recorder:
+        recorder.attach(server, server.runner, truth_rate_hz=0)
+        client = LineClient(server.port)
+        client.expect("NFO")
+        assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-3}", "INIT").type == "RES"
+        client.step(100)
+        client.send("DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0}")  # motors off: a free fall
+        crash = None
+        for _ in range(30):  # 3 s of sim time; a 3 m fall takes 0.8 s
+            crash = next((m for m in client.step(100)
+                          if m.type == "ERR" and m.get("Command") == "CRASH"), None)
+            if crash is not None:
+                break
+        assert crash is not None, "the free fall was not reported as a crash"
+        client.step(100)
+        raw = bytes(client.raw)
+        client.close()
+        assert wait_for(lambda: server.client_count == 0)
+    engine = [line for line in raw.split(b"\r\n")
+              if line.startswith((b"SEN ", b"STA ", b"ERR {Command CRASH}"))]
+    assert engine[-1].startswith(b"S"), "no reading after the crash to order it against"
+    with ReplayServer(path, port=0, speed=1000.0) as replay:
+        player = LineClient(replay.port)
+        player.expect("NFO")
+        player.read_until(lambda _m: engine[-1] + b"\r\n" in player.raw)
+        got = [line for line in player.raw.split(b"\r\n")
+               if line.startswith((b"SEN ", b"STA ", b"ERR "))]
+        player.close()
+    assert got == engine
+    assert b"ERR {Command CRASH} {Name R1} {Reason crashed: hard impact" in b"\n".join(got)
