@@ -167,6 +167,10 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
                 conn_robot[rec.conn] = msg.require("Name")
             continue
         name = conn_robot.get(rec.conn)
+        if name is None and msg.type == "STA" and msg.get("Name"):
+            # No INIT answer in this file (a later part of a rotated recording): the robot's
+            # status lines name it.
+            name = conn_robot[rec.conn] = msg.require("Name")
         if name is None:
             continue
         track = sensed.setdefault(name, RobotTrack(name))

@@ -222,15 +222,28 @@ class RecordingReader:
 
 
 def robot_connections(records: Iterator[Record]) -> dict[int, str]:
-    """Connection id -> robot name, from the ``RES {Command INIT} {Name ...}`` each was sent."""
+    """Connection id -> robot name, from the ``RES {Command INIT} {Name ...}`` each was sent,
+    or, for a connection whose INIT answer the file does not hold (a later part of a rotated
+    recording), from the ``{Name ...}`` of the ``STA`` lines its robot's stream sent it."""
     found: dict[int, str] = {}
     for rec in records:
-        if rec.direction == SENT and rec.line.startswith("RES {Command INIT}"):
-            for block in rec.line.split("{")[1:]:
-                key, _, value = block.rstrip("} ").partition(" ")
-                if key == "Name" and value:
-                    found[rec.conn] = value
+        if rec.direction != SENT:
+            continue
+        initialised = rec.line.startswith("RES {Command INIT}")
+        if initialised or (rec.line.startswith("STA ") and rec.conn not in found):
+            name = _block_value(rec.line, "Name")
+            if name:
+                found[rec.conn] = name
     return found
+
+
+def _block_value(line: str, key: str) -> str | None:
+    """The value of the first ``{key value}`` block of a protocol line, if it has one."""
+    for block in line.split("{")[1:]:
+        found, _, value = block.rstrip("} ").partition(" ")
+        if found == key:
+            return value
+    return None
 
 
 class Recorder:

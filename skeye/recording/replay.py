@@ -70,7 +70,8 @@ class ReplayServer:
         self.speed = speed
         self.robots = robot_connections(self.reader.records())
         if not self.robots:
-            raise ConfigError(f"{path}: the recording holds no robot (no INIT was answered)")
+            raise ConfigError(f"{path}: the recording holds no robot (no INIT answer, no robot "
+                              "status line)")
         names = list(self.robots.values())
         chosen = robot or names[0]
         conns = [c for c, n in self.robots.items() if n == chosen]

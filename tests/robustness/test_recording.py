@@ -623,3 +623,44 @@ def test_replay_plays_the_crash_the_client_was_told_of(tmp_path: Path) -> None:
         player.close()
     assert got == engine
     assert b"ERR {Command CRASH} {Name R1} {Reason crashed: hard impact" in b"\n".join(got)
+
+
+def test_a_later_part_of_a_rotated_recording_replays_and_plots_on_its_own(
+        tmp_path: Path) -> None:
+    """docs/recording.md: each part of a rotated recording is a whole recording. Yet a later
+    part could not be replayed (``holds no robot (no INIT was answered)``: the INIT answer is in
+    part 1) and its plot gave the robot none of the commands its client sent there. The robot's
+    connection is now also known by the ``{Name}`` of the STA lines it was sent, which every
+    part holds."""
+    path = tmp_path / "flight.rec"
+    with running_sim() as server, Recorder(path, {"world": "pad"}, max_bytes=64 * 1024,
+                                           rotate=True) as recorder:
+        recorder.attach(server, server.runner)
+        client = LineClient(server.port)
+        client.expect("NFO")
+        assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-2}", "INIT").type == "RES"
+        for _ in range(50):  # 64 KiB is about 1.2 s of sim time of one robot
+            client.step(100)
+            if len(recorder.parts) > 1:
+                break
+        assert len(recorder.parts) == 2, "the recording did not go on in a second part"
+        client.send("DRIVE {AltitudeVelocity 0.5}")  # queued after part 2 was opened
+        client.step(300)
+        client.close()
+        assert wait_for(lambda: server.client_count == 0)
+    part2 = tmp_path / "flight.rec.2"
+    records = list(RecordingReader(part2).records())
+    assert [r.line.split()[0] for r in records if r.direction == RECEIVED][-2:] == ["DRIVE", "STEP"]
+    assert not any(r.line.startswith("RES {Command INIT}") for r in records)
+    tracks, _summary = load_tracks(part2)
+    assert tracks["R1"].commands["DRIVE"] == 1
+    engine = [r.line.encode() for r in records if r.direction == SENT
+              and r.line.startswith(("SEN ", "STA "))]
+    with ReplayServer(part2, port=0, speed=1000.0) as replay:
+        assert replay.robot == "R1"
+        player = LineClient(replay.port)
+        player.expect("NFO")
+        player.read_until(lambda _m: engine[-1] + b"\r\n" in player.raw)
+        got = [line for line in player.raw.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
+        player.close()
+    assert got == engine
