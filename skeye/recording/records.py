@@ -465,9 +465,22 @@ class Recorder:
                     os.fsync(f.fileno())
                     last_flush = time.monotonic()
             except OSError as exc:
-                log.error("recording %s: write failed, recording stops: %s", self.path, exc)
-                self._closed = True
+                self._write_failed(exc)
                 return
+
+    def _write_failed(self, exc: OSError) -> None:
+        """A write or flush failed (a full disk, EFBIG past ``ulimit -f``, a failing device):
+        recording stops, said once; the simulator goes on. The file is closed without
+        retrying what the failed write left in its buffer, which would fail again (and did,
+        in ``close()``, ending ``skeye sim`` with an error after the recording had stopped)."""
+        self.stopped = f"writing {self.path} failed: {exc.strerror or exc}"
+        log.error("recording %s: write failed, recording stops: %s; the simulator goes on",
+                  self.path, exc.strerror or exc)
+        self._closed = True
+        try:
+            self._file.close()  # flushes the buffer, fails again, and closes the file anyway
+        except OSError:
+            pass
 
     def _writer_failed(self, exc: BaseException) -> None:
         """The writer thread raised (Worker logged it): record nothing more, keep the reason."""

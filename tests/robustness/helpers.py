@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import resource
 import subprocess
 import sys
 import threading
@@ -34,10 +35,22 @@ def thread_count() -> int:
 
 
 @contextmanager
-def sim_process(*extra: str) -> Iterator[tuple[subprocess.Popen[str], dict[str, int], list[str]]]:
-    """``skeye sim --port 0 ...`` as a child process; yields (process, ports, banner lines)."""
+def sim_process(
+    *extra: str, max_file_bytes: int | None = None
+) -> Iterator[tuple[subprocess.Popen[str], dict[str, int], list[str]]]:
+    """``skeye sim --port 0 ...`` as a child process; yields (process, ports, banner lines).
+
+    ``max_file_bytes`` limits the size of any file it writes (``ulimit -f``: a write past it
+    fails with EFBIG, as on a full disk)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     env.setdefault("MUJOCO_GL", "egl")
+    die = die_with_parent()
+
+    def preexec() -> None:
+        if die is not None:
+            die()
+        if max_file_bytes is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (max_file_bytes, max_file_bytes))
     proc = subprocess.Popen(
         [sys.executable, "-m", "skeye.cli", "sim", "--port", "0", *extra],
         stdout=subprocess.PIPE,
@@ -45,7 +58,7 @@ def sim_process(*extra: str) -> Iterator[tuple[subprocess.Popen[str], dict[str, 
         text=True,
         env=env,
         cwd=Path(__file__).resolve().parents[2],
-        preexec_fn=die_with_parent(),
+        preexec_fn=preexec,
     )
     ports: dict[str, int] = {}
     banner: list[str] = []

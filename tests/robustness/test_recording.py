@@ -6,6 +6,7 @@ import json
 import re
 import signal
 import socket
+import subprocess
 import threading
 import time
 from pathlib import Path
@@ -664,3 +665,43 @@ def test_a_later_part_of_a_rotated_recording_replays_and_plots_on_its_own(
         got = [line for line in player.raw.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
         player.close()
     assert got == engine
+
+
+def test_a_recording_that_cannot_be_written_stops_and_the_simulator_still_ends_cleanly(
+        tmp_path: Path) -> None:
+    """A write that fails (EFBIG past ``ulimit -f`` here; a full disk or a failing device
+    alike) stopped the recording with one log line, and the simulator served on, but on Ctrl-C
+    ``skeye sim`` ended with ``skeye sim: error: [Errno 27] File too large`` and exit status 2:
+    closing the file tried again to write what the failed write had left buffered. Now the
+    failure is said once, naming the file, the simulator stops as usual (exit 0), and what was
+    written before the failure reads back (the last line, cut off, skipped)."""
+    path = tmp_path / "flight.rec"
+    output: list[str] = []
+    failed = threading.Event()
+
+    def read_output(proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            output.append(line.rstrip("\n"))
+            if "write failed" in line:
+                failed.set()
+
+    with sim_process("--record", str(path), max_file_bytes=40_000) as (proc, ports, _banner):
+        client = _flying_client(ports["control"])
+        stop = threading.Event()
+        threading.Thread(target=_read_away, args=(client, stop), daemon=True).start()
+        watcher = threading.Thread(target=read_output, args=(proc,), daemon=True)
+        watcher.start()
+        assert failed.wait(STREAM_TIMEOUT_S), f"no write failure logged: {output[-5:]}"
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 0, output[-5:]
+        watcher.join(10)
+        stop.set()
+        client.close()
+    said = [line for line in output if str(path) in line and "write failed" in line]
+    assert len(said) == 1 and "File too large" in said[0], output
+    assert not [line for line in output if "error:" in line], output
+    reader = RecordingReader(path)
+    records = list(reader.records())
+    assert reader.bad_lines == 0 and any(r.direction == TRUTH for r in records)
+    assert path.stat().st_size <= 40_000
