@@ -164,9 +164,16 @@ def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
 
 
 def _die_with_parent() -> None:
-    """Block until the parent's pipe closes, then kill this whole process group."""
+    """Block until the parent's pipe closes, then kill this whole process group.
+
+    Reads the pipe's descriptor itself, not ``sys.stdin``: a thread blocked in a buffered read
+    holds the stream's lock, which the interpreter takes to shut down, so every trial process
+    ended in an abort (SIGABRT, ``Fatal Python error: _enter_buffered_busy``), whatever its own
+    exit status."""
+    fd = sys.stdin.fileno()
     try:
-        sys.stdin.buffer.read()
+        while os.read(fd, 65536):
+            pass
     finally:
         os.killpg(os.getpgid(0), signal.SIGKILL)
 

@@ -575,3 +575,47 @@ def test_the_progress_line_counts_a_finished_trial_as_done_not_running(
         running = int(line.split(" failed, ", 1)[1].split(" running", 1)[0])
         assert done + running <= 3, line  # a finished trial is not also running
     assert "0 failed, 0 running" in lines[-1], lines
+
+
+EXITING = """
+import sys
+
+def trial(settings, params, workdir):
+    if params["mode"] == "exit":
+        sys.exit(3)
+    return {"height_m": 1.0}
+"""
+
+
+def test_a_trial_process_ends_with_its_own_status_not_an_interpreter_abort(tmp_path: Path):
+    """Every trial process aborted at exit (SIGABRT, ``Fatal Python error:
+    _enter_buffered_busy: could not acquire lock for <_io.BufferedReader name='<stdin>'>``):
+    its parent-watch thread sat in a buffered read of stdin, whose lock the interpreter needs
+    to shut down. A trial that had written its row hid it (and left a core dump where they are
+    kept); a flight script's ``sys.exit(3)`` became "exited with code -6" and the abort's text.
+    Now a trial process ends with the status it exits with."""
+    from skeye.sweep.spec import Trial
+    from skeye.sweep.worker import run_trial_process
+
+    (tmp_path / "flight.py").write_text(EXITING)
+    ok, exiting = (Trial("script", {"mode": m}, 1, script=str(tmp_path / "flight.py"),
+                         timeout_s=60.0) for m in ("ok", "exit"))
+    (tmp_path / "trial.json").write_text(json.dumps(ok.to_json()))
+    # The trial process as run_trial_process starts it: its stdin a pipe that stays open.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye.sweep.worker", str(tmp_path / "trial.json"),
+         str(tmp_path / "result.json"), str(tmp_path / "work"), ""],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        start_new_session=True, text=True)
+    assert proc.stdin is not None and proc.stdout is not None
+    try:
+        status = proc.wait(60)  # what it prints is a few lines: the pipe does not fill
+        assert status == 0, f"exit status {status}: {proc.stdout.read()[-300:]}"
+    finally:
+        proc.stdin.close()
+        proc.stdout.close()
+    assert json.loads((tmp_path / "result.json").read_text()) == {
+        "figures": {"height_m": 1.0}, "error": ""}
+    row = run_trial_process(exiting.to_json())
+    assert row["error"].startswith("trial process exited with code 3"), row["error"]
+    assert "Fatal Python error" not in row["error"], row["error"]
