@@ -163,6 +163,12 @@ def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
     return row
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: its non-blank lines, trimmed, joined with `` | `` (a row's error
+    is one line of the sweep's log and one cell of the report's table)."""
+    return " | ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
 def _die_with_parent() -> None:
     """Block until the parent's pipe closes, then kill this whole process group.
 
@@ -189,7 +195,7 @@ def main(argv: list[str]) -> int:
         Path(workdir).mkdir(parents=True, exist_ok=True)
         figures, series = run_experiment(trial, Path(workdir))
     except Exception as exc:  # a failed flight is a row with its error, not a crash
-        error = f"{type(exc).__name__}: {exc}"
+        error = one_line(f"{type(exc).__name__}: {exc}")
     clean: dict[str, float | None] = {
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in figures.items()}

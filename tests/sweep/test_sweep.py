@@ -619,3 +619,29 @@ def test_a_trial_process_ends_with_its_own_status_not_an_interpreter_abort(tmp_p
     row = run_trial_process(exiting.to_json())
     assert row["error"].startswith("trial process exited with code 3"), row["error"]
     assert "Fatal Python error" not in row["error"], row["error"]
+
+
+MULTILINE = """
+def trial(settings, params, workdir):
+    raise RuntimeError("the flight went wrong\\n  at waypoint 3\\n")
+"""
+
+
+def test_a_trial_error_of_several_lines_is_said_in_one(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]):
+    """An exception whose text runs over several lines (a subprocess's output, a validation
+    listing) was stored as it was: off a terminal the sweep's line for the trial, one per
+    finished trial, came out in pieces, and the report's table of failed trials broke at the
+    line break. Its lines are now joined with ' | ', as a crashed trial process's last lines
+    are."""
+    (tmp_path / "flight.py").write_text(MULTILINE)
+    spec = tmp_path / "s.toml"
+    spec.write_text('experiment = "script"\nscript = "flight.py"\nseeds = [1]\ntimeout_s = 60\n')
+    result = sweep(spec, tmp_path / "out", "local", workers=1, show_progress=True)
+    error = "RuntimeError: the flight went wrong | at waypoint 3"
+    assert [r["error"] for r in result.rows] == [error]
+    said = [line for line in capsys.readouterr().err.splitlines() if "failed: " in line]
+    assert len(said) == 1 and f"failed: {error} in " in said[0], said
+    report = (tmp_path / "out" / "report.md").read_text().splitlines()
+    cell = error.replace("|", "/")  # the table's own separator, in a cell
+    assert [line for line in report if line.startswith("| ") and line.endswith(f"| {cell} |")]
