@@ -4,9 +4,10 @@ How this works: ``COMMANDS`` is a table, one ``CommandSpec`` per command the pag
 skeye packets of docs/protocols/packets.md, in SI with units in the argument names).
 ``parse_command(name, body)`` checks a decoded JSON object against it: unknown command, unknown
 or missing argument, wrong type (a JSON ``true`` is not a number), non-finite number, value out
-of range or not one of the choices all raise ``LocalProtocolError`` naming the argument and what
-was expected. Nothing here does I/O: ``run_command(vehicle, command)`` is the one place a parsed
-command becomes a ``skeye.link.Vehicle`` call (and so one packet on the wire).
+of range (a whole number too large for a float included) or not one of the choices all raise
+``LocalProtocolError`` naming the argument and what was expected. Nothing here does I/O:
+``run_command(vehicle, command)`` is the one place a parsed command becomes a
+``skeye.link.Vehicle`` call (and so one packet on the wire).
 
 Ranges are what the wire can carry (int16 mm/s, uint16 mm, ...) narrowed to what makes sense
 for a small multirotor. Speeds have one more bound, the vehicle's own: :class:`VehicleLimits`
@@ -144,7 +145,13 @@ class Arg:
             return value.lower()
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise LocalProtocolError(f"{where} must be a number, got {value!r}")
-        number = float(value)
+        try:
+            number = float(value)
+        except OverflowError:  # a whole number beyond a float's 1.8e308 (JSON has no bound)
+            raise LocalProtocolError(
+                f"{where} must be within [{self.lo:g}, {self.hi:g}], got a whole number of "
+                f"{len(str(abs(value)))} digits"
+            ) from None
         if not math.isfinite(number):
             raise LocalProtocolError(f"{where} must be finite, got {value!r}")
         if not self.lo <= number <= self.hi:

@@ -39,6 +39,7 @@ import ipaddress
 import json
 import logging
 import secrets
+import sys
 import time
 from collections.abc import Awaitable, Callable, Iterable, MutableMapping
 from dataclasses import dataclass, field
@@ -154,10 +155,13 @@ def json_depth_exceeds(text: str | bytes, limit: int = MAX_JSON_DEPTH) -> bool:
 def parse_json_limited(text: str | bytes) -> Any:
     """``json.loads`` that first refuses nesting deeper than ``MAX_JSON_DEPTH``, and then a
     string holding a lone UTF-16 surrogate (``"\\ud800"``: JSON text can spell one, but it is no
-    Unicode character, so no answer echoing it could be encoded as UTF-8).
+    Unicode character, so no answer echoing it could be encoded as UTF-8). A whole number of
+    more digits than Python reads (``sys.get_int_max_str_digits()``, 4300) is refused naming
+    that limit, not with ``int``'s advice to raise it.
 
     Raises:
-        ValueError: not JSON, nested too deeply, or a lone surrogate (the message says which).
+        ValueError: not JSON, nested too deeply, a number of too many digits, or a lone
+            surrogate (the message says which).
     """
     if json_depth_exceeds(text):
         raise InvalidArgument(f"is JSON nested deeper than {MAX_JSON_DEPTH} levels")
@@ -165,6 +169,10 @@ def parse_json_limited(text: str | bytes) -> Any:
         value = json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InvalidArgument(f"is not valid JSON: {exc}") from None
+    except ValueError:  # int() refuses more digits than sys.get_int_max_str_digits()
+        raise InvalidArgument(
+            f"holds a number of more than {sys.get_int_max_str_digits()} digits"
+        ) from None
     if not _may_hold_lone_surrogate(text):
         return value
     try:

@@ -265,6 +265,47 @@ def test_a_lone_surrogate_in_json_gets_a_clear_error(
     assert not errors, [r.getMessage() for r in errors]
 
 
+def test_a_huge_whole_number_gets_a_clear_error(
+    ground: Ground, caplog: pytest.LogCaptureFixture
+) -> None:
+    """JSON has no bound on a whole number. One of 400 digits (beyond a float's 1.8e308) made
+    the range check's float() raise OverflowError: a 500 with a traceback for a POST, and on the
+    WebSocket a task dying with no answer at all. One of over 4300 digits (Python's limit for
+    reading a whole number) was refused with Python's own advice to raise that limit. Each is
+    now refused naming the argument or the limit, and the page is served on."""
+    caplog.set_level(logging.WARNING)
+    headers = {**ground.web.auth, "Content-Type": "application/json"}
+    r = _post(ground, "take_off", b'{"height_m": 1' + b"0" * 400 + b"}", headers)
+    assert r.status_code == 422, r.text
+    assert r.json()["error"] == ("take_off: argument 'height_m' must be within [0.1, 100], "
+                                 "got a whole number of 401 digits")
+    r = _post(ground, "velocity", b'{"forward_m_s": -9' + b"9" * 399 + b"}", headers)
+    assert r.status_code == 422 and "got a whole number of 400 digits" in r.json()["error"]
+    r = _post(ground, "take_off", b'{"height_m": 1' + b"0" * 5000 + b"}", headers)
+    assert r.status_code == 400, r.text
+    assert r.json()["error"] == "request body holds a number of more than 4300 digits"
+    assert ground.commands_reached() == 0
+    with ws_connect(f"{ground.ws_url}?token={ground.web.token}", open_timeout=10) as ws:
+        assert json.loads(ws.recv(10))["type"] == "hello"
+        ws.send('{"type": "command", "id": 1, "name": "take_off", "args": {"height_m": 1'
+                + "0" * 400 + "}}")
+        ws.send('{"type": "command", "id": 2, "name": "take_off", "args": {"height_m": 1'
+                + "0" * 5000 + "}}")
+        ws.send('{"type": "command", "id": 3, "name": "hold", "args": {}}')
+        results = {}
+        while len(results) < 3:
+            msg = json.loads(ws.recv(10))
+            if msg["type"] == "result":
+                results[msg["id"]] = msg
+    assert results[1]["status"] == 422 and "whole number of 401 digits" in results[1]["error"]
+    assert results[None]["status"] == 400  # its id could not be read: the message was refused
+    assert results[None]["error"] == "message holds a number of more than 4300 digits"
+    assert results[3]["status"] == 503  # no vehicle: served on
+    assert ground.commands_reached() == 1  # the hold only
+    errors = [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info]
+    assert not errors, [r.getMessage() for r in errors]
+
+
 class SlowAirframe(FakeAirframe):
     """Each move takes the pilot 20 ms to start, as a busy vehicle might."""
 
