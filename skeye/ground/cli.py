@@ -11,11 +11,14 @@ or SIGTERM (or when one of them fails, or when the ``make`` that started it is s
 them all in the reverse of their start order, clients before the servers they use: ground
 control, then the pilot, then the simulator, each sent SIGTERM only once the one before has
 exited (SIGKILL for one that has not within ``STOP_TIMEOUT_S``), so a normal stop logs no lost
-camera, simulator or link. A child that was killed (by a signal, or stopped with status 0 by
-one it caught) is started again on the same ports, as systemd's ``Restart=on-abnormal`` does,
-at most ``RESTART_BURST`` times in ``RESTART_WINDOW_S``: the pilot re-attaches to a restarted
-simulator, ground control reconnects to a restarted pilot. A child that exits with an error
-status (the simulator's engine failed: 3; a bad option: 2; ...) stops everything, saying why.
+camera, simulator or link. A second Ctrl-C or SIGTERM during the stop kills every child still
+running at once, as a second Ctrl-C does to ``docker compose up``: three children hung at their
+stop would otherwise hold it ``STOP_TIMEOUT_S`` each. A child that was killed (by a signal, or
+stopped with status 0 by one it caught) is started again on the same ports, as systemd's
+``Restart=on-abnormal`` does, at most ``RESTART_BURST`` times in ``RESTART_WINDOW_S``: the
+pilot re-attaches to a restarted simulator, ground control reconnects to a restarted pilot. A
+child that exits with an error status (the simulator's engine failed: 3; a bad option: 2; ...)
+stops everything, saying why.
 The pilot serves its camera on ``--video-port`` (default 7001) and ground control shows
 that. Before starting anything it checks that each of its five ports is free and names the
 option that moves a taken one.
@@ -256,20 +259,20 @@ def _exit_meaning(what: str, status: int | None) -> str:
     return _EXIT_MEANING.get((what, status if status is not None else 0), "")
 
 
-def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> bool:
+def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]],
+                 stop: threading.Event | None = None) -> bool:
     """Say which children have exited, and how; True if any has.
 
     When another child died first, the simulator gets a moment to exit too: a pilot that lost
     its simulator (or failed while starting) is usually looking at one on its way out, and the
-    simulator's own status names the root cause."""
+    simulator's own status names the root cause. ``stop`` set (Ctrl-C, SIGTERM) ends that wait:
+    a stuck simulator never exits by itself, and the user asked to stop."""
     simulator = children[0][1] if children and children[0][0] == "simulator" else None
     others = [(w, c) for w, c in children if w != "simulator" and c.poll() is not None]
     if simulator is not None and others:
         lost = any(w == "pilot" and c.returncode == EXIT_LOST_SIMULATOR for w, c in others)
-        try:
-            simulator.wait(SIM_SETTLE_S if lost else OTHER_DEATH_SETTLE_S)
-        except subprocess.TimeoutExpired:
-            pass
+        _wait_exit(simulator, SIM_SETTLE_S if lost else OTHER_DEATH_SETTLE_S,
+                   stop or threading.Event())
     dead = [(w, c) for w, c in children if c.poll() is not None]
     for what, child in dead:
         meaning = _exit_meaning(what, child.returncode)
@@ -278,6 +281,15 @@ def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]]) -> boo
         print(f"skeye up: {what} exited ({status}"
               f"{': ' + meaning if meaning else ''}); stopping", flush=True)
     return bool(dead)
+
+
+def _wait_exit(child: subprocess.Popen[Any], timeout_s: float, stop: threading.Event) -> None:
+    """Wait up to ``timeout_s`` for ``child`` to exit, or until ``stop`` is set."""
+    end = time.monotonic() + timeout_s
+    while child.poll() is None:
+        left = end - time.monotonic()
+        if left <= 0.0 or sleep_until(stop, min(left, 0.05)):
+            return
 
 
 def restartable(status: int | None) -> bool:
@@ -372,13 +384,22 @@ def run_up(args: argparse.Namespace) -> int:
     token = env.get(TOKEN_ENV) or new_token()
     env[TOKEN_ENV] = token  # to the ground child by environment: argv is visible to all users
     stop = threading.Event()
+    children: list[tuple[str, subprocess.Popen[bytes]]] = []
+    killed: list[str] = []  # the children a second stop signal killed
 
     def handler(signum: int, frame: Any) -> None:
-        stop.set()
+        if not stop.is_set():
+            stop.set()  # the main thread stops the children, one after the other
+            return
+        # A second Ctrl-C or SIGTERM, or one while the children are being stopped: kill what
+        # still runs now, not STOP_TIMEOUT_S a child later.
+        for what, child in reversed(children):
+            if child.poll() is None:
+                child.kill()
+                killed.append(what)
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
-    children: list[tuple[str, subprocess.Popen[bytes]]] = []
     commands: dict[str, tuple[list[str], tuple[int, ...]]] = {}  # what -> argv, its ports
     restarts: dict[str, list[float]] = {}  # what -> when it was restarted
 
@@ -487,18 +508,24 @@ def run_up(args: argparse.Namespace) -> int:
             if going is not None:
                 print(f"skeye up: {going}; stopping", flush=True)
                 break
-            if not restart_dead() and _report_dead(children):
+            if not restart_dead() and _report_dead(children, stop):
                 status = 1
                 break
     except ConfigError as exc:
         print(f"skeye up: {exc}", file=sys.stderr, flush=True)
         # The root cause may be another child: a pilot that cannot reach its simulator is
         # usually looking at one that is exiting. _report_dead gives it time to say so.
-        _report_dead(children)
+        _report_dead(children, stop)
         status = 1
     finally:
+        if stop.is_set() and any(c.poll() is None for _, c in children):
+            print("skeye up: stopping (Ctrl-C or SIGTERM again kills what is still running at "
+                  "once)", flush=True)
+        stop.set()  # from here on (a failed child's stop too) a stop signal kills at once
         _stop_all(children)
         atexit.unregister(_stop_all)
+    if killed:
+        print(f"skeye up: killed {', '.join(killed)} at a second stop signal", flush=True)
     print("skeye up: stopped", flush=True)
     return status
 

@@ -1,0 +1,151 @@
+"""How ``skeye up`` stops when a child will not: a second Ctrl-C or SIGTERM kills what is still
+running at once, and a Ctrl-C ends the wait for the simulator's exit status.
+
+These run the real ``skeye up`` (its signal handling, stop order and reporting) with stand-ins
+for its three children: each a small interpreter listening on the ports ``skeye up`` waits for,
+so the stop is seen in a second instead of the minutes three MuJoCo imports take. A stand-in
+that ignores SIGTERM is a child hung at its stop (a simulator stuck in its engine, a pilot
+waiting on a frozen link), which ``skeye up`` SIGKILLs only after ``STOP_TIMEOUT_S`` (10 s),
+one child after the other: 30 s for three.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from skeye.ground.cli import STOP_TIMEOUT_S
+from tests.ground.conftest import wait_until
+from tests.ground.test_up import _children
+from tests.ports import free_ports
+
+# A child of skeye up: listens on every port given after --port, --image-port, --video-port;
+# SKEYE_STANDIN_HUNG=1: ignores SIGTERM (else exits 0 on it); SIGUSR1 makes it exit with 4.
+STANDIN = r"""
+import os, signal, socket, sys
+argv = sys.argv[1:]
+ports = [int(argv[i + 1]) for i, a in enumerate(argv) if a in ("--port", "--image-port",
+                                                               "--video-port")]
+servers = [socket.create_server(("127.0.0.1", p)) for p in ports]
+hung = os.environ.get("SKEYE_STANDIN_HUNG") == "1"
+signal.signal(signal.SIGTERM, signal.SIG_IGN if hung else lambda *_: os._exit(0))
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.signal(signal.SIGUSR1, lambda *_: os._exit(4))
+while True:
+    signal.pause()
+"""
+
+# skeye up itself, with the stand-ins in place of `python -m skeye.cli sim|pilot|ground`.
+UP = r"""
+import sys
+import skeye.ground.cli as up
+from skeye.cli import main
+standin = sys.argv[1]
+up._child_argv = lambda *args: [sys.executable, standin, *args]
+sys.exit(main(["up", *sys.argv[2:]]))
+"""
+
+
+@pytest.fixture
+def standin(tmp_path: Path) -> Path:
+    path = tmp_path / "standin.py"
+    path.write_text(STANDIN)
+    return path
+
+
+def _start_up(standin: Path, hung: bool) -> Iterator[tuple[subprocess.Popen[str], list[str]]]:
+    sim, img, pilot, ground, video = free_ports(5)
+    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
+            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
+            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_HUNG": "1" if hung else "0"}
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env, start_new_session=True)
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        while not any("skeye up: open" in line for line in lines):
+            line = proc.stdout.readline()
+            assert line, f"skeye up did not start: {lines}"
+            lines.append(line)
+        yield proc, lines
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # the whole group, whatever the test left
+        except ProcessLookupError:
+            pass
+        proc.wait(30)
+
+
+@pytest.fixture
+def hung_up(standin: Path) -> Iterator[tuple[subprocess.Popen[str], list[str]]]:
+    yield from _start_up(standin, hung=True)
+
+
+@pytest.fixture
+def up(standin: Path) -> Iterator[tuple[subprocess.Popen[str], list[str]]]:
+    yield from _start_up(standin, hung=False)
+
+
+def _gone(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_stop_signal_kills_children_that_will_not_stop(hung_up, sig) -> None:
+    """Before, a second Ctrl-C did nothing: three children hung at their stop took 30 s (10 s
+    each, one after the other), as docker compose's stop would, but without its way out, a
+    second Ctrl-C. Now the first asks each child to stop, saying how to force it, and the second
+    kills what is still running at once."""
+    proc, _ = hung_up
+    children = _children(proc.pid)
+    assert len(children) == 3
+    assert proc.stdout is not None
+    proc.send_signal(sig)
+    said = proc.stdout.readline()
+    assert said == ("skeye up: stopping (Ctrl-C or SIGTERM again kills what is still running "
+                    "at once)\n"), said
+    start = time.monotonic()
+    proc.send_signal(sig)
+    assert proc.wait(STOP_TIMEOUT_S / 2) == 0  # hung ground control alone held it 10 s
+    took = time.monotonic() - start
+    rest = proc.stdout.read()
+    assert "skeye up: killed ground control, pilot, simulator at a second stop signal" in rest
+    assert rest.rstrip().endswith("skeye up: stopped"), rest
+    assert all(_gone(pid) for pid in children)
+    assert took < STOP_TIMEOUT_S / 2
+
+
+def test_ctrl_c_ends_the_wait_for_the_simulators_exit_status(up) -> None:
+    """A pilot that lost its simulator (status 4) makes skeye up wait up to 30 s for the
+    simulator's own status, which names the root cause. A simulator that is stuck never gives
+    one, and Ctrl-C did nothing for those 30 s (and then 10 s more for each child that would
+    not stop). Now Ctrl-C ends the wait: the pilot's exit is still named, and everything stops."""
+    proc, _ = up
+    pids = {open(f"/proc/{pid}/cmdline").read().split("\0")[2]: pid
+            for pid in _children(proc.pid)}
+    os.kill(pids["pilot"], signal.SIGUSR1)  # the pilot exits 4: "it lost the simulator"
+    # skeye up reaps it (its /proc entry goes) and then waits for the simulator's status
+    wait_until(lambda: not os.path.exists(f"/proc/{pids['pilot']}"), 10,
+               "skeye up to see the pilot's exit")
+    start = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(STOP_TIMEOUT_S / 2) == 1  # the pilot failed: status 1, as before
+    took = time.monotonic() - start
+    assert proc.stdout is not None
+    rest = proc.stdout.read()
+    assert "skeye up: pilot exited (4: it lost the simulator); stopping" in rest, rest
+    assert rest.rstrip().endswith("skeye up: stopped"), rest
+    assert all(_gone(pid) for pid in pids.values())
+    assert took < STOP_TIMEOUT_S / 2
