@@ -26,7 +26,9 @@ it the newest frame once the previous one has gone), and one that takes nothing 
 (:class:`skeye.ground.limits.LimitedWebSocketProtocol`). A tab's commands
 are limited (``MAX_IN_FLIGHT`` waiting for the vehicle, ``COMMAND_RATE_HZ`` on average): the
 excess is answered at once with status 429, so one tab cannot queue work in front of another's.
-A binary frame closes ``/ws`` with code 1003, a message over ``MAX_WS_MESSAGE_BYTES`` with 1009,
+A command whose ``id`` holds NaN or Infinity (Python reads them; JSON has them not) is
+answered 400 without it: its echo would make the answer no JSON. A binary frame closes ``/ws``
+with code 1003, a message over ``MAX_WS_MESSAGE_BYTES`` with 1009,
 JSON nested deeper than ``MAX_JSON_DEPTH`` with 1008, each with a reason.
 
 Access (Host, Origin, token, content type, body size) is checked before any of this by
@@ -37,6 +39,7 @@ Access (Host, Origin, token, content type, body size) is checked before any of t
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import mimetypes
 from importlib import resources
@@ -308,6 +311,14 @@ def create_app(
                 if not isinstance(msg, dict) or msg.get("type") != "command":
                     await send({"type": "result", "id": None, "status": 400,
                                 "error": 'expected {"type": "command", "name": ..., "args": {}}'})
+                    continue
+                try:  # the id is echoed in the answer, which must be JSON
+                    json.dumps(msg.get("id"), allow_nan=False)
+                except ValueError:
+                    await send({"type": "result", "id": None, "status": 400,
+                                "error": "a command's \"id\" holds NaN or Infinity, which JSON "
+                                "has not (give text or a number); got "
+                                f"{json.dumps(msg.get('id')):.40}"})
                     continue
                 if not isinstance(msg.get("name"), str):  # (was: "unknown command 'None'")
                     await send({"type": "result", "id": msg.get("id"), "status": 400,

@@ -306,6 +306,38 @@ def test_a_huge_whole_number_gets_a_clear_error(
     assert not errors, [r.getMessage() for r in errors]
 
 
+def _strict_json(text: str) -> Any:
+    """JSON as RFC 8259 and a browser's JSON.parse read it: no NaN or Infinity."""
+    def refuse(constant: str) -> Any:
+        raise ValueError(f"{constant} is not JSON")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_a_command_id_of_nan_or_infinity_is_refused_not_echoed(ground: Ground) -> None:
+    """Python reads NaN and Infinity in JSON, which JSON has not. A command's id is echoed in
+    its answer, so an id of NaN got an answer that is no JSON (a browser's JSON.parse throws on
+    it, and the page's socket handler with it). Such an id is refused, naming it, with an
+    answer that is JSON, and the socket is served on."""
+    with ws_connect(f"{ground.ws_url}?token={ground.web.token}", open_timeout=10) as ws:
+        assert _strict_json(ws.recv(10))["type"] == "hello"
+        ws.send('{"type": "command", "id": NaN, "name": "hold", "args": {}}')
+        ws.send('{"type": "command", "id": [1, -Infinity], "name": "hold", "args": {}}')
+        ws.send('{"type": "command", "id": 3, "name": "hold", "args": {}}')
+        results = []
+        while len(results) < 3:
+            text = ws.recv(10)
+            assert isinstance(text, str)
+            msg = _strict_json(text)
+            if msg["type"] == "result":
+                results.append(msg)
+    for refused in results[:2]:
+        assert refused["id"] is None and refused["status"] == 400, refused
+        assert refused["error"].startswith('a command\'s "id" holds NaN or Infinity'), refused
+    assert "got NaN" in results[0]["error"] and "got [1, -Infinity]" in results[1]["error"]
+    assert results[2]["id"] == 3 and results[2]["status"] == 503  # no vehicle: served on
+    assert ground.commands_reached() == 1  # the third only
+
+
 class SlowAirframe(FakeAirframe):
     """Each move takes the pilot 20 ms to start, as a busy vehicle might."""
 
