@@ -42,6 +42,7 @@ __all__ = [
     "ERROR_LINE_CHARS",
     "FREE_TEXT_KEYS",
     "LINE_END",
+    "MAX_INT_DIGITS",
     "MISSING",
     "LineDecoder",
     "LineError",
@@ -61,6 +62,10 @@ ERROR_LINE_CHARS = 200
 """How much of a bad line a :class:`LineError` keeps (enough to see what went wrong)."""
 
 _MAX_REASON_CHARS = 1000
+MAX_INT_DIGITS = 4300
+"""The most digits (leading zeros aside) an integer field is read with: Python's own default
+limit for ``int()`` of text (``sys.int_info.default_max_str_digits``, against CVE-2020-10735).
+No integer field's range comes anywhere near it."""
 _KEY_TOKEN = re.compile(r"[A-Za-z][A-Za-z0-9_.]*\Z")
 _TYPE_WORD = re.compile(r"[^\s{}]*")
 _FLOAT_TEXT = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
@@ -238,7 +243,11 @@ class Message:
         min_value: int | None = None,
         max_value: int | None = None,
     ) -> int:
-        """The value of ``key`` as a decimal integer within ``[min_value, max_value]``."""
+        """The value of ``key`` as a decimal integer within ``[min_value, max_value]``.
+
+        Leading zeros are read away first; an integer of more than :data:`MAX_INT_DIGITS`
+        digits after them (which Python's ``int()`` refuses to convert) is beyond every range:
+        refused as out of range, or as too large when there is no range."""
         text = self.get(key)
         if text is None:
             if default is MISSING:
@@ -246,7 +255,13 @@ class Message:
             return default
         if not _INT_TEXT.match(text):
             raise RemoteProtocolError(f"{key}: {text!r} is not an integer")
-        value = int(text)
+        negative = text.startswith("-")
+        digits = text.lstrip("+-").lstrip("0") or "0"
+        if len(digits) > MAX_INT_DIGITS:
+            _check_range(key, text, -math.inf if negative else math.inf, min_value, max_value)
+            raise RemoteProtocolError(
+                f"{key}: {text!r} is too large an integer (more than {MAX_INT_DIGITS} digits)")
+        value = -int(digits) if negative else int(digits)
         _check_range(key, text, value, min_value, max_value)
         return value
 

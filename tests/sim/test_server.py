@@ -106,6 +106,23 @@ def test_overlong_line_gets_err_then_close():
         d.close()
 
 
+def test_an_integer_with_thousands_of_digits_is_read_not_a_server_failure():
+    """Python's int() refuses text of more than 4300 digits (CVE-2020-10735); the codec reads
+    such a count as the number it is: out of range when it is, and with leading zeros the
+    small number it spells, never ``failed: ValueError``."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        huge = "9" * 5000
+        err = c.answer(f"STEP {{Count {huge}}}", "STEP")
+        assert err.type == "ERR", err
+        reason = err.get("Reason") or ""
+        assert reason.startswith("Count: '9999") and "failed" not in reason, err
+        res = c.answer(f"STEP {{Count {'0' * 5000}3}}", "STEP")
+        assert res.type == "RES" and float(res.require("Time")) == pytest.approx(0.003), res
+        c.close()
+
+
 def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connection():
     with running_sim() as server:
         a, b = LineClient(server.port), LineClient(server.port)
