@@ -499,10 +499,20 @@ def _safe_text(text: str) -> str:
 
 def clean_reason(reason: str) -> str:
     """Free text fit for ``{Reason ...}``: braces and line breaks replaced, blanks collapsed,
-    at most 1000 characters (never empty: ``unspecified``)."""
+    at most 1000 characters (never empty: ``unspecified``). A longer text keeps its beginning
+    and its end, and says how much of its middle was left out: a reason quotes the value it
+    refuses before saying what is wrong with it, and a long value must not cut that off."""
     text = " ".join(_safe_text(str(reason)).split()) or "unspecified"
     if len(text) > _MAX_REASON_CHARS:
-        text = text[:_MAX_REASON_CHARS] + "..."
+        head = _MAX_REASON_CHARS // 2
+        left_out = len(text) - _MAX_REASON_CHARS
+        while True:  # the marker's own length moves what it leaves out (by a digit at most)
+            marker = f" ...({left_out} characters left out)... "
+            tail = _MAX_REASON_CHARS - head - len(marker)
+            if len(text) - head - tail == left_out:
+                break
+            left_out = len(text) - head - tail
+        text = text[:head] + marker + text[len(text) - tail:]
     return text
 
 

@@ -123,6 +123,26 @@ def test_an_integer_with_thousands_of_digits_is_read_not_a_server_failure():
         c.close()
 
 
+def test_a_long_value_in_a_refused_line_leaves_the_reason_readable():
+    """A reason quotes the value it refuses; cut to its first 1000 characters, the quote of a
+    long value left out what was wrong with it. The end of a long reason is kept."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        for line, command, said in [
+            (f"STEP {{Count {'9' * 5000}}}", "STEP", "is out of range [1, 10000000]"),
+            (f"SET {{Type Wind}} {{Mode constant}} {{Params speed_m_s={'4' * 2000}}}", "SET",
+             "speed_m_s must be in [0, 40]"),
+            (f"INIT {{ClassName {'h' * 3000}}} {{Start Pad1}}", "INIT",
+             "known classes: hummingbird"),
+        ]:
+            err = c.answer(line, command)
+            reason = err.get("Reason") or ""
+            assert err.type == "ERR" and said in reason, (line[:40], err)
+            assert len(reason) <= 1000, len(reason)
+        c.close()
+
+
 def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connection():
     with running_sim() as server:
         a, b = LineClient(server.port), LineClient(server.port)
