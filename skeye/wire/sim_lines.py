@@ -39,6 +39,7 @@ import numpy as np
 from skeye.errors import LocalProtocolError, RemoteProtocolError
 
 __all__ = [
+    "DECIMAL_PATTERN",
     "ERROR_LINE_CHARS",
     "FREE_TEXT_KEYS",
     "LINE_END",
@@ -68,9 +69,14 @@ limit for ``int()`` of text (``sys.int_info.default_max_str_digits``, against CV
 No integer field's range comes anywhere near it."""
 _KEY_TOKEN = re.compile(r"[A-Za-z][A-Za-z0-9_.]*\Z")
 _TYPE_WORD = re.compile(r"[^\s{}]*")
-_FLOAT_TEXT = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
+# A decimal number: its digits before the point and after it are one way to split the text
+# only (``\d+(?:\.\d*)?``, never ``\d+\.?\d*``, whose two digit runs a failed match tries at
+# every split: quadratic in the digits, and the regex engine holds the GIL, so one line of
+# 60 000 digits stood the whole simulator still for minutes).
+DECIMAL_PATTERN = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"
+_FLOAT_TEXT = re.compile(DECIMAL_PATTERN + r"\Z", re.ASCII)
 _INT_TEXT = re.compile(r"[+-]?\d+\Z", re.ASCII)
-_LEADING_FLOAT = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)", re.ASCII)
+_LEADING_FLOAT = re.compile(r"\s*(" + DECIMAL_PATTERN + ")", re.ASCII)
 _EOL = re.compile(rb"[\r\n]")
 _FIRST_WORD = re.compile(r"\s*([^\s{}]+)")
 

@@ -28,8 +28,9 @@ _DEFAULTS: Final[dict[str, dict[str, float]]] = {
 }
 
 # Plain decimal text, as the wire's numbers; nan and inf are read so that the range check names
-# them with the parameter's range.
-_NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*\Z",
+# them with the parameter's range. The digits split one way only (``\d+(?:\.\d*)?``, as
+# skeye.wire.sim_lines.DECIMAL_PATTERN: ``\d+\.?\d*`` made a failed match quadratic).
+_NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*\Z",
                      re.ASCII | re.IGNORECASE)
 
 # Physical ranges, inclusive (name: (low, high, why)). Winds above 40 m/s are beyond any small
