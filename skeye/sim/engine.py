@@ -59,6 +59,9 @@ log = logging.getLogger(__name__)
 
 TIMESTEP_RANGE_S = (1e-5, 0.01)
 """The physics step a simulation takes (``skeye sim --timestep``), seconds, both ends in."""
+MAX_ROBOT_NAME_CHARS = 64
+"""The longest robot name: an identifier, written in every STA line (and INIT's answer), which
+must stay within the control protocol's 64 KiB line limit."""
 
 
 @dataclass
@@ -281,6 +284,9 @@ class Simulation:
         name = name or f"R{number}"
         if name in self.robots:
             raise LocalProtocolError(f"a robot named {name!r} already exists")
+        if len(name) > MAX_ROBOT_NAME_CHARS:
+            raise LocalProtocolError(f"robot name of {len(name)} characters: at most "
+                                     f"{MAX_ROBOT_NAME_CHARS} characters")
         if not name.replace("_", "").replace("-", "").isalnum():
             raise LocalProtocolError(f"robot name {name!r} may hold only letters, digits, - and _")
         pos, rpy, airborne = self._spawn_pose(config, start, location_ned_m, rotation_rpy_rad)

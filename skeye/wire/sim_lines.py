@@ -116,6 +116,14 @@ def _parse_float(key: str, text: str) -> float:
     return value
 
 
+def _quoted(text: str, limit: int = 80) -> str:
+    """``text`` quoted for a note; a longer text by its start and its length, so that an answer
+    that quotes it stays well within the line limit."""
+    if len(text) <= limit:
+        return repr(text)
+    return f"{text[:limit]!r}... ({len(text)} characters)"
+
+
 def _unreal_float(key: str, text: str, whole: str) -> float:
     """UnrealScript's ``float(string)`` (C ``atof``): the leading decimal number after blanks,
     ignoring the rest; 0 when there is none."""
@@ -147,7 +155,7 @@ def parse_usarsim_float(key: str, text: str) -> tuple[float, str | None]:
     if _LEADING_FLOAT.match(text) is None:
         raise RemoteProtocolError(f"{key}: {text!r} is not a number")
     value = _unreal_float(key, text, text)
-    note = (f"{key} {text!r} read as {value:g} as USARSim's float() reads it (the leading "
+    note = (f"{key} {_quoted(text)} read as {value:g} as USARSim's float() reads it (the leading "
             "number); send numbers with '.' decimals")
     return value, note
 
@@ -178,7 +186,7 @@ def parse_usarsim_vector(key: str, text: str) -> tuple[tuple[float, float, float
     y = _unreal_float(key, rest[:second] if second >= 0 else "", text)
     z = _unreal_float(key, rest[second + 1 :], text)
     note = (
-        f"{key} {text!r} read as {x:g},{y:g},{z:g} as USARSim's ParseVector reads it "
+        f"{key} {_quoted(text)} read as {x:g},{y:g},{z:g} as USARSim's ParseVector reads it "
         "(split at the first two commas, the leading number of each part); "
         "send x,y,z with '.' decimals"
     )

@@ -171,6 +171,29 @@ def test_a_long_malformed_number_is_refused_at_once_and_others_are_served(line: 
         other.close()
 
 
+def test_the_server_never_writes_a_line_longer_than_the_protocols_limit():
+    """Lines are at most 64 KiB both ways (docs/protocols/simulator.md, Syntax): a robot name,
+    a PING Id or a number the answer quotes, as long as a line allows, was written back in
+    a longer line, which a client's decoder (skeye's own) takes for a broken stream. Such a
+    name or Id is now refused naming its limit; a note quotes the start of a long value."""
+    with running_sim() as server:
+        c = LineClient(server.port)  # its decoder takes lines of 65536 bytes, no longer
+        c.expect("NFO")
+        err = c.answer(f"INIT {{ClassName hummingbird}} {{Name {'N' * 65480}}} {{Start Pad1}}",
+                       "INIT")
+        assert err.type == "ERR" and "at most 64 characters" in (err.get("Reason") or ""), err
+        err = c.answer(f"PING {{Id {'y' * 65520}}}", "PING")
+        assert err.type == "ERR" and "at most 1000 characters" in (err.get("Reason") or ""), err
+        name = "N" * 64
+        res = c.answer(f"INIT {{ClassName hummingbird}} {{Name {name}}} {{Start Pad1}}", "INIT")
+        assert res.get("Name") == name, res
+        res = c.answer(f"DRIVE {{LinearVelocity 0,{'0' * 65450}}}", "DRIVE")
+        assert "read as 0" in (res.get("Note") or ""), res
+        stream = c.step(200)
+        assert any(m.type == "STA" and m.get("Name") == name for m in stream)
+        c.close()
+
+
 def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connection():
     with running_sim() as server:
         a, b = LineClient(server.port), LineClient(server.port)
