@@ -593,10 +593,17 @@ def set_camera_fov(sim: Any, robot_name: str, camera: str, fov_h_rad: float) -> 
     for cam in robot.cameras:
         if cam.name.lower() == camera.lower():
             check_fov(fov_h_rad, f"camera {camera!r}")
+            # The model holds the robot's cameras only while images are served (the camera
+            # system adds them); without, the camera keeps the field of view for when they are
+            # (the camera system sets the model's from it at every rebuild).
+            import mujoco
+
+            index = mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_CAMERA,
+                                      camera_model_name(robot_name, cam.name))
             cam.fov_h_rad = fov_h_rad
             if cam.model is not None:  # a zoom: the same lens model, a new focal length
                 cam.set_model(replace(cam.model, **pinhole(cam.width, cam.height, fov_h_rad)))
-            index = camera_index(sim.model, camera_model_name(robot_name, cam.name))
-            sim.model.cam_fovy[index] = cam.fovy_deg
+            if index >= 0:
+                sim.model.cam_fovy[index] = cam.fovy_deg
             return
     raise LocalProtocolError(f"robot {robot_name} has no camera named {camera!r}")

@@ -194,6 +194,21 @@ def test_the_server_never_writes_a_line_longer_than_the_protocols_limit():
         c.close()
 
 
+def test_set_camera_fov_without_images_served_is_done_and_said_so():
+    """Without --image-port the robot's cameras are not in the MuJoCo model (nothing renders
+    them), yet GETCONF lists them. SET {Type Camera} was answered with ERR naming the model's
+    internal camera name, and had changed the camera's FOV all the same (GETCONF said so)."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        assert c.answer("INIT {ClassName hummingbird} {Start Pad1}", "INIT").type == "RES"
+        res = c.answer("SET {Type Camera} {Name Down} {Opcode FOV} {Params 1}", "SET")
+        assert res.type == "RES" and res.get("Status") == "OK", res
+        c.send("GETCONF {Type Camera}")
+        assert float(c.expect("CONF").require("FOV")) == 1.0
+        c.close()
+
+
 def test_several_clients_each_drive_their_own_robot_and_it_goes_with_the_connection():
     with running_sim() as server:
         a, b = LineClient(server.port), LineClient(server.port)
