@@ -59,8 +59,20 @@ def output_folder(path: Path, option: str = "--out") -> Path:
 def cache_folder(kind: str) -> Path:
     """Where skeye keeps ``kind`` (a camera calibration, textures) for later runs:
     ``$XDG_CACHE_HOME/skeye/KIND``, ``~/.cache/skeye/KIND`` without it (XDG's base directory
-    rule). Not made here: a caller that cannot make it works without its cache."""
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "skeye" / kind
+    rule). Not made here: a caller that cannot make it works without its cache.
+
+    Raises:
+        OSError: no ``XDG_CACHE_HOME`` and no home folder (``HOME`` unset and no passwd entry,
+            as for a container's arbitrary user id): there is nowhere to keep anything.
+    """
+    base = os.environ.get("XDG_CACHE_HOME")
+    if not base:
+        try:
+            base = str(Path.home() / ".cache")
+        except RuntimeError:  # pathlib: "Could not determine home directory."
+            raise OSError("no cache folder: XDG_CACHE_HOME is not set and this user has no "
+                          "home folder") from None
+    return Path(base) / "skeye" / kind
 
 
 LOCK_NAME = ".skeye.lock"

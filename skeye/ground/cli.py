@@ -346,7 +346,11 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     ident = repr((model, BOARD, board_poses(model.width, model.height, model.fx_px),
                   __version__))
     key = hashlib.sha256(ident.encode()).hexdigest()[:12]
-    workdir = cache_folder("calibration") / f"{Path(robot).stem}-{model.profile}-{key}"
+    try:
+        workdir = cache_folder("calibration") / f"{Path(robot).stem}-{model.profile}-{key}"
+    except OSError as exc:
+        raise ConfigError(f"--calibration auto keeps the calibration in a cache folder: {exc}; "
+                          "set XDG_CACHE_HOME, or give --calibration FILE or none") from None
     path = workdir / "camera.toml"
     if path.is_file():
         print(f"skeye up: the pilot uses the camera calibration {path}", flush=True)
@@ -394,9 +398,12 @@ def run_up(args: argparse.Namespace) -> int:
         # A second Ctrl-C or SIGTERM, or one while the children are being stopped: kill what
         # still runs now, not STOP_TIMEOUT_S a child later.
         for what, child in reversed(children):
+            # poll() says None while the main thread waits on the child: a third signal
+            # kills it again, but names it once
             if child.poll() is None:
                 child.kill()
-                killed.append(what)
+                if what not in killed:
+                    killed.append(what)
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)

@@ -5,8 +5,9 @@ encoded as PNG; the same inputs give the same bytes every time, handed to MuJoCo
 :func:`skeye.sim.world.build_mjcf`. Rendering them is most of a world's build (about 0.5 s of a
 simulator's 0.9 s start), so they are kept twice: in the process (``lru_cache``) and on disk
 for later processes (:func:`_kept`, in ``$XDG_CACHE_HOME/skeye/textures/``), keyed by the
-texture's inputs, the code that renders it and the numpy and OpenCV versions it ran on. A kept
-file that is not a whole PNG is rendered again; a cache that cannot be written is done without.
+texture's inputs, the code that renders it and the numpy and OpenCV versions it ran on, each
+file checked against its own digest. A damaged file is rendered again; a cache that cannot be
+written is done without.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import hashlib
 import logging
 import os
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -36,8 +38,8 @@ log = logging.getLogger(__name__)
 KEPT_FILES = 32
 """At most this many textures stay on disk; the oldest go first (a code change keys anew)."""
 
-_PNG_START = b"\x89PNG\r\n\x1a\n"
-_PNG_END = b"IEND\xaeB`\x82"  # the last chunk and its CRC: a cut-off file lacks it
+PARTIAL_AGE_S = 600.0
+"""A half-written file (its writer killed before it was put in place) older than this goes."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -50,23 +52,32 @@ def _code_key() -> bytes:
     return digest.digest()
 
 
+def _digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()[:16]
+
+
 def _kept(what: tuple[object, ...], render: Callable[[], bytes]) -> bytes:
-    """The PNG ``render()`` makes for ``what`` (a texture's name and inputs, by ``repr``),
-    from the disk cache when a whole one is kept there, else rendered and kept."""
+    """The PNG ``render()`` makes for ``what`` (a texture's name and every input its pixels
+    depend on, by ``repr``), from the disk cache when a whole one is kept there, else rendered
+    and kept. A kept file is named ``KIND-KEY-DIGEST.png``, DIGEST its bytes' own (SHA-256), so
+    a file cut short or damaged anywhere is known and rendered again."""
     try:
         key = hashlib.sha256(_code_key() + repr(what).encode()).hexdigest()[:32]
-    except OSError as exc:  # no source to key by (an unusual install): render every time
+        folder = cache_folder("textures")
+    except OSError as exc:  # no source to key by, no cache folder: render every time
         log.debug("texture cache off: %s", exc)
         return render()
-    folder = cache_folder("textures")
-    path = folder / f"{what[0]}-{key}.png"
+    stem = f"{what[0]}-{key}"
     try:
-        data = path.read_bytes()
-        if data.startswith(_PNG_START) and data.endswith(_PNG_END):
-            return data
+        for path in sorted(folder.glob(f"{stem}-*.png")):
+            data = path.read_bytes()
+            if path.stem == f"{stem}-{_digest(data)}":
+                return data
+            path.unlink(missing_ok=True)  # damaged: rendered again below
     except OSError:
         pass  # not kept yet, or unreadable: rendered below
     data = render()
+    path = folder / f"{stem}-{_digest(data)}.png"
     partial = folder / f".{path.name}.{os.getpid()}.{threading.get_ident()}.partial"
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -83,8 +94,10 @@ def _kept(what: tuple[object, ...], render: Callable[[], bytes]) -> bytes:
 
 
 def _trim(folder: Path) -> None:
-    """Remove the oldest kept textures beyond :data:`KEPT_FILES`."""
+    """Remove the oldest kept textures beyond :data:`KEPT_FILES`, and half-written files older
+    than :data:`PARTIAL_AGE_S` (their writers were killed)."""
     files = []
+    now = time.time()
     for path in folder.glob("*.png"):
         try:
             files.append((path.stat().st_mtime, path))
@@ -92,6 +105,12 @@ def _trim(folder: Path) -> None:
             continue  # removed by another process meanwhile
     for _, path in sorted(files)[:-KEPT_FILES]:
         path.unlink(missing_ok=True)
+    for path in folder.glob(".*.partial"):
+        try:
+            if now - path.stat().st_mtime > PARTIAL_AGE_S:
+                path.unlink(missing_ok=True)
+        except OSError:
+            continue
 
 
 # ----------------------------------------------------------------------------------------------
@@ -150,13 +169,14 @@ def ground_texture_png(texture: str, rgb: Vec3, rgb2: Vec3, pixels: int = 512) -
     """A tileable procedural ground texture (grass or concrete), the same bytes every time."""
     if texture not in ("grass", "concrete"):
         raise ConfigError(f"no procedural texture for ground texture {texture!r}")
-    return _kept(("ground", texture, rgb, rgb2, pixels),
-                 lambda: _ground_png(texture, rgb, rgb2, pixels))
+    seed = 20240611 + GROUND_TEXTURES.index(texture)
+    return _kept(("ground", texture, rgb, rgb2, pixels, seed),
+                 lambda: _ground_png(rgb, rgb2, pixels, seed, texture == "grass"))
 
 
-def _ground_png(texture: str, rgb: Vec3, rgb2: Vec3, pixels: int) -> bytes:
-    rng = np.random.default_rng(20240611 + GROUND_TEXTURES.index(texture))
-    if texture == "grass":
+def _ground_png(rgb: Vec3, rgb2: Vec3, pixels: int, seed: int, grass: bool) -> bytes:
+    rng = np.random.default_rng(seed)
+    if grass:
         mix = (
             0.55 * _periodic_noise(rng, pixels, 1.0)
             + 0.35 * _periodic_noise(rng, pixels, 6.0)

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -47,15 +49,19 @@ def test_a_rendered_texture_is_kept_and_a_later_process_reads_it(cache: Path) ->
     grey = cv2.imdecode(np.frombuffer(first, np.uint8), cv2.IMREAD_GRAYSCALE)
     assert np.array_equal(grey, render_pad(SKEYE_4, 256, supersample=2))  # the same pixels
     # Another process keyed the same way returns what the file holds, not a new rendering:
-    # the file is replaced by another (whole) image, which is what comes back.
-    path.write_bytes(a_png(77))
+    # the file is replaced by another whole image (named by its own digest, as the cache names
+    # a file), which is what comes back.
+    other = a_png(77)
+    kind, key, _ = path.stem.split("-")
+    path.unlink()
+    (cache / f"{kind}-{key}-{hashlib.sha256(other).hexdigest()[:16]}.png").write_bytes(other)
     code = ("import sys; from skeye.sim.world_textures import pad_texture_png; "
             "from skeye.vision.pad import SKEYE_4; "
             "sys.stdout.buffer.write(pad_texture_png(SKEYE_4, 256))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120,
                          env={**os.environ, "XDG_CACHE_HOME": str(cache.parent.parent)})
     assert out.returncode == 0, out.stderr.decode()
-    assert out.stdout == a_png(77)
+    assert out.stdout == other
 
 
 def test_other_inputs_are_kept_apart(cache: Path) -> None:
@@ -65,15 +71,43 @@ def test_other_inputs_are_kept_apart(cache: Path) -> None:
     assert {p.read_bytes() for p in cache.glob("*.png")} == {small, large, ground}
 
 
-def test_a_cut_off_or_foreign_file_is_rendered_again_and_replaced(cache: Path) -> None:
+def test_a_damaged_file_is_rendered_again_and_replaced(cache: Path) -> None:
     whole = ground_texture_png(*GRASS, 64)
     (path,) = kept(cache, "ground")
-    for bad in (whole[: len(whole) // 2], b"", b"not a png at all"):
+    middle = len(whole) // 2
+    flipped = whole[:middle] + bytes([whole[middle] ^ 0xFF]) + whole[middle + 1:]
+    for bad in (whole[:middle], b"", b"not a png at all", flipped):
         path.write_bytes(bad)
         ground_texture_png.cache_clear()
         assert ground_texture_png(*GRASS, 64) == whole
-        assert path.read_bytes() == whole
+        assert kept(cache, "ground") == [path] and path.read_bytes() == whole
     assert not list(cache.glob(".*partial"))
+
+
+def test_without_a_home_folder_the_texture_is_still_made(
+        cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No XDG_CACHE_HOME and no home folder (HOME unset, no passwd entry: a container's
+    arbitrary user id): pathlib raises RuntimeError, which stopped every world's build."""
+    monkeypatch.delenv("XDG_CACHE_HOME")
+
+    def no_home() -> Path:
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.setattr(Path, "home", staticmethod(no_home))
+    made = pad_texture_png(SKEYE_4, 128)
+    grey = cv2.imdecode(np.frombuffer(made, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert np.array_equal(grey, render_pad(SKEYE_4, 128, supersample=2))
+
+
+def test_a_half_written_file_of_a_killed_writer_goes_in_time(cache: Path) -> None:
+    cache.mkdir(parents=True)
+    stale, fresh = cache / ".pad-x.png.1.2.partial", cache / ".pad-y.png.3.4.partial"
+    for path in (stale, fresh):
+        path.write_bytes(b"half")
+    old_s = time.time() - world_textures.PARTIAL_AGE_S - 60.0
+    os.utime(stale, (old_s, old_s))
+    pad_texture_png(SKEYE_4, 128)  # a write, and the trim after it
+    assert not stale.exists() and fresh.exists()
 
 
 def test_without_a_writable_cache_the_texture_is_still_made(
