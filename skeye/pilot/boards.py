@@ -206,6 +206,7 @@ class OnboardBoards:
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
         self.motion_changes = 0  # bumped by every command or event that replaces the motion
+        self.pad_commands = 0  # PAD_MODE commands taken (a new pad mode, or the same again)
         self.envelope_stops = 0  # times the envelope stopped a vehicle moving out
         self.envelope_reason = ""  # why, the last time
         self.clock_until_s = 0.0  # sim time granted by CLOCK (used with --ground-clock)
@@ -435,6 +436,7 @@ class OnboardBoards:
         if msg.max_speed:
             self._speed(si_value(msg, "max_speed"))
         self.pad.set_mode(msg)
+        self.pad_commands += 1
 
     def _reset(self) -> None:
         """RESET: the airframe brings the vehicle back at home; it stands LANDED there."""

@@ -311,6 +311,7 @@ class PolicyPilot:
         self.slow_calls = 0  # of them, calls that took longer than period_s of wall time
         self.engaged = False
         self._needs_reset = False  # engaged, its reset() not yet done (it raised)
+        self._engagement: tuple[PadAction, int, int] | None = None  # the one engaged in
         self._next_s = -math.inf
         self._image: np.ndarray | None = None
         self._video: Callable[[CameraFrame], None] | None = None
@@ -355,6 +356,9 @@ class PolicyPilot:
         boards = self.boards
         with self.vision.lock:
             mode, state = boards.pad.mode, boards.state
+            # what ground control did last: a later command, even one back to this mode, makes
+            # a call under way stale
+            engagement = (mode, boards.pad_commands, boards.motion_changes)
             engaged = mode is not PadAction.OFF and state is NavState.HOLDING
             if not engaged:
                 if self.engaged and state is NavState.HOLDING:
@@ -362,8 +366,11 @@ class PolicyPilot:
                 self.engaged = False
                 return
             snap = boards.airframe.snapshot()
+            if self.engaged and engagement != self._engagement:  # ground control engaged it
+                self.engaged = False  # anew between two steps (PAD_MODE 0, then HOLD again)
             if not self.engaged:
                 self.engaged = True
+                self._engagement = engagement
                 self._next_s = snap.time_s
                 self.failures_in_a_row = 0
                 self._needs_reset = True
@@ -381,7 +388,7 @@ class PolicyPilot:
                 reset_policy(self.policy)
             except (Exception, SystemExit) as exc:  # a policy's sys.exit(): its failure
                 self.calls += 1
-                self._failed(mode, LocalProtocolError(
+                self._failed(engagement, LocalProtocolError(
                     f"the policy's reset raised {type(exc).__name__}: {exc}; the vehicle "
                     f"holds still"), exc)
             self._needs_reset = False
@@ -391,16 +398,16 @@ class PolicyPilot:
             action = self.policy(obs)
         except (Exception, SystemExit) as exc:  # sys.exit() too: not the pilot's end
             self._timed(time.monotonic() - started)
-            self._failed(mode, LocalProtocolError(
+            self._failed(engagement, LocalProtocolError(
                 f"the policy raised {type(exc).__name__}: {exc}; the vehicle holds still"), exc)
         self._timed(time.monotonic() - started)
         try:
             forward, right, up, yaw_rate = velocity_setpoint(action, self.limits)
         except InvalidArgument as exc:
-            self._failed(mode, InvalidArgument(
+            self._failed(engagement, InvalidArgument(
                 f"the policy's action: {exc}; the vehicle holds still"), exc)
         with self.vision.lock:
-            if not self._still_engaged(mode):  # ground control took it meanwhile: its say
+            if not self._still_engaged(engagement):  # ground control took it meanwhile: its say
                 log.info("the policy's action came after ground control changed PAD_MODE "
                          "%s or took the vehicle out of HOLDING: not flown", mode.name)
                 return
@@ -410,11 +417,16 @@ class PolicyPilot:
                 self.failures_in_a_row = 0
             boards.fly_velocity(forward, right, up, yaw_rate)  # inside the flight envelope
 
-    def _still_engaged(self, mode: PadAction) -> bool:
+    def _still_engaged(self, engagement: tuple[PadAction, int, int]) -> bool:
         """Whether the engagement a policy call was made in still holds (call it holding the
-        boards' lock): the same PAD_MODE, the vehicle still HOLDING."""
-        return (self.engaged and self.boards.pad.mode is mode
-                and self.boards.state is NavState.HOLDING)
+        boards' lock): the same PAD_MODE, the vehicle still HOLDING, and no PAD_MODE command
+        or change of motion since (PAD_MODE 0 and HOLD again during one call, or a landing and
+        a new take-off, are another engagement, whose policy gets its ``reset()``)."""
+        mode, pad_commands, motion_changes = engagement
+        boards = self.boards
+        return (self.engaged and boards.pad.mode is mode and boards.state is NavState.HOLDING
+                and boards.pad_commands == pad_commands
+                and boards.motion_changes == motion_changes)
 
     def _timed(self, took_s: float) -> None:
         """A call slower than its period held up the pilot's loop (the boards' tick, their
@@ -427,17 +439,19 @@ class PolicyPilot:
                         "pilot's loop waited for it (%d slow call(s) so far)", took_s,
                         self.period_s, self.slow_calls)
 
-    def _failed(self, mode: PadAction, error: Exception, cause: BaseException) -> NoReturn:
+    def _failed(self, engagement: tuple[PadAction, int, int], error: Exception,
+                cause: BaseException) -> NoReturn:
         """A policy call that raised (``SystemExit`` included: a policy's ``sys.exit()`` would
         otherwise end the pilot's loop) or gave no action: the vehicle holds still (its last
-        set-point is not flown on; unless ground control took it during the call, ``mode``
-        being the call's), said at the first failure of a run of them, and the error goes to
-        the pilot's loop (counted in its ``loop_faults``). Called without the boards' lock."""
+        set-point is not flown on; unless ground control took it during the call,
+        ``engagement`` being the call's), said at the first failure of a run of them, and the
+        error goes to the pilot's loop (counted in its ``loop_faults``). Called without the
+        boards' lock."""
         self.failures += 1
         self.failures_in_a_row += 1
         if self.failures_in_a_row == 1:
             with self.vision.lock:
-                if self._still_engaged(mode):
+                if self._still_engaged(engagement):
                     self.boards.airframe.hover()
             log.warning("%s", error)
         raise error from cause

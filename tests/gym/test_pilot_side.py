@@ -207,7 +207,7 @@ def _holding_pilot(policy: object) -> tuple[PolicyPilot, _Airframe]:
     pad._settings = PadModeSi(PadAction.HOLD, 0.05, 0.3)
     airframe = _Airframe()
     boards = SimpleNamespace(pad=pad, state=NavState.HOLDING, airframe=airframe,
-                             home_ned_m=(0.0, 0.0, 0.0))
+                             home_ned_m=(0.0, 0.0, 0.0), pad_commands=0, motion_changes=0)
     # OnboardBoards.fly_velocity, far inside the flight envelope (nothing to limit)
     boards.fly_velocity = lambda fwd, right, up, yaw_rate=0.0: airframe.set_velocity(
         fwd, right, up, yaw_rate, None)
@@ -426,3 +426,50 @@ def test_ground_control_takes_the_vehicle_back_while_the_policy_thinks(
     assert len(calls) == 2 and pilot.vision.failures == 0
     assert not pilot.vision.engaged
     assert "the policy's action came after ground control changed PAD_MODE HOLD" in caplog.text
+
+
+def test_ground_control_engaging_it_anew_during_a_call_makes_the_call_stale(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """PAD_MODE 0 and then HOLD again while one policy call runs: the vehicle ends up in the
+    mode the call was made in, HOLDING, so a check of mode and state alone flew the stale
+    action, and the new engagement got no ``reset()``. The boards now count PAD_MODE
+    commands (and changes of motion): the late action is not flown, and the policy is reset
+    for the new engagement before its next call."""
+    from skeye.link.vehicle import pad_mode_command
+    from skeye.wire.packets import PadAction
+
+    thinking, released, again = threading.Event(), threading.Event(), threading.Event()
+
+    class Policy:
+        def __init__(self) -> None:
+            self.calls = 0
+            self.resets = 0
+            self.resets_at_call: list[int] = []
+
+        def reset(self) -> None:
+            self.resets += 1
+
+        def __call__(self, obs: object) -> object:
+            self.calls += 1
+            self.resets_at_call.append(self.resets)
+            if self.calls == 2:
+                thinking.set()
+                released.wait(30)  # until the test lets it answer
+                return np.array([1.0, 0.0, 0.0, 0.0])
+            if self.calls == 3:
+                again.set()
+            return np.zeros(4)
+
+    policy = Policy()
+    with caplog.at_level("INFO", logger="skeye.pilot.policy"), \
+            _policy_engaged(tmp_path, policy) as (vehicle, pilot):
+        try:
+            assert thinking.wait(30)
+            vehicle.command(pad_mode_command(PadAction.OFF), timeout_s=5.0)
+            vehicle.command(pad_mode_command(PadAction.HOLD), timeout_s=5.0)
+        finally:
+            released.set()
+        assert again.wait(30), "no call after the new engagement"
+    assert "the policy's action came after ground control changed PAD_MODE HOLD" in caplog.text
+    assert policy.resets_at_call[:3] == [1, 1, 2], policy.resets_at_call
+    assert pilot.vision.failures == 0
