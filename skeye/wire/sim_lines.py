@@ -32,6 +32,7 @@ import enum
 import math
 import numbers
 import re
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,8 +66,15 @@ ERROR_LINE_CHARS = 200
 _MAX_REASON_CHARS = 1000
 MAX_INT_DIGITS = 4300
 """The most digits (leading zeros aside) an integer field is read with: Python's own default
-limit for ``int()`` of text (``sys.int_info.default_max_str_digits``, against CVE-2020-10735).
-No integer field's range comes anywhere near it."""
+limit for ``int()`` of text (``sys.int_info.default_max_str_digits``, against CVE-2020-10735),
+or the interpreter's own limit where it is set lower (``PYTHONINTMAXSTRDIGITS``). No integer
+field's range comes anywhere near it."""
+
+
+def _max_int_digits() -> int:
+    """:data:`MAX_INT_DIGITS`, or the interpreter's limit where lower (0 there: none)."""
+    limit = sys.get_int_max_str_digits()
+    return min(MAX_INT_DIGITS, limit) if limit > 0 else MAX_INT_DIGITS
 _KEY_TOKEN = re.compile(r"[A-Za-z][A-Za-z0-9_.]*\Z")
 _TYPE_WORD = re.compile(r"[^\s{}]*")
 # A decimal number: its digits before the point and after it are one way to split the text
@@ -260,8 +268,9 @@ class Message:
         """The value of ``key`` as a decimal integer within ``[min_value, max_value]``.
 
         Leading zeros are read away first; an integer of more than :data:`MAX_INT_DIGITS`
-        digits after them (which Python's ``int()`` refuses to convert) is beyond every range:
-        refused as out of range, or as too large when there is no range."""
+        digits (or the interpreter's lower limit) after them, which Python's ``int()`` refuses
+        to convert, is beyond every range: refused as out of range, or as too large when there
+        is no range."""
         text = self.get(key)
         if text is None:
             if default is MISSING:
@@ -271,10 +280,11 @@ class Message:
             raise RemoteProtocolError(f"{key}: {text!r} is not an integer")
         negative = text.startswith("-")
         digits = text.lstrip("+-").lstrip("0") or "0"
-        if len(digits) > MAX_INT_DIGITS:
+        most = _max_int_digits()
+        if len(digits) > most:
             _check_range(key, text, -math.inf if negative else math.inf, min_value, max_value)
             raise RemoteProtocolError(
-                f"{key}: {text!r} is too large an integer (more than {MAX_INT_DIGITS} digits)")
+                f"{key}: {text!r} is too large an integer (more than {most} digits)")
         value = -int(digits) if negative else int(digits)
         _check_range(key, text, value, min_value, max_value)
         return value

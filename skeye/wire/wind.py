@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from skeye.errors import ConfigError
+from skeye.wire.sim_lines import DECIMAL_PATTERN
 
 WIND_MODES = ("none", "constant", "turbulence", "dryden", "random_force")
 
@@ -27,10 +28,10 @@ _DEFAULTS: Final[dict[str, dict[str, float]]] = {
     "random_force": {"f_max_n": 0.3, "tick_s": 1.0 / 30.0},
 }
 
-# Plain decimal text, as the wire's numbers; nan and inf are read so that the range check names
-# them with the parameter's range. The digits split one way only (``\d+(?:\.\d*)?``, as
-# skeye.wire.sim_lines.DECIMAL_PATTERN: ``\d+\.?\d*`` made a failed match quadratic).
-_NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*\Z",
+# Plain decimal text, as the wire's numbers (the digits split one way only: see
+# DECIMAL_PATTERN); nan and inf are read so that the range check names them with the
+# parameter's range.
+_NUMBER = re.compile(rf"\s*(?:{DECIMAL_PATTERN}|[+-]?(?:nan|inf|infinity))\s*\Z",
                      re.ASCII | re.IGNORECASE)
 
 # Physical ranges, inclusive (name: (low, high, why)). Winds above 40 m/s are beyond any small

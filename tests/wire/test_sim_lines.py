@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -237,6 +238,23 @@ def test_get_int() -> None:
             M.get_int(key)
     with pytest.raises(RemoteProtocolError, match="out of range"):
         M.get_int("I", min_value=0, max_value=10)
+
+
+def test_get_int_within_the_interpreters_own_lower_digit_limit() -> None:
+    """``PYTHONINTMAXSTRDIGITS`` (or ``sys.set_int_max_str_digits``) may set Python's limit
+    below the 4300 the codec assumed: a 1000-digit count then raised ``ValueError`` from
+    ``int()``. The codec now takes the lower of the two."""
+    limit = sys.get_int_max_str_digits()
+    sys.set_int_max_str_digits(640)
+    try:
+        line = parse_line(f"STEP {{Count {'9' * 1000}}} {{Small {'0' * 1000}7}}")
+        with pytest.raises(RemoteProtocolError, match="out of range"):
+            line.get_int("Count", min_value=1, max_value=10)
+        with pytest.raises(RemoteProtocolError, match="more than 640 digits"):
+            line.get_int("Count")
+        assert line.get_int("Small") == 7
+    finally:
+        sys.set_int_max_str_digits(limit)
 
 
 def test_get_bool() -> None:
