@@ -39,8 +39,9 @@ from skeye.wire.sim_messages import ROBOT_ERRORS
 log = logging.getLogger(__name__)
 
 READ_ONLY = frozenset(("INIT", "DRIVE", "SET", "STEP"))
-_STREAM_PREFIXES = ("STA ", "SEN ", *(f"ERR {{Command {c}}}" for c in ROBOT_ERRORS))
-"""The engine's lines (skeye.sim.stream), as opposed to the answers to the client's commands."""
+_STREAM_PREFIXES = ("STA ", "SEN ", *(f"ERR {{Command {c}}} {{Name " for c in ROBOT_ERRORS))
+"""The engine's lines (skeye.sim.stream), as opposed to the answers to the client's commands:
+the engine's ERR names its robot, an answer to a client's unknown command ``CRASH`` does not."""
 _MAX_BATCH_LINES = 512
 
 

@@ -592,13 +592,16 @@ def test_replay_plays_the_crash_the_client_was_told_of(tmp_path: Path) -> None:
     """A replay left out ``ERR {Command CRASH}``: its stream lines were those of before the
     crash report existed (STA, SEN, ERR PHYSICS), so a client watching a crashed flight saw
     the readings go on and never the crash. Now the replay sends every engine line its client
-    was sent, in order: the crash with its cause among them."""
+    was sent, in order: the crash with its cause among them; not the answer to a command of the
+    client's that happened to be named CRASH."""
     path = tmp_path / "crash.rec"
     with running_sim() as server, Recorder(path, {"world": "pad"}) as recorder:
         recorder.attach(server, server.runner, truth_rate_hz=0)
         client = LineClient(server.port)
         client.expect("NFO")
         assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-3}", "INIT").type == "RES"
+        # an answer to the client's own command named CRASH, not the engine's crash report
+        assert client.answer("CRASH", "CRASH").type == "ERR"
         client.step(100)
         client.send("DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0}")  # motors off: a free fall
         crash = None
@@ -612,8 +615,9 @@ def test_replay_plays_the_crash_the_client_was_told_of(tmp_path: Path) -> None:
         raw = bytes(client.raw)
         client.close()
         assert wait_for(lambda: server.client_count == 0)
+    assert b"ERR {Command CRASH} {Reason unknown command" in raw
     engine = [line for line in raw.split(b"\r\n")
-              if line.startswith((b"SEN ", b"STA ", b"ERR {Command CRASH}"))]
+              if line.startswith((b"SEN ", b"STA ", b"ERR {Command CRASH} {Name R1}"))]
     assert engine[-1].startswith(b"S"), "no reading after the crash to order it against"
     with ReplayServer(path, port=0, speed=1000.0) as replay:
         player = LineClient(replay.port)
