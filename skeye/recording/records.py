@@ -375,10 +375,15 @@ class Recorder:
         except ConfigError as exc:
             self._stop(str(exc))
             return
-        self._note(f"recording continues in {nxt.name} (size limit {limit})")
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._file.close()
+        try:
+            self._note(f"recording continues in {nxt.name} (size limit {limit})")
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+        except OSError:  # the old part cannot be finished: no new one begun (the writer says)
+            new.close()
+            nxt.unlink(missing_ok=True)
+            raise
         self._file = new
         self.parts.append(nxt)
         log.warning("recording: %s is full (%s); continuing in %s", self.parts[-2], limit, nxt)
@@ -473,7 +478,8 @@ class Recorder:
         recording stops, said once; the simulator goes on. The file is closed without
         retrying what the failed write left in its buffer, which would fail again (and did,
         in ``close()``, ending ``skeye sim`` with an error after the recording had stopped)."""
-        self.stopped = f"writing {self.path} failed: {exc.strerror or exc}"
+        if self.stopped is None:  # a size-limit stop whose last note failed keeps its reason
+            self.stopped = f"writing {self.path} failed: {exc.strerror or exc}"
         log.error("recording %s: write failed, recording stops: %s; the simulator goes on",
                   self.path, exc.strerror or exc)
         self._closed = True

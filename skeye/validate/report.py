@@ -214,14 +214,16 @@ def _truth_note(setup: dict[str, Any]) -> str:
 
 
 def _seeds_words(seeds: list[int], flown: dict[str, list[int]] | None,
-                 failed: list[dict[str, Any]], trials: int) -> str:
+                 failed: list[dict[str, Any]], trials: int | None) -> str:
     """The seeds the figures come from; with failed trials, beside the seeds asked for and
-    the number of trials that ran (``summary["trials"]``)."""
+    the number of trials that ran (``summary["trials"]``; a summary without it: each
+    experiment's seeds)."""
     if not failed or flown is None:
         return f"{seeds}"
     reported = sorted({s for flew in flown.values() for s in flew})
+    ran = trials if trials is not None else len(seeds) * len(flown)
     return (f"{reported} (seeds {', '.join(map(str, seeds))} asked for; {len(failed)} of "
-            f"{trials} trials failed, listed under \"Failed trials\")")
+            f"{ran} trials failed, listed under \"Failed trials\")")
 
 
 def _failed_lines(failed: list[dict[str, Any]]) -> list[str]:
@@ -251,7 +253,7 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
     lines = [
         "# skeye validation report",
         "",
-        f"Seeds: {_seeds_words(seeds, flown, failed, summary['trials'])}; "
+        f"Seeds: {_seeds_words(seeds, flown, failed, summary.get('trials'))}; "
         f"mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
         f"{setup.get('estimator', 'truth')}; world: {setup.get('world', 'pad')}; calibration: "

@@ -186,6 +186,11 @@ def test_the_report_of_a_run_with_failed_trials_names_them_out_of_the_trials_tha
     assert "E2: every trial failed, no figures." in report
     assert "| E2 | 1 | SkeyeError: a / b c |" in report
     assert json.loads((tmp_path / "summary.json").read_text())["trials"] == 2
+    # A summary of before the count was kept (no "trials"): counted from the seeds as then.
+    del summary["trials"]
+    write_report(tmp_path, summary, True, [1], {"E1": [1], "E2": []})
+    report = (tmp_path / "report.md").read_text()
+    assert "Seeds: [1] (seeds 1 asked for; 1 of 2 trials failed, listed under" in report
 
 
 def test_bad_arguments_are_refused(tmp_path: Path):
