@@ -14,8 +14,10 @@ wrong):
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
+import pytest
 from pymavlink import mavutil
 
 from tests.mavlink.conftest import GCS, scripted_endpoint, wait_for
@@ -28,6 +30,22 @@ def _client(server) -> Any:
     port = int(server.addresses[0].rsplit(":", 1)[1])
     return mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
                                       source_component=GCS[1])
+
+
+@pytest.fixture
+def vehicle() -> Iterator[tuple[Any, Any]]:
+    """The scripted vehicle and a pymavlink ground station that has heard it, holding a
+    mission of two waypoints."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            _upload(conn, 2)
+            assert _count(conn) == 2
+            yield server, conn
+            assert server.errors == 0
+        finally:
+            conn.close()
 
 
 def _item(conn: Any, seq: int) -> None:
@@ -52,70 +70,47 @@ def _count(conn: Any) -> int:
     return int(wait_for(conn, "MISSION_COUNT", timeout_s=10).count)
 
 
-def test_clear_all_of_every_mission_type_clears_the_mission():
-    with scripted_endpoint("udp://127.0.0.1:0") as server:
-        conn = _client(server)
-        try:
-            wait_for(conn, "HEARTBEAT")
-            _upload(conn, 2)
-            assert _count(conn) == 2
-            conn.mav.mission_clear_all_send(1, 1, M.MAV_MISSION_TYPE_ALL)
-            ack = wait_for(conn, "MISSION_ACK", timeout_s=10)
-            assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED,
-                                                    M.MAV_MISSION_TYPE_ALL)
-            assert _count(conn) == 0
-            assert server.errors == 0
-        finally:
-            conn.close()
+def test_clear_all_of_every_mission_type_clears_the_mission(vehicle: tuple[Any, Any]) -> None:
+    _, conn = vehicle
+    conn.mav.mission_clear_all_send(1, 1, M.MAV_MISSION_TYPE_ALL)
+    ack = wait_for(conn, "MISSION_ACK", timeout_s=10)
+    assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_ALL)
+    assert _count(conn) == 0
 
 
-
-def test_a_download_by_mission_request_gets_mission_items():
-    with scripted_endpoint("udp://127.0.0.1:0") as server:
-        conn = _client(server)
-        try:
-            wait_for(conn, "HEARTBEAT")
-            _upload(conn, 2)
-            assert _count(conn) == 2
-            for seq in range(2):
-                conn.mav.mission_request_send(1, 1, seq, M.MAV_MISSION_TYPE_MISSION)
-                item = wait_for(conn, ["MISSION_ITEM", "MISSION_ITEM_INT"], timeout_s=10)
-                assert item.get_type() == "MISSION_ITEM"
-                assert item.seq == seq
-                assert item.frame == M.MAV_FRAME_GLOBAL_RELATIVE_ALT
-                assert item.command == M.MAV_CMD_NAV_WAYPOINT
-                # degrees as float32: 49 deg is held to 2**-18 deg (4e-6), about 0.4 m
-                assert abs(item.x - (LAT_E7 + 100 * seq) / 1e7) <= 2.0**-18
-                assert abs(item.y - LON_E7 / 1e7) <= 2.0**-18
-                assert item.z == 5.0 + seq
-            conn.mav.mission_request_int_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
-            item = wait_for(conn, ["MISSION_ITEM", "MISSION_ITEM_INT"], timeout_s=10)
-            assert item.get_type() == "MISSION_ITEM_INT"
-            assert (item.x, item.y) == (LAT_E7 + 100, LON_E7)
-            conn.mav.mission_ack_send(1, 1, M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
-            assert server.errors == 0
-        finally:
-            conn.close()
+def test_a_download_by_mission_request_gets_mission_items(vehicle: tuple[Any, Any]) -> None:
+    _, conn = vehicle
+    for seq in range(2):
+        conn.mav.mission_request_send(1, 1, seq, M.MAV_MISSION_TYPE_MISSION)
+        item = wait_for(conn, ["MISSION_ITEM", "MISSION_ITEM_INT"], timeout_s=10)
+        assert item.get_type() == "MISSION_ITEM"
+        assert item.seq == seq
+        assert item.frame == M.MAV_FRAME_GLOBAL_RELATIVE_ALT
+        assert item.command == M.MAV_CMD_NAV_WAYPOINT
+        # degrees as float32: 49 deg is held to 2**-18 deg (4e-6), about 0.4 m
+        assert abs(item.x - (LAT_E7 + 100 * seq) / 1e7) <= 2.0**-18
+        assert abs(item.y - LON_E7 / 1e7) <= 2.0**-18
+        assert item.z == 5.0 + seq
+    conn.mav.mission_request_int_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+    item = wait_for(conn, ["MISSION_ITEM", "MISSION_ITEM_INT"], timeout_s=10)
+    assert item.get_type() == "MISSION_ITEM_INT"
+    assert (item.x, item.y) == (LAT_E7 + 100, LON_E7)
+    conn.mav.mission_ack_send(1, 1, M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
 
 
-def test_the_last_item_sent_again_after_a_lost_ack_is_acknowledged_again():
-    with scripted_endpoint("udp://127.0.0.1:0") as server:
-        conn = _client(server)
-        try:
-            wait_for(conn, "HEARTBEAT")
-            _upload(conn, 3)  # (its MISSION_ACK "lost": the station sends item 2 again)
-            _item(conn, 2)
-            ack = wait_for(conn, "MISSION_ACK", timeout_s=5)
-            assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED,
-                                                    M.MAV_MISSION_TYPE_MISSION)
-            assert (ack.target_system, ack.target_component) == GCS
-            assert _count(conn) == 3  # stored once, not changed by the repeat
-            assert server.vehicle.mission.version == 1
-            # an item no upload asked for is still not acknowledged: the next answer is the count
-            _item(conn, 1)
-            conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
-            answer = wait_for(conn, ["MISSION_ACK", "MISSION_COUNT"], timeout_s=10)
-            assert (answer.get_type(), answer.count) == ("MISSION_COUNT", 3)
-            assert server.errors == 0
-        finally:
-            conn.close()
+def test_the_last_item_sent_again_after_a_lost_ack_is_acknowledged_again(
+        vehicle: tuple[Any, Any]) -> None:
+    server, conn = vehicle
+    _upload(conn, 3)  # (its MISSION_ACK "lost": the station sends item 2 again)
+    stored = server.vehicle.mission.version
+    _item(conn, 2)
+    ack = wait_for(conn, "MISSION_ACK", timeout_s=5)
+    assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
+    assert (ack.target_system, ack.target_component) == GCS
+    assert _count(conn) == 3  # stored once, not changed by the repeat
+    assert server.vehicle.mission.version == stored
+    # an item no upload asked for is still not acknowledged: the next answer is the count
+    _item(conn, 1)
+    conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
+    answer = wait_for(conn, ["MISSION_ACK", "MISSION_COUNT"], timeout_s=10)
+    assert (answer.get_type(), answer.count) == ("MISSION_COUNT", 3)
