@@ -653,15 +653,20 @@ def test_a_later_part_of_a_rotated_recording_replays_and_plots_on_its_own(
         client.step(300)
         client.close()
         assert wait_for(lambda: server.client_count == 0)
-    part2 = tmp_path / "flight.rec.2"
-    records = list(RecordingReader(part2).records())
-    assert [r.line.split()[0] for r in records if r.direction == RECEIVED][-2:] == ["DRIVE", "STEP"]
+        parts = list(recorder.parts)
+    # The DRIVE is in part 2, or in a later one where the writer, behind the engine on a busy
+    # machine, was still filling part 2 with earlier readings when the test saw it opened.
+    holding = [p for p in parts[1:] if any(r.direction == RECEIVED and r.line.startswith("DRIVE")
+                                           for r in RecordingReader(p).records())]
+    assert len(holding) == 1, parts
+    (later,) = holding
+    records = list(RecordingReader(later).records())
     assert not any(r.line.startswith("RES {Command INIT}") for r in records)
-    tracks, _summary = load_tracks(part2)
+    tracks, _summary = load_tracks(later)
     assert tracks["R1"].commands["DRIVE"] == 1
     engine = [r.line.encode() for r in records if r.direction == SENT
               and r.line.startswith(("SEN ", "STA "))]
-    with ReplayServer(part2, port=0, speed=1000.0) as replay:
+    with ReplayServer(later, port=0, speed=1000.0) as replay:
         assert replay.robot == "R1"
         player = LineClient(replay.port)
         player.expect("NFO")
