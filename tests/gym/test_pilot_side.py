@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -125,6 +126,19 @@ def test_skeye_pilot_refuses_a_policy_without_images_or_that_does_not_load() -> 
     assert main(["pilot", "--images", "127.0.0.1:1", "--policy", "no_such_module:f"]) == 2
 
 
+def _policy_pilot(sim: Any, robot: Any, policy: object, lockstep_rate: float) -> PilotServer:
+    """A real pilot (``skeye pilot --policy``'s PolicyPilot on the pad detector) flying
+    ``robot`` of ``sim`` in lockstep, at the robot file's speed limits."""
+    cfg = robot.motion_config
+    vision = policy_factory(
+        pad_vision_factory(sim, robot, vision_class=DetectOnlyVision), policy,
+        observation="pad",
+        limits=ActionLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s),
+        period_s=0.05)
+    return PilotServer(SimAirframe(sim, robot), port=0, lockstep=True,
+                       lockstep_rate=lockstep_rate, tick_s=0.05, vision=vision)
+
+
 @pytest.fixture
 def policy_flight(monkeypatch: pytest.MonkeyPatch
                   ) -> Iterator[tuple[Vehicle, object, PilotServer]]:
@@ -134,15 +148,8 @@ def policy_flight(monkeypatch: pytest.MonkeyPatch
         sim = stack.enter_context(
             connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}"))
         robot = sim.spawn("hummingbird", start="Pad1")
-        cfg = robot.motion_config
-        vision = policy_factory(
-            pad_vision_factory(sim, robot, vision_class=DetectOnlyVision),
-            load_policy("pad_landing_scripted:ScriptedLander"), observation="pad",
-            limits=ActionLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s),
-            period_s=0.05)
-        pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=5.0,
-                        tick_s=0.05, vision=vision))
+        pilot = stack.enter_context(_policy_pilot(
+            sim, robot, load_policy("pad_landing_scripted:ScriptedLander"), lockstep_rate=5.0))
         vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
         yield vehicle, control, pilot
 
@@ -324,15 +331,7 @@ def _policy_engaged(tmp_path: Path, policy: object) -> Iterator[tuple[Vehicle, P
         sim = stack.enter_context(
             connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}"))
         robot = sim.spawn("smallcam", start="Pad1")
-        cfg = robot.motion_config
-        vision = policy_factory(
-            pad_vision_factory(sim, robot, vision_class=DetectOnlyVision), policy,
-            observation="pad",
-            limits=ActionLimits(cfg.max_speed_m_s, cfg.max_climb_m_s, cfg.max_yaw_rate_rad_s),
-            period_s=0.05)
-        pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True, lockstep_rate=0.0,
-                        tick_s=0.05, vision=vision))
+        pilot = stack.enter_context(_policy_pilot(sim, robot, policy, lockstep_rate=0.0))
         vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
         vehicle.take_off(0.5)
