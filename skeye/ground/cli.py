@@ -122,15 +122,19 @@ def run_ground(args: argparse.Namespace) -> int:
             )
             connections = ConnectionLimits(header_timeout_s=args.header_timeout,
                                            max_per_peer=args.max_connections_per_peer)
-            server = GroundServer(uvicorn_config(app, limits=connections))
-            limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
             shown = page_host(args.host)
-            # one write (print writes the text and its newline apart): the bridge's thread
-            # prints the vehicle it reached, and a line of its must never land inside this one
-            sys.stdout.write(
-                f"skeye ground: http://{shown}:{port}/?token={security.token} (vehicle "
-                f"{args.vehicle}{', video ' + args.video if args.video else ''})\n")
-            sys.stdout.flush()
+
+            def started() -> None:
+                # once it listens and stops in order on a signal (GroundServer); one write
+                # (print writes the text and its newline apart): the bridge's thread prints the
+                # vehicle it reached, and a line of its must never land inside this one
+                sys.stdout.write(
+                    f"skeye ground: http://{shown}:{port}/?token={security.token} (vehicle "
+                    f"{args.vehicle}{', video ' + args.video if args.video else ''})\n")
+                sys.stdout.flush()
+
+            server = GroundServer(uvicorn_config(app, limits=connections), on_started=started)
+            limit_repeats()  # after uvicorn set its handlers: a flood of one error is summed up
             server.run(sockets=[sock])  # returns on SIGINT / SIGTERM
         finally:
             if video is not None:

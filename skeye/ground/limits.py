@@ -40,6 +40,7 @@ import asyncio
 import contextlib
 import logging
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -265,7 +266,22 @@ class GroundServer(uvicorn.Server):
     traceback (status 130), and SIGTERM killed it (143) before it closed its vehicle link and
     video relay or said it stopped. A second Ctrl-C still ends the shutdown at once (uvicorn's
     ``force_exit``).
+
+    ``on_started`` is called once the server listens with these handlers in place (``skeye
+    ground`` prints its page's address there): a Ctrl-C at the address it printed always stops
+    it in order. Printed before ``run``, a signal that came before the handlers were set ended
+    it with a KeyboardInterrupt (status 130) and a coroutine never awaited.
     """
+
+    def __init__(self, config: uvicorn.Config,
+                 on_started: Callable[[], None] | None = None) -> None:
+        super().__init__(config)
+        self.on_started = on_started
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets=sockets)
+        if self.on_started is not None and self.started and not self.should_exit:
+            self.on_started()
 
     @contextlib.contextmanager
     def capture_signals(self) -> Iterator[None]:
