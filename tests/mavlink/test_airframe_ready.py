@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import pytest
 from pymavlink import mavutil
@@ -15,6 +16,16 @@ from pymavlink.dialects.v20 import common as mav
 from skeye.errors import LinkClosed
 from skeye.pilot.mavlink_airframe import open_mavlink_airframe
 from tests.mavlink.conftest import free_udp_port
+
+
+def send_telemetry(m: Any, boot_ms: int, status_mv: int | None) -> None:
+    """One round of a hovering PX4's telemetry on ``m`` (a pymavlink ``MAVLink``): HEARTBEAT,
+    ATTITUDE, LOCAL_POSITION_NED, and SYS_STATUS with ``status_mv`` unless it is None."""
+    m.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 0, 0, mav.MAV_STATE_STANDBY)
+    m.attitude_send(boot_ms, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
+    m.local_position_ned_send(boot_ms, 1.0, 2.0, -0.1, 0.0, 0.0, 0.0)
+    if status_mv is not None:
+        m.sys_status_send(0, 0, 0, 0, status_mv, -1, -1, 0, 0, 0, 0, 0, 0)
 
 
 @contextmanager
@@ -29,13 +40,7 @@ def scripted_controller(port: int, *, status_mv: int | None) -> Iterator[None]:
         boot_ms = 0
         while not stop.wait(0.05):
             boot_ms += 50
-            m = link.mav
-            m.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 0, 0,
-                             mav.MAV_STATE_STANDBY)
-            m.attitude_send(boot_ms, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
-            m.local_position_ned_send(boot_ms, 1.0, 2.0, -0.1, 0.0, 0.0, 0.0)
-            if status_mv is not None:
-                m.sys_status_send(0, 0, 0, 0, status_mv, -1, -1, 0, 0, 0, 0, 0, 0)
+            send_telemetry(link.mav, boot_ms, status_mv)
 
     thread = threading.Thread(target=send, daemon=True)
     thread.start()

@@ -14,11 +14,11 @@ import time
 
 import pytest
 from pymavlink import mavutil
-from pymavlink.dialects.v20 import common as mav
 
 from skeye.errors import ConfigError
 from skeye.pilot.mavlink_airframe import open_mavlink_airframe
 from tests.mavlink.conftest import free_udp_port
+from tests.mavlink.test_airframe_ready import send_telemetry
 
 
 def test_udpout_sends_from_the_address_its_bind_option_names():
@@ -38,12 +38,7 @@ def test_udpout_sends_from_the_address_its_bind_option_names():
             if not senders:
                 continue  # udpin sends to those it heard from: none yet
             boot_ms += 50
-            m = controller.mav
-            m.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 0, 0,
-                             mav.MAV_STATE_STANDBY)
-            m.attitude_send(boot_ms, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
-            m.local_position_ned_send(boot_ms, 1.0, 2.0, -0.1, 0.0, 0.0, 0.0)
-            m.sys_status_send(0, 0, 0, 0, 11_800, -1, -1, 0, 0, 0, 0, 0, 0)
+            send_telemetry(controller.mav, boot_ms, 11_800)
 
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
