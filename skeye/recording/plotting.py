@@ -2,7 +2,9 @@
 
 How this works: :func:`load_tracks` reads a recording once and builds, per robot, the time series
 of its ground truth: the recorder's ``TRUTH`` samples when there are any, otherwise the
-``SEN {Type GroundTruth}`` and ``STA`` lines its connection was sent. :func:`summarize` turns
+``SEN {Type GroundTruth}`` and ``STA`` lines its connection was sent. The first part of a
+rotated recording is read with the parts that continue it, as one flight (a later part named
+alone is read alone). :func:`summarize` turns
 the tracks into figures; :func:`plot_recording` draws three panels with matplotlib's Agg backend
 (no display needed): the trajectory seen from above (north up, east right), altitude above the
 world origin over sim time, and battery time left over sim time while flying (on the ground the
@@ -74,10 +76,14 @@ class RecordingSummary:
     truncated: bool
     robots: dict[str, dict[str, float | int | str]]
     far_positions: int = 0  # of the bad lines: a Location beyond MAX_POSITION_M
+    parts: list[str] = field(default_factory=list)  # the files read (a rotated flight's parts)
+    broken: str | None = None  # why the parts end before the recording did
 
     def text(self) -> str:
+        of = f" ({len(self.parts)} parts: {', '.join(Path(p).name for p in self.parts)})" \
+            if len(self.parts) > 1 else ""
         lines = [
-            f"{self.path}: {self.records} records, {self.connections} connection(s), "
+            f"{self.path}{of}: {self.records} records, {self.connections} connection(s), "
             f"sim {self.sim_duration_s:.2f} s over wall {self.wall_duration_s:.2f} s",
             f"  lines sent {self.lines_sent}, received {self.lines_received}, "
             f"bad {self.bad_lines}{self._far_text()}"
@@ -90,6 +96,8 @@ class RecordingSummary:
                 f"{r['battery_end_s']:.0f} s, commands {r['commands']}"
             )
         lines.extend(f"  note: {n}" for n in self.notes)
+        if self.broken is not None:
+            lines.append(f"  warning: {self.broken}: the flight is read up to there")
         return "\n".join(lines)
 
     def _far_text(self) -> str:
@@ -109,7 +117,7 @@ def _vector(msg: Any, key: str) -> tuple[float, float, float] | None:
 
 def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSummary]:
     """Read a recording: each robot's track and a summary (see :func:`summarize`)."""
-    reader = RecordingReader(path)
+    reader = RecordingReader(path, follow_parts=True)
     conn_robot: dict[int, str] = {}
     truth: dict[str, RobotTrack] = {}
     sensed: dict[str, RobotTrack] = {}
@@ -202,6 +210,8 @@ def load_tracks(path: str | Path) -> tuple[dict[str, RobotTrack], RecordingSumma
         bad_lines=reader.bad_lines + bad_values + far_positions,
         truncated=reader.truncated,
         far_positions=far_positions,
+        parts=[str(p) for p in reader.parts],
+        broken=reader.broken,
     )
     return tracks, summary
 
@@ -279,7 +289,8 @@ def plot_recording(path: str | Path, out: str | Path) -> RecordingSummary:
         ax.grid(True, alpha=0.3)
         if ax.lines:
             ax.legend(loc="best", fontsize="small")
-    fig.suptitle(Path(path).name)
+    fig.suptitle(Path(path).name + (f" and its {len(summary.parts) - 1} later part(s)"
+                                     if len(summary.parts) > 1 else ""))
     fig.tight_layout()
     fig.savefig(out, dpi=100)
     plt.close(fig)

@@ -27,6 +27,8 @@ says why, the log says so once, and later records are counted in ``dropped`` (th
 runs on). With ``rotate`` it goes on in a new part instead, ``FILE.2``, ``FILE.3``, ... (each
 a whole recording with its own header, whose settings name the part and the one before), up to
 ``max_parts`` parts; a part that exists already is never overwritten (recording stops there).
+A full part ends with the note ``recording continues in NAME``: :class:`RecordingReader` with
+``follow_parts`` reads a first part and the parts that continue it as one flight.
 """
 
 from __future__ import annotations
@@ -175,50 +177,130 @@ def split_lines(data: bytes) -> list[bytes]:
     return [line.rstrip(b"\r").replace(b"\r", b" ") for line in data.split(b"\n") if line.strip()]
 
 
+def read_header(path: Path) -> dict[str, Any]:
+    """The settings of ``path``'s header line (ConfigError or RemoteProtocolError, naming the
+    file, when it is no recording); reads no more than :data:`MAX_HEADER_BYTES` of it."""
+    if path.is_dir():
+        raise ConfigError(f"{path} is a directory, not a recording file")
+    if not path.is_file():
+        raise ConfigError(f"recording not found: {path}")
+    with path.open("rb") as f:
+        first = f.readline(MAX_HEADER_BYTES + 1)
+    if not first.endswith(b"\n"):
+        if len(first) > MAX_HEADER_BYTES:  # not read on: it could run to the file's end
+            raise RemoteProtocolError(
+                f"{path}: not a skeye recording (a first line longer than "
+                f"{MAX_HEADER_BYTES // 1024} KiB, the longest header)")
+        raise RemoteProtocolError(f"{path}: no complete header line")
+    try:
+        return parse_header(first.decode("utf-8", "replace"))
+    except RemoteProtocolError as exc:  # said of the file, as every other refusal is
+        raise RemoteProtocolError(f"{path}: {exc}") from None
+
+
+CONTINUES_NOTE = "recording continues in "
+"""How the note that ends a full part of a rotated recording begins; the next part's name
+follows, then `` (size limit ...)``."""
+_TAIL_BYTES = 4096  # a part's continue note is its last line, far shorter than this
+_PART_KEYS = frozenset(("part", "continues", "started_unix_s"))  # differ between parts
+
+
+def continued_in(path: Path) -> str | None:
+    """The name of the part that ``path`` ends saying the recording continues in, if its last
+    line is that note (a part cut short by a crash, or the last part, ends otherwise). Reads
+    only the file's tail."""
+    with path.open("rb") as f:
+        size = f.seek(0, os.SEEK_END)
+        f.seek(max(0, size - _TAIL_BYTES))
+        tail = f.read()
+    if not tail.endswith(b"\n"):
+        return None
+    last = tail[:-1].rsplit(b"\n", 1)[-1].decode("utf-8", "replace")
+    try:
+        record = parse_record(last)
+    except RemoteProtocolError:
+        return None
+    if record.direction != NOTE or not record.line.startswith(CONTINUES_NOTE):
+        return None
+    return record.line[len(CONTINUES_NOTE):].rsplit(" (size limit", 1)[0]
+
+
+def flight_parts(path: Path, header: dict[str, Any]) -> tuple[list[Path], str | None]:
+    """The parts of the flight whose first part is ``path`` (``header`` its settings), in
+    order, and why the chain ends early (None when it does not).
+
+    A full part ends with the note ``recording continues in NAME``; NAME, in the same folder,
+    must be a recording whose header says it is the next part (``part``), continues the one
+    before it (``continues``, by name) and holds the same settings. A part that is missing, or
+    is another recording's, ends the chain there: the parts before it are the flight."""
+    parts = [path]
+    while (name := continued_in(parts[-1])) is not None:
+        if Path(name).name != name or name in ("", ".", ".."):
+            return parts, f"{parts[-1]} ends saying the recording continues in {name!r}, " \
+                "which is no file name in its folder"
+        nxt = path.with_name(name)
+        said = f"{parts[-1]} ends saying the recording continues in {nxt}"
+        if not nxt.is_file():
+            return parts, f"{said}, which is missing"
+        try:
+            meta = read_header(nxt)
+        except (ConfigError, RemoteProtocolError) as exc:
+            return parts, f"{said}, which is no recording ({exc})"
+        want = len(parts) + 1
+        if meta.get("part") != want or meta.get("continues") != parts[-1].name:
+            return parts, (f"{said}, but that file is not part {want} continuing "
+                           f"{parts[-1].name}: its header says part {meta.get('part')!r}, "
+                           f"continuing {meta.get('continues')!r}")
+        differ = sorted(k for k in (set(meta) | set(header)) - _PART_KEYS
+                        if meta.get(k) != header.get(k))
+        if differ:
+            return parts, (f"{said}, but that file is another recording's part: its "
+                           f"{', '.join(differ)} differ from {path}'s")
+        parts.append(nxt)
+    return parts, None
+
+
 class RecordingReader:
     """Reads a recording file; tolerates an unterminated last line (a crash) and bad lines.
 
+    With ``follow_parts``, a first part of a rotated recording (``skeye sim --record-rotate``)
+    is read with the parts that continue it, as one flight (see :func:`flight_parts`); a later
+    part named on its own is read alone. The parts are read one after the other, lazily.
+
     Attributes:
-        header: the run settings from the header line.
+        header: the run settings from the header line (of the first part).
+        parts: the files read, in order (one unless parts are followed).
+        broken: why the parts end before the recording did (a part missing or another
+            recording's, named), or None.
         bad_lines: records that did not parse (counted, skipped).
         truncated: the file ended inside a line (that line was skipped).
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, follow_parts: bool = False) -> None:
         self.path = Path(path)
-        if self.path.is_dir():
-            raise ConfigError(f"{self.path} is a directory, not a recording file")
-        if not self.path.is_file():
-            raise ConfigError(f"recording not found: {self.path}")
-        with self.path.open("rb") as f:
-            first = f.readline(MAX_HEADER_BYTES + 1)
-        if not first.endswith(b"\n"):
-            if len(first) > MAX_HEADER_BYTES:  # not read on: it could run to the file's end
-                raise RemoteProtocolError(
-                    f"{self.path}: not a skeye recording (a first line longer than "
-                    f"{MAX_HEADER_BYTES // 1024} KiB, the longest header)")
-            raise RemoteProtocolError(f"{self.path}: no complete header line")
-        try:
-            self.header = parse_header(first.decode("utf-8", "replace"))
-        except RemoteProtocolError as exc:  # said of the file, as every other refusal is
-            raise RemoteProtocolError(f"{self.path}: {exc}") from None
+        self.header = read_header(self.path)
+        self.parts = [self.path]
+        self.broken: str | None = None
+        if follow_parts and "part" not in self.header:
+            self.parts, self.broken = flight_parts(self.path, self.header)
         self.bad_lines = 0
         self.truncated = False
 
     def records(self) -> Iterator[Record]:
-        """Every record in file order (reads lazily; safe to call again)."""
+        """Every record in file order, part after part (reads lazily; safe to call again)."""
         self.bad_lines = 0
         self.truncated = False
-        with self.path.open("rb") as f:
-            f.readline(MAX_HEADER_BYTES + 1)
-            for raw in f:
-                if not raw.endswith(b"\n"):
-                    self.truncated = True
-                    return
-                try:
-                    yield parse_record(raw.decode("utf-8", "replace"))
-                except RemoteProtocolError:
-                    self.bad_lines += 1
+        for part in self.parts:
+            with part.open("rb") as f:
+                f.readline(MAX_HEADER_BYTES + 1)
+                for raw in f:
+                    if not raw.endswith(b"\n"):
+                        self.truncated = True
+                        break
+                    try:
+                        yield parse_record(raw.decode("utf-8", "replace"))
+                    except RemoteProtocolError:
+                        self.bad_lines += 1
 
 
 def robot_connections(records: Iterator[Record]) -> dict[int, str]:

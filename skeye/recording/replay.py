@@ -6,14 +6,17 @@ thread: ``NFO {Gametype skeye} ... {Mode realtime} {Replay true}`` on accept, th
 stream of one robot (the lines the engine sent its connection: ``STA``, ``SEN``, and the ``ERR``
 of a crash, ``{Command CRASH}``, or of a robot the engine stopped, ``{Command PHYSICS}`` or
 ``{Command CAMERA}``; not the answers to its client's commands), each line released when
-``(sim_s - first_sim_s) / speed`` wall seconds have passed. The file is read lazily, so a long
-recording costs no memory per client. The client's own lines go through the same sans-IO
-decoder as the simulator's: ``PING`` is answered with the playback's current sim time; commands
-that would change the world (``INIT``, ``DRIVE``, ``SET``, ``STEP``) get ``ERR ... {Reason
-replay is read-only}``; the queries (``GETSTARTPOSES``, ``GETGEO``, ``GETCONF``) get ``ERR``
-too, as the recording holds no world to ask. At the end of the
-recording the connection stays open (PING still answered) and nothing more is sent.
-A client that does not read blocks only its own thread; ``close()`` shuts every socket.
+``(sim_s - first_sim_s) / speed`` wall seconds have passed. The first part of a rotated
+recording is played with the parts that continue it, as one flight (connection ids and robot
+names run on across parts as the recorder wrote them); a later part named alone plays alone.
+The files are read lazily, so a long recording costs no memory per client. The client's own
+lines go through the same sans-IO decoder as the simulator's: ``PING`` is answered with the
+playback's current sim time; commands that would change the world (``INIT``, ``DRIVE``,
+``SET``, ``STEP``) get ``ERR ... {Reason replay is read-only}``; the queries
+(``GETSTARTPOSES``, ``GETGEO``, ``GETCONF``) get ``ERR`` too, as the recording holds no world
+to ask. At the end of the recording the connection stays open (PING still answered) and
+nothing more is sent. A client that does not read blocks only its own thread; ``close()``
+shuts every socket.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import argparse
 import logging
 import select
 import socket
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -49,7 +53,7 @@ class ReplayServer:
     """Plays one robot of a recording to every client that connects; a context manager.
 
     Args:
-        path: the recording.
+        path: the recording (a rotated one's first part: the whole flight).
         host, port: where to listen (port 0 picks a free one; read :attr:`port`).
         speed: playback rate (2.0 = twice as fast as recorded).
         robot: which recorded robot to play (default: the first one recorded).
@@ -67,7 +71,7 @@ class ReplayServer:
     ) -> None:
         if not (0.01 <= speed <= 1000.0):
             raise LocalProtocolError(f"replay speed must be in [0.01, 1000], got {speed}")
-        self.reader = RecordingReader(path)
+        self.reader = RecordingReader(path, follow_parts=True)
         self.speed = speed
         self.robots = robot_connections(self.reader.records())
         if not self.robots:
@@ -255,8 +259,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
         args.file, host=args.host, port=args.port, speed=args.speed, robot=args.robot
     ) as server:
         where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
+        parts = server.reader.parts
+        if server.reader.broken is not None:
+            print(f"skeye replay: warning: {server.reader.broken}: playing "
+                  f"{', '.join(p.name for p in parts)} only", file=sys.stderr, flush=True)
+        of = f" ({len(parts)} parts: {', '.join(p.name for p in parts)})" if len(parts) > 1 \
+            else ""
         print(
-            f"skeye replay: {args.file}, robot {server.robot} (of "
+            f"skeye replay: {args.file}{of}, robot {server.robot} (of "
             f"{', '.join(server.robots.values())}), speed x{args.speed:g}; "
             f"control protocol on {args.host}:{server.port} ({where})",
             flush=True,

@@ -714,3 +714,90 @@ def test_a_recording_that_cannot_be_written_stops_and_the_simulator_still_ends_c
     records = list(reader.records())
     assert reader.bad_lines == 0 and any(r.direction == TRUTH for r in records)
     assert path.stat().st_size <= 40_000
+
+
+@pytest.fixture(scope="module")
+def rotated(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """A lockstep flight recorded into parts of 64 KiB (--record-rotate): the INIT in the
+    first part, a DRIVE in a later one; returns the parts in order."""
+    path = tmp_path_factory.mktemp("rotated") / "flight.rec"
+    with running_sim() as server, Recorder(path, {"world": "pad"}, max_bytes=64 * 1024,
+                                           rotate=True) as recorder:
+        recorder.attach(server, server.runner)
+        client = LineClient(server.port)
+        client.expect("NFO")
+        assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-2}", "INIT").type == "RES"
+        for _ in range(80):  # 64 KiB is about 1.2 s of sim time of one robot
+            client.step(100)
+            if len(recorder.parts) > 2:
+                break
+        assert len(recorder.parts) == 3, "the recording did not go on in a third part"
+        client.send("DRIVE {AltitudeVelocity 0.5}")
+        client.step(300)
+        client.close()
+        assert wait_for(lambda: server.client_count == 0)
+    return list(recorder.parts)
+
+
+def test_a_rotated_recording_replays_and_plots_as_one_flight_from_its_first_part(
+        rotated: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`skeye replay flight.rec` and `skeye plot flight.rec` of a recording made with
+    --record-rotate played and drew flight.rec alone: the rest of the flight, in flight.rec.2,
+    flight.rec.3, ..., was left out, and the plot counted none of the commands sent there.
+    Naming the first part now reads the parts that continue it, in order, as one flight."""
+    per_part = [list(RecordingReader(p).records()) for p in rotated]
+    engine = [r.line.encode() for records in per_part for r in records
+              if r.direction == SENT and r.line.startswith(("SEN ", "STA "))]
+    truth = sum(1 for records in per_part for r in records if r.direction == TRUTH)
+    with ReplayServer(rotated[0], port=0, speed=1000.0) as replay:
+        assert replay.robot == "R1"
+        player = LineClient(replay.port)
+        player.expect("NFO")
+        player.read_until(lambda _m: engine[-1] + b"\r\n" in player.raw, timeout_s=10)
+        got = [line for line in player.raw.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
+        player.close()
+    assert got == engine  # every part's stream, in order, once
+    tracks, summary = load_tracks(rotated[0])
+    assert summary.parts == [str(p) for p in rotated] and summary.broken is None
+    assert summary.connections == 1  # the one connection, opened in part 1, runs on
+    assert len(tracks["R1"].time_s) == truth
+    assert tracks["R1"].commands["INIT"] == 1 and tracks["R1"].commands["DRIVE"] == 1
+    out = tmp_path / "flight.png"
+    assert main(["plot", str(rotated[0]), "--out", str(out)]) == 0
+    names = ", ".join(p.name for p in rotated)
+    assert f"{rotated[0]} ({len(rotated)} parts: {names}): " in capsys.readouterr().out
+    # A later part named on its own is read alone, as before.
+    assert RecordingReader(rotated[1], follow_parts=True).parts == [rotated[1]]
+
+
+def test_a_missing_or_foreign_part_ends_the_flight_there_and_is_named(
+        rotated: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A flight whose second part is missing, or is not the part that continues the first
+    (another part, another recording's), is read up to the part before it, and the file is
+    named with what is wrong."""
+    first = tmp_path / "flight.rec"
+    first.write_bytes(rotated[0].read_bytes())
+    part1 = list(RecordingReader(rotated[0]).records())
+    second = tmp_path / "flight.rec.2"
+    header, body = rotated[1].read_bytes().split(b"\n", 1)
+    meta = parse_header(header.decode())
+    cases = [
+        (None, f"{first} ends saying the recording continues in {second}, which is missing"),
+        (rotated[2].read_bytes(), f"{first} ends saying the recording continues in {second}, "
+         "but that file is not part 2 continuing flight.rec: its header says part 3, "
+         "continuing 'flight.rec.2'"),
+        (format_header({**meta, "world": "yard"}) + body,
+         f"{first} ends saying the recording continues in {second}, but that file is another "
+         f"recording's part: its world differ from {first}'s"),
+    ]
+    for data, said in cases:
+        second.unlink(missing_ok=True)
+        if data is not None:
+            second.write_bytes(data)
+        _tracks, summary = load_tracks(first)
+        assert summary.broken == said and summary.parts == [str(first)]
+        assert summary.records == len(part1)
+        assert main(["plot", str(first), "--out", str(tmp_path / "p.png")]) == 0
+        assert f"warning: {said}: the flight is read up to there" in capsys.readouterr().out
+        with ReplayServer(first, port=0) as replay:
+            assert replay.reader.parts == [first] and replay.reader.broken == said
