@@ -24,11 +24,13 @@ Size: a recording never grows past ``max_bytes`` (``skeye sim --record-max-mb``,
 :data:`DEFAULT_MAX_BYTES`), nor is it written while the disk holds less than
 ``min_free_bytes`` (:data:`DEFAULT_MIN_FREE_BYTES`). At either limit it stops: a ``!`` note
 says why, the log says so once, and later records are counted in ``dropped`` (the simulator
-runs on). With ``rotate`` it goes on in a new part instead, ``FILE.2``, ``FILE.3``, ... (each
-a whole recording with its own header, whose settings name the part and the one before), up to
-``max_parts`` parts; a part that exists already is never overwritten (recording stops there).
-A full part ends with the note ``recording continues in NAME``: :class:`RecordingReader` with
-``follow_parts`` reads a first part and the parts that continue it as one flight.
+runs on); a write that fails stops it the same way, and :meth:`Recorder.close` says how many
+records a stopped recording did not write. With ``rotate`` it goes on in a new part instead,
+``FILE.2``, ``FILE.3``, ... (each a whole recording with its own header, whose settings name
+the part and the one before), up to ``max_parts`` parts; a part that exists already is never
+overwritten (recording stops there). A full part ends with the note ``recording continues in
+NAME``: :class:`RecordingReader` with ``follow_parts`` reads a first part and the parts that
+continue it as one flight.
 """
 
 from __future__ import annotations
@@ -491,12 +493,12 @@ class Recorder:
         if self._closed:
             return
         if self.stopped is not None:
-            self.dropped += 1
+            self.dropped += _records_in(direction, data)
             return
         try:
             self._queue.put_nowait((self._clock(), self._sim_time(), conn_id, direction, data))
         except queue.Full:
-            self.dropped += 1
+            self.dropped += _records_in(direction, data)
 
     def attach(
         self, server: Any, runner: Any, truth_rate_hz: float = DEFAULT_TRUTH_RATE_HZ
@@ -539,10 +541,12 @@ class Recorder:
                     done = True
                     break
                 self._format(entry, out)
+            records = len(out)  # observed records; the note below is the recorder's own
             if self.dropped != reported_drops and self.stopped is None:
                 note = f"dropped {self.dropped - reported_drops} records (queue full)"
                 reported_drops = self.dropped
                 out.append(format_record(Record(self._clock(), self._sim_time(), 0, NOTE, note)))
+            written, dropped = self.written, self.dropped
             try:
                 if out:
                     self._write_all(self._room(out))
@@ -552,6 +556,9 @@ class Recorder:
                     os.fsync(f.fileno())
                     last_flush = time.monotonic()
             except OSError as exc:
+                # The batch's records that were neither written nor counted are not written.
+                self.dropped += max(0, records - (self.written - written)
+                                    - (self.dropped - dropped))
                 self._write_failed(exc)
                 return
 
@@ -564,7 +571,8 @@ class Recorder:
             self.stopped = f"writing {self.path} failed: {exc.strerror or exc}"
         log.error("recording %s: write failed, recording stops: %s; the simulator goes on",
                   self.path, exc.strerror or exc)
-        self._closed = True
+        # From here on observe() counts what it is given in dropped, as at the size limit, and
+        # close() counts what is left in the queue.
         try:
             self._file.close()  # flushes the buffer, fails again, and closes the file anyway
         except OSError:
@@ -584,7 +592,9 @@ class Recorder:
             out.append(prefix + data.replace(b"\r", b" ").replace(b"\n", b" ") + b"\n")
 
     def close(self, timeout_s: float = 5.0) -> None:
-        """Detach, write everything queued, flush and close the file; idempotent."""
+        """Detach, write everything queued, flush and close the file; idempotent. A recording
+        that stopped early (a size or disk limit, a failed write) says, once, how many records
+        it did not write: the ``dropped`` count."""
         with self._lock:
             if self._closed and not self._thread.is_alive():
                 if not self._file.closed:
@@ -597,14 +607,33 @@ class Recorder:
             except (SkeyeError, ValueError, TimeoutError):
                 pass
         self._detach.clear()
-        try:
-            self._queue.put(None, timeout=timeout_s)
-        except queue.Full:
-            log.error("recording %s: writer did not drain its queue", self.path)
-        if not self._thread.join(timeout_s):
-            log.error("recording %s: writer did not finish within %g s", self.path, timeout_s)
+        if self._thread.is_alive():  # a writer stopped by a failed write reads no more
+            try:
+                self._queue.put(None, timeout=timeout_s)
+            except queue.Full:
+                log.error("recording %s: writer did not drain its queue", self.path)
+            if not self._thread.join(timeout_s):
+                log.error("recording %s: writer did not finish within %g s", self.path,
+                          timeout_s)
+        if not self._thread.is_alive():  # what a stopped writer left queued: not written
+            while True:
+                try:
+                    entry = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if entry is not None:
+                    self.dropped += _records_in(entry[3], entry[4])
         if not self._file.closed:
             self._file.close()
+        if self.stopped is not None:
+            log.warning("recording %s stopped early (%s): %d records were not written",
+                        self.path, self.stopped, self.dropped)
+
+
+def _records_in(direction: str, data: bytes) -> int:
+    """How many records ``data``, observed with ``direction``, is written as (see
+    :meth:`Recorder._format`): a line each for what was sent and for truth, else one."""
+    return len(split_lines(data)) if direction in (SENT, TRUTH) else 1
 
 
 class _TruthSampler:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import logging
+import os
 import re
 import signal
 import socket
@@ -34,6 +36,7 @@ from skeye.recording.records import (
     format_record,
     parse_header,
     parse_record,
+    split_lines,
 )
 from skeye.recording.replay import ReplayServer
 from tests.robustness.helpers import sim_process, wait_for
@@ -801,3 +804,62 @@ def test_a_missing_or_foreign_part_ends_the_flight_there_and_is_named(
         assert f"warning: {said}: the flight is read up to there" in capsys.readouterr().out
         with ReplayServer(first, port=0) as replay:
             assert replay.reader.parts == [first] and replay.reader.broken == said
+
+
+def _fd_of(path: Path) -> int:
+    """The descriptor this process holds open on ``path`` (Linux /proc)."""
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            if os.readlink(f"/proc/self/fd/{fd}") == str(path):
+                return int(fd)
+        except OSError:
+            continue
+    raise AssertionError(f"{path} is not open")
+
+
+@pytest.mark.parametrize("how", ["size limit", "failed write"])
+def test_a_stopped_recording_counts_what_it_does_not_write_and_says_so_at_close(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, how: str) -> None:
+    """docs/recording.md: a recording stopped at its size limit counts what it no longer
+    writes, and a failed write stops it the same way. Yet after a failed write nothing more
+    was counted (nor the records of the write that failed, nor those left queued), a record
+    dropped after a stop counted once however many lines it held, and no count reached the
+    user either way. Now every record the server offers is written or counted in ``dropped``,
+    and closing says how many were not written. The failed write is a real one: the file's
+    descriptor is made /dev/full's, as a disk that fills."""
+    path = tmp_path / "flight.rec"
+    offered = [0]
+
+    def count(_conn: int, direction: str, data: bytes) -> None:  # what the recorder is given
+        offered[0] += len(split_lines(data)) if direction in (SENT, TRUTH) else 1
+
+    with running_sim() as server:
+        with caplog.at_level(logging.WARNING, logger="skeye.recording.records"), \
+                Recorder(path, {"world": "pad"}, max_bytes=64 * 1024) as recorder:
+            recorder.attach(server, server.runner, truth_rate_hz=0)  # all through the server
+            server.observers.append(count)
+            client = LineClient(server.port)
+            client.expect("NFO")
+            assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-2}",
+                                 "INIT").type == "RES"
+            if how == "failed write":
+                client.step(100)
+                assert wait_for(lambda: recorder.written > 0)
+                full = os.open("/dev/full", os.O_WRONLY)
+                os.dup2(full, _fd_of(path))
+                os.close(full)
+            for _ in range(80):  # 64 KiB is about 1.2 s of sim time of one robot
+                client.step(100)
+                if recorder.stopped is not None:
+                    break
+            assert wait_for(lambda: recorder.stopped is not None, 30.0), "the recording ran on"
+            client.step(300)  # after the stop: none of it is written
+            client.close()
+            assert wait_for(lambda: server.client_count == 0)
+            server.observers.remove(count)
+            assert recorder.dropped > 0
+        stopped = [r.getMessage() for r in caplog.records if "stopped early" in r.getMessage()]
+    assert recorder.written + recorder.dropped == offered[0]
+    reason = "reached its size limit" if how == "size limit" else "No space left on device"
+    assert len(stopped) == 1 and reason in stopped[0], stopped
+    assert stopped[0].endswith(f": {recorder.dropped} records were not written"), stopped
