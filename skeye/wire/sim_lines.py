@@ -517,12 +517,22 @@ def format_message(type: str, *fields: tuple[str, object]) -> bytes:
     return " ".join(parts).encode("utf-8") + LINE_END
 
 
+# Control characters a terminal acts on (C0 but the blanks, DEL, C1): written as \xHH.
+_CONTROL = re.compile(r"[\x00-\x08\x0e-\x1b\x7f-\x9f]")
+
+
 def _safe_text(text: str) -> str:
-    return text.replace("{", "(").replace("}", ")").replace("\r", " ").replace("\n", " ")
+    """Text fit for a block of an answer: braces and line breaks replaced, and every control
+    character but the blanks (ESC, NUL, BEL, DEL, C1's CSI...) written as ``\\xHH``, so that
+    a terminal showing the line (``nc``, a client's log) shows a client's escape sequence
+    instead of running it, and the text stays recognisable."""
+    text = text.replace("{", "(").replace("}", ")").replace("\r", " ").replace("\n", " ")
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 def clean_reason(reason: str) -> str:
-    """Free text fit for ``{Reason ...}``: braces and line breaks replaced, blanks collapsed,
+    """Free text fit for ``{Reason ...}``: braces and line breaks replaced, control characters
+    escaped (``\\x1b``), blanks collapsed,
     at most 1000 characters (never empty: ``unspecified``). A longer text keeps its beginning
     and its end, and says how much of its middle was left out: a reason quotes the value it
     refuses before saying what is wrong with it, and a long value must not cut that off."""
@@ -541,7 +551,9 @@ def clean_reason(reason: str) -> str:
 
 
 def format_error(command: str, reason: str) -> bytes:
-    """``ERR {Command X} {Reason ...}``; braces and line breaks are replaced, so it never fails."""
+    """``ERR {Command X} {Reason ...}``; braces and line breaks are replaced and control
+    characters escaped (``\\x1b``), in the command word as in the reason, so it never fails
+    and never carries a client's terminal escape back."""
     word = "_".join(_safe_text(str(command)).split()) or "UNKNOWN"
     text = clean_reason(reason)
     return f"ERR {{Command {word[:_MAX_REASON_CHARS]}}} {{Reason {text}}}".encode() + LINE_END

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import socket
 import threading
 import time
@@ -140,6 +141,33 @@ def test_a_long_value_in_a_refused_line_leaves_the_reason_readable():
             reason = err.get("Reason") or ""
             assert err.type == "ERR" and said in reason, (line[:40], err)
             assert len(reason) <= 1000, len(reason)
+        c.close()
+
+
+# Every control character a terminal acts on: C0 (NUL, BEL, BS, ESC...), DEL and C1 (CSI).
+_CONTROL_BYTES = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]|\xc2[\x80-\x9f]")
+
+
+@pytest.mark.parametrize("word, shown", [
+    ("\x1b[2J\x1b[31mFLY", "\\x1b[2J\\x1b[31MFLY"),  # clear the screen, turn red
+    ("PI\x07NG\x08\x08", "PI\\x07NG\\x08\\x08"),  # a bell, two backspaces
+    ("\x00\x7fDRIVE", "\\x00\\x7fDRIVE"),
+    ("\u009b31mSTEP", "\\x9b31MSTEP"),  # the one-character CSI of C1
+], ids=["esc", "bel-bs", "nul-del", "c1-csi"])
+def test_control_characters_in_a_command_word_are_echoed_escaped(word: str, shown: str):
+    """An unknown command's word is echoed in ``ERR {Command X} {Reason unknown command X}``;
+    its control characters went back verbatim, so a terminal showing the answer (``nc``, a
+    client's log) ran the escape sequences a client (or a page's POST body) put there. They
+    are written as ``\\xHH`` now: the word stays recognisable and the line inert."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.sock.sendall(word.encode() + b" {Speed 3}\r\n")
+        err = c.read_until(lambda m: m.type == "ERR")[1]
+        assert err.get("Command") == shown, err
+        assert err.get("Reason") == f"unknown command {shown}", err
+        assert not _CONTROL_BYTES.search(bytes(c.raw).replace(b"\r\n", b"")), bytes(c.raw)
+        assert c.answer("PING {Id after}", "PING").type == "RES"
         c.close()
 
 
