@@ -53,15 +53,13 @@ from skeye.sim.surface_contrast import geom_contrasts
 from skeye.sim.wind import WindModel
 from skeye.sim.world import WorldDescription, build_mjcf
 from skeye.sim.world import start_pose_list as world_start_poses
+from skeye.wire.sim_messages import MAX_ROBOT_NAME_CHARS
 from skeye.wire.wind import WindSettings, make_settings
 
 log = logging.getLogger(__name__)
 
 TIMESTEP_RANGE_S = (1e-5, 0.01)
 """The physics step a simulation takes (``skeye sim --timestep``), seconds, both ends in."""
-MAX_ROBOT_NAME_CHARS = 64
-"""The longest robot name: an identifier, written in every STA line (and INIT's answer), which
-must stay within the control protocol's 64 KiB line limit."""
 
 
 @dataclass

@@ -116,6 +116,8 @@ class FieldSpec:
     max_value: float | None
     scale: float = 1.0
     """field value (SI) = wire value * scale; the range is in wire units."""
+    max_chars: int | None = None
+    """The most characters of a word or text (None: as many as a line holds)."""
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,7 @@ def _codec(cls: type) -> Codec:
                 f.metadata["min"],
                 f.metadata["max"],
                 f.metadata.get("scale", 1.0),
+                f.metadata.get("max_chars"),
             )
         )
     return Codec(cls.WORD, cls, tuple(specs))  # type: ignore[attr-defined]
@@ -195,6 +198,11 @@ def parse_value(
     return _read(msg, FieldSpec(key, key, kind, True, min_value, max_value))
 
 
+def _too_long(spec: FieldSpec, text: str) -> str:
+    return (f"{spec.key}: {clean_reason(text)[:40]!r}... of {len(text)} characters: at most "
+            f"{spec.max_chars} characters")
+
+
 def _read(msg: Message, spec: FieldSpec) -> Any:
     key, kind = spec.key, spec.kind
     if kind == "float":
@@ -207,7 +215,10 @@ def _read(msg: Message, spec: FieldSpec) -> Any:
     if kind == "bool":
         return msg.get_bool(key)
     if kind in ("word", "text"):
-        return msg.require(key)
+        text = msg.require(key)
+        if spec.max_chars is not None and len(text) > spec.max_chars:
+            raise RemoteProtocolError(_too_long(spec, text))
+        return text
     if kind == "vec3":
         return msg.get_vector(key, 3)
     if kind == "uvec3":
@@ -508,6 +519,8 @@ def _check_value(spec: FieldSpec, value: Any) -> object:
             raise LocalProtocolError(f"{key}: {value!r} is not a str")
         if kind == "word" and (not value or any(c.isspace() for c in value)):
             raise LocalProtocolError(f"{key}: {value!r} is not one word")
+        if spec.max_chars is not None and len(value) > spec.max_chars:
+            raise LocalProtocolError(_too_long(spec, value))
         return value
     try:
         items = tuple(value)

@@ -37,6 +37,13 @@ DEG = math.pi / 180.0
 """The scale of a field whose wire unit is the degree (or deg/s): SI value = wire value * DEG."""
 
 
+MAX_ROBOT_NAME_CHARS = 64
+"""The longest robot name (INIT's ``Name``): an identifier, written in every STA line (and
+INIT's answer), which must stay within the control protocol's 64 KiB line limit."""
+MAX_PING_ID_CHARS = 1000
+"""The longest PING ``Id``, echoed in its answer: as long as an ERR's reason."""
+
+
 def wire(
     key: str,
     kind: str,
@@ -44,17 +51,22 @@ def wire(
     min_value: float | None = None,
     max_value: float | None = None,
     scale: float = 1.0,
+    max_chars: int | None = None,
 ) -> dict[str, Any]:
     """A field's metadata: it is the block ``{key value}`` of ``kind`` within the range.
 
     ``scale`` converts the wire unit to the field's SI unit (field = wire * scale; ``DEG`` for
-    USARSim's degrees); the range is in wire units.
+    USARSim's degrees); the range is in wire units. ``max_chars`` bounds a word or text: the
+    simulator refuses a longer one, and a client cannot build it.
     """
     if kind not in KINDS:
         raise ValueError(f"unknown wire kind {kind!r}")  # a bug in this module
     if scale != 1.0 and kind != "float":
         raise ValueError(f"{key}: only a float field may have a scale")  # a bug in this module
-    return {"key": key, "kind": kind, "min": min_value, "max": max_value, "scale": scale}
+    if max_chars is not None and kind not in ("word", "text"):
+        raise ValueError(f"{key}: only a word or text may have max_chars")  # a bug here
+    return {"key": key, "kind": kind, "min": min_value, "max": max_value, "scale": scale,
+            "max_chars": max_chars}
 
 
 # --- commands --------------------------------------------------------------------------------
@@ -66,7 +78,8 @@ class Init:
 
     WORD: ClassVar[str] = "INIT"
     class_name: str = field(metadata=wire("ClassName", "word"))
-    name: str | None = field(default=None, metadata=wire("Name", "word"))
+    name: str | None = field(
+        default=None, metadata=wire("Name", "word", max_chars=MAX_ROBOT_NAME_CHARS))
     start: str | None = field(default=None, metadata=wire("Start", "word"))
     location_ned_m: Vec3 | None = field(default=None, metadata=wire("Location", "uvec3"))
     rotation_rpy_rad: Vec3 | None = field(default=None, metadata=wire("Rotation", "uvec3"))
@@ -173,7 +186,7 @@ class Ping:
     """``PING``: the simulator answers ``RES {Command PING} {Id id} {Time t}``."""
 
     WORD: ClassVar[str] = "PING"
-    id: str = field(default="", metadata=wire("Id", "text"))
+    id: str = field(default="", metadata=wire("Id", "text", max_chars=MAX_PING_ID_CHARS))
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,9 @@ import pytest
 
 import skeye
 from skeye.control import LinkClosed
-from skeye.errors import CommandRejected, LinkTimeout, SkeyeError
+from skeye.errors import CommandRejected, LinkTimeout, LocalProtocolError, SkeyeError
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_message
+from skeye.wire.sim_messages import Ping
 from tests.control.conftest import SimHandle, sim_running
 
 
@@ -279,3 +280,22 @@ def test_a_closed_connections_robot_is_gone_when_close_returns(mode: str) -> Non
             # queued before close() returned.
             robots = handle.runner.call(lambda s: list(s.robots))
             assert robots == [], (i, robots)
+
+
+def test_a_name_or_ping_id_beyond_the_simulators_limits_is_refused_before_it_is_sent(
+        lockstep_sim: SimHandle) -> None:
+    """The simulator refuses a robot name over 64 characters and a PING Id over 1000 (its
+    answers echo them within the line limit); the client built and sent such a command and
+    learnt it only from the ERR. It is now a LocalProtocolError naming the limit, as a value
+    out of its range is, and nothing goes out."""
+    received: list[bytes] = []
+    lockstep_sim.server.observers.append(
+        lambda conn_id, direction, data: received.append(data) if direction == "<" else None)
+    with skeye.connect(lockstep_sim.address) as sim:
+        with pytest.raises(LocalProtocolError, match=r"Name: .* at most 64 characters"):
+            sim.spawn(name="N" * 65, location_ned_m=(0.0, 0.0, -1.0))
+        with pytest.raises(LocalProtocolError, match=r"Id: .* at most 1000 characters"):
+            sim.request_message(Ping("y" * 1001))
+        assert sim.request_message(Ping("y" * 1000)).id == "y" * 1000  # the limit itself
+    assert received and not [line for line in received
+                              if line.startswith(b"INIT") or b"y" * 1001 in line], received
