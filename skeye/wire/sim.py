@@ -259,15 +259,25 @@ def _check_init(init: Init | Reset) -> None:
         )
 
 
+def _check_keys(codec: Codec, msg: Message) -> None:
+    """A command's keys: each one the command reads, or one of USARSim's own command that skeye
+    accepts and does nothing with (the class's ``IGNORED_KEYS``: INIT's Team). Any other is
+    refused, naming it: a misspelt key (``STEP {Cuont 500}``) would otherwise be left unread
+    and the command done without it. USARSim ignores every key its command does not read;
+    its clients send only the keys it reads, which skeye reads or ignores likewise."""
+    known = [f.key for f in codec.fields] + list(getattr(codec.cls, "IGNORED_KEYS", ()))
+    folded = {k.casefold() for k in known}
+    unknown = [k for k, _ in msg.fields if k.casefold() not in folded]
+    if unknown:
+        raise RemoteProtocolError(
+            f"{codec.word}: unknown key(s) {unknown}; known: {', '.join(known) or 'none'}")
+
+
 def _check_drive_form(msg: Message) -> None:
     if msg.has("Thrust") and msg.has("AltitudeVelocity"):
         raise RemoteProtocolError(
             "DRIVE: Thrust and AltitudeVelocity both set the vertical axis; send one of them"
         )
-    known = {f.key.lower() for f in CODECS["DRIVE"].fields}
-    unknown = [k for k, _ in msg.fields if k.lower() not in known]
-    if unknown:
-        raise RemoteProtocolError(f"DRIVE: unknown segment(s) {unknown}")
     if not any(msg.has(k) for k in (*Drive.ATTITUDE_KEYS, *Drive.VELOCITY_KEYS,
                                      "RotationalVelocity")):
         raise RemoteProtocolError("DRIVE needs at least one velocity or attitude segment")
@@ -358,9 +368,9 @@ def decode(msg: Message) -> Any:
     """The typed message a parsed line holds.
 
     Raises:
-        RemoteProtocolError: an unknown type word, a missing key, a value of the wrong kind or
-            out of range, or a combination the protocol forbids (DRIVE's two forms, INIT
-            without a place); the message says which.
+        RemoteProtocolError: an unknown type word, a command's key it does not know, a missing
+            key, a value of the wrong kind or out of range, or a combination the protocol
+            forbids (DRIVE's two forms, INIT without a place); the message says which.
     """
     word = msg.type
     if word == "SEN":
@@ -377,6 +387,8 @@ def decode(msg: Message) -> Any:
     codec = CODECS.get(word)
     if codec is None:
         raise RemoteProtocolError(f"unknown command {word}")
+    if codec.cls in COMMANDS:
+        _check_keys(codec, msg)
     if codec.cls is Drive:
         msg = usarsim_drive(msg)
         _check_drive_form(msg)

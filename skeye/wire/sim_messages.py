@@ -77,6 +77,8 @@ class Init:
     """``INIT``: spawn a robot of a class at a start pose or a NED location."""
 
     WORD: ClassVar[str] = "INIT"
+    IGNORED_KEYS: ClassVar[tuple[str, ...]] = ("Team",)
+    """Keys of USARSim's INIT (``BotConnection.InitReceived``) accepted and unused: no teams."""
     class_name: str = field(metadata=wire("ClassName", "word"))
     name: str | None = field(
         default=None, metadata=wire("Name", "word", max_chars=MAX_ROBOT_NAME_CHARS))

@@ -74,7 +74,7 @@ def test_every_bad_line_gets_err_and_the_connection_stays_usable():
             ("DRIVE {Thrust 1.5}", "range"),
             ("DRIVE {Thrust 0.3} {AltitudeVelocity 1}", "vertical axis"),
             ("DRIVE {Normalized true} {LinearVelocity 150}", "range"),
-            ("DRIVE {Banana 1}", "unknown segment"),
+            ("DRIVE {Banana 1}", "unknown key"),
             ("INIT {ClassName hummingbird} {Location 0,0,-1}", "one robot per connection"),
             ("GETCONF {Type Lidar}", "no sensor"),
             ("SET {Type Camera} {Name Down} {Opcode ZOOM} {Params 2}", "Opcode"),
@@ -168,6 +168,34 @@ def test_control_characters_in_a_command_word_are_echoed_escaped(word: str, show
         assert err.get("Reason") == f"unknown command {shown}", err
         assert not _CONTROL_BYTES.search(bytes(c.raw).replace(b"\r\n", b"")), bytes(c.raw)
         assert c.answer("PING {Id after}", "PING").type == "RES"
+        c.close()
+
+
+def test_a_key_no_command_knows_is_refused_by_every_command_naming_it():
+    """DRIVE refused a key it does not know; STEP, PING, SET, GETCONF and GETSTARTPOSES ignored
+    one, so a misspelt key was silently not applied: ``STEP {Cuont 500}`` stepped once,
+    ``SET {Type Wind} {Mode constant} {Param speed_m_s=3}`` set a calm "constant" wind and
+    answered OK. Every command now refuses a key it does not know, naming it; the keys of
+    USARSim's own command that skeye does not use (INIT's Team) are still accepted."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        for line, unknown in [
+            ("STEP {Cuont 500}", "Cuont"),
+            ("PING {Id a} {Extra 1}", "Extra"),
+            ("SET {Type Wind} {Mode constant} {Param speed_m_s=3}", "Param"),
+            ("GETSTARTPOSES {All true}", "All"),
+        ]:
+            err = c.answer(line, line.split()[0])
+            assert err.type == "ERR", (line, err)
+            assert f"unknown key(s) ['{unknown}']" in (err.get("Reason") or ""), (line, err)
+        res = c.answer("INIT {ClassName hummingbird} {Start Pad1} {Team 0}", "INIT")
+        assert res.type == "RES", res
+        err = c.answer("GETCONF {Type Robot} {Nmae R1}", "GETCONF")
+        assert err.type == "ERR" and "['Nmae']" in (err.get("Reason") or ""), err
+        err = c.answer("DRIVE {LinearVelocity 0.1} {Banana 1}", "DRIVE")
+        assert err.type == "ERR" and "['Banana']" in (err.get("Reason") or ""), err
+        assert c.answer("STEP {Count 2}", "STEP").get("Time") == "0.002000"  # nothing stepped
         c.close()
 
 

@@ -181,7 +181,7 @@ def test_known_lines(message: Any, line: bytes) -> None:
         ("INIT {ClassName x} {Location 0,0,0} {Rotation 0,0,90}", "radians, not degrees"),
         ("INIT {ClassName x} {Location 2e4,0,0}", "outside the world"),
         ("DRIVE {Thrust 0.3} {AltitudeVelocity 1}", "both set the vertical axis"),
-        ("DRIVE {Speed 1}", "unknown segment(s) ['Speed']"),
+        ("DRIVE {Speed 1}", "unknown key(s) ['Speed']"),
         ("DRIVE {Normalized true}", "needs at least one velocity or attitude segment"),
         ("DRIVE {Thrust 1.5}", "Thrust: '1.5' is out of range [0.0, 1.0]"),
         ("STEP {Count 0}", "Count: '0' is out of range [1, 10000000]"),
