@@ -302,7 +302,8 @@ class Connection:
         command = type_word.upper()
         ident = None
         if command == "PING":
-            ident = dict((k.lower(), str(v)) for k, v in fields).get("id")
+            # The simulator reads a key's first block (as USARSim's GetArgVal), so match that.
+            ident = next((str(v) for k, v in fields if str(k).lower() == "id"), None)
         pending = _Pending(command, _ANSWERS.get(command, frozenset({"RES"})), ident)
         line = format_message(type_word, *fields)
         with self._lock:

@@ -285,16 +285,21 @@ def _check_drive_form(msg: Message) -> None:
 
 def _usarsim_scalars(msg: Message) -> tuple[Message, list[str]]:
     """A DRIVE's numbers read as USARSim reads them (:func:`parse_usarsim_float`): the line
-    with each number that was not plain replaced by what was read, and a note for each."""
+    with each number that was not plain replaced by what was read, and a note for each. Only
+    a key's first block is read (:meth:`Message.get`, as USARSim's ``GetArgVal``); a later
+    block of the same key is left as it is, unread."""
     codec = CODECS["DRIVE"]
     fields: list[tuple[str, str]] = []
     notes: list[str] = []
+    seen: set[str] = set()
     for key, text in msg.fields:
         try:
             spec: FieldSpec | None = codec.spec(key)
         except KeyError:
             spec = None
-        if spec is not None and spec.kind == "float":
+        first = key.casefold() not in seen
+        seen.add(key.casefold())
+        if spec is not None and spec.kind == "float" and first:
             value, note = parse_usarsim_float(spec.key, text)
             if note is not None:
                 notes.append(note)

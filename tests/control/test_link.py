@@ -301,3 +301,11 @@ def test_a_name_or_ping_id_beyond_the_simulators_limits_is_refused_before_it_is_
     assert received and not [line for line in received
                               if line.startswith(b"INIT") or b"y" * 1001 in line], received
 
+
+def test_a_ping_id_given_twice_is_matched_by_its_first_block(lockstep_sim: SimHandle) -> None:
+    """The simulator reads a key's first block (as USARSim's GetArgVal); the client matched a
+    PING's answer by the last Id given, so the answer (Id a) was never matched and the
+    request ran into its timeout."""
+    with skeye.connect(lockstep_sim.address) as sim:
+        answer = sim.request("PING", ("Id", "a"), ("Id", "b"), timeout_s=2.0)
+        assert answer.get("Id") == "a", answer

@@ -199,6 +199,24 @@ def test_a_key_no_command_knows_is_refused_by_every_command_naming_it():
         c.close()
 
 
+def test_a_key_given_twice_is_read_from_its_first_block_alone():
+    """As USARSim's ParsedMessage.GetArgVal, which returns the first block of a key: the
+    first value is the command's and a later one of the same key is never read. DRIVE read
+    every block's number all the same, so ``{LinearVelocity 0.2} {LinearVelocity fast}``
+    was refused for a value it would not have used."""
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        res = c.answer("STEP {Count 1} {Count 2}", "STEP")
+        assert res.type == "RES" and res.get("Time") == "0.001000", res
+        assert c.answer("INIT {ClassName hummingbird} {Start Pad1}", "INIT").type == "RES"
+        c.send("DRIVE {LinearVelocity 0.2} {LinearVelocity fast} {LinearVelocity 99}")
+        c.send("PING {Id after}")  # DRIVE is answered only when refused (or read with a note)
+        seen, _ = c.read_until(lambda m: m.type == "RES" and m.get("Id") == "after")
+        assert not [m for m in seen if m.type in ("ERR", "RES")], seen
+        c.close()
+
+
 # How long a refusal may take on a loaded 2-core machine: a PING under a 1000-connection attack
 # was answered in 0.75 s at worst (docs/reliability.md); reading a line is far below that.
 ANSWER_WITHIN_S = 5.0
