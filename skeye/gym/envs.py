@@ -31,6 +31,7 @@ original's would. The copy keeps the ``spec`` that ``gymnasium.make`` set
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping
 from typing import Any, SupportsFloat
 
@@ -158,6 +159,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         self.flight: Flight | None = None
         self.vehicle: Vehicle | None = None
         self.episode: Episode | None = None
+        self._release: weakref.finalize | None = None  # closes the flight if we are dropped
         self._started_s = 0.0
         self._ended = ""  # why the episode ended ("terminated", "truncated"), "" while it runs
 
@@ -186,6 +188,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
             flight.close()
             raise
         self.flight, self.vehicle, self.episode = flight, vehicle, episode
+        self._release = flight.closed_with(self)
         self._started_s = flight.time_s
         self._ended = ""
         return self._observe(), self._info()
@@ -233,8 +236,9 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         return {"sim_time_s": self.flight.seconds_since(self._started_s), **self.episode.info}
 
     def _close_flight(self) -> None:
-        if self.flight is not None:
-            self.flight.close()
+        if self._release is not None:
+            self._release()  # closes the flight, once
+        self._release = None
         self.flight = self.vehicle = self.episode = None
 
 

@@ -19,6 +19,7 @@ checked once, and a bad one is a :class:`~skeye.errors.ConfigError` naming it.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePath
@@ -374,10 +375,27 @@ class Flight:
         return round(self.sim.time_s - start_s, 9)
 
     def close(self) -> None:
+        """Stop its threads (each vision's worker, the render thread, which frees its OpenGL
+        contexts on its way out); idempotent."""
         for vehicle in self.vehicles.values():
             vehicle.close()
         if self.cameras is not None:
             self.cameras.close()
+
+    def closed_with(self, owner: object) -> weakref.finalize:
+        """Close this flight when ``owner`` (the environment flying it) is garbage-collected,
+        or at interpreter exit, unless the returned finalizer was called before (the owner's
+        ``close()`` or next ``reset()`` calls it: it closes the flight once, then does nothing).
+
+        An environment dropped without ``close()`` would otherwise keep its flight for the
+        process's life: its render and vision threads hold the flight (their bound methods
+        reach the simulation, the vehicles, MuJoCo's model and the OpenGL contexts), so
+        nothing of it is ever collected, and each thread goes on waking. The threads never
+        reach ``owner``, so it is collected and the finalizer runs (a
+        :class:`weakref.finalize`, not ``__del__``: it runs once, holds no reference to the
+        owner, and runs at exit for an owner still alive).
+        """
+        return weakref.finalize(owner, self.close)
 
 
 def check_pose_source(setup: Setup) -> int:

@@ -24,6 +24,7 @@ the ``spec`` ``make_vec`` set): a new world of the same options, not yet reset.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -187,6 +188,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.flight: Flight | None = None
+        self._release: weakref.finalize | None = None  # closes the flight if we are dropped
         self.vehicles: list[Vehicle | None] = [None] * num_envs
         self.episodes: list[Episode | None] = [None] * num_envs
         self._started_s = np.zeros(num_envs)
@@ -222,6 +224,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         super().reset(seed=seed)
         self._close_flight()
         self.flight = Flight(self.setup, int(self.np_random.integers(2**31)))
+        self._release = self.flight.closed_with(self)
         for i in range(self.num_envs):
             self._start(i)
         self.flight.step()
@@ -299,8 +302,9 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         return {"sim_time_s": self.flight.seconds_since(self._started_s[i]), **episode.info}
 
     def _close_flight(self) -> None:
-        if self.flight is not None:
-            self.flight.close()
+        if self._release is not None:
+            self._release()  # closes the flight, once
+        self._release = None
         self.flight = None
         self.vehicles = [None] * self.num_envs
         self.episodes = [None] * self.num_envs
