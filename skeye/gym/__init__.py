@@ -22,10 +22,11 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
-from skeye.gym.envs import GoToEnv, HoverEnv, PadLandingEnv, SkeyeEnv
+from skeye.gym.envs import EnvironmentClosed, GoToEnv, HoverEnv, PadLandingEnv, SkeyeEnv
 from skeye.gym.vector import SkeyeVectorEnv
 
-__all__ = ["ENV_IDS", "GoToEnv", "HoverEnv", "PadLandingEnv", "SkeyeEnv", "SkeyeVectorEnv"]
+__all__ = ["ENV_IDS", "EnvironmentClosed", "GoToEnv", "HoverEnv", "PadLandingEnv", "SkeyeEnv",
+           "SkeyeVectorEnv"]
 
 ENV_IDS = ("skeye/Hover-v0", "skeye/GoTo-v0", "skeye/PadLanding-v0")
 

@@ -76,6 +76,16 @@ ENV_KEYWORDS = ("action", "episode_s", "render_mode")
 task's)."""
 
 
+class EnvironmentClosed(gymnasium.error.ClosedEnvironmentError, gymnasium.error.ResetNeeded):
+    """``reset()`` or ``step()`` after ``close()``: Gymnasium's ClosedEnvironmentError (as its
+    AsyncVectorEnv raises), and a ResetNeeded, which a ``step()`` after ``close()`` raised
+    before (so code catching that still does)."""
+
+    def __init__(self, call: str) -> None:
+        super().__init__(f"{call}: the environment was closed (close()); make a new one "
+                         f"(gymnasium.make, or copy.deepcopy of this one)")
+
+
 def action_limits(config: RobotConfig) -> ActionLimits:
     """What an action of 1 means for this robot (its [controller] limits)."""
     c = config.controller
@@ -160,6 +170,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         self.vehicle: Vehicle | None = None
         self.episode: Episode | None = None
         self._release: weakref.finalize | None = None  # closes the flight if we are dropped
+        self._closed = False
         self._started_s = 0.0
         self._ended = ""  # why the episode ended ("terminated", "truncated"), "" while it runs
 
@@ -168,6 +179,8 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
               ) -> tuple[Any, dict[str, Any]]:
         """A new episode; ``options`` may fix ``start_ned_m``, ``yaw_rad`` and (Hover, GoTo)
         ``target_ned_m`` instead of drawing them."""
+        if self._closed:  # a new flight now would outlive the user's close()
+            raise EnvironmentClosed("reset()")
         super().reset(seed=seed)
         self._close_flight()
         episode = self.task.start(self.np_random, self.origin)
@@ -195,6 +208,8 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         flight, vehicle, episode = self.flight, self.vehicle, self.episode
+        if self._closed:
+            raise EnvironmentClosed("step()")
         if flight is None or vehicle is None or episode is None:
             raise gymnasium.error.ResetNeeded("call reset() before step()")
         if self._ended:  # a crashed vehicle would fly on, its episode judged afresh
@@ -222,7 +237,10 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         return np.array(frame.rgb)
 
     def close(self) -> None:
+        """End the flight (its threads, the simulation); idempotent. A closed environment
+        refuses ``reset()`` and ``step()`` (:class:`EnvironmentClosed`)."""
         self._close_flight()
+        self._closed = True
         super().close()
 
     # -- helpers -----------------------------------------------------------------------------

@@ -40,6 +40,7 @@ from skeye.geo import MAX_POSITION_M
 from skeye.gym.envs import (
     ACTIONS,
     ENV_KEYWORDS,
+    EnvironmentClosed,
     SpecPickle,
     action_limits,
     apply_action,
@@ -221,6 +222,8 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
                 f"the batched vector environment takes no reset options (each vehicle starts "
                 f"in its own cell, spacing_m apart), got {options!r}; to fix the starts, use "
                 f"vectorization_mode='sync' or 'async'")
+        if self.closed:  # a new world now would outlive close(), which then does nothing
+            raise EnvironmentClosed("reset()")
         super().reset(seed=seed)
         self._close_flight()
         self.flight = Flight(self.setup, int(self.np_random.integers(2**31)))
@@ -239,8 +242,10 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
         flight = self.flight
+        if self.closed:
+            raise EnvironmentClosed("step()")
         if flight is None:  # as the single environment, and Gymnasium's own vector ones
-            raise ResetNeeded("call reset() before step() (after close() too)")
+            raise ResetNeeded("call reset() before step()")
         try:
             shape: Any = np.shape(actions)
         except ValueError:  # ragged rows

@@ -798,3 +798,28 @@ def test_an_environment_dropped_without_close_releases_its_flight(mode: str) -> 
     assert not any(t.is_alive() for t in threads)
     gc.collect()
     assert gone() is None
+
+
+@pytest.mark.parametrize("mode", ["single", "sync", "vector_entry_point"])
+def test_reset_after_close_is_refused_naming_it(mode: str) -> None:
+    """reset() after close() started a new flight, which the batched environment's next
+    close() then left running (Gymnasium's VectorEnv.close does nothing once ``closed``). A
+    closed environment now says so at reset() and step(), with Gymnasium's
+    ClosedEnvironmentError (as its AsyncVectorEnv does); close() again does nothing."""
+    if mode == "single":
+        env: Any = gymnasium.make("skeye/Hover-v0")
+        action: Any = np.zeros(4, np.float32)
+    else:
+        env = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode)
+        action = np.zeros((2, 4), np.float32)
+    env.reset(seed=0)
+    env.step(action)
+    env.close()
+    env.close()  # twice: nothing more
+    with pytest.raises(gymnasium.error.ClosedEnvironmentError, match=r"closed \(close\(\)\)"):
+        env.reset(seed=0)
+    with pytest.raises(gymnasium.error.ClosedEnvironmentError, match=r"closed \(close\(\)\)"):
+        env.step(action)
+    flights = [env.unwrapped.flight] if mode != "sync" else [e.unwrapped.flight
+                                                             for e in env.unwrapped.envs]
+    assert flights == [None] * len(flights)
