@@ -172,7 +172,9 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         self._release: weakref.finalize | None = None  # closes the flight if we are dropped
         self._closed = False
         self._started_s = 0.0
-        self._ended = ""  # why the episode ended ("terminated", "truncated"), "" while it runs
+        # why the episode ended ("terminated", "truncated", a step() cut short by an
+        # exception), "" while it runs
+        self._ended = ""
 
     # -- gymnasium ---------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -215,9 +217,13 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         if self._ended:  # a crashed vehicle would fly on, its episode judged afresh
             raise gymnasium.error.ResetNeeded(
                 f"the episode is over ({self._ended}): call reset() before step()")
-        if vehicle.alive:
+        if vehicle.alive:  # a refused action raises here, before anything is flown
             apply_action(vehicle, self.action_kind, action, self.limits)
-        flight.step()
+        try:
+            flight.step()
+        except BaseException as exc:  # the period half flown, unjudged: no step goes on from it
+            self._ended = f"the last step() was cut short by {type(exc).__name__}"
+            raise
         reward, terminated = self.task.judge(vehicle, episode)
         truncated = not terminated and flight.seconds_since(self._started_s) >= (
             self.task.episode_s - 1e-9)

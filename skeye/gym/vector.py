@@ -195,6 +195,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         self._started_s = np.zeros(num_envs)
         self._steps = np.zeros(num_envs, dtype=np.int64)  # each vehicle's steps this episode
         self._autoreset = np.zeros(num_envs, dtype=bool)
+        self._cut_short = ""  # why the last step() or reset() stopped half-way, "" if none did
 
     def _name(self, i: int) -> str:
         return f"V{i}"
@@ -226,6 +227,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
             raise EnvironmentClosed("reset()")
         super().reset(seed=seed)
         self._close_flight()
+        self._cut_short = "the last reset() did not finish"  # until it does (below)
         self.flight = Flight(self.setup, int(self.np_random.integers(2**31)))
         self._release = self.flight.closed_with(self)
         for i in range(self.num_envs):
@@ -234,6 +236,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         self._started_s[:] = self.flight.time_s
         self._steps[:] = 0
         self._autoreset[:] = False
+        self._cut_short = ""
         infos: dict[str, Any] = {}
         for i in range(self.num_envs):
             infos = self._add_info(infos, self._info(i), i)
@@ -255,16 +258,22 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
                                   f"({self.num_envs}, 4), got {shape}")
         for row in actions:  # every row checked before any vehicle is touched
             action_values(row)
+        if self._cut_short:
+            raise ResetNeeded(f"{self._cut_short}: call reset() before step()")
         restarted = self._autoreset.copy()
-        for i in range(self.num_envs):
-            if restarted[i]:
-                self._start(i)
-                continue
-            vehicle = self.vehicles[i]
-            assert vehicle is not None
-            if vehicle.alive:
-                apply_action(vehicle, self.action_kind, actions[i], self.limits)
-        flight.step()
+        try:
+            for i in range(self.num_envs):
+                if restarted[i]:
+                    self._start(i)
+                    continue
+                vehicle = self.vehicles[i]
+                assert vehicle is not None
+                if vehicle.alive:
+                    apply_action(vehicle, self.action_kind, actions[i], self.limits)
+            flight.step()
+        except BaseException as exc:  # half flown, unjudged: no step goes on from there
+            self._cut_short = f"the last step() was cut short by {type(exc).__name__}"
+            raise
         rewards = np.zeros(self.num_envs, dtype=np.float64)
         terminated = np.zeros(self.num_envs, dtype=bool)
         truncated = np.zeros(self.num_envs, dtype=bool)

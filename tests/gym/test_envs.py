@@ -823,3 +823,41 @@ def test_reset_after_close_is_refused_naming_it(mode: str) -> None:
     flights = [env.unwrapped.flight] if mode != "sync" else [e.unwrapped.flight
                                                              for e in env.unwrapped.envs]
     assert flights == [None] * len(flights)
+
+
+@pytest.mark.parametrize("mode", ["single", "vector_entry_point"])
+def test_a_step_cut_short_by_an_exception_needs_a_reset(mode: str) -> None:
+    """An exception inside step() (Ctrl-C, a render failure) leaves the period half flown:
+    the next step() flew on from there and returned a transition 20 ms longer than a period,
+    its reward for the cut period never judged, as if nothing had happened. It now raises
+    ResetNeeded naming the cause, and reset() repeats the seeded episode bit for bit."""
+    vector = mode != "single"
+    if vector:
+        env: Any = gymnasium.make_vec("skeye/Hover-v0", num_envs=2, vectorization_mode=mode)
+        action: Any = np.zeros((2, 4), np.float32)
+    else:
+        env = gymnasium.make("skeye/Hover-v0")
+        action = np.zeros(4, np.float32)
+    try:
+        first = [env.reset(seed=3)[0]] + [env.step(action)[0] for _ in range(2)]
+        env.reset(seed=3)
+        env.step(action)
+        sim = env.unwrapped.flight.sim
+        period = env.unwrapped.settings.period_steps
+        cut_at = sim.steps + period // 2
+        fired = threading.Event()
+
+        def interrupt(s: Any) -> None:  # the user's Ctrl-C, half-way through the period
+            if s.steps >= cut_at and not fired.is_set():  # (hooks run at the board's ticks)
+                fired.set()
+                raise KeyboardInterrupt
+
+        sim.step_hooks.append(interrupt)
+        with pytest.raises(KeyboardInterrupt):
+            env.step(action)
+        with pytest.raises(gymnasium.error.ResetNeeded, match="cut short by KeyboardInterrupt"):
+            env.step(action)
+        again = [env.reset(seed=3)[0]] + [env.step(action)[0] for _ in range(2)]
+        assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+    finally:
+        env.close()
