@@ -63,6 +63,7 @@ class CameraSensor(Sensor[CameraReading]):
         self._robot_name = robot_name
         self._client: ImageClient | None = None
         self._client_lock = threading.Lock()
+        self._closed = False
 
     def convert(self, message: Any) -> CameraReading:
         s: SenCamera = message
@@ -89,7 +90,7 @@ class CameraSensor(Sensor[CameraReading]):
             except (RemoteProtocolError, LinkClosed) as exc:
                 self._drop()
                 closed = isinstance(exc, LinkClosed) or "closed" in str(exc)
-                if not (reused and closed):
+                if not (reused and closed) or self._closed:  # close() ended it: no retry
                     raise _as_skeye(self.name, exc) from exc
                 # The server closed a connection that sat idle (its --idle-timeout): once more,
                 # on a fresh one.
@@ -112,6 +113,8 @@ class CameraSensor(Sensor[CameraReading]):
     def _fetch(self) -> Any:
         """The newest frame over the current connection, opening one if needed (lock held)."""
         assert self._images is not None
+        if self._closed:
+            raise LinkClosed(f"camera {self.name!r}: closed")
         if self._client is None:
             client = self._images()
             try:
@@ -132,7 +135,10 @@ class CameraSensor(Sensor[CameraReading]):
 
     def close(self) -> None:
         """Close the image-server connection (idempotent). A request blocked on it (on another
-        thread) is woken at once: it fails, instead of holding the lock until its timeout."""
+        thread) is woken at once: it fails, instead of holding the lock until its timeout, and
+        is not retried on a new connection (before 2026-11-27 it was, and a frozen image server
+        held ``close()`` for the whole timeout). :meth:`image` fails from now on."""
+        self._closed = True
         client = self._client
         if client is not None:
             client.close()

@@ -178,6 +178,8 @@ class Connection:
         self.level = ""
         self.time_s = 0.0
         self.unmatched_errors: list[Message] = []
+        self.close_unanswered: str | None = None
+        """Set by :meth:`close` when the simulator did not close its end in time."""
         self.robot: Robot | None = None
         self._error: SkeyeError | None = None
         self._closed = False
@@ -595,41 +597,51 @@ class Connection:
     # -- shutdown -------------------------------------------------------------------------
     def close(self, timeout_s: float = 2.0) -> None:
         """Stop every thread and close the socket; idempotent. The simulator removes the robot:
-        with one, this end is closed first and the simulator's end awaited (up to
-        ``timeout_s`` in all), which it closes once the robot's removal is queued on its engine,
-        so that a robot spawned after ``close()``, queued later, finds its place free (one a
-        connection, as the camera calibration photographs its views)."""
+        with one, this end is closed first and the simulator's end awaited, which it closes
+        once the robot's removal is queued on its engine, so that a robot spawned after
+        ``close()``, queued later, finds its place free (one a connection, as the camera
+        calibration photographs its views). Every wait here shares one deadline,
+        ``timeout_s`` in all: a simulator that does not answer (stopped with SIGSTOP, frozen)
+        costs at most that, and :attr:`close_unanswered` then says so."""
         if self._closed:
             return
         self._closed = True
         deadline = time.monotonic() + timeout_s
+
+        def left() -> float:
+            return max(0.0, deadline - time.monotonic())
+
         clock = getattr(self, "clock", None)
         if clock is not None:
-            clock.close(timeout_s)
+            clock.close(left())
         if self.robot is not None and self._error is None:
-            self._await_the_simulators_end(max(0.0, deadline - time.monotonic()))
+            if not self._await_the_simulators_end(left()):
+                self.close_unanswered = (
+                    f"the simulator at {self.peer} did not close its end within "
+                    f"{timeout_s:g} s (stopped or frozen?): it removes robot "
+                    f"{self.robot.name} when it reads again")
         self._fail(LinkClosed(f"the connection to {self.peer} was closed"))
         for t in (self._writer, self._reader):
-            t.join(timeout_s)  # returns at once for the calling thread's own worker
+            t.join(left())  # returns at once for the calling thread's own worker
         self._link.close()
         if self.robot is not None:
             self.robot.close()
 
-    def _await_the_simulators_end(self, timeout_s: float) -> None:
+    def _await_the_simulators_end(self, timeout_s: float) -> bool:
         """The queued commands sent, this end closed, and the simulator's end read (the reader
         stops there), within ``timeout_s``; on a full queue or a stuck send it gives up, and
-        ``close()`` closes the socket as it would have."""
+        ``close()`` closes the socket as it would have. True when the simulator's end came."""
         if timeout_s <= 0.0:
-            return
+            return False
         deadline = time.monotonic() + timeout_s
         try:
             self._outbox.put_nowait(_STOP)  # the writer sends what is queued, then stops
         except queue.Full:
-            return
+            return False
         if not self._writer.join(timeout_s):
-            return
+            return False
         self._link.finish_sending()
-        self._reader.join(max(0.0, deadline - time.monotonic()))
+        return self._reader.join(max(0.0, deadline - time.monotonic()))
 
     def add_close_hook(self, fn: Callable[[SkeyeError], None]) -> None:
         """Call ``fn(error)`` once when the link goes down."""

@@ -334,6 +334,9 @@ def run(args: argparse.Namespace) -> int:
                     if video is not None:
                         video.check()
             print("skeye pilot: stopping", flush=True)
+        unsaid = getattr(airframe, "close_problem", None)  # each wait at stop is bounded
+        if unsaid:
+            _warn(f"stopped without the simulator: {unsaid}")
     except SkeyeError as exc:
         _error(str(exc))
         if airframe is None and isinstance(exc, (LinkClosed, LinkTimeout)):

@@ -96,6 +96,9 @@ HTTP_METHODS = (b"GET ", b"POST ", b"PUT ", b"HEAD ", b"OPTIONS ", b"DELETE ", b
                 b"CONNECT ", b"TRACE ")
 REATTACH_S = 1.0
 """How often the pilot tries to re-attach to a lost simulator."""
+STOP_S = 1.0
+"""What ``close()`` waits for the threads, in all: one control tick and a simulator's answer
+take milliseconds; a frozen simulator's answer never comes, and Ctrl-C must stop the pilot."""
 KEEPALIVE_IDLE_S = 10
 KEEPALIVE_INTERVAL_S = 5
 KEEPALIVE_COUNT = 3
@@ -261,8 +264,15 @@ class PilotServer:
         if self.loop_error is not None:
             raise self.loop_error
 
-    def close(self, timeout_s: float = 2.0) -> None:
-        """Stop every thread and close the links (idempotent)."""
+    def close(self, timeout_s: float = STOP_S) -> None:
+        """Stop every thread and close the links (idempotent). Every wait shares one deadline,
+        ``timeout_s`` in all; a thread still busy then (the loop waiting on a frozen
+        simulator's answer) is a daemon, and ends when the airframe is closed."""
+        deadline = time.monotonic() + timeout_s
+
+        def left() -> float:
+            return max(0.0, deadline - time.monotonic())
+
         self._stop.set()
         if self._listener is not None:
             self._listener.close()
@@ -278,13 +288,13 @@ class PilotServer:
             waiting.link.close()
         with self._threads_lock:
             workers = list(self._threads)
-        for t in workers:
-            t.join(timeout_s)  # returns at once for the calling thread's own worker
         close_vision = getattr(self.vision, "close", None)
-        if close_vision is not None:
-            close_vision(timeout_s)
+        if close_vision is not None:  # first: it wakes a frame request the loop may wait on
+            close_vision(left())
+        for t in workers:
+            t.join(left())  # returns at once for the calling thread's own worker
         if self.video is not None:
-            self.video.close(timeout_s)
+            self.video.close(max(left(), 0.2))  # its own thread, never on the simulator
 
     def __enter__(self) -> PilotServer:
         return self.start()
@@ -604,6 +614,8 @@ class PilotServer:
                         self._stop.wait(0.001)  # wait for a CLOCK grant
                         continue
                 except SkeyeError as exc:
+                    if self._stop.is_set():  # stopping: the airframe was closed under it
+                        break
                     # The simulator (the vehicle's hardware) went away: keep the ground link,
                     # report it, and let the failsafe run; every command now gets a refusal.
                     self._lose_vehicle(str(exc))

@@ -53,6 +53,9 @@ from skeye.wire.sim_messages import Drive
 Attitude = tuple[float, float, float, float, bool]  # roll, pitch, yaw rate, thrust, height mode
 FROZEN_TIMEOUT_S = 5.0
 """Realtime: sim time standing still this long (wall seconds) means the simulator is frozen."""
+CLOSE_S = 1.0
+"""At stop, how long the pilot waits for the simulator to close its end of the connection (it
+does so in milliseconds once it has removed the robot; a stopped one never does)."""
 
 
 class SimAirframe:
@@ -202,9 +205,16 @@ class SimAirframe:
                 f"({'lockstep' if self.lockstep else 'realtime'})")
 
     def close(self) -> None:
-        """Close the simulator connection if this backend opened it (idempotent)."""
+        """Close the simulator connection if this backend opened it (idempotent), waiting at
+        most ``CLOSE_S`` for the simulator to close its end (it removes the robot then); one
+        that does not (stopped, frozen) is named in :attr:`close_problem`."""
         if self._owns_connection:
-            self.connection.close()
+            self.connection.close(CLOSE_S)
+
+    @property
+    def close_problem(self) -> str | None:
+        """What :meth:`close` could not do (the simulator did not answer), else None."""
+        return getattr(self.connection, "close_unanswered", None)
 
     def snapshot(self) -> Snapshot:
         r = self.robot

@@ -337,9 +337,14 @@ class PadVision:
         return self
 
     def close(self, timeout_s: float = 5.0) -> None:
-        """Stop the worker (idempotent)."""
+        """Stop the worker (idempotent). Its camera is closed first: a frame request waiting
+        on a silent image server (a frozen simulator) fails at once instead of holding the
+        worker for the camera's timeout."""
         self._stop.set()
         self._kick.set()
+        close_camera = getattr(getattr(self.robot, "camera", None), "close", None)
+        if close_camera is not None:
+            close_camera()
         if self._worker is not None:
             self._worker.join(timeout_s)
 
@@ -574,6 +579,8 @@ class PadVision:
         try:
             image = camera.image()
         except SkeyeError as exc:
+            if self._stop.is_set():  # close() closed the camera under the request
+                return None
             self.stats.errors += 1
             self.stats.last_error = str(exc)
             if not self.stats.camera_lost:

@@ -8,6 +8,9 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
+import sys
+import time
 import urllib.request
 from contextlib import ExitStack
 from typing import ClassVar
@@ -19,9 +22,9 @@ from skeye.control.motion import MotionConfig
 from skeye.errors import CommandRejected
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
-from skeye.pilot.server import PilotServer
-from skeye.pilot.sim_airframe import SimAirframe
-from skeye.processes import start_skeye, stop_process
+from skeye.pilot.server import STOP_S, PilotServer
+from skeye.pilot.sim_airframe import CLOSE_S, SimAirframe
+from skeye.processes import die_with_parent, start_skeye, stop_process
 from skeye.wire.packets import NavState, SkeyeMask
 from tests.ground.conftest import wait_until
 
@@ -111,3 +114,46 @@ def test_frozen_detection_needs_sim_time_to_stand_still() -> None:
     assert airframe.lost is None
     now[0] += 0.2
     assert airframe.lost is not None and "frozen" in airframe.lost
+
+
+def test_ctrl_c_stops_a_pilot_on_a_frozen_simulator_promptly(tmp_path) -> None:
+    """A ``skeye pilot`` process (lockstep, with its camera) whose ``skeye sim`` is stopped with
+    SIGSTOP gets Ctrl-C. Every wait at stop is bounded: the loop's STEP and the vision's frame
+    request never get their answer, nor does the simulator close its end. It took 6 s here
+    (14 s flying in realtime: the camera retried its request on a new connection); now it
+    stops within its stop bounds and says what it could not do."""
+    with ExitStack() as stack:
+        sim_proc, found = start_skeye(
+            ["sim", "--port", "0", "--image-port", "0", "--mode", "lockstep"],
+            [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"],
+            "simulator", timeout_s=120)
+        stack.callback(stop_process, sim_proc)
+        stack.callback(lambda: sim_proc.poll() is None and os.kill(sim_proc.pid, signal.SIGCONT))
+        out, err = tmp_path / "out", tmp_path / "err"
+        o, e = stack.enter_context(out.open("w")), stack.enter_context(err.open("w"))
+        pilot = subprocess.Popen(
+            [sys.executable, "-m", "skeye.cli", "pilot", "--sim",
+             f"127.0.0.1:{found[0].group(1)}", "--images", f"127.0.0.1:{found[1].group(1)}",
+             "--port", "0"],
+            stdout=o, stderr=e, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent())
+        stack.callback(stop_process, pilot)  # type: ignore[arg-type]
+        deadline = time.monotonic() + 120
+        while "ground control on" not in out.read_text():
+            assert pilot.poll() is None, err.read_text()
+            assert time.monotonic() < deadline, "the pilot did not start within 120 s"
+            time.sleep(0.05)
+
+        os.kill(sim_proc.pid, signal.SIGSTOP)  # connected, silent
+        t0 = time.monotonic()
+        pilot.send_signal(signal.SIGINT)
+        status = pilot.wait(60)
+        took_s = time.monotonic() - t0
+    # its bounds, the main thread's 0.2 s poll for the signal and 1 s for the interpreter's exit
+    bound_s = STOP_S + CLOSE_S + 0.2 + 1.0
+    said = err.read_text()
+    assert status == 0, said
+    assert took_s < bound_s, f"stopped in {took_s:.1f} s, bound {bound_s:g} s; {said}"
+    assert "skeye pilot: stopping" in out.read_text()
+    assert ("skeye pilot: warning: stopped without the simulator: the simulator at "
+            f"127.0.0.1:{found[0].group(1)} did not close its end") in said, said
+    assert "vehicle lost" not in said and "camera lost" not in said, said
