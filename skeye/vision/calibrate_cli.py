@@ -19,7 +19,15 @@ import cv2
 
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
 from skeye.image_files import read_image_file
-from skeye.vision.calibration import DIST_NAMES, Board, calibrate, check_lens, parse_board
+from skeye.vision.calibration import (
+    DIST_NAMES,
+    MAX_SQUARE_M,
+    MIN_SQUARE_M,
+    Board,
+    calibrate,
+    check_lens,
+    parse_board,
+)
 
 EXIT_BAD_INPUT = 2
 RMS_WARNING_PX = 1.0  # a good calibration reprojects to a fraction of a pixel
@@ -36,7 +44,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cols, rows = parse_board(args.board)
         if not (math.isfinite(args.square_mm) and args.square_mm > 0):
             raise InvalidArgument(f"--square-mm must be positive, got {args.square_mm}")
-        board = Board(cols, rows, args.square_mm / 1000.0)
+        square_m = args.square_mm / 1000.0
+        if not MIN_SQUARE_M <= square_m <= MAX_SQUARE_M:
+            raise InvalidArgument(
+                f"--square-mm must be {MIN_SQUARE_M * 1e3:g}..{MAX_SQUARE_M * 1e3:g} (a square "
+                f"from 1 um, what light can image, to 10 m), got {args.square_mm:g}")
+        board = Board(cols, rows, square_m)
     except InvalidArgument as exc:
         return _fail(str(exc))
     if not args.out.lower().endswith(".toml"):

@@ -39,6 +39,15 @@ FORMAT_VERSION = 1
 MAX_BOARD_CORNERS = 1000  # inner corners a side: far beyond any printed board
 MIN_IMAGE_PX = 16  # a side: a camera's smallest (OpenCV's corner finder fails below it)
 MAX_IMAGE_PX = 0xFFFF  # a side: a JPEG's largest (ITU T.81's 16-bit sizes), a RAW frame's too
+MIN_SQUARE_M = 1e-6
+"""A board's smallest square side, 1 um: visible light cannot image a checkerboard much finer
+(the diffraction limit, half a wavelength, is 0.2-0.4 um even through a microscope)."""
+MAX_SQUARE_M = 10.0
+"""A board's largest square side, 10 m: a 9x6 board of them is 100 m x 70 m, beyond any board
+painted on a field for a camera flying high. The calibration's intrinsics do not depend on the
+square size (it only scales the board poses), and these bounds keep the board's points (up to
+1000 corners a side, float32) finite and far from zero; 1e308 mm overflowed them, and OpenCV's
+calibrateCamera then failed an assertion."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +67,10 @@ class Board:
                                   f"side, got {self.cols}x{self.rows}")
         if not (math.isfinite(self.square_m) and self.square_m > 0):
             raise InvalidArgument(f"square size must be positive, got {self.square_m} m")
+        if not MIN_SQUARE_M <= self.square_m <= MAX_SQUARE_M:
+            raise InvalidArgument(
+                f"square size must be {MIN_SQUARE_M * 1e3:g}..{MAX_SQUARE_M * 1e3:g} mm (1 um, "
+                f"what light can image, to 10 m), got {self.square_m * 1e3:g} mm")
 
     @property
     def label(self) -> str:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -35,7 +36,7 @@ from skeye.vision.calibration import load_calibration
 from skeye.vision.camera import intrinsics
 from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient
-from tests.vision.helpers import FOV_H_RAD, H, W, distort_image, wide_camera
+from tests.vision.helpers import FOV_H_RAD, H, W, board_views, distort_image, wide_camera
 
 ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 CAMERA_FRD = np.array([0.0, 0.0, 0.035])
@@ -218,3 +219,34 @@ def test_calibrate_does_not_write_a_lens_the_loader_refuses(
     err = capsys.readouterr().err
     assert status == 2 and "a distortion coefficient must be within -10..10" in err, err
     assert "not written" in err and not out.exists()
+
+
+def test_calibrate_bounds_the_square_size_with_one_line(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--square-mm 1e308`` overflowed the board's float32 points (numpy's RuntimeWarning)
+    and OpenCV's calibrateCamera then failed an assertion, a traceback; 1e-300 underflowed
+    the same way. A square is now 0.001..10000 mm (1 um, what light can image, to 10 m):
+    outside, one line and status 2, nothing written. The intrinsics do not depend on the
+    square size, so both bounds calibrate exactly as 25 mm does."""
+    names = _write(tmp_path, board_views(640, 480, 576.0))
+    out = tmp_path / "camera.toml"
+    for given in ("1e308", "1e-300", "0.0009", "10001"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no numpy overflow warning either
+            status = main(["calibrate", *names, "--square-mm", given, "--out", str(out)])
+        err = capsys.readouterr().err
+        assert status == 2 and err == (
+            "skeye calibrate: error: --square-mm must be 0.001..10000 (a square from 1 um, "
+            f"what light can image, to 10 m), got {float(given):g}\n"), err
+        assert not out.exists()
+    fitted = []
+    for given in ("25", "0.001", "10000"):
+        assert main(["calibrate", *names, "--square-mm", given, "--out", str(out)]) == 0
+        capsys.readouterr()
+        cal = load_calibration(out)
+        assert cal.board is not None and math.isclose(cal.board.square_m, float(given) / 1e3)
+        fitted.append((cal.fx, cal.fy, cal.cx, cal.cy))
+    # the same fit, up to calibrateCamera's own convergence (float32 points, 1e-6 px apart)
+    assert np.allclose(fitted[1], fitted[0], rtol=0, atol=1e-3), fitted
+    assert np.allclose(fitted[2], fitted[0], rtol=0, atol=1e-3), fitted
+    assert abs(fitted[0][0] - 576.0) < 576.0 * 0.01, fitted  # and right: f to 1 %
