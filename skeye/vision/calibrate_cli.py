@@ -39,6 +39,11 @@ def _fail(message: str) -> int:
     return EXIT_BAD_INPUT
 
 
+def _progress(message: str) -> None:
+    """A line per large image as it is searched (they take seconds each)."""
+    print(f"skeye calibrate: {message}", file=sys.stderr, flush=True)
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     try:
         cols, rows = parse_board(args.board)
@@ -62,7 +67,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             return _fail(str(exc))
         images.append((name, grey))
     try:
-        result = calibrate(images, board)
+        result = calibrate(images, board, progress=_progress)
     except LocalProtocolError as exc:
         return _fail(str(exc))
     cal = result.calibration

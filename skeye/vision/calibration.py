@@ -7,9 +7,10 @@ coefficients in OpenCV's order (k1, k2, p1, p2, k3) - plus how it was found (RMS
 error, board, number of images). :func:`calibrate` runs the standard recipe (Zhang 2000, as
 OpenCV implements it): find the board's inner corners in every image
 (``findChessboardCorners``, refined with ``cornerSubPix``; the sector-based detector
-``findChessboardCornersSB`` when the classic one finds nothing), then ``calibrateCamera`` on
-all of them. :func:`load_calibration` / :meth:`CameraCalibration.to_toml` read and write
-camera.toml (format: docs/calibration.md).
+``findChessboardCornersSB`` when the classic one finds nothing; an image over
+``DETECT_MAX_PX`` a side on a reduced copy, the corners then refined on the image itself), then
+``calibrateCamera`` on all of them. :func:`load_calibration` /
+:meth:`CameraCalibration.to_toml` read and write camera.toml (format: docs/calibration.md).
 
 :meth:`CameraCalibration.distort_normalized` is OpenCV's forward model (normalized camera
 coordinates -> pixels), vectorized; the detector uses it to sample the image at undistorted
@@ -22,8 +23,9 @@ error, never a silent rescale. Nothing is rounded when written.
 from __future__ import annotations
 
 import math
+import time
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -321,20 +323,64 @@ def undistort_points(
 _SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-4)
 
 
+DETECT_MAX_PX = 2048
+"""The board is searched for on a copy of at most this many pixels a side. OpenCV's corner
+finders take time in proportion to the pixels when the board is not where they look first (a
+7559x5669 image without a board took 85 s here, a 2000x1500 one 3-5 s); the corners found on
+the copy are then refined at full resolution with ``cornerSubPix``, as ROS's camera_calibration
+does (``downsample_and_detect``, which searches a copy of about 640x480). Images up to this size
+(the simulator's 800x600, a webcam's 1920x1080) are searched as they are, unchanged."""
+
+
+def searched_size(width: int, height: int) -> tuple[int, int]:
+    """The size of the copy :func:`find_corners` searches for an image of this size."""
+    scale = max(width, height) / DETECT_MAX_PX
+    if scale <= 1.0:
+        return width, height
+    return max(1, round(width / scale)), max(1, round(height / scale))
+
+
 def find_corners(grey: np.ndarray, board: Board) -> np.ndarray | None:
-    """The board's inner corners in one greyscale image (N, 1, 2) float32, or None."""
+    """The board's inner corners in one greyscale image (N, 1, 2) float32, or None. An image
+    over ``DETECT_MAX_PX`` a side is searched on a reduced copy (area-averaged), and the corners
+    found there are refined on the image itself."""
+    height, width = grey.shape[:2]
+    scale = max(width, height) / DETECT_MAX_PX
+    if scale <= 1.0:
+        return _find_corners(grey, board)
+    small = cv2.resize(grey, searched_size(width, height), interpolation=cv2.INTER_AREA)
+    found = _find_corners(small, board)
+    if found is None:
+        return None
+    # pixel centres are at integer index coordinates in both images
+    corners = found.astype(np.float32)  # a copy, in the finder's own shape
+    corners[..., 0] = (corners[..., 0] + 0.5) * (width / small.shape[1]) - 0.5
+    corners[..., 1] = (corners[..., 1] + 0.5) * (height / small.shape[0]) - 0.5
+    # the window must reach the true corner from the scaled-up one (a fraction of a reduced
+    # pixel off, so up to about `scale` pixels here), and stay under half the spacing
+    return _refine(grey, corners, board, reach_px=math.ceil(2.0 * scale))
+
+
+def _refine(grey: np.ndarray, corners: np.ndarray, board: Board,
+            reach_px: int = 11) -> np.ndarray:
+    """``cornerSubPix`` with a window under half the smallest corner spacing, at most
+    ``reach_px`` (11 for corners found on the image itself) and at least 2 pixels."""
+    pts = corners.reshape(board.rows, board.cols, 2)
+    spacing = min(
+        float(np.linalg.norm(np.diff(pts, axis=1), axis=2).min()),
+        float(np.linalg.norm(np.diff(pts, axis=0), axis=2).min()),
+    )
+    half = int(max(2, min(max(11, reach_px), math.floor(0.4 * spacing))))
+    return cv2.cornerSubPix(grey, corners, (half, half), (-1, -1), _SUBPIX)
+
+
+def _find_corners(grey: np.ndarray, board: Board) -> np.ndarray | None:
     size = (board.cols, board.rows)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     ok, corners = cv2.findChessboardCorners(grey, size, flags=flags)
     if ok:
         # The refinement window: under half the smallest corner spacing, at most 11x11.
-        pts = corners.reshape(board.rows, board.cols, 2)
-        spacing = min(
-            float(np.linalg.norm(np.diff(pts, axis=1), axis=2).min()),
-            float(np.linalg.norm(np.diff(pts, axis=0), axis=2).min()),
-        )
-        half = int(max(2, min(11, math.floor(0.4 * spacing))))
-        return cv2.cornerSubPix(grey, corners, (half, half), (-1, -1), _SUBPIX)
+        return _refine(grey, corners, board)
     ok, corners = cv2.findChessboardCornersSB(grey, size, flags=cv2.CALIB_CB_ACCURACY)
     return corners.astype(np.float32) if ok else None
 
@@ -348,9 +394,13 @@ class CalibrationResult:
 
 
 def calibrate(
-    images: Sequence[tuple[str, np.ndarray]], board: Board, min_images: int = 3
+    images: Sequence[tuple[str, np.ndarray]], board: Board, min_images: int = 3,
+    progress: Callable[[str], None] | None = None,
 ) -> CalibrationResult:
-    """Calibrate from (name, greyscale uint8 image) pairs, all of one size.
+    """Calibrate from (name, greyscale uint8 image) pairs, all of one size. Images over
+    ``DETECT_MAX_PX`` a side are searched on a reduced copy (:func:`find_corners`), and
+    ``progress`` is told about each of them as it is done (which, its size, the copy's, found
+    or not, the seconds it took).
 
     Raises:
         LocalProtocolError: mixed image sizes, an image under 16 px a side, or fewer than
@@ -364,13 +414,22 @@ def calibrate(
             f"{images[0][0]} is {size[1]}x{size[0]}: a calibration image must be at least "
             f"{MIN_IMAGE_PX}x{MIN_IMAGE_PX} px")
     obj = board.object_points()
-    object_points, image_points, used, skipped = [], [], [], []
+    object_points, image_points = [], []
+    used: list[str] = []
+    skipped: list[str] = []
     for name, grey in images:
         if grey.shape[:2] != size:
             raise LocalProtocolError(
                 f"{name} is {grey.shape[1]}x{grey.shape[0]}, the first image "
                 f"{size[1]}x{size[0]}: all images must come from one camera at one resolution")
+        started = time.monotonic()
         corners = find_corners(grey, board)
+        if progress is not None and max(size) > DETECT_MAX_PX:
+            copy = searched_size(size[1], size[0])
+            progress(f"image {len(used) + len(skipped) + 1} of {len(images)}, {name} "
+                     f"({size[1]}x{size[0]}, searched at {copy[0]}x{copy[1]}): board "
+                     f"{'found' if corners is not None else 'not found'} in "
+                     f"{time.monotonic() - started:.1f} s")
         if corners is None:
             skipped.append(name)
             continue
