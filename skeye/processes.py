@@ -90,11 +90,17 @@ def die_with_parent() -> Callable[[], None] | None:
 
 
 def stop_processes(procs: Sequence[subprocess.Popen[Any]], timeout_s: float = 15.0) -> None:
-    """SIGTERM every running process, wait for all with one deadline, SIGKILL the rest."""
+    """SIGTERM every running process, wait for all with one deadline, SIGKILL the rest.
+
+    Each SIGTERM is followed by a SIGCONT, as systemd does ("to ensure that even suspended
+    tasks can be terminated cleanly", systemd.kill(5)): a stopped child (SIGSTOP, Ctrl-Z)
+    keeps a SIGTERM it handles pending, and used to be waited for the whole ``timeout_s`` and
+    then killed (``skeye up`` over a simulator stopped with SIGSTOP: 10 s, then SIGKILL)."""
     for proc in procs:
         if proc.poll() is None:
             try:
                 proc.terminate()
+                proc.send_signal(signal.SIGCONT)
             except OSError:
                 pass
     deadline = time.monotonic() + timeout_s

@@ -3,10 +3,14 @@ end, not left for the garbage collector; output that is not UTF-8 is read all th
 
 from __future__ import annotations
 
+import os
+import signal
+import time
+
 import pytest
 
 from skeye.errors import SkeyeError
-from skeye.processes import start_skeye, stop_process
+from skeye.processes import _signal_mask, start_skeye, stop_process, stop_processes
 from tests.robustness.helpers import wait_for
 
 
@@ -31,3 +35,25 @@ def test_output_that_is_not_utf8_is_quoted_not_a_decoding_error() -> None:
                     "skeye sim", timeout_s=120, env={"PYTHONIOENCODING": "latin-1"})
     # One line, the child's lines joined (a line break in it split a sweep's progress line).
     assert "\n" not in str(info.value), str(info.value)
+
+
+def test_a_stopped_child_is_woken_to_handle_its_sigterm() -> None:
+    """``skeye up`` stops its children with stop_processes. A ``skeye sim`` stopped with SIGSTOP
+    kept the SIGTERM it handles pending, and was waited for the whole timeout, then SIGKILLed
+    (10 s, status -9). A SIGCONT now follows the SIGTERM, as systemd sends one: the simulator
+    handles its SIGTERM and exits 0 at once."""
+    proc, _ = start_skeye(["sim", "--port", "0"], [r"control protocol on"], "skeye sim",
+                          timeout_s=120)
+    try:
+        term = 1 << (signal.SIGTERM - 1)  # its handler is in place (it is set after the line)
+        assert wait_for(lambda: (_signal_mask(proc.pid, "SigCgt") or 0) & term, timeout_s=60)
+        os.kill(proc.pid, signal.SIGSTOP)
+        started = time.monotonic()
+        stop_processes([proc], timeout_s=10.0)
+        took_s = time.monotonic() - started
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
+        stop_process(proc)
+    assert proc.returncode == 0, proc.returncode  # its own handler, not SIGKILL
+    assert took_s < 5.0, f"{took_s:.1f} s"  # half the timeout: it did not run out
