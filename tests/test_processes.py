@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 
 import pytest
 
@@ -48,12 +47,10 @@ def test_a_stopped_child_is_woken_to_handle_its_sigterm() -> None:
         term = 1 << (signal.SIGTERM - 1)  # its handler is in place (it is set after the line)
         assert wait_for(lambda: (_signal_mask(proc.pid, "SigCgt") or 0) & term, timeout_s=60)
         os.kill(proc.pid, signal.SIGSTOP)
-        started = time.monotonic()
-        stop_processes([proc], timeout_s=10.0)
-        took_s = time.monotonic() - started
+        # a stuck guard: without the SIGCONT it is never handled, and the kill comes then
+        stop_processes([proc], timeout_s=60.0)
     finally:
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGCONT)
         stop_process(proc)
     assert proc.returncode == 0, proc.returncode  # its own handler, not SIGKILL
-    assert took_s < 5.0, f"{took_s:.1f} s"  # half the timeout: it did not run out
