@@ -5,7 +5,9 @@ paced on the vehicle's clock: the first ``latest`` starts it, and frame k (from 
 ``k / fps`` seconds later, its capture time that instant, so in lockstep a video plays in sim
 time and a run stays reproducible. ``image()`` decodes up to the due frame (frames the vision
 had no time for are skipped, as a live camera's would be). At the end the camera is reported
-ended (``lost``; the pad modes hold still), unless ``loop=1`` starts it again.
+ended (``lost``; the pad modes hold still), unless ``loop=1`` starts it again: the file is
+opened again (a seek to frame 0 is ignored by OpenCV's reader of a photo), and whole passes
+the vision had no time for are skipped without decoding them.
 
 URI: ``file://video.mp4`` (relative to the working directory), ``file:///abs/video.mkv``;
 options ``fps=`` (when the file's own rate is missing or wrong), ``loop=1``, ``fov_deg=`` /
@@ -123,6 +125,7 @@ class FileCamera:
         self._decoded = 0  # frames read from the file so far (this pass)
         self._pass = 0  # times the video started over (loop)
         self._ended = False
+        self._loop_failed = ""
         self._frame: np.ndarray | None = None
 
     def _due(self) -> int:
@@ -152,11 +155,12 @@ class FileCamera:
                 ok = self._cap.grab()
                 if not ok:
                     if self.loop and self._decoded > 0:
-                        self.frame_count = self._decoded
-                        self._pass += 1
-                        self._cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
-                        due -= self._decoded
+                        count = self.frame_count = self._decoded
+                        laps = (due - 1) // count  # whole passes due, the frames of the last
+                        self._pass += laps  # ones skipped without decoding them
+                        due -= laps * count
                         self._decoded = 0
+                        self._reopen()
                         continue
                     self._ended = True
                     raise CameraError(self.lost or f"camera {self.uri}: ended")
@@ -173,8 +177,20 @@ class FileCamera:
             info = self._info(number)
             return CameraImage(info.frame, info.time_s, frame)
 
+    def _reopen(self) -> None:
+        """Open the file again, at its first frame (a loop). Not a seek to frame 0: OpenCV's
+        reader of a single image (a photo) ignores that, and its next read fails."""
+        self._cap.release()
+        self._cap = cv2.VideoCapture(str(self.path))
+        if not self._cap.isOpened():
+            self._ended = True
+            self._loop_failed = f"cannot open {self.path} again to loop it ({_why_not(self.path)})"
+            raise CameraError(self.lost or f"camera {self.uri}: ended")
+
     @property
     def lost(self) -> str | None:
+        if self._loop_failed:
+            return f"camera {self.uri}: {self._loop_failed}"
         if self._ended:
             return f"camera {self.uri}: the video ended after {self._decoded} frames"
         return None

@@ -155,6 +155,30 @@ def test_a_video_can_loop(tmp_path):
     source.close()
 
 
+def test_a_photo_can_loop(tmp_path):
+    """A photo with loop=1 (a still given to the pilot for as long as it runs): the loop
+    seeked back to frame 0, which OpenCV's reader of a single image ignores, so the photo was
+    shown once and the camera then said "the video ended after 0 frames". The file is now
+    opened again at each end, as for any video whose seek does not take."""
+    picture = np.zeros((48, 64, 3), np.uint8)
+    picture[:, 32:] = 200
+    path = tmp_path / "still.png"
+    cv2.imwrite(str(path), picture)
+    clock = FakeClock(3.0)
+    source = open_camera(f"file://{path}?fps=10&loop=1", CameraOptions(clock=clock))
+    try:
+        played = read_all(source, clock, 4, 0.1)
+        assert [p.frame for p in played] == [1, 2, 3, 4]
+        assert [p.time_s for p in played] == pytest.approx([3.0, 3.1, 3.2, 3.3])
+        assert all(np.array_equal(p.bgr, picture) for p in played) and source.lost is None
+        clock.t = 3.0 + 100.0  # the vision busy for 100 s: frame 1001 is due
+        image = source.image()
+        assert image.frame == 1001 and image.time_s == pytest.approx(103.0)
+        assert np.array_equal(image.bgr, picture) and source.lost is None
+    finally:
+        source.close()
+
+
 def test_the_sim_camera_from_the_image_server_alone(live):
     clock = FakeClock(0.0)
     fov = live["fov"]
