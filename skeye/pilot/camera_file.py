@@ -13,7 +13,9 @@ URI: ``file://video.mp4`` (relative to the working directory), ``file:///abs/vid
 options ``fps=`` (when the file's own rate is missing or wrong), ``loop=1``, ``fov_deg=`` /
 ``fov_rad=``. A lossless recording (FFV1 in MKV or AVI) gives the detector the very pixels
 that were recorded; a lossy one (MP4) close ones. A photo (JPEG, PNG) plays as a one-frame
-video; one cut short is refused when the camera opens (:mod:`skeye.image_files`).
+video; one cut short is refused when the camera opens (:mod:`skeye.image_files`), and so is a
+video whose first frame does not decode (an MP4 whose last bytes, its index, never arrived
+opens with a size, a rate and a frame count, and gives no frame).
 """
 
 from __future__ import annotations
@@ -120,13 +122,18 @@ class FileCamera:
             raise CameraError(f"camera {uri}: cannot open {path} as a video (not a video: no "
                               "frame size)")
         check_size(uri, options.size_px, self.width_px, self.height_px)
+        ok, first = self._cap.read()  # a file cut short opens with a size and a rate, and
+        if not ok or first is None:  # gives no frame: refused now, not "ended" once flying
+            self._cap.release()
+            raise CameraError(f"camera {uri}: cannot open {path} as a video (no frame decodes: "
+                              "cut short or damaged)")
         self._lock = threading.Lock()
         self._start_s: float | None = None
-        self._decoded = 0  # frames read from the file so far (this pass)
+        self._decoded = 1  # frames read from the file so far (this pass): the first, above
         self._pass = 0  # times the video started over (loop)
         self._ended = False
         self._loop_failed = ""
-        self._frame: np.ndarray | None = None
+        self._frame: np.ndarray | None = first
 
     def _due(self) -> int:
         """How many frames are due by now (1 = the first)."""

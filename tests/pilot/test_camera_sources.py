@@ -331,6 +331,27 @@ def test_a_directory_or_an_empty_file_is_named_as_such(tmp_path):
             open_camera(uri, CameraOptions(clock=FakeClock()))
 
 
+def test_a_video_that_gives_no_frame_is_refused_when_opened(tmp_path):
+    """An MP4 whose last bytes never arrived (a recording cut short: its index, written
+    last, is broken) opens in OpenCV with a frame size, rate and count, and gives no frame:
+    the pilot started on it, and its camera said at once "the video ended after 0 frames".
+    The first frame is now decoded when the camera opens."""
+    frames = [np.full((48, 64, 3), i * 20, np.uint8) for i in range(5)]
+    whole = tmp_path / "whole.mp4"
+    record(whole, frames, "mp4v")
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(whole.read_bytes()[:-100])
+    uri = f"file://{cut}"
+    with pytest.raises(CameraError, match=rf"^camera {uri}: cannot open {cut} as a video \(no "
+                       r"frame decodes: cut short or damaged\)$"):
+        open_camera(uri, CameraOptions(clock=FakeClock()))
+    source = open_camera(f"file://{whole}", CameraOptions(clock=FakeClock()))
+    try:
+        assert source.image().frame == 1 and source.lost is None
+    finally:
+        source.close()
+
+
 def test_a_photo_plays_as_one_frame_and_a_truncated_one_is_refused(tmp_path):
     """A photo given as the file camera plays as a one-frame video; the first 60 % of a JPEG
     played too (FFmpeg decodes what is there and paints the rest grey)."""
