@@ -14,8 +14,9 @@ options ``fps=`` (when the file's own rate is missing or wrong), ``loop=1``, ``f
 ``fov_rad=``. A lossless recording (FFV1 in MKV or AVI) gives the detector the very pixels
 that were recorded; a lossy one (MP4) close ones. A photo (JPEG, PNG) plays as a one-frame
 video; one cut short is refused when the camera opens (:mod:`skeye.image_files`), and so is a
-video whose first frame does not decode (an MP4 whose last bytes, its index, never arrived
-opens with a size, a rate and a frame count, and gives no frame).
+file the pilot may not read (named with the system's reason: OpenCV would only warn that it
+cannot open it) and a video whose first frame does not decode (an MP4 whose last bytes, its
+index, never arrived opens with a size, a rate and a frame count, and gives no frame).
 """
 
 from __future__ import annotations
@@ -99,6 +100,13 @@ class FileCamera:
         self.options = options
         self.loop = loop
         self.fov_h_rad = fov_h_rad if fov_h_rad is not None else options.fov_h_rad
+        if path.is_file():  # unreadable: OpenCV would warn on stderr, and say no more
+            try:
+                with open(path, "rb"):
+                    pass
+            except OSError as exc:
+                raise CameraError(f"camera {uri}: cannot open {path} as a video "
+                                  f"({exc.strerror or exc})") from None
         try:  # a photo plays as a one-frame video; OpenCV would half decode a cut-off one
             problem = file_damage(path)
         except OSError:

@@ -13,8 +13,11 @@ from __future__ import annotations
 
 import glob
 import math
+import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -317,6 +320,48 @@ def test_a_file_that_is_no_video_is_refused_when_opened(tmp_path):
     fake.write_text("hello, not an image\n")
     with pytest.raises(CameraError, match="not a video"):
         open_camera(f"file://{fake}", CameraOptions(clock=FakeClock()))
+
+
+def test_a_file_the_pilot_may_not_read_is_named_as_such():
+    """A recording copied off the vehicle by root, mode 600: it was refused as "not a video,
+    or one cut short or damaged" (and OpenCV warned "can't open/read file" on stderr), which
+    sends a user re-copying a file that is whole."""
+    frames = [np.full((48, 64, 3), 40, np.uint8)] * 2
+    folder = Path(tempfile.mkdtemp(prefix="skeye-unreadable-"))  # not tmp_path: its parents
+    folder.chmod(0o755)  # are the test runner's alone, and a user would be refused there
+    path = folder / "flight.mkv"
+    record(path, frames, "FFV1")
+    path.chmod(0)
+    uri = f"file://{path}"
+
+    def refusal() -> str:
+        try:
+            open_camera(uri, CameraOptions(clock=FakeClock())).close()
+        except CameraError as exc:
+            return str(exc)
+        return "opened"
+
+    try:
+        if os.geteuid() != 0:
+            said = refusal()
+        else:  # root reads any file: a user's refusal is seen in a child (no exec needed)
+            reader, writer = os.pipe()
+            pid = os.fork()
+            if pid == 0:  # pragma: no cover (the child)
+                try:
+                    os.close(reader)
+                    os.setgid(65534)
+                    os.setuid(65534)  # nobody
+                    os.write(writer, refusal().encode())
+                finally:
+                    os._exit(0)
+            os.close(writer)
+            with os.fdopen(reader, "rb") as f:
+                said = f.read().decode()
+            os.waitpid(pid, 0)
+    finally:
+        shutil.rmtree(folder)
+    assert said == f"camera {uri}: cannot open {path} as a video (Permission denied)", said
 
 
 def test_a_directory_or_an_empty_file_is_named_as_such(tmp_path):
