@@ -9,7 +9,9 @@ ended (``lost``; the pad modes hold still), unless ``loop=1`` starts it again: t
 opened again (a seek to frame 0 is ignored by OpenCV's reader of a photo), and whole passes
 the vision had no time for are skipped without decoding them.
 
-URI: ``file://video.mp4`` (relative to the working directory), ``file:///abs/video.mkv``;
+URI: ``file://video.mp4`` (relative to the working directory), ``file:///abs/video.mkv``
+(``%`` escapes as in any URI: ``flight%233.mkv`` for ``flight#3.mkv``; a ``#`` is refused, not
+taken as a fragment that cuts the name short);
 options ``fps=`` (when the file's own rate is missing or wrong), ``loop=1``, ``fov_deg=`` /
 ``fov_rad=``. A lossless recording (FFV1 in MKV or AVI) gives the detector the very pixels
 that were recorded; a lossy one (MP4) close ones. A photo (JPEG, PNG) plays as a one-frame
@@ -51,6 +53,9 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     parts = split_uri(uri, "camera", "file://PATH")
     if parts.scheme.lower() != "file":
         raise LocalProtocolError(f"camera {uri!r}: expected file://PATH")
+    if "#" in uri:  # urlsplit would cut the name there and drop the rest without a word
+        raise LocalProtocolError(f"camera {uri!r}: '#' starts a URI fragment, which a file "
+                                 "camera has none of: write a '#' in a file's name as %23")
     # file:///abs and file://localhost/abs (RFC 8089: the local host) are absolute paths;
     # file://name.mp4 and file://dir/name.mp4 are relative ones
     netloc = "" if parts.netloc.lower() == "localhost" and parts.path else parts.netloc

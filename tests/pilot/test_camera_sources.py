@@ -459,6 +459,18 @@ def test_sim_and_file_uris():
         open_camera("rtsp://cam/1")
 
 
+def test_a_hash_in_a_file_name_is_not_cut_off_as_a_fragment():
+    """``file://flight#3.mkv``: urlsplit takes ``#3.mkv`` as the URI's fragment, and the
+    camera looked for the file "flight" ("cannot open flight as a video (no such file)"), or,
+    where a file of the shorter name existed, played that one without a word. A fragment means
+    nothing to a file camera: it is refused, with the name's escape (%23) said."""
+    for uri in ("file://flight#3.mkv", "file:///v/pad.mkv?fps=30#t=5"):
+        with pytest.raises(LocalProtocolError, match=r"'#' starts a URI fragment, .*: write a "
+                           r"'#' in a file's name as %23"):
+            parse_file_camera(uri)
+    assert parse_file_camera("file://flight%233.mkv")[0] == Path("flight#3.mkv")
+
+
 @pytest.mark.parametrize(("uri", "words"), [
     ("sim://h:abc/R1/Down", "PORT 0..65535"),
     ("sim://h:99999/R1/Down", "PORT 0..65535"),
