@@ -18,7 +18,8 @@ that were recorded; a lossy one (MP4) close ones. A photo (JPEG, PNG) plays as a
 video; one cut short is refused when the camera opens (:mod:`skeye.image_files`), and so is a
 file the pilot may not read (named with the system's reason: OpenCV would only warn that it
 cannot open it) and a video whose first frame does not decode (an MP4 whose last bytes, its
-index, never arrived opens with a size, a rate and a frame count, and gives no frame).
+index, never arrived opens with a size, a rate and a frame count, and gives no frame). A photo
+of more pixels than FFmpeg decodes is refused naming the size its header declares.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import LocalProtocolError
-from skeye.image_files import file_damage
+from skeye.image_files import PNG_SIGNATURE, file_damage
 from skeye.pilot.camera import (
     CameraError,
     CameraImage,
@@ -41,7 +42,9 @@ from skeye.pilot.camera import (
     check_size,
     fov_option,
 )
+from skeye.pixels import declared_size
 from skeye.uris import split_uri
+from skeye.wire.images import FrameType
 
 
 def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]:
@@ -95,6 +98,27 @@ def _why_not(path: Path) -> str:
     return "not a video, or one cut short or damaged"
 
 
+FFMPEG_MAX_PIXELS = 1 << 28
+"""FFmpeg decodes a picture only if ``(width + 128) * (height + 128)`` is under this
+(libavutil's ``av_image_check_size2``: 8 bytes a pixel, padded, under 2 GiB)."""
+
+
+def _too_large(path: Path) -> str | None:
+    """Why OpenCV's video reader gave a photo (a PNG or JPEG) no frame size, when its header
+    declares more pixels than FFmpeg decodes; None otherwise."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(1 << 20)  # the JPEG frame header follows its EXIF: within 1 MiB
+    except OSError:
+        return None
+    kind = FrameType.PNG if head.startswith(PNG_SIGNATURE) else FrameType.JPEG_SUPER
+    size = declared_size(kind, head)
+    if size is None or (size[0] + 128) * (size[1] + 128) < FFMPEG_MAX_PIXELS:
+        return None
+    return (f"its header declares {size[0]}x{size[1]} px, more than FFmpeg decodes (about "
+            f"{FFMPEG_MAX_PIXELS / 1e6:.0f} million): give a smaller copy")
+
+
 class FileCamera:
     """A video file, paced at its frame rate on the vehicle's clock."""
 
@@ -132,8 +156,8 @@ class FileCamera:
         self.height_px = int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
         if self.width_px <= 0 or self.height_px <= 0:  # OpenCV "opened" it, but has no frames
             self._cap.release()
-            raise CameraError(f"camera {uri}: cannot open {path} as a video (not a video: no "
-                              "frame size)")
+            raise CameraError(f"camera {uri}: cannot open {path} as a video "
+                              f"({_too_large(path) or 'not a video: no frame size'})")
         check_size(uri, options.size_px, self.width_px, self.height_px)
         ok, first = self._cap.read()  # a file cut short opens with a size and a rate, and
         if not ok or first is None:  # gives no frame: refused now, not "ended" once flying

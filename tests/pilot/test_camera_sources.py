@@ -14,6 +14,7 @@ from __future__ import annotations
 import glob
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -362,6 +363,26 @@ def test_a_file_the_pilot_may_not_read_is_named_as_such():
     finally:
         shutil.rmtree(folder)
     assert said == f"camera {uri}: cannot open {path} as a video (Permission denied)", said
+
+
+def test_a_photo_larger_than_ffmpeg_decodes_is_named_with_its_size(tmp_path):
+    """A photo of more pixels than FFmpeg decodes (an orthomosaic, a panorama) was refused as
+    "not a video: no frame size", which sends a user looking for a damaged file. Its header's
+    size is now said. 16000 x 16000 is within FFmpeg's limit, 16384 x 16384 past it."""
+    from tests.test_image_files import _png_declaring
+
+    picture = np.zeros((48, 64, 3), np.uint8)
+    jpeg = bytearray(cv2.imencode(".jpg", picture)[1].tobytes())
+    sof = jpeg.index(b"\xff\xc0")
+    jpeg[sof + 5 : sof + 9] = (16384).to_bytes(2, "big") * 2  # height, width
+    (tmp_path / "big.png").write_bytes(_png_declaring(16384, 16384))
+    (tmp_path / "big.jpg").write_bytes(bytes(jpeg))
+    for name in ("big.png", "big.jpg"):
+        uri = f"file://{tmp_path / name}?fps=1"
+        with pytest.raises(CameraError, match=rf"^camera {re.escape(uri)}: cannot open "
+                           rf".*{name} as a video \(its header declares 16384x16384 px, more "
+                           r"than FFmpeg decodes \(about 268 million\): give a smaller copy\)$"):
+            open_camera(uri, CameraOptions(clock=FakeClock()))
 
 
 def test_a_directory_or_an_empty_file_is_named_as_such(tmp_path):
