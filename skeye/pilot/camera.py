@@ -113,10 +113,11 @@ BACKENDS: dict[str, str] = {
 URI_CHECKS: dict[str, str] = {
     "sim": "skeye.pilot.camera_sim:parse_sim_camera",
     "v4l2": "skeye.pilot.camera_v4l2:parse_v4l2_uri",
-    "file": "skeye.pilot.camera_file:parse_file_camera",
+    "file": "skeye.pilot.camera_file:check_file_camera",
 }
 """Scheme -> ``"module:function"`` parsing a URI of that scheme without opening anything (what
-:func:`check_camera_uri` runs, so ``skeye pilot`` refuses a bad ``--camera`` at start)."""
+:func:`check_camera_uri` runs, so ``skeye pilot`` refuses a bad ``--camera`` at start; a
+``file://`` camera's file is also looked at: missing, a directory, unreadable or empty)."""
 
 
 def camera_scheme(uri: str) -> str:
@@ -148,6 +149,7 @@ def check_camera_uri(uri: str) -> None:
 
     Raises:
         LocalProtocolError: naming what is wrong.
+        CameraError: a ``file://`` camera's file is missing, a directory, unreadable or empty.
     """
     _entry(URI_CHECKS, camera_scheme(uri))(uri)
 

@@ -84,6 +84,36 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     return Path(path), fps, loop_text == "1", fov_option(uri, query)
 
 
+def check_file_camera(uri: str) -> None:
+    """Parse a ``file://`` camera URI and look at its file, without opening it as a video:
+    what the file system tells (missing, a directory, unreadable, empty) is said when ``skeye
+    pilot`` starts, before it opens the vehicle.
+
+    Raises:
+        LocalProtocolError: a bad URI; CameraError: a file that cannot be played.
+    """
+    path = parse_file_camera(uri)[0]
+    problem = _unplayable(path)
+    if problem is not None:
+        raise CameraError(f"camera {uri}: cannot open {path} as a video ({problem})")
+
+
+def _unplayable(path: Path) -> str | None:
+    """Why ``path`` cannot be played as far as the file system tells, else None."""
+    try:
+        if path.is_dir():
+            return "a directory"
+        if not path.exists():
+            return "no such file"
+        if path.is_file():  # not a FIFO or a device: opening one may block
+            with open(path, "rb") as f:  # unreadable: OpenCV would warn, and say no more
+                if f.seek(0, 2) == 0:
+                    return "an empty file"
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
 def _why_not(path: Path) -> str:
     """Why OpenCV could not open ``path`` as a video, as far as the file system tells."""
     try:
@@ -129,13 +159,9 @@ class FileCamera:
         self.options = options
         self.loop = loop
         self.fov_h_rad = fov_h_rad if fov_h_rad is not None else options.fov_h_rad
-        if path.is_file():  # unreadable: OpenCV would warn on stderr, and say no more
-            try:
-                with open(path, "rb"):
-                    pass
-            except OSError as exc:
-                raise CameraError(f"camera {uri}: cannot open {path} as a video "
-                                  f"({exc.strerror or exc})") from None
+        unplayable = _unplayable(path)
+        if unplayable is not None:
+            raise CameraError(f"camera {uri}: cannot open {path} as a video ({unplayable})")
         try:  # a photo plays as a one-frame video; OpenCV would half decode a cut-off one
             problem = file_damage(path)
         except OSError:

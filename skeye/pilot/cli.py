@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     if camera_uri is not None:
         try:
             check_camera_uri(camera_uri)  # the whole URI, before the airframe opens
-        except LocalProtocolError as exc:
+        except (LocalProtocolError, CameraError) as exc:  # CameraError: a file not there
             return _error(f"--camera: {exc}")
     elif args.images is None and args.camera != DEFAULT_CAMERA:
         return _error(camera_name_problem(args.camera))

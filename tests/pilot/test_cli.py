@@ -312,6 +312,35 @@ def test_a_camera_file_that_cannot_be_flown_on_is_a_bad_camera_option(capsys, tm
     assert words in err, err
 
 
+@pytest.mark.parametrize("what", ["missing", "empty"])
+def test_a_camera_file_that_is_not_there_is_named_before_the_vehicle_is_opened(capsys, tmp_path,
+                                                                              what):
+    """``--camera file://...`` naming a file that is not there (a typo) or empty: the pilot
+    opened the vehicle first (connected to the LL board and polled it; on a ``sim://``
+    airframe, spawned its robot), and named the file only then, or not at all when the
+    vehicle failed first ("LL board silent"). The file is now looked at with the URI, before
+    the vehicle is opened. The "board" here is a loopback listener that must see no one."""
+    import socket
+
+    from skeye.cli import main
+
+    path = tmp_path / "flihgt.mkv"
+    if what == "empty":
+        path.write_bytes(b"")
+    uri = f"file://{path}?fov_deg=60"
+    with socket.create_server(("127.0.0.1", 0)) as board:
+        board.settimeout(0.0)
+        status = main(["pilot", "--airframe", f"asctec-ll://tcp/127.0.0.1:{board.getsockname()[1]}",
+                       "--port", "0", "--camera", uri])
+        with pytest.raises(BlockingIOError):  # nobody connected
+            board.accept()
+    err = capsys.readouterr().err
+    assert status == 2, err
+    words = "no such file" if what == "missing" else "an empty file"
+    assert err == (f"skeye pilot: error: --camera: camera {uri}: cannot open {path} as a video "
+                   f"({words})\n"), err
+
+
 def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
     """The message said ``--airframe: no start pose ...``: an option the user had not given
     (the airframe came from --sim) and not the one at fault."""
