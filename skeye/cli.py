@@ -347,8 +347,9 @@ def _add_sim(sub: Any) -> None:
         metavar="NAME=LINE",
         help="spawn robot NAME and present it as an AscTec low-level board on LINE: pty (a "
         "pseudo-terminal; its path is printed), tcp:PORT or serial:DEVICE; options after "
-        "commas: robot=CLASS, start=POSE, baud=N, serial_timeout=S; repeatable. The pilot "
-        "flies it with --airframe asctec-ll://... (docs/onboard.md)",
+        "commas: robot=CLASS, start=POSE, baud=N, serial_timeout=S, rate=R (lockstep: the board "
+        "drives the clock at R sim seconds per wall second); repeatable. The pilot flies it "
+        "with --airframe asctec-ll://... (docs/onboard.md)",
     )
     p.set_defaults(func=cmd_sim)
 

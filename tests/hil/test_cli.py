@@ -1,0 +1,41 @@
+"""``skeye sim --ll-board``'s help names every option its spec takes.
+
+How this works: the options ``parse_ll_board`` accepts are read from its own refusal of an
+unknown one (which lists them), each is checked to be accepted, and ``skeye sim --help`` (the
+real parser, in this process) must name each as ``key=``: a user reads the options there.
+"""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from skeye.cli import main
+from skeye.errors import ConfigError
+from skeye.hil.cli import parse_ll_board
+
+_EXAMPLE = {"robot": "hummingbird", "start": "Pad1", "baud": "57600", "serial_timeout": "1",
+            "rate": "1"}
+"""A value each option takes (baud on a serial line)."""
+
+
+def ll_board_options() -> list[str]:
+    with pytest.raises(ConfigError, match="unknown option") as refused:
+        parse_ll_board("R1=pty,no_such_option=1")
+    listed = re.search(r"\(([\w, ]+)\)$", str(refused.value))
+    assert listed is not None, f"the refusal lists no options: {refused.value}"
+    return [key.strip() for key in listed.group(1).split(",")]
+
+
+def test_sim_help_names_every_ll_board_option(capsys):
+    options = ll_board_options()
+    assert "serial_timeout" in options and len(options) >= 5, options
+    for key in options:  # each listed option is one the parser takes
+        line = "serial:/dev/ttyUSB0" if key == "baud" else "pty"
+        parse_ll_board(f"R1={line},{key}={_EXAMPLE[key]}")
+    with pytest.raises(SystemExit):
+        main(["sim", "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the help's lines
+    missing = [key for key in options if f"{key}=" not in text]
+    assert not missing, f"skeye sim --help does not name --ll-board option(s) {missing}"
