@@ -262,7 +262,8 @@ class FileCamera:
         if self._loop_failed:
             return f"camera {self.uri}: {self._loop_failed}"
         if self._ended:
-            return f"camera {self.uri}: the video ended after {self._decoded} frames"
+            n = self._decoded
+            return f"camera {self.uri}: the video ended after {n} frame{'' if n == 1 else 's'}"
         return None
 
     def close(self) -> None:

@@ -427,9 +427,13 @@ def test_a_photo_plays_as_one_frame_and_a_truncated_one_is_refused(tmp_path):
         whole = cv2.imencode(ext, picture)[1].tobytes()
         padded = tmp_path / f"padded{ext}"  # some cameras pad after the image's end
         padded.write_bytes(whole + b"\x00" * 64)
-        source = open_camera(f"file://{padded}?fps=10", CameraOptions(clock=FakeClock()))
+        clock = FakeClock()
+        source = open_camera(f"file://{padded}?fps=10", CameraOptions(clock=clock))
         try:
             assert source.image().bgr.shape == picture.shape
+            clock.t += 0.2  # its second frame would be due: the photo has none
+            with pytest.raises(CameraError, match=r"the video ended after 1 frame$"):
+                source.image()
         finally:
             source.close()
         cut = tmp_path / f"cut{ext}"
