@@ -307,5 +307,6 @@ def test_a_ping_id_given_twice_is_matched_by_its_first_block(lockstep_sim: SimHa
     PING's answer by the last Id given, so the answer (Id a) was never matched and the
     request ran into its timeout."""
     with skeye.connect(lockstep_sim.address) as sim:
-        answer = sim.request("PING", ("Id", "a"), ("Id", "b"), timeout_s=2.0)
+        # a stuck guard: the answer unmatched, the request ran out
+        answer = sim.request("PING", ("Id", "a"), ("Id", "b"), timeout_s=30.0)
         assert answer.get("Id") == "a", answer
