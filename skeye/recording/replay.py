@@ -33,12 +33,12 @@ from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
-from skeye.errors import ConfigError, LocalProtocolError
+from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
 from skeye.processes import check_ports_free, wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
-from skeye.wire.sim import encode, unknown_command
+from skeye.wire.sim import decode, encode, unknown_command
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
-from skeye.wire.sim_messages import ROBOT_ERRORS
+from skeye.wire.sim_messages import ROBOT_ERRORS, Ping
 
 log = logging.getLogger(__name__)
 
@@ -239,10 +239,12 @@ class _Playback:
 
     def _answer(self, msg: Message) -> bytes:
         if msg.type == "PING":
+            try:  # refused as the simulator refuses it (a key, an Id too long or not printable)
+                ping: Ping = decode(msg)
+            except RemoteProtocolError as exc:
+                return format_error("PING", str(exc))
             sim_s = self.sim_now_s if self.next_line is None else self._due_sim_s()
-            return format_message(
-                "RES", ("Command", "PING"), ("Id", msg.get("Id", "") or ""), ("Time", sim_s)
-            )
+            return format_message("RES", ("Command", "PING"), ("Id", ping.id), ("Time", sim_s))
         refused = unknown_command(msg.type)  # no command at all: the simulator's own answer
         if refused is not None:
             return encode(refused)

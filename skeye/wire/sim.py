@@ -39,6 +39,7 @@ from skeye.wire.sim_format import (
     parse_start_poses,
 )
 from skeye.wire.sim_lines import (
+    CONTROL_CHARACTERS,
     Message,
     clean_reason,
     format_error,
@@ -273,6 +274,19 @@ def _check_keys(codec: Codec, msg: Message) -> None:
             f"{codec.word}: unknown key(s) {unknown}; known: {', '.join(known) or 'none'}")
 
 
+def _check_characters(codec: Codec, msg: Message) -> None:
+    """A command's values hold no control character (:data:`CONTROL_CHARACTERS`: ESC, BEL,
+    NUL, DEL, C1's CSI...): none is any value's, and one echoed back (a PING's Id, a robot's
+    name in every STA line) would reach the terminal that shows the answer (``nc``, a client's
+    log) and run there. Refused, naming the key and the character as ``\\xHH``."""
+    for key, text in msg.fields:
+        found = CONTROL_CHARACTERS.search(text)
+        if found is not None:
+            raise RemoteProtocolError(
+                f"{codec.word}: {key} holds the control character \\x{ord(found.group()):02x}; "
+                "a value is printable text")
+
+
 def _check_drive_form(msg: Message) -> None:
     if msg.has("Thrust") and msg.has("AltitudeVelocity"):
         raise RemoteProtocolError(
@@ -394,6 +408,7 @@ def decode(msg: Message) -> Any:
         raise RemoteProtocolError(f"unknown command {word}")
     if codec.cls in COMMANDS:
         _check_keys(codec, msg)
+        _check_characters(codec, msg)
     if codec.cls is Drive:
         msg = usarsim_drive(msg)
         _check_drive_form(msg)
@@ -538,6 +553,9 @@ def _check_value(spec: FieldSpec, value: Any) -> object:
             raise LocalProtocolError(f"{key}: {value!r} is not one word")
         if spec.max_chars is not None and len(value) > spec.max_chars:
             raise LocalProtocolError(_too_long(spec, value))
+        if (found := CONTROL_CHARACTERS.search(value)) is not None:  # the simulator refuses it
+            raise LocalProtocolError(f"{key}: {value!r} holds the control character "
+                                     f"\\x{ord(found.group()):02x}")
         return value
     try:
         items = tuple(value)

@@ -517,8 +517,10 @@ def format_message(type: str, *fields: tuple[str, object]) -> bytes:
     return " ".join(parts).encode("utf-8") + LINE_END
 
 
-# Control characters a terminal acts on (C0 but the blanks, DEL, C1): written as \xHH.
-_CONTROL = re.compile(r"[\x00-\x08\x0e-\x1b\x7f-\x9f]")
+CONTROL_CHARACTERS = re.compile(r"[\x00-\x08\x0e-\x1f\x7f-\x9f]")
+"""Control characters a terminal acts on (C0 but the blanks tab to carriage return, DEL, C1):
+an answer writes them as ``\\xHH``, and a command's value holding one is refused
+(:func:`skeye.wire.sim.decode`)."""
 
 
 def _safe_text(text: str) -> str:
@@ -527,7 +529,7 @@ def _safe_text(text: str) -> str:
     a terminal showing the line (``nc``, a client's log) shows a client's escape sequence
     instead of running it, and the text stays recognisable."""
     text = text.replace("{", "(").replace("}", ")").replace("\r", " ").replace("\n", " ")
-    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+    return CONTROL_CHARACTERS.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 def clean_reason(reason: str) -> str:

@@ -380,9 +380,12 @@ def _errors(client: LineClient, lines: tuple[str, ...]) -> list:
 def test_replay_answers_a_line_that_is_no_command_as_the_simulator_does(
         recording: tuple[Path, bytes]) -> None:
     """docs/recording.md: bad lines get the simulator's ERRs; a simulator command a replay
-    cannot do keeps "not available in a replay"."""
+    cannot do keeps "not available in a replay". A PING the simulator refuses (a key it does
+    not know, an Id over 1000 characters or holding a control character) the replay refused
+    not: it answered, echoing the Id."""
     path, _ = recording
-    lines = ("garbage", "FLY {Speed 3}", "NOPE {x", "{Name x}")
+    lines = ("garbage", "FLY {Speed 3}", "NOPE {x", "{Name x}", "PING {Id a} {Extra 1}",
+             "PING {Id \x1b[2J}", "PING {Id " + "y" * 1001 + "}")
     with running_sim(mode="realtime") as server:
         sim = LineClient(server.port)
         sim.expect("NFO")

@@ -12,9 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, LocalProtocolError
 from skeye.robots.config import load_robot_config, parse_robot_config
 from skeye.sim.runner import MAX_LAG_S
+from skeye.wire.sim import encode
+from skeye.wire.sim_messages import Ping
 from tests.sim.conftest import LineClient, running_sim, sensor_series, vec
 
 BAD_LINES = [
@@ -169,6 +171,31 @@ def test_control_characters_in_a_command_word_are_echoed_escaped(word: str, show
         assert not _CONTROL_BYTES.search(bytes(c.raw).replace(b"\r\n", b"")), bytes(c.raw)
         assert c.answer("PING {Id after}", "PING").type == "RES"
         c.close()
+
+
+@pytest.mark.parametrize("line, key, char", [
+    ("PING {Id \x1b[2Jhi\x07}", "Id", "\\x1b"),  # a PING's Id is echoed in its answer
+    ("INIT {ClassName hummingbird} {Location 0,0,-1} {Team \x9b31m}", "Team", "\\x9b"),
+    ("STEP {Count 1\x00}", "Count", "\\x00"),
+], ids=["ping-id", "init-team", "step-count"])
+def test_a_control_character_in_a_value_is_refused_naming_it(line: str, key: str, char: str):
+    """A PING's Id came back verbatim in ``RES {Command PING} {Id ...}``, control characters
+    and all, so the escape sequences the ERR lines no longer carried still reached a terminal
+    showing the answers. No value of any command holds one: it is refused, naming the key and
+    the character, and nothing of it is echoed."""
+    word = line.split()[0]
+    with running_sim() as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        c.sock.sendall(line.encode() + b"\r\n")
+        err = c.read_until(lambda m: m.type in ("ERR", "RES"))[1]
+        assert err.type == "ERR" and err.get("Command") == word, err
+        assert f"{key} holds the control character {char}" in err.get("Reason"), err
+        assert not _CONTROL_BYTES.search(bytes(c.raw).replace(b"\r\n", b"")), bytes(c.raw)
+        assert c.answer("PING {Id after}", "PING").type == "RES"
+        c.close()
+    with pytest.raises(LocalProtocolError, match=r"Id: .* holds the control character"):
+        encode(Ping("a\x1bb"))  # the client's codec refuses it before sending
 
 
 def test_a_key_no_command_knows_is_refused_by_every_command_naming_it():
