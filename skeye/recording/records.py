@@ -380,8 +380,10 @@ class Recorder:
         self._queue: queue.Queue[tuple[float, float, int, str, bytes] | None] = queue.Queue(
             queue_records
         )
-        self.dropped = 0
-        self.written = 0
+        self.dropped = 0  # observed records not written (add with _drop: several threads do)
+        self._drop_lock = threading.Lock()
+        self._batch_dropped = 0  # of the writer's batch, what _room could not write
+        self.written = 0  # records written, the recorder's own "!" notes among them
         self._closed = False
         self._lock = threading.Lock()
         self._detach: list[Callable[[], None]] = []
@@ -421,14 +423,14 @@ class Recorder:
         fits: list[bytes] = []
         for i, record in enumerate(data):
             if self.stopped is not None:
-                self.dropped += len(data) - i
+                self._drop(len(data) - i, batch=True)
                 return fits
             if self._bytes + len(record) > self.max_bytes - 256:  # room for the last note
                 self._write_all(fits)
                 fits = []
                 self._part_full()
                 if self.stopped is not None:
-                    self.dropped += len(data) - i
+                    self._drop(len(data) - i, batch=True)
                     return fits
             fits.append(record)
             self._bytes += len(record)
@@ -493,12 +495,21 @@ class Recorder:
         if self._closed:
             return
         if self.stopped is not None:
-            self.dropped += _records_in(direction, data)
+            self._drop(_records_in(direction, data))
             return
         try:
             self._queue.put_nowait((self._clock(), self._sim_time(), conn_id, direction, data))
         except queue.Full:
-            self.dropped += _records_in(direction, data)
+            self._drop(_records_in(direction, data))
+
+    def _drop(self, records: int, *, batch: bool = False) -> None:
+        """Count ``records`` not written: observers on several threads (the engine's, each
+        client's reader) and the writer count at once, so under a lock. ``batch``: the
+        writer's own batch, which :meth:`_write_loop` needs to know apart."""
+        with self._drop_lock:
+            self.dropped += records
+        if batch:
+            self._batch_dropped += records
 
     def attach(
         self, server: Any, runner: Any, truth_rate_hz: float = DEFAULT_TRUTH_RATE_HZ
@@ -546,7 +557,7 @@ class Recorder:
                 note = f"dropped {self.dropped - reported_drops} records (queue full)"
                 reported_drops = self.dropped
                 out.append(format_record(Record(self._clock(), self._sim_time(), 0, NOTE, note)))
-            written, dropped = self.written, self.dropped
+            written, self._batch_dropped = self.written, 0
             try:
                 if out:
                     self._write_all(self._room(out))
@@ -556,9 +567,10 @@ class Recorder:
                     os.fsync(f.fileno())
                     last_flush = time.monotonic()
             except OSError as exc:
-                # The batch's records that were neither written nor counted are not written.
-                self.dropped += max(0, records - (self.written - written)
-                                    - (self.dropped - dropped))
+                # The batch's observed records neither written nor counted are not written
+                # (the recorder's own note, last in the batch, is written after them all).
+                self._drop(max(0, records - min(records, self.written - written)
+                               - self._batch_dropped))
                 self._write_failed(exc)
                 return
 
@@ -622,7 +634,7 @@ class Recorder:
                 except queue.Empty:
                     break
                 if entry is not None:
-                    self.dropped += _records_in(entry[3], entry[4])
+                    self._drop(_records_in(entry[3], entry[4]))
         if not self._file.closed:
             self._file.close()
         if self.stopped is not None:

@@ -832,9 +832,11 @@ def test_a_stopped_recording_counts_what_it_does_not_write_and_says_so_at_close(
     descriptor is made /dev/full's, as a disk that fills."""
     path = tmp_path / "flight.rec"
     offered = [0]
+    lock = threading.Lock()  # observers run on the engine's thread and each client's reader
 
     def count(_conn: int, direction: str, data: bytes) -> None:  # what the recorder is given
-        offered[0] += len(split_lines(data)) if direction in (SENT, TRUTH) else 1
+        with lock:
+            offered[0] += len(split_lines(data)) if direction in (SENT, TRUTH) else 1
 
     with running_sim() as server:
         with caplog.at_level(logging.WARNING, logger="skeye.recording.records"), \
