@@ -643,23 +643,7 @@ def test_a_later_part_of_a_rotated_recording_replays_and_plots_on_its_own(
     part 1) and its plot gave the robot none of the commands its client sent there. The robot's
     connection is now also known by the ``{Name}`` of the STA lines it was sent, which every
     part holds."""
-    path = tmp_path / "flight.rec"
-    with running_sim() as server, Recorder(path, {"world": "pad"}, max_bytes=64 * 1024,
-                                           rotate=True) as recorder:
-        recorder.attach(server, server.runner)
-        client = LineClient(server.port)
-        client.expect("NFO")
-        assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-2}", "INIT").type == "RES"
-        for _ in range(50):  # 64 KiB is about 1.2 s of sim time of one robot
-            client.step(100)
-            if len(recorder.parts) > 1:
-                break
-        assert len(recorder.parts) == 2, "the recording did not go on in a second part"
-        client.send("DRIVE {AltitudeVelocity 0.5}")  # queued after part 2 was opened
-        client.step(300)
-        client.close()
-        assert wait_for(lambda: server.client_count == 0)
-        parts = list(recorder.parts)
+    parts = _record_rotated(tmp_path / "flight.rec", 2)
     # The DRIVE is in part 2, or in a later one where the writer, behind the engine on a busy
     # machine, was still filling part 2 with earlier readings when the test saw it opened.
     holding = [p for p in parts[1:] if any(r.direction == RECEIVED and r.line.startswith("DRIVE")
@@ -726,18 +710,24 @@ def test_a_recording_that_cannot_be_written_stops_and_the_simulator_still_ends_c
 def rotated(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     """A lockstep flight recorded into parts of 64 KiB (--record-rotate): the INIT in the
     first part, a DRIVE in a later one; returns the parts in order."""
-    path = tmp_path_factory.mktemp("rotated") / "flight.rec"
+    return _record_rotated(tmp_path_factory.mktemp("rotated") / "flight.rec", 3)
+
+
+def _record_rotated(path: Path, parts: int) -> list[Path]:
+    """A lockstep flight recorded into parts of 64 KiB (--record-rotate) until the recording
+    goes on in part ``parts``, then a DRIVE sent (queued after that part was opened) and the
+    client gone; the parts in order, the recorder closed."""
     with running_sim() as server, Recorder(path, {"world": "pad"}, max_bytes=64 * 1024,
                                            rotate=True) as recorder:
         recorder.attach(server, server.runner)
         client = LineClient(server.port)
         client.expect("NFO")
         assert client.answer("INIT {ClassName hummingbird} {Location 0,0,-2}", "INIT").type == "RES"
-        for _ in range(80):  # 64 KiB is about 1.2 s of sim time of one robot
+        for _ in range(40 * parts):  # 64 KiB is about 1.2 s of sim time of one robot
             client.step(100)
-            if len(recorder.parts) > 2:
+            if len(recorder.parts) >= parts:
                 break
-        assert len(recorder.parts) == 3, "the recording did not go on in a third part"
+        assert len(recorder.parts) == parts, f"the recording did not go on in part {parts}"
         client.send("DRIVE {AltitudeVelocity 0.5}")
         client.step(300)
         client.close()
