@@ -116,16 +116,7 @@ def _unplayable(path: Path) -> str | None:
 
 def _why_not(path: Path) -> str:
     """Why OpenCV could not open ``path`` as a video, as far as the file system tells."""
-    try:
-        if path.is_dir():
-            return "a directory"
-        if not path.exists():
-            return "no such file"
-        if path.is_file() and path.stat().st_size == 0:
-            return "an empty file"
-    except OSError as exc:
-        return exc.strerror or str(exc)
-    return "not a video, or one cut short or damaged"
+    return _unplayable(path) or "not a video, or one cut short or damaged"
 
 
 FFMPEG_MAX_PIXELS = 1 << 28
