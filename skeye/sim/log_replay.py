@@ -50,6 +50,7 @@ hover segments (docs/physics.md, "In-flight vibration")."""
 REST_S = 1.0  # the log's first second: at rest, for the power-up calibration
 MIN_HOVER_S = REST_S + 1.0  # skeye logs --seconds: the rest, then a second of hover to measure
 TRUTH_GAP_S = 0.1  # ground truth further than this from an instant is not used for it
+GAP_INTERVALS = 5.0  # an IMU interval this many median ones long (and over 0.1 s) is a gap
 
 
 def _quat_rows(q: np.ndarray) -> np.ndarray:
@@ -181,10 +182,29 @@ def reference_imu(log: ImuLog, robot: str = "hummingbird") -> ImuLog:
     return simulated_imu(log.rate_hz, min(120.0, float(log.t_s[-1] - log.t_s[0])), robot)
 
 
+def refuse_gaps(log: ImuLog) -> None:
+    """Refuse IMU samples with a gap: an interval longer than ``TRUTH_GAP_S`` and than
+    ``GAP_INTERVALS`` median intervals (a logger's dropout). The spectra and the Allan deviation
+    take the samples as evenly spaced at the median rate, and the replay would integrate the
+    gyro across the gap in one step, so a gap would corrupt every figure; the ConfigError names
+    the first gap, in seconds from the log's first sample (``--start``'s clock)."""
+    dt = np.diff(log.t_s)
+    limit = max(TRUTH_GAP_S, GAP_INTERVALS * float(np.median(dt)))
+    gaps = np.flatnonzero(dt > limit)
+    if len(gaps):
+        k = int(gaps[0])
+        more = f" (and {len(gaps) - 1} more gaps)" if len(gaps) > 1 else ""
+        raise ConfigError(f"{log.name}: no IMU sample for {float(dt[k]):.3g} s after "
+                          f"{float(log.t_s[k]):.6g} s{more}, where the log samples every "
+                          f"{float(np.median(dt)):.3g} s: the figures need unbroken samples; "
+                          "measure a window without the gap with --start/--end")
+
+
 def compare(log: ImuLog, robot: str = "hummingbird", sim: ImuLog | None = None
             ) -> dict[str, Any]:
     """The log's figures, the simulated IMU's at the log's rate (``sim``, else
     :func:`reference_imu`), and both replays."""
+    refuse_gaps(log)
     rate = log.rate_hz
     flight = in_flight(log)
     sim = reference_imu(log, robot) if sim is None else sim

@@ -373,3 +373,27 @@ def test_options_that_would_do_nothing_are_refused(
         err = capsys.readouterr().err
         assert err.startswith(f"skeye logs: error: {named} "), err
         assert err.count("\n") == 1, err
+
+
+def _cut(s: make_logs.Synthetic, keep: np.ndarray) -> make_logs.Synthetic:
+    return make_logs.Synthetic(s.t_s[keep], s.gyro[keep], s.accel[keep], s.quat_ned[keep],
+                               s.pos_ned[keep])
+
+
+def test_a_gap_in_the_imu_samples_is_refused_naming_it(
+        flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # 3 s without IMU samples (a logger's dropout) was measured as if the samples ran on: the
+    # replay integrated the gyro over the 3 s at once and read 6.6 deg RMS (22 deg at most)
+    # where the unbroken log reads under 1 deg, with exit status 0
+    gap = (flight.t_s > 10.0) & (flight.t_s < 13.0)
+    folder = make_logs.write_euroc(tmp_path / "MH_gap", _cut(flight, ~gap))
+    assert main(["logs", str(folder)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no IMU sample for 3 s after 10 s" in err and "--start/--end" in err, err
+    assert len(err.splitlines()) == 1, err
+    # a window without the gap is measured
+    assert main(["logs", str(folder), "--start", "13"]) == 0
+    # a single dropped sample is no gap
+    folder = make_logs.write_euroc(tmp_path / "MH_drop", _cut(flight, np.arange(len(
+        flight.t_s)) != 1500))
+    assert main(["logs", str(folder)]) == 0
