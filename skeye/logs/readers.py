@@ -138,7 +138,7 @@ def read_euroc(folder: Path) -> ImuLog:
 def read_ulog(path: Path) -> ImuLog:
     """A PX4 ULog: ``sensor_combined`` (gyro_rad, accelerometer_m_s2, FRD body) and, in a
     simulation's log, ``vehicle_local_position_groundtruth`` + ``vehicle_attitude_groundtruth``
-    (NED)."""
+    (NED); a topic logged in several instances is read from instance 0."""
     try:
         from pyulog import ULog
     except ImportError:
@@ -153,7 +153,11 @@ def read_ulog(path: Path) -> ImuLog:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # pyulog raises bare exceptions on a damaged file
         raise ConfigError(f"{path}: not a readable ULog file: {exc}") from None
-    topics = {d.name: d.data for d in ulog.data_list}
+    # A topic logged in several instances is read from its lowest (0, the primary), as pyulog's
+    # get_dataset takes it by default.
+    topics: dict[str, dict[str, Any]] = {}
+    for d in sorted(ulog.data_list, key=lambda d: d.multi_id):
+        topics.setdefault(d.name, d.data)
     imu = topics.get("sensor_combined")
     if imu is None:
         raise ConfigError(f"{path}: no sensor_combined topic (the IMU)")

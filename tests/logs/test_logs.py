@@ -11,6 +11,7 @@ import gc
 import json
 import math
 import shutil
+import struct
 import warnings
 from pathlib import Path
 
@@ -397,3 +398,26 @@ def test_a_gap_in_the_imu_samples_is_refused_naming_it(
     folder = make_logs.write_euroc(tmp_path / "MH_drop", _cut(flight, np.arange(len(
         flight.t_s)) != 1500))
     assert main(["logs", str(folder)]) == 0
+
+
+def test_a_ulog_topic_logged_twice_is_read_from_its_first_instance(
+        flight: make_logs.Synthetic, tmp_path: Path) -> None:
+    """A ULog topic with two instances (multi_id 0 and 1) was read from the last one parsed;
+    pyulog's get_dataset takes instance 0, the primary, by default."""
+    def msg(kind: bytes, payload: bytes) -> bytes:
+        return struct.pack("<HB", len(payload), kind[0]) + payload
+
+    fields = "uint64_t timestamp;float[3] gyro_rad;float[3] accelerometer_m_s2"
+    out = bytearray(b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)) + msg(b"B", bytes(40))
+    out += msg(b"F", f"sensor_combined:{fields};".encode())
+    for msg_id in (0, 1):  # msg_id k subscribes instance k
+        out += msg(b"A", struct.pack("<BH", msg_id, msg_id) + b"sensor_combined")
+    level = np.tile([0.0, 0.0, -9.81], (len(flight.t_s), 1))
+    for k in range(len(flight.t_s)):
+        stamp = round(float(flight.t_s[k]) * 1e6) + 1_000_000
+        out += msg(b"D", struct.pack("<HQ6f", 0, stamp, *flight.gyro[k], *flight.accel[k]))
+        out += msg(b"D", struct.pack("<HQ6f", 1, stamp, 0.0, 0.0, 0.0, *level[k]))
+    (tmp_path / "two.ulg").write_bytes(bytes(out))
+    log = read_log(tmp_path / "two.ulg")
+    assert np.allclose(log.gyro_rad_s, flight.gyro, atol=1e-5)
+    assert np.allclose(log.accel_m_s2, flight.accel, atol=1e-4)
