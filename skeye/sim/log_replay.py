@@ -341,6 +341,9 @@ def cmd_logs(args: argparse.Namespace) -> int:
     if args.log is not None:
         log = read_log(Path(args.log), args.format, imu_topic=args.imu_topic,
                        truth_topic=args.truth_topic)
+        if args.start is not None and args.end is not None and args.start >= args.end:
+            raise ConfigError(f"--start {args.start:g} s is after --end {args.end:g} s: the "
+                              "window runs from --start to a later --end")
         log = log.span(args.start, args.end)
         length = float(log.t_s[-1] - log.t_s[0])
         if length < MIN_HOVER_S:  # the rest second, then a second of flight to measure
@@ -388,9 +391,10 @@ def register(sub: Any) -> None:
     p.add_argument("--format", choices=LOG_FORMATS, default="auto")
     p.add_argument("--imu-topic", default=None, help="ROS bags: the IMU topic")
     p.add_argument("--truth-topic", default=None, help="ROS bags: the ground-truth topic")
-    p.add_argument("--start", type=float, default=None, help="first second used (from the log's "
-                   "first IMU sample; the default: all)")
-    p.add_argument("--end", type=float, default=None, help="last second used")
+    p.add_argument("--start", type=cliargs.non_negative_float, default=None,
+                   help="first second used (from the log's first IMU sample; the default: all)")
+    p.add_argument("--end", type=cliargs.non_negative_float, default=None,
+                   help="last second used (after --start)")
     p.add_argument("--robot", default="hummingbird", help="the robot whose IMU is simulated")
     p.add_argument("--rate", type=float, default=None,
                    help=f"without a log: the simulated IMU's rate (Hz; default "

@@ -421,3 +421,17 @@ def test_a_ulog_topic_logged_twice_is_read_from_its_first_instance(
     log = read_log(tmp_path / "two.ulg")
     assert np.allclose(log.gyro_rad_s, flight.gyro, atol=1e-5)
     assert np.allclose(log.accel_m_s2, flight.accel, atol=1e-4)
+
+
+def test_a_reversed_or_not_numeric_window_is_refused_naming_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # these read "no IMU samples between 20 and 10 s" and "between nan and 3.995 s"
+    folder = make_logs.write_euroc(tmp_path / "MH_w", synthetic(4.0))
+    assert main(["logs", str(folder), "--start", "3", "--end", "1"]) == 2
+    assert "--start 3 s is after --end 1 s" in capsys.readouterr().err
+    for option, value, message in (("--start", "nan", "must be a finite number, got 'nan'"),
+                                   ("--end", "-1", "must be a number >= 0, got '-1'")):
+        with pytest.raises(SystemExit) as refused:  # argparse's refusal
+            main(["logs", str(folder), option, value])
+        assert refused.value.code == 2
+        assert f"argument {option}: {message}" in capsys.readouterr().err
