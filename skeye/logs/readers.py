@@ -9,9 +9,10 @@ for PX4's NED). Nothing is resampled or filtered. PX4 ULog needs ``pyulog`` and 
 reader from the path (a folder: EuRoC; ``.ulg``: ULog; ``.bag`` or a rosbag2 folder: ROS).
 
 Invariants: times are seconds from the log's first IMU sample; arrays are float64, one row per
-sample; a log without IMU samples, or with times that go backwards, is refused (ConfigError
-naming the file), and so is a ground truth that is not numbers, has a zero-length quaternion or
-times that go backwards (the replay would judge against NaN or the wrong instant).
+sample; a log without IMU samples, or with times that go backwards or repeat, is refused
+(ConfigError naming the file and the first such sample), and so is a ground truth that is not
+numbers, has a zero-length quaternion or times that go backwards (the replay would judge
+against NaN or the wrong instant).
 """
 
 from __future__ import annotations
@@ -69,8 +70,11 @@ def _checked(name: str, t_ns_or_s: np.ndarray, gyro: np.ndarray, accel: np.ndarr
     if len(t_ns_or_s) < 2:
         raise ConfigError(f"{name}: fewer than two IMU samples")
     t = (t_ns_or_s - t_ns_or_s[0]) * scale
-    if np.any(np.diff(t) <= 0.0):
-        raise ConfigError(f"{name}: IMU times do not increase")
+    back = np.flatnonzero(np.diff(t) <= 0.0)
+    if len(back):  # named by the first sample (from 0) whose time is not after the one before
+        k = int(back[0]) + 1
+        raise ConfigError(f"{name}: IMU times do not increase: sample {k} at {t[k]:.6g} s "
+                          f"follows one at {t[k - 1]:.6g} s (seconds from the first sample)")
     if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
         raise ConfigError(f"{name}: IMU samples that are not numbers")
     if truth is not None:

@@ -435,3 +435,14 @@ def test_a_reversed_or_not_numeric_window_is_refused_naming_it(
             main(["logs", str(folder), option, value])
         assert refused.value.code == 2
         assert f"argument {option}: {message}" in capsys.readouterr().err
+
+
+def test_imu_times_that_do_not_increase_are_refused_naming_where(
+        flight: make_logs.Synthetic, tmp_path: Path) -> None:
+    # "IMU times do not increase" said nothing of where, in a log of tens of thousands of lines
+    t = flight.t_s.copy()
+    t[1000:1010] -= 0.2  # sample 1000 (5 s) is stamped 4.8 s
+    s = dataclasses.replace(flight, t_s=t)
+    with pytest.raises(ConfigError, match=r"IMU times do not increase: sample 1000 at 4\.8 s "
+                       r"follows one at 4\.995 s"):
+        read_log(make_logs.write_euroc(tmp_path / "MH_back", s))
