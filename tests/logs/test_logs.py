@@ -446,3 +446,24 @@ def test_imu_times_that_do_not_increase_are_refused_naming_where(
     with pytest.raises(ConfigError, match=r"IMU times do not increase: sample 1000 at 4\.8 s "
                        r"follows one at 4\.995 s"):
         read_log(make_logs.write_euroc(tmp_path / "MH_back", s))
+
+
+def test_the_simulated_hover_figures_quoted_in_physics_md_come_out(
+        tmp_path: Path) -> None:
+    """docs/physics.md quotes `skeye logs --rate 200 --seconds 60` (seed 1, so the same every
+    run): the vibration above 10 Hz and the replay's tilt error, each to the digits quoted."""
+    import re
+
+    text = " ".join((Path(__file__).parents[2] / "docs" / "physics.md").read_text().split())
+    vib = re.search(r"Simulated, this part \(seed 1\) carries ([0-9.]+) m/s\^2 and ([0-9.]+) "
+                    r"rad/s above 10 Hz", text)
+    tilt = re.search(r"its tilt error, level truth, is ([0-9.]+) deg RMS and ([0-9.]+) deg at "
+                     r"most", text)
+    assert vib and tilt
+    assert main(["logs", "--rate", "200", "--seconds", "60",
+                 "--json", str(tmp_path / "f.json")]) == 0
+    sim = json.loads((tmp_path / "f.json").read_text())["simulated"]
+    for quoted, key in ((vib[1], "accel_band_rms"), (vib[2], "gyro_band_rms"),
+                        (tilt[1], "tilt_rms_deg"), (tilt[2], "tilt_max_deg")):
+        digits = len(quoted.split(".")[1])
+        assert f"{sim[key]:.{digits}f}" == quoted, (key, sim[key], quoted)
