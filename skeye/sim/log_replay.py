@@ -50,6 +50,7 @@ hover segments (docs/physics.md, "In-flight vibration")."""
 REST_S = 1.0  # the log's first second: at rest, for the power-up calibration
 MIN_HOVER_S = REST_S + 1.0  # skeye logs --seconds: the rest, then a second of hover to measure
 TRUTH_GAP_S = 0.1  # ground truth further than this from an instant is not used for it
+REST_TURN_DEG = 1.0  # a truth turning more than this in the first second: not at rest
 GAP_INTERVALS = 5.0  # an IMU interval this many median ones long (and over 0.1 s) is a gap
 
 
@@ -74,6 +75,26 @@ def _align(f_sensor: np.ndarray) -> np.ndarray:
     return np.eye(3) + vx + vx @ vx / (1.0 + c)
 
 
+def _refuse_turning_rest(t0_s: float, truth: TruthTrack) -> None:
+    """Refuse a first second in which the ground truth turns more than ``REST_TURN_DEG`` from
+    its first pose in it: the board calibrates its gyro on that second, as a board does at
+    power-up on a vehicle standing still, so a turning one would be judged on a gyro bias made
+    up of its turn rate (``--start`` mid-flight read 5.5 deg RMS where the log reads 0.5)."""
+    inside = (truth.t_s >= t0_s) & (truth.t_s < t0_s + REST_S)
+    if int(inside.sum()) < 2 or np.ptp(truth.t_s[inside]) == 0.0:
+        # no truth over that second (poses all stamped at one instant tell no turn): the
+        # accelerometer's check is all there is
+        return
+    q = truth.quat_wxyz[inside] / np.linalg.norm(truth.quat_wxyz[inside], axis=1)[:, None]
+    # the angle between two unit quaternions: 2 acos |q1 . q2|
+    turn = np.degrees(2.0 * np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0))).max()
+    if turn > REST_TURN_DEG:
+        raise ConfigError(f"the first second ({t0_s:g}..{t0_s + REST_S:g} s) is not at rest: its "
+                          f"ground truth turns {turn:.3g} deg in it (more than "
+                          f"{REST_TURN_DEG:g}), and the board calibrates its gyro on that "
+                          "second; start the window (--start) where the vehicle stands still")
+
+
 def replay_tilt(t_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                 truth: TruthTrack | None, every_s: float = 0.05) -> dict[str, float]:
     """The board estimator on these IMU samples; its tilt error against ``truth`` (a level
@@ -87,6 +108,8 @@ def replay_tilt(t_s: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                           f"{float(np.linalg.norm(at_rest)):.3g} m/s^2, not gravity's "
                           f"{GRAVITY_M_S2:g}: the log must start at rest, its accelerometer in "
                           "m/s^2")
+    if truth is not None:
+        _refuse_turning_rest(t_s[0], truth)
     rot = _align(at_rest)
     gyro_b = gyro @ rot.T
     accel_b = accel @ rot.T

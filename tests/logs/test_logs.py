@@ -393,7 +393,7 @@ def test_a_gap_in_the_imu_samples_is_refused_naming_it(
     assert "no IMU sample for 3 s after 10 s" in err and "--start/--end" in err, err
     assert len(err.splitlines()) == 1, err
     # a window without the gap is measured
-    assert main(["logs", str(folder), "--start", "13"]) == 0
+    assert main(["logs", str(folder), "--end", "10"]) == 0
     # a single dropped sample is no gap
     folder = make_logs.write_euroc(tmp_path / "MH_drop", _cut(flight, np.arange(len(
         flight.t_s)) != 1500))
@@ -467,3 +467,17 @@ def test_the_simulated_hover_figures_quoted_in_physics_md_come_out(
                         (tilt[1], "tilt_rms_deg"), (tilt[2], "tilt_max_deg")):
         digits = len(quoted.split(".")[1])
         assert f"{sim[key]:.{digits}f}" == quoted, (key, sim[key], quoted)
+
+
+def test_a_window_that_does_not_start_at_rest_is_refused_when_replayed(
+        flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # --start 10 (mid-flight, swaying 8 deg at 0.2 Hz) calibrated the board's gyro on a second
+    # of turning and read 5.5 deg RMS against the truth where the log reads 0.5, exit status 0
+    folder = make_logs.write_euroc(tmp_path / "MH_mid", flight)
+    assert main(["logs", str(folder), "--start", "10"]) == 2
+    err = capsys.readouterr().err
+    assert "is not at rest: its ground truth turns" in err and "--start" in err, err
+    assert main(["logs", str(folder), "--start", "0.5"]) == 0  # still on the ground: measured
+    # without a truth there is no replay to spoil: the IMU figures are measured
+    shutil.rmtree(folder / "mav0" / "state_groundtruth_estimate0")
+    assert main(["logs", str(folder), "--start", "10"]) == 0
