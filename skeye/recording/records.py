@@ -462,7 +462,7 @@ class Recorder:
             self._stop(str(exc))
             return
         try:
-            self._note(f"recording continues in {nxt.name} (size limit {limit})")
+            self._note(f"{CONTINUES_NOTE}{nxt.name} (size limit {limit})")
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()
