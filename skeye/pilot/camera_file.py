@@ -92,7 +92,11 @@ def check_file_camera(uri: str) -> None:
     Raises:
         LocalProtocolError: a bad URI; CameraError: a file that cannot be played.
     """
-    path = parse_file_camera(uri)[0]
+    _refuse_unplayable(uri, parse_file_camera(uri)[0])
+
+
+def _refuse_unplayable(uri: str, path: Path) -> None:
+    """CameraError when the file system tells ``path`` cannot be played (:func:`_unplayable`)."""
     problem = _unplayable(path)
     if problem is not None:
         raise CameraError(f"camera {uri}: cannot open {path} as a video ({problem})")
@@ -150,9 +154,7 @@ class FileCamera:
         self.options = options
         self.loop = loop
         self.fov_h_rad = fov_h_rad if fov_h_rad is not None else options.fov_h_rad
-        unplayable = _unplayable(path)
-        if unplayable is not None:
-            raise CameraError(f"camera {uri}: cannot open {path} as a video ({unplayable})")
+        _refuse_unplayable(uri, path)
         try:  # a photo plays as a one-frame video; OpenCV would half decode a cut-off one
             problem = file_damage(path)
         except OSError:
