@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -203,3 +204,33 @@ def test_an_output_folder_that_is_a_file_is_refused_naming_it(
         err = capsys.readouterr().err
         assert f"--out {taken} is a file: give a folder" in err and "Traceback" not in err, err
     assert taken.read_text() == "kept"
+
+
+def test_the_command_table_names_every_command_its_component_adds() -> None:
+    """``skeye COMMAND`` builds only that command's options (``build_parser(argv)``): the table
+    of names must name exactly what the components add, or a command would go missing."""
+    from skeye.cli import _REGISTRARS, build_parser
+
+    def commands(parser: Any) -> set[str]:
+        (sub,) = [a for a in parser._actions if a.dest == "command"]
+        return set(sub.choices)
+
+    assert commands(build_parser()) == set(_REGISTRARS)
+    for name in _REGISTRARS:
+        alone = commands(build_parser(["-v", name, "--help"]))
+        assert name in alone and alone < set(_REGISTRARS), (name, alone)
+    assert commands(build_parser(["--help"])) == commands(build_parser(["no-such"])) == set(
+        _REGISTRARS)
+
+
+def test_a_command_starts_without_importing_the_other_commands() -> None:
+    """``skeye ground`` (and every process ``skeye up`` or a sweep starts) imported every
+    component's options, the pilot's image stack (OpenCV) among them: about 0.5 s of CPU a
+    start."""
+    script = ("import sys; from skeye.cli import build_parser; build_parser(['ground']); "
+              "print(' '.join(sorted(m for m in sys.modules if m in ('cv2', 'skeye.pilot.cli', "
+              "'skeye.validate.cli', 'skeye.sweep.cli', 'skeye.recording.snapshot'))))")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [], out.stdout
