@@ -104,6 +104,21 @@ def test_skeye_pilot_help_works_there_and_other_commands_name_their_extra(onboar
     assert ground.returncode == 2 and "skeye[ground]" in ground.stderr, ground.stderr
 
 
+def test_skeye_up_there_names_both_extras_and_starts_nothing(onboard_venv, tmp_path):
+    """``skeye up`` runs the simulator and ground control: on the onboard install it says in
+    one line that it needs the sim and ground extras, exit status 2, as ``skeye sim`` does.
+    Until 2026-11-27 it went on: it calibrated the camera in a simulator that could not start
+    (or, with a calibration cached, started that simulator), printed five lines, the last
+    advising ``--calibration``, and exited 1."""
+    cache = tmp_path / "cache"
+    env = {**os.environ, "XDG_CACHE_HOME": str(cache)}
+    up = run([str(onboard_venv / "bin" / "skeye"), "up"], cwd=tmp_path, env=env, timeout_s=60)
+    assert up.returncode == 2, (up.stdout, up.stderr)
+    assert up.stdout == "" and not cache.exists(), up.stdout  # nothing tried, nothing kept
+    assert up.stderr.strip().count("\n") == 0 and "Traceback" not in up.stderr, up.stderr
+    assert "pip install 'skeye[sim,ground]'" in up.stderr, up.stderr
+
+
 def test_the_onboard_pilot_flies_the_emulated_ll_board(onboard_venv):
     sim, found = start_skeye(
         ["sim", "--mode", "lockstep", "--port", "0", "--seed", "3", "--estimator", "truth",

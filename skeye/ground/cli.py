@@ -383,10 +383,38 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     return path
 
 
+UP_NEEDS = (("mujoco", "sim"), ("fastapi", "ground"), ("uvicorn", "ground"))
+"""What ``skeye up``'s children import that lives in an extra: (module, the extra)."""
+
+
+def check_up_extras() -> None:
+    """Refuse ``skeye up`` before it starts or calibrates anything when the simulator's or
+    ground control's extra is missing (the onboard install), naming every extra it lacks.
+
+    Raises:
+        ConfigError: a module of ``UP_NEEDS`` is not installed.
+    """
+    from importlib.util import find_spec
+
+    missing = [(module, extra) for module, extra in UP_NEEDS if find_spec(module) is None]
+    if not missing:
+        return
+    modules = [module for module, _ in missing]
+    extras = list(dict.fromkeys(extra for _, extra in missing))
+    named = ", ".join(modules[:-1]) + " and " + modules[-1] if len(modules) > 1 else modules[0]
+    raise ConfigError(
+        f"{named} {'is' if len(modules) == 1 else 'are'} not installed: this "
+        f"command runs the simulator and ground control, so it needs skeye's "
+        f"{' and '.join(extras)} extra{'s' if len(extras) > 1 else ''} (pip install "
+        f"'skeye[sim,ground]'; the base install is the onboard pilot's, docs/onboard.md)")
+
+
 def run_up(args: argparse.Namespace) -> int:
-    """Start simulator, pilot and ground control; stop them all on a signal."""
+    """Start simulator, pilot and ground control; stop them all on a signal. Without the sim
+    or ground extra it refuses at once (``check_up_extras``)."""
     from skeye.ground.guard import TOKEN_ENV, new_token
 
+    check_up_extras()
     env = dict(os.environ)
     env.setdefault("MUJOCO_GL", "egl")
     token = env.get(TOKEN_ENV) or new_token()
