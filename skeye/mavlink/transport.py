@@ -261,6 +261,12 @@ class TcpClientTransport:
             self.sock.close()
 
 
+class SerialOpenError(ConfigError):
+    """A serial device that cannot be opened: not there, or held by another program. A bad
+    option of a ``--mavlink`` link (exit status 2); the vehicle unreachable where it is the
+    airframe's line (``mavlink://serial/...``: ``LinkClosed``, exit status 4)."""
+
+
 class SerialTransport:
     """A serial line (pyserial); one peer."""
 
@@ -273,7 +279,7 @@ class SerialTransport:
             self.port = serial.Serial(device, baud, timeout=0, write_timeout=0.5,
                                       exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise ConfigError(f"cannot open serial {device} at {baud} baud: "
+            raise SerialOpenError(f"cannot open serial {device} at {baud} baud: "
                               f"{serial_error(exc)}") from None
         self.name = f"serial://{device}?baud={baud}"
         self.datagram = False
@@ -330,7 +336,8 @@ def open_transport(uri: str) -> MavTransport:
     """Open the link a URI names (see the module's docstring).
 
     Raises:
-        ConfigError: a bad URI, a port that cannot be bound, a serial device that cannot open.
+        ConfigError: a bad URI, a port that cannot be bound, a serial device that cannot open
+            (``SerialOpenError``).
         LinkClosed: a TCP server that cannot be reached.
     """
     scheme, host, port, query = parse_uri(uri)

@@ -45,7 +45,7 @@ from pymavlink.dialects.v20 import common as mav
 from skeye.errors import ConfigError, LinkClosed, SkeyeError
 from skeye.mavlink.codec import BadFrame, MavCodec, MavParser
 from skeye.mavlink.modes import Px4Mode
-from skeye.mavlink.transport import MavTransport, open_transport
+from skeye.mavlink.transport import MavTransport, SerialOpenError, open_transport
 from skeye.pilot.airframe import (
     AirframeOptions,
     GpsFix,
@@ -531,7 +531,8 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
     Raises:
         ConfigError: a URI that is not one of these, or with an option its link does not take
             (:data:`LINK_OPTIONS`) or anything after HOST:PORT.
-        LinkClosed: no flight controller answered within ``wait_s``.
+        LinkClosed: no flight controller answered within ``wait_s``, or a serial device that
+            cannot be opened (not there, or held by another program).
     """
     parts = split_uri(uri, "airframe", "mavlink://udp/HOST:PORT (or udpout, tcp, serial)",
                       ConfigError)
@@ -558,7 +559,11 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
         raise ConfigError(f"{uri}: {kind} is mavlink://{kind}/HOST:PORT, with nothing after "
                           f"the port ({rest[rest.index('/'):]!r})")
     wait_s = float(options.pop("wait_s", 30.0))
-    airframe = MavlinkAirframe(open_transport(links[kind]), **options)
+    try:
+        transport = open_transport(links[kind])
+    except SerialOpenError as exc:  # the vehicle's line: unreachable, as asctec-ll://serial's
+        raise LinkClosed(f"{uri}: {exc}") from None
+    airframe = MavlinkAirframe(transport, **options)
     try:
         return airframe.start(wait_s)
     except BaseException:

@@ -71,3 +71,33 @@ def test_an_option_or_part_the_link_does_not_take_is_refused_before_it_opens(uri
         open_mavlink_airframe(uri, wait_s=5.0)
     assert uri in str(info.value) and named in str(info.value), info.value
     assert time.monotonic() - started < 1.0, "refused only after waiting for a controller"
+
+
+def test_a_controllers_serial_port_held_or_missing_stops_the_pilot_as_unreachable(tmp_path,
+                                                                                  capsys):
+    """``skeye pilot --airframe mavlink://serial/...`` whose port another program holds (a
+    second pilot beside the vehicle's own) or that is not there (the flight controller not
+    plugged in, or not enumerated yet at boot): the vehicle cannot be reached, exit status 4,
+    as on ``asctec-ll://serial/...`` and as docs/onboard.md says. Until 2026-11-27 it was
+    status 2, a bad option, which a supervisor restarting the pilot until the vehicle answers
+    takes as a mistake in the command not worth retrying."""
+    import os
+
+    from skeye.cli import main
+    from skeye.link.transport import open_link
+
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    os.close(slave)
+    first = open_link(f"serial://{path}")  # another program's: an advisory flock
+    try:
+        for device, said in ((path, "in use by another program"),
+                             (str(tmp_path / "ttyACM0"), "No such file")):
+            status = main(["pilot", "--airframe", f"mavlink://serial{device}?baud=57600",
+                           "--port", "0", "--timeout", "2"])
+            err = capsys.readouterr().err
+            assert status == 4, err
+            assert device in err and said in err, err
+    finally:
+        first.close()
+        os.close(master)
