@@ -644,7 +644,8 @@ def register(subparsers: Any) -> None:
     """Add ``skeye pilot`` to the main parser's subcommands."""
     p = subparsers.add_parser(
         "pilot",
-        help="emulate the vehicle's onboard boards on a simulated robot",
+        help="the vehicle's onboard program: fly a simulated robot, an AscTec LL board or a "
+             "MAVLink flight controller",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -232,3 +232,20 @@ def test_a_clock_answer_without_a_readable_sim_time_is_named(reason):
     # "1.2.3" used to reach float() and raise ValueError, which no caller of a cycle expects
     with pytest.raises(CommandRejected, match="did not say its sim time"):
         AscTecLLAirframe._grant(air, 1.0)  # type: ignore[arg-type]
+
+
+def test_docs_onboard_has_a_row_for_every_airframe_and_camera_scheme():
+    """docs/onboard.md's two tables ("Airframes and cameras by URI") are where a user on the
+    vehicle looks up what ``--airframe`` and ``--camera`` take: each scheme of the registries
+    (``airframe.BACKENDS``, ``camera.BACKENDS``) has a row there. ``mavlink://``, a PX4-style
+    flight controller, had none until 2026-11-27 (only docs/protocols/mavlink.md said it)."""
+    import re
+    from pathlib import Path
+
+    from skeye.pilot import camera as camera_module
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "onboard.md").read_text()
+    section = text.split("## Airframes and cameras by URI", 1)[1].split("\n## ", 1)[0]
+    rows = {m.group(1).lower() for m in re.finditer(r"^\| `([a-z0-9-]+)://", section, re.M)}
+    for scheme in (*airframe_module.BACKENDS, *camera_module.BACKENDS):
+        assert scheme in rows, f"docs/onboard.md has no table row for {scheme}://"
