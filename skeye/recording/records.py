@@ -330,6 +330,10 @@ def _block_value(line: str, key: str) -> str | None:
     return None
 
 
+_Entry = tuple[float, float, int, str, bytes] | threading.Event | None
+"""What the writer's queue holds (see ``Recorder._queue``)."""
+
+
 class Recorder:
     """Writes a recording; a context manager. Attach it to a server with :meth:`attach`.
 
@@ -377,9 +381,9 @@ class Recorder:
         self._clock = wall_clock
         self._sim_time: Callable[[], float] = lambda: 0.0
         self._flush_interval_s = flush_interval_s
-        self._queue: queue.Queue[tuple[float, float, int, str, bytes] | None] = queue.Queue(
-            queue_records
-        )
+        # records, a sync()'s event (set once what was queued before it is on disk), or None
+        # (close: the end)
+        self._queue: queue.Queue[_Entry] = queue.Queue(queue_records)
         self.dropped = 0  # observed records not written (add with _drop: several threads do)
         self._drop_lock = threading.Lock()
         self._batch_dropped = 0  # of the writer's batch, what _room could not write
@@ -539,7 +543,8 @@ class Recorder:
         done = False
         while not done:
             wait = max(0.0, self._flush_interval_s - (time.monotonic() - last_flush))
-            batch: list[tuple[float, float, int, str, bytes] | None] = []
+            batch: list[_Entry] = []
+            synced: list[threading.Event] = []
             try:
                 batch.append(self._queue.get(timeout=wait))
                 while len(batch) < 4096:
@@ -551,6 +556,9 @@ class Recorder:
                 if entry is None:
                     done = True
                     break
+                if isinstance(entry, threading.Event):
+                    synced.append(entry)
+                    continue
                 self._format(entry, out)
             records = len(out)  # observed records; the note below is the recorder's own
             if self.dropped != reported_drops and self.stopped is None:
@@ -562,17 +570,21 @@ class Recorder:
                 if out:
                     self._write_all(self._room(out))
                 f = self._file
-                if done or time.monotonic() - last_flush >= self._flush_interval_s:
+                if done or synced or time.monotonic() - last_flush >= self._flush_interval_s:
                     f.flush()
                     os.fsync(f.fileno())
                     last_flush = time.monotonic()
             except OSError as exc:
+                for event in synced:  # recording stopped: nothing more will be written
+                    event.set()
                 # The batch's observed records neither written nor counted are not written
                 # (the recorder's own note, last in the batch, is written after them all).
                 self._drop(max(0, records - min(records, self.written - written)
                                - self._batch_dropped))
                 self._write_failed(exc)
                 return
+            for event in synced:
+                event.set()
 
     def _write_failed(self, exc: OSError) -> None:
         """A write or flush failed (a full disk, EFBIG past ``ulimit -f``, a failing device):
@@ -602,6 +614,29 @@ class Recorder:
             out.extend(prefix + line + b"\n" for line in split_lines(data))
         else:
             out.append(prefix + data.replace(b"\r", b" ").replace(b"\n", b" ") + b"\n")
+
+    def sync(self, timeout_s: float = 5.0) -> None:
+        """Wait until every record observed before this call is written and flushed to disk,
+        or has been counted in ``dropped`` (a recording that stopped early, or closed).
+
+        Raises:
+            TimeoutError: the writer did not get there within ``timeout_s``.
+        """
+        if self._closed or not self._thread.is_alive():
+            return
+        done = threading.Event()
+        try:
+            self._queue.put(done, timeout=timeout_s)
+        except queue.Full:
+            raise TimeoutError(f"recording {self.path}: the writer's queue stayed full for "
+                               f"{timeout_s:g} s") from None
+        deadline = time.monotonic() + timeout_s
+        while not done.wait(0.1):
+            if not self._thread.is_alive():  # stopped by a failed write after the put
+                return
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"recording {self.path}: what was queued was not written "
+                                   f"within {timeout_s:g} s")
 
     def close(self, timeout_s: float = 5.0) -> None:
         """Detach, write everything queued, flush and close the file; idempotent. A recording
@@ -633,7 +668,9 @@ class Recorder:
                     entry = self._queue.get_nowait()
                 except queue.Empty:
                     break
-                if entry is not None:
+                if isinstance(entry, threading.Event):
+                    entry.set()
+                elif entry is not None:
                     self._drop(_records_in(entry[3], entry[4]))
         if not self._file.closed:
             self._file.close()
