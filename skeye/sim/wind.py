@@ -7,9 +7,11 @@ acts against and an extra force on the centre of mass (NED, N). Modes:
 - ``constant``: a steady wind ``speed_m_s`` from a direction (``from_deg``, meteorological:
   the direction the wind comes from, clockwise from north).
 - ``turbulence``: the constant wind plus Dryden-style gusts: each axis is white noise shaped by
-  a first-order filter with time constant L/V (length scales L_u = L_v = 30 m, L_w = 10 m, the
-  low-altitude values of MIL-F-8785C at ~10 m, V = max(mean speed, 1 m/s)), with standard
-  deviations ``sigma_m_s`` horizontally and half that vertically. Seeded.
+  a first-order filter with time constant L/V (length scales L_u = L_v = 30 m, L_w = 10 m,
+  V = max(mean speed, 1 m/s)), with standard deviations ``sigma_m_s`` horizontally and half that
+  vertically. Seeded. These scale lengths have no source: they are not MIL-F-8785C's
+  low-altitude values at 10 m, which are L_u = L_v = 67 m and L_w = 10 m (``dryden_profile``;
+  sigma_w = 0.53 sigma_u there); the ``dryden`` mode follows the specification.
 - ``dryden``: low-altitude atmospheric turbulence as MIL-F-8785C (and MIL-HDBK-1797) define it
   for flight below 1000 ft: a mean wind from ``w20_m_s``, the wind speed 20 ft (6.1 m) above the
   ground, scaled to the model height by the specification's logarithmic profile
