@@ -122,8 +122,9 @@ _WEBCAM: dict[str, Any] = {
     "read_noise_e": 3.0,
     # The C920 streams 800x600 at 30 fps as MJPEG over UVC; quality of its encoder about 85.
     "jpeg_quality": 85,
-    # USB webcam capture latency (exposure end to frame in user space): about 60 ms with
-    # +-10 ms of jitter (published glass-to-glass measurements of C920-class webcams).
+    # USB webcam capture latency (capture to delivery) 60 ms +- 10 ms: assumptions, no C920
+    # measurement found; Pupil Labs measured start of exposure to frame available for two of
+    # their own 30 fps UVC cameras, 35.6 and 127.7 ms (docs/camera.md, "Parameters").
     "latency_s": 0.060,
     "latency_jitter_s": 0.010,
     "shadows": True,
