@@ -296,10 +296,12 @@ class MagneticCompass(Sensor[CompassReading]):
     the heading of the sensor's x axis from magnetic north, in [0, 2 pi): the noisy field is
     tilt-compensated with the sensor's true roll and pitch (what the board does with its
     accelerometer attitude) and the angle read from its horizontal part, so bias and noise show
-    up in the heading as they would. Defaults, HMC5883L-class: noise floor 2 mG = 0.2 uT, with
-    quantisation at the 1.3 Ga gain NoiseSigma 0.3 uT (about 0.015 rad of heading at a 20 uT
-    horizontal field); BiasSigma 1.0 uT (residual hard iron after calibration); BiasWalk
-    0.005 uT/sqrt(s) (thermal drift). Default rate 20 Hz.
+    up in the heading as they would. Defaults, HMC5883L-class: NoiseSigma 0.3 uT (about 0.015
+    rad of heading at a 20 uT horizontal field), 1.5 times what the datasheet gives: its noise
+    floor is 2 mG = 0.2 uT, and its effective resolution the larger of that and the 0.92 mG LSb
+    at the 1.3 Ga gain (Configuration Register B), so 0.2 uT; the margin has no source (it was
+    credited to the quantisation, which does not give it); BiasSigma 1.0 uT (residual hard
+    iron after calibration); BiasWalk 0.005 uT/sqrt(s) (thermal drift). Default rate 20 Hz.
 
     Motor currents: the currents to the motors make a field of their own at the board, fixed
     in the body frame and growing with the current. The current follows the shaft power, so the
