@@ -16,13 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from skeye import __version__, cliargs
+from skeye.cliargs import EXTRA_OF
 from skeye.errors import SkeyeError
 from skeye.processes import wait_for_signal
 
 ENGINE_FAILED_STATUS = 3
-EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
-            "uvicorn": "ground", "pymavlink": "mavlink", "av": "mavlink"}
-"""A dependency that lives in an extra (pyproject.toml) -> the extra's name."""
 FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
 """Fault injection for tests (docs/reliability.md): the engine raises once sim time passes this."""
 

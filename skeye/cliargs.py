@@ -13,6 +13,9 @@ import argparse
 import math
 
 MAX_PORT = 65535
+EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
+            "uvicorn": "ground", "pymavlink": "mavlink", "av": "mavlink"}
+"""A dependency that lives in an extra (pyproject.toml) -> the extra's name."""
 
 
 def _int(text: str) -> int:

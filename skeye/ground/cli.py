@@ -383,8 +383,8 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     return path
 
 
-UP_NEEDS = (("mujoco", "sim"), ("fastapi", "ground"), ("uvicorn", "ground"))
-"""What ``skeye up``'s children import that lives in an extra: (module, the extra)."""
+UP_NEEDS = ("mujoco", "fastapi", "uvicorn")
+"""What ``skeye up``'s children import that lives in an extra (``cliargs.EXTRA_OF``)."""
 
 
 def check_up_extras() -> None:
@@ -396,11 +396,10 @@ def check_up_extras() -> None:
     """
     from importlib.util import find_spec
 
-    missing = [(module, extra) for module, extra in UP_NEEDS if find_spec(module) is None]
-    if not missing:
+    modules = [module for module in UP_NEEDS if find_spec(module) is None]
+    if not modules:
         return
-    modules = [module for module, _ in missing]
-    extras = list(dict.fromkeys(extra for _, extra in missing))
+    extras = list(dict.fromkeys(cliargs.EXTRA_OF[module] for module in modules))
     named = ", ".join(modules[:-1]) + " and " + modules[-1] if len(modules) > 1 else modules[0]
     raise ConfigError(
         f"{named} {'is' if len(modules) == 1 else 'are'} not installed: this "
