@@ -197,6 +197,12 @@ def run(args: argparse.Namespace) -> int:
     if args.mavlink:  # needs pymavlink (the `mavlink` extra): say so before the robot is spawned
         import skeye.pilot.mavlink_server  # noqa: F401
     try:
+        clash = shared_port_problem(args)
+    except ConfigError as exc:
+        return _error(f"--mavlink: {exc}")
+    if clash:
+        return _error(clash)
+    try:
         for uri in args.mavlink or ():
             from skeye.mavlink.transport import check_free
 
@@ -345,6 +351,37 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_LOST_SIMULATOR
         return 1
     return 0
+
+
+_ANY_HOST = ("", "0.0.0.0", "::")
+
+
+def shared_port_problem(args: argparse.Namespace) -> str | None:
+    """One port given to two of the pilot's listening links (``--port``, ``--video-port``, a
+    ``--mavlink`` ``tcp://`` or ``udp://``), on one protocol and overlapping addresses: said
+    before anything is opened, as each link's own check passes while the other is unbound.
+
+    Raises:
+        ConfigError: a ``--mavlink`` URI that is not one.
+    """
+    from skeye.mavlink.transport import parse_uri
+
+    links: list[tuple[str, str, int, str]] = []
+    if not args.serial:
+        links.append(("tcp", args.host, args.port, "the pilot (--port)"))
+    if args.video_port is not None:
+        links.append(("tcp", args.host, args.video_port, "the pilot's video (--video-port)"))
+    for uri in args.mavlink or ():
+        scheme, host, port, _ = parse_uri(uri)
+        if scheme in ("tcp", "udp"):
+            links.append((scheme, host, port, f"the MAVLink link {uri} (--mavlink)"))
+    for i, (scheme, host, port, what) in enumerate(links):
+        for other_scheme, other_host, other_port, other in links[:i]:
+            if (port and port == other_port and scheme == other_scheme
+                    and (host == other_host or host in _ANY_HOST or other_host in _ANY_HOST)):
+                return (f"{scheme.upper()} port {port} is given to both {other} and {what}; "
+                        "give each its own port")
+    return None
 
 
 def _error(message: str) -> int:

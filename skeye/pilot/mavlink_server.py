@@ -55,6 +55,8 @@ class MavlinkServer:
             self.vehicle = MavlinkVehicle(boards, settings=settings, now_s=clock(),
                                           wall_clock=wall_clock)
         self.transports: list[MavTransport] = []
+        self._worker: Worker | None = None  # before the links: close() below needs them
+        self._stop = threading.Event()
         try:
             for uri in uris:
                 self.transports.append(open_transport(uri))
@@ -66,8 +68,6 @@ class MavlinkServer:
         boards.pad.add_listener(self.vehicle.on_pad)
         self._parsers: list[dict[Hashable, MavParser]] = [{} for _ in self.transports]
         self._selector = selectors.DefaultSelector()
-        self._worker: Worker | None = None
-        self._stop = threading.Event()
         self.sent = 0
         self.received = 0
         self.errors = 0  # messages whose handling raised (logged; a bug, never a crash)

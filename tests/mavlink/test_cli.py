@@ -43,3 +43,47 @@ def test_skeye_pilot_refuses_a_taken_mavlink_port_before_reaching_the_simulator(
     assert "--rtp-video" not in done.stderr
     rtp = _skeye("pilot", "--sim", "127.0.0.1:1", "--rtp-video", "udp://127.0.0.1:5600")
     assert rtp.returncode == 2 and "needs --images" in rtp.stderr
+
+
+def test_skeye_pilot_refuses_one_port_given_to_two_of_its_links():
+    """A fleet's pilots each get their own ports; a copy-paste slip that gives one port twice
+    (``--port`` and a MAVLink TCP link, or one ``--mavlink udp://`` twice) is said at start,
+    exit 2, naming both, before the simulator is reached (``--sim`` is nobody here): until
+    2026-11-27 each check passed on its own, the robot was spawned and the pilot died with a
+    traceback when the second bind failed."""
+    with socket.create_server(("127.0.0.1", 0)) as probe:
+        port = probe.getsockname()[1]
+    tcp = _skeye("pilot", "--sim", "127.0.0.1:1", "--port", str(port),
+                 "--mavlink", f"tcp://127.0.0.1:{port}")
+    assert tcp.returncode == 2, tcp
+    assert f"TCP port {port} is given to both the pilot (--port)" in tcp.stderr, tcp.stderr
+    assert f"tcp://127.0.0.1:{port}" in tcp.stderr and "Traceback" not in tcp.stderr
+    udp = _skeye("pilot", "--sim", "127.0.0.1:1", "--port", "0",
+                 "--mavlink", f"udp://127.0.0.1:{port}", "--mavlink", f"udp://0.0.0.0:{port}")
+    assert udp.returncode == 2, udp
+    assert f"UDP port {port} is given to both" in udp.stderr, udp.stderr
+    # a UDP link beside a TCP port of the same number is no clash (two name spaces): it gets
+    # as far as the simulator, which is not there (exit 4)
+    apart = _skeye("pilot", "--sim", "127.0.0.1:1", "--port", str(port), "--timeout", "1",
+                   "--mavlink", f"udp://127.0.0.1:{port}")
+    assert apart.returncode == 4, apart
+
+
+def test_a_mavlink_endpoint_that_cannot_bind_says_why():
+    """``MavlinkServer`` with a link whose port is taken raises the ConfigError naming it (it
+    raised AttributeError from its own clean-up, hiding the cause, until 2026-11-27)."""
+    import threading
+
+    import pytest
+
+    from skeye.errors import ConfigError
+    from skeye.pilot.boards import OnboardBoards
+    from skeye.pilot.mavlink_server import MavlinkServer
+    from tests.pilot.fake_airframe import FakeAirframe
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        with pytest.raises(ConfigError, match=f"127.0.0.1:{port}"):
+            MavlinkServer(OnboardBoards(FakeAirframe()), threading.Lock(),
+                          ["udp://127.0.0.1:0", f"udp://127.0.0.1:{port}"])
