@@ -196,6 +196,9 @@ def run(args: argparse.Namespace) -> int:
             return _error("--rtp-video sends the camera: it needs --images or --camera URI")
     if args.mavlink:  # needs pymavlink (the `mavlink` extra): say so before the robot is spawned
         import skeye.pilot.mavlink_server  # noqa: F401
+    if not 1 <= args.mavlink_sysid <= 255:
+        return _error(f"--mavlink-sysid must be a MAVLink system id 1..255, got "
+                      f"{args.mavlink_sysid}")
     try:
         clash = shared_port_problem(args)
     except ConfigError as exc:
@@ -430,7 +433,8 @@ def open_mavlink(server: PilotServer, args: argparse.Namespace, pad_vision: bool
     from skeye.pilot.mavlink_vehicle import Settings
 
     return MavlinkServer(server.boards, server.lock, list(args.mavlink),
-                         settings=Settings(pad_vision=pad_vision))
+                         settings=Settings(pad_vision=pad_vision),
+                         system_id=args.mavlink_sysid)
 
 
 def open_rtp_video(server: PilotServer, video: Any, args: argparse.Namespace) -> Any:
@@ -812,6 +816,15 @@ def register(subparsers: Any) -> None:
         "udpout://127.0.0.1:14550 sends to QGroundControl, udpout://127.0.0.1:14540 to a "
         "MAVSDK script, udp://127.0.0.1:14560 listens, tcp://127.0.0.1:5760 serves TCP, "
         "serial:///dev/ttyUSB0?baud=57600 a radio (docs/protocols/mavlink.md)",
+    )
+    p.add_argument(
+        "--mavlink-sysid",
+        type=int,
+        default=1,
+        metavar="N",
+        help="the vehicle's MAVLink system id, 1..255 (default 1): give each vehicle of a "
+        "fleet its own, as PX4's MAV_SYS_ID or ArduPilot's SYSID_THISMAV, so that one ground "
+        "station tells them apart",
     )
     p.add_argument(
         "--rtp-video",

@@ -47,13 +47,14 @@ class MavlinkServer:
         tick_s: float = DEFAULT_TICK_S,
         clock: Callable[[], float] = time.monotonic,
         wall_clock: Callable[[], float] = time.time,
+        system_id: int = 1,
     ) -> None:
         self.lock = lock
         self.clock = clock
         self.tick_s = tick_s
         with lock:
             self.vehicle = MavlinkVehicle(boards, settings=settings, now_s=clock(),
-                                          wall_clock=wall_clock)
+                                          wall_clock=wall_clock, system_id=system_id)
         self.transports: list[MavTransport] = []
         self._worker: Worker | None = None  # before the links: close() below needs them
         self._stop = threading.Event()
