@@ -31,6 +31,7 @@ import argparse
 import logging
 import math
 import os
+import re
 import signal
 import sys
 import threading
@@ -690,6 +691,10 @@ def register(subparsers: Any) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    # ``--location -3,0,0`` (south of the origin) is a value, as ``-3`` alone is to argparse:
+    # its test for "a negative number, not an option" is widened to a comma-separated vector
+    p._negative_number_matcher = re.compile(  # argparse has no public hook for this
+        r"^-\d+$|^-\d*\.\d+$|^-\.?\d[^,\s]*(,[^,\s]*)+$")
     p.add_argument("--sim", default="127.0.0.1:3000", help="simulator control address (the "
                    "airframe sim://ADDRESS when --airframe is not given)")
     p.add_argument(
@@ -862,7 +867,8 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--name", default="R1", help="robot name")
     p.add_argument("--start", default="Pad1", help="start pose")
-    p.add_argument("--location", default=None, help="spawn at north,east,down (m) instead")
+    p.add_argument("--location", default=None, metavar="N,E,D",
+                   help="spawn at north,east,down (m) instead, e.g. -3,0,0 (3 m south)")
     p.add_argument("--link-timeout", type=cliargs.positive_float, default=2.0,
                    help="s without packets -> hold")
     p.add_argument("--land-timeout", type=cliargs.positive_float, default=20.0,

@@ -48,7 +48,7 @@ def test_two_pilots_are_two_systems_to_one_ground_station(tmp_path):
         stack.callback(gcs.close)
         pilots = [_pilot(stack, handle.address, "R1", ["--start", "Pad1"], "1", port,
                          str(tmp_path / "r1.err")),
-                  _pilot(stack, handle.address, "R2", ["--location", "3,0,0"], "2", port,
+                  _pilot(stack, handle.address, "R2", ["--location", "-3,0,0"], "2", port,
                          str(tmp_path / "r2.err"))]
         seen: set[int] = set()
         deadline = time.monotonic() + 90

@@ -500,3 +500,14 @@ def test_images_on_a_real_vehicle_is_refused_before_the_vehicle_is_opened(capsys
     assert status == 2, err
     assert err == (f"skeye pilot: error: --images reads the camera of a robot the pilot "
                    f"spawned (sim://); {uri} has none: give --camera URI\n"), err
+
+
+@pytest.mark.parametrize("where", ["-3,0,0", "-2.5,-1,-1.5", "-1e1,0,0"])
+def test_a_location_south_or_west_of_the_origin_is_a_value_not_an_option(where):
+    """A fleet's second vehicle spawns beside the pad, south or west of it as often as north or
+    east: ``--location -3,0,0`` was read as an unknown option ("argument --location: expected
+    one argument", exit 2) until 2026-11-27; a negative number alone always was a value."""
+    args = parser().parse_args(["pilot", "--location", where])
+    assert args.location == where
+    options = pilot_cli.airframe_options(args)
+    assert options.location_ned_m == tuple(float(v) for v in where.split(","))
