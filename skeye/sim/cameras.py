@@ -277,16 +277,17 @@ class CameraSystem:
         self._backlog = 0  # eager shots queued and not rendered
         self._newest_published: dict[str, int] = {}  # by camera: the newest frame out
         self._stop = threading.Event()
-        sim.xml_extras.append(self._xml)
-        sim.rebuild_hooks.append(self._on_rebuild)
-        sim.step_hooks.append(self._on_step)
-        sim.event_sources.append(self._next_event_step)
         self._reported = False
         # Frames waiting out their capture latency: (delivery sim time, seq, robot, cam, frame)
         self._pending: list[tuple[float, int, Any, CameraSpec, Frame]] = []
         self._pending_lock = threading.Lock()
         self._seq = 0
         self._last_delivery: dict[str, float] = {}
+        # Last: a real-time engine already running calls the hooks from the next step on
+        sim.xml_extras.append(self._xml)
+        sim.rebuild_hooks.append(self._on_rebuild)
+        sim.step_hooks.append(self._on_step)
+        sim.event_sources.append(self._next_event_step)
         self._worker = Worker(self._render_loop, "skeye-render", on_error=self._render_died)
         self._worker.start()
 
