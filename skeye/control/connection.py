@@ -162,6 +162,7 @@ class Connection:
         timeout_s: float = 10.0,
         queue_size: int = 256,
         motion: MotionConfig | None = None,
+        sync_clock: bool = False,
     ) -> None:
         _check_timeout(timeout_s)
         if queue_size < 1:
@@ -173,6 +174,9 @@ class Connection:
         )
         self.timeout_s = timeout_s
         self.motion_config = motion or MotionConfig()
+        self.sync_clock = sync_clock
+        """Lockstep: step in the simulator's clock barrier (``STEP {Sync true}``), in step
+        with the other clients that do (one per robot, as ``skeye pilot``); needs a robot."""
         self.mode = ""
         self.time_step_s = 0.0
         self.level = ""
@@ -484,7 +488,8 @@ class Connection:
 
     def _step(self, count: int) -> float:
         answer = self.request_message(
-            Step(count), timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
+            Step(count, sync=True if self.sync_clock else None),
+            timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
         t = res_time_s(answer)
         self.time_s = max(self.time_s, t)
         return t

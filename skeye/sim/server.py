@@ -41,6 +41,7 @@ import threading
 from collections.abc import Callable
 
 from skeye.peers import accept_failed, socket_peer_key
+from skeye.sim.clock_barrier import ClockBarrier
 from skeye.sim.limits import check_server_limits
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.session import (
@@ -103,6 +104,7 @@ class ControlServer:
             "camera": set_camera,
         }
         self.observers: list[LineObserver] = []
+        self.clock_barrier = ClockBarrier()  # STEP {Sync true}: engine thread only
         self._conn_ids = itertools.count(1)
         self._sessions: set[ClientSession] = set()
         self._lock = threading.Lock()
@@ -113,6 +115,7 @@ class ControlServer:
         self.host = host
         self.port = self._listener.getsockname()[1]
         self._accept_thread = Worker(self._accept_loop, "sim-accept").start()
+        runner.failure_listeners.append(self.clock_barrier.fail)
         runner.failure_listeners.append(self._engine_failed)
         if runner.error is not None:
             self._engine_failed(runner.error)

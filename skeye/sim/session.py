@@ -38,6 +38,7 @@ from typing import Any, Protocol
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.cameras import set_camera_fov
+from skeye.sim.clock_barrier import ClockBarrier
 from skeye.sim.engine import Simulation
 from skeye.sim.readings import Event, RobotStopped
 from skeye.sim.robot import Robot
@@ -206,6 +207,7 @@ class SessionHost(Protocol):
     idle_timeout_s: float
     command_timeout_s: float
     set_handlers: dict[str, Callable[[ClientSession, Set], None]]
+    clock_barrier: ClockBarrier
 
     def notify(self, conn_id: int, direction: str, data: bytes) -> None: ...
 
@@ -234,6 +236,7 @@ class ClientSession:
         self.conn_id = conn_id
         self.states = ConnectionStates()
         self.robot_name: str | None = None
+        self.drives_clock = False  # a member of the server's clock barrier (STEP {Sync true})
         # Set on the engine thread when it stops this connection's robot (RobotStopped); the
         # reader unbinds before its next command (_take_stop), so a new INIT is accepted.
         self._robot_stopped: tuple[str, str] | None = None
@@ -378,6 +381,8 @@ class ClientSession:
         return True
 
     def _finish(self) -> None:
+        if self.drives_clock:  # the other members step on without it
+            self._leave_clock()
         if self.robot_name is not None:
             name = self.robot_name
             self.robot_name = None
@@ -629,17 +634,26 @@ class ClientSession:
         connection's end and the session finishes as for any client gone."""
         count = command.count
         runner = self.server.runner
+        barrier = self.server.clock_barrier
         gone = threading.Event()
+
+        def answer(sim: Simulation) -> None:
+            self.send(encode(Res("STEP", time_s=sim.time_s)))
 
         def do(sim: Simulation) -> None:
             sim.step(count, gone.is_set)
             if not gone.is_set():
-                self.send(encode(Res("STEP", time_s=sim.time_s)))
+                answer(sim)
+            if barrier.members:  # members whose boundary these steps passed
+                barrier.advance(sim)
 
         if runner.mode != "lockstep":
             raise RemoteProtocolError(
                 "STEP works only when the simulator runs with --mode lockstep"
             )
+        if command.sync:
+            self._step_in_sync(count, answer, gone)
+            return
         fut = runner.submit(do, fatal=True)
         try:  # most STEPs are short: no watching
             fut.result(STEP_WATCH_AFTER_S)
@@ -648,7 +662,39 @@ class ClientSession:
             pass
         self._watch_while(fut, gone, STEP_TIMEOUT_S)
 
-    def _watch_while(self, fut: Future[None], gone: threading.Event, timeout_s: float) -> None:
+    def _step_in_sync(self, count: int, answer: Callable[[Simulation], None],
+                      gone: threading.Event) -> None:
+        """``STEP {Sync true}``: this connection's robot steps in the clock barrier
+        (:mod:`skeye.sim.clock_barrier`); the answer goes out when the world reaches this
+        connection's next boundary, once every member has asked for its own."""
+        if not self.drives_clock:  # only a connection flying a robot joins (it stays a member
+            self._robot("STEP with Sync")  # if the robot is stopped: a crash, a reset)
+        runner = self.server.runner
+        barrier = self.server.clock_barrier
+        reached: Future[None] = Future()
+        self.drives_clock = True
+        asked = runner.submit(
+            lambda sim: barrier.step(sim, self.conn_id, count, answer, gone.is_set, reached),
+            fatal=True)
+        asked.add_done_callback(lambda f: _pass_failure(f, reached))
+        try:  # most are answered at once (one pilot; or the last of the members to ask)
+            reached.result(STEP_WATCH_AFTER_S)
+            return
+        except TimeoutError:
+            pass
+        self._watch_while(reached, gone, STEP_TIMEOUT_S, on_gone=self._leave_clock)
+
+    def _leave_clock(self) -> None:
+        """Leave the clock barrier (its STEP, if one waits, ends unanswered)."""
+        conn_id, barrier = self.conn_id, self.server.clock_barrier
+        self.drives_clock = False
+        try:
+            self.server.runner.submit(lambda sim: barrier.leave(sim, conn_id))
+        except SkeyeError:
+            pass
+
+    def _watch_while(self, fut: Future[None], gone: threading.Event, timeout_s: float, *,
+                     on_gone: Callable[[], None] | None = None) -> None:
         """Wait for ``fut`` (a STEP on the engine thread, at most ``timeout_s`` to be taken up
         and as long again to end, as :meth:`SimulationRunner.call`), setting ``gone`` when the
         client's end of the connection closes. A pipe written from the future's done callback
@@ -681,6 +727,8 @@ class ClientSession:
                     if not gone.is_set():
                         log.info("client %s went away during its STEP; stopping it", self.peer)
                         gone.set()
+                        if on_gone is not None:
+                            on_gone()
                     poller.unregister(self.sock)  # reported for good: wait for the engine
             fut.result()  # done: its exception, if any (an engine failure), goes on
         finally:
@@ -694,6 +742,14 @@ class ClientSession:
         if self.server.runner.error is not None:
             raise self.server.runner.error  # no pretending: a dead engine's clock is not time
         self.send(encode(Res("PING", id=ping.id, time_s=self.server.runner.sim.time_s)))
+
+
+def _pass_failure(asked: Future[None], reached: Future[None]) -> None:
+    """A barrier STEP whose task failed or was refused (the engine died, the simulator is
+    stopping) ends with that error, unless the barrier has ended it already."""
+    exc = asked.exception() if not asked.cancelled() else None
+    if exc is not None and reached.set_running_or_notify_cancel():
+        reached.set_exception(exc)
 
 
 _HANDLERS: dict[str, Callable[[ClientSession, Message, Any], None]] = {

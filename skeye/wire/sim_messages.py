@@ -165,10 +165,12 @@ class Reset:
 
 @dataclass(frozen=True)
 class Step:
-    """``STEP``: advance a lockstep simulator ``count`` physics steps."""
+    """``STEP``: advance a lockstep simulator ``count`` physics steps; with ``sync``, in step
+    with the other connections that drive the clock so (see skeye.sim.clock_barrier)."""
 
     WORD: ClassVar[str] = "STEP"
     count: int = field(default=1, metadata=wire("Count", "int", min_value=1, max_value=10_000_000))
+    sync: bool | None = field(default=None, metadata=wire("Sync", "bool"))
 
 
 @dataclass(frozen=True)
