@@ -58,6 +58,9 @@ log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 3000
 DEFAULT_IMAGE_PORT = 5003
+SYNC_STEP_TIMEOUT_S = 3600.0
+"""How long a ``STEP {Sync true}`` waits for its answer: the other members' steps come first (the
+simulator's own limit for a STEP to be taken up, skeye.sim.session.STEP_TIMEOUT_S)."""
 _STOP = b""
 _RECV_WAIT_S = 1.0  # the reader's longest wait in one recv (a closed link wakes it at once)
 
@@ -176,7 +179,9 @@ class Connection:
         self.motion_config = motion or MotionConfig()
         self.sync_clock = sync_clock
         """Lockstep: step in the simulator's clock barrier (``STEP {Sync true}``), in step
-        with the other clients that do (one per robot, as ``skeye pilot``); needs a robot."""
+        with the other clients that do (one per robot, as ``skeye pilot --lockstep-sync``);
+        needs a robot, and each such connection stepped from a thread of its own: a STEP
+        waits for every other member's (up to ``SYNC_STEP_TIMEOUT_S``)."""
         self.mode = ""
         self.time_step_s = 0.0
         self.level = ""
@@ -487,9 +492,11 @@ class Connection:
         self.request_message(Set("Wind", mode=mode, params=params or None))
 
     def _step(self, count: int) -> float:
-        answer = self.request_message(
-            Step(count, sync=True if self.sync_clock else None),
-            timeout_s=max(self.timeout_s, count * self.time_step_s * 20))
+        timeout_s = max(self.timeout_s, count * self.time_step_s * 20)
+        if self.sync_clock:  # the other members' steps come first, however long they take
+            timeout_s = max(timeout_s, SYNC_STEP_TIMEOUT_S)
+        answer = self.request_message(Step(count, sync=True if self.sync_clock else None),
+                                      timeout_s=timeout_s)
         t = res_time_s(answer)
         self.time_s = max(self.time_s, t)
         return t

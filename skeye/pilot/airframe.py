@@ -223,6 +223,7 @@ class AirframeOptions:
     timeout_s: float = 10.0
     frozen_timeout_s: float = 5.0
     robot_dirs: tuple[str, ...] = ()  # where robot files outside the built-ins are found
+    sync_clock: bool = False  # lockstep sim://: step in the clock barrier (--lockstep-sync)
 
 
 @runtime_checkable

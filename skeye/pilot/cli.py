@@ -130,6 +130,7 @@ def airframe_options(args: argparse.Namespace) -> AirframeOptions:
         robot=args.robot, name=args.name, start=args.start, location_ned_m=location,
         images=args.images, timeout_s=args.timeout, frozen_timeout_s=args.sim_frozen_timeout,
         robot_dirs=(args.robot_dir,) if args.robot_dir else (),
+        sync_clock=args.lockstep_sync,
     )
 
 
@@ -878,6 +879,13 @@ def register(subparsers: Any) -> None:
         type=cliargs.non_negative_float,
         default=1.0,
         help="lockstep sim: sim seconds per wall second (0 = unpaced)",
+    )
+    p.add_argument(
+        "--lockstep-sync",
+        action="store_true",
+        help="lockstep sim: keep the clock together with the other pilots that give it, one "
+        "per robot (STEP {Sync true}; without it several pilots' steps add up); a pilot that "
+        "stops stepping holds the others (docs/pilot.md, Several vehicles)",
     )
     p.add_argument(
         "--ground-clock",

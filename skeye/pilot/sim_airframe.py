@@ -404,9 +404,8 @@ def open_sim_airframe(uri: str, options: AirframeOptions) -> SimAirframe:
     def attach() -> tuple[Connection, Robot]:
         """Connect and spawn: at start, and again whenever the simulator comes back after it
         was lost (the pilot re-attaches: :attr:`SimAirframe.needs_attach`)."""
-        # sync_clock: in lockstep, one pilot per robot keeps the clock together with the others
         sim = connect(address, images=options.images, timeout_s=options.timeout_s,
-                      sync_clock=True)
+                      sync_clock=options.sync_clock)
         try:
             if options.location_ned_m is not None:
                 robot = sim.spawn(options.robot, location_ned_m=options.location_ned_m,

@@ -8,7 +8,8 @@ boundary (now + ``n`` steps), and the world advances, to the nearest such bounda
 every member has asked; each member's answer goes out when the world reaches its boundary. With
 one member this is a plain ``STEP``, step for step. A member that stops asking holds the
 others, as PX4 instances hold Gazebo's lockstep world; a member leaves when its connection
-ends (or it goes away during its ``STEP``). Plain ``STEP``s of other connections still advance
+ends (or it goes away during its ``STEP``), and a STEP not answered within the server's limit
+is withdrawn. Plain ``STEP``s of other connections still advance
 the world; a member whose boundary they pass is answered then.
 
 Everything here runs on the engine thread (``SimulationRunner`` tasks), so it needs no lock.
@@ -84,10 +85,19 @@ class ClockBarrier:
                 return
             sim.step(min(ask.target for ask in asks) - sim.steps, partial(_any_gone, asks))
 
+    def withdraw(self, sim: Simulation, conn_id: int, future: Future[None]) -> None:
+        """The STEP of ``future`` was given up by its reader (the members did not all ask in
+        time): it no longer waits, and the world will not step to its boundary."""
+        ask = self._members.get(conn_id)
+        if ask is not None and ask.future is future:
+            self._members[conn_id] = None
+
     def fail(self, exc: BaseException) -> None:
-        """The engine died: every waiting STEP ends with its error."""
+        """The engine died: every waiting STEP ends with its error (one whose own task failed
+        has it already)."""
         for ask in self._members.values():
-            if ask is not None and ask.future.set_running_or_notify_cancel():
+            if (ask is not None and not ask.future.done()
+                    and ask.future.set_running_or_notify_cancel()):
                 ask.future.set_exception(exc)
         self._members.clear()
 

@@ -381,8 +381,6 @@ class ClientSession:
         return True
 
     def _finish(self) -> None:
-        if self.drives_clock:  # the other members step on without it
-            self._leave_clock()
         if self.robot_name is not None:
             name = self.robot_name
             self.robot_name = None
@@ -390,6 +388,8 @@ class ClientSession:
                 self.server.runner.submit(lambda sim: sim.remove(name))
             except SkeyeError:
                 pass
+        if self.drives_clock:  # the others step on without it (and without its robot: after)
+            self._leave_clock()
         self.outbox.put_nowait(_CLOSE)  # the writer sends what is queued, then stops
         self.server.forget(self)
         if not self._writer.join(CLOSE_LINGER_S):
@@ -682,14 +682,23 @@ class ClientSession:
             return
         except TimeoutError:
             pass
-        self._watch_while(reached, gone, STEP_TIMEOUT_S, on_gone=self._leave_clock)
+        try:
+            self._watch_while(reached, gone, STEP_TIMEOUT_S, on_gone=self._leave_clock)
+        except TimeoutError:
+            if not reached.cancelled():
+                raise  # its own steps took too long, as a plain STEP's
+            conn_id = self.conn_id
+            runner.submit(lambda sim: barrier.withdraw(sim, conn_id, reached))
+            raise TimeoutError(
+                f"the other clients driving the clock did not all ask within "
+                f"{STEP_TIMEOUT_S:g} s; this STEP is withdrawn, not done") from None
 
     def _leave_clock(self) -> None:
         """Leave the clock barrier (its STEP, if one waits, ends unanswered)."""
         conn_id, barrier = self.conn_id, self.server.clock_barrier
         self.drives_clock = False
-        try:
-            self.server.runner.submit(lambda sim: barrier.leave(sim, conn_id))
+        try:  # fatal: leaving may step the others' world
+            self.server.runner.submit(lambda sim: barrier.leave(sim, conn_id), fatal=True)
         except SkeyeError:
             pass
 
@@ -748,7 +757,7 @@ def _pass_failure(asked: Future[None], reached: Future[None]) -> None:
     """A barrier STEP whose task failed or was refused (the engine died, the simulator is
     stopping) ends with that error, unless the barrier has ended it already."""
     exc = asked.exception() if not asked.cancelled() else None
-    if exc is not None and reached.set_running_or_notify_cancel():
+    if exc is not None and not reached.done() and reached.set_running_or_notify_cancel():
         reached.set_exception(exc)
 
 

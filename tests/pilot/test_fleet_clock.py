@@ -1,5 +1,5 @@
-"""Two ``skeye pilot`` processes on one lockstep simulator keep the clock together: each steps
-its robot's control period with ``STEP {Sync true}`` (skeye.sim.clock_barrier), so the world
+"""Two ``skeye pilot --lockstep-sync`` on one lockstep simulator keep the clock together: each
+steps its robot's control period with ``STEP {Sync true}`` (skeye.sim.clock_barrier), so the world
 advances once for both, and each pilot's steps add up to the world's own. With plain STEPs they
 added up to twice the world's: sim time ran at twice each pilot's pace, and each robot's
 control ticked every other period of its own."""
@@ -35,7 +35,7 @@ def test_two_pilots_in_lockstep_each_step_as_far_as_the_world(tmp_path) -> None:
             err = stack.enter_context(open(tmp_path / f"{name}.err", "w"))
             pilot = subprocess.Popen(
                 [sys.executable, "-m", "skeye.cli", "pilot", "--sim", handle.address, "--port",
-                 "0", "--name", name, *where, "--lockstep-rate", "5"],
+                 "0", "--name", name, *where, "--lockstep-rate", "5", "--lockstep-sync"],
                 stdout=subprocess.DEVNULL, stderr=err, stdin=subprocess.DEVNULL)
             stack.callback(pilot.wait, 30)
             stack.callback(pilot.send_signal, signal.SIGINT)

@@ -81,3 +81,55 @@ def test_sync_needs_a_robot_and_a_lone_member_steps_as_a_plain_step() -> None:
         finally:
             a.close()
             watcher.close()
+
+
+def test_an_engine_failure_ends_a_waiting_members_step_with_an_error() -> None:
+    """The engine dies in one member's steps while another waits: the waiting STEP is answered
+    with the failure, not left for the hour a STEP may wait."""
+    with running_sim() as server:
+        barrier = server.clock_barrier
+        a, b = _flyer(server.port, "A", 0.0), _flyer(server.port, "B", 3.0)
+        try:
+            a.send("STEP {Count 10} {Sync true}")
+            assert _time(_res(a)) == pytest.approx(0.010)
+            b.send("STEP {Count 10} {Sync true}")
+            assert wait_for(lambda: barrier.waiting == 1, 60)
+
+            def fault(sim) -> None:
+                raise RuntimeError("injected engine fault")
+
+            server.runner.sim.step_hooks.append(fault)
+            a.send("STEP {Count 10} {Sync true}")
+            said = b.read_until(lambda m: m.type == "ERR", timeout_s=60)[1]
+            assert "injected engine fault" in said.get("Reason"), said
+            # both sessions end (the server ends them all): B's reader is not left waiting
+            assert wait_for(lambda: server.client_count == 0, 60), server.client_count
+        finally:
+            a.close()
+            b.close()
+
+
+def test_a_step_the_others_never_let_through_is_withdrawn(monkeypatch) -> None:
+    """Past the server's STEP limit (an hour; here a second) the waiting STEP is refused and
+    withdrawn: the world no longer stops at its boundary."""
+    import skeye.sim.session
+
+    monkeypatch.setattr(skeye.sim.session, "STEP_TIMEOUT_S", 1.0)
+    with running_sim() as server:
+        barrier = server.clock_barrier
+        a, b = _flyer(server.port, "A", 0.0), _flyer(server.port, "B", 3.0)
+        try:
+            a.send("STEP {Count 10} {Sync true}")
+            assert _time(_res(a)) == pytest.approx(0.010)
+            b.send("STEP {Count 10} {Sync true}")  # A never asks again in time
+            refused = _res(b)
+            assert refused.type == "ERR" and "withdrawn, not done" in refused.get("Reason"), (
+                refused)
+            assert wait_for(lambda: barrier.waiting == 0, 60)
+            a.send("STEP {Count 100} {Sync true}")  # B is a member not waiting: A waits for it
+            assert wait_for(lambda: barrier.waiting == 1, 60)
+            b.send("STEP {Count 200} {Sync true}")
+            assert _time(_res(a)) == pytest.approx(0.110)  # not stopped at B's withdrawn 0.020
+        finally:
+            a.close()
+            b.close()
