@@ -256,8 +256,11 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         if shape != (self.num_envs, 4):  # (no silent reshaping of a flat batch)
             raise InvalidArgument(f"the actions are one row of 4 per vehicle, shape "
                                   f"({self.num_envs}, 4), got {shape}")
-        for row in actions:  # every row checked before any vehicle is touched
-            action_values(row)
+        for i, row in enumerate(actions):  # every row checked before any vehicle is touched
+            try:
+                action_values(row)
+            except InvalidArgument as exc:  # which of the num_envs rows it was
+                raise InvalidArgument(f"vehicle {i} (row {i} of the actions): {exc}") from None
         if self._cut_short:
             raise ResetNeeded(f"{self._cut_short}: call reset() before step()")
         restarted = self._autoreset.copy()

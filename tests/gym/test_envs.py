@@ -444,6 +444,28 @@ def test_the_batched_environment_refuses_actions_of_another_shape_touching_no_ve
         envs.close()
 
 
+@pytest.mark.parametrize("actions,message", [
+    ([[0, 0, 0, 0], [0, 0, 0, 0], [0, np.nan, 0, 0]],
+     r"vehicle 2 \(row 2 of the actions\): an action must be finite"),
+    ([[0, 0, 0, 0], ["a"] * 4, [0, 0, 0, 0]],
+     r"vehicle 1 \(row 1 of the actions\): an action is 4 real numbers"),
+])
+def test_the_batched_environment_names_the_vehicle_of_a_bad_action_row(
+        actions: list, message: str) -> None:
+    """A NaN in one row of a (num_envs, 4) batch was refused as 'an action must be finite',
+    naming no row: with 16 or 256 vehicles the user could not tell whose action was bad."""
+    from skeye.errors import InvalidArgument
+
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=3,
+                              vectorization_mode="vector_entry_point")
+    try:
+        envs.reset(seed=0)
+        with pytest.raises(InvalidArgument, match=message):
+            envs.step(actions)
+    finally:
+        envs.close()
+
+
 @pytest.mark.parametrize("env_id,kwargs", [
     ("skeye/Hover-v0", {}),
     ("skeye/PadLanding-v0", {"camera": "ideal"}),
