@@ -193,6 +193,12 @@ class Vehicle:
                                rotation_rpy_rad=(0.0, 0.0, yaw_rad))
         # The robot's status as it stands now (the STA a client finds at spawn): flying.
         self.view.sink([self.robot.status(sim.time_s)])
+        # Its camera's pixel noise and latency jitter its own: drawn from the flight's seed and
+        # this spawn, not only the camera model's noise_seed and the frame number (every
+        # vehicle of a world, and every episode whatever its seed, drew the same noise).
+        flight.spawns += 1
+        for cam in self.robot.cameras:
+            cam.noise_stream = (flight.seed, flight.spawns)
         self.airframe = InProcessAirframe(sim, name, self.view)
         self.spawn_pose = Pose(sim.time_s, *location_ned_m, 0.0, 0.0, wrap_pi(yaw_rad))
         below = sim.ray_distance(name, location_ned_m, (0.0, 0.0, 1.0), 1000.0)
@@ -312,6 +318,8 @@ class Flight:
         settings = setup.settings
         self.setup = setup
         self.settings = settings
+        self.seed = seed
+        self.spawns = 0  # vehicles spawned so far, each its own camera noise (Vehicle)
         self.world = setup.world
         self.config = setup.config
         self.fov_h_rad = setup.fov_h_rad

@@ -80,6 +80,10 @@ class CameraSpec:
     lens: Lens | None = None  # its image path; None: the ideal pinhole, rendered as is
     auto_exposure: AutoExposure | None = None  # its exposure state (with a lens)
     captured: int = 0  # frames taken (their numbers), rendered or not
+    # Mixed into the seeds of its pixel noise and latency jitter with the model's noise_seed
+    # (none by default: every camera of a model draws alike); skeye.gym gives each vehicle's
+    # camera its flight's seed and the vehicle's spawn, so that no two share noise.
+    noise_stream: tuple[int, ...] = ()
     rendered: int = 0  # frames rendered
     due: int = 0
     type_name: str = field(default="Camera", init=False)
@@ -500,7 +504,7 @@ class CameraSystem:
         assert model is not None
         jitter = 0.0
         if model.latency_jitter_s > 0:
-            rng = np.random.default_rng((model.noise_seed, 1, number))
+            rng = np.random.default_rng((model.noise_seed, 1, *cam.noise_stream, number))
             jitter = float(rng.uniform(-model.latency_jitter_s, model.latency_jitter_s))
         when = max(capture_s + model.latency_s + jitter, self._last_delivery.get(key, 0.0))
         self._last_delivery[key] = when

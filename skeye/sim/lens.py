@@ -146,10 +146,12 @@ class Lens:
         return self.process(render, motion, frame_number, exposure, render_gain).rgb
 
     def process(self, render: np.ndarray, motion: Motion, frame_number: int,
-                exposure: Exposure | None = None, render_gain: float = 1.0) -> LensOutput:
+                exposure: Exposure | None = None, render_gain: float = 1.0,
+                stream: tuple[int, ...] = ()) -> LensOutput:
         """The frame from the wide render (RGB uint8) taken with ``exposure`` (the model's
         nominal settings if None); ``render_gain`` scales the render's values into signal
-        (the simulator renders with dimmed lights for headroom, skeye.sim.cameras)."""
+        (the simulator renders with dimmed lights for headroom, skeye.sim.cameras);
+        ``stream``: the camera's own noise (:meth:`add_noise`)."""
         model = self.model
         if exposure is None:
             exposure = nominal(model)
@@ -183,7 +185,7 @@ class Lens:
         # meters, on every 4th pixel of every 4th row.
         mean_dn = float(np.mean(image[::4, ::4].reshape(-1, 3) @ _LUMA_RGB))
         if model.noisy:
-            image = self.add_noise(image, frame_number, exposure.gain)
+            image = self.add_noise(image, frame_number, exposure.gain, stream)
         jpeg: bytes | None = None
         if model.jpeg_quality:
             bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
@@ -202,15 +204,17 @@ class Lens:
             return image
         return cv2.convertScaleAbs(image, alpha=scale)
 
-    def add_noise(self, image: np.ndarray, frame_number: int, gain: float | None = None
-                  ) -> np.ndarray:
+    def add_noise(self, image: np.ndarray, frame_number: int, gain: float | None = None,
+                  stream: tuple[int, ...] = ()) -> np.ndarray:
         """Shot and read noise (EMVA 1288) at ``gain`` (the model's if None), deterministic in
-        (noise_seed, frame_number)."""
+        (noise_seed, stream, frame_number). The lens is shared by every camera of its model:
+        ``stream`` (whole numbers >= 0, none by default) tells one camera's noise from
+        another's (:attr:`skeye.sim.cameras.CameraSpec.noise_stream`)."""
         n = image.size
         if self._bank is None or self._bank.size < n + _BANK_SPARE:
             rng = np.random.default_rng(self.model.noise_seed)
             self._bank = rng.standard_normal(n + _BANK_SPARE, dtype=np.float32)
-        offset = int(np.random.default_rng((self.model.noise_seed, frame_number))
+        offset = int(np.random.default_rng((self.model.noise_seed, *stream, frame_number))
                      .integers(0, _BANK_SPARE))
         noise = self._bank[offset:offset + n].reshape(image.shape)
         sigma = cv2.LUT(image, self._sigma_lut(self.model.gain if gain is None else gain))

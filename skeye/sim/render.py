@@ -167,7 +167,7 @@ class ShotRenderer:
             return rgb, None, -1.0
         ae = cam.auto_exposure
         exposure = ae.exposure_at(state.time_s) if ae is not None else None
-        out = lens.process(rgb, motion, number, exposure, HEADROOM)
+        out = lens.process(rgb, motion, number, exposure, HEADROOM, cam.noise_stream)
         if ae is not None and exposure is not None:
             ae.metered(state.time_s, exposure, out.mean_dn)
         return out.rgb, out.jpeg, out.mean_dn

@@ -883,3 +883,59 @@ def test_a_step_cut_short_by_an_exception_needs_a_reset(mode: str) -> None:
         assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
     finally:
         env.close()
+
+
+def _record_camera_noise(monkeypatch: pytest.MonkeyPatch) -> dict[tuple[str, int], bytes]:
+    """The noise each camera's lens adds to a mid-grey frame in place of each frame it takes,
+    by (camera, frame number), with the arguments the renderer gave it (the frames themselves
+    are left as they were)."""
+    from skeye.sim.lens import Lens
+    from skeye.sim.render import ShotRenderer
+
+    add_noise, render = Lens.add_noise, ShotRenderer.render
+    noises: dict[tuple[str, int], bytes] = {}
+    rendering: list[str] = []  # the camera whose frame the render thread is at
+
+    def recording_render(self: ShotRenderer, state: Any, camera: str, *args: Any) -> Any:
+        rendering[:] = [camera]
+        return render(self, state, camera, *args)
+
+    def recording_add_noise(self: Lens, image: np.ndarray, frame_number: int, *args: Any,
+                            **kwargs: Any) -> np.ndarray:
+        grey = np.full_like(image, 128)
+        noise = add_noise(self, grey, frame_number, *args, **kwargs).astype(np.int16) - 128
+        noises[(rendering[0], frame_number)] = noise.tobytes()
+        return add_noise(self, image, frame_number, *args, **kwargs)
+
+    monkeypatch.setattr(ShotRenderer, "render", recording_render)
+    monkeypatch.setattr(Lens, "add_noise", recording_add_noise)
+    return noises
+
+
+def test_every_vehicle_and_seed_has_its_own_camera_noise(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The webcam's pixel noise was drawn from (noise_seed, frame number) alone: the vehicles of
+    the batched environment took the same noise in the same frame, and every reset(seed=s),
+    whatever s, the same noise again (so did each environment of a SyncVectorEnv). It now
+    follows the flight's seed and the vehicle: a seed still repeats its images bit for bit."""
+    noises = _record_camera_noise(monkeypatch)
+    envs = gymnasium.make_vec("skeye/PadLanding-v0", num_envs=2,
+                              vectorization_mode="vector_entry_point")
+    runs = []
+    try:
+        for seed in (0, 1, 0):
+            noises.clear()
+            envs.reset(seed=seed)
+            for _ in range(4):
+                envs.step(np.zeros((2, 4), np.float32))
+            runs.append(dict(noises))
+    finally:
+        envs.close()
+    for run in runs:  # no two vehicles share noise
+        v0, v1 = "robot:V0:cam:Down", "robot:V1:cam:Down"  # the vehicles' MuJoCo cameras
+        both = {n for camera, n in run if camera == v0} & {n for camera, n in run if camera == v1}
+        assert both  # frames of the same number, rendered for each vehicle
+        for n in both:
+            assert run[(v0, n)] != run[(v1, n)]
+    assert runs[0] == runs[2]  # the same seed, the same noise
+    common = set(runs[0]) & set(runs[1])
+    assert common and all(runs[0][k] != runs[1][k] for k in common)  # another seed, other noise
