@@ -218,6 +218,13 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
                 f"the batched vector environment's vehicles fly in one world, seeded by one "
                 f"number: seed must be a whole number or None, got {seed!r} (a seed per "
                 f"environment: vectorization_mode='sync' or 'async')")
+        if isinstance(options, dict) and "reset_mask" in options:
+            raise ConfigError(
+                f"the batched vector environment offers no partial reset "
+                f"(options['reset_mask'], got {options['reset_mask']!r}): a vehicle whose "
+                f"episode ended is respawned at the next step (next-step autoreset), and reset() "
+                f"starts every vehicle afresh; for partial resets, use vectorization_mode='sync' "
+                f"or 'async'")
         if options:
             raise ConfigError(
                 f"the batched vector environment takes no reset options (each vehicle starts "

@@ -665,6 +665,22 @@ def test_the_batched_environment_refuses_reset_options_and_seed_lists_saying_why
         envs.close()
 
 
+def test_the_batched_environment_says_it_offers_no_partial_reset() -> None:
+    """Gymnasium 1.x's vector environments reset only some of their environments given
+    options={"reset_mask": ...}; the native one refused that as a reset option that would fix
+    the vehicles' starts ('each vehicle starts in its own cell'), which is not what was asked."""
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=2,
+                              vectorization_mode="vector_entry_point")
+    try:
+        envs.reset(seed=0)
+        with pytest.raises(ConfigError, match=r"no partial reset \(options\['reset_mask'\], got "
+                                              r"array.*next step.*'sync'"):
+            envs.reset(options={"reset_mask": np.array([True, False])})
+        envs.step(np.zeros((2, 4), np.float32))  # the refused reset changed nothing
+    finally:
+        envs.close()
+
+
 def test_the_environments_table_gives_the_starts_and_targets_the_tasks_draw() -> None:
     """docs/gym.md said Hover starts 'within 0.5 m' of its point and GoTo's target is 'up to 4 m
     away horizontally': the tasks draw each of north and east alone within those figures (a
