@@ -162,6 +162,9 @@ def run(args: argparse.Namespace) -> int:
     elif args.images is not None and airframe_scheme(airframe_uri) in REAL_VEHICLES:
         # said before the vehicle (a real board, a flight controller) is opened
         return _error(images_problem(airframe_uri))
+    if args.lockstep_sync and airframe_scheme(airframe_uri) in REAL_VEHICLES:
+        return _error(f"--lockstep-sync keeps a lockstep simulator's clock with the other "
+                      f"pilots of its robots (sim://); {airframe_uri} steps no simulator")
     has_camera = args.images is not None or camera_uri is not None
     calibration = None
     if args.calibration is not None:

@@ -511,3 +511,20 @@ def test_a_location_south_or_west_of_the_origin_is_a_value_not_an_option(where):
     assert args.location == where
     options = pilot_cli.airframe_options(args)
     assert options.location_ned_m == tuple(float(v) for v in where.split(","))
+
+
+
+def test_lockstep_sync_on_a_real_vehicle_is_refused(capsys):
+    """``--lockstep-sync`` is about a lockstep simulator's clock: on an LL board it would do
+    nothing, so it is refused before the vehicle is opened (a closed port: without the check,
+    status 4 after the wait)."""
+    from skeye.cli import main
+
+    uri = f"asctec-ll://tcp/127.0.0.1:{_unused_port()}"
+    status = main(["pilot", "--airframe", uri, "--port", "0", "--lockstep-sync",
+                   "--timeout", "30"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err == (f"skeye pilot: error: --lockstep-sync keeps a lockstep simulator's clock "
+                   f"with the other pilots of its robots (sim://); {uri} steps no "
+                   "simulator\n"), err
