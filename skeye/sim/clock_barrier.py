@@ -9,8 +9,8 @@ every member has asked; each member's answer goes out when the world reaches its
 one member this is a plain ``STEP``, step for step. A member that stops asking holds the
 others, as PX4 instances hold Gazebo's lockstep world; a member leaves when its connection
 ends (or it goes away during its ``STEP``), and a STEP not answered within the server's limit
-is withdrawn. Plain ``STEP``s of other connections still advance
-the world; a member whose boundary they pass is answered then.
+is withdrawn. Plain ``STEP``s of other connections still advance the world; a member whose
+boundary they pass is answered then.
 
 Everything here runs on the engine thread (``SimulationRunner`` tasks), so it needs no lock.
 """
@@ -96,14 +96,20 @@ class ClockBarrier:
         """The engine died: every waiting STEP ends with its error (one whose own task failed
         has it already)."""
         for ask in self._members.values():
-            if (ask is not None and not ask.future.done()
-                    and ask.future.set_running_or_notify_cancel()):
-                ask.future.set_exception(exc)
+            if ask is not None:
+                fail_step(ask.future, exc)
         self._members.clear()
 
 
 def _any_gone(asks: list[_Ask]) -> bool:
     return any(ask.gone() for ask in asks)
+
+
+def fail_step(future: Future[None], exc: BaseException) -> None:
+    """End a STEP's future with ``exc``, unless it has ended already (answered, failed, or
+    given up by its reader)."""
+    if not future.done() and future.set_running_or_notify_cancel():
+        future.set_exception(exc)
 
 
 def _end(future: Future[None]) -> None:

@@ -38,7 +38,7 @@ from typing import Any, Protocol
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.sim.cameras import set_camera_fov
-from skeye.sim.clock_barrier import ClockBarrier
+from skeye.sim.clock_barrier import ClockBarrier, fail_step
 from skeye.sim.engine import Simulation
 from skeye.sim.readings import Event, RobotStopped
 from skeye.sim.robot import Robot
@@ -757,8 +757,8 @@ def _pass_failure(asked: Future[None], reached: Future[None]) -> None:
     """A barrier STEP whose task failed or was refused (the engine died, the simulator is
     stopping) ends with that error, unless the barrier has ended it already."""
     exc = asked.exception() if not asked.cancelled() else None
-    if exc is not None and not reached.done() and reached.set_running_or_notify_cancel():
-        reached.set_exception(exc)
+    if exc is not None:
+        fail_step(reached, exc)
 
 
 _HANDLERS: dict[str, Callable[[ClientSession, Message, Any], None]] = {
