@@ -186,6 +186,10 @@ class Connection:
         self.time_step_s = 0.0
         self.level = ""
         self.time_s = 0.0
+        self.silent_s = 0.0
+        """How long the reader has waited, without a byte from the simulator, since the last
+        bytes arrived: counted only while it waits in ``recv``, so a pause of this process (a
+        busy machine) is never taken for a silent simulator."""
         self.unmatched_errors: list[Message] = []
         self.close_unanswered: str | None = None
         """Set by :meth:`close` when the simulator did not close its end in time."""
@@ -366,6 +370,7 @@ class Connection:
         error: SkeyeError
         try:
             while True:
+                waited_from = time.monotonic()
                 try:
                     data = self._link.recv(_RECV_WAIT_S)
                 except PeerClosed:
@@ -378,7 +383,9 @@ class Connection:
                     error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
                     break
                 if not data:
+                    self.silent_s += time.monotonic() - waited_from
                     continue
+                self.silent_s = 0.0
                 for event in decoder.feed(data):
                     if isinstance(event, LineError):
                         log.warning("simulator %s sent a bad line: %s: %r", self.peer,

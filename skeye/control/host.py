@@ -26,6 +26,8 @@ class RobotHost(Protocol):
     timeout_s: float
     time_s: float
     """The newest sim time seen on the link."""
+    silent_s: float
+    """How long the link's reader has waited without a byte from the simulator."""
     images_address: tuple[str, int] | None
     clock: Clock
 

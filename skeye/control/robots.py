@@ -20,7 +20,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
@@ -59,6 +58,10 @@ from .robot_sensors import FEEDBACK_TYPES, RobotSensors
 from .sensors import PoseReading, Sensor, StatusSensor
 
 log = logging.getLogger(__name__)
+
+STALE_FEEDBACK_SIM_S = 1.0
+"""Sim seconds the feedback sensor's newest reading may lag the connection's sim time (the
+newest time any line carried) before a motion fails on it."""
 
 
 class Robot(RobotSensors):
@@ -269,19 +272,25 @@ class Robot(RobotSensors):
         reading: PoseReading | None = sensor.latest
         if reading is None:
             raise LinkTimeout(f"{self.name}: no {feedback} reading yet")
-        self._check_fresh(sensor, reading.time_s, feedback)
+        self._check_fresh(reading.time_s, feedback)
         return NavState(reading.time_s, reading.position_ned_m, reading.rpy_rad[2],
                         reading.velocity_ned_m_s)
 
-    def _check_fresh(self, sensor: Sensor[Any], time_s: float, what: str) -> None:
-        if self.connection.mode == "lockstep":
-            age = self.connection.time_s - time_s
-            if age > 1.0:
-                raise LinkTimeout(f"{self.name}: the {what} reading is {age:.2f} s old (sim time)")
-        else:
-            seen = sensor.last_update_monotonic_s
-            if seen is not None and time.monotonic() - seen > 2.0:
-                raise LinkTimeout(f"{self.name}: no {what} reading for 2 s")
+    def _check_fresh(self, time_s: float, what: str) -> None:
+        """Feedback is stale when it lags the simulator's clock by more than
+        ``STALE_FEEDBACK_SIM_S`` of sim time (the sensor stopped while the world went on), or,
+        in realtime, when the simulator has sent nothing at all for the connection's
+        ``timeout_s``. A simulator that slips its clock (a starved process) freezes the world
+        with it, so wall-clock age alone says nothing about the vehicle."""
+        age = self.connection.time_s - time_s
+        if age > STALE_FEEDBACK_SIM_S:
+            raise LinkTimeout(f"{self.name}: the {what} reading is {age:.2f} s old (sim time)")
+        if self.connection.mode != "lockstep":
+            silent = self.connection.silent_s
+            if silent >= self.connection.timeout_s:
+                raise LinkTimeout(
+                    f"{self.name}: the simulator has sent nothing for {silent:.1f} s "
+                    f"(the connection's timeout_s is {self.connection.timeout_s:g} s)")
 
     # -- the control tick (clock thread or stepping loop) ----------------------------------
     def control_tick(self) -> None:

@@ -276,6 +276,8 @@ class OnboardBoards:
     def _dispatch(self, msg: Message, now_s: float) -> Message:
         pd = event_pd(msg)
         ok = Result(pd, ResultCode.OK, "")
+        if self._vehicle_lost and isinstance(msg, _NEEDS_THE_VEHICLE):
+            raise _Refused(ResultCode.REFUSED, f"the vehicle is lost: {self.health.reason}")
         if isinstance(msg, CtrlInput):
             self._ctrl_input(msg, now_s)
             return Ack(PD.CTRL_INPUT)
@@ -858,6 +860,14 @@ class OnboardBoards:
         snapshot's values do not fit it (counted in ``telemetry.unfit``)."""
         snap, status = self.airframe.snapshot(), self.status()
         return self.telemetry.built("NAV_STATUS", lambda: self.telemetry.nav_status(snap, status))
+
+
+_NEEDS_THE_VEHICLE = (WaypointGoto, Launch, EndFlight, ComeHome, TakeOff, Land, Hold, Velocity,
+                      MoveBy, GotoGps, PadMode)
+"""Commands refused while the vehicle below is lost (``vehicle_lost`` until it is back): they
+would go to a simulator that is gone or frozen, and a frozen one takes them without a word.
+Polls, the stream, a stored waypoint, the clock and RESET are answered; so is CTRL_INPUT (it
+is acknowledged, as the LL board does, and a station sends it twice a second as keep-alive)."""
 
 
 class _Refused(Exception):

@@ -32,18 +32,23 @@ def _assert_only(before: set[threading.Thread]) -> None:
 
 
 @contextmanager
-def relay(port: int) -> Iterator[tuple[int, bytearray]]:
-    """A TCP relay to the simulator that records every byte the client sends."""
+def relay(port: int, downstream: threading.Event | None = None) -> Iterator[tuple[int, bytearray]]:
+    """A TCP relay to the simulator that records every byte the client sends; while
+    ``downstream`` is clear it holds what the simulator sends (a silent link)."""
     listener = socket.create_server(("127.0.0.1", 0))
     captured = bytearray()
     threads: list[threading.Thread] = []
     sockets: list[socket.socket] = []
+    stop = threading.Event()
 
     def pump(src: socket.socket, dst: socket.socket, record: bool) -> None:
         try:
             while data := src.recv(65536):
                 if record:
                     captured.extend(data)
+                elif downstream is not None:
+                    while not downstream.wait(0.1) and not stop.is_set():
+                        pass
                 dst.sendall(data)
         except OSError:
             pass
@@ -68,6 +73,7 @@ def relay(port: int) -> Iterator[tuple[int, bytearray]]:
     try:
         yield listener.getsockname()[1], captured
     finally:
+        stop.set()
         acceptor.join(5)
         listener.close()
         for t in threads:
@@ -220,6 +226,40 @@ def test_realtime_simulator_dying_mid_flight_raises() -> None:
             copter.take_off(2.0)
         killer.join()
         assert time.monotonic() - started < 3.0
+
+
+def test_a_realtime_link_silent_for_a_while_is_waited_out() -> None:
+    """The simulator's lines held back for 3 s (a busy machine, a starved process) mid take-off:
+    the motion goes on once they arrive. Feedback is judged stale on the sim clock; a silent
+    link fails a motion only after the connection's timeout_s (the next test)."""
+    downstream = threading.Event()
+    downstream.set()
+    with sim_running(mode="realtime") as handle, relay(handle.server.port, downstream) as (
+            port, _), skeye.connect(f"127.0.0.1:{port}", timeout_s=10.0) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        copter.take_off(1.0, wait=False)
+        copter.ins.wait_next(5.0)
+        downstream.clear()
+        time.sleep(3.0)
+        assert sim.silent_s >= 1.0  # the reader saw the silence (in 1 s waits)
+        downstream.set()
+        copter.wait_done(60.0)
+        assert sim.silent_s < 1.0
+
+
+def test_a_realtime_link_silent_for_its_timeout_fails_the_motion() -> None:
+    downstream = threading.Event()
+    downstream.set()
+    with sim_running(mode="realtime") as handle, relay(handle.server.port, downstream) as (
+            port, _), skeye.connect(f"127.0.0.1:{port}", timeout_s=4.0) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        copter.take_off(1.0, wait=False)
+        copter.ins.wait_next(5.0)
+        downstream.clear()
+        with pytest.raises(LinkTimeout, match=r"the simulator has sent nothing for [4-9]\.\d s "
+                                              r"\(the connection's timeout_s is 4 s\)"):
+            copter.wait_done(60.0)
+        downstream.set()
 
 
 def test_nothing_listening_is_a_clear_error() -> None:

@@ -84,6 +84,7 @@ def test_frozen_realtime_simulator_puts_the_pilot_in_failsafe() -> None:
             with pytest.raises(CommandRejected) as info:
                 vehicle.move_by(forward_m=1.0)
             assert info.value.code == 4
+            assert "the vehicle is lost: simulator frozen" in str(info.value), info.value
         os.kill(sim_proc.pid, signal.SIGCONT)
 
 

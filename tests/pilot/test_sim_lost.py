@@ -48,6 +48,7 @@ def test_simulator_killed_under_the_pilot():
         with pytest.raises(CommandRejected) as info:
             vehicle.move_by(forward_m=1.0)
         assert info.value.code == 4
+        assert "the vehicle is lost: the simulator at" in str(info.value), info.value
         assert PD.LL_STATUS in vehicle.poll(int(PollMask.LL_STATUS))
 
 
