@@ -3,7 +3,7 @@
 How this works: the engine's render step calls :meth:`FrameBuffer.publish` with each rendered
 :class:`Frame`. That only stores a reference under a lock, notifies a Condition and pokes
 listeners that never block, so the simulator never waits on a client. Encoded images are cached
-per (camera, frame number, format, quality): the first client thread that needs an encoding
+per (camera, its id, frame number, format, quality): the first client thread that needs an encoding
 makes it, the others wait for that one (single flight), so four clients asking for the same
 frame in the same format cost one encoding. The cache is a small LRU. The TCP side is
 :mod:`skeye.sim.image_server`.
@@ -164,7 +164,7 @@ class _Encoding:
     result: tuple[FrameType, bytes] | None = None
 
 
-_CacheKey = tuple[str, int, ImageFormat, int | None]
+_CacheKey = tuple[str, int, int, ImageFormat, int | None]
 
 
 class _EncodeCache:
@@ -179,7 +179,9 @@ class _EncodeCache:
         self.encodes = 0
 
     def get(self, frame: Frame, kind: ImageFormat, quality: int | None) -> tuple[FrameType, bytes]:
-        key: _CacheKey = (frame.camera, frame.number, kind, quality)
+        # The camera's id too: a robot spawned again under a gone one's name numbers its
+        # frames from 1 again, and its frame 1 is not the gone robot's.
+        key: _CacheKey = (frame.camera, frame.camera_id, frame.number, kind, quality)
         with self._lock:
             entry = self._entries.get(key)
             owner = entry is None

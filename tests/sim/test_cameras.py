@@ -30,9 +30,9 @@ ROBOTS = Path(__file__).parents[2] / "skeye/robots"
 @contextmanager
 def sim_with_images(
     mode: str = "lockstep", robot_dirs: tuple[Path, ...] = (), estimator: str | None = None,
-    profile: str = "ideal",
+    profile: str = "ideal", seed: int = 3,
 ) -> Iterator[tuple[ControlServer, ImageServer, CameraSystem]]:
-    sim = Simulation(load_world("pad"), seed=3, robot_dirs=robot_dirs, estimator=estimator)
+    sim = Simulation(load_world("pad"), seed=seed, robot_dirs=robot_dirs, estimator=estimator)
     buffer = FrameBuffer()
     with (
         SimulationRunner(sim, mode=mode) as runner,
@@ -315,6 +315,32 @@ def test_snapshot_saves_png_and_jpeg(tmp_path):
         with pytest.raises(LocalProtocolError, match="port"):
             save_snapshot("127.0.0.1:notaport", tmp_path / "x.png")
         c.close()
+
+
+def test_a_robot_spawned_again_under_its_name_is_served_its_own_frame_1():
+    """The image server's encode cache was keyed by camera name and frame number: R1 spawned
+    again (the README's examples, one after another) numbers its frames from 1 again, and a
+    client was served the gone R1's frame 1, seen from where that one stood."""
+    with sim_with_images() as (control, images, cameras):
+        frames = []
+        for north in (0.0, 0.3):
+            c = LineClient(control.port)
+            c.expect("NFO")
+            c.answer(f"INIT {{ClassName hummingbird}} {{Name R1}} {{Location {north},0,-1}}",
+                     "INIT")
+            c.step(1)
+            camera_id = cameras.buffer.camera_id("R1/Down")
+            with ImageClient("127.0.0.1", images.port) as img:
+                img.select_camera("R1/Down")
+                img.set_meta(True)
+                frame = img.get_frame()
+            assert frame.meta is not None and frame.meta.frame_number == 1
+            assert frame.meta.camera_id == camera_id
+            frames.append(frame_image(frame))
+            c.close()
+            _wait(lambda gone=camera_id: cameras.buffer.camera_id("R1/Down") != gone,
+                  "R1 removed")
+    assert not np.array_equal(frames[0], frames[1])  # 0.3 m apart: the pad moved in view
 
 
 def _camera_shots(msgs) -> list[int]:
