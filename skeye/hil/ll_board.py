@@ -16,7 +16,9 @@ does on its line:
   ``chksum_error``), never answered; so are unknown ``>*>`` letters.
 - skeye commands (``>*>s`` frames) are answered RESULT code 3, "the LL board takes AscTec
   commands only", except CLOCK: in lockstep it grants sim time (the I/O side advances the
-  simulator and answers once the time is reached, see :mod:`skeye.hil.ll_server`).
+  simulator and answers once the time is reached, see :mod:`skeye.hil.ll_server`). So is an
+  intact skeye frame the board cannot read (its CRC holds: an unknown skeye PD, a field out of
+  range); a CLOCK of the wrong length is answered RESULT code 2, as the pilot answers it.
 - The serial timeout: a line with no valid packet for ``serial_timeout_s`` while the vehicle
   flies starts AscTec's emergency procedure "wait and land" (the AscTec emergency-mode
   documentation: the vehicle waits 5 s at its position and height, then descends; the R/C, which
@@ -72,6 +74,8 @@ WAIT_BEFORE_LANDING_S = 5.0
 SERIAL_TIMEOUT_S = 0.5
 """A line silent this long (10 of the pilot's 20 Hz command cycles) starts the emergency
 procedure. AscTec does not publish its figure; this is skeye's (docs/onboard.md)."""
+SKEYE_REFUSAL = "the LL board takes AscTec commands only (and CLOCK in lockstep)"
+SKEYE_COMMAND_PDS = range(0x80, 0x90)  # skeye commands' PDs (docs/protocols/packets.md)
 SWITCH_CHANNEL = 4  # RC_DATA channel[4]: the serial interface switch (> 2048 enabled)
 # The LL board keeps no flight envelope (that is the onboard computer's): limits this wide
 # never act.
@@ -148,6 +152,16 @@ class LLBoard:
             self.ignored["a field out of range"] += 1
             log.info("LL board: command acknowledged, not acted on: %s", event.reason)
             return [Ack(PD(event.pd))]
+        if (isinstance(event, CommandError) and event.code is not ResultCode.BAD_CHECKSUM
+                and event.pd in SKEYE_COMMAND_PDS):
+            # An intact skeye frame the board cannot read (a CLOCK of the wrong length, an
+            # unknown skeye PD, a field out of range): its CRC held, so a client sent it and
+            # waits for its RESULT; answered as the board's other skeye packets are.
+            replies = self.boards.handle(event, now_s)  # a valid packet: the line is alive
+            if event.pd == PD.CLOCK:
+                return replies  # the one it takes: code 2 or 3, the reason says what is wrong
+            self.refused_skeye += 1
+            return [Result(event.pd, ResultCode.BAD_VALUE, SKEYE_REFUSAL)]
         if isinstance(event, (CommandError, FrameError)):
             self.boards.handle(event, now_s)  # counted (LL_STATUS chksum_error), not answered
             return []
@@ -158,8 +172,7 @@ class LLBoard:
             return self._switch_shown(self.boards.handle(event, now_s))
         if not isinstance(event, ASCTEC_COMMANDS):
             self.refused_skeye += 1
-            return [Result(event_pd(event), ResultCode.BAD_VALUE,
-                           "the LL board takes AscTec commands only (and CLOCK in lockstep)")]
+            return [Result(event_pd(event), ResultCode.BAD_VALUE, SKEYE_REFUSAL)]
         pd = ACK_PD[type(event)]
         if isinstance(event, CtrlInput) and not self.serial_switch:
             self.boards.handle(Poll(0), now_s)

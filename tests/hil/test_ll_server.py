@@ -246,3 +246,43 @@ def test_a_serial_line_that_fails_is_said_not_left_silently(caplog):
     finally:
         if master >= 0:
             os.close(master)
+
+
+def _skeye_frame(pd: int, payload: bytes) -> bytes:
+    """A skeye command frame as docs/protocols/packets.md spells it (``>*>s``, uint16 length,
+    PD, payload, CRC16 of the payload, ``<#<``), built byte by byte as a third-party client
+    would, not by skeye's codec."""
+    crc = 0x00FF
+    for byte in payload:
+        d = byte ^ (crc & 0xFF)
+        d ^= (d << 4) & 0xFF
+        crc = (((d << 8) | (crc >> 8)) ^ (d >> 4) ^ (d << 3)) & 0xFFFF
+    return (b">*>s" + len(payload).to_bytes(2, "little") + bytes([pd]) + payload
+            + crc.to_bytes(2, "little") + b"<#<")
+
+
+def test_an_intact_skeye_frame_the_board_cannot_take_is_answered_not_dropped_silently():
+    """A CLOCK with a payload of the wrong length, a skeye PD the protocol does not have and a
+    skeye command with a field it cannot carry all arrive intact (their CRC and stop string
+    hold): the board answered none of them and counted none in LL_STATUS ``chksum_error``, so
+    a client granting time waited out its own timeout on a board that had heard it. Each is
+    now answered with a RESULT naming its PD, as the board's other skeye packets are: code 2
+    for the CLOCK the board takes, code 3 for the packets it does not."""
+    with board_line() as (_board, client):
+        client.sock.settimeout(10.0)  # the board answers at once
+        sent = [
+            (_skeye_frame(PD.CLOCK, b"\x00\x00\x00"), PD.CLOCK, ResultCode.BAD_LENGTH),
+            (_skeye_frame(0x8F, b""), 0x8F, ResultCode.BAD_VALUE),
+            (_skeye_frame(PD.TAKE_OFF, b"\x00"), PD.TAKE_OFF, ResultCode.BAD_VALUE),
+        ]
+        for data, pd, code in sent:
+            client.sock.sendall(data + encode(Poll(int(PollMask.LL_STATUS))))
+            answers = []
+            for event in client._events():
+                if isinstance(event, LlStatus):
+                    break
+                answers.append(event)
+            assert len(answers) == 1 and isinstance(answers[0], Result), (pd, answers)
+            assert answers[0].command_pd == pd and answers[0].code is code, answers[0]
+            assert event.chksum_error == 0  # intact: not a checksum error
+        _board.check()
