@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,8 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
                   quality: int | None = None,
                   timeout_s: float = 10.0) -> tuple[int, int, int | None]:
     """Fetch the newest frame and write it; returns (width, height, frame number).
-    ``quality`` is a JPEG file's (default 95); a PNG file, lossless, refuses one."""
+    ``quality`` is a JPEG file's (default 95); a PNG file, lossless, refuses one. The file's
+    folder is looked at before the server is asked: a missing or read-only one is named."""
     suffix = out.suffix.lower()
     if suffix not in (".png", ".jpg", ".jpeg"):
         raise LocalProtocolError(f"{out}: the file name must end in .png, .jpg or .jpeg")
@@ -32,6 +34,7 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
     quality = DEFAULT_QUALITY if quality is None else quality
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
+    _check_folder(out)
     try:
         host, port = parse_address(address, DEFAULT_IMAGE_PORT, "image server address")
     except LocalProtocolError as exc:
@@ -59,6 +62,26 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         raise LocalProtocolError(f"could not write {out}")
     number = frame.meta.frame_number if frame.meta is not None else None
     return image.shape[1], image.shape[0], number
+
+
+def _check_folder(out: Path) -> None:
+    """Refuse, naming why, an ``out`` whose folder cannot take the file: looked at before the
+    image server is asked (OpenCV's ``imwrite`` says only that it failed, not why).
+
+    Raises:
+        LocalProtocolError: the folder is missing, not a folder, or not writable.
+    """
+    folder = out.parent
+    # The nearest part of the path that exists: a file there, or a missing folder below it.
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing.exists() and not existing.is_dir():
+        raise LocalProtocolError(f"--out {out}: {existing} is not a folder")
+    if not folder.is_dir():
+        raise LocalProtocolError(f"--out {out}: no folder {folder}")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise LocalProtocolError(f"--out {out}: the folder {folder} is not writable")
 
 
 def cmd_snapshot(args: argparse.Namespace) -> int:

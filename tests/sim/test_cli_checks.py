@@ -213,3 +213,22 @@ def test_sim_refuses_recording_options_that_would_do_nothing(extra: list[str], m
             if stream is not None:
                 stream.close()
     assert not (tmp_path / "x.rec").exists()
+
+
+@pytest.mark.parametrize("where", ["missing", "file"])
+def test_snapshot_names_an_output_folder_it_cannot_write_to_before_asking_the_server(
+        tmp_path: Path, where: str) -> None:
+    """``--out`` in a folder that does not exist (or under a file): the frame was fetched
+    first, then ``could not write FILE`` said nothing of why (OpenCV's imwrite returns False
+    without a reason). The folder is now looked at before the image server is asked, and named."""
+    if where == "file":
+        (tmp_path / "notes.txt").write_text("x")
+        out = tmp_path / "notes.txt" / "frame.png"
+        why = f"{tmp_path / 'notes.txt'} is not a folder"
+    else:
+        out = tmp_path / "frames" / "frame.png"
+        why = f"no folder {tmp_path / 'frames'}"
+    port = free_port()  # nothing listens: the refusal comes first
+    done = _skeye("snapshot", "--images", f"127.0.0.1:{port}", "--out", str(out))
+    assert done.returncode == 2, done
+    assert done.stderr == f"skeye snapshot: error: --out {out}: {why}\n", done.stderr
