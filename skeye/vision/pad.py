@@ -22,6 +22,13 @@ PAD_SURFACE_HEIGHT_M = 0.001
 z-fights the ground); the simulator draws it there and measures height above it."""
 
 
+MIN_RINGS = 2
+"""The fewest rings a pad file may give: the detector reports a pad only when at least two of
+its rings are identified and agree on the centre and the scale. (A :class:`PadDefinition` may
+have one, as a pattern to draw: the tests render single rings to check they are not taken for
+a pad.)"""
+
+
 @dataclass(frozen=True)
 class Ring:
     """One white ring: radii in metres."""
@@ -46,8 +53,6 @@ class PadDefinition:
         if not (math.isfinite(self.side_m) and self.side_m > 0):  # nan, inf: no page, no texture
             raise InvalidArgument(f"pad {self.name!r}: side_m must be a positive finite number, "
                                   f"got {self.side_m}")
-        if not self.rings:
-            raise InvalidArgument(f"pad {self.name!r}: needs at least one ring")
         previous_inner = self.side_m / 2
         for i, ring in enumerate(self.rings, start=1):
             if not 0 < ring.inner_m < ring.outer_m <= previous_inner:
@@ -60,6 +65,8 @@ class PadDefinition:
         ratios = [r.ratio for r in self.rings]
         if len(set(round(r, 3) for r in ratios)) != len(ratios):
             raise InvalidArgument(f"pad {self.name!r}: ring ratios must be unique, got {ratios}")
+        if not self.rings:
+            raise InvalidArgument(f"pad {self.name!r}: needs at least one ring")
 
 
 SKEYE_4 = PadDefinition(
@@ -162,9 +169,15 @@ def pad_from_dict(data: dict[str, object], source: str = "<dict>") -> PadDefinit
             )
         )
     try:
-        return PadDefinition(name=name, side_m=side_m, rings=tuple(rings))
+        pad = PadDefinition(name=name, side_m=side_m, rings=tuple(rings))
     except ValueError as exc:
         raise ConfigError(f"{source}: {exc}") from None
+    if len(pad.rings) < MIN_RINGS:  # after the radii: a bad ring is named first
+        raise ConfigError(
+            f"{source}: rings: {len(pad.rings)} ring{'' if len(pad.rings) == 1 else 's'}; the "
+            f"detector needs at least {MIN_RINGS} (it reports a pad only when two of its rings "
+            "agree on the centre and the scale)")
+    return pad
 
 
 def load_pad(path: str | os.PathLike[str]) -> PadDefinition:

@@ -98,7 +98,7 @@ def test_missing_pad_file_and_unknown_name(tmp_path):
 
 @st.composite
 def pads(draw):
-    n = draw(st.integers(1, 5))
+    n = draw(st.integers(2, 5))
     side = draw(st.floats(0.1, 3.0))
     radii = sorted(
         draw(st.lists(st.floats(0.001, 0.5), min_size=2 * n, max_size=2 * n, unique=True)),
@@ -163,13 +163,15 @@ def test_a_png_too_large_to_draw_is_refused(tmp_path, capsys, side_m, dpi, words
     Both tracebacks from skeye pad; now refused before drawing, saying the dpi that fits."""
     from skeye.cli import main
 
-    pad = PadDefinition("big", side_m, (Ring(0.45 * side_m, 0.38 * side_m),))
+    pad = PadDefinition("big", side_m, (Ring(0.45 * side_m, 0.38 * side_m),
+                                         Ring(0.30 * side_m, 0.15 * side_m)))
     out = tmp_path / "pad.png"
     with pytest.raises(LocalProtocolError, match=re.escape(words)):
         write_printable(pad, out, dpi=dpi)
     pad_file = tmp_path / "big.toml"
     pad_file.write_text(f"name = 'big'\nside_m = {side_m!r}\n"
-                        f"rings = [{{outer_m = {0.45 * side_m!r}, inner_m = {0.38 * side_m!r}}}]")
+                        f"rings = [{{outer_m = {0.45 * side_m!r}, inner_m = {0.38 * side_m!r}}}, "
+                        f"{{outer_m = {0.30 * side_m!r}, inner_m = {0.15 * side_m!r}}}]")
     assert main(["pad", "--out", str(out), "--pad", str(pad_file), "--dpi", str(dpi)]) == 2
     err = capsys.readouterr().err
     assert words in err and "Traceback" not in err, err
@@ -186,7 +188,8 @@ def test_a_page_needing_too_many_sheets_is_refused(tmp_path, capsys):
         plan_tiles(20.04, "a4")
     assert len(plan_tiles(4.8, "a4").tiles) == 486
     pad_file = tmp_path / "big.toml"
-    pad_file.write_text("name = 'big'\nside_m = 1e9\nrings = [{outer_m = 4e8, inner_m = 3e8}]")
+    pad_file.write_text("name = 'big'\nside_m = 1e9\nrings = [{outer_m = 4e8, inner_m = 3e8}, "
+                        "{outer_m = 2e8, inner_m = 1e8}]")
     out = tmp_path / "pad.pdf"
     assert main(["pad", "--out", str(out), "--pad", str(pad_file), "--paper", "a4"]) == 2
     err = capsys.readouterr().err
@@ -286,7 +289,8 @@ def test_a_pdf_page_over_the_pdf_size_limit_is_refused(tmp_path, capsys):
     def pad_file(side_m: float) -> Path:
         path = tmp_path / f"big-{side_m}.toml"
         path.write_text(f"name = 'big'\nside_m = {side_m!r}\n"
-                        f"rings = [{{outer_m = {0.45 * side_m!r}, inner_m = {0.38 * side_m!r}}}]")
+                        f"rings = [{{outer_m = {0.45 * side_m!r}, inner_m = {0.38 * side_m!r}}}, "
+                        f"{{outer_m = {0.30 * side_m!r}, inner_m = {0.15 * side_m!r}}}]")
         return path
 
     at_limit = tmp_path / "limit.pdf"  # 5.04 m pad + 2 x 20 mm margin = 5.08 m
@@ -301,3 +305,21 @@ def test_a_pdf_page_over_the_pdf_size_limit_is_refused(tmp_path, capsys):
                           "may have (14400 units of 1/72 in, 200 in"), err
     assert "write a .png (--dpi 163 or less)" in err and "Traceback" not in err
     assert not over.exists()
+
+
+def test_a_pad_with_one_ring_is_refused(tmp_path, capsys):
+    """The detector reports a pad only when two identified rings agree on its centre and
+    scale (docs/landing-pad.md), so a one-ring pad is never found: skeye pad printed one
+    (exit 0) and skeye vision detect then said "found": false on every frame of it, even
+    a perfect one. The file is refused when read, naming the file and `rings`."""
+    from skeye.cli import main
+
+    path = tmp_path / "one.toml"
+    path.write_text("name = 'one'\nside_m = 0.6\nrings = [{outer_m = 0.28, inner_m = 0.15}]\n")
+    out = tmp_path / "one.pdf"
+    assert main(["pad", "--out", str(out), "--pad", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: rings: 1 ring; the detector needs at least 2" in err, err
+    assert not out.exists()
+    with pytest.raises(ConfigError, match="at least 2"):
+        load_pad(path)
