@@ -53,14 +53,20 @@ class PadDefinition:
         if not (math.isfinite(self.side_m) and self.side_m > 0):  # nan, inf: no page, no texture
             raise InvalidArgument(f"pad {self.name!r}: side_m must be a positive finite number, "
                                   f"got {self.side_m}")
+        # Ring 1 may reach the square's edge; every other ring needs black between it and the
+        # ring before (touching, the two white rings would be one band, naming neither ring).
         previous_inner = self.side_m / 2
         for i, ring in enumerate(self.rings, start=1):
-            if not 0 < ring.inner_m < ring.outer_m <= previous_inner:
+            first = i == 1
+            if not (0 < ring.inner_m < ring.outer_m
+                    and (ring.outer_m <= previous_inner if first
+                         else ring.outer_m < previous_inner)):
                 raise InvalidArgument(
                     f"pad {self.name!r}: ring {i} radii ({ring.outer_m}, {ring.inner_m}) "
                     "must satisfy "
-                    f"0 < inner < outer <= {previous_inner} (inside the square and the ring before)"
-                )
+                    + (f"0 < inner < outer <= {previous_inner} (inside the square)" if first else
+                       f"0 < inner < outer < {previous_inner} (inside the ring before, with "
+                       "black between them)"))
             previous_inner = ring.inner_m
         ratios = [r.ratio for r in self.rings]
         if len(set(round(r, 3) for r in ratios)) != len(ratios):

@@ -323,3 +323,27 @@ def test_a_pad_with_one_ring_is_refused(tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(ConfigError, match="at least 2"):
         load_pad(path)
+
+
+def test_rings_that_touch_are_refused(tmp_path, capsys):
+    """A ring whose outer radius equals the previous ring's inner one leaves no black between
+    them: the two white rings print as one band, whose borders name neither ring, so the
+    detector found no pad in any frame (a perfect render of the pad below included). The
+    rules allowed it (outer <= the previous inner); a black gap is now required. A ring whose
+    outer border is the square's edge stays allowed (its white still meets black inside)."""
+    from skeye.cli import main
+
+    rings = ("[[rings]]\nouter_m = 0.28\ninner_m = 0.238\n"
+             "[[rings]]\nouter_m = {second}\ninner_m = 0.15\n"
+             "[[rings]]\nouter_m = 0.13\ninner_m = 0.078\n")
+    touching = tmp_path / "touching.toml"
+    touching.write_text("name = 'touching'\nside_m = 0.6\n" + rings.format(second=0.238))
+    out = tmp_path / "touching.pdf"
+    assert main(["pad", "--out", str(out), "--pad", str(touching)]) == 2
+    err = capsys.readouterr().err
+    assert (f"{touching}: pad 'touching': ring 2 radii (0.238, 0.15) must satisfy "
+            "0 < inner < outer < 0.238") in err, err
+    assert not out.exists()
+    edge = tmp_path / "edge.toml"  # ring 1 out to the square's edge; a gap before ring 2
+    edge.write_text("name = 'edge'\nside_m = 0.56\n" + rings.format(second=0.2))
+    assert load_pad(edge).rings[0].outer_m == 0.28
