@@ -63,7 +63,8 @@ def cmd_pad(args: argparse.Namespace) -> int:
         print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale): {len(plan.tiles)} "
               f"{args.paper} sheets ({plan.rows} rows x {plan.cols} columns, "
               f"{'landscape' if plan.landscape else 'portrait'}); print at 100 %, check the "
-              "100 mm bar, overlap the sheets on their + marks")
+              "100 mm bar, cut each sheet's left and top margins off at its cut marks, lay "
+              "the sheets row by row on their + marks")
     return 0
 
 

@@ -14,13 +14,17 @@ much of the pad as its neighbours, none is mostly blank); each sheet shows its p
 the pad, dashed lines where its neighbours' parts begin, red ``+`` registration marks inside the
 overlaps (each appears on both sheets it joins: lay one over the other), its row and column,
 and a 100 mm scale bar to check the printer did not scale it (as AprilTag and ArUco print
-tools do).
+tools do). The sheets are laid row by row, each over its left and upper neighbours, so a
+sheet's left margin (column 2 on) and top margin (row 2 on), white paper that would cover the
+pad below, are cut off first: black cut marks in the margins, in line with the printed area's
+edge (printers' crop marks), show where, and a line in the top margin says so.
 """
 
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,6 +46,8 @@ PAPERS_M: dict[str, tuple[float, float]] = {  # portrait width, height
 PAPER_MARGIN_M = 0.010  # what most home printers cannot print, on every side
 TILE_OVERLAP_M = 0.010
 SCALE_BAR_M = 0.100
+CUT_MARK_GAP_M = 0.002  # between a cut mark and the paper's edge / the printed area
+CUT_TEXT_INSET_M = 0.010  # the margins' text and scale bar start this far right of a cut mark
 # The largest PDF page viewers accept: 14 400 x 14 400 units of default user space (1/72 in),
 # 200 in = 5.08 m a side (Adobe's PDF Reference, PDF 1.7, Appendix C "Implementation Limits":
 # Acrobat's architectural limits, 3 to 14 400 units a side; Acrobat and Reader refuse or crop
@@ -174,13 +180,17 @@ def _starts(length_m: float, usable_m: float, count: int) -> list[float]:
     return [i * step for i in range(count)]
 
 
-def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> TilePlan:
-    from matplotlib.backends.backend_pdf import PdfPages
+def _sheet_figures(pad: PadDefinition, margin_m: float, plan: TilePlan) -> Iterator[Figure]:
+    """One figure per sheet of ``plan``, in the order they are laid (row by row, top to
+    bottom, each row left to right): each later sheet lies over its left and upper
+    neighbours, so its left margin (column 2 on) and top margin (row 2 on) are cut off along
+    its cut marks first; laid on the + marks, the cut edge meets the neighbour's dashed line
+    farther from that neighbour's edge (where this sheet's part begins). Uncut, the white
+    margin would cover a 10 mm strip of the pad below it."""
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
-    side = page_size_m(pad, margin_m)
-    plan = plan_tiles(side, paper)
+    side = plan.page_side_m
     sheet_w, sheet_h = plan.sheet_m
     first_row = [t for t in plan.tiles if t.row == 1]
     first_col = [t for t in plan.tiles if t.col == 1]
@@ -190,44 +200,80 @@ def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> 
     ys = [t.y0_m + t.height_m - ov_y / 2 for t in first_col[1:]]
     mark_xs = xs or [side / 2]
     mark_ys = ys or [side / 2]
-    with PdfPages(out) as pdf:
-        for tile in plan.tiles:
-            fig = Figure(figsize=(sheet_w / METRES_PER_INCH, sheet_h / METRES_PER_INCH))
-            ax = fig.add_axes((PAPER_MARGIN_M / sheet_w, PAPER_MARGIN_M / sheet_h,
-                               tile.width_m / sheet_w, tile.height_m / sheet_h))
-            # axes in page metres, shifted so the pad (drawn about 0) sits mid-page
-            ax.set_xlim(tile.x0_m - side / 2, tile.x0_m + tile.width_m - side / 2)
-            ax.set_ylim(tile.y0_m - side / 2, tile.y0_m + tile.height_m - side / 2)
-            ax.axis("off")
-            _draw_pad(ax, pad, margin_m)
-            for x in xs:  # where the right/left neighbour's part begins / ends
-                for edge in (x - ov_x / 2, x + ov_x / 2):
-                    ax.axvline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
-            for y in ys:
-                for edge in (y - ov_y / 2, y + ov_y / 2):
-                    ax.axhline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
-            arm = 0.004
-            for mx in mark_xs:
-                for my in mark_ys:
-                    if (mx in xs or my in ys):
-                        ax.plot([mx - arm - side / 2, mx + arm - side / 2],
-                                [my - side / 2] * 2, color="red", lw=0.8)
-                        ax.plot([mx - side / 2] * 2,
-                                [my - arm - side / 2, my + arm - side / 2], color="red", lw=0.8)
-            # the scale bar and the sheet's place, in the bottom margin
-            y_bar = PAPER_MARGIN_M * 0.45 / sheet_h
-            x0 = PAPER_MARGIN_M / sheet_w
-            x1 = (PAPER_MARGIN_M + SCALE_BAR_M) / sheet_w
-            fig.add_artist(Line2D([x0, x1], [y_bar, y_bar], color="black", lw=1.2))
-            for x in (x0, x1):
-                fig.add_artist(Line2D([x, x], [y_bar - 0.004, y_bar + 0.004], color="black",
-                                      lw=1.2))
-            fig.text(x1 + 0.01, y_bar,
-                     f"<- this bar must measure {SCALE_BAR_M * 1000:.0f} mm (print at 100 %)  |  "
-                     f"{pad.name} sheet row {tile.row}/{plan.rows}, column {tile.col}/"
-                     f"{plan.cols}; overlap {ov_x * 1000:.0f} mm across, {ov_y * 1000:.0f} mm "
-                     "down, between the dashed lines: lay the + marks on each other",
+    m = PAPER_MARGIN_M
+    gap = CUT_MARK_GAP_M
+
+    def line(fig: Figure, x: tuple[float, float], y: tuple[float, float], **kw: Any) -> None:
+        """A line on the sheet, from paper coordinates (metres from its lower-left corner)."""
+        fig.add_artist(Line2D([x[0] / sheet_w, x[1] / sheet_w], [y[0] / sheet_h, y[1] / sheet_h],
+                              **kw))
+
+    for tile in plan.tiles:
+        fig = Figure(figsize=(sheet_w / METRES_PER_INCH, sheet_h / METRES_PER_INCH))
+        ax = fig.add_axes((m / sheet_w, m / sheet_h, tile.width_m / sheet_w,
+                           tile.height_m / sheet_h))
+        # axes in page metres, shifted so the pad (drawn about 0) sits mid-page
+        ax.set_xlim(tile.x0_m - side / 2, tile.x0_m + tile.width_m - side / 2)
+        ax.set_ylim(tile.y0_m - side / 2, tile.y0_m + tile.height_m - side / 2)
+        ax.axis("off")
+        _draw_pad(ax, pad, margin_m)
+        for x in xs:  # where the right/left neighbour's part begins / ends
+            for edge in (x - ov_x / 2, x + ov_x / 2):
+                ax.axvline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
+        for y in ys:
+            for edge in (y - ov_y / 2, y + ov_y / 2):
+                ax.axhline(edge - side / 2, color="red", lw=0.4, ls=(0, (4, 3)))
+        arm = 0.004
+        for mx in mark_xs:
+            for my in mark_ys:
+                if (mx in xs or my in ys):
+                    ax.plot([mx - arm - side / 2, mx + arm - side / 2],
+                            [my - side / 2] * 2, color="red", lw=0.8)
+                    ax.plot([mx - side / 2] * 2,
+                            [my - arm - side / 2, my + arm - side / 2], color="red", lw=0.8)
+
+        # cut marks (printers' crop marks): in the margins, in line with the printed area's
+        # left edge (column 2 on) and top edge (row 2 on), the margin to cut off
+        cuts = []
+        if tile.col > 1:
+            cuts.append("left")
+            for span in ((gap, m - gap), (sheet_h - m + gap, sheet_h - gap)):
+                line(fig, (m, m), span, color="black", lw=0.5)
+        if tile.row > 1:
+            cuts.append("top")
+            for span in ((gap, m - gap), (sheet_w - m + gap, sheet_w - gap)):
+                line(fig, span, (sheet_h - m, sheet_h - m), color="black", lw=0.5)
+        # in the top margin, right of the cut marks: the sheet's place and how to lay it
+        place = (f"{pad.name} sheet row {tile.row}/{plan.rows}, column {tile.col}/{plan.cols}; "
+                 f"overlap {ov_x * 1000:.0f} mm across, {ov_y * 1000:.0f} mm down, between the "
+                 "dashed lines: lay the + marks on each other")
+        lines = [place]
+        if cuts:
+            lines.append(f"first cut the white margin off the {' and '.join(cuts)} edge"
+                         f"{'s' if len(cuts) > 1 else ''} between the black cut marks; the cut "
+                         "edge lies on the neighbour's dashed line farther from its edge")
+        for k, text in enumerate(lines):
+            fig.text((m + CUT_TEXT_INSET_M) / sheet_w, 1 - m * (0.3 + 0.4 * k) / sheet_h, text,
                      fontsize=5.5, va="center", color="0.2")
+        # the scale bar, in the bottom margin (right of the cut marks)
+        y_bar = m * 0.45
+        x0, x1 = m + CUT_TEXT_INSET_M, m + CUT_TEXT_INSET_M + SCALE_BAR_M
+        line(fig, (x0, x1), (y_bar, y_bar), color="black", lw=1.2)
+        for end in (x0, x1):
+            line(fig, (end, end), (y_bar - 0.004 * sheet_h, y_bar + 0.004 * sheet_h),
+                 color="black", lw=1.2)
+        fig.text(x1 / sheet_w + 0.01, y_bar / sheet_h,
+                 f"<- this bar must measure {SCALE_BAR_M * 1000:.0f} mm (print at 100 %)",
+                 fontsize=5.5, va="center", color="0.2")
+        yield fig
+
+
+def _write_tiled(pad: PadDefinition, out: Path, margin_m: float, paper: str) -> TilePlan:
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    plan = plan_tiles(page_size_m(pad, margin_m), paper)
+    with PdfPages(out) as pdf:
+        for fig in _sheet_figures(pad, margin_m, plan):
             pdf.savefig(fig)
     return plan
 

@@ -347,3 +347,79 @@ def test_rings_that_touch_are_refused(tmp_path, capsys):
     edge = tmp_path / "edge.toml"  # ring 1 out to the square's edge; a gap before ring 2
     edge.write_text("name = 'edge'\nside_m = 0.56\n" + rings.format(second=0.2))
     assert load_pad(edge).rings[0].outer_m == 0.28
+
+
+def test_tiled_sheets_cut_on_their_marks_assemble_into_the_pad():
+    """Each sheet has a 10 mm white margin the printer cannot print. Laid over its neighbour
+    on the + marks, a sheet's left and top margins covered a 10 mm strip of the pad below
+    with white paper, and nothing on the sheets said to cut them: the assembled pad had white
+    bars across its black square and rings. Here the A4 sheets are drawn (100 dpi), each is
+    cut where its own cut marks say (none: not cut), laid on its place in order (row by row,
+    left to right, each over the ones before), and the result is compared with the one-page
+    pad: nowhere may white paper lie where the pad is black all around. The sheet's own words
+    must be printed whole (its line on the overlap ran 95 mm off the sheet's right edge)."""
+    import cv2
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from skeye.vision.printable import (
+        DEFAULT_MARGIN_M,
+        PAPER_MARGIN_M,
+        _figure,
+        _sheet_figures,
+        plan_tiles,
+    )
+
+    dpi = 100
+    px = dpi / METRES_PER_INCH  # pixels per metre
+    m = PAPER_MARGIN_M
+    side = page_size_m(SKEYE_4)
+    plan = plan_tiles(side, "a4")
+    sheet_h = plan.sheet_m[1]
+
+    def draw(fig) -> np.ndarray:
+        fig.set_dpi(dpi)
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].mean(axis=2)
+
+    n = round((side + 2 * m) * px) + 2  # the floor under the sheets: the page and a margin
+    floor = np.full((n, n), 255.0)
+    m_px = round(m * px)
+    for tile, fig in zip(plan.tiles, _sheet_figures(SKEYE_4, DEFAULT_MARGIN_M, plan),
+                         strict=True):
+        sheet = draw(fig)
+        h, w = sheet.shape
+        renderer = fig.canvas.get_renderer()
+        for text in fig.texts:  # the sheet's words are printed whole, not cut by its edge
+            box = text.get_window_extent(renderer)
+            assert 0 <= box.x0 and box.x1 <= w and 0 <= box.y0 and box.y1 <= h, (
+                text.get_text(), box.extents, (w, h))
+        keep = np.ones_like(sheet, dtype=bool)
+        # a cut mark on the left edge: a dark column in the top margin, near the printed area
+        near = m_px + round(0.005 * px)  # 5 mm: the marks sit in line with the printed area
+        top_band = sheet[2 : m_px - 2, :near] < 200
+        cols = np.nonzero(top_band.any(axis=0))[0]
+        if cols.size:
+            keep[:, : round(cols.mean())] = False
+        left_band = sheet[:near, 2 : m_px - 2] < 200  # on the top edge
+        rows = np.nonzero(left_band.any(axis=1))[0]
+        if rows.size:
+            keep[: round(rows.mean()), :] = False
+        col0 = round((tile.x0_m - m + m) * px)  # the sheet's place (the floor starts at -m)
+        row0 = round((side + m - (tile.y0_m - m + sheet_h)) * px)
+        place = floor[row0 : row0 + h, col0 : col0 + w]
+        place[keep[: place.shape[0], : place.shape[1]]] = sheet[: place.shape[0],
+                                                                : place.shape[1]][
+            keep[: place.shape[0], : place.shape[1]]]
+    ref = draw(_figure(SKEYE_4, DEFAULT_MARGIN_M))
+    r = ref.shape[0]
+    got = floor[m_px : m_px + r, m_px : m_px + r]
+    five = np.ones((5, 5), np.uint8)
+    black_around = cv2.dilate(ref, five) < 50  # the pad's black, 2 px from any edge
+    white_around = cv2.erode(ref, five) > 205
+    white_on_black = black_around & (got > 200)
+    black_on_white = white_around & (got < 50)
+    assert white_on_black.sum() == 0 and black_on_white.sum() == 0, (
+        f"{white_on_black.sum()} px of white paper over the pad's black "
+        f"({white_on_black.sum() / px**2 * 1e4:.1f} cm^2), {black_on_white.sum()} px of "
+        "black over its white")
