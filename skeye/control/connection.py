@@ -554,8 +554,11 @@ class Connection:
         name: str = "R1",
         feedback: str = "ins",
         motion: MotionConfig | None = None,
+        wait: bool = True,
     ) -> Robot:
-        """Spawn a robot at a start pose or a NED location; returns it once it streams.
+        """Spawn a robot at a start pose or a NED location; returns it once it streams
+        (``wait``; else once the simulator has answered, which in lockstep is before its first
+        step: the caller steps, as to catch the frame of its spawn state).
 
         Args:
             robot: a robot class (:class:`~skeye.control.robots.Hummingbird`) or class name.
@@ -599,7 +602,8 @@ class Connection:
             answer = self.request_message(init)
             new.name = answer.name or name
             new.configure(self.request_message(GetConf("Robot")))
-            new.await_first_readings()
+            if wait:
+                new.await_first_readings()
         except BaseException:
             self.robot = None
             raise

@@ -43,6 +43,7 @@ TILTED_VIEWS_RAD = ((0.3, 0.0), (-0.3, 0.0), (0.25, 0.25), (-0.25, -0.25), (0.2,
 TILTED_YAW_RAD = 0.5
 
 FRAME_WAIT_RATE_HZ = 500.0  # the capturing connection's lockstep period: 2 ms
+VIEW_TRIES = 5  # spawns for one view before giving up (each a new phase of the frame grid)
 Pose = tuple[float, float, float, float, float, float]  # camera north, east, down, roll, pitch, yaw
 
 
@@ -97,39 +98,47 @@ def capture_board(sim_address: str, images_address: str, robot: str = "hummingbi
 
     frames: list[np.ndarray] = []
     poses = [(0.0, 0.0, -BOARD_CAMERA_HEIGHT_M, 0.0, 0.0, 0.0)]  # the first view: centred
+    tries = 0
     while len(frames) < len(poses):
         pose = poses[len(frames)]
-        # One robot a connection; its clock steps 2 ms at a time (FRAME_WAIT_RATE_HZ), so the
-        # spawn-state frame is still the newest one when it is fetched.
-        # Wall-clock guards stretched with the machine's load: the first readings and frame
-        # come as fast as the lockstep simulator renders, which a busy host slows.
+        name = f"Cal{len(frames)}"
+        # One robot a connection, spawned without stepping (its first readings are not
+        # awaited); its clock then steps 2 ms at a time (FRAME_WAIT_RATE_HZ) up to the first
+        # frame's arrival, so the spawn-state frame is the newest one when it is fetched.
+        # Wall-clock guards stretched with the machine's load: the first frame comes as fast
+        # as the lockstep simulator renders, which a busy host slows.
         with skeye.connect(sim_address, images=images_address, timeout_s=scaled_s(10.0),
                            motion=MotionConfig(control_rate_hz=FRAME_WAIT_RATE_HZ)) as sim:
             if sim.mode != "lockstep":
                 raise SkeyeError("the simulator must run in lockstep: a vehicle spawned "
                                        "in the air falls in real time before its frame is taken")
-            copter = sim.spawn(robot, name=f"Cal{len(frames)}",
-                               location_ned_m=body_location(pose),
-                               rotation_rpy_rad=(pose[3], pose[4], pose[5]))
+            copter = sim.spawn(robot, name=name, location_ned_m=body_location(pose),
+                               rotation_rpy_rad=(pose[3], pose[4], pose[5]), wait=False)
             # The spawn-state frame (frame 1): the vehicle still. Later frames see it moving (a
             # tilted vehicle levels itself at once), and the rolling shutter skews those.
             sim.clock.wait_until(partial(_has_frame, copter.camera), sim.timeout_s,
-                                 f"the first frame of Cal{len(frames)}")
-            first = copter.camera.latest
+                                 f"the first frame of {name}")
             image = copter.camera.image()
-            if first is None or image.frame != first.frame:
-                raise SkeyeError(f"view {len(frames)}: the image server gave frame "
-                                       f"{image.frame}, not the spawn-state frame "
-                                       f"{first.frame if first else '?'}")
-            frames.append(image.bgr)
-            if progress is not None:
-                of = f" of {len(poses)}" if len(frames) > 1 else ""  # known after the first
-                progress(f"view {len(frames)}{of} photographed")
-            if len(frames) == 1:  # the camera's size and focal length, now that one exists
+            if image.frame == 1 and not frames:  # the camera's size and focal length
                 conf = sim.request("GETCONF", ("Type", "Camera"), ("Name", camera))
                 poses = board_poses(int(conf.get_float("Width")),
                                     int(conf.get_float("Height")),
                                     float(conf.get_float("FocalLength")))
+        if image.frame != 1:
+            # Frame 2 came out with frame 1: a camera's frames are on its grid of sim times,
+            # so when the spawn fell just before a grid time, frame 2 was taken a few ms after
+            # frame 1, and its capture latency (with its jitter) brought it out as soon. The
+            # view is photographed again, from a vehicle spawned later (another phase).
+            tries += 1
+            if tries >= VIEW_TRIES:
+                raise SkeyeError(f"view {len(frames)}: {VIEW_TRIES} spawns gave no spawn-state "
+                                 f"frame (the newest was frame {image.frame})")
+            continue
+        tries = 0
+        frames.append(image.bgr)
+        if progress is not None:
+            of = f" of {len(poses)}" if len(frames) > 1 else ""  # known after the first
+            progress(f"view {len(frames)}{of} photographed")
     return frames
 
 
