@@ -80,9 +80,9 @@ class CameraSpec:
     lens: Lens | None = None  # its image path; None: the ideal pinhole, rendered as is
     auto_exposure: AutoExposure | None = None  # its exposure state (with a lens)
     captured: int = 0  # frames taken (their numbers), rendered or not
-    # Mixed into the seeds of its pixel noise and latency jitter with the model's noise_seed
-    # (none by default: every camera of a model draws alike); skeye.gym gives each vehicle's
-    # camera its flight's seed and the vehicle's spawn, so that no two share noise.
+    # Mixed into the seeds of its pixel noise and latency jitter with the model's noise_seed:
+    # the engine gives a spawned robot's cameras (its seed, the spawn's number), skeye.gym
+    # (its flight's seed, the vehicle's spawn), so that no two share noise.
     noise_stream: tuple[int, ...] = ()
     rendered: int = 0  # frames rendered
     due: int = 0

@@ -302,6 +302,8 @@ class Simulation:
             declination_rad=self._declination_rad(),
         )
         robot.flight.landed_since_s = self.time_s
+        for cam in robot.cameras:  # its pixel noise and latency jitter: this seed, this spawn
+            cam.noise_stream = (self.seed, number)
         self.robots[name] = robot
         self._queries[name] = RobotWorldQuery(self, name)
         try:

@@ -343,6 +343,44 @@ def test_a_robot_spawned_again_under_its_name_is_served_its_own_frame_1():
     assert not np.array_equal(frames[0], frames[1])  # 0.3 m apart: the pad moved in view
 
 
+def _first_webcam_frames(seed: int, spawns: int) -> list[np.ndarray]:
+    """Frame 1 (the spawn state) of R1's webcam, R1 spawned ``spawns`` times one after another
+    at the same place in a lockstep simulator of ``seed``."""
+    frames = []
+    with sim_with_images(profile="webcam", seed=seed) as (control, images, cameras):
+        for _ in range(spawns):
+            c = LineClient(control.port)
+            c.expect("NFO")
+            c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+            c.step(75)  # frame 1 out (60 +- 10 ms of capture latency), frame 2 not (docs)
+            camera_id = cameras.buffer.camera_id("R1/Down")
+            with ImageClient("127.0.0.1", images.port) as img:
+                img.select_camera("R1/Down")
+                img.set_meta(True)
+                frame = img.get_frame()
+            assert frame.meta is not None and frame.meta.frame_number == 1
+            frames.append(frame_image(frame))
+            c.close()
+            _wait(lambda gone=camera_id: cameras.buffer.camera_id("R1/Down") != gone,
+                  "R1 removed")
+    return frames
+
+
+def test_each_seed_and_each_spawn_draws_its_own_webcam_noise():
+    """The webcam's pixel noise (and latency jitter) came from the camera model's noise_seed
+    and the frame number alone: every robot of a ``skeye sim`` and every ``--seed`` drew the
+    same noise in the same frame, so a sweep over seeds repeated one noise. It now follows the
+    simulator's seed and the robot's spawn, as the sensors' noise does; a seed still repeats
+    its frames bit for bit."""
+    first, second = _first_webcam_frames(3, 2)
+    (again,) = _first_webcam_frames(3, 1)
+    (other_seed,) = _first_webcam_frames(4, 1)
+    assert np.array_equal(first, again)  # the same seed and spawn: the same frame, to the bit
+    for other in (second, other_seed):  # the same scene, other noise
+        difference = np.abs(first.astype(np.int16) - other.astype(np.int16))
+        assert difference.max() > 0 and np.count_nonzero(difference) > first.size // 4
+
+
 def _camera_shots(msgs) -> list[int]:
     return [int(m.require("Frame")) for m in msgs if m.type == "SEN" and m.get("Type") == "Camera"]
 
