@@ -22,7 +22,7 @@ from types import TracebackType
 from typing import Any, Protocol
 
 from skeye.errors import LocalProtocolError
-from skeye.sweep.worker import base_row, run_trial_process
+from skeye.sweep.worker import base_row, run_trial_process, trials_allowed
 
 Row = dict[str, Any]
 OnStart = Callable[[int], None]  # the number of trials running now: before each wait, and
@@ -64,7 +64,8 @@ class LocalBackend(_Closing):
 
     def run(self, trials: list[dict[str, Any]], on_running: OnStart | None = None
             ) -> Iterator[Row]:
-        with ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="trial") as pool:
+        with trials_allowed(), ThreadPoolExecutor(max_workers=self.workers,
+                                                  thread_name_prefix="trial") as pool:
             pending: set[Future[Row]] = set()
             queue = list(trials)
             while queue or pending:

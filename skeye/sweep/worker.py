@@ -24,6 +24,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -34,14 +36,23 @@ from skeye.sweep.spec import Trial
 LOG_TAIL_LINES = 8
 
 # Trial process groups running now in this process (their pids), so that a sweep stopped by a
-# signal can end them at once: each waiting thread then cleans up its temporary folder.
+# signal can end them at once: each waiting thread then cleans up its temporary folder. A trial
+# is started and entered here under the lock, and a stop marks the run stopped under it: a stop
+# that came while a trial thread was starting its process (its temporary folder made, the
+# process not yet entered) found nothing to kill, and the pool's shutdown then waited for that
+# trial to end by itself. The lock is re-entrant: the stop runs in a signal handler, which may
+# interrupt the main thread inside this module's own ``with _running_lock``.
 _running: set[int] = set()
-_running_lock = threading.Lock()
+_running_lock = threading.RLock()
+_stopped = False  # a stop came: trials not yet started are not started
 
 
 def stop_running_trials() -> int:
-    """Kill every trial process group this process is running; how many there were."""
+    """Kill every trial process group this process is running; how many there were. Trials
+    not yet started are not started until :func:`trials_allowed` opens a new run."""
+    global _stopped
     with _running_lock:
+        _stopped = True
         pids = list(_running)
     for pid in pids:
         try:
@@ -49,6 +60,20 @@ def stop_running_trials() -> int:
         except ProcessLookupError:
             pass
     return len(pids)
+
+
+@contextmanager
+def trials_allowed() -> Iterator[None]:
+    """A run of trials: trials may start (again) inside it, until a stop; after it, a stop
+    made during it no longer refuses the trials of a later run in this process."""
+    global _stopped
+    with _running_lock:
+        _stopped = False
+    try:
+        yield
+    finally:
+        with _running_lock:
+            _stopped = False
 
 
 def _figures_only(figures: dict[str, Any]) -> dict[str, float]:
@@ -132,10 +157,12 @@ def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
         trial_file.write_text(json.dumps(trial_json))
         args = [sys.executable, "-m", "skeye.sweep.worker", str(trial_file), str(result_file),
                 workdir or str(Path(tmp) / "work"), series_file or ""]
-        with open(log_file, "w") as log:
+        with _running_lock, open(log_file, "w") as log:
+            if _stopped:
+                return _finished(row, trial, start,
+                                 "stopped: the run was stopped before this trial started")
             proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=log,
                                     stderr=subprocess.STDOUT, start_new_session=True)
-        with _running_lock:
             _running.add(proc.pid)
         try:
             proc.wait(trial.timeout_s)
@@ -158,6 +185,10 @@ def run_trial_process(trial_json: dict[str, Any], workdir: str | None = None,
             tail = log_file.read_text().splitlines()[-LOG_TAIL_LINES:]
             error = f"trial process exited with code {proc.returncode}: " + " | ".join(tail)
     row.update(figures)
+    return _finished(row, trial, start, error)
+
+
+def _finished(row: dict[str, Any], trial: Trial, start: float, error: str) -> dict[str, Any]:
     row.update(wall_s=round(time.monotonic() - start, 3), host=socket.gethostname(),
                skeye_version=skeye.__version__, code_version=trial.code, error=error)
     return row

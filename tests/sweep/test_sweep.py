@@ -453,6 +453,46 @@ def test_sweep_off_a_terminal_logs_lines_and_a_stop_signal_leaves_nothing_behind
     assert len(list((tmp_path / "out" / "trials").glob("*.json"))) == 1  # the ok row kept
 
 
+def test_a_stop_while_a_trial_process_is_starting_kills_it(tmp_path: Path,
+                                                           monkeypatch: pytest.MonkeyPatch):
+    """A stop (Ctrl-C, SIGTERM) that came while a pool thread was starting a trial process,
+    its temporary folder made and the process not yet entered among the running ones, killed
+    nothing: the stop's KeyboardInterrupt then waited in the pool's shutdown for that trial to
+    end by itself (a validation's E2 trial, minutes: `skeye validate` was not out within 60 s
+    of Ctrl-C on a loaded machine, where the start takes longest). A trial is now started and
+    entered under the lock the stop takes, and a trial not yet started when the stop came is
+    not started."""
+    import threading
+
+    from skeye.sweep import worker
+    from skeye.sweep.spec import Trial
+
+    (tmp_path / "flight.py").write_text(SLOW)
+    monkeypatch.setenv("SWEEP_TEST_PIDFILE", str(tmp_path / "hang.pid"))
+    hang = Trial("script", {"mode": "hang"}, 1, script=str(tmp_path / "flight.py"),
+                 timeout_s=60.0).to_json()
+    stopped: list[int] = []
+    stopper: list[threading.Thread] = []
+    real_popen = subprocess.Popen
+
+    def popen(*args, **kwargs):  # the stop comes while the trial's process is being started
+        stopper.append(threading.Thread(target=lambda: stopped.append(
+            worker.stop_running_trials())))
+        stopper[0].start()
+        stopper[0].join(0.5)  # it waits for the start (the lock), or had found nothing
+        return real_popen(*args, **kwargs)
+
+    with worker.trials_allowed():
+        monkeypatch.setattr(worker.subprocess, "Popen", popen)
+        row = worker.run_trial_process(hang)
+        stopper[0].join(60)
+        assert stopped == [1], stopped  # the starting trial was killed, not left to run
+        assert row["error"].startswith("trial process exited with code -9"), row["error"]
+        monkeypatch.setattr(worker.subprocess, "Popen", real_popen)
+        again = worker.run_trial_process(hang)  # after the stop: not started
+        assert again["error"].startswith("stopped: the run was stopped"), again["error"]
+
+
 STORE_BLOCKED = """
 import os
 import time
