@@ -185,6 +185,10 @@ class OnboardBoards:
         self.home_ned_m = snap.pos_ned_m
         self.motors_on = snap.armed
         self._last_packet_s = now_s
+        # The vehicle's time (sim time on a simulator) when a tick first saw _last_packet_s:
+        # the link's silence on the vehicle's clock (_link_silent_s).
+        self._packet_seen_s = now_s
+        self._packet_vehicle_s = snap.time_s
         self._failsafe_since_s: float | None = None
         self._vehicle_lost = False  # the vehicle below stopped answering (until it is back)
         # Vehicle time (the snapshot's: sim time on the simulator) a timed VELOCITY ends: the
@@ -776,9 +780,28 @@ class OnboardBoards:
         self.pad.landing_finished()
         self._set_health(HealthStatus.CRASHED, cause)
 
+    def _link_silent_s(self, now_s: float) -> float:
+        """How long ground control has been silent: on the wall clock (the link is a radio,
+        or a TCP connection, on wall time), and for a simulated vehicle at most as long on its
+        own clock, sim time. A simulator that is merely slow (a loaded machine, a ground
+        station that grants lockstep time and waits for it to be flown) does not make ground
+        control silent: a vehicle whose whole flight took a fifth of a second of sim time went
+        FAILSAFE (and never HOLDING) when the process stalled 2 s of wall time. A ground
+        station that is gone stays silent on both clocks, so the failsafe still comes, after
+        ``link_timeout_s`` of each. A vehicle lost below has no clock (its sim time stands
+        still): the wall clock alone."""
+        silent_s = now_s - self._last_packet_s
+        if not getattr(self.airframe, "clock_is_sim", False) or self._vehicle_lost:
+            return silent_s
+        vehicle_s = self.airframe.snapshot().time_s
+        if self._last_packet_s != self._packet_seen_s or vehicle_s < self._packet_vehicle_s:
+            # (a clock that went back is a new simulator's, the vehicle respawned there)
+            self._packet_seen_s, self._packet_vehicle_s = self._last_packet_s, vehicle_s
+        return min(silent_s, vehicle_s - self._packet_vehicle_s)
+
     def _failsafe(self, now_s: float) -> None:
         state = self.state
-        silent_s = now_s - self._last_packet_s
+        silent_s = self._link_silent_s(now_s)
         if state in _AIRBORNE:
             if silent_s >= self.settings.link_timeout_s:
                 self._fire(FlightEvent.LINK_LOST)

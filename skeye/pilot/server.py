@@ -32,7 +32,8 @@ How this works: ``PilotServer`` wraps an ``OnboardBoards`` (sans-IO) with thread
   failsafe) and, when the simulator is in lockstep, drives sim time: it advances the sim by
   ``tick_s`` per iteration, paced to ``lockstep_rate`` sim seconds per wall second (0 = as
   fast as the CPU allows). Time given to the boards is the wall clock (``time.monotonic``):
-  the link-loss timeouts are about the radio link, which runs on wall time.
+  the link-loss timeouts are about the radio link, which runs on wall time (on a simulator the
+  boards also wait for as much sim time: a slow simulator is not a silent station).
 
 When the vehicle below is lost (the simulator died, froze, or removed the robot and a RESET
 asked for a new one) and the airframe can re-attach (``SimAirframe`` with an ``attach``

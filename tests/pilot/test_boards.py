@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 from hypothesis import given, settings
@@ -248,6 +249,38 @@ def test_link_loss_holds_then_lands():
     air.finish(landed=True, armed=False)
     boards.tick(22.1)
     assert boards.state is NavState.LANDED
+
+
+def test_a_simulated_vehicle_is_failsafe_only_when_the_link_is_silent_on_both_clocks():
+    """A simulated vehicle (its clock sim time): a process that stalled 2.5 s of wall time
+    while the simulator flew 0.1 s (a loaded machine; a lockstep ground station waiting for
+    the time it granted) is not a silent ground station. On the wall clock alone that went
+    FAILSAFE, and a take-off in flight never became HOLDING. A gone station is silent on both
+    clocks: the failsafe comes once both have passed the link timeout. A real vehicle's
+    clock is the wall clock: the wall clock alone (test_link_loss_holds_then_lands)."""
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    air.clock_is_sim = True  # type: ignore[attr-defined]
+    airborne(boards, air, now_s=0.0)
+    boards.tick(0.05)
+    air.snap = replace(air.snap, time_s=0.1)
+    boards.tick(2.5)  # 2.5 s of wall time, 0.1 s of sim time
+    assert boards.state is NavState.HOLDING
+    air.snap = replace(air.snap, time_s=1.9)
+    boards.tick(30.0)
+    assert boards.state is NavState.HOLDING
+    air.snap = replace(air.snap, time_s=2.0)
+    boards.tick(30.1)  # silent 2 s of sim time and of wall time
+    assert boards.state is NavState.FAILSAFE and air.calls[-1][0] == "hover"
+    # unpaced (sim time runs ahead): the wall clock's 2 s still count
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    air.clock_is_sim = True  # type: ignore[attr-defined]
+    airborne(boards, air, now_s=0.0)
+    boards.tick(0.05)
+    air.snap = replace(air.snap, time_s=50.0)
+    boards.tick(1.9)
+    assert boards.state is NavState.HOLDING
+    boards.tick(2.0)
+    assert boards.state is NavState.FAILSAFE
 
 
 def test_a_packet_during_failsafe_stops_the_land_countdown():

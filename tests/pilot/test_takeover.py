@@ -27,10 +27,11 @@ from skeye.pilot.boards import BoardSettings
 from skeye.pilot.cli import pad_vision_factory
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
-from skeye.wire.packet_units import gps_data_to_si
+from skeye.wire.packet_units import gps_data_to_si, s_to_ms
 from skeye.wire.packets import (
     PD,
     Ack,
+    Clock,
     CtrlInput,
     NavState,
     NavStatus,
@@ -173,12 +174,46 @@ def test_sticks_take_over_a_pad_landing(stack: ExitStack, tmp_path: Path) -> Non
     assert ns.state is NavState.MANUAL and flight.height() > 0.7
 
 
+def test_a_stalled_process_is_not_a_silent_ground_station(stack: ExitStack) -> None:
+    """The pilot, its simulator and its ground station in one process (the tests, a gym
+    environment), stalled 3 s of wall time in a take-off (a loaded machine): the ground's
+    packets stopped for 3 s of wall time, but for no sim time. The boards judged the link on
+    the wall clock alone: FAILSAFE (no warning logged), and the take-off never became HOLDING
+    (the LL board test's ``sim://`` flight, never HOLDING within 60 s of sim time, at load
+    12-20). The stall is the pilot's clock jumping 3 s while the station sends nothing."""
+    server = stack.enter_context(running_sim(mode="lockstep", seed=23))
+    offset_s = [0.0]
+    reads = [0]
+
+    def clock() -> float:
+        reads[0] += 1
+        return time.monotonic() + offset_s[0]
+
+    flight = _fly(stack, server.port, settings=BoardSettings(link_timeout_s=2.0), clock=clock)
+    flight.vehicle.take_off(0.6)
+    flight.run_for(0.2)
+    keepalive_s, flight.vehicle.keepalive_s = flight.vehicle.keepalive_s, None
+    offset_s[0] = 3.0
+    seen = reads[0]
+    deadline = time.monotonic() + 60.0  # a stuck guard: the loop ticks on the new time
+    while reads[0] < seen + 50:
+        assert time.monotonic() < deadline, "the pilot's loop stopped reading its clock"
+        time.sleep(0.01)
+    flight.vehicle.keepalive_s = keepalive_s
+    ns = flight.run_until(lambda ns: ns.state is not NavState.TAKING_OFF, 30.0, step_s=0.5)
+    assert ns.state is NavState.HOLDING, ns
+
+
 def test_sticks_take_over_a_failsafe(stack: ExitStack) -> None:
     server = stack.enter_context(running_sim(mode="lockstep", seed=23))
     flight = _fly(stack, server.port, settings=BoardSettings(link_timeout_s=2.0))
     _hold_at(flight, 1.5)
+    # The station grants 3 s ahead and falls silent: silent on the wall clock and on the
+    # vehicle's (sim time runs 2 s without a packet), the link is lost. (Silent with no time
+    # granted, the simulated world stands still: no failsafe, as for a stalled process.)
     keepalive_s, flight.vehicle.keepalive_s = flight.vehicle.keepalive_s, None
-    flight.vehicle.wait_state(NavState.FAILSAFE, timeout_s=30.0)  # silent: the link is lost
+    flight.vehicle.command(Clock(s_to_ms(flight.now() + 3.0)))
+    flight.vehicle.wait_state(NavState.FAILSAFE, timeout_s=30.0)
     flight.vehicle.keepalive_s = keepalive_s  # the ground station is back
     _take_over(flight, NavState.FAILSAFE)
     ns = flight.run_for(1.0)
