@@ -17,13 +17,17 @@ does on its line:
 - skeye commands (``>*>s`` frames) are answered RESULT code 3, "the LL board takes AscTec
   commands only", except CLOCK: in lockstep it grants sim time (the I/O side advances the
   simulator and answers once the time is reached, see :mod:`skeye.hil.ll_server`). So is an
-  intact skeye frame the board cannot read (its CRC holds: an unknown skeye PD, a field out of
-  range); a CLOCK of the wrong length is answered RESULT code 2, as the pilot answers it.
+  intact skeye frame the board cannot read (its CRC holds: an unknown PD, whatever its value,
+  a field out of range); a CLOCK of the wrong length is answered RESULT code 2, as the pilot
+  answers it.
 - The serial timeout: a line with no valid packet for ``serial_timeout_s`` while the vehicle
   flies starts AscTec's emergency procedure "wait and land" (the AscTec emergency-mode
   documentation: the vehicle waits 5 s at its position and height, then descends; the R/C, which
   would otherwise take over, is not simulated): the boards' link-loss failsafe with these
-  times. A valid CTRL_INPUT after it ends the procedure (the boards go back to holding, then
+  times, counted as the pilot counts them on a simulator: the silence must last that long on
+  the wall clock and in sim time, the vehicle's own time (in lockstep a client that grants no
+  time leaves the world standing, and at ``--lockstep-rate 0.1`` 0.5 s of sim time is 5 s of
+  wall time). A valid CTRL_INPUT after it ends the procedure (the boards go back to holding, then
   fly the sticks), as AscTec's does when the connection comes back.
 - The R/C's serial-interface switch (channel 5 of the transmitter, ``RC_DATA`` channel[4]):
   on by default; :meth:`LLBoard.set_serial_switch` turns it off as a safety pilot would: the
@@ -75,7 +79,6 @@ SERIAL_TIMEOUT_S = 0.5
 """A line silent this long (10 of the pilot's 20 Hz command cycles) starts the emergency
 procedure. AscTec does not publish its figure; this is skeye's (docs/onboard.md)."""
 SKEYE_REFUSAL = "the LL board takes AscTec commands only (and CLOCK in lockstep)"
-SKEYE_COMMAND_PDS = range(0x80, 0x90)  # skeye commands' PDs (docs/protocols/packets.md)
 SWITCH_CHANNEL = 4  # RC_DATA channel[4]: the serial interface switch (> 2048 enabled)
 # The LL board keeps no flight envelope (that is the onboard computer's): limits this wide
 # never act.
@@ -153,7 +156,7 @@ class LLBoard:
             log.info("LL board: command acknowledged, not acted on: %s", event.reason)
             return [Ack(PD(event.pd))]
         if (isinstance(event, CommandError) and event.code is not ResultCode.BAD_CHECKSUM
-                and event.pd in SKEYE_COMMAND_PDS):
+                and event.pd not in ACK_PD.values()):
             # An intact skeye frame the board cannot read (a CLOCK of the wrong length, an
             # unknown skeye PD, a field out of range): its CRC held, so a client sent it and
             # waits for its RESULT; answered as the board's other skeye packets are.

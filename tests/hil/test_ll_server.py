@@ -273,6 +273,8 @@ def test_an_intact_skeye_frame_the_board_cannot_take_is_answered_not_dropped_sil
         sent = [
             (_skeye_frame(PD.CLOCK, b"\x00\x00\x00"), PD.CLOCK, ResultCode.BAD_LENGTH),
             (_skeye_frame(0x8F, b""), 0x8F, ResultCode.BAD_VALUE),
+            (_skeye_frame(0x42, b""), 0x42, ResultCode.BAD_VALUE),  # below the skeye PDs
+            (_skeye_frame(0x99, b""), 0x99, ResultCode.BAD_VALUE),  # above them
             (_skeye_frame(PD.TAKE_OFF, b"\x00"), PD.TAKE_OFF, ResultCode.BAD_VALUE),
         ]
         for data, pd, code in sent:
