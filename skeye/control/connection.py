@@ -188,8 +188,9 @@ class Connection:
         self.time_s = 0.0
         self.silent_s = 0.0
         """How long the reader has waited, without a byte from the simulator, since the last
-        bytes arrived: counted only while it waits in ``recv``, so a pause of this process (a
-        busy machine) is never taken for a silent simulator."""
+        bytes arrived: counted only while it waits in ``recv``, each wait at most its length
+        (1 s), so a pause of this process (a busy machine) outside ``recv`` is never taken for a
+        silent simulator, and one inside it counts at most 1 s."""
         self.unmatched_errors: list[Message] = []
         self.close_unanswered: str | None = None
         """Set by :meth:`close` when the simulator did not close its end in time."""
@@ -382,8 +383,10 @@ class Connection:
                 except LinkClosed as exc:
                     error = LinkClosed(f"simulator {self.peer}: connection lost: {exc}")
                     break
-                if not data:
-                    self.silent_s += time.monotonic() - waited_from
+                if not data:  # one wait counts at most its own length: a pause of this
+                    # process inside recv (a simulator in the same process pauses too) is not
+                    # all silence
+                    self.silent_s += min(time.monotonic() - waited_from, _RECV_WAIT_S)
                     continue
                 self.silent_s = 0.0
                 for event in decoder.feed(data):

@@ -344,11 +344,17 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
     if not model.distorted:
         return None  # the ideal pinhole: the pilot's field of view from GETCONF is exact
     from skeye import __version__
-    from skeye.validate.calibration import BOARD, board_poses, calibrate_simulated_camera
+    from skeye.validate.calibration import (
+        BOARD,
+        PROCEDURE_VERSION,
+        board_poses,
+        calibrate_simulated_camera,
+    )
 
-    # The key: the camera model, the procedure (board, poses) and the simulator's version.
+    # The key: the camera model, the procedure (board, poses, how the views are taken) and
+    # the simulator's version.
     ident = repr((model, BOARD, board_poses(model.width, model.height, model.fx_px),
-                  __version__))
+                  PROCEDURE_VERSION, __version__))
     key = hashlib.sha256(ident.encode()).hexdigest()[:12]
     try:
         workdir = cache_folder("calibration") / f"{Path(robot).stem}-{model.profile}-{key}"

@@ -22,7 +22,8 @@ is refused with the cause; RESET asks the airframe to bring the vehicle back (LA
 vehicle's health (OK, CRASHED, LOST with the reason) goes to ground control in HEALTH packets:
 pushed when it changes, and streamed with NAV_STATUS once a second.
 
-Link loss: while airborne, no packet for ``link_timeout_s`` -> FAILSAFE (hover), then after
+Link loss: while airborne, no packet for ``link_timeout_s`` (on a simulator, as long in sim
+time as on the wall clock: :meth:`OnboardBoards._link_silent_s`) -> FAILSAFE (hover), then after
 ``land_timeout_s`` more -> LANDING. A packet arriving in FAILSAFE stops the land countdown; the
 vehicle keeps holding until ground control commands it, and if the link is lost again first
 (no packet for ``link_timeout_s`` once more) the countdown starts again.

@@ -43,6 +43,10 @@ TILTED_VIEWS_RAD = ((0.3, 0.0), (-0.3, 0.0), (0.25, 0.25), (-0.25, -0.25), (0.2,
 TILTED_YAW_RAD = 0.5
 
 FRAME_WAIT_RATE_HZ = 500.0  # the capturing connection's lockstep period: 2 ms
+PROCEDURE_VERSION = 2
+"""Raised when the views come out otherwise for the same camera model (part of `skeye up`'s
+calibration cache key): 2 since 2026-11-27, the spawn-state frame caught and every camera's
+own pixel noise (1 before)."""
 VIEW_TRIES = 5  # spawns for one view before giving up (each a new phase of the frame grid)
 Pose = tuple[float, float, float, float, float, float]  # camera north, east, down, roll, pitch, yaw
 

@@ -199,6 +199,9 @@ def test_a_stalled_process_is_not_a_silent_ground_station(stack: ExitStack) -> N
     while reads[0] < seen + 50:
         assert time.monotonic() < deadline, "the pilot's loop stopped reading its clock"
         time.sleep(0.01)
+    # The stall happened as meant: the boards have heard nothing for over the link timeout
+    # of their (wall) clock (a keep-alive in flight when it was turned off came before it).
+    assert clock() - flight.pilot.boards._last_packet_s >= 2.0
     flight.vehicle.keepalive_s = keepalive_s
     ns = flight.run_until(lambda ns: ns.state is not NavState.TAKING_OFF, 30.0, step_s=0.5)
     assert ns.state is NavState.HOLDING, ns

@@ -475,11 +475,21 @@ def test_a_stop_while_a_trial_process_is_starting_kills_it(tmp_path: Path,
     stopper: list[threading.Thread] = []
     real_popen = subprocess.Popen
 
+    def lock_free() -> bool:  # can another thread take the stop's lock now?
+        taken = worker._running_lock.acquire(blocking=False)
+        if taken:
+            worker._running_lock.release()
+        return taken
+
     def popen(*args, **kwargs):  # the stop comes while the trial's process is being started
+        probe: list[bool] = []
+        checker = threading.Thread(target=lambda: probe.append(lock_free()))
+        checker.start()
+        checker.join(30)
+        assert probe == [False], "the trial's process is started outside the stop's lock"
         stopper.append(threading.Thread(target=lambda: stopped.append(
             worker.stop_running_trials())))
-        stopper[0].start()
-        stopper[0].join(0.5)  # it waits for the start (the lock), or had found nothing
+        stopper[0].start()  # it waits for the lock: the start and its entry among the running
         return real_popen(*args, **kwargs)
 
     with worker.trials_allowed():
