@@ -32,8 +32,16 @@ def output_file(path: Path, option: str, source: Path | None = None,
     "log") nor, when that is a folder (a EuRoC or ROS 2 log), a file in it."""
     if path.is_dir():
         raise ConfigError(f"{option} {path} is a directory: give a file name")
-    if not path.parent.is_dir():
-        raise ConfigError(f"{option} {path}: no folder {path.parent} to write it in")
+    folder = path.parent
+    existing = folder  # the nearest part of the path that exists: a file there is named
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing.exists() and not existing.is_dir():
+        raise ConfigError(f"{option} {path}: {existing} is not a folder")
+    if not folder.is_dir():
+        raise ConfigError(f"{option} {path}: no folder {folder} to write it in")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError(f"{option} {path}: the folder {folder} is not writable")
     if source is not None and _same_file(path, source):
         raise ConfigError(f"{option} {path} is the {source_kind} {source} itself: writing it "
                           "would overwrite what is read; give another file name")

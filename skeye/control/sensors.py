@@ -218,7 +218,6 @@ class Sensor(Generic[R]):
         self.count = 0
         self.callback_errors = 0
         self.parse_errors = 0
-        self.last_update_monotonic_s: float | None = None
         self._latest: R | None = None
         self._callbacks: list[Callable[[R], None]] = []
         self._cond = threading.Condition()
@@ -305,7 +304,6 @@ class Sensor(Generic[R]):
             self._latest = reading
             self.history.append(reading)
             self.count += 1
-            self.last_update_monotonic_s = time.monotonic()
             callbacks = list(self._callbacks)
             self._cond.notify_all()
         for fn in callbacks:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -14,6 +13,7 @@ from skeye import cliargs
 from skeye.control.connection import DEFAULT_IMAGE_PORT, parse_address
 from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
+from skeye.outputs import output_file
 from skeye.pixels import frame_image
 
 DEFAULT_QUALITY = 95  # skeye snapshot --out FILE.jpg without --quality
@@ -34,7 +34,7 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
     quality = DEFAULT_QUALITY if quality is None else quality
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
-    _check_folder(out)
+    output_file(out, "--out")  # its folder looked at before the server is asked
     try:
         host, port = parse_address(address, DEFAULT_IMAGE_PORT, "image server address")
     except LocalProtocolError as exc:
@@ -62,26 +62,6 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         raise LocalProtocolError(f"could not write {out}")
     number = frame.meta.frame_number if frame.meta is not None else None
     return image.shape[1], image.shape[0], number
-
-
-def _check_folder(out: Path) -> None:
-    """Refuse, naming why, an ``out`` whose folder cannot take the file: looked at before the
-    image server is asked (OpenCV's ``imwrite`` says only that it failed, not why).
-
-    Raises:
-        LocalProtocolError: the folder is missing, not a folder, or not writable.
-    """
-    folder = out.parent
-    # The nearest part of the path that exists: a file there, or a missing folder below it.
-    existing = folder
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if existing.exists() and not existing.is_dir():
-        raise LocalProtocolError(f"--out {out}: {existing} is not a folder")
-    if not folder.is_dir():
-        raise LocalProtocolError(f"--out {out}: no folder {folder}")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise LocalProtocolError(f"--out {out}: the folder {folder} is not writable")
 
 
 def cmd_snapshot(args: argparse.Namespace) -> int:

@@ -227,7 +227,7 @@ def test_snapshot_names_an_output_folder_it_cannot_write_to_before_asking_the_se
         why = f"{tmp_path / 'notes.txt'} is not a folder"
     else:
         out = tmp_path / "frames" / "frame.png"
-        why = f"no folder {tmp_path / 'frames'}"
+        why = f"no folder {tmp_path / 'frames'} to write it in"
     port = free_port()  # nothing listens: the refusal comes first
     done = _skeye("snapshot", "--images", f"127.0.0.1:{port}", "--out", str(out))
     assert done.returncode == 2, done
