@@ -7,6 +7,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import pytest
 
@@ -228,17 +229,29 @@ def test_realtime_simulator_dying_mid_flight_raises() -> None:
         assert time.monotonic() - started < 3.0
 
 
+@contextmanager
+def taking_off_through_a_relay(timeout_s: float) -> Iterator[tuple[Any, Any, threading.Event]]:
+    """A realtime simulator behind a relay, a hummingbird taking off from Pad1 (its first
+    reading in): the connection, the robot, and the relay's downstream gate (clear it to hold
+    back every line the simulator sends)."""
+    downstream = threading.Event()
+    downstream.set()
+    with sim_running(mode="realtime") as handle, relay(handle.server.port, downstream) as (
+            port, _), skeye.connect(f"127.0.0.1:{port}", timeout_s=timeout_s) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        copter.take_off(1.0, wait=False)
+        copter.ins.wait_next(5.0)
+        try:
+            yield sim, copter, downstream
+        finally:
+            downstream.set()
+
+
 def test_a_realtime_link_silent_for_a_while_is_waited_out() -> None:
     """The simulator's lines held back for 3 s (a busy machine, a starved process) mid take-off:
     the motion goes on once they arrive. Feedback is judged stale on the sim clock; a silent
     link fails a motion only after the connection's timeout_s (the next test)."""
-    downstream = threading.Event()
-    downstream.set()
-    with sim_running(mode="realtime") as handle, relay(handle.server.port, downstream) as (
-            port, _), skeye.connect(f"127.0.0.1:{port}", timeout_s=10.0) as sim:
-        copter = sim.spawn("hummingbird", start="Pad1")
-        copter.take_off(1.0, wait=False)
-        copter.ins.wait_next(5.0)
+    with taking_off_through_a_relay(10.0) as (sim, copter, downstream):
         downstream.clear()
         deadline = time.monotonic() + 30.0  # a ceiling: the reader counts 1 s waits
         while sim.silent_s < 2.5:  # past the 2 s that the wall-clock age check took as lost
@@ -250,18 +263,11 @@ def test_a_realtime_link_silent_for_a_while_is_waited_out() -> None:
 
 
 def test_a_realtime_link_silent_for_its_timeout_fails_the_motion() -> None:
-    downstream = threading.Event()
-    downstream.set()
-    with sim_running(mode="realtime") as handle, relay(handle.server.port, downstream) as (
-            port, _), skeye.connect(f"127.0.0.1:{port}", timeout_s=4.0) as sim:
-        copter = sim.spawn("hummingbird", start="Pad1")
-        copter.take_off(1.0, wait=False)
-        copter.ins.wait_next(5.0)
+    with taking_off_through_a_relay(4.0) as (_sim, copter, downstream):
         downstream.clear()
         with pytest.raises(LinkTimeout, match=r"the simulator has sent nothing for [4-9]\.\d s "
                                               r"\(the connection's timeout_s is 4 s\)"):
             copter.wait_done(60.0)
-        downstream.set()
 
 
 def test_nothing_listening_is_a_clear_error() -> None:

@@ -317,18 +317,19 @@ def test_snapshot_saves_png_and_jpeg(tmp_path):
         c.close()
 
 
-def test_a_robot_spawned_again_under_its_name_is_served_its_own_frame_1():
-    """The image server's encode cache was keyed by camera name and frame number: R1 spawned
-    again (the README's examples, one after another) numbers its frames from 1 again, and a
-    client was served the gone R1's frame 1, seen from where that one stood."""
-    with sim_with_images() as (control, images, cameras):
-        frames = []
-        for north in (0.0, 0.3):
+def _first_frames(norths_m: tuple[float, ...], profile: str = "ideal", seed: int = 3
+                  ) -> list[np.ndarray]:
+    """Frame 1 (the spawn state) of R1's camera, R1 spawned one after another 1 m up at each
+    of ``norths_m`` in a lockstep simulator of ``seed``, from the image server."""
+    steps = 75 if profile == "webcam" else 1  # the webcam: frame 1 out (60 +- 10 ms), not 2
+    frames = []
+    with sim_with_images(profile=profile, seed=seed) as (control, images, cameras):
+        for north in norths_m:
             c = LineClient(control.port)
             c.expect("NFO")
             c.answer(f"INIT {{ClassName hummingbird}} {{Name R1}} {{Location {north},0,-1}}",
                      "INIT")
-            c.step(1)
+            c.step(steps)
             camera_id = cameras.buffer.camera_id("R1/Down")
             with ImageClient("127.0.0.1", images.port) as img:
                 img.select_camera("R1/Down")
@@ -340,30 +341,15 @@ def test_a_robot_spawned_again_under_its_name_is_served_its_own_frame_1():
             c.close()
             _wait(lambda gone=camera_id: cameras.buffer.camera_id("R1/Down") != gone,
                   "R1 removed")
-    assert not np.array_equal(frames[0], frames[1])  # 0.3 m apart: the pad moved in view
-
-
-def _first_webcam_frames(seed: int, spawns: int) -> list[np.ndarray]:
-    """Frame 1 (the spawn state) of R1's webcam, R1 spawned ``spawns`` times one after another
-    at the same place in a lockstep simulator of ``seed``."""
-    frames = []
-    with sim_with_images(profile="webcam", seed=seed) as (control, images, cameras):
-        for _ in range(spawns):
-            c = LineClient(control.port)
-            c.expect("NFO")
-            c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
-            c.step(75)  # frame 1 out (60 +- 10 ms of capture latency), frame 2 not (docs)
-            camera_id = cameras.buffer.camera_id("R1/Down")
-            with ImageClient("127.0.0.1", images.port) as img:
-                img.select_camera("R1/Down")
-                img.set_meta(True)
-                frame = img.get_frame()
-            assert frame.meta is not None and frame.meta.frame_number == 1
-            frames.append(frame_image(frame))
-            c.close()
-            _wait(lambda gone=camera_id: cameras.buffer.camera_id("R1/Down") != gone,
-                  "R1 removed")
     return frames
+
+
+def test_a_robot_spawned_again_under_its_name_is_served_its_own_frame_1():
+    """The image server's encode cache was keyed by camera name and frame number: R1 spawned
+    again (the README's examples, one after another) numbers its frames from 1 again, and a
+    client was served the gone R1's frame 1, seen from where that one stood."""
+    first, second = _first_frames((0.0, 0.3))
+    assert not np.array_equal(first, second)  # 0.3 m apart: the pad moved in view
 
 
 def test_each_seed_and_each_spawn_draws_its_own_webcam_noise():
@@ -372,9 +358,9 @@ def test_each_seed_and_each_spawn_draws_its_own_webcam_noise():
     same noise in the same frame, so a sweep over seeds repeated one noise. It now follows the
     simulator's seed and the robot's spawn, as the sensors' noise does; a seed still repeats
     its frames bit for bit."""
-    first, second = _first_webcam_frames(3, 2)
-    (again,) = _first_webcam_frames(3, 1)
-    (other_seed,) = _first_webcam_frames(4, 1)
+    first, second = _first_frames((0.0, 0.0), "webcam", seed=3)
+    (again,) = _first_frames((0.0,), "webcam", seed=3)
+    (other_seed,) = _first_frames((0.0,), "webcam", seed=4)
     assert np.array_equal(first, again)  # the same seed and spawn: the same frame, to the bit
     for other in (second, other_seed):  # the same scene, other noise
         difference = np.abs(first.astype(np.int16) - other.astype(np.int16))
