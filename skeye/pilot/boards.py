@@ -264,7 +264,7 @@ class OnboardBoards:
             return [Result(pd, exc.code, reason[: Result.MAX_REASON_BYTES // 4])]
         except _Refused as exc:
             self.errors["refused"] += 1
-            return [Result(pd, exc.code, exc.reason)]
+            return [Result(pd, exc.code, exc.reason[: Result.MAX_REASON_BYTES // 4])]
         except LocalProtocolError as exc:  # beyond the vehicle's limits
             self.errors["refused"] += 1
             return [Result(pd, ResultCode.BAD_VALUE, str(exc)[: Result.MAX_REASON_BYTES // 4])]
