@@ -33,6 +33,7 @@ import math
 import os
 import re
 import signal
+import socket
 import sys
 import threading
 from collections.abc import Callable
@@ -364,10 +365,25 @@ def run(args: argparse.Namespace) -> int:
 _ANY_HOST = ("", "0.0.0.0", "::")
 
 
+def bound_address(host: str) -> str:
+    """The address a listener on ``host`` binds: the IPv4 address the name resolves to, as
+    each link's bind resolves it (``localhost`` is ``127.0.0.1``; ``0`` is ``0.0.0.0``, any
+    address, as ``""`` and ``::`` are), or ``host`` as written where it does not resolve (its
+    link's bind says so)."""
+    if host in _ANY_HOST:
+        return "0.0.0.0"
+    try:
+        return socket.gethostbyname(host)
+    except (OSError, UnicodeError):
+        return host
+
+
 def shared_port_problem(args: argparse.Namespace) -> str | None:
     """One port given to two of the pilot's listening links (``--port``, ``--video-port``, a
-    ``--mavlink`` ``tcp://`` or ``udp://``), on one protocol and overlapping addresses: said
-    before anything is opened, as each link's own check passes while the other is unbound.
+    ``--mavlink`` ``tcp://`` or ``udp://``), on one protocol and overlapping addresses (the
+    addresses the hosts resolve to: ``localhost`` and ``127.0.0.1`` are one; any address
+    overlaps every one): said before anything is opened, as each link's own check passes while
+    the other is unbound.
 
     Raises:
         ConfigError: a ``--mavlink`` URI that is not one.
@@ -383,10 +399,12 @@ def shared_port_problem(args: argparse.Namespace) -> str | None:
         scheme, host, port, _ = parse_uri(uri)
         if scheme in ("tcp", "udp"):
             links.append((scheme, host, port, f"the MAVLink link {uri} (--mavlink)"))
+    bound = {host: bound_address(host) for _, host, _, _ in links}
     for i, (scheme, host, port, what) in enumerate(links):
         for other_scheme, other_host, other_port, other in links[:i]:
+            address, other_address = bound[host], bound[other_host]
             if (port and port == other_port and scheme == other_scheme
-                    and (host == other_host or host in _ANY_HOST or other_host in _ANY_HOST)):
+                    and (address == other_address or "0.0.0.0" in (address, other_address))):
                 return (f"{scheme.upper()} port {port} is given to both {other} and {what}; "
                         "give each its own port")
     return None

@@ -69,6 +69,30 @@ def test_skeye_pilot_refuses_one_port_given_to_two_of_its_links():
     assert apart.returncode == 4, apart
 
 
+def test_one_port_under_two_names_of_one_address_is_refused_too():
+    """``localhost`` and ``127.0.0.1`` are one address to the bind: a pilot on ``--port P``
+    beside ``--mavlink tcp://localhost:P`` (or two ``udp://`` links naming the address two ways)
+    is the same clash as one port written twice, said at start, exit 2, naming both. Until
+    2026-11-28 the check compared the hosts as written: the robot was spawned and the pilot
+    exited 1 when the second link failed to bind (here, with no simulator at ``--sim``, exit 4
+    after the wait)."""
+    with socket.create_server(("127.0.0.1", 0)) as probe:
+        port = probe.getsockname()[1]
+    tcp = _skeye("pilot", "--sim", "127.0.0.1:1", "--timeout", "1", "--port", str(port),
+                 "--mavlink", f"tcp://localhost:{port}")
+    assert tcp.returncode == 2, tcp
+    assert f"TCP port {port} is given to both the pilot (--port)" in tcp.stderr, tcp.stderr
+    assert f"tcp://localhost:{port}" in tcp.stderr and "Traceback" not in tcp.stderr
+    udp = _skeye("pilot", "--sim", "127.0.0.1:1", "--timeout", "1", "--port", "0",
+                 "--mavlink", f"udp://localhost:{port}", "--mavlink", f"udp://127.0.0.1:{port}")
+    assert udp.returncode == 2, udp
+    assert f"UDP port {port} is given to both" in udp.stderr, udp.stderr
+    # two loopback addresses are two addresses: each link binds its own (exit 4: no simulator)
+    apart = _skeye("pilot", "--sim", "127.0.0.1:1", "--timeout", "1", "--port", "0",
+                   "--mavlink", f"udp://127.0.0.1:{port}", "--mavlink", f"udp://127.0.0.2:{port}")
+    assert apart.returncode == 4, apart
+
+
 def test_a_mavlink_endpoint_that_cannot_bind_says_why():
     """``MavlinkServer`` with a link whose port is taken raises the ConfigError naming it (it
     raised AttributeError from its own clean-up, hiding the cause, until 2026-11-27)."""
