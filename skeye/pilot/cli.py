@@ -158,6 +158,9 @@ def run(args: argparse.Namespace) -> int:
             check_camera_uri(camera_uri)  # the whole URI, before the airframe opens
         except (LocalProtocolError, CameraError) as exc:  # CameraError: a file not there
             return _error(f"--camera: {exc}")
+        problem = other_robots_camera_problem(airframe_uri, camera_uri, args.name)
+        if problem:
+            return _error(problem)
     elif args.images is None and args.camera != DEFAULT_CAMERA:
         return _error(camera_name_problem(args.camera))
     elif args.images is not None and airframe_scheme(airframe_uri) in REAL_VEHICLES:
@@ -611,6 +614,25 @@ def images_problem(airframe_uri: str) -> str:
     """Why ``--images`` is refused on an airframe without a spawned robot."""
     return (f"--images reads the camera of a robot the pilot spawned (sim://); {airframe_uri} "
             "has none: give --camera URI")
+
+
+def other_robots_camera_problem(airframe_uri: str, camera_uri: str, name: str) -> str:
+    """Why a ``sim://`` camera of another robot is refused on a ``sim://`` airframe ('' when
+    it is not one): the pilot spawns and flies robot ``name`` (``--name``), and a vehicle's
+    camera is on the vehicle, so another robot's camera would fly it on what that robot sees.
+    On ``asctec-ll://`` the pilot spawns no robot: the camera names the robot the board flies
+    (``skeye sim --ll-board``), which the pilot cannot check."""
+    if airframe_scheme(airframe_uri) != "sim" or not camera_uri.lower().startswith("sim://"):
+        return ""
+    from skeye.pilot.camera_sim import parse_sim_camera
+
+    _, _, camera_name, _ = parse_sim_camera(camera_uri, name)
+    owner = camera_name.partition("/")[0]
+    if owner == name:
+        return ""
+    return (f"--camera {camera_uri} is robot {owner}'s camera; this pilot flies {name} "
+            f"(--name): a vehicle's camera is on the vehicle: give sim://HOST:PORT/{name}/CAMERA, "
+            "or sim://HOST:PORT/CAMERA")
 
 
 def camera_name_problem(camera: str) -> str:

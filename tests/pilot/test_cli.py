@@ -514,6 +514,34 @@ def test_a_location_south_or_west_of_the_origin_is_a_value_not_an_option(where):
 
 
 
+@pytest.mark.parametrize("airframe", [None, "sim://127.0.0.1:{port}"])
+def test_a_sim_pilot_given_another_robots_camera_is_refused(capsys, airframe):
+    """A vehicle's camera is on the vehicle: a ``sim://`` pilot flying R1 given
+    ``--camera sim://.../R2/Down`` would fly R1 on what R2 sees (its pad offsets, its height).
+    Refused at start, exit 2, naming both robots, before the simulator is reached (nothing
+    listens at ``--sim``: until 2026-11-28 the pilot went on to it, exit 4; with a simulator
+    there it would have flown R1 on R2's camera). Its own camera, by its name or the short
+    form, passes this check (then exit 4: no simulator)."""
+    from skeye.cli import main
+
+    port = _unused_port()
+    where = ["--sim", f"127.0.0.1:{port}"] if airframe is None else [
+        "--airframe", airframe.format(port=port)]
+    other = "sim://127.0.0.1:5003/R2/Down?fov_deg=60"
+    status = main(["pilot", *where, "--name", "R1", "--port", "0", "--timeout", "1",
+                   "--camera", other])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err == (f"skeye pilot: error: --camera {other} is robot R2's camera; this pilot "
+                   "flies R1 (--name): a vehicle's camera is on the vehicle: give "
+                   "sim://HOST:PORT/R1/CAMERA, or sim://HOST:PORT/CAMERA\n"), err
+    for own in ("sim://127.0.0.1:5003/R1/Down?fov_deg=60", "sim://127.0.0.1:5003/Down"):
+        status = main(["pilot", *where, "--name", "R1", "--port", "0", "--timeout", "1",
+                       "--camera", own])
+        err = capsys.readouterr().err
+        assert status == 4, err
+
+
 def test_lockstep_sync_on_a_real_vehicle_is_refused(capsys):
     """``--lockstep-sync`` is about a lockstep simulator's clock: on an LL board it would do
     nothing, so it is refused before the vehicle is opened (a closed port: without the check,
