@@ -11,11 +11,32 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Sequence
 
 MAX_PORT = 65535
 EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
             "uvicorn": "ground", "pymavlink": "mavlink", "av": "mavlink"}
 """A dependency that lives in an extra (pyproject.toml) -> the extra's name."""
+
+
+def not_installed(modules: Sequence[str]) -> str:
+    """What a command that imports ``modules`` (each a key of :data:`EXTRA_OF`) lacks, in the
+    words ``skeye`` says when an import fails (``rich is not installed: this command needs
+    skeye's sim extra (pip install 'skeye[sim]'; ...)``), or '' when every one is there. A
+    command asks this before it makes anything, rather than failing at the import later; a
+    module is looked up, not imported (MuJoCo's import takes a while)."""
+    from importlib.util import find_spec
+
+    missing = [module for module in modules if find_spec(module) is None]
+    if not missing:
+        return ""
+    extras = list(dict.fromkeys(EXTRA_OF[module] for module in missing))
+    named = ", ".join(missing[:-1]) + " and " + missing[-1] if len(missing) > 1 else missing[0]
+    install = ",".join(extras)
+    return (f"{named} {'is' if len(missing) == 1 else 'are'} not installed: this command "
+            f"needs skeye's {' and '.join(extras)} extra{'s' if len(extras) > 1 else ''} (pip "
+            f"install 'skeye[{install}]'; the base install is the onboard pilot's, "
+            "docs/onboard.md)")
 
 
 def _int(text: str) -> int:

@@ -18,6 +18,7 @@ import os
 import socket
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from importlib.util import find_spec
 from types import TracebackType
 from typing import Any, Protocol
 
@@ -84,6 +85,8 @@ class LocalBackend(_Closing):
                     yield fut.result()
 
 
+RAY_MISSING = "the Ray backend needs Ray: pip install 'skeye[ray]'"
+
 RAY_CONNECT_TIMEOUT_S = 5.0
 """How long ``--address HOST:PORT`` may take to accept a TCP connection."""
 
@@ -127,8 +130,7 @@ class RayBackend(_Closing):
         try:
             import ray
         except ImportError:
-            raise LocalProtocolError(
-                "the Ray backend needs Ray: pip install 'skeye[ray]'") from None
+            raise LocalProtocolError(RAY_MISSING) from None
         self.ray = ray
         self.cpus, self.gpus, self.max_retries = cpus, gpus, max_retries
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # nothing leaves this machine
@@ -171,6 +173,28 @@ class RayBackend(_Closing):
         """Disconnect (and stop the cluster if this started it); idempotent."""
         if self.ray.is_initialized():
             self.ray.shutdown()
+
+
+def check_backend(name: str, address: str | None, workers: int | None) -> None:
+    """What :func:`make_backend` would refuse, checked without starting anything (Ray is
+    looked up, not imported; ``--address`` by :func:`check_ray_address`, which the Ray backend
+    runs again as it joins), so a command can say it before it makes its output folder.
+
+    Raises:
+        LocalProtocolError: naming the option, or the extra that is missing.
+    """
+    if workers is not None and workers < 1:
+        raise LocalProtocolError(f"--workers must be >= 1, got {workers}")
+    if name == "local":
+        if address:
+            raise LocalProtocolError("--address is for --backend ray")
+        return
+    if name != "ray":
+        raise LocalProtocolError(f"unknown backend {name!r}: local or ray")
+    if find_spec("ray") is None:
+        raise LocalProtocolError(RAY_MISSING)
+    if address:
+        check_ray_address(address)
 
 
 def make_backend(name: str, address: str | None, workers: int | None, cpus: float = 1.0,

@@ -22,9 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
+from skeye.cliargs import not_installed
 from skeye.errors import ConfigError
 from skeye.outputs import folder_lock, output_folder
-from skeye.sweep.backends import Backend, make_backend
+from skeye.sweep.backends import Backend, check_backend, make_backend
 from skeye.sweep.results import ResultStore, write_report, write_tables
 from skeye.sweep.spec import SweepSpec, load_spec
 from skeye.sweep.worker import stop_running_trials
@@ -102,8 +103,14 @@ def run_trials(spec: SweepSpec, out: Path, backend: Backend, label: str = "sweep
 def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str | None = None,
           workers: int | None = None, quick: bool | None = None, show_progress: bool = True
           ) -> SweepResult:
-    """Run a sweep spec and write results.csv/.parquet and report.md into ``out``."""
+    """Run a sweep spec and write results.csv/.parquet and report.md into ``out``. What
+    cannot run (a missing extra, Ray for ``--backend ray``, a bad ``--address``) is refused
+    before ``out`` is made."""
     spec = load_spec(spec_path, quick)
+    check_backend(backend_name, address, workers)
+    missing = not_installed(sweep_needs(spec))
+    if missing:
+        raise ConfigError(missing)
     output_folder(out)
     with folder_lock(out, "skeye sweep"):  # two there ran every trial twice, racing on rows
         start = time.monotonic()
@@ -118,6 +125,18 @@ def sweep(spec_path: Path, out: Path, backend_name: str = "local", address: str 
         write_tables(out, result.rows, spec.param_names)
         write_report(out, spec, result.rows, backend_name, time.monotonic() - start)
     return result
+
+
+def sweep_needs(spec: SweepSpec) -> tuple[str, ...]:
+    """The modules of an extra that running ``spec`` imports: rich (the progress), MuJoCo
+    (the simulator, for E1 and E2; a flight script brings its own imports), and matplotlib
+    when a parameter takes several values (the report plots the figures against it)."""
+    needs = ["rich"]
+    if any(t.experiment in ("E1", "E2") for t in spec.trials):
+        needs.append("mujoco")
+    if any(len({repr(t.params.get(p)) for t in spec.trials}) > 1 for p in spec.param_names):
+        needs.append("matplotlib")
+    return tuple(needs)
 
 
 @contextmanager

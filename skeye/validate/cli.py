@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from skeye import cliargs
+from skeye.cliargs import not_installed
 from skeye.errors import ConfigError, LocalProtocolError, SkeyeError
 from skeye.outputs import folder_lock, output_folder
 from skeye.processes import scaled_s
@@ -46,6 +47,11 @@ def _choice(name: str, value: str, what: str) -> None:
     except ConfigError:
         raise LocalProtocolError(f"unknown {what} {value!r}: "
                                  f"{', '.join(SETTING_CHOICES[name])}") from None
+
+
+VALIDATE_NEEDS = ("mujoco", "rich", "matplotlib")
+"""The modules of the sim extra a validation imports: the simulator its trials fly, the
+progress, the figures (drawn once every trial has flown)."""
 
 
 def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1,
@@ -84,6 +90,9 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     _choice("pad_source", pad_source, "pad source")
     if calibration is not None:  # a bad file is named here, not in every trial
         check_setting("calibration", str(calibration))
+    missing = not_installed(VALIDATE_NEEDS)  # before the folder, not after the trials
+    if missing:
+        raise ConfigError(missing)
     output_folder(out)
     with folder_lock(out, "skeye validate"):  # two runs there would mix their files
         if keep_recordings:  # each trial would refuse to write over one, or fail to make its

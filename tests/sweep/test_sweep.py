@@ -391,6 +391,33 @@ def test_a_ray_address_that_is_no_cluster_is_refused_at_once(tmp_path: Path, add
     assert "Traceback" not in run.stderr and time.monotonic() - start < 60
 
 
+def _skeye_without(module: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """``skeye ARGS`` where ``module`` cannot be imported (as on an install without its
+    extra; nothing is uninstalled)."""
+    code = (f"import sys; sys.modules[{module!r}] = None; from skeye.cli import main; "
+            "sys.exit(main(sys.argv[1:]))")
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.mark.parametrize(("module", "options", "said"), [
+    ("ray", ["--backend", "ray"], "the Ray backend needs Ray: pip install 'skeye[ray]'"),
+    ("matplotlib", [], "matplotlib is not installed: this command needs skeye's sim extra"),
+])
+def test_a_missing_extra_is_named_before_the_output_folder_is_made(tmp_path: Path, module: str,
+                                                                    options: list[str],
+                                                                    said: str):
+    """A sweep that cannot run (Ray missing for ``--backend ray``; matplotlib, which draws the
+    report, missing) is refused before anything is made: exit 2, the extra named, no ``--out``
+    folder. Until 2026-11-28 the folder was made (with its lock file) first, and without
+    matplotlib every trial ran before the report failed."""
+    out = tmp_path / "o"
+    run = _skeye_without(module, "sweep", str(_spec(tmp_path)), "--out", str(out), *options)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith(f"skeye sweep: error: {said}"), run.stderr
+    assert not out.exists(), sorted(p.name for p in out.iterdir())
+
+
 SLOW = """
 import os
 import time

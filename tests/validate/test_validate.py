@@ -252,6 +252,24 @@ def test_keep_recordings_with_a_file_where_a_seeds_folder_goes_is_refused_before
     assert sorted(p.name for p in out.iterdir()) == [".skeye.lock", "recordings_seed1"]
 
 
+def test_validate_names_a_missing_extra_before_it_makes_its_folder(tmp_path: Path) -> None:
+    """Without matplotlib (the sim extra's; it draws the figures) skeye validate is refused
+    at once, exit 2, naming it, and makes no ``--out`` folder. Until 2026-11-28 it made the
+    folder, flew every trial (hours without ``--quick``) and then failed at the first figure."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    code = ("import sys; sys.modules['matplotlib'] = None; from skeye.cli import main; "
+            "sys.exit(main(sys.argv[1:]))")
+    run = subprocess.run([sys.executable, "-c", code, "validate", "E1", "--quick", "--out",
+                          str(out)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith("skeye validate: error: matplotlib is not installed: this "
+                                 "command needs skeye's sim extra"), run.stderr
+    assert not out.exists(), sorted(p.name for p in out.iterdir())
+
+
 def test_ctrl_c_stops_validate_and_its_running_trials(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT) stops skeye validate as it stops skeye sweep: the running trial is
     killed and its temporary folder removed, exit 130 with the signal named (Python's own
