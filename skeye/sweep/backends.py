@@ -183,14 +183,9 @@ def check_backend(name: str, address: str | None, workers: int | None) -> None:
     Raises:
         LocalProtocolError: naming the option, or the extra that is missing.
     """
-    if workers is not None and workers < 1:
-        raise LocalProtocolError(f"--workers must be >= 1, got {workers}")
+    _check_choice(name, address, workers)
     if name == "local":
-        if address:
-            raise LocalProtocolError("--address is for --backend ray")
         return
-    if name != "ray":
-        raise LocalProtocolError(f"unknown backend {name!r}: local or ray")
     if find_spec("ray") is None:
         raise LocalProtocolError(RAY_MISSING)
     if address:
@@ -199,12 +194,18 @@ def check_backend(name: str, address: str | None, workers: int | None) -> None:
 
 def make_backend(name: str, address: str | None, workers: int | None, cpus: float = 1.0,
                  gpus: float = 0.0) -> Backend:
+    _check_choice(name, address, workers)
+    if name == "local":
+        return LocalBackend(workers)
+    return RayBackend(address, workers, cpus, gpus)
+
+
+def _check_choice(name: str, address: str | None, workers: int | None) -> None:
+    """The backend's name, ``--address`` (Ray's alone) and ``--workers``, as given."""
     if workers is not None and workers < 1:
         raise LocalProtocolError(f"--workers must be >= 1, got {workers}")
     if name == "local":
         if address:
             raise LocalProtocolError("--address is for --backend ray")
-        return LocalBackend(workers)
-    if name == "ray":
-        return RayBackend(address, workers, cpus, gpus)
-    raise LocalProtocolError(f"unknown backend {name!r}: local or ray")
+    elif name != "ray":
+        raise LocalProtocolError(f"unknown backend {name!r}: local or ray")
