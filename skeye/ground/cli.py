@@ -503,6 +503,7 @@ def run_up(args: argparse.Namespace) -> int:
             ("the pilot", "127.0.0.1", args.pilot_port, "--pilot-port"),
             ("the pilot's video", "127.0.0.1", args.video_port, "--video-port"),
             ("ground control", args.host, args.ground_port, "--ground-port"),
+            *mavlink_listeners(mavlink),
         ])
         calibration = pilot_calibration(args.calibration, args.robot)
         if stop.is_set():  # Ctrl-C while calibrating: start nothing
@@ -602,6 +603,20 @@ def up_mavlink_links(args: argparse.Namespace) -> list[str]:
     for uri in links:
         check_free(uri)
     return links
+
+
+def mavlink_listeners(links: list[str]) -> list[tuple[str, str, int, str]]:
+    """The pilot's ``tcp://`` MAVLink links, which listen on this machine, as
+    :func:`skeye.processes.check_ports_free` takes them: one on a port of the other children's
+    (all TCP) would fail in the pilot after the simulator had started."""
+    from skeye.mavlink.transport import parse_uri
+
+    listeners = []
+    for uri in links:
+        scheme, host, port, _ = parse_uri(uri)
+        if scheme == "tcp":
+            listeners.append((f"the MAVLink link {uri}", host, port, "--mavlink"))
+    return listeners
 
 
 def _add_up(sub: Any) -> None:

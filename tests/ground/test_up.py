@@ -197,6 +197,10 @@ def test_up_names_a_taken_port_and_its_option_before_starting_anything() -> None
                 assert probe.connect_ex(("127.0.0.1", port)) != 0
     done = _run_up("--sim-port", str(sim), "--image-port", str(sim))
     assert done.returncode == 1 and "--image-port" in done.stderr and f"port {sim}" in done.stderr
+    # the pilot's MAVLink link listening on a port of the other children's
+    done = _run_up(*ports, "--mavlink", f"tcp://127.0.0.1:{sim}")
+    assert done.returncode == 1 and "--mavlink" in done.stderr and f"port {sim}" in done.stderr
+    assert "the simulator" in done.stderr and "control protocol" not in done.stdout
 
 
 def test_ground_alone_names_a_taken_port_or_a_foreign_host_with_its_option(capsys) -> None:
