@@ -234,3 +234,17 @@ def test_a_command_starts_without_importing_the_other_commands() -> None:
                          timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == [], out.stdout
+
+
+def test_python_dash_m_skeye_is_the_command_line() -> None:
+    """``python -m skeye`` runs what the ``skeye`` script runs (a venv's python without its
+    ``bin`` on PATH, as ``make`` and the benchmarks call it); it answered "No module named
+    skeye.__main__"."""
+    from skeye import __version__
+
+    out = subprocess.run([sys.executable, "-m", "skeye", "--version"], capture_output=True,
+                         text=True, timeout=120, cwd=ROOT)
+    assert (out.returncode, out.stdout.strip()) == (0, f"skeye {__version__}"), out.stderr
+    bad = subprocess.run([sys.executable, "-m", "skeye", "sim", "--port", "-1"],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert bad.returncode == 2 and "usage: skeye sim" in bad.stderr, bad.stderr
