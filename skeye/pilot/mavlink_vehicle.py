@@ -26,7 +26,11 @@ commands (TAKE_OFF, LAND, HOLD, MOVE_BY in the world frame, VELOCITY, CTRL_INPUT
 handed to ``boards.handle``, so the flight-state table, the flight envelope, the speed limits
 and the link-loss failsafe apply exactly as over the AscTec link, and a refusal's RESULT code
 and reason become COMMAND_ACK's result and a STATUSTEXT. Every message from a ground station
-counts for the link-loss timer as a packet does (an empty poll). The last command wins,
+counts for the link-loss timer as a packet does (an empty poll); no message of another
+vehicle does (a system whose autopilot component, 1, sends a HEARTBEAT naming an autopilot, no
+ground station's type: heard where a router or a shared radio net forwards a fleet's streams to
+every vehicle; PX4 counts only MAV_TYPE_GCS heartbeats towards its data link, ArduPilot only
+its ground station's), nor is another vehicle a ground station. The last command wins,
 whichever link it came on; a program the endpoint runs (mission, return, precision landing,
 offboard) notes the boards' ``motion_changes`` after each of its own commands and stops, with a
 STATUSTEXT, when any other command changed the motion.
@@ -101,6 +105,18 @@ MANUAL_CTRL = (CtrlBits.PITCH | CtrlBits.ROLL | CtrlBits.YAW | CtrlBits.THRUST
                | CtrlBits.GPS_POSITION_CONTROL)
 
 
+def _flight_controller(src: tuple[int, int], heartbeat: MavMessage) -> bool:
+    """Whether a HEARTBEAT from ``src`` (system, component) is a vehicle's flight controller's:
+    from the autopilot component (MAV_COMP_ID_AUTOPILOT1, as PX4 and ArduPilot send), naming an
+    autopilot and no ground station's type. A ground station sends MAV_TYPE_GCS with
+    MAV_AUTOPILOT_INVALID from its own component (QGroundControl 255/190); a script that sends
+    a bare heartbeat (type and autopilot 0) from pymavlink's default component 0 is no vehicle
+    either."""
+    return (src[1] == mav.MAV_COMP_ID_AUTOPILOT1
+            and int(heartbeat.autopilot) != mav.MAV_AUTOPILOT_INVALID
+            and int(heartbeat.type) != mav.MAV_TYPE_GCS)
+
+
 def _over(value: float, limit: float) -> bool:
     """``value``, from a MAVLink float field, over ``limit`` by more than single precision's
     rounding (2**-24 of it, a few times over for a speed turned into the heading's frame): a
@@ -134,6 +150,9 @@ class MavlinkVehicle:
         self.params = ParamTable(self._param_specs(), self.codec)
         self.links: list[_Link] = []
         self.gcs: dict[tuple[int, int], float] = {}
+        # Other vehicles heard on the links (system id -> when last): their messages are no
+        # ground station's.
+        self.vehicles: dict[int, float] = {}
         self.bad_frames = 0
         self.ignored = 0  # messages understood but not acted on
         self.refusals = 0
@@ -263,12 +282,18 @@ class MavlinkVehicle:
             return []  # our own messages echoed back
         out: list[Out] = []
         self.links[link].peers_seen[peer] = now_s
-        if src not in self.gcs and msg.get_type() == "HEARTBEAT":
+        kind = msg.get_type()
+        if kind == "HEARTBEAT" and _flight_controller(src, msg):
+            self.vehicles[src[0]] = now_s  # another vehicle of a fleet
+        if src[0] in self.vehicles:
+            self.vehicles[src[0]] = now_s
+            self.ignored += 1  # its stream, forwarded to us: neither ground link nor station
+            return out
+        if src not in self.gcs and kind == "HEARTBEAT":
             out += self._new_station(src, link, peer, now_s)
-        if msg.get_type() == "HEARTBEAT" or src in self.gcs:
+        if kind == "HEARTBEAT" or src in self.gcs:
             self.gcs[src] = now_s
         self.boards.handle(Poll(0), now_s)  # a message from the ground: the link is alive
-        kind = msg.get_type()
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             if not self._for_us(msg):
                 return out
@@ -1202,6 +1227,9 @@ class MavlinkVehicle:
         for src, seen in list(self.gcs.items()):
             if now_s - seen > GCS_TIMEOUT_S:
                 del self.gcs[src]
+        for system, seen in list(self.vehicles.items()):
+            if now_s - seen > GCS_TIMEOUT_S:
+                del self.vehicles[system]
         return out
 
     def _origin_news(self, now_s: float, view: telem.VehicleView | None) -> list[Out]:
