@@ -3,7 +3,8 @@
 How this works: :class:`ReplayServer` listens like the simulator (127.0.0.1 unless told
 otherwise). Each client gets its own playback from the start of the recording, on its own
 thread: ``NFO {Gametype skeye} ... {Mode realtime} {Replay true}`` on accept, then the recorded
-stream of one robot (the lines the engine sent its connection: ``STA``, ``SEN``, and the ``ERR``
+stream of one robot (the lines the engine sent its connection, or each of its connections in
+turn where it was spawned again under its name: ``STA``, ``SEN``, and the ``ERR``
 of a crash, ``{Command CRASH}``, or of a robot the engine stopped, ``{Command PHYSICS}`` or
 ``{Command CAMERA}``; not the answers to its client's commands), each line released when
 ``(sim_s - first_sim_s) / speed`` wall seconds have passed. The first part of a rotated
@@ -77,13 +78,18 @@ class ReplayServer:
         if not self.robots:
             raise ConfigError(f"{path}: the recording holds no robot (no INIT answer, no robot "
                               "status line)")
-        names = list(self.robots.values())
-        chosen = robot or names[0]
-        conns = [c for c, n in self.robots.items() if n == chosen]
-        if not conns:
-            raise ConfigError(f"no robot {chosen!r} in the recording; it holds {', '.join(names)}")
+        self.names = list(dict.fromkeys(self.robots.values()))
+        """The recorded robots' names, each once, in the order they were first spawned."""
+        chosen = robot or self.names[0]
+        # Every connection that flew a robot of this name: a robot spawned again under it on a
+        # new connection (a pilot restarted, or re-attaching after the simulator removed its
+        # robot) goes on with the same robot. Names are unique at any one time, so their
+        # streams do not overlap.
+        self.conns = frozenset(c for c, n in self.robots.items() if n == chosen)
+        if not self.conns:
+            raise ConfigError(f"no robot {chosen!r} in the recording; it holds "
+                              f"{', '.join(self.names)}")
         self.robot = chosen
-        self.conn = conns[0]
         self.max_clients = max_clients
         self._threads: set[threading.Thread] = set()
         self._socks: set[socket.socket] = set()
@@ -122,7 +128,7 @@ class ReplayServer:
     def stream(self) -> Iterator[tuple[float, bytes]]:
         """(sim time, line) of the chosen robot's stream, in recorded order."""
         for rec in self.reader.records():
-            if rec.conn == self.conn and rec.direction == SENT:
+            if rec.conn in self.conns and rec.direction == SENT:
                 if rec.line.startswith(_STREAM_PREFIXES):
                     yield rec.sim_s, rec.line.encode() + b"\r\n"
 
@@ -269,7 +275,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             else ""
         print(
             f"skeye replay: {args.file}{of}, robot {server.robot} (of "
-            f"{', '.join(server.robots.values())}), speed x{args.speed:g}; "
+            f"{', '.join(server.names)}), speed x{args.speed:g}; "
             f"control protocol on {args.host}:{server.port} ({where})",
             flush=True,
         )

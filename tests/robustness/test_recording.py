@@ -874,3 +874,42 @@ def test_sync_returns_once_every_record_observed_before_it_is_on_disk(tmp_path: 
         assert text.count(b" SEN {Time ") == 2000 and b"SEN {Time 1999.0}" in text
         assert recorder.written == 2000
     recorder.sync(timeout_s=1.0)  # closed: nothing to wait for, no error
+
+
+def test_replay_of_a_robot_plays_every_connection_that_flew_it(tmp_path: Path) -> None:
+    """A robot spawned again under its name on a new connection (a pilot restarted, or one
+    re-attaching after the simulator removed its robot) is the same robot to ``--robot``: the
+    replay plays both lives in order, as the plot sums them. It played the first connection's
+    alone, and the listing named the robot twice."""
+    path = tmp_path / "fleet.rec"
+    streams: list[bytes] = []
+    with running_sim() as server, Recorder(path, {"world": "pad"}) as recorder:
+        recorder.attach(server, server.runner)
+        other = LineClient(server.port)
+        other.expect("NFO")
+        assert other.answer("INIT {ClassName hummingbird} {Name R2} {Location 3,0,-1}",
+                            "INIT").type == "RES"
+        for _ in range(2):
+            client = LineClient(server.port)
+            client.expect("NFO")
+            assert client.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}",
+                                 "INIT").type == "RES"
+            client.step(200)
+            client.sock.shutdown(socket.SHUT_WR)  # the robot's removal is queued by the end
+            with pytest.raises(ConnectionError):
+                client.read_until(lambda m: False)
+            streams.append(bytes(client.raw))
+            client.close()
+        other.close()
+        assert wait_for(lambda: server.client_count == 0)
+    expected = [line for raw in streams for line in raw.split(b"\r\n")
+                if line.startswith((b"SEN ", b"STA "))]
+    with ReplayServer(path, port=0, speed=1000.0, robot="R1") as replay:
+        assert replay.names == ["R2", "R1"]  # each name once
+        client = LineClient(replay.port)
+        played = iter(range(1, len(expected) + 1))
+        client.read_until(lambda m: m.type in ("SEN", "STA") and next(played) == len(expected),
+                          timeout_s=10)
+        got = [line for line in client.raw.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
+        client.close()
+    assert got == expected
