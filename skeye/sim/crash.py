@@ -12,7 +12,10 @@ estimator believes):
   does the simulated board. It applies with the motors off too: a vehicle that a gust rolls
   over on the ground has crashed as surely as one that tumbles in the air.
 - **Hard impact**: the vehicle touches something (ground contact after a tick without one)
-  faster than :data:`IMPACT_SPEED_M_S`, the speed of a free drop from 1.5 x 8 in: the reserve
+  faster than :data:`IMPACT_SPEED_M_S` (its speed relative to what it touches: on the ground,
+  and what stands on it, its own speed; against another vehicle, the two's closing speed, now
+  or at the tick before, as two vehicles flying at each other meet at the sum of their speeds),
+  the speed of a free drop from 1.5 x 8 in: the reserve
   energy drop (1.5 times the limit drop height, 14 CFR 27.727) of the smallest limit drop height
   the FAA's rotorcraft airworthiness standards require a landing gear to take (at least 8 in,
   14 CFR 29.725(a)). A small multirotor's skids are no stronger than a certified rotorcraft's
@@ -68,16 +71,19 @@ class CrashDetector:
         pitch_rad: float,
         vel_ned_m_s: tuple[float, float, float],
         in_contact: bool,
+        closing_m_s: float = 0.0,
     ) -> str | None:
         """One board tick's true state; the crash's cause the first time a rule fires, else
-        None (also after the crash: it is reported once)."""
+        None (also after the crash: it is reported once). ``closing_m_s``: the speed at which
+        the vehicle meets another vehicle it touches now (0: none); the ground's is the
+        vehicle's own."""
         if self.cause is not None:
             return None
         vx, vy, vz = vel_ned_m_s
         speed = math.sqrt(vx * vx + vy * vy + vz * vz)
         cause: str | None = None
         if in_contact and not self._was_in_contact:
-            impact = max(speed, self._last_speed_m_s)
+            impact = max(speed, self._last_speed_m_s, closing_m_s)
             if impact > self.impact_speed_m_s:
                 cause = (f"hard impact at {impact:.1f} m/s (a crash above "
                          f"{self.impact_speed_m_s:.2f} m/s)")

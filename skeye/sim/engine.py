@@ -132,6 +132,8 @@ class Simulation:
         self._spawned = 0
         self._resets = 0
         self._slots: dict[str, _Slot] = {}
+        # Each robot's linear velocity at its last board tick (see _closing_speed).
+        self._board_velocities: dict[str, tuple[float, float, float]] = {}
         self._queries: dict[str, RobotWorldQuery] = {}
         self.wind = WindModel(wind or make_settings("none"), np.random.default_rng([seed, 7]))
         self.step_hooks: list[Callable[[Simulation], None]] = []
@@ -412,13 +414,14 @@ class Simulation:
         if airborne:
             robot.controller.reset(hold_altitude_m=-pos[2])
         self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
+        self._board_velocities[name] = (0.0, 0.0, 0.0)  # still: no earlier flight to meet with
         # The board's power-up calibration. In the air the vehicle stands for one that took off
         # earlier, so its board calibrated on the ground before; its readings at the spawn
         # instant (no motion yet) give the gyro bias, while the accelerometer, free of any
         # force there, says nothing and the spawn attitude is kept.
         robot.power_up(self.body_state(name), self._queries[name])
         # The board's first tick now, so the wrench is set from the first step on.
-        self._board_tick(name, robot, self.body_state(name), self._bodies_in_contact())
+        self._board_tick(name, robot, self.body_state(name), self._bodies_in_contact(), {})
 
     def reset_robot(
         self,
@@ -491,6 +494,7 @@ class Simulation:
     def remove(self, name: str) -> None:
         if self.robots.pop(name, None) is not None:
             self._queries.pop(name, None)
+            self._board_velocities.pop(name, None)
             self._rebuild()
 
     def _surface_down(self, north_m: float, east_m: float) -> float:
@@ -575,15 +579,42 @@ class Simulation:
             self.robots[name].rotors.speed_rad_s,
         )
 
-    def _bodies_in_contact(self) -> set[int]:
-        """The bodies that touch something now (MuJoCo's contacts of the last step)."""
+    def _bodies_in_contact(self) -> dict[int, set[int]]:
+        """The bodies that touch something now (MuJoCo's contacts of the last step), each with
+        the root bodies of what it touches (0, the world body, for the ground and what stands
+        on it; a robot's own body for a robot)."""
         d, m = self.data, self.model
-        bodies: set[int] = set()
+        bodies: dict[int, set[int]] = {}
         for i in range(d.ncon):
             c = d.contact[i]
-            bodies.add(int(m.geom_bodyid[c.geom1]))
-            bodies.add(int(m.geom_bodyid[c.geom2]))
+            b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+            bodies.setdefault(b1, set()).add(int(m.body_rootid[b2]))
+            bodies.setdefault(b2, set()).add(int(m.body_rootid[b1]))
         return bodies
+
+    def _closing_speed(self, name: str, touched: set[int],
+                       before: dict[str, tuple[float, float, float]]) -> float:
+        """The fastest robot ``name`` meets another robot it touches now (m/s): the speed of
+        the one relative to the other, now and at the robot's board tick before (``before``:
+        each robot's linear velocity then), the larger. 0 when it touches no robot: the ground
+        and what stands on it are still, and the vehicle's own speed is its speed on them."""
+        qvel = self._qvel
+        slot = self._slots[name]
+        a = slot.qvel_adr
+        vx, vy, vz = float(qvel[a]), float(qvel[a + 1]), float(qvel[a + 2])
+        mine = before.get(name)
+        fastest = 0.0
+        for other_name, other in self._slots.items():
+            if other_name == name or other.body_id not in touched:
+                continue
+            o = other.qvel_adr
+            dx, dy, dz = vx - float(qvel[o]), vy - float(qvel[o + 1]), vz - float(qvel[o + 2])
+            fastest = max(fastest, math.sqrt(dx * dx + dy * dy + dz * dz))
+            theirs = before.get(other_name)
+            if mine is not None and theirs is not None:
+                dx, dy, dz = mine[0] - theirs[0], mine[1] - theirs[1], mine[2] - theirs[2]
+                fastest = max(fastest, math.sqrt(dx * dx + dy * dy + dz * dz))
+        return fastest
 
     # -- stepping ------------------------------------------------------------------------
     def step(self, count: int = 1, stop: Callable[[], bool] | None = None) -> None:
@@ -695,7 +726,11 @@ class Simulation:
         failed: list[tuple[str, str]] = []
         wind_advanced = False
         joints: tuple[list[float], list[float], list[float]] | None = None
-        contacts: set[int] | None = None  # read once, for all robots whose board ticks
+        contacts: dict[int, set[int]] | None = None  # read once, for all robots that tick
+        # Each robot's linear velocity at its board tick before this one (MuJoCo's frame: the
+        # closing speed of two robots is its length either way), and as of this step.
+        before = self._board_velocities
+        after: dict[str, tuple[float, float, float]] | None = None
         t = step * self.dt
         for name, robot in self.robots.items():
             board = step % robot.board_decimation == 0
@@ -729,8 +764,12 @@ class Simulation:
                     wind_advanced = True
                 if contacts is None:
                     contacts = self._bodies_in_contact()
+                if after is None:
+                    after = self._board_velocities = dict(before)
+                qvel, v = joints[1], slot.qvel_adr
+                after[name] = (qvel[v], qvel[v + 1], qvel[v + 2])
                 try:
-                    self._board_tick(name, robot, state, contacts)
+                    self._board_tick(name, robot, state, contacts, before)
                 except PhysicsError as exc:
                     failed.append((name, str(exc)))
                     self._park(name)
@@ -740,18 +779,22 @@ class Simulation:
             hook(self)
 
     def _board_tick(self, name: str, robot: Robot, state: BodyState,
-                    contacts: set[int]) -> None:
+                    contacts: dict[int, set[int]],
+                    before: dict[str, tuple[float, float, float]]) -> None:
         """Run one robot's board on ``state`` and set the wrench on its body (``contacts``:
-        the bodies touching something now)."""
+        the bodies touching something now, with what they touch; ``before``: the robot
+        bodies' velocities at their board tick before, see :meth:`_closing_speed`)."""
         check_state(name, state)
         slot = self._slots[name]
+        touched = contacts.get(slot.body_id)
+        closing = 0.0 if touched is None else self._closing_speed(name, touched, before)
         if self.steps % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
             pn, pe, pd = state.pos_ned_m
             ground = self._cast(pn, pe, pd, 0.0, 0.0, 1.0, slot.body_id, 10.0)
         else:
             ground = robot.ground_distance_m
         force, torque = robot.board_tick(
-            state, ground, slot.body_id in contacts, self.wind.air_velocity_ned()
+            state, ground, touched is not None, self.wind.air_velocity_ned(), closing
         )
         wf = self.wind.force_ned()
         frames.put_ned_wrench_mj(

@@ -496,15 +496,19 @@ class Robot:
         ground_distance_m: float | None,
         in_contact: bool,
         air_vel_ned: tuple[float, float, float],
+        closing_m_s: float = 0.0,
     ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """Advance the board one tick; returns (force NED N, torque NED N m) on the body.
+        ``closing_m_s``: the speed at which it meets another robot it touches now (0: none;
+        :class:`~skeye.sim.crash.CrashDetector`'s).
 
         Hot path (every board tick of every robot): plain floats throughout.
         """
         if self.flight.failed:
             return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
         roll, pitch, _ = state.rpy_rad
-        cause = self.crash.update(state.time_s, roll, pitch, state.vel_ned_m_s, in_contact)
+        cause = self.crash.update(state.time_s, roll, pitch, state.vel_ned_m_s, in_contact,
+                                  closing_m_s)
         if cause is not None:
             self._crashed(cause)
         estimator = self.estimator

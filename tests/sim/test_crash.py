@@ -4,6 +4,7 @@ fly the wreck, and RESET brings the vehicle back. Against a real lockstep server
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -138,3 +139,35 @@ def test_the_impact_rule_is_the_drop_speed():
     # Staying in contact, however fast it slides, is no new impact.
     still = CrashDetector()
     assert still.update(0.0, 0.0, 0.0, (5.0, 0.0, 0.0), True) is None
+
+
+def test_two_vehicles_flying_into_each_other_crash_at_their_closing_speed(
+        lockstep_server, client_factory):
+    """The impact rule takes the speed at which the vehicle meets what it touches: the ground's
+    is the vehicle's own, another vehicle's the difference of the two. Two Hummingbirds flying
+    at each other at 2 m/s each (each alone below the 2.445 m/s of the rule) meet at about
+    4 m/s; they bounced off each other and flew on."""
+    a, b = client_factory(lockstep_server), client_factory(lockstep_server)
+    assert a.answer("INIT {ClassName hummingbird} {Name A} {Location -4,0,-2}",
+                    "INIT").type == "RES"
+    assert b.answer("INIT {ClassName hummingbird} {Name B} {Location 4,0,-2} "
+                    "{Rotation 0,0,3.14159265}", "INIT").type == "RES"
+    a.step(500)
+    for c in (a, b):
+        c.send("DRIVE {LinearVelocity 2}")  # forward: A north, B (facing south) south
+    speeds, crashes = [], []
+    for _ in range(40):  # 8 m apart at 4 m/s: they meet within 2 s, 4 s at most
+        msgs = a.step(100)
+        truth = [m for m in msgs if m.type == "SEN" and m.get("Type") == "GroundTruth"]
+        speeds += [math.hypot(*vec(m.get("Velocity"))[:2]) for m in truth  # on its way, its
+                   if vec(m.get("Location"))[0] < -0.3]  # rotors (0.27 m) short of the middle
+        b.send("PING")  # answered after the lines those steps sent B
+        crashes += _crash(msgs) + _crash(b.read_until(
+            lambda m: m.type == "RES" and m.get("Command") == "PING")[0])
+        if len(crashes) == 2:
+            break
+    assert max(speeds) < IMPACT_SPEED_M_S  # A alone never flew fast enough to crash
+    assert sorted(c.get("Name") for c in crashes) == ["A", "B"], crashes
+    for err in crashes:
+        impact = float(re.search(r"hard impact at ([0-9.]+) m/s", err.get("Reason")).group(1))
+        assert IMPACT_SPEED_M_S < impact <= 2 * max(speeds) + 0.05, err  # (rounded to 0.1)
