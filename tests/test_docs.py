@@ -512,3 +512,22 @@ def test_checker_reads_the_sensor_parameter_table():
         "GroundTruth": {},
         "Barometer": {"NoiseSigma": 1.5, "RotorThrustCoefficient": 0.0, "Tiny": 1e-6},
     }
+
+
+def test_the_control_reference_gives_every_keyword_of_connect_and_spawn():
+    """docs/control.md writes out ``skeye.connect(...)`` and ``spawn(...)``: every keyword they
+    take is there (``sync_clock``, which several clients each flying a robot in lockstep need,
+    was missing from the API reference and said only on the protocol page)."""
+    import inspect
+
+    from skeye.control.connection import Connection
+
+    text = (ROOT / "docs" / "control.md").read_text(encoding="utf-8")
+    for written, function in (("skeye.connect(", Connection.__init__),
+                              ("spawn(", Connection.spawn)):
+        start = text.index(f"`{written}") + 1
+        signature = text[start:text.index("`", start)]
+        documented = set(re.findall(r"(\w+)=", signature))
+        taken = {p.name for p in inspect.signature(function).parameters.values()
+                 if p.default is not inspect.Parameter.empty}
+        assert taken <= documented, (written, sorted(taken - documented))
