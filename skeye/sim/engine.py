@@ -132,8 +132,9 @@ class Simulation:
         self._spawned = 0
         self._resets = 0
         self._slots: dict[str, _Slot] = {}
-        # Each robot's linear velocity at its last board tick (see _closing_speed).
-        self._board_velocities: dict[str, tuple[float, float, float]] = {}
+        # MuJoCo's velocities (qvel, as a list) at the last step a board ticked: what two
+        # robots that touch now met at (see _closing_speed); None after a rebuild or a start.
+        self._tick_qvel: list[float] | None = None
         self._queries: dict[str, RobotWorldQuery] = {}
         self.wind = WindModel(wind or make_settings("none"), np.random.default_rng([seed, 7]))
         self.step_hooks: list[Callable[[Simulation], None]] = []
@@ -237,6 +238,7 @@ class Simulation:
         self.data.time = self.time_s
         d = self.data
         self._qpos, self._qvel, self._qacc, self._xfrc = d.qpos, d.qvel, d.qacc, d.xfrc_applied
+        self._tick_qvel = None  # its addresses are the old model's
         self._xfrc_flat = memoryview(d.xfrc_applied).cast("B").cast("d")
         self._slots = {}
         for name in self.robots:
@@ -414,14 +416,15 @@ class Simulation:
         if airborne:
             robot.controller.reset(hold_altitude_m=-pos[2])
         self.data.qvel[slot.qvel_adr : slot.qvel_adr + 6] = 0.0
-        self._board_velocities[name] = (0.0, 0.0, 0.0)  # still: no earlier flight to meet with
+        self._tick_qvel = None  # its velocity is set to rest: no earlier flight to meet with
         # The board's power-up calibration. In the air the vehicle stands for one that took off
         # earlier, so its board calibrated on the ground before; its readings at the spawn
         # instant (no motion yet) give the gyro bias, while the accelerometer, free of any
         # force there, says nothing and the spawn attitude is kept.
         robot.power_up(self.body_state(name), self._queries[name])
         # The board's first tick now, so the wrench is set from the first step on.
-        self._board_tick(name, robot, self.body_state(name), self._bodies_in_contact(), {})
+        self._board_tick(name, robot, self.body_state(name), self._bodies_in_contact(),
+                         self._qvel.tolist())
 
     def reset_robot(
         self,
@@ -494,7 +497,6 @@ class Simulation:
     def remove(self, name: str) -> None:
         if self.robots.pop(name, None) is not None:
             self._queries.pop(name, None)
-            self._board_velocities.pop(name, None)
             self._rebuild()
 
     def _surface_down(self, north_m: float, east_m: float) -> float:
@@ -592,28 +594,25 @@ class Simulation:
             bodies.setdefault(b2, set()).add(int(m.body_rootid[b1]))
         return bodies
 
-    def _closing_speed(self, name: str, touched: set[int],
-                       before: dict[str, tuple[float, float, float]]) -> float:
+    def _closing_speed(self, name: str, touched: set[int], qvel: list[float],
+                       before: list[float] | None) -> float:
         """The fastest robot ``name`` meets another robot it touches now (m/s): the speed of
-        the one relative to the other, now and at the robot's board tick before (``before``:
-        each robot's linear velocity then), the larger. 0 when it touches no robot: the ground
-        and what stands on it are still, and the vehicle's own speed is its speed on them."""
-        qvel = self._qvel
-        slot = self._slots[name]
-        a = slot.qvel_adr
-        vx, vy, vz = float(qvel[a]), float(qvel[a + 1]), float(qvel[a + 2])
-        mine = before.get(name)
+        the one relative to the other, now (``qvel``) and at the last step a board ticked
+        before (``before``, None when there is none since the last rebuild or start), the
+        larger. 0 when it touches no robot: the ground and what stands on it are still, and the
+        vehicle's own speed is its speed on them."""
+        if len(touched) == 1 and 0 in touched:
+            return 0.0  # the world alone (the usual contact: standing on the ground)
+        a = self._slots[name].qvel_adr
         fastest = 0.0
         for other_name, other in self._slots.items():
             if other_name == name or other.body_id not in touched:
                 continue
             o = other.qvel_adr
-            dx, dy, dz = vx - float(qvel[o]), vy - float(qvel[o + 1]), vz - float(qvel[o + 2])
-            fastest = max(fastest, math.sqrt(dx * dx + dy * dy + dz * dz))
-            theirs = before.get(other_name)
-            if mine is not None and theirs is not None:
-                dx, dy, dz = mine[0] - theirs[0], mine[1] - theirs[1], mine[2] - theirs[2]
-                fastest = max(fastest, math.sqrt(dx * dx + dy * dy + dz * dz))
+            for v in (qvel, before):
+                if v is not None:
+                    dx, dy, dz = v[a] - v[o], v[a + 1] - v[o + 1], v[a + 2] - v[o + 2]
+                    fastest = max(fastest, math.sqrt(dx * dx + dy * dy + dz * dz))
         return fastest
 
     # -- stepping ------------------------------------------------------------------------
@@ -727,10 +726,6 @@ class Simulation:
         wind_advanced = False
         joints: tuple[list[float], list[float], list[float]] | None = None
         contacts: dict[int, set[int]] | None = None  # read once, for all robots that tick
-        # Each robot's linear velocity at its board tick before this one (MuJoCo's frame: the
-        # closing speed of two robots is its length either way), and as of this step.
-        before = self._board_velocities
-        after: dict[str, tuple[float, float, float]] | None = None
         t = step * self.dt
         for name, robot in self.robots.items():
             board = step % robot.board_decimation == 0
@@ -764,30 +759,28 @@ class Simulation:
                     wind_advanced = True
                 if contacts is None:
                     contacts = self._bodies_in_contact()
-                if after is None:
-                    after = self._board_velocities = dict(before)
-                qvel, v = joints[1], slot.qvel_adr
-                after[name] = (qvel[v], qvel[v + 1], qvel[v + 2])
                 try:
-                    self._board_tick(name, robot, state, contacts, before)
+                    self._board_tick(name, robot, state, contacts, joints[1])
                 except PhysicsError as exc:
                     failed.append((name, str(exc)))
                     self._park(name)
+        if contacts is not None and joints is not None:  # a board ticked: its velocities
+            self._tick_qvel = joints[1]
         for name, reason in failed:
             self._stop_robot(name, reason)
         for hook in self.step_hooks:
             hook(self)
 
     def _board_tick(self, name: str, robot: Robot, state: BodyState,
-                    contacts: dict[int, set[int]],
-                    before: dict[str, tuple[float, float, float]]) -> None:
+                    contacts: dict[int, set[int]], qvel: list[float]) -> None:
         """Run one robot's board on ``state`` and set the wrench on its body (``contacts``:
-        the bodies touching something now, with what they touch; ``before``: the robot
-        bodies' velocities at their board tick before, see :meth:`_closing_speed`)."""
+        the bodies touching something now, with what they touch; ``qvel``: MuJoCo's
+        velocities now, for :meth:`_closing_speed`)."""
         check_state(name, state)
         slot = self._slots[name]
         touched = contacts.get(slot.body_id)
-        closing = 0.0 if touched is None else self._closing_speed(name, touched, before)
+        closing = (0.0 if touched is None
+                   else self._closing_speed(name, touched, qvel, self._tick_qvel))
         if self.steps % (10 * robot.board_decimation) == 0 or robot.ground_distance_m is None:
             pn, pe, pd = state.pos_ned_m
             ground = self._cast(pn, pe, pd, 0.0, 0.0, 1.0, slot.body_id, 10.0)
