@@ -135,6 +135,10 @@ def airframe_options(args: argparse.Namespace) -> AirframeOptions:
     )
 
 
+LOCKSTEP_RATE_DEFAULT = 1.0
+"""``--lockstep-rate``: sim seconds per wall second in lockstep."""
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the pilot until SIGINT/SIGTERM; returns the exit code (0; 1 for an error; 2 for a
     bad option; :data:`EXIT_LOST_SIMULATOR` when the vehicle (simulator, LL board or flight
@@ -291,6 +295,13 @@ def run(args: argparse.Namespace) -> int:
                                                 pad_source=args.pad_source)
             lockstep = airframe.lockstep
             tick_s = airframe.control_period_s if lockstep else args.tick
+            if not lockstep:
+                idle = lockstep_options_given(args)
+                if idle:
+                    _warn(f"{' and '.join(idle)}: the vehicle runs in real time "
+                          f"({airframe.describe()}), with no lockstep clock to pace, keep "
+                          f"together or grant: {'they do' if len(idle) > 1 else 'it does'} "
+                          "nothing")
             video = None
             if args.video_port is not None:
                 video = VideoServer(
@@ -437,6 +448,15 @@ def serial_problem(device: str | None) -> str:
     if not os.access(device, os.R_OK | os.W_OK):
         return f"--serial {device}: no permission to read and write it"
     return ""
+
+
+def lockstep_options_given(args: argparse.Namespace) -> list[str]:
+    """The lockstep simulator's options given (``--lockstep-rate`` other than its default,
+    ``--lockstep-sync``, ``--ground-clock``): said when the vehicle turns out to run in real
+    time, where they do nothing (a real vehicle's ``--lockstep-sync`` is refused before)."""
+    given = [("--lockstep-rate", args.lockstep_rate != LOCKSTEP_RATE_DEFAULT),
+             ("--lockstep-sync", args.lockstep_sync), ("--ground-clock", args.ground_clock)]
+    return [option for option, on in given if on]
 
 
 def describe_airframe(described: str, lockstep: bool, args: argparse.Namespace) -> str:
@@ -920,7 +940,7 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--lockstep-rate",
         type=cliargs.non_negative_float,
-        default=1.0,
+        default=LOCKSTEP_RATE_DEFAULT,
         help="lockstep sim: sim seconds per wall second (0 = unpaced)",
     )
     p.add_argument(

@@ -556,3 +556,25 @@ def test_lockstep_sync_on_a_real_vehicle_is_refused(capsys):
     assert err == (f"skeye pilot: error: --lockstep-sync keeps a lockstep simulator's clock "
                    f"with the other pilots of its robots (sim://); {uri} steps no "
                    "simulator\n"), err
+
+
+def test_lockstep_options_on_a_realtime_simulator_are_a_warning(capsys, tmp_path):
+    """``--lockstep-sync``, ``--lockstep-rate`` and ``--ground-clock`` are about a lockstep
+    simulator's clock; on a realtime one (known only once connected) they do nothing, and the
+    pilot says so on stderr and flies on."""
+    with running_sim(mode="realtime") as server:
+        args = parser().parse_args([
+            "pilot", "--sim", f"127.0.0.1:{server.port}", "--lockstep-sync",
+            "--lockstep-rate", "3", "--serial", str(tmp_path)])
+        assert pilot_cli.run(args) == 2  # the --serial directory then stops it, a bad option
+    warning, error = capsys.readouterr().err.splitlines()
+    assert warning.startswith("skeye pilot: warning: --lockstep-rate and --lockstep-sync: the "
+                              "vehicle runs in real time (R1 in "), warning
+    assert warning.endswith("(realtime)), with no lockstep clock to pace, keep together or "
+                            "grant: they do nothing"), warning
+    assert error.startswith("skeye pilot: error: --serial: "), error
+    with running_sim(mode="lockstep") as server:  # where they apply: not a word
+        args.sim = f"127.0.0.1:{server.port}"
+        assert pilot_cli.run(args) == 2
+    (error,) = capsys.readouterr().err.splitlines()
+    assert error.startswith("skeye pilot: error: --serial: "), error
