@@ -15,6 +15,7 @@ from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
 from skeye.outputs import output_file
 from skeye.pixels import frame_image
+from skeye.wire.images import JPEG_TYPES, FrameType
 
 DEFAULT_QUALITY = 95  # skeye snapshot --out FILE.jpg without --quality
 
@@ -53,13 +54,17 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         client.set_format("png" if suffix == ".png" else "jpeg", quality=quality)
         client.set_meta(True)
         frame = client.get_frame()
-    image = frame_image(frame)
-    if suffix == ".png":
-        ok = cv2.imwrite(str(out), image)
-    else:
-        ok = cv2.imwrite(str(out), image, [cv2.IMWRITE_JPEG_QUALITY, quality])
-    if not ok:
-        raise LocalProtocolError(f"could not write {out}")
+    image = frame_image(frame)  # the server's file, checked: it decodes whole
+    if (frame.frame_type is FrameType.PNG if suffix == ".png"
+            else frame.frame_type in JPEG_TYPES):
+        try:  # as the server encoded it: a JPEG compressed once, at the quality asked for
+            out.write_bytes(frame.data)
+        except OSError as exc:
+            raise LocalProtocolError(f"could not write {out}: {exc}") from None
+    else:  # a server that sent another format than the one asked for
+        params = [] if suffix == ".png" else [cv2.IMWRITE_JPEG_QUALITY, quality]
+        if not cv2.imwrite(str(out), image, params):
+            raise LocalProtocolError(f"could not write {out}")
     number = frame.meta.frame_number if frame.meta is not None else None
     return image.shape[1], image.shape[0], number
 

@@ -310,6 +310,14 @@ def test_snapshot_saves_png_and_jpeg(tmp_path):
             w, h, number = save_snapshot(f"127.0.0.1:{images.port}", tmp_path / name, "R1/Down")
             assert (w, h) == (800, 600) and number and number >= 1
             assert cv2.imread(str(tmp_path / name)).shape == (600, 800, 3)
+        # A JPEG is the server's own file at the quality asked for, not decoded and
+        # compressed a second time (the world has not stepped: the same newest frame).
+        save_snapshot(f"127.0.0.1:{images.port}", tmp_path / "q60.jpg", "R1/Down", quality=60)
+        with ImageClient("127.0.0.1", images.port) as client:
+            client.select_camera("R1/Down")
+            client.set_format("jpeg", quality=60)
+            served = client.get_frame().data
+        assert (tmp_path / "q60.jpg").read_bytes() == served
         with pytest.raises(LocalProtocolError, match="must end in"):
             save_snapshot(f"127.0.0.1:{images.port}", tmp_path / "frame.gif")
         with pytest.raises(LocalProtocolError, match="port"):
