@@ -184,6 +184,10 @@ class VehicleBridge:
         clock: monotonic seconds.
         on_vehicle: called (on the reader thread) with each vehicle's VEHICLE message when it
             first arrives after a connect, or when it changes: which vehicle was reached.
+        on_link: called (on the worker thread) with the link's state and its error when the
+            link fails, is turned away or is lost with an error not said since it was last up,
+            and when it is up again after that: news for a terminal, each failure once, not
+            at every retry.
     """
 
     def __init__(
@@ -198,6 +202,7 @@ class VehicleBridge:
         open_vehicle: Callable[[str, float], Vehicle] = Vehicle.open,
         clock: Callable[[], float] = time.monotonic,
         on_vehicle: Callable[[VehicleInfo], None] | None = None,
+        on_link: Callable[[LinkState, str], None] | None = None,
     ) -> None:
         if not 0 < keepalive_s < stale_s:
             raise InvalidArgument(f"need 0 < keepalive_s < stale_s, got {keepalive_s}, {stale_s}")
@@ -227,6 +232,8 @@ class VehicleBridge:
         self._history: deque[dict[str, float]] = deque(maxlen=HISTORY_POINTS)
         self._pad_offset: tuple[float, float] | None = None
         self._on_vehicle = on_vehicle
+        self._on_link = on_link
+        self._said: tuple[LinkState, str] = (LinkState.CONNECTED, "")  # what on_link last got
         self._vehicle_info: VehicleInfo | None = None  # what the connected vehicle said it is
         self._t0_s = clock()
         self._stop = threading.Event()
@@ -268,6 +275,7 @@ class VehicleBridge:
         return self._state
 
     def _fire(self, event: LinkEvent, error: str = "") -> None:
+        news: tuple[LinkState, str] | None = None
         with self._lock:
             if self._state is LinkState.CLOSED:
                 return  # closing: the worker's last words change nothing
@@ -275,7 +283,11 @@ class VehicleBridge:
             if error:
                 self._last_error = error
             self._seq += 1
+            if self._state is not LinkState.CONNECTING and (self._state, error) != self._said:
+                news = self._said = (self._state, error)
         log.info("link %s: %s -> %s %s", self.uri, event.value, self._state.value, error)
+        if news is not None and self._on_link is not None:
+            self._on_link(*news)
 
     def quality(self) -> LinkQuality:
         """Link figures now."""

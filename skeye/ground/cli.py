@@ -58,6 +58,7 @@ from skeye.uris import url_host
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
 DEFAULT_VIDEO_FPS = 8.0  # skeye ground --video-fps: frames/s asked of the vehicle's video port
+LINK_RETRY_S = 1.0  # skeye ground: between attempts to reach the vehicle (VehicleBridge's)
 STOP_TIMEOUT_S = 10.0  # each child, after its SIGTERM, before SIGKILL
 RESTART_BURST = 5
 """Restarts of one child within ``RESTART_WINDOW_S`` before skeye up gives up (systemd's default
@@ -69,7 +70,7 @@ START_DEADLINE_S = 180.0  # per child: a loaded machine can take a minute to imp
 def run_ground(args: argparse.Namespace) -> int:
     """Serve the ground-control page until SIGINT/SIGTERM."""
     from skeye.ground.app import create_app, uvicorn_config
-    from skeye.ground.bridge import VehicleBridge
+    from skeye.ground.bridge import LinkState, VehicleBridge
     from skeye.ground.commands import VehicleLimits
     from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
     from skeye.ground.limits import ConnectionLimits, GroundServer, limit_repeats
@@ -110,7 +111,21 @@ def run_ground(args: argparse.Namespace) -> int:
         sys.stdout.write(f"skeye ground: reached {said} ({kind}) at {args.vehicle}\n")
         sys.stdout.flush()
 
-    with VehicleBridge(args.vehicle, on_vehicle=reached) as bridge:
+    def link(state: LinkState, error: str) -> None:
+        # one write, as reached's: the vehicle's words made printable
+        error = "".join(c for c in error if c.isprintable())
+        again = f"; trying again every {LINK_RETRY_S:g} s"
+        if state is LinkState.CONNECTED:
+            line = f"the link to the vehicle at {args.vehicle} is up again"
+        elif state is LinkState.REFUSED:
+            line = f"the vehicle at {args.vehicle} turned this ground station away: {error}{again}"
+        else:
+            line = f"no link to the vehicle: {error}{again}"
+        sys.stdout.write(f"skeye ground: {line}\n")
+        sys.stdout.flush()
+
+    with VehicleBridge(args.vehicle, retry_s=LINK_RETRY_S, on_vehicle=reached,
+                       on_link=link) as bridge:
         video = None
         if video_at is not None:
             video = VideoRelay(*video_at, fps=args.video_fps).start()

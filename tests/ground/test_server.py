@@ -131,3 +131,28 @@ def test_several_tabs_at_once(stack: Stack) -> None:
         for other in (tabs[0], tabs[2], tabs[3]):
             for _ in range(3):
                 assert json.loads(other.recv(5))["type"] == "telemetry"
+
+
+def test_the_link_tells_of_each_failure_once_and_of_the_vehicle_coming_back() -> None:
+    """``on_link`` (``skeye ground``'s terminal lines): a vehicle nobody serves is said once,
+    not at each retry, and the link coming up after it is said; a pilot started on the port
+    later is reached."""
+    from skeye.ground.bridge import LinkState
+    from skeye.pilot.airframe import AirframeOptions, open_airframe
+    from skeye.pilot.server import PilotServer
+    from tests.sim.conftest import running_sim
+
+    port = _free_port()
+    said: list[tuple[LinkState, str]] = []
+    with VehicleBridge(f"tcp://127.0.0.1:{port}", retry_s=0.05,
+                       on_link=lambda state, error: said.append((state, error))) as bridge:
+        wait_until(lambda: bridge.seq >= 10, 60, "five attempts to reach the vehicle")
+        assert len(said) == 1, said
+        assert said[0][0] is LinkState.DISCONNECTED and "refused" in said[0][1], said
+        with ExitStack() as stack:
+            server = stack.enter_context(running_sim(mode="realtime"))
+            airframe = open_airframe(f"sim://127.0.0.1:{server.port}", AirframeOptions())
+            stack.callback(airframe.close)
+            stack.enter_context(PilotServer(airframe, port=port))
+            wait_until(lambda: len(said) == 2, 60, "the link up again")
+            assert said[1] == (LinkState.CONNECTED, ""), said

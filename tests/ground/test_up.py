@@ -223,6 +223,27 @@ def test_ground_alone_names_a_taken_port_or_a_foreign_host_with_its_option(capsy
         "of this machine" in err and "Errno" not in err, err
 
 
+def test_ground_alone_says_on_the_terminal_that_it_cannot_reach_the_vehicle() -> None:
+    """A vehicle nobody serves is said on the terminal, not only on the page (the link's
+    retries are not: tests/ground/test_server.py)."""
+    child = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+         "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL, text=True)
+    assert child.stdout is not None
+    said: list[str] = []
+    try:
+        while not any(line.startswith("skeye ground: no link") for line in said):
+            line = child.stdout.readline()
+            assert line, said
+            said.append(line)
+    finally:
+        child.terminate()
+        child.communicate(timeout=60)
+    assert said[-1] == ("skeye ground: no link to the vehicle: tcp://127.0.0.1:1: cannot "
+                        "connect: [Errno 111] Connection refused; trying again every 1 s\n"), said
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_ground_alone_stops_on_ctrl_c_and_sigterm_saying_so(tmp_path: Path, sig: int) -> None:
     """Ctrl-C (SIGINT at its default, as in a terminal) and SIGTERM stop ``skeye ground``
@@ -240,8 +261,11 @@ def test_ground_alone_stops_on_ctrl_c_and_sigterm_saying_so(tmp_path: Path, sig:
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         assert child.stdout is not None
         try:
-            first = child.stdout.readline()  # blocks until the address (or the end)
-            assert "?token=" in first, (first, err.read_text())
+            first = ""  # up to the address (the unreachable vehicle is said too)
+            while "?token=" not in first.rpartition("skeye ground: ")[2]:
+                line = child.stdout.readline()  # blocks until a line (or the end)
+                assert line, (first, err.read_text())
+                first += line
             child.send_signal(sig)
             rest, _ = child.communicate(timeout=60)  # the rest of its output, and its end
             said, status = first + rest, child.returncode
