@@ -18,9 +18,12 @@ detector, and any other failure on one frame is counted in :class:`VisionStats` 
 ``last_error``), logged once per kind (one line for skeye's own errors, which name their
 cause; with a traceback for any other exception, a bug), and that frame is "pad not seen"; the
 worker goes on with the next. When the pilot re-attaches to a new robot,
-:meth:`PadVision.rebind` points the vision at it. In lockstep the loop waits (at most
-``lockstep_wait_s``) for the frame of the step it just made, so a run stays reproducible;
-the simulator is paused meanwhile, so nothing flies unwatched.
+:meth:`PadVision.rebind` points the vision at it. In lockstep the loop waits for the
+detector's result on the frame of the step it just made, however long it takes, so a run is
+the same on any machine at any load (the simulator is paused meanwhile, so nothing flies
+unwatched); only a detector still not done after ``lockstep_wait_s`` (``LOCKSTEP_WAIT_S``, a
+hang guard) stops the step with :class:`VisionStalled` naming the frame, never a flight that
+goes on without it.
 
 Frame times (docs/pilot.md, "Frame times"): by default a frame's time is when it reached the
 pilot, as a host sees a USB webcam's frames: the control loop notes the sim time at which each
@@ -117,6 +120,12 @@ def wire_detection(est: PadEstimate, roll_rad: float | None,
     )
 
 
+class VisionStalled(SkeyeError):
+    """In lockstep, the detector was not done with the step's frame after ``lockstep_wait_s``:
+    the step stops here rather than fly on without that frame's detection (which it would
+    apply a period or more late: another flight, chosen by the machine's load)."""
+
+
 @dataclass
 class VisionStats:
     """What the vision loop has done (for tests, benchmarks and the log)."""
@@ -162,6 +171,16 @@ VISION_RECOVERY_S = 1.0
 """Once too slow, the vision counts as in time again only after its detections have all been
 in time for this long (sim time): one late detection among prompt ones does not flip the pad
 modes between holding still and navigating (a design choice, docs/pilot.md)."""
+
+LOCKSTEP_WAIT_S = 120.0
+"""In lockstep, how long (wall clock) the loop waits for the detector's result on a frame
+before it raises :class:`VisionStalled`: a guard against a hung detector, not a deadline a
+slow machine may miss. The fetch of a frame includes its render in ``skeye.gym``, which the
+simulator's camera system gives up on after 60 s (``skeye.sim.render.RENDER_TIMEOUT_S``), and a
+pilot's image client after its own timeout (5 s); this outlasts both. Measured 2026-11-28
+(webcam profile, software GL, pure Python, 2 cores): a PadLanding-v0 episode's first frame
+(the renderer's first) took 3.1 s at load 7 and 5.3 s at load 13.5; at load 17 it took more
+than the 5 s this was until then."""
 
 WARNING_REPEAT_S = 60.0
 """At most one "too slow" warning a minute in the log; the ones held back are counted."""
@@ -224,7 +243,9 @@ class PadVision:
     the newest frame after it, as a real pipeline does); None ("measured") uses each frame's
     measured processing time (wall clock) as its latency in lockstep. ``predict``: fly on the
     pad offset predicted to now from each detection's capture pose (:mod:`skeye.pilot.pad_track`);
-    False flies on the detections as they arrive (the comparison case).
+    False flies on the detections as they arrive (the comparison case). ``lockstep_wait_s``: in
+    lockstep, how long :meth:`step` waits for a frame's detection before it raises
+    :class:`VisionStalled` (wall clock; :data:`LOCKSTEP_WAIT_S`).
     """
 
     def __init__(
@@ -237,7 +258,7 @@ class PadVision:
         pad: PadDefinition = SKEYE_4,
         params: PadHoldParams | None = None,
         lockstep: bool = False,
-        lockstep_wait_s: float = 5.0,
+        lockstep_wait_s: float = LOCKSTEP_WAIT_S,
         queue_size: int = 4,
         calibration: CameraCalibration | None = None,
         latency_s: float | None = 0.0,
@@ -342,6 +363,8 @@ class PadVision:
         worker for the camera's timeout."""
         self._stop.set()
         self._kick.set()
+        with self._done:  # a loop waiting for a detection in lockstep goes on at once
+            self._done.notify_all()
         close_camera = getattr(getattr(self.robot, "camera", None), "close", None)
         if close_camera is not None:
             close_camera()
@@ -397,11 +420,7 @@ class PadVision:
         elif latest is not None and now.time_s >= self._busy_until_s - 1e-9:
             self._permit = latest.frame  # the detector is free: it takes the newest frame
             self._kick.set()
-            with self._done:
-                self._done.wait_for(
-                    lambda: self._attempted >= latest.frame or not worker.alive,
-                    self.lockstep_wait_s,
-                )
+            self._await_detection(latest.frame, worker)
         while True:
             try:
                 obs, processing_s = self._observations.get_nowait()
@@ -424,6 +443,28 @@ class PadVision:
         if self.predict:
             with self.lock:
                 self._navigate_tick(now)
+
+    def _await_detection(self, frame: int, worker: Worker) -> None:
+        """Lockstep: wait until the worker is done with ``frame`` (or has died, or the vision
+        is closed). How long it takes never changes the flight: the simulator is paused, and
+        the step goes on only with the frame's result in the queue. Until 2026-11-28 the wait
+        ended after 5 s and the step flew on without it, applying it a period or more later:
+        on a loaded machine (load 17 on 2 cores) the first frame of a webcam episode took more
+        than that, and PadLanding-v0's seed 100 landed 4.3 cm from the pad instead of 5.4.
+
+        Raises:
+            VisionStalled: still not done after ``lockstep_wait_s`` (a hung detector).
+        """
+        with self._done:
+            done = self._done.wait_for(
+                lambda: self._attempted >= frame or not worker.alive or self._stop.is_set(),
+                self.lockstep_wait_s,
+            )
+        if not done:
+            raise VisionStalled(
+                f"vision: the detector has not finished frame {frame} after "
+                f"{self.lockstep_wait_s:g} s of wall time (lockstep waits for each frame's "
+                f"detection rather than fly on without it); is it hung?")
 
     def _apply(self, obs: PadObservation, now: Pose) -> None:
         """One observation reaches the pad hold, ``now.time_s - obs.frame_time_s`` late."""

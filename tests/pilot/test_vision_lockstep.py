@@ -1,0 +1,97 @@
+"""The vision in lockstep: the loop waits for the detector's result on each frame, however long
+it takes, so a flight never depends on the machine's load; a detector that hangs is an error
+naming the frame, never a silently different flight."""
+
+from __future__ import annotations
+
+import threading
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from skeye.errors import SkeyeError
+from skeye.gym.board import FrameImage, FrameInfo
+from skeye.pilot.boards import OnboardBoards
+from skeye.pilot.policy import ObservedPad
+from skeye.pilot.vision import LOCKSTEP_WAIT_S, PadVision
+from skeye.sim.render import RENDER_TIMEOUT_S
+from tests.pilot.fake_airframe import FakeAirframe
+
+HANG_GUARD_S = 60.0
+"""A bound on how long a broken test may hang, never reached by a passing one."""
+
+
+class GatedCamera:
+    """One frame (number 1, captured at 0 s), whose fetch waits until the test opens the
+    gate: a detector as slow as the test wants it, with no clock involved."""
+
+    def __init__(self) -> None:
+        self.latest = FrameInfo(1, 0.0)
+        self.gate = threading.Event()
+        self.fetching = threading.Event()  # the worker has started on the frame
+
+    def image(self) -> FrameImage:
+        self.fetching.set()
+        if not self.gate.wait(HANG_GUARD_S):
+            raise SkeyeError("the test never opened the gate")
+        return FrameImage(1, 0.0, np.zeros((48, 64, 3), np.uint8))
+
+
+def lockstep_vision(camera: GatedCamera, wait_s: float) -> tuple[PadVision, ObservedPad]:
+    pad = ObservedPad()
+    boards = OnboardBoards(FakeAirframe(), pad=pad)
+    robot = SimpleNamespace(camera=camera, ins=SimpleNamespace(latest=None))
+    return PadVision(boards, robot, threading.Lock(), fov_h_rad=1.309, lockstep=True,
+                     lockstep_wait_s=wait_s), pad
+
+
+def test_a_detector_past_the_lockstep_wait_is_an_error_not_another_flight() -> None:
+    # Until 2026-11-28 the loop waited at most lockstep_wait_s (5 s) and then flew on without
+    # the frame's detection, which it applied a period or more later: on a loaded machine a
+    # webcam episode's first frame took more than 5 s and PadLanding-v0's seed 100 landed
+    # 4.3 cm from the pad instead of 5.4.
+    camera = GatedCamera()
+    vision, pad = lockstep_vision(camera, wait_s=0.2)
+    try:
+        with pytest.raises(SkeyeError, match=r"frame 1 .*0\.2 s"):
+            vision.step()
+        assert pad.latest is None  # nothing applied, nothing flown on
+        camera.gate.set()  # the detector finishes: the next step applies the frame
+        vision.step()
+        assert pad.latest is not None and pad.latest.frame_time_s == 0.0
+        assert not pad.latest.found  # a black frame
+    finally:
+        camera.gate.set()
+        vision.close()
+
+
+def test_closing_the_vision_releases_a_loop_waiting_on_a_hung_detector() -> None:
+    camera = GatedCamera()
+    vision, _ = lockstep_vision(camera, wait_s=HANG_GUARD_S)
+    errors: list[BaseException] = []
+
+    def step() -> None:
+        try:
+            vision.step()
+        except BaseException as exc:  # reported by the assertion below
+            errors.append(exc)
+
+    loop = threading.Thread(target=step, name="test-loop", daemon=True)
+    try:
+        loop.start()
+        assert camera.fetching.wait(HANG_GUARD_S), "the worker never took the frame"
+        vision.close(timeout_s=0.1)  # the worker stays stuck in its fetch: not waited for
+        loop.join(HANG_GUARD_S / 2)
+        assert not loop.is_alive(), "close() left the loop waiting on the hung detector"
+        assert errors == []
+    finally:
+        camera.gate.set()
+
+
+def test_the_lockstep_wait_outlasts_a_frames_render() -> None:
+    # In skeye.gym a frame's fetch includes its render, which the camera system gives up on
+    # only after RENDER_TIMEOUT_S: a shorter wait would stop a flight that would go on.
+    assert LOCKSTEP_WAIT_S > RENDER_TIMEOUT_S
+    assert PadVision(SimpleNamespace(), SimpleNamespace(), threading.Lock(),
+                     fov_h_rad=1.309).lockstep_wait_s == LOCKSTEP_WAIT_S
