@@ -13,7 +13,14 @@ frame to a peer (``None``: to every peer it knows). A peer is whatever identifie
 - ``udpout://HOST:PORT``: send to HOST:PORT from a local port on 127.0.0.1 (``?bind=ADDR`` to
   choose), as PX4 SITL sends to QGroundControl's 14550 and MAVSDK's 14540; replies come back
   to that local port.
-- ``tcp://HOST:PORT``: listen for TCP clients (server side, as ArduPilot SITL's 5760);
+- ``tcp://HOST:PORT``: listen for TCP clients (server side, as ArduPilot SITL's 5760), at
+  most ``TCP_CLIENTS``, one peer (a local user, or a remote address:
+  :func:`skeye.peers.peer_key`) all but one of them. A connection at a cap takes the place of
+  the connection heard from longest ago of the peer holding too many (its own at its own cap;
+  else of the peer holding the most, when that is at least two more than the newcomer's); only
+  when every peer holds as many is it closed at once. A connection may send nothing (a script
+  that only reads telemetry), so quiet ones are never closed for it: idle connections keep no
+  one out, not even their own user.
   ``tcpout://HOST:PORT``: connect to one (client side).
 - ``serial:///dev/ttyACM0?baud=921600``: a serial line (pyserial); its one peer is the line.
 
@@ -23,13 +30,16 @@ the URI names another address. ``close`` is idempotent.
 
 from __future__ import annotations
 
+import logging
 import socket
 import time
+from collections import Counter
 from collections.abc import Callable, Hashable
 from typing import Any, Protocol
 from urllib.parse import parse_qs
 
 from skeye.errors import ConfigError, LinkClosed
+from skeye.peers import socket_peer_key
 from skeye.uris import port_of, split_uri
 
 Peer = Hashable
@@ -42,6 +52,8 @@ MAX_PEERS = 8  # ground stations one listening link serves; others are told and 
 # station after the same time (GCS_TIMEOUT_S).
 PEER_TIMEOUT_S = 10.0
 TCP_CLIENTS = 4
+
+log = logging.getLogger(__name__)
 
 
 class MavTransport(Protocol):
@@ -151,8 +163,12 @@ class TcpServerTransport:
         self.listener.setblocking(False)
         self.port = self.listener.getsockname()[1]
         self.max_clients = max_clients
+        self.max_clients_per_peer = max(1, max_clients - 1)  # one slot left for someone else
         self.clients: list[socket.socket] = []
+        self._keys: dict[socket.socket, str] = {}  # each client's peer (skeye.peers)
+        self._heard_s: dict[socket.socket, float] = {}  # when it last sent (or connected)
         self.refused_clients = 0
+        self.replaced_clients = 0
         self.datagram = False
         self.name = f"tcp://{host}:{self.port}"
 
@@ -170,12 +186,13 @@ class TcpServerTransport:
                 conn, _ = self.listener.accept()
             except (BlockingIOError, InterruptedError, OSError):
                 break
-            if len(self.clients) >= self.max_clients:
+            if not self._make_room(conn):
                 self.refused_clients += 1
                 conn.close()
                 continue
             conn.setblocking(False)
             self.clients.append(conn)
+            self._heard_s[conn] = time.monotonic()
         for conn in list(self.clients):
             try:
                 data = conn.recv(MAX_DATAGRAM)
@@ -186,12 +203,41 @@ class TcpServerTransport:
             if not data:
                 self._drop(conn)
                 continue
+            self._heard_s[conn] = time.monotonic()
             out.append((data, conn))
         return out
+
+    def _make_room(self, conn: socket.socket) -> bool:
+        """Whether ``conn`` may join (see the module docstring), after closing the connection
+        whose place it takes, if any."""
+        key = self._keys[conn] = socket_peer_key(conn)
+        held = Counter(self._keys[c] for c in self.clients)
+        if held[key] >= self.max_clients_per_peer:
+            victim = key
+        elif len(self.clients) >= self.max_clients:
+            victim, most = held.most_common(1)[0]
+            if most < held[key] + 2:
+                del self._keys[conn]
+                log.info("MAVLink link %s: turning away a connection of %s: its %d clients "
+                         "are taken and none holds two more than %s's %d", self.name, key,
+                         self.max_clients, key, held[key])
+                return False
+        else:
+            return True
+        old = min((c for c in self.clients if self._keys[c] == victim),
+                  key=self._heard_s.__getitem__)
+        log.info("MAVLink link %s: a connection of %s takes the place of %s's heard from "
+                 "longest ago (%d of its %d clients held by %s)", self.name, key, victim,
+                 held[victim], self.max_clients, victim)
+        self.replaced_clients += 1
+        self._drop(old)
+        return True
 
     def _drop(self, conn: socket.socket) -> None:
         if conn in self.clients:
             self.clients.remove(conn)
+        self._keys.pop(conn, None)
+        self._heard_s.pop(conn, None)
         conn.close()
 
     def send(self, data: bytes, peer: Peer | None = None) -> None:

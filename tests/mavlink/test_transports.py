@@ -4,10 +4,14 @@ server, with pymavlink on the other end; the vehicle is the boards on a scripted
 from __future__ import annotations
 
 import contextlib
+import os
 import select
 import socket
+import subprocess
+import sys
 import time
 
+import pytest
 from pymavlink import mavutil
 
 from skeye.link.transport import pty_null_modem
@@ -146,3 +150,65 @@ def test_a_listening_udp_link_s_peers_are_those_heard_within_the_timeout():
         stack.callback(out.close)
         clock.now_s = 1e6
         assert out.peers == [a] and out.expired_peers == 0
+
+
+def _tcp_station(port: int):
+    return mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=255,
+                                      source_component=190)
+
+
+def test_idle_tcp_connections_keep_no_ground_station_out():
+    """Ten connections that never send a byte, then a ground station: it is served (the
+    vehicle's HEARTBEAT and a parameter's answer reach it) and the link holds at most its four
+    clients. A connection of a user at its cap (all but one of the clients) takes the place of
+    that user's connection heard from longest ago. (Before, four idle connections held every
+    TCP client slot for good: each later one was closed at once, a ground station included.)"""
+    with endpoint("tcp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        link = server.transports[0]
+        idle = [socket.create_connection(("127.0.0.1", port)) for _ in range(10)]
+        conn = _tcp_station(port)
+        try:
+            wait_for(conn, "HEARTBEAT", timeout_s=20.0)
+            assert "RTL_RETURN_ALT" in _params(conn)
+            assert len(link.clients) <= 4
+            assert link.refused_clients == 0
+        finally:
+            conn.close()
+            for s in idle:
+                s.close()
+
+
+_OTHER_USER_HOLDS = """
+import os, socket, sys
+os.setuid(65534)  # nobody: another local user
+socks = [socket.socket() for _ in range(8)]
+for s in socks:
+    s.connect(("127.0.0.1", int(sys.argv[1])))
+print("connected", flush=True)
+sys.stdin.readline()
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0,
+                    reason="needs root to act as another local user (setuid nobody)")
+def test_another_user_holding_tcp_connections_keeps_no_ground_station_out():
+    """Another local user (uid 65534) opens eight idle connections and keeps them: it holds at
+    most three of the four clients, and this user's ground station is served beside them.
+    (Before, the first four held every slot and the station was closed at once.)"""
+    with endpoint("tcp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        other = subprocess.Popen([sys.executable, "-c", _OTHER_USER_HOLDS, str(port)],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        conn = None
+        try:
+            assert other.stdout is not None and other.stdout.readline().strip() == "connected"
+            conn = _tcp_station(port)
+            wait_for(conn, "HEARTBEAT", timeout_s=20.0)
+            assert "RTL_RETURN_ALT" in _params(conn)
+            assert len(server.transports[0].clients) <= 4
+        finally:
+            if conn is not None:
+                conn.close()
+            other.kill()
+            other.wait(10)
