@@ -45,7 +45,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Hashable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mav
@@ -127,7 +127,6 @@ def _over(value: float, limit: float) -> bool:
 @dataclass
 class _Link:
     scheduler: MessageScheduler
-    peers_seen: dict[Hashable, float] = field(default_factory=dict)
 
 
 class MavlinkVehicle:
@@ -281,7 +280,6 @@ class MavlinkVehicle:
         if src[0] == self.codec.system_id and src[1] == self.codec.component_id:
             return []  # our own messages echoed back
         out: list[Out] = []
-        self.links[link].peers_seen[peer] = now_s
         kind = msg.get_type()
         if kind == "HEARTBEAT" and _flight_controller(src, msg):
             self.vehicles[src[0]] = now_s  # another vehicle of a fleet

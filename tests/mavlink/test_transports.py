@@ -4,6 +4,7 @@ server, with pymavlink on the other end; the vehicle is the boards on a scripted
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import select
 import socket
@@ -13,9 +14,11 @@ import time
 
 import pytest
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as dialect
 
 from skeye.link.transport import pty_null_modem
 from skeye.mavlink.transport import PEER_TIMEOUT_S, UdpTransport
+from skeye.pilot.mavlink_server import MAX_PARSERS
 from tests.mavlink.conftest import scripted_endpoint as endpoint
 from tests.mavlink.conftest import wait_for
 
@@ -212,3 +215,34 @@ def test_another_user_holding_tcp_connections_keeps_no_ground_station_out():
                 conn.close()
             other.kill()
             other.wait(10)
+
+
+def _heartbeat_frame() -> bytes:
+    mav = dialect.MAVLink(None, 255, 190)
+    return bytes(mav.heartbeat_encode(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav))
+
+
+def _closed_sockets() -> int:
+    gc.collect()
+    return sum(1 for o in gc.get_objects() if isinstance(o, socket.socket) and o.fileno() == -1)
+
+
+def test_the_vehicle_keeps_nothing_of_tcp_clients_gone():
+    """300 ground stations that each connect, send a HEARTBEAT and close: the vehicle keeps at
+    most the parsers of the last ``MAX_PARSERS`` peers a link remembers, with their sockets
+    (before, it also noted every peer that sent a message, for good, and kept each closed
+    socket with it: memory grew with every connection ever made)."""
+    hb = _heartbeat_frame()
+    with endpoint("tcp://127.0.0.1:0") as server:
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        before = _closed_sockets()
+        for _ in range(300):
+            with socket.create_connection(("127.0.0.1", port)) as s:
+                s.sendall(hb)
+                s.shutdown(socket.SHUT_WR)
+                s.settimeout(10.0)
+                while s.recv(65536):  # the vehicle closes its end when it has read ours
+                    pass
+        held = _closed_sockets() - before
+        assert server.received >= 300
+        assert held <= MAX_PARSERS, f"{held} closed sockets of gone clients still held"
