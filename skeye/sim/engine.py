@@ -61,6 +61,12 @@ log = logging.getLogger(__name__)
 TIMESTEP_RANGE_S = (1e-5, 0.01)
 """The physics step a simulation takes (``skeye sim --timestep``), seconds, both ends in."""
 
+FLUSH_EVENTS = 10_000
+"""Events queued during one step() call are handed to their sinks at its end, or once this many
+wait: a lockstep STEP may ask for 10 000 000 steps, hours of a robot's stream (about 500 bytes
+an event, 300 events a sim second for a Hummingbird: 1.5 GB) that would otherwise all wait in
+memory for its end. 10 000 events are a few MB, some 30 s of one Hummingbird's stream."""
+
 
 @dataclass
 class _Slot:
@@ -141,6 +147,7 @@ class Simulation:
         # Each step hook names, through an event source, the next step it needs to see.
         self.event_sources: list[Callable[[Simulation], int]] = []
         self._pending: dict[int, tuple[ReadingSink, list[Event]]] = {}
+        self._pending_events = 0
         self._periods: list[int] = []
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
         self.xml_extras: list[Callable[[Robot], str]] = []
@@ -621,10 +628,12 @@ class Simulation:
 
         Steps after which nothing is due but physics (no board tick, no sensor, status or
         camera) run as one ``mj_step(nstep=k)`` call: the same arithmetic, without Python in
-        the loop. The lines the steps produce go to each client in one write at the end.
-        ``stop``, asked before each such call, ends the stepping early when it returns True
-        (the control server's: the client that asked for a lockstep STEP went away); the
-        steps taken so far stand, and their lines go out as ever.
+        the loop. The lines the steps produce go to each client in one write at the end, or,
+        in a long call, each time ``FLUSH_EVENTS`` of them wait (what waits in memory is
+        bounded however many steps are asked for). ``stop``, asked before each such call,
+        ends the stepping early when it returns True (the control server's: the client that
+        asked for a lockstep STEP went away); the steps taken so far stand, and their lines go
+        out as ever.
         """
         target = self.steps + count
         try:
@@ -632,6 +641,8 @@ class Simulation:
             while self.steps < target:
                 if stop is not None and stop():
                     break
+                if self._pending_events >= FLUSH_EVENTS:
+                    self.flush()
                 # The quiet steps and the one after which something is due: one MuJoCo call.
                 self._step_to_event(min(self._next_event_step(), target - 1) - self.steps + 1)
         finally:
@@ -701,7 +712,9 @@ class Simulation:
         return best if best > now else now
 
     def emit(self, robot: Robot, events: list[Event]) -> None:
-        """Queue events for a robot's sink; handed over when the current step() call ends."""
+        """Queue events for a robot's sink; handed over when the current step() call ends (or
+        ``FLUSH_EVENTS`` wait)."""
+        self._pending_events += len(events)
         entry = self._pending.get(id(robot))
         if entry is None:
             self._pending[id(robot)] = (robot.sink, list(events))
@@ -711,6 +724,7 @@ class Simulation:
     def flush(self) -> None:
         """Hand every robot's queued events to its sink (one call per robot)."""
         pending, self._pending = self._pending, {}
+        self._pending_events = 0
         for sink, events in pending.values():
             if events:
                 sink(events)

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from skeye.sim import session as session_module
-from skeye.sim.engine import Simulation
+from skeye.sim.engine import FLUSH_EVENTS, Simulation
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.session import CLOSE_LINGER_S
@@ -236,3 +236,37 @@ def test_odd_wind_params_in_flight_are_refused_naming_them(params: str, named: s
             assert not [m for m in seen if m.type == "ERR"], seen
         finally:
             client.close()
+
+
+def test_a_long_step_hands_its_lines_over_as_it_goes() -> None:
+    """A STEP of 100 s of sim time with a Hummingbird streaming (about 300 lines a sim second):
+    its lines reach the client while the STEP still runs, as soon as ``FLUSH_EVENTS`` of them
+    wait (another connection's PING, answered without the engine, shows a sim time short of the
+    STEP's end when the first line has come), and the RES comes after the last of them. The
+    engine used to keep every line of a STEP in memory until its end: 10 000 000 steps, the
+    most one STEP may ask, are hours of the robot's stream (measured on a ``skeye sim``: 93 MB
+    more for 600 s of one Hummingbird's, so about 1.5 GB for the whole of it)."""
+    sim = Simulation(load_world("pad"), seed=1)
+    count = 100_000  # 100 s of sim time at 1 ms: some 30 000 lines, FLUSH_EVENTS 10 000
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0) as server,
+    ):
+        stepper, other = LineClient(server.port, timeout_s=120), LineClient(server.port)
+        try:
+            stepper.expect("NFO")
+            other.expect("NFO")
+            assert stepper.answer("INIT {ClassName hummingbird} {Name R1} {Start Pad1}",
+                                  "INIT").type == "RES"
+            stepper.send(f"STEP {{Count {count}}}")
+            first, _ = stepper.read_until(lambda m: m.type == "SEN")
+            assert first == []  # nothing came before it (the STEP's own lines begin)
+            now_s = float(other.answer("PING {Id 1}", "PING").require("Time"))
+            assert now_s < count * sim.dt, "the first line came only when the STEP had ended"
+            lines, res = stepper.read_until(lambda m: m.type == "RES", timeout_s=600)
+            assert res.get("Command") == "STEP"
+            assert float(res.require("Time")) == pytest.approx(count * sim.dt)
+            assert len(lines) > FLUSH_EVENTS  # the whole stream came, in several hand-overs
+        finally:
+            stepper.close()
+            other.close()
