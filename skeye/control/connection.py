@@ -61,6 +61,14 @@ DEFAULT_IMAGE_PORT = 5003
 SYNC_STEP_TIMEOUT_S = 3600.0
 """How long a ``STEP {Sync true}`` waits for its answer: the other members' steps come first (the
 simulator's own limit for a STEP to be taken up, skeye.sim.session.STEP_TIMEOUT_S)."""
+LOCKSTEP_IMAGE_TIMEOUT_S = 70.0
+"""In lockstep, how long an image request may wait for its answer (at least): the frame may
+wait for its render, which the simulator gives up on after 60 s (skeye.sim.render.
+RENDER_TIMEOUT_S) and then answers with an error. The connection's own ``timeout_s`` (10 s by
+default) is too short for a loaded machine's first render (a renderer's first frame took 5.3 s
+at load 13.5 on 2 cores, 2026-11-28): the request failed, the pilot's vision saw "pad not seen"
+for that frame, and the lockstep flight went on differently; the simulator is paused meanwhile,
+so waiting changes nothing but the wall time."""
 _STOP = b""
 _RECV_WAIT_S = 1.0  # the reader's longest wait in one recv (a closed link wakes it at once)
 
@@ -614,11 +622,16 @@ class Connection:
 
     # -- images ---------------------------------------------------------------------------
     def image_client(self) -> ImageClient:
-        """A new client of the simulator's image server (``images=`` given to connect)."""
+        """A new client of the simulator's image server (``images=`` given to connect); its
+        answer deadline is ``timeout_s``, and in lockstep at least
+        :data:`LOCKSTEP_IMAGE_TIMEOUT_S`."""
         if self.images_address is None:
             raise LocalProtocolError("connect with images='host:port' to fetch camera frames")
         host, port = self.images_address
-        return ImageClient(host, port, timeout_s=self.timeout_s)
+        timeout_s = self.timeout_s
+        if self.mode == "lockstep":  # a frame may wait for its render: the simulator's limit
+            timeout_s = max(timeout_s, LOCKSTEP_IMAGE_TIMEOUT_S)
+        return ImageClient(host, port, timeout_s=timeout_s)
 
     # -- shutdown -------------------------------------------------------------------------
     def close(self, timeout_s: float = 2.0) -> None:

@@ -177,7 +177,8 @@ LOCKSTEP_WAIT_S = 120.0
 before it raises :class:`VisionStalled`: a guard against a hung detector, not a deadline a
 slow machine may miss. The fetch of a frame includes its render in ``skeye.gym``, which the
 simulator's camera system gives up on after 60 s (``skeye.sim.render.RENDER_TIMEOUT_S``), and a
-pilot's image client after its own timeout (5 s); this outlasts both. Measured 2026-11-28
+lockstep pilot's image client after at least 70 s
+(``skeye.control.connection.LOCKSTEP_IMAGE_TIMEOUT_S``); this outlasts both. Measured 2026-11-28
 (webcam profile, software GL, pure Python, 2 cores): a PadLanding-v0 episode's first frame
 (the renderer's first) took 3.1 s at load 7 and 5.3 s at load 13.5; at load 17 it took more
 than the 5 s this was until then."""

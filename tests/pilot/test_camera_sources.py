@@ -535,3 +535,33 @@ def test_a_real_v4l2_camera_where_there_is_one():
         assert a.bgr.ndim == 3 and a.bgr.shape[2] == 3
     finally:
         source.close()
+
+
+def test_a_lockstep_frame_slower_than_the_answer_deadline_still_comes():
+    """In lockstep a frame may wait for its render, which the simulator bounds (60 s) and the
+    paused world makes harmless: an image request waits at least LOCKSTEP_IMAGE_TIMEOUT_S, not
+    the connection's ``timeout_s``. Here the image server's first answer comes 5 s late and
+    the connection's timeout is 4 s: the request failed (a timeout, which the pilot's vision
+    takes for "pad not seen", and the lockstep flight went on differently); now the frame
+    comes."""
+    from tests.pilot.ll_proxy import Proxy
+
+    class FirstAnswerLate(Proxy):
+        late_s = 5.0
+        delayed = False
+
+        def from_board(self, data: bytes) -> bytes:
+            if not self.delayed:
+                self.delayed = True
+                time.sleep(self.late_s)
+            return data
+
+    with ExitStack() as stack:
+        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep"))
+        late = FirstAnswerLate(images.port)
+        stack.callback(late.close)
+        sim = stack.enter_context(connect(f"127.0.0.1:{control.port}",
+                                          images=f"127.0.0.1:{late.port}", timeout_s=4.0))
+        robot = sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, -1.0))
+        image = robot.camera.image()
+        assert late.delayed and image.frame >= 1 and image.bgr.shape == (600, 800, 3)

@@ -91,7 +91,11 @@ def test_closing_the_vision_releases_a_loop_waiting_on_a_hung_detector() -> None
 
 def test_the_lockstep_wait_outlasts_a_frames_render() -> None:
     # In skeye.gym a frame's fetch includes its render, which the camera system gives up on
-    # only after RENDER_TIMEOUT_S: a shorter wait would stop a flight that would go on.
-    assert LOCKSTEP_WAIT_S > RENDER_TIMEOUT_S
+    # only after RENDER_TIMEOUT_S, and a lockstep pilot's image request waits at least
+    # LOCKSTEP_IMAGE_TIMEOUT_S, itself past the render's limit: a shorter wait would stop a
+    # flight that would go on.
+    from skeye.control.connection import LOCKSTEP_IMAGE_TIMEOUT_S
+
+    assert LOCKSTEP_WAIT_S > LOCKSTEP_IMAGE_TIMEOUT_S > RENDER_TIMEOUT_S
     assert PadVision(SimpleNamespace(), SimpleNamespace(), threading.Lock(),
                      fov_h_rad=1.309).lockstep_wait_s == LOCKSTEP_WAIT_S
