@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from skeye import __version__, cliargs
-from skeye.cliargs import EXTRA_OF
+from skeye.cliargs import EXTRA_OF, missing_extra
 from skeye.errors import SkeyeError
 from skeye.processes import wait_for_signal
 
@@ -478,12 +478,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except ModuleNotFoundError as exc:
         top = (exc.name or "").split(".")[0]
-        extra = EXTRA_OF.get(top)
-        if extra is None:
+        if top not in EXTRA_OF:
             raise
-        print(f"skeye {args.command}: error: {top} is not installed: this command needs "
-              f"skeye's {extra} extra (pip install 'skeye[{extra}]'; the base install is the "
-              "onboard pilot's, docs/onboard.md)", file=sys.stderr)
+        print(f"skeye {args.command}: error: {missing_extra([top])}", file=sys.stderr)
         return 2
     except SkeyeError as exc:
         print(f"skeye {args.command}: error: {exc}", file=sys.stderr)

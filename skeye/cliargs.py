@@ -27,7 +27,12 @@ def not_installed(modules: Sequence[str]) -> str:
     module is looked up, not imported (MuJoCo's import takes a while)."""
     from importlib.util import find_spec
 
-    missing = [module for module in modules if find_spec(module) is None]
+    return missing_extra([module for module in modules if find_spec(module) is None])
+
+
+def missing_extra(missing: Sequence[str]) -> str:
+    """What ``skeye`` says of modules of its extras that are not installed (each a key of
+    :data:`EXTRA_OF`; '' for none): their names, the extras and the pip command."""
     if not missing:
         return ""
     extras = list(dict.fromkeys(EXTRA_OF[module] for module in missing))

@@ -624,14 +624,10 @@ def mavlink_listeners(links: list[str]) -> list[tuple[str, str, int, str]]:
     """The pilot's ``tcp://`` MAVLink links, which listen on this machine, as
     :func:`skeye.processes.check_ports_free` takes them: one on a port of the other children's
     (all TCP) would fail in the pilot after the simulator had started."""
-    from skeye.mavlink.transport import parse_uri
+    from skeye.mavlink.transport import listening_links
 
-    listeners = []
-    for uri in links:
-        scheme, host, port, _ = parse_uri(uri)
-        if scheme == "tcp":
-            listeners.append((f"the MAVLink link {uri}", host, port, "--mavlink"))
-    return listeners
+    return [(f"the MAVLink link {uri}", host, port, "--mavlink")
+            for scheme, host, port, uri in listening_links(links) if scheme == "tcp"]
 
 
 def _add_up(sub: Any) -> None:

@@ -34,7 +34,7 @@ import logging
 import socket
 import time
 from collections import Counter
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Sequence
 from typing import Any, Protocol
 from urllib.parse import parse_qs
 
@@ -376,6 +376,22 @@ def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
     if port is None or not parts.hostname:
         raise ConfigError(f"{uri}: give HOST:PORT, e.g. {scheme}://127.0.0.1:14540")
     return ("udp" if scheme == "udpin" else scheme), parts.hostname, port, query
+
+
+def listening_links(uris: Sequence[str]) -> list[tuple[str, str, int, str]]:
+    """``(scheme, host, port, uri)`` of the links among ``uris`` that listen on this machine
+    (``tcp://``, and ``udp://`` / ``udpin://`` as ``udp``), for the checks that two listeners
+    of one process share no port.
+
+    Raises:
+        ConfigError: a URI that is not a MAVLink link's (:func:`parse_uri`).
+    """
+    links = []
+    for uri in uris:
+        scheme, host, port, _ = parse_uri(uri)
+        if scheme in ("tcp", "udp"):
+            links.append((scheme, host, port, uri))
+    return links
 
 
 def open_transport(uri: str) -> MavTransport:

@@ -402,17 +402,15 @@ def shared_port_problem(args: argparse.Namespace) -> str | None:
     Raises:
         ConfigError: a ``--mavlink`` URI that is not one.
     """
-    from skeye.mavlink.transport import parse_uri
+    from skeye.mavlink.transport import listening_links
 
     links: list[tuple[str, str, int, str]] = []
     if not args.serial:
         links.append(("tcp", args.host, args.port, "the pilot (--port)"))
     if args.video_port is not None:
         links.append(("tcp", args.host, args.video_port, "the pilot's video (--video-port)"))
-    for uri in args.mavlink or ():
-        scheme, host, port, _ = parse_uri(uri)
-        if scheme in ("tcp", "udp"):
-            links.append((scheme, host, port, f"the MAVLink link {uri} (--mavlink)"))
+    for scheme, host, port, uri in listening_links(args.mavlink or ()):
+        links.append((scheme, host, port, f"the MAVLink link {uri} (--mavlink)"))
     bound = {host: bound_address(host) for _, host, _, _ in links}
     for i, (scheme, host, port, what) in enumerate(links):
         for other_scheme, other_host, other_port, other in links[:i]:

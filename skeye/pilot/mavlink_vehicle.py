@@ -281,10 +281,8 @@ class MavlinkVehicle:
             return []  # our own messages echoed back
         out: list[Out] = []
         kind = msg.get_type()
-        if kind == "HEARTBEAT" and _flight_controller(src, msg):
-            self.vehicles[src[0]] = now_s  # another vehicle of a fleet
-        if src[0] in self.vehicles:
-            self.vehicles[src[0]] = now_s
+        if src[0] in self.vehicles or (kind == "HEARTBEAT" and _flight_controller(src, msg)):
+            self.vehicles[src[0]] = now_s  # another vehicle of a fleet, heard now
             self.ignored += 1  # its stream, forwarded to us: neither ground link nor station
             return out
         if src not in self.gcs and kind == "HEARTBEAT":
