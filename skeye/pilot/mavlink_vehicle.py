@@ -157,7 +157,10 @@ class MavlinkVehicle:
         self.refusals = 0
         self.acks: dict[int, int] = {}  # MAV_RESULT -> count
         self._notices: dict[tuple[Hashable, str], float] = {}
-        self._recent: dict[tuple[Hashable, tuple[object, ...]], tuple[float, int]] = {}
+        # (peer, command) -> when it was answered, its result, and the vehicle's status (mode,
+        # armed, flight state) after it: a repeat is a retransmission only while that holds
+        self._recent: dict[tuple[Hashable, tuple[object, ...]],
+                           tuple[float, int, tuple[Px4Mode, bool, NavState]]] = {}
         self._armed_at_s: float | None = None
         self._setpoint: tuple[MavMessage, float] | None = None
         self._attitude_target_s: float | None = None  # the last SET_ATTITUDE_TARGET (not flown)
@@ -439,7 +442,7 @@ class MavlinkVehicle:
         key = (peer, cmd.key())
         seen = self._recent.get(key)
         if (seen is not None and self._now_s - seen[0] < DUPLICATE_WINDOW_S
-                and cmd.command not in QUERIES):
+                and cmd.command not in QUERIES and seen[2] == self._situation()):
             return [self._ack(cmd.command, seen[1], src)]  # a retransmission: same answer
         extra: list[MavMessage] = []
         self._command_peer = peer
@@ -462,9 +465,16 @@ class MavlinkVehicle:
                                  f"{command_name(cmd.command)}: {exc}")
         if len(self._recent) > 256:
             self._recent.clear()
-        self._recent[key] = (self._now_s, result)
+        self._recent[key] = (self._now_s, result, self._situation())
         self.acks[result] = self.acks.get(result, 0) + 1
         return [self._ack(cmd.command, result, src), *extra]
+
+    def _situation(self) -> tuple[Px4Mode, bool, NavState]:
+        """What a command's answer depends on and changes: the mode, armed, the flight state. A
+        command repeated within ``DUPLICATE_WINDOW_S`` is a retransmission only while these are
+        as its first answer left them; once they moved on (the take-off climbed and holds, a
+        disarm came between two arms) the repeat is a new command and is run."""
+        return (self.mode, self.armed, self.boards.state)
 
     def _ack(self, command: int, result: int, src: tuple[int, int]) -> MavMessage:
         return self.codec.mav.command_ack_encode(command, result, 0, 0, src[0], src[1])
@@ -1204,7 +1214,7 @@ class MavlinkVehicle:
         out += [Out(m, link_of, peer_of) for m in self.mission.tick(now_s)]
         out += self._landing_targets()
         view = None
-        status = (self.mode, self.armed, self.boards.state)
+        status = self._situation()
         changed = status != self._status
         self._status = status
         for i, link in enumerate(self.links):

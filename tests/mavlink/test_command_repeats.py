@@ -2,7 +2,9 @@
 an action is not run twice and gets its first COMMAND_ACK again, however its unused parameters
 are filled (MAVSDK sends NaN for each, and NaN != NaN once made every resend look new: a take-off
 resent was refused "not landed" after the first was accepted); a request for a message is
-answered again, message and all (the second REQUEST_MESSAGE once got only its COMMAND_ACK)."""
+answered again, message and all (the second REQUEST_MESSAGE once got only its COMMAND_ACK).
+A repeat after the vehicle's mode, arming or flight state moved on is a new command: arm,
+disarm, arm within a second once left the vehicle disarmed with the last arm ACCEPTED."""
 
 from __future__ import annotations
 
@@ -40,6 +42,20 @@ def test_a_take_off_resent_with_nan_parameters_gets_the_same_ack_and_runs_once()
                 assert _ack(conn, M.MAV_CMD_NAV_TAKEOFF) == M.MAV_RESULT_ACCEPTED
             calls = [c for c in server.vehicle.boards.airframe.calls if c[0] == "take_off"]
             assert len(calls) == 1
+            assert server.errors == 0
+        finally:
+            conn.close()
+
+
+def test_a_command_repeated_after_the_vehicle_changed_is_run_again():
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            for arm in (1.0, 0.0, 1.0):  # well within the second a resend is looked for
+                conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, arm, *NAN6)
+                assert _ack(conn, M.MAV_CMD_COMPONENT_ARM_DISARM) == M.MAV_RESULT_ACCEPTED
+                assert server.vehicle.armed == bool(arm)
             assert server.errors == 0
         finally:
             conn.close()
