@@ -64,6 +64,7 @@ class CameraSensor(Sensor[CameraReading]):
         self._client: ImageClient | None = None
         self._client_lock = threading.Lock()
         self._closed = False
+        self.prerender = True  # frames rendered ahead of this camera's requests (set_prerender)
 
     def convert(self, message: Any) -> CameraReading:
         s: SenCamera = message
@@ -121,11 +122,26 @@ class CameraSensor(Sensor[CameraReading]):
                 client.select_camera(f"{self._robot_name}/{self.name}")
                 client.set_format("raw")
                 client.set_meta(True)
+                if not self.prerender:
+                    client.set_prerender(False)
             except BaseException:
                 client.close()
                 raise
             self._client = client
         return self._client.get_frame()
+
+    def set_prerender(self, on: bool) -> None:
+        """Whether the simulator renders this camera's frames ahead of :meth:`image` (on, the
+        default) or only the frame each call asks for (off: the call waits for that render).
+        Off suits a lockstep client that takes some of the frames, as the pilot's vision does:
+        the others cost no render. In lockstep the pixels of a frame are the same either way,
+        but an auto-exposing camera meters only the frames rendered (docs/camera.md,
+        "Auto-exposure"), so the frames after a skipped one may be exposed a little
+        differently. It takes effect from the next request (on a fresh connection)."""
+        with self._client_lock:
+            if self.prerender != bool(on):
+                self.prerender = bool(on)
+                self._drop()
 
     def _drop(self) -> None:
         """Close the connection: its state is unknown (a frame may still be on its way)."""

@@ -26,6 +26,7 @@ from skeye.wire.image_requests import (
     SelectCamera,
     SetFormat,
     SetMeta,
+    SetPrerender,
     Stream,
     SubRect,
     encode_request,
@@ -122,6 +123,13 @@ class ImageClient:
     def set_meta(self, on: bool) -> None:
         """Ask for META frames (frame number, sim time, camera id, size) or plain UPIS ones."""
         self._send(SetMeta(bool(on)))
+
+    def set_prerender(self, on: bool) -> None:
+        """Whether the simulator renders this connection's camera frames ahead of its requests
+        (on, the default: a frame is ready when asked for) or only the frames it asks for
+        (off: each request waits for its render; in lockstep a client that takes some of the
+        frames, as the pilot's vision, saves the renders of the others)."""
+        self._send(SetPrerender(bool(on)))
 
     # ---------------------------------------------------------------- frames
 

@@ -342,11 +342,21 @@ class PadVision:
             self._newest_capture_s = -math.inf
             self._last_nav_s = -math.inf
             self.history = PoseHistory(self.max_latency_s + 1.0)
+        self._frames_on_demand()  # (not under _done: it may wait for the camera's lock)
         while True:
             try:
                 self._observations.get_nowait()
             except queue.Empty:
                 break
+
+    def _frames_on_demand(self) -> None:
+        """Lockstep: the simulator renders only the frames the detector takes (it takes the
+        newest whenever it is free, a few of a 30 frames/s camera's), not every frame ahead;
+        a camera that can say so (the simulator's, through ``--images``) is told. A realtime
+        vision keeps every frame rendered ahead: it wants the newest at once."""
+        tell = getattr(self.robot.camera, "set_prerender", None)
+        if self.lockstep and tell is not None:
+            tell(False)
 
     def attach_video(self, sink: Callable[[CameraFrame], None] | None) -> None:
         """Hand every frame looked at, with its detection, to ``sink`` (it must not block)."""
@@ -355,6 +365,7 @@ class PadVision:
     # -- lifecycle -------------------------------------------------------------------------
     def start(self) -> PadVision:
         if self._worker is None:
+            self._frames_on_demand()
             self._worker = Worker(self._run, "pilot-vision", on_error=self._on_error).start()
         return self
 

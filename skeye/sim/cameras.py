@@ -16,8 +16,9 @@ The pixels are made by one render thread that owns the OpenGL contexts (EGL or O
 belong to the thread that made them; :mod:`skeye.sim.render`), and only for someone:
 
 * a frame of a camera some image client watches (:meth:`FrameBuffer.wanted`: a client is
-  connected that selected it, or has not selected any and it is the first camera) is queued
-  for rendering when it is taken, so it is ready by its delivery;
+  connected that selected it, or has not selected any and it is the first camera, and has not
+  said ``SKEYE PRERENDER off``) is queued for rendering when it is taken, so it is ready by its
+  delivery;
 * any other frame is rendered when its pixels are first asked for (``Frame.rgb``: an image
   client's request, the pilot's vision), from its snapshot: the same pixels, later. A frame
   nobody asks for costs a copy of ``qpos`` and ``qvel``.

@@ -22,6 +22,9 @@ How this works:
   for another ``idle_timeout_s`` is closed without it: idle or stalled clients cannot hold the
   slots. The accept thread never waits on a
   client, and a shortage of file descriptors is logged and waited out.
+* A client watches its camera (:meth:`FrameBuffer.watch`: the simulator renders each frame
+  as it is taken) until it says ``SKEYE PRERENDER off``; from then on its frames are rendered
+  when it asks for one (a lockstep client that takes some of the frames, the pilot's vision).
 * ``close()`` wakes every thread through its socket pair and joins them all within a deadline.
 """
 
@@ -48,6 +51,7 @@ from skeye.wire.image_requests import (
     SelectCamera,
     SetFormat,
     SetMeta,
+    SetPrerender,
     Stream,
     SubRect,
 )
@@ -129,6 +133,7 @@ class _ClientHandler:
         self._active_s = time.monotonic()  # last request received or byte sent
         self.closed_reason: str | None = None
         self._watch = 0  # the buffer's watcher handle (set on the client's thread)
+        self._prerender = True  # frames rendered ahead for it (SKEYE PRERENDER off: when asked)
         self.peer_host = address.rpartition(":")[0]
         self.peer_key = self.peer_host  # whose slot it takes (skeye.peers); set by the server
         self.replaced: str | None = None  # why a newer connection of its peer took its slot
@@ -377,6 +382,12 @@ class _ClientHandler:
                 self._format, self._quality = kind, quality
             case SetMeta(on=on):
                 self._meta = on
+            case SetPrerender(on=on):
+                if on and not self._prerender:
+                    self._watch = self._buffer.watch(self.camera)
+                elif not on and self._prerender:
+                    self._buffer.unwatch(self._watch)
+                self._prerender = on
             case Stream(fps=fps):
                 self._stream_period_s = 1.0 / fps if fps > 0 else None
                 self._next_stream_s = now

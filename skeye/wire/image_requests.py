@@ -97,6 +97,14 @@ class SetMeta:
 
 
 @dataclass(frozen=True)
+class SetPrerender:
+    """``SKEYE PRERENDER on|off``: whether this connection's camera frames are rendered ahead
+    of its requests (on, the default) or only when it asks for one (off)."""
+
+    on: bool
+
+
+@dataclass(frozen=True)
 class Stream:
     """``SKEYE STREAM <fps>``: push frames at up to ``fps``; 0 stops."""
 
@@ -121,7 +129,8 @@ class RequestError:
     reason: str
 
 
-Request = NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | Stream | RequestError
+Request = (NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | SetPrerender | Stream
+           | RequestError)
 
 _EXT_PREFIX = b"SKEYE "
 _OPENINGS = re.compile(rb"[OUS]")
@@ -141,6 +150,8 @@ def encode_request(request: Request) -> bytes:
             return _EXT_PREFIX + f"FORMAT {kind.value}{tail}".encode("ascii") + b"\n"
         case SetMeta(on=on):
             return _EXT_PREFIX + (b"META on\n" if on else b"META off\n")
+        case SetPrerender(on=on):
+            return _EXT_PREFIX + (b"PRERENDER on\n" if on else b"PRERENDER off\n")
         case Stream(fps=fps):
             return _EXT_PREFIX + f"STREAM {float(fps)!r}".encode("ascii") + b"\n"
         case RequestError():
@@ -170,6 +181,10 @@ def parse_extension(line: bytes) -> Request:
             if len(args) != 1 or args[0].lower() not in ("on", "off"):
                 return RequestError(f"expected 'META on|off', got {shown!r}")
             return SetMeta(args[0].lower() == "on")
+        if command == "PRERENDER":
+            if len(args) != 1 or args[0].lower() not in ("on", "off"):
+                return RequestError(f"expected 'PRERENDER on|off', got {shown!r}")
+            return SetPrerender(args[0].lower() == "on")
         if command == "STREAM":
             if len(args) != 1:
                 return RequestError(f"expected 'STREAM <fps>', got {shown!r}")

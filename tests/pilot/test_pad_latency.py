@@ -23,6 +23,7 @@ from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
 from skeye.pilot.vision import PadVision
 from skeye.robots.config import camera_model
+from skeye.sim.cameras import CameraSystem
 from skeye.vision.calibration import CameraCalibration
 from skeye.wire.packets import PD, NavState, PadReport, SkeyeMask
 from tests.sim.test_cameras import sim_with_images
@@ -37,6 +38,7 @@ class Flight:
     vehicle: Vehicle
     control: object
     pilot: PilotServer
+    cameras: CameraSystem
 
     @property
     def vision(self) -> PadVision:
@@ -70,7 +72,7 @@ def flight(location_ne_m: tuple[float, float], *, predict: bool,
            lockstep_rate: float = 5.0) -> Iterator[Flight]:
     with ExitStack() as stack:
         # The oracle estimator: the hold is measured against ground truth in centimetres.
-        control, images, _cameras = stack.enter_context(
+        control, images, cameras = stack.enter_context(
             sim_with_images(mode="lockstep", estimator="truth", profile=profile)
         )
         sim = stack.enter_context(
@@ -86,7 +88,7 @@ def flight(location_ne_m: tuple[float, float], *, predict: bool,
         )
         vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
-        yield Flight(vehicle, control, pilot)
+        yield Flight(vehicle, control, pilot, cameras)
 
 
 def hold_from_0_6_m(predict: bool, params: PadHoldParams | None = None,
@@ -165,6 +167,21 @@ def test_land_on_pad_from_3_m_through_the_webcam_with_its_measured_latency():
           f"{start:.2f} m, landed after {landed_s:.1f} s, {miss_m * 100:.1f} cm from the centre")
     assert start == pytest.approx(3.0, abs=0.15)
     assert landed_s < 40.0 and miss_m < 0.05
+
+
+def test_in_lockstep_the_simulator_renders_only_the_frames_the_vision_takes():
+    """The detector takes the newest frame whenever it is free (here every 300 ms of sim
+    time, of a 30 frames/s camera): in lockstep the pilot's camera asks for no frame to be
+    rendered ahead (SKEYE PRERENDER off), so the others cost no render."""
+    with flight((0.3, 0.0), predict=True) as f:
+        start = f.truth()
+        f.record_until(lambda s: s[-1][0] >= start[0] + 3.0)
+        f.pilot.vision.close()  # (no frame is fetched while the counts are read)
+        cam = f.cameras.sim.robots["R1"].cameras[0]
+        taken = f.vision.stats.frames
+        assert taken >= 5 and f.vision.stats.errors == 0
+        assert cam.captured >= 5 * taken
+        assert taken <= cam.rendered <= taken + 1  # (+1: a frame fetched as the vision closed)
 
 
 def test_vision_too_slow_to_hold_is_said_and_the_vehicle_holds_still(caplog):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from skeye.control.image_client import ImageClient
+from skeye.errors import RemoteProtocolError
 from skeye.pixels import frame_image
 from skeye.sim.cameras import CameraSystem
 from skeye.sim.engine import Simulation
@@ -415,6 +416,36 @@ def test_frames_are_rendered_only_for_someone():
         before = cam.rendered
         assert _camera_shots(c.step(500))
         assert cam.rendered == before
+        c.close()
+
+
+def test_a_client_without_prerender_gets_only_the_frames_it_asks_for_rendered():
+    """SKEYE PRERENDER off: the client's camera is not rendered ahead; each request renders
+    the newest frame then (the same pixels a watched frame has), and a client that watches
+    (PRERENDER on again, or another client) makes every frame rendered once more."""
+    with sim_with_images(profile="webcam") as (control, images, cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        with ImageClient("127.0.0.1", images.port) as img:
+            img.set_meta(True)
+            img.set_prerender(False)
+            with pytest.raises(RemoteProtocolError, match="no frame available"):
+                img.get_frame()  # no camera yet; requests are served in order: it is off
+            c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+            cam = cameras.sim.robots["R1"].cameras[0]
+            img.select_camera("R1/Down")
+            for _ in range(3):
+                shots = _camera_shots(c.step(500))
+                assert len(shots) >= 14
+                frame = img.get_frame()  # the newest announced frame, rendered now
+                assert frame.meta is not None and frame.meta.frame_number == shots[-1]
+            assert cam.rendered == 3 and cameras.skipped == 0
+            assert not cameras.buffer.wanted("R1/Down")
+            img.set_prerender(True)
+            _wait(lambda: cameras.buffer.wanted("R1/Down"), "the client's PRERENDER on")
+            watched_from = cam.captured
+            _camera_shots(c.step(500))
+            _wait(lambda: cam.rendered == 3 + cam.captured - watched_from, "eager renders")
         c.close()
 
 

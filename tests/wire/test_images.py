@@ -26,6 +26,7 @@ from skeye.wire.image_requests import (
     SelectCamera,
     SetFormat,
     SetMeta,
+    SetPrerender,
     Stream,
     SubRect,
     encode_request,
@@ -57,6 +58,8 @@ REQUEST_TABLE: list[tuple[Request, bytes]] = [
     (SetFormat(ImageFormat.PNG), b"SKEYE FORMAT PNG\n"),
     (SetMeta(True), b"SKEYE META on\n"),
     (SetMeta(False), b"SKEYE META off\n"),
+    (SetPrerender(True), b"SKEYE PRERENDER on\n"),
+    (SetPrerender(False), b"SKEYE PRERENDER off\n"),
     (Stream(30.0), b"SKEYE STREAM 30.0\n"),
     (Stream(0.0), b"SKEYE STREAM 0.0\n"),
 ]
@@ -79,6 +82,7 @@ def test_request_table_both_ways(request_: Request, wire: bytes) -> None:
     [
         (b"SKEYE format jpeg 10\r\n", SetFormat(ImageFormat.JPEG, 10)),
         (b"SKEYE META ON\n", SetMeta(True)),
+        (b"SKEYE prerender Off\r\n", SetPrerender(False)),
         (b"SKEYE STREAM 15\n", Stream(15.0)),
         (b"SKEYE  CAMERA   R2/Front \n", SelectCamera("R2/Front")),
     ],
@@ -101,6 +105,8 @@ def test_extension_lines_are_lenient_about_case_and_spacing(line: bytes, expecte
         (b"SKEYE FORMAT RAW 5\n", "FORMAT"),
         (b"SKEYE FORMAT GIF\n", "FORMAT"),
         (b"SKEYE META maybe\n", "META"),
+        (b"SKEYE PRERENDER\n", "PRERENDER on|off"),
+        (b"SKEYE PRERENDER later\n", "PRERENDER on|off"),
         (b"SKEYE STREAM\n", "STREAM"),
         (b"SKEYE STREAM fast\n", "not a number"),
         (b"SKEYE STREAM -1\n", "0-1000"),
@@ -179,6 +185,7 @@ requests_st: st.SearchStrategy[Request] = st.one_of(
     st.builds(SetFormat, st.just(ImageFormat.JPEG), st.integers(1, 100)),
     st.sampled_from([SetFormat(ImageFormat.RAW), SetFormat(ImageFormat.PNG)]),
     st.builds(SetMeta, st.booleans()),
+    st.builds(SetPrerender, st.booleans()),
     st.builds(Stream, st.floats(0.0, 1000.0)),
 )
 
@@ -205,7 +212,8 @@ def test_parser_fuzz_gives_requests_only_and_ignores_splits(
     whole = whole_parser.feed(blob)
     assert all(
         isinstance(
-            r, NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | Stream | RequestError
+            r, NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | SetPrerender | Stream
+            | RequestError
         )
         for r in whole
     )
