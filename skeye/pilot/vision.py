@@ -350,12 +350,15 @@ class PadVision:
                 break
 
     def _frames_on_demand(self) -> None:
-        """Lockstep: the simulator renders only the frames the detector takes (it takes the
-        newest whenever it is free, a few of a 30 frames/s camera's), not every frame ahead;
-        a camera that can say so (the simulator's, through ``--images``) is told. A realtime
-        vision keeps every frame rendered ahead: it wants the newest at once."""
+        """Lockstep with a given latency: the simulator renders only the frames the detector
+        takes (it takes the newest whenever it is free, a few of a 30 frames/s camera's), not
+        every frame ahead; a camera that can say so (the simulator's, through ``--images``) is
+        told. A realtime vision keeps every frame rendered ahead (it wants the newest at once),
+        and so does a ``measured`` latency: a frame's fetch is part of the time it measures, and
+        waiting for the simulator's render there would count the simulator's work as the
+        vehicle's."""
         tell = getattr(self.robot.camera, "set_prerender", None)
-        if self.lockstep and tell is not None:
+        if self.lockstep and self.latency_s is not None and tell is not None:
             tell(False)
 
     def attach_video(self, sink: Callable[[CameraFrame], None] | None) -> None:
