@@ -157,10 +157,10 @@ class MavlinkVehicle:
         self.refusals = 0
         self.acks: dict[int, int] = {}  # MAV_RESULT -> count
         self._notices: dict[tuple[Hashable, str], float] = {}
-        # (peer, command) -> when it was answered, its result, and the vehicle's status (mode,
-        # armed, flight state) after it: a repeat is a retransmission only while that holds
+        # (peer, command) -> when it was answered, its result, and the vehicle's situation after
+        # it (_situation): a repeat is a retransmission only while that holds
         self._recent: dict[tuple[Hashable, tuple[object, ...]],
-                           tuple[float, int, tuple[Px4Mode, bool, NavState]]] = {}
+                           tuple[float, int, tuple[Px4Mode, bool, NavState | None]]] = {}
         self._armed_at_s: float | None = None
         self._setpoint: tuple[MavMessage, float] | None = None
         self._attitude_target_s: float | None = None  # the last SET_ATTITUDE_TARGET (not flown)
@@ -469,12 +469,18 @@ class MavlinkVehicle:
         self.acks[result] = self.acks.get(result, 0) + 1
         return [self._ack(cmd.command, result, src), *extra]
 
-    def _situation(self) -> tuple[Px4Mode, bool, NavState]:
-        """What a command's answer depends on and changes: the mode, armed, the flight state. A
-        command repeated within ``DUPLICATE_WINDOW_S`` is a retransmission only while these are
-        as its first answer left them; once they moved on (the take-off climbed and holds, a
-        disarm came between two arms) the repeat is a new command and is run."""
-        return (self.mode, self.armed, self.boards.state)
+    def _situation(self) -> tuple[Px4Mode, bool, NavState | None]:
+        """What a command's answer depends on and changes: the mode, armed, and the flight
+        state while no program runs. A command repeated within ``DUPLICATE_WINDOW_S`` is a
+        retransmission only while these are as its first answer left them; once they moved on
+        (the take-off climbed and holds, a disarm came between two arms) the repeat is a new
+        command and is run. A program (a mission, a return, offboard) moves through flight
+        states by itself, and its mode names it: its own progress is no change. (Until
+        2026-11-28 it was: a mission started on the ground took off at the next tick, and
+        MAVSDK's resend of the start, 0.5 s later, restarted it at its take-off item in the
+        air, which the climb refused: "mission stopped: move: busy while taking off".)"""
+        state = self.boards.state if self.program is Program.NONE else None
+        return (self.mode, self.armed, state)
 
     def _ack(self, command: int, result: int, src: tuple[int, int]) -> MavMessage:
         return self.codec.mav.command_ack_encode(command, result, 0, 0, src[0], src[1])
@@ -1214,7 +1220,7 @@ class MavlinkVehicle:
         out += [Out(m, link_of, peer_of) for m in self.mission.tick(now_s)]
         out += self._landing_targets()
         view = None
-        status = self._situation()
+        status = (self.mode, self.armed, self.boards.state)
         changed = status != self._status
         self._status = status
         for i, link in enumerate(self.links):

@@ -9,9 +9,13 @@ disarm, arm within a second once left the vehicle disarmed with the last arm ACC
 from __future__ import annotations
 
 import math
+import time
 
+import pytest
 from pymavlink import mavutil
 
+from skeye.mavlink.modes import Program, Px4Mode
+from skeye.wire.packets import NavState
 from tests.mavlink.conftest import GCS, scripted_endpoint, wait_for
 
 M = mavutil.mavlink
@@ -78,5 +82,70 @@ def test_a_request_for_a_message_repeated_at_once_is_answered_each_time():
                 reply = wait_for(conn, "MESSAGE_INTERVAL", timeout_s=10)
                 assert (reply.message_id, reply.interval_us) == (M.MAVLINK_MSG_ID_ATTITUDE,
                                                                  50_000)
+        finally:
+            conn.close()
+
+
+def _upload_take_off_mission(conn) -> None:
+    """A take-off to 2.5 m where the vehicle stands, then a waypoint 10 m north of it."""
+    items = [(M.MAV_CMD_NAV_TAKEOFF, 0, 0), (M.MAV_CMD_NAV_WAYPOINT, 490000900, 80000000)]
+    conn.mav.mission_count_send(1, 1, len(items), M.MAV_MISSION_TYPE_MISSION)
+    while True:
+        msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"], timeout_s=10)
+        if msg.get_type() == "MISSION_ACK":
+            assert msg.type == M.MAV_MISSION_ACCEPTED
+            return
+        cmd, lat, lon = items[msg.seq]
+        conn.mav.mission_item_int_send(
+            1, 1, msg.seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, cmd, int(msg.seq == 0), 1,
+            0, 0.5, 0, math.nan, lat, lon, 2.5, M.MAV_MISSION_TYPE_MISSION)
+
+
+@pytest.mark.parametrize("start", ["MISSION_START", "DO_SET_MODE"])
+def test_a_mission_start_resent_after_its_take_off_began_is_not_run_again(start: str):
+    """MAVSDK resends a command whose ACK it did not get within 0.5 s, unchanged. A mission
+    started on the ground takes off at the endpoint's next tick, so the resend finds the
+    flight state moved on (LANDED -> TAKING_OFF) by the mission itself: it is the same
+    command, and was run again (the mission restarted at its take-off item in the air, which
+    the climb refused as busy: "mission stopped"). MAVSDK's start_mission sends DO_SET_MODE
+    (Mission); MISSION_START is the command's own way."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, *NAN6)
+            assert _ack(conn, M.MAV_CMD_COMPONENT_ARM_DISARM) == M.MAV_RESULT_ACCEPTED
+            _upload_take_off_mission(conn)
+            if start == "MISSION_START":
+                cmd, params = M.MAV_CMD_MISSION_START, (0.0, 1.0, *NAN6[:5])
+            else:
+                main, sub = Px4Mode.MISSION.value
+                cmd = M.MAV_CMD_DO_SET_MODE
+                params = (float(M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(main), float(sub),
+                          *NAN6[:4])
+            boards = server.vehicle.boards
+            conn.mav.command_long_send(1, 1, cmd, 0, *params)
+            assert _ack(conn, cmd) == M.MAV_RESULT_ACCEPTED
+            acked_s = time.monotonic()
+            wait_for(conn, ["ATTITUDE", "HEARTBEAT", "SYS_STATUS", "LOCAL_POSITION_NED"],
+                     lambda m: boards.state is NavState.TAKING_OFF, timeout_s=10)
+            assert time.monotonic() - acked_s < 0.8  # MAVSDK's resend comes within the second
+            conn.mav.command_long_send(1, 1, cmd, 0, *params)  # the very same message again
+            assert _ack(conn, cmd) == M.MAV_RESULT_ACCEPTED
+            # The endpoint's next tick (it runs the programs before its streams: an ATTITUDE
+            # after the ACK comes from a tick after the resend), still mid-climb
+            msg = wait_for(conn, ["ATTITUDE", "STATUSTEXT"], timeout_s=10)
+            assert msg.get_type() == "ATTITUDE", msg.to_dict()
+            assert server.vehicle.program is Program.MISSION
+            with server.lock:  # the climb ends: the mission goes on to its waypoint
+                boards.airframe.finish(landed=False, pos_ned_m=(0.0, 0.0, -2.5), time_s=1.0)
+                boards.tick(1.0)
+            msg = wait_for(conn, ["MISSION_ITEM_REACHED", "STATUSTEXT"],
+                           lambda m: m.get_type() != "STATUSTEXT" or m.text.startswith("mission"),
+                           timeout_s=10)
+            assert msg.get_type() == "MISSION_ITEM_REACHED" and msg.seq == 0, msg.to_dict()
+            assert [c[0] for c in boards.airframe.calls].count("take_off") == 1
+            assert server.vehicle.program is Program.MISSION
+            assert server.errors == 0
         finally:
             conn.close()
