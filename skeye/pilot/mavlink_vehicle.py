@@ -157,10 +157,11 @@ class MavlinkVehicle:
         self.refusals = 0
         self.acks: dict[int, int] = {}  # MAV_RESULT -> count
         self._notices: dict[tuple[Hashable, str], float] = {}
-        # (peer, command) -> when it was answered, its result, and the vehicle's situation after
-        # it (_situation): a repeat is a retransmission only while that holds
-        self._recent: dict[tuple[Hashable, tuple[object, ...]],
-                           tuple[float, int, tuple[Px4Mode, bool, NavState | None]]] = {}
+        # (peer, command id) -> the last such command (Command.key), when it was answered, its
+        # result, and the vehicle's situation after it (_situation): a repeat is a
+        # retransmission only of the last command of its id, and while that situation holds
+        self._recent: dict[tuple[Hashable, int], tuple[tuple[object, ...], float, int,
+                                                        tuple[Px4Mode, bool, NavState | None]]] = {}
         self._armed_at_s: float | None = None
         self._setpoint: tuple[MavMessage, float] | None = None
         self._attitude_target_s: float | None = None  # the last SET_ATTITUDE_TARGET (not flown)
@@ -439,11 +440,14 @@ class MavlinkVehicle:
     def _command(self, peer: Hashable, msg: MavMessage) -> list[MavMessage]:
         cmd = Command.of(msg)
         src = (msg.get_srcSystem(), msg.get_srcComponent())
-        key = (peer, cmd.key())
-        seen = self._recent.get(key)
-        if (seen is not None and self._now_s - seen[0] < DUPLICATE_WINDOW_S
-                and cmd.command not in QUERIES and seen[2] == self._situation()):
-            return [self._ack(cmd.command, seen[1], src)]  # a retransmission: same answer
+        # A ground station retransmits only the command it waits on, and MAVSDK sends no other
+        # command of an id while one is waiting: A, B, A makes the second A a new command.
+        slot = (peer, cmd.command)
+        seen = self._recent.get(slot)
+        if (seen is not None and seen[0] == cmd.key()
+                and self._now_s - seen[1] < DUPLICATE_WINDOW_S
+                and cmd.command not in QUERIES and seen[3] == self._situation()):
+            return [self._ack(cmd.command, seen[2], src)]  # a retransmission: same answer
         extra: list[MavMessage] = []
         self._command_peer = peer
         try:
@@ -465,7 +469,7 @@ class MavlinkVehicle:
                                  f"{command_name(cmd.command)}: {exc}")
         if len(self._recent) > 256:
             self._recent.clear()
-        self._recent[key] = (self._now_s, result, self._situation())
+        self._recent[slot] = (cmd.key(), self._now_s, result, self._situation())
         self.acks[result] = self.acks.get(result, 0) + 1
         return [self._ack(cmd.command, result, src), *extra]
 

@@ -149,3 +149,46 @@ def test_a_mission_start_resent_after_its_take_off_began_is_not_run_again(start:
             assert server.errors == 0
         finally:
             conn.close()
+
+
+def test_a_command_repeated_after_another_of_its_kind_is_run_again():
+    """A, B, A within a second: the second A is no retransmission of the first (a ground
+    station retransmits only the command it is waiting on, and MAVSDK sends no second command
+    of an id while one is waiting), yet neither changes the mode, the arming or the flight
+    state: it got the first A's ACK and was not run, and B stayed (a speed, a message's
+    interval; a reposition's target the same way)."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            for speed in (2.0, 1.0, 2.0):
+                conn.mav.command_long_send(1, 1, M.MAV_CMD_DO_CHANGE_SPEED, 0, 1.0, speed, -1.0,
+                                           *NAN6[:4])
+                assert _ack(conn, M.MAV_CMD_DO_CHANGE_SPEED) == M.MAV_RESULT_ACCEPTED
+                assert server.vehicle.cruise_m_s == speed
+            for interval_us in (100_000.0, 500_000.0, 100_000.0):
+                conn.mav.command_long_send(1, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                           float(M.MAVLINK_MSG_ID_ATTITUDE), interval_us,
+                                           *NAN6[:5])
+                assert _ack(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL) == M.MAV_RESULT_ACCEPTED
+                scheduler = server.vehicle.links[0].scheduler
+                assert scheduler.interval_s(M.MAVLINK_MSG_ID_ATTITUDE) == interval_us / 1e6
+            # In the air, a reposition (COMMAND_INT) to A, to B, to A: it flies to A.
+            conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, *NAN6)
+            assert _ack(conn, M.MAV_CMD_COMPONENT_ARM_DISARM) == M.MAV_RESULT_ACCEPTED
+            conn.mav.command_long_send(1, 1, M.MAV_CMD_NAV_TAKEOFF, 0, *NAN6, math.nan)
+            assert _ack(conn, M.MAV_CMD_NAV_TAKEOFF) == M.MAV_RESULT_ACCEPTED
+            airframe = server.vehicle.boards.airframe
+            with server.lock:
+                airframe.finish(landed=False, pos_ned_m=(0.0, 0.0, -2.0), time_s=1.0)
+                server.vehicle.boards.tick(1.0)
+            for lat_e7 in (490000900, 490001800, 490000900):
+                conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                          M.MAV_CMD_DO_REPOSITION, 0, 0, -1.0, 0.0, 0.0,
+                                          math.nan, lat_e7, 80000000, 2.0)
+                assert _ack(conn, M.MAV_CMD_DO_REPOSITION) == M.MAV_RESULT_ACCEPTED
+            moves = [c[1] for c in airframe.calls if c[0] in ("fly_to", "fly_to_gps")]
+            assert len(moves) == 3 and moves[0] == moves[2] != moves[1], moves
+            assert server.errors == 0
+        finally:
+            conn.close()
