@@ -9,12 +9,12 @@ disarm, arm within a second once left the vehicle disarmed with the last arm ACC
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
 from pymavlink import mavutil
 
 from skeye.mavlink.modes import Program, Px4Mode
+from skeye.pilot import mavlink_vehicle
 from skeye.wire.packets import NavState
 from tests.mavlink.conftest import GCS, scripted_endpoint, wait_for
 
@@ -30,6 +30,13 @@ def _client(server):
 
 def _ack(conn, cmd: int) -> int:
     return int(wait_for(conn, "COMMAND_ACK", lambda m: m.command == cmd, timeout_s=10).result)
+
+
+@pytest.fixture
+def wide_window(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The resend window at a minute instead of 1 s of wall time: what these tests send "within
+    the window" stays within it on a machine as busy as it may be."""
+    monkeypatch.setattr(mavlink_vehicle, "DUPLICATE_WINDOW_S", 60.0)
 
 
 def test_a_take_off_resent_with_nan_parameters_gets_the_same_ack_and_runs_once():
@@ -51,7 +58,7 @@ def test_a_take_off_resent_with_nan_parameters_gets_the_same_ack_and_runs_once()
             conn.close()
 
 
-def test_a_command_repeated_after_the_vehicle_changed_is_run_again():
+def test_a_command_repeated_after_the_vehicle_changed_is_run_again(wide_window: None):
     with scripted_endpoint("udp://127.0.0.1:0") as server:
         conn = _client(server)
         try:
@@ -60,6 +67,32 @@ def test_a_command_repeated_after_the_vehicle_changed_is_run_again():
                 conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, arm, *NAN6)
                 assert _ack(conn, M.MAV_CMD_COMPONENT_ARM_DISARM) == M.MAV_RESULT_ACCEPTED
                 assert server.vehicle.armed == bool(arm)
+            assert server.errors == 0
+        finally:
+            conn.close()
+
+
+def test_a_take_off_repeated_once_its_climb_ended_is_refused_as_in_the_air(wide_window: None):
+    """The same NAV_TAKEOFF again, after the first one's climb ended in a hover: the flight
+    state moved on (TAKING_OFF -> HOLDING), so it is a new command, refused in the air (CI's
+    failure of test_commands_out_of_range_are_refused_with_their_reason: a fast lockstep
+    climb within the resend window, and the repeat got the first take-off's ACCEPTED)."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        conn = _client(server)
+        try:
+            wait_for(conn, "HEARTBEAT")
+            conn.mav.command_long_send(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, *NAN6)
+            assert _ack(conn, M.MAV_CMD_COMPONENT_ARM_DISARM) == M.MAV_RESULT_ACCEPTED
+            conn.mav.command_long_send(1, 1, M.MAV_CMD_NAV_TAKEOFF, 0, *NAN6, math.nan)
+            assert _ack(conn, M.MAV_CMD_NAV_TAKEOFF) == M.MAV_RESULT_ACCEPTED
+            boards = server.vehicle.boards
+            with server.lock:  # the climb ends: the vehicle hovers
+                boards.airframe.finish(landed=False, pos_ned_m=(0.0, 0.0, -2.5), time_s=1.0)
+                boards.tick(1.0)
+            assert boards.state is NavState.HOLDING
+            conn.mav.command_long_send(1, 1, M.MAV_CMD_NAV_TAKEOFF, 0, *NAN6, math.nan)
+            assert _ack(conn, M.MAV_CMD_NAV_TAKEOFF) == M.MAV_RESULT_TEMPORARILY_REJECTED
+            assert [c[0] for c in boards.airframe.calls].count("take_off") == 1
             assert server.errors == 0
         finally:
             conn.close()
@@ -102,7 +135,8 @@ def _upload_take_off_mission(conn) -> None:
 
 
 @pytest.mark.parametrize("start", ["MISSION_START", "DO_SET_MODE"])
-def test_a_mission_start_resent_after_its_take_off_began_is_not_run_again(start: str):
+def test_a_mission_start_resent_after_its_take_off_began_is_not_run_again(start: str,
+                                                                          wide_window: None):
     """MAVSDK resends a command whose ACK it did not get within 0.5 s, unchanged. A mission
     started on the ground takes off at the endpoint's next tick, so the resend finds the
     flight state moved on (LANDED -> TAKING_OFF) by the mission itself: it is the same
@@ -126,10 +160,9 @@ def test_a_mission_start_resent_after_its_take_off_began_is_not_run_again(start:
             boards = server.vehicle.boards
             conn.mav.command_long_send(1, 1, cmd, 0, *params)
             assert _ack(conn, cmd) == M.MAV_RESULT_ACCEPTED
-            acked_s = time.monotonic()
             wait_for(conn, ["ATTITUDE", "HEARTBEAT", "SYS_STATUS", "LOCAL_POSITION_NED"],
                      lambda m: boards.state is NavState.TAKING_OFF, timeout_s=10)
-            assert time.monotonic() - acked_s < 0.8  # MAVSDK's resend comes within the second
+            # MAVSDK's resend, 0.5 s after the first (here within the widened window)
             conn.mav.command_long_send(1, 1, cmd, 0, *params)  # the very same message again
             assert _ack(conn, cmd) == M.MAV_RESULT_ACCEPTED
             # The endpoint's next tick (it runs the programs before its streams: an ATTITUDE
@@ -151,7 +184,7 @@ def test_a_mission_start_resent_after_its_take_off_began_is_not_run_again(start:
             conn.close()
 
 
-def test_a_command_repeated_after_another_of_its_kind_is_run_again():
+def test_a_command_repeated_after_another_of_its_kind_is_run_again(wide_window: None):
     """A, B, A within a second: the second A is no retransmission of the first (a ground
     station retransmits only the command it is waiting on, and MAVSDK sends no second command
     of an id while one is waiting), yet neither changes the mode, the arming or the flight
