@@ -133,6 +133,9 @@ Request = (NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | SetPrere
            | RequestError)
 
 _EXT_PREFIX = b"SKEYE "
+_SWITCHES: dict[str, type[SetMeta] | type[SetPrerender]] = {"META": SetMeta,
+                                                           "PRERENDER": SetPrerender}
+"""The extension commands that take ``on`` or ``off``."""
 _OPENINGS = re.compile(rb"[OUS]")
 
 
@@ -177,14 +180,10 @@ def parse_extension(line: bytes) -> Request:
             return SelectCamera(args[0])
         if command == "FORMAT":
             return _parse_format(args, shown)
-        if command == "META":
+        if command in _SWITCHES:
             if len(args) != 1 or args[0].lower() not in ("on", "off"):
-                return RequestError(f"expected 'META on|off', got {shown!r}")
-            return SetMeta(args[0].lower() == "on")
-        if command == "PRERENDER":
-            if len(args) != 1 or args[0].lower() not in ("on", "off"):
-                return RequestError(f"expected 'PRERENDER on|off', got {shown!r}")
-            return SetPrerender(args[0].lower() == "on")
+                return RequestError(f"expected '{command} on|off', got {shown!r}")
+            return _SWITCHES[command](args[0].lower() == "on")
         if command == "STREAM":
             if len(args) != 1:
                 return RequestError(f"expected 'STREAM <fps>', got {shown!r}")
