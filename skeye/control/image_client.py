@@ -22,6 +22,7 @@ from skeye.errors import (
 from skeye.link.transport import Link, open_link, tcp_uri
 from skeye.wire.image_requests import (
     NewestFrame,
+    NewestInfo,
     Request,
     SelectCamera,
     SetFormat,
@@ -38,6 +39,8 @@ from skeye.wire.images import (
     FrameDecoder,
     FrameEvent,
     ImageFormat,
+    InfoFrame,
+    MetaHeader,
     ProtocolViolation,
     RemoteError,
 )
@@ -146,6 +149,23 @@ class ImageClient:
         """A sub-rectangle (origin top-left, px) of the newest frame."""
         return self._request(SubRect(x, y, width, height))
 
+    def frame_info(self) -> MetaHeader:
+        """The newest frame's META header (number, sim time, camera id, size) without its
+        pixels: the server does not render the frame for it (``SKEYE INFO``).
+
+        Raises:
+            RemoteProtocolError: an error frame, a protocol violation, or an image frame in
+                place of the answer.
+            LinkTimeout: no answer within ``timeout_s``.
+        """
+        if self._stream_fps is not None:
+            raise LocalProtocolError("stop the stream before asking for single frames")
+        self._send(NewestInfo())
+        event = self._checked(self._next_event())
+        if not isinstance(event, InfoFrame):
+            raise RemoteProtocolError("image server answered SKEYE INFO with an image frame")
+        return event.meta
+
     def stream(self, fps: float) -> Iterator[DecodedFrame]:
         """Ask the server to push frames at up to ``fps``; iterate to receive them.
 
@@ -206,7 +226,13 @@ class ImageClient:
             raise LinkTimeout(f"image server {self._peer}: send timed out") from exc
 
     def _next_frame(self) -> DecodedFrame:
-        event = self._next_event()
+        event = self._checked(self._next_event())
+        if isinstance(event, InfoFrame):
+            raise RemoteProtocolError("image server sent an INFO frame where an image was due")
+        return event
+
+    @staticmethod
+    def _checked(event: FrameEvent) -> DecodedFrame | InfoFrame:
         if isinstance(event, RemoteError):
             raise RemoteProtocolError(f"image server: {event.reason}")
         if isinstance(event, ProtocolViolation):

@@ -2,12 +2,15 @@
 
 How this works: the source needs no control connection, so it serves a robot the pilot did
 not spawn (the robot ``skeye sim --ll-board`` flies as the hardware in the loop). Two image
-clients (docs/protocols/images.md): ``latest`` asks one for a 1x1 sub-rectangle with the
-META header (the newest frame's number and sim time, 32 bytes on the wire), at most every
-``probe_interval_s`` of wall time unless the vehicle's clock moved (in lockstep: every step);
-``image()`` fetches the newest whole frame (RAW + META) on the other, so the vision's worker
-and the control loop never share a connection. A failed request drops its connection (a late
-frame never answers a later one) and raises :class:`CameraError`.
+clients (docs/protocols/images.md): ``latest`` asks one for the newest frame's META header
+alone (``SKEYE INFO``: its number and sim time, 29 bytes on the wire, the frame not rendered
+for it), at most every ``probe_interval_s`` of wall time unless the vehicle's clock moved (in
+lockstep: every step); ``image()`` fetches the newest whole frame (RAW + META) on the other,
+so the vision's worker and the control loop never share a connection. A failed request drops
+its connection (a late frame never answers a later one) and raises :class:`CameraError`.
+:meth:`SimCamera.set_prerender` (off: the pilot's lockstep vision, which takes some of the
+frames) makes both connections say ``SKEYE PRERENDER off``, so the simulator renders only
+the frames ``image()`` asks for.
 
 Times: frames carry the simulator's time. When the vehicle's clock is the simulator's
 (``sim://`` airframe, lockstep ``asctec-ll://``) they pass through; otherwise (a realtime
@@ -102,6 +105,7 @@ class SimCamera:
         self._offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)
         self._lost: str | None = None
         self._checked = False
+        self._prerender = True  # frames rendered ahead of our requests (set_prerender)
         # Numbering across the cameras met under the name (see the module docstring): the
         # frames of camera run k are announced as base + their own number.
         self._runs_lock = threading.Lock()
@@ -119,11 +123,25 @@ class SimCamera:
                 client.select_camera(self.name)
                 client.set_format("raw")
                 client.set_meta(True)
+                if not self._prerender:
+                    client.set_prerender(False)
             except BaseException:
                 client.close()
                 raise
             self._clients[which] = client
         return client
+
+    def set_prerender(self, on: bool) -> None:
+        """Whether the simulator renders this camera's frames ahead of :meth:`image` (on, the
+        default) or only the frame each call asks for (off; see the module docstring). The
+        connections are made again with the new setting at their next request."""
+        on = bool(on)
+        if on == self._prerender:
+            return
+        self._prerender = on
+        for which in ("probe", "image"):
+            with self._locks[which]:
+                self._drop(which)
 
     def _drop(self, which: str) -> None:
         client = self._clients[which]
@@ -188,12 +206,11 @@ class SimCamera:
         with self._locks["probe"]:
             self._probed_at, self._probed_vehicle_s = now, vehicle_now
             try:
-                frame = self._client("probe").get_subrect(0, 0, 1, 1)
+                meta = self._client("probe").frame_info()
             except SkeyeError as exc:
                 self._failed("probe", exc)
                 return self._latest
-            if frame.meta is not None:
-                self._frame_info("probe", frame.meta)
+            self._frame_info("probe", meta)
         return self._latest
 
     def image(self) -> CameraImage:

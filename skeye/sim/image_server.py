@@ -25,6 +25,8 @@ How this works:
 * A client watches its camera (:meth:`FrameBuffer.watch`: the simulator renders each frame
   as it is taken) until it says ``SKEYE PRERENDER off``; from then on its frames are rendered
   when it asks for one (a lockstep client that takes some of the frames, the pilot's vision).
+  ``SKEYE INFO`` is answered with the newest frame's META header alone and never renders it
+  (a client asking which frame is newest before it decides to fetch one).
 * ``close()`` wakes every thread through its socket pair and joins them all within a deadline.
 """
 
@@ -45,6 +47,7 @@ from skeye.sim.frame_store import Frame, FrameBuffer
 from skeye.sim.limits import check_server_limits
 from skeye.wire.image_requests import (
     NewestFrame,
+    NewestInfo,
     Request,
     RequestError,
     RequestParser,
@@ -60,7 +63,9 @@ from skeye.wire.images import (
     META_HEADER_BYTES,
     META_OFFSET,
     ImageFormat,
+    MetaHeader,
     encode_error_frame,
+    encode_info_frame,
     frame_header,
     meta_header,
 )
@@ -367,7 +372,7 @@ class _ClientHandler:
     def _serve(self, request: Request, now: float) -> bool:
         """Act on one request; False if it must wait for a frame to exist."""
         match request:
-            case NewestFrame() | SubRect():
+            case NewestFrame() | SubRect() | NewestInfo():
                 return self._serve_image(request, now)
             case SelectCamera(name=name):
                 if name in self._buffer.cameras():
@@ -416,7 +421,7 @@ class _ClientHandler:
         cameras = self._buffer.cameras()
         return cameras[0] if cameras else None
 
-    def _serve_image(self, request: NewestFrame | SubRect, now: float) -> bool:
+    def _serve_image(self, request: NewestFrame | SubRect | NewestInfo, now: float) -> bool:
         camera = self._camera_name()
         frame = None if camera is None else self._buffer.latest(camera)
         if frame is None:
@@ -433,6 +438,12 @@ class _ClientHandler:
             self._send_error(f"no frame available from camera {camera or '(none yet)'}")
             return True
         self._wait_deadline_s = None
+        if isinstance(request, NewestInfo):  # its size and number are known before its pixels
+            meta = MetaHeader(frame.number, frame.sim_time_s, frame.camera_id, frame.width,
+                              frame.height)
+            self._out = [memoryview(encode_info_frame(meta))]
+            self._out_is_error = False
+            return True
         if isinstance(request, NewestFrame):
             self._send_frame(frame, None)
             return True

@@ -97,6 +97,12 @@ class SetMeta:
 
 
 @dataclass(frozen=True)
+class NewestInfo:
+    """``SKEYE INFO``: the newest frame's META header alone (number, sim time, camera id,
+    size), answered with an INFO frame; the frame is not rendered for it."""
+
+
+@dataclass(frozen=True)
 class SetPrerender:
     """``SKEYE PRERENDER on|off``: whether this connection's camera frames are rendered ahead
     of its requests (on, the default) or only when it asks for one (off)."""
@@ -129,8 +135,8 @@ class RequestError:
     reason: str
 
 
-Request = (NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | SetPrerender | Stream
-           | RequestError)
+Request = (NewestFrame | SubRect | NewestInfo | SelectCamera | SetFormat | SetMeta
+           | SetPrerender | Stream | RequestError)
 
 _EXT_PREFIX = b"SKEYE "
 _SWITCHES: dict[str, type[SetMeta] | type[SetPrerender]] = {"META": SetMeta,
@@ -146,6 +152,8 @@ def encode_request(request: Request) -> bytes:
             return b"OK"
         case SubRect(x=x, y=y, width=w, height=h):
             return b"U" + _SUBRECT.pack(x, y, w, h)
+        case NewestInfo():
+            return _EXT_PREFIX + b"INFO\n"
         case SelectCamera(name=name):
             return _EXT_PREFIX + b"CAMERA " + name.encode("ascii") + b"\n"
         case SetFormat(kind=kind, quality=quality):
@@ -180,6 +188,10 @@ def parse_extension(line: bytes) -> Request:
             return SelectCamera(args[0])
         if command == "FORMAT":
             return _parse_format(args, shown)
+        if command == "INFO":
+            if args:
+                return RequestError(f"expected 'INFO', got {shown!r}")
+            return NewestInfo()
         if command in _SWITCHES:
             if len(args) != 1 or args[0].lower() not in ("on", "off"):
                 return RequestError(f"expected '{command} on|off', got {shown!r}")

@@ -3,9 +3,10 @@
 How this works (sans-IO: no sockets, no threads, no clock; only the standard library and numpy):
 
 * Server to client, a frame is ``type (1 byte) | size (uint32 BE) | data``. :func:`meta_header`,
-  :func:`encode_frame` and :func:`encode_error_frame` build bytes; :class:`FrameDecoder` turns a
-  byte stream back into :data:`FrameEvent` values. Every frame it returns has been checked
-  (known type, size within bounds, META header and RAW geometry consistent); anything else is a
+  :func:`encode_frame`, :func:`encode_error_frame` and :func:`encode_info_frame` build bytes;
+  :class:`FrameDecoder` turns a byte stream back into :data:`FrameEvent` values. Every frame it
+  returns has been checked (known type, size within bounds, META header and RAW geometry
+  consistent, an INFO frame exactly a META header); anything else is a
   single :class:`ProtocolViolation` event, after which the decoder stays failed, because a byte
   stream with a bad length prefix cannot be resynchronised. ``feed`` never raises.
 * Client to server requests (``OK``, ``U``, ``SKEYE ...`` lines) are in
@@ -44,7 +45,8 @@ UINT32_MAX = 0xFFFF_FFFF
 
 
 class FrameType(IntEnum):
-    """Base frame types on the wire; META frames add :attr:`META_OFFSET` to a base type."""
+    """Base frame types on the wire; META frames add :attr:`META_OFFSET` to an image type (RAW
+    to PNG). INFO is the answer to ``SKEYE INFO``: a META header alone, without pixels."""
 
     RAW = 0
     JPEG_SUPER = 1
@@ -53,6 +55,7 @@ class FrameType(IntEnum):
     JPEG_FAIR = 4
     JPEG_BAD = 5
     PNG = 6
+    INFO = 15
     ERROR = 255
 
 
@@ -158,7 +161,7 @@ def decode_raw(data: bytes | memoryview) -> np.ndarray:
 def is_valid_frame_type(frame_type: int) -> bool:
     """Whether a type byte names a frame this protocol defines."""
     return (
-        frame_type == FrameType.ERROR
+        frame_type in (FrameType.ERROR, FrameType.INFO)
         or frame_type in _IMAGE_TYPES
         or frame_type - META_OFFSET in _IMAGE_TYPES
     )
@@ -185,6 +188,11 @@ def encode_error_frame(reason: str) -> bytes:
     return encode_frame(FrameType.ERROR, reason.encode("utf-8"))
 
 
+def encode_info_frame(meta: MetaHeader) -> bytes:
+    """An INFO frame (type 15, the answer to ``SKEYE INFO``): the META header alone."""
+    return encode_frame(FrameType.INFO, meta.pack())
+
+
 # --------------------------------------------------------------------------- decoding
 
 
@@ -202,6 +210,13 @@ class DecodedFrame:
         return self.frame_type + (META_OFFSET if self.meta is not None else 0)
 
 @dataclass(frozen=True)
+class InfoFrame:
+    """An INFO frame (type 15): the newest frame's META header, without its pixels."""
+
+    meta: MetaHeader
+
+
+@dataclass(frozen=True)
 class RemoteError:
     """An error frame (type 255): the server refused a request, saying why."""
 
@@ -215,7 +230,7 @@ class ProtocolViolation:
     reason: str
 
 
-FrameEvent = DecodedFrame | RemoteError | ProtocolViolation
+FrameEvent = DecodedFrame | InfoFrame | RemoteError | ProtocolViolation
 
 
 class FrameDecoder:
@@ -279,6 +294,12 @@ class FrameDecoder:
 def _frame_event(frame_type: int, payload: bytes) -> FrameEvent:
     if frame_type == FrameType.ERROR:
         return RemoteError(payload.decode("utf-8", errors="replace"))
+    if frame_type == FrameType.INFO:
+        if len(payload) != META_HEADER_BYTES:
+            return ProtocolViolation(
+                f"INFO frame of {len(payload)} bytes is not a 24-byte META header"
+            )
+        return InfoFrame(MetaHeader(*_META_HEADER.unpack_from(payload)))
     meta: MetaHeader | None = None
     if frame_type >= META_OFFSET:
         if len(payload) < META_HEADER_BYTES:

@@ -17,7 +17,7 @@ import pytest
 
 from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
-from skeye.pilot.cli import pad_vision_factory
+from skeye.pilot.cli import camera_vision_factory, open_camera_for, pad_vision_factory
 from skeye.pilot.pad_hold import PadHoldParams
 from skeye.pilot.server import PilotServer
 from skeye.pilot.sim_airframe import SimAirframe
@@ -69,7 +69,10 @@ class Flight:
 def flight(location_ne_m: tuple[float, float], *, predict: bool,
            params: PadHoldParams | None = None, latency_s: float | None = LATENCY_S,
            profile: str = "ideal", calibration: CameraCalibration | None = None,
-           lockstep_rate: float = 5.0) -> Iterator[Flight]:
+           lockstep_rate: float = 5.0, sim_camera: bool = False) -> Iterator[Flight]:
+    """A lockstep pad flight; ``sim_camera``: the vision reads the camera as ``--camera
+    sim://HOST:PORT/R1/Down`` does (the source of an LL-board flight), not through the
+    control connection's ``--images``."""
     with ExitStack() as stack:
         # The oracle estimator: the hold is measured against ground truth in centimetres.
         control, images, cameras = stack.enter_context(
@@ -79,12 +82,20 @@ def flight(location_ne_m: tuple[float, float], *, predict: bool,
             connect(f"127.0.0.1:{control.port}", images=f"127.0.0.1:{images.port}")
         )
         robot = sim.spawn("hummingbird", location_ned_m=(*location_ne_m, 0.0))
+        airframe = SimAirframe(sim, robot)
+        if sim_camera:
+            source = open_camera_for(f"sim://127.0.0.1:{images.port}/R1/Down", airframe, "R1",
+                                     calibration, 10.0)
+            stack.callback(source.close)
+            vision = camera_vision_factory(source, source.fov_h_rad, calibration,
+                                           lockstep=True, latency_s=latency_s,
+                                           predict=predict, params=params)
+        else:
+            vision = pad_vision_factory(sim, robot, calibration=calibration,
+                                        latency_s=latency_s, predict=predict, params=params)
         pilot = stack.enter_context(
-            PilotServer(SimAirframe(sim, robot), port=0, lockstep=True,
-                        lockstep_rate=lockstep_rate, tick_s=0.05,
-                        vision=pad_vision_factory(sim, robot, calibration=calibration,
-                                                  latency_s=latency_s, predict=predict,
-                                                  params=params))
+            PilotServer(airframe, port=0, lockstep=True, lockstep_rate=lockstep_rate,
+                        tick_s=0.05, vision=vision)
         )
         vehicle = stack.enter_context(Vehicle.open(pilot.address, timeout_s=10.0))
         vehicle.stream(0, int(SkeyeMask.NAV_STATUS), 0.05)
@@ -169,14 +180,18 @@ def test_land_on_pad_from_3_m_through_the_webcam_with_its_measured_latency():
     assert landed_s < 40.0 and miss_m < 0.05
 
 
-@pytest.mark.parametrize("latency_s", [LATENCY_S, None], ids=["300ms", "measured"])
+@pytest.mark.parametrize(("latency_s", "sim_camera"),
+                         [(LATENCY_S, False), (None, False), (LATENCY_S, True)],
+                         ids=["300ms", "measured", "300ms-sim-camera"])
 def test_in_lockstep_the_simulator_renders_only_the_frames_the_vision_takes(
-        latency_s: float | None) -> None:
+        latency_s: float | None, sim_camera: bool) -> None:
     """The detector takes the newest frame whenever it is free (here every 300 ms of sim
     time, of a 30 frames/s camera): in lockstep the pilot's camera asks for no frame to be
     rendered ahead (SKEYE PRERENDER off), so the others cost no render. With the latency
-    measured (the fetch is part of what is measured) every frame is still rendered ahead."""
-    with flight((0.3, 0.0), predict=True, latency_s=latency_s) as f:
+    measured (the fetch is part of what is measured) every frame is still rendered ahead.
+    A ``sim://`` camera source asks which frame is newest at every step (SKEYE INFO, which
+    renders nothing) and says PRERENDER off on both its connections."""
+    with flight((0.3, 0.0), predict=True, latency_s=latency_s, sim_camera=sim_camera) as f:
         start = f.truth()
         f.record_until(lambda s: s[-1][0] >= start[0] + 3.0)
         f.pilot.vision.close()  # (no frame is fetched while the counts are read)

@@ -449,6 +449,36 @@ def test_a_client_without_prerender_gets_only_the_frames_it_asks_for_rendered():
         c.close()
 
 
+def test_info_answers_the_newest_frame_without_rendering_it():
+    """SKEYE INFO: the newest frame's META header alone (an INFO frame), for a client that
+    decides from it whether to fetch the frame; the simulator renders nothing for it, and the
+    frame fetched next is the one INFO named."""
+    with sim_with_images(profile="webcam") as (control, images, cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        cam = cameras.sim.robots["R1"].cameras[0]
+        with ImageClient("127.0.0.1", images.port) as img:
+            img.select_camera("R1/Down")
+            img.set_meta(True)
+            img.set_prerender(False)
+            _camera_shots(c.step(500))
+            img.frame_info()  # (requests are served in order: PRERENDER off has been taken)
+            rendered = cam.rendered
+            for _ in range(3):
+                shots = _camera_shots(c.step(500))
+                info = img.frame_info()
+                assert info.frame_number == shots[-1]
+                assert (info.width, info.height) == (cam.width, cam.height)
+            assert cam.rendered == rendered  # three newer frames, none rendered
+            frame = img.get_frame()
+            assert frame.meta is not None
+            assert (frame.meta.frame_number, frame.meta.sim_time_s) == (
+                info.frame_number, info.sim_time_s)
+            assert cam.rendered == rendered + 1
+        c.close()
+
+
 def test_a_jpeg_client_gets_the_webcams_own_mjpeg():
     """The webcam codes each frame as MJPEG (its quality 85); a client asking for JPEG at that
     quality receives those very bytes, another quality is coded afresh from the pixels."""

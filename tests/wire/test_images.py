@@ -20,6 +20,7 @@ from skeye.pixels import (
 )
 from skeye.wire.image_requests import (
     NewestFrame,
+    NewestInfo,
     Request,
     RequestError,
     RequestParser,
@@ -37,11 +38,13 @@ from skeye.wire.images import (
     FrameDecoder,
     FrameType,
     ImageFormat,
+    InfoFrame,
     MetaHeader,
     ProtocolViolation,
     RemoteError,
     encode_error_frame,
     encode_frame,
+    encode_info_frame,
     jpeg_type_for_quality,
     meta_header,
 )
@@ -60,6 +63,7 @@ REQUEST_TABLE: list[tuple[Request, bytes]] = [
     (SetMeta(False), b"SKEYE META off\n"),
     (SetPrerender(True), b"SKEYE PRERENDER on\n"),
     (SetPrerender(False), b"SKEYE PRERENDER off\n"),
+    (NewestInfo(), b"SKEYE INFO\n"),
     (Stream(30.0), b"SKEYE STREAM 30.0\n"),
     (Stream(0.0), b"SKEYE STREAM 0.0\n"),
 ]
@@ -83,6 +87,7 @@ def test_request_table_both_ways(request_: Request, wire: bytes) -> None:
         (b"SKEYE format jpeg 10\r\n", SetFormat(ImageFormat.JPEG, 10)),
         (b"SKEYE META ON\n", SetMeta(True)),
         (b"SKEYE prerender Off\r\n", SetPrerender(False)),
+        (b"SKEYE info \r\n", NewestInfo()),
         (b"SKEYE STREAM 15\n", Stream(15.0)),
         (b"SKEYE  CAMERA   R2/Front \n", SelectCamera("R2/Front")),
     ],
@@ -107,6 +112,7 @@ def test_extension_lines_are_lenient_about_case_and_spacing(line: bytes, expecte
         (b"SKEYE META maybe\n", "META"),
         (b"SKEYE PRERENDER\n", "PRERENDER on|off"),
         (b"SKEYE PRERENDER later\n", "PRERENDER on|off"),
+        (b"SKEYE INFO now\n", "expected 'INFO'"),
         (b"SKEYE STREAM\n", "STREAM"),
         (b"SKEYE STREAM fast\n", "not a number"),
         (b"SKEYE STREAM -1\n", "0-1000"),
@@ -186,6 +192,7 @@ requests_st: st.SearchStrategy[Request] = st.one_of(
     st.sampled_from([SetFormat(ImageFormat.RAW), SetFormat(ImageFormat.PNG)]),
     st.builds(SetMeta, st.booleans()),
     st.builds(SetPrerender, st.booleans()),
+    st.just(NewestInfo()),
     st.builds(Stream, st.floats(0.0, 1000.0)),
 )
 
@@ -212,8 +219,8 @@ def test_parser_fuzz_gives_requests_only_and_ignores_splits(
     whole = whole_parser.feed(blob)
     assert all(
         isinstance(
-            r, NewestFrame | SubRect | SelectCamera | SetFormat | SetMeta | SetPrerender | Stream
-            | RequestError
+            r, NewestFrame | SubRect | NewestInfo | SelectCamera | SetFormat | SetMeta
+            | SetPrerender | Stream | RequestError
         )
         for r in whole
     )
@@ -286,7 +293,7 @@ def test_raw_side_limit() -> None:
         raw_payload(np.zeros((1, 65536, 3), np.uint8))
 
 
-@pytest.mark.parametrize("frame_type", [7, 15, 23, 100, 254, 256, -1])
+@pytest.mark.parametrize("frame_type", [7, 14, 23, 31, 100, 254, 256, -1])
 def test_unknown_frame_types_cannot_be_encoded(frame_type: int) -> None:
     with pytest.raises(LocalProtocolError, match="frame type"):
         encode_frame(frame_type, b"")
@@ -381,13 +388,20 @@ def test_frames_decode_one_byte_at_a_time() -> None:
         encode_frame(FrameType.RAW, raw_payload(rgb))
         + encode_error_frame("nope")
         + encode_frame(FrameType.PNG + META_OFFSET, meta_header(4, 2.0, 1, 5, 3) + png_payload(rgb))
+        + encode_info_frame(MetaHeader(5, 2.5, 1, 5, 3))
     )
     decoder = FrameDecoder()
     events = []
     for i in range(len(wire)):
         events += decoder.feed(wire[i : i + 1])
-    assert [type(e) for e in events] == [DecodedFrame, RemoteError, DecodedFrame]
+    assert [type(e) for e in events] == [DecodedFrame, RemoteError, DecodedFrame, InfoFrame]
     assert isinstance(events[2], DecodedFrame) and events[2].meta == MetaHeader(4, 2.0, 1, 5, 3)
+    assert events[3] == InfoFrame(MetaHeader(5, 2.5, 1, 5, 3))
+
+
+def test_an_info_frame_is_type_15_and_the_meta_header_alone() -> None:
+    wire = encode_info_frame(MetaHeader(7, 1.25, 3, 800, 600))
+    assert wire == b"\x0f" + struct.pack(">I", 24) + struct.pack(">IdIII", 7, 1.25, 3, 800, 600)
 
 
 @pytest.mark.parametrize(
@@ -399,6 +413,8 @@ def test_frames_decode_one_byte_at_a_time() -> None:
         (b"\x00\0\0\0\x02ab", "shorter than its 4-byte prefix"),
         (b"\x00\0\0\0\x05" + struct.pack(">HH", 1, 1) + b"x", "needs 8 bytes"),
         (b"\x10\0\0\0\x03abc", "shorter than its 24-byte header"),
+        (b"\x0f\0\0\0\x17" + meta_header(1, 0.0, 0, 2, 1)[:23], "not a 24-byte META header"),
+        (b"\x0f\0\0\0\x19" + meta_header(1, 0.0, 0, 2, 1) + b"x", "not a 24-byte META header"),
         (
             b"\x10\0\0\0\x20" + meta_header(1, 0.0, 0, 2, 1) + struct.pack(">HH", 1, 1) + b"\0" * 4,
             "META says 2x1",
@@ -476,7 +492,8 @@ def test_decoder_fuzz_gives_events_only_and_ignores_splits(
     blob: bytes, data: st.DataObject
 ) -> None:
     whole = FrameDecoder(max_frame_bytes=4096).feed(blob)
-    assert all(isinstance(e, DecodedFrame | RemoteError | ProtocolViolation) for e in whole)
+    assert all(isinstance(e, DecodedFrame | InfoFrame | RemoteError | ProtocolViolation)
+               for e in whole)
     assert sum(isinstance(e, ProtocolViolation) for e in whole) <= 1
     cuts = sorted(data.draw(st.lists(st.integers(0, len(blob)), max_size=8)))
     decoder = FrameDecoder(max_frame_bytes=4096)
@@ -492,7 +509,7 @@ def test_decoder_fuzz_gives_events_only_and_ignores_splits(
                 pass
 
 
-@given(st.sampled_from([*range(0, 7), *range(16, 23), 255]), st.binary(max_size=64))
+@given(st.sampled_from([*range(0, 7), 15, *range(16, 23), 255]), st.binary(max_size=64))
 def test_frame_type_and_size_survive_any_payload(frame_type: int, payload: bytes) -> None:
     wire = encode_frame(frame_type, payload)
     assert wire[0] == frame_type
