@@ -5,8 +5,11 @@ the same :class:`~skeye.pilot.boards.OnboardBoards`. ``handle(link, peer, msg, n
 one decoded message and returns :class:`Out` items (a message and where it goes);
 ``tick(now_s)`` runs what depends on time (the streams, the mission and return programs, the
 offboard-loss and auto-disarm timers, mission transfer retries). The caller holds the boards'
-lock around both, and gives the wall clock as the boards get it. SYSTEM_TIME's Unix time comes
-from ``wall_clock`` (``time.time`` unless a test gives another).
+lock around both, and gives the wall clock as the boards get it (``now_s``: the timers' clock,
+the host's monotonic one under ``MavlinkServer``). The vehicle time every message carries
+(``time_boot_ms``, ``time_usec``, TIMESYNC's answer) is the airframe snapshot's ``time_s``
+instead: sim time on the simulator. SYSTEM_TIME's Unix time comes from ``wall_clock``
+(``time.time`` unless a test gives another).
 
 GPS_GLOBAL_ORIGIN: the geodetic position of the local NED origin, as GLOBAL_POSITION_INT
 anchors the estimate to GPS. That anchor is the mean over every fix, so the origin moves a
@@ -344,8 +347,11 @@ class MavlinkVehicle:
             self.landing_targets_in += 1  # a companion's detections (this vehicle's own
             return out  # precision landing flies on its own pad vision)
         if kind == "TIMESYNC":
-            if msg.tc1 == 0:
-                out.append(Out(self.codec.mav.timesync_encode(int(now_s * 1e9), msg.ts1),
+            # A request: tc1 our time in ns, on the clock of the telemetry's time_boot_ms and
+            # time_usec (sim time on the simulator), as PX4 answers with its boot time.
+            vehicle_s = self.boards.airframe.snapshot().time_s if msg.tc1 == 0 else math.nan
+            if math.isfinite(vehicle_s):
+                out.append(Out(self.codec.mav.timesync_encode(round(vehicle_s * 1e9), msg.ts1),
                                link, peer))
             return out
         if kind == "PING" and msg.target_system == 0:

@@ -1,0 +1,32 @@
+"""The vehicle's clock as MAVLink clients read it: TIMESYNC answered as PX4 answers it.
+
+A ground station (MAVROS, MAVSDK) sends TIMESYNC with ``tc1 = 0`` and its own time in ``ts1``;
+the vehicle answers with ``tc1`` its own time in nanoseconds, the clock of every
+``time_boot_ms`` and ``time_usec`` it sends (PX4: ``hrt_absolute_time() * 1000``, its boot
+time, which in SITL lockstep is sim time). The client takes the offset between its clock and
+that one to convert the telemetry's stamps; an answer on another clock puts every converted stamp
+off by the difference. The vehicle here runs in lockstep, so the checks compare stamps only
+(sim time), never the wall clock."""
+
+from __future__ import annotations
+
+from pymavlink import mavutil
+
+from tests.mavlink.conftest import mav_vehicle, wait_for
+
+M = mavutil.mavlink
+
+
+def test_timesync_answers_on_the_clock_of_the_telemetry_stamps():
+    with mav_vehicle() as v:
+        conn = v.client()
+        for ts1 in (111_111, 222_222, 333_333):
+            before = wait_for(conn, "ATTITUDE")
+            conn.mav.timesync_send(0, ts1)
+            answer = wait_for(conn, "TIMESYNC", lambda m, t=ts1: m.ts1 == t)
+            after = wait_for(conn, "ATTITUDE")
+            # The answer's instant lies between the two ATTITUDEs' (time_boot_ms is cut to whole
+            # milliseconds, hence the + 1 ms); both are sim time, the vehicle's boot clock.
+            assert before.time_boot_ms * 1_000_000 <= answer.tc1 \
+                < (after.time_boot_ms + 1) * 1_000_000, \
+                (before.time_boot_ms, answer.tc1, after.time_boot_ms)
