@@ -355,8 +355,10 @@ class MavlinkVehicle:
                                link, peer))
             return out
         if kind == "PING" and msg.target_system == 0:
-            out.append(Out(self.codec.mav.ping_encode(int(now_s * 1e6), msg.seq,
-                                                      src[0], src[1]), link, peer))
+            # The request's own time_usec comes back (as PX4 and MAVSDK answer): the sender
+            # takes its clock now minus it as the round trip.
+            out.append(Out(self.codec.mav.ping_encode(msg.time_usec, msg.seq, src[0], src[1]),
+                           link, peer))
             return out
         self.ignored += 1  # HEARTBEAT, SYSTEM_TIME, ...: nothing to do
         return out

@@ -1,4 +1,4 @@
-"""The vehicle's clock as MAVLink clients read it: TIMESYNC answered as PX4 answers it.
+"""The vehicle's clock as MAVLink clients read it: TIMESYNC and PING answered as PX4 does.
 
 A ground station (MAVROS, MAVSDK) sends TIMESYNC with ``tc1 = 0`` and its own time in ``ts1``;
 the vehicle answers with ``tc1`` its own time in nanoseconds, the clock of every
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import mav_vehicle, wait_for
+from tests.mavlink.conftest import GCS, mav_vehicle, wait_for
 
 M = mavutil.mavlink
 
@@ -30,3 +30,17 @@ def test_timesync_answers_on_the_clock_of_the_telemetry_stamps():
             assert before.time_boot_ms * 1_000_000 <= answer.tc1 \
                 < (after.time_boot_ms + 1) * 1_000_000, \
                 (before.time_boot_ms, answer.tc1, after.time_boot_ms)
+
+
+def test_ping_is_answered_with_the_senders_time_as_mavsdk_measures_the_round_trip():
+    """MAVSDK's ``Ping`` (and QGroundControl's link check) take the round trip as their clock now
+    minus the answer's ``time_usec``: the answer carries the request's stamp back unchanged,
+    with its ``seq``, addressed to the sender, as PX4 and MAVSDK answer a PING."""
+    with mav_vehicle() as v:
+        conn = v.client()
+        wait_for(conn, "HEARTBEAT")
+        for seq, stamp_us in ((1, 5_000_000), (2, 1_764_300_000_000_000)):  # boot, Unix time
+            conn.mav.ping_send(stamp_us, seq, 0, 0)
+            answer = wait_for(conn, "PING", lambda m, s=seq: m.seq == s)
+            assert (answer.time_usec, answer.target_system, answer.target_component) \
+                == (stamp_us, *GCS)
