@@ -9,7 +9,9 @@ link's GPS_DATA_ADVANCED "best estimate" (``skeye.pilot.telemetry.GeoAnchor``), 
 above mean sea level from the mean offset between the GPS fixes' and the estimate's altitudes;
 GPS_RAW_INT is the receiver's own fix; GPS_GLOBAL_ORIGIN is the geodetic position of
 LOCAL_POSITION_NED's origin as GLOBAL_POSITION_INT anchors it, so that origin + local = global.
-Times (``time_boot_ms``) are vehicle time: sim time on the simulator, as NAV_STATUS's;
+Times (``time_boot_ms``, ``time_usec``) are vehicle time: sim time on the simulator, as
+NAV_STATUS's, to the nearest microsecond (``time_boot_ms`` its whole milliseconds, as PX4 derives
+it), so one instant has one stamp in every message and on both links;
 SYSTEM_TIME's ``time_unix_usec`` is the host's wall clock (``VehicleView.unix_time_s``), as PX4
 SITL reports its host's real-time clock while its boot time runs in lockstep.
 """
@@ -67,8 +69,15 @@ class VehicleView:
     unix_time_s: float = 0.0  # the host's wall clock (0: not known)
 
     @property
+    def time_us(self) -> int:
+        """The vehicle time in whole microseconds, the nearest (``time_usec``)."""
+        return round(self.snap.time_s * 1e6)
+
+    @property
     def time_ms(self) -> int:
-        return int(self.snap.time_s * 1e3) & 0xFFFFFFFF
+        """``time_usec``'s whole milliseconds, as PX4 derives ``time_boot_ms`` from its
+        microsecond clock, wrapping at 2^32 (``time_boot_ms``)."""
+        return (self.time_us // 1000) & 0xFFFFFFFF
 
     @property
     def height_above_home_m(self) -> float:
@@ -160,7 +169,7 @@ def global_position_int(c: MavCodec, v: VehicleView) -> MavMessage | None:
 
 def gps_raw_int(c: MavCodec, v: VehicleView) -> MavMessage:
     g = v.snap.gps
-    usec = int(v.snap.time_s * 1e6)
+    usec = v.time_us
     if g is None or not g.fix:
         return c.mav.gps_raw_int_encode(usec, mav.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, UINT16_MAX,
                                         UINT16_MAX, UINT16_MAX, UINT16_MAX,
@@ -179,7 +188,7 @@ def altitude(c: MavCodec, v: VehicleView) -> MavMessage:
     amsl = geo[2] if geo is not None else math.nan
     local = -v.snap.pos_ned_m[2]
     rel = v.height_above_home_m
-    return c.mav.altitude_encode(int(v.snap.time_s * 1e6), v.snap.baro_altitude_m, amsl, local,
+    return c.mav.altitude_encode(v.time_us, v.snap.baro_altitude_m, amsl, local,
                                  rel, math.nan, rel)
 
 
@@ -204,7 +213,7 @@ def home_position(c: MavCodec, v: VehicleView) -> MavMessage | None:
     n, e, d = v.home_ned_m
     return c.mav.home_position_encode(_deg_e7(geo[0]), _deg_e7(geo[1]), round(geo[2] * 1e3),
                                       n, e, d, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
-                                      int(v.snap.time_s * 1e6))
+                                      v.time_us)
 
 
 def gps_global_origin(c: MavCodec, v: VehicleView) -> MavMessage | None:
@@ -214,7 +223,7 @@ def gps_global_origin(c: MavCodec, v: VehicleView) -> MavMessage | None:
         return None
     o = v.origin
     return c.mav.gps_global_origin_encode(_deg_e7(o.latitude_deg), _deg_e7(o.longitude_deg),
-                                          round(o.altitude_m * 1e3), int(v.snap.time_s * 1e6))
+                                          round(o.altitude_m * 1e3), v.time_us)
 
 
 def system_time(c: MavCodec, v: VehicleView) -> MavMessage:
@@ -233,7 +242,7 @@ def highres_imu(c: MavCodec, v: VehicleView) -> MavMessage:
     ax, ay, az = s.specific_force_frd_m_s2
     gx, gy, gz = s.rates_frd_rad_s
     mx, my, mz = (b / UT_PER_GAUSS for b in s.mag_field_frd_ut)
-    return c.mav.highres_imu_encode(int(s.time_s * 1e6), ax, ay, az, gx, gy, gz, mx, my, mz,
+    return c.mav.highres_imu_encode(v.time_us, ax, ay, az, gx, gy, gz, mx, my, mz,
                                     s.baro_pressure_pa / PA_PER_HPA, 0.0, s.baro_altitude_m,
                                     25.0, 0x1FFF)
 

@@ -117,7 +117,7 @@ def landing_target(codec: MavCodec, obs: PadObservation, yaw_rad: float) -> MavM
     north, east = c * fwd - s * right, s * fwd + c * right
     distance = math.sqrt(fwd * fwd + right * right + h * h)
     return codec.mav.landing_target_encode(
-        int(obs.frame_time_s * 1e6), 0, mav.MAV_FRAME_LOCAL_NED, math.atan2(right, h),
+        round(obs.frame_time_s * 1e6), 0, mav.MAV_FRAME_LOCAL_NED, math.atan2(right, h),
         math.atan2(-fwd, h), distance, 0.0, 0.0, north, east, h, [1.0, 0.0, 0.0, 0.0],
         mav.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1)
 

@@ -10,9 +10,11 @@ off by the difference. The vehicle here runs in lockstep, so the checks compare 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import GCS, mav_vehicle, wait_for
+from tests.mavlink.conftest import GCS, command, mav_vehicle, scripted_endpoint, wait_for
 
 M = mavutil.mavlink
 
@@ -44,3 +46,35 @@ def test_ping_is_answered_with_the_senders_time_as_mavsdk_measures_the_round_tri
             answer = wait_for(conn, "PING", lambda m, s=seq: m.seq == s)
             assert (answer.time_usec, answer.target_system, answer.target_component) \
                 == (stamp_us, *GCS)
+
+
+def test_one_instant_has_one_stamp_on_every_message_and_on_the_asctec_link():
+    """Sim time comes as text (``{Time 1.001000}``); 1.001 in binary is a hair under it, and
+    1.001 * 1000 is 1000.9999999999999. Each message's stamp is the nearest count of its unit,
+    as the AscTec link's NAV_STATUS ``time`` is: cut short instead, on a 1 ms simulator one
+    reading in 135 read a millisecond early (one in 67 a microsecond), and the links disagreed."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        airframe = server.vehicle.boards.airframe
+        with server.lock:
+            airframe.snap = replace(airframe.snap, time_s=float("1.001000"))
+        port = int(server.addresses[0].rsplit(":", 1)[1])
+        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
+                                          source_component=GCS[1])
+        try:
+            wanted = ["ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
+                      "HIGHRES_IMU", "GPS_RAW_INT", "ALTITUDE"]
+            assert command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_HIGHRES_IMU,
+                           100_000) == (0, "")  # on request only: 10 Hz
+            stamps: dict[str, object] = {}
+            while len(stamps) < len(wanted):
+                msg = wait_for(conn, [k for k in wanted if k not in stamps], timeout_s=10.0)
+                stamps[msg.get_type()] = msg
+            ms = {k: m.time_boot_ms for k, m in stamps.items() if hasattr(m, "time_boot_ms")}
+            us = {k: m.time_usec for k, m in stamps.items() if hasattr(m, "time_usec")}
+            with server.lock:
+                nav_status = server.vehicle.boards.nav_status()
+            assert nav_status is not None
+            assert ms == dict.fromkeys(ms, 1001) and nav_status.time == 1001, (ms, nav_status)
+            assert us == dict.fromkeys(us, 1_001_000), us
+        finally:
+            conn.close()
