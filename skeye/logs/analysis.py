@@ -4,7 +4,9 @@ How this works, on a uniformly sampled series (rate taken as the median of the l
 
 - :func:`allan_deviation`: the overlapping Allan deviation (IEEE Std 952 annex C) of a rate
   signal at octave-spaced averaging times, from the cumulative sum: for white noise of density
-  N it falls as N / sqrt(tau), so ``adev(1 s)`` reads the noise density.
+  N it falls as N / sqrt(tau) with N in Kalibr's convention (continuous-time, two-sided: a
+  sample at rate f carries N sqrt(f); EuRoC's ``sensor.yaml``), so ``adev(1 s)`` reads such a
+  density; a data sheet's one-sided density N gives N / sqrt(2 tau).
 - :func:`spectrum`: Welch's averaged periodogram (Hann window, half-overlapping segments),
   one-sided, as an amplitude spectral density (units / sqrt(Hz)).
 - :func:`band_rms`: the RMS of the content from ``low_hz`` to Nyquist (the spectrum
@@ -75,8 +77,9 @@ def band_rms(x: np.ndarray, rate_hz: float, low_hz: float = 10.0) -> float:
 
 def imu_figures(gyro: np.ndarray, accel: np.ndarray, rate_hz: float,
                 low_hz: float = 10.0) -> dict[str, float]:
-    """Per-axis-averaged figures: vibration RMS above ``low_hz`` and ADEV at 1 s (the noise
-    density where white noise dominates), for the gyro and the accelerometer."""
+    """Per-axis-averaged figures: vibration RMS above ``low_hz`` and ADEV at 1 s (where white
+    noise dominates, its density in Kalibr's convention: see :func:`allan_deviation`), for the
+    gyro and the accelerometer."""
     out: dict[str, float] = {}
     for name, data in (("gyro", gyro), ("accel", accel)):
         out[f"{name}_band_rms"] = float(np.mean([band_rms(data[:, i], rate_hz, low_hz)

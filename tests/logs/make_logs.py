@@ -2,7 +2,8 @@
 
 No licensed real log ships with skeye, so the tests make their own: an IMU of the EuRoC MAV
 dataset's kind (ADIS16448 at 200 Hz, the noise densities of the dataset's own sensor file,
-gyro 1.6968e-4 rad/s/sqrt(Hz) and accelerometer 2.0e-3 m/s^2/sqrt(Hz)), at rest for two
+gyro 1.6968e-4 rad/s/sqrt(Hz) and accelerometer 2.0e-3 m/s^2/sqrt(Hz), Kalibr's continuous-time
+densities: density x sqrt(200 Hz) per sample), at rest for two
 seconds and then hovering with a rotor line (75 Hz) and broadband vibration whose level is
 issue 33's measured hover figure (1.1 m/s^2, 0.065 rad/s per axis above 10 Hz), while the
 attitude sways (roll 8 deg at 0.2 Hz, pitch 5 deg at 0.13 Hz). Ground truth is the attitude and
@@ -61,7 +62,9 @@ def synthetic(seconds: float = 40.0, seed: int = 1, vibration: bool = True) -> S
     # specific force in hover (no acceleration): -g along the body's "up" in NED
     accel = np.column_stack([G * np.sin(pitch), -G * np.sin(roll) * np.cos(pitch),
                              -G * np.cos(roll) * np.cos(pitch)])
-    white = math.sqrt(RATE_HZ / 2.0)
+    # The densities are Kalibr's continuous-time (two-sided) ones, as EuRoC's sensor.yaml
+    # gives them: a sample carries density * sqrt(rate) (Kalibr wiki, "IMU Noise Model").
+    white = math.sqrt(RATE_HZ)
     gyro += GYRO_DENSITY * white * rng.standard_normal((n, 3))
     accel += ACCEL_DENSITY * white * rng.standard_normal((n, 3))
     if vibration:

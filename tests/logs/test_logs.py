@@ -41,6 +41,21 @@ def test_allan_deviation_reads_the_noise_density() -> None:
     assert adev_at(x, RATE_HZ, 4.0) == pytest.approx(density / math.sqrt(8.0), rel=0.15)
 
 
+def test_the_synthetic_log_has_the_white_noise_of_euroc_s_sensor_file() -> None:
+    # EuRoC's sensor.yaml gives Kalibr's continuous-time noise densities (two-sided): a sample
+    # at rate f carries sigma_d = density * sqrt(f) (Kalibr wiki, "IMU Noise Model"), and the
+    # Allan deviation at 1 s reads the density itself. At rest (the first 2 s) the log is that
+    # noise alone around the true gyro (0) and specific force (0, 0, -g): 400 samples per axis,
+    # 3 axes pooled, so the sample sigma's relative standard error is 1 / sqrt(2 x 1200).
+    s = make_logs.synthetic(10.0, seed=5)
+    rest = s.t_s < make_logs.REST_S
+    tol = 4.0 / math.sqrt(2.0 * 3 * int(rest.sum()))
+    for data, density in ((s.gyro, make_logs.GYRO_DENSITY), (s.accel, make_logs.ACCEL_DENSITY)):
+        noise = data[rest] - data[rest].mean(axis=0)
+        sigma = float(np.sqrt(np.mean(noise ** 2)))
+        assert sigma == pytest.approx(density * math.sqrt(RATE_HZ), rel=tol)
+
+
 def test_band_rms_counts_what_lies_above_the_cut() -> None:
     t = np.arange(int(20 * RATE_HZ)) / RATE_HZ
     low = 2.0 * np.sin(2 * np.pi * 3.0 * t)  # below 10 Hz: not counted
