@@ -18,8 +18,11 @@ commands and skeye frames). Invariants:
   matched) the parser skips the whole frame; when it is not (bad stop string, length field over
   1024, bad command checksum, unknown command letters) it resumes at the byte after the bad
   start marker, so a real frame hidden behind a corrupt length or a dropped byte is still found.
-  On the ground side a length field that disagrees with its PD's structure is such a bad frame
-  at once (``VehicleStreamParser``): it is not waited for.
+  A length field that disagrees with its PD's structure (every vehicle structure and every
+  skeye command has a fixed size; RESULT at least its fixed part) is such a bad frame at once,
+  on both sides: it is not waited for. The vehicle side answers it BAD_LENGTH
+  (``CommandError(..., intact=False)``: its CRC never came, so it is no packet for the link
+  timeout).
 - The buffer never holds more than one maximal frame (1035 bytes) plus the unparsed chunk.
   ``discard()`` drops an unfinished frame whose sender is gone (a new connection on the line).
 
@@ -196,6 +199,7 @@ class CommandError:
     pd: int
     code: ResultCode
     reason: str
+    intact: bool = True  # False: judged before its CRC came (a length that disagrees with its PD)
 
     def result(self) -> Result:
         """The RESULT packet that answers this error."""
@@ -214,12 +218,13 @@ def arrived_intact(event: CommandEvent) -> bool:
     command checksum failed, and bytes too broken to name a command, may be line noise, so the
     vehicle's link timeout does not count them as packets (docs/protocols/packets.md, "Flight
     states"). A rejected command whose bytes arrived intact (a wrong length, a value out of
-    range, an unknown skeye PD) was sent by a station and counts.
+    range, an unknown skeye PD) was sent by a station and counts; a length field that
+    disagrees with its PD is answered before the frame's CRC has come, so it does not.
     """
     if isinstance(event, FrameError):
         return False
     if isinstance(event, CommandError):
-        return event.code is not ResultCode.BAD_CHECKSUM
+        return event.intact and event.code is not ResultCode.BAD_CHECKSUM
     return True
 
 
@@ -545,6 +550,9 @@ class CommandStreamParser(_StreamParser):
             return self._command_error(rej.kind, layout.pd, rej.reason, consumed)
 
     def _skeye_frame(self) -> tuple[int, Any] | None:
+        wrong = self._wrong_length()
+        if wrong is not None:
+            return wrong
         framed = _split_frame(self._buf, len(SKEYE_START))
         if framed is None:
             return None
@@ -560,3 +568,27 @@ class CommandStreamParser(_StreamParser):
             return framed.size, _decode(cls, framed.payload)
         except _Reject as rej:
             return self._command_error(rej.kind, framed.pd, rej.reason, framed.size)
+
+    def _wrong_length(self) -> tuple[int, CommandError] | None:
+        """RESULT BAD_LENGTH, at once, when a skeye frame's length field disagrees with the
+        payload its PD names (every skeye command has a fixed size), as the ground side does
+        with the vehicle's structures: a corrupted length would otherwise hold every later
+        command (sticks, polls) as the frame's rest until up to 1024 bytes more had come.
+        The parser resumes at the byte after the start marker."""
+        buf = self._buf
+        start = len(SKEYE_START)
+        if len(buf) < start + 3:
+            return None
+        pd = buf[start + 2]
+        cls = SKEYE_BY_PD.get(pd)
+        if cls is None:
+            return None  # an unknown PD: its length cannot be checked
+        layout = LAYOUTS[cls]
+        length = buf[start] | buf[start + 1] << 8
+        if length > MAX_PAYLOAD:
+            return None  # too long for any frame: said as such (TOO_LONG)
+        if length == layout.size or (layout.tail is not None and layout.size <= length):
+            return None
+        self.errors[ErrorKind.BAD_LENGTH] += 1
+        reason = f"{cls.__name__}: length field {length}, its payload is {layout.size} bytes"
+        return 1, CommandError(pd, ResultCode.BAD_LENGTH, reason, intact=False)

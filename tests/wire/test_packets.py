@@ -65,6 +65,7 @@ from skeye.wire.packets import (
     Velocity,
     Waypoint,
     WaypointGoto,
+    arrived_intact,
     encode,
 )
 
@@ -622,6 +623,24 @@ def test_corrupt_length_hides_no_later_frame() -> None:
     events: list[Any] = parser.feed(bytes(first) + b"".join(encode(m) for m in later))
     assert events[0].kind is ErrorKind.BAD_LENGTH
     assert events[1:] == later and parser.buffered == 0
+
+
+def test_corrupt_length_of_a_command_hides_no_later_command() -> None:
+    """The vehicle side too: a skeye command whose length field disagrees with its PD's
+    payload (a LAND claiming 1000 bytes) is answered RESULT BAD_LENGTH at once, and the
+    commands behind it (sticks, polls) are read as they come. It used to wait for the 1000
+    bytes: on a ground link sending a 6-byte poll every 0.5 s that is minutes of commands
+    swallowed, the vehicle hearing nothing intact and going to FAILSAFE."""
+    first = bytearray(encode(Land()))
+    first[4:6] = struct.pack("<H", 1000)
+    later = [CtrlInput(100, -100, 0, 2000, 0x0F), Poll(int(PollMask.LL_STATUS))] * 3
+    parser = CommandStreamParser()
+    events: list[Any] = parser.feed(bytes(first) + b"".join(encode(m) for m in later))
+    assert events[0] == CommandError(PD.LAND, ResultCode.BAD_LENGTH, events[0].reason, False)
+    assert "1000" in events[0].reason and "0 bytes" in events[0].reason
+    assert events[1:] == later and parser.buffered == 0
+    # Its CRC never came: no packet for the link timeout (line noise may look like this).
+    assert not arrived_intact(events[0]) and all(map(arrived_intact, events[1:]))
 
 
 def test_corrupt_length_of_an_unknown_pd_still_rescans_at_the_stop_check() -> None:
