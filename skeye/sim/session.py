@@ -8,8 +8,11 @@ the robot's readings to the session's sink (:func:`skeye.sim.stream.text_sink`),
 their lines without ever blocking: when a client does not read, its queue fills and further
 stream lines are dropped and counted, so a slow client never slows the physics or other
 clients. Answers (RES, ERR, GEO, CONF, NFO) go through the same queue, so their order relative
-to the stream is kept. Every bad line gets an ``ERR`` with a reason and the connection stays
-usable; only an over-long line closes it, and so does an HTTP request line or header. A
+to the stream is kept; they have room of their own (``OUTBOX_BYTES // 8``), which the stream
+never takes: a backlog of stream lines never costs a client an answer it waits for (a STEP's
+RES), while one that floods commands and reads nothing loses the answers beyond that room.
+Every bad line gets an ``ERR`` with a reason and the connection stays usable; only an
+over-long line closes it, and so does an HTTP request line or header. A
 session that ends gives its writer ``CLOSE_LINGER_S`` to send what is queued, then shuts the
 socket: a client that reads nothing cannot keep a thread and a socket after its slot is freed.
 
@@ -76,7 +79,8 @@ from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
 
-OUTBOX_BYTES = 8 * 1024 * 1024  # per client: a client that stops reading costs at most this
+OUTBOX_BYTES = 8 * 1024 * 1024  # per client: the stream lines a client that stops reading holds
+# (its answers have an eighth of it more: a client that stops reading costs at most 9 MiB)
 STEP_TIMEOUT_S = 3600.0  # a lockstep STEP waits this long to be taken up (then as long to end)
 STEP_WATCH_AFTER_S = 0.05  # a STEP still running after this: its reader watches for the client
 # poll() events of a socket whose peer is gone: it closed (or shut its sending side), or reset.
@@ -88,7 +92,7 @@ CLOSE_LINGER_S = 5.0  # an ended session's writer has this long to send what is 
 _HTTP_LINE = re.compile(
     r"^(?:(?:GET|POST|PUT|DELETE|HEAD|OPTIONS|PATCH|CONNECT|TRACE) \S+ HTTP/\d|"
     r"(?:Host|Origin|Content-Type|User-Agent|Content-Length):)", re.IGNORECASE)
-_CLOSE = b""
+_CLOSE: tuple[bytes, bool] = (b"", False)  # the writer's last item
 
 # (connection id, direction "+" "-" "<" ">", data): see skeye.sim.server's module comment.
 LineObserver = Callable[[int, str, bytes], None]
@@ -242,9 +246,10 @@ class ClientSession:
         self._robot_stopped: tuple[str, str] | None = None
         self.stopped_reason: str | None = None
         self.robot_config: Any = None
-        self.outbox: queue.Queue[bytes] = queue.Queue()
+        self.outbox: queue.Queue[tuple[bytes, bool]] = queue.Queue()  # (bytes, stream lines)
         self.dropped = 0  # lines not sent because the client did not read them in time
         self._queued_bytes = 0
+        self._queued_answer_bytes = 0  # of which answers, not stream lines
         self._queued_lock = threading.Lock()
         self._closed = threading.Event()
         # The socket is closed by whichever of the two threads ends last (a client that hangs
@@ -269,40 +274,51 @@ class ClientSession:
             pass
 
     # -- output --------------------------------------------------------------------------
-    def send(self, line: bytes) -> None:
-        """Queue a line; never blocks (called from the engine thread too)."""
+    def send(self, line: bytes, stream: bool = False) -> None:
+        """Queue a line, or a chunk of the robot's ``stream`` lines; never blocks (called from
+        the engine thread too). Stream lines are dropped beyond ``OUTBOX_BYTES`` queued; the
+        other lines (answers) only beyond their own ``OUTBOX_BYTES // 8``, which stream lines
+        never take, so that a stream backlog never costs a client an answer."""
         if self._closed.is_set():
             return
         if self.server.observers:
             self.server.notify(self.conn_id, ">", line)
         with self._queued_lock:
             # One chunk may be larger than the bound (a long lockstep STEP); a backlog may not.
-            if self._queued_bytes and self._queued_bytes + len(line) > OUTBOX_BYTES:
+            if stream:
+                full = self._queued_bytes and self._queued_bytes + len(line) > OUTBOX_BYTES
+            else:
+                full = (self._queued_answer_bytes
+                        and self._queued_answer_bytes + len(line) > OUTBOX_BYTES // 8)
+            if full:
                 self.dropped += max(1, line.count(b"\n"))
                 return
             self._queued_bytes += len(line)
-        self.outbox.put_nowait(line)
+            if not stream:
+                self._queued_answer_bytes += len(line)
+        self.outbox.put_nowait((line, stream))
 
     def _write_loop(self) -> None:
         try:
             while True:
-                line = self.outbox.get()
-                if line is _CLOSE or not line:
+                item = self.outbox.get()
+                if not item[0]:  # _CLOSE
                     break
-                chunks = [line]
+                items = [item]
                 try:
-                    while len(chunks) < 512:
+                    while len(items) < 512:
                         more = self.outbox.get_nowait()
-                        if not more:
-                            self.sock.sendall(b"".join(chunks))
+                        if not more[0]:
+                            self.sock.sendall(b"".join(chunk for chunk, _ in items))
                             return
-                        chunks.append(more)
+                        items.append(more)
                 except queue.Empty:
                     pass
-                data = b"".join(chunks)
+                data = b"".join(chunk for chunk, _ in items)
                 self.sock.sendall(data)
                 with self._queued_lock:
                     self._queued_bytes -= len(data)
+                    self._queued_answer_bytes -= sum(len(c) for c, stream in items if not stream)
         except OSError:
             pass
         finally:
@@ -464,7 +480,7 @@ class ClientSession:
         return self.robot_name
 
     def cmd_init(self, msg: Message, init: Init) -> None:
-        text = text_sink(self.send)
+        text = text_sink(lambda chunk: self.send(chunk, stream=True))
         # A vector that was not three plain numbers was read as USARSim reads it: say how.
         note = "; ".join(usarsim_notes(msg)) or None
         if note is not None:

@@ -16,6 +16,7 @@ from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
 from skeye.sim.session import CLOSE_LINGER_S
 from skeye.sim.world import load_world
+from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient, running_sim
 
 
@@ -270,3 +271,50 @@ def test_a_long_step_hands_its_lines_over_as_it_goes() -> None:
         finally:
             stepper.close()
             other.close()
+
+
+def test_a_stream_backlog_never_costs_a_client_its_step_answer(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lockstep client whose reading falls behind its robot's stream loses stream lines (the
+    queue is bounded), never the RES of its STEP: that answer is what it waits for. Answers
+    have an eighth more room than the stream lines; they used to share the stream's bound,
+    so a RES queued while the backlog was full was dropped and the client waited for good.
+    (The bound is 20 kB here, so that a few seconds of sim time overfill it.)"""
+    monkeypatch.setattr(session_module, "OUTBOX_BYTES", 20_000)
+    sim = Simulation(load_world("pad"), seed=1)
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0) as server,
+    ):
+        slow = socket.socket()
+        slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        slow.connect(("127.0.0.1", server.port))
+        try:
+            assert slow.recv(4096).startswith(b"NFO")  # sent once its session is set up
+            # The kernel's buffers of a slow link: small, so that a few chunks fill them
+            # (Linux would grow the server's send buffer to 4 MiB on loopback).
+            port = slow.getsockname()[1]
+            session = next(s for s in server._sessions if s.peer.endswith(f":{port}"))
+            session.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+            # Each STEP's lines are one chunk (fewer than FLUSH_EVENTS), some 45 kB: the
+            # first fills the queue while the writer waits on the client, the others find it
+            # full and are dropped.
+            slow.sendall(b"INIT {ClassName hummingbird} {Name S} {Start Pad1}\r\n"
+                         + b"STEP {Count 1000}\r\n" * 4)
+            # S's reader takes its next STEP once the last is answered: wait (on sim time) for
+            # the fourth to be under way. Its client has read nothing: the first three RES
+            # were queued behind a full queue of stream lines.
+            assert wait_for(lambda: sim.time_s >= 3.5, timeout_s=30), "the STEPs did not run"
+            assert session.dropped > 0
+            slow.sendall(b"PING {Id done}\r\n")  # answered after everything queued before it
+            slow.settimeout(10)  # a lost answer: recv times out
+            received = b""
+            while b"{Id done}" not in received:
+                data = slow.recv(1 << 16)
+                assert data, "the server closed the connection"
+                received += data
+            lines = received.split(b"\r\n")
+            assert [line for line in lines if line.startswith(b"RES {Command STEP}")] == [
+                b"RES {Command STEP} {Time %d.000000}" % t for t in (1, 2, 3, 4)], lines[-5:]
+        finally:
+            slow.close()
