@@ -200,17 +200,22 @@ class SimCamera:
     def latest(self) -> FrameInfo | None:
         now = time.monotonic()
         vehicle_now = self.options.clock()
-        if (now - self._probed_at < self.probe_interval_s
-                and vehicle_now == self._probed_vehicle_s):
-            return self._latest  # asked again at the same moment (lockstep: the same step)
         with self._locks["probe"]:
-            self._probed_at, self._probed_vehicle_s = now, vehicle_now
+            # Asked again at the moment of the last probe (lockstep: the same step): its
+            # answer. Looked at under the lock, and the moment noted once the answer is in:
+            # until 2026-11-28 the moment was noted as a probe began, and a caller in between
+            # (the pilot's loop while its vision's worker probed) got the answer before it,
+            # a frame older than the worker's, and the two waited for each other.
+            if (now - self._probed_at < self.probe_interval_s
+                    and vehicle_now == self._probed_vehicle_s):
+                return self._latest
             try:
                 meta = self._client("probe").frame_info()
             except SkeyeError as exc:
                 self._failed("probe", exc)
-                return self._latest
-            self._frame_info("probe", meta)
+            else:
+                self._frame_info("probe", meta)
+            self._probed_at, self._probed_vehicle_s = now, vehicle_now
         return self._latest
 
     def image(self) -> CameraImage:

@@ -317,7 +317,7 @@ class PadVision:
         self._stop = threading.Event()
         self._done = threading.Condition()
         self._attempted = 0  # newest announced frame the worker has dealt with
-        self._permit = 0  # lockstep: newest frame the worker may take
+        self._permitted: Any = None  # lockstep: the frame the worker takes (as the loop saw it)
         self._busy_until_s = -math.inf  # lockstep: the detector's result is not out before
         self._pending: list[tuple[float, PadObservation]] = []  # (apply at, observation)
         self._fix: PadFix | None = None  # the pad where the newest detection put it
@@ -334,7 +334,7 @@ class PadVision:
             self.robot = robot
             self._last_frame = 0
             self._attempted = 0
-            self._permit = 0
+            self._permitted = None
             self._busy_until_s = -math.inf
             self._pending = []
             self._fix = None
@@ -433,7 +433,7 @@ class PadVision:
         if not self.lockstep:
             self._kick.set()
         elif latest is not None and now.time_s >= self._busy_until_s - 1e-9:
-            self._permit = latest.frame  # the detector is free: it takes the newest frame
+            self._permitted = latest  # the detector is free: it takes the newest frame
             self._kick.set()
             self._await_detection(latest.frame, worker)
         while True:
@@ -540,18 +540,24 @@ class PadVision:
         while not self._stop.is_set():
             self._kick.wait(0.05)
             self._kick.clear()
-            latest = self.robot.camera.latest
-            if latest is None or latest.frame <= self._last_frame or self._stop.is_set():
+            # In lockstep the worker takes the frame the loop let it take, as the loop saw it
+            # (the loop waits for it), never one it sees itself: a source's newest can move
+            # between the two looks, and a worker waiting for the loop's frame while the loop
+            # waits for the worker's was a deadlock (until 2026-11-28, with a sim:// camera).
+            latest = self._permitted if self.lockstep else self.robot.camera.latest
+            if latest is None or self._stop.is_set():
                 continue
-            if self.lockstep and latest.frame > self._permit:
-                continue  # the detector is still busy with an earlier frame (sim time)
-            t0 = time.perf_counter()
-            try:
-                obs = self._process(latest.frame, latest.time_s)
-            except Exception as exc:  # one frame's failure, whatever the value: not seen
-                obs = self._failed(latest.frame, latest.time_s, exc)
-            if obs is not None:
-                self._put((obs, time.perf_counter() - t0))
+            if latest.frame > self._last_frame:
+                t0 = time.perf_counter()
+                try:
+                    obs = self._process(latest.frame, latest.time_s)
+                except Exception as exc:  # one frame's failure, whatever the value: not seen
+                    obs = self._failed(latest.frame, latest.time_s, exc)
+                if obs is not None:
+                    self._put((obs, time.perf_counter() - t0))
+            elif not self.lockstep:
+                continue
+            # (lockstep: a frame no newer than the last fetched is dealt with as well)
             with self._done:
                 self._attempted = max(self._attempted, latest.frame)
                 self._done.notify_all()

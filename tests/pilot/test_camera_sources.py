@@ -16,9 +16,11 @@ import math
 import os
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -208,6 +210,107 @@ def test_a_sim_camera_on_another_clock_maps_the_frame_times(live):
         assert image.time_s == pytest.approx(1000.0)  # received now, on the vehicle's clock
     finally:
         source.close()
+
+
+class HeldProxy:
+    """A TCP relay to a server whose answers can be held back (``hold``/``release``): what a
+    client sends goes through at once (``requested`` is set), what the server answers waits
+    while held. One connection at a time is enough here."""
+
+    def __init__(self, port: int) -> None:
+        self._upstream = port
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self._listener.getsockname()[1]
+        self.requested = threading.Event()
+        self._open = threading.Event()
+        self._open.set()
+        self._socks: list[socket.socket] = [self._listener]
+        self._threads = [threading.Thread(target=self._accept, daemon=True)]
+        self._threads[0].start()
+
+    def hold(self) -> None:
+        self.requested.clear()
+        self._open.clear()
+
+    def release(self) -> None:
+        self._open.set()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                client, _ = self._listener.accept()
+            except OSError:
+                return
+            server = socket.create_connection(("127.0.0.1", self._upstream))
+            self._socks += [client, server]
+            for args in ((client, server, False), (server, client, True)):
+                t = threading.Thread(target=self._pump, args=args, daemon=True)
+                self._threads.append(t)
+                t.start()
+
+    def _pump(self, src: socket.socket, dst: socket.socket, answers: bool) -> None:
+        try:
+            while data := src.recv(65536):
+                if answers:
+                    self._open.wait(30.0)
+                dst.sendall(data)
+                if not answers:
+                    self.requested.set()
+        except OSError:
+            pass
+
+    def __enter__(self) -> HeldProxy:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._open.set()
+        for sock in self._socks:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)  # wakes a thread blocked on it (close does not)
+            except OSError:
+                pass
+            sock.close()
+        for t in self._threads:
+            t.join(5.0)
+
+
+def test_a_sim_camera_asked_during_anothers_probe_gets_that_probes_answer():
+    """The pilot's loop and its vision's worker both ask a ``sim://`` camera for its newest
+    frame. Asked again at the moment of the last probe, the source answers from that probe;
+    while one was under way (its answer held back here by a relay), a second caller got the
+    answer before it, an older frame than the prober's: in lockstep the loop let the worker
+    take that older frame while the worker saw a newer one, and each waited for the other
+    (until 2026-11-28; seen about once in six lockstep pad flights under load). Now the
+    second caller waits for the probe under way and gets its answer."""
+    with ExitStack() as stack:
+        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep",
+                                                                 estimator="truth"))
+        sim = stack.enter_context(connect(f"127.0.0.1:{control.port}"))
+        sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, 0.0))
+        sim.run_for(0.1)
+        proxy = stack.enter_context(HeldProxy(images.port))
+        clock = FakeClock(1.0)
+        source = open_camera(f"sim://127.0.0.1:{proxy.port}/R1/Down",
+                             CameraOptions(clock=clock, clock_is_sim=True))
+        stack.callback(source.close)
+        source.probe_interval_s = 60.0  # (the same moment: the same vehicle time)
+        before = source.latest
+        assert before is not None
+        sim.run_for(0.2)  # newer frames; the vehicle's clock moves on
+        clock.t = 2.0
+        proxy.hold()
+        probing: dict[str, object] = {}
+        prober = threading.Thread(target=lambda: probing.update(info=source.latest))
+        prober.start()
+        assert proxy.requested.wait(10.0)  # its request is at the server, the answer held
+        releaser = threading.Timer(0.2, proxy.release)  # (any delay: see the docstring)
+        releaser.start()
+        second = source.latest  # at the moment of the probe under way
+        prober.join(10.0)
+        releaser.join()
+        first = probing["info"]
+        assert isinstance(first, type(before)) and first.frame > before.frame
+        assert second == first, (before, first, second)
 
 
 def test_a_sim_camera_whose_robot_spawns_again_gives_the_new_cameras_frames_at_once(tmp_path):

@@ -38,7 +38,26 @@ class GatedCamera:
         return FrameImage(1, 0.0, np.zeros((48, 64, 3), np.uint8))
 
 
-def lockstep_vision(camera: GatedCamera, wait_s: float) -> tuple[PadVision, ObservedPad]:
+class MovingCamera:
+    """A camera whose newest frame moves on at every look, as one taking frames on its own
+    clock does: the pilot's loop and its vision's worker never see the same newest frame."""
+
+    def __init__(self) -> None:
+        self.looks = 0
+        self.fetched: list[int] = []
+
+    @property
+    def latest(self) -> FrameInfo:
+        self.looks += 1
+        return FrameInfo(self.looks, 0.01 * self.looks)
+
+    def image(self) -> FrameImage:
+        self.fetched.append(self.looks)  # the newest frame now
+        return FrameImage(self.looks, 0.01 * self.looks, np.zeros((48, 64, 3), np.uint8))
+
+
+def lockstep_vision(camera: GatedCamera | MovingCamera,
+                    wait_s: float) -> tuple[PadVision, ObservedPad]:
     pad = ObservedPad()
     boards = OnboardBoards(FakeAirframe(), pad=pad)
     robot = SimpleNamespace(camera=camera, ins=SimpleNamespace(latest=None))
@@ -63,6 +82,21 @@ def test_a_detector_past_the_lockstep_wait_is_an_error_not_another_flight() -> N
         assert not pad.latest.found  # a black frame
     finally:
         camera.gate.set()
+        vision.close()
+
+
+def test_in_lockstep_the_worker_takes_the_frame_the_loop_let_it_take() -> None:
+    """The loop lets the detector take the newest frame it sees and waits for it; the worker
+    takes that frame, not the newest it would see itself. Until 2026-11-28 the worker looked
+    again and waited for the loop to let it take that newer frame, while the loop waited for
+    the worker: with a ``sim://`` camera whose two looks disagreed, a pad flight stopped for
+    the lockstep wait (120 s) and then flew without the pad."""
+    camera = MovingCamera()
+    vision, _ = lockstep_vision(camera, wait_s=HANG_GUARD_S)
+    try:
+        vision.step()  # the loop looked once (frame 1), then waited for its detection
+        assert (camera.looks, camera.fetched, vision.stats.frames) == (1, [1], 1)
+    finally:
         vision.close()
 
 
