@@ -354,9 +354,12 @@ class FrameBuffer:
             self._listeners = (*self._listeners, listener)
 
     def remove_listener(self, listener: FrameListener) -> None:
-        """Stop calling ``listener``; unknown listeners are ignored."""
+        """Stop calling ``listener``; unknown listeners are ignored.
+
+        Listeners are compared with ``==``, not ``is``: a bound method (an image client's
+        ``_on_publish``) is a new object at each attribute access, equal to the one added."""
         with self._cond:
-            self._listeners = tuple(x for x in self._listeners if x is not listener)
+            self._listeners = tuple(x for x in self._listeners if x != listener)
 
     def _notify(self, camera: str) -> None:
         for listener in self._listeners:

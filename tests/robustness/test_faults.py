@@ -16,7 +16,7 @@ import pytest
 import skeye.sim.session as session_module
 from skeye.control.image_client import ImageClient
 from skeye.pixels import frame_image_rgb
-from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
+from skeye.sim.image_server import Frame, FrameBuffer, ImageServer, _ClientHandler
 from skeye.sim.server import ControlServer
 from tests.robustness.helpers import open_fds, thread_count, wait_for
 from tests.sim.conftest import LineClient, running_sim
@@ -193,3 +193,27 @@ def test_image_client_that_never_reads(images: ImageServer) -> None:
     assert stuck  # the sleeper is held back by TCP, not buffered in the server
     sleeper.close()
     assert wait_for(lambda: images.client_count() == 0)
+
+
+def test_image_connect_close_cycles_leave_no_client_behind(images: ImageServer) -> None:
+    """A client gone is gone: its handler (its sockets, parser, and the frame it was sending)
+    is freed, and the frame buffer no longer calls it on every publish. Nothing of a client
+    must persist once its connection has ended, so the bound is zero handlers."""
+
+    def cycle(n: int) -> None:
+        for i in range(n):
+            sock = socket.create_connection(("127.0.0.1", images.port))
+            sock.sendall(b"SKEYE STREAM 30\nOK" if i % 2 else b"OK")
+            assert len(sock.recv(1000)) > 0  # the 1.44 MB RAW frame has started
+            _abort(sock) if i % 3 == 0 else sock.close()
+        assert wait_for(lambda: images.client_count() == 0)
+
+    cycle(5)  # warm up
+    gc.collect()
+    threads, fds = thread_count(), open_fds()
+    cycle(30)
+    assert wait_for(lambda: thread_count() <= threads, timeout_s=10), thread_count() - threads
+    gc.collect()
+    left = [o for o in gc.get_objects() if isinstance(o, _ClientHandler)]
+    assert not left, f"{len(left)} image client handlers outlived their 30 connections"
+    assert open_fds() <= fds
