@@ -207,7 +207,12 @@ class OnboardBoards:
         self.taken_over_from: NavState | None = None  # the state they took over from, last
         self._waypoint: Waypoint | None = None
         self._waypoint_target: tuple[float, float, float] | None = None  # NED
-        self._waypoint_status = 0
+        self._waypoint_status = 0  # NavigationStatus bits: REACHED, REACHED_AND_WAITED
+        self._waypoint_flying = False  # from >*>wg until 0x02 (or the flight is replaced)
+        self._waypoint_radius_m = 0.0  # the waypoint's pos_acc
+        self._waypoint_stay_s = 0.0  # its time to stay
+        self._waypoint_arrived = False  # the motion to it has ended there
+        self._waypoint_inside_s: float | None = None  # vehicle time it came within pos_acc
         self._stream: Stream | None = None
         self._stream_next_s = 0.0
         self.motion_changes = 0  # bumped by every command or event that replaces the motion
@@ -336,6 +341,7 @@ class OnboardBoards:
         self._motion_pending = False
         self._velocity_until_s = None
         self._waypoint_target = None
+        self._waypoint_flying = False
 
     def check_move(self, target_ned_m: tuple[float, float, float] | None = None,
                    speed_m_s: float | None = None,
@@ -541,10 +547,42 @@ class OnboardBoards:
         else:
             n = self.home_ned_m[0] + si.y
             e = self.home_ned_m[1] + si.x
-            self._check_envelope(self.home_ned_m, (n, e, -altitude_m))
+            target = (n, e, -altitude_m)
+            self._check_envelope(self.home_ned_m, target)
             self._start_motion(lambda: self.airframe.fly_to(n, e, altitude_m, speed))
-            self._waypoint_target = (n, e, -altitude_m)
+        # (after _start_motion: replacing the previous flight is not this one's end)
+        self._waypoint_target = target  # None: an absolute one without a fix to place it
         self._waypoint_status = 0
+        self._waypoint_flying = True
+        self._waypoint_radius_m = si.position_accuracy_m
+        self._waypoint_stay_s = si.hold_time_s
+        self._waypoint_arrived = False
+        self._waypoint_inside_s = None
+
+    def _waypoint_progress(self, snap: Snapshot) -> None:
+        """The AscTec waypoint engine's navigation status (AscTec AutoPilot SDK, ``sdkio.h``
+        ``WP_NAVSTAT_*``; docs/protocols/packets.md, CURRENT_WAY): REACHED (0x01) once the
+        estimate has come within the waypoint's ``pos_acc`` (or the motion to it has arrived,
+        within the motion's own tolerance: a ``pos_acc`` below that is met there), latched;
+        REACHED_AND_WAITED (0x02) once the vehicle has been within it for ``time`` (the time
+        to stay) on the vehicle's clock, which ends the waypoint flight (the SDK's
+        ``gps_waypoints.c`` sends the next waypoint then). Leaving the radius before the time
+        is over starts the count again when it comes back. The vehicle holds at the
+        waypoint meanwhile and after."""
+        if not self._waypoint_flying:
+            return
+        target = self._waypoint_target
+        inside = self._waypoint_arrived or (
+            target is not None and math.dist(snap.pos_ned_m, target) <= self._waypoint_radius_m)
+        if not inside:
+            self._waypoint_inside_s = None
+            return
+        self._waypoint_status |= int(NavigationStatus.REACHED)
+        if self._waypoint_inside_s is None:
+            self._waypoint_inside_s = snap.time_s
+        if snap.time_s - self._waypoint_inside_s >= self._waypoint_stay_s - 1e-9:
+            self._waypoint_status |= int(NavigationStatus.REACHED_AND_WAITED)
+            self._waypoint_flying = False
 
     def _come_home(self) -> None:
         self.flight.check(FlightEvent.MOVE)
@@ -757,12 +795,13 @@ class OnboardBoards:
                 self._fire(FlightEvent.ARRIVED)
             elif self._motion_pending and not self.airframe.busy:
                 self._motion_pending = False
-                self._waypoint_status |= int(NavigationStatus.REACHED)
+                self._waypoint_arrived = self._waypoint_flying
                 self._fire(FlightEvent.ARRIVED)
         elif state is NavState.LANDING and not self.airframe.busy and snap.landed:
             self._fire(FlightEvent.TOUCHDOWN)
             self.motors_on = False
             self.pad.landing_finished()
+        self._waypoint_progress(snap)
         on_ground = (snap.landed and not snap.armed
                      and snap.time_s > self._sticks_sim_s + STICK_ARM_SETTLE_S)
         if on_ground and self.state in (NavState.FLYING, NavState.HOLDING, NavState.FAILSAFE,

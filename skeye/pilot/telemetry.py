@@ -100,8 +100,8 @@ class BoardStatus:
     checksum_errors: int
     home_ned_m: Vec3  # where the vehicle rested before its last take-off
     waypoint: Waypoint | None  # the uploaded one
-    waypoint_target: Vec3 | None  # NED, while flying to a relative waypoint
-    waypoint_status: int  # NavigationStatus bits
+    waypoint_target: Vec3 | None  # NED, the current waypoint (None: none is current)
+    waypoint_status: int  # NavigationStatus bits the boards latched (0x01, 0x02, 0x08)
     motor_time_s: float = 0.0  # sim time the motors have turned (LL_STATUS up_time)
 
 
@@ -361,6 +361,9 @@ class Telemetry:
         return gps_data_advanced_from_si(gps, best)
 
     def _current_way(self, snap: Snapshot, status: BoardStatus) -> CurrentWay:
+        """CURRENT_WAY: the boards' latched bits (``OnboardBoards._waypoint_progress``), with
+        0x04 and ``distance_to_wp`` from the estimate to the current waypoint (0 and clear
+        when none is current)."""
         nav_status = status.waypoint_status
         distance_m = 0.0
         target = status.waypoint_target
