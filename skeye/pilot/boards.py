@@ -207,8 +207,8 @@ class OnboardBoards:
         self.taken_over_from: NavState | None = None  # the state they took over from, last
         self._waypoint: Waypoint | None = None
         self._waypoint_target: tuple[float, float, float] | None = None  # NED
-        self._waypoint_status = 0  # NavigationStatus bits: REACHED, REACHED_AND_WAITED
-        self._waypoint_flying = False  # from >*>wg until 0x02 (or the flight is replaced)
+        self._waypoint_status = 0  # NavigationStatus bits the boards latch: 0x01, 0x02, 0x08
+        self._waypoint_flying = False  # from >*>wg until 0x02 or the flight is replaced (0x08)
         self._waypoint_radius_m = 0.0  # the waypoint's pos_acc
         self._waypoint_stay_s = 0.0  # its time to stay
         self._waypoint_arrived = False  # the motion to it has ended there
@@ -337,11 +337,18 @@ class OnboardBoards:
 
     # -- commands ------------------------------------------------------------------------
     def _end_motion(self) -> None:
+        """What flew the vehicle is replaced (a command, the sticks, an event). A waypoint
+        flight replaced before its 0x02 is aborted: CURRENT_WAY says 0x08, as the AscTec
+        board does when the safety pilot's sticks take over (SDK ``sdkio.h``,
+        ``WP_NAVSTAT_PILOT_ABORT``: "aborted by safety pilot (any stick was moved)"), here
+        whatever replaced it, so a station waiting for 0x02 learns it will not come."""
         self.motion_changes += 1
         self._motion_pending = False
         self._velocity_until_s = None
         self._waypoint_target = None
-        self._waypoint_flying = False
+        if self._waypoint_flying:
+            self._waypoint_flying = False
+            self._waypoint_status |= int(NavigationStatus.ABORTED)
 
     def check_move(self, target_ned_m: tuple[float, float, float] | None = None,
                    speed_m_s: float | None = None,

@@ -18,24 +18,30 @@ from skeye.wire.packets import (
     Ack,
     CommandStreamParser,
     CtrlInput,
+    CurrentWay,
     Hold,
     ImuCalcData,
     Land,
     LlStatus,
     MoveBy,
     MoveFrame,
+    NavigationStatus,
     NavState,
     NavStatus,
     PadAction,
     PadMode,
     PadReport,
     Poll,
+    PollMask,
     Result,
     ResultCode,
     SkeyeMask,
     Stream,
     TakeOff,
     Velocity,
+    Waypoint,
+    WaypointGoto,
+    WaypointProps,
     encode,
 )
 from tests.pilot.fake_airframe import FakeAirframe
@@ -233,6 +239,24 @@ def test_pad_mode_is_stored_and_pad_reports_not_found():
     assert nav.pad_mode is PadAction.LAND and pad.found == 0
     assert boards.tick(0.05) == []  # not due yet
     assert len(boards.tick(0.1)) == 2
+
+
+def test_link_loss_aborts_a_waypoint_flight():
+    # CURRENT_WAY 0x08 for a waypoint flight the link-loss failsafe replaced (docs/protocols/
+    # packets.md): a station that comes back learns its 0x02 will not come
+    air, boards = make(link_timeout_s=2.0, land_timeout_s=20.0)
+    airborne(boards, air, now_s=0.0)
+    wp = Waypoint(properties=int(WaypointProps.HEIGHT_ENABLED), max_speed=50, time=100,
+                  pos_acc=500, X=3000, Y=0, yaw=0, height=1000)
+    assert send(boards, encode(wp), 0.0) == [Ack(PD.WAYPOINT)]
+    assert send(boards, encode(WaypointGoto()), 0.0) == [Ack(PD.WAYPOINT_GOTO)]
+    boards.tick(1.9)
+    (way,) = boards.poll(int(PollMask.CURRENT_WAY))
+    assert isinstance(way, CurrentWay) and way.navigation_status == 0x04, way
+    boards.tick(2.0)
+    assert boards.state is NavState.FAILSAFE
+    (way,) = boards.poll(int(PollMask.CURRENT_WAY))
+    assert way.navigation_status == int(NavigationStatus.ABORTED), way
 
 
 def test_link_loss_holds_then_lands():

@@ -23,7 +23,7 @@ from skeye.wire.packets import (
     PollMask,
     WaypointProps,
 )
-from tests.pilot.test_takeover import Flight, _fly, _hold_at
+from tests.pilot.test_takeover import TAKEOVER, Flight, _fly, _hold_at
 from tests.sim.conftest import running_sim
 
 REACHED = int(NavigationStatus.REACHED)
@@ -87,3 +87,28 @@ def test_a_waypoint_is_reached_at_pos_acc_and_waited_for_its_time() -> None:
         assert waited_s - reached_s <= stay_s + TICK_S + (STEP_S + TICK_S), (reached_s, waited_s)
         assert way.navigation_status & ABORTED == 0, way
         assert way.distance_to_wp <= round(pos_acc_m * 10), way
+
+
+def test_sticks_abort_a_waypoint_flight_and_say_so() -> None:
+    # The SDK's WP_NAVSTAT_PILOT_ABORT: "waypoint navigation aborted by safety pilot (any
+    # stick was moved)". Sticks take over a waypoint flight under way: CURRENT_WAY reads 0x08
+    # and neither 0x01 nor 0x02 (a station waiting for 0x02 learns it never comes), no
+    # current waypoint (distance 0); the next >*>wg clears it. Before: 0x08 was never set.
+    with ExitStack() as stack_:
+        server = stack_.enter_context(running_sim(mode="lockstep", seed=32))
+        flight = _fly(stack_, server.port)
+        _hold_at(flight, 1.0)
+        _go(flight, 3.0, 1.0, pos_acc_m=0.5, stay_s=1.0)
+        flight.run_until(lambda ns: ns.state is NavState.FLYING and abs(ns.vy) > 300, 10.0)
+        way = _current_way(flight)
+        assert way.navigation_status & (REACHED | WAITED | ABORTED) == 0, way
+        assert way.distance_to_wp > 10, way  # still more than a metre to go
+        assert isinstance(flight.vehicle.command(TAKEOVER), Ack)
+        ns = flight.run_for(STEP_S)
+        assert ns.state is NavState.MANUAL, ns
+        way = _current_way(flight)
+        assert way.navigation_status & (REACHED | WAITED | ABORTED) == ABORTED, way
+        assert way.distance_to_wp == 0, way
+        _go(flight, 3.0, 1.0, pos_acc_m=0.5, stay_s=1.0)  # a new waypoint flight
+        way = _current_way(flight)
+        assert way.navigation_status & (REACHED | WAITED | ABORTED) == 0, way
