@@ -292,7 +292,15 @@ class OnboardBoards:
             self._ctrl_input(msg, now_s)
             return Ack(PD.CTRL_INPUT)
         if isinstance(msg, Waypoint):
-            self._waypoint = msg
+            self._waypoint = msg  # stored, whatever becomes of an automatic goto
+            if msg.properties & WaypointProps.AUTOMATIC_GOTO:
+                # WPPROP_AUTOMATICGOTO: "if set, vehicle will not wait for a goto command, but
+                # goto this waypoint directly" (AscTec LL/HL communication header): the upload
+                # is a >*>wg too, refused (RESULT naming 0x24) as that one would be
+                if self._vehicle_lost:
+                    raise _Refused(ResultCode.REFUSED,
+                                   f"the vehicle is lost: {self.health.reason}")
+                self._goto_waypoint()
             return Ack(PD.WAYPOINT)
         if isinstance(msg, WaypointGoto):
             self._goto_waypoint()

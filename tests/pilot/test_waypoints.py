@@ -112,3 +112,23 @@ def test_sticks_abort_a_waypoint_flight_and_say_so() -> None:
         _go(flight, 3.0, 1.0, pos_acc_m=0.5, stay_s=1.0)  # a new waypoint flight
         way = _current_way(flight)
         assert way.navigation_status & (REACHED | WAITED | ABORTED) == 0, way
+
+
+def test_an_automatic_goto_waypoint_is_flown_on_upload() -> None:
+    # WPPROP_AUTOMATICGOTO (0x10): "if set, vehicle will not wait for a goto command, but goto
+    # this waypoint directly" (AscTec's LL/HL communication header; the older SDK's sdk.c
+    # example uploads its waypoints so). Before: stored, and the vehicle hovered on.
+    with ExitStack() as stack_:
+        server = stack_.enter_context(running_sim(mode="lockstep", seed=33))
+        flight = _fly(stack_, server.port)
+        _hold_at(flight, 1.0)
+        wp = waypoint_from_si(WaypointSi(
+            properties=int(WaypointProps.HEIGHT_ENABLED | WaypointProps.AUTOMATIC_GOTO),
+            max_speed_percent=50, hold_time_s=0.0, position_accuracy_m=0.5, x=2.0, y=0.0,
+            yaw_rad=0.0, height_m=1.0))
+        assert isinstance(flight.vehicle.upload_waypoint(wp), Ack)  # and no >*>wg
+        ns = flight.run_for(0.5)
+        assert ns.state is NavState.FLYING, ns
+        way = _current_way(flight)
+        assert 10 <= way.distance_to_wp <= 20, way  # on its way: 2 m at the upload
+        assert way.navigation_status & (REACHED | WAITED | ABORTED) == 0, way
