@@ -4,13 +4,15 @@ How this works: the control server (:mod:`skeye.sim.server`) hands each accepted
 :class:`ClientSession` with two threads: a reader that decodes lines with the sans-IO codec
 (:mod:`skeye.wire.sim_lines`, then the typed table of :mod:`skeye.wire.sim`) and handles them,
 and a writer that alone writes to the socket, draining a bounded queue. The engine thread hands
-the robot's readings to the session's sink (:func:`skeye.sim.stream.text_sink`), which queues
-their lines without ever blocking: when a client does not read, its queue fills and further
+the robot's readings to the session's sink (a :class:`skeye.sim.stream.StreamEncoder`), which
+queues their lines without ever blocking: when a client does not read, its queue fills and further
 stream lines are dropped and counted, so a slow client never slows the physics or other
-clients. Answers (RES, ERR, GEO, CONF, NFO) go through the same queue, so their order relative
-to the stream is kept; they have room of their own (``OUTBOX_BYTES // 8``), which the stream
-never takes: a backlog of stream lines never costs a client an answer it waits for (a STEP's
-RES), while one that floods commands and reads nothing loses the answers beyond that room.
+clients. Answers (RES, ERR, GEO, CONF, NFO; the engine's ERR lines of a robot stopped or
+crashed too, split out of its chunk of stream lines in their place) go through the same
+queue, so their order relative to the stream is kept; they have room of their own
+(``OUTBOX_BYTES // 8``), which the stream never takes: a backlog of stream lines never costs
+a client an answer it waits for (a STEP's RES, an ERR of its robot's crash), while one that
+floods commands and reads nothing loses the answers beyond that room.
 Every bad line gets an ``ERR`` with a reason and the connection stays usable; only an
 over-long line closes it, and so does an HTTP request line or header. A
 session that ends gives its writer ``CLOSE_LINGER_S`` to send what is queued, then shuts the
@@ -43,10 +45,10 @@ from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError, S
 from skeye.sim.cameras import set_camera_fov
 from skeye.sim.clock_barrier import ClockBarrier, fail_step
 from skeye.sim.engine import Simulation
-from skeye.sim.readings import Event, RobotStopped
+from skeye.sim.readings import Event, RobotCrashed, RobotStopped
 from skeye.sim.robot import Robot
 from skeye.sim.runner import SimulationRunner
-from skeye.sim.stream import text_sink
+from skeye.sim.stream import StreamEncoder
 from skeye.wire.sim import (
     DriveLimits,
     decode,
@@ -480,17 +482,29 @@ class ClientSession:
         return self.robot_name
 
     def cmd_init(self, msg: Message, init: Init) -> None:
-        text = text_sink(lambda chunk: self.send(chunk, stream=True))
+        encoder = StreamEncoder()
         # A vector that was not three plain numbers was read as USARSim reads it: say how.
         note = "; ".join(usarsim_notes(msg)) or None
         if note is not None:
             log.info("client %s: INIT %s", self.peer, note)
 
         def sink(events: list[Event]) -> None:  # engine thread
-            for event in events:  # noted before the ERR goes out: a client's next line sees it
+            # The engine's ERR lines (a robot stopped or crashed) are answers, with their room
+            # of their own, in their place among the stream lines: a stream backlog must not
+            # cost the client the news (until 2026-11-28 they went in the stream's chunk and
+            # were dropped with it).
+            start = 0
+            for i, event in enumerate(events):
+                # A stop is noted before its ERR goes out: a client's next line sees it.
                 if isinstance(event, RobotStopped):
                     self._robot_stopped = (event.robot, event.reason)
-            text(events)
+                if isinstance(event, RobotStopped | RobotCrashed):
+                    if i > start:
+                        self.send(encoder.encode(events[start:i]), stream=True)
+                    self.send(encoder.encode([event]))
+                    start = i + 1
+            if start < len(events):
+                self.send(encoder.encode(events[start:] if start else events), stream=True)
 
         def spawn(sim: Simulation) -> tuple[str, Any]:
             robot: Robot = sim.spawn(

@@ -318,3 +318,47 @@ def test_a_stream_backlog_never_costs_a_client_its_step_answer(
                 b"RES {Command STEP} {Time %d.000000}" % t for t in (1, 2, 3, 4)], lines[-5:]
         finally:
             slow.close()
+
+
+def test_a_stream_backlog_never_costs_a_client_the_err_of_its_robots_crash(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The simulator's own ERR lines to a robot's connection (``ERR {Command CRASH}``,
+    ``ERR {Command PHYSICS}``) are answers too (simulator.md): a client whose reading falls
+    behind its robot's stream loses stream lines, not the news that its robot crashed (the
+    pilot's airframe and skeye.control learn of a crash from that line alone). They came
+    inside the engine's chunk of stream lines, and were dropped with it. As in the test
+    above, the bound is 20 kB and the kernel's buffers are small."""
+    monkeypatch.setattr(session_module, "OUTBOX_BYTES", 20_000)
+    sim = Simulation(load_world("pad"), seed=1)
+    with (
+        SimulationRunner(sim, mode="lockstep") as runner,
+        ControlServer(runner, port=0) as server,
+    ):
+        slow = socket.socket()
+        slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        slow.connect(("127.0.0.1", server.port))
+        try:
+            assert slow.recv(4096).startswith(b"NFO")
+            port = slow.getsockname()[1]
+            session = next(s for s in server._sessions if s.peer.endswith(f":{port}"))
+            session.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+            # Motors off 8 m up: the impact (a crash) comes in the second STEP, whose chunk
+            # finds the queue full of the first one's lines.
+            slow.sendall(b"INIT {ClassName hummingbird} {Name F} {Location 0,3,-8}\r\n"
+                         b"DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0}\r\n"
+                         + b"STEP {Count 1000}\r\n" * 4)
+            assert wait_for(lambda: sim.time_s >= 3.5, timeout_s=30), "the STEPs did not run"
+            assert session.dropped > 0
+            assert sim.robots["F"].flight.crashed  # (the simulator saw the crash)
+            slow.sendall(b"PING {Id done}\r\n")  # answered after everything queued before it
+            slow.settimeout(10)  # a lost answer: recv times out
+            received = b""
+            while b"{Id done}" not in received:
+                data = slow.recv(1 << 16)
+                assert data, "the server closed the connection"
+                received += data
+            crashes = [line for line in received.split(b"\r\n")
+                       if line.startswith(b"ERR {Command CRASH} {Name F}")]
+            assert len(crashes) == 1, received[-300:]
+        finally:
+            slow.close()
