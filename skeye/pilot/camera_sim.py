@@ -6,8 +6,11 @@ clients (docs/protocols/images.md): ``latest`` asks one for the newest frame's M
 alone (``SKEYE INFO``: its number and sim time, 29 bytes on the wire, the frame not rendered
 for it), at most every ``probe_interval_s`` of wall time unless the vehicle's clock moved (in
 lockstep: every step); ``image()`` fetches the newest whole frame (RAW + META) on the other,
-so the vision's worker and the control loop never share a connection. A failed request drops
-its connection (a late frame never answers a later one) and raises :class:`CameraError`.
+so the vision's worker and the control loop never share a connection. An image server from
+before ``SKEYE INFO`` (2026-11-28) answers it with an error frame (``unknown SKEYE command``):
+that connection is then probed with a 1x1 sub-rectangle and its META header instead (37 bytes;
+it renders the newest frame). A failed request drops its connection (a late frame never
+answers a later one) and raises :class:`CameraError`.
 :meth:`SimCamera.set_prerender` (off: the pilot's lockstep vision, which takes some of the
 frames) makes both connections say ``SKEYE PRERENDER off``, so the simulator renders only
 the frames ``image()`` asks for.
@@ -36,7 +39,7 @@ from collections import deque
 from urllib.parse import parse_qs
 
 from skeye.control.image_client import ImageClient
-from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
 from skeye.pilot.camera import (
     CameraError,
     CameraImage,
@@ -50,6 +53,7 @@ from skeye.uris import port_of, split_uri
 from skeye.wire.images import MetaHeader
 
 OFFSET_WINDOW = 50
+_NO_INFO = "unknown SKEYE command"  # an image server's answer to INFO from before it
 
 _Meta = tuple[int, int, float]  # a frame's camera id, number and sim time
 
@@ -106,6 +110,7 @@ class SimCamera:
         self._lost: str | None = None
         self._checked = False
         self._prerender = True  # frames rendered ahead of our requests (set_prerender)
+        self._no_info: ImageClient | None = None  # a probe connection refused SKEYE INFO
         # Numbering across the cameras met under the name (see the module docstring): the
         # frames of camera run k are announced as base + their own number.
         self._runs_lock = threading.Lock()
@@ -210,13 +215,28 @@ class SimCamera:
                     and vehicle_now == self._probed_vehicle_s):
                 return self._latest
             try:
-                meta = self._client("probe").frame_info()
+                meta = self._probe(self._client("probe"))
             except SkeyeError as exc:
                 self._failed("probe", exc)
             else:
                 self._frame_info("probe", meta)
             self._probed_at, self._probed_vehicle_s = now, vehicle_now
         return self._latest
+
+    def _probe(self, client: ImageClient) -> MetaHeader:
+        """The newest frame's META header: ``SKEYE INFO``, or on a server from before it a 1x1
+        sub-rectangle's (see the module docstring)."""
+        if client is not self._no_info:
+            try:
+                return client.frame_info()
+            except RemoteProtocolError as exc:
+                if _NO_INFO not in str(exc):
+                    raise
+                self._no_info = client  # the error frame was its answer: the connection holds
+        meta = client.get_subrect(0, 0, 1, 1).meta
+        if meta is None:
+            raise CameraError("the image server sent no META header")
+        return meta
 
     def image(self) -> CameraImage:
         with self._locks["image"]:

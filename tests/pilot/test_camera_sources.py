@@ -215,10 +215,13 @@ def test_a_sim_camera_on_another_clock_maps_the_frame_times(live):
 class HeldProxy:
     """A TCP relay to a server whose answers can be held back (``hold``/``release``): what a
     client sends goes through at once (``requested`` is set), what the server answers waits
-    while held. One connection at a time is enough here."""
+    while held. ``rewrite`` (old, new): what a client sends has ``old`` replaced by ``new``
+    on its way (``connections`` counts the clients accepted)."""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, rewrite: tuple[bytes, bytes] | None = None) -> None:
         self._upstream = port
+        self.rewrite = rewrite
+        self.connections = 0
         self._listener = socket.create_server(("127.0.0.1", 0))
         self.port = self._listener.getsockname()[1]
         self.requested = threading.Event()
@@ -243,16 +246,24 @@ class HeldProxy:
                 return
             server = socket.create_connection(("127.0.0.1", self._upstream))
             self._socks += [client, server]
+            self.connections += 1
             for args in ((client, server, False), (server, client, True)):
                 t = threading.Thread(target=self._pump, args=args, daemon=True)
                 self._threads.append(t)
                 t.start()
 
     def _pump(self, src: socket.socket, dst: socket.socket, answers: bool) -> None:
+        held = b""  # the end of what came, held while it may be the start of ``old``
         try:
             while data := src.recv(65536):
                 if answers:
                     self._open.wait(30.0)
+                elif self.rewrite is not None:
+                    old, new = self.rewrite
+                    data = (held + data).replace(old, new)
+                    keep = next((k for k in range(len(old) - 1, 0, -1)
+                                 if data.endswith(old[:k])), 0)
+                    data, held = data[:len(data) - keep], data[len(data) - keep:]
                 dst.sendall(data)
                 if not answers:
                     self.requested.set()
@@ -311,6 +322,34 @@ def test_a_sim_camera_asked_during_anothers_probe_gets_that_probes_answer():
         first = probing["info"]
         assert isinstance(first, type(before)) and first.frame > before.frame
         assert second == first, (before, first, second)
+
+
+def test_a_sim_camera_probes_an_image_server_from_before_info_as_it_did_before():
+    """An image server from before ``SKEYE INFO`` (2026-11-28: a simulator not upgraded with
+    the pilot, the LL board's in a hardware-in-the-loop rig) answers it with an error frame,
+    ``unknown SKEYE command``: the ``sim://`` source then probes that connection with a 1x1
+    sub-rectangle, as it did before INFO. It lost the camera at every look instead, and made
+    a new connection for the next. A relay makes the real server refuse INFO here."""
+    with ExitStack() as stack:
+        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep",
+                                                                 estimator="truth"))
+        sim = stack.enter_context(connect(f"127.0.0.1:{control.port}"))
+        sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, 0.0))
+        sim.run_for(0.1)
+        proxy = stack.enter_context(HeldProxy(images.port,
+                                              rewrite=(b"SKEYE INFO\n", b"SKEYE INFQ\n")))
+        clock = FakeClock(1.0)
+        source = open_camera(f"sim://127.0.0.1:{proxy.port}/R1/Down",
+                             CameraOptions(clock=clock, clock_is_sim=True))
+        stack.callback(source.close)
+        first = source.latest
+        sim.run_for(0.2)
+        clock.t = 2.0
+        second = source.latest
+        assert (source.errors, source.lost) == (0, None)
+        assert first is not None and second is not None and second.frame > first.frame
+        assert proxy.connections == 1  # the probe's, kept
+        assert source.image().frame == second.frame
 
 
 def test_a_sim_camera_whose_robot_spawns_again_gives_the_new_cameras_frames_at_once(tmp_path):
