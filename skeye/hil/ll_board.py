@@ -157,10 +157,12 @@ class LLBoard:
             return [Ack(PD(event.pd))]
         if (isinstance(event, CommandError) and event.code is not ResultCode.BAD_CHECKSUM
                 and event.pd not in ACK_PD.values()):
-            # An intact skeye frame the board cannot read (a CLOCK of the wrong length, an
-            # unknown skeye PD, a field out of range): its CRC held, so a client sent it and
-            # waits for its RESULT; answered as the board's other skeye packets are.
-            replies = self.boards.handle(event, now_s)  # a valid packet: the line is alive
+            # A skeye frame the board cannot read: a CLOCK whose length field is not its PD's
+            # (answered at once, before its CRC came), an unknown skeye PD or a field out of
+            # range (its CRC held). A client sent it and waits for its RESULT; answered as the
+            # board's other skeye packets are (the boards count it as a packet for the link
+            # only if it arrived intact: skeye.wire.packets.arrived_intact).
+            replies = self.boards.handle(event, now_s)
             if event.pd == PD.CLOCK:
                 return replies  # the one it takes: code 2 or 3, the reason says what is wrong
             self.refused_skeye += 1

@@ -87,7 +87,7 @@ MAX_CLIENTS_PER_PEER = 32  # connections of one peer, a user or address (half th
 
 @dataclass(frozen=True)
 class ClientStats:
-    """What the server has sent one client so far."""
+    """What the server has sent one client so far (``frames_sent``: image and INFO frames)."""
 
     address: str
     camera: str | None

@@ -214,6 +214,7 @@ def test_image_connect_close_cycles_leave_no_client_behind(images: ImageServer) 
     cycle(30)
     assert wait_for(lambda: thread_count() <= threads, timeout_s=10), thread_count() - threads
     gc.collect()
-    left = [o for o in gc.get_objects() if isinstance(o, _ClientHandler)]
+    left = [o for o in gc.get_objects()  # this server's (another test's are not counted)
+            if isinstance(o, _ClientHandler) and o._server is images]
     assert not left, f"{len(left)} image client handlers outlived their 30 connections"
     assert open_fds() <= fds
