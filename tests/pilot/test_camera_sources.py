@@ -25,6 +25,7 @@ import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -285,6 +286,24 @@ class HeldProxy:
             t.join(5.0)
 
 
+def _sim_camera_through_relay(stack: ExitStack, rewrite: tuple[bytes, bytes] | None = None
+                              ) -> tuple[Any, HeldProxy, FakeClock, CameraSource]:
+    """A lockstep simulator with a robot 0.1 s into its flight, and a ``sim://`` source of its
+    camera through a :class:`HeldProxy` relay (``rewrite``: the relay's), on a vehicle clock
+    the test sets (1.0 s to start with)."""
+    control, images, _ = stack.enter_context(sim_with_images(mode="lockstep",
+                                                             estimator="truth"))
+    sim = stack.enter_context(connect(f"127.0.0.1:{control.port}"))
+    sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, 0.0))
+    sim.run_for(0.1)
+    proxy = stack.enter_context(HeldProxy(images.port, rewrite=rewrite))
+    clock = FakeClock(1.0)
+    source = open_camera(f"sim://127.0.0.1:{proxy.port}/R1/Down",
+                         CameraOptions(clock=clock, clock_is_sim=True))
+    stack.callback(source.close)
+    return sim, proxy, clock, source
+
+
 def test_a_sim_camera_asked_during_anothers_probe_gets_that_probes_answer():
     """The pilot's loop and its vision's worker both ask a ``sim://`` camera for its newest
     frame. Asked again at the moment of the last probe, the source answers from that probe;
@@ -294,16 +313,7 @@ def test_a_sim_camera_asked_during_anothers_probe_gets_that_probes_answer():
     (until 2026-11-28; seen about once in six lockstep pad flights under load). Now the
     second caller waits for the probe under way and gets its answer."""
     with ExitStack() as stack:
-        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep",
-                                                                 estimator="truth"))
-        sim = stack.enter_context(connect(f"127.0.0.1:{control.port}"))
-        sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, 0.0))
-        sim.run_for(0.1)
-        proxy = stack.enter_context(HeldProxy(images.port))
-        clock = FakeClock(1.0)
-        source = open_camera(f"sim://127.0.0.1:{proxy.port}/R1/Down",
-                             CameraOptions(clock=clock, clock_is_sim=True))
-        stack.callback(source.close)
+        sim, proxy, clock, source = _sim_camera_through_relay(stack)
         source.probe_interval_s = 60.0  # (the same moment: the same vehicle time)
         before = source.latest
         assert before is not None
@@ -331,17 +341,8 @@ def test_a_sim_camera_probes_an_image_server_from_before_info_as_it_did_before()
     sub-rectangle, as it did before INFO. It lost the camera at every look instead, and made
     a new connection for the next. A relay makes the real server refuse INFO here."""
     with ExitStack() as stack:
-        control, images, _ = stack.enter_context(sim_with_images(mode="lockstep",
-                                                                 estimator="truth"))
-        sim = stack.enter_context(connect(f"127.0.0.1:{control.port}"))
-        sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, 0.0))
-        sim.run_for(0.1)
-        proxy = stack.enter_context(HeldProxy(images.port,
-                                              rewrite=(b"SKEYE INFO\n", b"SKEYE INFQ\n")))
-        clock = FakeClock(1.0)
-        source = open_camera(f"sim://127.0.0.1:{proxy.port}/R1/Down",
-                             CameraOptions(clock=clock, clock_is_sim=True))
-        stack.callback(source.close)
+        sim, proxy, clock, source = _sim_camera_through_relay(
+            stack, rewrite=(b"SKEYE INFO\n", b"SKEYE INFQ\n"))
         first = source.latest
         sim.run_for(0.2)
         clock.t = 2.0

@@ -7,6 +7,7 @@ import contextlib
 import socket
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -14,7 +15,7 @@ from skeye.sim import session as session_module
 from skeye.sim.engine import FLUSH_EVENTS, Simulation
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
-from skeye.sim.session import CLOSE_LINGER_S
+from skeye.sim.session import CLOSE_LINGER_S, ClientSession
 from skeye.sim.world import load_world
 from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient, running_sim
@@ -273,51 +274,63 @@ def test_a_long_step_hands_its_lines_over_as_it_goes() -> None:
             other.close()
 
 
-def test_a_stream_backlog_never_costs_a_client_its_step_answer(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """A lockstep client whose reading falls behind its robot's stream loses stream lines (the
-    queue is bounded), never the RES of its STEP: that answer is what it waits for. Answers
-    have an eighth more room than the stream lines; they used to share the stream's bound,
-    so a RES queued while the backlog was full was dropped and the client waited for good.
-    (The bound is 20 kB here, so that a few seconds of sim time overfill it.)"""
+@contextlib.contextmanager
+def _slow_client_of_small_queues(monkeypatch: pytest.MonkeyPatch
+                                 ) -> Iterator[tuple[Simulation, socket.socket, ClientSession]]:
+    """A lockstep simulator whose clients' queues hold 20 kB of stream lines (a few seconds of
+    sim time overfill them), a client of it on a slow link and its session: the kernel's
+    buffers both ways small, so that a few chunks fill them (Linux would grow the server's
+    send buffer to 4 MiB on loopback). Yielded once its session is set up (its NFO came)."""
     monkeypatch.setattr(session_module, "OUTBOX_BYTES", 20_000)
     sim = Simulation(load_world("pad"), seed=1)
     with (
         SimulationRunner(sim, mode="lockstep") as runner,
         ControlServer(runner, port=0) as server,
+        contextlib.closing(socket.socket()) as slow,
     ):
-        slow = socket.socket()
         slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         slow.connect(("127.0.0.1", server.port))
-        try:
-            assert slow.recv(4096).startswith(b"NFO")  # sent once its session is set up
-            # The kernel's buffers of a slow link: small, so that a few chunks fill them
-            # (Linux would grow the server's send buffer to 4 MiB on loopback).
-            port = slow.getsockname()[1]
-            session = next(s for s in server._sessions if s.peer.endswith(f":{port}"))
-            session.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
-            # Each STEP's lines are one chunk (fewer than FLUSH_EVENTS), some 45 kB: the
-            # first fills the queue while the writer waits on the client, the others find it
-            # full and are dropped.
-            slow.sendall(b"INIT {ClassName hummingbird} {Name S} {Start Pad1}\r\n"
-                         + b"STEP {Count 1000}\r\n" * 4)
-            # S's reader takes its next STEP once the last is answered: wait (on sim time) for
-            # the fourth to be under way. Its client has read nothing: the first three RES
-            # were queued behind a full queue of stream lines.
-            assert wait_for(lambda: sim.time_s >= 3.5, timeout_s=30), "the STEPs did not run"
-            assert session.dropped > 0
-            slow.sendall(b"PING {Id done}\r\n")  # answered after everything queued before it
-            slow.settimeout(10)  # a lost answer: recv times out
-            received = b""
-            while b"{Id done}" not in received:
-                data = slow.recv(1 << 16)
-                assert data, "the server closed the connection"
-                received += data
-            lines = received.split(b"\r\n")
-            assert [line for line in lines if line.startswith(b"RES {Command STEP}")] == [
-                b"RES {Command STEP} {Time %d.000000}" % t for t in (1, 2, 3, 4)], lines[-5:]
-        finally:
-            slow.close()
+        assert slow.recv(4096).startswith(b"NFO")  # sent once its session is set up
+        port = slow.getsockname()[1]
+        session = next(s for s in server._sessions if s.peer.endswith(f":{port}"))
+        session.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+        yield sim, slow, session
+
+
+def _lines_until_ping(slow: socket.socket) -> bytes:
+    """Everything the server sends up to the answer of a PING sent now (it is answered after
+    everything queued before it); a lost answer is a recv timeout."""
+    slow.sendall(b"PING {Id done}\r\n")
+    slow.settimeout(10)
+    received = b""
+    while b"{Id done}" not in received:
+        data = slow.recv(1 << 16)
+        assert data, "the server closed the connection"
+        received += data
+    return received
+
+
+def test_a_stream_backlog_never_costs_a_client_its_step_answer(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lockstep client whose reading falls behind its robot's stream loses stream lines (the
+    queue is bounded), never the RES of its STEP: that answer is what it waits for. Answers
+    have an eighth more room than the stream lines; they used to share the stream's bound,
+    so a RES queued while the backlog was full was dropped and the client waited for good."""
+    with _slow_client_of_small_queues(monkeypatch) as (sim, slow, session):
+        # Each STEP's lines are one chunk (fewer than FLUSH_EVENTS), some 45 kB: the
+        # first fills the queue while the writer waits on the client, the others find it
+        # full and are dropped.
+        slow.sendall(b"INIT {ClassName hummingbird} {Name S} {Start Pad1}\r\n"
+                     + b"STEP {Count 1000}\r\n" * 4)
+        # S's reader takes its next STEP once the last is answered: wait (on sim time) for
+        # the fourth to be under way. Its client has read nothing: the first three RES
+        # were queued behind a full queue of stream lines.
+        assert wait_for(lambda: sim.time_s >= 3.5, timeout_s=30), "the STEPs did not run"
+        assert session.dropped > 0
+        received = _lines_until_ping(slow)
+        lines = received.split(b"\r\n")
+        assert [line for line in lines if line.startswith(b"RES {Command STEP}")] == [
+            b"RES {Command STEP} {Time %d.000000}" % t for t in (1, 2, 3, 4)], lines[-5:]
 
 
 def test_a_stream_backlog_never_costs_a_client_the_err_of_its_robots_crash(
@@ -326,39 +339,17 @@ def test_a_stream_backlog_never_costs_a_client_the_err_of_its_robots_crash(
     ``ERR {Command PHYSICS}``) are answers too (simulator.md): a client whose reading falls
     behind its robot's stream loses stream lines, not the news that its robot crashed (the
     pilot's airframe and skeye.control learn of a crash from that line alone). They came
-    inside the engine's chunk of stream lines, and were dropped with it. As in the test
-    above, the bound is 20 kB and the kernel's buffers are small."""
-    monkeypatch.setattr(session_module, "OUTBOX_BYTES", 20_000)
-    sim = Simulation(load_world("pad"), seed=1)
-    with (
-        SimulationRunner(sim, mode="lockstep") as runner,
-        ControlServer(runner, port=0) as server,
-    ):
-        slow = socket.socket()
-        slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        slow.connect(("127.0.0.1", server.port))
-        try:
-            assert slow.recv(4096).startswith(b"NFO")
-            port = slow.getsockname()[1]
-            session = next(s for s in server._sessions if s.peer.endswith(f":{port}"))
-            session.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
-            # Motors off 8 m up: the impact (a crash) comes in the second STEP, whose chunk
-            # finds the queue full of the first one's lines.
-            slow.sendall(b"INIT {ClassName hummingbird} {Name F} {Location 0,3,-8}\r\n"
-                         b"DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0}\r\n"
-                         + b"STEP {Count 1000}\r\n" * 4)
-            assert wait_for(lambda: sim.time_s >= 3.5, timeout_s=30), "the STEPs did not run"
-            assert session.dropped > 0
-            assert sim.robots["F"].flight.crashed  # (the simulator saw the crash)
-            slow.sendall(b"PING {Id done}\r\n")  # answered after everything queued before it
-            slow.settimeout(10)  # a lost answer: recv times out
-            received = b""
-            while b"{Id done}" not in received:
-                data = slow.recv(1 << 16)
-                assert data, "the server closed the connection"
-                received += data
-            crashes = [line for line in received.split(b"\r\n")
-                       if line.startswith(b"ERR {Command CRASH} {Name F}")]
-            assert len(crashes) == 1, received[-300:]
-        finally:
-            slow.close()
+    inside the engine's chunk of stream lines, and were dropped with it."""
+    with _slow_client_of_small_queues(monkeypatch) as (sim, slow, session):
+        # Motors off 8 m up: the impact (a crash) comes in the second STEP, whose chunk
+        # finds the queue full of the first one's lines.
+        slow.sendall(b"INIT {ClassName hummingbird} {Name F} {Location 0,3,-8}\r\n"
+                     b"DRIVE {RollAngle 0} {PitchAngle 0} {Thrust 0}\r\n"
+                     + b"STEP {Count 1000}\r\n" * 4)
+        assert wait_for(lambda: sim.time_s >= 3.5, timeout_s=30), "the STEPs did not run"
+        assert session.dropped > 0
+        assert sim.robots["F"].flight.crashed  # (the simulator saw the crash)
+        received = _lines_until_ping(slow)
+        crashes = [line for line in received.split(b"\r\n")
+                   if line.startswith(b"ERR {Command CRASH} {Name F}")]
+        assert len(crashes) == 1, received[-300:]
