@@ -170,10 +170,12 @@ def pad_json(msg: PadReport) -> dict[str, Any]:
 
 
 def waypoint_json(msg: CurrentWay) -> dict[str, Any]:
-    """CURRENT_WAY: navigation status bits and distance to the waypoint."""
+    """CURRENT_WAY: navigation status bits (docs/protocols/packets.md: reached, reached and
+    waited, within 20 m, aborted) and distance to the waypoint."""
     status = NavigationStatus(msg.navigation_status)
     return {
         "reached": bool(status & NavigationStatus.REACHED),
+        "waited": bool(status & NavigationStatus.REACHED_AND_WAITED),  # its time to stay over
         "within_20m": bool(status & NavigationStatus.WITHIN_20M),
         "aborted": bool(status & NavigationStatus.ABORTED),
         "busy": bool(msg.status),

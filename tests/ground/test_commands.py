@@ -13,7 +13,7 @@ from skeye.ground.bridge import LinkEvent, LinkState, PacketRate, next_link_stat
 from skeye.ground.commands import COMMANDS, GroundCommand, describe_commands, parse_command
 from skeye.ground.telemetry import telemetry_json
 from skeye.wire.packet_units import NavStatusSi, PadSi, nav_status_from_si, pad_report_from_si
-from skeye.wire.packets import PD, Health, HealthStatus, NavState, PadAction
+from skeye.wire.packets import PD, CurrentWay, Health, HealthStatus, NavState, PadAction
 
 
 def test_defaults_are_filled_in() -> None:
@@ -131,6 +131,17 @@ def test_telemetry_converts_to_si_and_leaves_missing_sections_none() -> None:
     assert telemetry_json({PD.HEALTH: crashed})["health"] == {
         "status": "crashed", "reason": "crashed: hard impact at 3.2 m/s"}
     assert (t["nav"]["sigma_h_m"], t["nav"]["sigma_v_m"]) == (None, None)  # not stated
+
+
+def test_the_waypoint_s_status_bits_each_have_their_field() -> None:
+    """CURRENT_WAY's navigation_status: 0x01 reached, 0x02 reached and waited (what a ground
+    station sends the next waypoint on), 0x04 within 20 m, 0x08 aborted."""
+    fields = ("reached", "waited", "within_20m", "aborted")
+    for bit, field in zip((0x01, 0x02, 0x04, 0x08), fields, strict=True):
+        way = CurrentWay(0, 0x03, 1, 1, 0, 0, 0, bit, 25)
+        w = telemetry_json({PD.CURRENT_WAY: way})["waypoint"]
+        assert {f: w[f] for f in fields} == {f: f == field for f in fields}, (bit, w)
+        assert w["distance_m"] == 2.5 and w["busy"] is False
 
 
 def test_the_estimate_s_sigma_and_the_truth_only_while_the_vehicle_is_simulated() -> None:
