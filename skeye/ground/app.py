@@ -277,6 +277,7 @@ def create_app(
                 "type": "hello",
                 "commands": describe_commands(limits),
                 "keyboard": describe_keyboard(limits),
+                "max_in_flight": MAX_IN_FLIGHT,
                 "history": bridge.history(),
                 "video": video_status(),
             }

@@ -346,6 +346,37 @@ def test_held_keys_log_one_line_per_change(page: Any, stack: Stack) -> None:
     page.uncheck("#kbd-enable")
 
 
+def test_a_held_key_is_not_renewed_past_the_commands_the_server_lets_wait(page: Any,
+                                                                          stack: Stack) -> None:
+    """The page's commands waiting for the vehicle at the server's limit (2; a slow link or a
+    loaded vehicle): a held key's renewal would be refused (429) and logged between the held
+    velocity's lines, as a loaded run of the test above once saw. It is not sent; renewals go
+    on once an answer has come. Two stand-ins in the page's table of waiting commands put it
+    at the limit here."""
+    airborne(page)
+    page.check("#kbd-enable")
+    page.fill("#kbd-speed", "0.3")
+    page.click("#horizon")
+    lines = page.locator("#cmd-log li").count()
+    sent, skipped = page.evaluate("[S.cmdId, S.renewalsSkipped]")
+    assert page.evaluate("S.maxInFlight") == 2  # the server's MAX_IN_FLIGHT, from its hello
+    page.evaluate("for (const id of [-1, -2]) S.pending.set(id, "
+                  "{name: 'stand-in', args: {}, resolve: () => {}})")
+    page.keyboard.down("KeyD")  # a change of keys: sent whatever waits
+    wait_js(page, f"S.renewalsSkipped >= {skipped} + 3", 15, "three renewals at the limit")
+    assert page.evaluate("S.cmdId") == sent + 1  # the key press alone
+    page.evaluate("S.pending.delete(-1); S.pending.delete(-2)")
+    wait_js(page, f"S.cmdId >= {sent} + 3 && S.pending.size === 0", 15,
+            "renewals once the page is below the limit")
+    page.keyboard.up("KeyD")
+    wait_js(page, f"S.cmdId >= {sent} + 4 && S.pending.size === 0", 5, "the stop on release")
+    new = page.evaluate(f"[...document.querySelectorAll('#cmd-log li')].slice(0, "
+                        f"document.querySelectorAll('#cmd-log li').length - {lines})"
+                        ".map(li => li.dataset.text)")
+    assert len(new) == 2 and not any("not sent" in text for text in new), new
+    page.uncheck("#kbd-enable")
+
+
 OVER_THE_PAD_M = 0.35  # the pad (0.6 m) fills the small camera's view from 1.5 m up
 NUDGE_SIM_S = 90.0  # vehicle time allowed for the nudges
 

@@ -25,6 +25,7 @@ function onHello(msg) {
   S.hellos += 1;
   S.commands = indexCommands(msg.commands);
   S.keyboard = msg.keyboard;
+  S.maxInFlight = msg.max_in_flight;
   renderForms(document, S.commands);
   renderKeyboard(msg.keyboard);
   const limits = limitsSummary(msg.commands);

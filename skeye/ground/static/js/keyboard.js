@@ -72,6 +72,15 @@ function kbdSend(final = false) {
 
 function stopRepeat() { clearInterval(timer); timer = null; }
 
+// A held key's renewal while the page's commands waiting for the vehicle are at the server's
+// limit (a slow link or a loaded vehicle) would be refused, 429, and logged between the held
+// velocity's lines: it is not sent; the velocity still waiting renews the vehicle's, and the
+// next period sends again. A change of keys is always sent.
+function renew() {
+  if (S.pending.size >= S.maxInFlight) { S.renewalsSkipped += 1; return; }
+  kbdSend();
+}
+
 export function wireKeyboard() {
   $("kbd-enable").onchange = (e) => {
     $("kbd-enable").closest(".kbd").classList.toggle("active", e.target.checked);
@@ -89,7 +98,7 @@ export function wireKeyboard() {
     S.keys.add(e.code);
     kbdSend();
     stopRepeat();
-    timer = setInterval(() => kbdSend(), S.keyboard.repeat_s * 1000);
+    timer = setInterval(renew, S.keyboard.repeat_s * 1000);
   });
   document.addEventListener("keyup", (e) => {
     if (!(e.code in KEYMAP) || !S.keys.has(e.code)) return;

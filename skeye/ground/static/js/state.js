@@ -16,6 +16,8 @@ export const S = {
   padMode: null,
   flightState: null,  // the vehicle's last NAV_STATUS state (a change to manual is logged)
   hellos: 0,          // hello messages so far: one per (re)connection to the server
+  maxInFlight: 2,     // the server's limit on this page's commands waiting at once (hello)
+  renewalsSkipped: 0, // held-key renewals not sent: the page's commands were at that limit
 };
 
 window.S = S;
