@@ -323,22 +323,33 @@ def test_a_fast_move_is_flown_at_its_speed(page: Any, stack: Stack) -> None:
     page.fill("#arg-move_by-speed_m_s", "0.5")
 
 
-def test_held_keys_log_one_line_per_change(page: Any, stack: Stack) -> None:
-    # Item 8: a held key renews its velocity every 300 ms; the log shows one line (x n).
+def flying_by_keyboard(page: Any) -> int:
+    """Airborne, keyboard flying on at 0.3 m/s, the focus off the inputs (the keys fly): the
+    number of lines the command log has now."""
     airborne(page)
     page.check("#kbd-enable")
     page.fill("#kbd-speed", "0.3")
     page.click("#horizon")  # focus off the inputs: the keys fly
-    lines = page.locator("#cmd-log li").count()
+    return int(page.locator("#cmd-log li").count())
+
+
+def log_lines_since(page: Any, lines: int) -> list[list[Any]]:
+    """The command log's lines added since it had ``lines``, newest first: [text, repeats]."""
+    return list(page.evaluate(f"[...document.querySelectorAll('#cmd-log li')].slice(0, "
+                              f"document.querySelectorAll('#cmd-log li').length - {lines})"
+                              ".map(li => [li.dataset.text, Number(li.dataset.repeats)])"))
+
+
+def test_held_keys_log_one_line_per_change(page: Any, stack: Stack) -> None:
+    # Item 8: a held key renews its velocity every 300 ms; the log shows one line (x n).
+    lines = flying_by_keyboard(page)
     sent = page.evaluate("S.cmdId")
     page.keyboard.down("KeyD")
     wait_js(page, f"S.cmdId >= {sent} + 4 && S.pending.size === 0", 15,
             "four renewals of the held key's velocity to be answered")
     page.keyboard.up("KeyD")
     wait_js(page, f"S.cmdId >= {sent} + 5 && S.pending.size === 0", 5, "the stop on release")
-    new = page.evaluate(f"[...document.querySelectorAll('#cmd-log li')].slice(0, "
-                        f"document.querySelectorAll('#cmd-log li').length - {lines})"
-                        ".map(li => [li.dataset.text, Number(li.dataset.repeats)])")
+    new = log_lines_since(page, lines)
     assert len(new) == 2, new  # the held velocity (repeated), then the stop
     held, stop = new[1], new[0]
     assert "right_m_s=0.3" in held[0] and held[1] >= 4, new
@@ -353,11 +364,7 @@ def test_a_held_key_is_not_renewed_past_the_commands_the_server_lets_wait(page: 
     velocity's lines, as a loaded run of the test above once saw. It is not sent; renewals go
     on once an answer has come. Two stand-ins in the page's table of waiting commands put it
     at the limit here."""
-    airborne(page)
-    page.check("#kbd-enable")
-    page.fill("#kbd-speed", "0.3")
-    page.click("#horizon")
-    lines = page.locator("#cmd-log li").count()
+    lines = flying_by_keyboard(page)
     sent, skipped = page.evaluate("[S.cmdId, S.renewalsSkipped]")
     assert page.evaluate("S.maxInFlight") == 2  # the server's MAX_IN_FLIGHT, from its hello
     page.evaluate("for (const id of [-1, -2]) S.pending.set(id, "
@@ -370,10 +377,8 @@ def test_a_held_key_is_not_renewed_past_the_commands_the_server_lets_wait(page: 
             "renewals once the page is below the limit")
     page.keyboard.up("KeyD")
     wait_js(page, f"S.cmdId >= {sent} + 4 && S.pending.size === 0", 5, "the stop on release")
-    new = page.evaluate(f"[...document.querySelectorAll('#cmd-log li')].slice(0, "
-                        f"document.querySelectorAll('#cmd-log li').length - {lines})"
-                        ".map(li => li.dataset.text)")
-    assert len(new) == 2 and not any("not sent" in text for text in new), new
+    new = log_lines_since(page, lines)
+    assert len(new) == 2 and not any("not sent" in text for text, _ in new), new
     page.uncheck("#kbd-enable")
 
 
