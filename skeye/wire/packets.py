@@ -39,6 +39,7 @@ no command to name (bad stop string, over-long length, unknown ``>*>`` command l
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
 from typing import Any
@@ -395,6 +396,28 @@ class _StreamParser:
         self.garbage_bytes += dropped
         return dropped
 
+    def _length_misfit(self, start: int, by_pd: Mapping[int, type[Any]]
+                       ) -> tuple[type[Any], int, int] | None:
+        """(structure, length field, its payload size) when the frame at the buffer's head,
+        its start marker ``start`` bytes long, has a length field that disagrees with the
+        structure its PD names in ``by_pd`` (each has a fixed size; RESULT at least its fixed
+        part): a corrupted length would otherwise hold every later byte as the frame's rest,
+        up to 1024 bytes. None while the PD has not come, for an unknown PD (its length cannot
+        be checked), for a length too long for any frame (said as such, TOO_LONG) and for one
+        that fits."""
+        buf = self._buf
+        if len(buf) < start + 3:
+            return None
+        cls = by_pd.get(buf[start + 2])
+        if cls is None:
+            return None
+        layout = LAYOUTS[cls]
+        length = buf[start] | buf[start + 1] << 8
+        if (length > MAX_PAYLOAD or length == layout.size
+                or (layout.tail is not None and layout.size <= length)):
+            return None
+        return cls, length, layout.size
+
     def feed(self, data: bytes) -> list[Any]:
         """Add received bytes; return every message or error event now complete, in order.
 
@@ -479,24 +502,15 @@ class VehicleStreamParser(_StreamParser):
 
     def _wrong_length(self) -> tuple[int, FrameError] | None:
         """A bad frame, at once, when the length field disagrees with the structure its PD
-        names (each vehicle structure has a fixed size; RESULT at least its fixed part): a
-        corrupted length would otherwise hold every later byte as the frame's rest, up to
-        1024 bytes, on a line where the answers behind it only come once these are read.
-        The parser resumes at the byte after the start marker."""
-        buf = self._buf
-        if len(buf) < len(START) + 3:
+        names (:meth:`_StreamParser._length_misfit`), on a line where the answers behind it
+        only come once its claimed bytes are read. The parser resumes at the byte after the
+        start marker."""
+        misfit = self._length_misfit(len(START), VEHICLE_BY_PD)
+        if misfit is None:
             return None
-        cls = VEHICLE_BY_PD.get(buf[len(START) + 2])
-        if cls is None:
-            return None  # an unknown PD: its length cannot be checked
-        layout = LAYOUTS[cls]
-        length = buf[len(START)] | buf[len(START) + 1] << 8
-        if length > MAX_PAYLOAD:
-            return None  # too long for any frame: said as such (TOO_LONG), chunks or not
-        if length == layout.size or (layout.tail is not None and layout.size <= length):
-            return None
+        cls, length, size = misfit
         return self._error(ErrorKind.BAD_LENGTH, f"{cls.__name__}: length field {length}, "
-                           f"its structure is {layout.size} bytes", 1)
+                           f"its structure is {size} bytes", 1)
 
 
 class CommandStreamParser(_StreamParser):
@@ -571,24 +585,14 @@ class CommandStreamParser(_StreamParser):
 
     def _wrong_length(self) -> tuple[int, CommandError] | None:
         """RESULT BAD_LENGTH, at once, when a skeye frame's length field disagrees with the
-        payload its PD names (every skeye command has a fixed size), as the ground side does
-        with the vehicle's structures: a corrupted length would otherwise hold every later
-        command (sticks, polls) as the frame's rest until up to 1024 bytes more had come.
-        The parser resumes at the byte after the start marker."""
-        buf = self._buf
-        start = len(SKEYE_START)
-        if len(buf) < start + 3:
+        payload its PD names (:meth:`_StreamParser._length_misfit`), as the ground side does
+        with the vehicle's structures: every later command (sticks, polls) would otherwise
+        wait as the frame's rest. The parser resumes at the byte after the start marker."""
+        misfit = self._length_misfit(len(SKEYE_START), SKEYE_BY_PD)
+        if misfit is None:
             return None
-        pd = buf[start + 2]
-        cls = SKEYE_BY_PD.get(pd)
-        if cls is None:
-            return None  # an unknown PD: its length cannot be checked
-        layout = LAYOUTS[cls]
-        length = buf[start] | buf[start + 1] << 8
-        if length > MAX_PAYLOAD:
-            return None  # too long for any frame: said as such (TOO_LONG)
-        if length == layout.size or (layout.tail is not None and layout.size <= length):
-            return None
+        cls, length, size = misfit
         self.errors[ErrorKind.BAD_LENGTH] += 1
-        reason = f"{cls.__name__}: length field {length}, its payload is {layout.size} bytes"
+        reason = f"{cls.__name__}: length field {length}, its payload is {size} bytes"
+        pd = self._buf[len(SKEYE_START) + 2]
         return 1, CommandError(pd, ResultCode.BAD_LENGTH, reason, intact=False)
