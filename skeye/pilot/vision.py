@@ -555,8 +555,8 @@ class PadVision:
                     obs = self._failed(latest.frame, latest.time_s, exc)
                 if obs is not None:
                     self._put((obs, time.perf_counter() - t0))
-            elif not self.lockstep:
-                continue
+            elif not self.lockstep or latest.frame <= self._attempted:
+                continue  # (the loop is not waiting for it: nothing to say)
             # (lockstep: a frame no newer than the last fetched is dealt with as well)
             with self._done:
                 self._attempted = max(self._attempted, latest.frame)
