@@ -49,7 +49,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mav
 
@@ -93,11 +93,15 @@ from skeye.wire.packets import (
 )
 
 log = logging.getLogger(__name__)
+K = TypeVar("K")
+V = TypeVar("V")
 
 GCS_TIMEOUT_S = PEER_TIMEOUT_S  # a ground station silent this long is forgotten (10 s; a
 # listening UDP link stops sending to it after the same time)
 NOTICE_EVERY_S = 2.0  # the same refusal or bad-input notice at most this often per peer
 DUPLICATE_WINDOW_S = 1.0  # a command repeated within this is acked again, not re-run
+COMMANDS_KEPT = 256  # the most (peer, command id) answers kept for the repeat rule
+NOTICES_KEPT = 1024  # the most (peer, notice) times kept for the notices' rate limit
 ARRIVED_RADIUS_M = 0.5
 ORIGIN_CHECK_S = 1.0  # how often a moved GPS_GLOBAL_ORIGIN is looked for
 ORIGIN_MIN_DEG = 1e-7  # PX4's GPS_GLOBAL_ORIGIN re-send thresholds (about 1.1 cm; 1 mm)
@@ -414,9 +418,8 @@ class MavlinkVehicle:
         last = self._notices.get((peer, key))
         if last is not None and self._now_s - last < NOTICE_EVERY_S:
             return []
-        if len(self._notices) > 1024:
-            self._notices.clear()
-        self._notices[(peer, key)] = self._now_s
+        _remember(self._notices, (peer, key), self._now_s, lambda t: t, self._now_s,
+                  NOTICE_EVERY_S, NOTICES_KEPT)
         return statustext(self.codec, severity, text)
 
     def _mission_notice(self, answer: list[MavMessage]) -> list[MavMessage]:
@@ -475,9 +478,8 @@ class MavlinkVehicle:
             self.refusals += 1
             extra = self._notice(peer, f"cmd{cmd.command}:{exc}", mav.MAV_SEVERITY_WARNING,
                                  f"{command_name(cmd.command)}: {exc}")
-        if len(self._recent) > 256:
-            self._recent.clear()
-        self._recent[slot] = (cmd.key(), self._now_s, result, self._situation())
+        _remember(self._recent, slot, (cmd.key(), self._now_s, result, self._situation()),
+                  lambda seen: seen[1], self._now_s, DUPLICATE_WINDOW_S, COMMANDS_KEPT)
         self.acks[result] = self.acks.get(result, 0) + 1
         return [self._ack(cmd.command, result, src), *extra]
 
@@ -1281,6 +1283,22 @@ class MavlinkVehicle:
         msg_id = msg.get_msgId()
         return [Out(msg, i) for i, link in enumerate(self.links)
                 if msg_id not in link.scheduler.stopped]
+
+
+def _remember(memory: dict[K, V], key: K, value: V, stamp_s: Callable[[V], float],
+              now_s: float, keep_s: float, most: int) -> None:
+    """``memory[key] = value``, as its newest entry, and the entries that can no longer matter
+    forgotten, oldest first: those ``keep_s`` old (a repeat or a notice is looked for only
+    within it), then any beyond ``most`` (a flood of stations within ``keep_s``). A live
+    station's recent entry is never forgotten for stale ones (the memory was once cleared
+    whole when full, so a take-off resent just then was run again)."""
+    memory.pop(key, None)
+    memory[key] = value  # a dict keeps insertion order: oldest first
+    while len(memory) > 1:
+        first = next(iter(memory))
+        if now_s - stamp_s(memory[first]) < keep_s and len(memory) <= most:
+            break
+        del memory[first]
 
 
 QUERIES = (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_GET_MESSAGE_INTERVAL,
