@@ -52,6 +52,7 @@ MIN_HOVER_S = REST_S + 1.0  # skeye logs --seconds: the rest, then a second of h
 TRUTH_GAP_S = 0.1  # ground truth further than this from an instant is not used for it
 REST_TURN_DEG = 1.0  # a truth turning more than this in the first second: not at rest
 GAP_INTERVALS = 5.0  # an IMU interval this many median ones long (and over 0.1 s) is a gap
+MAX_SIM_S = 120.0  # the simulated hover's longest: a log's length beyond it, --seconds' limit
 
 
 def _quat_rows(q: np.ndarray) -> np.ndarray:
@@ -201,8 +202,9 @@ def axis_mean_spectrum(log: ImuLog, attr: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def reference_imu(log: ImuLog, robot: str = "hummingbird") -> ImuLog:
-    """The simulated IMU a log is compared with: at the log's rate, as long (120 s at most)."""
-    return simulated_imu(log.rate_hz, min(120.0, float(log.t_s[-1] - log.t_s[0])), robot)
+    """The simulated IMU a log is compared with: at the log's rate, as long (``MAX_SIM_S`` at
+    most)."""
+    return simulated_imu(log.rate_hz, min(MAX_SIM_S, float(log.t_s[-1] - log.t_s[0])), robot)
 
 
 def refuse_gaps(log: ImuLog) -> None:
@@ -382,9 +384,10 @@ def cmd_logs(args: argparse.Namespace) -> int:
         seconds = DEFAULT_SECONDS if args.seconds is None else args.seconds
         if not (math.isfinite(rate) and 10.0 <= rate <= 10000.0):
             raise ConfigError(f"--rate must be 10..10000 Hz, got {rate}")
-        if seconds < MIN_HOVER_S:
-            raise ConfigError(f"--seconds must be at least {MIN_HOVER_S:g} s (the first "
-                              f"{REST_S:g} s at rest, then the hover), got {seconds:g}")
+        if not MIN_HOVER_S <= seconds <= MAX_SIM_S:  # 1e9 s asked numpy for 1.5 TiB
+            raise ConfigError(f"--seconds must be {MIN_HOVER_S:g}..{MAX_SIM_S:g} s (the first "
+                              f"{REST_S:g} s at rest, then the hover; a log's simulated IMU is "
+                              f"{MAX_SIM_S:g} s at most too), got {seconds:g}")
         sim = simulated_imu(rate, seconds, args.robot)
         sim_flight = in_flight(sim)
         result = {"log": "none (simulated only)", "rate_hz": rate, "seconds": seconds,
@@ -423,8 +426,8 @@ def register(sub: Any) -> None:
                    help=f"without a log: the simulated IMU's rate (Hz; default "
                    f"{DEFAULT_RATE_HZ:g}, EuRoC's)")
     p.add_argument("--seconds", type=cliargs.positive_float, default=None,
-                   help=f"without a log: how long the simulated hover is (at least "
-                   f"{MIN_HOVER_S:g} s; default {DEFAULT_SECONDS:g})")
+                   help=f"without a log: how long the simulated hover is ({MIN_HOVER_S:g}.."
+                   f"{MAX_SIM_S:g} s; default {DEFAULT_SECONDS:g})")
     p.add_argument("--plot", default=None, metavar="PNG", help="write the spectra here")
     p.add_argument("--json", default=None, metavar="FILE", help="write the figures here")
     p.set_defaults(func=cmd_logs)

@@ -496,3 +496,15 @@ def test_a_window_that_does_not_start_at_rest_is_refused_when_replayed(
     # without a truth there is no replay to spoil: the IMU figures are measured
     shutil.rmtree(folder / "mav0" / "state_groundtruth_estimate0")
     assert main(["logs", str(folder), "--start", "10"]) == 0
+
+
+@pytest.mark.parametrize("seconds", ["1e9", "121"])
+def test_a_simulated_hover_longer_than_a_logs_is_refused(
+        capsys: pytest.CaptureFixture[str], seconds: str) -> None:
+    # --seconds 1e9 ended in numpy's MemoryError traceback ("Unable to allocate 1.46 TiB"), and
+    # a day's worth ran for days: the simulated hover is at most the 120 s a log's is
+    assert main(["logs", "--seconds", seconds]) == 2
+    err = capsys.readouterr().err
+    assert err == ("skeye logs: error: --seconds must be 2..120 s (the first 1 s at rest, then "
+                   "the hover; a log's simulated IMU is 120 s at most too), got "
+                   f"{float(seconds):g}\n")
