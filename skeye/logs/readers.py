@@ -17,7 +17,10 @@ against NaN or the wrong instant).
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +30,8 @@ import numpy as np
 from skeye.errors import ConfigError
 
 LOG_FORMATS = ("auto", "euroc", "ulog", "rosbag")
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -147,16 +152,20 @@ def read_ulog(path: Path) -> ImuLog:
         from pyulog import ULog
     except ImportError:
         raise ConfigError("reading ULog files needs pyulog: pip install 'skeye[logs]'") from None
+    said = io.StringIO()  # pyulog prints what it finds damaged: on stdout, into the table
     try:
         # The file is opened here, not by pyulog: given a name, it leaves the file open when
         # the parse fails.
-        with open(path, "rb") as f:
+        with open(path, "rb") as f, contextlib.redirect_stdout(said):
             ulog = ULog(f, ["sensor_combined", "vehicle_local_position_groundtruth",
                             "vehicle_attitude_groundtruth"])
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # pyulog raises bare exceptions on a damaged file
         raise ConfigError(f"{path}: not a readable ULog file: {exc}") from None
+    damage = "; ".join(line.strip() for line in said.getvalue().splitlines() if line.strip())
+    if ulog.file_corruption and not damage:
+        damage = "damaged messages skipped"
     # A topic logged in several instances is read from its lowest (0, the primary), as pyulog's
     # get_dataset takes it by default.
     topics: dict[str, dict[str, Any]] = {}
@@ -164,7 +173,16 @@ def read_ulog(path: Path) -> ImuLog:
         topics.setdefault(d.name, d.data)
     imu = topics.get("sensor_combined")
     if imu is None:
+        if damage:  # cut short or damaged before the IMU's first sample: say so
+            raise ConfigError(f"{path}: not a readable ULog file: damaged or cut short before "
+                              f"any sensor_combined sample (pyulog: {damage})")
+        if "sensor_combined" in ulog.message_formats:
+            raise ConfigError(f"{path}: the sensor_combined topic (the IMU) has no samples "
+                              "(a log cut short?)")
         raise ConfigError(f"{path}: no sensor_combined topic (the IMU)")
+    if damage:  # what pyulog read around the damage is used; a hole in it is a gap, refused
+        log.warning("%s: the ULog file is damaged, pyulog skipped what it could not read (%s)",
+                    path, damage)
     _ulog_fields(path, "sensor_combined", imu, ["timestamp"]
                  + [f"{v}[{i}]" for v in ("gyro_rad", "accelerometer_m_s2") for i in range(3)])
     t = np.asarray(imu["timestamp"], dtype=float)

@@ -508,3 +508,35 @@ def test_a_simulated_hover_longer_than_a_logs_is_refused(
     assert err == ("skeye logs: error: --seconds must be 2..120 s (the first 1 s at rest, then "
                    "the hover; a log's simulated IMU is 120 s at most too), got "
                    f"{float(seconds):g}\n")
+
+
+def test_a_ulog_cut_short_or_damaged_is_said_so_on_stderr_not_in_the_table(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        caplog: pytest.LogCaptureFixture) -> None:
+    # pyulog prints what it finds damaged on stdout: "File corruption detected while reading
+    # file definitions!" went into the table's output (skeye logs x.ulg > table.md), and the
+    # error under it read "no sensor_combined topic", as if the log had never held one
+    data = make_logs.write_ulog(tmp_path / "whole.ulg", synthetic(6.0)).read_bytes()
+    (tmp_path / "cut.ulg").write_bytes(data[:30])  # inside the flag bits, before the formats
+    assert main(["logs", str(tmp_path / "cut.ulg")]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.startswith(f"skeye logs: error: {tmp_path / 'cut.ulg'}: not a readable ULog "
+                          "file: damaged or cut short before any sensor_combined sample "
+                          "(pyulog: "), err
+    assert err.count("\n") == 1, err
+    (tmp_path / "nodata.ulg").write_bytes(data[:400])  # formats and subscriptions, no data
+    assert main(["logs", str(tmp_path / "nodata.ulg")]) == 2
+    assert capsys.readouterr().err.endswith(
+        "the sensor_combined topic (the IMU) has no samples (a log cut short?)\n")
+    # one IMU message three quarters through names a topic the log never subscribed: pyulog
+    # skips it (one sample lost, no gap) and printed "no subscription found" into the table
+    imu_header = struct.pack("<HBH", 34, ord("D"), 0)  # sensor_combined's data messages
+    at = data.index(imu_header, len(data) * 3 // 4)
+    damaged = data[:at + 3] + struct.pack("<H", 0x7777) + data[at + 5:]
+    (tmp_path / "damaged.ulg").write_bytes(damaged)
+    assert main(["logs", str(tmp_path / "damaged.ulg")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"Log: {tmp_path / 'damaged.ulg'} ("), out
+    assert "corrupt" not in out, out
+    assert any("the ULog file is damaged" in r.getMessage() for r in caplog.records)
