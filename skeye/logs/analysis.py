@@ -75,15 +75,31 @@ def band_rms(x: np.ndarray, rate_hz: float, low_hz: float = 10.0) -> float:
     return math.sqrt(float(np.sum(asd[keep] ** 2) * df))
 
 
+def samples_above(rate_hz: float, low_hz: float) -> bool:
+    """Whether a series at ``rate_hz`` samples anything above ``low_hz``: its Nyquist frequency
+    is above it by more than 1 % (a rate read from a log's stamps carries their rounding: a
+    20 Hz EuRoC log's read 20.00005 Hz, its one spectral bin at 10 Hz the whole "band")."""
+    return rate_hz > lowest_rate_hz(low_hz)
+
+
+def lowest_rate_hz(low_hz: float) -> float:
+    """The rate a series must be over to sample anything above ``low_hz`` (see
+    :func:`samples_above`)."""
+    return 2.0 * low_hz * 1.01
+
+
 def imu_figures(gyro: np.ndarray, accel: np.ndarray, rate_hz: float,
                 low_hz: float = 10.0) -> dict[str, float]:
     """Per-axis-averaged figures: vibration RMS above ``low_hz`` and ADEV at 1 s (where white
     noise dominates, its density in Kalibr's convention: see :func:`allan_deviation`), for the
-    gyro and the accelerometer."""
+    gyro and the accelerometer. The vibration is left out where the Nyquist frequency is not
+    above ``low_hz`` (nothing above it is sampled: it read 0), the ADEV where the series is
+    shorter than 9 s."""
     out: dict[str, float] = {}
     for name, data in (("gyro", gyro), ("accel", accel)):
-        out[f"{name}_band_rms"] = float(np.mean([band_rms(data[:, i], rate_hz, low_hz)
-                                                 for i in range(3)]))
+        if samples_above(rate_hz, low_hz):
+            out[f"{name}_band_rms"] = float(np.mean([band_rms(data[:, i], rate_hz, low_hz)
+                                                     for i in range(3)]))
         if len(data) >= 9 * rate_hz:
             out[f"{name}_adev_1s"] = float(np.mean([adev_at(data[:, i], rate_hz, 1.0)
                                                     for i in range(3)]))

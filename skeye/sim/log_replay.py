@@ -29,7 +29,7 @@ import numpy as np
 
 from skeye import cliargs
 from skeye.errors import ConfigError
-from skeye.logs.analysis import imu_figures, spectrum
+from skeye.logs.analysis import imu_figures, lowest_rate_hz, samples_above, spectrum
 from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
 from skeye.outputs import different_files, figure_file, output_file
 from skeye.robots.config import load_robot_config
@@ -52,6 +52,7 @@ MIN_HOVER_S = REST_S + 1.0  # skeye logs --seconds: the rest, then a second of h
 TRUTH_GAP_S = 0.1  # ground truth further than this from an instant is not used for it
 REST_TURN_DEG = 1.0  # a truth turning more than this in the first second: not at rest
 GAP_INTERVALS = 5.0  # an IMU interval this many median ones long (and over 0.1 s) is a gap
+VIBRATION_FROM_HZ = 10.0  # the vibration figure: the content above this (imu_figures' low_hz)
 MAX_SIM_S = 120.0  # the simulated hover's longest: a log's length beyond it, --seconds' limit
 
 
@@ -248,6 +249,10 @@ def compare(log: ImuLog, robot: str = "hummingbird", sim: ImuLog | None = None
                       **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)},
         "has_truth": log.truth is not None,
     }
+    if not samples_above(rate, VIBRATION_FROM_HZ):  # its cells read "-": the table says why
+        result["vibration_unsampled"] = (
+            f"The log samples at {rate:.3g} Hz: nothing above {VIBRATION_FROM_HZ:g} Hz is "
+            f"sampled (its Nyquist frequency is {rate / 2.0:.3g} Hz), so no vibration figure.")
     if log.truth is not None and not real_tilt:  # its cells read "-": the table says why
         gt = log.truth.t_s
         result["truth_unused"] = (
@@ -284,8 +289,9 @@ def report_table(result: dict[str, Any]) -> str:
             f"{'-' if ref is None else f'{ref[0]:g}-{ref[1]:g}'} |")
     if result["real"] and not result["has_truth"]:  # simulated only: there is no log
         lines += ["", "The log has no ground truth: no tilt error for it."]
-    if result.get("truth_unused"):
-        lines += ["", result["truth_unused"]]
+    for note in ("vibration_unsampled", "truth_unused"):
+        if result.get(note):
+            lines += ["", result[note]]
     return "\n".join(lines)
 
 
@@ -382,8 +388,12 @@ def cmd_logs(args: argparse.Namespace) -> int:
     else:
         rate = DEFAULT_RATE_HZ if args.rate is None else args.rate
         seconds = DEFAULT_SECONDS if args.seconds is None else args.seconds
-        if not (math.isfinite(rate) and 10.0 <= rate <= 10000.0):
-            raise ConfigError(f"--rate must be 10..10000 Hz, got {rate}")
+        if not (math.isfinite(rate) and samples_above(rate, VIBRATION_FROM_HZ)
+                and rate <= 10000.0):
+            raise ConfigError(f"--rate must be over {lowest_rate_hz(VIBRATION_FROM_HZ):g} Hz (the "
+                              f"vibration figure measures above {VIBRATION_FROM_HZ:g} Hz, and a "
+                              "rate samples nothing above half itself) and at most 10000, got "
+                              f"{rate:g}")
         if not MIN_HOVER_S <= seconds <= MAX_SIM_S:  # 1e9 s asked numpy for 1.5 TiB
             raise ConfigError(f"--seconds must be {MIN_HOVER_S:g}..{MAX_SIM_S:g} s (the first "
                               f"{REST_S:g} s at rest, then the hover; a log's simulated IMU is "

@@ -540,3 +540,26 @@ def test_a_ulog_cut_short_or_damaged_is_said_so_on_stderr_not_in_the_table(
     assert out.startswith(f"Log: {tmp_path / 'damaged.ulg'} ("), out
     assert "corrupt" not in out, out
     assert any("the ULog file is damaged" in r.getMessage() for r in caplog.records)
+
+
+def test_a_log_sampled_too_slowly_for_the_vibration_figure_gets_none(
+        flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # a 20 Hz log (a PX4 logger's slow profile) samples nothing above 10 Hz: the table read a
+    # vibration of 0.027 m/s^2 "above 10 Hz" from the one spectral bin at Nyquist (8 Hz: 0),
+    # and --rate 10 read 0 for the simulated IMU
+    slow = _cut(flight, np.arange(0, len(flight.t_s), 10))
+    folder = make_logs.write_euroc(tmp_path / "MH_20hz", slow)
+    assert main(["logs", str(folder), "--json", str(tmp_path / "f.json")]) == 0
+    out = capsys.readouterr().out
+    assert "| accelerometer vibration above 10 Hz (m/s^2) | - | - | 0.9-1.3 |" in out, out
+    assert "| gyro vibration above 10 Hz (rad/s) | - | - | 0.06-0.07 |" in out, out
+    assert ("The log samples at 20 Hz: nothing above 10 Hz is sampled (its Nyquist frequency "
+            "is 10 Hz), so no vibration figure.") in out, out
+    result = json.loads((tmp_path / "f.json").read_text())
+    assert "accel_band_rms" not in result["real"] and "gyro_band_rms" not in result["simulated"]
+    assert result["real"]["tilt_rms_deg"] > 0.0  # the rest is measured
+    for rate in ("10", "20.1"):
+        assert main(["logs", "--rate", rate]) == 2
+        assert capsys.readouterr().err.startswith(
+            "skeye logs: error: --rate must be over 20.2 Hz (the vibration figure measures above "
+            f"10 Hz, and a rate samples nothing above half itself) and at most 10000, got {rate}")
