@@ -230,14 +230,15 @@ def read_rosbag(path: Path, imu_topic: str | None = None,
     try:
         with AnyReader([path]) as reader:
             conns = reader.connections
-            imu_conn = [c for c in conns if (c.topic == imu_topic if imu_topic
+            imu_conn = [c for c in conns if (c.topic == imu_topic if imu_topic is not None
                                              else c.msgtype == "sensor_msgs/msg/Imu")][:1]
             if not imu_conn:
-                raise ConfigError(f"{path}: no IMU topic"
-                                  + (f" {imu_topic!r}" if imu_topic else " (sensor_msgs/Imu)"))
-            gt_conn = [c for c in conns if (c.topic == truth_topic if truth_topic
+                raise ConfigError(f"{path}: no IMU topic" + (
+                    f" {imu_topic!r}" if imu_topic is not None else " (sensor_msgs/Imu)"))
+            gt_conn = [c for c in conns if (c.topic == truth_topic if truth_topic is not None
                                             else c.msgtype in truth_types)][:1]
-            if truth_topic and not gt_conn:  # named, so wanted: refused as --imu-topic is
+            # named ("" too: no topic is called so), so wanted: refused as --imu-topic is
+            if truth_topic is not None and not gt_conn:
                 raise ConfigError(f"{path}: no ground-truth topic {truth_topic!r} "
                                   "(--truth-topic)")
             if imu_conn[0].msgtype != "sensor_msgs/msg/Imu":

@@ -563,3 +563,14 @@ def test_a_log_sampled_too_slowly_for_the_vibration_figure_gets_none(
         assert capsys.readouterr().err.startswith(
             "skeye logs: error: --rate must be over 20.2 Hz (the vibration figure measures above "
             f"10 Hz, and a rate samples nothing above half itself) and at most 10000, got {rate}")
+
+
+def test_an_empty_topic_name_is_refused_not_taken_as_none(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # --imu-topic "" (an unset shell variable: --imu-topic "$IMU") read the bag's first IMU
+    # topic, and --truth-topic "" its first pose, as if neither had been given
+    bag = make_logs.write_rosbag(tmp_path / "flight.bag", synthetic(3.0))
+    for option, message in (("--imu-topic", "no IMU topic ''"),
+                            ("--truth-topic", "no ground-truth topic '' (--truth-topic)")):
+        assert main(["logs", str(bag), option, ""]) == 2
+        assert capsys.readouterr().err.startswith(f"skeye logs: error: {bag}: {message}")
