@@ -102,7 +102,8 @@ def _check_truth(name: str, truth: TruthTrack) -> None:
 
 def _csv_rows(path: Path) -> np.ndarray:
     """The data rows of a EuRoC CSV file, as numbers; a row with another number of fields than
-    the first (a file cut short mid-line) is named by its line number."""
+    the first (a file cut short mid-line), or a field that is not a number, is named by its
+    line number."""
     try:
         with open(path, newline="") as f:
             reader = csv.reader(f)
@@ -114,10 +115,13 @@ def _csv_rows(path: Path) -> np.ndarray:
         if len(row) != len(numbered[0][1]):
             raise ConfigError(f"{path}: line {line} has {len(row)} fields where line "
                               f"{numbered[0][0]} has {len(numbered[0][1])} (a file cut short?)")
-    try:
-        return np.array([r for _, r in numbered], dtype=float)
-    except ValueError as exc:
-        raise ConfigError(f"{path}: not a readable EuRoC CSV file: {exc}") from None
+    values: list[list[float]] = []
+    for line, row in numbered:
+        try:
+            values.append([float(v) for v in row])
+        except ValueError as exc:  # named by its line: a log is tens of thousands of them
+            raise ConfigError(f"{path}: line {line} is not numbers: {exc}") from None
+    return np.array(values, dtype=float)
 
 
 def read_euroc(folder: Path) -> ImuLog:

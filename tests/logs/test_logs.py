@@ -574,3 +574,19 @@ def test_an_empty_topic_name_is_refused_not_taken_as_none(
                             ("--truth-topic", "no ground-truth topic '' (--truth-topic)")):
         assert main(["logs", str(bag), option, ""]) == 2
         assert capsys.readouterr().err.startswith(f"skeye logs: error: {bag}: {message}")
+
+
+def test_a_euroc_field_that_is_no_number_is_refused_naming_its_line(tmp_path: Path) -> None:
+    # "could not convert string to float: 'abc0.13'" named no line of the thousands; a header
+    # written without its "#" (timestamp,w_RS_S_x,...) is line 1
+    folder = make_logs.write_euroc(tmp_path / "MH_txt", synthetic(3.0))
+    imu = folder / "mav0" / "imu0" / "data.csv"
+    lines = imu.read_text().splitlines()
+    lines[499] = lines[499].replace(",", ",abc", 1)
+    imu.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigError, match=r"imu0/data\.csv: line 500 is not numbers: could not "
+                                          r"convert string to float: 'abc"):
+        read_log(folder)
+    imu.write_text("\n".join([lines[0].lstrip("#"), *lines[1:499]]) + "\n")
+    with pytest.raises(ConfigError, match=r"imu0/data\.csv: line 1 is not numbers"):
+        read_log(folder)
