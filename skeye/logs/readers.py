@@ -80,8 +80,14 @@ def _checked(name: str, t_ns_or_s: np.ndarray, gyro: np.ndarray, accel: np.ndarr
         k = int(back[0]) + 1
         raise ConfigError(f"{name}: IMU times do not increase: sample {k} at {t[k]:.6g} s "
                           f"follows one at {t[k - 1]:.6g} s (seconds from the first sample)")
-    if not (np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
-        raise ConfigError(f"{name}: IMU samples that are not numbers")
+    bad = np.flatnonzero(~(np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)))
+    if len(bad):  # named by the first, as a time that goes backwards is
+        k = int(bad[0])
+        row = np.concatenate((gyro[k], accel[k])).astype(float)
+        i = int(np.flatnonzero(~np.isfinite(row))[0])
+        raise ConfigError(f"{name}: IMU samples that are not numbers: sample {k} at {t[k]:.6g} s "
+                          f"reads {row[i]} in the {('gyro', 'accelerometer')[i // 3]}'s "
+                          f"{'xyz'[i % 3]} ({len(bad)} such samples)")
     if truth is not None:
         _check_truth(name, truth)
         t0 = t_ns_or_s[0]

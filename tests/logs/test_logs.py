@@ -590,3 +590,15 @@ def test_a_euroc_field_that_is_no_number_is_refused_naming_its_line(tmp_path: Pa
     imu.write_text("\n".join([lines[0].lstrip("#"), *lines[1:499]]) + "\n")
     with pytest.raises(ConfigError, match=r"imu0/data\.csv: line 1 is not numbers"):
         read_log(folder)
+
+
+def test_imu_samples_that_are_not_numbers_are_refused_naming_the_first(
+        flight: make_logs.Synthetic, tmp_path: Path) -> None:
+    # "IMU samples that are not numbers" said nothing of where, in a log of thousands
+    gyro = flight.gyro.copy()
+    gyro[1200, 1] = np.nan
+    gyro[1500, 0] = np.inf
+    with pytest.raises(ConfigError, match=r"IMU samples that are not numbers: sample 1200 at 6 s "
+                                          r"reads nan in the gyro's y \(2 such samples\)"):
+        read_log(make_logs.write_ulog(tmp_path / "nan.ulg",
+                                      dataclasses.replace(flight, gyro=gyro)))
