@@ -74,6 +74,11 @@ def _checked(name: str, t_ns_or_s: np.ndarray, gyro: np.ndarray, accel: np.ndarr
              scale: float, truth: TruthTrack | None) -> ImuLog:
     if len(t_ns_or_s) < 2:
         raise ConfigError(f"{name}: fewer than two IMU samples")
+    lost = np.flatnonzero(~np.isfinite(t_ns_or_s))  # a EuRoC stamp of "nan": no comparison
+    if len(lost):  # catches it, so the order check let it through
+        k = int(lost[0])
+        raise ConfigError(f"{name}: IMU times that are not numbers: sample {k} is stamped "
+                          f"{t_ns_or_s[k]} ({len(lost)} such samples)")
     t = (t_ns_or_s - t_ns_or_s[0]) * scale
     back = np.flatnonzero(np.diff(t) <= 0.0)
     if len(back):  # named by the first sample (from 0) whose time is not after the one before

@@ -602,3 +602,19 @@ def test_imu_samples_that_are_not_numbers_are_refused_naming_the_first(
                                           r"reads nan in the gyro's y \(2 such samples\)"):
         read_log(make_logs.write_ulog(tmp_path / "nan.ulg",
                                       dataclasses.replace(flight, gyro=gyro)))
+
+
+@pytest.mark.parametrize("row", [499, -1])
+def test_imu_times_that_are_not_numbers_are_refused_naming_the_first(
+        tmp_path: Path, row: int) -> None:
+    # a EuRoC stamp of "nan" passed the order check (no comparison with NaN holds): mid-log the
+    # figures came out of a log with a NaN time in it; last, "no IMU samples between 0 and nan s"
+    folder = make_logs.write_euroc(tmp_path / "MH_tnan", synthetic(3.0))
+    imu = folder / "mav0" / "imu0" / "data.csv"
+    lines = imu.read_text().splitlines()
+    lines[row] = "nan" + lines[row][lines[row].index(","):]
+    imu.write_text("\n".join(lines) + "\n")
+    k = (len(lines) - 2) if row == -1 else row - 1  # sample numbers count from 0, after a header
+    with pytest.raises(ConfigError, match=rf"IMU times that are not numbers: sample {k} is "
+                                          r"stamped nan \(1 such samples\)"):
+        read_log(folder)
