@@ -20,8 +20,11 @@ ground); only the IMU is replayed (position needs the log's aiding sensors, whic
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -407,12 +410,43 @@ def cmd_logs(args: argparse.Namespace) -> int:
                                 **replay_tilt(sim.t_s, sim.gyro_rad_s, sim.accel_m_s2, None)}}
     logs.append(sim)  # the simulated IMU the table measured (it is simulated once)
     print(report_table(result))
+    writes: list[tuple[str, Path, Callable[[Path], object]]] = []
     if json_out is not None:
-        json_out.write_text(json.dumps(result, indent=2))
+        text = json.dumps(result, indent=2)
+        writes.append(("--json", json_out, lambda path: path.write_text(text)))
     if plot_out is not None:
-        plot(logs, plot_out)
+        writes.append(("--plot", plot_out, lambda path: plot(logs, path)))
+    write_whole(writes)
+    if plot_out is not None:
         print(f"\nspectra: {plot_out}")
     return 0
+
+
+def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> None:
+    """Each ``(option, path, write)``: written to a partial file beside ``path``, then all
+    renamed into place. A write that fails (a full disk, a folder that takes no new file) is
+    refused naming its option and leaves no output behind: the --json file was left whole
+    after the --plot failed, and a file cut short where the disk filled."""
+    partials: list[tuple[str, Path, Path]] = []
+    try:
+        for option, path, write in writes:
+            partial = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
+            partials.append((option, path, partial))
+            try:
+                write(partial)
+            except OSError as exc:
+                raise ConfigError(f"{option} {path}: cannot write it: "
+                                  f"{exc.strerror or exc}") from None
+        for option, path, partial in partials:
+            try:
+                os.replace(partial, path)
+            except OSError as exc:
+                raise ConfigError(f"{option} {path}: cannot write it: "
+                                  f"{exc.strerror or exc}") from None
+    finally:
+        for _, _, partial in partials:
+            with contextlib.suppress(OSError):
+                partial.unlink(missing_ok=True)
 
 
 def register(sub: Any) -> None:

@@ -618,3 +618,22 @@ def test_imu_times_that_are_not_numbers_are_refused_naming_the_first(
     with pytest.raises(ConfigError, match=rf"IMU times that are not numbers: sample {k} is "
                                           r"stamped nan \(1 such samples\)"):
         read_log(folder)
+
+
+def test_a_figure_that_cannot_be_written_leaves_no_output_behind(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # the --json file was written, then the --plot failed (a folder that takes no new file:
+    # /proc here; a full disk), exit 2 with half the outputs there and an OSError naming no
+    # option
+    folder = make_logs.write_euroc(tmp_path / "MH_out", synthetic(3.0))
+    figures = tmp_path / "f.json"
+    assert main(["logs", str(folder), "--json", str(figures), "--plot", "/proc/spectra.png"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("skeye logs: error: --plot /proc/spectra.png: cannot write it: "), err
+    assert not figures.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["MH_out"]  # no partial file either
+    assert main(["logs", str(folder), "--json", str(figures), "--plot",
+                 str(tmp_path / "s.png")]) == 0
+    assert json.loads(figures.read_text())["log"] == str(folder)
+    assert (tmp_path / "s.png").stat().st_size > 10_000
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["MH_out", "f.json", "s.png"]
