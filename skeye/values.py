@@ -51,6 +51,20 @@ def numbers(name: str, value: Any, count: int, what: str) -> tuple[float, ...]:
     return tuple(float(v) for v in items)
 
 
+MAX_BAUD = 4_000_000
+"""The fastest serial line a baud option takes (the fastest FTDI and CP210x USB adapters')."""
+
+
+def baud_rate(text: str) -> int | None:
+    """A serial line's baud rate as written in a URI or spec: a whole number 1..MAX_BAUD in
+    ASCII digits, else None (each caller names its option). ``str.isdigit`` alone also takes
+    digits ``int()`` refuses (a superscript 2), and ``int()`` alone takes a sign and spaces."""
+    if not (text.isascii() and text.isdigit()):
+        return None
+    value = int(text)
+    return value if 1 <= value <= MAX_BAUD else None
+
+
 def text(name: str, value: Any) -> str:
     """``value`` as a string, or a ConfigError naming ``name``."""
     if not isinstance(value, str):

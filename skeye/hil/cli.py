@@ -25,6 +25,7 @@ from skeye.errors import ConfigError, SkeyeError
 from skeye.hil.line import open_line
 from skeye.hil.ll_board import SERIAL_TIMEOUT_S, LLSettings
 from skeye.hil.ll_server import REALTIME_TICK_S, LLBoardServer
+from skeye.values import MAX_BAUD, baud_rate
 
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
 
@@ -94,10 +95,11 @@ def parse_ll_board(text: str) -> LLBoardSpec:
         if key in ("robot", "start"):
             fields[key] = value
         elif key == "baud":
-            if kind != "serial" or not value.isdigit() or int(value) <= 0:
+            baud = baud_rate(value)
+            if kind != "serial" or baud is None:
                 raise ConfigError(f"--ll-board {text!r}: baud={value} is for a serial line, "
-                                  "a positive number")
-            fields["baud"] = int(value)
+                                  f"a whole number 1..{MAX_BAUD}")
+            fields["baud"] = baud
         elif key == "rate":
             fields["rate"] = _up_to(value, 1000.0, f"--ll-board {text!r}: rate must be 0..1000 "
                                                    "sim seconds per wall second")

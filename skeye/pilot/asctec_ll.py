@@ -67,6 +67,7 @@ from skeye.link.vehicle import Vehicle
 from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits, vehicle_limits
 from skeye.pilot.ll_control import LLEstimate, StickPilot, Sticks, Velocity, nav_state
 from skeye.uris import split_uri
+from skeye.values import MAX_BAUD, baud_rate
 from skeye.wire.packet_units import s_to_ms
 from skeye.wire.packets import PD, Clock, CtrlInput, PollMask, ResultCode, encode
 from skeye.workers import Worker
@@ -146,12 +147,11 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
         if not parts.path or parts.path == "/":
             raise LocalProtocolError(f"airframe {uri!r}: expected asctec-ll://serial/dev/ttyX")
         baud_text = query.get("baud", [str(DEFAULT_BAUD)])[-1]
-        # isascii: str.isdigit() also accepts digits int() refuses (superscripts)
-        if not (baud_text.isascii() and baud_text.isdigit()
-                and 1 <= int(baud_text) <= 4_000_000):
+        checked = baud_rate(baud_text)
+        if checked is None:
             raise LocalProtocolError(f"airframe {uri!r}: baud={baud_text} is not a whole "
-                                     "number 1..4000000")
-        baud = int(baud_text)
+                                     f"number 1..{MAX_BAUD}")
+        baud = checked
         link = f"serial://{parts.path}?baud={baud}"
     elif kind == "tcp":
         address = parts.path.lstrip("/")

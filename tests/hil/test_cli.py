@@ -39,3 +39,16 @@ def test_sim_help_names_every_ll_board_option(capsys):
     text = " ".join(capsys.readouterr().out.split())  # argparse wraps the help's lines
     missing = [key for key in options if f"{key}=" not in text]
     assert not missing, f"skeye sim --help does not name --ll-board option(s) {missing}"
+
+
+@pytest.mark.parametrize("baud", ["\u00b2", "0", "-1", "57600.5", "4000001", "99999999999"])
+def test_a_baud_that_is_no_serial_rate_is_refused_naming_it(baud, capsys):
+    """``--ll-board R1=serial:DEVICE,baud=...`` out of 1..4000000 or not a whole number: a
+    ConfigError naming it, exit status 2 from ``skeye sim`` before anything starts. Until
+    2026-11-28 a superscript digit (which ``str.isdigit`` takes and ``int`` refuses) ended
+    ``skeye sim`` in a ValueError traceback, and 99999999999 was passed to the serial port."""
+    with pytest.raises(ConfigError, match=rf"baud={re.escape(baud)} .*1\.\.4000000"):
+        parse_ll_board(f"R1=serial:/dev/ttyUSB0,baud={baud}")
+    assert main(["sim", "--port", "0", "--ll-board", f"R1=serial:/dev/ttyUSB0,baud={baud}"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and f"baud={baud}" in err, err
