@@ -41,6 +41,7 @@ from urllib.parse import parse_qs
 from skeye.errors import ConfigError, LinkClosed
 from skeye.peers import socket_peer_key
 from skeye.uris import port_of, split_uri
+from skeye.values import MAX_BAUD, baud_rate
 
 Peer = Hashable
 MAX_DATAGRAM = 65535
@@ -368,6 +369,9 @@ def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
         device = (parts.netloc + parts.path) if parts.netloc else parts.path
         if not device:
             raise ConfigError(f"{uri}: give the serial device, e.g. serial:///dev/ttyACM0")
+        if "baud" in query and baud_rate(query["baud"]) is None:
+            raise ConfigError(f"{uri}: baud={query['baud']} is not a whole number "
+                              f"1..{MAX_BAUD}")
         return scheme, device, 0, query
     if scheme not in ("udp", "udpin", "udpout", "tcp", "tcpout"):
         raise ConfigError(f"{uri}: MAVLink links are udp://, udpout://, tcp://, tcpout:// or "
@@ -411,11 +415,7 @@ def open_transport(uri: str) -> MavTransport:
         return TcpServerTransport(host, port)
     if scheme == "tcpout":
         return TcpClientTransport(host, port)
-    try:
-        baud = int(query.get("baud", "57600"))
-    except ValueError:
-        raise ConfigError(f"{uri}: baud must be a number") from None
-    return SerialTransport(host, baud)
+    return SerialTransport(host, int(query.get("baud", "57600")))  # checked by parse_uri
 
 
 def check_free(uri: str, option: str = "--mavlink") -> None:

@@ -101,3 +101,23 @@ def test_a_controllers_serial_port_held_or_missing_stops_the_pilot_as_unreachabl
     finally:
         first.close()
         os.close(master)
+
+
+@pytest.mark.parametrize("baud", ["0", "-1", "57600.5", "4000001", "99999999999"])
+def test_a_baud_that_is_no_serial_rate_is_a_bad_option(baud, tmp_path, capsys):
+    """``mavlink://serial/DEVICE?baud=...`` (and ``--mavlink serial://``) out of 1..4000000
+    or not a whole number is a bad option, exit status 2, named before the device is looked
+    at, as ``asctec-ll://serial/...?baud=`` is. Until 2026-11-28 0, -1 and 99999999999 were
+    handed to the serial port (exit status 4, the vehicle unreachable, "cannot open serial
+    /dev/ttyACM0 at 0 baud: ... No such file"), and 57600.5 was "not a number"."""
+    from skeye.cli import main
+
+    device = tmp_path / "ttyACM0"  # not there: a baud let through would say so, status 4
+    for args in (["--airframe", f"mavlink://serial{device}?baud={baud}"],
+                 ["--airframe", "asctec-ll://tcp/127.0.0.1:1",
+                  "--mavlink", f"serial://{device}?baud={baud}"]):
+        status = main(["pilot", "--port", "0", "--timeout", "2", *args])
+        err = capsys.readouterr().err
+        assert status == 2, err
+        assert f"baud={baud} is not a whole number 1..4000000" in err, err
+        assert "No such file" not in err and "Traceback" not in err, err
