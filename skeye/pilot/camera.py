@@ -117,7 +117,8 @@ URI_CHECKS: dict[str, str] = {
 }
 """Scheme -> ``"module:function"`` parsing a URI of that scheme without opening anything (what
 :func:`check_camera_uri` runs, so ``skeye pilot`` refuses a bad ``--camera`` at start; a
-``file://`` camera's file is also looked at: missing, a directory, unreadable or empty)."""
+``file://`` camera's file is also opened once: missing, a directory, unreadable, empty or no
+video is said then)."""
 
 
 def camera_scheme(uri: str) -> str:
@@ -149,7 +150,8 @@ def check_camera_uri(uri: str) -> None:
 
     Raises:
         LocalProtocolError: naming what is wrong.
-        CameraError: a ``file://`` camera's file is missing, a directory, unreadable or empty.
+        CameraError: a ``file://`` camera's file cannot be played (missing, a directory,
+            unreadable, empty, not a video or one cut short).
     """
     _entry(URI_CHECKS, camera_scheme(uri))(uri)
 

@@ -85,14 +85,18 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
 
 
 def check_file_camera(uri: str) -> None:
-    """Parse a ``file://`` camera URI and look at its file, without opening it as a video:
-    what the file system tells (missing, a directory, unreadable, empty) is said when ``skeye
-    pilot`` starts, before it opens the vehicle.
+    """Parse a ``file://`` camera URI and open its file once, as the camera will: everything
+    :class:`FileCamera` refuses (missing, a directory, unreadable, empty, not a video, a photo
+    cut short, no frame rate, a first frame that does not decode) is said when ``skeye pilot``
+    starts, before it opens the vehicle. Until 2026-11-28 only what the file system tells was
+    said so: a text file named ``.mp4`` was found out after the LL board was connected, and a
+    vehicle that did not answer hid it.
 
     Raises:
         LocalProtocolError: a bad URI; CameraError: a file that cannot be played.
     """
-    _refuse_unplayable(uri, parse_file_camera(uri)[0])
+    path, fps, loop, fov = parse_file_camera(uri)
+    FileCamera(uri, path, CameraOptions(), fps=fps, loop=loop, fov_h_rad=fov).close()
 
 
 def _refuse_unplayable(uri: str, path: Path) -> None:

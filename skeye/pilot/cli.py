@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     if camera_uri is not None:
         try:
             check_camera_uri(camera_uri)  # the whole URI, before the airframe opens
-        except (LocalProtocolError, CameraError) as exc:  # CameraError: a file not there
+        except (LocalProtocolError, CameraError) as exc:  # CameraError: a file no video
             return _error(f"--camera: {exc}")
         problem = other_robots_camera_problem(airframe_uri, camera_uri, args.name)
         if problem:

@@ -312,7 +312,8 @@ def test_a_camera_file_that_cannot_be_flown_on_is_a_bad_camera_option(capsys, tm
     assert words in err, err
 
 
-@pytest.mark.parametrize("what", ["missing", "empty"])
+@pytest.mark.parametrize("what", ["missing", "empty", "not a video", "a photo cut short",
+                                  "text named .png"])
 def test_a_camera_file_that_is_not_there_is_named_before_the_vehicle_is_opened(capsys, tmp_path,
                                                                               what):
     """``--camera file://...`` naming a file that is not there (a typo) or empty: the pilot
@@ -327,6 +328,19 @@ def test_a_camera_file_that_is_not_there_is_named_before_the_vehicle_is_opened(c
     path = tmp_path / "flihgt.mkv"
     if what == "empty":
         path.write_bytes(b"")
+    elif what == "not a video":  # until 2026-11-28 these three were opened after the vehicle
+        path = tmp_path / "notes.mp4"
+        path.write_text("not a video\n")
+    elif what == "a photo cut short":
+        import cv2
+        import numpy as np
+
+        path = tmp_path / "pad.png"
+        cv2.imwrite(str(path), np.random.default_rng(1).integers(0, 255, (48, 64, 3), np.uint8))
+        path.write_bytes(path.read_bytes()[:200])
+    elif what == "text named .png":
+        path = tmp_path / "pad.png"
+        path.write_text("not a photo\n")
     uri = f"file://{path}?fov_deg=60"
     with socket.create_server(("127.0.0.1", 0)) as board:
         board.settimeout(0.0)
@@ -336,9 +350,13 @@ def test_a_camera_file_that_is_not_there_is_named_before_the_vehicle_is_opened(c
             board.accept()
     err = capsys.readouterr().err
     assert status == 2, err
-    words = "no such file" if what == "missing" else "an empty file"
-    assert err == (f"skeye pilot: error: --camera: camera {uri}: cannot open {path} as a video "
-                   f"({words})\n"), err
+    words = {"missing": f"cannot open {path} as a video (no such file)",
+             "empty": f"cannot open {path} as a video (an empty file)",
+             "not a video": f"cannot open {path} as a video (not a video, or one cut short",
+             "a photo cut short": f"{path} is truncated or corrupt",
+             "text named .png": f"cannot open {path} as a video (not a video"}[what]
+    assert err.startswith(f"skeye pilot: error: --camera: camera {uri}: {words}"), err
+    assert err.count("\n") == 1, err
 
 
 def test_a_start_pose_the_world_lacks_names_the_start_option(capsys):
