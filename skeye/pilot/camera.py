@@ -28,10 +28,12 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol, cast, runtime_checkable
+from urllib.parse import parse_qs
 
 import numpy as np
 
 from skeye.errors import LocalProtocolError, SkeyeError
+from skeye.uris import split_uri
 
 
 class CameraError(SkeyeError):
@@ -164,6 +166,17 @@ def open_camera(uri: str, options: CameraOptions | None = None) -> CameraSource:
         CameraError: the camera cannot be opened (no such device or file).
     """
     return cast(CameraSource, _entry(BACKENDS, camera_scheme(uri))(uri, options or CameraOptions()))
+
+
+def needs_fov_option(uri: str) -> bool:
+    """Whether a camera URI (already checked) leaves its field of view unknown: a ``v4l2://``
+    or ``file://`` camera without ``fov_deg=``/``fov_rad=``, whose frames carry none (a
+    ``sim://`` camera's is the simulator's). Without ``--calibration`` the pad detector needs it,
+    so ``skeye pilot`` says so before it opens the vehicle."""
+    if camera_scheme(uri) == "sim":
+        return False
+    query = parse_qs(split_uri(uri, "camera", "SCHEME://...").query, keep_blank_values=True)
+    return fov_option(uri, query) is None
 
 
 def fov_option(uri: str, query: Mapping[str, list[str]]) -> float | None:

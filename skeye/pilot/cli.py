@@ -56,7 +56,7 @@ from skeye.pilot.airframe import (
     open_airframe,
 )
 from skeye.pilot.boards import BoardSettings
-from skeye.pilot.camera import CameraError, check_camera_uri
+from skeye.pilot.camera import CameraError, check_camera_uri, needs_fov_option
 from skeye.pilot.envelope import FlightEnvelope
 from skeye.pilot.server import DEFAULT_PORT, PilotServer
 from skeye.pilot.video_server import (
@@ -185,6 +185,8 @@ def run(args: argparse.Namespace) -> int:
             calibration = load_calibration(args.calibration)
         except ConfigError as exc:
             return _error(f"--calibration: {exc}")
+    elif camera_uri is not None and needs_fov_option(camera_uri):  # before the vehicle opens
+        return _error(fov_unknown_problem(camera_uri))
     try:
         latency_s = vision_latency_s(args.vision_latency_ms)
         check_policy_options(args)
@@ -266,9 +268,7 @@ def run(args: argparse.Namespace) -> int:
                 stack.callback(source.close)
                 fov_h_rad = source.fov_h_rad
                 if calibration is None and fov_h_rad is None:
-                    return _error(f"--camera {camera_uri}: its field of view is not known: "
-                                  "add fov_deg= to the URI, or give --calibration camera.toml "
-                                  "(skeye calibrate)")
+                    return _error(fov_unknown_problem(camera_uri))
                 if source.lost:  # the pilot runs on: a warning, as skeye calibrate's
                     _warn(f"{source.lost}; the pad modes hold still until it gives frames")
                 camera_name = camera_uri
@@ -420,6 +420,12 @@ def shared_port_problem(args: argparse.Namespace) -> str | None:
                 return (f"{scheme.upper()} port {port} is given to both {other} and {what}; "
                         "give each its own port")
     return None
+
+
+def fov_unknown_problem(camera_uri: str) -> str:
+    """The refusal of a ``--camera`` URI whose field of view nothing gives."""
+    return (f"--camera {camera_uri}: its field of view is not known: add fov_deg= to the URI, "
+            "or give --calibration camera.toml (skeye calibrate)")
 
 
 def _error(message: str) -> int:

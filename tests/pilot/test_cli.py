@@ -596,3 +596,28 @@ def test_lockstep_options_on_a_realtime_simulator_are_a_warning(capsys, tmp_path
         assert pilot_cli.run(args) == 2
     (error,) = capsys.readouterr().err.splitlines()
     assert error.startswith("skeye pilot: error: --serial: "), error
+
+
+@pytest.mark.parametrize("camera", ["file://{tmp}/pad.png", "v4l2:///dev/video63?width=800"])
+def test_a_camera_whose_field_of_view_nothing_gives_is_named_before_the_vehicle(capsys, tmp_path,
+                                                                              camera):
+    """``--camera file://pad.png`` or ``v4l2:///dev/video0`` (the first table of
+    docs/onboard.md, copied as written) with no ``fov_deg=`` and no ``--calibration``: the pad
+    detector cannot work, and the pilot says so with exit status 2. Until 2026-11-28 it said it
+    only after opening the vehicle (connecting to the LL board, spawning a robot), so a vehicle
+    that did not answer (here a closed port) ended it with status 4 and the missing option
+    unsaid. A ``sim://`` camera's field of view is the simulator's: not asked for."""
+    import cv2
+    import numpy as np
+
+    from skeye.cli import main
+
+    cv2.imwrite(str(tmp_path / "pad.png"), np.zeros((48, 64, 3), np.uint8))
+    uri = camera.format(tmp=tmp_path)
+    status = main(["pilot", "--airframe", f"asctec-ll://tcp/127.0.0.1:{_unused_port()}",
+                   "--port", "0", "--camera", uri])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err == (f"skeye pilot: error: --camera {uri}: its field of view is not known: add "
+                   "fov_deg= to the URI, or give --calibration camera.toml (skeye "
+                   "calibrate)\n"), err
