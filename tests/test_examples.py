@@ -13,7 +13,7 @@ from tests.control.conftest import sim_running
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
-NEEDS_IMAGES = {"camera.py", "capture_checkerboard.py"}
+NEEDS_IMAGES = {"camera.py", "capture_checkerboard.py", "record_camera.py"}
 WORLDS = {"capture_checkerboard.py": "checkerboard"}
 
 
@@ -44,6 +44,17 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
     if script.name == "camera.py":
         assert (tmp_path / "camera.png").stat().st_size > 1000
         assert "(600, 800, 3)" in done.stdout
+    if script.name == "record_camera.py":  # the pilot's file:// camera plays it
+        from skeye.pilot.camera import open_camera
+
+        assert "40 frames of 800x600" in done.stdout, done.stdout
+        uri = done.stdout.split("--camera '")[1].split("'")[0]
+        source = open_camera(uri.replace("file://", f"file://{tmp_path}/"))
+        try:
+            assert source.fov_h_rad is not None and source.latest is not None
+            assert source.image().bgr.shape == (600, 800, 3)
+        finally:
+            source.close()
     if script.name == "capture_checkerboard.py":  # the frames calibrate the default camera
         from skeye.cli import main
         from skeye.robots.config import camera_model

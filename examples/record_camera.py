@@ -1,0 +1,39 @@
+"""Record the downward camera over the pad as a lossless video, for ``--camera file://``.
+
+Hovers 0.8 m over the pad, records 40 frames into FFV1 in MKV (the very pixels: the pilot's
+detector gives the live detections again) at the camera's own frame rate, and lands. Needs the
+simulator's image server: ``skeye sim --image-port 5003`` ($SKEYE_IMAGES). Play it with
+``skeye pilot ... --camera 'file://flight.mkv?fov_rad=0.952105'`` (the printed URI).
+"""
+
+import os
+
+import cv2
+
+import skeye
+
+sim_address = os.environ.get("SKEYE_SIM", "127.0.0.1:3000")
+images = os.environ.get("SKEYE_IMAGES", "127.0.0.1:5003")
+path = os.environ.get("SKEYE_VIDEO_OUT", "flight.mkv")
+with skeye.connect(sim_address, images=images) as sim:
+    copter = sim.spawn("hummingbird", start="Pad1")
+    fov_rad = sim.request("GETCONF", ("Type", "Camera"), ("Name", "Down")).get_float("FOV")
+    copter.take_off(0.8)
+    frames, times = [], []
+    while len(frames) < 40:
+        copter.camera.wait_next()
+        image = copter.camera.image()
+        if not times or image.time_s > times[-1]:
+            frames.append(image.bgr)
+            times.append(image.time_s)
+    copter.land()
+fps = (len(times) - 1) / (times[-1] - times[0])
+height, width = frames[0].shape[:2]
+writer = cv2.VideoWriter(path, cv2.VideoWriter.fourcc(*"FFV1"), fps, (width, height))
+if not writer.isOpened():
+    raise SystemExit(f"this OpenCV cannot write FFV1 video to {path}")
+for frame in frames:
+    writer.write(frame)
+writer.release()
+print(f"saved {path}: {len(frames)} frames of {width}x{height} at {fps:g} fps")
+print(f"play it: skeye pilot ... --camera 'file://{path}?fov_rad={fov_rad!r}'")
