@@ -25,6 +25,7 @@ of more pixels than FFmpeg decodes is refused naming the size its header declare
 from __future__ import annotations
 
 import math
+import os
 import threading
 from pathlib import Path
 from urllib.parse import parse_qs, unquote
@@ -148,6 +149,19 @@ def _too_large(path: Path) -> str | None:
             f"{FFMPEG_MAX_PIXELS / 1e6:.0f} million): give a smaller copy")
 
 
+FFMPEG_LOG_LEVEL = "8"
+"""AV_LOG_FATAL: FFmpeg's own messages about a file it cannot read ("moov atom not found",
+"Invalid PNG signature") are not printed (OpenCV reads ``OPENCV_FFMPEG_LOGLEVEL`` when its
+FFmpeg reader first opens a file); the camera's refusal says what is wrong in one line. A
+``OPENCV_FFMPEG_LOGLEVEL`` already set (32: FFmpeg's errors and warnings) is kept."""
+
+
+def _video_capture(path: Path) -> cv2.VideoCapture:
+    """OpenCV's reader of ``path``, FFmpeg's own log quiet unless the environment asks for it."""
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", FFMPEG_LOG_LEVEL)
+    return cv2.VideoCapture(str(path))
+
+
 class FileCamera:
     """A video file, paced at its frame rate on the vehicle's clock."""
 
@@ -165,7 +179,7 @@ class FileCamera:
             problem = None  # VideoCapture says what is wrong with the file
         if problem is not None:
             raise CameraError(f"camera {uri}: {path} is truncated or corrupt: {problem}")
-        self._cap = cv2.VideoCapture(str(path))
+        self._cap = _video_capture(path)
         if not self._cap.isOpened():
             raise CameraError(f"camera {uri}: cannot open {path} as a video ({_why_not(path)})")
         file_fps = self._cap.get(cv2.CAP_PROP_FPS)
@@ -248,7 +262,7 @@ class FileCamera:
         """Open the file again, at its first frame (a loop). Not a seek to frame 0: OpenCV's
         reader of a single image (a photo) ignores that, and its next read fails."""
         self._cap.release()
-        self._cap = cv2.VideoCapture(str(self.path))
+        self._cap = _video_capture(self.path)
         if not self._cap.isOpened():
             self._ended = True
             self._loop_failed = f"cannot open {self.path} again to loop it ({_why_not(self.path)})"

@@ -621,3 +621,26 @@ def test_a_camera_whose_field_of_view_nothing_gives_is_named_before_the_vehicle(
     assert err == (f"skeye pilot: error: --camera {uri}: its field of view is not known: add "
                    "fov_deg= to the URI, or give --calibration camera.toml (skeye "
                    "calibrate)\n"), err
+
+
+@pytest.mark.parametrize("name", ["notes.mp4", "notes.png"])
+def test_a_camera_file_that_is_no_video_is_refused_in_one_line(tmp_path, name):
+    """``skeye pilot --camera file://notes.mp4`` (a text file): the refusal is one line. Until
+    2026-11-28 FFmpeg's own message came first on the pilot's stderr (``[mov,mp4,... @ 0x...]
+    moov atom not found``, ``[png @ 0x...] Invalid PNG signature``), written by the library to
+    the process's stderr, so a process of its own is run here."""
+    import os
+    import sys
+
+    path = tmp_path / name
+    path.write_text("not a video\n")
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    done = subprocess.run(
+        [sys.executable, "-m", "skeye", "pilot", "--airframe",
+         f"asctec-ll://tcp/127.0.0.1:{_unused_port()}", "--port", "0",
+         "--camera", f"file://{path}?fov_deg=60"],
+        capture_output=True, text=True, timeout=60, env=env, stdin=subprocess.DEVNULL)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith(f"skeye pilot: error: --camera: camera file://{path}"), \
+        done.stderr
+    assert done.stderr.count("\n") == 1, done.stderr
