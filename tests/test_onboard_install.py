@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -125,7 +126,7 @@ def test_the_onboard_pilot_flies_the_emulated_ll_board(onboard_venv):
          "--ll-board", "R1=pty"],
         [r"plays an AscTec LL board on \S+ \(skeye pilot --airframe (\S+)\)"], "skeye sim")
     try:
-        uri = found[0].group(1)
+        uri = shlex.split(found[0].group(1))[0]  # printed quoted for a shell
         pilot = subprocess.Popen(
             [str(onboard_venv / "bin" / "skeye"), "pilot", "--airframe", uri, "--port", "0",
              "--lockstep-rate", "0"],

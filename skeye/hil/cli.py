@@ -18,6 +18,7 @@ pilot`` does). The start-up line names the ``skeye pilot --airframe`` URI to use
 from __future__ import annotations
 
 import math
+import shlex
 from contextlib import ExitStack
 from dataclasses import dataclass
 
@@ -177,6 +178,9 @@ def describe(server: LLBoardServer, image_port: int | None = None,
     camera = ""
     if image_port is not None and server.camera is not None:
         name, fov = server.camera
-        camera = (f" --camera sim://{host}:{image_port}/{server.name}/{name}?fov_rad={fov!r}")
+        camera = " --camera " + shlex.quote(
+            f"sim://{host}:{image_port}/{server.name}/{name}?fov_rad={fov!r}")
+    # quoted for a shell: unquoted, a serial line's "?baud=57600&lockstep=1" ran the pilot in
+    # the background without lockstep, and zsh refuses a "?" that matches no file
     return (f"{server.name} plays an AscTec LL board on {server.line.address} "
-            f"(skeye pilot --airframe {uri}{camera})")
+            f"(skeye pilot --airframe {shlex.quote(uri)}{camera})")

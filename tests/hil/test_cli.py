@@ -52,3 +52,42 @@ def test_a_baud_that_is_no_serial_rate_is_refused_naming_it(baud, capsys):
     assert main(["sim", "--port", "0", "--ll-board", f"R1=serial:/dev/ttyUSB0,baud={baud}"]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and f"baud={baud}" in err, err
+
+
+def test_the_start_up_line_is_a_command_a_shell_runs_as_printed(tmp_path):
+    """The start-up line's ``skeye pilot`` options, pasted into a shell (docs/onboard.md says
+    to), give the pilot the URIs the simulator meant. Until 2026-11-28 they were printed
+    unquoted: a serial board in lockstep (``asctec-ll://serial/dev/ttyUSB0?baud=57600&lockstep=1``)
+    ran the pilot in the background at ``?baud=57600`` without lockstep, and zsh refused
+    the ``?`` of every URI ("no matches found"). The board here is a fake vehicle's on a real
+    serial line (the far end of a pseudo-terminal); the shell is bash, as run."""
+    import os
+    import shlex
+    import subprocess
+    import time
+
+    from skeye.hil.cli import describe
+    from skeye.hil.line import open_line
+    from skeye.hil.ll_server import LLBoardServer
+    from tests.pilot.fake_airframe import FakeAirframe
+
+    master, slave = os.openpty()
+    device = os.ttyname(slave)
+    try:
+        with LLBoardServer(FakeAirframe(), open_line("serial", device=device), time.monotonic,
+                           lockstep=True) as board:
+            board.camera = ("Down", 0.952105)
+            line = describe(board, image_port=5003)
+    finally:
+        os.close(slave)
+        os.close(master)
+    command = re.search(r"\(skeye pilot (.*)\)$", line)
+    assert command, line
+    (tmp_path / "a?b").write_text("")  # a file a bare "?" would match
+    shell = subprocess.run(["bash", "-c", f"printf '%s\\n' {command.group(1)}"], cwd=tmp_path,
+                           capture_output=True, text=True, timeout=10)
+    assert shell.returncode == 0, shell.stderr
+    assert shell.stdout.splitlines() == [
+        "--airframe", f"asctec-ll://serial{device}?baud=57600&lockstep=1",
+        "--camera", "sim://127.0.0.1:5003/R1/Down?fov_rad=0.952105"], line
+    assert shlex.split(command.group(1))[1].endswith("&lockstep=1")
