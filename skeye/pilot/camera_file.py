@@ -66,6 +66,10 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
     path = unquote(netloc + parts.path)
     if not path:
         raise LocalProtocolError(f"camera {uri!r}: expected file://PATH (a video file)")
+    if any(ord(c) < 0x20 or c == "\x7f" for c in path):  # frames/%04d.png: %04 is \x04
+        raise LocalProtocolError(f"camera {uri!r}: the name decodes to {path!r}, with a control "
+                                 "character: '%' starts an escape in a URI, write a '%' in a "
+                                 "file's name as %25")
     query = parse_qs(parts.query, keep_blank_values=True)
     unknown = sorted(set(query) - {"fps", "loop", "fov_deg", "fov_rad"})
     if unknown:

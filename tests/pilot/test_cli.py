@@ -644,3 +644,18 @@ def test_a_camera_file_that_is_no_video_is_refused_in_one_line(tmp_path, name):
     assert done.stderr.startswith(f"skeye pilot: error: --camera: camera file://{path}"), \
         done.stderr
     assert done.stderr.count("\n") == 1, done.stderr
+
+
+def test_a_camera_file_name_that_decodes_to_a_control_character_is_refused(capsys, tmp_path):
+    """``--camera file://frames/%04d.png`` (a printf pattern, as OpenCV and FFmpeg write image
+    sequences): ``%04`` is a URI escape, the byte 0x04, and the pilot said ``cannot open
+    frames/d.png as a video (no such file)``, the control character invisible. Now the URI
+    is refused naming the decoded name and how a ``%`` is written."""
+    from skeye.cli import main
+
+    uri = f"file://{tmp_path}/%04d.png?fov_deg=60"
+    status = main(["pilot", "--airframe", f"asctec-ll://tcp/127.0.0.1:{_unused_port()}",
+                   "--port", "0", "--camera", uri])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "\\x04d.png" in err and "%25" in err and "\x04" not in err, err
