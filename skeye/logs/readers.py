@@ -178,9 +178,10 @@ def read_ulog(path: Path) -> ImuLog:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # pyulog raises bare exceptions on a damaged file
         raise ConfigError(f"{path}: not a readable ULog file: {exc}") from None
-    damage = "; ".join(line.strip() for line in said.getvalue().splitlines() if line.strip())
-    if ulog.file_corruption and not damage:
-        damage = "damaged messages skipped"
+    words = "; ".join(line.strip() for line in said.getvalue().splitlines() if line.strip())
+    # Damage is what pyulog flags as such; it also prints notes on a whole file ("unknown file
+    # version", a longer flag bits message: a newer PX4's), which are passed on, not damage.
+    damage = (words or "damaged messages skipped") if ulog.file_corruption else ""
     # A topic logged in several instances is read from its lowest (0, the primary), as pyulog's
     # get_dataset takes it by default.
     topics: dict[str, dict[str, Any]] = {}
@@ -198,6 +199,8 @@ def read_ulog(path: Path) -> ImuLog:
     if damage:  # what pyulog read around the damage is used; a hole in it is a gap, refused
         log.warning("%s: the ULog file is damaged, pyulog skipped what it could not read (%s)",
                     path, damage)
+    elif words:
+        log.warning("%s: pyulog: %s", path, words)
     _ulog_fields(path, "sensor_combined", imu, ["timestamp"]
                  + [f"{v}[{i}]" for v in ("gyro_rad", "accelerometer_m_s2") for i in range(3)])
     t = np.asarray(imu["timestamp"], dtype=float)

@@ -542,6 +542,22 @@ def test_a_ulog_cut_short_or_damaged_is_said_so_on_stderr_not_in_the_table(
     assert any("the ULog file is damaged" in r.getMessage() for r in caplog.records)
 
 
+
+def test_a_whole_ulog_pyulog_only_remarks_on_is_not_called_damaged(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        caplog: pytest.LogCaptureFixture) -> None:
+    # pyulog prints notes on a whole file too: a newer format version ("Warning: unknown file
+    # version. Will attempt to read it anyway") was warned of as a damaged file, pyulog having
+    # "skipped what it could not read", where it skipped nothing
+    data = bytearray(make_logs.write_ulog(tmp_path / "whole.ulg", synthetic(6.0)).read_bytes())
+    data[7] = 2  # the file format's version
+    (tmp_path / "v2.ulg").write_bytes(bytes(data))
+    assert main(["logs", str(tmp_path / "v2.ulg")]) == 0
+    assert capsys.readouterr().out.startswith(f"Log: {tmp_path / 'v2.ulg'} (")
+    said = [r.getMessage() for r in caplog.records if r.name == "skeye.logs.readers"]
+    assert said == [f"{tmp_path / 'v2.ulg'}: pyulog: Warning: unknown file version. Will "
+                    "attempt to read it anyway"], said
+
 def test_a_log_sampled_too_slowly_for_the_vibration_figure_gets_none(
         flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # a 20 Hz log (a PX4 logger's slow profile) samples nothing above 10 Hz: the table read a
