@@ -426,25 +426,27 @@ def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> Non
     """Each ``(option, path, write)``: written to a partial file beside ``path``, then all
     renamed into place. A write that fails (a full disk, a folder that takes no new file) is
     refused naming its option and leaves no output behind: the --json file was left whole
-    after the --plot failed, and a file cut short where the disk filled."""
-    partials: list[tuple[str, Path, Path]] = []
+    after the --plot failed, and a file cut short where the disk filled. A symbolic link is
+    written through, as a plain write does: the file it names is replaced, the link kept."""
+    partials: list[tuple[str, Path, Path, Path]] = []
     try:
         for option, path, write in writes:
-            partial = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
-            partials.append((option, path, partial))
+            target = Path(os.path.realpath(path))  # a link renamed over would be no link
+            partial = target.with_name(f".{target.stem}.{os.getpid()}.partial{target.suffix}")
+            partials.append((option, path, target, partial))
             try:
                 write(partial)
             except OSError as exc:
                 raise ConfigError(f"{option} {path}: cannot write it: "
                                   f"{exc.strerror or exc}") from None
-        for option, path, partial in partials:
+        for option, path, target, partial in partials:
             try:
-                os.replace(partial, path)
+                os.replace(partial, target)
             except OSError as exc:
                 raise ConfigError(f"{option} {path}: cannot write it: "
                                   f"{exc.strerror or exc}") from None
     finally:
-        for _, _, partial in partials:
+        for _, _, _, partial in partials:
             with contextlib.suppress(OSError):
                 partial.unlink(missing_ok=True)
 

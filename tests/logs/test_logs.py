@@ -653,3 +653,18 @@ def test_a_figure_that_cannot_be_written_leaves_no_output_behind(
     assert json.loads(figures.read_text())["log"] == str(folder)
     assert (tmp_path / "s.png").stat().st_size > 10_000
     assert sorted(p.name for p in tmp_path.iterdir()) == ["MH_out", "f.json", "s.png"]
+
+
+def test_a_figure_written_to_a_symbolic_link_is_written_through_it(tmp_path: Path) -> None:
+    # the partial file was renamed over the link itself: the link became a plain file and the
+    # file it named (results/latest.json -> a run's own) kept the old figures
+    folder = make_logs.write_euroc(tmp_path / "MH_link", synthetic(3.0))
+    (tmp_path / "runs").mkdir()
+    run = tmp_path / "runs" / "run1.json"
+    run.write_text("{}")
+    latest = tmp_path / "latest.json"
+    latest.symlink_to(run)
+    assert main(["logs", str(folder), "--json", str(latest)]) == 0
+    assert latest.is_symlink() and latest.resolve() == run.resolve()
+    assert json.loads(run.read_text())["log"] == str(folder)
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["run1.json"]
