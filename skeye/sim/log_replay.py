@@ -425,7 +425,8 @@ def cmd_logs(args: argparse.Namespace) -> int:
 def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> None:
     """Each ``(option, path, write)``: written to a partial file beside ``path``, then all
     renamed into place. A write that fails (a full disk, a folder that takes no new file) is
-    refused naming its option and leaves no output behind: the --json file was left whole
+    refused naming its option and leaves no output behind (a rename that fails removes those
+    renamed before it): the --json file was left whole
     after the --plot failed, and a file cut short where the disk filled. A symbolic link is
     written through, as a plain write does: the file it names is replaced, the link kept."""
     partials: list[tuple[str, Path, Path, Path]] = []
@@ -439,12 +440,17 @@ def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> Non
             except OSError as exc:
                 raise ConfigError(f"{option} {path}: cannot write it: "
                                   f"{exc.strerror or exc}") from None
+        placed: list[Path] = []
         for option, path, target, partial in partials:
             try:
                 os.replace(partial, target)
-            except OSError as exc:
+            except OSError as exc:  # the ones renamed already go too: neither is left
+                for done in placed:
+                    with contextlib.suppress(OSError):
+                        done.unlink()
                 raise ConfigError(f"{option} {path}: cannot write it: "
                                   f"{exc.strerror or exc}") from None
+            placed.append(target)
     finally:
         for _, _, _, partial in partials:
             with contextlib.suppress(OSError):

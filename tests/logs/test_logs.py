@@ -10,6 +10,7 @@ import dataclasses
 import gc
 import json
 import math
+import os
 import shutil
 import struct
 import warnings
@@ -668,3 +669,25 @@ def test_a_figure_written_to_a_symbolic_link_is_written_through_it(tmp_path: Pat
     assert latest.is_symlink() and latest.resolve() == run.resolve()
     assert json.loads(run.read_text())["log"] == str(folder)
     assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["run1.json"]
+
+
+def test_a_figure_whose_rename_fails_leaves_the_other_not_written(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # both written, the --json renamed into place, then the --plot's rename refused (a file in a
+    # sticky folder that another user owns): the --json was left, where the docs say neither
+    folder = make_logs.write_euroc(tmp_path / "MH_rename", synthetic(3.0))
+    replace = os.replace
+
+    def refuse_png(src: str | Path, dst: str | Path) -> None:
+        if str(dst).endswith(".png"):
+            raise PermissionError(1, "Operation not permitted")
+        replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", refuse_png)
+    figures = tmp_path / "f.json"
+    assert main(["logs", str(folder), "--json", str(figures), "--plot",
+                 str(tmp_path / "s.png")]) == 2
+    assert capsys.readouterr().err == (f"skeye logs: error: --plot {tmp_path / 's.png'}: cannot "
+                                       "write it: Operation not permitted\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["MH_rename"]
