@@ -638,15 +638,27 @@ def test_imu_times_that_are_not_numbers_are_refused_naming_the_first(
 
 
 def test_a_figure_that_cannot_be_written_leaves_no_output_behind(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # the --json file was written, then the --plot failed (a folder that takes no new file:
-    # /proc here; a full disk), exit 2 with half the outputs there and an OSError naming no
-    # option
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # the --json file was written, then the --plot failed (a full disk; a folder that takes no
+    # new file), exit 2 with half the outputs there and an OSError naming no option. The disk
+    # fills mid-plot here: /proc, which refused the file only to a root user (to any other its
+    # folder is refused as not writable, before anything is written), made the test root's only
+    from skeye.sim import log_replay
+
+    def disk_full(logs: object, path: Path) -> None:
+        path.write_bytes(b"\x89PNG half a figure")
+        raise OSError(28, "No space left on device")
+
     folder = make_logs.write_euroc(tmp_path / "MH_out", synthetic(3.0))
     figures = tmp_path / "f.json"
-    assert main(["logs", str(folder), "--json", str(figures), "--plot", "/proc/spectra.png"]) == 2
+    with monkeypatch.context() as patched:
+        patched.setattr(log_replay, "plot", disk_full)
+        assert main(["logs", str(folder), "--json", str(figures), "--plot",
+                     str(tmp_path / "s.png")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("skeye logs: error: --plot /proc/spectra.png: cannot write it: "), err
+    assert err == (f"skeye logs: error: --plot {tmp_path / 's.png'}: cannot write it: No space "
+                   "left on device\n"), err
     assert not figures.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["MH_out"]  # no partial file either
     assert main(["logs", str(folder), "--json", str(figures), "--plot",
