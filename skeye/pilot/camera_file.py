@@ -95,12 +95,17 @@ def check_file_camera(uri: str) -> None:
     cut short, no frame rate, a first frame that does not decode) is said when ``skeye pilot``
     starts, before it opens the vehicle. Until 2026-11-28 only what the file system tells was
     said so: a text file named ``.mp4`` was found out after the LL board was connected, and a
-    vehicle that did not answer hid it.
+    vehicle that did not answer hid it. A FIFO or a device is only looked at, as before: read
+    once here, a FIFO's video would be gone (its writer ended), and the camera then waited for
+    another writer forever; with none yet, this check waited.
 
     Raises:
         LocalProtocolError: a bad URI; CameraError: a file that cannot be played.
     """
     path, fps, loop, fov = parse_file_camera(uri)
+    _refuse_unplayable(uri, path)
+    if not path.is_file():  # a FIFO or a device: what it gives is read once, by the camera
+        return
     FileCamera(uri, path, CameraOptions(), fps=fps, loop=loop, fov_h_rad=fov).close()
 
 

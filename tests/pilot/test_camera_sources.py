@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import math
 import os
@@ -33,7 +34,13 @@ import pytest
 
 from skeye.control.connection import connect
 from skeye.errors import LocalProtocolError
-from skeye.pilot.camera import CameraError, CameraOptions, CameraSource, open_camera
+from skeye.pilot.camera import (
+    CameraError,
+    CameraOptions,
+    CameraSource,
+    check_camera_uri,
+    open_camera,
+)
 from skeye.pilot.camera_file import parse_file_camera
 from skeye.pilot.camera_sim import parse_sim_camera
 from skeye.pilot.camera_v4l2 import V4l2Settings, parse_v4l2_uri
@@ -708,3 +715,48 @@ def test_a_lockstep_frame_slower_than_the_answer_deadline_still_comes():
         robot = sim.spawn("hummingbird", location_ned_m=(0.0, 0.0, -1.0))
         image = robot.camera.image()
         assert late.delayed and image.frame >= 1 and image.bgr.shape == (600, 800, 3)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+def test_a_video_from_a_fifo_is_checked_without_reading_it(tmp_path):
+    # skeye pilot's check at start opened the file as a video: a FIFO's (a recorder piping into
+    # it) first frames were read there and its writer ended, and the camera then waited for a
+    # writer forever; with no writer yet, the check itself waited
+    frames = [np.full((48, 64, 3), 10 * i, np.uint8) for i in range(5)]
+    record(tmp_path / "flight.mkv", frames, "FFV1")
+    data = (tmp_path / "flight.mkv").read_bytes()
+    fifo = tmp_path / "live.mkv"
+    os.mkfifo(fifo)
+    uri = f"file://{fifo}?fov_deg=60"
+
+    def feed() -> None:
+        with contextlib.suppress(BrokenPipeError), open(fifo, "wb") as f:
+            f.write(data)
+
+    writer = threading.Thread(target=feed, daemon=True)
+    writer.start()
+    opened: list[Any] = []
+    opening = threading.Thread(target=lambda: opened.append(_open_after_check(uri)),
+                               daemon=True)
+    opening.start()
+    opening.join(60.0)  # the work of a moment; the limit only ends a wait that never would
+    if opening.is_alive():  # its open() waits for a writer: writers that write nothing end
+        for _ in range(60):  # it (OpenCV opens the file again with each of its readers)
+            with contextlib.suppress(OSError):
+                os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+            opening.join(1.0)
+            if not opening.is_alive():
+                break
+        pytest.fail("the check read the FIFO's video: the camera then waited for a writer")
+    source = opened[0]
+    try:
+        assert source.image().bgr.shape == (48, 64, 3)
+    finally:
+        source.close()
+    writer.join(60.0)
+
+
+def _open_after_check(uri: str) -> CameraSource:
+    """What skeye pilot does with --camera: the check at start, then the camera."""
+    check_camera_uri(uri)
+    return open_camera(uri)
