@@ -39,6 +39,7 @@ from urllib.parse import parse_qs
 
 from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError, PeerClosed
 from skeye.uris import port_of, split_uri
+from skeye.values import MAX_BAUD, baud_rate
 
 DEFAULT_BAUD = 57600
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
@@ -312,14 +313,10 @@ def parse_uri(uri: str) -> tuple[str, str, int]:
         if unknown:
             raise LocalProtocolError(f"link URI {uri!r}: unknown option(s) {sorted(unknown)}")
         baud_text = query.get("baud", [str(DEFAULT_BAUD)])[-1]
-        try:
-            baud = int(baud_text)
-        except ValueError:
-            raise LocalProtocolError(
-                f"link URI {uri!r}: baud {baud_text!r} is not a number"
-            ) from None
-        if baud <= 0:
-            raise LocalProtocolError(f"link URI {uri!r}: baud must be positive")
+        baud = baud_rate(baud_text)  # the check asctec-ll:// and MAVLink serial links make
+        if baud is None:
+            raise LocalProtocolError(f"link URI {uri!r}: baud={baud_text} is not a whole number "
+                                     f"1..{MAX_BAUD}")
         return scheme, device, baud
     raise LocalProtocolError(f"link URI {uri!r}: scheme must be tcp:// or serial://")
 
