@@ -5,7 +5,8 @@ How this works: reads every image as greyscale, hands them to
 ``calibrateCamera``), writes camera.toml and prints what it found: the images used and
 skipped, the RMS reprojection error, fx, fy, cx, cy and the distortion coefficients. The same
 command serves simulator frames (``skeye snapshot``) and a real camera's. Exit 0 on success,
-2 for bad input (an unreadable image, a bad --board, the board found in too few images).
+2 for bad input (an unreadable image, a bad --board, the board found in too few images, an
+--out that cannot be written: that one checked before any image is read).
 """
 
 from __future__ import annotations
@@ -13,12 +14,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 import cv2
 
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
 from skeye.image_files import read_image_file
+from skeye.outputs import output_file
 from skeye.vision.calibration import (
     DIST_NAMES,
     MAX_SQUARE_M,
@@ -59,6 +62,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     if not args.out.lower().endswith(".toml"):
         return _fail(f"--out must name a .toml file, got {args.out}")
+    try:  # a name that cannot be written costs no search (minutes for a camera's photos)
+        output_file(Path(args.out), "--out")
+    except ConfigError as exc:
+        return _fail(str(exc))
     images = []
     for name in args.images:
         try:

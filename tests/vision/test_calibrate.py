@@ -283,3 +283,21 @@ def test_calibrate_searches_a_large_image_on_a_reduced_copy(
     cal = load_calibration(out)
     assert (cal.width_px, cal.height_px) == (w, h)
     assert abs(cal.fx - f) / f <= 0.01, (cal.fx, f)  # as test_calibrate_recovers_the_lens
+
+
+def test_calibrate_refuses_an_out_it_cannot_write_before_searching(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--out`` in a missing folder, or naming a folder, was found out only after every image
+    had been searched and calibrated (minutes for a camera's full-size photos): here, with
+    frames in which no board is found, the answer was "found in 0 of 3 images" and the --out
+    that could never be written went unsaid. It is now refused first, naming --out."""
+    names = _write(tmp_path, [np.full((480, 640), 128, np.uint8)] * 3)
+    (tmp_path / "folder.toml").mkdir()
+    for out, problem in ((tmp_path / "missing" / "camera.toml",
+                          f"no folder {tmp_path / 'missing'} to write it in"),
+                         (tmp_path / "folder.toml", "is a directory: give a file name"),
+                         (Path(names[0]) / "camera.toml", f"{names[0]} is not a folder")):
+        assert main(["calibrate", *names, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"skeye calibrate: error: --out {out}") and problem in err, err
+        assert err.count("\n") == 1, err
