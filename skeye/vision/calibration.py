@@ -17,12 +17,15 @@ coordinates -> pixels), vectorized; the detector uses it to sample the image at 
 positions, and ``cv2.undistortPoints`` for the way back.
 
 Invariants: a calibration belongs to one image size; using it on frames of another size is an
-error, never a silent rescale. Nothing is rounded when written.
+error, never a silent rescale. Nothing is rounded when written, and a file is written whole or
+not at all (a failed write leaves the previous file as it was).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import time
 import tomllib
 from collections.abc import Callable, Sequence
@@ -198,7 +201,22 @@ class CameraCalibration:
         return "\n".join(lines) + "\n"
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(self.to_toml(), encoding="utf-8")
+        """Write camera.toml whole or not at all: to a partial file beside ``path``, then
+        renamed over it, so a write that fails (a full disk, a file size limit) leaves the
+        file that was there, or none, never one cut short. A symbolic link is written through
+        (the file it names is replaced, the link kept), as a plain write does.
+
+        Raises:
+            OSError: the file could not be written (no partial file is left behind).
+        """
+        target = Path(os.path.realpath(path))  # a link renamed over would be no link
+        partial = target.with_name(f".{target.name}.{os.getpid()}.partial")
+        try:
+            partial.write_text(self.to_toml(), encoding="utf-8")
+            os.replace(partial, target)
+        finally:
+            with contextlib.suppress(OSError):
+                partial.unlink(missing_ok=True)
 
 
 def _number(table: dict[str, Any], key: str, where: str) -> float:

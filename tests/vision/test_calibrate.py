@@ -12,6 +12,10 @@ calibrated end to end in ``tests/validate/test_validate.py``
 from __future__ import annotations
 
 import math
+import os
+import resource
+import subprocess
+import sys
 import tomllib
 import warnings
 from collections.abc import Callable, Iterator
@@ -301,3 +305,31 @@ def test_calibrate_refuses_an_out_it_cannot_write_before_searching(
         err = capsys.readouterr().err
         assert err.startswith(f"skeye calibrate: error: --out {out}") and problem in err, err
         assert err.count("\n") == 1, err
+
+
+def test_a_failed_write_keeps_the_camera_toml_that_was_there(tmp_path: Path) -> None:
+    """camera.toml was written in place: a write that failed part-way (a full disk; here the
+    process's file size limit, ``ulimit -f``, which fails a write past it with EFBIG as a full
+    disk does) truncated the good calibration already there and left 200 bytes of the new one,
+    a file the pilot then refused. It is now written beside and renamed over: the old file is
+    left as it was, and no partial file stays behind."""
+    names = _write(tmp_path, board_views(640, 480, 576.0))
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", *names, "--square-mm", "25", "--out", str(out)]) == 0
+    before = out.read_bytes()
+    limit = 200
+    assert len(before) > limit
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    run = subprocess.run(
+        [sys.executable, "-m", "skeye", "calibrate", *names, "--square-mm", "24", "--out",
+         str(out)],
+        capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2],
+        env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"), preexec_fn=small_files, check=False)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr == f"skeye calibrate: error: cannot write {out}: File too large\n"
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [*(Path(n).name for n in names), "camera.toml"])
