@@ -64,18 +64,8 @@ class Board:
     square_m: float
 
     def __post_init__(self) -> None:
-        if self.cols < 2 or self.rows < 2:
-            raise InvalidArgument(f"a board needs at least 2x2 inner corners, got "
-                                  f"{self.cols}x{self.rows}")
-        if self.cols > MAX_BOARD_CORNERS or self.rows > MAX_BOARD_CORNERS:
-            raise InvalidArgument(f"a board has at most {MAX_BOARD_CORNERS} inner corners a "
-                                  f"side, got {self.cols}x{self.rows}")
-        if not (math.isfinite(self.square_m) and self.square_m > 0):
-            raise InvalidArgument(f"square size must be positive, got {self.square_m} m")
-        if not MIN_SQUARE_M <= self.square_m <= MAX_SQUARE_M:
-            raise InvalidArgument(
-                f"square size must be {MIN_SQUARE_M * 1e3:g}..{MAX_SQUARE_M * 1e3:g} mm (1 um, "
-                f"what light can image, to 10 m), got {self.square_m * 1e3:g} mm")
+        check_corners(self.cols, self.rows)
+        check_square(self.square_m)
 
     @property
     def label(self) -> str:
@@ -86,6 +76,25 @@ class Board:
         grid = np.zeros((self.rows * self.cols, 3), np.float32)
         grid[:, :2] = np.mgrid[0 : self.cols, 0 : self.rows].T.reshape(-1, 2) * self.square_m
         return grid
+
+
+def check_corners(cols: int, rows: int) -> None:
+    """InvalidArgument unless a board of ``cols`` x ``rows`` inner corners can be found."""
+    if cols < 2 or rows < 2:
+        raise InvalidArgument(f"a board needs at least 2x2 inner corners, got {cols}x{rows}")
+    if cols > MAX_BOARD_CORNERS or rows > MAX_BOARD_CORNERS:
+        raise InvalidArgument(f"a board has at most {MAX_BOARD_CORNERS} inner corners a "
+                              f"side, got {cols}x{rows}")
+
+
+def check_square(square_m: float) -> None:
+    """InvalidArgument unless ``square_m`` is a square side from MIN_SQUARE_M to MAX_SQUARE_M."""
+    if not (math.isfinite(square_m) and square_m > 0):
+        raise InvalidArgument(f"square size must be positive, got {square_m} m")
+    if not MIN_SQUARE_M <= square_m <= MAX_SQUARE_M:
+        raise InvalidArgument(
+            f"square size must be {MIN_SQUARE_M * 1e3:g}..{MAX_SQUARE_M * 1e3:g} mm (1 um, "
+            f"what light can image, to 10 m), got {square_m * 1e3:g} mm")
 
 
 def parse_board(text: str) -> tuple[int, int]:
@@ -268,24 +277,39 @@ def load_calibration(path: str | Path) -> CameraCalibration:
     unknown = sorted(set(cal) - {"rms_reprojection_px", "board", "square_mm", "images"})
     if unknown:
         raise ConfigError(f"{cwhere}: unknown key(s) {unknown}")
-    try:
-        if "rms_reprojection_px" in cal:
-            rms = _number(cal, "rms_reprojection_px", cwhere)
-        if "board" in cal:
-            if not isinstance(cal["board"], str):
-                raise ConfigError(f"{cwhere}.board: must be a string like \"9x6\"")
+    # Each value is checked here, naming its key; the dataclasses' own checks say no key.
+    if "rms_reprojection_px" in cal:
+        rms = _number(cal, "rms_reprojection_px", cwhere)
+    if "board" in cal:
+        if not isinstance(cal["board"], str):
+            raise ConfigError(f"{cwhere}.board: must be a string like \"9x6\"")
+        try:
             cols, rows = parse_board(cal["board"])
-            board = Board(cols, rows, _number(cal, "square_mm", cwhere) / 1000.0)
-        if "images" in cal:
-            images = _integer(cal, "images", cwhere)
-        calibration = CameraCalibration(
-            _integer(cam, "width_px", where), _integer(cam, "height_px", where),
-            _number(cam, "fx_px", where), _number(cam, "fy_px", where),
-            _number(cam, "cx_px", where), _number(cam, "cy_px", where),
-            (dist[0], dist[1], dist[2], dist[3], dist[4]), rms, board, images,
-        )
-    except InvalidArgument as exc:
-        raise ConfigError(f"{p}: {exc}") from None
+            check_corners(cols, rows)
+        except InvalidArgument as exc:
+            raise ConfigError(f"{cwhere}.board: {exc}") from None
+        square_m = _number(cal, "square_mm", cwhere) / 1000.0
+        try:
+            check_square(square_m)
+        except InvalidArgument as exc:
+            raise ConfigError(f"{cwhere}.square_mm: {exc}") from None
+        board = Board(cols, rows, square_m)
+    if "images" in cal:
+        images = _integer(cal, "images", cwhere)
+    sizes = {key: _integer(cam, key, where) for key in ("width_px", "height_px")}
+    for key, size in sizes.items():
+        if size < MIN_IMAGE_PX:
+            raise ConfigError(f"{where}.{key}: an image side is at least {MIN_IMAGE_PX} px, "
+                              f"got {size}")
+    focal = {key: _number(cam, key, where) for key in ("fx_px", "fy_px")}
+    for key, f in focal.items():
+        if f <= 0:
+            raise ConfigError(f"{where}.{key}: a focal length must be positive, got {f!r}")
+    calibration = CameraCalibration(
+        sizes["width_px"], sizes["height_px"], focal["fx_px"], focal["fy_px"],
+        _number(cam, "cx_px", where), _number(cam, "cy_px", where),
+        (dist[0], dist[1], dist[2], dist[3], dist[4]), rms, board, images,
+    )
     check_lens(calibration, where)
     return calibration
 

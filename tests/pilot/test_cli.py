@@ -154,6 +154,15 @@ def test_pilot_calibration_is_checked_before_anything_starts(capsys, tmp_path):
     assert pilot_cli.run(args) == 2
     err = capsys.readouterr().err
     assert "--calibration" in err and "missing required key" in err
+    # a hand-edited focal length is named by its key (it was "fx and fy must be positive")
+    text = CameraCalibration.pinhole(320, 240, 1.0).to_toml()
+    (tmp_path / "camera.toml").write_text(
+        "\n".join("fx_px = -400.0" if line.startswith("fx_px") else line
+                  for line in text.splitlines()))
+    assert pilot_cli.run(args) == 2
+    err = capsys.readouterr().err
+    assert err == (f"skeye pilot: error: --calibration: {tmp_path / 'camera.toml'}: [camera]"
+                   ".fx_px: a focal length must be positive, got -400.0\n"), err
 
 
 def test_pilot_hands_the_calibration_to_the_detector():

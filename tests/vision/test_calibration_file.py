@@ -30,7 +30,15 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("old", "new", "problem"),
     [
-        ("fx_px = 521.3", "fx_px = -5.0", "fx and fy must be positive"),
+        # A hand-edited value the dataclass refuses was not named by its key ("fx and fy
+        # must be positive", "image size must be at least 16x16", "a board needs ...").
+        ("fx_px = 521.3", "fx_px = -5.0", "[camera].fx_px: a focal length must be positive"),
+        ("fy_px = 520.9", "fy_px = 0.0", "[camera].fy_px: a focal length must be positive"),
+        ("width_px = 800", "width_px = 4", "[camera].width_px: an image side is at least 16"),
+        ("height_px = 600", "height_px = -600", "[camera].height_px: an image side is at least"),
+        ('board = "9x6"', 'board = "1x1"', "[calibration].board: a board needs at least 2x2"),
+        ("square_mm = 25.0", "square_mm = 0.0", "[calibration].square_mm: square size must be"),
+        ("square_mm = 25.0", "square_mm = 1e9", "[calibration].square_mm: square size must be"),
         ("fx_px = 521.3", 'fx_px = "wide"', "[camera].fx_px: must be a finite number"),
         ("width_px = 800", "width_px = 800.5", "[camera].width_px: must be an integer"),
         ("width_px = 800\n", "", "missing required key width_px"),
@@ -41,7 +49,7 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ("height_px = 600", "height_px = 65536",
          "[camera].height_px: an image side is at most 65535 px"),
         ("k1 = -0.21", "kappa = -0.21", "unknown key(s) ['kappa']"),
-        ('board = "9x6"', 'board = "nine"', "COLSxROWS"),
+        ('board = "9x6"', 'board = "nine"', "[calibration].board: board must be COLSxROWS"),
         ("format = 1", "format = 7", "format must be 1"),
         ("[camera]", "[lens]", "unknown key(s) ['lens']"),
         # A camera no lens makes (fx 1e-300 used to be blamed on vision detect's --fov, the
