@@ -235,7 +235,8 @@ def test_calibrate_bounds_the_square_size_with_one_line(tmp_path: Path,
     square size, so both bounds calibrate exactly as 25 mm does."""
     names = _write(tmp_path, board_views(640, 480, 576.0))
     out = tmp_path / "camera.toml"
-    for given in ("1e308", "1e-300", "0.0009", "10001"):
+    # inf (1e400 too) and nan were "must be positive, got inf": inf is positive
+    for given in ("1e308", "1e-300", "0.0009", "10001", "inf", "1e400", "nan", "0", "-3"):
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # no numpy overflow warning either
             status = main(["calibrate", *names, "--square-mm", given, "--out", str(out)])
