@@ -455,15 +455,16 @@ def calibrate(
         raise LocalProtocolError(
             f"{images[0][0]} is {size[1]}x{size[0]}: a calibration image must be at least "
             f"{MIN_IMAGE_PX}x{MIN_IMAGE_PX} px")
+    for name, grey in images:  # all before any search (seconds an image for a camera's photos)
+        if grey.shape[:2] != size:
+            raise LocalProtocolError(
+                f"{name} is {grey.shape[1]}x{grey.shape[0]}, the first image "
+                f"{size[1]}x{size[0]}: all images must come from one camera at one resolution")
     obj = board.object_points()
     object_points, image_points = [], []
     used: list[str] = []
     skipped: list[str] = []
     for name, grey in images:
-        if grey.shape[:2] != size:
-            raise LocalProtocolError(
-                f"{name} is {grey.shape[1]}x{grey.shape[0]}, the first image "
-                f"{size[1]}x{size[0]}: all images must come from one camera at one resolution")
         started = time.monotonic()
         corners = find_corners(grey, board)
         if progress is not None and max(size) > DETECT_MAX_PX:

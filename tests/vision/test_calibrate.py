@@ -334,3 +334,19 @@ def test_a_failed_write_keeps_the_camera_toml_that_was_there(tmp_path: Path) -> 
     assert out.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         [*(Path(n).name for n in names), "camera.toml"])
+
+
+def test_calibrate_refuses_mixed_sizes_before_searching(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Images of another size than the first were found out only when the search reached them:
+    every image before was searched first (a line on stderr each for a camera's large photos,
+    2-3 s each for 2200x1600 here). The sizes are now compared before any search."""
+    first, other = tmp_path / "first.png", tmp_path / "other.png"
+    assert cv2.imwrite(str(first), np.full((1600, 2200), 128, np.uint8))
+    assert cv2.imwrite(str(other), np.full((1600, 2100), 128, np.uint8))
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", str(first), str(other), "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        f"skeye calibrate: error: {other} is 2100x1600, the first image 2200x1600: all images "
+        "must come from one camera at one resolution\n")
+    assert not out.exists()
