@@ -255,7 +255,8 @@ def load_calibration(path: str | Path) -> CameraCalibration:
     if unknown:
         raise ConfigError(f"{p}: unknown key(s) {unknown}; known: format, [camera], "
                           "[calibration]")
-    if data.get("format", FORMAT_VERSION) != FORMAT_VERSION:
+    fmt = data.get("format", FORMAT_VERSION)  # true and 1.0 equal 1 in Python: not in TOML
+    if isinstance(fmt, bool) or not isinstance(fmt, int) or fmt != FORMAT_VERSION:
         raise ConfigError(f"{p}: format must be {FORMAT_VERSION}, got {data.get('format')!r}")
     cam = data.get("camera")
     if not isinstance(cam, dict):

@@ -51,6 +51,9 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ("k1 = -0.21", "kappa = -0.21", "unknown key(s) ['kappa']"),
         ('board = "9x6"', 'board = "nine"', "[calibration].board: board must be COLSxROWS"),
         ("format = 1", "format = 7", "format must be 1"),
+        # a boolean and a float: read as format 1 (True == 1.0 == 1 in Python)
+        ("format = 1", "format = true", "format must be 1, got True"),
+        ("format = 1", "format = 1.0", "format must be 1, got 1.0"),
         ("[camera]", "[lens]", "unknown key(s) ['lens']"),
         # A camera no lens makes (fx 1e-300 used to be blamed on vision detect's --fov, the
         # others to load and find nothing).
