@@ -428,6 +428,10 @@ def _find_corners(grey: np.ndarray, board: Board) -> np.ndarray | None:
     return corners.astype(np.float32) if ok else None
 
 
+MISSING_NAMED = 5
+"""Images without the board a refusal for too few boards names (the rest are counted)."""
+
+
 @dataclass(frozen=True)
 class CalibrationResult:
     calibration: CameraCalibration
@@ -481,9 +485,18 @@ def calibrate(
         image_points.append(corners)
         used.append(name)
     if len(used) < min_images:
+        found = f"the {board.label} board was found in {len(used)} of {len(images)} images"
+        if not used:  # in none: most likely the wrong count of corners
+            raise LocalProtocolError(f"{found}; at least {min_images} are needed (is --board "
+                                     "the count of INNER corners, COLSxROWS?)")
+        # in some: --board is right, the frames are too few or miss the board; name those
+        missing = ", ".join(skipped[:MISSING_NAMED])
+        if len(skipped) > MISSING_NAMED:
+            missing += f" and {len(skipped) - MISSING_NAMED} more"
         raise LocalProtocolError(
-            f"the {board.label} board was found in {len(used)} of {len(images)} images; at least "
-            f"{min_images} are needed (is --board the count of INNER corners, COLSxROWS?)")
+            f"{found}{f' (not in {missing})' if skipped else ''}; at least {min_images} are "
+            "needed: take more frames, each with the whole board in view, sharp and without "
+            "glare")
     height, width = size
     rms, k, dist, rvecs, tvecs = cv2.calibrateCamera(
         object_points, image_points, (width, height), None, None

@@ -350,3 +350,31 @@ def test_calibrate_refuses_mixed_sizes_before_searching(
         f"skeye calibrate: error: {other} is 2100x1600, the first image 2200x1600: all images "
         "must come from one camera at one resolution\n")
     assert not out.exists()
+
+
+def test_too_few_boards_names_the_frames_without_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """With the board found in some frames but fewer than 3, the refusal named none of the
+    frames it was not found in (docs/calibration.md: the images without a complete board are
+    named) and asked whether --board counted the inner corners, which finding it had shown
+    right. Those frames are now named (five, then a count), and the advice is about frames."""
+    views = _write(tmp_path, board_views(640, 480, 576.0, count=2))
+    blank = []
+    for i in range(7):
+        blank.append(str(tmp_path / f"blank{i}.png"))
+        assert cv2.imwrite(blank[-1], np.full((480, 640), 128, np.uint8))
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", *views, "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        "skeye calibrate: error: the 9x6 board was found in 2 of 2 images; at least 3 are "
+        "needed: take more frames, each with the whole board in view, sharp and without glare\n")
+    assert main(["calibrate", views[0], *blank, "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        f"skeye calibrate: error: the 9x6 board was found in 1 of 8 images (not in "
+        f"{', '.join(blank[:5])} and 2 more); at least 3 are needed: take more frames, each with "
+        "the whole board in view, sharp and without glare\n")
+    assert main(["calibrate", *blank[:3], "--out", str(out)]) == 2  # in none: the corner count
+    assert capsys.readouterr().err == (
+        "skeye calibrate: error: the 9x6 board was found in 0 of 3 images; at least 3 are "
+        "needed (is --board the count of INNER corners, COLSxROWS?)\n")
+    assert not out.exists()
