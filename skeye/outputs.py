@@ -51,6 +51,17 @@ def output_file(path: Path, option: str, source: Path | None = None,
     return path
 
 
+def partial_beside(path: Path) -> tuple[Path, Path]:
+    """Where a file is written whole or not at all: the file ``path`` names (a symbolic link
+    followed, so it is written through and kept, as a plain write does; a link renamed over
+    would be no link) and a partial file beside that, ``.NAME.PID.partial.EXT`` (the extension
+    kept: matplotlib picks a figure's format by it). The caller writes the partial file, renames
+    it over the target (``os.replace``) once whole, and removes it on every path: a write that
+    fails part-way (a full disk) then leaves the file that was there, never one cut short."""
+    target = Path(os.path.realpath(path))
+    return target, target.with_name(f".{target.stem}.{os.getpid()}.partial{target.suffix}")
+
+
 def output_folder(path: Path, option: str = "--out") -> Path:
     """``path`` made (with its parents) as the folder a command writes into; a file there, or
     a folder that cannot be made, is refused naming ``option``."""

@@ -34,7 +34,7 @@ from skeye import cliargs
 from skeye.errors import ConfigError
 from skeye.logs.analysis import imu_figures, lowest_rate_hz, samples_above, spectrum
 from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
-from skeye.outputs import different_files, figure_file, output_file
+from skeye.outputs import different_files, figure_file, output_file, partial_beside
 from skeye.robots.config import load_robot_config
 from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
 from skeye.sim.estimator import BoardEstimator
@@ -432,8 +432,7 @@ def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> Non
     partials: list[tuple[str, Path, Path, Path]] = []
     try:
         for option, path, write in writes:
-            target = Path(os.path.realpath(path))  # a link renamed over would be no link
-            partial = target.with_name(f".{target.stem}.{os.getpid()}.partial{target.suffix}")
+            target, partial = partial_beside(path)
             partials.append((option, path, target, partial))
             try:
                 write(partial)

@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
+from skeye.outputs import partial_beside
 from skeye.robots.camera_model import DISTORTION_LIMIT
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
@@ -218,8 +219,7 @@ class CameraCalibration:
         Raises:
             OSError: the file could not be written (no partial file is left behind).
         """
-        target = Path(os.path.realpath(path))  # a link renamed over would be no link
-        partial = target.with_name(f".{target.name}.{os.getpid()}.partial")
+        target, partial = partial_beside(Path(path))
         try:
             partial.write_text(self.to_toml(), encoding="utf-8")
             os.replace(partial, target)
