@@ -10,9 +10,17 @@ import numpy as np
 import pytest
 
 from skeye.sim.engine import RobotWorldQuery, Simulation
-from skeye.sim.sensors import GPS, Accelerometer, Barometer, Gyro, OpticalFlow, Sonar
+from skeye.sim.sensors import (
+    GPS,
+    Accelerometer,
+    Barometer,
+    Gyro,
+    MagneticCompass,
+    OpticalFlow,
+    Sonar,
+)
 from skeye.sim.world import load_world
-from tests.sim.test_sensors import ORIGIN, FlatWorld, make, make_state
+from tests.sim.test_sensors import ORIGIN, FlatWorld, make, make_state, series
 
 
 def test_sonar_reports_whole_centimetres_and_a_new_ranging_every_65_ms() -> None:
@@ -115,6 +123,38 @@ def test_gps_has_no_fix_before_acquisition_and_lags_by_its_latency() -> None:
         fixes.append((t, float(north)))
     lags = [t - north / speed for t, north in fixes]
     assert lags == pytest.approx([0.2] * len(lags), abs=1e-3)
+
+
+def test_gps_velocity_error_has_the_u_blox_6_accuracy() -> None:
+    """The LEA-6's u-blox 6 engine is rated 0.1 m/s velocity accuracy (NEO-6 data sheet
+    GPS.G6-HW-09005), read as the median of the horizontal error, as its 2.5 m CEP is the
+    position's: the readings' horizontal velocity error has that median (the M8's 0.05 m/s,
+    the default until 2026-11-28, gave 0.059 m/s)."""
+    gps = make(GPS, seed=4, FixTime=0.0)
+    n, velocity = 6000, np.array([1.0, -0.5, 0.0])
+    errors = []
+    for k in range(n):  # 20 minutes at 5 Hz, flying at a constant velocity
+        t = k / 5.0
+        f = dict(gps.sample(make_state(t=t, pos=tuple(velocity * t + [0.0, 0.0, -2.0]),
+                                       vel=tuple(velocity)), FlatWorld()))
+        errors.append(np.array(f["VelocityNED"]) - velocity)
+    err = np.array(errors)
+    horizontal = np.hypot(err[:, 0], err[:, 1])
+    # The sample median's standard error for a Rayleigh error: about 1.1 % at this n.
+    assert float(np.median(horizontal)) == pytest.approx(0.1, rel=0.05)
+    per_axis = 0.1 / math.sqrt(2.0 * math.log(2.0))  # 0.085 m/s: a Rayleigh median of 0.1
+    assert err.std(axis=0) == pytest.approx([per_axis] * 3, rel=0.05)
+
+
+def test_compass_white_noise_is_the_hmc5883l_noise_floor() -> None:
+    """Honeywell HMC5883L data sheet: noise floor 2 mG (0.2 uT), also its effective resolution
+    at the default 1.3 Ga gain (0.92 mG LSb). With the bias walk off, the readings at a fixed
+    attitude scatter by that per axis (the default was 0.3 uT until 2026-11-28)."""
+    compass = make(MagneticCompass, seed=6, BiasWalk=0.0)
+    fields = np.array([r["Field"] for r in series(compass, 6000, rpy=(0.0, 0.0, 0.4))])
+    noise_floor_ut = 2.0 * 0.1  # 2 mG, 0.1 uT per mG
+    # The sample standard deviation's standard error: 1/sqrt(2n), about 0.9 % at this n.
+    assert fields.std(axis=0) == pytest.approx([noise_floor_ut] * 3, rel=0.05)
 
 
 def test_baro_reads_low_in_ground_effect_from_the_rotor_wash() -> None:

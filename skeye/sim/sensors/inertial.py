@@ -296,12 +296,12 @@ class MagneticCompass(Sensor[CompassReading]):
     the heading of the sensor's x axis from magnetic north, in [0, 2 pi): the noisy field is
     tilt-compensated with the sensor's true roll and pitch (what the board does with its
     accelerometer attitude) and the angle read from its horizontal part, so bias and noise show
-    up in the heading as they would. Defaults, HMC5883L-class: NoiseSigma 0.3 uT (about 0.015
-    rad of heading at a 20 uT horizontal field), 1.5 times what the datasheet gives: its noise
-    floor is 2 mG = 0.2 uT, and its effective resolution the larger of that and the 0.92 mG LSb
-    at the 1.3 Ga gain (Configuration Register B), so 0.2 uT; the margin has no source (it was
-    credited to the quantisation, which does not give it); BiasSigma 1.0 uT (residual hard
-    iron after calibration); BiasWalk 0.005 uT/sqrt(s) (thermal drift). Default rate 20 Hz.
+    up in the heading as they would. Defaults, HMC5883L-class: NoiseSigma 0.2 uT (about 0.01
+    rad of heading at a 20 uT horizontal field): the datasheet's noise floor, 2 mG = 0.2 uT,
+    which is also its effective resolution, the larger of that and the 0.92 mG LSb at the
+    1.3 Ga gain (Configuration Register B) (was 0.3 uT, a margin without a source); BiasSigma
+    1.0 uT (residual hard iron after calibration); BiasWalk 0.005 uT/sqrt(s) (thermal drift).
+    Default rate 20 Hz.
 
     Motor currents: the currents to the motors make a field of their own at the board, fixed
     in the body frame and growing with the current. The current follows the shaft power, so the
@@ -316,7 +316,7 @@ class MagneticCompass(Sensor[CompassReading]):
 
     type_name = "MagneticCompass"
     PARAMS = (
-        *_noise_params("uT", 0.3, 1.0, 0.005, "HMC5883L: 2 mG noise floor"),
+        *_noise_params("uT", 0.2, 1.0, 0.005, "HMC5883L: 2 mG noise floor"),
         Param("MotorField", 2.2, "field of the motor currents at MotorSpeed, uT (assumption: "
               "ArduPilot compassmot's 30 % of the earth field at full throttle)"),
         Param("MotorSpeed", HOVER_SPEED_RAD_S, "rotor speed at which MotorField is given, rad/s",

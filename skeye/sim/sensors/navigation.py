@@ -383,7 +383,9 @@ class GPS(Sensor[GpsReading]):
     1.5 m sigma over a 700 s recording, changing on "the order of several hundred seconds"
     (docs/physics.md, GPS row); so the error moves about 2.12 sqrt(2 / 300) = 0.17 m in a second,
     not the 0.39 m of a 30 s process. Velocity: white
-    noise VelocitySigma 0.05 m/s (u-blox speed accuracy). Satellites: an integer random walk in
+    noise VelocitySigma 0.085 m/s per axis (the u-blox 6 engine's 0.1 m/s velocity accuracy,
+    read as the median of the horizontal error as the 2.5 m CEP is the position's:
+    0.1 / sqrt(2 ln 2); docs/physics.md, GPS row). Satellites: an integer random walk in
     [MinSatellites 9, MaxSatellites 12], one step with probability 0.05 per reading.
     Latitude/Longitude are written in USARSim's ``39,8.0341,N`` form plus decimal degrees.
     Default rate 5 Hz (the NEO-6M's maximum).
@@ -404,7 +406,8 @@ class GPS(Sensor[GpsReading]):
         Param("VerticalSigma", 3.0, "vertical position error, stationary sigma, m"),
         Param("CorrelationTime", 300.0, "position error correlation time, s",
               exclusive=True),
-        Param("VelocitySigma", 0.05, "velocity white noise, m/s"),
+        Param("VelocitySigma", 0.085,
+              "velocity white noise per axis, m/s (u-blox 6: 0.1 m/s, a horizontal median)"),
         Param("MinSatellites", 9, "fewest satellites reported with a fix", 4, integer=True,
               maximum=32),
         Param("MaxSatellites", 12, "most satellites reported", 4, integer=True, maximum=32),
