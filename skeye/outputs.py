@@ -7,7 +7,10 @@ in no folder, and the input itself or a file inside it; :func:`different_files` 
 naming one file; :func:`output_folder` makes an output folder, or names why it cannot;
 :func:`figure_file` also wants an extension matplotlib writes, or none (then ``.png`` is
 added, as matplotlib adds it, so the path the command says is the path written); a ``.pgf``
-figure also wants the TeX program matplotlib runs for it. :func:`folder_lock` holds an output
+figure also wants the TeX program matplotlib runs for it. :func:`write_whole` writes outputs
+whole or not at all (a partial file beside each, renamed into place; a failed write, a full
+disk, is refused naming the option and leaves the file that was there). :func:`folder_lock`
+holds an output
 folder for one run of a command at a time; :func:`cache_folder` names where skeye keeps what it
 computes once for later runs (``$XDG_CACHE_HOME/skeye/...``, ``~/.cache`` by default).
 Each refusal is a ConfigError naming the option and the path.
@@ -15,10 +18,11 @@ Each refusal is a ConfigError naming the option and the path.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -60,6 +64,40 @@ def partial_beside(path: Path) -> tuple[Path, Path]:
     fails part-way (a full disk) then leaves the file that was there, never one cut short."""
     target = Path(os.path.realpath(path))
     return target, target.with_name(f".{target.stem}.{os.getpid()}.partial{target.suffix}")
+
+
+def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> None:
+    """Each ``(option, path, write)``: written to a partial file beside ``path``, then all
+    renamed into place. A write that fails (a full disk, a folder that takes no new file) is
+    refused naming its option and leaves no output behind (a rename that fails removes those
+    renamed before it): the --json file was left whole
+    after the --plot failed, and a file cut short where the disk filled. A symbolic link is
+    written through, as a plain write does: the file it names is replaced, the link kept."""
+    partials: list[tuple[str, Path, Path, Path]] = []
+    try:
+        for option, path, write in writes:
+            target, partial = partial_beside(path)
+            partials.append((option, path, target, partial))
+            try:
+                write(partial)
+            except OSError as exc:
+                raise ConfigError(f"{option} {path}: cannot write it: "
+                                  f"{exc.strerror or exc}") from None
+        placed: list[Path] = []
+        for option, path, target, partial in partials:
+            try:
+                os.replace(partial, target)
+            except OSError as exc:  # the ones renamed already go too: neither is left
+                for done in placed:
+                    with contextlib.suppress(OSError):
+                        done.unlink()
+                raise ConfigError(f"{option} {path}: cannot write it: "
+                                  f"{exc.strerror or exc}") from None
+            placed.append(target)
+    finally:
+        for _, _, _, partial in partials:
+            with contextlib.suppress(OSError):
+                partial.unlink(missing_ok=True)
 
 
 def output_folder(path: Path, option: str = "--out") -> Path:

@@ -29,7 +29,7 @@ import numpy as np
 
 from skeye.errors import RemoteProtocolError
 from skeye.geo import MAX_POSITION_M
-from skeye.outputs import figure_file
+from skeye.outputs import figure_file, write_whole
 from skeye.recording.records import (
     CONNECTED,
     NOTE,
@@ -263,37 +263,47 @@ def summarize(tracks: dict[str, RobotTrack], **totals: Any) -> RecordingSummary:
     return RecordingSummary(robots=robots, **totals)
 
 
-def plot_recording(path: str | Path, out: str | Path) -> RecordingSummary:
-    """Draw ``path`` into the PNG ``out``; returns the summary."""
+def plot_recording(path: str | Path, out: str | Path, *,
+                   option: str = "--out") -> RecordingSummary:
+    """Draw ``path`` into the image ``out`` (its extension picks the format; none: ``.png``);
+    returns the summary. ``out`` is written whole or not at all
+    (:func:`skeye.outputs.write_whole`): a write that fails (a full disk, ``ulimit -f``) is a
+    ConfigError naming ``option`` and ``out``, and leaves the file that was there.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    out = Path(out)
+    if not out.suffix:  # as matplotlib names it; the partial file beside it needs the name
+        out = out.with_name(out.name + ".png")
     tracks, summary = load_tracks(path)
     fig, (top, alt, bat) = plt.subplots(1, 3, figsize=(15, 4.8))
-    for name, t in tracks.items():
-        if t.pos_ned_m:
-            p = np.asarray(t.pos_ned_m)
-            top.plot(p[:, 1], p[:, 0], label=name)
-            top.plot(p[0, 1], p[0, 0], "o", color=top.lines[-1].get_color())
-            alt.plot(t.time_s, -p[:, 2], label=name)
-        if t.battery_s:
-            bat.plot(t.battery_time_s, flight_time_left_min(t), label=name)
-    top.set(title="trajectory (top view)", xlabel="east (m)", ylabel="north (m)")
-    top.set_aspect("equal", adjustable="datalim")
-    alt.set(title="altitude", xlabel="sim time (s)", ylabel="altitude above origin (m)")
-    bat.set(title="battery (shown while flying only)", xlabel="sim time (s)",
-            ylabel="flight time left (min)")
-    for ax in (top, alt, bat):
-        ax.grid(True, alpha=0.3)
-        if ax.lines:
-            ax.legend(loc="best", fontsize="small")
-    fig.suptitle(Path(path).name + (f" and its {len(summary.parts) - 1} later part(s)"
-                                     if len(summary.parts) > 1 else ""))
-    fig.tight_layout()
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
+    try:
+        for name, t in tracks.items():
+            if t.pos_ned_m:
+                p = np.asarray(t.pos_ned_m)
+                top.plot(p[:, 1], p[:, 0], label=name)
+                top.plot(p[0, 1], p[0, 0], "o", color=top.lines[-1].get_color())
+                alt.plot(t.time_s, -p[:, 2], label=name)
+            if t.battery_s:
+                bat.plot(t.battery_time_s, flight_time_left_min(t), label=name)
+        top.set(title="trajectory (top view)", xlabel="east (m)", ylabel="north (m)")
+        top.set_aspect("equal", adjustable="datalim")
+        alt.set(title="altitude", xlabel="sim time (s)", ylabel="altitude above origin (m)")
+        bat.set(title="battery (shown while flying only)", xlabel="sim time (s)",
+                ylabel="flight time left (min)")
+        for ax in (top, alt, bat):
+            ax.grid(True, alpha=0.3)
+            if ax.lines:
+                ax.legend(loc="best", fontsize="small")
+        fig.suptitle(Path(path).name + (f" and its {len(summary.parts) - 1} later part(s)"
+                                         if len(summary.parts) > 1 else ""))
+        fig.tight_layout()
+        write_whole([(option, out, lambda partial: fig.savefig(partial, dpi=100))])
+    finally:
+        plt.close(fig)
     return summary
 
 

@@ -20,10 +20,8 @@ ground); only the IMU is replayed (position needs the log's aiding sensors, whic
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -34,7 +32,7 @@ from skeye import cliargs
 from skeye.errors import ConfigError
 from skeye.logs.analysis import imu_figures, lowest_rate_hz, samples_above, spectrum
 from skeye.logs.readers import LOG_FORMATS, ImuLog, TruthTrack, read_log
-from skeye.outputs import different_files, figure_file, output_file, partial_beside
+from skeye.outputs import different_files, figure_file, output_file, write_whole
 from skeye.robots.config import load_robot_config
 from skeye.robots.params import GRAVITY_M_S2, EstimatorParams
 from skeye.sim.estimator import BoardEstimator
@@ -420,40 +418,6 @@ def cmd_logs(args: argparse.Namespace) -> int:
     if plot_out is not None:
         print(f"\nspectra: {plot_out}")
     return 0
-
-
-def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> None:
-    """Each ``(option, path, write)``: written to a partial file beside ``path``, then all
-    renamed into place. A write that fails (a full disk, a folder that takes no new file) is
-    refused naming its option and leaves no output behind (a rename that fails removes those
-    renamed before it): the --json file was left whole
-    after the --plot failed, and a file cut short where the disk filled. A symbolic link is
-    written through, as a plain write does: the file it names is replaced, the link kept."""
-    partials: list[tuple[str, Path, Path, Path]] = []
-    try:
-        for option, path, write in writes:
-            target, partial = partial_beside(path)
-            partials.append((option, path, target, partial))
-            try:
-                write(partial)
-            except OSError as exc:
-                raise ConfigError(f"{option} {path}: cannot write it: "
-                                  f"{exc.strerror or exc}") from None
-        placed: list[Path] = []
-        for option, path, target, partial in partials:
-            try:
-                os.replace(partial, target)
-            except OSError as exc:  # the ones renamed already go too: neither is left
-                for done in placed:
-                    with contextlib.suppress(OSError):
-                        done.unlink()
-                raise ConfigError(f"{option} {path}: cannot write it: "
-                                  f"{exc.strerror or exc}") from None
-            placed.append(target)
-    finally:
-        for _, _, _, partial in partials:
-            with contextlib.suppress(OSError):
-                partial.unlink(missing_ok=True)
 
 
 def register(sub: Any) -> None:

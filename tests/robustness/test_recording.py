@@ -6,9 +6,11 @@ import json
 import logging
 import os
 import re
+import resource
 import signal
 import socket
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -229,6 +231,33 @@ def test_a_pgf_plot_without_tex_is_refused_before_the_recording_is_read(
     err = capsys.readouterr().err
     assert f"skeye plot: error: --out {out}: .pgf files need xelatex" in err
     assert "Traceback" not in err and not out.exists()
+
+
+def test_a_plot_that_cannot_be_written_keeps_the_image_that_was_there(
+    recording: tuple[Path, bytes], tmp_path: Path
+) -> None:
+    """skeye plot wrote its image in place: a write that failed part-way (a full disk; here
+    the process's file size limit, ``ulimit -f``, which fails a write past it with EFBIG as a
+    full disk does) cut the good plot already there short, and the error named neither the
+    file nor the option (`skeye plot: error: [Errno 27] File too large`). The image is now
+    written beside and renamed over: the old one is left as it was, and no partial file."""
+    out = tmp_path / "plot.png"
+    assert main(["plot", str(recording[0]), "--out", str(out)]) == 0
+    before = out.read_bytes()
+    limit = 4096
+    assert len(before) > limit
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    run = subprocess.run(
+        [sys.executable, "-m", "skeye", "plot", str(recording[0]), "--out", str(out)],
+        capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2],
+        env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"), preexec_fn=small_files, check=False)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr == f"skeye plot: error: --out {out}: cannot write it: File too large\n"
+    assert out.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["plot.png"]
 
 
 def test_reader_skips_a_cut_off_last_line_and_bad_lines(tmp_path: Path) -> None:
