@@ -404,6 +404,9 @@ class Recorder:
         try:
             return path.open("xb")
         except FileExistsError:
+            if path.is_dir():  # not to be deleted: `--record ""` is the folder "."
+                raise ConfigError(f"recording {path} is a directory: give a file name for the "
+                                  "recording") from None
             raise ConfigError(
                 f"recording {path} already exists; choose another name or delete it"
             ) from None

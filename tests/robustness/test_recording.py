@@ -280,6 +280,21 @@ def test_recorder_refuses_to_overwrite(tmp_path: Path) -> None:
         Recorder(tmp_path / "no-such-folder" / "x.rec")
 
 
+def test_a_recording_named_as_a_folder_is_refused_as_one(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`skeye sim --record FOLDER` said `recording FOLDER already exists; choose another name or
+    delete it`, and `--record ""` (the folder ".") told the user to delete the current
+    folder. A folder is named as one."""
+    monkeypatch.chdir(tmp_path)
+    for record, named in ((str(tmp_path), str(tmp_path)), ("", ".")):
+        assert main(["sim", "--mode", "lockstep", "--port", "0", "--record", record]) == 2
+        err = capsys.readouterr().err
+        assert err == (f"skeye sim: error: recording {named} is a directory: give a file name "
+                       "for the recording\n"), err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_recorder_flushes_within_a_second_without_closing(tmp_path: Path) -> None:
     path = tmp_path / "flush.rec"
     with Recorder(path, flush_interval_s=0.5) as rec:
