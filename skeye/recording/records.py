@@ -184,6 +184,9 @@ def read_header(path: Path) -> dict[str, Any]:
     file, when it is no recording); reads no more than :data:`MAX_HEADER_BYTES` of it."""
     if path.is_dir():
         raise ConfigError(f"{path} is a directory, not a recording file")
+    if path.exists() and not path.is_file():  # readers seek and read a file more than once
+        raise ConfigError(f"{path} is not a regular file (a pipe, a device or a socket): give "
+                          "the recording file itself")
     if not path.is_file():
         raise ConfigError(f"recording not found: {path}")
     with path.open("rb") as f:

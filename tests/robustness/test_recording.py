@@ -203,6 +203,24 @@ def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_writte
     assert (tmp_path / "noext.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_pipe_or_a_device_is_named_as_no_regular_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A FIFO, /dev/null or a shell's process substitution (`skeye plot <(zcat flight.rec.gz)`,
+    a /dev/fd/N pipe) was said to be `recording not found`, though it is there: it is no
+    regular file, which the readers need (they seek and read a file more than once)."""
+    fifo = tmp_path / "flight.rec"
+    os.mkfifo(fifo)
+    for path in (fifo, Path(os.devnull)):
+        for command in (["replay", str(path), "--port", "0"],
+                        ["plot", str(path), "--out", str(tmp_path / "plot.png")]):
+            assert main(command) == 2
+            err = capsys.readouterr().err
+            assert err == (f"skeye {command[0]}: error: {path} is not a regular file (a pipe, a "
+                           "device or a socket): give the recording file itself\n"), err
+    assert [p.name for p in tmp_path.iterdir()] == ["flight.rec"]
+
+
 def test_plot_never_writes_over_the_recording_it_draws(
     recording: tuple[Path, bytes], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
