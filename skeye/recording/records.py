@@ -71,6 +71,10 @@ DEFAULT_MAX_PARTS = 10
 MAX_HEADER_BYTES = 64 * 1024
 """The longest header line, terminator excluded: readers read no more of a first line (a
 file whose first line is longer is no recording), and the recorder writes none longer."""
+MAX_RECORD_BYTES = 1024 * 1024
+"""The longest record line readers take, terminator excluded (1 MiB: sixteen times the longest
+line the control protocol's decoders take, 64 KiB). A longer line is no record: counted with the
+bad lines and skipped without being held, so a damaged file's memory does not grow with it."""
 _DISK_CHECK_S = 1.0  # how often the free space is looked at
 
 
@@ -266,7 +270,8 @@ def flight_parts(path: Path, header: dict[str, Any]) -> tuple[list[Path], str | 
 
 
 class RecordingReader:
-    """Reads a recording file; tolerates an unterminated last line (a crash) and bad lines.
+    """Reads a recording file; tolerates an unterminated last line (a crash) and bad lines
+    (one longer than :data:`MAX_RECORD_BYTES` among them, not held in memory).
 
     With ``follow_parts``, a first part of a rotated recording (``skeye sim --record-rotate``)
     is read with the parts that continue it, as one flight (see :func:`flight_parts`); a later
@@ -298,7 +303,12 @@ class RecordingReader:
         for part in self.parts:
             with part.open("rb") as f:
                 f.readline(MAX_HEADER_BYTES + 1)
-                for raw in f:
+                while raw := f.readline(MAX_RECORD_BYTES + 1):
+                    if len(raw) > MAX_RECORD_BYTES and not raw.endswith(b"\n"):
+                        if _skip_line(f):  # too long for a record: not held, read past
+                            self.bad_lines += 1
+                            continue
+                        raw = b""  # and it runs to the end of the file: cut off
                     if not raw.endswith(b"\n"):
                         self.truncated = True
                         break
@@ -306,6 +316,15 @@ class RecordingReader:
                         yield parse_record(raw.decode("utf-8", "replace"))
                     except RemoteProtocolError:
                         self.bad_lines += 1
+
+
+def _skip_line(f: IO[bytes]) -> bool:
+    """Read ``f`` past the end of the line it is in, a piece at a time; False when the file
+    ends first (the line has no end)."""
+    while piece := f.readline(MAX_RECORD_BYTES):
+        if piece.endswith(b"\n"):
+            return True
+    return False
 
 
 def robot_connections(records: Iterator[Record]) -> dict[int, str]:

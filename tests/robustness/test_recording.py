@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from skeye.recording.records import (
     DEFAULT_MAX_PARTS,
     DIRECTIONS,
     MAX_HEADER_BYTES,
+    MAX_RECORD_BYTES,
     NOTE,
     RECEIVED,
     SENT,
@@ -286,6 +288,35 @@ def test_reader_skips_a_cut_off_last_line_and_bad_lines(tmp_path: Path) -> None:
     reader = RecordingReader(path)
     assert list(reader.records())[-2:] == good
     assert reader.truncated and reader.bad_lines == 1
+
+
+def test_a_line_too_long_for_a_record_is_counted_and_skipped_without_being_held(
+    tmp_path: Path
+) -> None:
+    """A damaged file's line of 20 MiB was read whole (skeye plot took 272 MB of memory for a
+    50 MB line, and would have taken all of it for a line of gigabytes), and skeye replay sent
+    it to its clients as a STA line. A line longer than MAX_RECORD_BYTES is now counted with
+    the bad lines and read past a piece at a time; one that runs to the file's end is a line
+    cut off."""
+    path = tmp_path / "long.rec"
+    good = [Record(1.0, 0.1, 1, SENT, "STA {Name R1}"), Record(2.0, 0.2, 1, SENT, "STA {Name R1}")]
+    long_line = b"1.5 0.15 1 > STA {Name R1} " + b"x" * (20 * MAX_RECORD_BYTES) + b"\n"
+    edge = format_record(Record(1.6, 0.16, 1, SENT, "STA {Name R1} {X "))
+    edge = edge[:-1] + b"y" * (MAX_RECORD_BYTES - len(edge)) + b"}\n"  # just fits
+    assert len(edge) == MAX_RECORD_BYTES + 1
+    path.write_bytes(format_header({}) + format_record(good[0]) + long_line + edge
+                     + format_record(good[1]) + long_line[:-1])
+    reader = RecordingReader(path)
+    tracemalloc.start()
+    try:
+        records = list(reader.records())
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert [r.line[:13] for r in records] == ["STA {Name R1}"] * 3
+    assert records[0] == good[0] and records[2] == good[1]
+    assert reader.bad_lines == 1 and reader.truncated
+    assert peak < 8 * MAX_RECORD_BYTES, peak  # the line that fits is held, in a few forms
 
 
 def test_recorder_refuses_to_overwrite(tmp_path: Path) -> None:
