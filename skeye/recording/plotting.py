@@ -37,6 +37,7 @@ from skeye.recording.records import (
     SENT,
     TRUTH,
     RecordingReader,
+    recording_file,
 )
 from skeye.wire.sim_lines import parse_line
 
@@ -308,6 +309,8 @@ def plot_recording(path: str | Path, out: str | Path, *,
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
+    if args.file.exists():  # a folder named as one, not as a folder --out is inside; a
+        recording_file(args.file)  # missing file is said after --out, as every input's is
     out = figure_file(args.out, "--out", args.file, "recording")  # before it is read
     summary = plot_recording(args.file, out)
     print(summary.text())

@@ -183,17 +183,23 @@ def split_lines(data: bytes) -> list[bytes]:
     return [line.rstrip(b"\r").replace(b"\r", b" ") for line in data.split(b"\n") if line.strip()]
 
 
-def read_header(path: Path) -> dict[str, Any]:
-    """The settings of ``path``'s header line (ConfigError or RemoteProtocolError, naming the
-    file, when it is no recording); reads no more than :data:`MAX_HEADER_BYTES` of it."""
+def recording_file(path: Path) -> Path:
+    """``path`` if it is a file a recording can be read from: ConfigError, naming it, for a
+    folder, a pipe or a device (readers seek and read a file more than once), or none."""
     if path.is_dir():
         raise ConfigError(f"{path} is a directory, not a recording file")
-    if path.exists() and not path.is_file():  # readers seek and read a file more than once
+    if path.exists() and not path.is_file():
         raise ConfigError(f"{path} is not a regular file (a pipe, a device or a socket): give "
                           "the recording file itself")
     if not path.is_file():
         raise ConfigError(f"recording not found: {path}")
-    with path.open("rb") as f:
+    return path
+
+
+def read_header(path: Path) -> dict[str, Any]:
+    """The settings of ``path``'s header line (ConfigError or RemoteProtocolError, naming the
+    file, when it is no recording); reads no more than :data:`MAX_HEADER_BYTES` of it."""
+    with recording_file(path).open("rb") as f:
         first = f.readline(MAX_HEADER_BYTES + 1)
     if not first.endswith(b"\n"):
         if len(first) > MAX_HEADER_BYTES:  # not read on: it could run to the file's end

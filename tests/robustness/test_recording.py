@@ -205,6 +205,23 @@ def test_a_directory_is_named_as_one_and_out_without_extension_is_said_as_writte
     assert (tmp_path / "noext.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_folder_given_as_the_recording_is_named_before_an_out_inside_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`skeye plot .` (the default --out, plot.png, in the current folder) and `skeye plot
+    FOLDER --out FOLDER/plot.png` said `--out ... is inside the recording FOLDER: ... write it
+    elsewhere`; written elsewhere, the run then said the folder is no recording file. The
+    folder is said first."""
+    monkeypatch.chdir(tmp_path)
+    for command, named in ((["plot", "."], "."),
+                           (["plot", str(tmp_path), "--out", str(tmp_path / "plot.png")],
+                            str(tmp_path))):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert err == f"skeye plot: error: {named} is a directory, not a recording file\n", err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_pipe_or_a_device_is_named_as_no_regular_file(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
