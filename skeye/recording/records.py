@@ -18,7 +18,8 @@ queue (never blocks the engine or a client thread; when the queue is full the re
 and dropped, and a ``!`` note says how many). One writer thread formats records, writes them and
 flushes and fsyncs the file at least every ``flush_interval_s`` (0.5 s) and on close, so a
 killed simulator loses at most the last second. The recorder writes the file it was given and
-refuses to overwrite an existing one.
+refuses to overwrite an existing one; it holds each file's ``flock`` while writing it, so
+another recorder given that file says it is being written.
 
 Size: a recording never grows past ``max_bytes`` (``skeye sim --record-max-mb``, default
 :data:`DEFAULT_MAX_BYTES`), nor is it written while the disk holds less than
@@ -35,6 +36,7 @@ continue it as one flight.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import logging
 import math
@@ -429,17 +431,29 @@ class Recorder:
 
     @staticmethod
     def _create(path: Path) -> IO[bytes]:
+        """``path`` made and opened for writing, locked (``flock``) while it is written, so that
+        another recorder given it knows it is being written (the kernel's lock ends with the
+        process however it ends)."""
         try:
-            return path.open("xb")
+            f = path.open("xb")
         except FileExistsError:
             if path.is_dir():  # not to be deleted: `--record ""` is the folder "."
                 raise ConfigError(f"recording {path} is a directory: give a file name for the "
                                   "recording") from None
+            if path.is_file() and _being_written(path):  # not to be deleted either (a FIFO
+                # is not opened: that would wait for its writer)
+                raise ConfigError(f"recording {path} is being written by another process (a "
+                                  "simulator recording now); choose another name") from None
             raise ConfigError(
                 f"recording {path} already exists; choose another name or delete it"
             ) from None
         except OSError as exc:
             raise ConfigError(f"cannot create recording {path}: {exc.strerror}") from None
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # a file system without locks (some network ones): recorded unlocked
+            pass
+        return f
 
     def _room(self, data: list[bytes]) -> list[bytes]:
         """The records of ``data`` that may still be written to the current part (writer
@@ -708,6 +722,18 @@ class Recorder:
         if self.stopped is not None:
             log.warning("recording %s stopped early (%s): %d records were not written",
                         self.path, self.stopped, self.dropped)
+
+
+def _being_written(path: Path) -> bool:
+    """Whether a recorder holds ``path``'s lock (see ``Recorder._create``)."""
+    try:
+        with path.open("rb") as f:
+            fcntl.flock(f, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:  # cannot be opened or locked: nothing says a recorder holds it
+        return False
+    return False
 
 
 def _records_in(direction: str, data: bytes) -> int:

@@ -361,6 +361,25 @@ def test_a_recording_named_as_a_folder_is_refused_as_one(
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_recording_being_written_is_said_to_be_and_not_offered_for_deletion(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second simulator given the file a first one was recording to said `recording FILE
+    already exists; choose another name or delete it`: deleting it would have lost the first
+    one's flight. A recorder now holds its file's lock while it writes, and the second is
+    told the file is being written; once the first ends, it is a file that exists."""
+    path = tmp_path / "flight.rec"
+    command = ["sim", "--mode", "lockstep", "--port", "0", "--record", str(path)]
+    with Recorder(path, {"world": "pad"}):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert err == (f"skeye sim: error: recording {path} is being written by another "
+                       "process (a simulator recording now); choose another name\n"), err
+    assert main(command) == 2
+    assert "already exists; choose another name or delete it" in capsys.readouterr().err
+    assert list(RecordingReader(path).records()) == []
+
+
 def test_recorder_flushes_within_a_second_without_closing(tmp_path: Path) -> None:
     path = tmp_path / "flush.rec"
     with Recorder(path, flush_interval_s=0.5) as rec:
