@@ -197,6 +197,14 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     sets += [dict(entry) for entry in listed]
     if not sets:
         sets = [{}]
+    seen: set[str] = set()
+    for params in sets:  # the same set twice is the same trials (one key) run twice
+        ident = json.dumps(params, sort_keys=True, default=str)
+        if ident in seen:
+            raise LocalProtocolError(f"parameter set {params} repeats (a value given twice in a "
+                                     "[grid] list, or a [[trials]] entry the grid makes "
+                                     "already): each of its trials would run twice")
+        seen.add(ident)
     if not isinstance(data.get("quick", False), bool):
         raise LocalProtocolError(f"quick must be true or false, got {data['quick']!r}")
     is_quick = bool(data.get("quick", False)) if quick is None else quick

@@ -269,6 +269,12 @@ def test_script_figures_that_would_overwrite_the_row_or_not_fit_it_are_the_trial
          r'^the spec names no experiment: give experiment = "E1", "E2" or "script"$'),
         ('experiment = "E2"\nseeds = 0', "seeds must be >= 1"),
         ('experiment = "E2"\nseeds = [1, 1]', "seeds repeat"),
+        # the same parameter set twice ran its trials twice (one key: the row written twice,
+        # results.csv holding it twice, the report counting it twice)
+        ('experiment = "script"\nscript = "flight.py"\n[grid]\ngain = [0.1, 0.2, 0.1]',
+         r"parameter set \{'gain': 0\.1\} repeats"),
+        ('experiment = "script"\nscript = "flight.py"\n[grid]\ngain = [1]\nmode = ["a"]\n'
+         '[[trials]]\ngain = 1\nmode = "a"', r"parameter set \{'gain': 1, 'mode': 'a'\} repeats"),
         ('experiment = "E2"\n[grid]\ngain = [1, 2]', "E2 has no parameter"),
         ('experiment = "E2"\n[grid]\nf_max_n = ["x"]', "f_max_n must be a number"),
         ('experiment = "E2"\n[grid]\nf_max_n = []', "non-empty list"),
