@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from skeye.errors import ConfigError
-from skeye.sweep.spec import SweepSpec
+from skeye.sweep.spec import ROW_FIXED, ROW_TAIL, SweepSpec
 
-FIXED = ["key", "experiment", "seed", "quick"]
-TAIL = ["wall_s", "host", "skeye_version", "code_version", "error"]
+FIXED = list(ROW_FIXED)
+TAIL = list(ROW_TAIL)
 # What a run was, not what it measured (E2's series length): kept in the rows, not summarised
 # or plotted as figures.
 RUN_DESCRIPTORS = frozenset({"duration_s", "samples"})

@@ -32,6 +32,9 @@ MAX_TRIALS = 100_000
 its own, seconds to minutes of a core, so more is a mistake (or a sweep to split); checked
 before any list is built (seeds = 1e11 used to end in MemoryError)."""
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(RunSettings)}
+ROW_FIXED = ("key", "experiment", "seed", "quick")
+ROW_TAIL = ("wall_s", "host", "skeye_version", "code_version", "error")
+"""The columns every row has besides its parameters and figures (results.csv's first and last)."""
 _SPEC_KEYS = {"experiment", "script", "seeds", "quick", "timeout_s", "grid", "trials",
               "resources", "name"}
 
@@ -179,6 +182,12 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     names = sorted(set(grid) | {k for entry in listed for k in entry})
     if "seed" in names:
         raise LocalProtocolError("seeds are set with seeds = N or [..], not as a parameter")
+    taken = [n for n in names if n in ROW_FIXED + ROW_TAIL]
+    if taken:  # the row's own value replaced it (a parameter "key" stored every row under its
+        # value, so none was found again), or it replaced the row's
+        raise LocalProtocolError(f"parameter(s) {taken} name columns every row has already "
+                                 f"({', '.join(c for c in ROW_FIXED + ROW_TAIL if c != 'seed')})"
+                                 ": rename them")
     if experiment != "script":
         bad = [n for n in names if n not in SETTING_NAMES]
         if bad:

@@ -269,6 +269,12 @@ def test_script_figures_that_would_overwrite_the_row_or_not_fit_it_are_the_trial
          r'^the spec names no experiment: give experiment = "E1", "E2" or "script"$'),
         ('experiment = "E2"\nseeds = 0', "seeds must be >= 1"),
         ('experiment = "E2"\nseeds = [1, 1]', "seeds repeat"),
+        # a flight script's parameter named like a column of the row: "key" stored every row
+        # under its value (none found again: results.csv empty, a rerun ran all again)
+        ('experiment = "script"\nscript = "flight.py"\n[grid]\nkey = [1, 2]',
+         r"parameter\(s\) \['key'\] name columns every row has already"),
+        ('experiment = "script"\nscript = "flight.py"\n[[trials]]\nerror = "x"\nhost = "a"',
+         r"parameter\(s\) \['error', 'host'\] name columns"),
         # the same parameter set twice ran its trials twice (one key: the row written twice,
         # results.csv holding it twice, the report counting it twice)
         ('experiment = "script"\nscript = "flight.py"\n[grid]\ngain = [0.1, 0.2, 0.1]',
