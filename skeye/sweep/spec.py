@@ -15,6 +15,7 @@ import hashlib
 import itertools
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from functools import cache
@@ -182,6 +183,12 @@ def parse_spec(data: dict[str, Any], base_dir: Path, quick: bool | None = None) 
     names = sorted(set(grid) | {k for entry in listed for k in entry})
     if "seed" in names:
         raise LocalProtocolError("seeds are set with seeds = N or [..], not as a parameter")
+    odd = [n for n in names if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", n)]
+    if odd:  # it names a column and the report's plot_<name>.png: "a/b" ended the sweep, after
+        # every trial, in "No such file or directory: plot_a/b.png"; "../x" wrote outside it
+        raise LocalProtocolError(f"parameter name(s) {odd}: a parameter's name is letters, "
+                                 "digits, _ . or -, starting with a letter or _ (it names a "
+                                 "column and the report's plot_<name>.png)")
     taken = [n for n in names if n in ROW_FIXED + ROW_TAIL]
     if taken:  # the row's own value replaced it (a parameter "key" stored every row under its
         # value, so none was found again), or it replaced the row's

@@ -269,6 +269,12 @@ def test_script_figures_that_would_overwrite_the_row_or_not_fit_it_are_the_trial
          r'^the spec names no experiment: give experiment = "E1", "E2" or "script"$'),
         ('experiment = "E2"\nseeds = 0', "seeds must be >= 1"),
         ('experiment = "E2"\nseeds = [1, 1]', "seeds repeat"),
+        # a name that is no file name: the report's plot_a/b.png ended the sweep, after every
+        # trial, in a "No such file or directory" (and "../x" wrote outside --out)
+        ('experiment = "script"\nscript = "flight.py"\n[grid]\n"a/b" = [1, 2]',
+         r"parameter name\(s\) \['a/b'\]: a parameter's name is letters, digits"),
+        ('experiment = "script"\nscript = "flight.py"\n[[trials]]\n"../x" = 1\n"" = 2',
+         r"parameter name\(s\) \['', '\.\./x'\]"),
         # a flight script's parameter named like a column of the row: "key" stored every row
         # under its value (none found again: results.csv empty, a rerun ran all again)
         ('experiment = "script"\nscript = "flight.py"\n[grid]\nkey = [1, 2]',
