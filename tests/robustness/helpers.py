@@ -86,3 +86,18 @@ def sim_process(
                 proc.wait(5)
         if proc.stdout is not None:
             proc.stdout.close()
+
+
+def skeye_under_a_file_size_limit(args: list[str], limit_bytes: int
+                                  ) -> subprocess.CompletedProcess[str]:
+    """``python -m skeye ARGS`` in a child whose files cannot grow past ``limit_bytes``
+    (RLIMIT_FSIZE, ``ulimit -f``): a write past it fails with EFBIG, as one on a full disk does.
+    Its output is captured as text."""
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return subprocess.run(
+        [sys.executable, "-m", "skeye", *args], capture_output=True, text=True,
+        cwd=Path(__file__).resolve().parents[2],
+        env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"), preexec_fn=small_files, check=False)

@@ -6,11 +6,9 @@ import json
 import logging
 import os
 import re
-import resource
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
 import tracemalloc
@@ -43,7 +41,7 @@ from skeye.recording.records import (
     split_lines,
 )
 from skeye.recording.replay import ReplayServer
-from tests.robustness.helpers import sim_process, wait_for
+from tests.robustness.helpers import sim_process, skeye_under_a_file_size_limit, wait_for
 from tests.sim.conftest import LineClient, running_sim
 
 STREAM_TIMEOUT_S = 60.0
@@ -283,14 +281,7 @@ def test_a_plot_that_cannot_be_written_keeps_the_image_that_was_there(
     before = out.read_bytes()
     limit = 4096
     assert len(before) > limit
-
-    def small_files() -> None:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-
-    run = subprocess.run(
-        [sys.executable, "-m", "skeye", "plot", str(recording[0]), "--out", str(out)],
-        capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2],
-        env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"), preexec_fn=small_files, check=False)
+    run = skeye_under_a_file_size_limit(["plot", str(recording[0]), "--out", str(out)], limit)
     assert run.returncode == 2, run.stderr
     assert run.stderr == f"skeye plot: error: --out {out}: cannot write it: File too large\n"
     assert out.read_bytes() == before

@@ -12,10 +12,6 @@ calibrated end to end in ``tests/validate/test_validate.py``
 from __future__ import annotations
 
 import math
-import os
-import resource
-import subprocess
-import sys
 import tomllib
 import warnings
 from collections.abc import Callable, Iterator
@@ -39,7 +35,7 @@ from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision import calibration
 from skeye.vision.calibration import Board, find_corners, load_calibration
 from skeye.vision.camera import intrinsics
-from tests.robustness.helpers import wait_for
+from tests.robustness.helpers import skeye_under_a_file_size_limit, wait_for
 from tests.sim.conftest import LineClient
 from tests.vision.helpers import FOV_H_RAD, H, W, board_views, distort_image, wide_camera
 
@@ -320,15 +316,8 @@ def test_a_failed_write_keeps_the_camera_toml_that_was_there(tmp_path: Path) -> 
     before = out.read_bytes()
     limit = 200
     assert len(before) > limit
-
-    def small_files() -> None:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-
-    run = subprocess.run(
-        [sys.executable, "-m", "skeye", "calibrate", *names, "--square-mm", "24", "--out",
-         str(out)],
-        capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2],
-        env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"), preexec_fn=small_files, check=False)
+    run = skeye_under_a_file_size_limit(
+        ["calibrate", *names, "--square-mm", "24", "--out", str(out)], limit)
     assert run.returncode == 2, run.stderr
     assert run.stderr == f"skeye calibrate: error: cannot write {out}: File too large\n"
     assert out.read_bytes() == before
