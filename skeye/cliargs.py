@@ -4,7 +4,8 @@ A bad value is refused while the command line is parsed: argparse prints one lin
 option (``skeye sim: error: argument --port: must be a port 0..65535, got '-1'``) and exits
 with status 2, before anything starts. Each validator raises
 :class:`argparse.ArgumentTypeError` with what the option takes and what it got; none of them
-imports anything beyond the standard library, so the parser stays cheap to build.
+imports anything beyond the standard library (and :mod:`skeye.values`, which does not either), so
+the parser stays cheap to build.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+
+from skeye.values import MAX_BAUD, baud_rate
 
 MAX_PORT = 65535
 EXTRA_OF = {"mujoco": "sim", "matplotlib": "sim", "rich": "sim", "fastapi": "ground",
@@ -91,6 +94,15 @@ def positive_int(text: str) -> int:
     value = _int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return value
+
+
+def baud(text: str) -> int:
+    """A serial line's baud rate: a whole number 1..4000000, the rule of every ``baud=`` in a
+    URI (:func:`skeye.values.baud_rate`); ``--baud 99999999999`` went to the serial port."""
+    value = baud_rate(text)
+    if value is None:
+        raise argparse.ArgumentTypeError(f"must be a whole number 1..{MAX_BAUD}, got {text!r}")
     return value
 
 

@@ -32,6 +32,7 @@ CASES = [
     ([*PILOT, "--port", "0", "--tick", "-1"], "--tick"),
     ([*PILOT, "--port", "0", "--lockstep-rate", "-1"], "--lockstep-rate"),
     ([*PILOT, "--serial", "/dev/null", "--baud", "-1"], "--baud"),
+    ([*PILOT, "--serial", "/dev/null", "--baud", "99999999999"], "--baud"),  # went to the port
     ([*PILOT, "--serial", "/dev/nonexistent-skeye"], "--serial"),
     # a camera URI is parsed whole before the airframe opens (only its scheme was)
     ([*PILOT, "--port", "0", "--camera", "v4l2:///dev/video0?width=abc"], "--camera"),
@@ -103,10 +104,12 @@ def test_a_bad_value_is_refused_naming_its_option(argv: list[str], option: str,
 def test_the_shared_validators_take_their_ranges_whole() -> None:
     assert cliargs.port("0") == 0 and cliargs.port("65535") == 65535
     assert cliargs.fixed_port("1") == 1 and cliargs.seed("0") == 0
+    assert cliargs.baud("57600") == 57600 and cliargs.baud("4000000") == 4_000_000
     assert cliargs.positive_float("0.5") == 0.5 and cliargs.non_negative_float("0") == 0.0
     for check, text in ((cliargs.fixed_port, "0"), (cliargs.port, "x"), (cliargs.seed, "1.5"),
                         (cliargs.positive_float, "nan"), (cliargs.positive_float, "inf"),
-                        (cliargs.positive_int, "0"), (cliargs.non_negative_float, "-0.1")):
+                        (cliargs.positive_int, "0"), (cliargs.non_negative_float, "-0.1"),
+                        (cliargs.baud, "4000001"), (cliargs.baud, "+57600")):
         with pytest.raises(Exception, match="must be"):
             check(text)
 

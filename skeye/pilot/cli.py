@@ -912,7 +912,8 @@ def register(subparsers: Any) -> None:
     where.add_argument("--port", type=cliargs.port, default=DEFAULT_PORT,
                        help="TCP port (0 = any free)")
     where.add_argument("--serial", default=None, help="serve on this serial device instead")
-    p.add_argument("--baud", type=cliargs.positive_int, default=57600, help="serial baud rate")
+    p.add_argument("--baud", type=cliargs.baud, default=57600,
+                   help="serial baud rate (1..4000000)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--robot", default="hummingbird", help="robot class to spawn")
     p.add_argument(
