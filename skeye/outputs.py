@@ -8,11 +8,11 @@ naming one file; :func:`output_folder` makes an output folder, or names why it c
 :func:`figure_file` also wants an extension matplotlib writes, or none (then ``.png`` is
 added, as matplotlib adds it, so the path the command says is the path written); a ``.pgf``
 figure also wants the TeX program matplotlib runs for it. :func:`write_whole` writes outputs
-whole or not at all (a partial file beside each, renamed into place; a failed write, a full
-disk, is refused naming the option and leaves the file that was there). :func:`folder_lock`
-holds an output
-folder for one run of a command at a time; :func:`cache_folder` names where skeye keeps what it
-computes once for later runs (``$XDG_CACHE_HOME/skeye/...``, ``~/.cache`` by default).
+whole or not at all (a partial file beside each, :func:`partial_beside`, renamed into place; a
+failed write, a full disk, is refused naming the option and leaves the file that was there).
+:func:`folder_lock` holds an output folder for one run of a command at a time;
+:func:`cache_folder` names where skeye keeps what it computes once for later runs
+(``$XDG_CACHE_HOME/skeye/...``, ``~/.cache`` by default).
 Each refusal is a ConfigError naming the option and the path.
 """
 
@@ -70,9 +70,9 @@ def write_whole(writes: list[tuple[str, Path, Callable[[Path], object]]]) -> Non
     """Each ``(option, path, write)``: written to a partial file beside ``path``, then all
     renamed into place. A write that fails (a full disk, a folder that takes no new file) is
     refused naming its option and leaves no output behind (a rename that fails removes those
-    renamed before it): the --json file was left whole
-    after the --plot failed, and a file cut short where the disk filled. A symbolic link is
-    written through, as a plain write does: the file it names is replaced, the link kept."""
+    renamed before it): the --json file was left whole after the --plot failed, and a file cut
+    short where the disk filled. A symbolic link is written through, as a plain write does: the
+    file it names is replaced, the link kept."""
     partials: list[tuple[str, Path, Path, Path]] = []
     try:
         for option, path, write in writes:
