@@ -739,8 +739,19 @@ class ClientSession:
         client's end of the connection closes. A pipe written from the future's done callback
         wakes the wait when the STEP ends."""
         wake_r, wake_w = os.pipe()
+        # The callback may run after this returns (a future is done() before its callbacks
+        # have run, and a STEP that timed out ends later): it writes only while the pipe is
+        # open, never to a closed descriptor number another socket may have taken since.
+        pipe_lock = threading.Lock()
+        pipe_open = [True]
+
+        def wake(_: Future[None]) -> None:
+            with pipe_lock:
+                if pipe_open[0]:
+                    os.write(wake_w, b".")
+
         try:
-            fut.add_done_callback(lambda _: os.write(wake_w, b"."))
+            fut.add_done_callback(wake)
             poller = select.poll()
             poller.register(wake_r, select.POLLIN)
             poller.register(self.sock, _PEER_GONE)
@@ -771,7 +782,8 @@ class ClientSession:
                     poller.unregister(self.sock)  # reported for good: wait for the engine
             fut.result()  # done: its exception, if any (an engine failure), goes on
         finally:
-            if fut.done():  # the callback has written (or the future was cancelled and has)
+            with pipe_lock:
+                pipe_open[0] = False
                 os.close(wake_r)
                 os.close(wake_w)
 

@@ -10,6 +10,7 @@ Waits are on events with generous deadlines, never on how fast a busy machine ru
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import subprocess
@@ -346,3 +347,57 @@ def test_both_servers_refuse_a_bad_connection_limit_the_same_way(limit: str, val
         ControlServer(None, port=0, **{limit: value})  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match=rf"image server: {limit} must be > 0, got {value!r}"):
         ImageServer(FrameBuffer(), port=0, **{limit: value})  # type: ignore[arg-type]
+
+
+def _pipes() -> set[int]:
+    """This process's open descriptors that are pipes."""
+    fds = set()
+    for name in os.listdir("/proc/self/fd"):
+        try:
+            if os.readlink(f"/proc/self/fd/{name}").startswith("pipe:"):
+                fds.add(int(name))
+        except OSError:  # closed since listed
+            pass
+    return fds
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/fd"), reason="reads /proc/self/fd (Linux)")
+def test_a_step_answered_past_its_limit_closes_its_watch_and_writes_nothing(
+        monkeypatch, caplog) -> None:
+    """A STEP still running after twice its limit is answered with an error at once. Its
+    watch's wake-up pipe is closed then (the old code left it open for good: two descriptors
+    per such STEP), and when the STEP ends later its wake-up writes to no descriptor: not to
+    the closed one (EBADF in the future's callback), nor to whatever has taken its numbers
+    since (here a pipe opened just after, as a socket of another client could)."""
+    import select
+    import threading
+
+    import skeye.sim.session
+
+    monkeypatch.setattr(skeye.sim.session, "STEP_TIMEOUT_S", 0.2)
+    caplog.set_level(logging.ERROR, logger="concurrent.futures")
+    release = threading.Event()
+    with running_sim(mode="lockstep") as server:
+        server.runner.call(lambda sim: sim.step_hooks.append(lambda _: release.wait(60)))
+        client = LineClient(server.port)
+        client.expect("NFO")
+        try:
+            pipes_before = _pipes()
+            client.send("STEP {Count 1}")
+            err = client.read_until(_is_err("STEP"), timeout_s=60)[1]
+            assert "still at it" in (err.get("Reason") or ""), err
+            taker_r, taker_w = os.pipe()
+            try:
+                left_open = _pipes() - pipes_before - {taker_r, taker_w}
+                release.set()
+                # The engine runs a task's callbacks before it takes up the next task.
+                server.runner.call(lambda sim: sim.step_hooks.clear())
+                assert select.select([taker_r], [], [], 0.0)[0] == []
+            finally:
+                os.close(taker_r)
+                os.close(taker_w)
+        finally:
+            release.set()
+            client.close()
+    assert not left_open, f"the watch's pipe is still open: descriptors {sorted(left_open)}"
+    assert not [r for r in caplog.records if r.name == "concurrent.futures"], caplog.text
