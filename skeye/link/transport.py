@@ -372,19 +372,34 @@ def pty_null_modem() -> Iterator[tuple[str, str]]:
     m2, s2 = os.openpty()
     for fd in (s1, s2):
         tty.setraw(fd)
+    for fd in (m1, m2):  # a side nobody reads fills up: the bridge must still see stop
+        os.set_blocking(fd, False)
     stop = threading.Event()
+
+    def put(fd: int, data: bytes) -> None:
+        while data and not stop.is_set():
+            try:
+                data = data[os.write(fd, data):]
+            except BlockingIOError:
+                select.select([], [fd], [], 0.05)
 
     def bridge() -> None:
         route = {m1: m2, m2: m1}
-        while not stop.is_set():
-            try:
-                ready, _, _ = select.select(list(route), [], [], 0.05)
-                for fd in ready:
-                    data = os.read(fd, RECV_CHUNK)
-                    if data:
-                        os.write(route[fd], data)
-            except OSError:  # a side was hung up and reopened: keep bridging
-                time.sleep(0.01)
+        try:
+            while not stop.is_set():
+                try:
+                    ready, _, _ = select.select(list(route), [], [], 0.05)
+                    for fd in ready:
+                        data = os.read(fd, RECV_CHUNK)
+                        if data:
+                            put(route[fd], data)
+                except BlockingIOError:
+                    pass
+                except OSError:  # a side was hung up and reopened: keep bridging
+                    time.sleep(0.01)
+        finally:  # the thread's own descriptors: closed when it no longer uses them, never
+            for fd in (m1, s1, m2, s2):  # under it (another socket may take a freed number)
+                os.close(fd)
 
     thread = threading.Thread(target=bridge, name="pty-null-modem", daemon=True)
     thread.start()
@@ -392,6 +407,4 @@ def pty_null_modem() -> Iterator[tuple[str, str]]:
         yield os.ttyname(s1), os.ttyname(s2)
     finally:
         stop.set()
-        thread.join(1.0)
-        for fd in (m1, s1, m2, s2):
-            os.close(fd)
+        thread.join(10.0)  # it sees stop within 0.05 s of select

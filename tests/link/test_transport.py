@@ -199,3 +199,56 @@ def test_memory_pair_delivers_any_chunking_in_order(chunks):
     while len(got) < len(total):
         got += b.recv(0.5)
     assert got == total
+
+
+def test_a_null_modem_with_a_side_nobody_reads_ends_its_bridge_on_exit():
+    """One side written until the other, unread, is full: the bridge waits to pass the bytes
+    on. Leaving the context ends the bridge thread and only then closes the pseudo-terminals
+    (it was blocked in a write, so its descriptors were closed under it after a second, and it
+    lived on, to use whatever files took those numbers next)."""
+    import os
+    import time
+    import tty
+
+    with pty_null_modem() as (dev_a, dev_b):
+        writer = os.open(dev_a, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        reader = os.open(dev_b, os.O_RDWR | os.O_NOCTTY)  # open, never read
+        tty.setraw(writer)
+        try:
+            written, stalled_since = 0, None
+            while stalled_since is None or time.monotonic() - stalled_since < 0.5:
+                try:
+                    written += os.write(writer, b"x" * 4096)
+                    stalled_since = None
+                except BlockingIOError:  # both ways full: the bridge holds the rest
+                    stalled_since = stalled_since or time.monotonic()
+                    time.sleep(0.01)
+            assert written > 0
+        finally:
+            bridges = [t for t in threading.enumerate() if t.name == "pty-null-modem"]
+    try:
+        assert bridges and not any(t.is_alive() for t in bridges), bridges
+        for dev in (dev_a, dev_b):  # closed: the master's end is gone
+            assert not os.path.exists(dev) or _hung_up(dev)
+    finally:
+        os.close(writer)
+        os.close(reader)
+
+
+def _hung_up(dev: str) -> bool:
+    """True when the pseudo-terminal's master is closed (its slave reads EIO or nothing)."""
+    import os
+
+    try:
+        fd = os.open(dev, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError:
+        return True
+    try:
+        os.read(fd, 1)
+    except BlockingIOError:
+        return False
+    except OSError:
+        return True
+    finally:
+        os.close(fd)
+    return True
