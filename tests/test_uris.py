@@ -53,3 +53,44 @@ def test_a_port_that_is_no_number_is_named(name, parse, form, error) -> None:
         with pytest.raises(error) as info:
             parse(uri)
         assert uri in str(info.value), info.value
+
+
+OPTIONED: list[tuple[str, Callable[[str], object], str, str, type[SkeyeError]]] = [
+    ("link", parse_link_uri, "serial:///dev/ttyUSB0?{}", "baud", LocalProtocolError),
+    ("MAVLink link", parse_mavlink_uri, "serial:///dev/ttyACM0?{}", "baud", ConfigError),
+    ("LL airframe", parse_asctec_ll, "asctec-ll://serial/dev/ttyUSB0?{}", "baud",
+     LocalProtocolError),
+    ("MAVLink airframe", open_mavlink_airframe, "mavlink://serial/dev/ttyACM0?{}", "baud",
+     ConfigError),
+    ("sim camera", parse_sim_camera, "sim://127.0.0.1:5003/R1/Down?{}", "fov_deg",
+     LocalProtocolError),
+    ("v4l2 camera", parse_v4l2_uri, "v4l2:///dev/video0?{}", "fov_deg", LocalProtocolError),
+    ("file camera", parse_file_camera, "file:///x.mp4?{}", "fps", LocalProtocolError),
+]
+VALUES = {"baud": ("57600", "9600"), "fov_deg": ("60", "90"), "fps": ("10", "30")}
+
+
+@pytest.mark.parametrize(("name", "parse", "form", "key", "error"), OPTIONED,
+                         ids=[p[0] for p in OPTIONED])
+def test_an_option_given_twice_is_refused_not_the_last_taken(name, parse, form, key,
+                                                             error) -> None:
+    """``parse_qs`` keeps every value and each parser took the last: a pasted
+    ``?baud=57600&baud=9600`` ran at 9600 without a word."""
+    first, second = VALUES[key]
+    uri = form.format(f"{key}={first}&{key}={second}")
+    with pytest.raises(error) as info:
+        parse(uri)
+    text = str(info.value)
+    assert uri in text and "given twice" in text and f"{key}={second}" in text, text
+
+
+@pytest.mark.parametrize(("name", "parse", "form", "key", "error"), OPTIONED,
+                         ids=[p[0] for p in OPTIONED])
+def test_an_option_without_a_value_sign_is_refused(name, parse, form, key, error) -> None:
+    """``?loop`` (a file camera's ``loop=1`` typed as a flag) was read as blank, so as no
+    loop, or dropped unread by the parsers that kept no blank values."""
+    uri = form.format(f"{key}={VALUES[key][0]}&loop")
+    with pytest.raises(error) as info:
+        parse(uri)
+    text = str(info.value)
+    assert uri in text and "'loop' is not KEY=VALUE" in text, text

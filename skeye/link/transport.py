@@ -35,10 +35,9 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import TracebackType
-from urllib.parse import parse_qs
 
 from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError, PeerClosed
-from skeye.uris import port_of, split_uri
+from skeye.uris import port_of, query_of, split_uri
 from skeye.values import MAX_BAUD, baud_rate
 
 DEFAULT_BAUD = 57600
@@ -308,7 +307,7 @@ def parse_uri(uri: str) -> tuple[str, str, int]:
         device = parts.netloc + parts.path
         if not device:
             raise LocalProtocolError(f"link URI {uri!r}: expected serial:///dev/ttyX?baud=57600")
-        query = parse_qs(parts.query)
+        query = query_of(uri, parts, "link URI")
         unknown = set(query) - {"baud"}
         if unknown:
             raise LocalProtocolError(f"link URI {uri!r}: unknown option(s) {sorted(unknown)}")

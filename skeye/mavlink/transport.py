@@ -36,11 +36,10 @@ import time
 from collections import Counter
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any, Protocol
-from urllib.parse import parse_qs
 
 from skeye.errors import ConfigError, LinkClosed
 from skeye.peers import socket_peer_key
-from skeye.uris import port_of, split_uri
+from skeye.uris import port_of, query_of, split_uri
 from skeye.values import MAX_BAUD, baud_rate
 
 Peer = Hashable
@@ -364,7 +363,7 @@ def parse_uri(uri: str) -> tuple[str, str, int, dict[str, str]]:
     parts = split_uri(uri, "MAVLink link", "HOST:PORT, an IPv6 address in brackets "
                       "([::1]:14540)", ConfigError)
     scheme = parts.scheme.lower()
-    query = {k: v[-1] for k, v in parse_qs(parts.query).items()}
+    query = {k: v[0] for k, v in query_of(uri, parts, "MAVLink link", ConfigError).items()}
     if scheme == "serial":
         device = (parts.netloc + parts.path) if parts.netloc else parts.path
         if not device:

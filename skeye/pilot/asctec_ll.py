@@ -50,7 +50,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from urllib.parse import parse_qs
 
 from skeye.errors import (
     AnswerLost,
@@ -66,7 +65,7 @@ from skeye.link.transport import DEFAULT_BAUD, open_link
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits, vehicle_limits
 from skeye.pilot.ll_control import LLEstimate, StickPilot, Sticks, Velocity, nav_state
-from skeye.uris import split_uri
+from skeye.uris import query_of, split_uri
 from skeye.values import MAX_BAUD, baud_rate
 from skeye.wire.packet_units import s_to_ms
 from skeye.wire.packets import PD, Clock, CtrlInput, PollMask, ResultCode, encode
@@ -124,7 +123,7 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
                       "asctec-ll://tcp/HOST:PORT")
     if parts.scheme.lower() != "asctec-ll":
         raise LocalProtocolError(f"airframe {uri!r}: expected asctec-ll://...")
-    query = parse_qs(parts.query, keep_blank_values=True)
+    query = query_of(uri, parts, "airframe")
     known = {"baud", "lockstep", "rate_hz", "timeout_s"}
     unknown = sorted(set(query) - known)
     if unknown:

@@ -28,12 +28,11 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol, cast, runtime_checkable
-from urllib.parse import parse_qs
 
 import numpy as np
 
 from skeye.errors import LocalProtocolError, SkeyeError
-from skeye.uris import split_uri
+from skeye.uris import query_of, split_uri
 
 
 class CameraError(SkeyeError):
@@ -175,7 +174,7 @@ def needs_fov_option(uri: str) -> bool:
     so ``skeye pilot`` says so before it opens the vehicle."""
     if camera_scheme(uri) == "sim":
         return False
-    query = parse_qs(split_uri(uri, "camera", "SCHEME://...").query, keep_blank_values=True)
+    query = query_of(uri, split_uri(uri, "camera", "SCHEME://..."), "camera")
     return fov_option(uri, query) is None
 
 

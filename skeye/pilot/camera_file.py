@@ -28,7 +28,7 @@ import math
 import os
 import threading
 from pathlib import Path
-from urllib.parse import parse_qs, unquote
+from urllib.parse import unquote
 
 import cv2
 import numpy as np
@@ -44,7 +44,7 @@ from skeye.pilot.camera import (
     fov_option,
 )
 from skeye.pixels import declared_size
-from skeye.uris import split_uri
+from skeye.uris import query_of, split_uri
 from skeye.wire.images import FrameType
 
 
@@ -70,7 +70,7 @@ def parse_file_camera(uri: str) -> tuple[Path, float | None, bool, float | None]
         raise LocalProtocolError(f"camera {uri!r}: the name decodes to {path!r}, with a control "
                                  "character: '%' starts an escape in a URI, write a '%' in a "
                                  "file's name as %25")
-    query = parse_qs(parts.query, keep_blank_values=True)
+    query = query_of(uri, parts, "camera")
     unknown = sorted(set(query) - {"fps", "loop", "fov_deg", "fov_rad"})
     if unknown:
         raise LocalProtocolError(f"camera {uri!r}: unknown option(s) {unknown} (fps, loop, "

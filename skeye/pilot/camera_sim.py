@@ -36,7 +36,6 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from urllib.parse import parse_qs
 
 from skeye.control.image_client import ImageClient
 from skeye.errors import LocalProtocolError, RemoteProtocolError, SkeyeError
@@ -49,7 +48,7 @@ from skeye.pilot.camera import (
     fov_option,
 )
 from skeye.pixels import frame_image
-from skeye.uris import port_of, split_uri
+from skeye.uris import port_of, query_of, split_uri
 from skeye.wire.images import MetaHeader
 
 OFFSET_WINDOW = 50
@@ -82,7 +81,7 @@ def parse_sim_camera(uri: str, robot: str = "R1") -> tuple[str, int, str, float 
                                  "sim://HOST:PORT/CAMERA")
     if "/" not in name:
         name = f"{robot}/{name}"
-    query = parse_qs(parts.query, keep_blank_values=True)
+    query = query_of(uri, parts, "camera")
     unknown = sorted(set(query) - {"fov_deg", "fov_rad"})
     if unknown:
         raise LocalProtocolError(f"camera {uri!r}: unknown option(s) {unknown} (fov_deg, "

@@ -38,7 +38,7 @@ import threading
 import time
 from dataclasses import dataclass
 from typing import Any
-from urllib.parse import parse_qs, unquote
+from urllib.parse import unquote
 
 import cv2
 import numpy as np
@@ -52,7 +52,7 @@ from skeye.pilot.camera import (
     check_size,
     fov_option,
 )
-from skeye.uris import split_uri
+from skeye.uris import query_of, split_uri
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -95,7 +95,7 @@ def parse_v4l2_uri(uri: str) -> V4l2Settings:
     device = unquote(parts.netloc + parts.path)
     if not device.startswith("/dev/"):
         raise LocalProtocolError(f"camera {uri!r}: expected a device path, v4l2:///dev/video0")
-    query = parse_qs(parts.query, keep_blank_values=True)
+    query = query_of(uri, parts, "camera")
     known = {"width", "height", "fps", "fourcc", "exposure", "gain", "buffers", "fov_deg",
              "fov_rad"}
     unknown = sorted(set(query) - known)

@@ -38,7 +38,6 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
-from urllib.parse import parse_qs
 
 from pymavlink.dialects.v20 import common as mav
 
@@ -54,7 +53,7 @@ from skeye.pilot.airframe import (
     vehicle_limits,
 )
 from skeye.pilot.pad import PadObservation
-from skeye.uris import split_uri
+from skeye.uris import query_of, split_uri
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -551,7 +550,7 @@ def open_mavlink_airframe(uri: str, **options: Any) -> MavlinkAirframe:
     # Each option is the link's or refused: one dropped in silence (udpout's bind, a baud
     # typed as speed) showed only as no controller answering, after the whole wait.
     takes = LINK_OPTIONS[kind]
-    unknown = sorted(set(parse_qs(parts.query, keep_blank_values=True)) - takes)
+    unknown = sorted(set(query_of(uri, parts, "airframe", ConfigError)) - takes)
     if unknown:
         raise ConfigError(f"{uri}: option(s) {unknown} are not for a {kind} link (it takes "
                           f"{', '.join(sorted(takes)) or 'none'})")
