@@ -19,6 +19,7 @@ checked once, and a bad one is a :class:`~skeye.errors.ConfigError` naming it.
 
 from __future__ import annotations
 
+import math
 import weakref
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
@@ -201,10 +202,11 @@ class Vehicle:
             cam.noise_stream = (flight.seed, flight.spawns)
         self.airframe = InProcessAirframe(sim, name, self.view)
         self.spawn_pose = Pose(sim.time_s, *location_ned_m, 0.0, 0.0, wrap_pi(yaw_rad))
-        below = sim.ray_distance(name, location_ned_m, (0.0, 0.0, 1.0), 1000.0)
-        ground_down_m = location_ned_m[2] + (below if below is not None else 0.0)
         # Home: where the vehicle would stand on the ground below its spawn point, as the
-        # pilot's home is the estimate at take-off.
+        # pilot's home is the estimate at take-off. The ground is looked for at any depth, as
+        # the simulator's spawn looks for it (a start may be up to 1e5 m high).
+        below = sim.ray_distance(name, location_ned_m, (0.0, 0.0, 1.0), math.inf)
+        ground_down_m = location_ned_m[2] + (below if below is not None else 0.0)
         self.home_ned_m = (location_ned_m[0], location_ned_m[1],
                            ground_down_m - flight.config.airframe.gear_height_m)
         self.vision: DetectOnlyVision | None = None

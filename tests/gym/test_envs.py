@@ -274,6 +274,20 @@ def test_a_start_that_is_not_in_the_air_is_refused(env_id: str, start: tuple) ->
         env.close()
 
 
+@pytest.mark.parametrize("height_m", [2.0, 1500.0, 20000.0])
+def test_the_home_is_on_the_ground_below_a_start_of_any_height(height_m: float) -> None:
+    """Home is where the vehicle would stand on the ground below its spawn point; the ground
+    was looked for within 1000 m only, so above that the home was the spawn point itself and
+    the state's down_m read +0.08 m (the gear's height: below the ground) at 1500 m up."""
+    env = gymnasium.make("skeye/Hover-v0", sensor_noise=0.0, estimator="truth")
+    try:
+        obs, _ = env.reset(seed=0, options={"start_ned_m": (0.0, 0.0, -height_m)})
+        gear_m = env.unwrapped.setup.config.airframe.gear_height_m  # type: ignore[attr-defined]
+        assert obs[STATE_FIELDS.index("down_m")] == pytest.approx(-(height_m - gear_m), abs=0.05)
+    finally:
+        env.close()
+
+
 def test_the_batched_environment_refuses_bad_options_as_config_errors() -> None:
     with pytest.raises(ConfigError, match="start_height_m must be"):
         gymnasium.make_vec("skeye/PadLanding-v0", num_envs=2,
