@@ -101,3 +101,15 @@ def test_the_gym_examples_refuse_a_count_below_one_naming_it(script: str, args: 
                           env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
     assert f"argument {args[0]}" in done.stderr and ">= 1" in done.stderr, done.stderr
+
+
+def test_the_landing_example_refuses_a_negative_seed_naming_it() -> None:
+    """``pad_landing_scripted.py --seed -1`` was taken and ended in a traceback from inside
+    Gymnasium's reset ("Seed must be greater or equal to zero"); it is now refused by its
+    option, before anything is flown."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(ROOT / "examples" / "gym" /
+                                               "pad_landing_scripted.py"), "--seed", "-1"],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "argument --seed" in done.stderr and "non-negative" in done.stderr, done.stderr

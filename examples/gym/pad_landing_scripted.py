@@ -24,7 +24,7 @@ import gymnasium
 import numpy as np
 
 import skeye.gym  # noqa: F401  (registers the environments)
-from skeye.cliargs import positive_int
+from skeye.cliargs import positive_int, seed
 from skeye.pilot.pad_hold import PadHoldLaw, PadHoldParams
 from skeye.pilot.pad_track import PadFix, Pose, PoseHistory, locate_pad, offset_now
 
@@ -125,7 +125,7 @@ def fly(episodes: int, seed: int, **env_kwargs: object) -> list[dict[str, object
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=positive_int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=seed, default=0)
     parser.add_argument("--camera", default="webcam", choices=("webcam", "ideal"))
     parser.add_argument("--estimator", default="onboard", choices=("onboard", "truth"))
     args = parser.parse_args()
