@@ -36,6 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from skeye.cliargs import positive_int
+
+MAX_ENVS = 256  # skeye.gym.vector: num_envs 1..256
+
 GPD_SCRIPT = r"""
 import json, sys, time, warnings
 warnings.filterwarnings("ignore")
@@ -116,13 +120,24 @@ def gpd(python: str | None, steps: int, envs: int, repeats: int) -> dict[str, fl
     return result
 
 
+def envs_count(text: str) -> int:
+    """``--envs``: 1..MAX_ENVS (the native vector environment's most vehicles)."""
+    value = positive_int(text)
+    if value > MAX_ENVS:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_ENVS} (the native vector "
+                                         f"environment's most vehicles), got {text!r}")
+    return value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=400, help="step calls per state run")
-    parser.add_argument("--camera-steps", type=int, default=40,
+    parser.add_argument("--steps", type=positive_int, default=400,
+                        help="step calls per state run")
+    parser.add_argument("--camera-steps", type=positive_int, default=40,
                         help="step calls per camera run (one environment)")
-    parser.add_argument("--envs", type=int, default=16)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--envs", type=envs_count, default=16,
+                        help=f"environments per vector run, 1..{MAX_ENVS}")
+    parser.add_argument("--repeats", type=positive_int, default=3)
     parser.add_argument("--gpd-python", default=None,
                         help="a Python with gym_pybullet_drones installed (HoverAviary)")
     parser.add_argument("--no-camera", action="store_true", help="skip the camera rows")
