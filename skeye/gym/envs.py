@@ -187,7 +187,8 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         self._close_flight()
         episode = self.task.start(self.np_random, self.origin)
         override_start(episode, options, target_fixed=self.task.target_fixed)
-        flight = Flight(self.setup, int(self.np_random.integers(2**31)))
+        flight = Flight(self.setup, int(self.np_random.integers(2**31)),
+                        vision=self.task.needs_camera)  # Hover, GoTo: a camera to render only
         try:
             vehicle = flight.spawn("R1", episode.start_ned_m, episode.yaw_rad)
             if not vehicle.robot.spawn_airborne:  # it would stand there: a crash at once

@@ -314,13 +314,17 @@ def prepare(settings: FlightSettings,
 class Flight:
     """One in-process simulation with its vehicles (see the module docstring)."""
 
-    def __init__(self, setup: Setup, seed: int) -> None:
+    def __init__(self, setup: Setup, seed: int, *, vision: bool = True) -> None:
+        """``vision``: each vehicle runs the pilot's pad detector on its camera (a task that
+        observes it: PadLanding); without, a camera is only rendered, each frame when its
+        pixels are asked for (``render()``)."""
         import threading
 
         settings = setup.settings
         self.setup = setup
         self.settings = settings
         self.seed = seed
+        self.vision = vision
         self.spawns = 0  # vehicles spawned so far, each its own camera noise (Vehicle)
         self.world = setup.world
         self.config = setup.config
@@ -350,10 +354,12 @@ class Flight:
 
     def step(self) -> None:
         """One control period of sim time, then each vehicle's vision takes its frame (its
-        vision starts with its first pose reading)."""
+        vision starts with its first pose reading), where the flight has vision."""
         self.sim.step(self.settings.period_steps)
+        if self.cameras is None or not self.vision:
+            return
         for vehicle in self.vehicles.values():
-            if self.cameras is not None and vehicle.alive:
+            if vehicle.alive:
                 if vehicle.vision is None and vehicle.reporting:
                     vehicle.start_vision()
                 if vehicle.vision is not None:

@@ -235,7 +235,8 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         super().reset(seed=seed)
         self._close_flight()
         self._cut_short = "the last reset() did not finish"  # until it does (below)
-        self.flight = Flight(self.setup, int(self.np_random.integers(2**31)))
+        self.flight = Flight(self.setup, int(self.np_random.integers(2**31)),
+                             vision=self.tasks[0].needs_camera)
         self._release = self.flight.closed_with(self)
         for i in range(self.num_envs):
             self._start(i)

@@ -4,6 +4,7 @@ environment would ignore, or a render mode it does not offer, is a ConfigError n
 from __future__ import annotations
 
 import re
+import threading
 from pathlib import Path
 
 import gymnasium
@@ -66,6 +67,30 @@ def test_a_camera_renders_hover_with_rgb_array() -> None:
         env.step(np.zeros(4, np.float32))
         frame = env.render()
         assert isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.dtype == np.uint8
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", ["skeye/Hover-v0", "skeye/GoTo-v0"])
+def test_a_camera_only_rendered_runs_no_pad_detector(env_id: str) -> None:
+    """Hover and GoTo given a camera to render started the pilot's pad detector on it (a
+    'pilot-vision' thread detecting, so rendering, every frame of every step), whose
+    detections they never observe: a step took about 35 times as long, and a hung detector
+    could stop it. Now the frames are rendered only when render() asks for one."""
+    def detectors() -> int:
+        return sum(1 for t in threading.enumerate() if t.name == "pilot-vision")
+
+    before = detectors()
+    env = gymnasium.make(env_id, camera="ideal", render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        first = env.render()
+        for _ in range(10):
+            env.step(np.array((1.0, 0.0, 0.5, 0.0), np.float32))
+        assert detectors() == before
+        frame = env.render()
+        assert isinstance(frame, np.ndarray) and frame.shape == first.shape  # type: ignore[union-attr]
+        assert not np.array_equal(frame, first)  # the view moved with the vehicle
     finally:
         env.close()
 
