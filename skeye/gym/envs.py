@@ -187,6 +187,7 @@ class SkeyeEnv(gymnasium.Env[Any, np.ndarray], SpecPickle):
         self._close_flight()
         episode = self.task.start(self.np_random, self.origin)
         override_start(episode, options, target_fixed=self.task.target_fixed)
+        self.task.prime(episode)  # the progress counted from the start and target given
         flight = Flight(self.setup, int(self.np_random.integers(2**31)),
                         vision=self.task.needs_camera)  # Hover, GoTo: a camera to render only
         try:

@@ -110,7 +110,18 @@ class Task:
         return _box((STATE_LOW, STATE_HIGH), (-TARGET_HIGH, TARGET_HIGH))
 
     def start(self, rng: np.random.Generator, origin: Vec3) -> Episode:
+        """A new episode drawn around ``origin``, primed (:meth:`prime`)."""
         raise NotImplementedError
+
+    def potential(self, pos: Vec3, episode: Episode) -> float:
+        """What the progress reward counts down (GoTo, PadLanding): the distance to the
+        target."""
+        return math.dist(pos, episode.target_ned_m)
+
+    def prime(self, episode: Episode) -> None:
+        """Count the progress from the episode's start: after drawing it, and again after
+        ``reset(options=...)`` replaced its start or target."""
+        episode.last_distance_m = self.potential(episode.start_ned_m, episode)
 
     def observe(self, vehicle: Vehicle, snap: Snapshot, episode: Episode) -> Any:
         """State + target offset from the estimate (Hover, GoTo)."""
@@ -196,7 +207,7 @@ class GoTo(Task):
         target = (origin[0] + float(dn), origin[1] + float(de),
                   origin[2] - float(rng.uniform(1.0, 3.0)))
         episode = Episode(start, float(rng.uniform(-math.pi, math.pi)), target)
-        episode.last_distance_m = math.dist(start, target)
+        self.prime(episode)
         return episode
 
     def step_reward(self, truth: BodyState, episode: Episode) -> float:
@@ -260,12 +271,13 @@ class PadLanding(Task):
         start = (origin[0] + radius * math.cos(bearing), origin[1] + radius * math.sin(bearing),
                  origin[2] - height)
         episode = Episode(start, float(rng.uniform(-math.pi, math.pi)), origin)
-        episode.last_distance_m = self._potential(start, episode)
+        self.prime(episode)
         # in every info, so an episode truncated (here or by Gymnasium's TimeLimit) says so
         episode.info["success"] = False
         return episode
 
-    def _potential(self, pos: Vec3, episode: Episode) -> float:
+    def potential(self, pos: Vec3, episode: Episode) -> float:
+        """Horizontal distance to the pad centre plus half the height above it."""
         t = episode.target_ned_m
         return math.hypot(pos[0] - t[0], pos[1] - t[1]) + 0.5 * max(0.0, t[2] - pos[2])
 
@@ -294,7 +306,7 @@ class PadLanding(Task):
             success = error <= self.pad_tolerance_m
             episode.info.update(success=success, touchdown_error_m=error)
             return (SUCCESS_REWARD if success else CRASH_REWARD), True
-        potential = self._potential(truth.pos_ned_m, episode)
+        potential = self.potential(truth.pos_ned_m, episode)
         progress = episode.last_distance_m - potential
         episode.last_distance_m = potential
         return progress, False

@@ -207,6 +207,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
             self.flight.remove(self._name(i))
         episode = self.tasks[i].start(self.np_random, self.origins[i])
         override_start(episode, options)
+        self.tasks[i].prime(episode)
         vehicle = self.flight.spawn(self._name(i), episode.start_ned_m, episode.yaw_rad)
         vehicle.airframe.hover()
         self.vehicles[i], self.episodes[i] = vehicle, episode

@@ -233,6 +233,27 @@ def test_bad_pad_landing_options_of_any_type_are_config_errors_naming_them(
         gymnasium.make("skeye/PadLanding-v0", **kwargs)
 
 
+@pytest.mark.parametrize("env_id,options", [
+    ("skeye/GoTo-v0", {"start_ned_m": (0.0, 0.0, -1.5), "target_ned_m": (0.5, 0.0, -1.5)}),
+    ("skeye/GoTo-v0", {"target_ned_m": (2.0, 0.0, -1.5)}),
+    ("skeye/PadLanding-v0", {"start_ned_m": (0.0, 0.0, -4.0)}),
+])
+def test_the_first_reward_of_a_start_or_target_given_in_the_options_is_their_progress(
+        env_id: str, options: dict) -> None:
+    """The progress reward was counted from the distance of the start and target the task
+    had drawn before the options replaced them: GoTo's first step, hovering 0.5 m from its
+    given target, was rewarded 4.3 (seed 0) for a progress of millimetres."""
+    env = gymnasium.make(env_id, sensor_noise=0.0, estimator="truth")
+    try:
+        for seed in (0, 1):
+            env.reset(seed=seed, options=options)
+            _, reward, terminated, _, info = env.step(np.zeros(4, np.float32))  # hold still
+            assert not terminated
+            assert abs(float(reward)) < 0.02, (seed, reward, info)
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("env_id,options,message", [
     ("skeye/PadLanding-v0", {"yaw_rad": "abc"}, "yaw_rad must be a finite number"),
     ("skeye/PadLanding-v0", {"yaw_rad": float("nan")}, "yaw_rad must be a finite number"),
