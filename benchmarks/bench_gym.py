@@ -38,7 +38,7 @@ import numpy as np
 
 from skeye.cliargs import positive_int
 
-MAX_ENVS = 256  # skeye.gym.vector: num_envs 1..256
+MAX_ENVS = 256  # skeye.gym.vector.MAX_NUM_ENVS (not imported here: it loads MuJoCo)
 
 GPD_SCRIPT = r"""
 import json, sys, time, warnings

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import weakref
 from collections.abc import Callable
+from numbers import Integral
 from typing import Any
 
 import numpy as np
@@ -68,6 +69,8 @@ from skeye.gym.tasks import (
 from skeye.pilot.policy import DEFAULT_IMAGE_SIZE, action_values
 from skeye.values import number
 
+MAX_NUM_ENVS = 256
+"""The most vehicles one batched environment flies."""
 DEFAULT_SPACING_M = 10.0
 """Between vehicles' cells, at least (a task whose reach needs more gets its minimum,
 :func:`min_spacing_m`): PadLanding's area is 3 m and the webcam sees about 1.5 m around
@@ -92,6 +95,15 @@ def min_spacing_m(task: Task) -> float:
     between them (``CELL_CLEARANCE_M``), so that no vehicle flies into a neighbour, nor is
     respawned where one flies (the simulator would refuse the spawn)."""
     return 2.0 * task.reach_m + CELL_CLEARANCE_M
+
+
+def vehicle_count(value: Any) -> int:
+    """``num_envs``: a whole number 1..MAX_NUM_ENVS of any integer type (numpy's too, as
+    Gymnasium's sync and async modes take it), not a bool."""
+    count = int(value) if isinstance(value, Integral) and not isinstance(value, bool) else 0
+    if not 1 <= count <= MAX_NUM_ENVS:
+        raise ConfigError(f"num_envs must be a whole number 1..{MAX_NUM_ENVS}, got {value!r}")
+    return count
 
 
 def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
@@ -130,8 +142,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
         EzPickle.__init__(self, task_factory, num_envs, spacing_m=spacing_m, action=action,
                           episode_s=episode_s, render_mode=render_mode,
                           max_episode_steps=max_episode_steps, **settings)
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or not 1 <= num_envs <= 256:
-            raise ConfigError(f"num_envs must be 1..256, got {num_envs!r}")
+        num_envs = vehicle_count(num_envs)
         if max_episode_steps == -1 and not isinstance(max_episode_steps, bool):
             max_episode_steps = None  # gymnasium.make's "no TimeLimit"
         if max_episode_steps is not None and (

@@ -321,6 +321,23 @@ def test_the_batched_environment_refuses_bad_options_as_config_errors() -> None:
                            vectorization_mode="vector_entry_point", spacing_m=1e9)
 
 
+def test_the_batched_environment_takes_num_envs_of_any_integer_type() -> None:
+    """num_envs=np.int64(2), which Gymnasium's sync and async modes take, was refused by the
+    batched environment as 'num_envs must be 1..256, got np.int64(2)'."""
+    envs = gymnasium.make_vec("skeye/Hover-v0", num_envs=np.int64(2),
+                              vectorization_mode="vector_entry_point")
+    try:
+        obs, _ = envs.reset(seed=0)
+        assert obs.shape == (2, 19) and type(envs.num_envs) is int
+    finally:
+        envs.close()
+    for bad in (0, 257, 2.0, True, "2"):
+        with pytest.raises(ConfigError, match=re.escape(f"num_envs must be a whole number "
+                                                        f"1..256, got {bad!r}")):
+            gymnasium.make_vec("skeye/Hover-v0", num_envs=bad,
+                               vectorization_mode="vector_entry_point")
+
+
 @pytest.mark.parametrize(("env_id", "closest_m"), [
     ("skeye/Hover-v0", 8.0), ("skeye/GoTo-v0", 2 * (8 + 4 * 2 ** 0.5) + 2)])
 def test_cells_closer_than_the_task_reach_are_refused(env_id: str, closest_m: float) -> None:
