@@ -157,3 +157,21 @@ def test_a_robot_dir_that_is_not_a_folder_is_refused_naming_it(tmp_path: Path) -
                                           r"folder$"):
         gymnasium.make("skeye/Hover-v0", robot_dir=[tmp_path, a_file])
     gymnasium.make("skeye/Hover-v0", robot_dir=tmp_path).close()
+
+
+def test_the_options_table_gives_every_keyword_the_environments_take() -> None:
+    """docs/gym.md's options table is the reference of gymnasium.make's keywords; timestep_s,
+    which every environment takes (the physics step, as skeye sim --timestep), was missing."""
+    from dataclasses import fields
+
+    from skeye.gym.envs import ENV_KEYWORDS
+    from skeye.gym.flight import FlightSettings
+    from skeye.gym.tasks import PadLanding
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "gym.md").read_text()
+    table = text.split("### Options", 1)[1].split("\n\n", 2)[1]  # the table after its heading
+    rows = [line for line in table.splitlines() if line.startswith("| `")]
+    documented = {name for row in rows for name in re.findall(r"`(\w+)`", row.split("|")[1])}
+    taken = {f.name for f in fields(FlightSettings)} | set(ENV_KEYWORDS) | set(
+        PadLanding.keywords) | {"max_episode_steps"}
+    assert taken <= documented, sorted(taken - documented)
