@@ -67,6 +67,8 @@ from skeye.gym.tasks import (
     Task,
 )
 from skeye.pilot.policy import DEFAULT_IMAGE_SIZE, action_values
+from skeye.sim.world import WorldDescription
+from skeye.sim.world_model import Box
 from skeye.values import number
 
 MAX_NUM_ENVS = 256
@@ -111,6 +113,38 @@ def grid(num: int, spacing_m: float) -> list[tuple[float, float]]:
     side = math.ceil(math.sqrt(num))
     half = (side - 1) / 2.0
     return [((i // side - half) * spacing_m, (i % side - half) * spacing_m) for i in range(num)]
+
+
+def box_distance_m(point_ne_m: tuple[float, float], box: Box) -> float:
+    """Horizontal distance from a (north, east) point to a box's footprint (0 inside it)."""
+    dn, de = point_ne_m[0] - box.center_ned_m[0], point_ne_m[1] - box.center_ned_m[1]
+    c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+    along, across = c * dn + s * de, -s * dn + c * de  # in the box's own north and east
+    return math.hypot(max(abs(along) - box.size_m[0] / 2.0, 0.0),
+                      max(abs(across) - box.size_m[1] / 2.0, 0.0))
+
+
+def check_cells_clear(world: WorldDescription, cells: list[tuple[float, float]],
+                      reach_m: float) -> None:
+    """Refuse a cell whose episodes would reach one of the world's boxes (a wall, a building,
+    a ceiling): the cells copy the world's pad, not its obstacles, so a box near a cell's
+    centre is where no episode of the single environment meets one, and every episode of that
+    vehicle would end flying into it (or start inside it). A cell at the origin is the world's
+    own scene, the one the single environment flies, and is not checked."""
+    clear_m = reach_m + CELL_CLEARANCE_M / 2.0  # the vehicle's size and a period's flight
+    for i, (north, east) in enumerate(cells):
+        if north == 0.0 and east == 0.0:
+            continue
+        for box in world.boxes:
+            distance = box_distance_m((north, east), box)
+            if distance < clear_m:
+                raise ConfigError(
+                    f"vehicle {i}'s cell, centred at ({north:g}, {east:g}) m NED, is "
+                    f"{distance:.2f} m from box {box.name!r} of world {world.name!r}: its "
+                    f"episodes run up to {reach_m:g} m from the centre, and need "
+                    f"{clear_m:g} m clear of any box (the cells copy the world's pad, not its "
+                    f"obstacles); use a world without boxes there (pad), other num_envs or "
+                    f"spacing_m, or vectorization_mode='sync' or 'async'")
 
 
 def check_period(setup: Setup) -> None:
@@ -185,6 +219,7 @@ class SkeyeVectorEnv(VectorEnv[Any, Any, Any], SpecPickle):
                               f"{MAX_POSITION_M:g} m")
         self.setup = prepare(self.settings, tuple(cells) if task.needs_camera else None)
         check_period(self.setup)
+        check_cells_clear(self.setup.world, cells, task.reach_m)
         if task.needs_camera:
             pads = self.setup.world.pads
             self.origins = [(p.position_ned_m[0], p.position_ned_m[1], p.surface_down_m)

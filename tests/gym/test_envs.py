@@ -338,6 +338,31 @@ def test_the_batched_environment_takes_num_envs_of_any_integer_type() -> None:
                                vectorization_mode="vector_entry_point")
 
 
+@pytest.mark.parametrize("env_id,world,num_envs,box", [
+    ("skeye/Hover-v0", "yard", 16, "'shed'"),  # vehicle 3 stood in the tower, 15 in the house
+    ("skeye/Hover-v0", "indoor", 4, "'wall_south'"),  # the room's walls, at the cells' corners
+    ("skeye/PadLanding-v0", "indoor", 4, "'wall_south'"),
+])
+def test_the_batched_environment_refuses_cells_that_reach_the_worlds_boxes(
+        env_id: str, world: str, num_envs: int, box: str) -> None:
+    """The cells copy the world's pad, not its obstacles, and were laid out over them: in the
+    yard, 16 Hover vehicles of spacing 10 m put vehicle 3 inside the tower and 15 in the house,
+    whose every episode ended at once in a crash ('hard impact', 'left the area') whatever
+    the policy. Such a cell is now refused, naming the vehicle and the box."""
+    with pytest.raises(ConfigError, match=rf"vehicle \d+'s cell, centred at .* m from box "
+                                          rf"{box} of world '{world}'.*need 4 m clear"):
+        gymnasium.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                           world=world)
+    envs = gymnasium.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point",
+                              world=world)  # one cell, at the origin: the world's own scene
+    try:
+        envs.reset(seed=0)
+        _, _, terminated, _, _ = envs.step(np.zeros((1, 4), np.float32))
+        assert not terminated.any()
+    finally:
+        envs.close()
+
+
 @pytest.mark.parametrize(("env_id", "closest_m"), [
     ("skeye/Hover-v0", 8.0), ("skeye/GoTo-v0", 2 * (8 + 4 * 2 ** 0.5) + 2)])
 def test_cells_closer_than_the_task_reach_are_refused(env_id: str, closest_m: float) -> None:
