@@ -359,12 +359,22 @@ def _grey_world(scene: Any) -> None:
         geom.reflectance = 0.0
 
 
+_CONTEXT_FAILURES: dict[str, SkeyeError] = {}
+"""The backends (``MUJOCO_GL``) this process could not make an OpenGL context with, and the
+error: a second ``mujoco.Renderer`` after a failed one can abort the whole process (GLFW
+without a display: libc++abi's "recursive initialization" in MuJoCo's GL loader), so a later
+renderer is refused with the first error instead of trying again."""
+
+
 def _make_renderer(mujoco: Any, model: Any, height: int, width: int, samples: int,
                    shadow_px: int = 0) -> Any:
     """A renderer of this size with ``samples``-fold multisampling and a ``shadow_px`` shadow
     map (MuJoCo reads the model's ``offsamples`` and ``shadowsize`` when it makes the GL
     context; the model's own values are put back)."""
     backend = os.environ.get("MUJOCO_GL", "?")
+    failed = _CONTEXT_FAILURES.get(backend)
+    if failed is not None:  # a second try can abort the process (below): the same error
+        raise SkeyeError(str(failed))
     quality = model.vis.quality
     before = (int(quality.offsamples), int(quality.shadowsize))
     quality.offsamples = samples
@@ -372,12 +382,14 @@ def _make_renderer(mujoco: Any, model: Any, height: int, width: int, samples: in
     try:
         renderer = mujoco.Renderer(model, height=height, width=width)
     except Exception as exc:
-        raise SkeyeError(
+        error = SkeyeError(
             f"cannot render camera images with MUJOCO_GL={backend}: {exc}. Install an OpenGL "
             "backend: Mesa's EGL (apt-get install libegl1 libgl1-mesa-dri) for MUJOCO_GL=egl, "
             "or OSMesa (apt-get install libosmesa6) for MUJOCO_GL=osmesa, or run with a display "
             "(MUJOCO_GL=glfw)"
-        ) from exc
+        )
+        _CONTEXT_FAILURES[backend] = error
+        raise error from exc
     finally:
         quality.offsamples, quality.shadowsize = before
     flags = renderer.scene.flags

@@ -526,3 +526,39 @@ def test_calibration_pages_single_frame_recipe_gives_the_spawn_state_frame(tmp_p
                                        camera.group(1))
         assert number == 1
         c.close()
+
+
+_TWO_RENDERERS = r"""
+import mujoco
+from skeye.errors import SkeyeError
+from skeye.sim.render import _make_renderer
+model = mujoco.MjModel.from_xml_string("<mujoco/>")
+for attempt in range(2):
+    try:
+        _make_renderer(mujoco, model, 8, 8, 0).close()
+        print("made")
+    except SkeyeError as exc:
+        print("refused:", str(exc).splitlines()[0][:60])
+"""
+
+
+def test_a_renderer_after_a_failed_context_is_refused_not_tried_again() -> None:
+    """MUJOCO_GL=glfw without a display: the first renderer fails with a clear error, and a
+    second one (the next camera, the next episode) tried again aborted the whole Python
+    process in MuJoCo's GL loader (SIGABRT, libc++abi "recursive initialization", found by a
+    Gymnasium probe). The second is refused with the first's error."""
+    import os
+    import subprocess
+    import sys
+
+    pytest.importorskip("glfw")
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["MUJOCO_GL"] = "glfw"
+    child = subprocess.run([sys.executable, "-c", _TWO_RENDERERS], env=env,
+                           capture_output=True, text=True, timeout=120)
+    if child.stdout.startswith("made"):
+        pytest.skip("GLFW made a context without a display here")
+    assert child.returncode == 0, (child.returncode, child.stderr[-500:])
+    lines = child.stdout.splitlines()
+    assert len(lines) == 2 and all(line.startswith("refused: cannot render camera images "
+                                                   "with MUJOCO_GL=glfw") for line in lines), lines
