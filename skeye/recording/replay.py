@@ -35,6 +35,7 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
+from skeye.peers import accept_failed
 from skeye.processes import check_ports_free, wait_for_signal
 from skeye.recording.records import SENT, RecordingReader, robot_connections
 from skeye.wire.sim import decode, encode, unknown_command
@@ -133,23 +134,39 @@ class ReplayServer:
                     yield rec.sim_s, rec.line.encode() + b"\r\n"
 
     def _accept_loop(self) -> None:
+        said_s = 0.0
         while not self._closing.is_set():
             try:
                 sock, addr = self._listener.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                break
+            except OSError as exc:  # out of descriptors: waited out; the listener closed: done
+                when = accept_failed(exc, said_s, "replay")
+                if when is None:
+                    break
+                said_s = when
+                continue
             with self._lock:
-                if len(self._socks) >= self.max_clients:
-                    sock.sendall(format_error("CONNECT", "too many clients"))
-                    sock.close()
-                    continue
-                self._socks.add(sock)
-                t = threading.Thread(
-                    target=self._serve, args=(sock,), name=f"replay {addr[1]}", daemon=True
-                )
-                self._threads.add(t)
+                full = len(self._socks) >= self.max_clients
+                if not full:
+                    self._socks.add(sock)
+                    t = threading.Thread(
+                        target=self._serve, args=(sock,), name=f"replay {addr[1]}", daemon=True
+                    )
+                    self._threads.add(t)
+            if full:
+                # One non-blocking send, its failure ignored, as the simulator refuses: a
+                # blocking sendall to a client that had reset its connection raised, and the
+                # accept thread died of it (no client was taken again).
+                log.warning("refusing client %s:%s: too many clients (%d)", addr[0], addr[1],
+                            self.max_clients)
+                try:
+                    sock.setblocking(False)
+                    sock.send(format_error("CONNECT", "too many clients"))
+                except OSError:
+                    pass
+                sock.close()
+                continue
             t.start()
 
     def _serve(self, sock: socket.socket) -> None:

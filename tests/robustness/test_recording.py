@@ -8,6 +8,7 @@ import os
 import re
 import signal
 import socket
+import struct
 import subprocess
 import threading
 import time
@@ -1033,3 +1034,39 @@ def test_replay_of_a_robot_plays_every_connection_that_flew_it(tmp_path: Path) -
         got = [line for line in client.raw.split(b"\r\n") if line.startswith((b"SEN ", b"STA "))]
         client.close()
     assert got == expected
+
+
+def _short_flight(path: Path, meta: dict | None = None, seconds: float = 1.0) -> Path:
+    """A recording written by hand: robot R1 spawned on connection 1, then a STA line every
+    0.1 s of sim time for ``seconds``."""
+    records = [Record(100.0, 0.0, 1, SENT, "RES {Command INIT} {Name R1} {Status OK}")]
+    records += [Record(100.0 + k / 10, k / 10, 1, SENT, f"STA {{Name R1}} {{Time {k / 10:.1f}}}")
+                for k in range(1, round(seconds * 10) + 1)]
+    path.write_bytes(format_header({"world": "pad"} if meta is None else meta)
+                     + b"".join(format_record(r) for r in records))
+    return path
+
+
+def test_a_full_replay_goes_on_accepting_after_a_refused_client_reset_its_connection(
+        tmp_path: Path) -> None:
+    """The answer to a client over ``max_clients`` was a blocking sendall that raised
+    ConnectionResetError when that client had already reset its connection, and the accept
+    thread died of it: the replay took no client again, its listener left open (connections
+    hung without an NFO). The refusal is now one non-blocking send whose failure is ignored,
+    as the simulator's."""
+    path = _short_flight(tmp_path / "flight.rec")
+    with ReplayServer(path, port=0, speed=1000.0, max_clients=1) as replay:
+        first = LineClient(replay.port)
+        first.expect("NFO")
+        # The accept thread is held before it answers, so the refused clients' resets are in
+        # before its answer is sent (it takes each connection, then waits for the lock).
+        with replay._lock:
+            for _ in range(3):
+                gone = socket.create_connection(("127.0.0.1", replay.port), timeout=10)
+                gone.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                gone.close()  # SO_LINGER 0: a reset, not a FIN
+        first.close()
+        assert wait_for(lambda: replay.client_count == 0, timeout_s=30)
+        later = LineClient(replay.port)
+        assert later.expect("NFO", timeout_s=10).get("Replay") == "true"
+        later.close()
