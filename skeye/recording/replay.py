@@ -16,7 +16,9 @@ playback's current sim time; commands that would change the world (``INIT``, ``D
 ``SET``, ``STEP``) get ``ERR ... {Reason replay is read-only}``; the queries
 (``GETSTARTPOSES``, ``GETGEO``, ``GETCONF``) get ``ERR`` too, as the recording holds no world
 to ask. At the end of the recording the connection stays open (PING still answered) and
-nothing more is sent. A client that does not read blocks only its own thread; ``close()``
+nothing more is sent. A file of the recording that can no longer be read (moved or deleted
+since the replay started) is said to the client, ``ERR {Command REPLAY}``, and logged, and
+its connection closes. A client that does not read blocks only its own thread; ``close()``
 shuts every socket.
 """
 
@@ -127,11 +129,20 @@ class ReplayServer:
         )
 
     def stream(self) -> Iterator[tuple[float, bytes]]:
-        """(sim time, line) of the chosen robot's stream, in recorded order."""
-        for rec in self.reader.records():
-            if rec.conn in self.conns and rec.direction == SENT:
-                if rec.line.startswith(_STREAM_PREFIXES):
-                    yield rec.sim_s, rec.line.encode() + b"\r\n"
+        """(sim time, line) of the chosen robot's stream, in recorded order.
+
+        Raises:
+            ConfigError: a file of the recording can no longer be read (moved or deleted
+                since the replay started: each client's playback reads it anew).
+        """
+        try:
+            for rec in self.reader.records():
+                if rec.conn in self.conns and rec.direction == SENT:
+                    if rec.line.startswith(_STREAM_PREFIXES):
+                        yield rec.sim_s, rec.line.encode() + b"\r\n"
+        except OSError as exc:  # the file's, not the client socket's (that is the caller's)
+            raise ConfigError(f"the recording {exc.filename or self.reader.path} cannot be "
+                              f"read: {exc.strerror or exc}") from None
 
     def _accept_loop(self) -> None:
         said_s = 0.0
@@ -172,7 +183,14 @@ class ReplayServer:
     def _serve(self, sock: socket.socket) -> None:
         try:
             _Playback(self, sock).run()
-        except OSError:
+        except ConfigError as exc:  # the recording, not the client: said to both
+            log.error("replay: %s; client %s closed", exc, _peer(sock))
+            try:
+                sock.setblocking(False)
+                sock.send(format_error("REPLAY", f"{exc}; closing"))
+            except OSError:
+                pass
+        except OSError:  # the client went
             pass
         except Exception:
             log.exception("replay client failed")
@@ -199,6 +217,14 @@ class ReplayServer:
         deadline = time.monotonic() + timeout_s
         for t in threads:
             t.join(max(0.0, deadline - time.monotonic()))
+
+
+def _peer(sock: socket.socket) -> str:
+    try:
+        host, port = sock.getpeername()[:2]
+    except OSError:
+        return "(gone)"
+    return f"{host}:{port}"
 
 
 class _Playback:

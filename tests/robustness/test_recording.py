@@ -1070,3 +1070,39 @@ def test_a_full_replay_goes_on_accepting_after_a_refused_client_reset_its_connec
         later = LineClient(replay.port)
         assert later.expect("NFO", timeout_s=10).get("Replay") == "true"
         later.close()
+
+
+@pytest.mark.parametrize("gone", ["first part", "later part"])
+def test_a_recording_gone_while_replayed_is_said_to_the_client_and_logged(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, gone: str) -> None:
+    """The replay reads the recording anew for each client: a file moved or deleted after the
+    replay started (a rotated recording's later part among them) closed the client's
+    connection without a word, and the replay logged nothing (the OSError was taken for the
+    client's socket failing). The client now gets ``ERR {Command REPLAY}`` naming the file and
+    why, and the replay logs it."""
+    first = _short_flight(tmp_path / "flight.rec")
+    if gone == "later part":
+        later = tmp_path / "flight.rec.2"
+        later.write_bytes(format_header({"world": "pad", "part": 2, "continues": first.name})
+                          + format_record(Record(102.0, 2.0, 1, SENT, "STA {Name R1} {Time 2}")))
+        with first.open("ab") as f:
+            f.write(format_record(Record(101.5, 1.5, 0, NOTE, "recording continues in "
+                                         "flight.rec.2 (size limit 1 MiB)")))
+        missing = later
+    else:
+        missing = first
+    with ReplayServer(first, port=0, speed=1000.0) as replay:
+        assert len(replay.reader.parts) == (2 if gone == "later part" else 1)
+        missing.unlink()
+        with caplog.at_level(logging.ERROR, logger="skeye.recording.replay"):
+            client = LineClient(replay.port)
+            err = client.read_until(lambda m: m.type == "ERR", timeout_s=30)[1]
+            assert err.get("Command") == "REPLAY", err
+            assert str(missing) in (err.get("Reason") or "")
+            assert "No such file or directory" in (err.get("Reason") or "")
+            with pytest.raises(ConnectionError):
+                client.read_until(lambda m: False, timeout_s=30)
+            client.close()
+            assert wait_for(lambda: replay.client_count == 0, timeout_s=30)
+    assert any(str(missing) in r.getMessage() and r.levelno == logging.ERROR
+               for r in caplog.records), caplog.records
