@@ -93,6 +93,11 @@ class ReplayServer:
             raise ConfigError(f"no robot {chosen!r} in the recording; it holds "
                               f"{', '.join(self.names)}")
         self.robot = chosen
+        try:  # each client's first line: a header it cannot be made of is refused now
+            self._nfo = self._format_nfo()
+        except LocalProtocolError as exc:
+            raise RemoteProtocolError(f"{path}: recording header: its world cannot be sent in "
+                                      f"the NFO line ({exc})") from None
         self.max_clients = max_clients
         self._threads: set[threading.Thread] = set()
         self._socks: set[socket.socket] = set()
@@ -117,6 +122,10 @@ class ReplayServer:
             return len(self._socks)
 
     def nfo_line(self) -> bytes:
+        """The line each client is sent first."""
+        return self._nfo
+
+    def _format_nfo(self) -> bytes:
         h = self.reader.header
         return format_message(
             "NFO",

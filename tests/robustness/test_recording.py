@@ -1106,3 +1106,18 @@ def test_a_recording_gone_while_replayed_is_said_to_the_client_and_logged(
             assert wait_for(lambda: replay.client_count == 0, timeout_s=30)
     assert any(str(missing) in r.getMessage() and r.levelno == logging.ERROR
                for r in caplog.records), caplog.records
+
+
+@pytest.mark.parametrize("world", ["pad}{Mode lockstep", "pad{"])
+def test_a_header_world_no_nfo_line_can_hold_is_refused_when_the_replay_starts(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], world: str) -> None:
+    """A header's world goes into each client's NFO line, ``{Level <world>}``; one holding a
+    brace cannot. The replay started and every client that connected was closed without a
+    word (a LocalProtocolError traceback logged per client); it is now refused at the start,
+    naming the file and the setting."""
+    path = _short_flight(tmp_path / "odd.rec", {"world": world})
+    with pytest.raises(RemoteProtocolError, match="world"):
+        ReplayServer(path, port=0)
+    assert main(["replay", str(path), "--port", "0"]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "world" in err and "Traceback" not in err, err
