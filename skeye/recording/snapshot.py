@@ -13,7 +13,7 @@ from skeye import cliargs
 from skeye.control.connection import DEFAULT_IMAGE_PORT, parse_address
 from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
-from skeye.outputs import output_file
+from skeye.outputs import output_file, write_whole
 from skeye.pixels import frame_image
 from skeye.wire.images import JPEG_TYPES, FrameType
 
@@ -25,7 +25,8 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
                   timeout_s: float = 10.0) -> tuple[int, int, int | None]:
     """Fetch the newest frame and write it; returns (width, height, frame number).
     ``quality`` is a JPEG file's (default 95); a PNG file, lossless, refuses one. The file's
-    folder is looked at before the server is asked: a missing or read-only one is named."""
+    folder is looked at before the server is asked: a missing or read-only one is named. The
+    file is written whole or not at all: a write that fails leaves the file that was there."""
     suffix = out.suffix.lower()
     if suffix not in (".png", ".jpg", ".jpeg"):
         raise LocalProtocolError(f"{out}: the file name must end in .png, .jpg or .jpeg")
@@ -55,16 +56,20 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         client.set_meta(True)
         frame = client.get_frame()
     image = frame_image(frame)  # the server's file, checked: it decodes whole
+    # Written whole or not at all (a partial file beside it, renamed into place): a write that
+    # failed part-way, a full disk, left the frame cut short where the earlier file was.
     if (frame.frame_type is FrameType.PNG if suffix == ".png"
             else frame.frame_type in JPEG_TYPES):
-        try:  # as the server encoded it: a JPEG compressed once, at the quality asked for
-            out.write_bytes(frame.data)
-        except OSError as exc:
-            raise LocalProtocolError(f"could not write {out}: {exc}") from None
+        # as the server encoded it: a JPEG compressed once, at the quality asked for
+        write_whole([("--out", out, lambda path: path.write_bytes(frame.data))])
     else:  # a server that sent another format than the one asked for
         params = [] if suffix == ".png" else [cv2.IMWRITE_JPEG_QUALITY, quality]
-        if not cv2.imwrite(str(out), image, params):
-            raise LocalProtocolError(f"could not write {out}")
+
+        def encode(path: Path) -> None:
+            if not cv2.imwrite(str(path), image, params):  # says no more than that
+                raise OSError(f"OpenCV could not write a {suffix} file")
+
+        write_whole([("--out", out, encode)])
     number = frame.meta.frame_number if frame.meta is not None else None
     return image.shape[1], image.shape[0], number
 

@@ -562,3 +562,28 @@ def test_a_renderer_after_a_failed_context_is_refused_not_tried_again() -> None:
     lines = child.stdout.splitlines()
     assert len(lines) == 2 and all(line.startswith("refused: cannot render camera images "
                                                    "with MUJOCO_GL=glfw") for line in lines), lines
+
+
+@pytest.mark.parametrize("name", ["frame.png", "frame.jpg"])
+def test_a_snapshot_that_cannot_be_written_keeps_the_file_that_was_there(tmp_path, name):
+    """``skeye snapshot --out`` wrote the file in place: a write that failed part-way (a full
+    disk; here ``ulimit -f``) left the frame cut short where the earlier file was. It is now
+    written beside it and renamed into place once whole: the earlier file is kept, no partial
+    file is left, and the error names --out."""
+    from tests.robustness.helpers import skeye_under_a_file_size_limit
+
+    out = tmp_path / name
+    out.write_bytes(b"the earlier file" * 4096)  # 64 KiB: more than the limit below
+    with sim_with_images() as (control, images, _cameras):
+        c = LineClient(control.port)
+        c.expect("NFO")
+        c.answer("INIT {ClassName hummingbird} {Name R1} {Location 0,0,-1}", "INIT")
+        c.step(40)
+        done = skeye_under_a_file_size_limit(
+            ["snapshot", "--images", f"127.0.0.1:{images.port}", "--out", str(out)], 8192)
+        c.close()
+    assert done.returncode == 2, done
+    assert out.read_bytes() == b"the earlier file" * 4096
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+    assert f"--out {out}: cannot write it: File too large" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
