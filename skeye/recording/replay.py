@@ -51,6 +51,8 @@ _STREAM_PREFIXES = ("STA ", "SEN ", *(f"ERR {{Command {c}}} {{Name " for c in RO
 """The engine's lines (skeye.sim.stream), as opposed to the answers to the client's commands:
 the engine's ERR names its robot, an answer to a client's unknown command ``CRASH`` does not."""
 _MAX_BATCH_LINES = 512
+MIN_SPEED, MAX_SPEED = 0.01, 1000.0
+"""The playback rates a replay takes (``--speed``; 1 = as recorded)."""
 
 
 class ReplayServer:
@@ -73,8 +75,9 @@ class ReplayServer:
         robot: str | None = None,
         max_clients: int = 64,
     ) -> None:
-        if not (0.01 <= speed <= 1000.0):
-            raise LocalProtocolError(f"replay speed must be in [0.01, 1000], got {speed}")
+        if not (MIN_SPEED <= speed <= MAX_SPEED):
+            raise LocalProtocolError(f"replay speed must be in [{MIN_SPEED:g}, {MAX_SPEED:g}], "
+                                     f"got {speed}")
         self.reader = RecordingReader(path, follow_parts=True)
         self.speed = speed
         self.robots = robot_connections(self.reader.records())
@@ -342,13 +345,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _speed(text: str) -> float:
+    """``--speed``: a playback rate the replay takes, refused naming the option (the range was
+    said only once the recording was read, without the option's name)."""
+    value = cliargs.positive_float(text)
+    if not MIN_SPEED <= value <= MAX_SPEED:
+        raise argparse.ArgumentTypeError(f"must be {MIN_SPEED:g}..{MAX_SPEED:g} (1 = as "
+                                         f"recorded), got {text!r}")
+    return value
+
+
 def register(sub: Any) -> None:
     """Add ``skeye replay`` to the command line."""
     p = sub.add_parser("replay", help="play a flight recording to clients (control protocol)")
     p.add_argument("file", type=Path, help="a recording made with skeye sim --record")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=cliargs.port, default=3000, help="port (0 = any free)")
-    p.add_argument("--speed", type=cliargs.positive_float, default=1.0,
-                   help="playback rate (1.0 = as recorded)")
+    p.add_argument("--speed", type=_speed, default=1.0,
+                   help=f"playback rate, {MIN_SPEED:g}..{MAX_SPEED:g} (1.0 = as recorded)")
     p.add_argument("--robot", default=None, help="recorded robot to play (default: the first)")
     p.set_defaults(func=cmd_replay)
