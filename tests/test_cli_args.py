@@ -68,6 +68,8 @@ CASES = [
     (["validate", "E1", "--quick", "--seeds", "99999999999999"], "--seeds"),  # MemoryError
     (["sweep", "spec.toml", "--out", "o", "--workers", "0"], "--workers"),
     (["snapshot", "--images", NO_SIM, "--timeout", "-1", "--out", "x.png"], "--timeout"),
+    # past what a socket's timeout takes (about 9.2e9 s): an OverflowError traceback
+    (["snapshot", "--images", NO_SIM, "--timeout", "1e10", "--out", "x.png"], "--timeout"),
     # outside the replay's range: said as "replay speed must be in [0.01, 1000], got 5000.0"
     (["replay", "flight.rec", "--port", "0", "--speed", "5000"], "--speed"),
     (["replay", "flight.rec", "--port", "0", "--speed", "0.001"], "--speed"),

@@ -18,6 +18,9 @@ from skeye.pixels import frame_image
 from skeye.wire.images import JPEG_TYPES, FrameType
 
 DEFAULT_QUALITY = 95  # skeye snapshot --out FILE.jpg without --quality
+MAX_TIMEOUT_S = 3600.0
+"""The longest --timeout: a socket takes no timeout past about 9.2e9 s (1e10 raised an
+OverflowError from the connect), and an hour is longer than any wait for a frame."""
 
 
 def save_snapshot(address: str, out: Path, camera: str | None = None,
@@ -34,6 +37,9 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         raise LocalProtocolError(f"--quality applies to a .jpg or .jpeg file, not {out.name} "
                                  "(PNG is lossless)")
     quality = DEFAULT_QUALITY if quality is None else quality
+    if not 0.0 < timeout_s <= MAX_TIMEOUT_S:
+        raise LocalProtocolError(f"--timeout must be over 0 and at most {MAX_TIMEOUT_S:g} s, "
+                                 f"got {timeout_s:g}")
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
     output_file(out, "--out")  # its folder looked at before the server is asked
@@ -89,5 +95,5 @@ def register(sub: Any) -> None:
     p.add_argument("--quality", type=int, default=None,
                    help=f"JPEG quality 1-100 of a .jpg or .jpeg --out (default {DEFAULT_QUALITY})")
     p.add_argument("--timeout", type=cliargs.positive_float, default=10.0,
-                   help="seconds to wait for a frame")
+                   help=f"seconds to wait for a frame (at most {MAX_TIMEOUT_S:g})")
     p.set_defaults(func=cmd_snapshot)
