@@ -70,6 +70,10 @@ CASES = [
     (["snapshot", "--images", NO_SIM, "--timeout", "-1", "--out", "x.png"], "--timeout"),
     # past what a socket's timeout takes (about 9.2e9 s): an OverflowError traceback
     (["snapshot", "--images", NO_SIM, "--timeout", "1e10", "--out", "x.png"], "--timeout"),
+    # an empty --camera took the server's first camera, as no --camera does; a bad one was
+    # said only after connecting, without the option's name (no server: "no image server")
+    (["snapshot", "--images", NO_SIM, "--camera", "", "--out", "x.png"], "--camera"),
+    (["snapshot", "--images", NO_SIM, "--camera", "R1 Down", "--out", "x.png"], "--camera"),
     # outside the replay's range: said as "replay speed must be in [0.01, 1000], got 5000.0"
     (["replay", "flight.rec", "--port", "0", "--speed", "5000"], "--speed"),
     (["replay", "flight.rec", "--port", "0", "--speed", "0.001"], "--speed"),
@@ -256,3 +260,13 @@ def test_python_dash_m_skeye_is_the_command_line() -> None:
     bad = subprocess.run([sys.executable, "-m", "skeye", "sim", "--port", "-1"],
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert bad.returncode == 2 and "usage: skeye sim" in bad.stderr, bad.stderr
+
+
+def test_a_camera_name_far_too_long_is_refused_without_being_echoed_whole(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """``skeye snapshot --camera`` of 100 000 characters printed all of them back in its
+    error."""
+    assert main(["snapshot", "--images", NO_SIM, "--camera", "x" * 100_000,
+                 "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "--camera" in err and "100000 characters" in err and len(err) < 400, err[:400]

@@ -15,6 +15,7 @@ from skeye.control.image_client import ImageClient
 from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
 from skeye.outputs import output_file, write_whole
 from skeye.pixels import frame_image
+from skeye.wire.image_requests import SelectCamera
 from skeye.wire.images import JPEG_TYPES, FrameType
 
 DEFAULT_QUALITY = 95  # skeye snapshot --out FILE.jpg without --quality
@@ -43,6 +44,11 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
     if not 1 <= quality <= 100:
         raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
     output_file(out, "--out")  # its folder looked at before the server is asked
+    if camera is not None:  # "" too: it is no camera name, not "the first camera"
+        try:
+            SelectCamera(camera)
+        except LocalProtocolError as exc:
+            raise LocalProtocolError(f"--camera: {exc}") from None
     try:
         host, port = parse_address(address, DEFAULT_IMAGE_PORT, "image server address")
     except LocalProtocolError as exc:
@@ -56,7 +62,7 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
             "images on 5003), or point --images at the one that runs"
         ) from None
     with client:
-        if camera:
+        if camera is not None:
             client.select_camera(camera)
         client.set_format("png" if suffix == ".png" else "jpeg", quality=quality)
         client.set_meta(True)

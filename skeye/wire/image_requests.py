@@ -65,9 +65,11 @@ class SelectCamera:
 
     def __post_init__(self) -> None:
         if not _CAMERA_NAME.fullmatch(self.name):
+            shown = (repr(self.name) if len(self.name) <= 60  # a long one is not echoed whole
+                     else f"{self.name[:40]!r}... ({len(self.name)} characters)")
             raise LocalProtocolError(
                 f"camera name must be 1-200 printable ASCII characters without spaces, "
-                f"got {self.name!r}"
+                f"got {shown}"
             )
 
 
