@@ -86,7 +86,7 @@ class ReplayServer:
                               "status line)")
         self.names = list(dict.fromkeys(self.robots.values()))
         """The recorded robots' names, each once, in the order they were first spawned."""
-        chosen = robot or self.names[0]
+        chosen = self.names[0] if robot is None else robot  # "" is no robot's name
         # Every connection that flew a robot of this name: a robot spawned again under it on a
         # new connection (a pilot restarted, or re-attaching after the simulator removed its
         # robot) goes on with the same robot. Names are unique at any one time, so their

@@ -1121,3 +1121,14 @@ def test_a_header_world_no_nfo_line_can_hold_is_refused_when_the_replay_starts(
     assert main(["replay", str(path), "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert str(path) in err and "world" in err and "Traceback" not in err, err
+
+
+def test_an_empty_robot_name_is_refused_not_taken_for_the_first_robot(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``skeye replay FILE --robot ""`` (a shell variable left empty) played the first robot as
+    if no --robot were given; it is a name no robot has, refused listing those there are."""
+    path = _short_flight(tmp_path / "flight.rec")
+    with pytest.raises(ConfigError, match="no robot '' in the recording; it holds R1"):
+        ReplayServer(path, port=0, robot="")
+    assert main(["replay", str(path), "--port", "0", "--robot", ""]) == 2
+    assert "no robot '' in the recording" in capsys.readouterr().err
