@@ -74,6 +74,9 @@ CASES = [
     # said only after connecting, without the option's name (no server: "no image server")
     (["snapshot", "--images", NO_SIM, "--camera", "", "--out", "x.png"], "--camera"),
     (["snapshot", "--images", NO_SIM, "--camera", "R1 Down", "--out", "x.png"], "--camera"),
+    # said as "JPEG quality must be 1..100", without the option's name
+    (["snapshot", "--images", NO_SIM, "--out", "x.jpg", "--quality", "0"], "--quality"),
+    (["snapshot", "--images", NO_SIM, "--out", "x.jpg", "--quality", "101"], "--quality"),
     # outside the replay's range: said as "replay speed must be in [0.01, 1000], got 5000.0"
     (["replay", "flight.rec", "--port", "0", "--speed", "5000"], "--speed"),
     (["replay", "flight.rec", "--port", "0", "--speed", "0.001"], "--speed"),

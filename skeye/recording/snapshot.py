@@ -42,7 +42,7 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         raise LocalProtocolError(f"--timeout must be over 0 and at most {MAX_TIMEOUT_S:g} s, "
                                  f"got {timeout_s:g}")
     if not 1 <= quality <= 100:
-        raise LocalProtocolError(f"JPEG quality must be 1..100, got {quality}")
+        raise LocalProtocolError(f"--quality (a JPEG file's) must be 1..100, got {quality}")
     output_file(out, "--out")  # its folder looked at before the server is asked
     if camera is not None:  # "" too: it is no camera name, not "the first camera"
         try:
