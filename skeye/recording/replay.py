@@ -10,7 +10,9 @@ of a crash, ``{Command CRASH}``, or of a robot the engine stopped, ``{Command PH
 ``(sim_s - first_sim_s) / speed`` wall seconds have passed. The first part of a rotated
 recording is played with the parts that continue it, as one flight (connection ids and robot
 names run on across parts as the recorder wrote them); a later part named alone plays alone.
-The files are read lazily, so a long recording costs no memory per client. The client's own
+The files are read lazily, so a long recording costs no memory per client, and in slices
+of ``_SLICE_RECORDS`` records, the client's lines answered between them (the NFO is sent on
+connecting: another robot's records do not hold it). The client's own
 lines go through the same sans-IO decoder as the simulator's: ``PING`` is answered with the
 playback's current sim time; commands that would change the world (``INIT``, ``DRIVE``,
 ``SET``, ``STEP``) get ``ERR ... {Reason replay is read-only}``; the queries
@@ -39,7 +41,7 @@ from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
 from skeye.peers import accept_failed
 from skeye.processes import check_ports_free, wait_for_signal
-from skeye.recording.records import SENT, RecordingReader, robot_connections
+from skeye.recording.records import SENT, Record, RecordingReader, robot_connections
 from skeye.wire.sim import decode, encode, unknown_command
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 from skeye.wire.sim_messages import ROBOT_ERRORS, Ping
@@ -51,6 +53,10 @@ _STREAM_PREFIXES = ("STA ", "SEN ", *(f"ERR {{Command {c}}} {{Name " for c in RO
 """The engine's lines (skeye.sim.stream), as opposed to the answers to the client's commands:
 the engine's ERR names its robot, an answer to a client's unknown command ``CRASH`` does not."""
 _MAX_BATCH_LINES = 512
+_SLICE_RECORDS = 10_000
+"""Records a playback reads before it looks at its client again: another robot's records do
+not hold the client's NFO or answers while the playback reads past them (a robot spawned late
+in a long recording)."""
 MIN_SPEED, MAX_SPEED = 0.01, 1000.0
 """The playback rates a replay takes (``--speed``; 1 = as recorded)."""
 
@@ -80,7 +86,16 @@ class ReplayServer:
                                      f"got {speed}")
         self.reader = RecordingReader(path, follow_parts=True)
         self.speed = speed
-        self.robots = robot_connections(self.reader.records())
+        first_line_s: dict[int, float] = {}  # each connection's first stream line, sim time
+
+        def noting_first_lines(records: Iterator[Record]) -> Iterator[Record]:
+            for rec in records:
+                if (rec.conn not in first_line_s and rec.direction == SENT
+                        and rec.line.startswith(_STREAM_PREFIXES)):
+                    first_line_s[rec.conn] = rec.sim_s
+                yield rec
+
+        self.robots = robot_connections(noting_first_lines(self.reader.records()))
         if not self.robots:
             raise ConfigError(f"{path}: the recording holds no robot (no INIT answer, no robot "
                               "status line)")
@@ -96,6 +111,10 @@ class ReplayServer:
             raise ConfigError(f"no robot {chosen!r} in the recording; it holds "
                               f"{', '.join(self.names)}")
         self.robot = chosen
+        self.first_sim_s = min((first_line_s[c] for c in self.conns if c in first_line_s),
+                               default=0.0)
+        """The sim time of the chosen robot's first stream line: each playback's clock starts
+        there, on connecting (0 when the robot has none)."""
         try:  # each client's first line: a header it cannot be made of is refused now
             self._nfo = self._format_nfo()
         except LocalProtocolError as exc:
@@ -140,18 +159,26 @@ class ReplayServer:
             ("Replay", True),
         )
 
-    def stream(self) -> Iterator[tuple[float, bytes]]:
-        """(sim time, line) of the chosen robot's stream, in recorded order.
+    def stream(self) -> Iterator[tuple[float, bytes] | None]:
+        """(sim time, line) of the chosen robot's stream, in recorded order; None after every
+        ``_SLICE_RECORDS`` records read without one (the reader looks at its client then).
 
         Raises:
             ConfigError: a file of the recording can no longer be read (moved or deleted
                 since the replay started: each client's playback reads it anew).
         """
         try:
+            read = 0
             for rec in self.reader.records():
-                if rec.conn in self.conns and rec.direction == SENT:
-                    if rec.line.startswith(_STREAM_PREFIXES):
-                        yield rec.sim_s, rec.line.encode() + b"\r\n"
+                if (rec.conn in self.conns and rec.direction == SENT
+                        and rec.line.startswith(_STREAM_PREFIXES)):
+                    read = 0
+                    yield rec.sim_s, rec.line.encode() + b"\r\n"
+                else:
+                    read += 1
+                    if read >= _SLICE_RECORDS:
+                        read = 0
+                        yield None
         except OSError as exc:  # the file's, not the client socket's (that is the caller's)
             raise ConfigError(f"the recording {exc.filename or self.reader.path} cannot be "
                               f"read: {exc.strerror or exc}") from None
@@ -231,6 +258,9 @@ class ReplayServer:
             t.join(max(0.0, deadline - time.monotonic()))
 
 
+_END = object()  # a playback's stream has no more lines
+
+
 def _peer(sock: socket.socket) -> str:
     try:
         host, port = sock.getpeername()[:2]
@@ -247,20 +277,29 @@ class _Playback:
         self.sock = sock
         self.decoder = LineDecoder()
         self.lines = server.stream()
-        self.next_line: tuple[float, bytes] | None = next(self.lines, None)
-        self.first_sim_s = self.next_line[0] if self.next_line else 0.0
+        self.next_line: tuple[float, bytes] | None = None  # None: the end, or still reading
+        self.reading = True  # the next line is not read yet (the file is read in slices)
+        self.first_sim_s = server.first_sim_s
         self.sim_now_s = self.first_sim_s
         self.start = time.monotonic()
 
     def _due_sim_s(self) -> float:
         return self.first_sim_s + (time.monotonic() - self.start) * self.server.speed
 
+    def _read_on(self) -> None:
+        """One slice of the file further: the next line, or still reading, or the end."""
+        item = next(self.lines, _END)
+        self.reading = item is None
+        self.next_line = item if isinstance(item, tuple) else None
+
     def run(self) -> None:
         self.sock.sendall(self.server.nfo_line())
         while not self.server._closing.is_set():
             self._send_due()
             timeout = 0.5
-            if self.next_line is not None:
+            if self.reading:
+                timeout = 0.0  # a look at the client, then the next slice
+            elif self.next_line is not None:
                 wait = (self.next_line[0] - self._due_sim_s()) / self.server.speed
                 timeout = min(timeout, max(0.0, wait))
             readable, _, _ = select.select([self.sock], [], [], timeout)
@@ -274,10 +313,12 @@ class _Playback:
     def _send_due(self) -> None:
         now = self._due_sim_s()
         batch: list[bytes] = []
+        if self.reading:
+            self._read_on()
         while self.next_line is not None and self.next_line[0] <= now:
             self.sim_now_s = self.next_line[0]
             batch.append(self.next_line[1])
-            self.next_line = next(self.lines, None)
+            self._read_on()
             if len(batch) >= _MAX_BATCH_LINES:
                 self.sock.sendall(b"".join(batch))
                 batch = []
@@ -304,6 +345,8 @@ class _Playback:
                 ping: Ping = decode(msg)
             except RemoteProtocolError as exc:
                 return format_error("PING", str(exc))
+            # the line last played while the next is not known (read on, or the end): the
+            # clock past it could run beyond the next line's time, and go back once it is read
             sim_s = self.sim_now_s if self.next_line is None else self._due_sim_s()
             return format_message("RES", ("Command", "PING"), ("Id", ping.id), ("Time", sim_s))
         refused = unknown_command(msg.type)  # no command at all: the simulator's own answer
