@@ -1065,6 +1065,12 @@ def test_a_full_replay_goes_on_accepting_after_a_refused_client_reset_its_connec
                 gone = socket.create_connection(("127.0.0.1", replay.port), timeout=10)
                 gone.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
                 gone.close()  # SO_LINGER 0: a reset, not a FIN
+        # Taken in order: once this one is refused, so are those before it (one left over
+        # would take the place the later client is given below).
+        refused = LineClient(replay.port)
+        err = refused.read_until(lambda m: m.type == "ERR", timeout_s=30)[1]
+        assert err.get("Command") == "CONNECT" and err.get("Reason") == "too many clients"
+        refused.close()
         first.close()
         assert wait_for(lambda: replay.client_count == 0, timeout_s=30)
         later = LineClient(replay.port)
