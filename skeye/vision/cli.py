@@ -18,12 +18,14 @@ import json
 import math
 import os
 import sys
+from pathlib import Path
 from typing import Any
 
 import cv2
 
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.image_files import read_image_file
+from skeye.outputs import output_file, write_whole
 from skeye.vision.detector import detect
 from skeye.vision.pad import SKEYE_4, resolve_pad
 from skeye.vision.printable import DEFAULT_DPI, write_printable
@@ -46,14 +48,17 @@ def cmd_pad(args: argparse.Namespace) -> int:
     if args.dpi is not None and name.lower().endswith(".pdf"):  # it would do nothing
         return _fail(PAD, f"--dpi sets a PNG's resolution; {name} is a PDF (vector: it has "
                      "none to set)")
+    dpi = DEFAULT_DPI if args.dpi is None else args.dpi
+    out = args.out
     try:
         pad = resolve_pad(args.pad)
-        out = write_printable(pad, args.out, dpi=DEFAULT_DPI if args.dpi is None else args.dpi,
-                              paper=args.paper)
+        # written whole or not at all: a partial file beside it, renamed over it once whole, so
+        # a full disk or Ctrl-C part-way leaves the file that was there (it left one cut short,
+        # or a valid PDF missing its later sheets)
+        write_whole([("--out", output_file(Path(out), "--out"),
+                      lambda partial: write_printable(pad, partial, dpi=dpi, paper=args.paper))])
     except (ConfigError, LocalProtocolError) as exc:
         return _fail(PAD, str(exc))
-    except OSError as exc:
-        return _fail(PAD, f"cannot write {args.out}: {exc.strerror or exc}")
     if args.paper is None:
         print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale)")
     else:

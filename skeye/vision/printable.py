@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -325,11 +326,32 @@ def write_printable(
     if paper is not None:
         if ext != ".pdf":
             raise LocalProtocolError(f"--paper writes a PDF of sheets; name it .pdf, not {ext}")
-        _write_tiled(pad, out, margin_m, paper)
+        with _write_errors():
+            _write_tiled(pad, out, margin_m, paper)
         return out
     fig = _figure(pad, margin_m)
-    if ext == ".pdf":
-        fig.savefig(out, format="pdf")
-    else:
-        fig.savefig(out, format="png", dpi=dpi)
+    with _write_errors():
+        if ext == ".pdf":
+            fig.savefig(out, format="pdf")
+        else:
+            fig.savefig(out, format="png", dpi=dpi)
     return out
+
+
+@contextmanager
+def _write_errors() -> Iterator[None]:
+    """A write that failed raises its OSError (a full disk: EFBIG, ENOSPC). matplotlib's PDF
+    backend, cleaning up after a failed write, raises another error in its stead (a
+    ``zlib.error`` from :class:`PdfPages`' close, an ``AttributeError`` from its stream), the
+    OSError only its ``__context__``: that reached the user as a traceback."""
+    try:
+        yield
+    except OSError:
+        raise
+    except Exception as exc:
+        cause: BaseException | None = exc
+        while cause is not None and not isinstance(cause, OSError):
+            cause = cause.__cause__ or cause.__context__
+        if cause is None:
+            raise
+        raise cause from None

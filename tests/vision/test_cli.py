@@ -5,6 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import cv2
 import pytest
@@ -12,6 +16,7 @@ import pytest
 from skeye.vision.camera import render_pad_view
 from skeye.vision.cli import register
 from skeye.vision.pad import SKEYE_4
+from tests.robustness.helpers import skeye_under_a_file_size_limit, wait_for
 
 from .helpers import FOV_H_RAD, H, W
 
@@ -342,3 +347,52 @@ def test_detect_refuses_a_robot_or_camera_beside_fov_or_calibration(pad_png, tmp
         assert captured.err.startswith("skeye vision detect: error: ")
         for flag in (given[0], *(f for f in extra if f.startswith("--"))):
             assert flag in captured.err
+
+
+@pytest.mark.parametrize("extra", [[], ["--paper", "a4"]], ids=["pdf", "tiled-pdf"])
+def test_pad_a_failed_write_keeps_the_file_that_was_there(tmp_path, extra):
+    """The pad was written in place: a write that failed part-way (a full disk; here the
+    file size limit, ``ulimit -f``, which fails a write past it with EFBIG as a full disk
+    does) left the first kilobytes of a PDF over the file that was there, and matplotlib's
+    PDF backend, cleaning up, raised a zlib.error or AttributeError: a traceback, exit 1. It
+    is now written beside and renamed over: exit 2 naming --out, the old file as it was, no
+    partial file left."""
+    out = tmp_path / "pad.pdf"
+    out.write_bytes(b"the pad printed last week")
+    run = skeye_under_a_file_size_limit(["pad", "--out", str(out), *extra], 4096)
+    assert run.returncode == 2, run.stderr
+    # the last line: matplotlib may warn first that its font cache cannot be saved
+    assert run.stderr.splitlines()[-1] == (f"skeye pad: error: --out {out}: cannot write it: "
+                                           "File too large"), run.stderr
+    assert out.read_bytes() == b"the pad printed last week"
+    assert [p.name for p in tmp_path.iterdir()] == ["pad.pdf"]
+
+
+def test_pad_interrupted_leaves_no_part_of_a_tiled_pdf(tmp_path):
+    """Ctrl-C while the sheets were drawn: PdfPages closed the file on its way out, leaving a
+    valid PDF of the sheets drawn so far (41 of a 4 m pad's) where the whole pad was asked
+    for, over the file that was there. Now nothing is written until every sheet is."""
+    toml = tmp_path / "big.toml"
+    toml.write_text("name = 'big'\nside_m = 4.0\n[[rings]]\nouter_m = 1.8\ninner_m = 1.5\n"
+                    "[[rings]]\nouter_m = 1.0\ninner_m = 0.5\n")
+    out = tmp_path / "pad.pdf"
+    out.write_bytes(b"the pad printed last week")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye", "pad", "--out", str(out), "--paper", "a4", "--pad",
+         str(toml)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=Path(__file__).resolve().parents[2])
+    try:
+        # the sheets are being written once their file is open (a partial one beside --out;
+        # before, --out itself)
+        assert wait_for(lambda: len(list(tmp_path.iterdir())) > 2
+                        or out.read_bytes() != b"the pad printed last week", timeout_s=120.0)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert err == "skeye pad: interrupted (Ctrl-C)\n"
+    assert out.read_bytes() == b"the pad printed last week"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.toml", "pad.pdf"]
