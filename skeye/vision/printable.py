@@ -27,6 +27,7 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from decimal import Decimal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -142,11 +143,12 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
         w, h = PAPERS_M[paper]
         sheet_w, sheet_h = (h, w) if landscape else (w, h)
         usable_w, usable_h = sheet_w - 2 * PAPER_MARGIN_M, sheet_h - 2 * PAPER_MARGIN_M
-        cols = _count(page_side_m, usable_w)
-        rows = _count(page_side_m, usable_h)
-        fewest = min(fewest, rows * cols)
-        if rows * cols > MAX_SHEETS:  # not listed: a 1e9 m page has 1e19 of them
+        cols_n = _count(page_side_m, usable_w)
+        rows_n = _count(page_side_m, usable_h)
+        fewest = min(fewest, rows_n * cols_n)
+        if rows_n * cols_n > MAX_SHEETS:  # not listed: a 1e9 m page has 1e19 of them
             continue
+        rows, cols = int(rows_n), int(cols_n)  # finite: at most MAX_SHEETS
         xs = _starts(page_side_m, usable_w, cols)  # left edges, left to right
         ys = _starts(page_side_m, usable_h, rows)[::-1]  # bottom edges, row 1 at the top
         tiles = tuple(Tile(r + 1, c + 1, xs[c], ys[r], usable_w, usable_h)
@@ -158,7 +160,7 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
             best = plan
     if best is None:
         raise LocalProtocolError(
-            f"a {page_side_m:g} m page needs {fewest:.0f} {paper} sheets, over the "
+            f"a {page_side_m:g} m page needs {_sheets_text(fewest)} {paper} sheets, over the "
             f"{MAX_SHEETS} --paper writes: write it without --paper (one true-scale page) "
             "for a print shop" + ("" if page_side_m <= MAX_PDF_SIDE_M * (1 + 1e-12) else
                                   f", as a .png (over {MAX_PDF_SIDE_M:g} m a side, more than a "
@@ -166,10 +168,24 @@ def plan_tiles(page_side_m: float, paper: str) -> TilePlan:
     return best
 
 
-def _count(length_m: float, usable_m: float) -> int:
+def _sheets_text(count: float) -> str:
+    """A count of sheets as a line says it: whole up to a billion, else in three digits (a
+    1e300 m page's is an integer of 600 digits, which ``:.0f`` could not even convert to a
+    float: an OverflowError traceback)."""
+    if count < 1e9:
+        return f"{count:.0f}"
+    if count == math.inf:  # a page near the largest float: its rows are no finite number
+        return "more than 1e+308"
+    return format(Decimal(int(count)), ".3g")
+
+
+def _count(length_m: float, usable_m: float) -> int | float:
+    """Tiles of ``usable_m`` that span ``length_m`` with their overlaps; ``math.inf`` where
+    that is no finite float (a page near the largest float)."""
     if length_m <= usable_m:
         return 1
-    return math.ceil((length_m - TILE_OVERLAP_M) / (usable_m - TILE_OVERLAP_M) - 1e-9)
+    count = (length_m - TILE_OVERLAP_M) / (usable_m - TILE_OVERLAP_M) - 1e-9
+    return math.ceil(count) if math.isfinite(count) else math.inf
 
 
 def _starts(length_m: float, usable_m: float, count: int) -> list[float]:
@@ -311,7 +327,8 @@ def write_printable(
             said = (f": {', or '.join(fix)}" if fix else " even at 10 dpi") + (
                 "" if pdf_fits else f" (the page is over the {MAX_PDF_SIDE_M:g} m a PDF page "
                 "may have)")
-            count = f"{side_px:.0f}" if side_px < 1e9 else f"{side_px:.3g}"  # not 300 digits
+            count = (f"{side_px:.0f}" if side_px < 1e9 else f"{side_px:.3g}"  # not 300 digits
+                     if math.isfinite(side_px) else "more than 1e+308")
             raise LocalProtocolError(
                 f"a {side:g} m page at {dpi} dpi is {count} px a side, over the "
                 f"{MAX_PNG_SIDE_PX} px a PNG may have{said}")

@@ -396,3 +396,25 @@ def test_pad_interrupted_leaves_no_part_of_a_tiled_pdf(tmp_path):
     assert err == "skeye pad: interrupted (Ctrl-C)\n"
     assert out.read_bytes() == b"the pad printed last week"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.toml", "pad.pdf"]
+
+
+@pytest.mark.parametrize(("side", "sheets", "px"), [
+    ("1e300", "2.16e+601", "1.18e+304"), ("1.7e308", "more than 1e+308", "more than 1e+308")])
+def test_pad_far_too_large_for_sheets_is_refused_with_its_count(tmp_path, capsys, side, sheets,
+                                                                px):
+    """A pad file of a 1e300 m side with --paper: its count of sheets, an integer of 600
+    digits, was formatted as a float, an OverflowError traceback (exit 1); near the largest
+    float the count of rows was no finite number (math.ceil raised). It is refused, exit 2,
+    with the count in three digits; so is the PNG, whose size was said as "inf px"."""
+    toml = tmp_path / "huge.toml"
+    toml.write_text(f"name = 'huge'\nside_m = {side}\n[[rings]]\nouter_m = 0.9\ninner_m = 0.5\n"
+                    "[[rings]]\nouter_m = 0.4\ninner_m = 0.1\n")
+    out = tmp_path / "pad.pdf"
+    assert run(["pad", "--out", str(out), "--pad", str(toml), "--paper", "letter"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"skeye pad: error: a {float(side):g} m page needs {sheets} letter "
+                          "sheets, over the 500 --paper writes"), err
+    assert run(["pad", "--out", str(tmp_path / "pad.png"), "--pad", str(toml)]) == 2
+    err = capsys.readouterr().err
+    assert f"m page at 300 dpi is {px} px a side" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["huge.toml"]
