@@ -7,6 +7,8 @@ command's packet (and a poll or stream mask) is built before the link is opened,
 cannot carry is said as typed: the argument or option, in its unit, with the range the
 packet carries (``skeye link: error: --yaw-rate-deg-s 5000 deg/s is outside
 -1877.47..1877.41 deg/s, what a VELOCITY packet carries``; exit 2), vehicle or none; so is
+a value not 0 that rounds to 0 where the packet reads 0 as a word of its own (STREAM's
+period 0: stop; a speed's: the default 1 m/s); so is
 a mask that requests nothing (``skeye link: error: mask 0 requests no structure; known:
 ...``), which would bring nothing back.
 Telemetry prints one line per frame: the structure's name, then ``field=value`` in wire units.
@@ -173,11 +175,28 @@ _VALUES: dict[str, tuple[_ValueSpec, ...]] = {
 }
 _INVERSE: dict[Callable[[float], float], Callable[[float], float]] = {
     _same: _same, _negated: _negated, math.radians: math.degrees}
+# The wire fields whose 0 is no small value but a word of its own (packets.md): what the
+# vehicle reads it as. A value typed not 0 that rounds to 0 counts would be read so.
+_ZERO_MEANS: dict[tuple[type[Message], str], str] = {
+    (Velocity, "duration"): "until replaced",
+    (MoveBy, "speed"): "the default 1 m/s",
+    (GotoGps, "speed"): "the default 1 m/s",
+    (PadMode, "deadband"): "the default 0.05 m",
+    (PadMode, "max_speed"): "the default 0.3 m/s",
+    (Stream, "period"): "stop streaming",
+}
 
 
 def _packet_name(cls: type[Message]) -> str:
     """The packet's name as the protocol's page writes it (``MoveBy`` -> ``MOVE_BY``)."""
     return re.sub(r"(?<!^)(?=[A-Z])", "_", cls.__name__).upper()
+
+
+def _one_count_si(cls: type[Message], name: str) -> float:
+    """One count of ``cls``'s scaled wire field ``name``, in SI."""
+    scale = next(f for f in LAYOUTS[cls].fields if f.name == name).scale
+    assert scale is not None  # every field of _VALUES is scaled
+    return float(scale.to_si(1))
 
 
 def check_values(args: argparse.Namespace) -> None:
@@ -193,12 +212,21 @@ def check_values(args: argparse.Namespace) -> None:
         if not math.isfinite(value):
             raise LocalProtocolError(f"{label} must be a finite number ({unit}), got {value}")
         try:
-            wire_value(cls, name, to_si(value))
+            counts = wire_value(cls, name, to_si(value))
         except LocalProtocolError:
             a, b = sorted(_INVERSE[to_si](v) for v in si_range(cls, name))
             raise LocalProtocolError(
                 f"{label} {value:g} {unit} is outside {a:g}..{b:g} {unit}, what a "
                 f"{_packet_name(cls)} packet carries") from None
+        meaning = _ZERO_MEANS.get((cls, name))
+        if meaning is not None and value != 0 and counts == 0:
+            # --period 0.0004 was sent as 0 ms, "stop": 0 frames, exit 0; --speed 0.0004 as
+            # 0 mm/s, flown at 1 m/s
+            step = abs(_INVERSE[to_si](_one_count_si(cls, name)))
+            raise LocalProtocolError(
+                f"{label} {value:g} {unit} is 0 in the {_packet_name(cls)} packet, which "
+                f"carries it in steps of {step:g} {unit}, and 0 there means {meaning}: give "
+                f"at least {step:g} {unit}")
 
 
 def command_message(args: argparse.Namespace) -> Message | None:

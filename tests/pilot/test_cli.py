@@ -668,3 +668,42 @@ def test_a_camera_file_name_that_decodes_to_a_control_character_is_refused(capsy
     err = capsys.readouterr().err
     assert status == 2, err
     assert "\\x04d.png" in err and "%25" in err and "\x04" not in err, err
+
+
+@pytest.mark.parametrize(("argv", "said"), [
+    (["stream", "1", "--period", "0.0004"],
+     "--period 0.0004 s is 0 in the STREAM packet, which carries it in steps of 0.001 s, and 0 "
+     "there means stop streaming: give at least 0.001 s"),
+    (["velocity", "0", "0", "0", "--duration", "0.0004"],
+     "--duration 0.0004 s is 0 in the VELOCITY packet, which carries it in steps of 0.001 s, "
+     "and 0 there means until replaced"),
+    (["move-by", "1", "0", "0", "--speed", "0.0004"],
+     "--speed 0.0004 m/s is 0 in the MOVE_BY packet, which carries it in steps of 0.001 m/s, "
+     "and 0 there means the default 1 m/s"),
+    (["move-by", "1", "0", "0", "--speed", "-0.0004"], "--speed -0.0004 m/s is 0 in the MOVE_BY"),
+    (["goto-gps", "49", "8", "1", "--speed", "0.0001"],
+     "--speed 0.0001 m/s is 0 in the GOTO_GPS packet"),
+    (["pad-mode", "hold", "--deadband", "0.0001"],
+     "--deadband 0.0001 m is 0 in the PAD_MODE packet, which carries it in steps of 0.001 m, "
+     "and 0 there means the default 0.05 m"),
+    (["pad-mode", "hold", "--max-speed", "0.0001"],
+     "--max-speed 0.0001 m/s is 0 in the PAD_MODE packet, which carries it in steps of "
+     "0.001 m/s, and 0 there means the default 0.3 m/s"),
+])
+def test_link_a_value_that_would_be_sent_as_a_zero_of_another_meaning_is_refused(argv, said,
+                                                                                 capsys):
+    """A field whose 0 is a word of its own (STREAM's period 0 = stop, a speed's 0 = the
+    default 1 m/s, VELOCITY's duration 0 = until replaced, PAD_MODE's 0 = its defaults) took a
+    value typed not 0 that rounds to 0 counts as that word: ``stream 5 --period 0.0004`` was
+    sent as "stop" and printed 0 frames, status 0; ``move-by --speed 0.0004`` asked for
+    1 m/s. It is refused before it is sent (status 2), and the vehicle is left as it was."""
+    from skeye.cli import main
+
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot:
+        settings = pilot.boards.pad.settings
+        assert main(["link", pilot.address, *argv]) == link_cli.EXIT_USAGE
+        err = capsys.readouterr().err
+        assert err.startswith(f"skeye link: error: {said}"), err
+        assert err.count("\n") == 1, err
+        assert air.calls == [] and pilot.boards.pad.settings == settings
