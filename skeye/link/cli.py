@@ -31,6 +31,7 @@ from typing import Any, TextIO
 
 from skeye import cliargs
 from skeye.errors import CommandRejected, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
+from skeye.link.transport import open_link
 from skeye.link.vehicle import (
     Vehicle,
     goto_gps_command,
@@ -262,7 +263,9 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     try:
         masks = command_masks(args)  # a bad mask is named before the link is opened
         msg = command_message(args)
-        with Vehicle.open(args.uri, timeout_s=args.timeout) as vehicle:
+        # --timeout bounds the connection too: it was 5 s whatever was given (--timeout 1
+        # waited 5 s for a host that does not answer; --timeout 30 gave up at 5 s)
+        with Vehicle(open_link(args.uri, args.timeout), timeout_s=args.timeout) as vehicle:
             opened.append(vehicle)
             return _run(vehicle, args, msg, masks, out)
     except CommandRejected as exc:
@@ -338,7 +341,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("uri", help="tcp://host:port or serial:///dev/ttyUSB0?baud=57600")
     p.add_argument("--timeout", type=cliargs.positive_float, default=5.0,
-                   help="seconds to wait for an answer")
+                   help="seconds to wait for the connection and for the answer")
     sub = p.add_subparsers(dest="link_command", required=True, metavar="COMMAND")
     c = sub.add_parser("take-off", help="start motors and climb")
     c.add_argument("height", type=float, help="metres above the take-off point")

@@ -43,6 +43,7 @@ from skeye.values import MAX_BAUD, baud_rate
 DEFAULT_BAUD = 57600
 DEFAULT_CONNECT_TIMEOUT_S = 5.0
 DEFAULT_SEND_TIMEOUT_S = 5.0
+MAX_SOCKET_TIMEOUT_S = 1e9  # about 32 years; socket.settimeout overflows past about 9.2e9 s
 RECV_CHUNK = 65536
 
 
@@ -349,7 +350,10 @@ def open_link(
     scheme, where, number = parse_uri(uri)
     if scheme == "tcp":
         try:
-            sock = socket.create_connection((where, number), timeout=timeout_s)
+            # a timeout past what a socket takes (time_t: socket.settimeout raises
+            # OverflowError) is no bound at all: connect waits as the kernel lets it
+            sock = socket.create_connection(
+                (where, number), timeout=timeout_s if timeout_s < MAX_SOCKET_TIMEOUT_S else None)
         except TimeoutError:
             raise LinkTimeout(f"{uri}: no connection within {timeout_s} s") from None
         except OSError as exc:

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -707,3 +710,44 @@ def test_link_a_value_that_would_be_sent_as_a_zero_of_another_meaning_is_refused
         assert err.startswith(f"skeye link: error: {said}"), err
         assert err.count("\n") == 1, err
         assert air.calls == [] and pilot.boards.pad.settings == settings
+
+
+@contextlib.contextmanager
+def a_port_that_completes_no_connection() -> Iterator[int]:
+    """A loopback port whose accept queue is full (listen(0), never accepted): the kernel
+    drops each further SYN, so a connect to it waits, as one to a host that does not answer."""
+    server = socket.socket()
+    fillers: list[socket.socket] = []
+    try:
+        server.bind(("127.0.0.1", 0))
+        server.listen(0)
+        while True:  # until a connect does not complete: the queue is full
+            filler = socket.socket()
+            fillers.append(filler)
+            filler.settimeout(1.0)
+            try:
+                filler.connect(server.getsockname())
+            except TimeoutError:
+                break
+            assert len(fillers) < 64, "the accept queue never filled"
+        yield server.getsockname()[1]
+    finally:
+        for filler in fillers:
+            filler.close()
+        server.close()
+
+
+def test_link_timeout_bounds_the_connection_too(capsys):
+    """--timeout ("seconds to wait for the connection and for the answer") did not bound the
+    connection: that waited 5 s whatever was given (--timeout 0.5 said "no connection within
+    5.0 s"; --timeout 30 gave up after 5). A timeout past what a socket takes (1e300 s) is no
+    bound at all, not an OverflowError traceback."""
+    from skeye.cli import main
+
+    with a_port_that_completes_no_connection() as port:
+        assert main(["link", "--timeout", "0.5", f"tcp://127.0.0.1:{port}", "land"]
+                    ) == link_cli.EXIT_LINK
+    err = capsys.readouterr().err
+    assert err == f"skeye link: link error: tcp://127.0.0.1:{port}: no connection within 0.5 s\n"
+    assert main(["link", "--timeout", "1e300", "tcp://127.0.0.1:1", "land"]) == link_cli.EXIT_LINK
+    assert "cannot connect" in capsys.readouterr().err
