@@ -46,6 +46,7 @@ from skeye.wire.packets import (
     GotoGps,
     Hold,
     Land,
+    LlStatus,
     Message,
     MoveBy,
     PadMode,
@@ -307,8 +308,15 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, poll_mask: int, skeye_ma
     count = [0]
     closed = threading.Event()  # the output was closed (a broken pipe): stop streaming
 
+    # The link's keepalive polls LL_STATUS every 0.5 s the command sends nothing: its answers
+    # are no frames of this stream unless --poll-mask asked for LL_STATUS (they were printed
+    # and counted among the stream's, two a second, with --poll-mask none)
+    keepalive_only = not poll_mask & PollMask.LL_STATUS
+
     def show(msg: Message) -> None:
         if isinstance(msg, Result) or closed.is_set():
+            return
+        if keepalive_only and isinstance(msg, LlStatus):
             return
         with lock:
             count[0] += 1

@@ -751,3 +751,22 @@ def test_link_timeout_bounds_the_connection_too(capsys):
     assert err == f"skeye link: link error: tcp://127.0.0.1:{port}: no connection within 0.5 s\n"
     assert main(["link", "--timeout", "1e300", "tcp://127.0.0.1:1", "land"]) == link_cli.EXIT_LINK
     assert "cannot connect" in capsys.readouterr().err
+
+
+def test_link_stream_prints_only_what_it_asked_for():
+    """``stream`` printed (and counted) an LL_STATUS every 0.5 s that --poll-mask never asked
+    for: the answers to the link's keepalive poll, sent while the command sends nothing. They
+    are left out unless --poll-mask asks for LL_STATUS, as the docs' example shows."""
+    air = FakeAirframe()
+    with PilotServer(air, port=0) as pilot:
+        # longer than two keepalive intervals (0.5 s of silence each)
+        code, text = run("link", pilot.address, "stream", "1.5", "--period", "0.1")
+        assert code == 0, text
+        lines = text.splitlines()
+        assert lines[0].startswith("Result command_pd=135 code=OK")
+        assert "NavStatus state=LANDED" in text
+        assert not [line for line in lines if line.startswith("LlStatus")], text
+        assert lines[-1] == f"# {len(lines) - 2} frames in 1.5 s"  # what it printed
+        code, text = run("link", pilot.address, "stream", "0.5", "--period", "0.1",
+                         "--poll-mask", "ll_status")
+        assert code == 0 and "LlStatus battery_voltage_1=12400" in text, text
