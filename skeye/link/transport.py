@@ -303,6 +303,16 @@ def parse_uri(uri: str) -> tuple[str, str, int]:
         if not parts.hostname or port is None or port == 0:
             raise LocalProtocolError(f"link URI {uri!r}: expected tcp://host:port (port "
                                      "1..65535)")
+        # what a tcp:// link has no use for was dropped without a word (serial:// refuses an
+        # unknown option): ?baud=57600 copied from a serial URI, a path, a user name
+        extra = [what for what, there in (
+            (f"options (?{parts.query})", parts.query or uri.endswith("?")),
+            (f"path ({parts.path})", parts.path not in ("", "/")),
+            (f"fragment (#{parts.fragment})", parts.fragment or "#" in uri),
+            (f"user name ({parts.netloc.rpartition('@')[0]}@)", "@" in parts.netloc)) if there]
+        if extra:
+            raise LocalProtocolError(f"link URI {uri!r}: a tcp:// link takes no "
+                                     f"{' and no '.join(extra)}; expected tcp://host:port")
         return scheme, parts.hostname, port
     if scheme == "serial":
         device = parts.netloc + parts.path

@@ -156,6 +156,7 @@ def test_connect_refused_and_missing_serial_port_raise_link_closed():
         ("tcp://127.0.0.1:7000", ("tcp", "127.0.0.1", 7000)),
         ("TCP://localhost:1", ("tcp", "localhost", 1)),
         ("tcp://[::1]:7000", ("tcp", "::1", 7000)),
+        ("tcp://127.0.0.1:7000/", ("tcp", "127.0.0.1", 7000)),
         ("serial:///dev/ttyUSB0?baud=57600", ("serial", "/dev/ttyUSB0", 57600)),
         ("serial:///dev/ttyS1", ("serial", "/dev/ttyS1", 57600)),
     ],
@@ -182,6 +183,15 @@ def test_parse_uri(uri, expected):
         ("serial:///dev/x?baud=%2B57600", "not a whole number"),
         ("serial:///dev/x?baud=57_600", "not a whole number"),
         ("serial:///dev/x?parity=E", "unknown option"),
+        # each was dropped without a word (serial:// refuses an unknown option): the link
+        # opened to host:port as if it had not been given
+        ("tcp://127.0.0.1:7000?baud=57600", r"a tcp:// link takes no options \(\?baud=57600\); "
+                                            "expected tcp://host:port"),
+        ("tcp://127.0.0.1:7000/pilot", r"takes no path \(/pilot\)"),
+        ("tcp://127.0.0.1:7000#x", r"takes no fragment \(#x\)"),
+        ("tcp://pilot@127.0.0.1:7000", r"takes no user name \(pilot@\)"),
+        ("tcp://pilot@127.0.0.1:7000/x?y=1", r"takes no options \(\?y=1\) and no path \(/x\) and "
+                                             r"no user name \(pilot@\)"),
     ],
 )
 def test_bad_uris_name_the_problem(uri, match):
