@@ -6,6 +6,8 @@ calibrated on or searched for the pad as if it were whole. :func:`read_image_fil
 first walks the file's structure (:func:`damage`): a JPEG's marker segments and entropy-coded
 scans up to its end-of-image marker (FF D9), a PNG's chunks up to IEND. Bytes after that end
 are allowed (some cameras pad their files). A file of another format goes to OpenCV as it is.
+A 16-bit image is brought to 8 bits by the bits its data uses (a 12-bit sensor's frame in a
+16-bit PNG is shifted right by 4, not 8: OpenCV's own conversion left it 16 grey levels).
 Pixels are decoded as the sensor recorded them: an EXIF orientation tag (phones, some cameras)
 is not applied, as the ``file://`` camera's video reader does not apply it either, since a field
 of view and a calibration describe the sensor's rows and columns (rotated, a 4:3 frame's
@@ -147,8 +149,14 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
     if problem is not None:
         raise ConfigError(f"image {path} is truncated or corrupt: {problem}")
     try:
-        image = (cv2.imdecode(np.frombuffer(data, np.uint8), flags | cv2.IMREAD_IGNORE_ORIENTATION)
+        image = (cv2.imdecode(np.frombuffer(data, np.uint8),
+                              flags | cv2.IMREAD_IGNORE_ORIENTATION | cv2.IMREAD_ANYDEPTH)
                  if data else None)
+        if image is not None and image.dtype == np.uint16:
+            image = _to_8_bits(image)
+        elif image is not None and image.dtype != np.uint8:  # float (TIFF, EXR): as OpenCV does
+            image = cv2.imdecode(np.frombuffer(data, np.uint8),
+                                 flags | cv2.IMREAD_IGNORE_ORIENTATION)
     except cv2.error as exc:  # OpenCV refuses, with an assertion, what it will not decode
         raise ConfigError(f"image {path} does not decode: {_too_large(data) or _reason(exc)}"
                           ) from None
@@ -158,6 +166,16 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
             raise ConfigError(f"image {path} is corrupt: its {kind} data does not decode")
         raise ConfigError(f"cannot read image (not a supported image format?): {path}")
     return image
+
+
+def _to_8_bits(image: np.ndarray) -> np.ndarray:
+    """A 16-bit image as 8 bits, by the bits its data uses: a 12-bit sensor's frame kept in a
+    16-bit PNG (0..4095) is shifted right by 4, not 8. OpenCV's own conversion divides by 256
+    whatever the data, which left such a frame 16 grey levels (0..15), a 10-bit one 4: the
+    pad was not found in it. A frame that uses all 16 bits is converted as OpenCV does."""
+    top = int(image.max())
+    shift = max(0, top.bit_length() - 8)
+    return (image >> shift).astype(np.uint8)
 
 
 def _too_large(data: bytes) -> str | None:

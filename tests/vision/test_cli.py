@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 from skeye.vision.camera import render_pad_view
@@ -418,3 +419,21 @@ def test_pad_far_too_large_for_sheets_is_refused_with_its_count(tmp_path, capsys
     err = capsys.readouterr().err
     assert f"m page at 300 dpi is {px} px a side" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["huge.toml"]
+
+
+@pytest.mark.parametrize("bits", [16, 12, 10])
+def test_detect_reads_a_16_bit_frame_by_the_bits_it_uses(tmp_path, capsys, bits):
+    """A 12-bit (or 10-bit) sensor's frame kept in a 16-bit PNG (0..4095) was brought to 8 bits
+    by OpenCV's division by 256: 16 grey levels (4 for 10 bits), in which the pad was not
+    found ("found": false, status 0: a silent wrong answer). It is shifted by the bits its
+    data uses, and the pad is found as in the 8-bit frame; a frame using all 16 bits is read
+    as before."""
+    img = render_pad_view(SKEYE_4, W, H, FOV_H_RAD, 1.2, (0.1, -0.2))
+    deep = np.round(img.astype(np.float64) / 255.0 * (2**bits - 1)).astype(np.uint16)
+    path = tmp_path / f"frame{bits}.png"
+    assert cv2.imwrite(str(path), deep)
+    assert run(["vision", "detect", str(path), "--fov", str(FOV_H_RAD)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["found"] and out["rings"] == [1, 2, 3, 4], out
+    assert out["height_m"] == pytest.approx(1.2, abs=0.01)
+    assert out["offset_cam_m"] == pytest.approx([0.1, -0.2], abs=0.01)
