@@ -328,10 +328,15 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, poll_mask: int, skeye_ma
     vehicle.add_callback(show)
     answer = vehicle.stream(poll_mask, skeye_mask, args.period)
     _answer(answer, out)
-    deadline = time.monotonic() + args.seconds
+    start = time.monotonic()
+    deadline = start + args.seconds
     while time.monotonic() < deadline and vehicle.connected and not closed.is_set():
         time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
     vehicle.remove_callback(show)
+    if vehicle.link.closed and not closed.is_set():  # said as such, not "link is closed"
+        raise LinkClosed(f"{vehicle.link.name}: the vehicle closed the link after "
+                         f"{time.monotonic() - start:.1f} of {args.seconds:g} s, {count[0]} "
+                         "frames")
     vehicle.stream(0, 0, 0.0)
     if closed.is_set():  # skeye's main() ends the command quietly
         raise BrokenPipeError("the output was closed")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import re
 import signal
 import socket
 import subprocess
@@ -770,3 +771,37 @@ def test_link_stream_prints_only_what_it_asked_for():
         code, text = run("link", pilot.address, "stream", "0.5", "--period", "0.1",
                          "--poll-mask", "ll_status")
         assert code == 0 and "LlStatus battery_voltage_1=12400" in text, text
+
+
+
+class _Watched(io.StringIO):
+    """Standard output that says when a NAV_STATUS frame was printed."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.frame = threading.Event()
+
+    def write(self, text: str) -> int:
+        if text.startswith("NavStatus"):
+            self.frame.set()
+        return super().write(text)
+
+
+def test_link_stream_says_when_the_vehicle_closed_the_link(capsys):
+    """A vehicle that closed the link mid-stream was reported as "link is closed" (the error
+    of the STREAM sent to stop it): nothing said who closed it, nor after how much of the
+    stream. It is said as the vehicle closing it, after how long and how many frames."""
+    out = _Watched()
+    result: list[int] = []
+    with PilotServer(FakeAirframe(), port=0) as pilot:
+        args = parser().parse_args(["link", pilot.address, "stream", "60", "--period", "0.05"])
+        worker = threading.Thread(target=lambda: result.append(link_cli.run(args, out)))
+        worker.start()
+        assert out.frame.wait(30.0), out.getvalue()
+    # the pilot has stopped: its connection is closed
+    worker.join(30.0)
+    assert not worker.is_alive()
+    assert result == [link_cli.EXIT_LINK]
+    err = capsys.readouterr().err
+    assert re.fullmatch(r"skeye link: link error: tcp://127\.0\.0\.1:\d+: the vehicle closed the "
+                        r"link after \d+\.\d of 60 s, [1-9]\d* frames\n", err), err
