@@ -59,6 +59,12 @@ MAX_PDF_SIDE_M = 14400 / 72 * METRES_PER_INCH
 MAX_SHEETS = 500  # a 4.8 m page on A4 (486 sheets); each sheet takes a second or more to draw
 
 
+# The pad's name is printed as written: matplotlib otherwise reads text between two $ as
+# mathtext (a pad "pad$1$" was printed "pad1" in italics; "a$$" was a ParseException
+# traceback) and, under a matplotlibrc's text.usetex, runs it through TeX.
+_PLAIN_TEXT: dict[str, Any] = {"parse_math": False, "usetex": False}
+
+
 def page_size_m(pad: PadDefinition, margin_m: float = DEFAULT_MARGIN_M) -> float:
     """Side of the (square) page: the pad plus a margin on every side."""
     return pad.side_m + 2.0 * margin_m
@@ -99,6 +105,7 @@ def _draw_pad(ax: Any, pad: PadDefinition, margin_m: float) -> None:
             va="center",
             fontsize=min(8.0, margin_m / METRES_PER_INCH * 72 * 0.4),
             color="0.5",
+            **_PLAIN_TEXT,
         )
 
 
@@ -271,7 +278,7 @@ def _sheet_figures(pad: PadDefinition, margin_m: float, plan: TilePlan) -> Itera
                          "edge lies on the neighbour's dashed line farther from its edge")
         for k, text in enumerate(lines):
             fig.text((m + CUT_TEXT_INSET_M) / sheet_w, 1 - m * (0.3 + 0.4 * k) / sheet_h, text,
-                     fontsize=5.5, va="center", color="0.2")
+                     fontsize=5.5, va="center", color="0.2", **_PLAIN_TEXT)
         # the scale bar, in the bottom margin (right of the cut marks)
         y_bar = m * 0.45
         x0, x1 = m + CUT_TEXT_INSET_M, m + CUT_TEXT_INSET_M + SCALE_BAR_M
@@ -281,7 +288,7 @@ def _sheet_figures(pad: PadDefinition, margin_m: float, plan: TilePlan) -> Itera
                  color="black", lw=1.2)
         fig.text(x1 / sheet_w + 0.01, y_bar / sheet_h,
                  f"<- this bar must measure {SCALE_BAR_M * 1000:.0f} mm (print at 100 %)",
-                 fontsize=5.5, va="center", color="0.2")
+                 fontsize=5.5, va="center", color="0.2", **_PLAIN_TEXT)
         yield fig
 
 

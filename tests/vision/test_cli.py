@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import signal
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import cv2
@@ -437,3 +439,36 @@ def test_detect_reads_a_16_bit_frame_by_the_bits_it_uses(tmp_path, capsys, bits)
     assert out["found"] and out["rings"] == [1, 2, 3, 4], out
     assert out["height_m"] == pytest.approx(1.2, abs=0.01)
     assert out["offset_cam_m"] == pytest.approx([0.1, -0.2], abs=0.01)
+
+
+def _pdf_text(path: Path) -> str:
+    """The text a matplotlib PDF shows: its content streams' strings, in order."""
+    text = []
+    data = path.read_bytes()
+    for stream in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.S):
+        try:
+            content = zlib.decompress(stream.group(1))
+        except zlib.error:  # a font or an image, not a page's content
+            continue
+        for block in re.findall(rb"BT(.*?)ET", content, re.S):
+            strings = re.findall(rb"\(((?:\\.|[^\\)])*)\)", block)
+            text.append(b"".join(re.sub(rb"\\(.)", rb"\1", s) for s in strings).decode("latin-1"))
+    return "\n".join(text)
+
+
+@pytest.mark.parametrize("name", ["pad$1$", "a$$", "x_y^2"])
+def test_pad_prints_its_name_as_written(tmp_path, capsys, name):
+    """The pad's name went to matplotlib as mathtext: "pad$1$" was printed "pad1" (the 1 set
+    as maths) and "a$$" was a ParseException traceback, exit 1. It is printed as written, on
+    the page and on every sheet."""
+    toml = tmp_path / "named.toml"
+    toml.write_text(f"name = '{name}'\nside_m = 0.6\n[[rings]]\nouter_m = 0.28\ninner_m = 0.2\n"
+                    "[[rings]]\nouter_m = 0.1\ninner_m = 0.05\n")
+    for extra in ([], ["--paper", "a4"]):
+        out = tmp_path / "pad.pdf"
+        assert run(["pad", "--out", str(out), "--pad", str(toml), *extra]) == 0
+        assert capsys.readouterr().out.startswith(f"wrote {out} ({name}, side 0.6 m")
+        text = _pdf_text(out)
+        assert f"{name}: square side 600.0 mm" in text, text
+        if extra:
+            assert f"{name} sheet row 1/3, column 1/4" in text, text
