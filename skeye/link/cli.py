@@ -31,7 +31,7 @@ from typing import Any, TextIO
 
 from skeye import cliargs
 from skeye.errors import CommandRejected, LinkClosed, LinkTimeout, LocalProtocolError, SkeyeError
-from skeye.link.transport import open_link
+from skeye.link.transport import open_link, parse_uri
 from skeye.link.vehicle import (
     Vehicle,
     goto_gps_command,
@@ -277,14 +277,31 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         return EXIT_USAGE
     except (LinkClosed, LinkTimeout) as exc:
         unheard = opened[0].unheard if opened else None
-        hint = (f"; {unheard}: is {args.uri} a skeye pilot's link (skeye pilot --port)? "
-                "A simulator's or ground control's port speaks another protocol"
-                ) if unheard else ""
+        hint = f"; {unheard}: {_unheard_hint(args.uri, opened[0])}" if unheard else ""
         print(f"skeye link: link error: {exc}{hint}", file=sys.stderr)
         return EXIT_LINK
     except SkeyeError as exc:
         print(f"skeye link: error: {exc}", file=sys.stderr)
         return EXIT_LINK
+
+
+def _unheard_hint(uri: str, vehicle: Vehicle) -> str:
+    """What to check when no whole frame came on ``uri``: a TCP port may be another program's
+    (a simulator's, ground control's); a serial line may have no pilot on it, or run at
+    another baud rate, whose bytes read as garbage. (A serial line was asked whether it was
+    "a skeye pilot's link (skeye pilot --port)", the TCP port, and a baud rate unlike the
+    pilot's went unnamed.)"""
+    scheme, where, number = parse_uri(uri)  # it opened: the URI parses
+    if scheme == "tcp":
+        return (f"is {uri} a skeye pilot's link (skeye pilot --port)? A simulator's or ground "
+                "control's port speaks another protocol")
+    garbage, bad = vehicle.line_errors
+    said = (f"is a skeye pilot on the other end of {where} at {number} baud (skeye pilot "
+            f"--serial DEVICE --baud {number})? ")
+    if garbage or bad:
+        return said + ("Unreadable bytes are what a line read at another baud rate than its "
+                       "sender's gives: try the pilot's --baud")
+    return said + "Nothing at all came: check the cable and that the pilot runs"
 
 
 def _run(vehicle: Vehicle, args: argparse.Namespace, msg: Message | None,

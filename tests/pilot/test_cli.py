@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import os
 import re
 import signal
 import socket
@@ -19,6 +20,7 @@ import pytest
 from skeye.control.connection import connect
 from skeye.errors import ConfigError
 from skeye.link import cli as link_cli
+from skeye.link.transport import pty_null_modem
 from skeye.pilot import cli as pilot_cli
 from skeye.pilot.server import PilotServer
 from skeye.pilot.vision import PadVision
@@ -805,3 +807,39 @@ def test_link_stream_says_when_the_vehicle_closed_the_link(capsys):
     err = capsys.readouterr().err
     assert re.fullmatch(r"skeye link: link error: tcp://127\.0\.0\.1:\d+: the vehicle closed the "
                         r"link after \d+\.\d of 60 s, [1-9]\d* frames\n", err), err
+
+
+@pytest.mark.parametrize("line", ["silent", "garbage"])
+def test_link_on_a_serial_line_where_no_pilot_answers_says_what_to_check(capsys, line):
+    """A serial line on which no whole frame came was asked whether it was "a skeye pilot's
+    link (skeye pilot --port)" and told that a simulator's or ground control's port speaks
+    another protocol: the TCP port's advice. It now names the device and baud rate to check,
+    and where unreadable bytes came, that a line at another baud rate reads so."""
+    from skeye.cli import main
+
+    with pty_null_modem() as (ours, theirs):
+        stop = threading.Event()
+        far = os.open(theirs, os.O_RDWR | os.O_NOCTTY)
+
+        def babble() -> None:  # what a line at the wrong baud rate reads: no frame
+            while not stop.wait(0.02):
+                os.write(far, bytes(range(0, 256, 3)))
+
+        talker = threading.Thread(target=babble)
+        if line == "garbage":
+            talker.start()
+        try:
+            status = main(["link", "--timeout", "1", f"serial://{ours}?baud=9600", "land"])
+        finally:
+            stop.set()
+            if talker.is_alive():
+                talker.join(5.0)
+            os.close(far)
+    err = capsys.readouterr().err
+    assert status == link_cli.EXIT_LINK, err
+    assert "skeye pilot --port" not in err and "simulator" not in err, err
+    assert (f"is a skeye pilot on the other end of {ours} at 9600 baud (skeye pilot --serial "
+            "DEVICE --baud 9600)? ") in err, err
+    assert err.endswith("Unreadable bytes are what a line read at another baud rate than its "
+                        "sender's gives: try the pilot's --baud\n" if line == "garbage" else
+                        "Nothing at all came: check the cable and that the pilot runs\n"), err
