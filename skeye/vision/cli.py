@@ -151,7 +151,7 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=cmd_pad)
 
     v = subparsers.add_parser("vision", help="landing-pad vision tools")
-    vsub = v.add_subparsers(dest="vision_command", required=True)
+    vsub = v.add_subparsers(dest="vision_command", required=True, metavar="COMMAND")
     d = vsub.add_parser("detect", help="detect the landing pad in an image, print JSON")
     d.add_argument("image", help="image file (any format OpenCV reads)")
     d.add_argument(

@@ -472,3 +472,16 @@ def test_pad_prints_its_name_as_written(tmp_path, capsys, name):
         assert f"{name}: square side 600.0 mm" in text, text
         if extra:
             assert f"{name} sheet row 1/3, column 1/4" in text, text
+
+
+def test_vision_without_its_command_names_it_as_the_user_sees_it(capsys):
+    """``skeye vision`` alone said "the following arguments are required: vision_command",
+    the parser's attribute; it says COMMAND, as ``skeye`` and ``skeye link`` do."""
+    from skeye.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["vision"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.endswith("skeye vision: error: the following arguments are required: COMMAND\n")
+    assert "vision_command" not in err, err
