@@ -204,10 +204,15 @@ def load_pad(path: str | os.PathLike[str]) -> PadDefinition:
 
 
 def resolve_pad(name_or_path: str) -> PadDefinition:
-    """A built-in pad by name, or a pad TOML file by path (anything ending in .toml)."""
-    if name_or_path.endswith(".toml"):
+    """A built-in pad by name, or a pad TOML file by path (anything ending in .toml, in any
+    case: ``PAD.TOML`` was looked up as a built-in name, "unknown pad"). A file of another
+    name is said to be one, not only an unknown name."""
+    if name_or_path.lower().endswith(".toml"):
         return load_pad(name_or_path)
     try:
         return get_pad(name_or_path)
     except KeyError as exc:
-        raise ConfigError(str(exc.args[0])) from None
+        said = str(exc.args[0])
+        if os.path.isfile(name_or_path):
+            said += f" ({name_or_path} is a file, but a pad file's name ends in .toml)"
+        raise ConfigError(said) from None

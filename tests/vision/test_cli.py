@@ -485,3 +485,22 @@ def test_vision_without_its_command_names_it_as_the_user_sees_it(capsys):
     err = capsys.readouterr().err
     assert err.endswith("skeye vision: error: the following arguments are required: COMMAND\n")
     assert "vision_command" not in err, err
+
+
+def test_pad_files_are_known_by_toml_in_any_case(tmp_path, capsys):
+    """--pad PAD.TOML was looked up as a built-in pad's name ("unknown pad 'PAD.TOML'; known
+    pads: skeye-4"), as was a pad file of another name, with nothing said of the file. A
+    .TOML file is read; a file of another name is said to need .toml."""
+    text = ("name = 'upper'\nside_m = 0.6\n[[rings]]\nouter_m = 0.28\ninner_m = 0.2\n"
+            "[[rings]]\nouter_m = 0.1\ninner_m = 0.05\n")
+    upper = tmp_path / "PAD.TOML"
+    upper.write_text(text)
+    assert run(["pad", "--out", str(tmp_path / "pad.pdf"), "--pad", str(upper)]) == 0
+    assert "(upper, side 0.6 m" in capsys.readouterr().out
+    other = tmp_path / "pad.txt"
+    other.write_text(text)
+    assert run(["pad", "--out", str(tmp_path / "other.pdf"), "--pad", str(other)]) == 2
+    assert capsys.readouterr().err == (
+        f"skeye pad: error: unknown pad '{other}'; known pads: skeye-4 ({other} is a file, but "
+        "a pad file's name ends in .toml)\n")
+    assert not (tmp_path / "other.pdf").exists()
