@@ -516,8 +516,10 @@ class Robot:
         gps_hold = estimator.has_gps_fix(state.time_s) if estimator is not None else False
         airframe = self.airframe
         battery = self.battery
-        voltage_scale = min(1.0, battery.voltage_v / self._full_voltage_v + 0.15)
-        w_max = airframe.max_rotor_speed_rad_s * voltage_scale
+        # A brushless motor's top speed is its Kv times the voltage it gets (less its own
+        # resistive drop): the airframe's top speed at a full battery, scaled by the battery's
+        # voltage under load now (docs/physics.md, Battery and endurance).
+        w_max = airframe.max_rotor_speed_rad_s * min(1.0, battery.voltage_v / self._full_voltage_v)
         if self.flight.armed and not battery.empty:
             pos, vel = est.pos_ned_m, est.vel_ned_m_s
             if estimator is not None and self.command.attitude and self.command.height_mode:
