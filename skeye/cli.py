@@ -19,6 +19,7 @@ from skeye import __version__, cliargs
 from skeye.cliargs import EXTRA_OF, missing_extra
 from skeye.errors import SkeyeError
 from skeye.processes import wait_for_signal
+from skeye.uris import url_host
 
 ENGINE_FAILED_STATUS = 3
 FAULT_ENV = "SKEYE_SIM_FAULT_AT_S"
@@ -171,7 +172,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(
             f"skeye sim: world {world.name!r}, {args.mode} mode, step {args.timestep * 1000:g} ms, "
             f"seed {args.seed}, estimator {args.estimator or 'per robot file'}; "
-            f"control protocol on {args.host}:{server.port} ({where})",
+            f"control protocol on {url_host(args.host)}:{server.port} ({where})",
             flush=True,
         )
         print(f"skeye sim: {native.status().describe()}", flush=True)
@@ -185,7 +186,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
                             **limits)
             )
             print(
-                f"skeye sim: image server on {args.host}:{images.port} "
+                f"skeye sim: image server on {url_host(args.host)}:{images.port} "
                 f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')}; frames {image_format.value}"
                 f"{f' {image_quality}' if image_quality is not None else ''} by default)",
                 flush=True,

@@ -30,7 +30,7 @@ import struct
 import time
 from pathlib import Path
 
-__all__ = ["LOOPBACK", "accept_failed", "is_loopback", "peer_key", "socket_peer_key"]
+__all__ = ["LOOPBACK", "accept_failed", "is_loopback", "listen", "peer_key", "socket_peer_key"]
 
 log = logging.getLogger(__name__)
 
@@ -162,3 +162,15 @@ def accept_failed(exc: OSError, last_said_s: float, what: str) -> float | None:
         last_said_s = now
     time.sleep(0.05)
     return last_said_s
+
+
+
+def listen(host: str, port: int, *, backlog: int | None = None) -> socket.socket:
+    """``socket.create_server((host, port), backlog=backlog)`` in the host's address family:
+    an IPv6 address (``::1``; ``::``, every address, IPv4 ones too where the system can) is
+    bound as IPv6, as :func:`skeye.processes.port_in_use` probes it. ``create_server`` alone
+    binds IPv4, and refused ``::1`` with "Address family for hostname not supported"."""
+    if ":" not in host:
+        return socket.create_server((host, port), backlog=backlog)
+    return socket.create_server((host, port), family=socket.AF_INET6, backlog=backlog,
+                                dualstack_ipv6=host == "::" and socket.has_dualstack_ipv6())

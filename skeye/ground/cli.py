@@ -52,6 +52,7 @@ from typing import Any
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.outputs import cache_folder
+from skeye.peers import listen
 from skeye.processes import EXIT_LOST_SIMULATOR, check_ports_free, die_with_parent, sleep_until
 from skeye.uris import url_host
 
@@ -101,7 +102,7 @@ def run_ground(args: argparse.Namespace) -> int:
     robot_dirs = robot_folders(args.robot_dir)  # a typo is named now, not ignored
     # a taken port or a host that is not this machine's, named with the option that moves it
     check_ports_free([("ground control", args.host, args.port, "--port")])
-    sock = socket.create_server((args.host, args.port))
+    sock = listen(args.host, args.port)
     port = sock.getsockname()[1]
     def reached(info: VehicleInfo) -> None:
         # the vehicle's own words: printable characters only (no terminal escapes), and one

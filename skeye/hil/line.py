@@ -24,13 +24,13 @@ import errno
 import logging
 import os
 import select
-import socket
 import threading
 import time
 import tty
 
 from skeye.errors import LinkClosed, LocalProtocolError
 from skeye.link.transport import Link, SerialLink, TcpLink, tcp_uri
+from skeye.peers import listen
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -173,7 +173,7 @@ class TcpLine(BoardLine):
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
         super().__init__()
-        self._listener = socket.create_server((host, port))
+        self._listener = listen(host, port)
         self._listener.settimeout(0.2)
         self.host = host
         self.port = self._listener.getsockname()[1]

@@ -38,7 +38,7 @@ from collections.abc import Callable, Hashable, Sequence
 from typing import Any, Protocol
 
 from skeye.errors import ConfigError, LinkClosed
-from skeye.peers import socket_peer_key
+from skeye.peers import listen, socket_peer_key
 from skeye.uris import port_of, query_of, split_uri
 from skeye.values import MAX_BAUD, baud_rate
 
@@ -157,7 +157,7 @@ class TcpServerTransport:
 
     def __init__(self, host: str, port: int, max_clients: int = TCP_CLIENTS) -> None:
         try:
-            self.listener = socket.create_server((host, port))
+            self.listener = listen(host, port)
         except OSError as exc:
             raise ConfigError(f"cannot listen on TCP {host}:{port}: {exc}") from None
         self.listener.setblocking(False)

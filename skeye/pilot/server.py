@@ -62,7 +62,7 @@ from typing import Any
 
 from skeye.errors import ConfigError, InvalidArgument, SkeyeError
 from skeye.link.transport import Link, LinkClosed, TcpLink, open_link
-from skeye.peers import accept_failed, socket_peer_key
+from skeye.peers import accept_failed, listen, socket_peer_key
 from skeye.pilot.airframe import Airframe
 from skeye.pilot.boards import NO_COMMAND_PD, BoardSettings, OnboardBoards
 from skeye.pilot.outbox import Outbox
@@ -211,7 +211,7 @@ class PilotServer:
         self.port: int | None = None
         self.serial_uri = serial_uri
         if port is not None:
-            self._listener = socket.create_server((host, port), backlog=socket.SOMAXCONN)
+            self._listener = listen(host, port, backlog=socket.SOMAXCONN)
             self._listener.settimeout(0.2)
             self.port = self._listener.getsockname()[1]
 

@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
-from skeye.peers import accept_failed, socket_peer_key
+from skeye.peers import accept_failed, listen, socket_peer_key
 from skeye.wire.video import (
     DEFAULT_JPEG_QUALITY,
     Detection,
@@ -172,7 +172,7 @@ class VideoServer:
         self._current: tuple[int, CameraFrame] | None = None
         self._clients: dict[int, _Client] = {}
         self._stop = threading.Event()
-        self._listener = socket.create_server((host, port), backlog=socket.SOMAXCONN)
+        self._listener = listen(host, port, backlog=socket.SOMAXCONN)
         self._listener.setblocking(False)
         self.port: int = self._listener.getsockname()[1]
         self._wake_r, self._wake_w = socket.socketpair()

@@ -39,9 +39,10 @@ from typing import Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
-from skeye.peers import accept_failed
+from skeye.peers import accept_failed, listen
 from skeye.processes import check_ports_free, wait_for_signal
 from skeye.recording.records import SENT, Record, RecordingReader, robot_connections
+from skeye.uris import url_host
 from skeye.wire.sim import decode, encode, unknown_command
 from skeye.wire.sim_lines import LineDecoder, LineError, Message, format_error, format_message
 from skeye.wire.sim_messages import ROBOT_ERRORS, Ping
@@ -125,7 +126,7 @@ class ReplayServer:
         self._socks: set[socket.socket] = set()
         self._lock = threading.Lock()
         self._closing = threading.Event()
-        self._listener = socket.create_server((host, port))
+        self._listener = listen(host, port)
         self._listener.settimeout(0.2)
         self.host = host
         self.port: int = self._listener.getsockname()[1]
@@ -374,7 +375,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(
             f"skeye replay: {args.file}{of}, robot {server.robot} (of "
             f"{', '.join(server.names)}), speed x{args.speed:g}; "
-            f"control protocol on {args.host}:{server.port} ({where})",
+            f"control protocol on {url_host(args.host)}:{server.port} ({where})",
             flush=True,
         )
         if args.host == "127.0.0.1":

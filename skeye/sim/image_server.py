@@ -41,7 +41,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from skeye.errors import SkeyeError
-from skeye.peers import accept_failed, socket_peer_key
+from skeye.peers import accept_failed, listen, socket_peer_key
 from skeye.pixels import encode_image
 from skeye.sim.frame_store import Frame, FrameBuffer
 from skeye.sim.limits import check_server_limits
@@ -543,7 +543,7 @@ class ImageServer:
         self._closed = False
         # A full accept queue drops new SYNs: a real client then waits out TCP's 1 s (3 s, ...)
         # retransmission while attackers' connections wait to be turned away. Keep it long.
-        self._listener = socket.create_server((host, port), backlog=socket.SOMAXCONN)
+        self._listener = listen(host, port, backlog=socket.SOMAXCONN)
         self._listener.setblocking(False)
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)

@@ -40,7 +40,7 @@ import socket
 import threading
 from collections.abc import Callable
 
-from skeye.peers import accept_failed, socket_peer_key
+from skeye.peers import accept_failed, listen, socket_peer_key
 from skeye.sim.clock_barrier import ClockBarrier
 from skeye.sim.limits import check_server_limits
 from skeye.sim.runner import SimulationRunner
@@ -109,8 +109,7 @@ class ControlServer:
         self._sessions: set[ClientSession] = set()
         self._lock = threading.Lock()
         self._closing = threading.Event()
-        self._listener = socket.create_server((host, port), reuse_port=False,
-                                              backlog=socket.SOMAXCONN)
+        self._listener = listen(host, port, backlog=socket.SOMAXCONN)
         self._listener.settimeout(0.2)
         self.host = host
         self.port = self._listener.getsockname()[1]
