@@ -39,7 +39,13 @@ from skeye.link.vehicle import (
     pad_mode_command,
     velocity_command,
 )
-from skeye.wire.packet_units import si_range, take_off_from_si, wire_value
+from skeye.wire.packet_units import (
+    ZERO_MEANS,
+    RoundsToZero,
+    si_range,
+    take_off_from_si,
+    wire_value,
+)
 from skeye.wire.packets import (
     LAYOUTS,
     Ack,
@@ -177,16 +183,6 @@ _VALUES: dict[str, tuple[_ValueSpec, ...]] = {
 }
 _INVERSE: dict[Callable[[float], float], Callable[[float], float]] = {
     _same: _same, _negated: _negated, math.radians: math.degrees}
-# The wire fields whose 0 is no small value but a word of its own (packets.md): what the
-# vehicle reads it as. A value typed not 0 that rounds to 0 counts would be read so.
-_ZERO_MEANS: dict[tuple[type[Message], str], str] = {
-    (Velocity, "duration"): "until replaced",
-    (MoveBy, "speed"): "the default 1 m/s",
-    (GotoGps, "speed"): "the default 1 m/s",
-    (PadMode, "deadband"): "the default 0.05 m",
-    (PadMode, "max_speed"): "the default 0.3 m/s",
-    (Stream, "period"): "stop streaming",
-}
 
 
 def _packet_name(cls: type[Message]) -> str:
@@ -214,21 +210,20 @@ def check_values(args: argparse.Namespace) -> None:
         if not math.isfinite(value):
             raise LocalProtocolError(f"{label} must be a finite number ({unit}), got {value}")
         try:
-            counts = wire_value(cls, name, to_si(value))
-        except LocalProtocolError:
-            a, b = sorted(_INVERSE[to_si](v) for v in si_range(cls, name))
-            raise LocalProtocolError(
-                f"{label} {value:g} {unit} is outside {a:g}..{b:g} {unit}, what a "
-                f"{_packet_name(cls)} packet carries") from None
-        meaning = _ZERO_MEANS.get((cls, name))
-        if meaning is not None and value != 0 and counts == 0:
+            wire_value(cls, name, to_si(value))
+        except RoundsToZero:
             # --period 0.0004 was sent as 0 ms, "stop": 0 frames, exit 0; --speed 0.0004 as
             # 0 mm/s, flown at 1 m/s
             step = abs(_INVERSE[to_si](_one_count_si(cls, name)))
             raise LocalProtocolError(
                 f"{label} {value:g} {unit} is 0 in the {_packet_name(cls)} packet, which "
-                f"carries it in steps of {step:g} {unit}, and 0 there means {meaning}: give "
-                f"at least {step:g} {unit}")
+                f"carries it in steps of {step:g} {unit}, and 0 there means "
+                f"{ZERO_MEANS[(cls, name)]}: give at least {step:g} {unit}") from None
+        except LocalProtocolError:
+            a, b = sorted(_INVERSE[to_si](v) for v in si_range(cls, name))
+            raise LocalProtocolError(
+                f"{label} {value:g} {unit} is outside {a:g}..{b:g} {unit}, what a "
+                f"{_packet_name(cls)} packet carries") from None
 
 
 def command_message(args: argparse.Namespace) -> Message | None:
@@ -330,6 +325,18 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, poll_mask: int, skeye_ma
     # and counted among the stream's, two a second, with --poll-mask none)
     keepalive_only = not poll_mask & PollMask.LL_STATUS
 
+    # Frames that come before the STREAM's answer is printed wait for it: the link's thread
+    # printed the first ones while the main thread was about to print the answer, so the
+    # answer came after them about one run in two.
+    early: list[Message] = []
+    answered = threading.Event()
+
+    def emit(msg: Message) -> None:  # with lock held
+        try:
+            print(format_message(msg), file=out, flush=True)
+        except BrokenPipeError:
+            closed.set()  # said once, in the main thread; not raised in the link's thread
+
     def show(msg: Message) -> None:
         if isinstance(msg, Result) or closed.is_set():
             return
@@ -337,14 +344,18 @@ def _stream(vehicle: Vehicle, args: argparse.Namespace, poll_mask: int, skeye_ma
             return
         with lock:
             count[0] += 1
-            try:
-                print(format_message(msg), file=out, flush=True)
-            except BrokenPipeError:
-                closed.set()  # said once, in the main thread; not raised in the link's thread
+            if answered.is_set():
+                emit(msg)
+            else:
+                early.append(msg)
 
     vehicle.add_callback(show)
     answer = vehicle.stream(poll_mask, skeye_mask, args.period)
-    _answer(answer, out)
+    with lock:
+        _answer(answer, out)
+        for msg in early:
+            emit(msg)
+        answered.set()
     start = time.monotonic()
     deadline = start + args.seconds
     while time.monotonic() < deadline and vehicle.connected and not closed.is_set():

@@ -44,6 +44,7 @@ from skeye.wire.packet_units import (
     s_to_ms,
     take_off_from_si,
     velocity_from_si,
+    wire_value,
 )
 from skeye.wire.packets import (
     PD,
@@ -544,8 +545,10 @@ class Vehicle:
     def stream(
         self, poll_mask: int = 0, skeye_mask: int = int(SkeyeMask.NAV_STATUS), period_s: float = 0.1
     ) -> Result | Ack:
-        """Have the vehicle push the masked telemetry every ``period_s`` (0 stops it)."""
-        return self.command(Stream(poll_mask, skeye_mask, s_to_ms(period_s)))
+        """Have the vehicle push the masked telemetry every ``period_s`` (0 stops it; a period
+        that rounds to 0 ms but is not 0 raises LocalProtocolError, where it was sent as
+        "stop")."""
+        return self.command(Stream(poll_mask, skeye_mask, wire_value(Stream, "period", period_s)))
 
     # -- AscTec commands -----------------------------------------------------------------
     def ctrl_input(

@@ -51,6 +51,7 @@ from skeye.wire.packet_defs import (
     PadAction,
     PadMode,
     PadReport,
+    Stream,
     TakeOff,
     Truth,
     Velocity,
@@ -133,6 +134,24 @@ def _field(cls: type[Message], name: str) -> Field:
         raise LocalProtocolError(f"{cls.__name__} has no wire field {name!r}") from None
 
 
+ZERO_MEANS: dict[tuple[type[Message], str], str] = {
+    (Velocity, "duration"): "until replaced",
+    (MoveBy, "speed"): "the default 1 m/s",
+    (GotoGps, "speed"): "the default 1 m/s",
+    (PadMode, "deadband"): "the default 0.05 m",
+    (PadMode, "max_speed"): "the default 0.3 m/s",
+    (Stream, "period"): "stop streaming",
+}
+"""The wire fields whose 0 is no small value but a word of its own (docs/protocols/packets.md),
+and what the vehicle reads it as: a value not 0 that rounds to 0 counts there is refused
+(:class:`RoundsToZero`), where it was sent as that word (a 0.4 ms stream period as "stop")."""
+
+
+class RoundsToZero(LocalProtocolError):
+    """A value not 0 that a field whose 0 means something else (:data:`ZERO_MEANS`) would
+    carry as 0."""
+
+
 def wire_value(
     cls: type[Message], name: str, value: Any, scale: Scale | None = None, what: str = ""
 ) -> Any:
@@ -142,6 +161,13 @@ def wire_value(
     if scale is None:
         return value
     counts = scale.to_wire(value, what or f"{cls.__name__}.{name} in {scale.unit}")
+    meaning = ZERO_MEANS.get((cls, name))
+    if meaning is not None and counts == 0 and value != 0:
+        step = abs(scale.to_si(1))
+        raise RoundsToZero(f"{what or f'{cls.__name__}.{name}'} {float(value):g} "
+                           f"{scale.unit} is 0 in {cls.__name__}, which carries it in steps "
+                           f"of {step:g} {scale.unit}, and 0 there means {meaning}: give 0 "
+                           f"for that, or at least {step:g} {scale.unit}")
     if f.saturate:
         return clamp(counts, *f.limits)
     lo, hi = f.limits

@@ -28,6 +28,12 @@ def test_removing_a_callback_that_was_never_added_names_the_problem() -> None:
         (lambda v: v.take_off(float("nan")), "must be a finite number"),
         (lambda v: v.set_velocity(40.0), "outside"),
         (lambda v: v.stream(period_s=-1.0), "outside"),
+        # not 0, but 0 on the wire, where 0 is a word of its own: it was sent as that word
+        (lambda v: v.stream(period_s=0.0004), "0 there means stop streaming"),
+        (lambda v: v.set_velocity(1.0, duration_s=0.0004), "0 there means until replaced"),
+        (lambda v: v.move_by(1.0, speed_m_s=0.0004), "0 there means the default 1 m/s"),
+        (lambda v: v.goto_gps(52.0, 4.0, 10.0, speed_m_s=0.0004), "the default 1 m/s"),
+        (lambda v: v.pad_mode("hold", deadband_m=0.0004), "the default 0.05 m"),
     ],
 )
 def test_bad_arguments_are_local_protocol_errors_sent_nowhere(call, match: str) -> None:
