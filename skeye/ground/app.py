@@ -113,6 +113,8 @@ async def perform(
         outcome = await asyncio.to_thread(bridge.execute, command)
     except VehicleUnavailable as exc:
         raise CommandError(503, str(exc)) from None
+    except LocalProtocolError as exc:  # a packet that cannot be built: never a bare 500
+        raise CommandError(422, str(exc)) from None
     return (200 if outcome.ok else 409), outcome.to_json()
 
 

@@ -32,7 +32,13 @@ from pathlib import Path
 from typing import Any
 
 from skeye.errors import LocalProtocolError
-from skeye.link.vehicle import Vehicle
+from skeye.link.vehicle import (
+    Vehicle,
+    goto_gps_command,
+    move_by_command,
+    pad_mode_command,
+    velocity_command,
+)
 from skeye.wire.packets import Ack, Result
 
 Value = float | str
@@ -329,7 +335,21 @@ def parse_command(
             raise LocalProtocolError(f"{name}: missing argument {arg.name!r}")
         else:
             values.append((arg.name, arg.default))
-    return GroundCommand(name, tuple(values))
+    command = GroundCommand(name, tuple(values))
+    packet = _PACKETS.get(name)
+    if packet is not None:  # the packet's own rules too (wire.packet_units), said as a 422 now:
+        packet(**command.kwargs())  # they were raised by the send, a 500 / no WebSocket answer
+    return command
+
+
+_PACKETS: dict[str, Callable[..., object]] = {
+    "velocity": velocity_command,
+    "move_by": move_by_command,
+    "goto_gps": goto_gps_command,
+    "pad_mode": pad_mode_command,
+}
+"""The commands whose packet is built from their arguments (the same names as the
+:class:`Vehicle` methods that send them): built once in :func:`parse_command` to check it."""
 
 
 _RUNNERS: dict[str, Callable[..., Result | Ack]] = {

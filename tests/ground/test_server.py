@@ -43,6 +43,11 @@ def test_page_and_static_files_are_served_locally(offline: TestClient) -> None:
         ("/api/command/take_off", b'{"height": 1}', 422, "unknown argument(s) height"),
         ("/api/command/velocity", b'{"up_m_s": 40}', 422, "'up_m_s' must be within [-3, 3]"),
         ("/api/command/goto_gps", b"[]", 422, "arguments must be a JSON object"),
+        # within the argument's range, but 0 on the wire, where 0 means "until replaced":
+        # it was a 500 from the send (and no answer on the WebSocket)
+        ("/api/command/velocity", b'{"duration_s": 0.0004}', 422, "0 there means until"),
+        ("/api/command/pad_mode", b'{"mode": "hold", "deadband_m": 0.0004}', 422,
+         "0 there means the default"),
         ("/api/command/land", b"", 503, "no vehicle connected"),
     ],
 )
