@@ -45,6 +45,9 @@ def _fail(command: str, message: str) -> int:
 def cmd_pad(args: argparse.Namespace) -> int:
     """Write the printable pad."""
     name = os.path.basename(args.out)
+    if os.path.splitext(name)[1].lower() not in (".pdf", ".png"):  # named as given, before
+        # the partial file it is written to (whose name the printer's own check would say)
+        return _fail(PAD, f"--out {args.out}: a printable pad is .pdf or .png")
     if args.dpi is not None and name.lower().endswith(".pdf"):  # it would do nothing
         return _fail(PAD, f"--dpi sets a PNG's resolution; {name} is a PDF (vector: it has "
                      "none to set)")

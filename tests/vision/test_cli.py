@@ -134,6 +134,17 @@ def test_pad_refuses_a_dpi_for_a_pdf(tmp_path, capsys):
         assert not pdf.exists()
 
 
+def test_pad_refuses_another_extension_naming_the_out_given(tmp_path, capsys):
+    """A .txt --out was refused by the printer's own check, which named the partial file it
+    was being written to ('.pad.15423.partial.txt'), a file the user never gave."""
+    out = tmp_path / "pad.txt"
+    assert run(["pad", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out}: a printable pad is .pdf or .png" in err, err
+    assert "partial" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_pad_command_writes_files(tmp_path, capsys):
     pdf = tmp_path / "pad.pdf"
     assert run(["pad", "--out", str(pdf)]) == 0
