@@ -7,7 +7,8 @@ stream of one robot (the lines the engine sent its connection, or each of its co
 turn where it was spawned again under its name: ``STA``, ``SEN``, and the ``ERR``
 of a crash, ``{Command CRASH}``, or of a robot the engine stopped, ``{Command PHYSICS}`` or
 ``{Command CAMERA}``; not the answers to its client's commands), each line released when
-``(sim_s - first_sim_s) / speed`` wall seconds have passed. The first part of a rotated
+``(sim_s - first_sim_s) / speed`` wall seconds have passed since the first of them was read.
+The first part of a rotated
 recording is played with the parts that continue it, as one flight (connection ids and robot
 names run on across parts as the recorder wrote them); a later part named alone plays alone.
 The files are read lazily, so a long recording costs no memory per client, and in slices
@@ -282,7 +283,11 @@ class _Playback:
         self.reading = True  # the next line is not read yet (the file is read in slices)
         self.first_sim_s = server.first_sim_s
         self.sim_now_s = self.first_sim_s
+        # The playback's clock starts with the robot's first line, once read: a robot far into
+        # a long recording is paced from there (started on connecting, the lines of the read's
+        # duration were all due at once when it ended, and went out in one burst).
         self.start = time.monotonic()
+        self.clock_started = False
 
     def _due_sim_s(self) -> float:
         return self.first_sim_s + (time.monotonic() - self.start) * self.server.speed
@@ -292,6 +297,9 @@ class _Playback:
         item = next(self.lines, _END)
         self.reading = item is None
         self.next_line = item if isinstance(item, tuple) else None
+        if self.next_line is not None and not self.clock_started:
+            self.clock_started = True
+            self.start = time.monotonic()
 
     def run(self) -> None:
         self.sock.sendall(self.server.nfo_line())
@@ -312,10 +320,10 @@ class _Playback:
                     return
 
     def _send_due(self) -> None:
-        now = self._due_sim_s()
-        batch: list[bytes] = []
         if self.reading:
             self._read_on()
+        now = self._due_sim_s()  # after the read: it may have started the clock
+        batch: list[bytes] = []
         while self.next_line is not None and self.next_line[0] <= now:
             self.sim_now_s = self.next_line[0]
             batch.append(self.next_line[1])

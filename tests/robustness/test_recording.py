@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -1140,6 +1141,25 @@ def test_an_empty_robot_name_is_refused_not_taken_for_the_first_robot(
     assert "no robot '' in the recording" in capsys.readouterr().err
 
 
+def _write_to_fifo_reader(path: Path, content: bytes, timeout_s: float = 60.0) -> None:
+    """Write ``content`` to the FIFO at ``path`` once a reader has opened it (within
+    ``timeout_s``: a plain open for writing waits for a reader without end)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            writer = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+            break
+        except OSError as exc:  # ENXIO: no reader yet
+            if exc.errno != errno.ENXIO or time.monotonic() > deadline:
+                raise
+            time.sleep(0.01)
+    try:
+        os.set_blocking(writer, True)
+        os.write(writer, content)  # a blocking write, read as it goes
+    finally:
+        os.close(writer)
+
+
 def test_a_client_is_greeted_before_its_playback_reads_the_recording(tmp_path: Path) -> None:
     """Each client's playback read the recording up to its robot's first line before it sent
     the NFO, answering nothing meanwhile: a robot spawned late in a long recording kept every
@@ -1165,13 +1185,44 @@ def test_a_client_is_greeted_before_its_playback_reads_the_recording(tmp_path: P
         try:
             client.expect("NFO")
         finally:  # the playback waits to open the FIFO (either code): give it the recording
-            writer = os.open(path, os.O_WRONLY)
-            try:
-                os.write(writer, content)  # a blocking write, read as it goes
-            finally:
-                os.close(writer)
+            _write_to_fifo_reader(path, content)
         _, sta = client.read_until(lambda m: m.type == "STA")
         assert sta.get("Name") == "R2", sta
         client.send("PING {Id after}")
         assert client.read_until(lambda m: m.type == "RES")[1].get("Id") == "after"
         client.close()
+
+
+def test_a_late_robots_playback_is_paced_from_its_first_line_once_read(tmp_path: Path) -> None:
+    """The playback's clock started on connecting, so the sim time a long read of the file
+    took was all due when its robot's first line came: those lines went out in one burst. It
+    starts with the first line now. The read is held here for ``held_s`` (the recording a
+    FIFO given only then); a PING sent when the first STA (sim 9.0) arrives is answered with
+    the playback's time, about 9.0 plus the PING's round trip, where the old clock said 9.0
+    plus the ``held_s`` of the read."""
+    held_s = 6.0
+    path = tmp_path / "late.rec"
+    content = (format_header({"world": "pad"})
+               + format_record(Record(1.0, 0.0, 1, SENT, "RES {Command INIT} {Name R1}"))
+               + format_record(Record(1.0, 0.0, 1, SENT, "STA {Name R1} {Time 0}"))
+               + format_record(Record(2.0, 9.0, 2, SENT, "RES {Command INIT} {Name R2}"))
+               + b"".join(format_record(Record(2.0, 9.0 + k / 10, 2, SENT,
+                                               f"STA {{Name R2}} {{Time {9 + k / 10:.1f}}}"))
+                          for k in range(100)))
+    path.write_bytes(content)
+    with ReplayServer(path, port=0, speed=1.0, robot="R2") as replay:
+        path.unlink()
+        os.mkfifo(path)
+        client = LineClient(replay.port, timeout_s=60)
+        try:
+            client.expect("NFO")
+            time.sleep(held_s)  # the read held: the test's own delay, not a guess at speed
+        finally:
+            _write_to_fifo_reader(path, content)
+        client.read_until(lambda m: m.type == "STA")
+        client.send("PING {Id paced}")
+        answer = client.read_until(lambda m: m.type == "RES")[1]
+        client.close()
+    assert answer.get("Id") == "paced"
+    # the round trip of one PING on loopback: far below half of held_s, loaded or not
+    assert float(answer.get("Time")) < 9.0 + held_s / 2, answer
