@@ -44,11 +44,13 @@ def query_of(uri: str, parts: SplitResult, what: str,
              error: type[SkeyeError] = LocalProtocolError) -> dict[str, list[str]]:
     """The URI's options, ``{key: [value]}`` as ``parse_qs`` gives them with blank values kept
     (``baud=`` is ``[""]``, for its parser to refuse); raises ``error`` naming ``what`` it was
-    for and the URI for an option given twice or a part that is not ``key=value``."""
+    for and the URI for an option given twice or a part that is not ``key=value`` (an empty
+    part, a stray ``&``, is passed over)."""
+    given = [part for part in parts.query.split("&") if part]  # a stray & is no option
     try:
-        pairs = parse_qsl(parts.query, keep_blank_values=True, strict_parsing=True)
+        pairs = parse_qsl("&".join(given), keep_blank_values=True, strict_parsing=True)
     except ValueError:
-        bad = [part for part in parts.query.split("&") if "=" not in part]
+        bad = [part for part in given if "=" not in part]
         raise error(f"{what} {uri!r}: option {bad[0]!r} is not KEY=VALUE") from None
     query: dict[str, list[str]] = {}
     for key, value in pairs:

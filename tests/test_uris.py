@@ -94,3 +94,11 @@ def test_an_option_without_a_value_sign_is_refused(name, parse, form, key, error
         parse(uri)
     text = str(info.value)
     assert uri in text and "'loop' is not KEY=VALUE" in text, text
+
+
+def test_a_stray_ampersand_is_passed_over() -> None:
+    """``?baud=57600&`` (a pasted URL's trailing &) was taken before options were read
+    strictly, and must still be: an empty part is no option."""
+    assert parse_link_uri("serial:///dev/ttyUSB0?baud=57600&") == ("serial", "/dev/ttyUSB0",
+                                                                   57600)
+    assert parse_link_uri("serial:///dev/ttyUSB0?&baud=9600&&")[2] == 9600

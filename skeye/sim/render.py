@@ -363,7 +363,8 @@ _CONTEXT_FAILURES: dict[str, SkeyeError] = {}
 """The backends (``MUJOCO_GL``) this process could not make an OpenGL context with, and the
 error: a second ``mujoco.Renderer`` after a failed one can abort the whole process (GLFW
 without a display: libc++abi's "recursive initialization" in MuJoCo's GL loader), so a later
-renderer is refused with the first error instead of trying again."""
+renderer is refused with the first error instead of trying again. Only GLFW's failures are
+kept: EGL's and OSMesa's are tried again (one may be transient: memory)."""
 
 
 def _make_renderer(mujoco: Any, model: Any, height: int, width: int, samples: int,
@@ -388,7 +389,8 @@ def _make_renderer(mujoco: Any, model: Any, height: int, width: int, samples: in
             "or OSMesa (apt-get install libosmesa6) for MUJOCO_GL=osmesa, or run with a display "
             "(MUJOCO_GL=glfw)"
         )
-        _CONTEXT_FAILURES[backend] = error
+        if backend == "glfw":  # only there is a retry known to abort (EGL's may be transient)
+            _CONTEXT_FAILURES[backend] = error
         raise error from exc
     finally:
         quality.offsamples, quality.shadowsize = before

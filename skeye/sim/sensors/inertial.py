@@ -309,9 +309,12 @@ class MagneticCompass(Sensor[CompassReading]):
     every rotor at MotorSpeed, the Hummingbird's hover), along a body-frame direction drawn once
     from the seed. MotorField 2.2 uT is an assumption at the edge of what ArduPilot's compass /
     motor calibration (compassmot) calls acceptable, 30 % of the earth's field (about 50 uT) at
-    full throttle: full throttle draws (838 / 441.7)^3 = 6.8 times the hover current, so 15 uT
-    there and 2.2 uT in hover. A board compensates it only when it has been calibrated for it
-    (compassmot); the simulated board has not.
+    full throttle: the rotors' top speed at a full pack's open-circuit voltage draws
+    (838 / 441.7)^3 = 6.8 times the hover current, so 15 uT there and 2.2 uT in hover. (Under
+    the voltage sag of full throttle the top speed is about 775 rad/s, 5.4 times the hover
+    current, 11.9 uT: MotorField was set on the open-circuit figure and is kept.) A board
+    compensates it only when it has been calibrated for it (compassmot); the simulated board
+    has not.
     """
 
     type_name = "MagneticCompass"
