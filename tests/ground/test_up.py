@@ -452,3 +452,37 @@ def test_up_stops_the_clients_before_the_servers_they_use(tmp_path: Path) -> Non
             if child.poll() is None:
                 child.kill()
                 child.wait(10)
+
+
+@pytest.mark.parametrize(("host", "reach"), [("::1", "::1"), ("::", "127.0.0.1"), ("::", "::1")])
+def test_ground_alone_listens_on_an_ipv6_host(host: str, reach: str) -> None:
+    """``--host ::1`` and ``--host ::`` passed the port check (an IPv6 test bind) and then
+    failed in the real bind, made for IPv4: ``[Errno -9] Address family for hostname not
+    supported``, status 2. Ground control now listens there, and the printed address answers
+    (``::``, as ``0.0.0.0``, prints 127.0.0.1: it takes IPv4 too)."""
+    import http.client
+
+    child = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+         "--port", "0", "--host", host], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL, text=True)
+    assert child.stdout is not None
+    said: list[str] = []
+    try:
+        while not any("?token=" in line for line in said):
+            line = child.stdout.readline()
+            assert line, said
+            said.append(line)
+        url = next(line for line in said if "?token=" in line).split()[2]
+        shown = "[::1]" if host == "::1" else "127.0.0.1"
+        assert url.startswith(f"http://{shown}:"), url
+        port = int(url.split("]:" if host == "::1" else "1:", 1)[1].split("/", 1)[0])
+        token = url.split("?token=", 1)[1]
+        conn = http.client.HTTPConnection(reach, port, timeout=60)
+        conn.request("GET", "/api/state", headers={"X-Skeye-Token": token})
+        assert conn.getresponse().status == 200
+        conn.close()
+    finally:
+        child.terminate()
+        child.communicate(timeout=60)
+    assert child.returncode == 0, said
