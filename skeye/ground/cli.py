@@ -327,9 +327,10 @@ def _signal_name(status: int) -> str:
         return f"signal {-status}"
 
 
-def pilot_calibration(choice: str, robot: str) -> Path | None:
+def pilot_calibration(choice: str, robot: str, robot_dirs: tuple[Path, ...] = ()) -> Path | None:
     """The calibration file ``skeye up`` gives the pilot: ``choice`` is ``auto``, ``none`` or a
-    file (see the module's docstring).
+    file (see the module's docstring); ``robot`` is looked up as the simulator does, in the
+    built-ins, then in ``robot_dirs`` (``--robot-dir``).
 
     Raises:
         ConfigError: a file that does not exist, an unknown robot, a calibration that failed.
@@ -352,7 +353,7 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
         except Exception as exc:  # its message names the file already
             raise ConfigError(f"--calibration: {exc}") from None
         return path
-    config = load_robot_config(robot)
+    config = load_robot_config(robot, robot_dirs, allow_paths=False)
     mount = next((m for m in config.sensors if m.type_name.lower() == CAMERA_TYPE), None)
     if mount is None:
         return None  # a robot without a camera: nothing to calibrate
@@ -390,7 +391,8 @@ def pilot_calibration(choice: str, robot: str) -> Path | None:
         print(f"skeye up: calibrating [{time.monotonic() - start:5.1f} s]: {step}", flush=True)
 
     try:
-        calibrate_simulated_camera(partial, model.profile, robot=robot, progress=progress)
+        calibrate_simulated_camera(partial, model.profile, robot=robot, progress=progress,
+                                   robot_dirs=robot_dirs)
         try:
             os.replace(partial, workdir)  # whole or not at all
         except OSError:
@@ -508,10 +510,17 @@ def run_up(args: argparse.Namespace) -> int:
         return True
 
     from skeye.processes import ParentWatch, check_ports_free
+    from skeye.robots.config import BUILTIN_ROBOTS, load_robot_config, robot_folders
+    from skeye.sim.world_file import load_world
 
     parent = ParentWatch()
     status = 0
     try:
+        # the world, the robot-dirs and the robot, named before anything starts (they were
+        # found wrong by the simulator or the pilot, once started)
+        folders = robot_folders(tuple(args.robot_dir or ()))
+        robot = load_robot_config(args.robot, folders, allow_paths=False)
+        load_world(args.world)
         mavlink = up_mavlink_links(args)  # a bad URI or a taken port: nothing starts
         check_ports_free([
             ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
@@ -521,10 +530,14 @@ def run_up(args: argparse.Namespace) -> int:
             ("ground control", args.host, args.ground_port, "--ground-port"),
             *mavlink_listeners(mavlink),
         ])
-        calibration = pilot_calibration(args.calibration, args.robot)
+        calibration = pilot_calibration(args.calibration, args.robot, folders)
         if stop.is_set():  # Ctrl-C while calibrating: start nothing
             raise ConfigError("stopped while calibrating the camera")
         robot_dirs = [f"--robot-dir={d}" for d in args.robot_dir or ()]
+        # the pilot takes one --robot-dir: the folder that holds the robot's file (a built-in
+        # needs none)
+        builtin = args.robot.lower().removeprefix("usarbot.") in BUILTIN_ROBOTS
+        pilot_dir = [] if builtin else [f"--robot-dir={Path(robot.source).parent}"]
         start(
             "simulator",
             _child_argv(
@@ -538,7 +551,7 @@ def run_up(args: argparse.Namespace) -> int:
             _child_argv(
                 "pilot", "--sim", f"127.0.0.1:{args.sim_port}",
                 "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
-                "--video-port", str(args.video_port), "--robot", args.robot, *robot_dirs[:1],
+                "--video-port", str(args.video_port), "--robot", args.robot, *pilot_dir,
                 *(["--calibration", str(calibration)] if calibration is not None else []),
                 *[f"--mavlink={uri}" for uri in mavlink],
                 *([f"--rtp-video={args.rtp_video}"] if args.rtp_video else []),

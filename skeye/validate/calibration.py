@@ -147,17 +147,21 @@ def capture_board(sim_address: str, images_address: str, robot: str = "hummingbi
 
 
 def calibrate_simulated_camera(workdir: Path, camera_profile: str, seed: int = 1,
-                               robot: str = "hummingbird", progress: Progress | None = None
+                               robot: str = "hummingbird", progress: Progress | None = None,
+                               robot_dirs: tuple[Path, ...] = ()
                                ) -> tuple[Path, CalibrationResult]:
     """Start ``skeye sim`` on the checkerboard world with ``camera_profile``, photograph the
     board, calibrate; the calibration file written (``workdir/camera.toml``) and the result.
-    ``progress`` is told of each step (the simulator starting, each view, the solve)."""
+    ``progress`` is told of each step (the simulator starting, each view, the solve);
+    ``robot_dirs`` are the simulator's ``--robot-dir`` folders, where a ``robot`` that is not a
+    built-in is found."""
     workdir.mkdir(parents=True, exist_ok=True)
     if progress is not None:
         progress("starting a lockstep simulator of the checkerboard world")
     sim, found = start_skeye(
         ["sim", "--world", "checkerboard", "--mode", "lockstep", "--port", "0",
-         "--image-port", "0", "--seed", str(seed), "--camera-profile", camera_profile],
+         "--image-port", "0", "--seed", str(seed), "--camera-profile", camera_profile,
+         *[f"--robot-dir={d}" for d in robot_dirs]],
         [r"control protocol on [\d.]+:(\d+)", r"image server on [\d.]+:(\d+)"], "skeye sim",
         timeout_s=scaled_s(180.0))
     try:

@@ -486,3 +486,71 @@ def test_ground_alone_listens_on_an_ipv6_host(host: str, reach: str) -> None:
         child.terminate()
         child.communicate(timeout=60)
     assert child.returncode == 0, said
+
+
+def test_up_refuses_an_unknown_world_robot_or_robot_dir_before_starting_anything(
+        tmp_path: Path) -> None:
+    """``--world``, ``--robot-dir`` and a ``--robot`` that lives in none of them were found
+    wrong by the simulator or the pilot, after ``skeye up`` had started the simulator (with
+    ``--calibration none``: ``simulator exited with status 2 while starting``). Each is named
+    now, before anything starts."""
+    sim, img, pilot, ground, video = _free_ports(5)
+    ports = ["--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
+             "--ground-port", str(ground), "--video-port", str(video), "--no-mavlink",
+             "--calibration", "none"]
+    for extra, said in ((["--world", "nosuch"], "unknown world 'nosuch'"),
+                        (["--robot-dir", str(tmp_path / "nope")], "--robot-dir"),
+                        (["--robot", "myquad", "--robot-dir", str(tmp_path)],
+                         "unknown robot class 'myquad'")):
+        done = _run_up(*ports, *extra, timeout_s=120)
+        assert done.returncode == 1, done
+        assert said in done.stderr and "skeye sim" not in done.stderr, done.stderr
+        assert "control protocol" not in done.stdout and "open http" not in done.stdout, done
+
+
+def test_up_flies_a_robot_of_its_second_robot_dir_calibrated(tmp_path: Path) -> None:
+    """A robot file of ``--robot-dir`` (here the second of two): with ``--calibration auto``
+    ``skeye up`` looked the robot up among the built-ins only (``unknown robot class``), and
+    the pilot was given only the first folder, where the robot is not. Now the camera is
+    calibrated on the robot's own file, and the pilot gets the folder that holds it."""
+    from importlib import resources
+
+    first, second = tmp_path / "first", tmp_path / "second"
+    first.mkdir()
+    second.mkdir()
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    text = text.replace('name = "hummingbird"', 'name = "myquad"', 1)
+    (second / "myquad.toml").write_text(text, encoding="utf-8")
+    sim, img, pilot, ground, video = _free_ports(5)
+    argv = [sys.executable, "-m", "skeye.cli", "up", "--robot", "myquad",
+            "--robot-dir", str(first), "--robot-dir", str(second), "--no-mavlink",
+            "--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
+            "--ground-port", str(ground), "--video-port", str(video)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+                                 "XDG_CACHE_HOME": str(tmp_path / "cache")},
+                            start_new_session=True)
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        while not any("skeye up: open" in line for line in lines):
+            line = proc.stdout.readline()
+            assert line, f"skeye up did not start: {''.join(lines)}"
+            lines.append(line)
+        said = "".join(lines)
+        assert "calibrating the myquad's webcam camera" in said, said
+        pilot_argv = [Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+                      for pid in _children(proc.pid)]
+        pilot_argv = [a for a in pilot_argv if "pilot" in a]
+        assert len(pilot_argv) == 1, pilot_argv
+        assert [a for a in pilot_argv[0] if a.startswith("--robot-dir")] == [
+            f"--robot-dir={second}"], pilot_argv
+        assert "--calibration" in pilot_argv[0], pilot_argv
+        assert "robot file " + str(second / "myquad.toml") in said, said  # the pilot's envelope
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=120)
+        assert proc.returncode == 0, rest
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(30)
