@@ -78,6 +78,7 @@ def run_ground(args: argparse.Namespace) -> int:
     from skeye.ground.video import VideoRelay, parse_video_uri
     from skeye.robots.config import robot_folders
     from skeye.wire.packets import VehicleInfo
+    from skeye.wire.video import MAX_FPS, MIN_FPS, Subscribe
 
     if not (args.header_timeout > 0 and args.max_connections_per_peer >= 1):
         raise ConfigError(f"--header-timeout must be > 0 s and --max-connections-per-peer >= 1, "
@@ -96,10 +97,25 @@ def run_ground(args: argparse.Namespace) -> int:
         parse_uri(args.vehicle)  # a bad URI stops us here, not in the bridge's thread
     except LocalProtocolError as exc:
         raise ConfigError(f"--vehicle: {exc}") from None
-    video_at = parse_video_uri(args.video) if args.video else None
+    try:
+        video_at = parse_video_uri(args.video) if args.video else None
+    except LocalProtocolError as exc:
+        raise ConfigError(f"--video: {exc}") from None
+    if video_at is not None and video_at[1] == 0:  # a port to connect to, not "any free"
+        raise ConfigError(f"--video {args.video}: port 0 is no port to connect to (the "
+                          "pilot's --video-port, 1..65535)")
     if video_at is None and args.video_fps != DEFAULT_VIDEO_FPS:  # it would do nothing
         raise ConfigError("--video-fps applies to the vehicle's video: it needs --video")
+    try:
+        Subscribe(args.video_fps)  # what the video protocol carries, checked before the link
+    except LocalProtocolError:
+        raise ConfigError(f"--video-fps must be within [{MIN_FPS:g}, {MAX_FPS:g}] "
+                          f"frames/s, got {args.video_fps:g}") from None
     robot_dirs = robot_folders(args.robot_dir)  # a typo is named now, not ignored
+    try:
+        limits = VehicleLimits.for_robot(args.robot, robot_dirs)  # before the link starts
+    except ConfigError as exc:
+        raise ConfigError(f"--robot: {exc}") from None
     # a taken port or a host that is not this machine's, named with the option that moves it
     check_ports_free([("ground control", args.host, args.port, "--port")])
     sock = listen(args.host, args.port)
@@ -133,7 +149,7 @@ def run_ground(args: argparse.Namespace) -> int:
         try:
             app = create_app(
                 bridge, video, security=security,
-                limits=VehicleLimits.for_robot(args.robot, robot_dirs),
+                limits=limits,
                 body_timeout_s=args.header_timeout,
             )
             connections = ConnectionLimits(header_timeout_s=args.header_timeout,

@@ -202,6 +202,10 @@ class Detection:
             raise LocalProtocolError("a pad not found has no figures and no rings")
 
 
+MIN_FPS, MAX_FPS = 0.01, 1000.0
+"""The frame rates SUBSCRIBE and HELLO carry (frames/s)."""
+
+
 @dataclass(frozen=True)
 class Subscribe:
     """Client -> server: send me frames, at most ``max_fps`` per second."""
@@ -209,7 +213,7 @@ class Subscribe:
     max_fps: float
 
     def __post_init__(self) -> None:
-        _finite("subscribe max_fps", self.max_fps, 0.01, 1000.0)
+        _finite("subscribe max_fps", self.max_fps, MIN_FPS, MAX_FPS)
 
 
 @dataclass(frozen=True)
@@ -225,7 +229,7 @@ class Hello:
         _text("hello camera", self.camera)
         _finite("hello fov_h_rad", self.fov_h_rad, 1e-6, math.pi)
         _int("hello jpeg_quality", self.jpeg_quality, 1, 100)
-        _finite("hello max_fps", self.max_fps, 0.01, 1000.0)
+        _finite("hello max_fps", self.max_fps, MIN_FPS, MAX_FPS)
 
 
 @dataclass(frozen=True)

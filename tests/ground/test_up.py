@@ -554,3 +554,22 @@ def test_up_flies_a_robot_of_its_second_robot_dir_calibrated(tmp_path: Path) -> 
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(30)
+
+
+def test_ground_alone_names_a_bad_video_rate_robot_or_video_port_before_its_link() -> None:
+    """``--video-fps`` outside what the video protocol carries was refused by the protocol's
+    message check (``subscribe max_fps must be in [0.01, 1000]``, no option named), ``--robot``
+    unknown without naming the option, both after the vehicle link had started; and
+    ``--video tcp://host:0`` was taken, and ground control served a camera that could never
+    come. Each is named with its option now, before the link starts."""
+    base = [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+            "--port", "0"]
+    for extra, said in ((["--video", "tcp://127.0.0.1:1", "--video-fps", "1e-9"],
+                         "--video-fps"),
+                        (["--video", "tcp://127.0.0.1:1", "--video-fps", "5000"], "--video-fps"),
+                        (["--robot", "nosuch"], "--robot"),
+                        (["--video", "tcp://127.0.0.1:0"], "--video")):
+        done = subprocess.run([*base, *extra], capture_output=True, text=True, timeout=60)
+        assert done.returncode == 2, done
+        assert f"skeye ground: error: {said}" in done.stderr, done.stderr
+        assert "no link" not in done.stdout, done.stdout
