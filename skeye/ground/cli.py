@@ -250,16 +250,21 @@ def reach_host(host: str) -> str:
     return host
 
 
+class StartStopped(ConfigError):
+    """Ctrl-C or SIGTERM while ``skeye up`` was starting: asked for, not a failure."""
+
+
 def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float,
                     stop: threading.Event | None = None, host: str = "127.0.0.1") -> None:
     end = time.monotonic() + deadline_s
     while time.monotonic() < end:
+        # the stop first: a terminal's Ctrl-C reaches the child too, which then exits
+        if stop is not None and stop.is_set():
+            raise StartStopped(f"stopped while {what} was starting")
         if child.poll() is not None:
             meaning = _exit_meaning(what, child.returncode)
             raise ConfigError(f"{what} exited with status {child.returncode}"
                               f"{' (' + meaning + ')' if meaning else ''} while starting")
-        if stop is not None and stop.is_set():
-            raise ConfigError(f"stopped while {what} was starting")
         try:
             with socket.create_connection((host, port), timeout=0.5):
                 return
@@ -548,7 +553,7 @@ def run_up(args: argparse.Namespace) -> int:
         ])
         calibration = pilot_calibration(args.calibration, args.robot, folders)
         if stop.is_set():  # Ctrl-C while calibrating: start nothing
-            raise ConfigError("stopped while calibrating the camera")
+            raise StartStopped("stopped while calibrating the camera")
         robot_dirs = [f"--robot-dir={d}" for d in args.robot_dir or ()]
         # the pilot takes one --robot-dir: the folder that holds the robot's file (a built-in
         # needs none)
@@ -602,11 +607,18 @@ def run_up(args: argparse.Namespace) -> int:
                 status = 1
                 break
     except ConfigError as exc:
-        print(f"skeye up: {exc}", file=sys.stderr, flush=True)
-        # The root cause may be another child: a pilot that cannot reach its simulator is
-        # usually looking at one that is exiting. _report_dead gives it time to say so.
-        _report_dead(children, stop)
-        status = 1
+        if stop.is_set():
+            # Ctrl-C or SIGTERM while starting: a stop asked for, status 0 as once started
+            # (it was 1, as for a child that failed). A terminal's Ctrl-C also reaches the
+            # calibration's or a child's process, whose failure it caused: not said as one.
+            said = exc if isinstance(exc, StartStopped) else "stopped while starting"
+            print(f"skeye up: {said}", flush=True)
+        else:
+            print(f"skeye up: {exc}", file=sys.stderr, flush=True)
+            # The root cause may be another child: a pilot that cannot reach its simulator is
+            # usually looking at one that is exiting. _report_dead gives it time to say so.
+            _report_dead(children, stop)
+            status = 1
     finally:
         if stop.is_set() and any(c.poll() is None for _, c in children):
             print("skeye up: stopping (Ctrl-C or SIGTERM again kills what is still running at "

@@ -28,15 +28,20 @@ from tests.ports import free_ports
 
 # A child of skeye up: listens on every port given after --port, --image-port, --video-port;
 # SKEYE_STANDIN_HUNG=1: ignores SIGTERM (else exits 0 on it); SIGUSR1 makes it exit with 4.
+# SKEYE_STANDIN_STARTING=pilot: the pilot never listens (it is still starting): it says
+# "standin pilot starting" and exits 130 on SIGINT, as a Ctrl-C in a terminal ends it.
 STANDIN = r"""
 import os, signal, socket, sys
 argv = sys.argv[1:]
+starting = os.environ.get("SKEYE_STANDIN_STARTING") == argv[0]
 ports = [int(argv[i + 1]) for i, a in enumerate(argv) if a in ("--port", "--image-port",
                                                                "--video-port")]
-servers = [socket.create_server(("127.0.0.1", p)) for p in ports]
+servers = [] if starting else [socket.create_server(("127.0.0.1", p)) for p in ports]
 hung = os.environ.get("SKEYE_STANDIN_HUNG") == "1"
 signal.signal(signal.SIGTERM, signal.SIG_IGN if hung else lambda *_: os._exit(0))
-signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.signal(signal.SIGINT, (lambda *_: os._exit(130)) if starting else signal.SIG_IGN)
+if starting:
+    print(f"standin {argv[0]} starting", flush=True)
 signal.signal(signal.SIGUSR1, lambda *_: os._exit(4))
 while True:
     signal.pause()
@@ -149,3 +154,41 @@ def test_ctrl_c_ends_the_wait_for_the_simulators_exit_status(up) -> None:
     assert rest.rstrip().endswith("skeye up: stopped"), rest
     assert all(_gone(pid) for pid in pids.values())
     assert took < STOP_TIMEOUT_S / 2
+
+
+@pytest.mark.parametrize("group", [False, True], ids=["to skeye up", "to its process group"])
+def test_ctrl_c_while_starting_stops_with_status_0(standin: Path, group: bool) -> None:
+    """Ctrl-C while a child was starting ended ``skeye up`` with status 1 and ``stopped while
+    pilot was starting`` on stderr, as if the pilot had failed; the same Ctrl-C a moment later,
+    once started, gave 0. A stop asked for is now status 0 whenever it comes. A terminal's
+    Ctrl-C goes to the whole process group: the starting pilot exits of it too (130), and that
+    is not said as its failure."""
+    sim, img, pilot, ground, video = free_ports(5)
+    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
+            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
+            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_STARTING": "pilot"}
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line == "standin pilot starting\n", line
+        children = _children(proc.pid)
+        assert len(children) == 2  # the simulator and the starting pilot
+        if group:
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 0, (out, err)
+        assert "skeye up: stopped while pilot was starting\n" in out, out
+        assert out.endswith("skeye up: stopped\n"), out
+        assert "exited" not in out and err == "", (out, err)
+        assert all(_gone(pid) for pid in children)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait(30)
