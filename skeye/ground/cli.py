@@ -491,8 +491,11 @@ def run_up(args: argparse.Namespace) -> int:
     atexit.register(_stop_all, children)
 
     def start(what: str, argv: list[str], *ports: int) -> None:
+        # Its own process group: a terminal's Ctrl-C (SIGINT to the foreground group) reaches
+        # skeye up alone, which stops the children in order; it used to reach all three at
+        # once, and ground control logged the pilot gone at a normal stop.
         child = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL,
-                                 preexec_fn=die_with_parent())
+                                 preexec_fn=die_with_parent(), process_group=0)
         commands[what] = (argv, ports)
         for i, (name, _) in enumerate(children):
             if name == what:

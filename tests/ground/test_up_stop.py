@@ -43,6 +43,14 @@ signal.signal(signal.SIGINT, (lambda *_: os._exit(130)) if starting else signal.
 if starting:
     print(f"standin {argv[0]} starting", flush=True)
 signal.signal(signal.SIGUSR1, lambda *_: os._exit(4))
+log = os.environ.get("SKEYE_STANDIN_LOG")
+if log:  # as the real children: Ctrl-C or SIGTERM stops it; it says which came
+    def stopped(signum, frame):
+        with open(log, "a") as f:
+            f.write(f"{argv[0]}:{signal.Signals(signum).name}\n")
+        os._exit(0)
+    signal.signal(signal.SIGTERM, stopped)
+    signal.signal(signal.SIGINT, stopped)
 while True:
     signal.pause()
 """
@@ -82,10 +90,13 @@ def _start_up(standin: Path, hung: bool) -> Iterator[tuple[subprocess.Popen[str]
             lines.append(line)
         yield proc, lines
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)  # the whole group, whatever the test left
-        except ProcessLookupError:
-            pass
+        # skeye up's group and each child's own, whatever the test left (a hung stand-in
+        # ignores the SIGTERM of its parent's death)
+        for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
         proc.wait(30)
 
 
@@ -161,8 +172,8 @@ def test_ctrl_c_while_starting_stops_with_status_0(standin: Path, group: bool) -
     """Ctrl-C while a child was starting ended ``skeye up`` with status 1 and ``stopped while
     pilot was starting`` on stderr, as if the pilot had failed; the same Ctrl-C a moment later,
     once started, gave 0. A stop asked for is now status 0 whenever it comes. A terminal's
-    Ctrl-C goes to the whole process group: the starting pilot exits of it too (130), and that
-    is not said as its failure."""
+    Ctrl-C goes to the whole process group: it reached the starting pilot too, which exited 130
+    (``pilot exited (130)``, said as its failure; the children now have their own group)."""
     sim, img, pilot, ground, video = free_ports(5)
     argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
             str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
@@ -191,4 +202,42 @@ def test_ctrl_c_while_starting_stops_with_status_0(standin: Path, group: bool) -
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+        proc.wait(30)
+
+
+def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path: Path) -> None:
+    """A terminal's Ctrl-C goes to the whole foreground process group, which held the
+    children too: ground control, the pilot and the simulator each got SIGINT at once, and
+    ground control logged the pilot gone (``no link to the vehicle: ... the vehicle closed the
+    link``) at a normal stop, the order of docs/ground.md not kept. The children now run in
+    their own process group, so the Ctrl-C reaches ``skeye up`` alone, which stops them in
+    order with SIGTERM."""
+    log = tmp_path / "stopped"
+    sim, img, pilot, ground, video = free_ports(5)
+    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
+            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
+            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_LOG": str(log)}
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        lines: list[str] = []
+        while not any("skeye up: open" in line for line in lines):
+            line = proc.stdout.readline()
+            assert line, f"skeye up did not start: {lines}"
+            lines.append(line)
+        children = _children(proc.pid)
+        assert len(children) == 3
+        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+        assert proc.wait(60) == 0
+        assert log.read_text().splitlines() == ["ground:SIGTERM", "pilot:SIGTERM",
+                                                "sim:SIGTERM"], log.read_text()
+        assert all(_gone(pid) for pid in children)
+    finally:
+        for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
         proc.wait(30)
