@@ -545,6 +545,7 @@ def run_up(args: argparse.Namespace) -> int:
         folders = robot_folders(tuple(args.robot_dir or ()))
         robot = load_robot_config(args.robot, folders, allow_paths=False)
         load_world(args.world)
+        check_up_rtp_video(args.rtp_video)
         mavlink = up_mavlink_links(args)  # a bad URI or a taken port: nothing starts
         check_ports_free([
             ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
@@ -633,6 +634,27 @@ def run_up(args: argparse.Namespace) -> int:
         print(f"skeye up: killed {', '.join(killed)} at a second stop signal", flush=True)
     print("skeye up: stopped", flush=True)
     return status
+
+
+def check_up_rtp_video(uri: str | None) -> None:
+    """``--rtp-video`` checked as the pilot checks it (the URI, a route there, PyAV), before
+    anything starts: the pilot found it wrong once the simulator ran.
+
+    Raises:
+        ConfigError: naming the option and what is wrong.
+    """
+    if uri is None:
+        return
+    from skeye.pilot.rtp_video import check_rtp_destination
+
+    try:
+        check_rtp_destination(uri)
+    except ConfigError as exc:
+        raise ConfigError(f"--rtp-video: {exc}") from None
+    try:
+        import av  # noqa: F401  (the `mavlink` extra)
+    except ImportError:
+        raise ConfigError("--rtp-video needs PyAV: pip install 'skeye[mavlink]'") from None
 
 
 DEFAULT_MAVLINK = ("udpout://127.0.0.1:14550", "udpout://127.0.0.1:14540")

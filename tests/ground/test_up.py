@@ -490,10 +490,10 @@ def test_ground_alone_listens_on_an_ipv6_host(host: str, reach: str) -> None:
 
 def test_up_refuses_an_unknown_world_robot_or_robot_dir_before_starting_anything(
         tmp_path: Path) -> None:
-    """``--world``, ``--robot-dir`` and a ``--robot`` that lives in none of them were found
-    wrong by the simulator or the pilot, after ``skeye up`` had started the simulator (with
-    ``--calibration none``: ``simulator exited with status 2 while starting``). Each is named
-    now, before anything starts."""
+    """``--world``, ``--robot-dir``, a ``--robot`` that lives in none of them and a bad
+    ``--rtp-video`` were found wrong by the simulator or the pilot, after ``skeye up`` had
+    started the simulator (with ``--calibration none``: ``simulator exited with status 2 while
+    starting``). Each is named now, before anything starts."""
     sim, img, pilot, ground, video = _free_ports(5)
     ports = ["--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
              "--ground-port", str(ground), "--video-port", str(video), "--no-mavlink",
@@ -501,10 +501,12 @@ def test_up_refuses_an_unknown_world_robot_or_robot_dir_before_starting_anything
     for extra, said in ((["--world", "nosuch"], "unknown world 'nosuch'"),
                         (["--robot-dir", str(tmp_path / "nope")], "--robot-dir"),
                         (["--robot", "myquad", "--robot-dir", str(tmp_path)],
-                         "unknown robot class 'myquad'")):
+                         "unknown robot class 'myquad'"),
+                        (["--rtp-video", "bogus"], "--rtp-video: bogus")):
         done = _run_up(*ports, *extra, timeout_s=120)
         assert done.returncode == 1, done
         assert said in done.stderr and "skeye sim" not in done.stderr, done.stderr
+        assert "skeye pilot" not in done.stderr, done.stderr
         assert "control protocol" not in done.stdout and "open http" not in done.stdout, done
 
 
