@@ -226,7 +226,8 @@ def create_app(
     async def detection() -> Response:
         latest = None if video is None else video.latest()
         if latest is None:
-            return _error(503, "no video frame yet")
+            why = "no video source configured" if video is None else "no video frame yet"
+            return _error(503, why)
         return JSONResponse(latest.meta_json())
 
     @app.websocket("/ws")

@@ -86,6 +86,10 @@ def test_state_and_video_without_a_vehicle(offline: TestClient) -> None:
     assert state["nav"] is None and state["video"] is None
     r = offline.get("/api/video/frame.jpg")
     assert r.status_code == 503 and "no video source" in r.json()["error"]
+    # the detection said "no video frame yet", as if one were coming, on a ground control
+    # without --video
+    r = offline.get("/api/video/detection")
+    assert r.status_code == 503 and r.json()["error"] == "no video source configured", r.text
 
 
 def test_websocket_rejects_malformed_messages(offline: TestClient) -> None:
