@@ -254,6 +254,14 @@ class StartStopped(ConfigError):
     """Ctrl-C or SIGTERM while ``skeye up`` was starting: asked for, not a failure."""
 
 
+class StartFailed(ConfigError):
+    """A child exited while ``skeye up`` waited for it to listen (``what``: which one)."""
+
+    def __init__(self, what: str, message: str) -> None:
+        super().__init__(message)
+        self.what = what
+
+
 def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadline_s: float,
                     stop: threading.Event | None = None, host: str = "127.0.0.1") -> None:
     end = time.monotonic() + deadline_s
@@ -262,9 +270,8 @@ def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadli
         if stop is not None and stop.is_set():
             raise StartStopped(f"stopped while {what} was starting")
         if child.poll() is not None:
-            meaning = _exit_meaning(what, child.returncode)
-            raise ConfigError(f"{what} exited with status {child.returncode}"
-                              f"{' (' + meaning + ')' if meaning else ''} while starting")
+            raise StartFailed(what, f"{what} exited ({_exit_status(what, child.returncode)}) "
+                              "while starting")
         try:
             with socket.create_connection((host, port), timeout=0.5):
                 return
@@ -301,8 +308,8 @@ def _exit_meaning(what: str, status: int | None) -> str:
 
 
 def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]],
-                 stop: threading.Event | None = None) -> bool:
-    """Say which children have exited, and how; True if any has.
+                 stop: threading.Event | None = None, named: str = "") -> bool:
+    """Say which children have exited, and how (but ``named``, said already); True if any has.
 
     When another child died first, the simulator gets a moment to exit too: a pilot that lost
     its simulator (or failed while starting) is usually looking at one on its way out, and the
@@ -316,12 +323,18 @@ def _report_dead(children: Sequence[tuple[str, subprocess.Popen[bytes]]],
                    stop or threading.Event())
     dead = [(w, c) for w, c in children if c.poll() is not None]
     for what, child in dead:
-        meaning = _exit_meaning(what, child.returncode)
-        code = child.returncode or 0
-        status = str(code) if code >= 0 else _signal_name(code)
-        print(f"skeye up: {what} exited ({status}"
-              f"{': ' + meaning if meaning else ''}); stopping", flush=True)
+        if what != named:
+            print(f"skeye up: {what} exited ({_exit_status(what, child.returncode)}); "
+                  "stopping", flush=True)
     return bool(dead)
+
+
+def _exit_status(what: str, status: int | None) -> str:
+    """A child's exit as said: ``3: its simulation engine failed``, ``SIGKILL``."""
+    meaning = _exit_meaning(what, status)
+    code = status or 0
+    said = str(code) if code >= 0 else _signal_name(code)
+    return f"{said}{': ' + meaning if meaning else ''}"
 
 
 def _wait_exit(child: subprocess.Popen[Any], timeout_s: float, stop: threading.Event) -> None:
@@ -621,7 +634,7 @@ def run_up(args: argparse.Namespace) -> int:
             print(f"skeye up: {exc}", file=sys.stderr, flush=True)
             # The root cause may be another child: a pilot that cannot reach its simulator is
             # usually looking at one that is exiting. _report_dead gives it time to say so.
-            _report_dead(children, stop)
+            _report_dead(children, stop, exc.what if isinstance(exc, StartFailed) else "")
             status = 1
     finally:
         if stop.is_set() and any(c.poll() is None for _, c in children):

@@ -241,3 +241,35 @@ def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path:
             except ProcessLookupError:
                 pass
         proc.wait(30)
+
+
+def test_a_child_killed_while_starting_is_named_with_its_signal(standin: Path) -> None:
+    """A child killed while starting was said as ``pilot exited with status -9 while
+    starting`` (Popen's negative status), and again as ``pilot exited (SIGKILL); stopping``.
+    It is named once, with its signal, and ``skeye up`` exits 1."""
+    sim, img, pilot, ground, video = free_ports(5)
+    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
+            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
+            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_STARTING": "pilot"}
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline() == "standin pilot starting\n"
+        pids = {open(f"/proc/{pid}/cmdline").read().split("\0")[2]: pid
+                for pid in _children(proc.pid)}
+        os.kill(pids["pilot"], signal.SIGKILL)
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 1, (out, err)
+        said = out + err
+        assert "-9" not in said, said
+        assert said.count("pilot exited") == 1, said
+        assert "skeye up: pilot exited (SIGKILL) while starting" in err, said
+    finally:
+        for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        proc.wait(30)
