@@ -469,7 +469,7 @@ def check_up_extras() -> None:
 def run_up(args: argparse.Namespace) -> int:
     """Start simulator, pilot and ground control; stop them all on a signal. Without the sim
     or ground extra it refuses at once (``check_up_extras``)."""
-    from skeye.ground.guard import TOKEN_ENV, new_token
+    from skeye.ground.guard import TOKEN_ENV, GroundSecurity, new_token
 
     check_up_extras()
     env = dict(os.environ)
@@ -559,6 +559,10 @@ def run_up(args: argparse.Namespace) -> int:
         robot = load_robot_config(args.robot, folders, allow_paths=False)
         load_world(args.world)
         check_up_rtp_video(args.rtp_video)
+        try:  # what ground control, the last child, would refuse
+            GroundSecurity(token=token, allowed_hosts=tuple(args.allow_host or ()))
+        except ValueError as exc:
+            raise ConfigError(f"{exc} (from ${TOKEN_ENV} or --allow-host)") from None
         mavlink = up_mavlink_links(args)  # a bad URI or a taken port: nothing starts
         check_ports_free([
             ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),

@@ -575,3 +575,21 @@ def test_ground_alone_names_a_bad_video_rate_robot_or_video_port_before_its_link
         assert done.returncode == 2, done
         assert f"skeye ground: error: {said}" in done.stderr, done.stderr
         assert "no link" not in done.stdout, done.stdout
+
+
+def test_up_refuses_a_bad_token_or_allowed_host_before_starting_anything() -> None:
+    """A ``$SKEYE_GROUND_TOKEN`` or ``--allow-host`` that ground control refuses was found by
+    ground control itself, the third child, once the simulator and the pilot ran (``ground
+    control exited (2) while starting``). Both are named now, before anything starts."""
+    sim, img, pilot, ground, video = _free_ports(5)
+    argv = [sys.executable, "-m", "skeye.cli", "up", "--sim-port", str(sim), "--image-port",
+            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
+            "--video-port", str(video), "--no-mavlink", "--calibration", "none"]
+    for token, extra, said in (("bad token", [], "$SKEYE_GROUND_TOKEN"),
+                               ("", ["--allow-host", "x/y"], "--allow-host 'x/y'")):
+        env = {**os.environ, "SKEYE_GROUND_TOKEN": token}
+        done = subprocess.run([*argv, *extra], capture_output=True, text=True, timeout=120,
+                              env=env)
+        assert done.returncode == 1, done
+        assert said in done.stderr and "skeye ground" not in done.stderr, done.stderr
+        assert "control protocol" not in done.stdout, done.stdout
