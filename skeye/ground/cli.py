@@ -47,7 +47,7 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
@@ -55,6 +55,9 @@ from skeye.outputs import cache_folder
 from skeye.peers import listen
 from skeye.processes import EXIT_LOST_SIMULATOR, check_ports_free, die_with_parent, sleep_until
 from skeye.uris import url_host
+
+if TYPE_CHECKING:
+    from skeye.robots.config import RobotConfig
 
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
@@ -547,7 +550,12 @@ def run_up(args: argparse.Namespace) -> int:
         return True
 
     from skeye.processes import ParentWatch, check_ports_free
-    from skeye.robots.config import BUILTIN_ROBOTS, load_robot_config, robot_folders
+    from skeye.robots.config import (
+        BUILTIN_ROBOTS,
+        CAMERA_TYPE,
+        load_robot_config,
+        robot_folders,
+    )
     from skeye.sim.world_file import load_world
 
     parent = ParentWatch()
@@ -557,7 +565,15 @@ def run_up(args: argparse.Namespace) -> int:
         # found wrong by the simulator or the pilot, once started)
         folders = robot_folders(tuple(args.robot_dir or ()))
         robot = load_robot_config(args.robot, folders, allow_paths=False)
+        check_pilot_can_fly(args.robot, robot)
+        # the camera the pilot watches: the robot's first (None: it carries none, as the
+        # AirRobot: no images, no video, and the page says so)
+        camera = next((m.name for m in robot.sensors if m.type_name.lower() == CAMERA_TYPE),
+                      None)
         load_world(args.world)
+        if args.rtp_video and camera is None:
+            raise ConfigError(f"--rtp-video sends the camera, and the robot {args.robot} "
+                              "carries none")
         check_up_rtp_video(args.rtp_video)
         try:  # what ground control, the last child, would refuse
             GroundSecurity(token=token, allowed_hosts=tuple(args.allow_host or ()))
@@ -568,7 +584,8 @@ def run_up(args: argparse.Namespace) -> int:
             ("the simulator", "127.0.0.1", args.sim_port, "--sim-port"),
             ("the image server", "127.0.0.1", args.image_port, "--image-port"),
             ("the pilot", "127.0.0.1", args.pilot_port, "--pilot-port"),
-            ("the pilot's video", "127.0.0.1", args.video_port, "--video-port"),
+            *([("the pilot's video", "127.0.0.1", args.video_port, "--video-port")]
+              if camera is not None else []),
             ("ground control", args.host, args.ground_port, "--ground-port"),
             *mavlink_listeners(mavlink),
         ])
@@ -591,9 +608,11 @@ def run_up(args: argparse.Namespace) -> int:
         start(
             "pilot",
             _child_argv(
-                "pilot", "--sim", f"127.0.0.1:{args.sim_port}",
-                "--images", f"127.0.0.1:{args.image_port}", "--port", str(args.pilot_port),
-                "--video-port", str(args.video_port), "--robot", args.robot, *pilot_dir,
+                "pilot", "--sim", f"127.0.0.1:{args.sim_port}", "--port", str(args.pilot_port),
+                *([] if camera is None else [
+                    "--images", f"127.0.0.1:{args.image_port}", f"--camera={camera}",
+                    "--video-port", str(args.video_port)]),
+                "--robot", args.robot, *pilot_dir,
                 *(["--calibration", str(calibration)] if calibration is not None else []),
                 *[f"--mavlink={uri}" for uri in mavlink],
                 *([f"--rtp-video={args.rtp_video}"] if args.rtp_video else []),
@@ -604,7 +623,8 @@ def run_up(args: argparse.Namespace) -> int:
             "ground control",
             _child_argv(
                 "ground", "--vehicle", f"tcp://127.0.0.1:{args.pilot_port}",
-                "--video", f"tcp://127.0.0.1:{args.video_port}", "--port", str(args.ground_port),
+                *([] if camera is None else ["--video", f"tcp://127.0.0.1:{args.video_port}"]),
+                "--port", str(args.ground_port),
                 "--host", args.host, "--robot", args.robot, *robot_dirs,
                 *[f"--allow-host={h}" for h in args.allow_host or ()],
             ),
@@ -614,7 +634,8 @@ def run_up(args: argparse.Namespace) -> int:
         print(
             f"skeye up: open http://{shown}:{args.ground_port}/?token={token}  "
             f"(simulator {args.sim_port}, "
-            f"images {args.image_port}, pilot {args.pilot_port}, video {args.video_port}"
+            f"images {args.image_port}, pilot {args.pilot_port}, "
+            f"{'no camera' if camera is None else f'video {args.video_port}'}"
             f"{'; MAVLink ' + ', '.join(mavlink) if mavlink else ''}); "
             "Ctrl-C stops everything",
             flush=True,
@@ -651,6 +672,24 @@ def run_up(args: argparse.Namespace) -> int:
         print(f"skeye up: killed {', '.join(killed)} at a second stop signal", flush=True)
     print("skeye up: stopped", flush=True)
     return status
+
+
+def check_pilot_can_fly(name: str, robot: RobotConfig) -> None:
+    """Refuse a robot the pilot cannot fly: one without a sensor type the pilot reads
+    (``skeye.pilot.sim_airframe.SENSORS_READ``; the AirRobot carries no Gyro, Accelerometer,
+    Barometer or Battery). The pilot found it once the simulator ran.
+
+    Raises:
+        ConfigError: naming the types the robot lacks.
+    """
+    from skeye.pilot.sim_airframe import SENSORS_READ
+
+    mounted = {m.type_name.lower() for m in robot.sensors}
+    missing = [t for t in SENSORS_READ if t.lower() not in mounted]
+    if missing:
+        raise ConfigError(
+            f"--robot {name}: the pilot cannot fly it: it carries no {', '.join(missing)} "
+            f"sensor (the pilot reads {', '.join(SENSORS_READ)}; the hummingbird mounts all)")
 
 
 def check_up_rtp_video(uri: str | None) -> None:

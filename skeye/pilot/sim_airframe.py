@@ -51,6 +51,11 @@ from skeye.pilot.airframe import (
 from skeye.wire.sim_messages import Drive
 
 Attitude = tuple[float, float, float, float, bool]  # roll, pitch, yaw rate, thrust, height mode
+SENSORS_READ = ("GroundTruth", "INS", "Gyro", "Accelerometer", "MagneticCompass", "Barometer",
+                "GPS", "Battery")
+"""The sensor types :meth:`SimAirframe.snapshot` reads: a robot that mounts none of one type
+cannot be flown (``R1 (airrobot) has no Gyro sensor``); ``skeye up`` checks them first."""
+
 FROZEN_TIMEOUT_S = 5.0
 """Realtime: sim time standing still this long (wall seconds) means the simulator is frozen."""
 CLOSE_S = 1.0

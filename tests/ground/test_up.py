@@ -593,3 +593,68 @@ def test_up_refuses_a_bad_token_or_allowed_host_before_starting_anything() -> No
         assert done.returncode == 1, done
         assert said in done.stderr and "skeye ground" not in done.stderr, done.stderr
         assert "control protocol" not in done.stdout, done.stdout
+
+
+def test_up_flies_a_robot_without_a_camera(tmp_path: Path) -> None:
+    """A robot without a camera (here the hummingbird without its own) was given to the pilot
+    with ``--images`` and ``--video-port`` all the same: ``skeye pilot: error: --camera Down:
+    GETCONF: robot R1 has no sensor of type Camera named Down``, status 1. It now flies
+    without: no images or video for the pilot, no ``--video`` for ground control (its page
+    says there is no video source). The AirRobot, which lacks sensors the pilot reads, is
+    refused before anything starts (the pilot said ``has no Gyro sensor`` once started)."""
+    from importlib import resources
+
+    ports = [a for p, o in zip(_free_ports(5), ("--sim-port", "--image-port", "--pilot-port",
+                                                "--ground-port", "--video-port"), strict=True)
+             for a in (o, str(p))]
+    done = _run_up("--robot", "airrobot", "--no-mavlink", "--calibration", "none", *ports,
+                   timeout_s=120)
+    assert done.returncode == 1, done
+    assert "--robot airrobot: the pilot cannot fly it: it carries no Gyro, Accelerometer, " \
+        "Barometer, Battery sensor" in done.stderr, done.stderr
+    assert "control protocol" not in done.stdout, done.stdout
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    text = text.replace('name = "hummingbird"', 'name = "blindquad"', 1)
+    text = text[:text.index('[[sensors]]\ntype = "Camera"')]
+    (tmp_path / "blindquad.toml").write_text(text, encoding="utf-8")
+    sim, img, pilot, ground, video = _free_ports(5)
+    argv = [sys.executable, "-m", "skeye.cli", "up", "--robot", "blindquad", "--no-mavlink",
+            "--robot-dir", str(tmp_path),
+            "--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
+            "--ground-port", str(ground), "--video-port", str(video)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+                                 "XDG_CACHE_HOME": str(tmp_path / "cache")},
+                            start_new_session=True)
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        while not any("skeye up: open" in line for line in lines):
+            line = proc.stdout.readline()
+            assert line, f"skeye up did not start: {''.join(lines)}"
+            lines.append(line)
+        assert "no camera" in lines[-1], lines[-1]
+        argvs = {a[3]: a for a in (Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+                                   for pid in _children(proc.pid))}
+        assert "--images" not in argvs["pilot"] and "--video-port" not in argvs["pilot"], argvs
+        assert "--video" not in argvs["ground"], argvs
+        token = lines[-1].split("?token=", 1)[1].split()[0]
+
+        def connected() -> bool:
+            request = urllib.request.Request(
+                f"http://127.0.0.1:{ground}/api/state", headers={"X-Skeye-Token": token})
+            try:
+                with urllib.request.urlopen(request, timeout=30) as r:
+                    state = json.load(r)
+            except OSError:
+                return False
+            return state["link"]["state"] == "connected" and state["video"] is None
+
+        wait_until(connected, 120, "ground control connected to the camera-less pilot")
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=120)
+        assert proc.returncode == 0, rest
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(30)
