@@ -269,7 +269,8 @@ def _wait_listening(port: int, child: subprocess.Popen[bytes], what: str, deadli
                     stop: threading.Event | None = None, host: str = "127.0.0.1") -> None:
     end = time.monotonic() + deadline_s
     while time.monotonic() < end:
-        # the stop first: a terminal's Ctrl-C reaches the child too, which then exits
+        # the stop first: a stop signal sent to every process (systemd's control group,
+        # kill -- -PGID) may have ended the child too
         if stop is not None and stop.is_set():
             raise StartStopped(f"stopped while {what} was starting")
         if child.poll() is not None:
@@ -566,8 +567,8 @@ def run_up(args: argparse.Namespace) -> int:
         folders = robot_folders(tuple(args.robot_dir or ()))
         robot = load_robot_config(args.robot, folders, allow_paths=False)
         check_pilot_can_fly(args.robot, robot)
-        # the camera the pilot watches: the robot's first (None: it carries none, as the
-        # AirRobot: no images, no video, and the page says so)
+        # the camera the pilot watches: the robot's first (None: it carries none: no images,
+        # no video, and the page says so)
         camera = next((m.name for m in robot.sensors if m.type_name.lower() == CAMERA_TYPE),
                       None)
         load_world(args.world)
@@ -652,7 +653,8 @@ def run_up(args: argparse.Namespace) -> int:
         if stop.is_set():
             # Ctrl-C or SIGTERM while starting: a stop asked for, status 0 as once started
             # (it was 1, as for a child that failed). A terminal's Ctrl-C also reaches the
-            # calibration's or a child's process, whose failure it caused: not said as one.
+            # calibration's simulator (a signal to every process, a child too), whose failure
+            # it caused: not said as one.
             said = exc if isinstance(exc, StartStopped) else "stopped while starting"
             print(f"skeye up: {said}", flush=True)
         else:
