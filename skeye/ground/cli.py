@@ -575,6 +575,9 @@ def run_up(args: argparse.Namespace) -> int:
         if args.rtp_video and camera is None:
             raise ConfigError(f"--rtp-video sends the camera, and the robot {args.robot} "
                               "carries none")
+        if args.calibration not in ("auto", "none") and camera is None:
+            raise ConfigError(f"--calibration {args.calibration} is the camera's, and the "
+                              f"robot {args.robot} carries none (give auto or none)")
         check_up_rtp_video(args.rtp_video)
         try:  # what ground control, the last child, would refuse
             GroundSecurity(token=token, allowed_hosts=tuple(args.allow_host or ()))

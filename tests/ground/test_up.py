@@ -617,6 +617,19 @@ def test_up_flies_a_robot_without_a_camera(tmp_path: Path) -> None:
     text = text.replace('name = "hummingbird"', 'name = "blindquad"', 1)
     text = text[:text.index('[[sensors]]\ntype = "Camera"')]
     (tmp_path / "blindquad.toml").write_text(text, encoding="utf-8")
+    from skeye.robots.config import camera_model
+    from tests.vision.helpers import model_calibration
+
+    (tmp_path / "cal").mkdir()  # not among the robot files
+    model_calibration(camera_model("hummingbird")).save(tmp_path / "cal" / "camera.toml")
+    for extra, said in ((["--calibration", str(tmp_path / "cal" / "camera.toml")],
+                         "--calibration"),
+                        (["--rtp-video", "udp://127.0.0.1:5600"], "--rtp-video")):
+        done = _run_up("--robot", "blindquad", "--robot-dir", str(tmp_path), "--no-mavlink",
+                       *ports, *extra, timeout_s=120)
+        assert done.returncode == 1, done
+        assert f"skeye up: {said}" in done.stderr and "carries none" in done.stderr, done.stderr
+        assert "control protocol" not in done.stdout, done.stdout
     sim, img, pilot, ground, video = _free_ports(5)
     argv = [sys.executable, "-m", "skeye.cli", "up", "--robot", "blindquad", "--no-mavlink",
             "--robot-dir", str(tmp_path),
