@@ -39,6 +39,7 @@ Access (Host, Origin, token, content type, body size) is checked before any of t
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import mimetypes
@@ -357,17 +358,35 @@ def create_app(
             await ws.send_json({"type": "status", "state": "no video source configured"})
             await ws.close()
             return
+        # The page sends nothing here, but its going (or the server closing it at a stop) is
+        # read: a task that only sent waited for the next frame for good while none came (the
+        # vehicle's video down), and held the server's shutdown with it.
+        gone = asyncio.Event()
+
+        async def watch() -> None:
+            try:
+                while (await ws.receive())["type"] != "websocket.disconnect":
+                    pass  # nothing is taken from the page on /ws/video
+            except (WebSocketDisconnect, WebSocketDisconnected, OSError, RuntimeError):
+                pass  # closed under it (RuntimeError: receive after the disconnect)
+            finally:
+                gone.set()
+
+        watcher = asyncio.create_task(watch())
         last_seq = -1
         try:
-            while True:
+            while not gone.is_set():
                 latest = video.latest()
                 if latest is not None and latest.seq != last_seq:
                     last_seq = latest.seq
                     await ws.send_json(latest.meta_json())
                     await ws.send_bytes(latest.jpeg)
                 else:
-                    await asyncio.sleep(0.5 / video.fps)
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(gone.wait(), 0.5 / video.fps)
         except (WebSocketDisconnect, WebSocketDisconnected, OSError):
             pass  # the page went
+        finally:
+            watcher.cancel()
 
     return app

@@ -159,3 +159,42 @@ def test_a_vehicle_that_trickles_bytes_without_a_whole_message_is_timed_out() ->
                 done.set()
                 sender.join(30)
                 conn.close()
+
+
+def test_ground_stops_after_video_pages_came_and_went_while_no_frame_came(tmp_path) -> None:
+    """``/ws/video`` only sent, never read: a page that closed it while no frame came (the
+    vehicle's video down) left its task waiting for a frame for good, and so did an open page
+    at the stop. SIGTERM then hung ``skeye ground`` for good (uvicorn waits for every task;
+    under ``skeye up``, 10 s, then SIGKILL). Each page's task now ends when its page goes, or
+    when the server closes it."""
+    import os
+    import signal
+
+    from tests.ports import free_ports
+
+    port, video_port = free_ports(2)  # nothing serves video there
+    env = {**os.environ, "SKEYE_GROUND_TOKEN": "t" * 32}
+    child = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+         "--video", f"tcp://127.0.0.1:{video_port}", "--port", str(port)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
+        env=env)
+    try:
+        assert child.stdout is not None
+        said = ""
+        while "?token=" not in said:
+            line = child.stdout.readline()
+            assert line, said
+            said += line
+        url = f"ws://127.0.0.1:{port}/ws/video?token={'t' * 32}"
+        for _ in range(3):  # pages that came and went
+            with ws_connect(url, open_timeout=60):
+                pass
+        with ws_connect(url, open_timeout=60):  # a page still open at the stop
+            child.send_signal(signal.SIGTERM)
+            rest, _ = child.communicate(timeout=60)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait(30)
+    assert child.returncode == 0 and rest.endswith("skeye ground: stopped\n"), (said, rest)
