@@ -89,7 +89,7 @@ def run_ground(args: argparse.Namespace) -> int:
     try:
         security = GroundSecurity(
             token=os.environ.get(TOKEN_ENV) or new_token(),
-            allowed_hosts=tuple(args.allow_host or ()),
+            allowed_hosts=(*(args.allow_host or ()), *host_name(args.host)),
         )
     except ValueError as exc:
         raise ConfigError(f"{exc} (from ${TOKEN_ENV} or --allow-host)") from None
@@ -176,6 +176,19 @@ def run_ground(args: argparse.Namespace) -> int:
                 video.close()
     print("skeye ground: stopped", flush=True)
     return 0
+
+
+def host_name(host: str) -> tuple[str, ...]:
+    """``--host`` as a name the server answers to, when it is one (not an IP address): the
+    page's address is printed with it, and was refused (``Host ... is not a name of this
+    server``) without ``--allow-host`` of the same name."""
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(host.strip("[]"))
+    except ValueError:
+        return (host,)
+    return ()
 
 
 def _add_ground(sub: Any) -> None:

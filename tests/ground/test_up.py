@@ -671,3 +671,43 @@ def test_up_flies_a_robot_without_a_camera(tmp_path: Path) -> None:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(30)
+
+
+def test_ground_alone_on_a_host_name_answers_at_the_address_it_prints() -> None:
+    """``--host NAME`` (this machine's name) printed ``http://NAME:PORT/?token=...``, and the
+    server refused that very address: ``Host 'NAME:PORT' is not a name of this server``, 400,
+    unless ``--allow-host NAME`` was given too. The name it listens on is one of its names."""
+    import http.client
+
+    from skeye.errors import ConfigError
+    from skeye.processes import port_in_use
+
+    name = socket.gethostname()
+    try:
+        port_in_use(name, 0)
+    except ConfigError as exc:
+        pytest.skip(f"this machine's name {name!r} is not an address to listen on: {exc}")
+    if name.lower() == "localhost":
+        pytest.skip("this machine is called localhost, a name the server always answers to")
+    child = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+         "--port", "0", "--host", name], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL, text=True)
+    assert child.stdout is not None
+    said: list[str] = []
+    try:
+        while not any("?token=" in line for line in said):
+            line = child.stdout.readline()
+            assert line, said
+            said.append(line)
+        url = next(line for line in said if "?token=" in line).split()[2]
+        assert url.startswith(f"http://{name}:"), url
+        port = int(url.split(f"{name}:", 1)[1].split("/", 1)[0])
+        conn = http.client.HTTPConnection(name, port, timeout=60)
+        conn.request("GET", url.split(f":{port}", 1)[1])  # Host: NAME:PORT, as a browser
+        answer = conn.getresponse()
+        assert answer.status in (200, 302, 303, 307), (answer.status, answer.read())
+        conn.close()
+    finally:
+        child.terminate()
+        child.communicate(timeout=60)
