@@ -49,6 +49,7 @@ from typing import Any
 
 from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
 from starlette.websockets import WebSocketDisconnected
@@ -389,4 +390,9 @@ def create_app(
         finally:
             watcher.cancel()
 
+    # HEAD wherever GET is (RFC 9110 9.3.2: the same answer without its body; uvicorn sends
+    # none); FastAPI's GET routes took only GET, and `curl -I` got 405.
+    for route in app.routes:
+        if isinstance(route, APIRoute) and route.methods and "GET" in route.methods:
+            route.methods.add("HEAD")
     return app

@@ -71,9 +71,10 @@ def test_unknown_paths_and_methods_get_the_apis_error_naming_them() -> None:
                 "error": "no such endpoint: GET /api/nope (the API: docs/ground.md#api)",
                 "status": 404}, r.text
             r = httpx.delete(f"{web.url}/api/state", headers=web.auth, timeout=30)
-            assert r.status_code == 405 and r.headers["allow"] == "GET", r.headers
+            allowed = r.headers["allow"]  # in no fixed order: the route's methods are a set
+            assert r.status_code == 405 and set(allowed.split(", ")) == {"GET", "HEAD"}, allowed
             assert r.json() == {"error": "DELETE /api/state: method not allowed here "
-                                "(allowed: GET)", "status": 405}, r.text
+                                f"(allowed: {allowed})", "status": 405}, r.text
             r = httpx.get(f"{web.url}/static/nope.js", timeout=30)  # public, no token
             assert r.status_code == 404 and "GET /static/nope.js" in r.json()["error"]
         finally:
@@ -165,3 +166,24 @@ def test_the_link_tells_of_each_failure_once_and_of_the_vehicle_coming_back() ->
             stack.enter_context(PilotServer(airframe, port=port))
             wait_until(lambda: len(said) == 2, 60, "the link up again")
             assert said[1] == (LinkState.CONNECTED, ""), said
+
+
+def test_head_is_answered_where_get_is() -> None:
+    """``HEAD`` (``curl -I``, uptime checks) got 405 on every page and API address, whose
+    ``GET`` it is the body-less form of (RFC 9110: a general-purpose server supports both).
+    It is answered as ``GET`` is, without the body."""
+    security = GroundSecurity()
+    with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
+        web = UvicornThread(create_app(bridge, security=security), security.token)
+        try:
+            for path in ("/", "/api/state", "/api/history", "/api/commands"):
+                got = httpx.get(f"{web.url}{path}", headers=web.auth, timeout=30)
+                head = httpx.head(f"{web.url}{path}", headers=web.auth, timeout=30)
+                assert head.status_code == got.status_code == 200, (path, head.status_code)
+                assert head.content == b"", path
+                assert head.headers["content-type"] == got.headers["content-type"], path
+            head = httpx.head(f"{web.url}/api/video/frame.jpg", headers=web.auth, timeout=30)
+            assert head.status_code == 503, head.status_code  # no video, as GET says
+            assert httpx.head(f"{web.url}/api/state", timeout=30).status_code == 401
+        finally:
+            web.close()
