@@ -52,6 +52,7 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.routing import APIRoute
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
+from starlette.routing import WebSocketRoute
 from starlette.websockets import WebSocketDisconnected
 
 from skeye.errors import LocalProtocolError, SkeyeError
@@ -171,6 +172,13 @@ def create_app(
     async def http_error(request: Request, exc: HTTPException) -> Response:
         # The API's own error shape ({"error", "status"}), naming what was asked for
         where = f"{request.method} {request.url.path}"
+        websockets = {r.path for r in app.routes if isinstance(r, WebSocketRoute)}
+        if exc.status_code == 404 and request.url.path in websockets:
+            # there is one, but it speaks WebSocket: "no such endpoint" said otherwise
+            return JSONResponse(
+                {"error": f"{where}: a WebSocket endpoint: open it as one (ws://, with the "
+                          "upgrade), not with plain HTTP", "status": 426},
+                status_code=426, headers={"Upgrade": "websocket"})
         if exc.status_code == 404:
             message = f"no such endpoint: {where} (the API: docs/ground.md#api)"
         elif exc.status_code == 405:

@@ -187,3 +187,23 @@ def test_head_is_answered_where_get_is() -> None:
             assert httpx.head(f"{web.url}/api/state", timeout=30).status_code == 401
         finally:
             web.close()
+
+
+def test_a_websocket_address_asked_with_plain_http_says_so() -> None:
+    """``GET /ws`` without the WebSocket upgrade (a curl, a link opened in the browser) was
+    answered ``no such endpoint: GET /ws``, which it is. It is now 426 Upgrade Required,
+    naming it a WebSocket endpoint."""
+    security = GroundSecurity()
+    with VehicleBridge(f"tcp://127.0.0.1:{_free_port()}", retry_s=0.2) as bridge:
+        web = UvicornThread(create_app(bridge, security=security), security.token)
+        try:
+            for path in ("/ws", "/ws/video"):
+                r = httpx.get(f"{web.url}{path}", headers=web.auth, timeout=30)
+                assert r.status_code == 426 and r.headers["upgrade"] == "websocket", r.text
+                assert r.json() == {"error": f"GET {path}: a WebSocket endpoint: open it as "
+                                    "one (ws://, with the upgrade), not with plain HTTP",
+                                    "status": 426}, r.text
+            r = httpx.get(f"{web.url}/wsx", headers=web.auth, timeout=30)
+            assert r.status_code == 404  # not every unknown path
+        finally:
+            web.close()
