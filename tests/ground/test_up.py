@@ -10,12 +10,43 @@ import subprocess
 import sys
 import time
 import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 
 from tests.ground.conftest import wait_until
 from tests.ports import free_ports as _free_ports
+
+PORT_OPTIONS = ("--sim-port", "--image-port", "--pilot-port", "--ground-port", "--video-port")
+
+
+@contextmanager
+def _up_opened(tmp_path: Path, *extra: str
+               ) -> Iterator[tuple[subprocess.Popen[str], list[str], dict[str, int]]]:
+    """``skeye up EXTRA`` on free ports (its cache under ``tmp_path``), read until it says
+    where its page is open; yields (the process, its lines so far, its ports by option). Its
+    process group is killed at the end if it still runs: a failure leaves no orphans."""
+    ports = dict(zip(PORT_OPTIONS, _free_ports(5), strict=True))
+    argv = [sys.executable, "-m", "skeye.cli", "up", *extra,
+            *(a for option, port in ports.items() for a in (option, str(port)))]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+                                 "XDG_CACHE_HOME": str(tmp_path / "cache")},
+                            start_new_session=True)
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        while not any("skeye up: open" in line for line in lines):
+            line = proc.stdout.readline()
+            assert line, f"skeye up did not start: {''.join(lines)}"
+            lines.append(line)
+        yield proc, lines, ports
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(30)
 
 
 def _children(pid: int) -> list[int]:
@@ -523,22 +554,8 @@ def test_up_flies_a_robot_of_its_second_robot_dir_calibrated(tmp_path: Path) -> 
     text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
     text = text.replace('name = "hummingbird"', 'name = "myquad"', 1)
     (second / "myquad.toml").write_text(text, encoding="utf-8")
-    sim, img, pilot, ground, video = _free_ports(5)
-    argv = [sys.executable, "-m", "skeye.cli", "up", "--robot", "myquad",
-            "--robot-dir", str(first), "--robot-dir", str(second), "--no-mavlink",
-            "--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
-            "--ground-port", str(ground), "--video-port", str(video)]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
-                                 "XDG_CACHE_HOME": str(tmp_path / "cache")},
-                            start_new_session=True)
-    lines: list[str] = []
-    try:
-        assert proc.stdout is not None
-        while not any("skeye up: open" in line for line in lines):
-            line = proc.stdout.readline()
-            assert line, f"skeye up did not start: {''.join(lines)}"
-            lines.append(line)
+    with _up_opened(tmp_path, "--robot", "myquad", "--robot-dir", str(first), "--robot-dir",
+                    str(second), "--no-mavlink") as (proc, lines, _ports):
         said = "".join(lines)
         assert "calibrating the myquad's webcam camera" in said, said
         pilot_argv = [Path(f"/proc/{pid}/cmdline").read_text().split("\0")
@@ -552,10 +569,6 @@ def test_up_flies_a_robot_of_its_second_robot_dir_calibrated(tmp_path: Path) -> 
         proc.send_signal(signal.SIGTERM)
         rest, _ = proc.communicate(timeout=120)
         assert proc.returncode == 0, rest
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(30)
 
 
 def test_ground_alone_names_a_bad_video_rate_robot_or_video_port_before_its_link() -> None:
@@ -604,9 +617,7 @@ def test_up_flies_a_robot_without_a_camera(tmp_path: Path) -> None:
     refused before anything starts (the pilot said ``has no Gyro sensor`` once started)."""
     from importlib import resources
 
-    ports = [a for p, o in zip(_free_ports(5), ("--sim-port", "--image-port", "--pilot-port",
-                                                "--ground-port", "--video-port"), strict=True)
-             for a in (o, str(p))]
+    ports = [a for p, o in zip(_free_ports(5), PORT_OPTIONS, strict=True) for a in (o, str(p))]
     done = _run_up("--robot", "airrobot", "--no-mavlink", "--calibration", "none", *ports,
                    timeout_s=120)
     assert done.returncode == 1, done
@@ -630,22 +641,9 @@ def test_up_flies_a_robot_without_a_camera(tmp_path: Path) -> None:
         assert done.returncode == 1, done
         assert f"skeye up: {said}" in done.stderr and "carries none" in done.stderr, done.stderr
         assert "control protocol" not in done.stdout, done.stdout
-    sim, img, pilot, ground, video = _free_ports(5)
-    argv = [sys.executable, "-m", "skeye.cli", "up", "--robot", "blindquad", "--no-mavlink",
-            "--robot-dir", str(tmp_path),
-            "--sim-port", str(sim), "--image-port", str(img), "--pilot-port", str(pilot),
-            "--ground-port", str(ground), "--video-port", str(video)]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
-                                 "XDG_CACHE_HOME": str(tmp_path / "cache")},
-                            start_new_session=True)
-    lines: list[str] = []
-    try:
-        assert proc.stdout is not None
-        while not any("skeye up: open" in line for line in lines):
-            line = proc.stdout.readline()
-            assert line, f"skeye up did not start: {''.join(lines)}"
-            lines.append(line)
+    with _up_opened(tmp_path, "--robot", "blindquad", "--no-mavlink", "--robot-dir",
+                    str(tmp_path)) as (proc, lines, up_ports):
+        ground = up_ports["--ground-port"]
         assert "no camera" in lines[-1], lines[-1]
         argvs = {a[3]: a for a in (Path(f"/proc/{pid}/cmdline").read_text().split("\0")
                                    for pid in _children(proc.pid))}
@@ -667,10 +665,6 @@ def test_up_flies_a_robot_without_a_camera(tmp_path: Path) -> None:
         proc.send_signal(signal.SIGTERM)
         rest, _ = proc.communicate(timeout=120)
         assert proc.returncode == 0, rest
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(30)
 
 
 def test_ground_alone_on_a_host_name_answers_at_the_address_it_prints() -> None:

@@ -73,31 +73,47 @@ def standin(tmp_path: Path) -> Path:
     return path
 
 
-def _start_up(standin: Path, hung: bool) -> Iterator[tuple[subprocess.Popen[str], list[str]]]:
+def _spawn_up(standin: Path, env: dict[str, str], *, stderr: int = subprocess.STDOUT
+              ) -> subprocess.Popen[str]:
+    """``skeye up`` over the stand-in children, on free ports, in its own session, with
+    ``env`` added to the environment (the stand-in's switches)."""
     sim, img, pilot, ground, video = free_ports(5)
     argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
             str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
             "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_HUNG": "1" if hung else "0"}
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env, start_new_session=True)
+    return subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=stderr, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1", **env},
+                            start_new_session=True)
+
+
+def _kill_up(proc: subprocess.Popen[str]) -> None:
+    """Kill skeye up's group and each child's own, whatever the test left (a hung stand-in
+    ignores the SIGTERM of its parent's death)."""
+    for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
+        try:
+            os.killpg(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    proc.wait(30)
+
+
+def _read_until_open(proc: subprocess.Popen[str]) -> list[str]:
+    """skeye up's lines up to the one that says its page is open."""
+    assert proc.stdout is not None
     lines: list[str] = []
+    while not any("skeye up: open" in line for line in lines):
+        line = proc.stdout.readline()
+        assert line, f"skeye up did not start: {lines}"
+        lines.append(line)
+    return lines
+
+
+def _start_up(standin: Path, hung: bool) -> Iterator[tuple[subprocess.Popen[str], list[str]]]:
+    proc = _spawn_up(standin, {"SKEYE_STANDIN_HUNG": "1" if hung else "0"})
     try:
-        assert proc.stdout is not None
-        while not any("skeye up: open" in line for line in lines):
-            line = proc.stdout.readline()
-            assert line, f"skeye up did not start: {lines}"
-            lines.append(line)
-        yield proc, lines
+        yield proc, _read_until_open(proc)
     finally:
-        # skeye up's group and each child's own, whatever the test left (a hung stand-in
-        # ignores the SIGTERM of its parent's death)
-        for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        proc.wait(30)
+        _kill_up(proc)
 
 
 @pytest.fixture
@@ -174,13 +190,7 @@ def test_ctrl_c_while_starting_stops_with_status_0(standin: Path, group: bool) -
     once started, gave 0. A stop asked for is now status 0 whenever it comes. A terminal's
     Ctrl-C goes to the whole process group: it reached the starting pilot too, which exited 130
     (``pilot exited (130)``, said as its failure; the children now have their own group)."""
-    sim, img, pilot, ground, video = free_ports(5)
-    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
-            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
-            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_STARTING": "pilot"}
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, start_new_session=True)
+    proc = _spawn_up(standin, {"SKEYE_STANDIN_STARTING": "pilot"}, stderr=subprocess.PIPE)
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline()
@@ -198,11 +208,7 @@ def test_ctrl_c_while_starting_stops_with_status_0(standin: Path, group: bool) -
         assert "exited" not in out and err == "", (out, err)
         assert all(_gone(pid) for pid in children)
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.wait(30)
+        _kill_up(proc)
 
 
 def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path: Path) -> None:
@@ -213,20 +219,9 @@ def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path:
     their own process group, so the Ctrl-C reaches ``skeye up`` alone, which stops them in
     order with SIGTERM."""
     log = tmp_path / "stopped"
-    sim, img, pilot, ground, video = free_ports(5)
-    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
-            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
-            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_LOG": str(log)}
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env, start_new_session=True)
+    proc = _spawn_up(standin, {"SKEYE_STANDIN_LOG": str(log)})
     try:
-        assert proc.stdout is not None
-        lines: list[str] = []
-        while not any("skeye up: open" in line for line in lines):
-            line = proc.stdout.readline()
-            assert line, f"skeye up did not start: {lines}"
-            lines.append(line)
+        _read_until_open(proc)
         children = _children(proc.pid)
         assert len(children) == 3
         os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
@@ -235,25 +230,14 @@ def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path:
                                                 "sim:SIGTERM"], log.read_text()
         assert all(_gone(pid) for pid in children)
     finally:
-        for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        proc.wait(30)
+        _kill_up(proc)
 
 
 def test_a_child_killed_while_starting_is_named_with_its_signal(standin: Path) -> None:
     """A child killed while starting was said as ``pilot exited with status -9 while
     starting`` (Popen's negative status), and again as ``pilot exited (SIGKILL); stopping``.
     It is named once, with its signal, and ``skeye up`` exits 1."""
-    sim, img, pilot, ground, video = free_ports(5)
-    argv = [sys.executable, "-c", UP, str(standin), "--sim-port", str(sim), "--image-port",
-            str(img), "--pilot-port", str(pilot), "--ground-port", str(ground),
-            "--video-port", str(video), "--calibration", "none", "--no-mavlink"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "SKEYE_STANDIN_STARTING": "pilot"}
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env, start_new_session=True)
+    proc = _spawn_up(standin, {"SKEYE_STANDIN_STARTING": "pilot"}, stderr=subprocess.PIPE)
     try:
         assert proc.stdout is not None
         assert proc.stdout.readline() == "standin pilot starting\n"
@@ -267,9 +251,4 @@ def test_a_child_killed_while_starting_is_named_with_its_signal(standin: Path) -
         assert said.count("pilot exited") == 1, said
         assert "skeye up: pilot exited (SIGKILL) while starting" in err, said
     finally:
-        for pid in (proc.pid, *(_children(proc.pid) if proc.poll() is None else ())):
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        proc.wait(30)
+        _kill_up(proc)

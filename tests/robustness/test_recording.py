@@ -14,6 +14,8 @@ import subprocess
 import threading
 import time
 import tracemalloc
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -1160,6 +1162,28 @@ def _write_to_fifo_reader(path: Path, content: bytes, timeout_s: float = 60.0) -
         os.close(writer)
 
 
+@contextmanager
+def _replayed_from_a_fifo(path: Path, content: bytes, *, speed: float, held_s: float = 0.0
+                          ) -> Iterator[LineClient]:
+    """A replay of R2 in ``content``, whose playback (which reads the file anew) finds a FIFO
+    at ``path`` that gives the recording only once the client has its NFO and ``held_s`` more
+    have passed (the test's own delay, not a guess at speed); yields the client."""
+    path.write_bytes(content)
+    with ReplayServer(path, port=0, speed=speed, robot="R2") as replay:
+        path.unlink()
+        os.mkfifo(path)
+        client = LineClient(replay.port, timeout_s=60)
+        try:
+            try:
+                client.expect("NFO")
+                time.sleep(held_s)
+            finally:  # the playback waits to open the FIFO (either code): give it the file
+                _write_to_fifo_reader(path, content)
+            yield client
+        finally:
+            client.close()
+
+
 def test_a_client_is_greeted_before_its_playback_reads_the_recording(tmp_path: Path) -> None:
     """Each client's playback read the recording up to its robot's first line before it sent
     the NFO, answering nothing meanwhile: a robot spawned late in a long recording kept every
@@ -1177,20 +1201,11 @@ def test_a_client_is_greeted_before_its_playback_reads_the_recording(tmp_path: P
                + truth * 1000
                + format_record(Record(2.0, 9.0, 2, SENT, "RES {Command INIT} {Name R2}"))
                + format_record(Record(2.0, 9.0, 2, SENT, "STA {Name R2} {Time 9}")))
-    path.write_bytes(content)
-    with ReplayServer(path, port=0, speed=1000.0, robot="R2") as replay:
-        path.unlink()
-        os.mkfifo(path)
-        client = LineClient(replay.port, timeout_s=60)
-        try:
-            client.expect("NFO")
-        finally:  # the playback waits to open the FIFO (either code): give it the recording
-            _write_to_fifo_reader(path, content)
+    with _replayed_from_a_fifo(path, content, speed=1000.0) as client:
         _, sta = client.read_until(lambda m: m.type == "STA")
         assert sta.get("Name") == "R2", sta
         client.send("PING {Id after}")
         assert client.read_until(lambda m: m.type == "RES")[1].get("Id") == "after"
-        client.close()
 
 
 def test_a_late_robots_playback_is_paced_from_its_first_line_once_read(tmp_path: Path) -> None:
@@ -1209,20 +1224,10 @@ def test_a_late_robots_playback_is_paced_from_its_first_line_once_read(tmp_path:
                + b"".join(format_record(Record(2.0, 9.0 + k / 10, 2, SENT,
                                                f"STA {{Name R2}} {{Time {9 + k / 10:.1f}}}"))
                           for k in range(100)))
-    path.write_bytes(content)
-    with ReplayServer(path, port=0, speed=1.0, robot="R2") as replay:
-        path.unlink()
-        os.mkfifo(path)
-        client = LineClient(replay.port, timeout_s=60)
-        try:
-            client.expect("NFO")
-            time.sleep(held_s)  # the read held: the test's own delay, not a guess at speed
-        finally:
-            _write_to_fifo_reader(path, content)
+    with _replayed_from_a_fifo(path, content, speed=1.0, held_s=held_s) as client:
         client.read_until(lambda m: m.type == "STA")
         client.send("PING {Id paced}")
         answer = client.read_until(lambda m: m.type == "RES")[1]
-        client.close()
     assert answer.get("Id") == "paced"
     # the round trip of one PING on loopback: far below half of held_s, loaded or not
     assert float(answer.get("Time")) < 9.0 + held_s / 2, answer
