@@ -49,6 +49,27 @@ def _up_opened(tmp_path: Path, *extra: str
             proc.wait(30)
 
 
+@contextmanager
+def _ground_alone(host: str) -> Iterator[tuple[subprocess.Popen[str], list[str], str]]:
+    """``skeye ground --host HOST`` on a free port, for a vehicle that is not there; yields
+    (the process, its lines up to the page's address, that address). Stopped (SIGTERM, then
+    its output read to the end) when the block ends."""
+    child = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
+         "--port", "0", "--host", host], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL, text=True)
+    assert child.stdout is not None
+    said: list[str] = []
+    try:
+        while not any("?token=" in line for line in said):
+            line = child.stdout.readline()
+            assert line, said
+            said.append(line)
+        yield child, said, next(line for line in said if "?token=" in line).split()[2]
+    finally:
+        child.terminate()
+        child.communicate(timeout=60)
+
 def _children(pid: int) -> list[int]:
     out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True)
     return [int(p) for p in out.stdout.split()]
@@ -493,18 +514,7 @@ def test_ground_alone_listens_on_an_ipv6_host(host: str, reach: str) -> None:
     (``::``, as ``0.0.0.0``, prints 127.0.0.1: it takes IPv4 too)."""
     import http.client
 
-    child = subprocess.Popen(
-        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
-         "--port", "0", "--host", host], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        stdin=subprocess.DEVNULL, text=True)
-    assert child.stdout is not None
-    said: list[str] = []
-    try:
-        while not any("?token=" in line for line in said):
-            line = child.stdout.readline()
-            assert line, said
-            said.append(line)
-        url = next(line for line in said if "?token=" in line).split()[2]
+    with _ground_alone(host) as (child, said, url):
         shown = "[::1]" if host == "::1" else "127.0.0.1"
         assert url.startswith(f"http://{shown}:"), url
         port = int(url.split("]:" if host == "::1" else "1:", 1)[1].split("/", 1)[0])
@@ -513,9 +523,6 @@ def test_ground_alone_listens_on_an_ipv6_host(host: str, reach: str) -> None:
         conn.request("GET", "/api/state", headers={"X-Skeye-Token": token})
         assert conn.getresponse().status == 200
         conn.close()
-    finally:
-        child.terminate()
-        child.communicate(timeout=60)
     assert child.returncode == 0, said
 
 
@@ -683,18 +690,7 @@ def test_ground_alone_on_a_host_name_answers_at_the_address_it_prints() -> None:
         pytest.skip(f"this machine's name {name!r} is not an address to listen on: {exc}")
     if name.lower() == "localhost":
         pytest.skip("this machine is called localhost, a name the server always answers to")
-    child = subprocess.Popen(
-        [sys.executable, "-m", "skeye.cli", "ground", "--vehicle", "tcp://127.0.0.1:1",
-         "--port", "0", "--host", name], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        stdin=subprocess.DEVNULL, text=True)
-    assert child.stdout is not None
-    said: list[str] = []
-    try:
-        while not any("?token=" in line for line in said):
-            line = child.stdout.readline()
-            assert line, said
-            said.append(line)
-        url = next(line for line in said if "?token=" in line).split()[2]
+    with _ground_alone(name) as (_child, _said, url):
         assert url.startswith(f"http://{name}:"), url
         port = int(url.split(f"{name}:", 1)[1].split("/", 1)[0])
         conn = http.client.HTTPConnection(name, port, timeout=60)
@@ -702,6 +698,3 @@ def test_ground_alone_on_a_host_name_answers_at_the_address_it_prints() -> None:
         answer = conn.getresponse()
         assert answer.status in (200, 302, 303, 307), (answer.status, answer.read())
         conn.close()
-    finally:
-        child.terminate()
-        child.communicate(timeout=60)
