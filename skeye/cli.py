@@ -95,8 +95,25 @@ def record_limits(args: argparse.Namespace) -> tuple[float, int]:
     return max_mb, parts
 
 
+def check_sim_files(args: argparse.Namespace) -> int:
+    """``skeye sim --check``: the world and the robot files (``--robot-dir``) loaded and
+    checked as the simulator checks them at its start, the first problem said (status 2) or
+    nothing (0); nothing started: no MuJoCo, no port. ``skeye up`` asks it before it starts
+    anything (it never imports the simulator itself)."""
+    from skeye.robots.config import validate_robot_dirs
+    from skeye.sim.robot import check_robot_config
+    from skeye.sim.world_file import load_world
+
+    load_world(args.world)
+    validate_robot_dirs(tuple(args.robot_dir),
+                        partial(check_robot_config, physics_step_s=args.timestep))
+    return 0
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run the simulator: control server (and image server when asked) until stopped."""
+    if args.check:
+        return check_sim_files(args)
     from skeye import native
     from skeye.errors import ConfigError
     from skeye.processes import check_ports_free
@@ -235,6 +252,9 @@ def _add_sim(sub: Any) -> None:
     p = sub.add_parser("sim", help="run the simulator (control protocol server)")
     p.add_argument("--world", default="pad",
                    help="built-in world (pad, yard, indoor, checkerboard) or a .toml")
+    p.add_argument("--check", action="store_true",
+                   help="check the world and the --robot-dir robot files, say what is wrong "
+                        "(status 2) or nothing (0), and start nothing")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=cliargs.port, default=3000,
                    help="control protocol port (0 = any free)")

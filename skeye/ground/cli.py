@@ -59,6 +59,7 @@ from skeye.uris import url_host
 if TYPE_CHECKING:
     from skeye.robots.config import RobotConfig
 
+CHECK_TIMEOUT_S = 120.0  # skeye sim --check of --world (a child: its imports, no MuJoCo)
 HEADER_TIMEOUT_S = 10.0  # skeye.ground.limits.HEADER_TIMEOUT_S (imported lazily there)
 MAX_PER_PEER = 32  # skeye.ground.limits.MAX_PER_PEER
 DEFAULT_VIDEO_FPS = 8.0  # skeye ground --video-fps: frames/s asked of the vehicle's video port
@@ -189,6 +190,29 @@ def host_name(host: str) -> tuple[str, ...]:
     except ValueError:
         return (host,)
     return ()
+
+
+def check_world(world: str, robot_dirs: Sequence[Path]) -> None:
+    """``--world`` checked by the simulator's own ``skeye sim --check`` in a child: named
+    before anything starts (the simulator found it once started, after the camera's
+    calibration), where this process never imports the simulator (docs/architecture.md).
+
+    Raises:
+        ConfigError: the simulator's words for what is wrong.
+    """
+    argv = [sys.executable, "-m", "skeye.cli", "sim", "--check", "--world", world,
+            *(f"--robot-dir={folder}" for folder in robot_dirs)]
+    try:
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=CHECK_TIMEOUT_S,
+                              stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        raise ConfigError(f"--world {world}: the simulator's check took over "
+                          f"{CHECK_TIMEOUT_S:g} s") from None
+    if done.returncode != 0:
+        said = [line for line in done.stderr.splitlines() if line.strip()]
+        reason = said[-1].removeprefix("skeye sim: error: ") if said else \
+            f"status {done.returncode}"
+        raise ConfigError(reason)
 
 
 def _add_ground(sub: Any) -> None:
@@ -570,7 +594,6 @@ def run_up(args: argparse.Namespace) -> int:
         load_robot_config,
         robot_folders,
     )
-    from skeye.sim.world_file import load_world
 
     parent = ParentWatch()
     status = 0
@@ -584,7 +607,7 @@ def run_up(args: argparse.Namespace) -> int:
         # no video, and the page says so)
         camera = next((m.name for m in robot.sensors if m.type_name.lower() == CAMERA_TYPE),
                       None)
-        load_world(args.world)
+        check_world(args.world, folders)
         if args.rtp_video and camera is None:
             raise ConfigError(f"--rtp-video sends the camera, and the robot {args.robot} "
                               "carries none")

@@ -232,3 +232,23 @@ def test_snapshot_names_an_output_folder_it_cannot_write_to_before_asking_the_se
     done = _skeye("snapshot", "--images", f"127.0.0.1:{port}", "--out", str(out))
     assert done.returncode == 2, done
     assert done.stderr == f"skeye snapshot: error: --out {out}: {why}\n", done.stderr
+
+
+def test_sim_check_says_what_is_wrong_with_a_world_or_robot_file_and_starts_nothing(
+        tmp_path: Path) -> None:
+    """``skeye sim --check``: the world and the robot files loaded and checked as at the
+    simulator's start, and nothing started (``skeye up`` asks it before it starts anything)."""
+    done = _skeye("sim", "--check", "--world", "yard")
+    assert done.returncode == 0 and done.stdout == "" and done.stderr == "", done
+    world = tmp_path / "mine.toml"
+    world.write_text("[ground]\nsize_m = [40, 40]\n[[pads]]\nposition_ned_m = [0, 0, 1e9]\n")
+    done = _skeye("sim", "--check", "--world", str(world))
+    assert done.returncode == 2 and str(world) in done.stderr, done
+    assert "control protocol on" not in done.stdout
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    robots = tmp_path / "robots"
+    robots.mkdir()
+    (robots / "typo.toml").write_text(
+        text.replace('name = "hummingbird"', 'name = "typo"').replace("mass_kg", "mas_kg"))
+    done = _skeye("sim", "--check", "--robot-dir", str(robots))
+    assert done.returncode == 2 and "mas_kg" in done.stderr, done
