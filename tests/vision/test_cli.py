@@ -391,10 +391,13 @@ def test_pad_interrupted_leaves_no_part_of_a_tiled_pdf(tmp_path):
                     "[[rings]]\nouter_m = 1.0\ninner_m = 0.5\n")
     out = tmp_path / "pad.pdf"
     out.write_bytes(b"the pad printed last week")
+    # SIGINT as a terminal leaves it: a runner started in the background of a shell (nohup
+    # CMD &) hands its children SIGINT ignored, and the pad was drawn whole past the timeout
     proc = subprocess.Popen(
         [sys.executable, "-m", "skeye", "pad", "--out", str(out), "--paper", "a4", "--pad",
          str(toml)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        cwd=Path(__file__).resolve().parents[2])
+        cwd=Path(__file__).resolve().parents[2],
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         # the sheets are being written once their file is open (a partial one beside --out;
         # before, --out itself)
