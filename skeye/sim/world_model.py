@@ -25,7 +25,9 @@ DEFAULT_SEA_LEVEL_PRESSURE_PA = 101325.0
 NEAR_CLIP_M = 0.01
 GRAVITY_M_S2 = 9.81
 
-NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")  # safe inside protocol segments and MJCF names
+# Safe inside protocol segments and MJCF names. \A and \Z, not ^ and $: "$" also matches
+# before a final newline, and a world named "x\n" killed the server's accept loop (its NFO line).
+NAME_RE = re.compile(r"\A[A-Za-z0-9_.\-]+\Z")
 Vec3 = tuple[float, float, float]
 
 

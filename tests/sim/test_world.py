@@ -257,6 +257,10 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         ('pad = "skeye-4"', 'pad = "skeye-9"', "pad", "skeye-4"),
         ('name = "Field1"', 'name = "Pad1"', "name", "duplicate start pose name 'Pad1'"),
         ('name = "Field1"', 'name = "Field 1"', "name", "letters, digits"),
+        # "$" matched before a final newline: a world named "test_world\n" loaded, and its
+        # NFO {Level ...} line raised in the server's accept thread, which then took no client.
+        ('name = "test_world"', 'name = "test_world\\n"', "name", "letters, digits"),
+        ('name = "Field1"', 'name = "Field1\\n"', "name", "letters, digits"),
         # INIT's {Start name} ignores case: {Start Pad1} stood the vehicle on PAD1.
         ('name = "Field1"', 'name = "PAD1"', "name",
          "duplicate start pose name 'PAD1' (as 'Pad1'"),
