@@ -49,6 +49,10 @@ _REQUIRED = object()
 # bound is the lowest dry land, the Dead Sea shore, about 430 m below sea level.
 ORIGIN_ALTITUDE_MIN_M: Final = LOWEST_LAND_AMSL_M
 ORIGIN_ALTITUDE_MAX_M: Final = 11000.0
+# The ground's texture tiles 2 * size_m / texture_cell_m times; MuJoCo refuses a texrepeat
+# beyond float range (a 1e-300 m cell stopped skeye sim with a traceback). 1 mm, the smallest
+# checkerboard square_m, is far below any useful tile and keeps the count finite.
+MIN_TEXTURE_CELL_M: Final = 0.001
 
 
 class _Table:
@@ -266,7 +270,10 @@ def _parse_geo_origin(table: _Table | None) -> GeoOrigin | None:
 
 def _parse_ground(table: _Table) -> Ground:
     table.check_keys({"size_m", "texture", "rgb", "rgb2", "texture_cell_m"})
-    size = table.number("size_m", 50.0, _positive, "positive")
+    size = table.number(
+        "size_m", 50.0, lambda v: 0.0 < v <= MAX_LOCATION_M,
+        f"in (0, {MAX_LOCATION_M:g}] m, the bound start poses and INIT's Location have",
+    )
     texture = table.choice("texture", GROUND_TEXTURES, "grass")
     rgb_default, rgb2_default, cell_default = _GROUND_DEFAULTS[texture]
     return Ground(
@@ -274,7 +281,10 @@ def _parse_ground(table: _Table) -> Ground:
         texture=texture,
         rgb=table.rgb("rgb", rgb_default),
         rgb2=table.rgb("rgb2", rgb2_default),
-        texture_cell_m=table.number("texture_cell_m", cell_default, _positive, "positive"),
+        texture_cell_m=table.number(
+            "texture_cell_m", cell_default, lambda v: v >= MIN_TEXTURE_CELL_M,
+            f"at least {MIN_TEXTURE_CELL_M:g} m (the smallest printed checkerboard square)",
+        ),
     )
 
 

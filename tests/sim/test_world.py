@@ -271,6 +271,11 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
         ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [7.5, 2.5, -1.0]',
          "position_ned_m", "start pose 'Field1' lies inside box 'house'"),
         ('texture = "checker"', 'texture = "lava"', "texture", "grass"),
+        # Both passed the check and stopped skeye sim with MuJoCo's XML error (znear 0.01/1e300
+        # underflowed to 0; texrepeat 2 * 20 / 1e-300 overflowed).
+        ('size_m = 20.0', 'size_m = 1e300', "size_m", "in (0, 10000] m"),
+        ('texture = "checker"', 'texture = "checker"\ntexture_cell_m = 1e-300', "texture_cell_m",
+         "at least 0.001 m"),
         ('latitude_deg = 50.0', 'latitude_deg = 95.0', "latitude_deg", "(-90, 90)"),
         ('altitude_m = 250.0', 'altitude_m = 50000', "altitude_m", "[-430, 11000]"),
         ('altitude_m = 250.0', 'altitude_m = 1e300', "altitude_m", "[-430, 11000]"),
