@@ -225,6 +225,9 @@ def build_mjcf(
     light_xml: list[str] = []
     for light in world.lights:
         direction = ned_to_mj(light.direction_ned)
+        # Scaled to a largest component of 1 before the norm: the norm of [1e300, 1e300, 0]
+        # overflowed to inf and MuJoCo refused the zero direction left by dividing by it.
+        direction = direction / np.max(np.abs(direction))
         common: dict[str, Any] = {
             "name": f"light:{light.name}", "dir": _f(*(direction / np.linalg.norm(direction))),
             "diffuse": _f(*light.diffuse), "ambient": _f(*light.ambient),

@@ -370,6 +370,15 @@ def test_toml_syntax_error_names_the_file(tmp_path: Path) -> None:
     assert str(path) in str(err.value) and "line" in str(err.value)
 
 
+def test_light_direction_of_huge_components_is_normalised(tmp_path: Path) -> None:
+    # Its norm overflowed to inf: the light's dir came out "0 0 0" and MuJoCo refused the
+    # model ("zero direction in light"), a traceback from skeye sim.
+    text = BASE_TOML.replace("direction_ned = [0.0, 0.0, 1.0]", "direction_ned = [1e300, 0, 1e300]")
+    model = compile_world(load_world(write(tmp_path, text)))
+    # NED (1, 0, 1) is MuJoCo (1, 0, -1): north and down.
+    assert model.light_dir[0] == pytest.approx([math.sqrt(0.5), 0.0, -math.sqrt(0.5)])
+
+
 def test_duplicate_box_names_are_rejected(tmp_path: Path) -> None:
     text = BASE_TOML + (
         '\n[[boxes]]\nname = "house"\ncenter_ned_m = [0, 0, -1]\nsize_m = [1, 1, 2]\n'
