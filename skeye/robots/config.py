@@ -2,10 +2,10 @@
 
 How this works: a robot class is a TOML file (built-ins in ``skeye/robots/``). Its tables
 ``[airframe]``, ``[battery]`` and ``[controller]`` fill the parameter dataclasses of
-:mod:`skeye.robots.params`; each ``[[sensors]]`` entry mounts a
-sensor USARSim-style: ``type``, ``name`` (no whitespace, braces, ``/``, ``,`` or ``:``: protocol
-lines carry it), ``position_m`` (body FRD), ``direction_rad`` (roll,
-pitch, yaw of the sensor frame in the body frame) and the sensor class's own parameters. An
+:mod:`skeye.robots.params`; each ``[[sensors]]`` entry mounts a sensor USARSim-style: ``type``,
+``name`` (no whitespace, braces, ``/``, ``,``, ``:`` or control characters: protocol lines carry
+it), ``position_m`` (body FRD), ``direction_rad`` (roll, pitch, yaw of the sensor frame in the
+body frame) and the sensor class's own parameters. An
 optional ``[envelope]`` table (``ceiling_m``, ``max_radius_m``) is the flight envelope the pilot
 enforces for this class (``skeye.pilot.envelope``; the simulator itself does not use it). Every
 mistake raises ConfigError naming the file and the key; nothing is half-loaded.
@@ -31,6 +31,7 @@ from skeye.robots.params import (
     EstimatorParams,
     dataclass_from_mapping,
 )
+from skeye.wire.sim_lines import CONTROL_CHARACTERS
 
 BUILTIN_ROBOTS = ("hummingbird", "airrobot")
 CAMERA_TYPE = "camera"
@@ -80,9 +81,10 @@ _TOP_KEYS = {
 
 
 _NAME_FORBIDDEN = "{}/,:"
-"""What a sensor's name may not hold, besides whitespace: the braces and blanks that delimit a
-protocol line's fields, ``/`` (a camera's key is ``robot/camera``), and the ``,`` and ``:`` of
-the robot's ``CONF {Sensors Type:Name,...}``."""
+"""What a sensor's name may not hold, besides whitespace and control characters: the braces and
+blanks that delimit a protocol line's fields, ``/`` (a camera's key is ``robot/camera``), and the
+``,`` and ``:`` of the robot's ``CONF {Sensors Type:Name,...}``. A control character (BEL, ESC,
+...) went out in every SEN line to the client's terminal, and the encoder refused CONF over it."""
 
 
 def _vector(owner: str, key: str, value: Any) -> tuple[float, float, float]:
@@ -143,10 +145,11 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
         if not isinstance(type_name, str) or not type_name:
             raise ConfigError(f"{owner}: 'type' must be a non-empty string")
         if (not isinstance(sensor_name, str) or not sensor_name
-                or any(c in _NAME_FORBIDDEN or c.isspace() for c in sensor_name)):
+                or any(c in _NAME_FORBIDDEN or c.isspace() for c in sensor_name)
+                or CONTROL_CHARACTERS.search(sensor_name)):
             raise ConfigError(
                 f"{owner}: 'name' must be a non-empty string without whitespace, braces, '/', "
-                f"',' or ':' (protocol lines carry it), got {sensor_name!r}"
+                f"',', ':' or control characters (protocol lines carry it), got {sensor_name!r}"
             )
         ident = (type_name.lower(), sensor_name.lower())
         if ident in seen:

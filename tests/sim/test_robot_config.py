@@ -76,6 +76,12 @@ CASES = [
     ("sensor-name-brace", '[[sensors]]\ntype = "GPS"\nname = "{G}"', "'name'", "'{G}'"),
     ("sensor-name-comma", '[[sensors]]\ntype = "GPS"\nname = "G,2"', "'name'", "'G,2'"),
     ("sensor-name-colon", '[[sensors]]\ntype = "GPS"\nname = "G:2"', "'name'", "'G:2'"),
+    # Loaded: every SEN line carried the BEL to the client, and GETCONF {Type Robot} answered
+    # ERR (the encoder refuses a control character in CONF {Sensors ...}).
+    ("sensor-name-control", '[[sensors]]\ntype = "Sonar"\nname = "Down\\u0007"', "'name'",
+     "'Down\\x07'"),
+    ("sensor-name-escape", '[[sensors]]\ntype = "GPS"\nname = "G\\u001b[2J"', "'name'",
+     "'G\\x1b[2J'"),
     # Sampled once per physics step (1 kHz) while CONF and the board's estimator took the
     # file's rate: a rate above the physics rate is refused.
     ("sensor-rate-above-physics", '[[sensors]]\ntype = "GPS"\nname = "G"\nrate_hz = 5000',
