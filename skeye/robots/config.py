@@ -104,8 +104,16 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
     if unknown:
         raise ConfigError(f"{source}: unknown key(s) {unknown}; known: {sorted(_TOP_KEYS)}")
     name = data.get("name")
-    if not isinstance(name, str) or not name:
-        raise ConfigError(f"{source}: 'name' must be a non-empty string")
+    # CONF {Class <name>} carries it: one word of printable text (a blank, a brace or a control
+    # character made GETCONF {Type Robot} answer ERR for every robot of the class).
+    if (not isinstance(name, str) or not name or any(c in "{}" or c.isspace() for c in name)
+            or CONTROL_CHARACTERS.search(name)):
+        raise ConfigError(f"{source}: 'name' must be a non-empty string without whitespace, "
+                          f"braces or control characters (CONF {{Class ...}} carries it), "
+                          f"got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ConfigError(f"{source}: 'description' must be a string, got {description!r}")
     rates = {}
     for key, default in (("board_rate_hz", 1000.0), ("status_rate_hz", 10.0)):
         value = data.get(key, default)
@@ -165,7 +173,7 @@ def parse_robot_config(data: dict[str, Any], source: str) -> RobotConfig:
         mounts.append(SensorMount(type_name, sensor_name, position, direction, params))
     return RobotConfig(
         class_name=name.lower(),
-        description=str(data.get("description", "")),
+        description=description,
         board_rate_hz=rates["board_rate_hz"],
         status_rate_hz=rates["status_rate_hz"],
         airframe=airframe,

@@ -148,6 +148,24 @@ def test_start_up_validation_refuses_what_init_refuses(
     assert str(info.value) == str(init.value)  # the message INIT would give
 
 
+@pytest.mark.parametrize(("text", "key", "value"), [
+    # Loaded: GETCONF {Type Robot} then answered ERR "Class: 'my quad' is not one word".
+    ('name = "my quad"', "'name'", "'my quad'"),
+    ('name = "q}"', "'name'", "'q}'"),
+    ('name = "q\\u001b[2J"', "'name'", "'q\\x1b[2J'"),
+    # Turned into the text "5" without a word.
+    ('name = "q"\ndescription = 5', "'description'", "5"),
+])
+def test_robot_name_and_description_are_refused_naming_the_file(
+    tmp_path: Path, text: str, key: str, value: str
+) -> None:
+    path = tmp_path / "q.toml"
+    path.write_text(text + "\n", encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        validate_robot_dirs((tmp_path,))
+    _assert_names(info.value, path, key, value)
+
+
 def test_good_robot_files_pass_start_up_validation(tmp_path: Path) -> None:
     for name in ("hummingbird", "airrobot"):
         text = resources.files("skeye.robots").joinpath(f"{name}.toml").read_text("utf-8")
