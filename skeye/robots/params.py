@@ -123,10 +123,19 @@ class AirframeParams:
                 f"height (body_size_m[2] / 2 = {half_height!r}): standing on its gear the hull "
                 "would reach into the ground; gear_height_m must be at least body_size_m[2] / 2"
             )
-        if self.max_thrust_n <= self.mass_kg * GRAVITY_M_S2:
+        # 4 kf w^2 in floats: kf = 1e300 gave inf, max_rotor_speed_rad_s = 1e200 raised
+        # OverflowError (from "**") out of the robot file's loading, naming no file or key.
+        thrust = 4.0 * self.kf * self.max_rotor_speed_rad_s * self.max_rotor_speed_rad_s
+        if not math.isfinite(thrust):
+            raise ConfigError(
+                f"{owner}: the rotors' max thrust 4 * kf * max_rotor_speed_rad_s^2 (kf "
+                f"{self.kf!r}, max_rotor_speed_rad_s {self.max_rotor_speed_rad_s!r}) is not a "
+                "finite number of newtons"
+            )
+        if thrust <= self.mass_kg * GRAVITY_M_S2:
             raise ConfigError(
                 f"{owner}: the rotors cannot lift the vehicle (max thrust "
-                f"{self.max_thrust_n:.2f} N <= weight {self.mass_kg * GRAVITY_M_S2:.2f} N)"
+                f"{thrust:.4g} N <= weight {self.mass_kg * GRAVITY_M_S2:.4g} N)"
             )
 
     @property

@@ -33,6 +33,11 @@ CASES = [
      "0.012"),
     # The hull reached 12 cm into the ground on the gear: the vehicle jumped at its spawn.
     ("gear-below-hull", "[airframe]\nbody_size_m = [0.12, 0.12, 0.4]", "gear_height_m", "0.08"),
+    # OverflowError out of loading the file (4 * kf * w**2), naming neither file nor key; a
+    # kf of 1e305 gave an infinite max thrust and loaded.
+    ("rotor-speed-overflow", "[airframe]\nmax_rotor_speed_rad_s = 1e200",
+     "max_rotor_speed_rad_s", "1e+200"),
+    ("kf-infinite-thrust", "[airframe]\nkf = 1e305", "kf", "1e+305"),
     ("avionics-negative", "[battery]\navionics_power_w = -5", "avionics_power_w", "-5.0"),
     ("avionics-nan", "[battery]\navionics_power_w = nan", "avionics_power_w", "nan"),
     ("avionics-inf", "[battery]\navionics_power_w = inf", "avionics_power_w", "inf"),
