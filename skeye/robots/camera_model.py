@@ -31,6 +31,10 @@ from skeye.errors import ConfigError
 
 PROFILES = ("ideal", "webcam")
 DEFAULT_PROFILE = "ideal"
+FOV_MIN_RAD = 0.01
+FOV_MAX_RAD = math.pi - 0.01
+"""The range of a camera's field of view on each axis, ``fov_h_rad`` or the one its focal
+lengths give (open at both ends)."""
 DISTORTION_LIMIT = 10.0
 """The largest magnitude of a distortion coefficient (k1, k2, p1, p2, k3) a camera may have,
 here and in a calibration file (skeye.vision.calibration): OpenCV fits of real lenses, wide
@@ -210,8 +214,28 @@ def build_camera_model(
     if model.line_time_s * height > 1.0:
         raise ConfigError(f"{where}: line_time_s * height must be <= 1 s, got "
                           f"{model.line_time_s * height:g} s")
+    _check_intrinsics(model, where)
     _check_monotonic(model, where)
     return model
+
+
+def _check_intrinsics(model: CameraModel, where: str) -> None:
+    """Each axis's field of view within the range of a mount's ``fov_h_rad`` (0.01, pi - 0.01),
+    and the principal point on the image. A focal length of 1e-6 px (an image corner at a
+    normalised radius of 1e8) held :func:`_check_monotonic`'s walk out to the corner for hours,
+    so ``skeye sim --robot-dir`` never started; a principal point far off the image did too."""
+    for key, centre, size in (("cx_px", model.cx_px, model.width),
+                              ("cy_px", model.cy_px, model.height)):
+        if not 0.0 <= centre <= size - 1:
+            raise ConfigError(f"{where}: {key} must lie on the image, 0..{size - 1} px (pixel "
+                              f"centres), got {centre!r}")
+    for key, focal, size, axis in (("fx_px", model.fx_px, model.width, "horizontal"),
+                                   ("fy_px", model.fy_px, model.height, "vertical")):
+        fov = 2.0 * math.atan((size / 2.0) / focal)
+        if not FOV_MIN_RAD < fov < FOV_MAX_RAD:
+            raise ConfigError(
+                f"{where}: {key} {focal:g} px gives a {axis} field of view of {fov:.4g} rad "
+                f"over {size} px; it must be in (0.01, pi - 0.01) rad, as fov_h_rad")
 
 
 def _check_monotonic(model: CameraModel, where: str) -> None:

@@ -63,6 +63,12 @@ def test_robot_file_overrides_and_bad_values_are_named():
         ({"msaa_samples": 2.5}, "msaa_samples must be a non-negative integer"),
         ({"latency_s": 0.01, "latency_jitter_s": 0.02}, "latency_jitter_s (0.02) must not exceed"),
         ({"profile": "webcam", "k2": -1.0}, "folds over"),
+        ({"cy_px": 600.0}, "cy_px must lie on the image, 0..599 px"),
+        ({"fy_px": 1e300}, "fy_px 1e+300 px gives a vertical field of view of 6e-298 rad"),
+        # Both hung for hours (skeye sim --robot-dir never started): the fold-over check walked
+        # in steps of 0.002 out to the image corner, at normalised radius 4e8 and 1e297.
+        ({"fx_px": 1e-6}, "fx_px 1e-06 px gives a horizontal field of view of 3.142 rad"),
+        ({"cx_px": 1e300}, "cx_px must lie on the image, 0..799 px"),
         ({"lens_colour": 3}, "unknown key(s) ['lens_colour']"),
     ]
     for params, message in cases:
