@@ -189,15 +189,18 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
     ground = _parse_ground(top.table("ground") or _Table(source, "[ground]", {}))
     visual = _parse_visual(top.table("visual"))
 
+    boxes = tuple(_parse_box(t) for t in top.array_of_tables("boxes"))
     pads: list[PadPlacement] = []
     for i, table in enumerate(top.array_of_tables("pads"), 1):
         pads.append(_parse_pad(table, i))
         _check_on_ground(table, "position_ned_m", pads[-1].position_ned_m, ground, "pad")
-    boxes = tuple(_parse_box(t) for t in top.array_of_tables("boxes"))
+        _check_outside_boxes(table, pads[-1].position_ned_m, boxes, f"pad {pads[-1].name!r}")
     boards = []
     for i, table in enumerate(top.array_of_tables("checkerboards"), 1):
         boards.append(_parse_checkerboard(table, i))
         _check_on_ground(table, "position_ned_m", boards[-1].position_ned_m, ground, "board")
+        _check_outside_boxes(table, boards[-1].position_ned_m, boxes,
+                             f"checkerboard {boards[-1].name!r}")
     _check_unique(top, "checkerboards", [b.name for b in boards])
     lights = tuple(_parse_light(t, i) for i, t in enumerate(top.array_of_tables("lights"), 1))
     _check_unique(top, "pads", [p.name for p in pads])
@@ -219,12 +222,8 @@ def parse_world(data: dict[str, Any], source: str) -> WorldDescription:
             table.fail(f"start pose {pose_name!r} lies more than {MAX_LOCATION_M:g} m from the "
                        "origin along an axis, the bound INIT's Location has (beyond it the "
                        "barometer's atmosphere model fails)", "position_ned_m")
-        for box in boxes:
-            if _stands_in_box(pose.position_ned_m, box):
-                top_down = box.center_ned_m[2] - box.size_m[2] / 2.0
-                table.fail(f"start pose {pose_name!r} lies inside box {box.name!r}: a vehicle "
-                           "standing there would stand in the box; put it on the box's top "
-                           f"(down = {top_down:g}) or outside its footprint", "position_ned_m")
+        _check_outside_boxes(table, pose.position_ned_m, boxes, f"start pose {pose_name!r}",
+                             "a vehicle standing there would stand in the box")
         start_poses[pose_name] = pose
 
     return WorldDescription(
@@ -404,6 +403,17 @@ def _stands_in_box(position_ned_m: Vec3, box: Box) -> bool:
     tol = _BOX_TOLERANCE_M
     return (abs(along) < half_n - tol and abs(across) < half_e - tol
             and -half_d + tol < down <= half_d + tol)
+
+
+def _check_outside_boxes(table: _Table, position: Vec3, boxes: tuple[Box, ...], what: str,
+                         why: str = "no camera sees it there") -> None:
+    """Not inside a box (:func:`_stands_in_box`): a start pose, a pad or a board on the ground
+    under a building, or in its walls, is refused; on its top or under a ceiling is fine."""
+    for box in boxes:
+        if _stands_in_box(position, box):
+            top_down = box.center_ned_m[2] - box.size_m[2] / 2.0
+            table.fail(f"{what} lies inside box {box.name!r}: {why}; put it on the box's top "
+                       f"(down = {top_down:g}) or outside its footprint", "position_ned_m")
 
 
 def _check_unique(top: _Table, key: str, names: list[str]) -> None:

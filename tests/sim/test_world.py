@@ -270,6 +270,10 @@ def test_robot_xml_is_inserted_and_options_follow_arguments(tmp_path: Path) -> N
          "position_ned_m", "start pose 'Field1' lies inside box 'house'"),
         ('position_ned_m = [-3.0, 0.0, 0.0]', 'position_ned_m = [7.5, 2.5, -1.0]',
          "position_ned_m", "start pose 'Field1' lies inside box 'house'"),
+        # Loaded: the pad lay under the house (its bottom on the ground), hidden from every
+        # camera, its collider inside the box.
+        ('position_ned_m = [1.0, 2.0, 0.0]', 'position_ned_m = [6.0, 2.0, 0.0]',
+         "position_ned_m", "pad 'pad1' lies inside box 'house': no camera sees it there"),
         ('texture = "checker"', 'texture = "lava"', "texture", "grass"),
         # Both passed the check and stopped skeye sim with MuJoCo's XML error (znear 0.01/1e300
         # underflowed to 0; texrepeat 2 * 20 / 1e-300 overflowed).
@@ -344,6 +348,8 @@ def test_checkerboard_world_holds_the_calibration_board() -> None:
         ("inner_corners = [9, 6]\nsquare_m = 0.025\nsquares = 3", "unknown key"),
         ("inner_corners = [9, 6]\nsquare_m = 0.025\nposition_ned_m = [0.0, 0.0, 2.0]",
          "the board is 2 m below the ground"),
+        ("inner_corners = [9, 6]\nsquare_m = 0.025\nposition_ned_m = [6.0, 2.0, 0.0]",
+         "checkerboard 'board1' lies inside box 'house'"),
     ],
 )
 def test_checkerboard_errors_name_the_key(tmp_path: Path, board: str, problem: str) -> None:
