@@ -1144,11 +1144,12 @@ class MavlinkVehicle:
         if cmd == mav.MAV_CMD_NAV_TAKEOFF and not self._airborne():
             if not self.armed:
                 return []  # waits for the arming
-            if item.relative_alt or here:
+            if item.relative_alt:
                 height = item.z
-            else:  # AMSL: above where the vehicle stands
-                height = snap.pos_ned_m[2] - self._global_to_ned(item.x, item.y, item.z,
-                                                                 item.frame)[2]
+            else:  # AMSL (0/0, "here", too): above where the vehicle stands
+                down = (self._item_down(item) if here else
+                        self._global_to_ned(item.x, item.y, item.z, item.frame)[2])
+                height = snap.pos_ned_m[2] - down
             self._board(TakeOff(round(max(MIN_TAKE_OFF_M, height) * 1e3)))
             self._mine()
             st.phase = "going"

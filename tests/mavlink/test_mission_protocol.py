@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import GCS, scripted_endpoint, wait_for
+from tests.mavlink.conftest import GCS, command, scripted_endpoint, wait_for
 
 M = mavutil.mavlink
 LAT_E7, LON_E7 = 490_001_000, 80_002_000  # near the scripted fix at 49 N 8 E
@@ -114,3 +114,25 @@ def test_the_last_item_sent_again_after_a_lost_ack_is_acknowledged_again(
     conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
     answer = wait_for(conn, ["MISSION_ACK", "MISSION_COUNT"], timeout_s=10)
     assert (answer.get_type(), answer.count) == ("MISSION_COUNT", 3)
+
+
+def test_a_take_off_item_here_in_the_amsl_frame_climbs_to_that_altitude(
+        vehicle: tuple[Any, Any]) -> None:
+    """A NAV_TAKEOFF at 0/0 ("here") in GLOBAL_INT: z is above mean sea level, as for any
+    item in that frame. Until 2026-11-28 it was flown as a height above the ground: z 103 m
+    AMSL, 3 m over the vehicle standing at 100 m, climbed 103 m (a probe with pymavlink)."""
+    server, conn = vehicle
+    airframe = server.vehicle.boards.airframe
+    conn.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+    assert wait_for(conn, "MISSION_REQUEST_INT", timeout_s=10).seq == 0
+    conn.mav.mission_item_int_send(
+        1, 1, 0, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_NAV_TAKEOFF, 0, 1, 0, 0, 0, math.nan,
+        0, 0, 103.0, M.MAV_MISSION_TYPE_MISSION)
+    assert wait_for(conn, "MISSION_ACK", timeout_s=10).type == M.MAV_MISSION_ACCEPTED
+    assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
+    assert command(conn, M.MAV_CMD_MISSION_START, 0, 0)[0] == M.MAV_RESULT_ACCEPTED
+    wait_for(conn, "HEARTBEAT", lambda h: h.system_status == M.MAV_STATE_ACTIVE, timeout_s=10)
+    with server.lock:
+        take_offs = [args for name, args in airframe.calls if name == "take_off"]
+    assert len(take_offs) == 1
+    assert take_offs[0][0] == pytest.approx(3.0, abs=1e-3)  # the scripted fix: 100 m AMSL
