@@ -304,7 +304,19 @@ class MavlinkVehicle:
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             if not self._for_us(msg):
                 return out
-            return out + reply(self._command(peer, msg))
+            return out + reply(self._command(peer, Command.of(msg), src))
+        if kind == "SET_MODE":
+            # The mode message (QGroundControl's Vehicle::setFlightMode before it sent
+            # DO_SET_MODE, a script's mav.set_mode_send): DO_SET_MODE with its base mode and
+            # PX4's custom mode, answered with DO_SET_MODE's COMMAND_ACK, as PX4 runs it
+            # (handle_message_set_mode).
+            if int(msg.target_system) not in (0, self.codec.system_id):
+                return out
+            custom = int(msg.custom_mode)
+            params = (float(msg.base_mode), float((custom >> 16) & 0xFF),
+                      float((custom >> 24) & 0xFF), 0.0, 0.0, 0.0, 0.0)
+            return out + reply(self._command(
+                peer, Command(mav.MAV_CMD_DO_SET_MODE, params, None), src))
         if kind.startswith("PARAM_"):
             if kind == "PARAM_VALUE":
                 return out
@@ -448,9 +460,7 @@ class MavlinkVehicle:
         return out
 
     # -- commands ------------------------------------------------------------------------
-    def _command(self, peer: Hashable, msg: MavMessage) -> list[MavMessage]:
-        cmd = Command.of(msg)
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
+    def _command(self, peer: Hashable, cmd: Command, src: tuple[int, int]) -> list[MavMessage]:
         # A ground station retransmits only the command it waits on, and MAVSDK sends no other
         # command of an id while one is waiting: A, B, A makes the second A a new command.
         slot = (peer, cmd.command)
