@@ -124,6 +124,20 @@ def _flight_controller(src: tuple[int, int], heartbeat: MavMessage) -> bool:
             and int(heartbeat.type) != mav.MAV_TYPE_GCS)
 
 
+LOCAL_SETPOINT_FRAMES = (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_LOCAL_OFFSET_NED,
+                         mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED,
+                         mav.MAV_FRAME_BODY_FRD)
+"""SET_POSITION_TARGET_LOCAL_NED's frames flown (PX4's, and BODY_FRD as BODY_NED)."""
+GLOBAL_SETPOINT_FRAMES = (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                          mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+"""SET_POSITION_TARGET_GLOBAL_INT's frames flown (PX4 takes the float ones' ids too)."""
+
+
+def _frame_name(frame: int) -> str:
+    entry = mav.enums["MAV_FRAME"].get(frame)
+    return entry.name.removeprefix("MAV_FRAME_") if entry is not None else "unknown"
+
+
 def _over(value: float, limit: float) -> bool:
     """``value``, from a MAVLink float field, over ``limit`` by more than single precision's
     rounding (2**-24 of it, a few times over for a speed turned into the heading's frame): a
@@ -836,6 +850,15 @@ class MavlinkVehicle:
         velocity (VELOCITY lasting COM_OF_LOSS_T, so lost setpoints end in a hover); True if
         a command went to the boards. One that cannot be flown raises ``Refused`` (or
         ``LocalProtocolError``) naming its field, and nothing is flown."""
+        frame = int(msg.coordinate_frame)
+        local = int(msg.get_msgId()) == mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED
+        if frame not in (LOCAL_SETPOINT_FRAMES if local else GLOBAL_SETPOINT_FRAMES):
+            # (a LOCAL_ENU or FLU setpoint flown as NED went east for north and down for up;
+            # a terrain altitude as one above mean sea level)
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"coordinate_frame {frame} ({_frame_name(frame)}) is not flown: give "
+                          + ("LOCAL_NED, LOCAL_OFFSET_NED, BODY_NED, BODY_OFFSET_NED or BODY_FRD"
+                             if local else "GLOBAL_INT or GLOBAL_RELATIVE_ALT_INT"))
         mask = int(msg.type_mask)
         pos_ignored = mask & 0b111 == 0b111
         vel_ignored = mask & 0b111000 == 0b111000
@@ -853,10 +876,8 @@ class MavlinkVehicle:
         if vel_ignored:
             return False
         vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
-        if int(msg.get_msgId()) == mav.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED and \
-                int(msg.coordinate_frame) in (mav.MAV_FRAME_BODY_NED,
-                                              mav.MAV_FRAME_BODY_OFFSET_NED,
-                                              mav.MAV_FRAME_BODY_FRD):
+        if local and frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED,
+                               mav.MAV_FRAME_BODY_FRD):
             fwd, right = vn, ve
         else:
             yaw = snap.rpy_rad[2]

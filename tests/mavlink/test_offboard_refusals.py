@@ -211,3 +211,30 @@ def test_a_speed_limit_sent_as_a_float32_is_flown_at_the_limit() -> None:
                 name, args = airframe.calls[-1]
             assert name == "fly_to" and args[-1] == pytest.approx(2.2, abs=1e-3), (speed, args)
         assert server.errors == 0
+
+
+def test_a_setpoint_in_a_frame_not_flown_is_refused_naming_the_frame() -> None:
+    """A setpoint's frame that is none of those the vehicle flies was flown as another: a
+    LOCAL_ENU velocity 0.5 m/s east went north, a GLOBAL_TERRAIN_ALT_INT altitude was taken as
+    above mean sea level (a probe of 2026-11-28 with pymavlink). PX4 drops such a setpoint
+    ("invalid coordinate frame"); here it is refused naming the frame, and nothing is flown."""
+    with _flying() as (server, conn):
+        airframe = server.vehicle.boards.airframe
+        _offboard(conn)
+        with server.lock:
+            flown = len(airframe.calls)
+        _local(conn, VELOCITY_ONLY, vx=0.5, frame=M.MAV_FRAME_LOCAL_ENU)
+        assert _refusal(conn) == ("coordinate_frame 4 (LOCAL_ENU) is not flown: give LOCAL_NED, "
+                                  "LOCAL_OFFSET_NED, BODY_NED, BODY_OFFSET_NED or BODY_FRD")
+        conn.mav.set_position_target_global_int_send(
+            0, 1, 1, M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT, POSITION_ONLY, 490_000_000, 80_000_000,
+            2.0, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert _refusal(conn) == ("coordinate_frame 11 (GLOBAL_TERRAIN_ALT_INT) is not flown: "
+                                  "give GLOBAL_INT or GLOBAL_RELATIVE_ALT_INT")
+        _local(conn, VELOCITY_ONLY, vx=0.5)  # in a frame flown: flown
+        _local(conn, VELOCITY_ONLY, vz=-40.0)  # a refusal after it: the one before was taken
+        assert _refusal(conn).startswith("velocity setpoint: vz -40 m/s ")
+        with server.lock:
+            calls = airframe.calls[flown:]
+        assert calls == [("set_velocity", (0.5, 0.0, 0.0, 0.0, 1.0))], calls
+        assert server.errors == 0
