@@ -875,7 +875,10 @@ class MavlinkVehicle:
             return True
         if vel_ignored:
             return False
-        vn, ve, vd = float(msg.vx), float(msg.vy), float(msg.vz)
+        # an axis ignored in type_mask (vx 8, vy 16, vz 32) is not commanded: 0, whatever the
+        # field holds (a client's NaN or stale value there is no speed to fly)
+        vn, ve, vd = ((0.0 if mask & bit else float(v))
+                      for bit, v in ((0b1000, msg.vx), (0b10000, msg.vy), (0b100000, msg.vz)))
         if local and frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED,
                                mav.MAV_FRAME_BODY_FRD):
             fwd, right = vn, ve

@@ -238,3 +238,24 @@ def test_a_setpoint_in_a_frame_not_flown_is_refused_naming_the_frame() -> None:
             calls = airframe.calls[flown:]
         assert calls == [("set_velocity", (0.5, 0.0, 0.0, 0.0, 1.0))], calls
         assert server.errors == 0
+
+
+def test_a_velocity_axis_ignored_in_the_type_mask_is_not_flown() -> None:
+    """A velocity setpoint with vz ignored in type_mask (bit 32) was flown with whatever vz
+    held: NaN refused the whole setpoint ("vz nan m/s is not a finite number"), 1 m/s descended
+    (a probe of 2026-11-28 with pymavlink). An ignored axis is now not commanded (0), as a
+    position axis ignored keeps the vehicle's own coordinate."""
+    with _flying() as (server, conn):
+        airframe = server.vehicle.boards.airframe
+        _offboard(conn)
+        with server.lock:
+            flown = len(airframe.calls)
+        _local(conn, VELOCITY_ONLY | 0b100000, vx=0.5, vz=math.nan)
+        _local(conn, VELOCITY_ONLY | 0b11000, vx=-40.0, vy=math.nan, vz=1.0)
+        _local(conn, VELOCITY_ONLY, vz=-40.0)  # a refusal after them: both were taken
+        assert _refusal(conn).startswith("velocity setpoint: vz -40 m/s ")
+        with server.lock:
+            calls = airframe.calls[flown:]
+        assert calls == [("set_velocity", (0.5, 0.0, 0.0, 0.0, 1.0)),
+                         ("set_velocity", (0.0, 0.0, -1.0, 0.0, 1.0))], calls
+        assert server.errors == 0
