@@ -70,7 +70,7 @@ class ParamTable:
     def value(self, name: str) -> float:
         return float(self.specs[self._by_name[name]].get())
 
-    def _value_msg(self, index: int) -> MavMessage:
+    def value_msg(self, index: int) -> MavMessage:
         spec = self.specs[index]
         return self.codec.mav.param_value_encode(
             spec.name.encode("ascii"), float(spec.get()), mav.MAV_PARAM_TYPE_REAL32,
@@ -80,7 +80,7 @@ class ParamTable:
         """Answer one PARAM_* message (others: nothing)."""
         kind = msg.get_type()
         if kind == "PARAM_REQUEST_LIST":
-            return [self._value_msg(i) for i in range(len(self.specs))]
+            return [self.value_msg(i) for i in range(len(self.specs))]
         if kind == "PARAM_REQUEST_READ":
             index = int(msg.param_index)
             if index < 0:
@@ -90,7 +90,7 @@ class ParamTable:
                 return statustext(self.codec, mav.MAV_SEVERITY_WARNING,
                                   f"no parameter {_name(msg.param_id)!r} (index "
                                   f"{msg.param_index})")
-            return [self._value_msg(index)]
+            return [self.value_msg(index)]
         if kind == "PARAM_SET":
             name = _name(msg.param_id)
             found = self._by_name.get(name)
@@ -109,10 +109,10 @@ class ParamTable:
                     problem = f"{spec.name}: {exc}"
             if problem is not None:
                 self.refused += 1
-                return [self._value_msg(index),
+                return [self.value_msg(index),
                         *statustext(self.codec, mav.MAV_SEVERITY_WARNING, problem)]
             self.changed += 1
-            return [self._value_msg(index)]
+            return [self.value_msg(index)]
         return []
 
 

@@ -221,6 +221,26 @@ class MavlinkVehicle:
             setattr(self.settings, name, value)
         return set_value
 
+    def _set_cruise(self, value: float) -> None:
+        """MPC_XY_CRUISE: no faster than MPC_XY_VEL_MAX, which every move is checked against
+        (one above it made every move that names no speed refused)."""
+        limit = self.boards.settings.max_speed_m_s
+        if _over(value, limit):
+            raise LocalProtocolError(f"must be at most MPC_XY_VEL_MAX, {limit:g} m/s, not "
+                                     f"{value:g}")
+        self._board_setting("default_speed_m_s")(min(value, limit))
+
+    def _set_max_speed(self, value: float) -> None:
+        """MPC_XY_VEL_MAX: the cruise speed (MPC_XY_CRUISE) and DO_CHANGE_SPEED's come down to
+        a limit set below them, as PX4 constrains MPC_XY_CRUISE ("Cruise speed has been
+        constrained by max speed"); the caller tells the ground stations the new values."""
+        settings = self.boards.settings
+        self.boards.settings = replace(
+            settings, max_speed_m_s=value,
+            default_speed_m_s=min(settings.default_speed_m_s, value))
+        if self.cruise_m_s is not None:
+            self.cruise_m_s = min(self.cruise_m_s, value)
+
     def _param_specs(self) -> list[ParamSpec]:
         b = lambda: self.boards.settings  # noqa: E731
         s = self.settings
@@ -230,11 +250,12 @@ class MavlinkVehicle:
                       lambda: s.takeoff_alt_m, self._endpoint_setting("takeoff_alt_m")),
             ParamSpec("RTL_RETURN_ALT", 0.0, 150.0, "m", "return height above home",
                       lambda: s.rtl_alt_m, self._endpoint_setting("rtl_alt_m")),
-            ParamSpec("MPC_XY_CRUISE", 0.1, top, "m/s", "speed of moves that name none",
-                      lambda: b().default_speed_m_s, self._board_setting("default_speed_m_s")),
+            ParamSpec("MPC_XY_CRUISE", 0.1, top, "m/s",
+                      "speed of moves that name none (MPC_XY_VEL_MAX at most)",
+                      lambda: b().default_speed_m_s, self._set_cruise),
             ParamSpec("MPC_XY_VEL_MAX", 0.1, top, "m/s",
                       "fastest horizontal speed a command may ask for (the robot file's limit "
-                      "at most)", lambda: b().max_speed_m_s, self._board_setting("max_speed_m_s")),
+                      "at most)", lambda: b().max_speed_m_s, self._set_max_speed),
             ParamSpec("GF_MAX_VER_DIST", 1.0, 10_000.0, "m", "flight envelope ceiling above home",
                       lambda: b().envelope.ceiling_m, self._envelope_setting("ceiling_m")),
             ParamSpec("GF_MAX_HOR_DIST", 1.0, 100_000.0, "m",
@@ -337,8 +358,18 @@ class MavlinkVehicle:
             if not self._for_us(msg):  # (the list too: PX4 answers its own system's only)
                 return out
             changed = self.params.changed
+            before = [spec.get() for spec in self.params.specs]
             answer = self.params.handle(msg)
-            if self.params.changed != changed:  # a new value: every ground station hears it
+            if self.params.changed != changed:  # a new value: every ground station hears it,
+                # and of every other parameter it changed (MPC_XY_VEL_MAX lowers MPC_XY_CRUISE)
+                name = str(msg.param_id).split("\x00", 1)[0]
+                others = [i for i, (spec, was) in enumerate(zip(self.params.specs, before,
+                                                                 strict=True))
+                          if spec.get() != was and spec.name != name]
+                answer += [self.params.value_msg(i) for i in others]
+                answer += statustext(self.codec, mav.MAV_SEVERITY_NOTICE, "; ".join(
+                    f"{self.params.specs[i].name} constrained to "
+                    f"{self.params.specs[i].get():g} by {name}" for i in others)) if others else []
                 return out + [Out(m) for m in answer]
             return out + reply(answer)
         if kind.startswith("MISSION_"):
