@@ -40,6 +40,9 @@ INT_FRAME = {mav.MAV_FRAME_GLOBAL: mav.MAV_FRAME_GLOBAL_INT,
 FLOAT_FRAME = {i: f for f, i in INT_FRAME.items()}  # a stored item's frame in MISSION_ITEM
 NAV_WITH_POSITION = (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LAND,
                      mav.MAV_CMD_NAV_LOITER_TIME)
+DEFAULT_SPEED = (-1.0, -2.0)
+"""DO_CHANGE_SPEED's p2 for the cruise speed again: -2 ("return to default vehicle speed", the
+command's definition) and -1 (PX4 resets on any speed not above 0)."""
 SUPPORTED = (*NAV_WITH_POSITION, mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED,
              mav.MAV_CMD_NAV_DELAY)
 
@@ -123,7 +126,7 @@ def basic_problem(item: MissionItem) -> tuple[int, str] | None:
             return (getattr(mav, f"MAV_MISSION_INVALID_PARAM{n}"),
                     f"item {item.seq}: param{n} is infinite")
     if item.command == mav.MAV_CMD_DO_CHANGE_SPEED and not (
-        math.isfinite(item.param2) and (item.param2 == -1 or item.param2 > 0)
+        math.isfinite(item.param2) and (item.param2 in DEFAULT_SPEED or item.param2 > 0)
     ):
         return mav.MAV_MISSION_INVALID_PARAM2, f"item {item.seq}: speed {item.param2} m/s"
     if item.command in (mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_DELAY) and not (

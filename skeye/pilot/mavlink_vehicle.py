@@ -56,7 +56,7 @@ from pymavlink.dialects.v20 import common as mav
 from skeye.errors import LocalProtocolError
 from skeye.geo import LOWEST_LAND_AMSL_M, MAX_POSITION_M, GeoOrigin
 from skeye.mavlink.codec import BadFrame, MavCodec, MavMessage, statustext
-from skeye.mavlink.mission import MissionItem, MissionProtocol
+from skeye.mavlink.mission import DEFAULT_SPEED, MissionItem, MissionProtocol
 from skeye.mavlink.modes import MODE_TABLE, REQUESTS, Program, Px4Mode, Request
 from skeye.mavlink.params import ParamSpec, ParamTable
 from skeye.mavlink.streams import MessageScheduler
@@ -727,7 +727,7 @@ class MavlinkVehicle:
 
     def _change_speed(self, cmd: Command) -> None:
         speed = cmd.p(2)
-        if speed == -1.0:
+        if speed in DEFAULT_SPEED:
             self.cruise_m_s = None
             return
         limit = self.boards.settings.max_speed_m_s
@@ -1195,7 +1195,8 @@ class MavlinkVehicle:
         self.mission_current = st.index
         cmd = item.command
         if cmd == mav.MAV_CMD_DO_CHANGE_SPEED:
-            self.cruise_m_s = None if item.param2 == -1 else self._at_most_the_limit(item.param2)
+            self.cruise_m_s = (None if item.param2 in DEFAULT_SPEED
+                               else self._at_most_the_limit(item.param2))
             return self._item_done()
         if cmd == mav.MAV_CMD_NAV_DELAY:
             st.phase, st.wait_until_s = "wait", snap.time_s + item.param1

@@ -136,3 +136,16 @@ def test_a_take_off_item_here_in_the_amsl_frame_climbs_to_that_altitude(
         take_offs = [args for name, args in airframe.calls if name == "take_off"]
     assert len(take_offs) == 1
     assert take_offs[0][0] == pytest.approx(3.0, abs=1e-3)  # the scripted fix: 100 m AMSL
+
+
+def test_a_change_speed_item_of_minus_two_is_taken(vehicle: tuple[Any, Any]) -> None:
+    """A DO_CHANGE_SPEED item with p2 -2 ("return to default vehicle speed") was refused with
+    INVALID_PARAM2 ("item 0: speed -2.0 m/s"), the whole mission with it."""
+    _, conn = vehicle
+    conn.mav.mission_count_send(1, 1, 1, M.MAV_MISSION_TYPE_MISSION)
+    assert wait_for(conn, "MISSION_REQUEST_INT", timeout_s=10).seq == 0
+    conn.mav.mission_item_int_send(
+        1, 1, 0, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_CHANGE_SPEED, 0, 1, 1, -2, -1, 0, 0, 0, 0,
+        M.MAV_MISSION_TYPE_MISSION)
+    assert wait_for(conn, "MISSION_ACK", timeout_s=10).type == M.MAV_MISSION_ACCEPTED
+    assert _count(conn) == 1

@@ -259,3 +259,16 @@ def test_a_velocity_axis_ignored_in_the_type_mask_is_not_flown() -> None:
         assert calls == [("set_velocity", (0.5, 0.0, 0.0, 0.0, 1.0)),
                          ("set_velocity", (0.0, 0.0, -1.0, 0.0, 1.0))], calls
         assert server.errors == 0
+
+
+def test_change_speed_minus_two_returns_to_the_cruise_speed() -> None:
+    """DO_CHANGE_SPEED's p2 -2 is "return to default vehicle speed" (the command's definition):
+    it was refused ("speed -2 m/s: must be above 0 ...", a probe of 2026-11-28 with pymavlink),
+    as was a mission's DO_CHANGE_SPEED item of -2 (``test_mission_protocol.py``)."""
+    with _flying() as (server, conn):
+        assert command(conn, M.MAV_CMD_DO_CHANGE_SPEED, 1, 2.0)[0] == M.MAV_RESULT_ACCEPTED
+        assert server.vehicle.cruise_m_s == 2.0
+        result, text = command(conn, M.MAV_CMD_DO_CHANGE_SPEED, 1, -2.0, -1)
+        assert result == M.MAV_RESULT_ACCEPTED, text
+        assert server.vehicle.cruise_m_s is None  # MPC_XY_CRUISE's again
+        assert server.errors == 0
