@@ -133,6 +133,9 @@ GLOBAL_SETPOINT_FRAMES = (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIV
 """SET_POSITION_TARGET_GLOBAL_INT's frames flown (PX4 takes the float ones' ids too)."""
 
 
+INT32_MAX = 2**31 - 1  # an integer field's "not given" (MAV_CMD: NaN for a float field's)
+
+
 def _frame_name(frame: int) -> str:
     entry = mav.enums["MAV_FRAME"].get(frame)
     return entry.name.removeprefix("MAV_FRAME_") if entry is not None else "unknown"
@@ -708,7 +711,9 @@ class MavlinkVehicle:
                           "-1 for the cruise speed")
         snap = self._snap()
         n, e, d = snap.pos_ned_m
-        if not (cmd.x == 0 and cmd.y == 0):  # 0/0: here
+        # 0/0 or INT32_MAX/INT32_MAX (MAV_CMD's "not given" for an integer field, to "use the
+        # component's current ... latitude rather than a specific value"): here
+        if (cmd.x, cmd.y) not in ((0, 0), (INT32_MAX, INT32_MAX)):
             n, e, _ = self._global_to_ned(cmd.x, cmd.y, 0.0, cmd.frame)
         origin = self.origin()
         if not math.isnan(cmd.p(7)) and origin is not None:  # NaN: keep the altitude

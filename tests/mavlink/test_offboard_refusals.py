@@ -272,3 +272,23 @@ def test_change_speed_minus_two_returns_to_the_cruise_speed() -> None:
         assert result == M.MAV_RESULT_ACCEPTED, text
         assert server.vehicle.cruise_m_s is None  # MPC_XY_CRUISE's again
         assert server.errors == 0
+
+
+def test_a_reposition_to_int32_max_latitude_and_longitude_changes_only_the_altitude() -> None:
+    """MAV_CMD's definition: "NaN and INT32_MAX may be used in float/integer params
+    (respectively) to indicate optional/default values (e.g. to use the component's current yaw
+    or latitude rather than a specific value)". DO_REPOSITION with x, y INT32_MAX was refused
+    ("latitude (x) 214.748 deg is out of range -90..90", a probe of 2026-11-28 with pymavlink);
+    it is an altitude change where the vehicle is."""
+    with _flying() as (server, conn):
+        airframe = server.vehicle.boards.airframe
+        int32_max = 2**31 - 1
+        conn.mav.command_int_send(1, 1, M.MAV_FRAME_GLOBAL, M.MAV_CMD_DO_REPOSITION, 0, 0,
+                                  -1, 1, 0, math.nan, int32_max, int32_max, 103.0)
+        ack = wait_for(conn, "COMMAND_ACK", lambda m: m.command == M.MAV_CMD_DO_REPOSITION)
+        assert ack.result == M.MAV_RESULT_ACCEPTED, statustext(conn)
+        with server.lock:
+            name, args = airframe.calls[-1]
+        # from 2 m over the origin (100 m above mean sea level) to 103 m: 3 m up, in place
+        assert name == "fly_to" and args[:3] == pytest.approx((0.0, 0.0, 3.0), abs=1e-3), args
+        assert server.errors == 0
