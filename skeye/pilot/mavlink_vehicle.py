@@ -699,7 +699,7 @@ class MavlinkVehicle:
 
     def _reposition(self, cmd: Command) -> list[MavMessage]:
         if cmd.frame is None:
-            raise Refused(mav.MAV_RESULT_DENIED, "DO_REPOSITION is a COMMAND_INT")
+            cmd = self._reposition_as_int(cmd)
         if cmd.frame not in (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                              mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
             raise Refused(mav.MAV_RESULT_DENIED,
@@ -729,6 +729,24 @@ class MavlinkVehicle:
         return self._notice(self._command_peer, "reposition-yaw", mav.MAV_SEVERITY_NOTICE,
                             f"DO_REPOSITION: yaw (p4) {yaw:g} deg is not flown: the heading "
                             "is kept (give NaN for no yaw)")
+
+    @staticmethod
+    def _reposition_as_int(cmd: Command) -> Command:
+        """A COMMAND_LONG DO_REPOSITION (QGroundControl's altitude change for PX4, its go-to
+        where COMMAND_INT is not supported, a script's) as the COMMAND_INT it stands for, as
+        PX4 reads it: p5, p6 latitude and longitude in degrees (both NaN: here), p7 altitude
+        above mean sea level (a COMMAND_LONG has no frame: GLOBAL)."""
+        lat, lon = cmd.p(5), cmd.p(6)
+        if math.isnan(lat) and math.isnan(lon):
+            x = y = INT32_MAX
+        else:
+            for value, lo, hi, what, name in ((lat, -90, 90, "latitude", "p5"),
+                                              (lon, -180, 180, "longitude", "p6")):
+                if not lo <= value <= hi:  # (NaN too)
+                    raise Refused(mav.MAV_RESULT_DENIED,
+                                  f"{what} ({name}) {value:g} deg is out of range {lo}..{hi}")
+            x, y = round(lat * 1e7), round(lon * 1e7)
+        return Command(cmd.command, cmd.params, mav.MAV_FRAME_GLOBAL, x, y)
 
     def _change_speed(self, cmd: Command) -> None:
         speed = cmd.p(2)

@@ -292,3 +292,31 @@ def test_a_reposition_to_int32_max_latitude_and_longitude_changes_only_the_altit
         # from 2 m over the origin (100 m above mean sea level) to 103 m: 3 m up, in place
         assert name == "fly_to" and args[:3] == pytest.approx((0.0, 0.0, 3.0), abs=1e-3), args
         assert server.errors == 0
+
+
+def test_a_reposition_sent_as_command_long_is_flown() -> None:
+    """DO_REPOSITION as COMMAND_LONG (p5, p6 latitude and longitude in degrees, NaN for here;
+    p7 above mean sea level), as QGroundControl's PX4 plugin sends its altitude change, was
+    refused ("DO_REPOSITION is a COMMAND_INT", a probe of 2026-11-28 with pymavlink); PX4 flies
+    either form."""
+    with _flying() as (server, conn):
+        airframe = server.vehicle.boards.airframe
+        result, text = command(conn, M.MAV_CMD_DO_REPOSITION, -1, 1, 0, math.nan, math.nan,
+                               math.nan, 103.0)
+        assert result == M.MAV_RESULT_ACCEPTED, text
+        with server.lock:
+            name, args = airframe.calls[-1]
+        assert name == "fly_to" and args[:3] == pytest.approx((0.0, 0.0, 3.0), abs=1e-3), args
+        # 10 m north (1e-7 deg of latitude is 1.1 cm), at 102 m; degrees as float32 are held
+        # to 2**-18 deg at 49 N, about 0.4 m
+        result, text = command(conn, M.MAV_CMD_DO_REPOSITION, -1, 1, 0, math.nan, 49.00009,
+                               8.0, 102.0)
+        assert result == M.MAV_RESULT_ACCEPTED, text
+        with server.lock:
+            name, args = airframe.calls[-1]
+        assert name == "fly_to" and args[:3] == pytest.approx((10.0, 0.0, 2.0), abs=0.45), args
+        result, text = command(conn, M.MAV_CMD_DO_REPOSITION, -1, 1, 0, math.nan, 95.0, 8.0,
+                               102.0)
+        assert (result, text) == (M.MAV_RESULT_DENIED, "DO_REPOSITION: latitude (p5) 95 deg is "
+                                  "out of range -90..90")
+        assert server.errors == 0
