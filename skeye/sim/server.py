@@ -161,6 +161,10 @@ class ControlServer:
             except OSError as exc:  # the client went already: nothing to serve
                 log.info("client %s:%s gone while connecting: %s", addr[0], addr[1], exc)
                 sock.close()
+            except Exception:  # a fault in greeting one client never ends the accepting
+                log.exception("could not admit client %s:%s; its connection is closed",
+                              addr[0], addr[1])
+                sock.close()
 
     def _admit(self, sock: socket.socket, peer: str) -> None:
         """A new connection: served, or refused with one non-blocking line (never waits)."""
@@ -205,10 +209,15 @@ class ControlServer:
                 pass
             sock.close()
             return
-        if self.observers:
-            self.notify(session.conn_id, "+", session.peer.encode())
-        session.send(self.nfo_line())
-        session.start()
+        try:
+            if self.observers:
+                self.notify(session.conn_id, "+", session.peer.encode())
+            session.send(self.nfo_line())
+            session.start()
+        except BaseException:  # not served: its slot is free again
+            with self._lock:
+                self._sessions.discard(session)
+            raise
         log.info("client %s connected (%s)", session.peer, key)
 
     def forget(self, session: ClientSession) -> None:

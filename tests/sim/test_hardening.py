@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import pytest
 
-from skeye.errors import ConfigError
+from skeye.errors import ConfigError, LocalProtocolError
 from skeye.processes import die_with_parent
 from skeye.sim.image_server import FrameBuffer, ImageServer
 from skeye.sim.server import ControlServer
@@ -401,3 +401,34 @@ def test_a_step_answered_past_its_limit_closes_its_watch_and_writes_nothing(
             client.close()
     assert not left_open, f"the watch's pipe is still open: descriptors {sorted(left_open)}"
     assert not [r for r in caplog.records if r.name == "concurrent.futures"], caplog.text
+
+
+def test_a_fault_in_greeting_one_client_leaves_the_server_accepting_the_next(
+        monkeypatch, caplog) -> None:
+    """Anything but an OSError raised while a client was admitted (its NFO line, as a world
+    named with a line break once made it) ended the accept thread: the simulator served no
+    other client, without a word. The fault is logged, that connection closed, its slot
+    freed, and the next client served."""
+    caplog.set_level(logging.ERROR, logger="skeye.sim.server")
+    with running_sim() as server:
+        nfo = server.nfo_line
+        calls = [0]
+
+        def faulty_once() -> bytes:
+            calls[0] += 1
+            if calls[0] == 1:
+                raise LocalProtocolError("injected: an NFO line that cannot be written")
+            return nfo()
+
+        monkeypatch.setattr(server, "nfo_line", faulty_once)
+        first = LineClient(server.port)
+        _closed(first)
+        first.close()
+        second = LineClient(server.port)
+        try:
+            second.expect("NFO")
+            assert second.answer("PING {Id 1}", "PING").type == "RES"
+        finally:
+            second.close()
+        assert server.client_count <= 1
+    assert any("could not admit client" in r.getMessage() for r in caplog.records), caplog.text
