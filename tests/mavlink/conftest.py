@@ -196,6 +196,18 @@ def upload_mission(conn: Any, items: list[tuple[int, int, float]]) -> int:
 
 
 @contextmanager
+def ground_station(server: MavlinkServer) -> Iterator[Any]:
+    """A pymavlink ground station (255/190) on a scripted endpoint's UDP link, closed after."""
+    port = int(server.addresses[0].rsplit(":", 1)[1])
+    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
+                                      source_component=GCS[1])
+    try:
+        yield conn
+    finally:
+        conn.close()
+
+
+@contextmanager
 def two_ground_stations(server: MavlinkServer) -> Iterator[tuple[Any, Any]]:
     """Two pymavlink ground stations (255/190 and 254/190) on a scripted endpoint's UDP link,
     closed after."""

@@ -17,6 +17,7 @@ from tests.mavlink.conftest import (
     MavVehicle,
     command,
     free_udp_port,
+    ground_station,
     mav_vehicle,
     scripted_endpoint,
     statustext,
@@ -141,10 +142,7 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
     "MoveBy.dx=... outside ...". The vehicle is the scripted one (landed, GPS at 49 N 8 E):
     these checks come before the boards' own (which would say "landed")."""
     with scripted_endpoint("udp://127.0.0.1:0") as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             pos = wait_for(conn, "GLOBAL_POSITION_INT")
             lat, lon = pos.lat, pos.lon
             cases = [
@@ -177,8 +175,6 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
             result, _ = _reposition(conn, -1.0, lat, lon, pos.alt / 1000.0 + 1.0, reason=False)
             assert result == M.MAV_RESULT_TEMPORARILY_REJECTED
             assert server.errors == 0
-        finally:
-            conn.close()
 
 
 def _mission_ack(conn, item: dict, count: int = 1) -> tuple[int, str]:

@@ -14,7 +14,14 @@ from dataclasses import replace
 
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import GCS, command, mav_vehicle, scripted_endpoint, wait_for
+from tests.mavlink.conftest import (
+    GCS,
+    command,
+    ground_station,
+    mav_vehicle,
+    scripted_endpoint,
+    wait_for,
+)
 
 M = mavutil.mavlink
 
@@ -57,10 +64,7 @@ def test_one_instant_has_one_stamp_on_every_message_and_on_the_asctec_link():
         airframe = server.vehicle.boards.airframe
         with server.lock:
             airframe.snap = replace(airframe.snap, time_s=float("1.001000"))
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             wanted = ["ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYSTEM_TIME",
                       "HIGHRES_IMU", "GPS_RAW_INT", "ALTITUDE"]
             assert command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_HIGHRES_IMU,
@@ -76,5 +80,3 @@ def test_one_instant_has_one_stamp_on_every_message_and_on_the_asctec_link():
             assert nav_status is not None
             assert ms == dict.fromkeys(ms, 1001) and nav_status.time == 1001, (ms, nav_status)
             assert us == dict.fromkeys(us, 1_001_000), us
-        finally:
-            conn.close()

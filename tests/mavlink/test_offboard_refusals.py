@@ -24,7 +24,7 @@ from pymavlink import mavutil
 from skeye.pilot.airframe import GpsFix
 from skeye.pilot.boards import BoardSettings, OnboardBoards
 from skeye.pilot.mavlink_server import MavlinkServer
-from tests.mavlink.conftest import GCS, command, statustext, wait_for
+from tests.mavlink.conftest import command, ground_station, statustext, wait_for
 from tests.pilot.fake_airframe import FakeAirframe
 
 M = mavutil.mavlink
@@ -44,10 +44,7 @@ def _flying(gps: bool = True, settings: BoardSettings | None = None,
         airframe.snap = replace(airframe.snap, gps=NO_FIX)
     boards = OnboardBoards(airframe, settings)
     with MavlinkServer(boards, threading.Lock(), ["udp://127.0.0.1:0"]) as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             wait_for(conn, "HEARTBEAT", timeout_s=10)
             assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
             assert command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6,
@@ -56,8 +53,6 @@ def _flying(gps: bool = True, settings: BoardSettings | None = None,
                 airframe.finish(landed=False, pos_ned_m=(0.0, 0.0, -2.0), time_s=1.0)
                 boards.tick(1.0)
             yield server, conn
-        finally:
-            conn.close()
 
 
 def _local(conn: Any, mask: int, x: float = 0.0, y: float = 0.0, z: float = -2.0,

@@ -9,17 +9,14 @@ import math
 
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import GCS, scripted_endpoint, statustext, wait_for
+from tests.mavlink.conftest import ground_station, scripted_endpoint, statustext, wait_for
 
 M = mavutil.mavlink
 
 
 def test_a_parameter_list_asked_of_another_system_is_not_answered():
     with scripted_endpoint("udp://127.0.0.1:0") as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             wait_for(conn, "HEARTBEAT")
             count = len(server.vehicle.params.specs)
             conn.mav.param_request_list_send(2, 1)  # another vehicle's
@@ -34,8 +31,6 @@ def test_a_parameter_list_asked_of_another_system_is_not_answered():
                        for _ in range(count)]
             assert indexes == list(range(count))
             assert server.errors == 0
-        finally:
-            conn.close()
 
 
 def test_a_speed_limit_set_below_the_cruise_speed_brings_the_cruise_speed_down():

@@ -8,7 +8,14 @@ from __future__ import annotations
 
 from pymavlink import mavutil
 
-from tests.mavlink.conftest import GCS, command, scripted_endpoint, statustext, wait_for
+from tests.mavlink.conftest import (
+    GCS,
+    command,
+    ground_station,
+    scripted_endpoint,
+    statustext,
+    wait_for,
+)
 
 M = mavutil.mavlink
 CUSTOM = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
@@ -20,10 +27,7 @@ def _px4(main: int, sub: int = 0) -> int:
 
 def test_set_mode_changes_the_mode_and_is_acknowledged():
     with scripted_endpoint("udp://127.0.0.1:0") as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             wait_for(conn, "HEARTBEAT", timeout_s=10)
             assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
             conn.mav.set_mode_send(2, CUSTOM, _px4(4, 2))  # another system's: not for us
@@ -38,5 +42,3 @@ def test_set_mode_changes_the_mode_and_is_acknowledged():
             assert (ack.command, ack.result) == (M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED)
             assert "mode STABILIZED is not flown" in statustext(conn, timeout_s=10)
             assert server.errors == 0
-        finally:
-            conn.close()

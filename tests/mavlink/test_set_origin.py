@@ -23,7 +23,13 @@ from skeye.geo import GeoOrigin
 from skeye.pilot.airframe import GpsFix
 from skeye.pilot.boards import OnboardBoards
 from skeye.pilot.mavlink_server import MavlinkServer
-from tests.mavlink.conftest import GCS, command, scripted_endpoint, statustext, wait_for
+from tests.mavlink.conftest import (
+    command,
+    ground_station,
+    scripted_endpoint,
+    statustext,
+    wait_for,
+)
 from tests.pilot.fake_airframe import FakeAirframe
 
 M = mavutil.mavlink
@@ -39,13 +45,8 @@ def _indoor_endpoint() -> Iterator[tuple[MavlinkServer, FakeAirframe, Any]]:
     airframe = FakeAirframe()
     airframe.snap = replace(airframe.snap, gps=NO_FIX, pos_ned_m=(3.0, -4.0, 1.5))
     with MavlinkServer(OnboardBoards(airframe), threading.Lock(), ["udp://127.0.0.1:0"]) as server:
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             yield server, airframe, conn
-        finally:
-            conn.close()
 
 
 def _request(conn: Any, msg_id: int) -> tuple[int, Any]:
@@ -117,17 +118,12 @@ def test_an_origin_out_of_range_or_for_another_system_changes_nothing_a_later_on
 
 def test_with_gps_the_fixes_place_the_local_frame_and_an_origin_given_is_refused():
     with scripted_endpoint("udp://127.0.0.1:0") as server:  # (a fix at 49 N 8 E, 100 m)
-        port = int(server.addresses[0].rsplit(":", 1)[1])
-        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=GCS[0],
-                                          source_component=GCS[1])
-        try:
+        with ground_station(server) as conn:
             wait_for(conn, "HEARTBEAT")
             conn.mav.set_gps_global_origin_send(1, LAT_E7, LON_E7, ALT_MM, 0)
             assert "the GPS places this vehicle's local frame" in statustext(conn, timeout_s=10)
             kept = wait_for(conn, "GPS_GLOBAL_ORIGIN", timeout_s=10)
             assert _origin_of(kept) == (490_000_000, 80_000_000, 100_000)
-        finally:
-            conn.close()
         assert server.errors == 0
 
 
