@@ -35,14 +35,8 @@ def _up_opened(tmp_path: Path, *extra: str
                             env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
                                  "XDG_CACHE_HOME": str(tmp_path / "cache")},
                             start_new_session=True)
-    lines: list[str] = []
     try:
-        assert proc.stdout is not None
-        while not any("skeye up: open" in line for line in lines):
-            line = proc.stdout.readline()
-            assert line, f"skeye up did not start: {''.join(lines)}"
-            lines.append(line)
-        yield proc, lines, ports
+        yield proc, _read_until_open(proc), ports
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -69,6 +63,17 @@ def _ground_alone(host: str) -> Iterator[tuple[subprocess.Popen[str], list[str],
     finally:
         child.terminate()
         child.communicate(timeout=60)
+
+def _read_until_open(proc: subprocess.Popen[str]) -> list[str]:
+    """skeye up's lines (or make run's) up to the one that says its page is open."""
+    assert proc.stdout is not None
+    lines: list[str] = []
+    while not any("skeye up: open" in line for line in lines):
+        line = proc.stdout.readline()
+        assert line, f"skeye up did not start: {''.join(lines)}"
+        lines.append(line)
+    return lines
+
 
 def _children(pid: int) -> list[int]:
     out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True)
@@ -429,12 +434,7 @@ def test_signals_to_make_run_stop_every_server(tmp_path) -> None:
         ports = _free_ports(5)
         make = _make_run(tmp_path / sig.name, ports)
         try:
-            assert make.stdout is not None
-            lines: list[str] = []
-            while not any("skeye up: open" in line for line in lines):
-                line = make.stdout.readline()
-                assert line, f"make run did not start: {lines}"
-                lines.append(line)
+            _read_until_open(make)
             servers = _descendants(make.pid)
             assert len(servers) == 4  # skeye up and its three children
             os.kill(make.pid, sig)

@@ -23,7 +23,7 @@ import pytest
 
 from skeye.ground.cli import STOP_TIMEOUT_S
 from tests.ground.conftest import wait_until
-from tests.ground.test_up import _children
+from tests.ground.test_up import _children, _read_until_open
 from tests.ports import free_ports
 
 # A child of skeye up: listens on every port given after --port, --image-port, --video-port;
@@ -95,17 +95,6 @@ def _kill_up(proc: subprocess.Popen[str]) -> None:
         except ProcessLookupError:
             pass
     proc.wait(30)
-
-
-def _read_until_open(proc: subprocess.Popen[str]) -> list[str]:
-    """skeye up's lines up to the one that says its page is open."""
-    assert proc.stdout is not None
-    lines: list[str] = []
-    while not any("skeye up: open" in line for line in lines):
-        line = proc.stdout.readline()
-        assert line, f"skeye up did not start: {lines}"
-        lines.append(line)
-    return lines
 
 
 def _start_up(standin: Path, hung: bool) -> Iterator[tuple[subprocess.Popen[str], list[str]]]:
