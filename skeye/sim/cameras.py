@@ -296,6 +296,13 @@ class CameraSystem:
         self._worker = Worker(self._render_loop, "skeye-render", on_error=self._render_died)
         self._worker.start()
 
+    @property
+    def pending_renders(self) -> int:
+        """Frames rendered ahead for a watching client (PRERENDER on) that are queued and not
+        yet rendered."""
+        with self._lock:
+            return self._backlog
+
     def describe_renderer(self, timeout_s: float = 30.0) -> str:
         """The OpenGL renderer the cameras render on (probed when the render thread starts)."""
         self._described.wait(timeout_s)

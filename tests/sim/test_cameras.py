@@ -22,6 +22,7 @@ from skeye.sim.server import ControlServer
 from skeye.sim.world import PAD_SURFACE_HEIGHT_M, load_world
 from skeye.vision.pad import SKEYE_4
 from skeye.wire.images import DecodedFrame, RemoteError
+from tests.robustness.helpers import wait_for
 from tests.sim.conftest import LineClient
 from tests.sim.test_image_server import RawConn
 
@@ -464,6 +465,10 @@ def test_info_answers_the_newest_frame_without_rendering_it():
             img.set_prerender(False)
             _camera_shots(c.step(500))
             img.frame_info()  # (requests are served in order: PRERENDER off has been taken)
+            # the frames captured before it was taken were rendered ahead, as watched: the
+            # count starts once they are (frame 1's late render made it one more, about one
+            # run in four)
+            assert wait_for(lambda: cameras.pending_renders == 0, 60)
             rendered = cam.rendered
             for _ in range(3):
                 shots = _camera_shots(c.step(500))
