@@ -774,11 +774,13 @@ class MavlinkVehicle:
                           "only PX4 custom modes (base mode with CUSTOM_MODE_ENABLED)")
         mode = Px4Mode.from_custom(cmd.whole(2, "custom main mode"),
                                    cmd.whole(3, "custom sub mode"))
-        request = REQUESTS.get(mode) if mode is not None else None
-        if request is None:
-            name = mode.name if mode is not None else f"{cmd.p(2):g}/{cmd.p(3):g}"
+        if mode is None:  # it was said as one not flown, for the sticks of the AscTec link
             raise Refused(mav.MAV_RESULT_DENIED,
-                          f"mode {name} is not flown by this vehicle (attitude sticks come "
+                          f"custom mode {cmd.p(2):g}/{cmd.p(3):g} (main/sub) is no PX4 mode")
+        request = REQUESTS.get(mode)
+        if request is None:
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"mode {mode.name} is not flown by this vehicle (attitude sticks come "
                           "over its AscTec link)")
         if mode == self.mode and request is not Request.MISSION \
                 and self.boards.state is not NavState.FAILSAFE:

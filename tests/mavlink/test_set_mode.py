@@ -41,4 +41,8 @@ def test_set_mode_changes_the_mode_and_is_acknowledged():
             ack = wait_for(conn, "COMMAND_ACK", timeout_s=10)
             assert (ack.command, ack.result) == (M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED)
             assert "mode STABILIZED is not flown" in statustext(conn, timeout_s=10)
+            conn.mav.set_mode_send(1, CUSTOM, _px4(4, 99))  # no PX4 mode at all
+            ack = wait_for(conn, "COMMAND_ACK", timeout_s=10)
+            assert (ack.command, ack.result) == (M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED)
+            assert "custom mode 4/99 (main/sub) is no PX4 mode" in statustext(conn, timeout_s=10)
             assert server.errors == 0
