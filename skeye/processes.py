@@ -306,13 +306,32 @@ def sleep_until(stop: threading.Event, seconds: float) -> bool:
     return True
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""The signals that stop a skeye server in order: Ctrl-C, SIGTERM, and SIGHUP (its terminal or
+SSH session closed: a pilot started over SSH on a vehicle's computer stops as on Ctrl-C, its
+recording closed and its airframe let go, where the default disposition killed it outright)."""
+
+
+def on_stop_signals(handler: Callable[[int, Any], None]) -> dict[int, Any]:
+    """Install ``handler`` for each of :data:`STOP_SIGNALS` and return the handlers it replaced.
+
+    A SIGHUP this process was started ignoring is left ignored: ``nohup skeye sim`` keeps running
+    when its terminal closes, as nohup promises. (SIGINT and SIGTERM are always taken: a shell
+    starts a background job with SIGINT ignored, and ``kill -INT`` must still stop it.)"""
+    before: dict[int, Any] = {}
+    for sig in STOP_SIGNALS:
+        if sig == signal.SIGHUP and signal.getsignal(sig) is signal.SIG_IGN:
+            continue
+        before[sig] = signal.signal(sig, handler)
+    return before
+
+
 def wait_for_signal(stop: threading.Event, failed: threading.Event | None = None) -> None:
-    """Wait for SIGTERM/SIGINT (or ``failed`` to be set)."""
+    """Wait for a stop signal (:data:`STOP_SIGNALS`; or ``failed`` to be set)."""
     def handler(signum: int, frame: Any) -> None:
         stop.set()
 
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGINT, handler)
+    on_stop_signals(handler)
     while not sleep_until(stop, 0.2):
         if failed is not None and failed.is_set():
             return

@@ -24,6 +24,11 @@ settings.register_profile(
 )
 settings.load_profile("skeye")
 
+# SIGHUP at its default in this process and every child it starts: a suite started under
+# `nohup` (SIGHUP ignored, inherited) made every skeye process keep ignoring it, as nohup
+# promises (skeye.processes.on_stop_signals), and the tests that stop one with SIGHUP failed.
+signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
 
 def child_pids(pid: int) -> list[int]:
     """The direct children of ``pid`` (Linux /proc; empty elsewhere)."""

@@ -53,7 +53,13 @@ from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.outputs import cache_folder
 from skeye.peers import listen
-from skeye.processes import EXIT_LOST_SIMULATOR, check_ports_free, die_with_parent, sleep_until
+from skeye.processes import (
+    EXIT_LOST_SIMULATOR,
+    check_ports_free,
+    die_with_parent,
+    on_stop_signals,
+    sleep_until,
+)
 from skeye.uris import url_host
 
 if TYPE_CHECKING:
@@ -535,8 +541,7 @@ def run_up(args: argparse.Namespace) -> int:
                 if what not in killed:
                     killed.append(what)
 
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGINT, handler)
+    on_stop_signals(handler)
     commands: dict[str, tuple[list[str], tuple[int, ...]]] = {}  # what -> argv, its ports
     restarts: dict[str, list[float]] = {}  # what -> when it was restarted
 

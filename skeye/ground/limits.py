@@ -52,6 +52,7 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from skeye.peers import peer_key
+from skeye.processes import on_stop_signals
 
 log = logging.getLogger(__name__)
 
@@ -288,8 +289,7 @@ class GroundServer(uvicorn.Server):
         if threading.current_thread() is not threading.main_thread():
             yield  # only the main thread may set handlers (a test's server in a thread)
             return
-        stopping = (signal.SIGINT, signal.SIGTERM)
-        original = {sig: signal.signal(sig, self.handle_exit) for sig in stopping}
+        original = on_stop_signals(self.handle_exit)
         try:
             yield
         finally:

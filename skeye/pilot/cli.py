@@ -32,7 +32,6 @@ import logging
 import math
 import os
 import re
-import signal
 import socket
 import sys
 import threading
@@ -65,7 +64,7 @@ from skeye.pilot.video_server import (
     DEFAULT_VIDEO_PORT,
     VideoServer,
 )
-from skeye.processes import EXIT_LOST_SIMULATOR, sleep_until
+from skeye.processes import EXIT_LOST_SIMULATOR, on_stop_signals, sleep_until
 from skeye.wire.video import DEFAULT_JPEG_QUALITY
 
 log = logging.getLogger(__name__)
@@ -329,8 +328,7 @@ def run(args: argparse.Namespace) -> int:
             if forward is not None:  # a flight controller takes the detections (LANDING_TARGET)
                 server.boards.pad.add_listener(forward)
             stop = threading.Event()
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, lambda *_: stop.set())
+            on_stop_signals(lambda *_: stop.set())
             mavlink = open_mavlink(server, args, pad_vision=vision is not None)
             rtp = open_rtp_video(server, video, args)
             airframe_check = getattr(airframe, "check", None)

@@ -301,9 +301,11 @@ def test_ground_alone_says_on_the_terminal_that_it_cannot_reach_the_vehicle() ->
                         "connect: [Errno 111] Connection refused; trying again every 1 s\n"), said
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP],
+                         ids=["SIGINT", "SIGTERM", "SIGHUP"])
 def test_ground_alone_stops_on_ctrl_c_and_sigterm_saying_so(tmp_path: Path, sig: int) -> None:
-    """Ctrl-C (SIGINT at its default, as in a terminal) and SIGTERM stop ``skeye ground``
+    """Ctrl-C (SIGINT at its default, as in a terminal), SIGTERM and SIGHUP (its terminal
+    closed; it killed the process, status -1) stop ``skeye ground``
     with status 0 and its "stopped" line, after closing its vehicle link. uvicorn raised the
     signal again once it had shut down: Ctrl-C gave a KeyboardInterrupt traceback (130) and
     SIGTERM killed the process (143) before it said anything. The signal goes the moment the

@@ -200,20 +200,23 @@ def test_ctrl_c_while_starting_stops_with_status_0(standin: Path, group: bool) -
         _kill_up(proc)
 
 
-def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP], ids=["Ctrl-C", "hang-up"])
+def test_a_terminals_ctrl_c_stops_the_children_in_order(standin: Path, tmp_path: Path,
+                                                        sig: int) -> None:
     """A terminal's Ctrl-C goes to the whole foreground process group, which held the
     children too: ground control, the pilot and the simulator each got SIGINT at once, and
     ground control logged the pilot gone (``no link to the vehicle: ... the vehicle closed the
     link``) at a normal stop, the order of docs/ground.md not kept. The children now run in
     their own process group, so the Ctrl-C reaches ``skeye up`` alone, which stops them in
-    order with SIGTERM."""
+    order with SIGTERM. The terminal closing (SIGHUP to the group) stops them so too: it used
+    to kill ``skeye up`` outright (status -1), and the kernel SIGTERMed the three at once."""
     log = tmp_path / "stopped"
     proc = _spawn_up(standin, {"SKEYE_STANDIN_LOG": str(log)})
     try:
         _read_until_open(proc)
         children = _children(proc.pid)
         assert len(children) == 3
-        os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+        os.killpg(proc.pid, sig)  # what a terminal's Ctrl-C, or its closing, does
         assert proc.wait(60) == 0
         assert log.read_text().splitlines() == ["ground:SIGTERM", "pilot:SIGTERM",
                                                 "sim:SIGTERM"], log.read_text()
