@@ -18,7 +18,7 @@ from typing import Any
 from skeye import __version__, cliargs
 from skeye.cliargs import EXTRA_OF, missing_extra
 from skeye.errors import SkeyeError
-from skeye.processes import wait_for_signal
+from skeye.processes import on_stop_signals, wait_for_signal
 from skeye.uris import url_host
 
 ENGINE_FAILED_STATUS = 3
@@ -185,6 +185,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
         server = stack.enter_context(
             ControlServer(runner, host=args.host, port=args.port, **limits)
         )
+        # Taken before the address is printed: a stop signal sent the moment a user (or a
+        # script) reads it stops in order; it used to kill the process outright until the wait
+        # below set the handlers, after the other servers' lines.
+        on_stop_signals(lambda *_: stop.set())
         where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
         print(
             f"skeye sim: world {world.name!r}, {args.mode} mode, step {args.timestep * 1000:g} ms, "

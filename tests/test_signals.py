@@ -10,9 +10,12 @@ it; else a timer sends it a second later."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import textwrap
+
+from skeye.processes import die_with_parent, stop_process
 
 CHILD = textwrap.dedent("""
     import os, signal, threading
@@ -42,3 +45,24 @@ def test_sigterm_stops_the_wait_whenever_it_comes() -> None:
     child = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True,
                            timeout=60)
     assert child.returncode == 0 and child.stdout == "stopped\n", child
+
+
+def test_a_stop_signal_the_moment_the_simulator_prints_its_address_stops_it_in_order() -> None:
+    """``skeye sim`` printed its control address and went on starting its image server before
+    it took SIGTERM: a script (or a user) that stopped it on reading that line killed it
+    outright (status -15), its recording's last records unwritten. The handlers are now in
+    place before the address is printed."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "sim", "--port", "0", "--image-port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
+        preexec_fn=die_with_parent())
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # blocks until its first line (or its end)
+        assert "control protocol on" in first, first
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=120)
+    finally:
+        stop_process(proc)  # type: ignore[arg-type]
+    assert proc.returncode == 0, first + rest
+    assert rest.rstrip().endswith("skeye sim: stopping"), rest

@@ -41,7 +41,7 @@ from typing import Any
 from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
 from skeye.peers import accept_failed, listen
-from skeye.processes import check_ports_free, wait_for_signal
+from skeye.processes import check_ports_free, on_stop_signals, wait_for_signal
 from skeye.recording.records import SENT, Record, RecordingReader, robot_connections
 from skeye.uris import url_host
 from skeye.wire.sim import decode, encode, unknown_command
@@ -98,6 +98,11 @@ class ReplayServer:
                 yield rec
 
         self.robots = robot_connections(noting_first_lines(self.reader.records()))
+        self.skipped_lines = self.reader.bad_lines
+        """Records of the file that did not parse: counted, never played (said at the start)."""
+        self.cut_short = self.reader.truncated
+        """The file ends inside a line (a recording cut off by a crash): that line is not
+        played."""
         if not self.robots:
             raise ConfigError(f"{path}: the recording holds no robot (no INIT answer, no robot "
                               "status line)")
@@ -373,11 +378,20 @@ def cmd_replay(args: argparse.Namespace) -> int:
     with ReplayServer(
         args.file, host=args.host, port=args.port, speed=args.speed, robot=args.robot
     ) as server:
+        stop = threading.Event()
+        on_stop_signals(lambda *_: stop.set())  # before its address is printed, as the sim's
         where = "all interfaces" if args.host in ("0.0.0.0", "::") else args.host
         parts = server.reader.parts
         if server.reader.broken is not None:
             print(f"skeye replay: warning: {server.reader.broken}: playing "
                   f"{', '.join(p.name for p in parts)} only", file=sys.stderr, flush=True)
+        if server.skipped_lines:
+            print(f"skeye replay: warning: {args.file}: {server.skipped_lines} "
+                  f"line{'s' if server.skipped_lines > 1 else ''} that did not parse, skipped",
+                  file=sys.stderr, flush=True)
+        if server.cut_short:
+            print(f"skeye replay: warning: {args.file}: its last line is cut short (the "
+                  "recording ended in a crash?), not played", file=sys.stderr, flush=True)
         of = f" ({len(parts)} parts: {', '.join(p.name for p in parts)})" if len(parts) > 1 \
             else ""
         print(
@@ -392,7 +406,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 "machines",
                 flush=True,
             )
-        wait_for_signal(threading.Event())
+        wait_for_signal(stop)
         print("skeye replay: stopping", flush=True)
     return 0
 

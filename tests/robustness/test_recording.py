@@ -11,6 +11,7 @@ import signal
 import socket
 import struct
 import subprocess
+import sys
 import threading
 import time
 import tracemalloc
@@ -25,6 +26,7 @@ from hypothesis import strategies as st
 
 from skeye.cli import main
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
+from skeye.processes import die_with_parent, stop_process
 from skeye.recording.plotting import load_tracks, plot_recording
 from skeye.recording.records import (
     DEFAULT_MAX_PARTS,
@@ -1141,6 +1143,35 @@ def test_an_empty_robot_name_is_refused_not_taken_for_the_first_robot(
         ReplayServer(path, port=0, robot="")
     assert main(["replay", str(path), "--port", "0", "--robot", ""]) == 2
     assert "no robot '' in the recording" in capsys.readouterr().err
+
+
+def test_a_replay_says_the_lines_it_skips_and_a_last_line_cut_short(tmp_path: Path) -> None:
+    """Lines of a recording that do not parse, and a last line a crash cut short, are skipped
+    by every reader; ``skeye plot`` counted them in its summary, but ``skeye replay`` played
+    on without a word, so a damaged file looked whole to its user. It says both at the start
+    (stderr), and serves the rest."""
+    path = _short_flight(tmp_path / "damaged.rec")
+    lines = path.read_bytes().splitlines(keepends=True)
+    path.write_bytes(b"".join(lines[:3]) + b"not a record\n" + b"".join(lines[3:])
+                     + b"{not one either\n" + lines[-1][:20])
+    with ReplayServer(path, port=0) as replay:
+        assert (replay.skipped_lines, replay.cut_short) == (2, True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skeye.cli", "replay", str(path), "--port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
+        preexec_fn=die_with_parent())
+    try:
+        assert proc.stdout is not None
+        banner = proc.stdout.readline()  # blocks until its first line (or its end)
+        assert "control protocol on" in banner, banner
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        stop_process(proc)  # type: ignore[arg-type]
+    assert proc.returncode == 0, err
+    assert err == (f"skeye replay: warning: {path}: 2 lines that did not parse, skipped\n"
+                   f"skeye replay: warning: {path}: its last line is cut short (the recording "
+                   "ended in a crash?), not played\n"), err
 
 
 def _write_to_fifo_reader(path: Path, content: bytes, timeout_s: float = 60.0) -> None:
