@@ -89,6 +89,9 @@ class FlightSettings:
             if not folder.is_dir():
                 raise ConfigError(f"robot_dir {str(folder)!r}: "
                                   f"{'not a folder' if folder.exists() else 'no such folder'}")
+        if self.calibration == "":
+            raise ConfigError("calibration must name a calibration file (skeye calibrate's "
+                              "camera.toml), or be \"model\" or None, got ''")
         if self.estimator is not None and self.estimator not in ESTIMATOR_KINDS:
             raise ConfigError(f"estimator must be one of {list(ESTIMATOR_KINDS)}, "
                               f"got {self.estimator!r}")

@@ -244,6 +244,8 @@ def _integer(table: dict[str, Any], key: str, where: str) -> int:
 
 def load_calibration(path: str | Path) -> CameraCalibration:
     """Read camera.toml; ConfigError names the file and the key at fault."""
+    if isinstance(path, str) and not path:  # Path("") is ".": "Is a directory", said of "."
+        raise ConfigError("no calibration file named (an empty name)")
     p = Path(path)
     try:
         data = tomllib.loads(p.read_text(encoding="utf-8"))

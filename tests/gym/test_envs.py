@@ -215,6 +215,9 @@ def test_bad_options_are_refused_with_their_name(kwargs: dict, message: str) -> 
     ({"robot_dir": 5}, "robot_dir must be"),
     ({"camera_name": 3}, "camera_name must be a string"),
     ({"calibration": 3}, "calibration must be a string"),
+    # "" (a variable left empty) was read as the folder ".": "cannot read calibration file:
+    # Is a directory", naming no option
+    ({"calibration": ""}, "calibration must name a calibration file"),
     ({"timestep_s": 0}, "timestep_s must be in"),
     ({"timestep_s": 1.0}, "timestep_s must be in"),
     ({"episode_s": "x"}, "episode_s must be a finite number"),
