@@ -660,6 +660,14 @@ class MavlinkVehicle:
         alt = cmd.p(7)
         if math.isnan(alt):
             height = self.settings.takeoff_alt_m
+        elif not math.isfinite(alt):  # was "inf m AMSL is not at least 0.1 m above the vehicle"
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"take-off altitude (param7) {alt:g} m is not a finite number: give "
+                          "metres above mean sea level, or NaN for MIS_TAKEOFF_ALT")
+        elif alt > ORIGIN_MAX_ALT_M:  # bounded before the boards' packet, which it overflowed
+            raise Refused(mav.MAV_RESULT_DENIED,
+                          f"take-off altitude (param7) {alt:g} m above mean sea level is over "
+                          f"{ORIGIN_MAX_ALT_M:g} m (the edge of space)")
         else:
             origin = self.origin()
             if origin is None:

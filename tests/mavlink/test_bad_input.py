@@ -177,6 +177,21 @@ def test_a_reposition_with_bad_values_is_refused_naming_the_value():
             assert server.errors == 0
 
 
+def test_a_take_off_altitude_that_is_no_number_or_past_space_is_refused_naming_param7():
+    """NAV_TAKEOFF's param7 infinite was refused as "inf m AMSL is not at least 0.1 m above
+    the vehicle"; 1e30 reached the boards' packet and came back as its encoder's
+    "TakeOff.height=1000000015047466219876688855040000 outside 1..2147483647"."""
+    with scripted_endpoint("udp://127.0.0.1:0") as server:
+        with ground_station(server) as conn:
+            assert command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)[0] == M.MAV_RESULT_ACCEPTED
+            for alt, words in ((math.inf, "(param7) inf m is not a finite number"),
+                               (-math.inf, "(param7) -inf m is not a finite number"),
+                               (1e30, "(param7) 1e+30 m above mean sea level is over 100000 m")):
+                result, text = command(conn, M.MAV_CMD_NAV_TAKEOFF, *[0.0] * 6, alt)
+                assert result == M.MAV_RESULT_DENIED and words in text, (alt, text)
+            assert server.errors == 0
+
+
 def _mission_ack(conn, item: dict, count: int = 1) -> tuple[int, str]:
     conn.mav.mission_count_send(1, 1, count, M.MAV_MISSION_TYPE_MISSION)
     msg = wait_for(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"])
