@@ -162,7 +162,14 @@ class PadHoldLaw:
         height estimate, which bounds the search when the pad is not seen (else the height of
         the last detection does)."""
         p = self.p
-        dt = 0.0 if self._last_time_s is None else max(0.0, time_s - self._last_time_s)
+        if not math.isfinite(time_s):  # a NaN time would never count as lost: no search
+            raise LocalProtocolError(f"pad hold: time must be finite, got {time_s!r}")
+        if self._last_time_s is not None and time_s < self._last_time_s:
+            # The clock went back (a restarted simulator under a re-attached pilot): nothing
+            # from the old clock holds. Kept, a pad last seen at 500 s left the vehicle
+            # holding still, never searching, until the new clock passed 500 s.
+            self.reset()
+        dt = 0.0 if self._last_time_s is None else time_s - self._last_time_s
         self._last_time_s = time_s
         if not found:
             if self._last_seen_s is None or time_s - self._last_seen_s >= p.lost_after_s:

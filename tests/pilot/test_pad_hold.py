@@ -90,3 +90,22 @@ def test_the_integral_does_not_wind_up_while_the_speed_is_at_its_limit():
         law.update(i * 0.05, True, 3.0, 0.0, 1.5)
     # Just past the pad: the command turns back at once (no integral left pushing on).
     assert law.update(20.0, True, -0.1, 0.0, 1.5).forward_m_s < 0
+
+
+def test_a_clock_that_goes_back_starts_the_law_afresh():
+    # A pad last seen at 500 s, then a clock that starts again (a restarted simulator under a
+    # re-attached pilot): the pad is unseen on the new clock, so the law searches after
+    # lost_after_s, not only once the new clock passes 500 s.
+    law = PadHoldLaw(PadHoldParams(lost_after_s=0.5))
+    law.update(500.0, True, 0.3, 0.0, 2.0)
+    sp = law.update(0.0, False, altitude_m=2.0)
+    assert sp.searching and sp.up_m_s > 0
+
+
+def test_a_time_that_is_not_finite_is_refused():
+    law = PadHoldLaw()
+    law.update(1.0, True, 0.3, 0.0, 2.0)
+    for bad in (math.nan, math.inf):
+        with pytest.raises(LocalProtocolError, match="time must be finite"):
+            law.update(bad, True, 0.3, 0.0, 2.0)
+    assert law.update(2.0, False, altitude_m=2.0).searching  # the law's clock is intact
