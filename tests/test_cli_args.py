@@ -81,6 +81,9 @@ CASES = [
     (["replay", "flight.rec", "--port", "0", "--speed", "5000"], "--speed"),
     (["replay", "flight.rec", "--port", "0", "--speed", "0.001"], "--speed"),
     (["plot", "flight.rec", "--out", "x.txt"], "--out"),
+    # said as "dpi must be within 10..1200", without the option's name
+    (["pad", "--out", "x.png", "--dpi", "0"], "--dpi"),
+    (["pad", "--out", "x.png", "--dpi", "5000"], "--dpi"),
     (["logs", "--rate", "200", "--seconds", "-5"], "--seconds"),
     (["logs", "--rate", "200", "--seconds", "0"], "--seconds"),
     (["logs", "--rate", "200", "--seconds", "1"], "--seconds"),

@@ -28,7 +28,7 @@ from skeye.image_files import read_image_file
 from skeye.outputs import output_file, write_whole
 from skeye.vision.detector import detect
 from skeye.vision.pad import SKEYE_4, resolve_pad
-from skeye.vision.printable import DEFAULT_DPI, write_printable
+from skeye.vision.printable import DEFAULT_DPI, MAX_DPI, MIN_DPI, write_printable
 
 EXIT_BAD_INPUT = 2
 PAD = "skeye pad"
@@ -52,6 +52,8 @@ def cmd_pad(args: argparse.Namespace) -> int:
         return _fail(PAD, f"--dpi sets a PNG's resolution; {name} is a PDF (vector: it has "
                      "none to set)")
     dpi = DEFAULT_DPI if args.dpi is None else args.dpi
+    if not MIN_DPI <= dpi <= MAX_DPI:  # (the printer's own check did not name the option)
+        return _fail(PAD, f"--dpi must be within {MIN_DPI}..{MAX_DPI} dots per inch, got {dpi}")
     out = args.out
     try:
         pad = resolve_pad(args.pad)
@@ -144,7 +146,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--out", required=True, help="output file, .pdf or .png")
     p.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
     p.add_argument("--dpi", type=int, default=None,
-                   help=f"PNG resolution (dots per inch; default {DEFAULT_DPI})")
+                   help=f"PNG resolution (dots per inch, {MIN_DPI}..{MAX_DPI}; default "
+                   f"{DEFAULT_DPI})")
     p.add_argument(
         "--paper",
         choices=("a4", "letter"),

@@ -40,6 +40,7 @@ if TYPE_CHECKING:
 METRES_PER_INCH = 0.0254
 DEFAULT_MARGIN_M = 0.02
 DEFAULT_DPI = 300
+MIN_DPI, MAX_DPI = 10, 1200  # what `skeye pad --dpi` takes for a PNG
 MAX_PNG_SIDE_PX = 32768  # 4 GiB of RGBA while drawing; skeye-4's page at 1200 dpi is 30236
 PAPERS_M: dict[str, tuple[float, float]] = {  # portrait width, height
     "a4": (0.210, 0.297),
@@ -320,8 +321,8 @@ def write_printable(
         raise LocalProtocolError(f"printable pad must be .pdf or .png, got {out.name!r}")
     if not 0 <= margin_m <= 1.0:
         raise LocalProtocolError(f"margin must be within 0..1 m, got {margin_m}")
-    if ext == ".png" and not 10 <= dpi <= 1200:
-        raise LocalProtocolError(f"dpi must be within 10..1200, got {dpi}")
+    if ext == ".png" and not MIN_DPI <= dpi <= MAX_DPI:
+        raise LocalProtocolError(f"dpi must be within {MIN_DPI}..{MAX_DPI}, got {dpi}")
     side = page_size_m(pad, margin_m)
     pdf_fits = side <= MAX_PDF_SIDE_M * (1 + 1e-12)
     if ext == ".png" and paper is None:
