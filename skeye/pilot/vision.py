@@ -227,7 +227,9 @@ class LateVision:
             return True
         if not self.on:
             return None
-        if self.in_time_since_s is None:
+        if self.in_time_since_s is None or now_s < self.in_time_since_s:
+            # (a clock that went back, a restarted simulator under a re-attached pilot, counts
+            # from now: kept, the old clock's time held the flag on until the new one passed it)
             self.in_time_since_s = now_s
         if now_s - self.in_time_since_s < self.recovery_s - 1e-9:
             return None

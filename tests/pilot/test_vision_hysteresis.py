@@ -41,3 +41,18 @@ def test_warnings_are_rate_limited_and_count_what_they_held_back() -> None:
             said.append(text)
     assert len(said) == 9, said  # one a minute
     assert said[0] == "too slow" and said[1] == "too slow (7 more such in the last 62 s)"
+
+
+def test_a_clock_that_goes_back_counts_the_recovery_from_its_own_time() -> None:
+    # Too slow, recovering since 500 s of the old clock; then the clock starts again (a
+    # restarted simulator under a re-attached pilot): in time for VISION_RECOVERY_S of the new
+    # clock turns it off, not only once the new clock passes 500 s.
+    flag = LateVision()
+    assert flag.update(True, 499.9) is True
+    assert flag.update(False, 500.0) is None
+    t, off_at = 0.0, None
+    while t < 3.0 and off_at is None:
+        if flag.update(False, round(t, 9)) is False:
+            off_at = round(t, 9)
+        t += 0.1
+    assert off_at == round(VISION_RECOVERY_S, 9) and not flag.on
