@@ -53,8 +53,11 @@ DOWNWARD_CAMERA_TO_BODY = np.array(
 
 def _check_fov(fov_h_rad: float) -> float:
     """The field of view as a float; any real number (numpy's included), not a bool."""
-    if (isinstance(fov_h_rad, bool) or not isinstance(fov_h_rad, numbers.Real)
-            or not 0.0 < fov_h_rad < math.pi):
+    if isinstance(fov_h_rad, bool) or not isinstance(fov_h_rad, numbers.Real):
+        # (said as "must be in (0, pi) rad, got 1.3" for the string "1.3")
+        raise LocalProtocolError(f"horizontal field of view must be a number of radians, got "
+                                 f"{type(fov_h_rad).__name__} {fov_h_rad!r}")
+    if not 0.0 < fov_h_rad < math.pi:
         raise LocalProtocolError(
             f"horizontal field of view must be in (0, pi) rad, got {fov_h_rad}"
         )

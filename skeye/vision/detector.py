@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any
 
@@ -400,6 +401,10 @@ def detect(
     if (roll_rad is None) != (pitch_rad is None):
         raise LocalProtocolError("give both roll_rad and pitch_rad, or neither")
     for name, value in (("roll_rad", roll_rad), ("pitch_rad", pitch_rad)):
+        if value is not None and (isinstance(value, bool)
+                                  or not isinstance(value, numbers.Real)):  # was a TypeError
+            raise LocalProtocolError(f"{name} must be a number of radians, got "
+                                     f"{type(value).__name__} {value!r}")
         if value is not None and not (math.isfinite(value) and abs(value) < math.pi / 2):
             raise LocalProtocolError(f"{name} must be finite and within (-pi/2, pi/2), got {value}")
     grey = to_grey(image)

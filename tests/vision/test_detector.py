@@ -270,3 +270,14 @@ def test_bad_input_raises(image, kwargs, match):
 def test_bad_fov_raises():
     with pytest.raises(LocalProtocolError, match="field of view"):
         detect(np.zeros((600, 800), np.uint8), 0.0)
+
+
+def test_a_fov_roll_or_pitch_that_is_no_number_is_said_so():
+    # The string "1.3" was said as "must be in (0, pi) rad, got 1.3"; a string roll was a
+    # TypeError from math.isfinite.
+    grey = np.zeros((600, 800), np.uint8)
+    with pytest.raises(LocalProtocolError, match=r"field of view must be a number .* str '1\.3'"):
+        detect(grey, "1.3")  # type: ignore[arg-type]
+    for kw in ({"roll_rad": "0.1", "pitch_rad": 0.0}, {"roll_rad": 0.0, "pitch_rad": True}):
+        with pytest.raises(LocalProtocolError, match="_rad must be a number of radians"):
+            detect(grey, 1.3, **kw)
