@@ -160,6 +160,11 @@ def pad_from_dict(data: dict[str, object], source: str = "<dict>") -> PadDefinit
     name = data["name"]
     if not isinstance(name, str) or not name:
         raise ConfigError(f"{source}: name must be a non-empty string, got {name!r}")
+    if not name.isprintable():  # printed on the page and said on the terminal: a newline
+        # broke the page's caption, an escape sequence reached the terminal, a NUL was drawn as
+        # a missing glyph
+        raise ConfigError(f"{source}: name must be printable characters (no newline, tab or "
+                          f"control character), got {name!r}")
     side_m = number(data["side_m"], "side_m")
     rings_data = data["rings"]
     if not isinstance(rings_data, list) or not rings_data:

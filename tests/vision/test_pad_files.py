@@ -79,6 +79,12 @@ def test_load_pad_from_toml(tmp_path):
          "side_m must be a positive finite number, got inf"),
         ("name = 'x'\nside_m = nan\nrings = [{outer_m = 0.2, inner_m = 0.1}]",
          "side_m must be a positive finite number, got nan"),
+        # a name is printed on the page and said on the terminal: a newline, a tab or an
+        # escape sequence went there as it was
+        ('name = "a\\nb"\nside_m = 0.6\nrings = [{outer_m = 0.2, inner_m = 0.1}]',
+         "name must be printable"),
+        ('name = "\\u001b[31mred"\nside_m = 0.6\nrings = [{outer_m = 0.2, inner_m = 0.1}]',
+         "name must be printable"),
     ],
 )
 def test_bad_pad_files_name_the_file_and_key(tmp_path, text, match):
