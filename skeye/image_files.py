@@ -155,8 +155,14 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
         if image is not None and image.dtype == np.uint16:
             image = _to_8_bits(image)
         elif image is not None and image.dtype != np.uint8:  # float (TIFF, EXR): as OpenCV does
+            depth = image.dtype
             image = cv2.imdecode(np.frombuffer(data, np.uint8),
                                  flags | cv2.IMREAD_IGNORE_ORIENTATION)
+            if image is None:  # OpenCV reads it only as it is (a 32-bit float TIFF): no grey
+                # levels to take (was "not a supported image format?", for a file it reads)
+                raise ConfigError(f"image {path} has {depth} samples, which are not brought to "
+                                  "8 bits (their range is the writer's choice): save it with 8 "
+                                  "or 16 bits")
     except cv2.error as exc:  # OpenCV refuses, with an assertion, what it will not decode
         raise ConfigError(f"image {path} does not decode: {_too_large(data) or _reason(exc)}"
                           ) from None

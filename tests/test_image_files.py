@@ -180,3 +180,13 @@ def test_a_file_declaring_more_pixels_than_opencv_decodes_is_named(tmp_path: Pat
                        r"60000x60000 px \(3600000000 pixels\), more than the 1073741824 "
                        "OpenCV decodes"):
         read_image_file(big, cv2.IMREAD_GRAYSCALE)
+
+
+def test_a_floating_point_image_is_said_to_be_one(tmp_path: Path) -> None:
+    """A 32-bit float TIFF, which OpenCV reads only as floats, was said to be "not a supported
+    image format?"; its samples are named, with the 8 or 16 bits that are read."""
+    path = tmp_path / "frame.tiff"
+    assert cv2.imwrite(str(path), np.linspace(0.0, 1.0, 64 * 48, dtype=np.float32).reshape(48, 64))
+    with pytest.raises(ConfigError, match=r"float32 samples.*8 or 16 bits") as info:
+        read_image_file(path, cv2.IMREAD_GRAYSCALE)
+    assert str(path) in str(info.value)
