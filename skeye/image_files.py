@@ -7,7 +7,8 @@ first walks the file's structure (:func:`damage`): a JPEG's marker segments and 
 scans up to its end-of-image marker (FF D9), a PNG's chunks up to IEND. Bytes after that end
 are allowed (some cameras pad their files). A file of another format goes to OpenCV as it is.
 A 16-bit image is brought to 8 bits by the bits its data uses (a 12-bit sensor's frame in a
-16-bit PNG is shifted right by 4, not 8: OpenCV's own conversion left it 16 grey levels).
+16-bit PNG is shifted right by 4, not 8: OpenCV's own conversion left it 16 grey levels);
+a floating-point one (PFM, a 32-bit TIFF, HDR) is refused: its range is the writer's choice.
 Pixels are decoded as the sensor recorded them: an EXIF orientation tag (phones, some cameras)
 is not applied, as the ``file://`` camera's video reader does not apply it either, since a field
 of view and a calibration describe the sensor's rows and columns (rotated, a 4:3 frame's
@@ -152,17 +153,20 @@ def read_image_file(path: str | Path, flags: int = cv2.IMREAD_COLOR) -> np.ndarr
         image = (cv2.imdecode(np.frombuffer(data, np.uint8),
                               flags | cv2.IMREAD_IGNORE_ORIENTATION | cv2.IMREAD_ANYDEPTH)
                  if data else None)
+        if image is None and data:  # a colour float TIFF does not decode as grey: as it is
+            image = cv2.imdecode(np.frombuffer(data, np.uint8),
+                                 cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
+            if image is not None and image.dtype in (np.uint8, np.uint16):
+                image = None  # (it decodes only unchanged: OpenCV's refusal stands)
         if image is not None and image.dtype == np.uint16:
             image = _to_8_bits(image)
-        elif image is not None and image.dtype != np.uint8:  # float (TIFF, EXR): as OpenCV does
-            depth = image.dtype
-            image = cv2.imdecode(np.frombuffer(data, np.uint8),
-                                 flags | cv2.IMREAD_IGNORE_ORIENTATION)
-            if image is None:  # OpenCV reads it only as it is (a 32-bit float TIFF): no grey
-                # levels to take (was "not a supported image format?", for a file it reads)
-                raise ConfigError(f"image {path} has {depth} samples, which are not brought to "
-                                  "8 bits (their range is the writer's choice): save it with 8 "
-                                  "or 16 bits")
+        elif image is not None and image.dtype != np.uint8:  # float (TIFF, PFM, HDR, EXR)
+            # Their range is the writer's choice, and OpenCV's own 8 bits are no grey levels to
+            # take: a PFM of 0..1 became 0 and 1 (the pad "not found", status 0), a 32-bit
+            # float TIFF nothing ("not a supported image format?"), a Radiance HDR a gamma curve.
+            raise ConfigError(f"image {path} has {image.dtype} samples, which are not brought "
+                              "to 8 bits (their range is the writer's choice): save it with 8 "
+                              "or 16 bits")
     except cv2.error as exc:  # OpenCV refuses, with an assertion, what it will not decode
         raise ConfigError(f"image {path} does not decode: {_too_large(data) or _reason(exc)}"
                           ) from None

@@ -182,11 +182,14 @@ def test_a_file_declaring_more_pixels_than_opencv_decodes_is_named(tmp_path: Pat
         read_image_file(big, cv2.IMREAD_GRAYSCALE)
 
 
-def test_a_floating_point_image_is_said_to_be_one(tmp_path: Path) -> None:
+@pytest.mark.parametrize("suffix", [".tiff", ".pfm"])
+def test_a_floating_point_image_is_said_to_be_one(tmp_path: Path, suffix: str) -> None:
     """A 32-bit float TIFF, which OpenCV reads only as floats, was said to be "not a supported
-    image format?"; its samples are named, with the 8 or 16 bits that are read."""
-    path = tmp_path / "frame.tiff"
-    assert cv2.imwrite(str(path), np.linspace(0.0, 1.0, 64 * 48, dtype=np.float32).reshape(48, 64))
+    image format?"; a PFM of 0..1 was read as OpenCV brings it to 8 bits, 0 and 1 (a frame
+    with the pad was "not found"). Their samples are named, with the 8 or 16 bits read."""
+    path = tmp_path / f"frame{suffix}"
+    grey = np.linspace(0.0, 1.0, 64 * 48, dtype=np.float32).reshape(48, 64)
+    assert cv2.imwrite(str(path), cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR))
     with pytest.raises(ConfigError, match=r"float32 samples.*8 or 16 bits") as info:
         read_image_file(path, cv2.IMREAD_GRAYSCALE)
     assert str(path) in str(info.value)
