@@ -70,6 +70,11 @@ def cmd_pad(args: argparse.Namespace) -> int:
         from skeye.vision.printable import page_size_m, plan_tiles
 
         plan = plan_tiles(page_size_m(pad), args.paper)
+        if len(plan.tiles) == 1:  # nothing to cut or lay (was "1 a4 sheets (1 rows x 1
+            # columns ...); ... cut each sheet's left and top margins off ...")
+            print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale): one "
+                  f"{args.paper} sheet; print at 100 %, check the 100 mm bar")
+            return 0
         print(f"wrote {out} ({pad.name}, side {pad.side_m} m, true scale): {len(plan.tiles)} "
               f"{args.paper} sheets ({plan.rows} rows x {plan.cols} columns, "
               f"{'landscape' if plan.landscape else 'portrait'}); print at 100 %, check the "

@@ -214,6 +214,20 @@ def test_pad_command_tiles_over_paper(tmp_path, capsys):
     assert "--paper writes a PDF of sheets" in capsys.readouterr().err
 
 
+def test_a_pad_on_one_sheet_is_not_said_to_need_cutting_and_laying(tmp_path, capsys):
+    # A pad that fits one sheet was said as "1 a4 sheets (1 rows x 1 columns, portrait); ...
+    # cut each sheet's left and top margins off at its cut marks, lay the sheets row by row"
+    pad_file = tmp_path / "small.toml"
+    pad_file.write_text("name = 'small'\nside_m = 0.1\nrings = [{outer_m = 0.05, inner_m = 0.04}, "
+                        "{outer_m = 0.03, inner_m = 0.01}]")
+    out = tmp_path / "small.pdf"
+    assert run(["pad", "--out", str(out), "--pad", str(pad_file), "--paper", "a4"]) == 0
+    said = capsys.readouterr().out
+    assert said == (f"wrote {out} (small, side 0.1 m, true scale): one a4 sheet; print at "
+                    "100 %, check the 100 mm bar\n"), said
+    assert out.read_bytes().startswith(b"%PDF")
+
+
 def test_detect_takes_a_calibration_file(tmp_path, capsys):
     """A rendered pad seen through k1 = -0.2: --calibration gives the true height back."""
     from skeye.vision.calibration import CameraCalibration
