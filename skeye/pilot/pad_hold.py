@@ -165,10 +165,14 @@ class PadHoldLaw:
         if not math.isfinite(time_s):  # a NaN time would never count as lost: no search
             raise LocalProtocolError(f"pad hold: time must be finite, got {time_s!r}")
         if self._last_time_s is not None and time_s < self._last_time_s:
-            # The clock went back (a restarted simulator under a re-attached pilot): nothing
-            # from the old clock holds. Kept, a pad last seen at 500 s left the vehicle
-            # holding still, never searching, until the new clock passed 500 s.
-            self.reset()
+            # The clock went back (a restarted simulator under a re-attached pilot, or a
+            # snapshot a little older than the last): no time passed, so the pad was last seen
+            # as long before now as before the step. Kept on the old clock, a pad last seen at
+            # 500 s left the vehicle holding still, never searching, until the new clock passed
+            # 500 s; a full reset would drop the integral on a reordered snapshot.
+            if self._last_seen_s is not None:
+                self._last_seen_s += time_s - self._last_time_s
+            self._last_time_s = time_s
         dt = 0.0 if self._last_time_s is None else time_s - self._last_time_s
         self._last_time_s = time_s
         if not found:

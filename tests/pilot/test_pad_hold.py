@@ -92,14 +92,23 @@ def test_the_integral_does_not_wind_up_while_the_speed_is_at_its_limit():
     assert law.update(20.0, True, -0.1, 0.0, 1.5).forward_m_s < 0
 
 
-def test_a_clock_that_goes_back_starts_the_law_afresh():
+def test_a_clock_that_goes_back_counts_no_time_across_the_step():
     # A pad last seen at 500 s, then a clock that starts again (a restarted simulator under a
-    # re-attached pilot): the pad is unseen on the new clock, so the law searches after
-    # lost_after_s, not only once the new clock passes 500 s.
+    # re-attached pilot): the law searches once the pad has been unseen for lost_after_s of
+    # the new clock, not only once the new clock passes 500 s.
     law = PadHoldLaw(PadHoldParams(lost_after_s=0.5))
     law.update(500.0, True, 0.3, 0.0, 2.0)
-    sp = law.update(0.0, False, altitude_m=2.0)
+    brief = law.update(0.0, False, altitude_m=2.0)
+    assert not brief.searching and brief.up_m_s == 0.0  # a missed frame: keep still
+    sp = law.update(0.6, False, altitude_m=2.0)
     assert sp.searching and sp.up_m_s > 0
+    # A snapshot a little older than the last keeps what the law has learnt: the integral
+    # still pushes as it did.
+    law = PadHoldLaw()
+    for i in range(60):
+        steady = law.update(i / 20, True, 0.0, 0.08, 1.0)
+    again = law.update(59 / 20 - 0.01, True, 0.0, 0.08, 1.0)
+    assert again.right_m_s == pytest.approx(steady.right_m_s)
 
 
 def test_a_time_that_is_not_finite_is_refused():
