@@ -55,6 +55,7 @@ REST_TURN_DEG = 1.0  # a truth turning more than this in the first second: not a
 GAP_INTERVALS = 5.0  # an IMU interval this many median ones long (and over 0.1 s) is a gap
 VIBRATION_FROM_HZ = 10.0  # the vibration figure: the content above this (imu_figures' low_hz)
 MAX_SIM_S = 120.0  # the simulated hover's longest: a log's length beyond it, --seconds' limit
+MAX_RATE_HZ = 10000.0  # the simulated IMU's fastest rate: --rate's limit, and a log's
 
 
 def _quat_rows(q: np.ndarray) -> np.ndarray:
@@ -205,8 +206,20 @@ def axis_mean_spectrum(log: ImuLog, attr: str) -> tuple[np.ndarray, np.ndarray]:
 
 def reference_imu(log: ImuLog, robot: str = "hummingbird") -> ImuLog:
     """The simulated IMU a log is compared with: at the log's rate, as long (``MAX_SIM_S`` at
-    most)."""
-    return simulated_imu(log.rate_hz, min(MAX_SIM_S, float(log.t_s[-1] - log.t_s[0])), robot)
+    most). A log whose rate (its median interval's) is over ``MAX_RATE_HZ`` is refused: IMU
+    stamps that come in bursts (a FIFO's samples stamped as they are read, microseconds apart)
+    read a rate of a MHz or more, and its simulated IMU (a Python loop, 12 us a sample) then
+    ran for hours or ran out of memory, with no word."""
+    seconds = float(log.t_s[-1] - log.t_s[0])
+    rate = log.rate_hz
+    if rate > MAX_RATE_HZ:
+        raise ConfigError(
+            f"{log.name}: the IMU samples every {1.0 / rate:.3g} s (its median interval: "
+            f"{rate:.3g} Hz), over the {MAX_RATE_HZ:g} Hz the simulated IMU is sampled at most; "
+            f"its {len(log.t_s)} samples over {seconds:.3g} s are "
+            f"{(len(log.t_s) - 1) / seconds:.3g} Hz on average (stamps that come in bursts, "
+            "several samples read at once, are no rate)")
+    return simulated_imu(rate, min(MAX_SIM_S, seconds), robot)
 
 
 def refuse_gaps(log: ImuLog) -> None:
@@ -390,11 +403,11 @@ def cmd_logs(args: argparse.Namespace) -> int:
         rate = DEFAULT_RATE_HZ if args.rate is None else args.rate
         seconds = DEFAULT_SECONDS if args.seconds is None else args.seconds
         if not (math.isfinite(rate) and samples_above(rate, VIBRATION_FROM_HZ)
-                and rate <= 10000.0):
+                and rate <= MAX_RATE_HZ):
             raise ConfigError(f"--rate must be over {lowest_rate_hz(VIBRATION_FROM_HZ):g} Hz (the "
                               f"vibration figure measures above {VIBRATION_FROM_HZ:g} Hz, and a "
-                              "rate samples nothing above half itself) and at most 10000, got "
-                              f"{rate:g}")
+                              "rate samples nothing above half itself) and at most "
+                              f"{MAX_RATE_HZ:g}, got {rate:g}")
         if not MIN_HOVER_S <= seconds <= MAX_SIM_S:  # 1e9 s asked numpy for 1.5 TiB
             raise ConfigError(f"--seconds must be {MIN_HOVER_S:g}..{MAX_SIM_S:g} s (the first "
                               f"{REST_S:g} s at rest, then the hover; a log's simulated IMU is "

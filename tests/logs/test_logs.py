@@ -703,3 +703,20 @@ def test_a_figure_whose_rename_fails_leaves_the_other_not_written(
     assert capsys.readouterr().err == (f"skeye logs: error: --plot {tmp_path / 's.png'}: cannot "
                                        "write it: Operation not permitted\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["MH_rename"]
+
+
+def test_imu_stamps_in_bursts_are_refused_not_simulated_at_their_median_rate(
+        flight: make_logs.Synthetic, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A FIFO's samples stamped as they are read: three at a time, 10 us apart, every 15 ms. The
+    # median interval read a rate of 100 kHz, and the simulated IMU beside the log was sampled
+    # at it (exit 0, after 30 s for these 3 s; 1 us apart, a minute a second of log; 1 ns apart,
+    # out of memory), with no word.
+    k = np.arange(int(3.0 * RATE_HZ))
+    burst = dataclasses.replace(_cut(flight, k), t_s=(k // 3) * 0.015 + (k % 3) * 1e-5)
+    folder = make_logs.write_euroc(tmp_path / "MH_burst", burst)
+    assert main(["logs", str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"skeye logs: error: {folder}: the IMU samples every ") and (
+        "over the 10000 Hz the simulated IMU is sampled at most; its 600 samples over 2.99 s "
+        "are 201 Hz on average") in err, err
+    assert len(err.splitlines()) == 1, err
