@@ -24,6 +24,7 @@ not at all (a failed write leaves the previous file as it was).
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import math
 import os
 import time
@@ -452,8 +453,9 @@ def calibrate(
     or not, the seconds it took).
 
     Raises:
-        LocalProtocolError: mixed image sizes, an image under 16 px a side, or fewer than
-            ``min_images`` images with the whole board found.
+        LocalProtocolError: mixed image sizes, an image under 16 px a side, an image with
+            the board identical to an earlier one, or fewer than ``min_images`` images with the
+            whole board found.
     """
     if not images:
         raise LocalProtocolError("no images given")
@@ -471,7 +473,14 @@ def calibrate(
     object_points, image_points = [], []
     used: list[str] = []
     skipped: list[str] = []
+    found_in: dict[bytes, str] = {}  # the images with the board, by their pixels' digest
     for name, grey in images:
+        digest = hashlib.sha256(np.ascontiguousarray(grey).tobytes()).digest()
+        if digest in found_in:  # one view given twice: a name or a glob repeated, a copy
+            raise LocalProtocolError(
+                f"{name} is the same image as {found_in[digest]} (pixel for pixel): a view "
+                "given twice adds nothing to the fit but weight (one view given thrice fitted "
+                "fx 2e10 px, a field of view of 3e-8 rad); give each view once")
         started = time.monotonic()
         corners = find_corners(grey, board)
         if progress is not None and max(size) > DETECT_MAX_PX:
@@ -486,6 +495,7 @@ def calibrate(
         object_points.append(obj)
         image_points.append(corners)
         used.append(name)
+        found_in[digest] = name
     if len(used) < min_images:
         found = f"the {board.label} board was found in {len(used)} of {len(images)} images"
         if not used:  # in none: most likely the wrong count of corners
