@@ -152,10 +152,12 @@ def read_euroc(folder: Path) -> ImuLog:
     gt_csv = root / "state_groundtruth_estimate0" / "data.csv"
     if gt_csv.is_file():
         gt = _csv_rows(gt_csv)
-        if gt.size and (gt.ndim != 2 or gt.shape[1] < 8):
+        if not gt.size:  # a file cut short or left empty: not a log without ground truth
+            raise ConfigError(f"{gt_csv}: no ground-truth poses (no line but comments); a log "
+                              "without ground truth has no state_groundtruth_estimate0/")
+        if gt.ndim != 2 or gt.shape[1] < 8:
             raise ConfigError(f"{gt_csv}: expected 8 columns (timestamp, p xyz, q wxyz)")
-        if gt.size:
-            truth = TruthTrack(gt[:, 0], gt[:, 1:4], gt[:, 4:8], "up")
+        truth = TruthTrack(gt[:, 0], gt[:, 1:4], gt[:, 4:8], "up")
     return _checked(str(folder), imu[:, 0], imu[:, 1:4], imu[:, 4:7], 1e-9, truth)
 
 

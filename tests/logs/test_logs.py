@@ -720,3 +720,24 @@ def test_imu_stamps_in_bursts_are_refused_not_simulated_at_their_median_rate(
         "over the 10000 Hz the simulated IMU is sampled at most; its 600 samples over 2.99 s "
         "are 201 Hz on average") in err, err
     assert len(err.splitlines()) == 1, err
+
+
+@pytest.mark.parametrize("text", ["", "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], "
+                                      "q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n"],
+                         ids=["empty", "header only"])
+def test_a_euroc_ground_truth_file_with_no_pose_is_refused_naming_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str) -> None:
+    # An empty state_groundtruth_estimate0/data.csv (a download cut short) was read as a log
+    # without ground truth: exit 0, the tilt error "-", "The log has no ground truth"; the IMU's
+    # file with no line but comments was refused (docs/logs.md: "a EuRoC file with no line but
+    # comments" is)
+    folder = make_logs.write_euroc(tmp_path / "MH_gt", synthetic(3.0))
+    gt = folder / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    gt.write_text(text)
+    assert main(["logs", str(folder)]) == 2
+    assert capsys.readouterr().err == (
+        f"skeye logs: error: {gt}: no ground-truth poses (no line but comments); a log without "
+        "ground truth has no state_groundtruth_estimate0/\n")
+    shutil.rmtree(gt.parent)  # a log without ground truth is still measured
+    assert main(["logs", str(folder)]) == 0
+    assert "The log has no ground truth: no tilt error for it." in capsys.readouterr().out
