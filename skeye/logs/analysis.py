@@ -42,8 +42,12 @@ def allan_deviation(x: np.ndarray, rate_hz: float, points: int = 24
 
 
 def adev_at(x: np.ndarray, rate_hz: float, tau_s: float) -> float:
-    """The Allan deviation at ``tau_s`` (interpolated on log axes)."""
+    """The Allan deviation at ``tau_s`` (interpolated on log axes; on a linear one where it is
+    0 at some tau: a constant series, a dead sensor's axis, has no logarithm, and numpy's
+    "divide by zero" warning went to stderr under the table)."""
     taus, devs = allan_deviation(x, rate_hz, points=40)
+    if not np.all(devs > 0.0):
+        return float(np.interp(math.log(tau_s), np.log(taus), devs))
     return float(np.exp(np.interp(math.log(tau_s), np.log(taus), np.log(devs))))
 
 

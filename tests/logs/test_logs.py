@@ -741,3 +741,19 @@ def test_a_euroc_ground_truth_file_with_no_pose_is_refused_naming_it(
     shutil.rmtree(gt.parent)  # a log without ground truth is still measured
     assert main(["logs", str(folder)]) == 0
     assert "The log has no ground truth: no tilt error for it." in capsys.readouterr().out
+
+
+def test_a_dead_gyro_axis_reads_zero_without_numpy_s_warning(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A gyro logged as zeros (a dead sensor) has an Allan deviation of 0, and its logarithm
+    # printed numpy's "RuntimeWarning: divide by zero encountered in log", with the source
+    # line, on stderr under the table
+    s = synthetic(12.0)
+    folder = make_logs.write_euroc(tmp_path / "MH_dead", dataclasses.replace(
+        s, gyro=np.zeros_like(s.gyro)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["logs", str(folder)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    assert "| gyro Allan deviation at 1 s (rad/s) | 0 |" in captured.out, captured.out
