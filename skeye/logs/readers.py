@@ -116,7 +116,9 @@ def _csv_rows(path: Path) -> np.ndarray:
     the first (a file cut short mid-line), or a field that is not a number, is named by its
     line number."""
     try:
-        with open(path, newline="") as f:
+        # utf-8-sig: a file saved by a spreadsheet or Notepad starts with a byte-order mark,
+        # which hid the header's "#" ("line 1 is not numbers: '\ufeff#timestamp [ns]'")
+        with open(path, newline="", encoding="utf-8-sig") as f:
             reader = csv.reader(f)
             numbered = [(reader.line_num, r) for r in reader
                         if r and not r[0].lstrip().startswith("#")]

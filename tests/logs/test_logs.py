@@ -757,3 +757,20 @@ def test_a_dead_gyro_axis_reads_zero_without_numpy_s_warning(
     captured = capsys.readouterr()
     assert captured.err == ""
     assert "| gyro Allan deviation at 1 s (rad/s) | 0 |" in captured.out, captured.out
+
+
+def test_a_euroc_file_that_starts_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
+    # A CSV saved by a spreadsheet or Notepad starts with UTF-8's byte-order mark; it hid the
+    # header's "#", and the log was refused: "line 1 is not numbers: could not convert string
+    # to float: '\ufeff#timestamp [ns]'"
+    s = synthetic(3.0)
+    plain = read_log(make_logs.write_euroc(tmp_path / "MH_plain", s))
+    folder = make_logs.write_euroc(tmp_path / "MH_bom", s)
+    for name in ("imu0", "state_groundtruth_estimate0"):
+        csv_file = folder / "mav0" / name / "data.csv"
+        csv_file.write_bytes(b"\xef\xbb\xbf" + csv_file.read_bytes())
+    marked = read_log(folder)
+    assert np.array_equal(marked.t_s, plain.t_s)
+    assert np.array_equal(marked.gyro_rad_s, plain.gyro_rad_s)
+    assert marked.truth is not None and plain.truth is not None
+    assert np.array_equal(marked.truth.quat_wxyz, plain.truth.quat_wxyz)
