@@ -111,10 +111,12 @@ def _check_truth(name: str, truth: TruthTrack) -> None:
         raise ConfigError(f"{name}: ground-truth times go backwards")
 
 
-def _csv_rows(path: Path) -> np.ndarray:
-    """The data rows of a EuRoC CSV file, as numbers; a row with another number of fields than
-    the first (a file cut short mid-line), or a field that is not a number, is named by its
-    line number."""
+def _csv_rows(path: Path) -> tuple[np.ndarray, list[int] | None]:
+    """The data rows of a EuRoC CSV file, as numbers, and their first field (the timestamp, ns)
+    as exact integers where every one is an integer (else None): a float64 holds EuRoC's
+    19-digit stamps to 256 ns only, and a 200 Hz log read 200.0026 Hz. A row with another number
+    of fields than the first (a file cut short mid-line), or a field that is not a number, is
+    named by its line number."""
     try:
         # utf-8-sig: a file saved by a spreadsheet or Notepad starts with a byte-order mark,
         # which hid the header's "#" ("line 1 is not numbers: '\ufeff#timestamp [ns]'")
@@ -134,7 +136,11 @@ def _csv_rows(path: Path) -> np.ndarray:
             values.append([float(v) for v in row])
         except ValueError as exc:  # named by its line: a log is tens of thousands of them
             raise ConfigError(f"{path}: line {line} is not numbers: {exc}") from None
-    return np.array(values, dtype=float)
+    try:
+        stamps: list[int] | None = [int(row[0]) for _, row in numbered]
+    except ValueError:  # "1.4e18", "nan": read as the numbers they are
+        stamps = None
+    return np.array(values, dtype=float), stamps
 
 
 def read_euroc(folder: Path) -> ImuLog:
@@ -145,22 +151,29 @@ def read_euroc(folder: Path) -> ImuLog:
     imu_csv = root / "imu0" / "data.csv"
     if not imu_csv.is_file():
         raise ConfigError(f"{folder}: no imu0/data.csv (an EuRoC-style folder has mav0/imu0/)")
-    imu = _csv_rows(imu_csv)
+    imu, imu_ns = _csv_rows(imu_csv)
     if not imu.size:
         raise ConfigError(f"{imu_csv}: no IMU samples (no line but comments)")
     if imu.ndim != 2 or imu.shape[1] < 7:
         raise ConfigError(f"{imu_csv}: expected 7 columns (timestamp, w xyz, a xyz)")
     truth = None
+    gt_ns: list[int] | None = None
     gt_csv = root / "state_groundtruth_estimate0" / "data.csv"
     if gt_csv.is_file():
-        gt = _csv_rows(gt_csv)
+        gt, gt_ns = _csv_rows(gt_csv)
         if not gt.size:  # a file cut short or left empty: not a log without ground truth
             raise ConfigError(f"{gt_csv}: no ground-truth poses (no line but comments); a log "
                               "without ground truth has no state_groundtruth_estimate0/")
         if gt.ndim != 2 or gt.shape[1] < 8:
             raise ConfigError(f"{gt_csv}: expected 8 columns (timestamp, p xyz, q wxyz)")
-        truth = TruthTrack(gt[:, 0], gt[:, 1:4], gt[:, 4:8], "up")
-    return _checked(str(folder), imu[:, 0], imu[:, 1:4], imu[:, 4:7], 1e-9, truth)
+        gt_t = gt[:, 0]
+        if imu_ns is not None and gt_ns is not None:  # from the IMU's first stamp, exactly
+            gt_t = np.array([k - imu_ns[0] for k in gt_ns], dtype=float)
+        truth = TruthTrack(gt_t, gt[:, 1:4], gt[:, 4:8], "up")
+    imu_t = imu[:, 0]
+    if imu_ns is not None and (truth is None or gt_ns is not None):
+        imu_t = np.array([k - imu_ns[0] for k in imu_ns], dtype=float)
+    return _checked(str(folder), imu_t, imu[:, 1:4], imu[:, 4:7], 1e-9, truth)
 
 
 def read_ulog(path: Path) -> ImuLog:

@@ -774,3 +774,16 @@ def test_a_euroc_file_that_starts_with_a_byte_order_mark_is_read(tmp_path: Path)
     assert np.array_equal(marked.gyro_rad_s, plain.gyro_rad_s)
     assert marked.truth is not None and plain.truth is not None
     assert np.array_equal(marked.truth.quat_wxyz, plain.truth.quat_wxyz)
+
+
+def test_euroc_s_nanosecond_stamps_are_read_exactly(tmp_path: Path) -> None:
+    # EuRoC's 19-digit stamps (1403636579758555392 ns) were read as float64, which holds them
+    # to 256 ns: every interval of the 200 Hz log was off by up to 256 ns, its rate read
+    # 200.0026 Hz and its length 2.995000064 s
+    s = synthetic(3.0)
+    log = read_log(make_logs.write_euroc(tmp_path / "MH_ns", s))
+    stamps_ns = np.round(s.t_s * 1e9)  # as make_logs writes them, from the first
+    assert np.array_equal(log.t_s, stamps_ns * 1e-9)
+    assert log.rate_hz == pytest.approx(RATE_HZ, rel=1e-12)
+    assert log.truth is not None
+    assert np.array_equal(log.truth.t_s, stamps_ns[::2] * 1e-9)
