@@ -166,9 +166,9 @@ def write_ulog(path: Path, s: Synthetic,
     return path
 
 
-def write_rosbag(path: Path, s: Synthetic) -> Path:
+def write_rosbag(path: Path, s: Synthetic, t0_sec: int = 1000) -> Path:
     """A ROS 1 bag (rosbags' writer): /imu0 (sensor_msgs/Imu) and /vicon (TransformStamped),
-    world z up."""
+    world z up, stamped from ``t0_sec`` seconds (exactly, in whole nanoseconds)."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -186,8 +186,8 @@ def write_rosbag(path: Path, s: Synthetic) -> Path:
         imu_conn = writer.add_connection("/imu0", Imu.__msgtype__, typestore=ts)
         gt_conn = writer.add_connection("/vicon", TransformStamped.__msgtype__, typestore=ts)
         for k in range(len(s.t_s)):
-            t = 1000.0 + float(s.t_s[k])
-            stamp = Time(sec=int(t), nanosec=round((t - int(t)) * 1e9))
+            rel_ns = round(float(s.t_s[k]) * 1e9)
+            stamp = Time(sec=t0_sec + rel_ns // 1_000_000_000, nanosec=rel_ns % 1_000_000_000)
             header = Header(seq=k, stamp=stamp, frame_id="imu4")
             g, a = s.gyro[k], s.accel[k]
             msg = Imu(header=header, orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
@@ -196,7 +196,7 @@ def write_rosbag(path: Path, s: Synthetic) -> Path:
                       angular_velocity_covariance=zero9,
                       linear_acceleration=Vector3(x=a[0], y=a[1], z=a[2]),
                       linear_acceleration_covariance=zero9)
-            ns = int(t * 1e9)
+            ns = t0_sec * 1_000_000_000 + rel_ns
             writer.write(imu_conn, ns, ts.serialize_ros1(msg, Imu.__msgtype__))
             if k % 4 == 0:
                 q = _from_rows(c @ _rows(s.quat_ned[k]))

@@ -787,3 +787,16 @@ def test_euroc_s_nanosecond_stamps_are_read_exactly(tmp_path: Path) -> None:
     assert log.rate_hz == pytest.approx(RATE_HZ, rel=1e-12)
     assert log.truth is not None
     assert np.array_equal(log.truth.t_s, stamps_ns[::2] * 1e-9)
+
+
+def test_a_bag_s_stamps_of_today_s_clock_are_read_exactly(tmp_path: Path) -> None:
+    # A header stamp (sec, nanosec) was read as float64 seconds, which hold a stamp of today's
+    # clock (1.7e9 s) to 238 ns: every interval of the 200 Hz IMU was off by up to 238 ns, and
+    # its rate read 199.9954 Hz
+    s = synthetic(3.0)
+    log = read_log(make_logs.write_rosbag(tmp_path / "today.bag", s, t0_sec=1_764_000_000))
+    stamps_ns = np.round(s.t_s * 1e9)  # as make_logs writes them, from the first
+    assert np.array_equal(log.t_s, stamps_ns * 1e-9)
+    assert log.rate_hz == pytest.approx(RATE_HZ, rel=1e-12)
+    assert log.truth is not None
+    assert np.array_equal(log.truth.t_s, stamps_ns[::4] * 1e-9)
