@@ -284,6 +284,9 @@ def load_calibration(path: str | Path) -> CameraCalibration:
     # Each value is checked here, naming its key; the dataclasses' own checks say no key.
     if "rms_reprojection_px" in cal:
         rms = _number(cal, "rms_reprojection_px", cwhere)
+        if rms < 0.0:  # a root mean square
+            raise ConfigError(f"{cwhere}.rms_reprojection_px: an RMS error is not negative, "
+                              f"got {rms!r}")
     if "board" in cal:
         if not isinstance(cal["board"], str):
             raise ConfigError(f"{cwhere}.board: must be a string like \"9x6\"")
@@ -300,6 +303,9 @@ def load_calibration(path: str | Path) -> CameraCalibration:
         board = Board(cols, rows, square_m)
     if "images" in cal:
         images = _integer(cal, "images", cwhere)
+        if images < 1:  # the board was found in them all
+            raise ConfigError(f"{cwhere}.images: a calibration is made from at least one "
+                              f"image with the board, got {images}")
     sizes = {key: _integer(cam, key, where) for key in ("width_px", "height_px")}
     for key, size in sizes.items():
         if size < MIN_IMAGE_PX:

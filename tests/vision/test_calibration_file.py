@@ -63,6 +63,13 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ("cy_px = 298.7", "cy_px = 600.0", "[camera].cy_px: the principal point must lie in"),
         ("k1 = -0.21", "k1 = 1e10", "[camera].k1: a distortion coefficient must be within"),
         ("p2 = -0.0004", "p2 = -10.5", "[camera].p2: a distortion coefficient must be within"),
+        # the record of how it was found: no calibration has these (they were read as given)
+        ("images = 14", "images = 0",
+         "[calibration].images: a calibration is made from at least one image with the board, "
+         "got 0"),
+        ("images = 14", "images = -5", "[calibration].images: a calibration is made from"),
+        ("rms_reprojection_px = 0.083", "rms_reprojection_px = -1.0",
+         "[calibration].rms_reprojection_px: an RMS error is not negative, got -1.0"),
     ],
 )
 def test_bad_files_name_the_key(tmp_path: Path, old: str, new: str, problem: str) -> None:
