@@ -287,6 +287,11 @@ def load_calibration(path: str | Path) -> CameraCalibration:
         if rms < 0.0:  # a root mean square
             raise ConfigError(f"{cwhere}.rms_reprojection_px: an RMS error is not negative, "
                               f"got {rms!r}")
+    # one without the other: square_mm alone was dropped unread, board alone "got None"
+    if ("board" in cal) != ("square_mm" in cal):
+        given, lacking = ("board", "square_mm") if "board" in cal else ("square_mm", "board")
+        raise ConfigError(f"{cwhere}: {given} without {lacking}: the board used is both, its "
+                          "inner corners COLSxROWS and its square side in mm")
     if "board" in cal:
         if not isinstance(cal["board"], str):
             raise ConfigError(f"{cwhere}.board: must be a string like \"9x6\"")

@@ -70,6 +70,10 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ("images = 14", "images = -5", "[calibration].images: a calibration is made from"),
         ("rms_reprojection_px = 0.083", "rms_reprojection_px = -1.0",
          "[calibration].rms_reprojection_px: an RMS error is not negative, got -1.0"),
+        # one half of the board: square_mm alone was dropped unread, board alone "got None"
+        ('board = "9x6"\n', "", "[calibration]: square_mm without board: the board used is "
+         "both, its inner corners COLSxROWS and its square side in mm"),
+        ("square_mm = 25.0\n", "", "[calibration]: board without square_mm: the board used is"),
     ],
 )
 def test_bad_files_name_the_key(tmp_path: Path, old: str, new: str, problem: str) -> None:
