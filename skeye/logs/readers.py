@@ -234,8 +234,14 @@ def read_ulog(path: Path) -> ImuLog:
         if np.any(np.diff(np.asarray(att["timestamp"], dtype=float)) < 0.0):
             raise ConfigError(f"{path}: ground-truth times go backwards "
                               "(vehicle_attitude_groundtruth)")
-        quat = np.column_stack([np.interp(tp, att["timestamp"], att[f"q[{i}]"])
-                                for i in range(4)])
+        q = np.column_stack([att[f"q[{i}]"] for i in range(4)]).astype(float)
+        # q and -q are one rotation, and a log may give either (one that keeps w >= 0 flips
+        # sign when w crosses 0): each is put in the hemisphere of the one before, since
+        # interpolating from q towards -q passes through 0 (refused as "quaternions of zero
+        # length") or a rotation neither is
+        turn = np.where(np.sum(q[1:] * q[:-1], axis=1) < 0.0, -1.0, 1.0)
+        q[1:] *= np.cumprod(turn)[:, None]
+        quat = np.column_stack([np.interp(tp, att["timestamp"], q[:, i]) for i in range(4)])
         truth = TruthTrack(tp, np.column_stack([pos["x"], pos["y"], pos["z"]]), quat, "down")
     return _checked(str(path), t, gyro, accel, 1e-6, truth)
 

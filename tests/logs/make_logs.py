@@ -138,10 +138,12 @@ def _from_rows(m: np.ndarray) -> np.ndarray:
 
 def write_ulog(path: Path, s: Synthetic,
                imu_fields: str = "uint64_t timestamp;float[3] gyro_rad;"
-                                 "float[3] accelerometer_m_s2") -> Path:
+                                 "float[3] accelerometer_m_s2", attitude_delay_us: int = 0) -> Path:
     """A minimal ULog (the format PX4 documents: file header, format and subscription
     messages, data): sensor_combined and the ground-truth topics of a PX4 simulation.
-    ``imu_fields`` renames sensor_combined's fields (the data keep their layout)."""
+    ``imu_fields`` renames sensor_combined's fields (the data keep their layout);
+    ``attitude_delay_us`` stamps the attitude that much after the position it was taken with
+    (two topics, published apart)."""
     def msg(kind: bytes, payload: bytes) -> bytes:
         return struct.pack("<HB", len(payload), kind[0]) + payload
 
@@ -161,7 +163,8 @@ def write_ulog(path: Path, s: Synthetic,
         out += msg(b"D", struct.pack("<HQ6f", 0, stamp, *s.gyro[k], *s.accel[k]))
         if k % 4 == 0:
             out += msg(b"D", struct.pack("<HQ3f", 1, stamp, *s.pos_ned[k]))
-            out += msg(b"D", struct.pack("<HQ4f", 2, stamp, *s.quat_ned[k]))
+            out += msg(b"D", struct.pack("<HQ4f", 2, stamp + attitude_delay_us,
+                                         *s.quat_ned[k]))
     path.write_bytes(bytes(out))
     return path
 

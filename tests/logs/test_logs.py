@@ -800,3 +800,20 @@ def test_a_bag_s_stamps_of_today_s_clock_are_read_exactly(tmp_path: Path) -> Non
     assert log.rate_hz == pytest.approx(RATE_HZ, rel=1e-12)
     assert log.truth is not None
     assert np.array_equal(log.truth.t_s, stamps_ns[::4] * 1e-9)
+
+
+def test_a_ulog_attitude_truth_that_changes_sign_is_one_rotation(tmp_path: Path) -> None:
+    # q and -q are one rotation; the attitude truth was interpolated to the position's stamps
+    # component by component, through 0 between a q and a -q: with the attitude stamped 10 ms
+    # after the position, a log whose quaternions alternate in sign was refused, "ground-truth
+    # quaternions of zero length (no attitude)"
+    s = synthetic(12.0)
+    k = np.arange(len(s.t_s))
+    flipped = dataclasses.replace(s, quat_ned=s.quat_ned * np.where((k // 4) % 2, -1.0, 1.0)[
+        :, None])
+    figures = []
+    for name, log in (("same", s), ("flipped", flipped)):
+        path = make_logs.write_ulog(tmp_path / f"{name}.ulg", log, attitude_delay_us=10_000)
+        assert main(["logs", str(path), "--json", str(tmp_path / f"{name}.json")]) == 0
+        figures.append(json.loads((tmp_path / f"{name}.json").read_text())["real"])
+    assert figures[1] == figures[0] and figures[0]["tilt_rms_deg"] < 1.0, figures
