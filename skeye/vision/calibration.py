@@ -44,6 +44,7 @@ from skeye.robots.camera_model import DISTORTION_LIMIT
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 FORMAT_VERSION = 1
 MAX_BOARD_CORNERS = 1000  # inner corners a side: far beyond any printed board
+MIN_BOARD_CORNERS = 3  # inner corners a side: findChessboardCorners refuses fewer (cv2.error)
 MIN_IMAGE_PX = 16  # a side: a camera's smallest (OpenCV's corner finder fails below it)
 MAX_IMAGE_PX = 0xFFFF  # a side: a JPEG's largest (ITU T.81's 16-bit sizes), a RAW frame's too
 MIN_SQUARE_M = 1e-6
@@ -82,8 +83,9 @@ class Board:
 
 def check_corners(cols: int, rows: int) -> None:
     """InvalidArgument unless a board of ``cols`` x ``rows`` inner corners can be found."""
-    if cols < 2 or rows < 2:
-        raise InvalidArgument(f"a board needs at least 2x2 inner corners, got {cols}x{rows}")
+    if cols < MIN_BOARD_CORNERS or rows < MIN_BOARD_CORNERS:
+        raise InvalidArgument(f"a board needs at least {MIN_BOARD_CORNERS}x{MIN_BOARD_CORNERS} "
+                              f"inner corners (OpenCV's corner finders), got {cols}x{rows}")
     if cols > MAX_BOARD_CORNERS or rows > MAX_BOARD_CORNERS:
         raise InvalidArgument(f"a board has at most {MAX_BOARD_CORNERS} inner corners a "
                               f"side, got {cols}x{rows}")

@@ -36,7 +36,8 @@ def test_toml_round_trip_is_exact(tmp_path: Path) -> None:
         ("fy_px = 520.9", "fy_px = 0.0", "[camera].fy_px: a focal length must be positive"),
         ("width_px = 800", "width_px = 4", "[camera].width_px: an image side is at least 16"),
         ("height_px = 600", "height_px = -600", "[camera].height_px: an image side is at least"),
-        ('board = "9x6"', 'board = "1x1"', "[calibration].board: a board needs at least 2x2"),
+        ('board = "9x6"', 'board = "1x1"', "[calibration].board: a board needs at least 3x3"),
+        ('board = "9x6"', 'board = "2x6"', "[calibration].board: a board needs at least 3x3"),
         ("square_mm = 25.0", "square_mm = 0.0", "[calibration].square_mm: square size must be"),
         ("square_mm = 25.0", "square_mm = 1e9", "[calibration].square_mm: square size must be"),
         ("fx_px = 521.3", 'fx_px = "wide"', "[camera].fx_px: must be a finite number"),
@@ -188,4 +189,21 @@ def test_calibrate_refuses_tiny_images(sizes: tuple[tuple[int, int], ...], tmp_p
     assert err.startswith("skeye calibrate: error: ") and "Traceback" not in err, err
     h, w = sizes[0] if min(sizes[0]) < 16 else sizes[1]
     assert f"is {w}x{h}" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("board", ["2x2", "3x2", "2x6"])
+def test_a_board_with_two_corners_a_side_is_refused_in_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], board: str) -> None:
+    """A board of 2 inner corners a side (docs/calibration.md said 2 to 1000) made OpenCV's
+    findChessboardCorners fail its assertion ("Both width and height of the pattern should have
+    bigger than 2"): a traceback out of skeye calibrate. Now one line, status 2, nothing
+    written."""
+    image = tmp_path / "board.png"
+    cv2.imwrite(str(image), np.full((480, 640), 128, np.uint8))
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", str(image), "--board", board, "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (
+        "skeye calibrate: error: a board needs at least 3x3 inner corners (OpenCV's corner "
+        f"finders), got {board}\n")
     assert not out.exists()
