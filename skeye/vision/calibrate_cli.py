@@ -89,6 +89,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return _fail(f"cannot write {args.out}: {exc.strerror or exc}")
     for name in result.skipped:
         print(f"skeye calibrate: board not found in {name} (skipped)", file=sys.stderr)
+    for name, earlier in result.repeated:
+        print(f"skeye calibrate: {name} is the same image as {earlier}, pixel for pixel "
+              "(skipped: a view counts once)", file=sys.stderr)
     print(f"wrote {args.out}: {cal.width_px}x{cal.height_px}, board {board.label} "
           f"({args.square_mm:g} mm squares) found in {len(result.used)} of {len(images)} images")
     print(f"  RMS reprojection error {cal.rms_px:.3f} px (worst image "

@@ -454,6 +454,7 @@ class CalibrationResult:
     used: tuple[str, ...]  # image names the board was found in
     skipped: tuple[str, ...]  # ... and not found in
     per_image_rms_px: tuple[float, ...]  # reprojection RMS of each used image
+    repeated: tuple[tuple[str, str], ...] = ()  # (name, the earlier image it is): not used
 
 
 def calibrate(
@@ -466,9 +467,9 @@ def calibrate(
     or not, the seconds it took).
 
     Raises:
-        LocalProtocolError: mixed image sizes, an image under 16 px a side, an image with
-            the board identical to an earlier one, or fewer than ``min_images`` images with the
-            whole board found.
+        LocalProtocolError: mixed image sizes, an image under 16 px a side, or fewer than
+            ``min_images`` distinct images with the whole board found (an image with the board
+            identical, pixel for pixel, to an earlier one is not used: ``repeated``).
     """
     if not images:
         raise LocalProtocolError("no images given")
@@ -486,14 +487,15 @@ def calibrate(
     object_points, image_points = [], []
     used: list[str] = []
     skipped: list[str] = []
+    repeated: list[tuple[str, str]] = []
     found_in: dict[bytes, str] = {}  # the images with the board, by their pixels' digest
     for name, grey in images:
         digest = hashlib.sha256(np.ascontiguousarray(grey).tobytes()).digest()
-        if digest in found_in:  # one view given twice: a name or a glob repeated, a copy
-            raise LocalProtocolError(
-                f"{name} is the same image as {found_in[digest]} (pixel for pixel): a view "
-                "given twice adds nothing to the fit but weight (one view given thrice fitted "
-                "fx 2e10 px, a field of view of 3e-8 rad); give each view once")
+        if digest in found_in:  # one view given twice: a name or a glob repeated, a copy, a
+            # stalled camera's frame saved again. Used, it adds nothing to the fit but weight:
+            # one view given thrice fitted fx 2e10 px, a field of view of 3e-8 rad
+            repeated.append((name, found_in[digest]))
+            continue
         started = time.monotonic()
         corners = find_corners(grey, board)
         if progress is not None and max(size) > DETECT_MAX_PX:
@@ -511,6 +513,9 @@ def calibrate(
         found_in[digest] = name
     if len(used) < min_images:
         found = f"the {board.label} board was found in {len(used)} of {len(images)} images"
+        if repeated:
+            found += (f" (and {len(repeated)} more the same as one of those, pixel for pixel, "
+                      "not used)")
         if not used:  # in none: most likely the wrong count of corners
             raise LocalProtocolError(f"{found}; at least {min_images} are needed (is --board "
                                      "the count of INNER corners, COLSxROWS?)")
@@ -536,4 +541,4 @@ def calibrate(
         width, height, float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]),
         (d[0], d[1], d[2], d[3], d[4]), float(rms), board, len(used),
     )
-    return CalibrationResult(cal, tuple(used), tuple(skipped), tuple(per_image))
+    return CalibrationResult(cal, tuple(used), tuple(skipped), tuple(per_image), tuple(repeated))
