@@ -114,6 +114,13 @@ def _float_from(text: str, bound: float, inclusive: bool) -> float:
     return value
 
 
+def path(text: str) -> str:
+    """A file or folder name: not empty (``--out ''`` was the current folder, written into)."""
+    if not text:
+        raise argparse.ArgumentTypeError("must name a file or folder, got ''")
+    return text
+
+
 def positive_float(text: str) -> float:
     """A finite number > 0 (a timeout or period in seconds, a rate in Hz)."""
     return _float_from(text, 0.0, inclusive=False)

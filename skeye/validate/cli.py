@@ -183,7 +183,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
                 args.experiment, args.seeds, Path(args.out), args.quick, args.first_seed,
                 args.workers, args.keep_recordings, camera=args.camera,
                 estimator=args.estimator, world=args.world,
-                calibration=Path(args.calibration) if args.calibration else None,
+                calibration=Path(args.calibration) if args.calibration is not None else None,
                 wind=args.wind, vision_latency=args.vision_latency_ms,
                 pad_source=args.pad_source)
     except KeyboardInterrupt as exc:
@@ -208,7 +208,7 @@ def register(sub: Any) -> None:
                    help="number of seeds (run in parallel)")
     p.add_argument("--first-seed", type=cliargs.seed, default=1,
                    help="the first seed (a whole number >= 0; default 1)")
-    p.add_argument("--out", default="validation", help="output folder")
+    p.add_argument("--out", type=cliargs.path, default="validation", help="output folder")
     p.add_argument("--quick", action="store_true", help="shortened runs (CI)")
     p.add_argument("--workers", type=cliargs.positive_int, default=None,
                    help="worker processes (>= 1)")
@@ -217,7 +217,7 @@ def register(sub: Any) -> None:
     p.add_argument("--camera", choices=CAMERAS, default="ideal",
                    help="camera profile of every run (skeye sim --camera-profile); webcam is "
                    "calibrated first unless --calibration is given")
-    p.add_argument("--calibration", default=None,
+    p.add_argument("--calibration", type=cliargs.path, default=None,
                    help="a `skeye calibrate` file for the pilot's pad detector")
     p.add_argument("--estimator", choices=ESTIMATORS, default="onboard",
                    help="the boards' state estimator (skeye sim --estimator): onboard flies on "

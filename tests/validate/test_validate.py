@@ -304,3 +304,23 @@ def test_ctrl_c_stops_validate_and_its_running_trials(tmp_path: Path) -> None:
         proc.stderr.close()
     assert "skeye validate: stopped by signal SIGINT" in err and "Traceback" not in err, err
     assert not list(tmp.glob("skeye-trial-*")), list(tmp.iterdir())
+
+
+@pytest.mark.parametrize("option", ["--out", "--calibration"])
+def test_an_empty_out_or_calibration_is_refused_naming_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        option: str) -> None:
+    """``--out ''`` was the current folder: the run flew and wrote its report, series, figure
+    and lock there. ``--calibration ''`` was taken as no calibration. Both are refused while
+    the command line is parsed, exit 2, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["validate", "E1", "--quick", option, ""]
+    if option != "--out":
+        argv += ["--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert f"error: argument {option}: must name a file or folder, got ''" in err, err
+    assert "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []
