@@ -14,6 +14,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
+from skeye.errors import SkeyeError
 from skeye.validate.experiments import E1Series, E2Series, RunSettings
 
 PAPER = {"E1_max_rel_error": 0.02, "E2_std_m": 0.0249, "E2_max_m": 0.1327}
@@ -62,9 +63,17 @@ def e2_figures(series: E2Series, velocity: E2Series, attitude: E2Series,
 
 
 def _latency_words(latency: str) -> str:
-    if latency == "measured":
+    """When the vision run's detections were used, read as ``skeye pilot --vision-latency-ms``
+    reads the setting: ``MEASURED`` was said as "MEASURED ms after their frame (fixed ...)"."""
+    from skeye.pilot.cli import vision_latency_s
+
+    try:
+        seconds = vision_latency_s(latency)
+    except SkeyeError:  # a summary of before the setting was kept: as it was given
+        return f"{latency} ms after their frame (fixed on request)"
+    if seconds is None:
         return "after the detector's measured processing time (as on a real computer)"
-    return f"{latency} ms after their frame (fixed on request)"
+    return f"{seconds * 1e3:g} ms after their frame (fixed on request)"
 
 
 def where_it_lands(std_m: float, max_m: float) -> str:

@@ -324,3 +324,25 @@ def test_an_empty_out_or_calibration_is_refused_naming_it(
     assert f"error: argument {option}: must name a file or folder, got ''" in err, err
     assert "Traceback" not in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("latency", "words"), [
+    ("MEASURED", "used after the detector's measured processing time (as on a real computer)"),
+    (" 40", "used 40 ms after their frame (fixed on request)"),
+    ("4e1", "used 40 ms after their frame (fixed on request)"),
+])
+def test_the_report_says_the_vision_latency_as_the_pilot_read_it(
+        tmp_path: Path, latency: str, words: str) -> None:
+    """``--vision-latency-ms MEASURED`` (the pilot takes any case and spaces) flew with the
+    measured latency, but E2's report said "used MEASURED ms after their frame (fixed on
+    request)"; the setting is now read as the pilot reads it."""
+    from skeye.validate.experiments import E2Series, RunSettings
+    from skeye.validate.report import PAPER, e2_figures, write_report
+
+    run = E2Series(time_s=[0.0, 0.02, 0.04], distance_m=[0.01, 0.02, 0.03])
+    settings = RunSettings(seed=1, quick=True, vision_latency=latency)
+    summary = {"paper": PAPER, "setup": {"vision_latency": latency}, "trials": 1,
+               "E2": e2_figures(run, run, run, settings)}
+    write_report(tmp_path, summary, True, [1])
+    report = (tmp_path / "report.md").read_text()
+    assert f"pad detections are {words}." in report, report
