@@ -108,8 +108,20 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
                 raise ConfigError(f"--keep-recordings: {', '.join(full)} already hold(s) "
                                   "recordings of an earlier run: give another --out, or remove "
                                   "them")
+        calibrating = calibration is None and camera != "ideal"
+        blocked = [str(out / name) for name in written_names(experiments, calibrating
+                                                             or calibration is not None)
+                   if (out / name).is_dir()]
+        if calibrating and os.path.lexists(out / "calibration") and not (
+                out / "calibration").is_dir():
+            blocked.append(str(out / "calibration"))
+        if blocked:  # found before anything is calibrated or flown, not when it is written
+            raise ConfigError(f"--out {out}: {', '.join(blocked)} is in the way of what this "
+                              "run writes there (the report, summary, series and figures are "
+                              "files, the calibration a folder): remove it, or give another "
+                              "--out")
         summary: dict[str, Any] = {"paper": PAPER}
-        if calibration is None and camera != "ideal":
+        if calibrating:
             calibration, found = calibrate_simulated_camera(out / "calibration", camera, first_seed)
             summary["calibration"] = calibration_figures(found, camera)
         cal_path = str(calibration.resolve()) if calibration is not None else ""
@@ -162,6 +174,18 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
             summary["failed"] = failed
         write_report(out, summary, quick, seed_list, flown)
         return summary
+
+
+def written_names(experiments: tuple[str, ...], calibrated: bool) -> list[str]:
+    """The files a run of ``experiments`` writes in its ``--out`` folder (E1's uncalibrated
+    series when it flies with a calibration)."""
+    names = ["report.md", "summary.json"]
+    if "E1" in experiments:
+        names += ["e1_series.csv", "e1_height.png"]
+        names += ["e1_uncalibrated_series.csv"] if calibrated else []
+    if "E2" in experiments:
+        names += ["e2_series.csv", "e2_distance.png"]
+    return names
 
 
 def calibration_figures(result: CalibrationResult, camera: str) -> dict[str, Any]:

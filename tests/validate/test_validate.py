@@ -346,3 +346,28 @@ def test_the_report_says_the_vision_latency_as_the_pilot_read_it(
     write_report(tmp_path, summary, True, [1])
     report = (tmp_path / "report.md").read_text()
     assert f"pad detections are {words}." in report, report
+
+
+@pytest.mark.parametrize(("name", "argv"), [
+    ("summary.json", ["E1"]),
+    ("e2_distance.png", ["all"]),
+    ("calibration", ["E1", "--camera", "webcam"]),
+])
+def test_something_in_the_way_of_an_output_is_refused_before_anything_flies(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, argv: list[str]) -> None:
+    """A folder where the run writes a file (a file where it makes its calibration folder)
+    was found only when written: after every trial had flown ``[Errno 21] Is a directory:
+    '.../summary.json'``, exit 2 with report.md written and summary.json not (``[Errno 17] File
+    exists`` for the calibration). Now refused before anything runs, the path named."""
+    out = tmp_path / "val"
+    out.mkdir()
+    if name == "calibration":
+        (out / name).write_text("a file where the calibration folder goes\n")
+    else:
+        (out / name).mkdir()
+    assert main(["validate", *argv, "--quick", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"skeye validate: error: --out {out}: {out / name} is in the way of "
+                          "what this run writes there"), err
+    assert sorted(p.name for p in out.iterdir()) == sorted([".skeye.lock", name])
