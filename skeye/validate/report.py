@@ -206,6 +206,26 @@ def write_e2(out: Path, series_by_seed: dict[int, dict[str, E2Series]],
     return runs
 
 
+def _hundredths(value: float, unit: str) -> str:
+    """A figure in m (or a fraction) said in cm (or %); an error figure of a run with no
+    detection at all is NaN (no error to take): said as none, not "nan cm"."""
+    if not math.isfinite(value):
+        return "none (no frame with a detection)"
+    return f"{value * 100:.2f} {unit}"
+
+
+def _json_figures(value: Any) -> Any:
+    """``value`` with every NaN or infinite figure as None (JSON's null, as ``skeye sweep``'s
+    rows have it): ``json.dumps`` wrote NaN, which JSON has not, and strict readers refuse."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_figures(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_figures(v) for v in value]
+    return value
+
+
 def _shown_path(path: str, out: Path) -> str:
     """``path`` relative to the output folder when it lies inside it (the report travels)."""
     if not path:
@@ -299,10 +319,11 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
             *_missing_note("E1", flown, seeds),
             "| figure | skeye | paper | target |",
             "| --- | --- | --- | --- |",
-            f"| max absolute error | {e1['max_abs_error_m'] * 100:.2f} cm | ~2 cm | <= 1 cm |",
-            f"| max relative error | {e1['max_rel_error'] * 100:.2f} % | 2 % (5 % with the "
+            f"| max absolute error | {_hundredths(e1['max_abs_error_m'], 'cm')} | ~2 cm "
+            "| <= 1 cm |",
+            f"| max relative error | {_hundredths(e1['max_rel_error'], '%')} | 2 % (5 % with the "
             f"integer FOV) | <= 1 % (goal 0.5 %) |",
-            f"| RMS error | {e1['rms_error_m'] * 100:.2f} cm | - | - |",
+            f"| RMS error | {_hundredths(e1['rms_error_m'], 'cm')} | - | - |",
             f"| frames processed | {e1['frames']} | - | - |",
             f"| frames with no detection | {e1['missed_frames']} | - | 0 |",
             "",
@@ -316,9 +337,9 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
             lines += [
                 "The same flight with the detector on the ideal pinhole of the camera's field "
                 "of view (no calibration): max relative error "
-                f"{e1['uncalibrated_max_rel_error'] * 100:.2f} %, max absolute "
-                f"{e1['uncalibrated_max_abs_error_m'] * 100:.2f} cm, RMS "
-                f"{e1['uncalibrated_rms_error_m'] * 100:.2f} cm, "
+                f"{_hundredths(e1['uncalibrated_max_rel_error'], '%')}, max absolute "
+                f"{_hundredths(e1['uncalibrated_max_abs_error_m'], 'cm')}, RMS "
+                f"{_hundredths(e1['uncalibrated_rms_error_m'], 'cm')}, "
                 f"{e1['uncalibrated_missed_frames']} of {e1['uncalibrated_frames']} frames "
                 "without a detection: the bias a missing calibration causes "
                 "(series: `e1_uncalibrated_series.csv`).",
@@ -363,4 +384,5 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         lines += [""] if lost else []
         lines += _failed_lines(failed)
     (out / "report.md").write_text("\n".join(lines))
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(_json_figures(summary), indent=2,
+                                                 allow_nan=False))

@@ -371,3 +371,29 @@ def test_something_in_the_way_of_an_output_is_refused_before_anything_flies(
     assert err.startswith(f"skeye validate: error: --out {out}: {out / name} is in the way of "
                           "what this run writes there"), err
     assert sorted(p.name for p in out.iterdir()) == sorted([".skeye.lock", name])
+
+
+def test_an_e1_run_with_no_detection_reports_no_error_figure_and_writes_strict_json(
+        tmp_path: Path) -> None:
+    """E1 flown with a calibration its detector finds no pad through (a k1 of 5: every frame
+    missed) has no error to take: summary.json held ``NaN`` (no JSON: ``JSON.parse``, ``jq``
+    and any strict reader refuse it) and the report "nan cm" and "nan %". Now null (as
+    ``skeye sweep``'s rows) and "none (no frame with a detection)"."""
+    from skeye.validate.experiments import E1Series
+    from skeye.validate.report import PAPER, e1_figures, write_report
+
+    blind = E1Series(time_s=[0.1, 0.2], estimated_m=[None, None], true_m=[0.3, 0.3])
+    e1 = e1_figures(blind, 1)
+    e1.update({f"uncalibrated_{k}": v for k, v in e1.items() if k != "seed"})
+    write_report(tmp_path, {"paper": PAPER, "setup": {}, "trials": 1, "E1": e1}, True, [1])
+
+    def refuse(constant: str) -> None:
+        raise AssertionError(f"summary.json holds {constant}, which JSON has not")
+
+    summary = json.loads((tmp_path / "summary.json").read_text(), parse_constant=refuse)
+    assert summary["E1"]["max_abs_error_m"] is None and summary["E1"]["missed_frames"] == 2
+    report = (tmp_path / "report.md").read_text()
+    assert "nan" not in report.lower(), report
+    assert "| max absolute error | none (no frame with a detection) | ~2 cm |" in report
+    assert "max relative error none (no frame with a detection), max absolute" in report
+    assert "2 of 2 frames without a detection" in report
