@@ -90,6 +90,7 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
     _choice("pad_source", pad_source, "pad source")
     if calibration is not None:  # a bad file is named here, not in every trial
         check_setting("calibration", str(calibration))
+        calibration_fits(calibration, camera)
     missing = not_installed(VALIDATE_NEEDS)  # before the folder, not after the trials
     if missing:
         raise ConfigError(missing)
@@ -174,6 +175,20 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
             summary["failed"] = failed
         write_report(out, summary, quick, seed_list, flown)
         return summary
+
+
+def calibration_fits(path: Path, camera: str) -> None:
+    """A ``--calibration`` for the image size of the camera every run flies (the
+    Hummingbird's, under ``camera``), refused here as each trial's ``skeye pilot`` would refuse
+    it: once, before anything runs, not again in every trial."""
+    from skeye.vision.calibration import load_calibration
+
+    cal = load_calibration(path)
+    model = camera_model("hummingbird", profile=camera)
+    if (cal.width_px, cal.height_px) != (model.width, model.height):
+        raise ConfigError(f"--calibration {path} is for {cal.width_px}x{cal.height_px} images, "
+                          f"the {camera} camera every run flies gives {model.width}x"
+                          f"{model.height}: calibrate it at that resolution")
 
 
 def written_names(experiments: tuple[str, ...], calibrated: bool) -> list[str]:

@@ -397,3 +397,23 @@ def test_an_e1_run_with_no_detection_reports_no_error_figure_and_writes_strict_j
     assert "| max absolute error | none (no frame with a detection) | ~2 cm |" in report
     assert "max relative error none (no frame with a detection), max absolute" in report
     assert "2 of 2 frames without a detection" in report
+
+
+def test_a_calibration_for_another_image_size_is_refused_once_before_anything_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A calibration of 640x480 images for the 800x600 camera was let through and refused by
+    every trial's pilot ('every trial failed, no report written: E1 seed 1: SkeyeError: skeye
+    pilot did not start: ...', once per trial). Now refused once, before anything runs."""
+    from skeye.vision.calibration import CameraCalibration
+
+    cal = tmp_path / "camera.toml"
+    CameraCalibration.pinhole(640, 480, 1.309).save(cal)
+    out = tmp_path / "val"
+    assert main(["validate", "all", "--quick", "--seeds", "2", "--calibration", str(cal),
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"skeye validate: error: --calibration {cal} is for 640x480 images, "
+                          "the ideal camera every run flies gives 800x600: calibrate it at "
+                          "that resolution"), err
+    assert not out.exists()
