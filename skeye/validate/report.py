@@ -94,7 +94,10 @@ def where_it_lands(std_m: float, max_m: float) -> str:
 
 
 def median_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Each numeric figure's median over the runs, plus the runs themselves."""
+    """Each numeric figure's median over the runs, plus the runs themselves. A run without a
+    figure (NaN: E1's errors when no frame had a detection) is left out of its median and
+    spread, which are NaN when no run has it: NaN has no place in an order, and the median
+    and spread were whatever the seeds' order made of it."""
     if len(runs) == 1:
         return dict(runs[0])
     out: dict[str, Any] = {}
@@ -102,9 +105,10 @@ def median_summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
         if key == "seed":
             out["seeds"] = [r["seed"] for r in runs]
         elif isinstance(value, int | float):
-            values = [r[key] for r in runs]
-            out[key] = statistics.median(values)
-            out[f"{key}_spread"] = [min(values), max(values)]
+            values = [r[key] for r in runs if not math.isnan(r[key])]
+            out[key] = statistics.median(values) if values else math.nan
+            out[f"{key}_spread"] = ([min(values), max(values)] if values
+                                    else [math.nan, math.nan])
         elif isinstance(value, str):
             out[key] = value  # a setting, the same for every run
     out["runs"] = runs

@@ -417,3 +417,24 @@ def test_a_calibration_for_another_image_size_is_refused_once_before_anything_ru
                           "the ideal camera every run flies gives 800x600: calibrate it at "
                           "that resolution"), err
     assert not out.exists()
+
+
+def test_a_seed_with_no_detection_is_left_out_of_the_median_not_sorted_in() -> None:
+    """E1's error figures are NaN for a seed whose detector found nothing; the median over
+    the seeds sorted NaN in as it came: seeds (NaN, 1, 2 mm) gave a median of 1 mm and a
+    spread of [NaN, NaN], seeds (1, 2 mm, NaN) a median of 2 mm and a spread hiding the third.
+    The median and spread are now over the seeds that have the figure."""
+    from skeye.validate.experiments import E1Series
+    from skeye.validate.report import e1_figures, median_summary
+
+    def run(seed: int, error_m: float | None) -> dict[str, object]:
+        estimate = None if error_m is None else 1.0 + error_m
+        return e1_figures(E1Series([0.1], [estimate], [1.0]), seed)
+
+    for errors in ((None, 0.001, 0.002), (0.001, 0.002, None), (0.001, None, 0.002)):
+        summary = median_summary([run(seed, e) for seed, e in enumerate(errors, start=1)])
+        assert summary["max_abs_error_m"] == pytest.approx(0.0015), (errors, summary)
+        assert summary["max_abs_error_m_spread"] == pytest.approx([0.001, 0.002]), errors
+        assert summary["missed_frames"] == 0 and summary["missed_frames_spread"] == [0, 1]
+    blind = median_summary([run(1, None), run(2, None)])
+    assert math.isnan(blind["max_abs_error_m"]) and blind["missed_frames"] == 1
