@@ -86,7 +86,11 @@ def validate(which: str, seeds: int, out: Path, quick: bool, first_seed: int = 1
         _choice(name, value, what)
     if wind not in E2_WINDS:
         raise LocalProtocolError(f"unknown E2 disturbance {wind!r}: {', '.join(E2_WINDS)}")
-    check_setting("vision_latency", vision_latency)  # refused here, not in every trial
+    try:  # refused here, not in every trial; in the CLI's words (it was "vision_latency")
+        check_setting("vision_latency", vision_latency)
+    except ConfigError:
+        raise LocalProtocolError(f"--vision-latency-ms must be 'measured' or a number of ms "
+                                 f"0..10000, got {vision_latency!r}") from None
     _choice("pad_source", pad_source, "pad source")
     if calibration is not None:  # a bad file is named here, not in every trial
         check_setting("calibration", str(calibration))

@@ -438,3 +438,17 @@ def test_a_seed_with_no_detection_is_left_out_of_the_median_not_sorted_in() -> N
         assert summary["missed_frames"] == 0 and summary["missed_frames_spread"] == [0, 1]
     blind = median_summary([run(1, None), run(2, None)])
     assert math.isnan(blind["max_abs_error_m"]) and blind["missed_frames"] == 1
+
+
+@pytest.mark.parametrize("latency", ["nan", "-5", "fast", ""])
+def test_a_bad_vision_latency_is_refused_naming_the_option(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], latency: str) -> None:
+    """A bad ``--vision-latency-ms`` was refused as "vision_latency must be ...", the name of
+    a sweep setting the user of skeye validate never typed; now the option is named."""
+    out = tmp_path / "val"
+    assert main(["validate", "E2", "--quick", "--vision-latency-ms", latency,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"skeye validate: error: --vision-latency-ms must be 'measured' or a number "
+                   f"of ms 0..10000, got {latency!r}\n"), err
+    assert not out.exists()
