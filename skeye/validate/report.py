@@ -230,14 +230,17 @@ def _json_figures(value: Any) -> Any:
     return value
 
 
-def _shown_path(path: str, out: Path) -> str:
-    """``path`` relative to the output folder when it lies inside it (the report travels)."""
+def _shown_path(path: str, out: Path, made: bool) -> str:
+    """``path`` relative to the output folder when it lies inside it (the report travels),
+    said made by this run when it was (``made``): a ``--calibration`` given from an earlier
+    run's ``OUT/calibration/`` was said made by this one."""
     if not path:
         return "none"
     try:
-        return f"`{Path(path).resolve().relative_to(out.resolve())}` (made by this run)"
+        inside = Path(path).resolve().relative_to(out.resolve())
     except ValueError:
         return f"`{path}`"
+    return f"`{inside}` ({'made by this run' if made else 'given'})"
 
 
 def _truth_note(setup: dict[str, Any]) -> str:
@@ -290,7 +293,8 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
         f"mode: {'quick (CI: shortened runs)' if quick else 'full'}; "
         f"camera profile: {setup.get('camera', 'ideal')}; board estimator: "
         f"{setup.get('estimator', 'truth')}; world: {setup.get('world', 'pad')}; calibration: "
-        f"{_shown_path(setup.get('calibration', ''), out)}; E2 disturbance: "
+        f"{_shown_path(setup.get('calibration', ''), out, 'calibration' in summary)}; "
+        "E2 disturbance: "
         f"{setup.get('wind', 'random_force')}; vision latency: "
         f"{setup.get('vision_latency', '0')}; pad observations: "
         f"{setup.get('pad_source', 'vision')}{_truth_note(setup)}.",

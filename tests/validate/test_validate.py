@@ -452,3 +452,18 @@ def test_a_bad_vision_latency_is_refused_naming_the_option(
     assert err == (f"skeye validate: error: --vision-latency-ms must be 'measured' or a number "
                    f"of ms 0..10000, got {latency!r}\n"), err
     assert not out.exists()
+
+
+def test_a_given_calibration_inside_out_is_not_said_made_by_this_run(tmp_path: Path) -> None:
+    """``--calibration OUT/calibration/camera.toml`` (an earlier webcam run's, into the same
+    --out) skips the calibration step, but the report said "calibration:
+    `calibration/camera.toml` (made by this run)": any file inside --out was said made."""
+    from skeye.validate.report import PAPER, write_report
+
+    cal = tmp_path / "calibration" / "camera.toml"
+    summary = {"paper": PAPER, "setup": {"camera": "webcam", "calibration": str(cal)},
+               "trials": 1}
+    write_report(tmp_path, summary, True, [1], {"E1": []})
+    report = (tmp_path / "report.md").read_text()
+    assert "calibration: `calibration/camera.toml` (given);" in report, report
+    assert "made by this run" not in report, report
