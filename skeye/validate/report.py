@@ -332,12 +332,12 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
             f"| max relative error | {_hundredths(e1['max_rel_error'], '%')} | 2 % (5 % with the "
             f"integer FOV) | <= 1 % (goal 0.5 %) |",
             f"| RMS error | {_hundredths(e1['rms_error_m'], 'cm')} | - | - |",
-            f"| frames processed | {e1['frames']} | - | - |",
-            f"| frames with no detection | {e1['missed_frames']} | - | 0 |",
+            f"| frames processed | {e1['frames']:g} | - | - |",
+            f"| frames with no detection | {e1['missed_frames']:g} | - | 0 |",
             "",
             f"Error targets (<= 1 %, <= 1 cm): {'met' if ok else 'NOT met'}. "
             f"No missed frames: {'met' if e1['missed_frames'] == 0 else 'NOT met'} "
-            f"({e1['missed_frames']} of {e1['frames']} frames without a detection). "
+            f"({e1['missed_frames']:g} of {e1['frames']:g} frames without a detection). "
             "Plot: `e1_height.png`; series: `e1_series.csv`.",
             "",
         ]
@@ -348,7 +348,7 @@ def write_report(out: Path, summary: dict[str, Any], quick: bool, seeds: list[in
                 f"{_hundredths(e1['uncalibrated_max_rel_error'], '%')}, max absolute "
                 f"{_hundredths(e1['uncalibrated_max_abs_error_m'], 'cm')}, RMS "
                 f"{_hundredths(e1['uncalibrated_rms_error_m'], 'cm')}, "
-                f"{e1['uncalibrated_missed_frames']} of {e1['uncalibrated_frames']} frames "
+                f"{e1['uncalibrated_missed_frames']:g} of {e1['uncalibrated_frames']:g} frames "
                 "without a detection: the bias a missing calibration causes "
                 "(series: `e1_uncalibrated_series.csv`).",
                 "",

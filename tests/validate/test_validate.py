@@ -467,3 +467,27 @@ def test_a_given_calibration_inside_out_is_not_said_made_by_this_run(tmp_path: P
     report = (tmp_path / "report.md").read_text()
     assert "calibration: `calibration/camera.toml` (given);" in report, report
     assert "made by this run" not in report, report
+
+
+def test_frame_counts_over_two_seeds_are_said_as_counts(tmp_path: Path) -> None:
+    """With an even number of seeds the median of a count is a float (the mean of the middle
+    two): ``skeye validate E1 --quick --seeds 2`` reported "| frames processed | 54.0 |" and
+    "(0.0 of 54.0 frames without a detection)". Counts are now said without the ".0"."""
+    from skeye.validate.experiments import E1Series
+    from skeye.validate.report import PAPER, e1_figures, median_summary, write_report
+
+    def run(seed: int, frames: int) -> dict[str, object]:
+        return e1_figures(E1Series([0.1] * frames, [1.0] * frames, [1.0] * frames), seed)
+
+    for frames, said in ((54, "54"), (55, "54.5")):
+        e1 = median_summary([run(1, 54), run(2, frames)])
+        e1.update({f"uncalibrated_{k}": v for k, v in e1.items()
+                   if k in ("frames", "missed_frames", "max_abs_error_m", "max_rel_error",
+                            "rms_error_m")})
+        write_report(tmp_path, {"paper": PAPER, "setup": {}, "trials": 2, "E1": e1}, True,
+                     [1, 2])
+        report = (tmp_path / "report.md").read_text()
+        assert f"| frames processed | {said} | - | - |" in report, report
+        assert "| frames with no detection | 0 | - | 0 |" in report, report
+        assert f"(0 of {said} frames without a detection)" in report, report
+        assert f"0 of {said} frames without a detection: the bias" in report, report
