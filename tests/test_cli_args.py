@@ -67,6 +67,9 @@ CASES = [
     (["validate", "--workers", "0", "--seeds", "0"], "--workers"),
     (["validate", "E1", "--quick", "--seeds", "99999999999999"], "--seeds"),  # MemoryError
     (["sweep", "spec.toml", "--out", "o", "--workers", "0"], "--workers"),
+    # an empty name was the current folder: the trials were run and written there, and said
+    # to be kept in "/trials"
+    (["sweep", "spec.toml", "--out", ""], "--out"),
     (["snapshot", "--images", NO_SIM, "--timeout", "-1", "--out", "x.png"], "--timeout"),
     # past what a socket's timeout takes (about 9.2e9 s): an OverflowError traceback
     (["snapshot", "--images", NO_SIM, "--timeout", "1e10", "--out", "x.png"], "--timeout"),

@@ -186,7 +186,8 @@ def register(sub: Any) -> None:
                        description="Run the trials of SPEC.toml (docs/sweeps.md) on a local "
                                    "process pool or a Ray cluster; rerun to resume.")
     p.add_argument("spec", help="sweep specification (TOML)")
-    p.add_argument("--out", required=True, help="output folder (rerun with it to resume)")
+    p.add_argument("--out", type=cliargs.path, required=True,
+                   help="output folder (rerun with it to resume)")
     p.add_argument("--backend", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None,
                    help="Ray cluster to join (auto, or HOST:PORT); none starts a local one")
