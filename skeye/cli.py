@@ -12,7 +12,6 @@ import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from functools import partial
-from pathlib import Path
 from typing import Any
 
 from skeye import __version__, cliargs
@@ -254,7 +253,7 @@ def ll_board_specs(args: argparse.Namespace) -> list[Any]:
 
 def _add_sim(sub: Any) -> None:
     p = sub.add_parser("sim", help="run the simulator (control protocol server)")
-    p.add_argument("--world", default="pad",
+    p.add_argument("--world", type=cliargs.path, default="pad",
                    help="built-in world (pad, yard, indoor, checkerboard) or a .toml")
     p.add_argument("--check", action="store_true",
                    help="check the world and the --robot-dir robot files, say what is wrong "
@@ -289,7 +288,7 @@ def _add_sim(sub: Any) -> None:
         "--robot-dir",
         action="append",
         default=[],
-        type=Path,
+        type=cliargs.file_path,
         help="folder of extra robot classes (<name>.toml); repeatable",
     )
     p.add_argument(
@@ -345,7 +344,7 @@ def _add_sim(sub: Any) -> None:
     )
     p.add_argument(
         "--record",
-        type=Path,
+        type=cliargs.file_path,
         default=None,
         metavar="FILE",
         help="record every line sent and received, and ground truth, to FILE (docs/recording.md)",

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 from skeye.values import MAX_BAUD, baud_rate
 
@@ -115,10 +116,17 @@ def _float_from(text: str, bound: float, inclusive: bool) -> float:
 
 
 def path(text: str) -> str:
-    """A file or folder name: not empty (``--out ''`` was the current folder, written into)."""
+    """A file or folder name: not empty (``--out ''`` was the current folder, written into;
+    ``--robot-dir ''`` the current folder searched; ``--record ''`` "recording . is a
+    directory")."""
     if not text:
         raise argparse.ArgumentTypeError("must name a file or folder, got ''")
     return text
+
+
+def file_path(text: str) -> Path:
+    """:func:`path` as a ``Path``."""
+    return Path(path(text))
 
 
 def positive_float(text: str) -> float:

@@ -70,6 +70,19 @@ CASES = [
     # an empty name was the current folder: the trials were run and written there, and said
     # to be kept in "/trials"
     (["sweep", "spec.toml", "--out", ""], "--out"),
+    # Every file or folder named empty (a shell variable left empty) is refused naming its
+    # option: it was the current folder, "." ("recording . is a directory", "--out . is a
+    # directory", "calibration file: Is a directory"), searched for robots, or nothing.
+    *[(argv, option) for argv, option in (
+        (["sim", "--record", ""], "--record"), (["sim", "--world", ""], "--world"),
+        (["sim", "--robot-dir", ""], "--robot-dir"), (["replay", ""], "file"),
+        (["plot", ""], "file"), (["plot", "x.rec", "--out", ""], "--out"),
+        (["snapshot", "--images", NO_SIM, "--out", ""], "--out"),
+        (["pad", "--out", ""], "--out"), (["calibrate", ""], "images"),
+        (["calibrate", "a.png", "--out", ""], "--out"), (["logs", ""], "log"),
+        (["logs", "--json", ""], "--json"), (["up", "--calibration", ""], "--calibration"),
+        (["up", "--world", ""], "--world"), (["ground", "--robot-dir", ""], "--robot-dir"),
+        ([*PILOT, "--robot-dir", ""], "--robot-dir"), (["vision", "detect", ""], "image"))],
     (["snapshot", "--images", NO_SIM, "--timeout", "-1", "--out", "x.png"], "--timeout"),
     # past what a socket's timeout takes (about 9.2e9 s): an OverflowError traceback
     (["snapshot", "--images", NO_SIM, "--timeout", "1e10", "--out", "x.png"], "--timeout"),

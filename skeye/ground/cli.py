@@ -243,7 +243,7 @@ def _add_ground(sub: Any) -> None:
         default="hummingbird",
         help="the vehicle's robot class: the speed limits commands are checked against",
     )
-    p.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
+    p.add_argument("--robot-dir", action="append", default=[], metavar="DIR", type=cliargs.path,
                    help="a folder of robot files where --robot is looked up (as skeye sim's)")
     p.add_argument("--video-fps", type=cliargs.positive_float, default=DEFAULT_VIDEO_FPS,
                    help="the most camera frames per second asked of the vehicle's --video "
@@ -805,7 +805,8 @@ def _add_up(sub: Any) -> None:
         help="start simulator, pilot and ground control on this machine",
         description="Start skeye sim, skeye pilot and skeye ground; Ctrl-C stops them all.",
     )
-    p.add_argument("--world", default="pad", help="world for the simulator (default pad)")
+    p.add_argument("--world", type=cliargs.path, default="pad",
+                   help="world for the simulator (default pad)")
     p.add_argument("--robot", default="hummingbird", help="robot class the pilot flies")
     p.add_argument("--seed", type=cliargs.seed, default=0,
                    help="simulator seed (a whole number >= 0)")
@@ -826,10 +827,10 @@ def _add_up(sub: Any) -> None:
                    help="the pilot also sends its camera as H.264 RTP there (QGroundControl: "
                    "udp://127.0.0.1:5600)")
     p.add_argument("--host", default="127.0.0.1", help="address the web page binds")
-    p.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
+    p.add_argument("--robot-dir", action="append", default=[], metavar="DIR", type=cliargs.path,
                    help="a folder of robot files for the simulator (and the pilot's envelope), "
                    "as skeye sim --robot-dir; repeatable")
-    p.add_argument("--calibration", default="auto", metavar="auto|none|FILE",
+    p.add_argument("--calibration", type=cliargs.path, default="auto", metavar="auto|none|FILE",
                    help="the pilot's camera calibration: auto (default) calibrates a "
                         "distorting simulated camera once and keeps it; a skeye calibrate file; "
                         "none")

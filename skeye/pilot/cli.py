@@ -790,6 +790,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--calibration",
+        type=cliargs.path,
         default=None,
         metavar="CAMERA_TOML",
         help="the downward camera's calibration from `skeye calibrate` (camera matrix and lens "
@@ -916,6 +917,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--robot", default="hummingbird", help="robot class to spawn")
     p.add_argument(
         "--robot-dir",
+        type=cliargs.path,
         default=None,
         help="folder of robot files (as skeye sim's): the class's [envelope] is read there",
     )

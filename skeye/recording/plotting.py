@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from skeye import cliargs
 from skeye.errors import RemoteProtocolError
 from skeye.geo import MAX_POSITION_M
 from skeye.outputs import figure_file, write_whole
@@ -321,7 +322,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 def register(sub: Any) -> None:
     """Add ``skeye plot`` to the command line."""
     p = sub.add_parser("plot", help="draw a flight recording (trajectory, altitude, battery)")
-    p.add_argument("file", type=Path, help="a recording made with skeye sim --record")
-    p.add_argument("--out", type=Path, default=Path("plot.png"),
+    p.add_argument("file", type=cliargs.file_path, help="a recording made with skeye sim --record")
+    p.add_argument("--out", type=cliargs.file_path, default=Path("plot.png"),
                    help="image to write (its extension picks the format; none: .png)")
     p.set_defaults(func=cmd_plot)

@@ -424,7 +424,7 @@ def _speed(text: str) -> float:
 def register(sub: Any) -> None:
     """Add ``skeye replay`` to the command line."""
     p = sub.add_parser("replay", help="play a flight recording to clients (control protocol)")
-    p.add_argument("file", type=Path, help="a recording made with skeye sim --record")
+    p.add_argument("file", type=cliargs.file_path, help="a recording made with skeye sim --record")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=cliargs.port, default=3000, help="port (0 = any free)")
     p.add_argument("--speed", type=_speed, default=1.0,

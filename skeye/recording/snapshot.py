@@ -97,7 +97,8 @@ def register(sub: Any) -> None:
     p = sub.add_parser("snapshot", help="save one camera frame from the image server")
     p.add_argument("--images", default="127.0.0.1:5003", help="image server host:port")
     p.add_argument("--camera", default=None, help="robot/camera, e.g. R1/Down (default: first)")
-    p.add_argument("--out", required=True, help="output file (.png, .jpg or .jpeg)")
+    p.add_argument("--out", type=cliargs.path, required=True,
+                   help="output file (.png, .jpg or .jpeg)")
     p.add_argument("--quality", type=int, default=None,
                    help=f"JPEG quality 1-100 of a .jpg or .jpeg --out (default {DEFAULT_QUALITY})")
     p.add_argument("--timeout", type=cliargs.positive_float, default=10.0,

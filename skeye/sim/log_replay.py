@@ -440,7 +440,7 @@ def register(sub: Any) -> None:
         "measure its IMU (vibration above 10 Hz, Allan deviation), replay it through the "
         "board estimator against the log's ground truth, and print the simulated IMU's "
         "figures beside it. Without a log: the simulated figures alone.")
-    p.add_argument("log", nargs="?", default=None,
+    p.add_argument("log", nargs="?", default=None, type=cliargs.path,
                    help="the log: an EuRoC folder (mav0/), a .ulg file, a .bag or rosbag2 folder")
     p.add_argument("--format", choices=LOG_FORMATS, default="auto")
     p.add_argument("--imu-topic", default=None, help="ROS bags: the IMU topic")
@@ -456,6 +456,8 @@ def register(sub: Any) -> None:
     p.add_argument("--seconds", type=cliargs.positive_float, default=None,
                    help=f"without a log: how long the simulated hover is ({MIN_HOVER_S:g}.."
                    f"{MAX_SIM_S:g} s; default {DEFAULT_SECONDS:g})")
-    p.add_argument("--plot", default=None, metavar="PNG", help="write the spectra here")
-    p.add_argument("--json", default=None, metavar="FILE", help="write the figures here")
+    p.add_argument("--plot", type=cliargs.path, default=None, metavar="PNG",
+                   help="write the spectra here")
+    p.add_argument("--json", type=cliargs.path, default=None, metavar="FILE",
+                   help="write the figures here")
     p.set_defaults(func=cmd_logs)

@@ -18,6 +18,7 @@ from typing import Any
 
 import cv2
 
+from skeye import cliargs
 from skeye.errors import ConfigError, InvalidArgument, LocalProtocolError
 from skeye.image_files import read_image_file
 from skeye.outputs import output_file
@@ -113,10 +114,12 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "calibrate", help="calibrate a camera from checkerboard images (writes camera.toml)"
     )
-    p.add_argument("images", nargs="+", help="image files of the board (any format OpenCV reads)")
+    p.add_argument("images", nargs="+", type=cliargs.path,
+                   help="image files of the board (any format OpenCV reads)")
     p.add_argument("--board", default="9x6",
                    help="inner corners per row x per column, COLSxROWS (default 9x6)")
     p.add_argument("--square-mm", type=float, default=25.0,
                    help="side of one printed square in millimetres (default 25)")
-    p.add_argument("--out", default="camera.toml", help="calibration file to write (.toml)")
+    p.add_argument("--out", type=cliargs.path, default="camera.toml",
+                   help="calibration file to write (.toml)")
     p.set_defaults(func=cmd_calibrate)

@@ -23,6 +23,7 @@ from typing import Any
 
 import cv2
 
+from skeye import cliargs
 from skeye.errors import ConfigError, LocalProtocolError
 from skeye.image_files import read_image_file
 from skeye.outputs import output_file, write_whole
@@ -148,7 +149,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
 def register(subparsers: Any) -> None:
     """Add ``pad`` and ``vision detect`` to an argparse subparsers object."""
     p = subparsers.add_parser("pad", help="write the landing pad as a printable PDF or PNG")
-    p.add_argument("--out", required=True, help="output file, .pdf or .png")
+    p.add_argument("--out", type=cliargs.path, required=True, help="output file, .pdf or .png")
     p.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
     p.add_argument("--dpi", type=int, default=None,
                    help=f"PNG resolution (dots per inch, {MIN_DPI}..{MAX_DPI}; default "
@@ -164,7 +165,7 @@ def register(subparsers: Any) -> None:
     v = subparsers.add_parser("vision", help="landing-pad vision tools")
     vsub = v.add_subparsers(dest="vision_command", required=True, metavar="COMMAND")
     d = vsub.add_parser("detect", help="detect the landing pad in an image, print JSON")
-    d.add_argument("image", help="image file (any format OpenCV reads)")
+    d.add_argument("image", type=cliargs.path, help="image file (any format OpenCV reads)")
     d.add_argument(
         "--fov",
         type=float,
@@ -181,7 +182,7 @@ def register(subparsers: Any) -> None:
     d.add_argument("--roll", type=float, default=None, help="vehicle roll, rad (with --pitch)")
     d.add_argument("--pitch", type=float, default=None, help="vehicle pitch, rad (with --roll)")
     d.add_argument("--pad", default=SKEYE_4.name, help="built-in pad name or a pad .toml file")
-    d.add_argument("--calibration", default=None, metavar="CAMERA_TOML",
+    d.add_argument("--calibration", type=cliargs.path, default=None, metavar="CAMERA_TOML",
                    help="the camera's calibration from `skeye calibrate` (replaces --fov: not "
                    "with it; the lens distortion is corrected)")
     d.set_defaults(func=cmd_detect)

@@ -348,13 +348,17 @@ def test_a_recording_named_as_a_folder_is_refused_as_one(
 ) -> None:
     """`skeye sim --record FOLDER` said `recording FOLDER already exists; choose another name or
     delete it`, and `--record ""` (the folder ".") told the user to delete the current
-    folder. A folder is named as one."""
+    folder. A folder is named as one; an empty name is no name (refused with the option)."""
     monkeypatch.chdir(tmp_path)
-    for record, named in ((str(tmp_path), str(tmp_path)), ("", ".")):
-        assert main(["sim", "--mode", "lockstep", "--port", "0", "--record", record]) == 2
-        err = capsys.readouterr().err
-        assert err == (f"skeye sim: error: recording {named} is a directory: give a file name "
-                       "for the recording\n"), err
+    command = ["sim", "--mode", "lockstep", "--port", "0", "--record"]
+    assert main([*command, str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"skeye sim: error: recording {tmp_path} is a directory: give a file name "
+                   "for the recording\n"), err
+    with pytest.raises(SystemExit) as refused:
+        main([*command, ""])
+    assert refused.value.code == 2
+    assert "argument --record: must name a file or folder, got ''" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
 
