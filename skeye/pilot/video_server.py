@@ -16,7 +16,10 @@ sans-IO :class:`~skeye.wire.video.VideoConnection` per client:
   first), and only when every one in its way streams does it get ERROR ("busy") and is closed
   at once; running short of file descriptors is waited out;
 - bytes that are not the protocol (an HTTP request, garbage, a message the client may not send)
-  get ERROR naming the problem and the connection is closed; other clients are not touched;
+  get ERROR naming the problem and the connection is closed; other clients are not touched; a
+  message under way to that client goes out whole first (the client is ``closing``: nothing
+  more is read from it, and it is closed when its ERROR has gone out or it takes nothing for
+  ``send_timeout_s``);
 - the newest frame is JPEG-encoded once (OpenCV, ``jpeg_quality``) when some client will take
   it, and queued to each subscribed client whose previous frame has left its buffer and whose
   rate (the smaller of its SUBSCRIBE and the server's ``max_fps``) allows; a client still
@@ -106,6 +109,7 @@ class _Client:
     frames_sent: int = 0
     dropped: int = 0
     key: str = ""  # whose connection it is (skeye.peers)
+    closing: bool = False  # its ERROR queued after a message under way; closed once out
 
     @property
     def streaming(self) -> bool:
@@ -345,6 +349,15 @@ class VideoServer:
         if reason is not None:
             log.info("video: closing %s: %s", client.peer, reason)
             if client.conn.state is not State.CLOSED:
+                if client.out:  # a message under way: ERROR after it, else it lands inside it
+                    try:
+                        client.out += client.conn.send(Error(reason[:500]))
+                    except LocalProtocolError:
+                        pass
+                    else:
+                        client.closing = True  # read no more; closed once out or stalled
+                        self._want_write(sel, client)
+                        return
                 self._send_last(client.sock, client.conn, reason)
         with self._lock:
             self._clients.pop(client.sock.fileno(), None)
@@ -385,7 +398,8 @@ class VideoServer:
                 return
 
     def _want_write(self, sel: selectors.BaseSelector, client: _Client) -> None:
-        events = selectors.EVENT_READ | (selectors.EVENT_WRITE if client.out else 0)
+        events = ((0 if client.closing else selectors.EVENT_READ)
+                  | (selectors.EVENT_WRITE if client.out else 0))
         try:
             sel.modify(client.sock, events, "client")
         except (KeyError, ValueError):
@@ -406,6 +420,9 @@ class VideoServer:
             return
         del client.out[:n]
         client.stalled_since_s = None if n else client.stalled_since_s
+        if client.closing and not client.out:
+            self._drop(sel, client, None)  # its ERROR has gone out
+            return
         self._want_write(sel, client)
 
     def _take_pending(self) -> None:

@@ -136,6 +136,40 @@ def test_garbage_gets_an_error_and_others_are_not_touched(server: VideoServer) -
     good.close()
 
 
+def test_a_bad_message_during_a_frame_gets_its_error_after_the_frame(
+        server: VideoServer) -> None:
+    """A viewer that sends a bad SUBSCRIBE while a frame to it is still under way receives the
+    rest of that frame and then the ERROR, whole: the ERROR used to be sent at once, in the
+    middle of the frame's JPEG, and the frame was cut there, so its reason was lost."""
+    rng = np.random.default_rng(5)
+    viewer = Viewer(server.port)
+    viewer.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    assert isinstance(viewer.next(), Hello)
+    n = 1
+
+    def under_way() -> bool:
+        nonlocal n
+        clients = server.clients()
+        if clients and clients[0].frames_sent >= 1 and clients[0].buffered_bytes > 0:
+            return True
+        server.publish(_frame(n, rng, (480, 640)))  # noise: JPEGs far over the socket buffers
+        n += 1
+        return False
+
+    wait_until(under_way, 60, "a frame under way to a viewer that does not read", poll_s=0.05)
+    header = b'{"max_fps": 0}'  # a bad field: the rate is 0.01..1000
+    viewer.sock.sendall(b"SV\x01\x04" + len(header).to_bytes(4, "big") + bytes(4) + header)
+    wait_until(lambda: server.bad_clients == 1, 30, "the bad SUBSCRIBE refused")
+    data = b""
+    while chunk := viewer.sock.recv(1 << 20):
+        data += chunk
+    msgs = viewer.conn.receive_data(data)
+    assert [type(m) for m in msgs] == [Frame, Error], msgs
+    assert isinstance(msgs[1], Error) and "not the skeye video protocol" in msgs[1].reason
+    assert "max_fps" in msgs[1].reason
+    viewer.close()
+
+
 def test_idle_and_surplus_clients_are_closed_with_a_reason(server: VideoServer) -> None:
     idle = socket.create_connection(("127.0.0.1", server.port), timeout=60)
     viewer = Viewer(server.port)
