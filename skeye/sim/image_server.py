@@ -17,7 +17,8 @@ How this works:
   made no progress longest among those not streaming (it gets an error frame saying so); only
   when all of them stream is the new one refused. A connection that sends no complete request
   within ``handshake_timeout_s`` of connecting, or that makes no progress (no request received,
-  no byte sent to it) for ``idle_timeout_s``, gets an error frame naming the reason (after the
+  no byte sent to it; a stream that has taken every frame sent and waits for a newer one is
+  making progress) for ``idle_timeout_s``, gets an error frame naming the reason (after the
   frame under way, if any, so the stream stays whole) and is closed; one that takes none of it
   for another ``idle_timeout_s`` is closed without it: idle or stalled clients cannot hold the
   slots. The accept thread never waits on a
@@ -250,6 +251,10 @@ class _ClientHandler:
                          "without it", self.address, self._server.idle_timeout_s)
                 self._stop = True
             return
+        if self._stream_period_s is not None and not self._out and not self._queue:
+            # A stream that has taken every frame sent waits for a newer one (in lockstep
+            # between steps, or while its camera is gone): it is not idle, the camera is.
+            self._active_s = now
         if self.replaced is None and now < self._idle_deadline_s():
             return
         server = self._server

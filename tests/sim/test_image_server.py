@@ -636,3 +636,34 @@ def test_a_client_that_never_takes_its_error_frame_is_closed(
                 time.sleep(0.05)
         finally:
             conn.close()
+
+
+def test_a_stream_waiting_for_a_newer_frame_is_not_idled_out(buffer: FrameBuffer) -> None:
+    """A stream that has read every frame sent and waits for a newer one (lockstep between
+    steps, its camera gone) is not idle: it was closed after idle_timeout_s as 'idle ...
+    nothing read', though it had read everything and 'the stream goes on' was promised."""
+    buffer.publish(Frame("R1/Down", 1, 1, 0.1, make_frame_rgb(1)))
+    with ImageServer(buffer, port=0, idle_timeout_s=1.0) as srv:
+        stream = RawConn(srv.port)
+        once = RawConn(srv.port)
+        try:
+            stream.send(b"SKEYE META on\nSKEYE STREAM 10\n")
+            first = stream.next_event()
+            assert isinstance(first, DecodedFrame) and first.meta is not None
+            assert first.meta.frame_number == 1
+            # A connection quiet since after the stream's last frame is idled out first.
+            once.send(b"SKEYE META on\n")
+            once.sock.settimeout(30)
+            events = []
+            while data := once.sock.recv(1 << 20):
+                events += once.decoder.feed(data)
+            assert [e.reason for e in events if isinstance(e, RemoteError)] == [
+                "idle for 1 s (no request, nothing read); closed"], events
+            buffer.publish(Frame("R1/Down", 1, 2, 0.2, make_frame_rgb(2)))
+            stream.sock.settimeout(30)
+            second = stream.next_event()
+            assert isinstance(second, DecodedFrame), second
+            assert second.meta is not None and second.meta.frame_number == 2
+        finally:
+            stream.close()
+            once.close()
