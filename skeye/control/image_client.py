@@ -2,7 +2,10 @@
 
 Extension requests (camera, format, META, stream) get no reply when they succeed, so a refused
 one (an unknown camera, say) surfaces as an error frame in place of the next frame: the next
-``get_frame`` raises :class:`~skeye.errors.RemoteProtocolError` with the server's reason.
+``get_frame`` raises :class:`~skeye.errors.RemoteProtocolError` with the server's reason. A
+connection the server refuses (too many clients) gets an error frame and is closed; the
+request that then fails to send raises the same, with that reason (from
+:meth:`~skeye.link.transport.Link.leftover`), not the bare ``LinkClosed``.
 """
 
 from __future__ import annotations
@@ -224,6 +227,13 @@ class ImageClient:
             self._link.send(encode_request(request))
         except LinkTimeout as exc:
             raise LinkTimeout(f"image server {self._peer}: send timed out") from exc
+        except LinkClosed:
+            # A server that refuses the connection (too many clients) sends an error frame and
+            # closes; a request sent meanwhile fails, and the reason is in what it sent.
+            for event in self._decoder.feed(self._link.leftover()):
+                if isinstance(event, RemoteError):
+                    raise RemoteProtocolError(f"image server: {event.reason}") from None
+            raise
 
     def _next_frame(self) -> DecodedFrame:
         event = self._checked(self._next_event())

@@ -91,6 +91,13 @@ class Link(ABC):
         (TCP's half-close); a link without one does nothing (its peer learns at close)."""
         return
 
+    def leftover(self, max_bytes: int = RECV_CHUNK) -> bytes:
+        """After the link broke (a ``send`` raised ``LinkClosed``): the bytes the peer had
+        sent that were not read yet, at most ``max_bytes``, without waiting; ``b""`` if none
+        or if the link was closed here. A server that refuses a connection says why and
+        closes; a request sent meanwhile fails, and the reason is only in these bytes."""
+        return b""
+
     @abstractmethod
     def _send(self, data: bytes) -> None: ...
 
@@ -163,6 +170,21 @@ class TcpLink(Link):
             self._closed.set()
             raise PeerClosed(f"{self.name}: peer closed the connection")
         return data
+
+    def leftover(self, max_bytes: int = RECV_CHUNK) -> bytes:
+        data = bytearray()
+        with self._release_lock:
+            if self._released:
+                return b""
+            while len(data) < max_bytes:
+                try:
+                    chunk = self._sock.recv(max_bytes - len(data), socket.MSG_DONTWAIT)
+                except OSError:  # nothing more (EAGAIN), or the reset after the bytes
+                    break
+                if not chunk:
+                    break
+                data += chunk
+        return bytes(data)
 
     def finish_sending(self) -> None:
         try:

@@ -395,6 +395,27 @@ def test_too_many_clients_are_refused(buffer: FrameBuffer) -> None:
             conn.close()
 
 
+def test_a_refused_client_says_why_though_its_requests_fail(buffer: FrameBuffer) -> None:
+    """The server answers a connection it refuses with an error frame and closes it; the
+    client's next request then fails to send. ImageClient said only that ('[Errno 32] Broken
+    pipe', and so did skeye snapshot --camera), not the reason the server had sent."""
+    with ImageServer(buffer, port=0, max_clients=1) as srv, ImageClient("127.0.0.1", srv.port):
+        deadline = time.monotonic() + 30
+        while srv.client_count() < 1:
+            assert time.monotonic() < deadline, "the first client was never served"
+            time.sleep(0.01)
+        with ImageClient("127.0.0.1", srv.port, timeout_s=30) as refused:
+            sock = refused.link._sock  # type: ignore[attr-defined]
+            close_wait = 8  # Linux's TCP state: the server closed its end
+            while sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] != close_wait:
+                assert time.monotonic() < deadline, "the server never closed the connection"
+                time.sleep(0.01)
+            with pytest.raises(RemoteProtocolError, match="image server: too many clients"):
+                refused.select_camera("R1/Down")  # sent: the server's end answers with a reset
+                refused.set_meta(True)  # fails to send
+                refused.get_frame()
+
+
 # ------------------------------------------------------------------ robustness
 
 
