@@ -675,9 +675,7 @@ class ImageServer:
                 self._handlers.append(handler)
                 handler.thread.start()
         if refuse:
-            log.warning(
-                "image server: refusing %s (closed or %d clients)", address, self._max_clients
-            )
+            log.warning("image server: refusing %s: %s", address, reason)
             try:
                 sock.setblocking(False)
                 sock.send(encode_error_frame(reason))

@@ -382,7 +382,10 @@ def test_four_clients_same_frame_encode_once(buffer: FrameBuffer, server: ImageS
             client.close()
 
 
-def test_too_many_clients_are_refused(buffer: FrameBuffer) -> None:
+def test_too_many_clients_are_refused(
+    buffer: FrameBuffer, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="skeye.sim.image_server")
     with ImageServer(buffer, port=0, max_clients=1) as srv, ImageClient("127.0.0.1", srv.port):
         deadline = time.monotonic() + 2.0
         while srv.client_count() < 1 and time.monotonic() < deadline:
@@ -393,6 +396,9 @@ def test_too_many_clients_are_refused(buffer: FrameBuffer) -> None:
             assert event == RemoteError("too many clients")
         finally:
             conn.close()
+    # The log names the reason: it said '(closed or 1 clients)' whatever the reason was.
+    refusals = [r.getMessage() for r in caplog.records if "refusing" in r.getMessage()]
+    assert len(refusals) == 1 and refusals[0].endswith(": too many clients"), refusals
 
 
 def test_a_refused_client_says_why_though_its_requests_fail(buffer: FrameBuffer) -> None:
