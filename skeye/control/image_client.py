@@ -22,7 +22,8 @@ from skeye.errors import (
     PeerClosed,
     RemoteProtocolError,
 )
-from skeye.link.transport import Link, open_link, tcp_uri
+from skeye.link.transport import MAX_SOCKET_TIMEOUT_S, Link, open_link, tcp_uri
+from skeye.values import is_finite_number
 from skeye.wire.image_requests import (
     NewestFrame,
     NewestInfo,
@@ -64,6 +65,8 @@ class ImageClient:
         max_frame_bytes: larger frames are a protocol error.
 
     Raises:
+        LocalProtocolError: ``timeout_s`` not a number over 0 (at most 1e9 s), or
+            ``max_frame_bytes`` not a whole number >= 1.
         LinkTimeout: connecting took longer than ``timeout_s``.
         LinkClosed: the connection was refused (and later: the link broke).
     """
@@ -76,6 +79,13 @@ class ImageClient:
         *,
         max_frame_bytes: int = DEFAULT_MAX_FRAME_BYTES,
     ) -> None:
+        if not (is_finite_number(timeout_s) and 0 < timeout_s <= MAX_SOCKET_TIMEOUT_S):
+            raise LocalProtocolError(f"timeout_s must be a number over 0 and at most "
+                                     f"{MAX_SOCKET_TIMEOUT_S:g} s, got {timeout_s!r}")
+        if (isinstance(max_frame_bytes, bool) or not isinstance(max_frame_bytes, int)
+                or max_frame_bytes < 1):
+            raise LocalProtocolError(
+                f"max_frame_bytes must be a whole number >= 1, got {max_frame_bytes!r}")
         self.timeout_s = timeout_s
         try:
             self._link: Link = open_link(tcp_uri(host, port), timeout_s,

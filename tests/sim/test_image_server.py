@@ -612,6 +612,15 @@ def test_client_argument_checks(server: ImageServer) -> None:
             client.select_camera("has space")
     with pytest.raises(LocalProtocolError, match="closed"):
         client.get_frame()
+    # A bad timeout was a bare ValueError, OverflowError or TypeError from the socket, and 0
+    # said 'cannot connect: Operation now in progress'.
+    for timeout_s in (0, -1, float("nan"), float("inf"), 1e10, "5"):
+        with pytest.raises(LocalProtocolError, match="timeout_s must be a number over 0"):
+            ImageClient("127.0.0.1", server.port, timeout_s=timeout_s)  # type: ignore[arg-type]
+    for max_frame_bytes in (0, -1, 1.5, True):
+        with pytest.raises(LocalProtocolError, match="max_frame_bytes must be a whole number"):
+            ImageClient("127.0.0.1", server.port,
+                        max_frame_bytes=max_frame_bytes)  # type: ignore[arg-type]
 
 
 def _raw_stalled_mid_frame(port: int) -> RawConn:
