@@ -197,8 +197,11 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         return _error(problem)
     if args.rtp_video is not None:
-        from skeye.pilot.rtp_video import check_rtp_destination
+        from skeye.pilot.rtp_video import MAX_RTP_FPS, MIN_RTP_FPS, check_rtp_destination
 
+        if not MIN_RTP_FPS <= args.rtp_fps <= MAX_RTP_FPS:  # before the robot is spawned
+            return _error(f"--rtp-fps must be {MIN_RTP_FPS:g}..{MAX_RTP_FPS:g} frames/s, got "
+                          f"{args.rtp_fps:g}")
         try:
             check_rtp_destination(args.rtp_video)  # resolves, and a route exists
             import av  # noqa: F401  (the `mavlink` extra)
@@ -906,7 +909,7 @@ def register(subparsers: Any) -> None:
         "(QGroundControl's UDP video on udp://127.0.0.1:5600; needs --images and PyAV)",
     )
     p.add_argument("--rtp-fps", type=cliargs.positive_float, default=10.0,
-                   help="most frames per second of the RTP video (default 10)")
+                   help="most frames per second of the RTP video, 0.1..60 (default 10)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--port", type=cliargs.port, default=DEFAULT_PORT,
                        help="TCP port (0 = any free)")

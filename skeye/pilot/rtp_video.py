@@ -36,6 +36,7 @@ log = logging.getLogger(__name__)
 
 PAYLOAD_TYPE = 96
 DEFAULT_RTP_FPS = 10.0
+MIN_RTP_FPS, MAX_RTP_FPS = 0.1, 60.0  # frames/s (--rtp-fps)
 DEFAULT_BITRATE = 1_000_000  # bit/s
 RESOLVE_TIMEOUT_S = 5.0
 """How long the start check waits for the system resolver (glibc's own: 5 s a try, 2 tries
@@ -134,8 +135,9 @@ class RtpVideo:
 
         if "libx264" not in av.codecs_available:
             raise ConfigError("PyAV has no libx264 encoder here: no H.264 RTP video")
-        if not 0.1 <= max_fps <= 60:
-            raise ConfigError(f"RTP video frame rate must be 0.1..60 frames/s, got {max_fps:g}")
+        if not MIN_RTP_FPS <= max_fps <= MAX_RTP_FPS:
+            raise ConfigError(f"RTP video frame rate must be {MIN_RTP_FPS:g}..{MAX_RTP_FPS:g} "
+                              f"frames/s, got {max_fps:g}")
         self.host, self.port, self.ip = check_rtp_destination(uri)
         self.address = f"udp://{url_host(self.host)}:{self.port}"
         self.max_fps = max_fps

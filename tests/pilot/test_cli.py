@@ -244,7 +244,11 @@ def _unused_port() -> int:
     (["--rtp-video", "udp://127.0.0.1:5600"], 2,
      "--rtp-video sends the camera: it needs --images or --camera URI"),
     (["--port", "0"], pilot_cli.EXIT_LOST_SIMULATOR, "cannot connect to the simulator at"),
-], ids=["bad option", "option needs another", "simulator not there"])
+    # refused by the RTP video only once the robot was spawned (status 1), and here as a
+    # simulator not there (status 4)
+    (["--port", "0", "--images", "127.0.0.1:1", "--rtp-video", "udp://127.0.0.1:5600",
+      "--rtp-fps", "100"], 2, "--rtp-fps must be 0.1..60 frames/s, got 100"),
+], ids=["bad option", "option needs another", "simulator not there", "bad --rtp-fps"])
 def test_pilot_errors_go_to_stderr_naming_the_command(capsys, extra, status, words):
     """As every sub-command: ``skeye pilot: error: ...`` on stderr, nothing on stdout (which
     carries the start-up line and ``stopping``), and the exit status says which error."""
