@@ -23,6 +23,7 @@ one at a time), so "the oldest pending request this message answers" is the righ
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import numbers
 import queue
@@ -108,6 +109,13 @@ def parse_address(address: str, default_port: int = DEFAULT_PORT,
         host, port_text = text, str(default_port)
     if not host:
         raise LocalProtocolError(f"{what} {address!r} has no host")
+    if ":" in host:  # bare or bracketed: only an IPv6 address has colons
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise LocalProtocolError(
+                f"{what} {address!r}: {host!r} is no IPv6 address; give host:port, or an "
+                "IPv6 address in brackets, [::1]:5003") from None
     if not port_text.isdigit() or not 0 < int(port_text) < 65536:
         raise LocalProtocolError(f"{what} {address!r}: bad port {port_text!r} (1..65535)")
     return host, int(port_text)

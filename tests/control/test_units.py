@@ -34,6 +34,8 @@ from tests.control.conftest import sim_running
         ("tcp://sim.local:4000", ("sim.local", 4000)),
         ("localhost", ("localhost", 3000)),
         ("[::1]:3001", ("::1", 3001)),
+        ("::1", ("::1", 3000)),
+        ("[fe80::1%eth0]:3001", ("fe80::1%eth0", 3001)),
     ],
 )
 def test_parse_address(text: str, expected: tuple[str, int]) -> None:
@@ -43,6 +45,16 @@ def test_parse_address(text: str, expected: tuple[str, int]) -> None:
 @pytest.mark.parametrize("text", [":3000", "host:0", "host:99999", "host:abc", "udp://h:1"])
 def test_parse_address_rejects(text: str) -> None:
     with pytest.raises(LocalProtocolError):
+        parse_address(text)
+
+
+@pytest.mark.parametrize("text", ["127.0.0.1:3000:1", "[127.0.0.1:3000",
+                                  "host:3000:"])
+def test_parse_address_names_a_host_with_colons_that_is_no_ipv6_address(text: str) -> None:
+    """A host:port with a colon too many was taken for a bare IPv6 address with the default
+    port, and refused only later, by the link, as 'link URI 'tcp://[127.0.0.1:3000:1]:3000'
+    ...', naming neither the option nor what was typed."""
+    with pytest.raises(LocalProtocolError, match=r"is no IPv6 address; give host:port"):
         parse_address(text)
 
 
