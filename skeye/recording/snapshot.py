@@ -56,8 +56,9 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
     try:
         client = ImageClient(host, port, timeout_s=timeout_s)
     except LinkClosed as exc:
+        where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"  # as --images takes it
         raise ConfigError(
-            f"no image server at {host}:{port} ({exc}): start the simulator "
+            f"no image server at {where} ({exc}): start the simulator "
             f"with one (`skeye sim --image-port {port}`; `skeye up` and `make run` serve "
             "images on 5003), or point --images at the one that runs"
         ) from None

@@ -87,6 +87,17 @@ def test_snapshot_without_an_image_server_names_the_address_and_the_option() -> 
     assert f"--image-port {port}" in done.stderr and "--images" in done.stderr
 
 
+def test_snapshot_without_an_image_server_names_an_ipv6_address_in_brackets(tmp_path) -> None:
+    """'no image server at ::1:5003' named no address --images takes (the port read as part
+    of the IPv6 address); it is written as --images takes it, [::1]:5003."""
+    from skeye.errors import ConfigError
+    from skeye.recording.snapshot import save_snapshot
+
+    port = free_port()  # nothing listens there
+    with pytest.raises(ConfigError, match=rf"^no image server at \[::1\]:{port} \("):
+        save_snapshot(f"[::1]:{port}", tmp_path / "x.png", timeout_s=5.0)
+
+
 def test_snapshot_refuses_a_jpeg_quality_for_a_png_file() -> None:
     """``--quality`` is JPEG's: with a .png file it was accepted and ignored (a lossless PNG
     was written); it is refused before the image server is asked, as ``skeye sim`` refuses
