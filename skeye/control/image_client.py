@@ -237,13 +237,13 @@ class ImageClient:
             self._link.send(encode_request(request))
         except LinkTimeout as exc:
             raise LinkTimeout(f"image server {self._peer}: send timed out") from exc
-        except LinkClosed:
+        except LinkClosed as exc:
             # A server that refuses the connection (too many clients) sends an error frame and
             # closes; a request sent meanwhile fails, and the reason is in what it sent.
             for event in self._decoder.feed(self._link.leftover()):
                 if isinstance(event, RemoteError):
                     raise RemoteProtocolError(f"image server: {event.reason}") from None
-            raise
+            raise LinkClosed(f"image server {self._peer} closed the connection ({exc})") from None
 
     def _next_frame(self) -> DecodedFrame:
         event = self._checked(self._next_event())

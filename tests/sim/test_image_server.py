@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from skeye.control.image_client import ImageClient
-from skeye.errors import LocalProtocolError, RemoteProtocolError
+from skeye.errors import LinkClosed, LocalProtocolError, RemoteProtocolError
 from skeye.pixels import frame_image, frame_image_rgb
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
 from skeye.wire.images import (
@@ -399,6 +399,25 @@ def test_too_many_clients_are_refused(
     # The log names the reason: it said '(closed or 1 clients)' whatever the reason was.
     refusals = [r.getMessage() for r in caplog.records if "refusing" in r.getMessage()]
     assert len(refusals) == 1 and refusals[0].endswith(": too many clients"), refusals
+
+
+def test_a_server_that_closes_at_once_is_named_as_such() -> None:
+    """A request that cannot be sent because the server closed the connection said only
+    'tcp://127.0.0.1:PORT: [Errno 32] Broken pipe' (so did skeye snapshot)."""
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        port = listener.getsockname()[1]
+        with ImageClient("127.0.0.1", port, timeout_s=30) as client:
+            listener.accept()[0].close()  # a server that closes without a word
+            sock = client.link._sock  # type: ignore[attr-defined]
+            close_wait = 8  # Linux's TCP state: the server closed its end
+            deadline = time.monotonic() + 30
+            while sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] != close_wait:
+                assert time.monotonic() < deadline, "the server never closed the connection"
+                time.sleep(0.01)
+            with pytest.raises(LinkClosed, match=rf"^image server 127.0.0.1:{port} closed the "
+                               r"connection \("):
+                client.select_camera("R1/Down")  # sent: the server's end answers with a reset
+                client.set_meta(True)  # fails to send
 
 
 def test_a_refused_client_says_why_though_its_requests_fail(buffer: FrameBuffer) -> None:
