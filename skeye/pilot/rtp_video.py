@@ -108,15 +108,27 @@ def check_rtp_destination(uri: str, timeout_s: float | None = None) -> tuple[str
     return host, port, str(address[0])
 
 
+MAX_DRAWN_PX = 1 << 20
+"""The largest coordinate or semi-axis (px, either sign) overlay draws: OpenCV takes only C
+ints, and a shape that far out is no part of any camera's image anyway."""
+
+
+def _drawable(*values: float) -> bool:
+    return all(abs(v) <= MAX_DRAWN_PX for v in values)
+
+
 def overlay(frame: CameraFrame) -> np.ndarray:
-    """The frame with its detection drawn on it (a copy)."""
+    """The frame with its detection drawn on it (a copy); a shape too far out to draw
+    (:data:`MAX_DRAWN_PX`) is left out."""
     img = np.ascontiguousarray(frame.bgr).copy()
     det = frame.detection
     for ring in det.ellipses:
         (cx, cy), (a, b) = ring.center_px, ring.semi_axes_px
+        if not _drawable(cx, cy, a, b):
+            continue
         cv2.ellipse(img, (round(cx), round(cy)), (max(1, round(a)), max(1, round(b))),
                     math.degrees(ring.angle_rad), 0, 360, GREEN, 1, cv2.LINE_AA)
-    if det.found and det.center_px is not None:
+    if det.found and det.center_px is not None and _drawable(*det.center_px):
         cx, cy = (round(v) for v in det.center_px)
         cv2.drawMarker(img, (cx, cy), RED, cv2.MARKER_CROSS, 14, 2)
     text = (f"pad {det.height_m:.2f} m" if det.found and det.height_m is not None

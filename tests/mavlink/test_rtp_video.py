@@ -14,9 +14,9 @@ import pytest
 av = pytest.importorskip("av")
 
 from skeye.errors import ConfigError  # noqa: E402
-from skeye.pilot.rtp_video import RtpVideo, check_rtp_destination  # noqa: E402
+from skeye.pilot.rtp_video import RtpVideo, check_rtp_destination, overlay  # noqa: E402
 from skeye.pilot.video_server import CameraFrame  # noqa: E402
-from skeye.wire.video import Detection  # noqa: E402
+from skeye.wire.video import Detection, RingEllipse  # noqa: E402
 from tests.mavlink.conftest import free_udp_port  # noqa: E402
 
 
@@ -162,5 +162,31 @@ def test_the_stream_goes_to_the_address_resolved_at_start(monkeypatch: pytest.Mo
             assert video.address == f"udp://gcs.invalid:{port}"
             assert "c=IN IP4 127.0.0.1" in video.sdp()
             _sends_rtp(video, receiver)
+        finally:
+            video.close()
+
+
+def test_a_detection_too_far_out_to_draw_neither_kills_the_video_nor_hides_the_rest():
+    """A Detection's figures are checked finite only; an ellipse or centre beyond a C int
+    made OpenCV's drawing raise, the RTP worker died with it, and so did the pilot (it stops
+    with a worker's error). Such a shape is left out; the rest is drawn."""
+    far = RingEllipse(1, "outer", (1e12, 5.0), (3.0, 2.0), 0.0)
+    huge = RingEllipse(1, "inner", (100.0, 100.0), (1e12, 1e12), 0.0)
+    near = RingEllipse(2, "outer", (40.0, 30.0), (10.0, 8.0), 0.0)
+    det = Detection(True, center_px=(-1e15, 0.0), height_m=1.0, offset_cam_m=(0.0, 0.0),
+                    offset_body_m=(0.0, 0.0), rings=(1, 2), ellipses=(far, huge, near),
+                    quality=0.5)
+    black = np.zeros((60, 80, 3), np.uint8)
+    img = overlay(CameraFrame(1, 0.0, black, det, 1.0))
+    assert img[30, 30:51, 1].max() > 0  # the ring that fits is drawn (green)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(60)
+        video = RtpVideo(f"udp://127.0.0.1:{receiver.getsockname()[1]}", max_fps=10.0).start()
+        try:
+            video.publish(CameraFrame(1, 0.0, np.zeros((240, 320, 3), np.uint8), det, 1.0))
+            packet = receiver.recv(2048)
+            assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96
+            video.check()
         finally:
             video.close()
