@@ -6,7 +6,7 @@ How this works (sans-IO: no sockets, no threads, no clock; only the standard lib
   :func:`encode_frame`, :func:`encode_error_frame` and :func:`encode_info_frame` build bytes;
   :class:`FrameDecoder` turns a byte stream back into :data:`FrameEvent` values. Every frame it
   returns has been checked (known type, size within bounds, META header and RAW geometry
-  consistent, an INFO frame exactly a META header); anything else is a
+  consistent, a finite META sim time, an INFO frame exactly a META header); anything else is a
   single :class:`ProtocolViolation` event, after which the decoder stays failed, because a byte
   stream with a bad length prefix cannot be resynchronised. ``feed`` never raises.
 * Client to server requests (``OK``, ``U``, ``SKEYE ...`` lines) are in
@@ -20,6 +20,7 @@ itself is encoded at the exact quality asked for.
 """
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from enum import Enum, IntEnum
@@ -299,7 +300,10 @@ def _frame_event(frame_type: int, payload: bytes) -> FrameEvent:
             return ProtocolViolation(
                 f"INFO frame of {len(payload)} bytes is not a 24-byte META header"
             )
-        return InfoFrame(MetaHeader(*_META_HEADER.unpack_from(payload)))
+        info = MetaHeader(*_META_HEADER.unpack_from(payload))
+        if not math.isfinite(info.sim_time_s):
+            return ProtocolViolation(f"INFO frame's sim time is {info.sim_time_s!r}")
+        return InfoFrame(info)
     meta: MetaHeader | None = None
     if frame_type >= META_OFFSET:
         if len(payload) < META_HEADER_BYTES:
@@ -307,6 +311,8 @@ def _frame_event(frame_type: int, payload: bytes) -> FrameEvent:
                 f"META frame of {len(payload)} bytes is shorter than its 24-byte header"
             )
         meta = MetaHeader(*_META_HEADER.unpack_from(payload))
+        if not math.isfinite(meta.sim_time_s):  # a frame shows a moment: never NaN or inf
+            return ProtocolViolation(f"META header's sim time is {meta.sim_time_s!r}")
         payload = payload[META_HEADER_BYTES:]
         frame_type -= META_OFFSET
     base = FrameType(frame_type)

@@ -312,7 +312,7 @@ def _smooth(height: int, width: int, color: tuple[int, int, int]) -> np.ndarray:
 metas = st.builds(
     MetaHeader,
     st.integers(0, 0xFFFFFFFF),
-    st.floats(allow_nan=False),
+    st.floats(allow_nan=False, allow_infinity=False),  # a moment: finite (protocol)
     st.integers(0, 0xFFFFFFFF),
     st.just(0),
     st.just(0),
@@ -419,6 +419,14 @@ def test_an_info_frame_is_type_15_and_the_meta_header_alone() -> None:
             b"\x10\0\0\0\x20" + meta_header(1, 0.0, 0, 2, 1) + struct.pack(">HH", 1, 1) + b"\0" * 4,
             "META says 2x1",
         ),
+        # A NaN or infinite sim time was passed on as a frame's capture time (the pilot's
+        # sim:// camera hands it to the vision as it is).
+        (b"\x10\0\0\0\x20" + meta_header(1, float("nan"), 0, 1, 1) + struct.pack(">HH", 1, 1)
+         + b"\0" * 4, "META header's sim time is nan"),
+        (b"\x16\0\0\0\x1b" + meta_header(1, float("inf"), 0, 1, 1) + b"png",
+         "META header's sim time is inf"),
+        (b"\x0f\0\0\0\x18" + meta_header(1, float("-inf"), 0, 2, 1),
+         "INFO frame's sim time is -inf"),
     ],
 )
 def test_bad_frames_are_protocol_violations(wire: bytes, reason_part: str) -> None:
