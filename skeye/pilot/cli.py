@@ -823,7 +823,7 @@ def register(subparsers: Any) -> None:
         choices=("vision", "truth"),
         default="vision",
         help="where pad observations come from: vision (default), the detector on the camera "
-        "frames; truth, the simulator's ground truth at each frame's time in place of the "
+        "frames; truth, the simulator's ground truth at each frame's capture in place of the "
         "detection (a comparison mode: a perfect detector, same timing)",
     )
     p.add_argument(

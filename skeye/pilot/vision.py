@@ -575,15 +575,26 @@ class PadVision:
             while self._truth and self._truth[0][0] < gt.time_s - 2.0:
                 self._truth.pop(0)
 
-    def _truth_observation(self, frame_s: float) -> PadObservation:
-        """The pad's offset and height from ground truth at ``frame_s`` (the pad at the world
-        origin, as in the pad and indoor worlds): a perfect detector, for comparison."""
+    def _truth_observation(self, frame_s: float, capture_s: float) -> PadObservation:
+        """The pad's offset and height from ground truth at the frame's capture, ``capture_s``
+        (interpolated between the rows around it; the pad at the world origin, as in the pad
+        and indoor worlds), stamped ``frame_s`` as a detection is: a perfect detector, for
+        comparison. (Until 2026-11-28 it took the last row kept at or before ``frame_s``: by
+        default the frame's arrival, a later moment than the image's, and at any frame time
+        a row up to the pilot's loop interval old; E1, which flies with the capture as the
+        frame time, read a 0.47 cm, 1.27 % height error for it, 0.05 cm, 0.14 % now.)"""
         with self._arrivals_lock:
-            before = [row for row in self._truth if row[0] <= frame_s + 1e-9]
-            row = before[-1] if before else (self._truth[0] if self._truth else None)
-        if row is None:
+            rows = list(self._truth)
+        if not rows:
             return PadObservation(frame_s, False)
-        _, n, e, d, yaw = row
+        later = next((k for k, row in enumerate(rows) if row[0] > capture_s), len(rows))
+        if later == 0 or later == len(rows):  # outside the rows kept: the nearest
+            _, n, e, d, yaw = rows[min(later, len(rows) - 1)]
+        else:
+            (t0, *a), (t1, *b) = rows[later - 1], rows[later]
+            w = (capture_s - t0) / (t1 - t0)
+            n, e, d = (a[k] + w * (b[k] - a[k]) for k in range(3))
+            yaw = a[3] + w * math.remainder(b[3] - a[3], math.tau)
         c, s = math.cos(yaw), math.sin(yaw)
         forward, right = c * -n + s * -e, -s * -n + c * -e
         height = -d - CAMERA_BELOW_CENTRE_M - PAD_SURFACE_M
@@ -693,7 +704,7 @@ class PadVision:
                 self.stats.video_errors += 1
                 log.warning("frame %d not served on the video port: %s", image.frame, exc)
         if self.pad_source == "truth":
-            return self._truth_observation(frame_s)
+            return self._truth_observation(frame_s, image.time_s)
         if est.found and est.offset_body_m is not None and est.height_m is not None:
             self.stats.detections += 1
             bits = 0
