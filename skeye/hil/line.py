@@ -2,8 +2,9 @@
 
 How this works: :class:`BoardLine` is what the board's server reads and writes, whatever the
 line is made of. ``recv`` returns the bytes that arrived (``b""`` when none did, or when no
-client is on the line), ``send`` writes a reply or drops it when nobody is there to read it (a
-serial line with nothing plugged in loses its bytes; the board never blocks on its line).
+client is on the line), ``send`` writes a reply or drops it when nobody is there to read it, or
+the client takes none of it for 1 s (a serial line with nothing plugged in loses its bytes; the
+board never blocks on its line for longer).
 ``plugged`` says whether a client is known to be on it: True or False for a pseudo-terminal
 (the kernel tells when the last client closed its end: reading the master gives ``EIO``) and
 a TCP port (a client connected or not), None for a real serial port (a line cannot tell).
@@ -28,7 +29,7 @@ import threading
 import time
 import tty
 
-from skeye.errors import LinkClosed, LocalProtocolError
+from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError
 from skeye.link.transport import Link, SerialLink, TcpLink, tcp_uri
 from skeye.peers import listen
 from skeye.workers import Worker
@@ -234,7 +235,7 @@ class TcpLine(BoardLine):
             return
         try:
             client.send(data)
-        except LinkClosed:
+        except (LinkClosed, LinkTimeout):  # gone, or it reads nothing: the reply is lost
             self.dropped_bytes += len(data)
 
     def close(self) -> None:

@@ -288,3 +288,33 @@ def test_an_intact_skeye_frame_the_board_cannot_take_is_answered_not_dropped_sil
             assert answers[0].command_pd == pd and answers[0].code is code, answers[0]
             assert event.chksum_error == 0  # intact: not a checksum error
         _board.check()
+
+
+def test_a_tcp_client_that_reads_nothing_does_not_silence_the_board():
+    """A TCP client that floods the line with polls and reads none of the answers: the board's
+    send to it timed out (LinkTimeout, which the line did not catch) and killed the board's
+    reader, so the board never answered anyone again, a new client included. The answers it
+    cannot deliver are dropped (counted), as on a line with nobody reading, and it serves on."""
+    with board_line() as (board, client):
+        client.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        client.sock.settimeout(0.5)
+        flood = encode(Poll(0xFFFF)) * 1000  # every structure: ~65 times the bytes back
+        try:
+            while True:  # until the board stops taking them (it waits on its own sends)
+                client.sock.sendall(flood)
+        except TimeoutError:
+            pass
+        deadline = time.monotonic() + 60.0  # a stuck guard: a send times out within 1 s
+        while board.line.dropped_bytes == 0:
+            assert time.monotonic() < deadline, "the board's sends never timed out"
+            board.check()  # the reader is alive
+            time.sleep(0.05)
+        client.sock.close()
+        second = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        try:
+            second.sock.settimeout(30.0)  # the board answers a poll at once
+            _, status = second.exchange(b"")
+            assert isinstance(status, LlStatus)
+            board.check()
+        finally:
+            second.sock.close()
