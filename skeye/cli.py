@@ -240,14 +240,18 @@ def ll_board_specs(args: argparse.Namespace) -> list[Any]:
     """``--ll-board`` values, parsed before anything starts (ConfigError names a bad one)."""
     if not args.ll_board:
         return []
+    from skeye.errors import ConfigError
     from skeye.hil.cli import parse_ll_board
 
     specs = [parse_ll_board(text) for text in args.ll_board]
     names = [spec.name for spec in specs]
     if len(set(names)) != len(names):
-        from skeye.errors import ConfigError
-
         raise ConfigError(f"--ll-board names must differ, got {', '.join(names)}")
+    for spec, text in zip(specs, args.ll_board, strict=True):
+        if spec.rate is not None and args.mode != "lockstep":
+            raise ConfigError(f"--ll-board {text!r}: rate={spec.rate:g} is for --mode lockstep "
+                              "(the board drives the lockstep clock); a realtime simulator's "
+                              "clock is the wall clock")
     return specs
 
 

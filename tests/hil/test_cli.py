@@ -91,3 +91,13 @@ def test_the_start_up_line_is_a_command_a_shell_runs_as_printed(tmp_path):
         "--airframe", f"asctec-ll://serial{device}?baud=57600&lockstep=1",
         "--camera", "sim://127.0.0.1:5003/R1/Down?fov_rad=0.952105"], line
     assert shlex.split(command.group(1))[1].endswith("&lockstep=1")
+
+
+def test_rate_on_a_realtime_simulator_is_refused_not_ignored(capsys):
+    """``rate=R`` makes the board drive a lockstep simulator's clock; on a realtime one
+    (``--mode realtime``, the default) it was taken and ignored without a word, the board
+    running at real time whatever R said. It is refused naming it, exit 2, before anything
+    starts."""
+    assert main(["sim", "--port", "0", "--ll-board", "R1=pty,rate=2"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "rate=2" in err and "--mode lockstep" in err, err
