@@ -63,6 +63,7 @@ log = logging.getLogger(__name__)
 
 REALTIME_TICK_S = 0.01
 REPORT_EVERY_S = 5.0  # garbage on the line is logged at most this often
+GRANT_WAIT_S = 0.1  # lockstep: the clock waits this long at most for a grant, then looks again
 MAX_GRANTS = math.ceil(RATE_HZ_MAX * CLOCK_TIMEOUT_S)
 """CLOCK grants not yet reached that a client may hold (12 000): one per control cycle at the
 fastest cycle ``asctec-ll://`` allows (200 Hz) for as long as a client waits for a grant (60 s).
@@ -317,9 +318,12 @@ class LLBoardServer:
                         next_s = time.monotonic()
                     self._stop.wait(max(0.0, delay))
                     continue
+                wait_s = GRANT_WAIT_S
+                if self.rate is not None or self.free_running:  # not past the clock's next tick
+                    wait_s = min(wait_s, max(0.0, next_s - time.monotonic()))
                 with self._granted:
                     self._granted.wait_for(lambda: bool(self.grants) or self._stop.is_set(),
-                                           0.1)
+                                           wait_s)
                     self._drop_stale_grants()
                     target = self.grants.latest
                 if target is not None:

@@ -318,3 +318,54 @@ def test_a_tcp_client_that_reads_nothing_does_not_silence_the_board():
             board.check()
         finally:
             second.sock.close()
+
+
+def _pace(board: LLBoardServer, sim_s: float) -> float:
+    """Sim seconds per wall second while the board's clock moves ``sim_s`` of sim time."""
+    start_sim, start_wall = board.sim_time(), time.monotonic()
+    deadline = start_wall + 120.0  # a stuck guard
+    while board.sim_time() < start_sim + sim_s:
+        assert time.monotonic() < deadline, "the board's clock did not move"
+        board.check()
+        time.sleep(0.01)
+    return (board.sim_time() - start_sim) / (time.monotonic() - start_wall)
+
+
+def _granted_pace(board: LLBoardServer, client: LineClient, sim_s: float) -> float:
+    """How fast the simulator steps when a client grants ``sim_s`` ahead (unpaced)."""
+    results, _ = client.exchange(encode(Clock(0)))
+    start_sim, start_wall = sim_time(results[0]), time.monotonic()
+    results, _ = client.exchange(encode(Clock(round((start_sim + sim_s) * 1000))))
+    answer = results[0] if results else client.next_clock_result()
+    return (sim_time(answer) - start_sim) / (time.monotonic() - start_wall)
+
+
+def test_the_boards_paced_clock_keeps_the_rate_it_was_given():
+    """``rate=R``: the board drives the lockstep clock at R sim seconds per wall second. Each
+    of its ticks first waited out the whole 0.1 s wait for a CLOCK grant, so the clock never
+    passed 0.5 (one 0.05 s tick per 0.1 s): ``rate=4`` ran at 0.44. Measured against how fast
+    the simulator steps on a grant, so a slow machine cannot fail it."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=6, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=tcp:0,rate=4"),
+                               f"127.0.0.1:{server.port}")
+        client = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        able = _granted_pace(board, client, 2.0)
+        client.sock.close()  # the board's own clock from here
+        paced = _pace(board, 2.0)
+        assert paced >= 0.6 * min(4.0, able), (paced, able)
+
+
+def test_the_boards_clock_runs_on_at_real_time_once_its_client_left():
+    """With no client left the lockstep board's clock runs on at real time (docs/onboard.md),
+    so its serial timeout plays out as on the vehicle; it ran at half of it (each 0.05 s tick
+    waited out a 0.1 s wait for a grant first)."""
+    with board_line() as (board, client):
+        able = _granted_pace(board, client, 2.0)
+        client.sock.close()
+        deadline = time.monotonic() + 30.0  # a stuck guard: the line notices within a read
+        while not board.free_running:
+            assert time.monotonic() < deadline, "the board never noticed the client left"
+            time.sleep(0.05)
+        free = _pace(board, 2.0)
+        assert free >= 0.6 * min(1.0, able), (free, able)
