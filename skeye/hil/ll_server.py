@@ -342,13 +342,14 @@ class LLBoardServer:
                         self._answer_grants()  # the lower ones, as they are reached
                     self._answer_grants()
                 elif self.rate is not None:  # the board's own clock, paced
+                    now = time.monotonic()
+                    if now < next_s:
+                        continue  # not due yet: waited above, where a grant ends the wait
+                    if now - next_s > 1.0:
+                        next_s = now
                     self._advance(self.tick_s)
                     self._tick()
                     next_s += self.tick_s / self.rate
-                    delay = next_s - time.monotonic()
-                    if delay < -1.0:
-                        next_s = time.monotonic()
-                    self._stop.wait(max(0.0, delay))
                 elif self._client_left():
                     if not self.free_running:
                         log.warning("LL board %s: the client left the line: the board's clock "

@@ -369,3 +369,24 @@ def test_the_boards_clock_runs_on_at_real_time_once_its_client_left():
             time.sleep(0.05)
         free = _pace(board, 2.0)
         assert free >= 0.6 * min(1.0, able), (free, able)
+
+
+def test_a_paced_clock_slower_than_a_timeout_can_wait_still_serves_grants():
+    """``rate=1e-300`` (above 0, so taken): the paced clock's next tick lay beyond what a
+    thread can wait for, and the clock worker died on an OverflowError; no grant was answered
+    again. A slow paced clock also held a grant sent meanwhile until its next tick (at
+    ``rate=0.001``, 50 s). The clock now waits for a grant and its next tick together."""
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=6, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=tcp:0,rate=1e-300"),
+                               f"127.0.0.1:{server.port}")
+        # (its first tick is due at once, as the board starts: the next one is not)
+        client = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        stack.callback(client.sock.close)
+        client.sock.settimeout(30.0)  # the simulator steps 0.5 s on a grant in well under it
+        results, _ = client.exchange(encode(Clock(0)))
+        now_ms = round(sim_time(results[0]) * 1000)
+        results, _ = client.exchange(encode(Clock(now_ms + 500)))
+        answer = results[0] if results else client.next_clock_result()
+        assert answer.code is ResultCode.OK and sim_time(answer) >= (now_ms + 500) / 1000
+        board.check()
