@@ -89,10 +89,15 @@ def parse_ll_board(text: str) -> LLBoardSpec:
     else:
         raise ConfigError(f"--ll-board {text!r}: the line must be pty, tcp:PORT or "
                           f"serial:DEVICE, not {line!r}")
+    given: dict[str, str] = {}
     for option in options:
         key, sep, value = option.partition("=")
         if not sep or not value:
             raise ConfigError(f"--ll-board {text!r}: option {option!r} is not key=value")
+        if key in given:
+            raise ConfigError(f"--ll-board {text!r}: option {key!r} is given twice "
+                              f"({key}={given[key]}, {key}={value}): give it once")
+        given[key] = value
         if key in ("robot", "start"):
             fields[key] = value
         elif key == "baud":
