@@ -225,6 +225,9 @@ class AscTecLLAirframe:
         for attempt in range(1, FIRST_CONTACT_TRIES + 1):
             try:
                 self._poll(FIRST_POLL, self._granted_s if self.lockstep else clock())
+                if not self.estimate.ready:  # every answer came corrupted: none to fly on
+                    raise LinkTimeout("its answers came corrupted: LL_STATUS and IMU_CALCDATA "
+                                      "not both read")
                 break
             except LinkTimeout:
                 if attempt == FIRST_CONTACT_TRIES:

@@ -193,6 +193,42 @@ def test_a_line_that_carries_only_garbage_is_said_so_not_only_silent():
         os.close(slave)
 
 
+def test_a_board_whose_every_answer_comes_corrupted_is_said_so_at_start(capsys):
+    """A board whose answers to the first poll all come as bad frames (each a readable start,
+    its length field not its structure's): the poll counted them as answers lost and
+    returned none, the pilot started on an estimate with nothing in it and failed later with
+    "the LL board has not answered a poll yet", exit status 1. It is the silent board it is:
+    "LL board silent", the bad frames named, exit status 4, as for a board that answers
+    nothing."""
+    master, slave = os.openpty()
+    stop = threading.Event()
+    bad = b">*>" + (1000).to_bytes(2, "little") + bytes([PD.LL_STATUS])  # LL_STATUS is 16 B
+
+    def corrupting_board() -> None:  # each request answered with bad frames only
+        while not stop.is_set():
+            try:
+                data = os.read(master, 4096) if select.select([master], [], [], 0.1)[0] else b""
+            except OSError:  # the pilot closed the device: EIO until it opens it again
+                stop.wait(0.05)
+                continue
+            if data:
+                os.write(master, bad * 8)
+
+    board = Worker(corrupting_board, "test-corrupting-board").start()
+    try:
+        uri = f"asctec-ll://serial{os.ttyname(slave)}?timeout_s=0.3"
+        with pytest.raises(LinkTimeout, match=r"LL board silent: .* [1-9][0-9]* bad frames"):
+            open_airframe(uri, AirframeOptions())
+        args = pilot_cli_parser().parse_args(["pilot", "--airframe", uri, "--port", "0"])
+        assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR
+        assert "LL board silent" in capsys.readouterr().err
+    finally:
+        stop.set()
+        board.join(2.0)
+        os.close(master)
+        os.close(slave)
+
+
 def pilot_cli_parser():
     import argparse
 
