@@ -155,7 +155,8 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
     elif kind == "tcp":
         address = parts.path.lstrip("/")
         host, sep, port = address.rpartition(":")
-        if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        if (not sep or not host or not (port.isascii() and port.isdigit())
+                or not 0 < int(port) < 65536):
             raise LocalProtocolError(f"airframe {uri!r}: expected asctec-ll://tcp/HOST:PORT")
         if "baud" in query:
             raise LocalProtocolError(f"airframe {uri!r}: baud is for a serial line")

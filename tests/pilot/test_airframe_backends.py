@@ -162,6 +162,12 @@ def test_backend_conformance(scheme):
     # a baud rate is a whole number: 57600.5 and 5.76e4 were truncated and flown at 57600
     ("asctec-ll://serial/dev/ttyS1?baud=57600.5", "baud=57600.5 is not a whole number"),
     ("asctec-ll://serial/dev/ttyS1?baud=5.76e4", "baud=5.76e4 is not a whole number"),
+    # a port of digits str.isdigit takes and int refuses ended the pilot in a ValueError
+    # traceback; digits int reads but no link takes (Arabic-Indic) were refused naming an
+    # inner tcp:// URI the user never wrote
+    ("asctec-ll://tcp/127.0.0.1:\u00b2", "expected asctec-ll://tcp/HOST:PORT"),
+    ("asctec-ll://tcp/127.0.0.1:7000\u00b2", "expected asctec-ll://tcp/HOST:PORT"),
+    ("asctec-ll://tcp/127.0.0.1:\u0667\u0660\u0660\u0660", "expected asctec-ll://tcp/HOST:PORT"),
 ])
 def test_bad_airframe_uris_are_named(uri, words):
     with pytest.raises(LocalProtocolError, match=words):
