@@ -61,7 +61,7 @@ from skeye.errors import (
     SkeyeError,
 )
 from skeye.geo import GeoOrigin
-from skeye.link.transport import DEFAULT_BAUD, open_link
+from skeye.link.transport import DEFAULT_BAUD, open_link, parse_uri
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.airframe import AirframeOptions, Snapshot, VehicleLimits, vehicle_limits
 from skeye.pilot.ll_control import LLEstimate, StickPilot, Sticks, Velocity, nav_state
@@ -161,6 +161,11 @@ def parse_asctec_ll(uri: str) -> LLLinkSettings:
         if "baud" in query:
             raise LocalProtocolError(f"airframe {uri!r}: baud is for a serial line")
         link = f"tcp://{address}"
+        try:
+            parse_uri(link)  # the host as a link takes it (an IPv6 address in brackets)
+        except LocalProtocolError:
+            raise LocalProtocolError(f"airframe {uri!r}: expected asctec-ll://tcp/HOST:PORT, "
+                                     "an IPv6 HOST in brackets ([::1])") from None
     else:
         raise LocalProtocolError(f"airframe {uri!r}: the line must be serial/DEVICE or "
                                  f"tcp/HOST:PORT, not {parts.netloc!r}")

@@ -168,6 +168,9 @@ def test_backend_conformance(scheme):
     ("asctec-ll://tcp/127.0.0.1:\u00b2", "expected asctec-ll://tcp/HOST:PORT"),
     ("asctec-ll://tcp/127.0.0.1:7000\u00b2", "expected asctec-ll://tcp/HOST:PORT"),
     ("asctec-ll://tcp/127.0.0.1:\u0667\u0660\u0660\u0660", "expected asctec-ll://tcp/HOST:PORT"),
+    # an IPv6 host without its brackets, or one left open: refused naming an inner tcp:// URI
+    ("asctec-ll://tcp/::1:7000", r"asctec-ll://tcp/::1:7000.*in brackets"),
+    ("asctec-ll://tcp/[::1:7000", r"asctec-ll://tcp/\[::1:7000.*in brackets"),
 ])
 def test_bad_airframe_uris_are_named(uri, words):
     with pytest.raises(LocalProtocolError, match=words):
