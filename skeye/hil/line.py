@@ -31,7 +31,7 @@ import tty
 
 from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError
 from skeye.link.transport import Link, SerialLink, TcpLink, tcp_uri
-from skeye.peers import listen
+from skeye.peers import accept_failed, listen
 from skeye.workers import Worker
 
 log = logging.getLogger(__name__)
@@ -196,13 +196,18 @@ class TcpLine(BoardLine):
         return f"asctec-ll://tcp/{tcp_uri(self.host, self.port)[len('tcp://'):]}"
 
     def _accept_loop(self) -> None:
+        said_s = 0.0
         while not self._closed:
             try:
                 sock, _ = self._listener.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                return
+            except OSError as exc:  # out of descriptors: said and waited out; else closed
+                when = accept_failed(exc, said_s, f"LL board line {self.address}")
+                if when is None:
+                    return
+                said_s = when
+                continue
             link = TcpLink(sock, send_timeout_s=1.0)
             with self._lock:
                 old, self._client = self._client, link

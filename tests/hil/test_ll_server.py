@@ -390,3 +390,46 @@ def test_a_paced_clock_slower_than_a_timeout_can_wait_still_serves_grants():
         answer = results[0] if results else client.next_clock_result()
         assert answer.code is ResultCode.OK and sim_time(answer) >= (now_ms + 500) / 1000
         board.check()
+
+
+def test_a_tcp_line_out_of_descriptors_accepts_again_once_they_free(caplog):
+    """accept() failing for want of file descriptors (EMFILE, a simulator serving many
+    clients) ended the line's accept thread without a word: the board never took a client
+    again. It is said and waited out, as the simulator's and the pilot's own listeners do
+    (skeye.peers.accept_failed)."""
+    import resource
+
+    from skeye.hil.line import TcpLine
+
+    line = TcpLine()
+    try:
+        client = socket.socket()  # made before the descriptors run out: connect needs none
+        filler: list[int] = []
+        soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (len(os.listdir("/proc/self/fd")) + 8,
+                                                        hard))
+            try:
+                while True:
+                    filler.append(os.open(os.devnull, os.O_RDONLY))
+            except OSError:
+                pass
+            client.connect(("127.0.0.1", line.port))  # the kernel completes it; accept fails
+            deadline = time.monotonic() + 30.0  # a stuck guard: accept wakes every 0.2 s
+            while line._accept.alive and "cannot accept" not in caplog.text:
+                assert time.monotonic() < deadline, "accept never ran out of descriptors"
+                time.sleep(0.01)
+        finally:
+            for fd in filler:
+                os.close(fd)
+            resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+        try:
+            deadline = time.monotonic() + 30.0  # a stuck guard: accepted within a retry
+            while not line.plugged:
+                assert line._accept.alive, "the line's accept thread ended"
+                assert time.monotonic() < deadline, "the client was never accepted"
+                time.sleep(0.01)
+        finally:
+            client.close()
+    finally:
+        line.close()
