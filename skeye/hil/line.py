@@ -16,7 +16,8 @@ a TCP port (a client connected or not), None for a real serial port (a line cann
 - ``serial``: a real serial device (a USB adapter wired to an onboard computer), through
   pyserial at ``baud``.
 
-``unplug()`` cuts the line as a pulled cable would (tests, and ``skeye sim``'s shutdown).
+``unplug()`` cuts the line as a pulled cable would (tests, and ``skeye sim``'s shutdown). A line
+is a context manager: ``with`` closes it (a TCP line's listener and accept thread too).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import select
 import threading
 import time
 import tty
+from typing import Self
 
 from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError
 from skeye.link.transport import Link, SerialLink, TcpLink, tcp_uri
@@ -77,6 +79,12 @@ class BoardLine:
 
     def close(self) -> None:
         raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 class PtyLine(BoardLine):

@@ -433,3 +433,18 @@ def test_a_tcp_line_out_of_descriptors_accepts_again_once_they_free(caplog):
             client.close()
     finally:
         line.close()
+
+
+def test_a_board_line_is_a_context_manager_that_closes_its_port_and_thread():
+    """A line is a server (a TCP line listens on a thread of its own): ``with`` closes it, its
+    listener and its accept thread with it; it was no context manager at all."""
+    from skeye.hil.line import open_line
+
+    with open_line("tcp") as line:
+        assert line.plugged is False
+    assert not line._accept.alive
+    with socket.socket() as probe:
+        assert probe.connect_ex(("127.0.0.1", line.port)) != 0  # nobody listens there
+    with open_line("pty") as pty:
+        path = pty.address
+    assert pty._closed and path.startswith("/dev/")
