@@ -350,7 +350,7 @@ class LLBoardServer:
                     self._advance(self.tick_s)
                     self._tick()
                     next_s += self.tick_s / self.rate
-                elif self._client_left():
+                elif self.free_running or self._client_left():  # on till a client grants
                     if not self.free_running:
                         log.warning("LL board %s: the client left the line: the board's clock "
                                     "runs on at real time", self.name)

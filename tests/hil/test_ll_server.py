@@ -448,3 +448,38 @@ def test_a_board_line_is_a_context_manager_that_closes_its_port_and_thread():
     with open_line("pty") as pty:
         path = pty.address
     assert pty._closed and path.startswith("/dev/")
+
+
+def test_a_client_that_only_polls_does_not_stop_the_clock_that_runs_on():
+    """The client that granted time left: the board's clock runs on at real time, and goes
+    back to granted time when a client grants again (docs/onboard.md). A client that came on
+    the line and only polled (a tool watching the emergency landing) stopped it instead: the
+    vehicle stood still in mid-air, its serial timeout's procedure frozen, for as long as that
+    client stayed."""
+    with board_line() as (board, client):
+        client.exchange(encode(Clock(0)))
+        client.sock.close()
+        deadline = time.monotonic() + 30.0  # a stuck guard: the line notices within a read
+        while not board.free_running:
+            assert time.monotonic() < deadline, "the board never noticed the client left"
+            time.sleep(0.05)
+        watcher = LineClient(int(board.line.address.rsplit(":", 1)[1]))
+        try:
+            watcher.sock.settimeout(30.0)  # the board answers a poll at once
+            watcher.exchange(b"")  # on the line, polling
+            start_s = board.sim_time()
+            deadline = time.monotonic() + 30.0  # a stuck guard: it runs on at real time
+            while board.sim_time() < start_s + 0.5:
+                assert time.monotonic() < deadline, "the clock stopped for a client that polls"
+                watcher.exchange(b"")
+                time.sleep(0.05)
+            assert board.free_running
+            # A grant takes the clock back.
+            results, _ = watcher.exchange(encode(Clock(0)))
+            now_ms = round(sim_time(results[0]) * 1000)
+            results, _ = watcher.exchange(encode(Clock(now_ms + 5000)))
+            answer = results[0] if results else watcher.next_clock_result()
+            assert answer.code is ResultCode.OK and not board.free_running
+            board.check()
+        finally:
+            watcher.sock.close()
