@@ -10,12 +10,11 @@ it; else a timer sends it a second later."""
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import textwrap
 
-from skeye.processes import die_with_parent, stop_process
+from tests.robustness.helpers import stopped_at_its_first_line
 
 CHILD = textwrap.dedent("""
     import os, signal, threading
@@ -52,17 +51,7 @@ def test_a_stop_signal_the_moment_the_simulator_prints_its_address_stops_it_in_o
     it took SIGTERM: a script (or a user) that stopped it on reading that line killed it
     outright (status -15), its recording's last records unwritten. The handlers are now in
     place before the address is printed."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "skeye.cli", "sim", "--port", "0", "--image-port", "0"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
-        preexec_fn=die_with_parent())
-    try:
-        assert proc.stdout is not None
-        first = proc.stdout.readline()  # blocks until its first line (or its end)
-        assert "control protocol on" in first, first
-        proc.send_signal(signal.SIGTERM)
-        rest, _ = proc.communicate(timeout=120)
-    finally:
-        stop_process(proc)  # type: ignore[arg-type]
-    assert proc.returncode == 0, first + rest
-    assert rest.rstrip().endswith("skeye sim: stopping"), rest
+    status, out, err = stopped_at_its_first_line(["sim", "--port", "0", "--image-port", "0"])
+    assert status == 0, (out, err)
+    assert out.startswith("skeye sim: world") and "control protocol on" in out.splitlines()[0]
+    assert out.rstrip().endswith("skeye sim: stopping"), out

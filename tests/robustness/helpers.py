@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import re
 import resource
+import signal
 import subprocess
 import sys
 import threading
@@ -13,7 +14,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from skeye.processes import die_with_parent
+from skeye.processes import die_with_parent, stop_process
 
 
 def open_fds() -> int:
@@ -28,6 +29,25 @@ def wait_for(predicate: Callable[[], bool], timeout_s: float = 5.0) -> bool:
             return True
         time.sleep(0.02)
     return predicate()
+
+
+def stopped_at_its_first_line(args: list[str], sig: int = signal.SIGTERM
+                              ) -> tuple[int, str, str]:
+    """Start ``python -m skeye.cli ARGS``, send it ``sig`` the moment its first stdout line is
+    read (as a script stops a server on reading its address), and let it end; returns (status,
+    stdout, stderr). The first line must say where it listens."""
+    proc = subprocess.Popen([sys.executable, "-m", "skeye.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
+                            preexec_fn=die_with_parent())
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # blocks until its first line (or its end)
+        assert " on " in first, first
+        proc.send_signal(sig)
+        rest, err = proc.communicate(timeout=120)
+    finally:
+        stop_process(proc)  # type: ignore[arg-type]
+    return proc.returncode, first + rest, err
 
 
 def thread_count() -> int:

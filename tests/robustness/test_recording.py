@@ -11,7 +11,6 @@ import signal
 import socket
 import struct
 import subprocess
-import sys
 import threading
 import time
 import tracemalloc
@@ -26,7 +25,6 @@ from hypothesis import strategies as st
 
 from skeye.cli import main
 from skeye.errors import ConfigError, LocalProtocolError, RemoteProtocolError
-from skeye.processes import die_with_parent, stop_process
 from skeye.recording.plotting import load_tracks, plot_recording
 from skeye.recording.records import (
     DEFAULT_MAX_PARTS,
@@ -47,7 +45,12 @@ from skeye.recording.records import (
     split_lines,
 )
 from skeye.recording.replay import ReplayServer
-from tests.robustness.helpers import sim_process, skeye_under_a_file_size_limit, wait_for
+from tests.robustness.helpers import (
+    sim_process,
+    skeye_under_a_file_size_limit,
+    stopped_at_its_first_line,
+    wait_for,
+)
 from tests.sim.conftest import LineClient, running_sim
 
 STREAM_TIMEOUT_S = 60.0
@@ -1160,19 +1163,8 @@ def test_a_replay_says_the_lines_it_skips_and_a_last_line_cut_short(tmp_path: Pa
                      + b"{not one either\n" + lines[-1][:20])
     with ReplayServer(path, port=0) as replay:
         assert (replay.skipped_lines, replay.cut_short) == (2, True)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "skeye.cli", "replay", str(path), "--port", "0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True,
-        preexec_fn=die_with_parent())
-    try:
-        assert proc.stdout is not None
-        banner = proc.stdout.readline()  # blocks until its first line (or its end)
-        assert "control protocol on" in banner, banner
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        stop_process(proc)  # type: ignore[arg-type]
-    assert proc.returncode == 0, err
+    status, out, err = stopped_at_its_first_line(["replay", str(path), "--port", "0"])
+    assert status == 0 and "control protocol on" in out, (out, err)
     assert err == (f"skeye replay: warning: {path}: 2 lines that did not parse, skipped\n"
                    f"skeye replay: warning: {path}: its last line is cut short (the recording "
                    "ended in a crash?), not played\n"), err
