@@ -776,30 +776,24 @@ def test_a_euroc_file_that_starts_with_a_byte_order_mark_is_read(tmp_path: Path)
     assert np.array_equal(marked.truth.quat_wxyz, plain.truth.quat_wxyz)
 
 
-def test_euroc_s_nanosecond_stamps_are_read_exactly(tmp_path: Path) -> None:
+@pytest.mark.parametrize("fmt", ["euroc", "rosbag"])
+def test_nanosecond_stamps_are_read_exactly(tmp_path: Path, fmt: str) -> None:
     # EuRoC's 19-digit stamps (1403636579758555392 ns) were read as float64, which holds them
     # to 256 ns: every interval of the 200 Hz log was off by up to 256 ns, its rate read
-    # 200.0026 Hz and its length 2.995000064 s
+    # 200.0026 Hz and its length 2.995000064 s. A bag's header stamp (sec, nanosec) was read
+    # as float64 seconds, which hold a stamp of today's clock (1.7e9 s) to 238 ns: its rate
+    # read 199.9954 Hz.
     s = synthetic(3.0)
-    log = read_log(make_logs.write_euroc(tmp_path / "MH_ns", s))
+    if fmt == "euroc":
+        log, truth_every = read_log(make_logs.write_euroc(tmp_path / "MH_ns", s)), 2
+    else:
+        log = read_log(make_logs.write_rosbag(tmp_path / "today.bag", s, t0_sec=1_764_000_000))
+        truth_every = 4
     stamps_ns = np.round(s.t_s * 1e9)  # as make_logs writes them, from the first
     assert np.array_equal(log.t_s, stamps_ns * 1e-9)
     assert log.rate_hz == pytest.approx(RATE_HZ, rel=1e-12)
     assert log.truth is not None
-    assert np.array_equal(log.truth.t_s, stamps_ns[::2] * 1e-9)
-
-
-def test_a_bag_s_stamps_of_today_s_clock_are_read_exactly(tmp_path: Path) -> None:
-    # A header stamp (sec, nanosec) was read as float64 seconds, which hold a stamp of today's
-    # clock (1.7e9 s) to 238 ns: every interval of the 200 Hz IMU was off by up to 238 ns, and
-    # its rate read 199.9954 Hz
-    s = synthetic(3.0)
-    log = read_log(make_logs.write_rosbag(tmp_path / "today.bag", s, t0_sec=1_764_000_000))
-    stamps_ns = np.round(s.t_s * 1e9)  # as make_logs writes them, from the first
-    assert np.array_equal(log.t_s, stamps_ns * 1e-9)
-    assert log.rate_hz == pytest.approx(RATE_HZ, rel=1e-12)
-    assert log.truth is not None
-    assert np.array_equal(log.truth.t_s, stamps_ns[::4] * 1e-9)
+    assert np.array_equal(log.truth.t_s, stamps_ns[::truth_every] * 1e-9)
 
 
 def test_a_ulog_attitude_truth_that_changes_sign_is_one_rotation(tmp_path: Path) -> None:
