@@ -12,8 +12,9 @@ does on its line:
   landing) or a field is out of its range (a stick beyond +-2047: its checksum holds, it is
   not flown): the real board acknowledges what it received, and LL_STATUS tells what it did. The
   skeye RESULT the pilot would answer instead is counted in ``ignored`` (with the reason).
-- A command with a bad checksum and an unreadable frame are counted (LL_STATUS
-  ``chksum_error``), never answered; so are unknown ``>*>`` letters.
+- A command with a bad checksum is counted (LL_STATUS ``chksum_error``), never answered; an
+  unreadable frame and unknown ``>*>`` letters are not answered either (counted with the
+  line's garbage, which the board's server says at most every 5 s; not in ``chksum_error``).
 - skeye commands (``>*>s`` frames) are answered RESULT code 3, "the LL board takes AscTec
   commands only", except CLOCK: in lockstep it grants sim time (the I/O side advances the
   simulator and answers once the time is reached, see :mod:`skeye.hil.ll_server`). So is an
@@ -168,7 +169,7 @@ class LLBoard:
             self.refused_skeye += 1
             return [Result(event.pd, ResultCode.BAD_VALUE, SKEYE_REFUSAL)]
         if isinstance(event, (CommandError, FrameError)):
-            self.boards.handle(event, now_s)  # counted (LL_STATUS chksum_error), not answered
+            self.boards.handle(event, now_s)  # counted (a bad checksum: LL_STATUS chksum_error)
             return []
         if isinstance(event, Clock):
             self.boards.handle(Poll(0), now_s)  # a valid packet: the line is alive
