@@ -103,6 +103,12 @@ CASES = [
      'vibration_broadband = 1e300', "VibrationBroadband", "1e+300 is too large"),
     ("gyro-vibration-overflow", '[[sensors]]\ntype = "Gyro"\nname = "G"\n'
      'vibration_rotor = 1e200', "VibrationRotor", "1e+200 is too large"),
+    # Infinite counts per radian: the first reading raised OverflowError in round() and
+    # stopped the engine for every client ("the simulation engine failed").
+    ("flow-pixels-overflow", '[[sensors]]\ntype = "OpticalFlow"\nname = "F"\npixels = 1e308',
+     "Pixels", "1e+308 is too large"),
+    ("flow-counts-overflow", '[[sensors]]\ntype = "OpticalFlow"\nname = "F"\n'
+     'counts_per_pixel = 1e308', "CountsPerPixel", "1e+308 is too large"),
 ]
 
 
@@ -217,3 +223,30 @@ def test_a_bad_init_gets_a_clear_err_and_the_server_goes_on(tmp_path: Path) -> N
                         "INIT").type == "RES"
         c.close()
         d.close()
+
+
+@pytest.mark.parametrize("key", ["noise_sigma", "quality_sigma"])
+def test_a_huge_flow_noise_saturates_the_registers_and_the_engine_goes_on(
+    tmp_path: Path, key: str
+) -> None:
+    """A sigma of 1e308 times a normal deviate above 1.8 is inf: round(inf) raised
+    OverflowError out of the flow sensor's reading and stopped the engine for every client."""
+    # The oracle estimator: the board's own filter does not read the flow sensor.
+    _write(tmp_path, f'[estimator]\nkind = "truth"\n[[sensors]]\ntype = "OpticalFlow"\n'
+                     f'name = "F"\nrate_hz = 25\n{key} = 1e308')
+    with running_sim(robot_dirs=(tmp_path,)) as server:
+        c = LineClient(server.port)
+        c.expect("NFO")
+        init = c.answer("INIT {ClassName bad} {Name B} {Location 0,0,-1}", "INIT")
+        assert init.type == "RES", init
+        c.send("STEP {Count 400}")
+        seen, done = c.read_until(lambda m: m.type in ("RES", "ERR")
+                                  and m.get("Command") == "STEP")
+        assert done.type == "RES", done
+        flows = [m for m in seen if m.type == "SEN" and m.get("Type") == "OpticalFlow"]
+        assert len(flows) >= 5
+        for m in flows:
+            dx, dy = (int(v) for v in m.require("Delta").split(","))
+            assert -128 <= dx <= 127 and -128 <= dy <= 127, m
+            assert 0 <= int(m.require("Quality")) <= 169, m
+        c.close()

@@ -22,6 +22,12 @@ from skeye.wire.sim_messages import SenOpticalFlow, SenSonar
 
 SQUAL_MAX: Final = 169  # ADNS-3080: SQUAL register maximum
 DELTA_MIN, DELTA_MAX = -128, 127  # ADNS-3080: 8-bit signed Delta_X / Delta_Y registers
+_COUNTS_LIMIT: Final = 1e9  # far beyond the registers' range: any larger term saturates them
+
+
+def _saturate(counts: float) -> float:
+    """``counts`` within +-1e9 (an overflowed +-inf too; never NaN here: finite factors)."""
+    return min(_COUNTS_LIMIT, max(-_COUNTS_LIMIT, counts))
 
 
 _SONAR_LAYOUT: Final[Layout] = sen_layout(SenSonar)
@@ -249,6 +255,13 @@ class OpticalFlow(Sensor[FlowReading]):
         self.counts_per_rad = p["Pixels"] * p["CountsPerPixel"] / (
             2.0 * math.tan(p["FieldOfView"] / 2.0)
         )
+        # Pixels or CountsPerPixel 1e308 gave infinite counts per radian: the first reading
+        # raised OverflowError in round() and stopped the engine for every client.
+        if not math.isfinite(self.counts_per_rad):
+            key = "Pixels" if p["Pixels"] >= p["CountsPerPixel"] else "CountsPerPixel"
+            raise self._error(key, f"{p[key]:g} is too large: Pixels x CountsPerPixel / "
+                                   "(2 tan(FieldOfView / 2)) is not a finite number of counts "
+                                   "per radian")
         self._prev_rate: tuple[float, float] | None = None
         self._carry = [0.0, 0.0]
 
@@ -267,7 +280,7 @@ class OpticalFlow(Sensor[FlowReading]):
         if scale <= 0.0:
             return 0
         q = p["SurfaceQuality"] * scale + p["QualitySigma"] * self.normals.take(1)[0]
-        return int(min(SQUAL_MAX, max(0, round(q))))
+        return round(min(float(SQUAL_MAX), max(0.0, q)))  # clipped first: q may be inf
 
     def _read(self, state: BodyState, world: WorldQuery, dt_s: float) -> FlowReading:
         p = self.params
@@ -295,10 +308,13 @@ class OpticalFlow(Sensor[FlowReading]):
         noise = self.normals.take(2)
         delta: list[int] = []
         for axis in range(2):
+            # Each term saturated far beyond the registers' range first: a huge NoiseSigma (or
+            # counts per radian times a fast rate) overflowed to inf, and round(inf) raised
+            # OverflowError, which stopped the engine for every client.
             total = (
                 self._carry[axis]
-                + self.counts_per_rad * dt_s * 0.5 * (prev[axis] + rate[axis])
-                + p["NoiseSigma"] * noise[axis]
+                + _saturate(self.counts_per_rad * dt_s * 0.5 * (prev[axis] + rate[axis]))
+                + _saturate(p["NoiseSigma"] * noise[axis])
             )
             counts = round(total)
             if counts > DELTA_MAX or counts < DELTA_MIN:
