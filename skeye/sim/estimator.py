@@ -66,6 +66,9 @@ REST_VEL_NOISE_M_S: Final = 0.2
 """Zero-velocity update noise while disarmed: PX4 EKF2 (zero_velocity_update.cpp)."""
 M_PER_PA: Final = 1.0 / (1.225 * GRAVITY_M_S2)
 """Height per pascal near sea level (ISA density 1.225 kg/m^3): 8.3 cm/Pa."""
+VARIANCE_HEADROOM: Final = 1e12
+"""A sensor-derived noise figure's square times this must be finite (the filter scales its
+variances by distances and times)."""
 HISTORY: Final = 64  # horizontal estimate history entries (for the GPS delay)
 HISTORY_STEP_S: Final = 0.01  # one entry per this much sim time: 0.63 s of history
 _PI: Final = math.pi
@@ -562,9 +565,35 @@ def from_sensor_figures(
         "gps_delay_s": r["Latency"],
     }
 
+    vibration = ("NoiseSigma", "VibrationRotor", "VibrationBladePass", "VibrationBroadband")
+    sources: dict[str, tuple[Any, tuple[str, ...]]] = {
+        "accel_noise_m_s2": (accel, vibration),
+        "tilt_noise_rad_s": (gyro, vibration),
+        "baro_noise_m": (baro, ("NoiseSigma",)),
+        "sonar_noise_m": (sonar, ("NoiseSigma",)),
+        "flow_noise_rad_s": (flow, ("NoiseSigma",)) if flow_rate >= gyro_total
+        else (gyro, vibration),
+        "gps_pos_noise_m": (gps, ("HorizontalSigma",)),
+        "gps_vel_noise_m_s": (gps, ("VelocitySigma",)),
+        "gps_delay_s": (gps, ("Latency",)),
+    }
+
     def pick(name: str) -> float:
         value = float(getattr(params, name))
-        return derived[name] if math.isnan(value) else value
+        if not math.isnan(value):
+            return value
+        value = derived[name]
+        # The filter squares it (a variance) and scales it by distances and times: a sensor
+        # noise of 1e308 made INIT refuse "estimator: flow_noise_rad_s ... got inf" (no file,
+        # no sensor key), or loaded and raised OverflowError in the filter (the engine stopped
+        # for every client) or sent STEP's ERR "PositionSigma: inf" at every step.
+        if not math.isfinite(value * value * VARIANCE_HEADROOM):
+            sensor, keys = sources[name]
+            key = max(keys, key=lambda k: float(sensor.params[k]))
+            raise sensor._error(key, f"{sensor.params[key]:g} is too large: the board's "
+                                     f"estimator's {name} from it, {value:g}, squared is not a "
+                                     "finite number with room to spare")
+        return value
 
     # Built field by field (not dataclasses.replace): mypyc compiles both dataclasses.
     return EstimatorParams(

@@ -337,7 +337,10 @@ class Robot:
         self.board_sensors: list[ScheduledSensor] = []  # sampled for the board, not streamed
         self.estimator: BoardEstimator | None = None
         if kind == "onboard":
-            self.estimator = self._build_estimator(physics_step_s, rng, declination_rad)
+            try:  # a sensor figure the board's filter cannot take: named with the file
+                self.estimator = self._build_estimator(physics_step_s, rng, declination_rad)
+            except ConfigError as exc:
+                raise ConfigError(f"{config.source}: {exc}") from None
             self.ins.board = self.estimator
         self.ground_effect = 1.0
         self.airframe: AirframeParams = config.airframe  # typed: the board reads it every tick

@@ -109,6 +109,18 @@ CASES = [
      "Pixels", "1e+308 is too large"),
     ("flow-counts-overflow", '[[sensors]]\ntype = "OpticalFlow"\nname = "F"\n'
      'counts_per_pixel = 1e308', "CountsPerPixel", "1e+308 is too large"),
+    # The board's filter squares the noise its sensors give: INIT refused "estimator:
+    # flow_noise_rad_s must be a number >= 0, got inf" (no file, no sensor key); at 25 Hz the
+    # file loaded and the filter's OverflowError stopped the engine; an accelerometer's 1e308
+    # loaded and every STEP answered ERR "PositionSigma: inf is not a finite number".
+    ("flow-noise-estimator", '[[sensors]]\ntype = "OpticalFlow"\nname = "F"\nrate_hz = 500\n'
+     'noise_sigma = 1e308', "NoiseSigma", "1e+308 is too large"),
+    ("flow-noise-estimator-slow", '[[sensors]]\ntype = "OpticalFlow"\nname = "F"\n'
+     'rate_hz = 25\nnoise_sigma = 1e308', "NoiseSigma", "1e+308 is too large"),
+    ("accel-noise-estimator", '[[sensors]]\ntype = "Accelerometer"\nname = "A"\n'
+     'noise_sigma = 1e308', "sensor 'A' (Accelerometer): NoiseSigma", "1e+308 is too large"),
+    ("gps-sigma-estimator", '[[sensors]]\ntype = "GPS"\nname = "G"\n'
+     'horizontal_sigma = 1e200', "HorizontalSigma", "1e+200 is too large"),
 ]
 
 
