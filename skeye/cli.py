@@ -94,6 +94,21 @@ def record_limits(args: argparse.Namespace) -> tuple[float, int]:
     return max_mb, parts
 
 
+def check_timestep(timestep_s: float) -> None:
+    """``--timestep`` within the engine's range, said in the option's name.
+
+    Raises:
+        ConfigError: outside it.
+    """
+    from skeye.errors import ConfigError
+    from skeye.sim.limits import TIMESTEP_RANGE_S
+
+    low, high = TIMESTEP_RANGE_S
+    if not low <= timestep_s <= high:
+        raise ConfigError(f"--timestep must be in [{low:g}, {high:g}] s (the physics step), "
+                          f"got {timestep_s:g}")
+
+
 def check_sim_files(args: argparse.Namespace) -> int:
     """``skeye sim --check``: the world and the robot files (``--robot-dir``) loaded and
     checked as the simulator checks them at its start, the first problem said (status 2) or
@@ -103,6 +118,7 @@ def check_sim_files(args: argparse.Namespace) -> int:
     from skeye.sim.robot import check_robot_config
     from skeye.sim.world_file import load_world
 
+    check_timestep(args.timestep)  # the robot files are checked at this physics step
     load_world(args.world)
     validate_robot_dirs(tuple(args.robot_dir),
                         partial(check_robot_config, physics_step_s=args.timestep))
@@ -114,10 +130,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.check:
         return check_sim_files(args)
     from skeye import native
-    from skeye.errors import ConfigError
     from skeye.processes import check_ports_free
     from skeye.robots.config import validate_robot_dirs
-    from skeye.sim.engine import TIMESTEP_RANGE_S, Simulation
+    from skeye.sim.engine import Simulation
     from skeye.sim.robot import check_robot_config
     from skeye.sim.runner import SimulationRunner
     from skeye.sim.server import ControlServer
@@ -126,10 +141,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     image_format, image_quality = image_defaults(args)  # before anything starts
     record_max_mb, record_parts = record_limits(args)
-    low, high = TIMESTEP_RANGE_S  # the engine's range, said in the option's name
-    if not low <= args.timestep <= high:
-        raise ConfigError(f"--timestep must be in [{low:g}, {high:g}] s (the physics step), "
-                          f"got {args.timestep:g}")
+    check_timestep(args.timestep)
     ports = [("the simulator's control protocol", args.host, args.port, "--port")]
     if args.image_port is not None:
         ports.append(("the simulator's image server", args.host, args.image_port,
@@ -260,8 +272,8 @@ def _add_sim(sub: Any) -> None:
     p.add_argument("--world", type=cliargs.path, default="pad",
                    help="built-in world (pad, yard, indoor, checkerboard) or a .toml")
     p.add_argument("--check", action="store_true",
-                   help="check the world and the --robot-dir robot files, say what is wrong "
-                        "(status 2) or nothing (0), and start nothing")
+                   help="check --timestep, the world and the --robot-dir robot files, say "
+                        "what is wrong (status 2) or nothing (0), and start nothing")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=cliargs.port, default=3000,
                    help="control protocol port (0 = any free)")

@@ -39,6 +39,7 @@ from skeye.geo import MAX_POSITION_M
 from skeye.robots.config import RobotConfig, load_robot_config
 from skeye.robots.params import ESTIMATOR_KINDS
 from skeye.sim import frames
+from skeye.sim.limits import TIMESTEP_RANGE_S
 from skeye.sim.raycast import ROBOT_GEOM_GROUP, RayCaster
 from skeye.sim.readings import Event, ReadingSink, RobotCrashed, RobotStopped, SensorSample
 from skeye.sim.robot import (
@@ -57,9 +58,6 @@ from skeye.wire.sim_messages import MAX_ROBOT_NAME_CHARS
 from skeye.wire.wind import WindSettings, make_settings
 
 log = logging.getLogger(__name__)
-
-TIMESTEP_RANGE_S = (1e-5, 0.01)
-"""The physics step a simulation takes (``skeye sim --timestep``), seconds, both ends in."""
 
 FLUSH_EVENTS = 10_000
 """Events queued during one step() call are handed to their sinks at its end, or once this many

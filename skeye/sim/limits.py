@@ -1,10 +1,15 @@
-"""The connection limits both simulator servers (control and image) take, checked one way."""
+"""The connection limits both simulator servers (control and image) take, checked one way, and
+the physics step's range (here, not in :mod:`skeye.sim.engine`: ``skeye sim --check`` checks
+``--timestep`` without importing MuJoCo)."""
 
 from __future__ import annotations
 
 import math
 
 from skeye.errors import ConfigError
+
+TIMESTEP_RANGE_S = (1e-5, 0.01)
+"""The physics step a simulation takes (``skeye sim --timestep``), seconds, both ends in."""
 
 
 def check_server_limits(server: str, **limits: float) -> None:

@@ -263,3 +263,19 @@ def test_sim_check_says_what_is_wrong_with_a_world_or_robot_file_and_starts_noth
         text.replace('name = "hummingbird"', 'name = "typo"').replace("mass_kg", "mas_kg"))
     done = _skeye("sim", "--check", "--robot-dir", str(robots))
     assert done.returncode == 2 and "mas_kg" in done.stderr, done
+
+
+@pytest.mark.parametrize("robots", [False, True])
+def test_sim_check_refuses_a_timestep_the_simulator_refuses(tmp_path: Path, robots: bool) -> None:
+    """``skeye sim --check --timestep 0.5`` said nothing (status 0) where ``skeye sim`` refuses
+    it; with a robot folder, --timestep 1e9 was blamed on the robot file ("board_rate_hz 250.0:
+    the board rate is not an integer fraction of the physics rate 1e-09 Hz")."""
+    argv = ["sim", "--check", "--timestep", "1e9" if robots else "0.5"]
+    if robots:
+        text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+        (tmp_path / "mine.toml").write_text(text.replace('name = "hummingbird"', 'name = "mine"'))
+        argv += ["--robot-dir", str(tmp_path)]
+    done = _skeye(*argv)
+    assert done.returncode == 2, done
+    assert "--timestep must be in [1e-05, 0.01] s (the physics step)" in done.stderr, done
+    assert "mine.toml" not in done.stderr
