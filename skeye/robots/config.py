@@ -265,7 +265,8 @@ def robot_folders(search_dirs: tuple[str | Path, ...]) -> tuple[Path, ...]:
 
 
 def validate_robot_dirs(
-    search_dirs: tuple[Path, ...], check: Callable[[RobotConfig], None] | None = None
+    search_dirs: tuple[Path, ...], check: Callable[[RobotConfig], None] | None = None,
+    profile: str | None = None,
 ) -> list[RobotConfig]:
     """Load every ``*.toml`` in each ``--robot-dir`` folder, so a typo stops ``skeye sim`` at
     start-up with the message an ``INIT`` would have got, not at the first ``INIT``.
@@ -274,7 +275,8 @@ def validate_robot_dirs(
     passes :func:`skeye.sim.robot.check_robot_config` at its physics step, which builds the
     robot as INIT does: the sensors' parameters and rates, the cameras, the board rate, the
     board's estimator; this package may not import the simulator). Without it only the file
-    and its camera models are checked.
+    and its camera models are checked. ``profile`` is ``skeye sim --camera-profile``: the
+    camera models are checked under it, as the cameras will render them.
 
     Raises:
         ConfigError: a folder that is missing or not a folder, or a robot file that does not
@@ -291,7 +293,7 @@ def validate_robot_dirs(
             config = load_robot_config(folder / path.name)
             for mount in config.sensors:  # a bad camera model stops us here too
                 if mount.type_name.lower() == CAMERA_TYPE:
-                    mount_camera_model(config, mount)
+                    mount_camera_model(config, mount, profile)
             if check is not None:
                 check(config)
             configs.append(config)

@@ -347,7 +347,7 @@ class CameraSystem:
                     fov = dict(cam.mount.params).get("fov_h_rad", 1.309)
                     cam.set_model(build_camera_model(
                         dict(cam.mount.params), cam.width, cam.height, float(fov),
-                        f"camera {cam.name!r}", self.profile))
+                        f"{robot.config.source} camera {cam.name!r}", self.profile))
         return "\n".join(cam.mjcf(robot.name) for cam in robot.cameras)
 
     def _on_rebuild(self, sim: Any) -> None:

@@ -4,7 +4,10 @@ OpenCV's projection, seeded noise, motion blur, rolling shutter, shadows and cap
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from dataclasses import replace
+from importlib import resources
 from pathlib import Path
 
 import cv2
@@ -429,3 +432,29 @@ def test_skeye_sim_checks_camera_models_and_the_profile_option(tmp_path: Path):
                            "--camera-profile", "fisheye"], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 2 and "--camera-profile" in done.stderr
+
+
+def test_a_camera_the_camera_profile_cannot_model_is_refused_naming_the_file(
+        tmp_path: Path) -> None:
+    """The start-up check ignored ``--camera-profile``: a file whose camera sets latency_s 5 ms
+    under its own ideal profile passed ``skeye sim --check`` and the start-up check, and with
+    ``--camera-profile webcam`` (latency_jitter_s 10 ms) INIT was then refused with "camera
+    'Down': latency_jitter_s (0.01) must not exceed latency_s (0.005)", naming no file."""
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    path = tmp_path / "mine.toml"
+    path.write_text(text.replace('name = "hummingbird"', 'name = "mine"')
+                    .replace('profile = "webcam"', 'profile = "ideal"\nlatency_s = 0.005'))
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--check", "--robot-dir",
+                           str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done  # its own profile models it
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--check", "--robot-dir",
+                           str(tmp_path), "--camera-profile", "webcam"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done
+    assert f"{path} camera 'Down': latency_jitter_s (0.01) must not exceed" in done.stderr, done
+    sim = Simulation(load_world("pad"), seed=3, robot_dirs=(tmp_path,))
+    with CameraSystem(sim, FrameBuffer(), synchronous=True, profile="webcam"):
+        with pytest.raises(ConfigError) as info:
+            sim.spawn("mine", sink=lambda events: None, name="M",
+                      location_ned_m=(0.0, 0.0, -1.0))
+    assert f"{path} camera 'Down': latency_jitter_s" in str(info.value)
