@@ -121,7 +121,8 @@ def check_sim_files(args: argparse.Namespace) -> int:
     check_timestep(args.timestep)  # the robot files are checked at this physics step
     load_world(args.world)
     validate_robot_dirs(tuple(args.robot_dir),
-                        partial(check_robot_config, physics_step_s=args.timestep),
+                        partial(check_robot_config, physics_step_s=args.timestep,
+                                estimator=args.estimator),
                         args.camera_profile)
     return 0
 
@@ -154,7 +155,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     world = load_world(args.world)
     # A robot file with a typo, or one INIT would refuse, stops us here.
     validate_robot_dirs(tuple(args.robot_dir),
-                        partial(check_robot_config, physics_step_s=args.timestep),
+                        partial(check_robot_config, physics_step_s=args.timestep,
+                                estimator=args.estimator),
                         args.camera_profile)
     wind = make_settings(args.wind, parse_params(args.wind_params))
     sim = Simulation(

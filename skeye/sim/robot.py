@@ -240,9 +240,13 @@ def mount_sensors(
     return sensors, cameras
 
 
-def check_robot_config(config: RobotConfig, physics_step_s: float) -> None:
+def check_robot_config(
+    config: RobotConfig, physics_step_s: float, estimator: str | None = None
+) -> None:
     """Run every check building a :class:`Robot` of this class runs, without a simulation
     (``skeye sim --robot-dir`` runs it at start-up, so a file INIT would refuse stops it).
+    ``estimator`` is ``skeye sim --estimator``, over the file's ``[estimator] kind`` as at INIT
+    (the board's filter, built for ``onboard``, has checks of its own).
 
     Raises:
         ConfigError: what INIT would answer, naming the file, the key and the value.
@@ -250,7 +254,7 @@ def check_robot_config(config: RobotConfig, physics_step_s: float) -> None:
     try:  # a robot of this class, as INIT builds one (its board's estimator too), off the ground
         Robot("check", config, physics_step_s=physics_step_s, rng=np.random.default_rng(0),
               sink=_no_readings, spawn_pos_ned_m=(0.0, 0.0, -1.0),
-              spawn_rpy_rad=(0.0, 0.0, 0.0), airborne=False)
+              spawn_rpy_rad=(0.0, 0.0, 0.0), airborne=False, estimator=estimator)
     except ConfigError as exc:
         text = str(exc)
         raise ConfigError(text if text.startswith(config.source)

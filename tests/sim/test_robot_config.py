@@ -262,3 +262,18 @@ def test_a_huge_flow_noise_saturates_the_registers_and_the_engine_goes_on(
             assert -128 <= dx <= 127 and -128 <= dy <= 127, m
             assert 0 <= int(m.require("Quality")) <= 169, m
         c.close()
+
+
+def test_sim_check_builds_the_board_filter_that_estimator_option_asks_for(tmp_path: Path) -> None:
+    """A file of ``[estimator] kind = "truth"`` was checked without the board's filter even
+    under ``skeye sim --estimator onboard``: an accelerometer noise the filter refuses passed
+    ``skeye sim --check`` (status 0), and every INIT of the class was then refused."""
+    path = _write(tmp_path, '[estimator]\nkind = "truth"\n[[sensors]]\ntype = "Accelerometer"\n'
+                            'name = "A"\nnoise_sigma = 1e308')
+    argv = [sys.executable, "-m", "skeye.cli", "sim", "--check", "--robot-dir", str(tmp_path)]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done  # the oracle does not filter its readings
+    done = subprocess.run([*argv, "--estimator", "onboard"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2, done
+    assert f"{path}: sensor 'A' (Accelerometer): NoiseSigma 1e+308 is too large" in done.stderr
