@@ -144,7 +144,7 @@ class Simulation:
         self.step_hooks: list[Callable[[Simulation], None]] = []
         # Each step hook names, through an event source, the next step it needs to see.
         self.event_sources: list[Callable[[Simulation], int]] = []
-        self._pending: dict[int, tuple[ReadingSink, list[Event]]] = {}
+        self._pending: dict[int, tuple[Robot, list[Event]]] = {}
         self._pending_events = 0
         self._periods: list[int] = []
         self.rebuild_hooks: list[Callable[[Simulation], None]] = []
@@ -715,17 +715,32 @@ class Simulation:
         self._pending_events += len(events)
         entry = self._pending.get(id(robot))
         if entry is None:
-            self._pending[id(robot)] = (robot.sink, list(events))
+            self._pending[id(robot)] = (robot, list(events))
         else:
             entry[1].extend(events)
 
     def flush(self) -> None:
-        """Hand every robot's queued events to its sink (one call per robot)."""
+        """Hand every robot's queued events to its sink (one call per robot).
+
+        A robot whose events its sink cannot encode (a reading that is not a finite number: a
+        robot file's sensor noise of 1e308 made a compass read -inf) is stopped, and the
+        other robots' events go out: the encoder's LocalProtocolError used to end the flush,
+        so the robots after it lost their lines and every STEP of every client answered ERR
+        from then on.
+        """
         pending, self._pending = self._pending, {}
         self._pending_events = 0
-        for sink, events in pending.values():
+        unsendable: list[tuple[str, str]] = []
+        for robot, events in pending.values():
             if events:
-                sink(events)
+                try:
+                    robot.sink(events)
+                except LocalProtocolError as exc:
+                    unsendable.append((robot.name, str(exc)))
+        for name, reason in unsendable:
+            self._stop_robot(name, f"a reading could not be sent: {reason}")
+        if unsendable:
+            self.flush()  # the stops' own news
 
     def _step_to_event(self, count: int = 1) -> None:
         """``count`` physics steps, then whatever falls due at the new step count, robot by
