@@ -211,6 +211,10 @@ def build_camera_model(
     if model.vignetting_exponent > 16.0:
         raise ConfigError(f"{where}: vignetting_exponent must be within 0..16, got "
                           f"{model.vignetting_exponent}")
+    # 1e308 (times the gain, inf) made the auto-exposure's brightness range 0 and its log
+    # raised ValueError: a traceback out of skeye sim --check and the start-up check.
+    if model.exposure_s > 1.0:
+        raise ConfigError(f"{where}: exposure_s must be <= 1 s, got {model.exposure_s:g} s")
     if model.line_time_s * height > 1.0:
         raise ConfigError(f"{where}: line_time_s * height must be <= 1 s, got "
                           f"{model.line_time_s * height:g} s")

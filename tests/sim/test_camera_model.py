@@ -458,3 +458,19 @@ def test_a_camera_the_camera_profile_cannot_model_is_refused_naming_the_file(
             sim.spawn("mine", sink=lambda events: None, name="M",
                       location_ned_m=(0.0, 0.0, -1.0))
     assert f"{path} camera 'Down': latency_jitter_s" in str(info.value)
+
+
+@pytest.mark.parametrize("profile", ["ideal", "webcam"])
+def test_an_exposure_over_a_second_is_refused_naming_the_file(tmp_path: Path,
+                                                             profile: str) -> None:
+    """exposure_s = 1e308 times the gain is inf: the auto-exposure's brightness range became 0
+    and math.log raised ValueError, a traceback out of ``skeye sim --check``."""
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    path = tmp_path / "mine.toml"
+    path.write_text(text.replace('name = "hummingbird"', 'name = "mine"')
+                    .replace('profile = "webcam"', f'profile = "{profile}"\nexposure_s = 1e308'))
+    done = subprocess.run([sys.executable, "-m", "skeye.cli", "sim", "--check", "--robot-dir",
+                           str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done
+    assert done.stderr == (f"skeye sim: error: {path} camera 'Down': exposure_s must be <= 1 s, "
+                           "got 1e+308 s\n"), done.stderr
