@@ -778,8 +778,17 @@ class Simulation:
             state = frames.free_joint_state(t, joints[0], joints[1], joints[2],
                                             robot.rotors.speed_rad_s, slot.qpos_adr,
                                             slot.qvel_adr)
+            # One robot's arithmetic fault stops that robot, not the engine: a robot file's
+            # [estimator] attitude_kp = 1e308 drove its board's attitude filter to NaN, and a
+            # ZeroDivisionError out of its next gyro reading ended the simulation for every
+            # client ("the simulation engine failed").
             if due or status or hidden:
-                self._emit_readings(robot, state, due, status, hidden)
+                try:
+                    self._emit_readings(robot, state, due, status, hidden)
+                except ArithmeticError as exc:
+                    failed.append((name, f"its board failed: {type(exc).__name__}: {exc}"))
+                    self._park(name)
+                    continue
             if board:
                 if not wind_advanced:
                     self.wind.advance(state.time_s, robot.tick_s)
@@ -790,6 +799,9 @@ class Simulation:
                     self._board_tick(name, robot, state, contacts, joints[1])
                 except PhysicsError as exc:
                     failed.append((name, str(exc)))
+                    self._park(name)
+                except ArithmeticError as exc:
+                    failed.append((name, f"its board failed: {type(exc).__name__}: {exc}"))
                     self._park(name)
         if contacts is not None and joints is not None:  # a board ticked: its velocities
             self._tick_qvel = joints[1]

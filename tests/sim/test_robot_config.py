@@ -306,3 +306,28 @@ def test_a_robot_whose_reading_cannot_be_sent_is_stopped_and_the_others_fly_on(
         assert "robot stopped" in reason and "is not a finite number" in reason, stopped
         good.close()
         bad.close()
+
+
+def test_a_robot_whose_board_fails_is_stopped_and_the_others_fly_on(tmp_path: Path) -> None:
+    """An [estimator] attitude_kp of 1e308 drove the board's attitude filter to NaN, and the
+    ZeroDivisionError out of its next gyro reading ended the engine for every client."""
+    _write(tmp_path, "[estimator]\nattitude_kp = 1e308")
+    with running_sim(robot_dirs=(tmp_path,)) as server:
+        good = LineClient(server.port)
+        good.expect("NFO")
+        assert good.answer("INIT {ClassName hummingbird} {Name H} {Location 3,0,-1}",
+                           "INIT").type == "RES"
+        bad = LineClient(server.port)
+        bad.expect("NFO")
+        assert bad.answer("INIT {ClassName bad} {Name B} {Location 0,0,-1}", "INIT").type == "RES"
+        for _ in range(3):
+            good.send("STEP {Count 200}")
+            seen, done = good.read_until(lambda m: m.type in ("RES", "ERR")
+                                         and m.get("Command") == "STEP")
+            assert done.type == "RES", done
+            assert any(m.type == "SEN" and m.get("Name") == "GPS" for m in seen)
+        stopped = bad.read_until(lambda m: m.type == "ERR")[1]
+        reason = stopped.get("Reason") or ""
+        assert "robot stopped" in reason and "its board failed" in reason, stopped
+        good.close()
+        bad.close()
