@@ -287,6 +287,17 @@ def validate_robot_dirs(
         paths = sorted(folder.glob("*.toml"))
         stems = [p.stem.casefold() for p in paths]
         for path in paths:
+            # A file INIT never loads: its edits were silently ignored (hummingbird.toml with
+            # another mass_kg flew the built-in's) or its class could not be asked for.
+            if path.stem.casefold() in BUILTIN_ROBOTS:
+                raise ConfigError(f"--robot-dir {folder}: {path.name} is never used: INIT "
+                                  f"{{ClassName {path.stem}}} takes the built-in class "
+                                  f"{path.stem.lower()}; give the file (and its 'name') another "
+                                  "name")
+            if not path.stem.replace("_", "").replace("-", "").isalnum():
+                raise ConfigError(f"--robot-dir {folder}: {path.name} is never used: a class "
+                                  "name (the file's name) holds only letters, digits, '-' and "
+                                  "'_'")
             if stems.count(path.stem.casefold()) > 1:
                 raise ConfigError(f"--robot-dir {folder}: {path.name} and another file name "
                                   "the same robot class (class names ignore case)")

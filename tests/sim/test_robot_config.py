@@ -331,3 +331,23 @@ def test_a_robot_whose_board_fails_is_stopped_and_the_others_fly_on(tmp_path: Pa
         assert "robot stopped" in reason and "its board failed" in reason, stopped
         good.close()
         bad.close()
+
+
+
+@pytest.mark.parametrize(("file_name", "why"), [
+    ("hummingbird.toml", "INIT {ClassName hummingbird} takes the built-in class hummingbird"),
+    ("AirRobot.toml", "INIT {ClassName AirRobot} takes the built-in class airrobot"),
+    ("my.quad.toml", "holds only letters, digits, '-' and '_'"),
+])
+def test_a_robot_file_init_never_loads_is_refused(tmp_path: Path, file_name: str,
+                                                   why: str) -> None:
+    """A --robot-dir hummingbird.toml passed the start-up check while INIT {ClassName
+    hummingbird} flew the built-in (its mass_kg 0.9 unseen: CONF said Mass 0.68); my.quad.toml
+    could not be asked for at all."""
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    (tmp_path / file_name).write_text(text.replace("mass_kg = 0.68", "mass_kg = 0.9"))
+    with pytest.raises(ConfigError) as info:
+        validate_robot_dirs((tmp_path,))
+    assert str(info.value) == f"--robot-dir {tmp_path}: {file_name} is never used: " + (
+        f"{why}; give the file (and its 'name') another name" if "INIT" in why
+        else f"a class name (the file's name) {why}")
