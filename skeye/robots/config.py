@@ -283,7 +283,12 @@ def validate_robot_dirs(
             load (the message names the file and the problem).
     """
     configs = []
+    classes: dict[str, Path] = {}  # class name -> the file INIT takes for it
+    seen_folders: set[Path] = set()
     for folder in robot_folders(search_dirs):
+        if folder.resolve() in seen_folders:
+            continue  # the same folder named twice: its files are the same classes
+        seen_folders.add(folder.resolve())
         paths = sorted(folder.glob("*.toml"))
         stems = [p.stem.casefold() for p in paths]
         for path in paths:
@@ -301,6 +306,12 @@ def validate_robot_dirs(
             if stems.count(path.stem.casefold()) > 1:
                 raise ConfigError(f"--robot-dir {folder}: {path.name} and another file name "
                                   "the same robot class (class names ignore case)")
+            # INIT takes the first folder's file: a later one's edits were silently ignored.
+            earlier = classes.setdefault(path.stem.casefold(), path)
+            if earlier != path:
+                raise ConfigError(f"--robot-dir {folder}: {path.name} is never used: INIT "
+                                  f"{{ClassName {path.stem}}} takes {earlier} (an earlier "
+                                  "--robot-dir; class names ignore case)")
             config = load_robot_config(folder / path.name)
             for mount in config.sensors:  # a bad camera model stops us here too
                 if mount.type_name.lower() == CAMERA_TYPE:

@@ -351,3 +351,23 @@ def test_a_robot_file_init_never_loads_is_refused(tmp_path: Path, file_name: str
     assert str(info.value) == f"--robot-dir {tmp_path}: {file_name} is never used: " + (
         f"{why}; give the file (and its 'name') another name" if "INIT" in why
         else f"a class name (the file's name) {why}")
+
+
+
+def test_a_class_an_earlier_robot_dir_gives_is_refused(tmp_path: Path) -> None:
+    """INIT takes the first --robot-dir's file of a class: a second folder's MyQuad.toml (mass_kg
+    0.9) passed the start-up check and was never flown. The same folder named twice is fine."""
+    text = resources.files("skeye.robots").joinpath("hummingbird.toml").read_text("utf-8")
+    text = text.replace('name = "hummingbird"', 'name = "myquad"')
+    first, second = tmp_path / "a", tmp_path / "b"
+    first.mkdir()
+    second.mkdir()
+    (first / "myquad.toml").write_text(text)
+    (second / "MyQuad.toml").write_text(text.replace("mass_kg = 0.68", "mass_kg = 0.9"))
+    assert load_robot_config("MyQuad", (first, second)).airframe.mass_kg == 0.68
+    assert len(validate_robot_dirs((first, first))) == 1
+    with pytest.raises(ConfigError) as info:
+        validate_robot_dirs((first, second))
+    assert str(info.value) == (f"--robot-dir {second}: MyQuad.toml is never used: INIT "
+                               f"{{ClassName MyQuad}} takes {first / 'myquad.toml'} (an earlier "
+                               "--robot-dir; class names ignore case)")
