@@ -22,7 +22,7 @@ import random
 import select
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 
@@ -162,14 +162,14 @@ def test_a_line_nobody_answers_stops_the_pilot_at_start(capsys):
         os.close(slave)
 
 
-def test_a_line_that_carries_only_garbage_is_said_so_not_only_silent():
-    """A board at another baud rate answers every poll with bytes the pilot cannot read: the
-    pilot said only "LL board silent: ... answered no poll", as if nothing had come."""
+@contextmanager
+def pty_board(answer: Callable[[bytes], bytes], name: str) -> Iterator[str]:
+    """A board on a pseudo-terminal that answers each request the pilot writes with
+    ``answer(request)``; yields the path the pilot opens."""
     master, slave = os.openpty()
     stop = threading.Event()
 
-    def garbled_board() -> None:  # each request answered with as many unreadable bytes
-        rng = random.Random(3)
+    def board() -> None:
         while not stop.is_set():
             try:
                 data = os.read(master, 4096) if select.select([master], [], [], 0.1)[0] else b""
@@ -177,20 +177,28 @@ def test_a_line_that_carries_only_garbage_is_said_so_not_only_silent():
                 stop.wait(0.05)
                 continue
             if data:
-                os.write(master, bytes(rng.randrange(256) for _ in range(8 * len(data))))
+                os.write(master, answer(data))
 
-    board = Worker(garbled_board, "test-garbled-board").start()
+    worker = Worker(board, name).start()
     try:
-        path = os.ttyname(slave)
+        yield os.ttyname(slave)
+    finally:
+        stop.set()
+        worker.join(2.0)
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_line_that_carries_only_garbage_is_said_so_not_only_silent():
+    """A board at another baud rate answers every poll with bytes the pilot cannot read: the
+    pilot said only "LL board silent: ... answered no poll", as if nothing had come."""
+    rng = random.Random(3)  # each request answered with as many unreadable bytes
+    with pty_board(lambda data: bytes(rng.randrange(256) for _ in range(8 * len(data))),
+                   "test-garbled-board") as path:
         with pytest.raises(LinkTimeout, match=r"LL board silent: .* answered no poll .*; the "
                            r"line carried [1-9][0-9]* bytes of garbage and [0-9]+ bad frames "
                            r"instead: a wrong baud rate"):
             open_airframe(f"asctec-ll://serial{path}?timeout_s=0.3", AirframeOptions())
-    finally:
-        stop.set()
-        board.join(2.0)
-        os.close(master)
-        os.close(slave)
 
 
 def test_a_board_whose_every_answer_comes_corrupted_is_said_so_at_start(capsys):
@@ -200,33 +208,14 @@ def test_a_board_whose_every_answer_comes_corrupted_is_said_so_at_start(capsys):
     "the LL board has not answered a poll yet", exit status 1. It is the silent board it is:
     "LL board silent", the bad frames named, exit status 4, as for a board that answers
     nothing."""
-    master, slave = os.openpty()
-    stop = threading.Event()
     bad = b">*>" + (1000).to_bytes(2, "little") + bytes([PD.LL_STATUS])  # LL_STATUS is 16 B
-
-    def corrupting_board() -> None:  # each request answered with bad frames only
-        while not stop.is_set():
-            try:
-                data = os.read(master, 4096) if select.select([master], [], [], 0.1)[0] else b""
-            except OSError:  # the pilot closed the device: EIO until it opens it again
-                stop.wait(0.05)
-                continue
-            if data:
-                os.write(master, bad * 8)
-
-    board = Worker(corrupting_board, "test-corrupting-board").start()
-    try:
-        uri = f"asctec-ll://serial{os.ttyname(slave)}?timeout_s=0.3"
+    with pty_board(lambda data: bad * 8, "test-corrupting-board") as path:
+        uri = f"asctec-ll://serial{path}?timeout_s=0.3"
         with pytest.raises(LinkTimeout, match=r"LL board silent: .* [1-9][0-9]* bad frames"):
             open_airframe(uri, AirframeOptions())
         args = pilot_cli_parser().parse_args(["pilot", "--airframe", uri, "--port", "0"])
         assert pilot_cli.run(args) == pilot_cli.EXIT_LOST_SIMULATOR
         assert "LL board silent" in capsys.readouterr().err
-    finally:
-        stop.set()
-        board.join(2.0)
-        os.close(master)
-        os.close(slave)
 
 
 def pilot_cli_parser():
