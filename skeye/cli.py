@@ -228,12 +228,21 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 flush=True,
             )
             print(f"skeye sim: camera renderer: {cameras.describe_renderer()}", flush=True)
+        board_failures: list[str] = []  # an LL board whose worker died: the simulator stops
         if ll_boards:
             from skeye.hil.cli import describe, start_ll_board
 
+            def board_failed(name: str) -> Callable[[BaseException], None]:
+                def failed(exc: BaseException) -> None:  # on the dying worker's thread
+                    board_failures.append(f"LL board {name} failed: {type(exc).__name__}: "
+                                          f"{exc}")
+                    stop.set()
+                return failed
+
             image_port = images.port if cameras is not None else None
             for spec in ll_boards:
-                board = start_ll_board(stack, spec, f"127.0.0.1:{server.port}", host=args.host)
+                board = start_ll_board(stack, spec, f"127.0.0.1:{server.port}", host=args.host,
+                                       on_error=board_failed(spec.name))
                 print(f"skeye sim: {describe(board, image_port, args.host)}", flush=True)
         if args.host == "127.0.0.1":
             print(
@@ -247,9 +256,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
             deadline = time.monotonic() + 2.0
             while server.client_count and time.monotonic() < deadline:
                 time.sleep(0.05)
+        elif board_failures:  # its line answers no one now: a bench that looks alive is worse
+            print(f"skeye sim: error: {'; '.join(board_failures)}; stopping", file=sys.stderr,
+                  flush=True)
         else:
             print("skeye sim: stopping", flush=True)
-    return ENGINE_FAILED_STATUS if runner.error is not None else 0
+    return ENGINE_FAILED_STATUS if runner.error is not None or board_failures else 0
 
 
 def ll_board_specs(args: argparse.Namespace) -> list[Any]:

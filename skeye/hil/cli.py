@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import shlex
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass
 
@@ -119,9 +120,11 @@ def parse_ll_board(text: str) -> LLBoardSpec:
 
 
 def start_ll_board(stack: ExitStack, spec: LLBoardSpec, control_address: str, *,
-                   host: str = "127.0.0.1", timeout_s: float = 10.0) -> LLBoardServer:
+                   host: str = "127.0.0.1", timeout_s: float = 10.0,
+                   on_error: Callable[[BaseException], None] | None = None) -> LLBoardServer:
     """Spawn ``spec``'s robot through the control port and serve it on its line; the server
-    closes with ``stack``.
+    closes with ``stack``. ``on_error`` is called (on the dying thread, so it must not block)
+    if one of the board's workers dies on an exception: ``skeye sim`` stops, naming it.
 
     Raises:
         ConfigError: naming the board: the simulator refused its robot (an unknown class or
@@ -147,7 +150,7 @@ def start_ll_board(stack: ExitStack, spec: LLBoardSpec, control_address: str, *,
         airframe, line, lambda: sim.time_s, name=robot.name, lockstep=lockstep,
         tick_s=airframe.control_period_s if lockstep else REALTIME_TICK_S,
         time_step_s=sim.time_step_s, settings=settings,
-        rate=spec.rate if lockstep else None,
+        rate=spec.rate if lockstep else None, on_error=on_error,
     )
     stack.enter_context(server)
     server.camera = _camera(sim, spec.robot)

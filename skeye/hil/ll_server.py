@@ -147,6 +147,7 @@ class LLBoardServer:
         time_step_s: float = 0.001,
         settings: LLSettings | None = None,
         rate: float | None = None,
+        on_error: Callable[[BaseException], None] | None = None,
     ) -> None:
         self.airframe = airframe
         self.line = line
@@ -168,14 +169,15 @@ class LLBoardServer:
         self._granted = threading.Condition()
         self._stop = threading.Event()
         self._workers: list[Worker] = []
+        self._on_error = on_error  # a worker died (a bug): told at once, on its thread
         self._reported: tuple[int, int] = (0, 0)
         self._reported_at = -REPORT_EVERY_S
 
     # -- lifecycle -----------------------------------------------------------------------
     def start(self) -> LLBoardServer:
         self._workers = [
-            Worker(self._read_loop, f"ll-read-{self.name}").start(),
-            Worker(self._clock_loop, f"ll-clock-{self.name}").start(),
+            Worker(self._read_loop, f"ll-read-{self.name}", on_error=self._on_error).start(),
+            Worker(self._clock_loop, f"ll-clock-{self.name}", on_error=self._on_error).start(),
         ]
         return self
 

@@ -6,10 +6,13 @@ from __future__ import annotations
 import os
 import select
 import socket
+import threading
 import time
 import tty
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+
+import pytest
 
 from skeye.hil.cli import parse_ll_board, start_ll_board
 from skeye.hil.ll_server import MAX_GRANTS, Grants, LLBoardServer
@@ -25,6 +28,7 @@ from skeye.wire.packets import (
     VehicleStreamParser,
     encode,
 )
+from skeye.workers import WorkerFailed
 from tests.sim.conftest import running_sim
 
 FAR_MS = 3_000_000_000  # ms of sim time no test reaches
@@ -483,3 +487,25 @@ def test_a_client_that_only_polls_does_not_stop_the_clock_that_runs_on():
             board.check()
         finally:
             watcher.sock.close()
+
+
+def test_a_board_worker_that_dies_is_told_to_its_owner(monkeypatch):
+    """A worker of the board that died on an exception (a bug) was logged with its traceback
+    and nothing more: ``skeye sim`` served on with a board that answered no one, a bench that
+    looked alive. Its owner is told at once (``on_error``); ``skeye sim`` then stops, naming
+    the board, with status 3."""
+    failed: list[BaseException] = []
+    told = threading.Event()
+    with ExitStack() as stack:
+        server = stack.enter_context(running_sim(mode="lockstep", seed=6, estimator="truth"))
+        board = start_ll_board(stack, parse_ll_board("R1=tcp:0"), f"127.0.0.1:{server.port}",
+                               on_error=lambda exc: (failed.append(exc), told.set()))
+
+        def broken(timeout_s: float) -> bytes:
+            raise RuntimeError("a bug under the board's reader")
+
+        monkeypatch.setattr(board.line, "recv", broken)
+        assert told.wait(30.0), "the owner was not told"  # a stuck guard: it reads every 0.1 s
+        assert isinstance(failed[0], RuntimeError) and "a bug under" in str(failed[0])
+        with pytest.raises(WorkerFailed, match="ll-read-R1 failed"):
+            board.check()
