@@ -52,6 +52,11 @@ class LinkClosed(SkeyeError):
     link (:mod:`skeye.link.transport`)."""
 
 
+class UnknownHost(LinkClosed):
+    """A link's host name that does not resolve (no such name, or no DNS answer): nothing
+    listens there to start, since there is no there."""
+
+
 class PeerClosed(LinkClosed):
     """The peer ended the connection in order (end of stream, a serial line hung up)."""
 

@@ -36,7 +36,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import TracebackType
 
-from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError, PeerClosed
+from skeye.errors import LinkClosed, LinkTimeout, LocalProtocolError, PeerClosed, UnknownHost
 from skeye.uris import port_of, query_of, split_uri
 from skeye.values import MAX_BAUD, baud_rate
 
@@ -388,6 +388,10 @@ def open_link(
                 (where, number), timeout=timeout_s if timeout_s < MAX_SOCKET_TIMEOUT_S else None)
         except TimeoutError:
             raise LinkTimeout(f"{uri}: no connection within {timeout_s} s") from None
+        except socket.gaierror as exc:  # said as "cannot connect: [Errno -2] ...", the
+            # simulator's start suggested as if the name were right and nothing listened
+            raise UnknownHost(f"{uri}: cannot resolve the host {where!r}: "
+                              f"{exc.strerror or exc}") from None
         except OSError as exc:
             raise LinkClosed(f"{uri}: cannot connect: {exc}") from None
         return TcpLink(sock, name=tcp_uri(where, number), send_timeout_s=send_timeout_s,

@@ -12,7 +12,7 @@ import cv2
 from skeye import cliargs
 from skeye.control.connection import DEFAULT_IMAGE_PORT, parse_address
 from skeye.control.image_client import ImageClient
-from skeye.errors import ConfigError, LinkClosed, LocalProtocolError
+from skeye.errors import ConfigError, LinkClosed, LocalProtocolError, UnknownHost
 from skeye.outputs import output_file, write_whole
 from skeye.pixels import frame_image
 from skeye.wire.image_requests import SelectCamera
@@ -55,6 +55,8 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
         raise LocalProtocolError(f"--images: {exc}") from None
     try:
         client = ImageClient(host, port, timeout_s=timeout_s)
+    except UnknownHost as exc:  # no server to start there: the name is wrong
+        raise ConfigError(f"--images: {exc}") from None
     except LinkClosed as exc:
         where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"  # as --images takes it
         raise ConfigError(

@@ -98,6 +98,23 @@ def test_snapshot_without_an_image_server_names_an_ipv6_address_in_brackets(tmp_
         save_snapshot(f"[::1]:{port}", tmp_path / "x.png", timeout_s=5.0)
 
 
+def test_snapshot_of_a_host_that_does_not_resolve_says_so(tmp_path, monkeypatch) -> None:
+    """A host name that does not resolve was said as "no image server at HOST:5003 (...
+    cannot connect: [Errno -2] Name or service not known): start the simulator with one
+    (`skeye sim --image-port 5003` ...)", as if the name were right and nothing listened."""
+    from skeye.recording.snapshot import save_snapshot
+
+    def no_such_name(*args: object, **kwargs: object) -> list[object]:
+        raise socket.gaierror(socket.EAI_NONAME, "Name or service not known")
+
+    monkeypatch.setattr(socket, "getaddrinfo", no_such_name)  # no DNS wait in a test
+    with pytest.raises(ConfigError) as refused:
+        save_snapshot("groundstation.invalid:5003", tmp_path / "x.png", timeout_s=5.0)
+    said = str(refused.value)
+    assert said == ("--images: tcp://groundstation.invalid:5003: cannot resolve the host "
+                    "'groundstation.invalid': Name or service not known"), said
+
+
 def test_snapshot_refuses_a_jpeg_quality_for_a_png_file() -> None:
     """``--quality`` is JPEG's: with a .png file it was accepted and ignored (a lossless PNG
     was written); it is refused before the image server is asked, as ``skeye sim`` refuses
