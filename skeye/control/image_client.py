@@ -94,6 +94,10 @@ class ImageClient:
             raise LinkTimeout(
                 f"image server {host}:{port}: no connection in {timeout_s} s"
             ) from exc
+        except LinkClosed as exc:  # named as the simulator's connection names the simulator
+            # (its kind kept: an UnknownHost stays one)
+            raise type(exc)(f"cannot connect to the image server at {host}:{port}: {exc}"
+                            ) from exc
         self._decoder = FrameDecoder(max_frame_bytes)
         self._events: deque[FrameEvent] = deque()
         self._stream_fps: float | None = None

@@ -56,11 +56,12 @@ def save_snapshot(address: str, out: Path, camera: str | None = None,
     try:
         client = ImageClient(host, port, timeout_s=timeout_s)
     except UnknownHost as exc:  # no server to start there: the name is wrong
-        raise ConfigError(f"--images: {exc}") from None
+        raise ConfigError(f"--images: {exc.__cause__ or exc}") from None
     except LinkClosed as exc:
         where = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"  # as --images takes it
+        why = exc.__cause__ or exc  # the socket's word: the address is named here already
         raise ConfigError(
-            f"no image server at {where} ({exc}): start the simulator "
+            f"no image server at {where} ({why}): start the simulator "
             f"with one (`skeye sim --image-port {port}`; `skeye up` and `make run` serve "
             "images on 5003), or point --images at the one that runs"
         ) from None

@@ -26,6 +26,7 @@ from skeye.wire.images import (
     ImageFormat,
     RemoteError,
 )
+from tests.ports import free_port
 
 WIDTH, HEIGHT = 800, 600
 _Y, _X = np.mgrid[0:HEIGHT, 0:WIDTH]
@@ -418,6 +419,17 @@ def test_a_server_that_closes_at_once_is_named_as_such() -> None:
                                r"connection \("):
                 client.select_camera("R1/Down")  # sent: the server's end answers with a reset
                 client.set_meta(True)  # fails to send
+
+
+def test_a_client_that_finds_no_server_names_the_image_server() -> None:
+    """``skeye.connect(..., images=...)`` with no image server there (``examples/camera.py``
+    against a ``skeye sim`` without ``--image-port``) said only 'tcp://127.0.0.1:PORT: cannot
+    connect: [Errno 111] Connection refused', not what it tried to reach; the simulator's
+    connection names the simulator."""
+    port = free_port()
+    with pytest.raises(LinkClosed, match=rf"^cannot connect to the image server at "
+                       rf"127.0.0.1:{port}: .*refused"):
+        ImageClient("127.0.0.1", port, timeout_s=5)
 
 
 def test_a_refused_client_says_why_though_its_requests_fail(buffer: FrameBuffer) -> None:
