@@ -11,7 +11,11 @@ import skeye
 
 sim_address = os.environ.get("SKEYE_SIM", "127.0.0.1:3000")
 images = os.environ.get("SKEYE_IMAGES", "127.0.0.1:5003")
-with skeye.connect(sim_address, images=images) as sim:
+try:  # no simulator there, or a bad address: said in one line, not a traceback
+    sim = skeye.connect(sim_address, images=images)
+except skeye.SkeyeError as exc:
+    raise SystemExit(f"camera: {exc}") from None
+with sim:
     copter = sim.spawn("hummingbird", start="Pad1")
     copter.take_off(0.6)
     for _ in range(3):

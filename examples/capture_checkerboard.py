@@ -16,6 +16,7 @@ from pathlib import Path
 
 import cv2
 
+from skeye.errors import SkeyeError
 from skeye.validate.calibration import capture_board
 
 sim_address = os.environ.get("SKEYE_SIM", "127.0.0.1:3000")
@@ -23,7 +24,11 @@ images = os.environ.get("SKEYE_IMAGES", "127.0.0.1:5003")
 out = Path(os.environ.get("SKEYE_BOARD_DIR", "."))
 out.mkdir(parents=True, exist_ok=True)
 
-for i, bgr in enumerate(capture_board(sim_address, images)):
+try:  # no simulator there, one not in lockstep, a bad address: said in one line
+    frames = capture_board(sim_address, images)
+except SkeyeError as exc:
+    raise SystemExit(f"capture_checkerboard: {exc}") from None
+for i, bgr in enumerate(frames):
     path = out / f"board{i:02d}.png"
     if not cv2.imwrite(str(path), bgr):  # OpenCV says False, never raises, when it cannot write
         raise SystemExit(f"capture_checkerboard: could not write {path}")

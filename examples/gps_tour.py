@@ -4,7 +4,11 @@ import os
 
 import skeye
 
-with skeye.connect(os.environ.get("SKEYE_SIM", "127.0.0.1:3000")) as sim:
+try:  # no simulator there, or a bad address: said in one line, not a traceback
+    sim = skeye.connect(os.environ.get("SKEYE_SIM", "127.0.0.1:3000"))
+except skeye.SkeyeError as exc:
+    raise SystemExit(f"gps_tour: {exc}") from None
+with sim:
     copter = sim.spawn("hummingbird", start="Pad1")
     copter.take_off(2.0)
     fix = copter.gps.wait_next()

@@ -9,7 +9,11 @@ import os
 
 import skeye
 
-with skeye.connect(os.environ.get("SKEYE_SIM", "127.0.0.1:3000")) as sim:
+try:  # no simulator there, or a bad address: said in one line, not a traceback
+    sim = skeye.connect(os.environ.get("SKEYE_SIM", "127.0.0.1:3000"))
+except skeye.SkeyeError as exc:
+    raise SystemExit(f"square: {exc}") from None
+with sim:
     copter = sim.spawn("hummingbird", start="Pad1")
     start, start_believed = copter.position(), copter.estimated_position()
     with copter.flight(take_off_m=1.5):  # lands on any exit, errors included

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from tests.control.conftest import sim_running
+from tests.ports import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
@@ -113,3 +114,21 @@ def test_the_landing_example_refuses_a_negative_seed_naming_it() -> None:
                           env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
     assert "argument --seed" in done.stderr and "non-negative" in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("script", [p for p in EXAMPLES if p.name != "takeoff_land.py"],
+                         ids=lambda p: p.name)
+def test_an_example_without_a_simulator_says_so_in_one_line(script: Path,
+                                                            tmp_path: Path) -> None:
+    """With nothing listening at $SKEYE_SIM, each example ended in a traceback of skeye's
+    internals (LinkClosed from Connection.__init__); it now exits with status 1 and one line
+    naming the script and the address. takeoff_land.py stays the under-ten-lines example."""
+    port = free_port()
+    env = dict(os.environ, SKEYE_SIM=f"127.0.0.1:{port}", SKEYE_IMAGES=f"127.0.0.1:{port}",
+               PYTHONPATH=str(ROOT), SKEYE_BOARD_DIR=str(tmp_path))
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.startswith(f"{script.stem}: cannot connect to the simulator at "
+                                  f"127.0.0.1:{port}: "), done.stderr
+    assert list(tmp_path.iterdir()) == [], "it wrote files though it flew nothing"
