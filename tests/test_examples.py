@@ -48,7 +48,12 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
     if script.name == "record_camera.py":  # the pilot's file:// camera plays it
         from skeye.pilot.camera import open_camera
 
-        assert "40 frames of 800x600" in done.stdout, done.stdout
+        # Every frame in a row at the camera's 30 Hz: it passed over about one in three (two
+        # frames in one of the control clock's 50 ms steps) and wrote about 20 fps.
+        assert "40 frames of 800x600 at " in done.stdout, done.stdout
+        fps = float(done.stdout.split("800x600 at ")[1].split()[0])
+        assert fps == pytest.approx(30.0, abs=0.1) and "passed over" not in done.stdout, (
+            done.stdout)
         uri = done.stdout.split("--camera '")[1].split("'")[0]
         source = open_camera(uri.replace("file://", f"file://{tmp_path}/"))
         try:
