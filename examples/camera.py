@@ -23,6 +23,11 @@ with sim:
         image = copter.camera.image()
         print(f"frame {image.frame} at t={image.time_s:.3f} s: {image.bgr.shape}")
     path = os.environ.get("SKEYE_CAMERA_OUT", "camera.png")
-    cv2.imwrite(path, image.bgr)
+    try:  # OpenCV says False when it cannot write, and raises for a name it has no format for
+        saved = cv2.imwrite(path, image.bgr)
+    except cv2.error:
+        saved = False
+    if not saved:
+        raise SystemExit(f"camera: could not write {path} (a folder that exists, a .png or .jpg)")
     print(f"saved {path}")
     copter.land()

@@ -137,3 +137,19 @@ def test_an_example_without_a_simulator_says_so_in_one_line(script: Path,
     assert done.stderr.startswith(f"{script.stem}: cannot connect to the simulator at "
                                   f"127.0.0.1:{port}: "), done.stderr
     assert list(tmp_path.iterdir()) == [], "it wrote files though it flew nothing"
+
+
+@pytest.mark.parametrize("name", ["missing/camera.png", "camera.txt"])
+def test_the_camera_example_says_when_it_cannot_save_the_frame(name: str,
+                                                               tmp_path: Path) -> None:
+    """examples/camera.py into a folder that does not exist printed 'saved missing/camera.png'
+    and exited 0 (OpenCV's imwrite returns False, never raises, for that), and a name without
+    an image format's ending ended in a cv2.error traceback; each now exits 1 naming the file."""
+    with sim_running(images=True) as handle:
+        env = dict(os.environ, SKEYE_SIM=handle.address, SKEYE_IMAGES=str(handle.images),
+                   PYTHONPATH=str(ROOT), SKEYE_CAMERA_OUT=str(tmp_path / name))
+        done = subprocess.run([sys.executable, str(ROOT / "examples" / "camera.py")],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert f"camera: could not write {tmp_path / name}" in done.stderr, done.stderr
+    assert "saved" not in done.stdout, done.stdout
