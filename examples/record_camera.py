@@ -17,6 +17,10 @@ import skeye
 sim_address = os.environ.get("SKEYE_SIM", "127.0.0.1:3000")
 images = os.environ.get("SKEYE_IMAGES", "127.0.0.1:5003")
 path = os.environ.get("SKEYE_VIDEO_OUT", "flight.mkv")
+# Said before the flight, so that no recording is lost to it:
+if not os.path.isdir(os.path.dirname(path) or ".") or not path.endswith((".mkv", ".avi")):
+    raise SystemExit(f"record_camera: cannot write FFV1 video to {path} (a folder that exists, "
+                     "a .mkv or .avi)")
 try:  # no simulator there, or a bad address: said in one line, not a traceback
     sim = skeye.connect(sim_address, images=images)
 except skeye.SkeyeError as exc:

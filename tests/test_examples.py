@@ -153,3 +153,21 @@ def test_the_camera_example_says_when_it_cannot_save_the_frame(name: str,
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     assert f"camera: could not write {tmp_path / name}" in done.stderr, done.stderr
     assert "saved" not in done.stdout, done.stdout
+
+
+@pytest.mark.parametrize("name", ["missing/flight.mkv", "flight.txt"])
+def test_the_recording_example_refuses_a_file_it_cannot_write_before_it_flies(
+        name: str, tmp_path: Path) -> None:
+    """examples/record_camera.py flew and recorded its 40 frames, then said only 'this OpenCV
+    cannot write FFV1 video to missing/flight.mkv' (of a folder that does not exist) and lost
+    the recording (a .txt: the same); the name is now checked first, and nothing is flown (nor
+    connected to: here nothing listens) when it cannot be written."""
+    port = free_port()
+    env = dict(os.environ, SKEYE_SIM=f"127.0.0.1:{port}", SKEYE_IMAGES=f"127.0.0.1:{port}",
+               PYTHONPATH=str(ROOT), SKEYE_VIDEO_OUT=str(tmp_path / name))
+    done = subprocess.run([sys.executable, str(ROOT / "examples" / "record_camera.py")],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.startswith(f"record_camera: cannot write FFV1 video to {tmp_path / name}"
+                                  " ("), done.stderr  # OpenCV's own warnings first, no more
+    assert list(tmp_path.iterdir()) == []
