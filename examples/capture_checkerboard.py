@@ -22,7 +22,11 @@ from skeye.validate.calibration import capture_board
 sim_address = os.environ.get("SKEYE_SIM", "127.0.0.1:3000")
 images = os.environ.get("SKEYE_IMAGES", "127.0.0.1:5003")
 out = Path(os.environ.get("SKEYE_BOARD_DIR", "."))
-out.mkdir(parents=True, exist_ok=True)
+try:  # before any view is photographed
+    out.mkdir(parents=True, exist_ok=True)
+except OSError as exc:
+    raise SystemExit(f"capture_checkerboard: no folder {out} to write the frames in: "
+                     f"{exc.strerror}") from None
 
 try:  # no simulator there, one not in lockstep, a bad address: said in one line
     frames = capture_board(sim_address, images)

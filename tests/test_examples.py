@@ -171,3 +171,19 @@ def test_the_recording_example_refuses_a_file_it_cannot_write_before_it_flies(
     assert done.stderr.startswith(f"record_camera: cannot write FFV1 video to {tmp_path / name}"
                                   " ("), done.stderr  # OpenCV's own warnings first, no more
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_board_example_names_a_folder_it_cannot_make(tmp_path: Path) -> None:
+    """SKEYE_BOARD_DIR naming a file (or a path through one) ended capture_checkerboard.py in a
+    FileExistsError (NotADirectoryError) traceback; it now says so in one line, before any
+    simulator is asked."""
+    (tmp_path / "a_file").write_text("")
+    for board_dir in (tmp_path / "a_file", tmp_path / "a_file" / "frames"):
+        env = dict(os.environ, SKEYE_SIM=f"127.0.0.1:{free_port()}", PYTHONPATH=str(ROOT),
+                   SKEYE_BOARD_DIR=str(board_dir))
+        done = subprocess.run([sys.executable, str(ROOT / "examples" /
+                                                   "capture_checkerboard.py")],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+        assert done.stderr.startswith(f"capture_checkerboard: no folder {board_dir} to write "
+                                      "the frames in: "), done.stderr
