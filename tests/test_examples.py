@@ -187,3 +187,16 @@ def test_the_board_example_names_a_folder_it_cannot_make(tmp_path: Path) -> None
         assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
         assert done.stderr.startswith(f"capture_checkerboard: no folder {board_dir} to write "
                                       "the frames in: "), done.stderr
+
+
+def test_the_gps_tour_without_gps_says_so_in_one_line(tmp_path: Path) -> None:
+    """examples/gps_tour.py in the indoor world (no GPS) ended in 'AssertionError: no GPS fix'
+    with a traceback (and under ``python -O`` the assert is gone: a TypeError formatting None);
+    it now lands and exits 1 saying the world has no GPS."""
+    with sim_running(world="indoor") as handle:
+        env = dict(os.environ, SKEYE_SIM=handle.address, PYTHONPATH=str(ROOT))
+        done = subprocess.run([sys.executable, str(ROOT / "examples" / "gps_tour.py")],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.startswith("gps_tour: no GPS fix ("), done.stderr
+    assert "this world has no GPS" in done.stderr, done.stderr
