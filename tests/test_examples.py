@@ -200,3 +200,36 @@ def test_the_gps_tour_without_gps_says_so_in_one_line(tmp_path: Path) -> None:
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     assert done.stderr.startswith("gps_tour: no GPS fix ("), done.stderr
     assert "this world has no GPS" in done.stderr, done.stderr
+
+
+def test_the_landing_example_keeps_the_episodes_flown_when_interrupted() -> None:
+    """``pad_landing_scripted.py`` printed nothing until every episode had flown (20 take some
+    minutes), and a Ctrl-C threw them all away in a KeyboardInterrupt traceback; each
+    episode's line now comes as it ends, and a Ctrl-C prints the tally of those flown."""
+    import select
+    import signal
+    import time
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen(
+        [sys.executable, str(ROOT / "examples" / "gym" / "pad_landing_scripted.py"),
+         "--episodes", "20", "--seed", "100"], env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal's
+    try:
+        assert proc.stdout is not None
+        deadline = time.monotonic() + 300
+        while not select.select([proc.stdout], [], [], 1.0)[0]:
+            assert time.monotonic() < deadline and proc.poll() is None, "no episode ended"
+        first = proc.stdout.readline()
+        assert first.startswith("seed 100: "), first
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    flown = 1 + sum(line.startswith("seed ") for line in out.splitlines())
+    assert f"interrupted after {flown} of 20 episodes" in out, out
+    assert f" of {flown} episodes (" in out, out  # the tally of those flown

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Callable
 
 import gymnasium
 import numpy as np
@@ -100,8 +101,10 @@ class ScriptedLander:
                          up / self.max_climb_m_s, 0.0), dtype=np.float32)
 
 
-def fly(episodes: int, seed: int, **env_kwargs: object) -> list[dict[str, object]]:
-    """Fly ``episodes`` seeded episodes; one result per episode."""
+def fly(episodes: int, seed: int, on_result: Callable[[dict[str, object]], None] | None = None,
+        **env_kwargs: object) -> list[dict[str, object]]:
+    """Fly ``episodes`` seeded episodes; one result per episode, each also given to
+    ``on_result`` as soon as its episode ends."""
     env = gymnasium.make("skeye/PadLanding-v0", **env_kwargs)
     lander = ScriptedLander(1.0 / float(env.unwrapped.settings.control_rate_hz))  # type: ignore[attr-defined]
     results = []
@@ -116,6 +119,8 @@ def fly(episodes: int, seed: int, **env_kwargs: object) -> list[dict[str, object
             results.append({"seed": seed + k, "success": bool(info.get("success", False)),
                             "error_m": info.get("touchdown_error_m"), "crash": info.get("crash"),
                             "time_s": info["sim_time_s"], "truncated": truncated})
+            if on_result is not None:
+                on_result(results[-1])
     finally:
         env.close()
     return results
@@ -130,17 +135,32 @@ def main() -> None:
     parser.add_argument("--estimator", default="onboard", choices=("onboard", "truth"))
     args = parser.parse_args()
     started = time.perf_counter()
-    results = fly(args.episodes, args.seed, camera=args.camera, estimator=args.estimator)
-    for r in results:
+    results: list[dict[str, object]] = []
+
+    def show(r: dict[str, object]) -> None:  # each episode's line as it ends
+        results.append(r)
         error = "-" if r["error_m"] is None else f"{100 * float(r['error_m']):.1f} cm"  # type: ignore[arg-type]
         print(f"seed {r['seed']}: {'landed on the pad' if r['success'] else 'FAILED'} "
               f"(touchdown error {error}, {float(r['time_s']):.1f} s sim"  # type: ignore[arg-type]
               f"{', ' + str(r['crash']) if r['crash'] else ''}"
-              f"{', out of time' if r['truncated'] else ''})")
+              f"{', out of time' if r['truncated'] else ''})", flush=True)
+
+    interrupted = False
+    try:
+        fly(args.episodes, args.seed, on_result=show, camera=args.camera,
+            estimator=args.estimator)
+    except KeyboardInterrupt:  # Ctrl-C: the episodes flown so far are still counted
+        if not results:
+            raise SystemExit("pad_landing_scripted: interrupted before the first episode "
+                             "ended") from None
+        interrupted = True
+        print(f"interrupted after {len(results)} of {args.episodes} episodes")
     landed = sum(1 for r in results if r["success"])
     print(f"landed on the pad in {landed} of {len(results)} episodes "
           f"({100.0 * landed / len(results):.0f} %); camera {args.camera}, estimator "
           f"{args.estimator}; {time.perf_counter() - started:.0f} s wall")
+    if interrupted:
+        raise SystemExit(130)  # as a shell reports a Ctrl-C
 
 
 if __name__ == "__main__":
