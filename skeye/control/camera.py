@@ -22,7 +22,13 @@ from typing import Any
 import numpy as np
 
 from skeye.control.image_client import ImageClient
-from skeye.errors import LinkClosed, LocalProtocolError, RemoteProtocolError, SkeyeError
+from skeye.errors import (
+    LinkClosed,
+    LinkTimeout,
+    LocalProtocolError,
+    RemoteProtocolError,
+    SkeyeError,
+)
 from skeye.pixels import frame_image
 from skeye.wire.sim_messages import SenCamera
 
@@ -69,6 +75,16 @@ class CameraSensor(Sensor[CameraReading]):
     def convert(self, message: Any) -> CameraReading:
         s: SenCamera = message
         return CameraReading(s.time_s, s.frame)
+
+    def wait_next(self, timeout_s: float = 5.0) -> CameraReading:
+        """:meth:`Sensor.wait_next`; a timeout before any frame names the likely cause."""
+        try:
+            return super().wait_next(timeout_s)
+        except LinkTimeout as exc:
+            if self.latest is not None:
+                raise
+            raise LinkTimeout(f"{exc}, and none before: the simulator announces frames only "
+                              "when it serves images (`skeye sim --image-port 5003`)") from None
 
     def image(self) -> CameraImage:
         """The newest frame of this camera from the image server.

@@ -358,3 +358,16 @@ def test_a_ping_id_given_twice_is_matched_by_its_first_block(lockstep_sim: SimHa
         # a stuck guard: the answer unmatched, the request ran out
         answer = sim.request("PING", ("Id", "a"), ("Id", "b"), timeout_s=30.0)
         assert answer.get("Id") == "a", answer
+
+
+def test_waiting_for_a_camera_of_a_simulator_without_images_names_the_cause(
+        lockstep_sim: SimHandle) -> None:
+    """examples/camera.py against ``skeye sim`` without ``--image-port`` took off and ended in
+    "Camera 'Down': no reading within 5 s", which did not say that such a simulator announces no
+    frames at all; a camera that never had a frame says so now."""
+    with skeye.connect(lockstep_sim.address) as sim:
+        copter = sim.spawn("hummingbird", start="Pad1")
+        with pytest.raises(LinkTimeout, match=r"^Camera 'Down': no reading within 0\.5 s, and "
+                           r"none before: .*--image-port"):
+            copter.camera.wait_next(0.5)
+        copter.imu.wait_next()  # the link is still up
