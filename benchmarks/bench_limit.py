@@ -27,6 +27,7 @@ import statistics
 import time
 
 from skeye import native
+from skeye.cliargs import positive_float, positive_int, seed
 from skeye.sim.engine import Simulation
 from skeye.sim.gl import GL_BACKEND  # noqa: F401  (before mujoco: picks MUJOCO_GL)
 from skeye.sim.readings import Event
@@ -63,7 +64,8 @@ def hovering(vehicles: int, seed: int) -> tuple[Simulation, Counter]:
 
 def measure(vehicles: int, args: argparse.Namespace) -> None:
     sim, sink = hovering(vehicles, args.seed)
-    steps = round(args.sim_seconds / sim.dt)
+    steps = max(1, round(args.sim_seconds / sim.dt))
+    sim_s = steps * sim.dt  # what is simulated: --sim-seconds to the nearest step
     model = sim.model
     data = mujoco.MjData(model)
     skeye_rtf: list[float] = []
@@ -74,7 +76,7 @@ def measure(vehicles: int, args: argparse.Namespace) -> None:
         before = sink.events
         t0 = time.perf_counter()
         sim.step(steps)
-        skeye_rtf.append(args.sim_seconds / (time.perf_counter() - t0))
+        skeye_rtf.append(sim_s / (time.perf_counter() - t0))
         events = sink.events - before
         for target, loop in ((c_rtf, False), (loop_rtf, True)):
             data.qpos[:] = sim.data.qpos
@@ -88,7 +90,7 @@ def measure(vehicles: int, args: argparse.Namespace) -> None:
                     mujoco.mj_step(model, data)
             else:
                 mujoco.mj_step(model, data, steps)
-            target.append(args.sim_seconds / (time.perf_counter() - t0))
+            target.append(sim_s / (time.perf_counter() - t0))
         if data.ncon:
             print(f"  (note: the raw run met {data.ncon} contacts)")
 
@@ -96,21 +98,21 @@ def measure(vehicles: int, args: argparse.Namespace) -> None:
         return f"{name} {max(values):7.1f}x (median {statistics.median(values):7.1f}x)"
 
     skeye_best, c_best, loop_best = max(skeye_rtf), max(c_rtf), max(loop_rtf)
-    print(f"{vehicles:2d} vehicle(s), {args.sim_seconds:g} s x {args.repeats}: "
+    print(f"{vehicles:2d} vehicle(s), {sim_s:g} s x {args.repeats}: "
           f"{line('skeye', skeye_rtf)}; raw {line('mj_step C loop', c_rtf)}, "
           f"{line('Python loop', loop_rtf)}", flush=True)
     print(f"   skeye / raw mj_step: {skeye_best / c_best:.2f} (C loop), "
-          f"{skeye_best / loop_best:.2f} (Python loop); {events / args.sim_seconds:.0f} "
+          f"{skeye_best / loop_best:.2f} (Python loop); {events / sim_s:.0f} "
           f"readings per sim second; skeye's own share of a step "
           f"{1.0 - skeye_best / c_best:.0%}", flush=True)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--vehicles", type=int, nargs="+", default=[1, 10])
-    parser.add_argument("--sim-seconds", type=float, default=5.0)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--vehicles", type=positive_int, nargs="+", default=[1, 10])
+    parser.add_argument("--sim-seconds", type=positive_float, default=5.0)
+    parser.add_argument("--repeats", type=positive_int, default=5)
+    parser.add_argument("--seed", type=seed, default=1)
     args = parser.parse_args()
     print(f"bench_limit: {native.status().describe()}; MuJoCo {mujoco.__version__}; {load()}")
     for vehicles in args.vehicles:
