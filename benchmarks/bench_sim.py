@@ -47,7 +47,11 @@ from importlib import resources
 from pathlib import Path
 
 from skeye import native
+from skeye.cliargs import positive_float, positive_int
+from skeye.errors import SkeyeError
 from skeye.processes import start_skeye, stop_process
+
+STEP_S = 0.5  # sim seconds per STEP of the lockstep runs
 
 
 def robot_dir_with_board_rate(folder: Path, board_rate_hz: float) -> str:
@@ -164,8 +168,8 @@ def measure_rtf(
     for i, c in enumerate(conns):
         c.spawn(robot_class, f"B{i}", f"{i * 2.0},0,-1.5")
     driver = conns[0]
-    steps_per_call = round(0.5 / timestep)
-    calls = int(sim_seconds / 0.5)
+    steps_per_call = round(STEP_S / timestep)
+    calls = int(sim_seconds / STEP_S)
     start = time.perf_counter()
     for _ in range(calls):
         driver.send(f"STEP {{Count {steps_per_call}}}")
@@ -247,20 +251,36 @@ def pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
 
 
+def sim_seconds(text: str) -> float:
+    """``--sim-seconds``: at least one lockstep STEP (a shorter run measured nothing)."""
+    value = positive_float(text)
+    if value < STEP_S:
+        raise argparse.ArgumentTypeError(f"must be a number >= {STEP_S:g} (one STEP of the "
+                                         f"lockstep runs), got {text!r}")
+    return value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sim-seconds", type=float, default=20.0)
-    parser.add_argument("--timestep", type=float, default=0.001)
-    parser.add_argument("--samples", type=int, default=2000)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--sim-seconds", type=sim_seconds, default=20.0)
+    parser.add_argument("--timestep", type=positive_float, default=0.001)
+    parser.add_argument("--samples", type=positive_int, default=2000)
+    parser.add_argument("--repeats", type=positive_int, default=3)
     parser.add_argument("--no-pure", action="store_true",
                         help="skip the pure-Python simulator (no speed-up ratio)")
     parser.add_argument("--estimator", choices=("onboard", "truth"), default=None,
                         help="the boards' estimator (skeye sim --estimator; default: the robot "
                         "file's)")
-    parser.add_argument("--board-rate", type=float, default=None, metavar="HZ",
+    parser.add_argument("--board-rate", type=positive_float, default=None, metavar="HZ",
                         help="fly a Hummingbird whose board runs at HZ (default: its own 250 Hz)")
     args = parser.parse_args()
+    try:
+        run(args)
+    except SkeyeError as exc:  # the simulator refused what it was given (--timestep 1)
+        parser.exit(1, f"bench_sim: {exc}\n")
+
+
+def run(args: argparse.Namespace) -> None:
     with ExitStack() as stack:
         robot_class, robot_dir, board = "hummingbird", None, "250 Hz (the robot's own)"
         if args.board_rate is not None:

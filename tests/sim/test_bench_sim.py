@@ -2,11 +2,14 @@
 
 The benchmark's figures are not asserted (speed is the benchmark's job); what is tested is that
 its ``--board-rate`` robot copy loads and flies, and that a robot the simulator refuses stops the
-benchmark with the simulator's reason instead of waiting forever for an INIT answer.
+benchmark with the simulator's reason instead of waiting forever for an INIT answer, and that
+an option it cannot measure with is refused by its name.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -17,6 +20,8 @@ from tests.sim.conftest import running_sim
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
 from bench_sim import Conn, measure_in_process_rtf, measure_rtf, robot_dir_with_board_rate
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_board_rate_copy_flies_at_every_physics_step(tmp_path: Path) -> None:
@@ -63,3 +68,32 @@ def test_still_copy_has_no_imu_vibration(tmp_path: Path) -> None:
     assert len(imu) == 2 and not any(s.vibration.enabled for s in imu)
     rtf, readings = measure_in_process_rtf(1, 0.2, 0.001, name, str(tmp_path))
     assert rtf > 0 and readings > 0
+
+
+def bench_sim(*args: str) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_sim.py"),
+                           "--no-pure", *args], env=env, capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.mark.parametrize("args", [
+    ["--sim-seconds", "0.3"], ["--sim-seconds", "nan"], ["--samples", "0"],
+    ["--repeats", "-1"], ["--timestep", "0"], ["--board-rate", "nan"],
+])
+def test_a_value_it_cannot_measure_is_refused_naming_its_option(args: list[str]) -> None:
+    """``--sim-seconds 0.3`` (under one 0.5 s STEP) printed real-time factors of 0.0x measured on
+    no step, ``--samples 0`` ended in an IndexError traceback after the real-time factors,
+    ``--timestep 0`` and ``--board-rate nan`` in a SkeyeError traceback quoting the simulator's
+    usage text."""
+    done = bench_sim(*args)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert f"argument {args[0]}" in done.stderr, done.stderr
+
+
+def test_a_simulator_that_refuses_its_options_ends_the_run_with_its_reason() -> None:
+    """``--timestep 1`` (a number, but not a physics step skeye sim takes) ended in a
+    SkeyeError traceback; the simulator's reason is the run's one error line."""
+    done = bench_sim("--timestep", "1", "--sim-seconds", "0.5", "--samples", "1")
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "bench_sim: skeye sim did not start" in done.stderr and "--timestep" in done.stderr
