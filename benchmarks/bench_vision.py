@@ -14,6 +14,7 @@ import time
 import cv2
 import numpy as np
 
+from skeye.cliargs import positive_int
 from skeye.vision.calibration import CameraCalibration
 from skeye.vision.camera import intrinsics, render_pad_view
 from skeye.vision.detector import detect
@@ -109,9 +110,9 @@ def bench_accuracy(rng: np.random.Generator, per_height: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--frames", type=int, default=20, help="distinct frames for speed")
-    parser.add_argument("--repeats", type=int, default=15, help="passes over them")
-    parser.add_argument("--per-height", type=int, default=10, help="frames per height")
+    parser.add_argument("--frames", type=positive_int, default=20, help="distinct frames for speed")
+    parser.add_argument("--repeats", type=positive_int, default=15, help="passes over them")
+    parser.add_argument("--per-height", type=positive_int, default=10, help="frames per height")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     rng = np.random.default_rng(12345)
