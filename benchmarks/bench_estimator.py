@@ -40,6 +40,7 @@ import math
 import time
 
 from skeye import native
+from skeye.cliargs import positive_float, seed
 from skeye.pilot.telemetry import GPS_DRMS_M
 from skeye.sim.engine import Simulation
 from skeye.sim.world import load_world
@@ -58,6 +59,18 @@ def _angle(a: float) -> float:
 # err / DRMS of a circular 2-D Gaussian: P(r <= k DRMS) = 1 - exp(-k^2), so the median is
 # sqrt(ln 2) and the 95th percentile sqrt(ln 20).
 CONSISTENT = (math.sqrt(math.log(2.0)), math.sqrt(math.log(20.0)))
+
+
+SAMPLE_S = 0.1  # sim seconds between two comparisons with the truth
+
+
+def sim_seconds(text: str) -> float:
+    """``--sim-seconds``: at least one comparison (a shorter run compared nothing)."""
+    value = positive_float(text)
+    if value < SAMPLE_S:
+        raise argparse.ArgumentTypeError(f"must be a number >= {SAMPLE_S:g} (one comparison "
+                                         f"with the truth), got {text!r}")
+    return value
 
 
 def run(world: str, moving: bool, sim_seconds: float, seed: int,
@@ -121,8 +134,8 @@ def _quantile(values: list[float], q: float) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--sim-seconds", type=float, default=60.0)
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--sim-seconds", type=sim_seconds, default=60.0)
+    parser.add_argument("--seed", type=seed, default=1)
     args = parser.parse_args()
     print(f"bench_estimator: {native.status().describe()}; {args.sim_seconds:g} s per run, "
           f"seed {args.seed}")
