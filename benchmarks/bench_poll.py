@@ -30,6 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.cliargs import non_negative_float, positive_int
 from skeye.processes import start_skeye, stop_process
 from skeye.wire.crc import crc16
 
@@ -91,6 +92,9 @@ class RawPoller:
 
 
 def _stats(name: str, rtts: list[float], lost: int) -> None:
+    if not rtts:
+        print(f"  {name}: no poll answered, unanswered {lost}")
+        return
     ms = sorted(r * 1000 for r in rtts)
     p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
     print(f"  {name}: n={len(ms)} p50 {statistics.median(ms):.2f} ms  p99 {p99:.2f} ms  "
@@ -99,9 +103,9 @@ def _stats(name: str, rtts: list[float], lost: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--polls", type=int, default=2000)
-    ap.add_argument("--startup-s", type=float, default=10.0,
-                    help="how long to poll from the ready line on (start-up phase)")
+    ap.add_argument("--polls", type=positive_int, default=2000)
+    ap.add_argument("--startup-s", type=non_negative_float, default=10.0,
+                    help="how long to poll from the ready line on (start-up phase; 0: none)")
     args = ap.parse_args()
 
     print(f"load average before: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)")

@@ -1,0 +1,41 @@
+"""benchmarks/bench_poll.py's command line and figures: a count it cannot measure is refused by
+its option, and a phase with no answer is reported as such.
+
+The benchmark's figures are not asserted (speed is the benchmark's job).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+
+from bench_poll import _stats
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("args", [
+    ["--polls", "0"], ["--polls", "-3"], ["--startup-s", "nan"], ["--startup-s", "-1"],
+])
+def test_a_value_it_cannot_measure_is_refused_naming_its_option(args: list[str]) -> None:
+    """``--polls 0`` started the simulator and the pilot, then ended in an IndexError traceback
+    (the p99 of no round trip); ``--startup-s nan`` polled for no time and printed "in the first
+    nan s"."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_poll.py"), *args],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert f"argument {args[0]}" in done.stderr, done.stderr
+
+
+def test_a_phase_with_no_answer_is_reported_not_raised(capsys: pytest.CaptureFixture[str]) -> None:
+    """Every poll of a phase unanswered (a pilot that stopped answering) raised an IndexError
+    (the p99 of no round trip) and ended the run before the other phases' figures."""
+    _stats("steady LL_STATUS", [], 5)
+    assert "steady LL_STATUS: no poll answered, unanswered 5" in capsys.readouterr().out
