@@ -41,6 +41,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from typing import Any
 
+from skeye.cliargs import positive_float, positive_int
 from skeye.control.connection import Connection
 from skeye.control.image_client import ImageClient
 from skeye.processes import start_skeye, stop_process
@@ -258,21 +259,21 @@ def run_stages(args: argparse.Namespace) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=5.0)
-    parser.add_argument("--fps", type=float, default=30.0)
-    parser.add_argument("--clients", type=int, nargs="+", default=[1, 4])
+    parser.add_argument("--seconds", type=positive_float, default=5.0)
+    parser.add_argument("--fps", type=positive_float, default=30.0)
+    parser.add_argument("--clients", type=positive_int, nargs="+", default=[1, 4])
     parser.add_argument("--formats", nargs="+", choices=("raw", "jpeg", "png"),
                         default=["raw", "jpeg", "png"])
     parser.add_argument("--profiles", nargs="+", choices=("ideal", "webcam"),
                         default=["ideal", "webcam"])
-    parser.add_argument("--lockstep", type=int, nargs="*", default=[],
+    parser.add_argument("--lockstep", type=positive_int, nargs="*", default=[],
                         help="also the lockstep figure with these numbers of vehicles")
     parser.add_argument("--lockstep-profile", choices=("ideal", "webcam"), default="webcam")
     parser.add_argument("--only-lockstep", action="store_true",
                         help="skip the real-time streams")
     parser.add_argument("--stages", action="store_true",
                         help="only the in-process timing of each step of a webcam frame")
-    parser.add_argument("--stage-repeats", type=int, default=10)
+    parser.add_argument("--stage-repeats", type=positive_int, default=10)
     args = parser.parse_args()
     print(f"bench_camera: {load()} at the start")
     if args.stages:
