@@ -13,9 +13,36 @@ PY=${1:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}
 export MUJOCO_GL=egl PYTHONPATH=${PYTHONPATH:-$PWD}
 LOG=${OUT:+$OUT/gpu_figures.txt}
 LOG=${LOG:-/dev/null}
+# Each command runs in the background of this script, and the script waits for it: a trap runs
+# at once only then. `timeout` puts the command in a process group of its own, out of reach of a
+# terminal's Ctrl-C, so the trap hands the signal on to that group (the benchmark and the
+# simulators it started) and stops the script there.
+child="" sim=""
+exec {stderr}>&2  # the trap's own, whatever the interrupted command's output went to
+stop() {
+  trap - INT TERM
+  [ -n "$child" ] && kill -INT -- "-$child" 2>/dev/null && wait "$child"
+  [ -n "$sim" ] && kill "$sim" 2>/dev/null && wait "$sim"
+  echo "gpu_figures.sh: interrupted" | tee -a "$LOG" >&"$stderr"
+  exit 130
+}
+trap stop INT TERM
+waited() {  # timeout 150 COMMAND... in the background, waited for; its status
+  timeout 150 "$@" &
+  child=$!
+  wait "$child"
+  local rc=$?
+  child=""
+  return $rc
+}
 run() {
   echo "\$ $*" | tee -a "$LOG"
-  timeout 150 "$@" 2>&1 | tee -a "$LOG"
+  local out tee_pid
+  exec {out}> >(tee -i -a "$LOG")  # -i: the benchmark's last lines after a Ctrl-C
+  tee_pid=$!
+  waited "$@" >&"$out" 2>&1
+  exec {out}>&-
+  wait "$tee_pid"  # its last lines before the next command's
 }
 { date -u; uname -srm; nproc; uptime; nvidia-smi -L 2>&1 || true; } | tee -a "$LOG"
 run "$PY" -c "from skeye import native; print(native.status().describe())"
@@ -31,9 +58,10 @@ for images in "" "--image-port 0"; do
   for _ in $(seq 300); do grep -q "bound to" /tmp/skeye_gpu_sim.log && break; sleep 0.1; done
   port=$(sed -n 's/.*control protocol on [0-9.]*:\([0-9]*\).*/\1/p' /tmp/skeye_gpu_sim.log)
   start=$(date +%s%N)
-  SKEYE_SIM=127.0.0.1:$port timeout 150 "$PY" examples/takeoff_land.py > /dev/null 2>&1
+  SKEYE_SIM=127.0.0.1:$port waited "$PY" examples/takeoff_land.py > /dev/null 2>&1
   rc=$?
   took_ms=$(( ($(date +%s%N) - start) / 1000000 ))
   echo "takeoff_land.py, lockstep ${images:-without images}: ${took_ms} ms (rc $rc)" | tee -a "$LOG"
   kill $sim; wait $sim 2>/dev/null
+  sim=""
 done
