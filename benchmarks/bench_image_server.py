@@ -22,6 +22,7 @@ from multiprocessing.synchronize import Event as EventType
 import cv2
 import numpy as np
 
+from skeye.cliargs import positive_float
 from skeye.control.image_client import ImageClient
 from skeye.sim.image_server import Frame, FrameBuffer, ImageServer
 from skeye.wire.images import ImageFormat
@@ -142,7 +143,8 @@ def run_config(
 
 def main(frame_source: FrameSource | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per config")
+    parser.add_argument("--seconds", type=positive_float, default=3.0,
+                        help="measuring time per config")
     args = parser.parse_args()
     source = frame_source or gradient_source()
     print(f"frame {source(1).shape[1]}x{source(1).shape[0]}, {args.seconds:g} s per config")
