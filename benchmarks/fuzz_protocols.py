@@ -24,6 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+from skeye.cliargs import positive_float
 from skeye.errors import RemoteProtocolError
 from skeye.pixels import frame_image
 from skeye.recording.records import parse_record
@@ -164,7 +165,7 @@ TARGETS: dict[str, Callable[[random.Random, bytes], None]] = {
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=float, default=10.0, help="per codec")
+    parser.add_argument("--seconds", type=positive_float, default=10.0, help="per codec")
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
     failures = 0
