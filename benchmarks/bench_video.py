@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from skeye.cliargs import positive_int
 from skeye.pilot.video_server import CameraFrame, VideoServer
 from skeye.vision.camera import render_pad_view
 from skeye.vision.pad import SKEYE_4
@@ -49,16 +50,32 @@ def _viewer(port: int, got: dict[int, float], sizes: list[int], stop: threading.
         sock.close()
 
 
+def side(text: str) -> int:
+    """``--width`` / ``--height``: a frame's side in pixels, 2 at least (the video port's)."""
+    value = positive_int(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 2 (pixels), got {text!r}")
+    return value
+
+
+def quality(text: str) -> int:
+    """``--quality``: a JPEG quality, 1..100."""
+    value = positive_int(text)
+    if value > 100:
+        raise argparse.ArgumentTypeError(f"must be a whole number 1..100, got {text!r}")
+    return value
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=300)
-    ap.add_argument("--width", type=int, default=800)
-    ap.add_argument("--height", type=int, default=600)
+    ap.add_argument("--width", type=side, default=800)
+    ap.add_argument("--height", type=side, default=600)
     ap.add_argument("--clients", type=int, default=1)
     ap.add_argument("--rate", type=float, default=30.0,
                     help="frames/s published (the hummingbird's camera: 30); a high rate shows "
                          "the most the port serves")
-    ap.add_argument("--quality", type=int, default=80)
+    ap.add_argument("--quality", type=quality, default=80)
     args = ap.parse_args()
     if not args.rate > 0 or args.frames < 1 or args.clients < 1:
         ap.error("--rate > 0, --frames >= 1 and --clients >= 1 needed")
