@@ -16,6 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.cliargs import positive_float, positive_int
 from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.server import PilotServer
@@ -34,8 +35,8 @@ def percentile(values: list[float], q: float) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--polls", type=int, default=500)
-    ap.add_argument("--stream-s", type=float, default=3.0)
+    ap.add_argument("--polls", type=positive_int, default=500)
+    ap.add_argument("--stream-s", type=positive_float, default=3.0)
     args = ap.parse_args()
     sim = Simulation(load_world("pad"), seed=1)
     with (
