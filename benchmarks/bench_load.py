@@ -28,6 +28,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.cliargs import positive_float, positive_int
+from skeye.cliargs import seed as non_negative_int
 from skeye.control.image_client import ImageClient
 from skeye.processes import start_skeye, stop_process
 
@@ -202,10 +204,10 @@ def run_load(control: int, image: int, seconds: float, fps: float = 30.0,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--control", type=int, default=20)
-    parser.add_argument("--image", type=int, default=8)
-    parser.add_argument("--seconds", type=float, default=30.0)
-    parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--control", type=positive_int, default=20)
+    parser.add_argument("--image", type=non_negative_int, default=8)
+    parser.add_argument("--seconds", type=positive_float, default=30.0)
+    parser.add_argument("--fps", type=positive_float, default=30.0)
     args = parser.parse_args()
     result = run_load(args.control, args.image, args.seconds, args.fps)
     print(json.dumps(asdict(result), indent=2))
