@@ -25,6 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.cliargs import positive_float, positive_int
 from skeye.sim.engine import Simulation
 from skeye.sim.runner import SimulationRunner
 from skeye.sim.server import ControlServer
@@ -127,8 +128,8 @@ def per_peer() -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--clients", type=int, default=20)
-    parser.add_argument("--handshake-timeout", type=float, default=10.0)
+    parser.add_argument("--clients", type=positive_int, default=20)
+    parser.add_argument("--handshake-timeout", type=positive_float, default=10.0)
     args = parser.parse_args()
     print(json.dumps({"engine_death": engine_death(args.clients),
                       "idle_slots": idle_slots(args.handshake_timeout),
