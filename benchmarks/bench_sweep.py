@@ -19,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from skeye.cliargs import positive_float, positive_int
 from skeye.sweep.backends import LocalBackend, RayBackend
 from skeye.sweep.cli import run_trials
 from skeye.sweep.spec import parse_spec
@@ -27,8 +28,8 @@ from skeye.sweep.worker import run_experiment
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=4, help="trials per configuration")
-    ap.add_argument("--hold-s", type=float, default=2.0, help="E2 hold per trial (sim s)")
+    ap.add_argument("--trials", type=positive_int, default=4, help="trials per configuration")
+    ap.add_argument("--hold-s", type=positive_float, default=2.0, help="E2 hold per trial (sim s)")
     ap.add_argument("--no-ray", action="store_true", help="local backend only")
     args = ap.parse_args()
     spec = parse_spec({"experiment": "E2", "quick": True, "seeds": args.trials,
