@@ -47,6 +47,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from pymavlink import mavutil
 
+from skeye.cliargs import positive_int
 from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.boards import BoardSettings
@@ -344,7 +345,7 @@ def bench_pad() -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--trials", type=positive_int, default=20)
     ap.add_argument("--only", choices=("link", "pad"), default=None)
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} on "
