@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 
+from skeye.cliargs import non_negative_float
 from skeye.control.connection import connect
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.cli import pad_vision_factory
@@ -147,7 +148,7 @@ def land_from_3_m(predict: bool, params: PadHoldParams | None,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--latency-ms", type=float, nargs="+", default=[540.0])
+    ap.add_argument("--latency-ms", type=non_negative_float, nargs="+", default=[540.0])
     ap.add_argument("--only", choices=("hold", "land"), default=None)
     args = ap.parse_args()
     for ms in args.latency_ms:
