@@ -40,6 +40,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from skeye.cliargs import positive_float
+from skeye.cliargs import seed as seed_value
 from skeye.hil.cli import parse_ll_board, start_ll_board
 from skeye.link.vehicle import Vehicle
 from skeye.pilot.airframe import AirframeOptions, open_airframe
@@ -262,9 +264,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", choices=("cpu", "hil"), default=None)
-    ap.add_argument("--hold-s", type=float, default=20.0, help="cpu: sim seconds measured")
-    ap.add_argument("--e2-s", type=float, default=20.0, help="hil: E2 hold, sim seconds")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[1])
+    ap.add_argument("--hold-s", type=positive_float, default=20.0, help="cpu: sim seconds measured")
+    ap.add_argument("--e2-s", type=positive_float, default=20.0, help="hil: E2 hold, sim seconds")
+    ap.add_argument("--seeds", type=seed_value, nargs="+", default=[1])
     args = ap.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     if args.only in (None, "cpu"):
