@@ -29,7 +29,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import resource
+import shlex
 import statistics
 import sys
 import threading
@@ -51,6 +53,16 @@ from skeye.processes import start_skeye, stop_process
 from skeye.wire.packets import NavState, SkeyeMask
 
 TICK_HZ = 20.0
+# --only cpu's simulator, and its start-up line naming the pilot's airframe and camera URIs
+CPU_SIM = ["sim", "--mode", "lockstep", "--port", "0", "--seed", "1", "--image-port", "0",
+           "--ll-board", "R1=pty"]
+LL_LINE = r"LL board on \S+ \(skeye pilot --airframe (\S+) --camera (\S+)\)"
+
+
+def pilot_uris(line: re.Match[str]) -> tuple[str, str]:
+    """The airframe and camera URIs of the LL board's start-up line: it quotes them for a shell
+    (``'asctec-ll://serial/dev/pts/0?lockstep=1'``)."""
+    return shlex.split(line.group(1))[0], shlex.split(line.group(2))[0]
 CAMERA_FPS = 30.0
 
 
@@ -81,16 +93,13 @@ def role(name: str) -> str:
 
 
 def cpu(hold_s: float) -> None:
-    sim, found = start_skeye(
-        ["sim", "--mode", "lockstep", "--port", "0", "--seed", "1", "--image-port", "0",
-         "--ll-board", "R1=pty"],
-        [r"image server on [\d.]+:(\d+)",
-         r"LL board on \S+ \(skeye pilot --airframe (\S+) --camera (\S+)\)"], "skeye sim")
+    sim, found = start_skeye(CPU_SIM, [r"image server on [\d.]+:(\d+)", LL_LINE], "skeye sim")
     try:
         with ExitStack() as stack:
-            airframe = open_airframe(found[1].group(1), AirframeOptions())
+            airframe_uri, camera_uri = pilot_uris(found[1])
+            airframe = open_airframe(airframe_uri, AirframeOptions())
             stack.callback(airframe.close)
-            camera = open_camera_for(found[1].group(2), airframe, "R1", None, 30.0)
+            camera = open_camera_for(camera_uri, airframe, "R1", None, 30.0)
             stack.callback(camera.close)
             pilot = stack.enter_context(PilotServer(
                 airframe, port=0, lockstep=True, lockstep_rate=0, tick_s=1 / TICK_HZ,
