@@ -248,17 +248,27 @@ def _start(argv: list[str], patterns: dict[str, str], env: dict[str, str]
     return proc, found
 
 
+def port_kinds(text: str) -> str:
+    """``--ports``: a comma-separated list of the ports PAYLOADS attacks."""
+    if not text or any(kind not in PAYLOADS for kind in text.split(",")):
+        raise argparse.ArgumentTypeError(f"must be a comma-separated list of "
+                                         f"{', '.join(PAYLOADS)}, got {text!r}")
+    return text
+
+
 def main() -> None:
+    from skeye.cliargs import non_negative_float, positive_float, positive_int
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--connections", type=int, default=1000)
-    parser.add_argument("--addresses", type=int, default=128)
-    parser.add_argument("--trickle-s", type=float, default=2.0)
-    parser.add_argument("--rate", type=float, default=200.0,
+    parser.add_argument("--connections", type=positive_int, default=1000)
+    parser.add_argument("--addresses", type=positive_int, default=128)
+    parser.add_argument("--trickle-s", type=positive_float, default=2.0)
+    parser.add_argument("--rate", type=positive_float, default=200.0,
                         help="the attacker's new connections per second at most")
-    parser.add_argument("--samples", type=int, default=10)
-    parser.add_argument("--ramp-s", type=float, default=8.0,
+    parser.add_argument("--samples", type=positive_int, default=10)
+    parser.add_argument("--ramp-s", type=non_negative_float, default=8.0,
                         help="seconds of attack before the real client is timed")
-    parser.add_argument("--ports", default="control,image,pilot,video,ground")
+    parser.add_argument("--ports", type=port_kinds, default="control,image,pilot,video,ground")
     parser.add_argument("--same-user", action="store_true")
     parser.add_argument("--attacker", nargs=2, metavar=("PORT", "KIND"), help=argparse.SUPPRESS)
     args = parser.parse_args()
