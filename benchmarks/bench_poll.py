@@ -139,7 +139,7 @@ def main() -> None:
             print(f"start-up (vision on): connected {connected * 1000:.1f} ms after the ready "
                   f"line; first answer after {'-' if first is None else f'{first * 1000:.1f}'} ms; "
                   f"{missed} polls unanswered within {POLL_PERIOD_S * 1000:.0f} ms "
-                  f"in the first {args.startup_s:.0f} s")
+                  f"in the first {args.startup_s:g} s")
             if startup:
                 _stats("start-up LL_STATUS", startup, missed)
             client.buf = b""

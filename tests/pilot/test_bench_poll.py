@@ -39,3 +39,13 @@ def test_a_phase_with_no_answer_is_reported_not_raised(capsys: pytest.CaptureFix
     (the p99 of no round trip) and ended the run before the other phases' figures."""
     _stats("steady LL_STATUS", [], 5)
     assert "steady LL_STATUS: no poll answered, unanswered 5" in capsys.readouterr().out
+
+
+def test_the_start_up_line_names_the_time_it_polled_for() -> None:
+    """``--startup-s 0.5`` printed "in the first 0 s" (the seconds rounded to a whole number)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_poll.py"),
+                           "--polls", "1", "--startup-s", "0.5"], env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "in the first 0.5 s" in done.stdout, done.stdout
