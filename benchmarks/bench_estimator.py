@@ -40,7 +40,7 @@ import math
 import time
 
 from skeye import native
-from skeye.cliargs import positive_float, seed
+from skeye.cliargs import float_at_least, seed
 from skeye.pilot.telemetry import GPS_DRMS_M
 from skeye.sim.engine import Simulation
 from skeye.sim.world import load_world
@@ -64,13 +64,8 @@ CONSISTENT = (math.sqrt(math.log(2.0)), math.sqrt(math.log(20.0)))
 SAMPLE_S = 0.1  # sim seconds between two comparisons with the truth
 
 
-def sim_seconds(text: str) -> float:
-    """``--sim-seconds``: at least one comparison (a shorter run compared nothing)."""
-    value = positive_float(text)
-    if value < SAMPLE_S:
-        raise argparse.ArgumentTypeError(f"must be a number >= {SAMPLE_S:g} (one comparison "
-                                         f"with the truth), got {text!r}")
-    return value
+# --sim-seconds: at least one comparison (a shorter run compared nothing)
+sim_seconds = float_at_least(SAMPLE_S, "one comparison with the truth")
 
 
 def run(world: str, moving: bool, sim_seconds: float, seed: int,

@@ -47,7 +47,7 @@ from importlib import resources
 from pathlib import Path
 
 from skeye import native
-from skeye.cliargs import positive_float, positive_int
+from skeye.cliargs import float_at_least, positive_float, positive_int
 from skeye.errors import SkeyeError
 from skeye.processes import start_skeye, stop_process
 
@@ -251,13 +251,8 @@ def pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] * 1000.0
 
 
-def sim_seconds(text: str) -> float:
-    """``--sim-seconds``: at least one lockstep STEP (a shorter run measured nothing)."""
-    value = positive_float(text)
-    if value < STEP_S:
-        raise argparse.ArgumentTypeError(f"must be a number >= {STEP_S:g} (one STEP of the "
-                                         f"lockstep runs), got {text!r}")
-    return value
+# --sim-seconds: at least one lockstep STEP (a shorter run measured nothing)
+sim_seconds = float_at_least(STEP_S, "one STEP of the lockstep runs")
 
 
 def main() -> None:

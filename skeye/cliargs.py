@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from skeye.values import MAX_BAUD, baud_rate
@@ -137,3 +137,15 @@ def positive_float(text: str) -> float:
 def non_negative_float(text: str) -> float:
     """A finite number >= 0 (0 has a meaning the option's help gives)."""
     return _float_from(text, 0.0, inclusive=True)
+
+
+def float_at_least(low: float, why: str) -> Callable[[str], float]:
+    """An argparse type: a finite number >= ``low``, the refusal saying ``why`` that is the
+    least (a benchmark's run shorter than one sample measures nothing)."""
+    def check(text: str) -> float:
+        value = _float(text)
+        if not value >= low:
+            raise argparse.ArgumentTypeError(f"must be a number >= {low:g} ({why}), got "
+                                             f"{text!r}")
+        return value
+    return check
